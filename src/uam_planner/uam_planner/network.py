@@ -1,0 +1,689 @@
+"""The corridor network that UAM flights follow: nodes (aerodromes and corridor way points) and
+undirected corridors between them.
+
+A :class:`Network` is immutable. Node coordinates are given in WGS84 (lat, lon in degrees, altitude
+in metres above the reference surface) and converted once into a local east-north-up frame
+(``enu_m``, metres) about ``origin_lat_lon_alt``; everything downstream (candidate routes,
+trajectories, separation) works in that frame. Corridor lengths are Euclidean 3D distances between
+ENU end points.
+
+File formats (YAML, GeoJSON, GraphML) are described in ``docs/network-format.md``. Every
+validation failure raises :class:`NetworkError` with a message that names the field and the bad
+value, e.g. ``nodes[3] (id 'N17').lat: 95.2 is out of range [-90, 90]``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterable, Mapping, Sequence
+
+import networkx as nx
+import numpy as np
+import scipy.sparse
+import scipy.sparse.csgraph
+import yaml
+
+from uam_planner.geo import enu_to_geodetic, geodetic_to_enu
+
+__all__ = [
+    "NetworkError",
+    "Network",
+    "build_network",
+    "network_from_enu",
+    "load_network",
+    "save_network_yaml",
+    "save_network_graphml",
+    "save_network_geojson",
+    "network_to_dict",
+    "network_from_dict",
+    "ALT_RANGE_M",
+    "MIN_CORRIDOR_LENGTH_M",
+]
+
+#: Accepted node altitude range, metres above the reference surface.
+ALT_RANGE_M = (-500.0, 10000.0)
+#: Corridors shorter than this (end points coincide) are rejected, metres.
+MIN_CORRIDOR_LENGTH_M = 1e-3
+#: Default origin for networks built from ENU coordinates (central Singapore).
+DEFAULT_ENU_ORIGIN = (1.3521, 103.8198, 0.0)
+
+
+class NetworkError(ValueError):
+    """A network definition is invalid; the message names the field and the offending value."""
+
+
+def _readonly(a: np.ndarray) -> np.ndarray:
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True, eq=False)
+class Network:
+    """An immutable corridor network.
+
+    Attributes:
+        name: network name.
+        node_ids: unique string id per node; a node's index is its position here.
+        names: human-readable name per node ('' if none).
+        is_aerodrome: (n,) bool, True where a node is an aerodrome (vertiport).
+        lat_lon_alt: (n, 3) float64: latitude deg, longitude deg, altitude m above the reference
+            surface (WGS84 ellipsoid).
+        enu_m: (n, 3) float64: local east, north, up metres about ``origin_lat_lon_alt``.
+        origin_lat_lon_alt: (lat deg, lon deg, alt m) of the ENU origin.
+        edges: (m, 2) int32 node-index pairs, u < v, lexicographically sorted and unique.
+        edge_length_m: (m,) float64 Euclidean 3D corridor length between ENU end points.
+
+    Derived (computed on construction): ``index`` (id -> index), ``aerodrome_ids``,
+    ``aerodrome_indices``, ``graph`` (networkx.Graph over indices 0..n-1; node attrs ``id``,
+    ``aerodrome``; edge attrs ``length_m`` and ``edge_index``; treat it as read-only, copy it
+    before changing weights) and ``adjacency_m`` (symmetric scipy CSR matrix of corridor lengths,
+    for vectorised shortest paths). All arrays are read-only.
+
+    Construction validates the structure (shapes, finite values, unique ids, canonical edges,
+    no zero-length corridor, >= 2 aerodromes, all aerodromes mutually reachable) and raises
+    :class:`NetworkError` otherwise. Use :func:`build_network`, :func:`network_from_enu` or
+    :func:`load_network` rather than calling the constructor directly.
+    """
+
+    name: str
+    node_ids: tuple[str, ...]
+    names: tuple[str, ...]
+    is_aerodrome: np.ndarray
+    lat_lon_alt: np.ndarray
+    enu_m: np.ndarray
+    origin_lat_lon_alt: tuple[float, float, float]
+    edges: np.ndarray
+    edge_length_m: np.ndarray
+    index: dict[str, int] = field(init=False, repr=False)
+    aerodrome_ids: tuple[str, ...] = field(init=False, repr=False)
+    aerodrome_indices: np.ndarray = field(init=False, repr=False)
+    graph: nx.Graph = field(init=False, repr=False)
+    adjacency_m: scipy.sparse.csr_array = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        set_ = object.__setattr__  # frozen dataclass: derived fields are set once, here
+        node_ids = tuple(self.node_ids)
+        n = len(node_ids)
+        names = tuple("" if s is None else str(s) for s in self.names)
+        if len(names) != n:
+            raise NetworkError(f"names: {len(names)} entries for {n} nodes")
+        index: dict[str, int] = {}
+        for i, node_id in enumerate(node_ids):
+            if not isinstance(node_id, str) or not node_id:
+                raise NetworkError(f"node_ids[{i}]: {node_id!r} is not a non-empty string")
+            if node_id in index:
+                raise NetworkError(
+                    f"node_ids[{i}]: {node_id!r} duplicates node_ids[{index[node_id]}]")
+            index[node_id] = i
+        is_aerodrome = np.array(self.is_aerodrome, dtype=bool).reshape(-1)
+        if is_aerodrome.shape != (n,):
+            raise NetworkError(f"is_aerodrome: shape {is_aerodrome.shape}, expected ({n},)")
+        lla = np.array(self.lat_lon_alt, dtype=np.float64)
+        enu = np.array(self.enu_m, dtype=np.float64)
+        for fname, arr in (("lat_lon_alt", lla), ("enu_m", enu)):
+            if arr.shape != (n, 3):
+                raise NetworkError(f"{fname}: shape {arr.shape}, expected ({n}, 3)")
+            bad = np.argwhere(~np.isfinite(arr))
+            if len(bad):
+                i, j = bad[0]
+                raise NetworkError(
+                    f"{fname}[{i}] (id {node_ids[i]!r}): {arr[i].tolist()} is not finite")
+        origin = tuple(float(v) for v in self.origin_lat_lon_alt)
+        if len(origin) != 3 or not all(math.isfinite(v) for v in origin):
+            raise NetworkError(f"origin_lat_lon_alt: {self.origin_lat_lon_alt!r} is not 3 finite numbers")
+        edges = np.array(self.edges, dtype=np.int64).reshape(-1, 2) if len(self.edges) else \
+            np.zeros((0, 2), dtype=np.int64)
+        m = len(edges)
+        if m:
+            bad = np.flatnonzero((edges < 0).any(axis=1) | (edges >= n).any(axis=1))
+            if len(bad):
+                raise NetworkError(f"edges[{bad[0]}]: {edges[bad[0]].tolist()} has a node index "
+                                   f"outside [0, {n - 1}]")
+            bad = np.flatnonzero(edges[:, 0] >= edges[:, 1])
+            if len(bad):
+                u, v = edges[bad[0]]
+                what = "is a self loop" if u == v else "is not ordered u < v"
+                raise NetworkError(f"edges[{bad[0]}] ({node_ids[u]!r}-{node_ids[v]!r}): "
+                                   f"{[int(u), int(v)]} {what}")
+            order = np.lexsort((edges[:, 1], edges[:, 0]))
+            if np.any(order != np.arange(m)):
+                raise NetworkError("edges: not sorted lexicographically by (u, v)")
+            dup = np.flatnonzero((np.diff(edges, axis=0) == 0).all(axis=1))
+            if len(dup):
+                u, v = edges[dup[0] + 1]
+                raise NetworkError(f"edges[{dup[0] + 1}] ({node_ids[u]!r}-{node_ids[v]!r}): "
+                                   f"duplicate corridor")
+        edges = edges.astype(np.int32)
+        length = np.array(self.edge_length_m, dtype=np.float64).reshape(-1)
+        if length.shape != (m,):
+            raise NetworkError(f"edge_length_m: shape {length.shape}, expected ({m},)")
+        expected = np.linalg.norm(enu[edges[:, 1]] - enu[edges[:, 0]], axis=1) if m else length
+        if m and not np.allclose(length, expected, rtol=1e-9, atol=1e-6):
+            k = int(np.argmax(np.abs(length - expected)))
+            raise NetworkError(f"edge_length_m[{k}]: {length[k]} differs from the ENU distance "
+                               f"{expected[k]}")
+        short = np.flatnonzero(length < MIN_CORRIDOR_LENGTH_M)
+        if len(short):
+            u, v = edges[short[0]]
+            raise NetworkError(
+                f"edges[{short[0]}] ({node_ids[u]!r}-{node_ids[v]!r}): zero-length corridor "
+                f"({length[short[0]]:.3g} m; end points coincide)")
+
+        aerodrome_indices = np.flatnonzero(is_aerodrome).astype(np.int64)
+        if len(aerodrome_indices) < 2:
+            raise NetworkError(
+                f"is_aerodrome: {len(aerodrome_indices)} aerodrome(s); at least 2 are needed")
+        adjacency = scipy.sparse.csr_array(
+            (np.concatenate([length, length]),
+             (np.concatenate([edges[:, 0], edges[:, 1]]), np.concatenate([edges[:, 1], edges[:, 0]]))),
+            shape=(n, n))
+        _, labels = scipy.sparse.csgraph.connected_components(adjacency, directed=False)
+        a_labels = labels[aerodrome_indices]
+        off = np.flatnonzero(a_labels != a_labels[0])
+        if len(off):
+            a, b = node_ids[aerodrome_indices[0]], node_ids[aerodrome_indices[off[0]]]
+            raise NetworkError(f"corridors: aerodromes {a!r} and {b!r} cannot reach each other "
+                               f"({len(off)} of {len(aerodrome_indices)} aerodromes are not "
+                               f"connected to {a!r})")
+
+        graph = nx.Graph(name=str(self.name))
+        graph.add_nodes_from(
+            (i, {"id": node_ids[i], "aerodrome": bool(is_aerodrome[i])}) for i in range(n))
+        graph.add_edges_from(
+            (int(u), int(v), {"length_m": float(d), "edge_index": k})
+            for k, ((u, v), d) in enumerate(zip(edges.tolist(), length.tolist())))
+
+        set_(self, "name", str(self.name))
+        set_(self, "node_ids", node_ids)
+        set_(self, "names", names)
+        set_(self, "is_aerodrome", _readonly(is_aerodrome))
+        set_(self, "lat_lon_alt", _readonly(lla))
+        set_(self, "enu_m", _readonly(enu))
+        set_(self, "origin_lat_lon_alt", origin)
+        set_(self, "edges", _readonly(edges))
+        set_(self, "edge_length_m", _readonly(length))
+        set_(self, "index", index)
+        set_(self, "aerodrome_ids", tuple(node_ids[i] for i in aerodrome_indices))
+        set_(self, "aerodrome_indices", _readonly(aerodrome_indices))
+        set_(self, "graph", graph)
+        set_(self, "adjacency_m", adjacency)
+
+    # -- queries -------------------------------------------------------------------------------
+    @property
+    def n_nodes(self) -> int:
+        """Number of nodes."""
+        return len(self.node_ids)
+
+    @property
+    def n_edges(self) -> int:
+        """Number of corridors."""
+        return len(self.edges)
+
+    def node_index(self, node_id: str) -> int:
+        """Index of the node with id ``node_id``; NetworkError naming the id if unknown. O(1)."""
+        try:
+            return self.index[node_id]
+        except (KeyError, TypeError):
+            raise NetworkError(f"node id {node_id!r} is not in network {self.name!r}") from None
+
+    def edge_index(self, u: int, v: int) -> int:
+        """Index into ``edges`` of the corridor between node indices u and v (either order). O(1)."""
+        data = self.graph.get_edge_data(int(u), int(v))
+        if data is None:
+            raise NetworkError(f"no corridor between node indices {u} and {v} "
+                               f"in network {self.name!r}")
+        return data["edge_index"]
+
+    def path_length_m(self, path: Sequence[int]) -> float:
+        """Length in metres of a route given as a sequence of node indices along corridors.
+
+        Raises NetworkError if two consecutive nodes are not joined by a corridor. O(len(path)).
+        """
+        p = np.asarray(path, dtype=np.int64).reshape(-1)
+        if len(p) < 2:
+            return 0.0
+        if p.min() < 0 or p.max() >= self.n_nodes:
+            raise NetworkError(f"path: node index out of range [0, {self.n_nodes - 1}] in {p.tolist()}")
+        adj = self.graph.adj
+        for k in range(len(p) - 1):
+            if int(p[k + 1]) not in adj[int(p[k])]:
+                raise NetworkError(
+                    f"path[{k}]->path[{k + 1}]: no corridor between {self.node_ids[p[k]]!r} and "
+                    f"{self.node_ids[p[k + 1]]!r}")
+        return float(np.linalg.norm(np.diff(self.enu_m[p], axis=0), axis=1).sum())
+
+    def __repr__(self) -> str:
+        return (f"Network(name={self.name!r}, nodes={self.n_nodes}, corridors={self.n_edges}, "
+                f"aerodromes={len(self.aerodrome_ids)})")
+
+
+# -- construction ------------------------------------------------------------------------------
+def _canonical_edges(pairs: np.ndarray) -> np.ndarray:
+    """Sort each pair (u < v) and the list lexicographically. Duplicates must already be gone."""
+    pairs = np.sort(np.asarray(pairs, dtype=np.int64).reshape(-1, 2), axis=1)
+    order = np.lexsort((pairs[:, 1], pairs[:, 0]))
+    return pairs[order]
+
+
+def _check_corridor_pairs(pairs: np.ndarray, node_ids: Sequence[str], enu: np.ndarray,
+                          field_name: str) -> None:
+    """Reject self loops, duplicate and zero-length corridors, naming the offending entry."""
+    m = len(pairs)
+    if m == 0:
+        return
+    loops = np.flatnonzero(pairs[:, 0] == pairs[:, 1])
+    if len(loops):
+        k = loops[0]
+        raise NetworkError(f"{field_name}[{k}].to: {node_ids[pairs[k, 1]]!r} equals from "
+                           f"(self loop)")
+    key = np.sort(pairs, axis=1)
+    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    dup = np.flatnonzero(first[inverse] != np.arange(m))
+    if len(dup):
+        k = dup[0]
+        raise NetworkError(
+            f"{field_name}[{k}] ({node_ids[pairs[k, 0]]!r}-{node_ids[pairs[k, 1]]!r}): duplicate "
+            f"of {field_name}[{first[inverse[k]]}]")
+    length = np.linalg.norm(enu[pairs[:, 1]] - enu[pairs[:, 0]], axis=1)
+    short = np.flatnonzero(length < MIN_CORRIDOR_LENGTH_M)
+    if len(short):
+        k = short[0]
+        raise NetworkError(
+            f"{field_name}[{k}] ({node_ids[pairs[k, 0]]!r}-{node_ids[pairs[k, 1]]!r}): zero-length "
+            f"corridor ({length[k]:.3g} m; the end points coincide)")
+
+
+def _assemble(name: str, node_ids: Sequence[str], names: Sequence[str], is_aerodrome,
+              lla: np.ndarray, enu: np.ndarray, origin, pairs: np.ndarray,
+              field_name: str) -> Network:
+    _check_corridor_pairs(pairs, node_ids, enu, field_name)
+    edges = _canonical_edges(pairs) if len(pairs) else np.zeros((0, 2), dtype=np.int64)
+    length = np.linalg.norm(enu[edges[:, 1]] - enu[edges[:, 0]], axis=1) if len(edges) else \
+        np.zeros(0)
+    return Network(name=name, node_ids=tuple(node_ids), names=tuple(names),
+                   is_aerodrome=np.asarray(is_aerodrome, dtype=bool), lat_lon_alt=lla,
+                   enu_m=enu, origin_lat_lon_alt=tuple(float(v) for v in origin),
+                   edges=edges, edge_length_m=length)
+
+
+_NODE_KEYS = {"id", "lat", "lon", "alt_m", "aerodrome", "name"}
+_CORRIDOR_KEYS = {"from", "to", "route"}
+
+
+def _number(value: Any, where: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise NetworkError(f"{where}: {value!r} is not a number")
+    x = float(value)
+    if not math.isfinite(x):
+        raise NetworkError(f"{where}: {value!r} is not finite")
+    return x
+
+
+def _in_range(value: Any, lo: float, hi: float, where: str) -> float:
+    x = _number(value, where)
+    if not lo <= x <= hi:
+        raise NetworkError(f"{where}: {value!r} is out of range [{lo:g}, {hi:g}]")
+    return x
+
+
+def _parse_origin(origin: Any, where: str = "origin") -> tuple[float, float, float]:
+    if isinstance(origin, Mapping):
+        unknown = set(origin) - {"lat", "lon", "alt_m"}
+        if unknown:
+            raise NetworkError(f"{where}: unknown field {sorted(unknown)[0]!r}")
+        for key in ("lat", "lon"):
+            if key not in origin:
+                raise NetworkError(f"{where}.{key}: missing")
+        vals = (origin["lat"], origin["lon"], origin.get("alt_m", 0.0))
+    elif isinstance(origin, (list, tuple, np.ndarray)) and len(origin) in (2, 3):
+        vals = (origin[0], origin[1], origin[2] if len(origin) == 3 else 0.0)
+    else:
+        raise NetworkError(f"{where}: {origin!r} is not {{lat, lon, alt_m}} or [lat, lon, alt_m]")
+    return (_in_range(vals[0], -90.0, 90.0, f"{where}.lat"),
+            _in_range(vals[1], -180.0, 180.0, f"{where}.lon"),
+            _in_range(vals[2], *ALT_RANGE_M, f"{where}.alt_m"))
+
+
+def build_network(name: str, nodes: list[dict], corridors: list[dict], origin=None) -> Network:
+    """Build and validate a network from plain dictionaries (the YAML schema).
+
+    Args:
+        name: network name.
+        nodes: ``{id: str, lat: deg, lon: deg, alt_m: m, aerodrome: bool = False, name: str = ''}``
+            per node, in index order.
+        corridors: ``{from: id, to: id, route: str (optional, informational)}`` per undirected
+            corridor.
+        origin: ENU origin as ``{lat, lon, alt_m}`` or ``(lat, lon, alt_m)``; default: the mean
+            latitude and longitude of the nodes at altitude 0 m.
+
+    Returns the :class:`Network`; raises :class:`NetworkError` naming the field and the value.
+    O(n + m log m).
+    """
+    if not isinstance(name, str) or not name:
+        raise NetworkError(f"name: {name!r} is not a non-empty string")
+    if not isinstance(nodes, (list, tuple)):
+        raise NetworkError(f"nodes: expected a list, got {type(nodes).__name__}")
+    if not isinstance(corridors, (list, tuple)):
+        raise NetworkError(f"corridors: expected a list, got {type(corridors).__name__}")
+    n = len(nodes)
+    node_ids: list[str] = []
+    names: list[str] = []
+    aerodrome = np.zeros(n, dtype=bool)
+    lla = np.zeros((n, 3))
+    index: dict[str, int] = {}
+    for i, node in enumerate(nodes):
+        where = f"nodes[{i}]"
+        if not isinstance(node, Mapping):
+            raise NetworkError(f"{where}: {node!r} is not a mapping")
+        if "id" not in node:
+            raise NetworkError(f"{where}.id: missing")
+        node_id = node["id"]
+        if not isinstance(node_id, str) or not node_id.strip():
+            raise NetworkError(f"{where}.id: {node_id!r} is not a non-empty string")
+        where = f"nodes[{i}] (id {node_id!r})"
+        if node_id in index:
+            raise NetworkError(f"{where}.id: {node_id!r} duplicates nodes[{index[node_id]}]")
+        unknown = set(node) - _NODE_KEYS
+        if unknown:
+            key = sorted(unknown)[0]
+            raise NetworkError(f"{where}.{key}: unknown field (value {node[key]!r}); "
+                               f"allowed: {sorted(_NODE_KEYS)}")
+        for key in ("lat", "lon", "alt_m"):
+            if key not in node:
+                raise NetworkError(f"{where}.{key}: missing")
+        lla[i] = (_in_range(node["lat"], -90.0, 90.0, f"{where}.lat"),
+                  _in_range(node["lon"], -180.0, 180.0, f"{where}.lon"),
+                  _in_range(node["alt_m"], *ALT_RANGE_M, f"{where}.alt_m"))
+        flag = node.get("aerodrome", False)
+        if not isinstance(flag, (bool, np.bool_)):
+            raise NetworkError(f"{where}.aerodrome: {flag!r} is not true/false")
+        aerodrome[i] = bool(flag)
+        label = node.get("name", "")
+        if label is None:
+            label = ""
+        if not isinstance(label, str):
+            raise NetworkError(f"{where}.name: {label!r} is not a string")
+        index[node_id] = i
+        node_ids.append(node_id)
+        names.append(label)
+
+    pairs = np.zeros((len(corridors), 2), dtype=np.int64)
+    for k, cor in enumerate(corridors):
+        where = f"corridors[{k}]"
+        if not isinstance(cor, Mapping):
+            raise NetworkError(f"{where}: {cor!r} is not a mapping")
+        unknown = set(cor) - _CORRIDOR_KEYS
+        if unknown:
+            key = sorted(unknown)[0]
+            raise NetworkError(f"{where}.{key}: unknown field (value {cor[key]!r}); "
+                               f"allowed: {sorted(_CORRIDOR_KEYS)}")
+        for j, key in enumerate(("from", "to")):
+            if key not in cor:
+                raise NetworkError(f"{where}.{key}: missing")
+            ref = cor[key]
+            if not isinstance(ref, str) or ref not in index:
+                raise NetworkError(f"{where}.{key}: {ref!r} is not a node id")
+            pairs[k, j] = index[ref]
+
+    if n == 0:
+        raise NetworkError("nodes: empty list; at least 2 aerodromes are needed")
+    if origin is None:
+        origin_t = (float(lla[:, 0].mean()), float(lla[:, 1].mean()), 0.0)
+    else:
+        origin_t = _parse_origin(origin)
+    enu = geodetic_to_enu(lla, origin_t)
+    return _assemble(name, node_ids, names, aerodrome, lla, enu, origin_t, pairs, "corridors")
+
+
+def network_from_enu(name: str, node_ids: Sequence[str], enu_m, is_aerodrome,
+                     edges_as_id_pairs: Iterable[tuple[str, str]], names: Sequence[str] | None = None,
+                     origin_lat_lon_alt=DEFAULT_ENU_ORIGIN) -> Network:
+    """Build a network straight from local ENU coordinates (synthetic networks, tests).
+
+    Args:
+        name: network name.
+        node_ids: unique string ids, in index order.
+        enu_m: (n, 3) east, north, up metres about ``origin_lat_lon_alt``.
+        is_aerodrome: (n,) bool.
+        edges_as_id_pairs: corridors as (id, id) pairs, any order.
+        names: optional human names.
+        origin_lat_lon_alt: geodetic origin of the ENU frame (default central Singapore).
+
+    The geodetic coordinates are derived from ENU (the exact inverse transform); ``enu_m`` is kept
+    as given. Raises :class:`NetworkError`. O(n + m log m).
+    """
+    node_ids = [str(s) for s in node_ids]
+    n = len(node_ids)
+    enu = np.array(enu_m, dtype=np.float64)
+    if enu.shape != (n, 3):
+        raise NetworkError(f"enu_m: shape {enu.shape}, expected ({n}, 3)")
+    bad = np.argwhere(~np.isfinite(enu))
+    if len(bad):
+        i = bad[0][0]
+        raise NetworkError(f"enu_m[{i}] (id {node_ids[i]!r}): {enu[i].tolist()} is not finite")
+    origin = _parse_origin(origin_lat_lon_alt, "origin_lat_lon_alt")
+    index = {}
+    for i, node_id in enumerate(node_ids):
+        if not node_id:
+            raise NetworkError(f"node_ids[{i}]: {node_id!r} is not a non-empty string")
+        if node_id in index:
+            raise NetworkError(f"node_ids[{i}]: {node_id!r} duplicates node_ids[{index[node_id]}]")
+        index[node_id] = i
+    pair_list = list(edges_as_id_pairs)
+    pairs = np.zeros((len(pair_list), 2), dtype=np.int64)
+    for k, pair in enumerate(pair_list):
+        if len(pair) != 2:
+            raise NetworkError(f"edges_as_id_pairs[{k}]: {pair!r} is not an (id, id) pair")
+        for j in range(2):
+            if pair[j] not in index:
+                raise NetworkError(f"edges_as_id_pairs[{k}][{j}]: {pair[j]!r} is not a node id")
+            pairs[k, j] = index[pair[j]]
+    lla = enu_to_geodetic(enu, origin)
+    names = [""] * n if names is None else list(names)
+    return _assemble(name, node_ids, names, is_aerodrome, lla, enu, origin, pairs,
+                     "edges_as_id_pairs")
+
+
+# -- dictionaries and files --------------------------------------------------------------------
+def network_to_dict(net: Network) -> dict:
+    """The YAML schema of a network as plain Python data (floats as full-precision floats)."""
+    nodes = []
+    for i, node_id in enumerate(net.node_ids):
+        lat, lon, alt = (float(v) for v in net.lat_lon_alt[i])
+        entry = {"id": node_id, "lat": lat, "lon": lon, "alt_m": alt,
+                 "aerodrome": bool(net.is_aerodrome[i])}
+        if net.names[i]:
+            entry["name"] = net.names[i]
+        nodes.append(entry)
+    o = net.origin_lat_lon_alt
+    return {
+        "name": net.name,
+        "origin": {"lat": o[0], "lon": o[1], "alt_m": o[2]},
+        "nodes": nodes,
+        "corridors": [{"from": net.node_ids[u], "to": net.node_ids[v]}
+                      for u, v in net.edges.tolist()],
+    }
+
+
+_TOP_KEYS = {"name", "origin", "nodes", "corridors", "description", "cruise_alt_m", "source"}
+
+
+def network_from_dict(data: Any, default_name: str = "network") -> Network:
+    """Build a network from the YAML schema (see docs/network-format.md). Raises NetworkError."""
+    if not isinstance(data, Mapping):
+        raise NetworkError(f"document: expected a mapping with nodes and corridors, got "
+                           f"{type(data).__name__}")
+    unknown = set(data) - _TOP_KEYS
+    if unknown:
+        key = sorted(unknown)[0]
+        raise NetworkError(f"{key}: unknown top-level field; allowed: {sorted(_TOP_KEYS)}")
+    for key in ("nodes", "corridors"):
+        if key not in data:
+            raise NetworkError(f"{key}: missing")
+    return build_network(data.get("name", default_name), data["nodes"], data["corridors"],
+                         origin=data.get("origin"))
+
+
+def _load_yaml(path: Path) -> Network:
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise NetworkError(f"{path}: not valid YAML ({exc})") from None
+    return network_from_dict(data, default_name=path.stem)
+
+
+def _load_geojson(path: Path) -> Network:
+    try:
+        doc = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise NetworkError(f"{path}: not valid JSON ({exc})") from None
+    if not isinstance(doc, Mapping) or doc.get("type") != "FeatureCollection":
+        raise NetworkError(f"type: {doc.get('type') if isinstance(doc, Mapping) else doc!r} "
+                           f"is not 'FeatureCollection'")
+    features = doc.get("features")
+    if not isinstance(features, list):
+        raise NetworkError(f"features: {features!r} is not a list")
+    nodes, corridors = [], []
+    for f_i, feat in enumerate(features):
+        where = f"features[{f_i}]"
+        if not isinstance(feat, Mapping):
+            raise NetworkError(f"{where}: {feat!r} is not a feature object")
+        geom = feat.get("geometry") or {}
+        props = dict(feat.get("properties") or {})
+        gtype = geom.get("type")
+        coords = geom.get("coordinates")
+        if gtype == "Point":
+            if not isinstance(coords, list) or len(coords) not in (2, 3):
+                raise NetworkError(f"{where}.geometry.coordinates: {coords!r} is not "
+                                   f"[lon, lat] or [lon, lat, alt_m]")
+            node = {"id": props.pop("id", feat.get("id")), "lon": coords[0], "lat": coords[1]}
+            if "alt_m" in props:
+                node["alt_m"] = props.pop("alt_m")
+            elif len(coords) == 3:
+                node["alt_m"] = coords[2]
+            for key in ("aerodrome", "name"):
+                if key in props:
+                    node[key] = props.pop(key)
+            if node["id"] is None:
+                raise NetworkError(f"{where}.properties.id: missing")
+            nodes.append(node)
+        elif gtype == "LineString":
+            cor = {key: props[key] for key in ("from", "to", "route") if key in props}
+            for key in ("from", "to"):
+                if key not in cor:
+                    raise NetworkError(f"{where}.properties.{key}: missing")
+            corridors.append(cor)
+        else:
+            raise NetworkError(f"{where}.geometry.type: {gtype!r} is not 'Point' or 'LineString'")
+    origin = doc.get("origin")
+    return build_network(doc.get("name", path.stem), nodes, corridors, origin=origin)
+
+
+def _load_graphml(path: Path) -> Network:
+    try:
+        g = nx.read_graphml(path)
+    except Exception as exc:  # networkx raises assorted parser errors
+        raise NetworkError(f"{path}: not readable as GraphML ({type(exc).__name__}: {exc})") from None
+    nodes = []
+    for node_id, attrs in g.nodes(data=True):
+        node = {"id": str(node_id)}
+        for key in ("lat", "lon", "alt_m"):
+            if key in attrs:
+                node[key] = attrs[key]
+        if "aerodrome" in attrs:
+            flag = attrs["aerodrome"]
+            # GraphML booleans come back as bool; tolerate "true"/"false" strings from other tools
+            if isinstance(flag, str) and flag.lower() in ("true", "false"):
+                flag = flag.lower() == "true"
+            node["aerodrome"] = flag
+        if "name" in attrs:
+            node["name"] = attrs["name"]
+        nodes.append(node)
+    corridors = [{"from": str(u), "to": str(v)} for u, v in g.edges()]
+    origin = None
+    if "origin_lat" in g.graph and "origin_lon" in g.graph:
+        origin = {"lat": g.graph["origin_lat"], "lon": g.graph["origin_lon"],
+                  "alt_m": g.graph.get("origin_alt_m", 0.0)}
+    return build_network(str(g.graph.get("name", path.stem)), nodes, corridors, origin=origin)
+
+
+def load_network(path) -> Network:
+    """Load a network file, dispatching on the extension: .yaml/.yml, .geojson/.json, .graphml.
+
+    Raises NetworkError (file missing, unknown extension, or invalid content naming the field).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise NetworkError(f"path: {str(path)!r} does not exist or is not a file")
+    suffix = path.suffix.lower()
+    if suffix in (".yaml", ".yml"):
+        return _load_yaml(path)
+    if suffix in (".geojson", ".json"):
+        return _load_geojson(path)
+    if suffix == ".graphml":
+        return _load_graphml(path)
+    raise NetworkError(f"path: extension {suffix!r} of {str(path)!r} is not one of "
+                       f".yaml, .yml, .geojson, .json, .graphml")
+
+
+def save_network_yaml(net: Network, path, header: str | None = None) -> None:
+    """Write the network in the YAML schema, one node or corridor per line.
+
+    ``header`` (optional) is written as leading ``#`` comment lines (e.g. data sources).
+    Floats are written with full precision, so loading gives back the same coordinates.
+    """
+    d = network_to_dict(net)
+    lines = []
+    if header:
+        lines += [f"# {line}".rstrip() for line in header.splitlines()]
+    dump = lambda obj: yaml.safe_dump(obj, default_flow_style=True, sort_keys=False,  # noqa: E731
+                                      width=1_000_000).strip()
+    lines.append(yaml.safe_dump({"name": d["name"]}, width=1_000_000).strip())
+    lines.append(f"origin: {dump(d['origin'])}")
+    lines.append("nodes:")
+    lines += [f"  - {dump(node)}" for node in d["nodes"]]
+    lines.append("corridors:")
+    lines += [f"  - {dump(c)}" for c in d["corridors"]]
+    Path(path).write_text("\n".join(lines) + "\n")
+
+
+def save_network_graphml(net: Network, path) -> None:
+    """Write the network as GraphML (node key = id; attrs lat, lon, alt_m, aerodrome, name;
+    edge attr length_m, informational; graph attrs name, origin_lat, origin_lon, origin_alt_m)."""
+    o = net.origin_lat_lon_alt
+    g = nx.Graph(name=net.name, origin_lat=o[0], origin_lon=o[1], origin_alt_m=o[2])
+    for i, node_id in enumerate(net.node_ids):
+        lat, lon, alt = (float(v) for v in net.lat_lon_alt[i])
+        g.add_node(node_id, lat=lat, lon=lon, alt_m=alt, aerodrome=bool(net.is_aerodrome[i]),
+                   name=net.names[i])
+    for k, (u, v) in enumerate(net.edges.tolist()):
+        g.add_edge(net.node_ids[u], net.node_ids[v], length_m=float(net.edge_length_m[k]))
+    nx.write_graphml(g, path)
+
+
+def save_network_geojson(net: Network, path) -> None:
+    """Write the network as a GeoJSON FeatureCollection: a Point per node ([lon, lat, alt_m];
+    properties id, name, aerodrome, alt_m) and a LineString per corridor (properties from, to,
+    length_m); top-level members name and origin."""
+    o = net.origin_lat_lon_alt
+    features = []
+    for i, node_id in enumerate(net.node_ids):
+        lat, lon, alt = (float(v) for v in net.lat_lon_alt[i])
+        features.append({"type": "Feature", "geometry": {"type": "Point",
+                                                         "coordinates": [lon, lat, alt]},
+                         "properties": {"id": node_id, "name": net.names[i],
+                                        "aerodrome": bool(net.is_aerodrome[i]), "alt_m": alt}})
+    for k, (u, v) in enumerate(net.edges.tolist()):
+        coords = [[float(net.lat_lon_alt[j, 1]), float(net.lat_lon_alt[j, 0]),
+                   float(net.lat_lon_alt[j, 2])] for j in (u, v)]
+        features.append({"type": "Feature", "geometry": {"type": "LineString",
+                                                         "coordinates": coords},
+                         "properties": {"from": net.node_ids[u], "to": net.node_ids[v],
+                                        "length_m": float(net.edge_length_m[k])}})
+    doc = {"type": "FeatureCollection", "name": net.name,
+           "origin": {"lat": o[0], "lon": o[1], "alt_m": o[2]}, "features": features}
+    Path(path).write_text(json.dumps(doc, indent=1) + "\n")
