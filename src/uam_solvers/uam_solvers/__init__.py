@@ -1,0 +1,96 @@
+"""MWIS solver backends behind one interface.
+
+Quick use::
+
+    from uam_solvers import solve
+    result = solve(weights, edges, groups=[[0, 1, 2]], backend="exact", time_limit_s=1.0)
+    result.selected, result.objective, result.proven_optimal, result.fallback
+
+The default pipeline is ``ValidateFallback(Reduce(ComponentSplit(backend)))``: split the conflict
+graph into connected components, apply exact reductions, solve what is left with the named
+backend, then check the answer is an independent set of the input graph and fall back to greedy
+when it is not (or the backend raised or ran past its time limit).
+"""
+from __future__ import annotations
+
+from typing import Any, Mapping, Sequence
+
+from .base import (
+    Backend,
+    BackendUnavailable,
+    MwisInputError,
+    MwisProblem,
+    MwisResult,
+    check_selection,
+)
+from .registry import UnknownBackendError, get_backend, list_backends
+
+__all__ = [
+    "Backend",
+    "BackendUnavailable",
+    "MwisInputError",
+    "MwisProblem",
+    "MwisResult",
+    "UnknownBackendError",
+    "check_selection",
+    "get_backend",
+    "list_backends",
+    "build_pipeline",
+    "solve",
+    "solve_problem",
+]
+
+
+def build_pipeline(backend: str | Backend, layers: bool = True) -> Backend:
+    """The default pipeline around ``backend`` (a name or an instance).
+
+    ``layers=True``: ValidateFallback(Reduce(ComponentSplit(backend))); ``layers=False``:
+    ValidateFallback(backend) - validation is never skipped. Raises UnknownBackendError for an
+    unknown name and BackendUnavailable when the backend cannot run here.
+    """
+    from .layers import ComponentSplit, Reduce, ValidateFallback
+
+    inner = get_backend(backend) if isinstance(backend, str) else backend
+    inner.require_available()
+    if layers:
+        inner = Reduce(ComponentSplit(inner))
+    return ValidateFallback(inner)
+
+
+def solve_problem(
+    problem: MwisProblem,
+    backend: str | Backend = "greedy",
+    time_limit_s: float = 10.0,
+    seed: int = 0,
+    options: Mapping[str, Any] | None = None,
+    layers: bool = True,
+) -> MwisResult:
+    """Solve an already validated problem with the default pipeline (see :func:`build_pipeline`)."""
+    if not (time_limit_s > 0):
+        raise MwisInputError(f"time_limit_s: {time_limit_s!r} must be > 0")
+    pipeline = build_pipeline(backend, layers=layers)
+    return pipeline.solve(problem, time_limit_s=float(time_limit_s), seed=int(seed), options=dict(options or {}))
+
+
+def solve(
+    weights: Any,
+    edges: Any,
+    groups: Sequence[Any] | None = None,
+    backend: str | Backend = "greedy",
+    time_limit_s: float = 10.0,
+    seed: int = 0,
+    options: Mapping[str, Any] | None = None,
+    layers: bool = True,
+    max_vertices: int | None = None,
+) -> MwisResult:
+    """Validate the arrays and solve MWIS with the named backend through the default pipeline.
+
+    Inputs: ``weights`` (n,) finite >= 0; ``edges`` (m, 2) vertex pairs; ``groups`` optional
+    clique groups; ``backend`` a registered name (``python -m uam_solvers.registry``) or Backend
+    instance; ``time_limit_s`` wall-time budget; ``seed`` for stochastic backends; ``options``
+    passed to the backend; ``layers`` enables component split and reductions.
+    Output: an MwisResult whose ``selected`` is always an independent set of the input graph.
+    Raises MwisInputError (bad arrays), UnknownBackendError, BackendUnavailable.
+    """
+    problem = MwisProblem.from_arrays(weights, edges, groups, max_vertices=max_vertices)
+    return solve_problem(problem, backend, time_limit_s, seed, options, layers)

@@ -1,0 +1,345 @@
+"""The one interface every MWIS backend keeps.
+
+A maximum weighted independent set (MWIS) problem is a conflict graph: a float64 weight per
+vertex (a candidate route, w = d*/d in the paper), int32 edge pairs (conflicts between candidates
+of different requests) and optional clique groups (the candidates of one request: at most one of
+them may be selected). A backend takes a validated :class:`MwisProblem`, a time limit, a seed and
+its own options and returns an :class:`MwisResult`.
+
+Nothing here imports rclpy; the solver node converts messages to these types.
+"""
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+import scipy.sparse as sp
+
+__all__ = [
+    "MwisInputError",
+    "MwisProblem",
+    "MwisResult",
+    "Backend",
+    "BackendUnavailable",
+    "check_selection",
+    "integer_weights",
+]
+
+
+class MwisInputError(ValueError):
+    """Malformed MWIS input; the message names the field and the offending value."""
+
+
+class BackendUnavailable(RuntimeError):
+    """The backend cannot run here (missing package, missing credentials); message says why."""
+
+
+def _as_index_array(values: Any, field_name: str, n: int) -> np.ndarray:
+    """Return ``values`` as a 1-D int64 array of vertex indices in [0, n), or raise MwisInputError."""
+    arr = np.asarray(values)
+    if arr.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    if arr.ndim != 1:
+        raise MwisInputError(f"{field_name}: expected a 1-D index array, got shape {arr.shape}")
+    if arr.dtype.kind == "f":
+        bad = ~np.isfinite(arr) | (arr != np.round(arr))
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise MwisInputError(f"{field_name}[{i}]: {arr[i]!r} is not an integer vertex index")
+    elif arr.dtype.kind not in "iub":
+        raise MwisInputError(f"{field_name}: expected integer vertex indices, got dtype {arr.dtype}")
+    idx = arr.astype(np.int64)
+    bad = (idx < 0) | (idx >= n)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise MwisInputError(f"{field_name}[{i}]: vertex {int(idx[i])} is out of range [0, {n})")
+    return idx
+
+
+@dataclass(frozen=True, eq=False)
+class MwisProblem:
+    """A validated MWIS instance (a conflict graph).
+
+    Attributes:
+        weights: (n,) float64 vertex weights, finite and >= 0.
+        edges: (m, 2) int32 conflict pairs with u < v, unique, sorted lexicographically.
+        groups: clique groups (int32 vertex-index arrays, sorted, unique, size >= 2); every pair
+            inside a group conflicts even when it is not listed in ``edges``.
+
+    Build it with :meth:`from_arrays`, which validates and normalises; the constructor trusts its
+    arguments.
+    """
+
+    weights: np.ndarray
+    edges: np.ndarray
+    groups: tuple[np.ndarray, ...] = ()
+
+    @classmethod
+    def from_arrays(
+        cls,
+        weights: Any,
+        edges: Any,
+        groups: Sequence[Any] | None = None,
+        max_vertices: int | None = None,
+    ) -> "MwisProblem":
+        """Validate and normalise arrays into a problem.
+
+        Inputs: ``weights`` (n,) numbers, finite and >= 0; ``edges`` (m, 2) vertex indices in
+        [0, n) without self-loops (duplicates and order are normalised to unique u < v);
+        ``groups`` an optional sequence of vertex-index sequences (clique groups; duplicates
+        inside a group are dropped, groups of fewer than two vertices add nothing);
+        ``max_vertices`` an optional size limit on n.
+        Raises :class:`MwisInputError` naming the field and value. O(m log m + sum |group|).
+        """
+        try:
+            w = np.asarray(weights, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise MwisInputError(f"weights: not numeric ({exc})") from None
+        if w.ndim != 1:
+            raise MwisInputError(f"weights: expected a 1-D array, got shape {w.shape}")
+        n = int(w.shape[0])
+        if max_vertices is not None and n > max_vertices:
+            raise MwisInputError(f"weights: {n} vertices exceed the limit max_vertices={max_vertices}")
+        bad = ~np.isfinite(w)
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise MwisInputError(f"weights[{i}]: {float(w[i])!r} is not finite")
+        bad = w < 0
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise MwisInputError(f"weights[{i}]: {float(w[i])!r} is negative")
+
+        e = np.asarray(edges if edges is not None else np.zeros((0, 2)))
+        if e.size == 0:
+            e = np.zeros((0, 2), dtype=np.int64)
+        if e.ndim != 2 or e.shape[1] != 2:
+            raise MwisInputError(f"edges: expected shape (m, 2), got {e.shape}")
+        if e.dtype.kind == "f":
+            bad = ~np.isfinite(e) | (e != np.round(e))
+            if bad.any():
+                i = int(np.flatnonzero(bad.any(axis=1))[0])
+                raise MwisInputError(f"edges[{i}]: {tuple(e[i].tolist())} is not a pair of integer vertex indices")
+        elif e.dtype.kind not in "iub":
+            raise MwisInputError(f"edges: expected integer vertex indices, got dtype {e.dtype}")
+        e64 = e.astype(np.int64)
+        bad = ((e64 < 0) | (e64 >= n)).any(axis=1)
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise MwisInputError(
+                f"edges[{i}]: ({int(e64[i, 0])}, {int(e64[i, 1])}) has a vertex out of range [0, {n})"
+            )
+        loops = e64[:, 0] == e64[:, 1]
+        if loops.any():
+            i = int(np.flatnonzero(loops)[0])
+            raise MwisInputError(f"edges[{i}]: ({int(e64[i, 0])}, {int(e64[i, 1])}) is a self-loop")
+        norm = _normalise_edges(e64)
+
+        gs: list[np.ndarray] = []
+        for gi, g in enumerate(groups or ()):
+            idx = _as_index_array(g, f"groups[{gi}]", n)
+            idx = np.unique(idx)
+            if idx.size >= 2:
+                gs.append(idx.astype(np.int32))
+        return cls(weights=w, edges=norm.astype(np.int32), groups=tuple(gs))
+
+    @property
+    def n(self) -> int:
+        """Number of vertices."""
+        return int(self.weights.shape[0])
+
+    @property
+    def m(self) -> int:
+        """Number of listed edges (group clique pairs not included; see :meth:`all_edges`)."""
+        return int(self.edges.shape[0])
+
+    @cached_property
+    def _all_edges(self) -> np.ndarray:
+        parts = [self.edges.astype(np.int64)]
+        for g in self.groups:
+            iu, ju = np.triu_indices(g.size, k=1)
+            parts.append(np.stack([g[iu], g[ju]], axis=1).astype(np.int64))
+        out = _normalise_edges(np.concatenate(parts, axis=0)) if len(parts) > 1 else parts[0]
+        out = out.astype(np.int32)
+        out.setflags(write=False)
+        return out
+
+    def all_edges(self) -> np.ndarray:
+        """(m', 2) int32 unique u < v pairs: the listed edges plus every pair inside each group."""
+        return self._all_edges
+
+    @cached_property
+    def _adjacency(self) -> sp.csr_matrix:
+        e = self.all_edges()
+        n = self.n
+        data = np.ones(2 * e.shape[0], dtype=np.int8)
+        rows = np.concatenate([e[:, 0], e[:, 1]])
+        cols = np.concatenate([e[:, 1], e[:, 0]])
+        a = sp.csr_matrix((data, (rows, cols)), shape=(n, n))
+        a.sort_indices()
+        return a
+
+    def adjacency(self) -> sp.csr_matrix:
+        """Symmetric (n, n) CSR adjacency of the full conflict graph (groups included), sorted indices."""
+        return self._adjacency
+
+    def is_independent(self, selected: Any) -> bool:
+        """True when ``selected`` is a set of distinct in-range vertices with no conflict between them."""
+        return check_selection(self, selected)[0]
+
+    def objective(self, selected: Any) -> float:
+        """Sum of the weights of ``selected`` in float64 (no independence check)."""
+        idx = np.asarray(selected, dtype=np.int64).reshape(-1)
+        return float(math.fsum(self.weights[idx].tolist())) if idx.size else 0.0
+
+
+def _normalise_edges(e: np.ndarray) -> np.ndarray:
+    """Sort each pair to u < v and drop duplicates (lexicographic order). O(m log m)."""
+    if e.shape[0] == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    lo = np.minimum(e[:, 0], e[:, 1])
+    hi = np.maximum(e[:, 0], e[:, 1])
+    return np.unique(np.stack([lo, hi], axis=1), axis=0)
+
+
+def check_selection(problem: MwisProblem, selected: Any) -> tuple[bool, str]:
+    """Check an answer against the input graph (groups included).
+
+    Returns ``(True, "")`` when ``selected`` is a 1-D collection of distinct integer vertex indices
+    in range with no conflicting pair, else ``(False, reason)`` naming the first problem found.
+    O(n + m').
+    """
+    try:
+        arr = np.asarray(selected)
+    except Exception as exc:  # noqa: BLE001 - any garbage from a broken backend is a reason
+        return False, f"selected: not an array ({exc})"
+    if arr.size == 0:
+        return True, ""
+    if arr.ndim != 1:
+        return False, f"selected: expected a 1-D array, got shape {arr.shape}"
+    if arr.dtype.kind not in "iu":
+        return False, f"selected: expected integer vertex indices, got dtype {arr.dtype}"
+    idx = arr.astype(np.int64)
+    bad = (idx < 0) | (idx >= problem.n)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        return False, f"selected[{i}]: vertex {int(idx[i])} is out of range [0, {problem.n})"
+    mask = np.zeros(problem.n, dtype=bool)
+    mask[idx] = True
+    if int(mask.sum()) != idx.size:
+        return False, "selected: contains duplicate vertices"
+    e = problem.all_edges()
+    both = mask[e[:, 0]] & mask[e[:, 1]]
+    if both.any():
+        i = int(np.flatnonzero(both)[0])
+        return False, f"selected: vertices {int(e[i, 0])} and {int(e[i, 1])} conflict"
+    return True, ""
+
+
+def integer_weights(weights: np.ndarray, resolution: int = 10**6) -> tuple[np.ndarray, float]:
+    """Scale float weights to non-negative int64 for integer solvers (CP-SAT, KaMIS, CHILS).
+
+    ``w_int = round(w * scale)`` with ``scale = resolution / max(w)``: the heaviest vertex becomes
+    ``resolution`` and every weight is rounded to a multiple of ``max(w) / resolution`` (absolute
+    error <= max(w) / (2 * resolution) per vertex). Positive weights that would round to 0 are
+    kept at 1 so the solver still prefers taking them. Returns ``(w_int, scale)``; scale is 1.0
+    when all weights are 0. Callers recompute the objective from the float weights.
+    Raises MwisInputError when ``n * resolution`` would overflow int64 sums.
+    """
+    w = np.asarray(weights, dtype=np.float64)
+    if w.size and w.size * float(resolution) > 2.0**62:
+        raise MwisInputError(f"weights: {w.size} vertices x resolution {resolution} overflows int64")
+    wmax = float(w.max()) if w.size else 0.0
+    if wmax <= 0.0:
+        return np.zeros(w.shape, dtype=np.int64), 1.0
+    scale = float(resolution) / wmax
+    wi = np.rint(w * scale).astype(np.int64)
+    wi[(wi == 0) & (w > 0)] = 1
+    return wi, scale
+
+
+@dataclass
+class MwisResult:
+    """A backend's answer.
+
+    Attributes:
+        selected: int32 sorted vertex indices, an independent set of the input graph.
+        objective: sum of their weights, recomputed in float64 from ``problem.weights``.
+        proven_optimal: True only when the backend proved optimality (for integer solvers:
+            optimal for the integer-scaled weights, see :func:`integer_weights`).
+        solve_time_s: wall time of the solve in seconds.
+        backend: name of the backend that produced the answer (the fallback's name on fallback).
+        stats: backend statistics, str -> int | float | str.
+        fallback: True when validation rejected the requested backend's answer.
+        message: why a fallback happened, or other notes for the caller.
+    """
+
+    selected: np.ndarray
+    objective: float
+    proven_optimal: bool
+    solve_time_s: float
+    backend: str
+    stats: dict = field(default_factory=dict)
+    fallback: bool = False
+    message: str = ""
+
+
+def make_result(
+    problem: MwisProblem,
+    selected: Any,
+    *,
+    proven_optimal: bool,
+    solve_time_s: float,
+    backend: str,
+    stats: Mapping[str, Any] | None = None,
+    message: str = "",
+) -> MwisResult:
+    """Build an MwisResult with sorted int32 ``selected`` and the objective recomputed in float64."""
+    sel = np.unique(np.asarray(selected, dtype=np.int64).reshape(-1)).astype(np.int32)
+    return MwisResult(
+        selected=sel,
+        objective=problem.objective(sel),
+        proven_optimal=bool(proven_optimal),
+        solve_time_s=float(solve_time_s),
+        backend=backend,
+        stats=dict(stats or {}),
+        message=message,
+    )
+
+
+class Backend(ABC):
+    """An MWIS solver with one small surface (like a dimod sampler).
+
+    Subclasses set ``name`` (registry name) and ``description`` (one line) and implement
+    :meth:`solve`. Layers in :mod:`uam_solvers.layers` wrap any backend and are backends too.
+    """
+
+    name: str = "backend"
+    description: str = ""
+
+    def available(self) -> tuple[bool, str]:
+        """``(True, "")`` when the backend can run here, else ``(False, reason)``."""
+        return True, ""
+
+    def require_available(self) -> None:
+        """Raise :class:`BackendUnavailable` with the reason when :meth:`available` is False."""
+        ok, reason = self.available()
+        if not ok:
+            raise BackendUnavailable(f"backend {self.name!r} is unavailable: {reason}")
+
+    @abstractmethod
+    def solve(
+        self,
+        problem: MwisProblem,
+        *,
+        time_limit_s: float,
+        seed: int,
+        options: Mapping[str, Any],
+    ) -> MwisResult:
+        """Solve ``problem`` within about ``time_limit_s`` seconds, deterministically for ``seed``."""
+
+    def __repr__(self) -> str:
+        return f"<{type(self).__name__} {self.name!r}>"

@@ -1,0 +1,133 @@
+"""Find MWIS backends by name.
+
+Two sources, like a setuptools plugin table (Nav2's planner plugins in Python form):
+
+- the built-in table :data:`BUILTIN_BACKENDS`, name -> ``"module:Class"``, imported lazily so a
+  backend whose optional dependency is missing does not break the others;
+- third-party backends advertised in the ``importlib.metadata`` entry-point group
+  ``uam_solvers.backends`` (entry-point name = backend name, value = ``module:Class``). A built-in
+  name wins over an entry point of the same name.
+
+CLI: ``python -m uam_solvers.registry`` prints one line per backend.
+"""
+from __future__ import annotations
+
+import importlib
+import sys
+from importlib import metadata
+
+from .base import Backend
+
+__all__ = ["BUILTIN_BACKENDS", "ENTRY_POINT_GROUP", "UnknownBackendError", "get_backend",
+           "list_backends", "backend_names"]
+
+ENTRY_POINT_GROUP = "uam_solvers.backends"
+
+BUILTIN_BACKENDS: dict[str, str] = {
+    "greedy": "uam_solvers.greedy:GreedyBackend",
+    "exact": "uam_solvers.cpsat:CpSatBackend",
+    "kamis": "uam_solvers.chszla:KamisBackend",
+    "chils": "uam_solvers.chszla:ChilsBackend",
+    "gurobi": "uam_solvers.gurobi_backend:GurobiBackend",
+    "sa": "uam_solvers.annealing:SimulatedAnnealingBackend",
+    "tabu": "uam_solvers.annealing:TabuBackend",
+    "qpu": "uam_solvers.qpu:QpuBackend",
+    "qpu-emulator": "uam_solvers.qpu:QpuEmulatorBackend",
+}
+
+
+class UnknownBackendError(KeyError):
+    """No backend of that name; the message lists the known names."""
+
+    def __str__(self) -> str:  # KeyError would quote the whole message
+        return str(self.args[0]) if self.args else ""
+
+
+def _entry_points() -> dict[str, str]:
+    try:
+        eps = metadata.entry_points(group=ENTRY_POINT_GROUP)
+    except Exception:  # noqa: BLE001 - a broken installed distribution must not break lookup
+        return {}
+    return {ep.name: ep.value for ep in eps}
+
+
+def _table() -> dict[str, str]:
+    table = dict(_entry_points())
+    table.update(BUILTIN_BACKENDS)
+    return table
+
+
+def backend_names() -> list[str]:
+    """All known backend names (built-in first, then entry points, each sorted as listed)."""
+    extra = sorted(k for k in _entry_points() if k not in BUILTIN_BACKENDS)
+    return list(BUILTIN_BACKENDS) + extra
+
+
+def _load(target: str) -> type:
+    module_name, _, attr = target.partition(":")
+    module = importlib.import_module(module_name)
+    obj = module
+    for part in attr.split("."):
+        obj = getattr(obj, part)
+    return obj  # type: ignore[return-value]
+
+
+def get_backend(name: str) -> Backend:
+    """A fresh instance of the backend called ``name``.
+
+    Raises :class:`UnknownBackendError` (a KeyError) listing the known names when ``name`` is not
+    registered, and ImportError when the backend's module fails to import. An instance of an
+    unavailable backend is returned; its ``solve`` raises BackendUnavailable with the reason.
+    """
+    table = _table()
+    if not isinstance(name, str) or name not in table:
+        raise UnknownBackendError(
+            f"backend: unknown name {name!r}; known backends: {', '.join(backend_names())}"
+        )
+    cls = _load(table[name])
+    backend = cls()
+    if not isinstance(backend, Backend):
+        raise TypeError(f"backend {name!r}: {table[name]} is not a uam_solvers Backend")
+    return backend
+
+
+def list_backends() -> list[tuple[str, str, bool, str]]:
+    """``(name, description, available, reason)`` for every known backend.
+
+    A backend whose module cannot be imported is listed as unavailable with the import error.
+    """
+    rows = []
+    table = _table()
+    for name in backend_names():
+        try:
+            backend = get_backend(name)
+            ok, reason = backend.available()
+            rows.append((name, backend.description, bool(ok), reason))
+        except Exception as exc:  # noqa: BLE001 - listing must survive any one broken backend
+            rows.append((name, f"({table[name]})", False, f"{type(exc).__name__}: {exc}"))
+    return rows
+
+
+def format_backend_table() -> str:
+    """One line per backend: name, [available|unavailable: reason], description."""
+    rows = list_backends()
+    width = max((len(r[0]) for r in rows), default=4)
+    lines = []
+    for name, desc, ok, reason in rows:
+        status = "available" if ok else f"unavailable ({reason})"
+        lines.append(f"{name:<{width}}  {desc}  [{status}]")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m uam_solvers.registry [list]``: print the backends, one line each."""
+    args = list(sys.argv[1:] if argv is None else argv)
+    if args and args[0] not in ("list",):
+        print("usage: python -m uam_solvers.registry [list]", file=sys.stderr)
+        return 2
+    print(format_backend_table())
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
