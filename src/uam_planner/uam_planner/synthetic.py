@@ -1,0 +1,125 @@
+"""Seeded synthetic corridor networks of any size, for tests, scaling studies and benchmarks.
+
+The corridor layer is a jittered grid of way points at cruise altitude joined by the short edges of
+their Delaunay triangulation (a planar, street-grid-like mesh) plus a minimum spanning tree, so it
+is always connected. Aerodromes sit at ground level at random places inside the same square and
+each is joined to its nearest corridor nodes, so every aerodrome reaches every other.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import scipy.sparse
+import scipy.sparse.csgraph
+from scipy.spatial import Delaunay, QhullError, cKDTree
+
+from uam_planner.network import DEFAULT_ENU_ORIGIN, Network, NetworkError, network_from_enu
+
+__all__ = ["generate_network", "DEFAULT_CORRIDOR_SPACING_M"]
+
+#: Default grid spacing of corridor way points when no extent is given, metres.
+DEFAULT_CORRIDOR_SPACING_M = 750.0
+#: Delaunay edges up to this multiple of the grid spacing are kept as corridors (grid edges and
+#: a few diagonals); longer ones only if the spanning tree needs them.
+_MAX_EDGE_FACTOR = 1.3
+#: Each aerodrome gets corridors to this many nearest corridor nodes (redundant access).
+_AERODROME_LINKS = 2
+
+
+def _corridor_edges(xy: np.ndarray, spacing_m: float) -> np.ndarray:
+    """Undirected edges (k, 2), u < v, over corridor points: short Delaunay edges + an MST."""
+    n = len(xy)
+    if n < 2:
+        return np.zeros((0, 2), dtype=np.int64)
+    try:
+        if n < 3:
+            raise QhullError("too few points")
+        simplices = Delaunay(xy).simplices
+        cand = np.concatenate([simplices[:, [0, 1]], simplices[:, [1, 2]], simplices[:, [0, 2]]])
+    except QhullError:
+        # Collinear or tiny inputs: a chain in x order is the planar answer.
+        order = np.lexsort((xy[:, 1], xy[:, 0]))
+        cand = np.stack([order[:-1], order[1:]], axis=1)
+    cand = np.unique(np.sort(cand, axis=1), axis=0)
+    length = np.linalg.norm(xy[cand[:, 0]] - xy[cand[:, 1]], axis=1)
+    # The MST of the Delaunay graph is the Euclidean MST, so connectivity never needs a long jump
+    # beyond what the triangulation offers.
+    w = scipy.sparse.coo_array((length + 1e-9, (cand[:, 0], cand[:, 1])), shape=(n, n)).tocsr()
+    mst = scipy.sparse.csgraph.minimum_spanning_tree(w).tocoo()
+    mst_edges = np.sort(np.stack([mst.row, mst.col], axis=1), axis=1)
+    keep = cand[length <= _MAX_EDGE_FACTOR * spacing_m]
+    return np.unique(np.concatenate([keep, mst_edges]).astype(np.int64), axis=0)
+
+
+def generate_network(n_nodes: int, n_aerodromes: int, seed: int, extent_m: float | None = None,
+                     cruise_alt_m: float = 120.0, name: str | None = None,
+                     origin_lat_lon_alt=DEFAULT_ENU_ORIGIN) -> Network:
+    """Generate a random, connected, planar-ish corridor network.
+
+    Args:
+        n_nodes: total number of nodes, aerodromes included (>= n_aerodromes + 1).
+        n_aerodromes: number of aerodromes (>= 2), at ground level (up = 0 m).
+        seed: seed for ``numpy.random.default_rng``; the same arguments give the same network.
+        extent_m: side of the square area, metres, centred on the ENU origin; default
+            ``750 m * ceil(sqrt(n_nodes - n_aerodromes))``, which gives corridors of about
+            0.75-0.9 km on average.
+        cruise_alt_m: altitude of the corridor way points, metres.
+        name: network name; default ``synthetic-n{n_nodes}-a{n_aerodromes}-s{seed}``.
+        origin_lat_lon_alt: geodetic origin of the ENU frame (default central Singapore).
+
+    Returns a :class:`Network` whose first ``n_aerodromes`` nodes are the aerodromes
+    (ids ``A000``...) followed by the corridor way points (ids ``N0000``...). Corridor way points
+    are placed one per cell of a jittered k x k grid (k = ceil(sqrt(corridor nodes)), cells picked
+    at random when not all are needed) and joined by Delaunay edges up to 1.3 grid spacings plus a
+    Euclidean minimum spanning tree; each aerodrome is joined to its 2 nearest corridor nodes.
+    Raises NetworkError on bad arguments. O(n log n).
+    """
+    for label, value in (("n_nodes", n_nodes), ("n_aerodromes", n_aerodromes), ("seed", seed)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+            raise NetworkError(f"{label}: {value!r} is not an integer")
+    if n_aerodromes < 2:
+        raise NetworkError(f"n_aerodromes: {n_aerodromes} is below the minimum 2")
+    if n_nodes < n_aerodromes + 1:
+        raise NetworkError(f"n_nodes: {n_nodes} must exceed n_aerodromes ({n_aerodromes}) by at "
+                           f"least 1 corridor node")
+    if not (isinstance(cruise_alt_m, (int, float)) and math.isfinite(cruise_alt_m)
+            and cruise_alt_m > 0):
+        raise NetworkError(f"cruise_alt_m: {cruise_alt_m!r} is not a positive finite number")
+    n_corridor = int(n_nodes - n_aerodromes)
+    k = max(1, math.ceil(math.sqrt(n_corridor)))
+    if extent_m is None:
+        extent_m = DEFAULT_CORRIDOR_SPACING_M * k
+    if not (isinstance(extent_m, (int, float)) and math.isfinite(extent_m) and extent_m > 0):
+        raise NetworkError(f"extent_m: {extent_m!r} is not a positive finite number")
+    spacing_m = float(extent_m) / k
+    rng = np.random.default_rng(seed)
+
+    cells = np.sort(rng.choice(k * k, size=n_corridor, replace=False))
+    cx, cy = cells % k, cells // k
+    jitter = rng.uniform(-0.3, 0.3, size=(n_corridor, 2))
+    xy = (np.stack([cx, cy], axis=1) + 0.5 + jitter) * spacing_m - extent_m / 2.0
+    corridor_edges = _corridor_edges(xy, spacing_m) + n_aerodromes
+
+    a_xy = rng.uniform(-extent_m / 2.0, extent_m / 2.0, size=(n_aerodromes, 2))
+    n_links = min(_AERODROME_LINKS, n_corridor)
+    _, nearest = cKDTree(xy).query(a_xy, k=n_links)
+    nearest = np.asarray(nearest).reshape(n_aerodromes, n_links)
+    access = np.stack([np.repeat(np.arange(n_aerodromes), n_links),
+                       nearest.reshape(-1) + n_aerodromes], axis=1)
+
+    enu = np.zeros((n_nodes, 3))
+    enu[:n_aerodromes, :2] = a_xy
+    enu[n_aerodromes:, :2] = xy
+    enu[n_aerodromes:, 2] = cruise_alt_m
+    width_a = max(3, len(str(n_aerodromes - 1)))
+    width_n = max(4, len(str(n_corridor - 1)))
+    ids = [f"A{i:0{width_a}d}" for i in range(n_aerodromes)] + \
+          [f"N{i:0{width_n}d}" for i in range(n_corridor)]
+    is_aerodrome = np.zeros(n_nodes, dtype=bool)
+    is_aerodrome[:n_aerodromes] = True
+    edges = np.concatenate([access, corridor_edges])
+    pairs = [(ids[u], ids[v]) for u, v in edges.tolist()]
+    return network_from_enu(name or f"synthetic-n{n_nodes}-a{n_aerodromes}-s{seed}", ids, enu,
+                            is_aerodrome, pairs, origin_lat_lon_alt=origin_lat_lon_alt)
