@@ -1,0 +1,282 @@
+"""Layers that each add one concern around any MWIS backend (like dimod composites).
+
+Each layer is itself a :class:`~uam_solvers.base.Backend`, so they nest:
+``ValidateFallback(Reduce(ComponentSplit(get_backend("exact"))))`` is the default pipeline.
+
+- :class:`ComponentSplit`: solve each connected component separately; single vertices and
+  cliques are answered directly (optimally), the rest share the time budget by size.
+- :class:`Reduce`: exact reductions that keep the optimum (see :mod:`uam_solvers.reductions`),
+  then solve the remaining kernel with the child.
+- :class:`ValidateFallback`: check the child's answer against the INPUT graph and fall back to
+  greedy on an invalid answer, an exception or a time-limit overrun.
+"""
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from typing import Any, Mapping
+
+import numpy as np
+from scipy.sparse.csgraph import connected_components
+
+from .base import Backend, MwisProblem, MwisResult, check_selection, make_result
+from .reductions import complete_maximal, reduce_problem
+
+__all__ = ["ComponentSplit", "Reduce", "ValidateFallback", "induced_subproblem", "Layer"]
+
+log = logging.getLogger("uam_solvers")
+
+
+def induced_subproblem(problem: MwisProblem, vertices: np.ndarray) -> MwisProblem:
+    """The subgraph induced by sorted ``vertices`` (original indices), re-indexed 0..k-1.
+
+    Listed edges and clique groups are restricted (groups shrinking below 2 vertices vanish), so
+    group structure survives for solvers that use it. O(n + m + sum |group|).
+    """
+    vertices = np.asarray(vertices, dtype=np.int64)
+    new_index = np.full(problem.n, -1, dtype=np.int64)
+    new_index[vertices] = np.arange(vertices.size)
+    e = problem.edges
+    keep = (new_index[e[:, 0]] >= 0) & (new_index[e[:, 1]] >= 0)
+    # new_index is increasing on vertices, so u < v and lexicographic order are preserved.
+    sub_edges = new_index[e[keep]].astype(np.int32).reshape(-1, 2)
+    groups = []
+    for g in problem.groups:
+        ng = new_index[g]
+        ng = ng[ng >= 0]
+        if ng.size >= 2:
+            groups.append(ng.astype(np.int32))
+    return MwisProblem(weights=problem.weights[vertices].copy(), edges=sub_edges, groups=tuple(groups))
+
+
+class _Worker:
+    """A reusable daemon thread. Reusing threads matters: OR-Tools costs a few ms of
+    per-thread set-up, which would dominate the solve of a 50-vertex graph."""
+
+    _idle: list["_Worker"] = []
+    _lock = threading.Lock()
+
+    def __init__(self) -> None:
+        self._jobs: "queue.SimpleQueue" = queue.SimpleQueue()
+        self._thread = threading.Thread(target=self._loop, name="uam-solvers-worker", daemon=True)
+        self._thread.start()
+
+    def _loop(self) -> None:
+        while True:
+            fn, done = self._jobs.get()
+            try:
+                fn()
+            finally:
+                done.set()
+                with _Worker._lock:  # back to the pool only once the (maybe late) job is over
+                    _Worker._idle.append(self)
+
+    @classmethod
+    def acquire(cls) -> "_Worker":
+        with cls._lock:
+            if cls._idle:
+                return cls._idle.pop()
+        return cls()
+
+
+def _run_in_worker(fn, timeout_s: float) -> bool:
+    """Run ``fn`` on a pooled worker thread; True when it finished within ``timeout_s``. A late
+    job keeps its thread (which rejoins the pool when done); the caller moves on."""
+    done = threading.Event()
+    _Worker.acquire()._jobs.put((fn, done))
+    return done.wait(timeout_s)
+
+
+class Layer(Backend):
+    """A backend wrapping a child backend; reports the child's name on its results."""
+
+    def __init__(self, child: Backend):
+        self.child = child
+        self.name = child.name
+        self.description = f"{type(self).__name__}({child.description})"
+
+    def available(self) -> tuple[bool, str]:
+        return self.child.available()
+
+
+class ComponentSplit(Layer):
+    """Solve each connected component of the conflict graph on its own.
+
+    Components of one vertex are selected; components that are cliques (e.g. a request whose
+    candidates conflict with nobody else) get their heaviest vertex (lowest index on ties); both
+    are optimal. Other components go to the child in increasing size with a time share
+    ``remaining_s * size / remaining_size``, so time left by fast components passes to later ones.
+    ``proven_optimal`` is the AND over components. Stats: the child's stats of the largest
+    component plus ``components``, ``trivial_components``, ``largest_component``.
+    """
+
+    def solve(self, problem: MwisProblem, *, time_limit_s: float, seed: int,
+              options: Mapping[str, Any]) -> MwisResult:
+        t0 = time.perf_counter()
+        n = problem.n
+        if n == 0:
+            return make_result(problem, [], proven_optimal=True, solve_time_s=0.0, backend=self.name,
+                               stats={"components": 0})
+        adj = problem.adjacency()
+        ncomp, labels = connected_components(adj, directed=False)
+        sizes = np.bincount(labels, minlength=ncomp)
+        e = problem.all_edges()
+        edge_counts = np.bincount(labels[e[:, 0]], minlength=ncomp) if e.shape[0] else np.zeros(ncomp, int)
+        trivial = edge_counts == sizes * (sizes - 1) // 2  # single vertices and cliques
+        selected: list[np.ndarray] = []
+        # Trivial components: heaviest vertex, lowest index on ties (lexsort: last key primary).
+        triv_vertices = np.flatnonzero(trivial[labels])
+        if triv_vertices.size:
+            order = np.lexsort((triv_vertices, -problem.weights[triv_vertices], labels[triv_vertices]))
+            ordered = triv_vertices[order]
+            first = np.ones(ordered.size, dtype=bool)
+            first[1:] = labels[ordered[1:]] != labels[ordered[:-1]]
+            selected.append(ordered[first])
+        hard = np.flatnonzero(~trivial)
+        if hard.size == 0:
+            return make_result(problem, np.concatenate(selected), proven_optimal=True,
+                               solve_time_s=time.perf_counter() - t0, backend=self.name,
+                               stats={"components": int(ncomp), "trivial_components": int(ncomp),
+                                      "largest_component": int(sizes.max())})
+        if hard.size == 1 and triv_vertices.size == 0:
+            # One component: nothing to split; hand the problem over unchanged.
+            res = self.child.solve(problem, time_limit_s=time_limit_s, seed=seed, options=options)
+            res.stats = {**res.stats, "components": 1, "trivial_components": 0, "largest_component": n}
+            return res
+        # Vertices of each hard component, in index order.
+        vorder = np.argsort(labels, kind="stable")
+        starts = np.concatenate([[0], np.cumsum(sizes)])
+        hard = hard[np.argsort(sizes[hard], kind="stable")]
+        remaining_size = int(sizes[hard].sum())
+        proven = True
+        largest_stats: dict = {}
+        largest = -1
+        deadline = t0 + time_limit_s
+        for c in hard:
+            verts = vorder[starts[c]:starts[c + 1]]
+            sub = induced_subproblem(problem, verts)
+            remaining_s = max(deadline - time.perf_counter(), 0.0)
+            share = max(remaining_s * sub.n / remaining_size, 1e-3)
+            res = self.child.solve(sub, time_limit_s=share, seed=seed, options=options)
+            remaining_size -= sub.n
+            selected.append(verts[np.asarray(res.selected, dtype=np.int64)])
+            proven = proven and res.proven_optimal
+            if sub.n > largest:
+                largest, largest_stats = sub.n, dict(res.stats)
+        stats = {**largest_stats, "components": int(ncomp),
+                 "trivial_components": int(trivial.sum()), "largest_component": int(sizes.max())}
+        return make_result(problem, np.concatenate(selected), proven_optimal=proven,
+                           solve_time_s=time.perf_counter() - t0, backend=self.name, stats=stats)
+
+
+class Reduce(Layer):
+    """Apply exact reductions (:func:`uam_solvers.reductions.reduce_problem`), solve the kernel
+    with the child, lift the answer back and make it maximal.
+
+    The reductions keep at least one optimum, so ``proven_optimal`` is the child's flag on the
+    kernel (True when the kernel is empty). Stats add the reduction counters.
+    """
+
+    def solve(self, problem: MwisProblem, *, time_limit_s: float, seed: int,
+              options: Mapping[str, Any]) -> MwisResult:
+        t0 = time.perf_counter()
+        red = reduce_problem(problem)
+        stats = dict(red.counts)
+        proven = True
+        chosen = [red.forced]
+        if red.kernel.n:
+            budget = max(time_limit_s - (time.perf_counter() - t0), 1e-3)
+            res = self.child.solve(red.kernel, time_limit_s=budget, seed=seed, options=options)
+            chosen.append(red.kept[np.asarray(res.selected, dtype=np.int64)])
+            proven = res.proven_optimal
+            stats = {**res.stats, **stats}
+        sel = complete_maximal(problem, np.concatenate(chosen))
+        return make_result(problem, sel, proven_optimal=proven,
+                           solve_time_s=time.perf_counter() - t0, backend=self.name, stats=stats)
+
+
+class ValidateFallback(Layer):
+    """Check every answer of ``child`` and fall back to ``fallback`` (greedy GWMIN) when needed.
+
+    The child runs on a pooled daemon worker thread so a solve that overruns ``time_limit_s`` by more
+    than ``max(margin_s, margin_fraction * time_limit_s)`` is abandoned (the thread is left to
+    finish on its own) instead of blocking the caller. The answer must be a 1-D array of distinct
+    in-range vertex indices that is independent in the input graph, groups included; the
+    objective is recomputed in float64 (a differing reported objective is kept in
+    ``stats["reported_objective"]``). On an invalid answer, an exception or an overrun the
+    fallback's answer is returned with ``fallback=True`` and the reason in ``message``, and a
+    warning is logged on the ``uam_solvers`` logger. No caller receives a non-independent set.
+    """
+
+    def __init__(self, child: Backend, fallback: Backend | None = None, margin_s: float = 1.0,
+                 margin_fraction: float = 0.5):
+        super().__init__(child)
+        if fallback is None:
+            from .greedy import GreedyBackend
+            fallback = GreedyBackend()
+        self.fallback = fallback
+        self.margin_s = float(margin_s)
+        self.margin_fraction = float(margin_fraction)
+
+    def solve(self, problem: MwisProblem, *, time_limit_s: float, seed: int,
+              options: Mapping[str, Any]) -> MwisResult:
+        t0 = time.perf_counter()
+        box: dict[str, Any] = {}
+
+        def run() -> None:
+            try:
+                box["result"] = self.child.solve(problem, time_limit_s=time_limit_s, seed=seed,
+                                                 options=options)
+            except BaseException as exc:  # noqa: BLE001 - any failure means fall back
+                box["error"] = exc
+
+        allowed_s = time_limit_s + max(self.margin_s, self.margin_fraction * time_limit_s)
+        finished = _run_in_worker(run, allowed_s)
+        elapsed = time.perf_counter() - t0
+        reason = ""
+        if not finished:
+            reason = (f"backend {self.child.name!r} exceeded its time limit: still running after "
+                      f"{elapsed:.3f} s (limit {time_limit_s:.3f} s + margin)")
+        elif "error" in box:
+            exc = box["error"]
+            reason = f"backend {self.child.name!r} raised {type(exc).__name__}: {exc}"
+        else:
+            res = box.get("result")
+            if not isinstance(res, MwisResult):
+                reason = f"backend {self.child.name!r} returned {type(res).__name__}, not MwisResult"
+            else:
+                ok, why = check_selection(problem, res.selected)
+                if not ok:
+                    reason = f"backend {self.child.name!r} returned an invalid answer: {why}"
+                elif elapsed > allowed_s:
+                    reason = (f"backend {self.child.name!r} exceeded its time limit: {elapsed:.3f} s "
+                              f"(limit {time_limit_s:.3f} s + margin)")
+        if not reason:
+            sel = np.unique(np.asarray(res.selected, dtype=np.int64)).astype(np.int32)
+            obj = problem.objective(sel)
+            stats = dict(res.stats)
+            if not np.isclose(float(res.objective), obj, rtol=1e-9, atol=1e-9):
+                stats["reported_objective"] = float(res.objective)
+            return MwisResult(selected=sel, objective=obj, proven_optimal=bool(res.proven_optimal),
+                              solve_time_s=elapsed, backend=res.backend, stats=stats,
+                              fallback=bool(res.fallback), message=res.message)
+        log.warning("MWIS fallback to %s: %s", self.fallback.name, reason)
+        try:
+            fb = self.fallback.solve(problem, time_limit_s=time_limit_s, seed=seed, options={})
+            ok, why = check_selection(problem, fb.selected)
+            if not ok:
+                raise RuntimeError(why)
+            sel = fb.selected
+            stats = dict(fb.stats)
+            proven = bool(fb.proven_optimal)
+        except Exception as exc:  # noqa: BLE001 - last resort: the empty set is always independent
+            log.error("MWIS fallback %s failed too: %s", self.fallback.name, exc)
+            reason += f"; fallback {self.fallback.name!r} failed ({exc}), returning the empty set"
+            sel, stats, proven = np.zeros(0, dtype=np.int32), {}, False
+        out = make_result(problem, sel, proven_optimal=proven,
+                          solve_time_s=time.perf_counter() - t0, backend=self.fallback.name,
+                          stats={**stats, "requested_backend": self.child.name}, message=reason)
+        out.fallback = True
+        return out
