@@ -1,0 +1,207 @@
+"""Candidate routes by penalised Dijkstra (framework step 2).
+
+For a request from origin o to destination d: find the shortest path, then add
+``penalty_factor`` x the ORIGINAL length to every corridor that path used and search again; k
+searches in all, duplicate paths dropped. Each route keeps its true (unpenalised) length d, and
+its MWIS weight is w = d* / d with d* the shortest length, so the shortest route has w = 1 and
+every weight lies in (0, 1].
+
+Routes depend only on (o, d), the network and (k, penalty_factor), never on time, so
+``CandidateCache`` computes them once per pair and also keeps each route's waypoint positions and
+relative waypoint times at the cruise speed, so a trajectory departing at t is one addition.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse
+from scipy.sparse.csgraph import dijkstra
+
+from .trajectory import DEFAULT_SPEED_MPS, Trajectory, relative_times_s
+
+
+@dataclass(frozen=True)
+class CandidateRoute:
+    """One candidate route of a request.
+
+    Attributes:
+        node_indices: route as network node indices, origin first.
+        length_m: true (unpenalised) route length [m].
+        weight: MWIS weight d*/d in (0, 1]; 1 for the shortest route.
+        candidate_index: position among the request's candidates (0 = shortest).
+    """
+
+    node_indices: tuple[int, ...]
+    length_m: float
+    weight: float
+    candidate_index: int
+
+
+class _PenalisedGraph:
+    """A directed CSR copy of the network whose corridor costs can be raised per search."""
+
+    def __init__(self, network):
+        n = network.n_nodes
+        edges = np.asarray(network.edges, dtype=np.int64)
+        m = edges.shape[0]
+        rows = np.concatenate((edges[:, 0], edges[:, 1]))
+        cols = np.concatenate((edges[:, 1], edges[:, 0]))
+        order = np.lexsort((cols, rows))
+        self.length = np.asarray(network.edge_length_m, dtype=np.float64)
+        self.indptr = np.concatenate(([0], np.cumsum(np.bincount(rows, minlength=n)))).astype(np.int32)
+        self.indices = cols[order].astype(np.int32)
+        self.entry_edge = np.concatenate((np.arange(m), np.arange(m)))[order]
+        # position of every directed entry in CSR order; edge e sits at pos[e] and pos[m + e]
+        pos = np.empty(2 * m, dtype=np.int64)
+        pos[order] = np.arange(2 * m)
+        self.pos_fwd = pos[:m]
+        self.pos_bwd = pos[m:]
+        self.n = n
+        self.edge_of = {(int(u), int(v)): k for k, (u, v) in enumerate(edges.tolist())}
+
+    def matrix(self, cost: np.ndarray) -> scipy.sparse.csr_matrix:
+        return scipy.sparse.csr_matrix((cost[self.entry_edge], self.indices, self.indptr),
+                                       shape=(self.n, self.n))
+
+    def path_edges(self, path: list[int]) -> np.ndarray:
+        return np.fromiter((self.edge_of[(min(a, b), max(a, b))] for a, b in zip(path, path[1:])),
+                           dtype=np.int64, count=len(path) - 1)
+
+
+def _validate_k_penalty(k, penalty_factor):
+    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
+        raise ValueError(f"k must be an integer >= 1, got {k!r}")
+    if not (np.isfinite(penalty_factor) and penalty_factor >= 0.0):
+        raise ValueError(f"penalty_factor must be finite and >= 0, got {penalty_factor!r}")
+
+
+def _routes(graph: _PenalisedGraph, network, o: int, d: int, k: int,
+            penalty_factor: float) -> list[CandidateRoute]:
+    cost = graph.length.copy()
+    seen: set[tuple[int, ...]] = set()
+    paths: list[tuple[tuple[int, ...], float]] = []
+    for _ in range(int(k)):
+        _, pred = dijkstra(graph.matrix(cost), directed=True, indices=o, return_predecessors=True)
+        if pred[d] < 0:
+            raise ValueError(f"destination node {network.node_ids[d]!r} is unreachable from "
+                             f"origin {network.node_ids[o]!r}")
+        path = [d]
+        while path[-1] != o:
+            path.append(int(pred[path[-1]]))
+        path.reverse()
+        used = graph.path_edges(path)
+        key = tuple(path)
+        if key not in seen:
+            seen.add(key)
+            paths.append((key, float(graph.length[used].sum())))
+        cost[used] += penalty_factor * graph.length[used]
+    d_star = paths[0][1]
+    return [CandidateRoute(p, length, d_star / length, i) for i, (p, length) in enumerate(paths)]
+
+
+def candidate_routes(network, origin_id: str, destination_id: str, k: int = 5,
+                     penalty_factor: float = 5.0) -> list[CandidateRoute]:
+    """Up to k distinct candidate routes from ``origin_id`` to ``destination_id``.
+
+    Args:
+        network: a ``uam_planner.network.Network``.
+        origin_id, destination_id: node ids (distinct).
+        k: number of penalised Dijkstra searches (routes after dropping duplicates: 1..k).
+        penalty_factor: after each search, each used corridor's cost grows by this times its length.
+    Returns: routes in search order; the first is a shortest route (weight 1).
+    Complexity: k Dijkstra searches, O(k (m + n log n)). Ties are broken deterministically (same
+    network, same routes), by scipy's Dijkstra on the fixed CSR order of the corridors.
+    """
+    _validate_k_penalty(k, penalty_factor)
+    o = network.node_index(origin_id)
+    d = network.node_index(destination_id)
+    if o == d:
+        raise ValueError(f"origin_id and destination_id are the same node {origin_id!r}")
+    return _routes(_PenalisedGraph(network), network, o, d, k, penalty_factor)
+
+
+@dataclass(frozen=True)
+class RouteTemplate:
+    """A candidate route ready to fly: waypoints and times relative to departure.
+
+    ``segments_rel`` holds (t0_s, t1_s, p0_m, v_mps) with times relative to departure.
+    """
+
+    route: CandidateRoute
+    node_ids: tuple[str, ...]
+    points_m: np.ndarray
+    rel_times_s: np.ndarray
+    segments_rel: tuple
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.rel_times_s[-1])
+
+    def trajectory(self, departure_s: float) -> Trajectory:
+        """The trajectory departing at ``departure_s`` [s]."""
+        t0, t1, p0, v = self.segments_rel
+        dep = float(departure_s)
+        return Trajectory(self.rel_times_s + dep, self.points_m,
+                          (t0 + dep, t1 + dep, p0, v))
+
+
+class CandidateCache:
+    """Candidate routes per (origin, destination) pair, computed once.
+
+    Args:
+        network: the ``Network``.
+        k, penalty_factor: as in :func:`candidate_routes`.
+        speed_mps: cruise speed [m/s] used for the templates' relative times.
+
+    ``templates(o_idx, d_idx)`` returns the tuple of RouteTemplate for node indices o, d; the
+    first call for a pair costs k Dijkstra searches, later calls a dict lookup. ``hits`` and
+    ``misses`` count lookups.
+    """
+
+    def __init__(self, network, k: int = 5, penalty_factor: float = 5.0,
+                 speed_mps: float = DEFAULT_SPEED_MPS):
+        _validate_k_penalty(k, penalty_factor)
+        if not (np.isfinite(speed_mps) and speed_mps > 0.0):
+            raise ValueError(f"speed_mps must be positive and finite, got {speed_mps!r}")
+        self.network = network
+        self.k = int(k)
+        self.penalty_factor = float(penalty_factor)
+        self.speed_mps = float(speed_mps)
+        self._graph = _PenalisedGraph(network)
+        self._store: dict[tuple[int, int], tuple[RouteTemplate, ...]] = {}
+        self.hits = 0
+        self.misses = 0
+
+    def __len__(self) -> int:
+        return len(self._store)
+
+    def routes(self, origin_index: int, destination_index: int) -> list[CandidateRoute]:
+        return [t.route for t in self.templates(origin_index, destination_index)]
+
+    def templates(self, origin_index: int, destination_index: int) -> tuple[RouteTemplate, ...]:
+        key = (int(origin_index), int(destination_index))
+        got = self._store.get(key)
+        if got is not None:
+            self.hits += 1
+            return got
+        self.misses += 1
+        if key[0] == key[1]:
+            raise ValueError(f"origin and destination are the same node "
+                             f"{self.network.node_ids[key[0]]!r}")
+        routes = _routes(self._graph, self.network, key[0], key[1], self.k, self.penalty_factor)
+        out = []
+        for r in routes:
+            pts = np.ascontiguousarray(self.network.enu_m[np.asarray(r.node_indices)], dtype=np.float64)
+            rel = relative_times_s(pts, self.speed_mps)
+            t0 = rel[:-1]
+            t1 = rel[1:]
+            v = (pts[1:] - pts[:-1]) / (t1 - t0)[:, None]
+            for a in (pts, rel, v):
+                a.setflags(write=False)
+            out.append(RouteTemplate(r, tuple(self.network.node_ids[i] for i in r.node_indices),
+                                     pts, rel, (t0, t1, pts[:-1], v)))
+        got = tuple(out)
+        self._store[key] = got
+        return got

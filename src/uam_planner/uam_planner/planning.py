@@ -1,0 +1,498 @@
+"""The planning cycle (framework steps 1-7) and the shortest-FIFO baseline, free of ROS.
+
+One epoch at time t:
+
+1. eligible requests: pending with earliest_departure_s <= t <= latest_departure_s;
+2. candidate routes (cached per origin-destination pair);
+3. trajectories departing at t;
+4. discard candidates that lose separation with an active flight;
+5. conflicts between candidates of different requests;
+6. conflict graph, solved by an injected MWIS function whose answer is checked here (independent,
+   at most one per request, indices in range) and replaced by greedy if it fails or is invalid;
+7. the selected candidates become flights departing at t; an unapproved request whose latest
+   departure comes before the next epoch (t + epoch_s) expires now; the others wait.
+
+``plan_epoch_fifo`` is the paper's baseline with the same inputs and outputs: in arrival order,
+each eligible request gets its shortest route if that route keeps separation with every active
+flight and every flight approved before it in this epoch; otherwise it waits (until it expires).
+
+``Planner`` holds the pending requests and active flights between epochs; the ROS planner node and
+the in-process experiment runner both drive it, so they approve the same flights for the same
+inputs. Wall time is measured only for reports (``solve_time_s``, ``planning_time_s``); no
+decision depends on it.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+
+from .candidates import CandidateCache, RouteTemplate
+from .conflict_graph import ConflictGraph, build_conflict_graph
+from .separation import SegmentSet, conflicting_pairs
+from .trajectory import Trajectory
+
+POLICIES = ("mwis", "fifo")
+
+
+@dataclass(frozen=True)
+class FlightRequest:
+    """A request to fly from one aerodrome to another. Times are simulation seconds."""
+
+    request_id: str
+    origin_id: str
+    destination_id: str
+    request_time_s: float
+    earliest_departure_s: float
+    latest_departure_s: float
+
+
+@dataclass(frozen=True, eq=False)
+class Flight:
+    """An approved flight: a request with its chosen route and 4D trajectory."""
+
+    request_id: str
+    origin_id: str
+    destination_id: str
+    route_node_ids: tuple[str, ...]
+    trajectory: Trajectory
+    departure_s: float
+    arrival_s: float
+    length_m: float
+    weight: float
+    candidate_index: int
+    method: str
+    backend: str
+    epoch_index: int
+
+
+@dataclass(frozen=True)
+class PlanningConfig:
+    """Planner parameters (paper defaults).
+
+    Attributes:
+        epoch_s: time between planning epochs [s].
+        separation_m: separation minimum [m].
+        k: candidate routes per request (penalised Dijkstra searches).
+        penalty_factor: penalised Dijkstra factor.
+        speed_mps: cruise speed [m/s].
+        backend: MWIS backend name asked of ``uam_solvers.solve`` by the default solve function.
+        time_limit_s: MWIS time budget [s] for the default solve function.
+        seed: seed for stochastic backends.
+    """
+
+    epoch_s: float = 30.0
+    separation_m: float = 100.0
+    k: int = 5
+    penalty_factor: float = 5.0
+    speed_mps: float = 10.0
+    backend: str = "greedy"
+    time_limit_s: float = 10.0
+    seed: int = 0
+
+    def __post_init__(self):
+        for name in ("epoch_s", "separation_m", "speed_mps", "time_limit_s"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+                raise ValueError(f"PlanningConfig.{name} must be a positive finite number, got {v!r}")
+        if isinstance(self.k, bool) or not isinstance(self.k, (int, np.integer)) or self.k < 1:
+            raise ValueError(f"PlanningConfig.k must be an integer >= 1, got {self.k!r}")
+        pf = self.penalty_factor
+        if isinstance(pf, bool) or not isinstance(pf, (int, float)) or not math.isfinite(pf) or pf < 0:
+            raise ValueError(f"PlanningConfig.penalty_factor must be finite and >= 0, got {pf!r}")
+        if not isinstance(self.backend, str) or not self.backend:
+            raise ValueError(f"PlanningConfig.backend must be a non-empty string, got {self.backend!r}")
+
+
+@dataclass
+class EpochReport:
+    """Every count of one planning epoch (mirrors uam_msgs/PlanningReport) and the MWIS instance."""
+
+    epoch_index: int
+    t_s: float
+    policy: str
+    pending: int = 0
+    eligible: int = 0
+    candidates: int = 0
+    discarded: int = 0
+    vertices: int = 0
+    edges: int = 0
+    conflict_edges: int = 0
+    approved: int = 0
+    rejected: int = 0
+    expired: int = 0
+    active_flights: int = 0
+    objective: float = 0.0
+    solve_time_s: float = 0.0
+    planning_time_s: float = 0.0
+    proven_optimal: bool = False
+    backend_requested: str = ""
+    backend_used: str = ""
+    fallback: bool = False
+    fallback_reason: str = ""
+    weights: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float64))
+    edges_array: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int32))
+    vertex_request_ids: list = field(default_factory=list)
+    vertex_candidate_index: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    selected: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    phase_times_s: dict = field(default_factory=dict)
+
+
+@dataclass
+class EpochResult:
+    """Approvals, expiries and the requests left waiting after one epoch, with the report."""
+
+    approved: list
+    expired: list
+    waiting: list
+    report: EpochReport
+
+
+# ---- MWIS answer checking ---------------------------------------------------------------------
+
+def _fallback_greedy(weights: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    from uam_solvers.greedy import greedy_mwis
+    return np.asarray(greedy_mwis(weights, edges), dtype=np.int64)
+
+
+def check_selection(selected, graph: ConflictGraph) -> str:
+    """Why ``selected`` is not a valid answer for ``graph`` ('' when valid).
+
+    Valid: integer vertex indices in range, no repeats, no edge with both ends selected, at most
+    one vertex per request. O(v + e).
+    """
+    sel = np.asarray(selected)
+    if sel.ndim != 1:
+        return f"selected has shape {sel.shape}, expected a 1-D array"
+    if sel.size and sel.dtype.kind not in "iu":
+        return f"selected has dtype {sel.dtype}, expected integers"
+    sel = sel.astype(np.int64)
+    n = graph.n_vertices
+    if sel.size and (sel.min() < 0 or sel.max() >= n):
+        bad = sel[(sel < 0) | (sel >= n)][0]
+        return f"selected vertex {int(bad)} is outside [0, {n - 1}]"
+    chosen = np.zeros(n, dtype=bool)
+    chosen[sel] = True
+    if int(chosen.sum()) != sel.size:
+        return "selected lists a vertex more than once"
+    e = graph.edges
+    both = chosen[e[:, 0]] & chosen[e[:, 1]] if e.shape[0] else np.zeros(0, bool)
+    if both.any():
+        u, v = e[np.argmax(both)]
+        return f"selected vertices {int(u)} and {int(v)} share an edge (not independent)"
+    req = graph.vertex_request[sel]
+    if np.unique(req).size != req.size:
+        return "selected holds two candidates of one request"
+    return ""
+
+
+def _solve_checked(graph: ConflictGraph, solve_mwis: Callable, report: EpochReport) -> np.ndarray:
+    """Call the injected solver, check its answer, fall back to greedy; fill the report."""
+    if graph.n_vertices == 0:
+        return np.zeros(0, dtype=np.int64)
+    t = time.perf_counter()
+    reason = ""
+    result = None
+    try:
+        result = solve_mwis(graph.weights, graph.edges, graph.groups)
+        selected = getattr(result, "selected", None)
+        if selected is None:
+            reason = f"solver answer {type(result).__name__} has no 'selected'"
+        else:
+            reason = check_selection(selected, graph)
+    except Exception as exc:  # any solver failure must not stop planning; it is reported
+        reason = f"solver raised {type(exc).__name__}: {exc}"
+    report.solve_time_s = time.perf_counter() - t
+    if reason:
+        selected = _fallback_greedy(graph.weights, graph.edges)
+        report.backend_used = "greedy"
+        report.fallback = True
+        report.fallback_reason = reason
+        report.proven_optimal = False
+        assert check_selection(selected, graph) == "", "greedy fallback returned an invalid set"
+    else:
+        selected = np.asarray(selected, dtype=np.int64)
+        report.backend_used = str(getattr(result, "backend", "") or report.backend_requested)
+        report.proven_optimal = bool(getattr(result, "proven_optimal", False))
+        report.fallback = bool(getattr(result, "fallback", False))
+        if report.fallback:
+            report.fallback_reason = str(getattr(result, "message", "") or "solver fell back")
+    return np.sort(selected)
+
+
+def default_solve_mwis(config: PlanningConfig) -> Callable:
+    """A solve function calling ``uam_solvers.solve`` with the config's backend, limit and seed."""
+    import uam_solvers
+
+    def solve(weights, edges, groups):
+        return uam_solvers.solve(weights, edges, groups=groups, backend=config.backend,
+                                 time_limit_s=config.time_limit_s, seed=config.seed)
+    return solve
+
+
+# ---- the two policies ---------------------------------------------------------------------------
+
+def _eligible(t_s: float, pending: Sequence[FlightRequest]) -> list:
+    return [r for r in pending if r.earliest_departure_s <= t_s <= r.latest_departure_s]
+
+
+def _finish(t_s, config, pending, approved, active_count, report) -> EpochResult:
+    done = {f.request_id for f in approved}
+    horizon = t_s + config.epoch_s
+    expired, waiting = [], []
+    for r in pending:
+        if r.request_id in done:
+            continue
+        (expired if r.latest_departure_s < horizon else waiting).append(r)
+    report.approved = len(approved)
+    report.expired = len(expired)
+    report.active_flights = active_count + len(approved)
+    report.objective = float(sum(f.weight for f in approved))
+    return EpochResult(approved=approved, expired=expired, waiting=waiting, report=report)
+
+
+def _flight(req: FlightRequest, tmpl: RouteTemplate, traj: Trajectory, method: str, backend: str,
+            epoch_index: int) -> Flight:
+    r = tmpl.route
+    return Flight(request_id=req.request_id, origin_id=req.origin_id,
+                  destination_id=req.destination_id, route_node_ids=tmpl.node_ids,
+                  trajectory=traj, departure_s=traj.departure_s, arrival_s=traj.arrival_s,
+                  length_m=r.length_m, weight=r.weight, candidate_index=r.candidate_index,
+                  method=method, backend=backend, epoch_index=int(epoch_index))
+
+
+def _airborne(active: Sequence[Flight], t_s: float) -> list:
+    return [f for f in active if f.arrival_s >= t_s]
+
+
+def plan_epoch_mwis(t_s: float, epoch_index: int, pending: Sequence[FlightRequest],
+                    active: Sequence[Flight], network, config: PlanningConfig,
+                    solve_mwis: Callable, cache: CandidateCache) -> EpochResult:
+    """One MWIS planning epoch at time ``t_s`` [s].
+
+    Args:
+        t_s: epoch time [s]; approved flights depart at t_s.
+        epoch_index: epoch number, copied to the report and the flights.
+        pending: requests not yet decided, in arrival order.
+        active: approved flights (those that landed before t_s are ignored).
+        network: the Network (ids in requests are its node ids).
+        config: PlanningConfig.
+        solve_mwis: callable(weights, edges, groups) -> object with ``selected`` (and optionally
+            backend, proven_optimal, fallback, message); its answer is checked, and replaced by
+            greedy (marked as a fallback in the report) if it raises or is invalid.
+        cache: CandidateCache built for this network and config.
+    Returns: EpochResult. Approved flights never lose separation with each other or with
+    ``active``: every conflict is an edge and the answer is checked to be independent.
+    """
+    t_start = time.perf_counter()
+    phases = {}
+    report = EpochReport(epoch_index=int(epoch_index), t_s=float(t_s), policy="mwis",
+                         pending=len(pending), backend_requested=config.backend)
+    eligible = _eligible(t_s, pending)
+    airborne = _airborne(active, t_s)
+    t1 = time.perf_counter()
+    phases["eligible_s"] = t1 - t_start
+
+    tmpls: list[RouteTemplate] = []
+    req_of: list[int] = []
+    for i, r in enumerate(eligible):
+        ts = cache.templates(network.node_index(r.origin_id), network.node_index(r.destination_id))
+        tmpls.extend(ts)
+        req_of.extend([i] * len(ts))
+    t2 = time.perf_counter()
+    phases["candidates_s"] = t2 - t1
+    trajs = [tp.trajectory(t_s) for tp in tmpls]
+    t3 = time.perf_counter()
+    phases["trajectories_s"] = t3 - t2
+
+    graph = build_conflict_graph(
+        trajs, np.asarray(req_of, dtype=np.int64),
+        np.fromiter((tp.route.candidate_index for tp in tmpls), dtype=np.int64, count=len(tmpls)),
+        np.fromiter((tp.route.weight for tp in tmpls), dtype=np.float64, count=len(tmpls)),
+        len(eligible), [f.trajectory for f in airborne], config.separation_m, timings=phases)
+    t4 = time.perf_counter()
+
+    selected = _solve_checked(graph, solve_mwis, report)
+    t5 = time.perf_counter()
+    phases["solve_s"] = t5 - t4
+
+    approved = []
+    for v in selected.tolist():
+        src = int(graph.vertex_source[v])
+        approved.append(_flight(eligible[req_of[src]], tmpls[src], trajs[src], "mwis",
+                                report.backend_used, epoch_index))
+    # Vertices follow the eligible order, so sorted vertices give approvals in arrival order.
+
+    report.eligible = len(eligible)
+    report.candidates = graph.n_candidates
+    report.discarded = graph.n_discarded
+    report.vertices = graph.n_vertices
+    report.edges = graph.n_edges
+    report.conflict_edges = graph.n_conflict_edges
+    report.weights = graph.weights
+    report.edges_array = graph.edges
+    report.vertex_request_ids = [eligible[i].request_id for i in graph.vertex_request.tolist()]
+    report.vertex_candidate_index = graph.vertex_candidate
+    report.selected = selected.astype(np.int32)
+    result = _finish(t_s, config, pending, approved, len(airborne), report)
+    t6 = time.perf_counter()
+    phases["finish_s"] = t6 - t5
+    report.planning_time_s = (t6 - t_start) - phases["solve_s"]
+    report.phase_times_s = phases
+    return result
+
+
+def plan_epoch_fifo(t_s: float, epoch_index: int, pending: Sequence[FlightRequest],
+                    active: Sequence[Flight], network, config: PlanningConfig,
+                    solve_mwis: Callable | None, cache: CandidateCache) -> EpochResult:
+    """One shortest-FIFO epoch; same inputs and outputs as :func:`plan_epoch_mwis`.
+
+    In the order of ``pending`` (arrival order), each eligible request gets its shortest route if
+    it keeps separation with every active flight and every flight approved before it in this
+    epoch; otherwise it waits. ``solve_mwis`` is ignored. The report's instance is empty;
+    ``vertices`` counts the shortest routes that survive the active flights and ``edges`` /
+    ``conflict_edges`` the conflicting pairs among them.
+    """
+    t_start = time.perf_counter()
+    phases = {}
+    report = EpochReport(epoch_index=int(epoch_index), t_s=float(t_s), policy="fifo",
+                         pending=len(pending))
+    eligible = _eligible(t_s, pending)
+    airborne = _airborne(active, t_s)
+    t1 = time.perf_counter()
+    phases["eligible_s"] = t1 - t_start
+    tmpls = [cache.templates(network.node_index(r.origin_id),
+                             network.node_index(r.destination_id))[0] for r in eligible]
+    t2 = time.perf_counter()
+    phases["candidates_s"] = t2 - t1
+    trajs = [tp.trajectory(t_s) for tp in tmpls]
+    t3 = time.perf_counter()
+    phases["trajectories_s"] = t3 - t2
+    cand_set = SegmentSet.from_trajectories(trajs)
+    active_set = SegmentSet.from_trajectories([f.trajectory for f in airborne])
+    discarded = np.zeros(len(trajs), dtype=bool)
+    if len(trajs) and len(active_set):
+        pairs = conflicting_pairs(cand_set, active_set, config.separation_m)
+        discarded[pairs[:, 0]] = True
+    t4 = time.perf_counter()
+    phases["deconfliction_s"] = t4 - t3
+    surv = np.flatnonzero(~discarded)
+    conflicts = conflicting_pairs([trajs[i] for i in surv], None, config.separation_m) \
+        if surv.size > 1 else np.zeros((0, 2), dtype=np.int64)
+    t5 = time.perf_counter()
+    phases["conflicts_s"] = t5 - t4
+    partners: dict[int, list[int]] = {}
+    for a, b in conflicts.tolist():
+        partners.setdefault(int(surv[b]), []).append(int(surv[a]))  # a < b: a arrived first
+    taken = np.zeros(len(trajs), dtype=bool)
+    approved = []
+    for i in surv.tolist():
+        if any(taken[j] for j in partners.get(i, ())):
+            continue
+        taken[i] = True
+        approved.append(_flight(eligible[i], tmpls[i], trajs[i], "fifo", "", epoch_index))
+    t6 = time.perf_counter()
+    phases["graph_s"] = t6 - t5
+    phases["solve_s"] = 0.0
+    report.eligible = len(eligible)
+    report.candidates = len(trajs)
+    report.discarded = int(discarded.sum())
+    report.vertices = int(surv.size)
+    report.edges = report.conflict_edges = int(conflicts.shape[0])
+    result = _finish(t_s, config, pending, approved, len(airborne), report)
+    t7 = time.perf_counter()
+    phases["finish_s"] = t7 - t6
+    report.planning_time_s = t7 - t_start
+    report.phase_times_s = phases
+    return result
+
+
+# ---- the stateful planner -----------------------------------------------------------------------
+
+class Planner:
+    """Pending requests and active flights between epochs, with one policy.
+
+    Args:
+        network: the Network.
+        config: PlanningConfig (default: paper defaults).
+        policy: "mwis" or "fifo".
+        solve_mwis: callable(weights, edges, groups) for the MWIS policy; default calls
+            ``uam_solvers.solve`` with ``config.backend``.
+
+    ``submit`` validates and queues a request; ``plan(t_s, epoch_index)`` runs one epoch, keeps
+    the waiting requests, adds the approvals to the active flights and drops flights that landed
+    before t_s. Each request is decided once: approved, expired or rejected.
+    """
+
+    def __init__(self, network, config: PlanningConfig | None = None, policy: str = "mwis",
+                 solve_mwis: Callable | None = None):
+        if policy not in POLICIES:
+            raise ValueError(f"policy must be one of {POLICIES}, got {policy!r}")
+        self.network = network
+        self.config = config if config is not None else PlanningConfig()
+        self.policy = policy
+        if solve_mwis is None and policy == "mwis":
+            solve_mwis = default_solve_mwis(self.config)
+        self.solve_mwis = solve_mwis
+        self.cache = CandidateCache(network, self.config.k, self.config.penalty_factor,
+                                    self.config.speed_mps)
+        self.pending: list[FlightRequest] = []
+        self.active: list[Flight] = []
+        self._known_ids: set[str] = set()
+        self._rejected_since_plan = 0
+
+    def validate(self, request: FlightRequest) -> str | None:
+        """Why ``request`` cannot be accepted (naming the field and value), or None."""
+        rid = getattr(request, "request_id", None)
+        if not isinstance(rid, str) or not rid:
+            return f"request_id: {rid!r} is not a non-empty string"
+        if rid in self._known_ids:
+            return f"request_id: {rid!r} duplicates an earlier request"
+        net = self.network
+        for name in ("origin_id", "destination_id"):
+            node = getattr(request, name)
+            i = net.index.get(node) if isinstance(node, str) else None
+            if i is None:
+                return f"{name}: {node!r} is not a node of network {net.name!r}"
+            if not net.is_aerodrome[i]:
+                return f"{name}: {node!r} is not an aerodrome of network {net.name!r}"
+        if request.origin_id == request.destination_id:
+            return (f"destination_id: {request.destination_id!r} is the same as origin_id "
+                    f"{request.origin_id!r}")
+        for name in ("request_time_s", "earliest_departure_s", "latest_departure_s"):
+            v = getattr(request, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) \
+                    or not math.isfinite(v):
+                return f"{name}: {v!r} is not a finite time"
+        if request.latest_departure_s < request.earliest_departure_s:
+            return (f"latest_departure_s: {request.latest_departure_s!r} is before "
+                    f"earliest_departure_s {request.earliest_departure_s!r}")
+        return None
+
+    def submit(self, request: FlightRequest) -> str | None:
+        """Queue ``request``; return None if accepted, else the rejection reason."""
+        reason = self.validate(request)
+        if reason is not None:
+            self._rejected_since_plan += 1
+            return reason
+        self._known_ids.add(request.request_id)
+        self.pending.append(request)
+        return None
+
+    def plan(self, t_s: float, epoch_index: int) -> EpochResult:
+        """Run one planning epoch at ``t_s`` [s] and update the planner's state."""
+        if not math.isfinite(t_s):
+            raise ValueError(f"t_s must be finite, got {t_s!r}")
+        self.active = [f for f in self.active if f.arrival_s >= t_s]
+        fn = plan_epoch_mwis if self.policy == "mwis" else plan_epoch_fifo
+        result = fn(t_s, epoch_index, self.pending, self.active, self.network, self.config,
+                    self.solve_mwis, self.cache)
+        self.pending = list(result.waiting)
+        self.active = self.active + list(result.approved)
+        result.report.rejected = self._rejected_since_plan
+        self._rejected_since_plan = 0
+        return result
