@@ -23,7 +23,30 @@ from .base import (
     MwisResult,
     check_selection,
 )
-from .registry import UnknownBackendError, get_backend, list_backends
+
+# The registry is imported lazily so ``python -m uam_solvers.registry`` runs without a warning.
+
+
+def get_backend(name: str) -> Backend:
+    """A fresh instance of the backend called ``name`` (see :func:`uam_solvers.registry.get_backend`)."""
+    from .registry import get_backend as _get
+
+    return _get(name)
+
+
+def list_backends() -> list[tuple[str, str, bool, str]]:
+    """``(name, description, available, reason)`` per backend (see :mod:`uam_solvers.registry`)."""
+    from .registry import list_backends as _list
+
+    return _list()
+
+
+def __getattr__(attr: str):
+    if attr == "UnknownBackendError":
+        from .registry import UnknownBackendError
+
+        return UnknownBackendError
+    raise AttributeError(f"module 'uam_solvers' has no attribute {attr!r}")
 
 __all__ = [
     "Backend",

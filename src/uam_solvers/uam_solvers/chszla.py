@@ -1,0 +1,125 @@
+"""KaMIS branch-and-reduce and CHILS through the ``chszlablib`` wheel (MIT, Heidelberg).
+
+Both take integer vertex weights. Float weights are scaled with
+:func:`uam_solvers.base.integer_weights`: ``W = round(w * R / max(w))`` (positive weights never
+round to 0). KaMIS's weighted branch-and-reduce stores weights and their sums as 32-bit ints, so
+its resolution is ``R = min(10^6, (2^31 - 1) // n)`` (the sum of all weights stays below 2^31);
+CHILS uses 64-bit weights and ``R = 10^6``. Each weight is off by at most max(w) / (2R). The
+answer is checked to be an independent set (a violation raises, so the validation layer falls
+back) and its objective is recomputed in float64 from the original weights.
+
+- ``kamis``: exact branch-and-reduce. chszlablib does not say whether the search finished, so
+  ``proven_optimal`` is True only when the call returned before ``finish_fraction`` (0.9) of the
+  time limit: a search stopped by the limit runs to it. Optimal then means optimal for the
+  integer weights.
+- ``chils``: concurrent iterated local search; it always runs until its time limit (plus ~70 ms of
+  set-up), never proves optimality, and with more than one concurrent search or a time-bounded
+  run its answer depends on machine speed (so it is deterministic only in distribution).
+"""
+from __future__ import annotations
+
+import time
+from typing import Any, Mapping
+
+import numpy as np
+
+from .base import Backend, MwisProblem, MwisResult, check_selection, integer_weights, make_result
+
+__all__ = ["KamisBackend", "ChilsBackend"]
+
+
+def _csr(problem: MwisProblem) -> tuple[np.ndarray, np.ndarray]:
+    a = problem.adjacency()
+    return a.indptr, a.indices
+
+
+def _available() -> tuple[bool, str]:
+    try:
+        import chszlablib._chils  # noqa: F401
+        import chszlablib._kamis_wmis  # noqa: F401
+    except ImportError as exc:
+        return False, f"chszlablib is not installed ({exc}); pip install chszlablib"
+    return True, ""
+
+
+def _checked(problem: MwisProblem, vertices: Any, backend: str) -> np.ndarray:
+    sel = np.asarray(vertices, dtype=np.int64).reshape(-1)
+    ok, why = check_selection(problem, sel)
+    if not ok:
+        raise RuntimeError(f"{backend}: chszlablib returned an invalid answer: {why}")
+    return sel
+
+
+class KamisBackend(Backend):
+    """KaMIS weighted branch-and-reduce; options ``resolution``, ``finish_fraction`` (0.9)."""
+
+    name = "kamis"
+    description = "KaMIS branch-and-reduce (chszlablib), exact when it finishes within the limit"
+
+    def available(self) -> tuple[bool, str]:
+        return _available()
+
+    def solve(self, problem: MwisProblem, *, time_limit_s: float = 10.0, seed: int = 0,
+              options: Mapping[str, Any] | None = None) -> MwisResult:
+        self.require_available()
+        from chszlablib._kamis_wmis import branch_reduce
+
+        options = dict(options or {})
+        n = problem.n
+        resolution = int(options.pop("resolution", min(10**6, (2**31 - 1) // max(n, 1))))
+        finish_fraction = float(options.pop("finish_fraction", 0.9))
+        if options:
+            raise ValueError(f"options: unknown option(s) {sorted(options)} for backend 'kamis' "
+                             "(known: resolution, finish_fraction)")
+        if n * resolution >= 2**31:
+            raise ValueError(f"options.resolution: {resolution} x {n} vertices overflows KaMIS's 32-bit weights")
+        t0 = time.perf_counter()
+        if n == 0:
+            return make_result(problem, [], proven_optimal=True, solve_time_s=0.0, backend=self.name)
+        wi, scale = integer_weights(problem.weights, resolution)
+        indptr, indices = _csr(problem)
+        int_obj, verts = branch_reduce(indptr.astype(np.int32), indices.astype(np.int32),
+                                       wi.astype(np.int32), float(time_limit_s), int(seed) % (2**31))
+        dt = time.perf_counter() - t0
+        sel = _checked(problem, verts, self.name)
+        finished = dt < finish_fraction * time_limit_s
+        return make_result(problem, sel, proven_optimal=finished, solve_time_s=dt, backend=self.name,
+                           stats={"weight_scale": scale, "integer_objective": int(int_obj),
+                                  "finished_before_limit": int(finished)})
+
+
+class ChilsBackend(Backend):
+    """CHILS concurrent local search; options ``num_concurrent`` (1), ``resolution`` (10**6)."""
+
+    name = "chils"
+    description = "CHILS concurrent local search (chszlablib), best heuristic for large graphs"
+
+    def available(self) -> tuple[bool, str]:
+        return _available()
+
+    def solve(self, problem: MwisProblem, *, time_limit_s: float = 10.0, seed: int = 0,
+              options: Mapping[str, Any] | None = None) -> MwisResult:
+        self.require_available()
+        from chszlablib._chils import mwis
+
+        options = dict(options or {})
+        num_concurrent = int(options.pop("num_concurrent", 1))
+        resolution = int(options.pop("resolution", 10**6))
+        if options:
+            raise ValueError(f"options: unknown option(s) {sorted(options)} for backend 'chils' "
+                             "(known: num_concurrent, resolution)")
+        if num_concurrent < 1:
+            raise ValueError(f"options.num_concurrent: {num_concurrent} must be >= 1")
+        t0 = time.perf_counter()
+        if problem.n == 0:
+            return make_result(problem, [], proven_optimal=True, solve_time_s=0.0, backend=self.name)
+        wi, scale = integer_weights(problem.weights, resolution)
+        indptr, indices = _csr(problem)
+        int_obj, verts = mwis(indptr.astype(np.int64), indices.astype(np.int32), wi.astype(np.int64),
+                              float(time_limit_s), num_concurrent, int(seed) % (2**31))
+        dt = time.perf_counter() - t0
+        sel = _checked(problem, verts, self.name)
+        return make_result(problem, sel, proven_optimal=problem.all_edges().shape[0] == 0,
+                           solve_time_s=dt, backend=self.name,
+                           stats={"weight_scale": scale, "integer_objective": int(int_obj),
+                                  "num_concurrent": num_concurrent})
