@@ -30,6 +30,7 @@ from uam_planner.geo import enu_to_geodetic, geodetic_to_enu
 
 __all__ = [
     "NetworkError",
+    "NoFlyZone",
     "Network",
     "build_network",
     "network_from_enu",
@@ -55,6 +56,20 @@ class NetworkError(ValueError):
     """A network definition is invalid; the message names the field and the offending value."""
 
 
+@dataclass(frozen=True)
+class NoFlyZone:
+    """A vertical cylinder of restricted airspace (e.g. an airport zone) that no node may lie in
+    and no corridor may cross (checked in the horizontal ENU plane).
+
+    Attributes: name; lat, lon (deg) of the centre; radius_m (horizontal radius, metres).
+    """
+
+    name: str
+    lat: float
+    lon: float
+    radius_m: float
+
+
 def _readonly(a: np.ndarray) -> np.ndarray:
     a.setflags(write=False)
     return a
@@ -75,6 +90,8 @@ class Network:
         origin_lat_lon_alt: (lat deg, lon deg, alt m) of the ENU origin.
         edges: (m, 2) int32 node-index pairs, u < v, lexicographically sorted and unique.
         edge_length_m: (m,) float64 Euclidean 3D corridor length between ENU end points.
+        no_fly_zones: restricted circles (default none); construction checks that no node lies
+            inside one and no corridor crosses one.
 
     Derived (computed on construction): ``index`` (id -> index), ``aerodrome_ids``,
     ``aerodrome_indices``, ``graph`` (networkx.Graph over indices 0..n-1; node attrs ``id``,
@@ -97,6 +114,7 @@ class Network:
     origin_lat_lon_alt: tuple[float, float, float]
     edges: np.ndarray
     edge_length_m: np.ndarray
+    no_fly_zones: tuple[NoFlyZone, ...] = ()
     index: dict[str, int] = field(init=False, repr=False)
     aerodrome_ids: tuple[str, ...] = field(init=False, repr=False)
     aerodrome_indices: np.ndarray = field(init=False, repr=False)
@@ -189,6 +207,9 @@ class Network:
                                f"({len(off)} of {len(aerodrome_indices)} aerodromes are not "
                                f"connected to {a!r})")
 
+        zones = tuple(self.no_fly_zones)
+        _check_no_fly_zones(zones, node_ids, enu, edges, origin)
+
         graph = nx.Graph(name=str(self.name))
         graph.add_nodes_from(
             (i, {"id": node_ids[i], "aerodrome": bool(is_aerodrome[i])}) for i in range(n))
@@ -205,6 +226,7 @@ class Network:
         set_(self, "origin_lat_lon_alt", origin)
         set_(self, "edges", _readonly(edges))
         set_(self, "edge_length_m", _readonly(length))
+        set_(self, "no_fly_zones", zones)
         set_(self, "index", index)
         set_(self, "aerodrome_ids", tuple(node_ids[i] for i in aerodrome_indices))
         set_(self, "aerodrome_indices", _readonly(aerodrome_indices))
@@ -260,6 +282,68 @@ class Network:
                 f"aerodromes={len(self.aerodrome_ids)})")
 
 
+def _segment_point_distance_xy(a: np.ndarray, b: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Horizontal distance from point p (2,) to each segment a[i]-b[i] ((m, 2) arrays). O(m)."""
+    d = b - a
+    dd = np.einsum("ij,ij->i", d, d)
+    t = np.clip(np.einsum("ij,ij->i", p - a, d) / np.where(dd > 0, dd, 1.0), 0.0, 1.0)
+    return np.linalg.norm(a + t[:, None] * d - p, axis=1)
+
+
+def _check_no_fly_zones(zones: Sequence[NoFlyZone], node_ids: Sequence[str], enu: np.ndarray,
+                        edges: np.ndarray, origin: tuple[float, float, float]) -> None:
+    """Raise NetworkError if a node lies inside, or a corridor crosses, a no-fly zone. O(z (n+m))."""
+    for z_i, zone in enumerate(zones):
+        if not isinstance(zone, NoFlyZone):
+            raise NetworkError(f"no_fly_zones[{z_i}]: {zone!r} is not a NoFlyZone")
+        centre = geodetic_to_enu([zone.lat, zone.lon, 0.0], origin)[:2]
+        dist = np.linalg.norm(enu[:, :2] - centre, axis=1)
+        inside = np.flatnonzero(dist < zone.radius_m)
+        if len(inside):
+            i = inside[0]
+            raise NetworkError(
+                f"nodes[{i}] (id {node_ids[i]!r}): lies {dist[i]:.0f} m from the centre of no-fly "
+                f"zone {zone.name!r}, inside its radius {zone.radius_m:g} m")
+        if len(edges):
+            seg = _segment_point_distance_xy(enu[edges[:, 0], :2], enu[edges[:, 1], :2], centre)
+            crossing = np.flatnonzero(seg < zone.radius_m)
+            if len(crossing):
+                k = crossing[0]
+                u, v = edges[k]
+                raise NetworkError(
+                    f"corridor ({node_ids[u]!r}-{node_ids[v]!r}): passes {seg[k]:.0f} m from the "
+                    f"centre of no-fly zone {zone.name!r}, inside its radius {zone.radius_m:g} m")
+
+
+def _parse_no_fly_zones(zones: Any, where: str = "no_fly_zones") -> tuple[NoFlyZone, ...]:
+    """Validate the ``no_fly_zones`` list of the file formats: {name, lat, lon, radius_m}."""
+    if zones is None:
+        return ()
+    if not isinstance(zones, (list, tuple)):
+        raise NetworkError(f"{where}: expected a list, got {type(zones).__name__}")
+    out = []
+    for k, z in enumerate(zones):
+        w = f"{where}[{k}]"
+        if isinstance(z, NoFlyZone):
+            z = {"name": z.name, "lat": z.lat, "lon": z.lon, "radius_m": z.radius_m}
+        if not isinstance(z, Mapping):
+            raise NetworkError(f"{w}: {z!r} is not a mapping")
+        unknown = set(z) - {"name", "lat", "lon", "radius_m"}
+        if unknown:
+            raise NetworkError(f"{w}.{sorted(unknown)[0]}: unknown field")
+        for key in ("name", "lat", "lon", "radius_m"):
+            if key not in z:
+                raise NetworkError(f"{w}.{key}: missing")
+        if not isinstance(z["name"], str) or not z["name"]:
+            raise NetworkError(f"{w}.name: {z['name']!r} is not a non-empty string")
+        radius = _number(z["radius_m"], f"{w}.radius_m")
+        if radius <= 0:
+            raise NetworkError(f"{w}.radius_m: {z['radius_m']!r} is not positive")
+        out.append(NoFlyZone(z["name"], _in_range(z["lat"], -90.0, 90.0, f"{w}.lat"),
+                             _in_range(z["lon"], -180.0, 180.0, f"{w}.lon"), radius))
+    return tuple(out)
+
+
 # -- construction ------------------------------------------------------------------------------
 def _canonical_edges(pairs: np.ndarray) -> np.ndarray:
     """Sort each pair (u < v) and the list lexicographically. Duplicates must already be gone."""
@@ -299,7 +383,7 @@ def _check_corridor_pairs(pairs: np.ndarray, node_ids: Sequence[str], enu: np.nd
 
 def _assemble(name: str, node_ids: Sequence[str], names: Sequence[str], is_aerodrome,
               lla: np.ndarray, enu: np.ndarray, origin, pairs: np.ndarray,
-              field_name: str) -> Network:
+              field_name: str, no_fly_zones: tuple[NoFlyZone, ...] = ()) -> Network:
     _check_corridor_pairs(pairs, node_ids, enu, field_name)
     edges = _canonical_edges(pairs) if len(pairs) else np.zeros((0, 2), dtype=np.int64)
     length = np.linalg.norm(enu[edges[:, 1]] - enu[edges[:, 0]], axis=1) if len(edges) else \
@@ -307,7 +391,7 @@ def _assemble(name: str, node_ids: Sequence[str], names: Sequence[str], is_aerod
     return Network(name=name, node_ids=tuple(node_ids), names=tuple(names),
                    is_aerodrome=np.asarray(is_aerodrome, dtype=bool), lat_lon_alt=lla,
                    enu_m=enu, origin_lat_lon_alt=tuple(float(v) for v in origin),
-                   edges=edges, edge_length_m=length)
+                   edges=edges, edge_length_m=length, no_fly_zones=no_fly_zones)
 
 
 _NODE_KEYS = {"id", "lat", "lon", "alt_m", "aerodrome", "name"}
@@ -348,7 +432,8 @@ def _parse_origin(origin: Any, where: str = "origin") -> tuple[float, float, flo
             _in_range(vals[2], *ALT_RANGE_M, f"{where}.alt_m"))
 
 
-def build_network(name: str, nodes: list[dict], corridors: list[dict], origin=None) -> Network:
+def build_network(name: str, nodes: list[dict], corridors: list[dict], origin=None,
+                  no_fly_zones=None) -> Network:
     """Build and validate a network from plain dictionaries (the YAML schema).
 
     Args:
@@ -359,6 +444,8 @@ def build_network(name: str, nodes: list[dict], corridors: list[dict], origin=No
             corridor.
         origin: ENU origin as ``{lat, lon, alt_m}`` or ``(lat, lon, alt_m)``; default: the mean
             latitude and longitude of the nodes at altitude 0 m.
+        no_fly_zones: optional list of ``{name, lat, lon, radius_m}`` (or :class:`NoFlyZone`);
+            no node may lie inside and no corridor may cross one.
 
     Returns the :class:`Network`; raises :class:`NetworkError` naming the field and the value.
     O(n + m log m).
@@ -431,17 +518,19 @@ def build_network(name: str, nodes: list[dict], corridors: list[dict], origin=No
 
     if n == 0:
         raise NetworkError("nodes: empty list; at least 2 aerodromes are needed")
+    zones = _parse_no_fly_zones(no_fly_zones)
     if origin is None:
         origin_t = (float(lla[:, 0].mean()), float(lla[:, 1].mean()), 0.0)
     else:
         origin_t = _parse_origin(origin)
     enu = geodetic_to_enu(lla, origin_t)
-    return _assemble(name, node_ids, names, aerodrome, lla, enu, origin_t, pairs, "corridors")
+    return _assemble(name, node_ids, names, aerodrome, lla, enu, origin_t, pairs, "corridors",
+                     zones)
 
 
 def network_from_enu(name: str, node_ids: Sequence[str], enu_m, is_aerodrome,
                      edges_as_id_pairs: Iterable[tuple[str, str]], names: Sequence[str] | None = None,
-                     origin_lat_lon_alt=DEFAULT_ENU_ORIGIN) -> Network:
+                     origin_lat_lon_alt=DEFAULT_ENU_ORIGIN, no_fly_zones=None) -> Network:
     """Build a network straight from local ENU coordinates (synthetic networks, tests).
 
     Args:
@@ -452,6 +541,7 @@ def network_from_enu(name: str, node_ids: Sequence[str], enu_m, is_aerodrome,
         edges_as_id_pairs: corridors as (id, id) pairs, any order.
         names: optional human names.
         origin_lat_lon_alt: geodetic origin of the ENU frame (default central Singapore).
+        no_fly_zones: optional list of ``{name, lat, lon, radius_m}`` or :class:`NoFlyZone`.
 
     The geodetic coordinates are derived from ENU (the exact inverse transform); ``enu_m`` is kept
     as given. Raises :class:`NetworkError`. O(n + m log m).
@@ -485,7 +575,7 @@ def network_from_enu(name: str, node_ids: Sequence[str], enu_m, is_aerodrome,
     lla = enu_to_geodetic(enu, origin)
     names = [""] * n if names is None else list(names)
     return _assemble(name, node_ids, names, is_aerodrome, lla, enu, origin, pairs,
-                     "edges_as_id_pairs")
+                     "edges_as_id_pairs", _parse_no_fly_zones(no_fly_zones))
 
 
 # -- dictionaries and files --------------------------------------------------------------------
@@ -500,16 +590,24 @@ def network_to_dict(net: Network) -> dict:
             entry["name"] = net.names[i]
         nodes.append(entry)
     o = net.origin_lat_lon_alt
-    return {
+    d = {
         "name": net.name,
         "origin": {"lat": o[0], "lon": o[1], "alt_m": o[2]},
-        "nodes": nodes,
-        "corridors": [{"from": net.node_ids[u], "to": net.node_ids[v]}
-                      for u, v in net.edges.tolist()],
     }
+    if net.no_fly_zones:
+        d["no_fly_zones"] = _zones_to_list(net.no_fly_zones)
+    d["nodes"] = nodes
+    d["corridors"] = [{"from": net.node_ids[u], "to": net.node_ids[v]}
+                      for u, v in net.edges.tolist()]
+    return d
 
 
-_TOP_KEYS = {"name", "origin", "nodes", "corridors", "description", "cruise_alt_m", "source"}
+def _zones_to_list(zones: Sequence[NoFlyZone]) -> list[dict]:
+    return [{"name": z.name, "lat": float(z.lat), "lon": float(z.lon),
+             "radius_m": float(z.radius_m)} for z in zones]
+
+
+_TOP_KEYS = {"name", "origin", "no_fly_zones", "nodes", "corridors", "description", "cruise_alt_m"}
 
 
 def network_from_dict(data: Any, default_name: str = "network") -> Network:
@@ -525,7 +623,7 @@ def network_from_dict(data: Any, default_name: str = "network") -> Network:
         if key not in data:
             raise NetworkError(f"{key}: missing")
     return build_network(data.get("name", default_name), data["nodes"], data["corridors"],
-                         origin=data.get("origin"))
+                         origin=data.get("origin"), no_fly_zones=data.get("no_fly_zones"))
 
 
 def _load_yaml(path: Path) -> Network:
@@ -579,8 +677,8 @@ def _load_geojson(path: Path) -> Network:
             corridors.append(cor)
         else:
             raise NetworkError(f"{where}.geometry.type: {gtype!r} is not 'Point' or 'LineString'")
-    origin = doc.get("origin")
-    return build_network(doc.get("name", path.stem), nodes, corridors, origin=origin)
+    return build_network(doc.get("name", path.stem), nodes, corridors, origin=doc.get("origin"),
+                         no_fly_zones=doc.get("no_fly_zones"))
 
 
 def _load_graphml(path: Path) -> Network:
@@ -608,7 +706,15 @@ def _load_graphml(path: Path) -> Network:
     if "origin_lat" in g.graph and "origin_lon" in g.graph:
         origin = {"lat": g.graph["origin_lat"], "lon": g.graph["origin_lon"],
                   "alt_m": g.graph.get("origin_alt_m", 0.0)}
-    return build_network(str(g.graph.get("name", path.stem)), nodes, corridors, origin=origin)
+    zones = None
+    if "no_fly_zones" in g.graph:
+        try:
+            zones = json.loads(g.graph["no_fly_zones"])
+        except (TypeError, json.JSONDecodeError):
+            raise NetworkError(f"graph.no_fly_zones: {g.graph['no_fly_zones']!r} is not a JSON "
+                               f"list") from None
+    return build_network(str(g.graph.get("name", path.stem)), nodes, corridors, origin=origin,
+                         no_fly_zones=zones)
 
 
 def load_network(path) -> Network:
@@ -630,20 +736,43 @@ def load_network(path) -> Network:
                        f".yaml, .yml, .geojson, .json, .graphml")
 
 
-def save_network_yaml(net: Network, path, header: str | None = None) -> None:
+def save_network_yaml(net: Network, path, header: str | None = None,
+                      corridor_routes: Sequence[str] | None = None,
+                      extra: Mapping[str, Any] | None = None) -> None:
     """Write the network in the YAML schema, one node or corridor per line.
 
-    ``header`` (optional) is written as leading ``#`` comment lines (e.g. data sources).
+    Args:
+        net: the network.
+        path: output file.
+        header: optional text written as leading ``#`` comment lines (e.g. data sources).
+        corridor_routes: optional informational route label per corridor (in ``net.edges``
+            order), written as each corridor's ``route``.
+        extra: optional informational top-level fields (``description``, ``cruise_alt_m``).
+
     Floats are written with full precision, so loading gives back the same coordinates.
     """
     d = network_to_dict(net)
+    if corridor_routes is not None:
+        if len(corridor_routes) != net.n_edges:
+            raise NetworkError(f"corridor_routes: {len(corridor_routes)} labels for "
+                               f"{net.n_edges} corridors")
+        for cor, route in zip(d["corridors"], corridor_routes):
+            if route:
+                cor["route"] = str(route)
     lines = []
     if header:
         lines += [f"# {line}".rstrip() for line in header.splitlines()]
     dump = lambda obj: yaml.safe_dump(obj, default_flow_style=True, sort_keys=False,  # noqa: E731
                                       width=1_000_000).strip()
     lines.append(yaml.safe_dump({"name": d["name"]}, width=1_000_000).strip())
+    for key, value in (extra or {}).items():
+        if key not in ("description", "cruise_alt_m"):
+            raise NetworkError(f"extra.{key}: not an informational top-level field")
+        lines.append(yaml.safe_dump({key: value}, width=1_000_000).strip())
     lines.append(f"origin: {dump(d['origin'])}")
+    if "no_fly_zones" in d:
+        lines.append("no_fly_zones:")
+        lines += [f"  - {dump(z)}" for z in d["no_fly_zones"]]
     lines.append("nodes:")
     lines += [f"  - {dump(node)}" for node in d["nodes"]]
     lines.append("corridors:")
@@ -653,9 +782,12 @@ def save_network_yaml(net: Network, path, header: str | None = None) -> None:
 
 def save_network_graphml(net: Network, path) -> None:
     """Write the network as GraphML (node key = id; attrs lat, lon, alt_m, aerodrome, name;
-    edge attr length_m, informational; graph attrs name, origin_lat, origin_lon, origin_alt_m)."""
+    edge attr length_m, informational; graph attrs name, origin_lat, origin_lon, origin_alt_m and,
+    if any, no_fly_zones as a JSON string)."""
     o = net.origin_lat_lon_alt
     g = nx.Graph(name=net.name, origin_lat=o[0], origin_lon=o[1], origin_alt_m=o[2])
+    if net.no_fly_zones:
+        g.graph["no_fly_zones"] = json.dumps(_zones_to_list(net.no_fly_zones))
     for i, node_id in enumerate(net.node_ids):
         lat, lon, alt = (float(v) for v in net.lat_lon_alt[i])
         g.add_node(node_id, lat=lat, lon=lon, alt_m=alt, aerodrome=bool(net.is_aerodrome[i]),
@@ -668,7 +800,7 @@ def save_network_graphml(net: Network, path) -> None:
 def save_network_geojson(net: Network, path) -> None:
     """Write the network as a GeoJSON FeatureCollection: a Point per node ([lon, lat, alt_m];
     properties id, name, aerodrome, alt_m) and a LineString per corridor (properties from, to,
-    length_m); top-level members name and origin."""
+    length_m); top-level members name, origin and (if any) no_fly_zones."""
     o = net.origin_lat_lon_alt
     features = []
     for i, node_id in enumerate(net.node_ids):
@@ -685,5 +817,8 @@ def save_network_geojson(net: Network, path) -> None:
                          "properties": {"from": net.node_ids[u], "to": net.node_ids[v],
                                         "length_m": float(net.edge_length_m[k])}})
     doc = {"type": "FeatureCollection", "name": net.name,
-           "origin": {"lat": o[0], "lon": o[1], "alt_m": o[2]}, "features": features}
+           "origin": {"lat": o[0], "lon": o[1], "alt_m": o[2]}}
+    if net.no_fly_zones:
+        doc["no_fly_zones"] = _zones_to_list(net.no_fly_zones)
+    doc["features"] = features
     Path(path).write_text(json.dumps(doc, indent=1) + "\n")
