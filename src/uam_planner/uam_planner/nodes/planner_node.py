@@ -1,0 +1,262 @@
+"""Planner node: keeps the pending requests and runs the planning cycle at each epoch.
+
+    ros2 run uam_planner planner --ros-args --params-file config/planner.yaml
+
+Subscribes /uam/requests (FlightRequest) and /uam/epoch_sync (EpochSync); publishes
+/uam/flight_plans (FlightPlan, reliable + transient local), /uam/planning_reports
+(PlanningReport) and its own EpochSync acknowledgements; calls /uam/solve_mwis (SolveMwis).
+
+Lockstep: when the simulator announces epoch k at time t, the planner waits for the request
+generator's acknowledgement of epoch k and for every request it counted, then plans, publishes
+the plans and the report, and acknowledges epoch k with the number of plans published so far, so
+the simulator moves on only when the epoch's outcome is complete.
+
+A request with an unknown aerodrome, the same origin and destination, or an impossible time
+window is answered at once with a rejected plan whose reason names the field. If the solver
+service is absent, late or fails, the planning cycle falls back to greedy locally, logs a warning
+and marks the report; every answer is checked, so no conflicting pair is ever approved.
+The planning itself is uam_planner.planning.Planner, shared with the in-process experiment runner.
+"""
+
+from __future__ import annotations
+
+import sys
+import threading
+from types import SimpleNamespace
+
+import numpy as np
+import rclpy
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from uam_msgs.msg import EpochSync, FlightPlan, FlightRequest, PlanningReport
+from uam_msgs.srv import SolveMwis
+
+from uam_planner.network import load_network
+from uam_planner.nodes import messages as m
+from uam_planner.planning import POLICIES, Planner, PlanningConfig, default_solve_mwis
+
+
+def _desc(text: str, lo: float | None = None, hi: float | None = None, integer: bool = False) -> ParameterDescriptor:
+    d = ParameterDescriptor(description=text)
+    if lo is not None:
+        if integer:
+            d.integer_range = [IntegerRange(from_value=int(lo), to_value=int(hi))]
+        else:
+            d.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi))]
+    return d
+
+
+class PlannerNode(Node):
+    """ROS glue around uam_planner.planning.Planner."""
+
+    def __init__(self, **kwargs):
+        kwargs.setdefault("parameter_overrides", [])
+        if not any(p.name == "use_sim_time" for p in kwargs["parameter_overrides"]):
+            kwargs["parameter_overrides"].append(Parameter("use_sim_time", Parameter.Type.BOOL, True))
+        super().__init__("planner", **kwargs)
+        p = self.declare_parameter
+        p("network", "", _desc("routing network file (.yaml, .geojson, .graphml), e.g. config/networks/singapore.yaml"))
+        p("policy", "mwis", _desc("planning policy: 'mwis' (conflict graph + MWIS) or 'fifo' (shortest FIFO baseline)"))
+        p("backend", "exact", _desc("MWIS backend asked of the solver service (see `ros2 run uam_solvers backends`)"))
+        p("time_limit_s", 5.0, _desc("MWIS solve time limit [s]", 0.001, 3600.0))
+        p("solver_timeout_margin_s", 5.0, _desc("extra wall time [s] to wait for the solver service before the local greedy fallback", 0.0, 3600.0))
+        p("use_solver_service", True, _desc("call /uam/solve_mwis; false solves in-process with the same backend"))
+        p("seed", 0, _desc("seed passed to stochastic MWIS backends", 0, 2**31 - 1, integer=True))
+        p("epoch_s", 30.0, _desc("time between planning epochs [s] (the simulator announces epochs)", 0.001, 86400.0))
+        p("separation_m", 100.0, _desc("separation minimum [m]", 0.001, 100000.0))
+        p("k", 5, _desc("candidate routes per request", 1, 100, integer=True))
+        p("penalty_factor", 5.0, _desc("penalised Dijkstra factor for diverse candidates", 0.0, 1000.0))
+        p("speed_mps", 10.0, _desc("cruise speed [m/s]", 0.001, 1000.0))
+        p("wait_for_generator", True, _desc("in lockstep, plan epoch k only after the request generator acknowledged it"))
+        params = {name: self.get_parameter(name).value for name in (
+            "network", "policy", "backend", "time_limit_s", "seed", "epoch_s", "separation_m", "k",
+            "penalty_factor", "speed_mps")}
+        if params["policy"] not in POLICIES:
+            raise ValueError(f"parameter policy: {params['policy']!r} is not one of {POLICIES}")
+        if not params["network"]:
+            raise ValueError("parameter network: empty; give a network file, e.g. config/networks/singapore.yaml")
+        self.network = load_network(params["network"])
+        self.config = PlanningConfig(
+            epoch_s=params["epoch_s"], separation_m=params["separation_m"], k=params["k"],
+            penalty_factor=params["penalty_factor"], speed_mps=params["speed_mps"], backend=params["backend"],
+            time_limit_s=params["time_limit_s"], seed=params["seed"])
+        self.policy = params["policy"]
+        self.planner = Planner(self.network, self.config, self.policy, solve_mwis=self._solve_mwis)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+
+        self._lock = threading.RLock()
+        self._plan_group = MutuallyExclusiveCallbackGroup()
+        self._client_group = ReentrantCallbackGroup()
+        self._plan_pub = self.create_publisher(FlightPlan, m.TOPIC_PLANS, m.QOS_LATCHED)
+        self._report_pub = self.create_publisher(PlanningReport, m.TOPIC_REPORTS, m.QOS_LATCHED)
+        self._sync_pub = self.create_publisher(EpochSync, m.TOPIC_SYNC, m.QOS_LATCHED)
+        self.create_subscription(FlightRequest, m.TOPIC_REQUESTS, self._on_request, m.QOS_LATCHED,
+                                 callback_group=self._plan_group)
+        self.create_subscription(EpochSync, m.TOPIC_SYNC, self._on_sync, m.QOS_LATCHED,
+                                 callback_group=self._plan_group)
+        self._client = self.create_client(SolveMwis, m.SERVICE_SOLVE, callback_group=self._client_group)
+
+        self._announced: dict[int, float] = {}       # simulator: epoch -> time [s]
+        self._generator_acks: dict[int, int] = {}    # generator: epoch -> requests published so far
+        self._next_epoch = 0
+        self._last_t_s = float("-inf")
+        self.requests_received = 0
+        self.plans_published = 0
+        self.finished = False
+        self.get_logger().info(
+            f"planner ready: network {self.network.name!r} ({len(self.network.node_ids)} nodes, "
+            f"{len(self.network.aerodrome_ids)} aerodromes), policy {self.policy}, backend {self.config.backend}")
+
+    # ---- parameters --------------------------------------------------------------------------
+    def _on_set_parameters(self, params) -> SetParametersResult:
+        fixed = {"network", "policy", "epoch_s", "separation_m", "k", "penalty_factor", "speed_mps"}
+        for prm in params:
+            if prm.name in fixed:
+                return SetParametersResult(successful=False, reason=f"{prm.name} cannot change during a run")
+            if prm.name == "backend":
+                from uam_solvers.registry import UnknownBackendError, backend_names, get_backend
+                try:
+                    get_backend(prm.value)
+                except (UnknownBackendError, TypeError):
+                    return SetParametersResult(successful=False, reason=(
+                        f"backend: unknown backend {prm.value!r}; known: {', '.join(backend_names())}"))
+        for prm in params:  # accepted: backend, time limit and seed take effect at the next epoch
+            if prm.name in ("backend", "time_limit_s", "seed"):
+                with self._lock:
+                    fields = {"backend": prm.value} if prm.name == "backend" else {prm.name: prm.value}
+                    self.config = PlanningConfig(**{**self.config.__dict__, **fields})
+                    self.planner.config = self.config
+        return SetParametersResult(successful=True)
+
+    # ---- MWIS through the service --------------------------------------------------------------
+    def _solve_mwis(self, weights, edges, groups):
+        """Injected into Planner: solve via /uam/solve_mwis; raise so the cycle falls back to greedy."""
+        if not self.get_parameter("use_solver_service").value:
+            return default_solve_mwis(self.config)(weights, edges, groups)
+        if not self._client.service_is_ready():
+            msg = f"solver service {m.SERVICE_SOLVE} is not available"
+            self.get_logger().warning(msg + "; solving with greedy locally")
+            raise RuntimeError(msg)
+        vertex_group = np.full(len(weights), -1, dtype=np.int64)
+        for gid, members in enumerate(groups or ()):
+            vertex_group[np.asarray(members, dtype=np.int64)] = gid
+        edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+        req = SolveMwis.Request(
+            weights=[float(w) for w in weights], edges_u=[int(u) for u in edges[:, 0]],
+            edges_v=[int(v) for v in edges[:, 1]], vertex_group=[int(g) for g in vertex_group],
+            backend=self.config.backend, time_limit_s=float(self.config.time_limit_s), seed=int(self.config.seed))
+        done = threading.Event()
+        future = self._client.call_async(req)
+        future.add_done_callback(lambda _f: done.set())
+        timeout = self.config.time_limit_s + self.get_parameter("solver_timeout_margin_s").value
+        if not done.wait(timeout):
+            self._client.remove_pending_request(future)
+            msg = f"solver service {m.SERVICE_SOLVE} did not answer within {timeout:.1f} s"
+            self.get_logger().warning(msg + "; solving with greedy locally")
+            raise TimeoutError(msg)
+        res = future.result()
+        if res is None or not res.success:
+            msg = f"solver service refused or failed: {getattr(res, 'message', 'no response')}"
+            self.get_logger().warning(msg + "; solving with greedy locally")
+            raise RuntimeError(msg)
+        return SimpleNamespace(selected=np.asarray(res.selected, dtype=np.int64), objective=res.objective,
+                               proven_optimal=res.proven_optimal, backend=res.backend_used,
+                               fallback=res.fallback, message=res.message, solve_time_s=res.solve_time_s)
+
+    # ---- requests ----------------------------------------------------------------------------
+    def _publish_plan(self, plan: FlightPlan) -> None:
+        self._plan_pub.publish(plan)
+        self.plans_published += 1
+
+    def _on_request(self, msg: FlightRequest) -> None:
+        with self._lock:
+            self.requests_received += 1
+            try:
+                req = m.request_from_msg(msg)
+                reason = None
+                if req.latest_departure_s < self._last_t_s:
+                    reason = (f"latest_departure: {req.latest_departure_s:g} s is before the current "
+                              f"simulation time {self._last_t_s:g} s")
+            except ValueError as exc:
+                req, reason = None, f"request: {exc}"
+            if reason is None:
+                reason = self.planner.submit(req)
+            else:
+                self.planner._rejected_since_plan += 1
+            if reason is not None:
+                epoch = max(self._next_epoch - 1, 0)
+                self._publish_plan(m.unapproved_plan(
+                    msg.request_id, msg.origin_id, msg.destination_id, FlightPlan.OUTCOME_REJECTED, reason,
+                    max(self._last_t_s, 0.0), epoch, self.policy))
+                self.get_logger().warning(f"rejected request {msg.request_id!r}: {reason}")
+            self._try_plan()
+
+    # ---- epochs ------------------------------------------------------------------------------
+    def _on_sync(self, msg: EpochSync) -> None:
+        with self._lock:
+            if msg.sender == "simulator":
+                if msg.finished:
+                    self.finished = True
+                    return
+                self._announced.setdefault(msg.epoch_index, m.from_time(msg.epoch_time))
+            elif msg.sender == "request_generator":
+                self._generator_acks[msg.epoch_index] = int(msg.requests_published)
+            self._try_plan()
+
+    def _try_plan(self) -> None:
+        while self._next_epoch in self._announced:
+            k = self._next_epoch
+            if self.get_parameter("wait_for_generator").value:
+                expected = self._generator_acks.get(k)
+                if expected is None or self.requests_received < expected:
+                    return
+            self._plan(k, self._announced[k])
+            self._next_epoch += 1
+
+    def _plan(self, k: int, t_s: float) -> None:
+        self._last_t_s = t_s
+        result = self.planner.plan(t_s, k)
+        report = result.report
+        for flight in result.approved:
+            self._publish_plan(m.approved_plan(flight, t_s, self.policy))
+        for req in result.expired:
+            self._publish_plan(m.unapproved_plan(
+                req.request_id, req.origin_id, req.destination_id, FlightPlan.OUTCOME_EXPIRED,
+                f"no conflict-free departure found by latest_departure {req.latest_departure_s:g} s",
+                t_s, k, self.policy))
+        self._report_pub.publish(m.report_to_msg(report))
+        if report.fallback:
+            self.get_logger().warning(f"epoch {k}: MWIS fallback to {report.backend_used}: {report.fallback_reason}")
+        self._sync_pub.publish(EpochSync(
+            epoch_index=k, epoch_time=m.to_time(t_s), sender="planner", plans_published=self.plans_published,
+            requests_received=self.requests_received))
+        self.get_logger().debug(
+            f"epoch {k} t={t_s:g}s: eligible {report.eligible}, approved {report.approved}, expired {report.expired}")
+
+
+def main(args=None) -> int:
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = PlannerNode()
+        executor = MultiThreadedExecutor(num_threads=3)
+        executor.add_node(node)
+        while rclpy.ok() and not node.finished:
+            executor.spin_once(timeout_sec=0.1)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except ValueError as exc:
+        print(f"planner: {exc}", file=sys.stderr)
+        return 2
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

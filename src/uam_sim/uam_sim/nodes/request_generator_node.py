@@ -1,0 +1,119 @@
+"""Request generator node: publishes flight requests on /uam/requests.
+
+    ros2 run uam_sim request_generator --ros-args --params-file config/request_generator.yaml
+
+Every interval (30 s of simulation time) it publishes `rate` requests between random distinct
+aerodromes of the network (seeded; earliest departure now, latest now + window_s), or, when
+`demand_file` is set, replays that file (format: docs/demand-format.md). It is driven by the
+simulator's epoch announcements on /uam/epoch_sync and acknowledges each epoch with the number of
+requests published so far, so the planner knows when it has them all (lockstep). The stream is
+uam_sim.demand's, identical to the in-process experiment runner's for the same seed.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+
+import rclpy
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from uam_msgs.msg import EpochSync, FlightRequest
+
+from uam_planner.network import load_network
+from uam_planner.nodes import messages as m
+from uam_sim.demand import DemandSchedule, RequestGenerator, load_demand
+
+
+class RequestGeneratorNode(Node):
+    def __init__(self, **kwargs):
+        kwargs.setdefault("parameter_overrides", [])
+        if not any(p.name == "use_sim_time" for p in kwargs["parameter_overrides"]):
+            kwargs["parameter_overrides"].append(Parameter("use_sim_time", Parameter.Type.BOOL, True))
+        super().__init__("request_generator", **kwargs)
+        self.declare_parameter("network", "", ParameterDescriptor(
+            description="routing network file; its aerodromes are the origins and destinations"))
+        self.declare_parameter("rate", 10.0, ParameterDescriptor(
+            description="requests per interval (paper: 1 to 20 per 30 s); fractional rates allowed",
+            floating_point_range=[FloatingPointRange(from_value=0.0, to_value=10000.0)]))
+        self.declare_parameter("interval_s", 30.0, ParameterDescriptor(
+            description="time between request batches [s]; must match the simulator's epoch_s",
+            floating_point_range=[FloatingPointRange(from_value=0.001, to_value=86400.0)]))
+        self.declare_parameter("window_s", 60.0, ParameterDescriptor(
+            description="latest departure - earliest departure of each request [s]",
+            floating_point_range=[FloatingPointRange(from_value=0.0, to_value=86400.0)]))
+        self.declare_parameter("seed", 0, ParameterDescriptor(
+            description="random seed of the request stream",
+            integer_range=[IntegerRange(from_value=0, to_value=2**31 - 1)]))
+        self.declare_parameter("demand_file", "", ParameterDescriptor(
+            description="optional YAML demand file to replay instead of random requests (docs/demand-format.md)"))
+        net_path = self.get_parameter("network").value
+        if not net_path:
+            raise ValueError("parameter network: empty; give a network file, e.g. config/networks/singapore.yaml")
+        network = load_network(net_path)
+        interval = float(self.get_parameter("interval_s").value)
+        demand_file = self.get_parameter("demand_file").value
+        if demand_file:
+            self.source = DemandSchedule(load_demand(demand_file, network.aerodrome_ids,
+                                                     float(self.get_parameter("window_s").value)), interval)
+        else:
+            self.source = RequestGenerator(network.aerodrome_ids, float(self.get_parameter("rate").value),
+                                           interval, float(self.get_parameter("window_s").value),
+                                           int(self.get_parameter("seed").value))
+        self.interval_s = interval
+        self._pub = self.create_publisher(FlightRequest, m.TOPIC_REQUESTS, m.QOS_LATCHED)
+        self._sync_pub = self.create_publisher(EpochSync, m.TOPIC_SYNC, m.QOS_LATCHED)
+        self.create_subscription(EpochSync, m.TOPIC_SYNC, self._on_sync, m.QOS_LATCHED)
+        self._done_epochs: set[int] = set()
+        self.published = 0
+        self.finished = False
+        self.get_logger().info(
+            "replaying " + demand_file if demand_file else
+            f"random demand: {self.get_parameter('rate').value:g} requests per {interval:g} s, "
+            f"seed {self.get_parameter('seed').value}, {len(network.aerodrome_ids)} aerodromes")
+
+    def _on_sync(self, msg: EpochSync) -> None:
+        if msg.sender != "simulator":
+            return
+        if msg.finished:
+            self.finished = True
+            return
+        k = int(msg.epoch_index)
+        if k in self._done_epochs:
+            return
+        self._done_epochs.add(k)
+        t_s = m.from_time(msg.epoch_time)
+        interval_index = t_s / self.interval_s
+        if math.isclose(interval_index, round(interval_index), abs_tol=1e-9):
+            for req in self.source.requests_at(t_s, int(round(interval_index))):
+                self._pub.publish(m.request_to_msg(req))
+                self.published += 1
+        self._sync_pub.publish(EpochSync(epoch_index=k, epoch_time=msg.epoch_time, sender="request_generator",
+                                         requests_published=self.published))
+
+
+def main(args=None) -> int:
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = RequestGeneratorNode()
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        while rclpy.ok() and not node.finished:
+            executor.spin_once(timeout_sec=0.1)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except ValueError as exc:
+        print(f"request_generator: {exc}", file=sys.stderr)
+        return 2
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,256 @@
+"""Simulator node: owns simulation time, moves the fleet, publishes /clock and the fleet state.
+
+    ros2 run uam_sim simulator --ros-args --params-file config/simulator.yaml
+
+Publishes /clock (rosgraph_msgs/Clock; every other node runs with use_sim_time), /uam/fleet_state
+(uam_msgs/FleetState) and /uam/fleet_poses (geometry_msgs/PoseArray, for generic viewers) at
+every step, and announces planning epochs on /uam/epoch_sync. Subscribes /uam/flight_plans and
+flies every approved plan exactly as planned.
+
+Lockstep (mode "lockstep", the default): at each epoch time t the simulator announces the epoch
+and does not move past t until the planner has acknowledged it and every plan the planner
+counted has arrived; between epochs it steps as fast as it can. /clock alone cannot give this
+(rclpy takes /clock best effort, depth 1, and timers fire once after a jump), so a run's result
+does not depend on CPU speed only because of this handshake. Mode "realtime" keeps the same
+handshake but paces steps at `real_time_factor` x wall time, for watching live.
+
+The run ends at `duration_s`: the simulator announces `finished`, and the other nodes exit.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+
+import rclpy
+from geometry_msgs.msg import Point, Pose, PoseArray, Quaternion, Vector3
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy, DurabilityPolicy, HistoryPolicy
+from rosgraph_msgs.msg import Clock
+from uam_msgs.msg import EpochSync, FleetState, FlightPlan, VehicleState
+
+from uam_planner.nodes import messages as m
+from uam_sim.fleet import Fleet
+
+MODES = ("lockstep", "realtime")
+# Like rclpy's ClockQoS but reliable, so recordings hold every tick; best-effort readers still match.
+QOS_CLOCK = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.VOLATILE)
+
+
+def _yaw_quaternion(vx: float, vy: float) -> Quaternion:
+    yaw = math.atan2(vy, vx) if (vx or vy) else 0.0
+    return Quaternion(x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2))
+
+
+class SimulatorNode(Node):
+    def __init__(self, **kwargs):
+        super().__init__("simulator", **kwargs)
+        self.declare_parameter("step_s", 1.0, ParameterDescriptor(
+            description="simulation step [s]", floating_point_range=[FloatingPointRange(from_value=0.001, to_value=3600.0)]))
+        self.declare_parameter("duration_s", 3500.0, ParameterDescriptor(
+            description="simulated time after which the run ends [s]",
+            floating_point_range=[FloatingPointRange(from_value=0.0, to_value=10_000_000.0)]))
+        self.declare_parameter("epoch_s", 30.0, ParameterDescriptor(
+            description="time between planning epochs [s]; a multiple of step_s",
+            floating_point_range=[FloatingPointRange(from_value=0.001, to_value=86400.0)]))
+        self.declare_parameter("mode", "lockstep", ParameterDescriptor(
+            description="'lockstep' (as fast as the planner allows, CPU-independent result) or 'realtime' (paced)"))
+        self.declare_parameter("real_time_factor", 1.0, ParameterDescriptor(
+            description="in realtime mode: simulated seconds per wall second",
+            floating_point_range=[FloatingPointRange(from_value=0.001, to_value=100000.0)]))
+        self.declare_parameter("expected_subscribers", 2, ParameterDescriptor(
+            description="start only when this many nodes subscribe to /uam/epoch_sync (planner, generator, recorder)",
+            integer_range=[IntegerRange(from_value=0, to_value=100)]))
+        self.declare_parameter("ack_timeout_s", 120.0, ParameterDescriptor(
+            description="wall time [s] to wait for an epoch acknowledgement before ending the run with an error",
+            floating_point_range=[FloatingPointRange(from_value=0.1, to_value=86400.0)]))
+        g = self.get_parameter
+        self.step_s = float(g("step_s").value)
+        self.duration_s = float(g("duration_s").value)
+        self.epoch_s = float(g("epoch_s").value)
+        self.mode = g("mode").value
+        if self.mode not in MODES:
+            raise ValueError(f"parameter mode: {self.mode!r} is not one of {MODES}")
+        ratio = self.epoch_s / self.step_s
+        if not math.isclose(ratio, round(ratio), rel_tol=0, abs_tol=1e-9):
+            raise ValueError(f"parameter epoch_s: {self.epoch_s} is not a multiple of step_s {self.step_s}")
+        self.steps_per_epoch = int(round(ratio))
+        self.rtf = float(g("real_time_factor").value)
+        self.expected_subscribers = int(g("expected_subscribers").value)
+        self.ack_timeout_s = float(g("ack_timeout_s").value)
+
+        self._clock_pub = self.create_publisher(Clock, "/clock", QOS_CLOCK)
+        self._fleet_pub = self.create_publisher(FleetState, m.TOPIC_FLEET, m.QOS_STREAM)
+        self._pose_pub = self.create_publisher(PoseArray, m.TOPIC_POSES, m.QOS_STREAM)
+        self._sync_pub = self.create_publisher(EpochSync, m.TOPIC_SYNC, m.QOS_LATCHED)
+        self.create_subscription(FlightPlan, m.TOPIC_PLANS, self._on_plan, m.QOS_LATCHED)
+        self.create_subscription(EpochSync, m.TOPIC_SYNC, self._on_sync, m.QOS_LATCHED)
+
+        self.fleet = Fleet()
+        self.step_index = 0                 # t = step_index * step_s
+        self.plans_received = 0
+        self.approved_received = 0
+        self._planner_acks: dict[int, int] = {}
+        self._waiting_epoch: int | None = None
+        self._wait_started = 0.0
+        self.started = False
+        self.finished = False
+        self.error = ""
+        self.active_samples: list[int] = []  # airborne vehicles at each step, for the summary
+        self._wall_start = 0.0
+        period = self.step_s / self.rtf if self.mode == "realtime" else 0.02
+        self._timer = self.create_timer(period, self._on_timer)  # wall clock: this node owns sim time
+        self.get_logger().info(
+            f"simulator: {self.mode}, step {self.step_s:g} s, epoch {self.epoch_s:g} s, duration {self.duration_s:g} s; "
+            f"waiting for {self.expected_subscribers} subscriber(s) of {m.TOPIC_SYNC}")
+
+    @property
+    def t_s(self) -> float:
+        return self.step_index * self.step_s
+
+    # ---- inputs ------------------------------------------------------------------------------
+    def _on_plan(self, plan: FlightPlan) -> None:
+        self.plans_received += 1
+        if plan.outcome == FlightPlan.OUTCOME_APPROVED:
+            try:
+                self.fleet.add(plan.request_id, m.trajectory_from_plan(plan))
+                self.approved_received += 1
+            except ValueError as exc:
+                self.get_logger().error(f"cannot fly plan {plan.request_id!r}: {exc}")
+        self._maybe_resume()
+
+    def _on_sync(self, msg: EpochSync) -> None:
+        if msg.sender == "planner":
+            self._planner_acks[int(msg.epoch_index)] = int(msg.plans_published)
+            self._maybe_resume()
+
+    # ---- stepping ------------------------------------------------------------------------------
+    def _epoch_at(self, step_index: int) -> int | None:
+        return step_index // self.steps_per_epoch if step_index % self.steps_per_epoch == 0 else None
+
+    def _acked(self, k: int) -> bool:
+        need = self._planner_acks.get(k)
+        return need is not None and self.plans_received >= need
+
+    def _maybe_resume(self) -> None:
+        if self._waiting_epoch is not None and self._acked(self._waiting_epoch):
+            self._waiting_epoch = None
+            self._publish_state()
+            self.step_index += 1
+            if self.mode == "lockstep":
+                self._run_until_blocked()
+
+    def _on_timer(self) -> None:
+        if self.finished:
+            return
+        if not self.started:
+            if self._sync_pub.get_subscription_count() < self.expected_subscribers:
+                return
+            self.started = True
+            self._wall_start = time.monotonic()
+            self.get_logger().info("all subscribers present: starting the run")
+            if self.mode == "lockstep":
+                self._timer.timer_period_ns = int(0.5e9)  # from now on only a watchdog
+            self._run_until_blocked()
+            return
+        if self._waiting_epoch is not None:
+            if time.monotonic() - self._wait_started > self.ack_timeout_s:
+                self.error = (f"no acknowledgement of epoch {self._waiting_epoch} from the planner within "
+                              f"{self.ack_timeout_s:g} s")
+                self.get_logger().error(self.error + "; ending the run")
+                self._finish()
+            return
+        if self.mode == "realtime":
+            self._step_once()
+
+    def _run_until_blocked(self) -> None:
+        while not self.finished and self._waiting_epoch is None:
+            self._step_once()
+
+    def _step_once(self) -> None:
+        if self.t_s > self.duration_s + 1e-9:
+            self._finish()
+            return
+        k = self._epoch_at(self.step_index)
+        if k is not None:
+            self._waiting_epoch = k
+            self._wait_started = time.monotonic()
+            self._clock_pub.publish(Clock(clock=m.to_time(self.t_s)))
+            self._sync_pub.publish(EpochSync(epoch_index=k, epoch_time=m.to_time(self.t_s), sender="simulator"))
+            if self._acked(k):  # (only after a restart of the planner with latched acks)
+                self._maybe_resume()
+            return
+        self._publish_state()
+        self.step_index += 1
+
+    def _publish_state(self) -> None:
+        t = self.t_s
+        stamp = m.to_time(t)
+        self._clock_pub.publish(Clock(clock=stamp))
+        samples = self.fleet.sample(t)
+        self.active_samples.append(len(samples))
+        fleet = FleetState(step_index=self.step_index)
+        fleet.header.stamp = stamp
+        fleet.header.frame_id = m.FRAME_ID
+        poses = PoseArray()
+        poses.header = fleet.header
+        for s in samples:
+            px, py, pz = (float(v) for v in s.position_m)
+            vx, vy, vz = (float(v) for v in s.velocity_mps)
+            fleet.vehicles.append(VehicleState(
+                vehicle_id=s.vehicle_id, position=Point(x=px, y=py, z=pz), velocity=Vector3(x=vx, y=vy, z=vz),
+                phase=s.phase, segment_index=s.segment_index, distance_flown_m=s.distance_flown_m,
+                distance_remaining_m=s.distance_remaining_m))
+            poses.poses.append(Pose(position=Point(x=px, y=py, z=pz), orientation=_yaw_quaternion(vx, vy)))
+        self._fleet_pub.publish(fleet)
+        self._pose_pub.publish(poses)
+
+    def _finish(self) -> None:
+        if self.finished:
+            return
+        self.finished = True
+        self._sync_pub.publish(EpochSync(epoch_index=self.step_index // self.steps_per_epoch,
+                                         epoch_time=m.to_time(min(self.t_s, self.duration_s)),
+                                         sender="simulator", finished=True))
+        wall = time.monotonic() - self._wall_start if self.started else 0.0
+        sim = min(self.t_s, self.duration_s)
+        avg = sum(self.active_samples) / len(self.active_samples) if self.active_samples else 0.0
+        self.get_logger().info(
+            f"run finished at t={sim:g} s: {self.approved_received} approved flights flown, "
+            f"{self.plans_received} plans received, average airborne {avg:.2f}; wall {wall:.2f} s, "
+            f"real-time factor {sim / wall if wall > 0 else float('inf'):.1f}")
+
+
+def main(args=None) -> int:
+    rclpy.init(args=args)
+    node = None
+    rc = 0
+    try:
+        node = SimulatorNode()
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        while rclpy.ok() and not node.finished:
+            executor.spin_once(timeout_sec=0.1)
+        # let the final announcement reach the others
+        end = time.monotonic() + 1.0
+        while rclpy.ok() and time.monotonic() < end:
+            executor.spin_once(timeout_sec=0.05)
+        rc = 1 if node.error else 0
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except ValueError as exc:
+        print(f"simulator: {exc}", file=sys.stderr)
+        rc = 2
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return rc
+
+
+if __name__ == "__main__":
+    sys.exit(main())

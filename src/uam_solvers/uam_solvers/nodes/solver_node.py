@@ -1,0 +1,172 @@
+"""Solver node: serves MWIS on /uam/solve_mwis with a selectable backend.
+
+    ros2 run uam_solvers solver --ros-args --params-file config/solver.yaml
+
+Parameters (all validated; changes at run time are checked by a parameter callback):
+    default_backend (string, "exact"): backend used when a request names none; an unknown or
+        unavailable name is refused with the list of known backends.
+    default_time_limit_s (double, 10.0): limit used when a request gives 0.
+    max_vertices (int, 20000): larger graphs are refused.
+    layers (bool, true): component split and exact reductions around the backend.
+
+Glue only: requests are converted to uam_solvers.MwisProblem and solved by uam_solvers.solve_problem
+(validation and greedy fallback included). Malformed requests get success=false with a message
+naming the field and value; the node keeps serving. Requests are served concurrently (reentrant
+callback group on a multi-threaded executor) so a slow solve does not block the others.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import KeyValue
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult, FloatingPointRange, IntegerRange
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.node import Node
+from uam_msgs.srv import SolveMwis
+
+from uam_solvers import MwisInputError, MwisProblem, solve_problem
+from uam_solvers.registry import UnknownBackendError, backend_names, get_backend
+
+SERVICE_NAME = "/uam/solve_mwis"
+
+
+def parse_option(value: str):
+    """Backend option values arrive as strings: 'true'/'false', ints and floats are converted."""
+    low = value.strip().lower()
+    if low in ("true", "false"):
+        return low == "true"
+    for cast in (int, float):
+        try:
+            return cast(value)
+        except ValueError:
+            pass
+    return value
+
+
+def problem_from_request(request: SolveMwis.Request, max_vertices: int) -> MwisProblem:
+    """Validate a SolveMwis request into an MwisProblem; MwisInputError names the bad field."""
+    n = len(request.weights)
+    if len(request.edges_u) != len(request.edges_v):
+        raise MwisInputError(
+            f"edges_u/edges_v: lengths differ ({len(request.edges_u)} != {len(request.edges_v)})")
+    if len(request.vertex_group) not in (0, n):
+        raise MwisInputError(
+            f"vertex_group: length {len(request.vertex_group)} must be 0 or len(weights) = {n}")
+    edges = np.stack([np.asarray(request.edges_u, dtype=np.int64),
+                      np.asarray(request.edges_v, dtype=np.int64)], axis=1).reshape(-1, 2)
+    groups = None
+    if len(request.vertex_group):
+        g = np.asarray(request.vertex_group, dtype=np.int64)
+        groups = [np.flatnonzero(g == gid) for gid in np.unique(g[g >= 0])]
+    return MwisProblem.from_arrays(np.asarray(request.weights, dtype=np.float64), edges, groups,
+                                   max_vertices=max_vertices)
+
+
+class SolverNode(Node):
+    """Serves SolveMwis; algorithms live in uam_solvers."""
+
+    def __init__(self, **kwargs):
+        super().__init__("solver", **kwargs)
+        self.declare_parameter("default_backend", "exact", ParameterDescriptor(
+            description="MWIS backend used when a request names none; one of: " + ", ".join(backend_names())))
+        self.declare_parameter("default_time_limit_s", 10.0, ParameterDescriptor(
+            description="solve time limit [s] used when a request gives 0",
+            floating_point_range=[FloatingPointRange(from_value=0.001, to_value=3600.0)]))
+        self.declare_parameter("max_vertices", 20000, ParameterDescriptor(
+            description="graphs with more vertices are refused",
+            integer_range=[IntegerRange(from_value=1, to_value=10_000_000)]))
+        self.declare_parameter("layers", True, ParameterDescriptor(
+            description="split into components and apply exact reductions around the backend"))
+        problem = self._check_backend(self.get_parameter("default_backend").value)
+        if problem:
+            raise ValueError(f"parameter default_backend: {problem}")
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self._group = ReentrantCallbackGroup()
+        self.create_service(SolveMwis, SERVICE_NAME, self._on_solve, callback_group=self._group)
+        self.get_logger().info(
+            f"serving {SERVICE_NAME}; default backend {self.get_parameter('default_backend').value!r}")
+
+    @staticmethod
+    def _check_backend(name) -> str:
+        if not isinstance(name, str) or not name:
+            return f"{name!r} is not a backend name; known: {', '.join(backend_names())}"
+        try:
+            backend = get_backend(name)
+        except UnknownBackendError:
+            return f"unknown backend {name!r}; known: {', '.join(backend_names())}"
+        ok, reason = backend.available()
+        return "" if ok else f"backend {name!r} is unavailable here: {reason}"
+
+    def _on_set_parameters(self, params) -> SetParametersResult:
+        for p in params:
+            if p.name == "default_backend":
+                problem = self._check_backend(p.value)
+                if problem:
+                    return SetParametersResult(successful=False, reason=f"default_backend: {problem}")
+        return SetParametersResult(successful=True)
+
+    def _on_solve(self, request: SolveMwis.Request, response: SolveMwis.Response) -> SolveMwis.Response:
+        backend = request.backend or self.get_parameter("default_backend").value
+        limit = request.time_limit_s or self.get_parameter("default_time_limit_s").value
+        try:
+            if not math.isfinite(limit) or limit <= 0:
+                raise MwisInputError(f"time_limit_s: {request.time_limit_s!r} must be a positive number")
+            problem_text = self._check_backend(backend)
+            if problem_text:
+                raise MwisInputError(f"backend: {problem_text}")
+            problem = problem_from_request(request, int(self.get_parameter("max_vertices").value))
+            options = {kv.key: parse_option(kv.value) for kv in request.options}
+            result = solve_problem(problem, backend=backend, time_limit_s=float(limit), seed=int(request.seed),
+                                   options=options, layers=bool(self.get_parameter("layers").value))
+        except (MwisInputError, ValueError, TypeError) as exc:
+            response.success = False
+            response.message = str(exc)
+            self.get_logger().warning(f"refused a SolveMwis request: {exc}")
+            return response
+        except Exception as exc:  # noqa: BLE001 - the node must keep serving after any failure
+            response.success = False
+            response.message = f"{type(exc).__name__}: {exc}"
+            self.get_logger().error(f"SolveMwis failed: {response.message}")
+            return response
+        response.success = True
+        response.selected = [int(v) for v in result.selected]
+        response.objective = float(result.objective)
+        response.solve_time_s = float(result.solve_time_s)
+        response.proven_optimal = bool(result.proven_optimal)
+        response.backend_used = result.backend
+        response.fallback = bool(result.fallback)
+        response.message = result.message or (
+            f"{len(result.selected)} of {problem.n} vertices, objective {result.objective:.6g}")
+        response.stats = [KeyValue(key=str(k), value=str(v)) for k, v in sorted(result.stats.items())]
+        if result.fallback:
+            self.get_logger().warning(f"backend {backend!r} fell back: {result.message}")
+        return response
+
+
+def main(args=None) -> int:
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = SolverNode()
+        executor = MultiThreadedExecutor(num_threads=4)
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except ValueError as exc:
+        print(f"solver: {exc}", file=sys.stderr)
+        return 2
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,72 @@
+"""Build and run the whole node graph inside one process for tests (one Context, one executor)."""
+
+from __future__ import annotations
+
+import pathlib
+from dataclasses import dataclass, field
+
+from rclpy.executors import MultiThreadedExecutor
+from rclpy.parameter import Parameter
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+TINY = str(ROOT / "config" / "networks" / "tiny.yaml")
+
+
+def params(**values) -> list[Parameter]:
+    return [Parameter(k, value=v) for k, v in values.items()]
+
+
+@dataclass
+class Observer:
+    """Collects what the graph publishes, like an operator's console."""
+
+    plans: list = field(default_factory=list)
+    reports: list = field(default_factory=list)
+    requests: list = field(default_factory=list)
+    fleet: list = field(default_factory=list)
+
+
+def make_observer(context):
+    import rclpy
+    from uam_msgs.msg import FleetState, FlightPlan, FlightRequest, PlanningReport
+
+    from uam_planner.nodes import messages as m
+
+    obs = Observer()
+    node = rclpy.create_node("test_observer", context=context)
+    node.create_subscription(FlightPlan, m.TOPIC_PLANS, obs.plans.append, m.QOS_LATCHED)
+    node.create_subscription(PlanningReport, m.TOPIC_REPORTS, obs.reports.append, m.QOS_LATCHED)
+    node.create_subscription(FlightRequest, m.TOPIC_REQUESTS, obs.requests.append, m.QOS_LATCHED)
+    node.create_subscription(FleetState, m.TOPIC_FLEET, obs.fleet.append, m.QOS_STREAM)
+    return node, obs
+
+
+def build_graph(context, *, network=TINY, rate=2.0, seed=3, duration_s=300.0, policy="mwis", backend="exact",
+                with_solver=True, planner_extra=None, expected_subscribers=3):
+    """The graph's nodes on one multi-threaded executor; returns (executor, nodes dict, observer)."""
+    from uam_planner.nodes.planner_node import PlannerNode
+    from uam_sim.nodes.request_generator_node import RequestGeneratorNode
+    from uam_sim.nodes.simulator_node import SimulatorNode
+    from uam_solvers.nodes.solver_node import SolverNode
+
+    nodes = {}
+    if with_solver:
+        nodes["solver"] = SolverNode(context=context, parameter_overrides=params(default_backend=backend))
+    nodes["planner"] = PlannerNode(context=context, parameter_overrides=params(
+        network=network, policy=policy, backend=backend, **(planner_extra or {})))
+    nodes["generator"] = RequestGeneratorNode(context=context, parameter_overrides=params(
+        network=network, rate=float(rate), seed=int(seed)))
+    observer_node, obs = make_observer(context)
+    nodes["observer"] = observer_node
+    nodes["simulator"] = SimulatorNode(context=context, parameter_overrides=params(
+        duration_s=float(duration_s), expected_subscribers=int(expected_subscribers)))
+    executor = MultiThreadedExecutor(num_threads=4, context=context)
+    for n in nodes.values():
+        executor.add_node(n)
+    return executor, nodes, obs
+
+
+def shutdown(executor, nodes):
+    executor.shutdown()
+    for n in nodes.values():
+        n.destroy_node()

@@ -1,0 +1,139 @@
+"""The whole node graph in one process: generator -> planner -> solver service -> simulator."""
+
+from __future__ import annotations
+
+import collections
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip("rclpy", reason="needs the built workspace (scripts/test.sh sources it)")
+
+from graph_harness import TINY, build_graph, params, shutdown  # noqa: E402
+from uam_msgs.msg import FlightPlan  # noqa: E402
+
+from uam_planner.audit import audit_flights  # noqa: E402
+from uam_planner.network import load_network  # noqa: E402
+from uam_planner.nodes.messages import trajectory_from_plan  # noqa: E402
+from uam_planner.planning import Planner, PlanningConfig  # noqa: E402
+from uam_sim.demand import RequestGenerator  # noqa: E402
+
+pytestmark = pytest.mark.ros
+
+
+def _run(ros_context, spin_until, timeout_s=120.0, **kw):
+    executor, nodes, obs = build_graph(ros_context, **kw)
+    try:
+        assert spin_until(executor, lambda: nodes["simulator"].finished, timeout_s=timeout_s), \
+            f"run did not finish; simulator at t={nodes['simulator'].t_s}"
+        n_expected = nodes["generator"].published
+        assert spin_until(executor, lambda: len(obs.requests) >= n_expected, timeout_s=10)
+        n_states = len(nodes["simulator"].active_samples)
+        assert spin_until(executor, lambda: len(obs.fleet) >= n_states, timeout_s=10)
+        assert not nodes["simulator"].error
+        return obs, nodes
+    finally:
+        shutdown(executor, nodes)
+
+
+def _in_process_approvals(rate, seed, duration_s, backend, policy="mwis", epoch_s=30.0):
+    """The same scenario through the library alone (what the experiment runner does)."""
+    net = load_network(TINY)
+    planner = Planner(net, PlanningConfig(backend=backend, time_limit_s=5.0), policy)
+    gen = RequestGenerator(net.aerodrome_ids, rate, seed=seed)
+    approved = {}
+    k = 0
+    while k * epoch_s <= duration_s:
+        t = k * epoch_s
+        for req in gen.requests_at(t, k):
+            assert planner.submit(req) is None
+        for f in planner.plan(t, k).approved:
+            approved[f.request_id] = (f.departure_s, tuple(f.route_node_ids))
+        k += 1
+    return approved
+
+
+def test_every_request_decided_once_safe_and_equal_to_in_process_run(ros_context, spin_until):
+    rate, seed, duration = 3.0, 11, 300.0
+    obs, nodes = _run(ros_context, spin_until, rate=rate, seed=seed, duration_s=duration)
+    request_ids = [r.request_id for r in obs.requests]
+    assert len(request_ids) == len(set(request_ids)) > 0
+    decided = collections.Counter(p.request_id for p in obs.plans)
+    # Requests of the last epoch may still be waiting when the run ends; all others are decided once.
+    last_epoch_t = (duration // 30) * 30
+    undecided = [r for r in obs.requests if r.request_id not in decided]
+    assert all(r.request_time.sec >= last_epoch_t - 60 for r in undecided)
+    assert all(c == 1 for c in decided.values()), [k for k, c in decided.items() if c != 1]
+    approved = [p for p in obs.plans if p.outcome == FlightPlan.OUTCOME_APPROVED]
+    assert approved, "a 300 s run at 3 requests per epoch approves something"
+    # Independent safety audit over the flown plans.
+    audit = audit_flights([trajectory_from_plan(p) for p in approved], separation_m=100.0)
+    assert audit.ok and audit.pairs_checked > 0, audit.losses
+    # Reports: one per epoch, counts add up, solver used without fallback.
+    assert len(obs.reports) == int(duration // 30) + 1
+    assert sum(r.approved for r in obs.reports) == len(approved)
+    assert not any(r.fallback for r in obs.reports)
+    assert {r.backend_used for r in obs.reports if r.vertices} <= {"exact"}
+    # One library, two ways to run it: identical approvals in-process.
+    lib = _in_process_approvals(rate, seed, duration, "exact")
+    graph = {p.request_id: (p.departure_time.sec + p.departure_time.nanosec * 1e-9, tuple(p.route_node_ids))
+             for p in approved}
+    assert graph.keys() == lib.keys()
+    for rid in graph:
+        assert graph[rid][1] == lib[rid][1]
+        assert np.isclose(graph[rid][0], lib[rid][0])
+    # The fleet flew them: fleet state every step, vehicles only when airborne.
+    assert [f.step_index for f in obs.fleet] == sorted(f.step_index for f in obs.fleet)
+    assert len(obs.fleet) == duration + 1  # t = 0, 1, ..., 300 s
+    assert max(len(f.vehicles) for f in obs.fleet) >= 1
+
+
+def test_planner_falls_back_to_greedy_when_solver_absent(ros_context, spin_until):
+    obs, _ = _run(ros_context, spin_until, rate=3.0, seed=5, duration_s=120.0, with_solver=False,
+                  planner_extra={"solver_timeout_margin_s": 0.5})
+    with_graph = [r for r in obs.reports if r.vertices > 0]
+    assert with_graph, "some epoch had candidates"
+    assert all(r.fallback and r.backend_used == "greedy" for r in with_graph)
+    assert all("not available" in r.fallback_reason for r in with_graph)
+    approved = [p for p in obs.plans if p.outcome == FlightPlan.OUTCOME_APPROVED]
+    audit = audit_flights([trajectory_from_plan(p) for p in approved], separation_m=100.0)
+    assert not audit.losses
+
+
+def test_bad_requests_are_rejected_with_reason_and_graph_keeps_running(ros_context, spin_until):
+    from uam_msgs.msg import FlightRequest
+
+    from uam_planner.nodes import messages as m
+
+    executor, nodes, obs = build_graph(ros_context, rate=2.0, seed=1, duration_s=120.0, expected_subscribers=4)
+    bad_node = rclpy.create_node("bad_client", context=ros_context)
+    executor.add_node(bad_node)
+    try:
+        pub = bad_node.create_publisher(FlightRequest, m.TOPIC_REQUESTS, m.QOS_LATCHED)
+        bad = [
+            FlightRequest(request_id="bad1", origin_id="NOPE", destination_id="A",
+                          earliest_departure=m.to_time(0), latest_departure=m.to_time(60)),
+            FlightRequest(request_id="bad2", origin_id="A", destination_id="A",
+                          earliest_departure=m.to_time(0), latest_departure=m.to_time(60)),
+            FlightRequest(request_id="bad3", origin_id="A", destination_id="B",
+                          earliest_departure=m.to_time(60), latest_departure=m.to_time(30)),
+        ]
+        for r in bad:
+            pub.publish(r)
+        # the simulator waits for a 4th /uam/epoch_sync subscriber: this one
+        bad_node.create_subscription(type(nodes["simulator"]._sync_pub.msg_type()), m.TOPIC_SYNC,
+                                     lambda _: None, m.QOS_LATCHED)
+        assert spin_until(executor, lambda: nodes["simulator"].finished, timeout_s=120)
+        by_id = {p.request_id: p for p in obs.plans}
+        assert spin_until(executor, lambda: all(b.request_id in {p.request_id for p in obs.plans} for b in bad), 10)
+        by_id = {p.request_id: p for p in obs.plans}
+        assert by_id["bad1"].outcome == FlightPlan.OUTCOME_REJECTED and "origin_id" in by_id["bad1"].reason \
+            and "NOPE" in by_id["bad1"].reason
+        assert by_id["bad2"].outcome == FlightPlan.OUTCOME_REJECTED and "same as origin" in by_id["bad2"].reason
+        assert by_id["bad3"].outcome == FlightPlan.OUTCOME_REJECTED and "latest_departure" in by_id["bad3"].reason
+        # the run went on: the good requests were planned in every epoch after the bad ones
+        assert len(obs.reports) == 5
+        assert any(p.outcome == FlightPlan.OUTCOME_APPROVED for p in obs.plans)
+    finally:
+        bad_node.destroy_node()
+        shutdown(executor, nodes)
