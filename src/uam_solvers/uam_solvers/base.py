@@ -27,6 +27,8 @@ __all__ = [
     "BackendUnavailable",
     "check_selection",
     "integer_weights",
+    "make_result",
+    "brute_force_mwis",
 ]
 
 
@@ -343,3 +345,27 @@ class Backend(ABC):
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} {self.name!r}>"
+
+
+def brute_force_mwis(problem: MwisProblem, max_vertices: int = 22) -> tuple[np.ndarray, float]:
+    """Exact MWIS by enumerating all 2^n subsets (a reference for tests and tiny graphs).
+
+    Returns ``(selected, objective)``; among equal-weight optima the smallest bitmask wins.
+    O(2^n (n + m')) time, O(2^n) memory; raises MwisInputError above ``max_vertices``.
+    """
+    n = problem.n
+    if n > max_vertices:
+        raise MwisInputError(f"weights: brute force needs n <= {max_vertices}, got {n}")
+    if n == 0:
+        return np.zeros(0, dtype=np.int32), 0.0
+    masks = np.arange(1 << n, dtype=np.int64)
+    ok = np.ones(masks.size, dtype=bool)
+    for u, v in problem.all_edges().tolist():
+        ok &= ((masks >> u) & (masks >> v) & 1) == 0
+    total = np.zeros(masks.size, dtype=np.float64)
+    for i in range(n):
+        total += ((masks >> i) & 1) * problem.weights[i]
+    total[~ok] = -1.0
+    best = int(np.argmax(total))
+    sel = np.flatnonzero((best >> np.arange(n)) & 1).astype(np.int32)
+    return sel, problem.objective(sel)

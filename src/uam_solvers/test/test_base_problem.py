@@ -1,0 +1,83 @@
+"""MwisProblem validation and normalisation, MwisResult helpers, integer weight scaling."""
+import numpy as np
+import pytest
+
+from uam_solvers.base import (MwisInputError, MwisProblem, brute_force_mwis, check_selection,
+                              integer_weights)
+
+
+def test_edges_are_normalised_and_groups_expand_to_cliques():
+    p = MwisProblem.from_arrays([1, 2, 3, 4], [[1, 0], [0, 1], [3, 2], [2, 3]], groups=[[3, 1, 1]])
+    assert p.edges.dtype == np.int32 and p.weights.dtype == np.float64
+    assert p.edges.tolist() == [[0, 1], [2, 3]]
+    assert [g.tolist() for g in p.groups] == [[1, 3]]
+    assert p.all_edges().tolist() == [[0, 1], [1, 3], [2, 3]]
+    assert (p.n, p.m) == (4, 2)
+
+
+def test_empty_graph_and_empty_edges():
+    p = MwisProblem.from_arrays([], [])
+    assert p.n == 0 and p.all_edges().shape == (0, 2)
+    q = MwisProblem.from_arrays([0.5, 0.25], np.zeros((0, 2)), groups=[[1]])
+    assert q.groups == () and q.is_independent([0, 1]) and q.objective([0, 1]) == 0.75
+
+
+@pytest.mark.parametrize(
+    "weights, edges, groups, kwargs, expected",
+    [
+        ([1, 2, 3], [[0, 1], [1, 5]], None, {}, "edges[1]: (1, 5) has a vertex out of range [0, 3)"),
+        ([1, 2, 3], [[0, 1], [2, 2]], None, {}, "edges[1]: (2, 2) is a self-loop"),
+        ([1, 2, 3], [[-1, 1]], None, {}, "edges[0]: (-1, 1) has a vertex out of range"),
+        ([1, float("nan"), 3], [], None, {}, "weights[1]: nan is not finite"),
+        ([1, 2, float("inf")], [], None, {}, "weights[2]: inf is not finite"),
+        ([1, -0.5, 3], [], None, {}, "weights[1]: -0.5 is negative"),
+        ([[1, 2]], [], None, {}, "weights: expected a 1-D array, got shape (1, 2)"),
+        ([1, 2, 3], [[0, 1, 2]], None, {}, "edges: expected shape (m, 2), got (1, 3)"),
+        ([1, 2, 3], [0, 1], None, {}, "edges: expected shape (m, 2), got (2,)"),
+        ([1, 2, 3], [[0, 1.5]], None, {}, "edges[0]: (0.0, 1.5) is not a pair of integer vertex indices"),
+        ([1, 2, 3], [], [[0, 1], [2, 7]], {}, "groups[1][1]: vertex 7 is out of range [0, 3)"),
+        ([1, 2, 3], [], None, {"max_vertices": 2}, "weights: 3 vertices exceed the limit max_vertices=2"),
+        (["a", 2], [], None, {}, "weights: not numeric"),
+    ],
+)
+def test_validation_errors_name_field_and_value(weights, edges, groups, kwargs, expected):
+    with pytest.raises(MwisInputError) as err:
+        MwisProblem.from_arrays(weights, edges, groups, **kwargs)
+    assert expected in str(err.value)
+
+
+def test_check_selection_reports_each_kind_of_bad_answer():
+    p = MwisProblem.from_arrays([1, 1, 1, 1], [[0, 1]], groups=[[2, 3]])
+    assert check_selection(p, [0, 2]) == (True, "")
+    assert check_selection(p, []) == (True, "")
+    assert check_selection(p, [0, 1])[1] == "selected: vertices 0 and 1 conflict"
+    assert check_selection(p, [2, 3])[1] == "selected: vertices 2 and 3 conflict"  # group pair
+    assert "out of range" in check_selection(p, [0, 4])[1]
+    assert "out of range" in check_selection(p, [-1])[1]
+    assert "duplicate" in check_selection(p, [0, 0])[1]
+    assert "integer" in check_selection(p, [0.0, 2.0])[1]
+    assert "1-D" in check_selection(p, [[0, 2]])[1]
+    assert not p.is_independent([1, 0])
+
+
+def test_objective_is_float_sum_of_selected_weights():
+    p = MwisProblem.from_arrays([0.1, 0.2, 0.3], [])
+    assert p.objective([0, 1, 2]) == pytest.approx(0.6, abs=1e-15)
+    assert p.objective([]) == 0.0
+
+
+def test_integer_weights_scale_to_resolution_and_keep_positive_weights_positive():
+    wi, scale = integer_weights(np.array([1.0, 0.5, 1e-9, 0.0]), resolution=1000)
+    assert scale == 1000.0
+    assert wi.tolist() == [1000, 500, 1, 0]
+    wi, scale = integer_weights(np.zeros(3))
+    assert wi.tolist() == [0, 0, 0] and scale == 1.0
+
+
+def test_brute_force_on_hand_checked_graphs():
+    # Path 0-1-2 with a heavy middle: take the middle.
+    p = MwisProblem.from_arrays([1, 3, 1], [[0, 1], [1, 2]])
+    assert brute_force_mwis(p)[0].tolist() == [1]
+    # 5-cycle with unit weights: optimum 2.
+    c5 = MwisProblem.from_arrays(np.ones(5), [[i, (i + 1) % 5] for i in range(5)])
+    assert brute_force_mwis(c5)[1] == 2.0
