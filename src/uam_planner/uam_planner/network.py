@@ -628,7 +628,8 @@ def network_from_dict(data: Any, default_name: str = "network") -> Network:
 
 def _load_yaml(path: Path) -> Network:
     try:
-        data = yaml.safe_load(path.read_text())
+        # the C loader (when PyYAML has it) parses a few-hundred-node file ~10x faster
+        data = yaml.load(path.read_text(), Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
     except yaml.YAMLError as exc:
         raise NetworkError(f"{path}: not valid YAML ({exc})") from None
     return network_from_dict(data, default_name=path.stem)
