@@ -9,7 +9,8 @@ import pytest
 
 rclpy = pytest.importorskip("rclpy", reason="needs the built workspace (scripts/test.sh sources it)")
 
-from graph_harness import TINY, build_graph, params, shutdown  # noqa: E402
+import rclpy.parameter  # noqa: E402
+from graph_harness import TINY, build_graph, shutdown  # noqa: E402
 from uam_msgs.msg import FlightPlan  # noqa: E402
 
 from uam_planner.audit import audit_flights  # noqa: E402
@@ -136,4 +137,20 @@ def test_bad_requests_are_rejected_with_reason_and_graph_keeps_running(ros_conte
         assert any(p.outcome == FlightPlan.OUTCOME_APPROVED for p in obs.plans)
     finally:
         bad_node.destroy_node()
+        shutdown(executor, nodes)
+
+
+def test_planner_switches_backend_by_parameter(ros_context, spin_until):
+    executor, nodes, obs = build_graph(ros_context, rate=3.0, seed=2, duration_s=90.0, backend="exact")
+    planner = nodes["planner"]
+    try:
+        refused = planner.set_parameters([rclpy.parameter.Parameter("backend", value="no-such")])[0]
+        assert not refused.successful and "no-such" in refused.reason and "greedy" in refused.reason
+        assert planner.set_parameters([rclpy.parameter.Parameter("backend", value="greedy")])[0].successful
+        assert spin_until(executor, lambda: nodes["simulator"].finished, timeout_s=60)
+        assert spin_until(executor, lambda: len(obs.reports) == 4, timeout_s=10)
+        solved = [r for r in obs.reports if r.vertices]
+        assert solved and all(r.backend_requested == "greedy" and r.backend_used == "greedy" for r in solved)
+        assert not any(r.fallback for r in solved)
+    finally:
         shutdown(executor, nodes)

@@ -1,0 +1,134 @@
+#!/usr/bin/env bash
+# Run the UAM node graph end to end: solver, planner, request generator, recorder and simulator,
+# each started with `ros2 run` (or, where the ros2 command line is absent, as with the PyPI
+# wheels, the same installed executable install/<pkg>/lib/<pkg>/<exe>). The run is recorded to
+# MCAP (and a Rerun .rrd); at the end the analysis summary and safety audit are printed.
+#
+# usage: scripts/run_fleet.sh [options]
+#   --backend NAME     MWIS backend of the solver (default exact; `--backend list` lists them)
+#   --policy P         mwis | fifo (default mwis)
+#   --rate R           requests per 30 s (default 10, the paper's middle rate)
+#   --duration S       simulated seconds (default 3500)
+#   --seed N           demand seed (default 0)
+#   --network FILE     routing network (default config/networks/singapore.yaml)
+#   --demand FILE      replay a demand file instead of random requests
+#   --mode M           lockstep | realtime (default lockstep)
+#   --rtf X            real-time factor in realtime mode (default 1)
+#   --rerun M          off | save | spawn | connect (default save: a .rrd next to the MCAP)
+#   --out DIR          output folder (default runs/<date>-<policy>-<backend>-r<rate>-s<seed>)
+# Ctrl-C stops every node cleanly; the recording is closed properly.
+set -Eeuo pipefail
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$ROOT"
+
+BACKEND=exact POLICY=mwis RATE=10 DURATION=3500 SEED=0 NETWORK=config/networks/singapore.yaml
+DEMAND="" MODE=lockstep RTF=1 RERUN=save OUT=""
+die() { echo "run_fleet: $*" >&2; exit 2; }
+while [[ $# -gt 0 ]]; do
+  case "$1" in
+    --backend) BACKEND="${2:?--backend needs a value}"; shift 2;;
+    --policy) POLICY="${2:?--policy needs a value}"; shift 2;;
+    --rate) RATE="${2:?--rate needs a value}"; shift 2;;
+    --duration) DURATION="${2:?--duration needs a value}"; shift 2;;
+    --seed) SEED="${2:?--seed needs a value}"; shift 2;;
+    --network) NETWORK="${2:?--network needs a value}"; shift 2;;
+    --demand) DEMAND="${2:?--demand needs a value}"; shift 2;;
+    --mode) MODE="${2:?--mode needs a value}"; shift 2;;
+    --rtf) RTF="${2:?--rtf needs a value}"; shift 2;;
+    --rerun) RERUN="${2:?--rerun needs a value}"; shift 2;;
+    --out) OUT="${2:?--out needs a value}"; shift 2;;
+    -h|--help) sed -n '2,21p' "$0"; exit 0;;
+    *) die "unknown option '$1' (see --help)";;
+  esac
+done
+[[ "$POLICY" == mwis || "$POLICY" == fifo ]] || die "--policy: '$POLICY' is not mwis or fifo"
+[[ "$MODE" == lockstep || "$MODE" == realtime ]] || die "--mode: '$MODE' is not lockstep or realtime"
+[[ "$RERUN" =~ ^(off|save|spawn|connect)$ ]] || die "--rerun: '$RERUN' is not off, save, spawn or connect"
+[[ "$RATE" =~ ^[0-9]+(\.[0-9]+)?$ ]] || die "--rate: '$RATE' is not a number >= 0"
+[[ "$DURATION" =~ ^[0-9]+(\.[0-9]+)?$ ]] || die "--duration: '$DURATION' is not a number of seconds"
+[[ "$SEED" =~ ^[0-9]+$ ]] || die "--seed: '$SEED' is not an integer >= 0"
+[[ "$RTF" =~ ^[0-9]+(\.[0-9]+)?$ ]] || die "--rtf: '$RTF' is not a positive number"
+[[ -f "$NETWORK" ]] || die "--network: no file '$NETWORK'"
+[[ -z "$DEMAND" || -f "$DEMAND" ]] || die "--demand: no file '$DEMAND'"
+
+bash scripts/setup.sh >/tmp/uam-setup-$$.log 2>&1 || { cat /tmp/uam-setup-$$.log; die "setup failed"; }
+rm -f /tmp/uam-setup-$$.log
+# shellcheck disable=SC1091
+source scripts/env.sh
+if [[ "$BACKEND" == list ]]; then python -m uam_solvers.registry; exit 0; fi
+python - "$BACKEND" <<'EOF' || exit 2
+import sys
+from uam_solvers.registry import UnknownBackendError, get_backend
+try:
+    ok, why = get_backend(sys.argv[1]).available()
+except UnknownBackendError as exc:
+    sys.exit(f"run_fleet: --backend: {exc}")
+if not ok:
+    sys.exit(f"run_fleet: --backend: {sys.argv[1]!r} is unavailable here: {why}")
+EOF
+
+[[ -n "$OUT" ]] || OUT="runs/$(date +%Y%m%d-%H%M%S)-$POLICY-$BACKEND-r$RATE-s$SEED"
+mkdir -p "$OUT"
+OUT="$(cd "$OUT" && pwd)"
+MCAP="$OUT/run.mcap" RRD="$OUT/run.rrd"
+export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$(( (RANDOM % 80) + 20 ))}"
+echo "run_fleet: policy $POLICY, backend $BACKEND, rate $RATE per 30 s, ${DURATION} s, seed $SEED, network $NETWORK"
+echo "run_fleet: outputs in $OUT (ROS_DOMAIN_ID=$ROS_DOMAIN_ID)"
+
+PIDS=()
+start() {  # start <pkg> <exe> <log name> [ros args...]
+  local pkg=$1 exe=$2 name=$3; shift 3
+  local cmd
+  if command -v ros2 >/dev/null 2>&1; then cmd=(ros2 run "$pkg" "$exe")
+  else cmd=("$ROOT/install/$pkg/lib/$pkg/$exe"); fi
+  "${cmd[@]}" --ros-args "$@" >"$OUT/$name.log" 2>&1 &
+  PIDS+=($!)
+}
+stop_all() {
+  local sig=${1:-INT}
+  for pid in "${PIDS[@]}"; do kill -"$sig" "$pid" 2>/dev/null || true; done
+  local deadline=$((SECONDS + 10))
+  for pid in "${PIDS[@]}"; do
+    while kill -0 "$pid" 2>/dev/null && (( SECONDS < deadline )); do sleep 0.1; done
+    kill -KILL "$pid" 2>/dev/null || true
+  done
+  wait 2>/dev/null || true
+}
+interrupted() { echo; echo "run_fleet: interrupted; stopping every node"; stop_all INT; trap - INT TERM; INTERRUPTED=1; }
+INTERRUPTED=0
+trap interrupted INT TERM
+
+start uam_solvers solver solver --params-file config/solver.yaml -p "default_backend:=$BACKEND"
+start uam_planner planner planner --params-file config/planner.yaml -p "network:=$NETWORK" \
+  -p "policy:=$POLICY" -p "backend:=$BACKEND"
+start uam_sim request_generator request_generator --params-file config/request_generator.yaml \
+  -p "network:=$NETWORK" -p "rate:=$RATE" -p "seed:=$SEED" -p "demand_file:=$DEMAND"
+start uam_sim recorder recorder -p "output:=$MCAP" -p "network:=$NETWORK" -p "rerun:=$RERUN" -p "rerun_rrd:=$RRD"
+start uam_sim simulator simulator --params-file config/simulator.yaml -p "duration_s:=$DURATION" \
+  -p "mode:=$MODE" -p "real_time_factor:=$RTF"
+SIM_PID=${PIDS[-1]}
+T0=$SECONDS
+SIM_RC=0
+wait "$SIM_PID" || SIM_RC=$?
+if (( INTERRUPTED == 0 )); then
+  # The others exit by themselves on the simulator's `finished`; give them a moment, then stop them.
+  deadline=$((SECONDS + 15))
+  for pid in "${PIDS[@]}"; do
+    while kill -0 "$pid" 2>/dev/null && (( SECONDS < deadline )); do sleep 0.1; done
+  done
+  stop_all INT
+fi
+trap - INT TERM
+echo "run_fleet: node graph finished in $((SECONDS - T0)) s wall (simulator exit code $SIM_RC)"
+grep -h "run finished" "$OUT/simulator.log" || true
+echo "run_fleet: recording: $MCAP"
+[[ "$RERUN" == save && -f "$RRD" ]] && echo "run_fleet: rerun:     $RRD   (view: rerun $RRD)"
+echo "run_fleet: node logs: $OUT/*.log"
+if [[ -f "$MCAP" ]]; then
+  python -m uam_sim.analysis "$MCAP" | tee "$OUT/summary.txt"
+else
+  echo "run_fleet: no recording was written; see $OUT/recorder.log" >&2
+  exit 1
+fi
+(( INTERRUPTED == 0 )) || exit 130
+exit "$SIM_RC"
