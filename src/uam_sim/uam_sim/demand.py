@@ -1,0 +1,237 @@
+"""Flight demand: the paper's seeded random request stream and replayable demand files, free of ROS.
+
+Random demand (the paper's setup): every interval (30 s of simulation time) ``rate`` requests are
+issued between random distinct aerodromes, each with earliest departure = now and latest departure
+= now + ``window_s`` (60 s). The stream is a pure function of (seed, interval index): the random
+numbers of interval i come from ``numpy.random.default_rng(SeedSequence([seed, i]))``, so the ROS
+request generator node and the in-process experiment runner produce the same requests whatever
+order or how often they ask, and one interval can be regenerated alone.
+
+Fractional rates: an interval issues ``floor(rate)`` requests plus one more with probability
+``rate - floor(rate)`` (drawn from that interval's RNG). Rate 0.5 gives on average one request
+every other interval; the expected count per interval is exactly ``rate``.
+
+Demand files (docs/demand-format.md): a YAML list of requests, each {t_s, origin, destination,
+optionally id, window_s or latest_s}, replayed by :class:`DemandSchedule` at the epoch whose
+interval contains ``t_s``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterable, Sequence
+
+import numpy as np
+import yaml
+
+from uam_planner.planning import FlightRequest
+
+DEFAULT_INTERVAL_S = 30.0
+DEFAULT_WINDOW_S = 60.0
+
+
+class DemandError(ValueError):
+    """Bad demand input; the message names the field and the offending value."""
+
+
+def _positive(name: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
+            or not math.isfinite(value) or value <= 0:
+        raise DemandError(f"{name}: {value!r} must be a positive finite number")
+    return float(value)
+
+
+def request_id(interval_index: int, i: int) -> str:
+    """Deterministic id of the i-th request of an interval: ``r{interval:05d}_{i:03d}``."""
+    return f"r{int(interval_index):05d}_{int(i):03d}"
+
+
+class RequestGenerator:
+    """The paper's random request stream.
+
+    Args:
+        aerodrome_ids: aerodrome node ids (>= 2 distinct) to draw origins and destinations from.
+        rate_per_interval: requests per interval (>= 0; fractional allowed, see module doc).
+        interval_s: time between generation instants [s] (30 s in the paper).
+        window_s: latest departure - earliest departure [s] (60 s in the paper).
+        seed: integer >= 0; the stream is a function of (seed, interval index) only.
+
+    ``requests_at(t_s, interval_index)`` returns that interval's requests, requested at ``t_s``,
+    earliest departure ``t_s``, latest ``t_s + window_s``. O(rate) per call.
+    """
+
+    def __init__(self, aerodrome_ids: Sequence[str], rate_per_interval: float,
+                 interval_s: float = DEFAULT_INTERVAL_S, window_s: float = DEFAULT_WINDOW_S,
+                 seed: int = 0):
+        ids = [str(a) for a in aerodrome_ids]
+        if len(set(ids)) < 2:
+            raise DemandError(f"aerodrome_ids: need at least 2 distinct aerodromes, got {ids!r}")
+        if len(set(ids)) != len(ids):
+            raise DemandError(f"aerodrome_ids: duplicates in {ids!r}")
+        r = rate_per_interval
+        if isinstance(r, bool) or not isinstance(r, (int, float, np.integer, np.floating)) \
+                or not math.isfinite(r) or r < 0:
+            raise DemandError(f"rate_per_interval: {r!r} must be a finite number >= 0")
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise DemandError(f"seed: {seed!r} must be an integer >= 0")
+        self.aerodrome_ids = tuple(ids)
+        self.rate_per_interval = float(r)
+        self.interval_s = _positive("interval_s", interval_s)
+        self.window_s = _positive("window_s", window_s)
+        self.seed = int(seed)
+
+    def rng(self, interval_index: int) -> np.random.Generator:
+        """The RNG of one interval, derived from (seed, interval_index) only."""
+        return np.random.default_rng(np.random.SeedSequence([self.seed, int(interval_index)]))
+
+    def requests_at(self, t_s: float, interval_index: int) -> list[FlightRequest]:
+        """The requests issued at ``t_s`` [s] for interval ``interval_index`` (>= 0)."""
+        if isinstance(interval_index, bool) or not isinstance(interval_index, (int, np.integer)) \
+                or interval_index < 0:
+            raise DemandError(f"interval_index: {interval_index!r} must be an integer >= 0")
+        if not isinstance(t_s, (int, float, np.integer, np.floating)) or not math.isfinite(t_s):
+            raise DemandError(f"t_s: {t_s!r} must be a finite time")
+        rng = self.rng(interval_index)
+        whole = math.floor(self.rate_per_interval)
+        frac = self.rate_per_interval - whole
+        extra = rng.random() < frac  # always drawn, so integer rates use the same stream layout
+        n = int(whole) + int(extra)
+        m = len(self.aerodrome_ids)
+        origin = rng.integers(0, m, size=n)
+        dest = rng.integers(0, m - 1, size=n)
+        dest = dest + (dest >= origin)  # uniform over the aerodromes other than the origin
+        t = float(t_s)
+        return [FlightRequest(request_id=request_id(interval_index, i),
+                              origin_id=self.aerodrome_ids[o], destination_id=self.aerodrome_ids[d],
+                              request_time_s=t, earliest_departure_s=t,
+                              latest_departure_s=t + self.window_s)
+                for i, (o, d) in enumerate(zip(origin.tolist(), dest.tolist()))]
+
+    def requests_for_epoch(self, epoch_index: int) -> list[FlightRequest]:
+        """Requests of interval ``epoch_index``, issued at ``epoch_index * interval_s``."""
+        return self.requests_at(epoch_index * self.interval_s, epoch_index)
+
+
+# ---- demand files --------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class DemandEntry:
+    """One request of a demand file (times in simulation seconds)."""
+
+    request_id: str
+    t_s: float
+    origin: str
+    destination: str
+    latest_s: float
+
+    def to_request(self) -> FlightRequest:
+        return FlightRequest(request_id=self.request_id, origin_id=self.origin,
+                             destination_id=self.destination, request_time_s=self.t_s,
+                             earliest_departure_s=self.t_s, latest_departure_s=self.latest_s)
+
+
+_KEYS = {"t_s", "origin", "destination", "window_s", "latest_s", "id"}
+
+
+def parse_demand(data: Any, aerodrome_ids: Iterable[str] | None = None,
+                 default_window_s: float = DEFAULT_WINDOW_S, where: str = "demand") -> list[DemandEntry]:
+    """Validate a demand list (the parsed YAML) into entries sorted by (t_s, file order).
+
+    Args:
+        data: a list of mappings, or a mapping with key ``requests`` holding that list.
+        aerodrome_ids: if given, origins and destinations must be among them.
+        default_window_s: window [s] for entries giving neither window_s nor latest_s.
+        where: prefix for error messages (the file name).
+    Raises DemandError naming the entry index, the field and the value. O(n log n).
+    """
+    if isinstance(data, dict):
+        if "requests" not in data:
+            raise DemandError(f"{where}: expected a list of requests or a mapping with 'requests', "
+                              f"got keys {sorted(data)!r}")
+        data = data["requests"]
+    if not isinstance(data, list):
+        raise DemandError(f"{where}: expected a list of requests, got {type(data).__name__}")
+    known = set(aerodrome_ids) if aerodrome_ids is not None else None
+    entries, seen = [], set()
+    for i, item in enumerate(data):
+        at = f"{where}[{i}]"
+        if not isinstance(item, dict):
+            raise DemandError(f"{at}: expected a mapping, got {item!r}")
+        unknown = set(item) - _KEYS
+        if unknown:
+            raise DemandError(f"{at}: unknown field {sorted(unknown)[0]!r} (known: {sorted(_KEYS)})")
+        for key in ("t_s", "origin", "destination"):
+            if key not in item:
+                raise DemandError(f"{at}.{key}: missing")
+        t = item["t_s"]
+        if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t) or t < 0:
+            raise DemandError(f"{at}.t_s: {t!r} must be a finite time >= 0")
+        for key in ("origin", "destination"):
+            v = item[key]
+            if not isinstance(v, (str, int)) or isinstance(v, bool) or str(v) == "":
+                raise DemandError(f"{at}.{key}: {v!r} must be a node id")
+            if known is not None and str(v) not in known:
+                raise DemandError(f"{at}.{key}: {v!r} is not an aerodrome of the network")
+        if str(item["origin"]) == str(item["destination"]):
+            raise DemandError(f"{at}.destination: {item['destination']!r} equals the origin")
+        if "window_s" in item and "latest_s" in item:
+            raise DemandError(f"{at}.latest_s: give window_s or latest_s, not both")
+        if "latest_s" in item:
+            lat = item["latest_s"]
+            if isinstance(lat, bool) or not isinstance(lat, (int, float)) or not math.isfinite(lat) \
+                    or lat < t:
+                raise DemandError(f"{at}.latest_s: {lat!r} must be a finite time >= t_s {t!r}")
+            latest = float(lat)
+        else:
+            w = item.get("window_s", default_window_s)
+            if isinstance(w, bool) or not isinstance(w, (int, float)) or not math.isfinite(w) or w < 0:
+                raise DemandError(f"{at}.window_s: {w!r} must be a finite number >= 0")
+            latest = float(t) + float(w)
+        rid = item.get("id", f"d{i:05d}")
+        if not isinstance(rid, (str, int)) or isinstance(rid, bool) or str(rid) == "":
+            raise DemandError(f"{at}.id: {rid!r} must be a non-empty string")
+        rid = str(rid)
+        if rid in seen:
+            raise DemandError(f"{at}.id: {rid!r} is used by an earlier request")
+        seen.add(rid)
+        entries.append(DemandEntry(rid, float(t), str(item["origin"]), str(item["destination"]),
+                                   latest))
+    order = sorted(range(len(entries)), key=lambda j: (entries[j].t_s, j))
+    return [entries[j] for j in order]
+
+
+def load_demand(path, aerodrome_ids: Iterable[str] | None = None,
+                default_window_s: float = DEFAULT_WINDOW_S) -> list[DemandEntry]:
+    """Read and validate a YAML demand file (format: docs/demand-format.md)."""
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except yaml.YAMLError as exc:
+        raise DemandError(f"{path}: not valid YAML ({exc})") from None
+    return parse_demand(data, aerodrome_ids, default_window_s, where=str(path))
+
+
+class DemandSchedule:
+    """Replays demand-file entries with the same interface as :class:`RequestGenerator`.
+
+    ``requests_at(t_s, interval_index)`` returns the entries with
+    ``(interval_index - 1) * interval_s < t_s <= interval_index * interval_s`` (interval 0 takes
+    every ``t_s <= 0``), i.e. a request is handed to the planner at the first epoch at or after
+    its time; its request time stays as written. O(n) per call.
+    """
+
+    def __init__(self, entries: Sequence[DemandEntry], interval_s: float = DEFAULT_INTERVAL_S):
+        self.entries = list(entries)
+        self.interval_s = _positive("interval_s", interval_s)
+        self._t = np.array([e.t_s for e in self.entries], dtype=np.float64)
+
+    def requests_at(self, t_s: float, interval_index: int) -> list[FlightRequest]:
+        hi = interval_index * self.interval_s
+        lo = (interval_index - 1) * self.interval_s if interval_index > 0 else -math.inf
+        idx = np.flatnonzero((self._t > lo) & (self._t <= hi))
+        return [self.entries[j].to_request() for j in idx.tolist()]
+
+    def requests_for_epoch(self, epoch_index: int) -> list[FlightRequest]:
+        return self.requests_at(epoch_index * self.interval_s, epoch_index)
