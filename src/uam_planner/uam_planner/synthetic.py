@@ -123,3 +123,31 @@ def generate_network(n_nodes: int, n_aerodromes: int, seed: int, extent_m: float
     pairs = [(ids[u], ids[v]) for u, v in edges.tolist()]
     return network_from_enu(name or f"synthetic-n{n_nodes}-a{n_aerodromes}-s{seed}", ids, enu,
                             is_aerodrome, pairs, origin_lat_lon_alt=origin_lat_lon_alt)
+
+
+def _benchmark(argv=None) -> int:
+    """Print a table of generation times: ``python -m uam_planner.synthetic [sizes...]``."""
+    import argparse
+    import time
+
+    ap = argparse.ArgumentParser(description="Time generate_network for several sizes.")
+    ap.add_argument("sizes", nargs="*", type=int, default=[100, 500, 2000, 5000, 10000])
+    ap.add_argument("--repeat", type=int, default=3, help="runs per size; the median is shown")
+    args = ap.parse_args(argv)
+    print(f"{'nodes':>7} {'aerodromes':>10} {'corridors':>9} {'mean corridor m':>15} "
+          f"{'build ms (median)':>17}")
+    for n in args.sizes:
+        n_a = max(2, n // 50)
+        times = []
+        for r in range(args.repeat):
+            t0 = time.perf_counter()
+            net = generate_network(n, n_a, seed=r)
+            times.append(time.perf_counter() - t0)
+        corridor = ~net.is_aerodrome[net.edges].any(axis=1)
+        print(f"{n:>7} {n_a:>10} {net.n_edges:>9} {net.edge_length_m[corridor].mean():>15.0f} "
+              f"{1000 * float(np.median(times)):>17.1f}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(_benchmark())
