@@ -1,6 +1,8 @@
 """Network file formats: YAML, GeoJSON and GraphML load and save, round trips, and file errors."""
 
+import copy
 import json
+import pickle
 from pathlib import Path
 
 import numpy as np
@@ -132,3 +134,12 @@ def test_file_level_errors(tmp_path):
     (tmp_path / "lat.yaml").write_text(yaml.safe_dump(doc))
     with pytest.raises(NetworkError, match=r"nodes\[4\] \(id 'W2'\)\.lat: 95\.2 is out of range"):
         load_network(tmp_path / "lat.yaml")
+
+
+def test_pickle_and_deepcopy_keep_a_valid_read_only_network():
+    net = load_network(CONFIG / "singapore.yaml")
+    for other in (pickle.loads(pickle.dumps(net)), copy.deepcopy(net)):
+        _assert_same(other, net)
+        assert not other.enu_m.flags.writeable
+        assert other.index == net.index
+        assert other.graph.number_of_edges() == net.n_edges

@@ -277,6 +277,13 @@ class Network:
                     f"{self.node_ids[p[k + 1]]!r}")
         return float(np.linalg.norm(np.diff(self.enu_m[p], axis=0), axis=1).sum())
 
+    def __reduce__(self):
+        # Rebuild through the constructor, so an unpickled copy (e.g. in a worker process) is
+        # validated again and keeps read-only arrays and the derived fields.
+        return (Network, (self.name, self.node_ids, self.names, self.is_aerodrome,
+                          self.lat_lon_alt, self.enu_m, self.origin_lat_lon_alt, self.edges,
+                          self.edge_length_m, self.no_fly_zones))
+
     def __repr__(self) -> str:
         return (f"Network(name={self.name!r}, nodes={self.n_nodes}, corridors={self.n_edges}, "
                 f"aerodromes={len(self.aerodrome_ids)})")
