@@ -252,3 +252,15 @@ def test_direct_constructor_rejects_non_canonical_edges():
         Network(**fields, edges=net.edges, edge_length_m=np.r_[5.0, net.edge_length_m[1:]])
     ok = Network(**fields, edges=net.edges, edge_length_m=net.edge_length_m)
     assert ok.edges.tolist() == net.edges.tolist()
+
+
+def test_build_network_from_plain_lists_with_an_origin_tuple():
+    doc = _doc()
+    net = build_network("direct", doc["nodes"], doc["corridors"], origin=(1.35, 103.80))
+    assert net.name == "direct"
+    assert net.origin_lat_lon_alt == (1.35, 103.80, 0.0)
+    assert net.enu_m[0] == pytest.approx([0.0, 0.0, 5.0], abs=1e-6)
+    with pytest.raises(NetworkError, match=r"name: '' is not a non-empty string"):
+        build_network("", doc["nodes"], doc["corridors"])
+    with pytest.raises(NetworkError, match=r"nodes: expected a list, got dict"):
+        build_network("x", {"A": 1}, doc["corridors"])
