@@ -59,11 +59,17 @@ class _PenalisedGraph:
         self.pos_fwd = pos[:m]
         self.pos_bwd = pos[m:]
         self.n = n
+        self._mat = None
         self.edge_of = {(int(u), int(v)): k for k, (u, v) in enumerate(edges.tolist())}
 
     def matrix(self, cost: np.ndarray) -> scipy.sparse.csr_matrix:
-        return scipy.sparse.csr_matrix((cost[self.entry_edge], self.indices, self.indptr),
-                                       shape=(self.n, self.n))
+        """The CSR matrix with corridor costs ``cost`` (m,); reuses one matrix object."""
+        if self._mat is None:
+            self._mat = scipy.sparse.csr_matrix(
+                (cost[self.entry_edge], self.indices, self.indptr), shape=(self.n, self.n))
+        else:
+            self._mat.data[:] = cost[self.entry_edge]
+        return self._mat
 
     def path_edges(self, path: list[int]) -> np.ndarray:
         return np.fromiter((self.edge_of[(min(a, b), max(a, b))] for a, b in zip(path, path[1:])),
@@ -82,8 +88,13 @@ def _routes(graph: _PenalisedGraph, network, o: int, d: int, k: int,
     cost = graph.length.copy()
     seen: set[tuple[int, ...]] = set()
     paths: list[tuple[tuple[int, ...], float]] = []
+    limit = np.inf
+    found: list[np.ndarray] = []
     for _ in range(int(k)):
-        _, pred = dijkstra(graph.matrix(cost), directed=True, indices=o, return_predecessors=True)
+        # After the first search, the penalised cost of a route already found bounds the new
+        # optimum, so the search may stop there (same result, fewer nodes settled).
+        _, pred = dijkstra(graph.matrix(cost), directed=True, indices=o, return_predecessors=True,
+                           limit=limit)
         if pred[d] < 0:
             raise ValueError(f"destination node {network.node_ids[d]!r} is unreachable from "
                              f"origin {network.node_ids[o]!r}")
@@ -97,6 +108,8 @@ def _routes(graph: _PenalisedGraph, network, o: int, d: int, k: int,
             seen.add(key)
             paths.append((key, float(graph.length[used].sum())))
         cost[used] += penalty_factor * graph.length[used]
+        found.append(used)
+        limit = min(float(cost[u].sum()) for u in found) * (1.0 + 1e-9) + 1e-6
     d_star = paths[0][1]
     return [CandidateRoute(p, length, d_star / length, i) for i, (p, length) in enumerate(paths)]
 
@@ -141,10 +154,14 @@ class RouteTemplate:
 
     def trajectory(self, departure_s: float) -> Trajectory:
         """The trajectory departing at ``departure_s`` [s]."""
-        t0, t1, p0, v = self.segments_rel
+        _, _, p0, v = self.segments_rel
         dep = float(departure_s)
-        return Trajectory(self.rel_times_s + dep, self.points_m,
-                          (t0 + dep, t1 + dep, p0, v))
+        if not np.isfinite(dep):
+            raise ValueError(f"departure_s must be finite, got {departure_s!r}")
+        times = self.rel_times_s + dep
+        times.setflags(write=False)
+        # The template was validated when cached; only the time shift is new.
+        return Trajectory._trusted(times, self.points_m, (times[:-1], times[1:], p0, v))
 
 
 class CandidateCache:

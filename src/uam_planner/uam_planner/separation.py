@@ -31,6 +31,7 @@ Pairs are generated in bounded chunks so memory stays bounded even in a crowded 
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -40,6 +41,11 @@ from .trajectory import Trajectory
 
 DEFAULT_SEPARATION_M = 100.0
 _MAX_PAIRS_PER_CHUNK = 1 << 20
+# Broad-phase defaults, tuned on the city-scale benchmark (python -m uam_planner.bench): cells of
+# 4 separations and time buckets of 2 cells' flight time balance the number of cell keys per piece
+# (sorting cost) against the pairs that share a cell without coming near (filtering cost).
+DEFAULT_CELL_SEPARATIONS = 4.0
+DEFAULT_BUCKET_CELLS = 2.0
 
 
 def segment_pair_min_distance(t0a, t1a, p0a, va, t0b, t1b, p0b, vb) -> np.ndarray:
@@ -185,7 +191,7 @@ def _cut_pieces(s: SegmentSet, cell_m: float, bucket_s: float, half_m: float) ->
 
 def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPARATION_M,
                       groups_a=None, cell_m: float | None = None, bucket_s: float | None = None,
-                      return_distances: bool = False):
+                      return_distances: bool = False, stats: dict | None = None):
     """Pairs of trajectories that lose separation (come closer than ``separation_m``) at some time.
 
     Args:
@@ -195,9 +201,12 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
             strictly below it.
         groups_a: optional (n_a,) labels, only with ``trajs_b=None``: pairs within one group are
             skipped (the candidates of one request exclude each other anyway).
-        cell_m, bucket_s: broad-phase cell size [m] (>= separation; default 2 x separation) and
-            time bucket [s] (default the time to fly one cell at the median speed).
+        cell_m, bucket_s: broad-phase cell size [m] (>= separation) and
+            time bucket [s] (defaults: 4 x separation, and the time to fly 2 cells at the
+            median segment speed).
         return_distances: also return each pair's exact minimum distance [m].
+        stats: optional dict that receives broad-phase counts (segments, pieces, keys, pairs
+            sharing a cell, exact checks) and wall times, for benchmarks.
     Returns:
         (k, 2) int64 array of trajectory index pairs (i into a, j into b; i < j within one set),
         sorted lexicographically; with ``return_distances`` also (k,) float64 distances.
@@ -229,13 +238,14 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
         if len(sb) == 0:
             return (empty, np.zeros(0)) if return_distances else empty
 
-    cell = float(cell_m) if cell_m is not None else 2.0 * float(separation_m)
+    clock = [time.perf_counter()]
+    cell = float(cell_m) if cell_m is not None else DEFAULT_CELL_SEPARATIONS * float(separation_m)
     if cell < separation_m:
         raise ValueError(f"cell_m must be >= separation_m={separation_m}, got {cell}")
     if bucket_s is None:
         speeds = np.linalg.norm(sa.v_mps, axis=1)
         med = float(np.median(speeds))
-        bucket = cell / med if med > 0.0 else 60.0
+        bucket = DEFAULT_BUCKET_CELLS * cell / med if med > 0.0 else 60.0
     else:
         bucket = float(bucket_s)
     if not (np.isfinite(bucket) and bucket > 0.0):
@@ -245,6 +255,7 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
     pa = _cut_pieces(sa, cell, bucket, half)
     pb = pa if single else _cut_pieces(sb, cell, bucket, half)
     na = pa.t0.shape[0]
+    clock.append(time.perf_counter())
 
     # Global grid origin shared by both sets so keys agree.
     x0 = min(pa.xlo.min(), pb.xlo.min())
@@ -265,40 +276,54 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
     nx = int(max(ra[1].max(), rb[1].max())) + 1
     ny = int(max(ra[3].max(), rb[3].max())) + 1
 
+    n_items = na + (0 if single else pb.t0.shape[0])
+    item_bits = max(int(n_items).bit_length(), 1)
+    max_code = ((int(max(ra[5].max(), rb[5].max())) + 1) * ny * nx) * 2
+    packed = max_code.bit_length() + item_bits <= 63
+
     def expand(r, side: int, offset: int):
         ix0, ix1, iy0, iy1, it0, it1 = r
         cx = ix1 - ix0 + 1
         cy = iy1 - iy0 + 1
-        ct = it1 - it0 + 1
-        cnt = cx * cy * ct
+        cnt = cx * cy * (it1 - it0 + 1)
         item = np.repeat(np.arange(cnt.shape[0], dtype=np.int64), cnt)
-        local = np.arange(item.shape[0], dtype=np.int64) - (np.cumsum(cnt) - cnt)[item]
+        local = np.arange(item.shape[0], dtype=np.int64) - np.repeat(np.cumsum(cnt) - cnt, cnt)
         cxi = cx[item]
+        rest, ix = np.divmod(local, cxi)
+        ix += ix0[item]
         cyi = cy[item]
-        ix = ix0[item] + local % cxi
-        rest = local // cxi
-        iy = iy0[item] + rest % cyi
-        it = it0[item] + rest // cyi
-        key = (it * ny + iy) * nx + ix
-        return key * 2 + side, item + offset, ix, iy, it
+        it, iy = np.divmod(rest, cyi)
+        iy += iy0[item]
+        it += it0[item]
+        code = ((it * ny + iy) * nx + ix) * 2 + side
+        item += offset
+        if packed:
+            # one int64 holds (cell, side, item): a plain sort beats an argsort several-fold
+            code <<= item_bits
+            code |= item
+            return code, None
+        return code, item
 
-    ka, ia, xa, ya, ta = expand(ra, 0, 0)
+    ka, ia = expand(ra, 0, 0)
     if single:
-        keys, items, kx, ky, kt = ka, ia, xa, ya, ta
+        codes, items = ka, ia
     else:
-        kb, ib, xb, yb, tb = expand(rb, 1, na)
-        keys = np.concatenate((ka, kb))
-        items = np.concatenate((ia, ib))
-        kx = np.concatenate((xa, xb))
-        ky = np.concatenate((ya, yb))
-        kt = np.concatenate((ta, tb))
-    order = np.argsort(keys, kind="stable")
-    keys = keys[order]
-    items = items[order]
-    kx = kx[order]
-    ky = ky[order]
-    kt = kt[order]
+        kb, ib = expand(rb, 1, na)
+        codes = np.concatenate((ka, kb))
+        items = None if packed else np.concatenate((ia, ib))
+    clock.append(time.perf_counter())
+    if packed:
+        codes.sort()
+        items = codes & ((1 << item_bits) - 1)
+        keys = codes >> item_bits
+    else:
+        order = np.argsort(codes)
+        keys = codes[order]
+        items = items[order]
     cell_key = keys >> 1
+    # cell coordinates of each sorted entry (for the canonical-cell test)
+    rest, kx = np.divmod(cell_key, nx)
+    kt, ky = np.divmod(rest, ny)
     m = keys.shape[0]
     bounds = np.flatnonzero(np.diff(cell_key)) + 1
     g_start = np.concatenate(([0], bounds))
@@ -339,8 +364,11 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
     P_traj = np.concatenate((sa.traj[pa.seg], sb.traj[pb.seg])) if not single else sa.traj[pa.seg]
     P_v = sa.v_mps[pa.seg] if single else np.concatenate((sa.v_mps[pa.seg], sb.v_mps[pb.seg]))
 
+    clock.append(time.perf_counter())
     out_pairs = []
     out_dist = []
+    n_shared = int(n_right.sum())
+    n_exact = 0
     csum = np.cumsum(n_right)
     start = 0
     while start < left_pos.shape[0]:
@@ -356,23 +384,31 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
         start = stop
         i = items[lrep]
         j = items[rpos]
-        ti = P_traj[i]
-        tj = P_traj[j]
-        ok = ti != tj if single else np.ones(cnt, dtype=bool)
-        if groups is not None:
-            ok &= groups[ti] != groups[tj]
-        lo_t = np.maximum(P_t0[i], P_t0[j])
-        ok &= lo_t <= np.minimum(P_t1[i], P_t1[j])
-        lo_x = np.maximum(P_xlo[i], P_xlo[j])
-        ok &= lo_x <= np.minimum(P_xhi[i], P_xhi[j])
-        lo_y = np.maximum(P_ylo[i], P_ylo[j])
-        ok &= lo_y <= np.minimum(P_yhi[i], P_yhi[j])
-        # Report each pair once: in the cell holding the low corner of the boxes' intersection.
-        ok &= np.floor((lo_x - x0) / cell).astype(np.int64) == kx[lrep]
-        ok &= np.floor((lo_y - y0) / cell).astype(np.int64) == ky[lrep]
-        ok &= np.floor((lo_t - tt0) / bucket).astype(np.int64) == kt[lrep]
+        kl = lrep
+        if single:
+            ti = P_traj[i]
+            tj = P_traj[j]
+            ok = ti != tj
+            if groups is not None:
+                ok &= groups[ti] != groups[tj]
+            i, j, kl = i[ok], j[ok], kl[ok]
+        # Filters in order of selectivity, compressing after each so later gathers are cheap.
+        # Each keeps a pair only in its canonical cell (the one holding the low corner of the
+        # intersection of the two boxes), so a pair sharing several cells is checked once.
+        lo = np.maximum(P_t0[i], P_t0[j])
+        ok = lo <= np.minimum(P_t1[i], P_t1[j])
+        ok &= np.floor((lo - tt0) / bucket).astype(np.int64) == kt[kl]
+        i, j, kl = i[ok], j[ok], kl[ok]
+        lo = np.maximum(P_xlo[i], P_xlo[j])
+        ok = lo <= np.minimum(P_xhi[i], P_xhi[j])
+        ok &= np.floor((lo - x0) / cell).astype(np.int64) == kx[kl]
+        i, j, kl = i[ok], j[ok], kl[ok]
+        lo = np.maximum(P_ylo[i], P_ylo[j])
+        ok = lo <= np.minimum(P_yhi[i], P_yhi[j])
+        ok &= np.floor((lo - y0) / cell).astype(np.int64) == ky[kl]
         i = i[ok]
         j = j[ok]
+        n_exact += int(i.size)
         if i.size == 0:
             continue
         d = segment_pair_min_distance(P_t0[i], P_t1[i], P_p0[i], P_v[i],
@@ -386,6 +422,12 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
             a_idx, b_idx = np.minimum(a_idx, b_idx), np.maximum(a_idx, b_idx)
         out_pairs.append(np.stack((a_idx, b_idx), axis=1))
         out_dist.append(d[lose])
+    clock.append(time.perf_counter())
+    if stats is not None:
+        stats.update(segments_a=len(sa), segments_b=len(sb), pieces=int(na + (0 if single else pb.t0.shape[0])),
+                     keys=int(m), pairs_sharing_cell=n_shared, exact_checks=n_exact,
+                     pieces_s=clock[1] - clock[0], keys_s=clock[2] - clock[1],
+                     sort_s=clock[3] - clock[2], pairs_and_exact_s=clock[4] - clock[3])
     if not out_pairs:
         return (empty, np.zeros(0)) if return_distances else empty
     pairs = np.concatenate(out_pairs)

@@ -97,6 +97,15 @@ class Trajectory:
             object.__setattr__(self, "_segments", (t0, t1, p0, v))
         return self._segments
 
+    @classmethod
+    def _trusted(cls, times_s: np.ndarray, points_m: np.ndarray, segments: tuple) -> "Trajectory":
+        """Build without validation from arrays already checked (cached route templates)."""
+        obj = object.__new__(cls)
+        object.__setattr__(obj, "times_s", times_s)
+        object.__setattr__(obj, "points_m", points_m)
+        object.__setattr__(obj, "_segments", segments)
+        return obj
+
     def shifted(self, dt_s: float) -> "Trajectory":
         """The same path flown ``dt_s`` seconds later."""
         return Trajectory(self.times_s + float(dt_s), self.points_m)

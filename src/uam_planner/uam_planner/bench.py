@@ -1,0 +1,210 @@
+"""Benchmark of the planning core: ``python -m uam_planner.bench``.
+
+Prints tables of the time per planning cycle split by phase (the MWIS solve excluded) and of the
+exact segment-pair separation checks per second:
+
+- paper scale: the Singapore network (config/networks/singapore.yaml), 10 requests per 30 s
+  epoch between random distinct aerodromes, 5 candidates, active flights from the running
+  scenario itself (MWIS by greedy), target median cycle < 20 ms;
+- city scale: a generated 2,000-node network, 100 requests per epoch, 1,500 active flights
+  airborne at the epoch, target cycle < 1 s (first epoch with an empty route cache, then epochs
+  whose origin-destination pairs are cached);
+- kernel: ``segment_pair_min_distance`` on random segment pairs, target >= 5 million checks/s.
+
+Wall time is measured here only; the library never reads the clock to decide anything.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import statistics
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .candidates import CandidateCache
+from .planning import FlightRequest, Flight, PlanningConfig, Planner
+from .separation import segment_pair_min_distance
+
+PHASES = ("eligible_s", "candidates_s", "trajectories_s", "deconfliction_s", "conflicts_s",
+          "graph_s", "finish_s")
+
+
+def _greedy(weights, edges, groups):
+    from uam_solvers.greedy import greedy_mwis
+
+    class _R:
+        selected = greedy_mwis(weights, edges)
+        backend = "greedy"
+    return _R()
+
+
+def _find_network(path: str | None) -> Path:
+    if path:
+        return Path(path)
+    here = Path(__file__).resolve()
+    for base in [Path.cwd(), *here.parents]:
+        cand = base / "config" / "networks" / "singapore.yaml"
+        if cand.exists():
+            return cand
+    raise FileNotFoundError("config/networks/singapore.yaml not found; pass --network")
+
+
+def _phase_row(label: str, reports: list) -> str:
+    cells = []
+    for ph in PHASES:
+        vals = [r.phase_times_s.get(ph, 0.0) for r in reports]
+        cells.append(f"{1e3 * statistics.median(vals):8.2f}")
+    tot = [r.planning_time_s for r in reports]
+    return (f"| {label:<26} | " + " | ".join(cells) +
+            f" | {1e3 * statistics.median(tot):8.2f} | {1e3 * max(tot):8.2f} |")
+
+
+def _header() -> str:
+    names = ["eligible", "candid.", "traject.", "deconfl.", "conflict", "graph", "finish"]
+    h = "| case (ms, median)          | " + " | ".join(f"{n:>8}" for n in names) + \
+        " | cycle md |  cycle max |"
+    return h + "\n|" + "|".join("-" * (len(c) + 0) for c in h.split("|")[1:-1]) + "|"
+
+
+def paper_scale(network_path: Path, epochs: int, per_epoch: int, seed: int):
+    from .network import load_network
+    net = load_network(network_path)
+    planner = Planner(net, PlanningConfig(), "mwis", solve_mwis=_greedy)
+    rng = np.random.default_rng(seed)
+    reports = []
+    n = 0
+    for e in range(epochs):
+        t = 30.0 * e
+        for _ in range(per_epoch):
+            o, d = rng.choice(len(net.aerodrome_ids), 2, replace=False)
+            planner.submit(FlightRequest(f"r{n:05d}", net.aerodrome_ids[o], net.aerodrome_ids[d],
+                                         t, t, t + 60.0))
+            n += 1
+        reports.append(planner.plan(t, e).report)
+    return net, reports
+
+
+def city_scale(n_nodes: int, n_aerodromes: int, n_active: int, per_epoch: int, epochs: int,
+               seed: int):
+    from .synthetic import generate_network
+    net = generate_network(n_nodes, n_aerodromes, seed=seed)
+    cfg = PlanningConfig()
+    rng = np.random.default_rng(seed)
+    # Active flights: shortest routes between random aerodromes, each airborne at t0.
+    cache = CandidateCache(net, cfg.k, cfg.penalty_factor, cfg.speed_mps)
+    t0 = 10_000.0
+    pairs = [tuple(rng.choice(net.aerodrome_indices, 2, replace=False)) for _ in range(n_active)]
+    active = []
+    for i, (o, d) in enumerate(pairs):
+        tp = cache.templates(o, d)[0]
+        dep = t0 - float(rng.uniform(0.0, tp.duration_s))
+        tr = tp.trajectory(dep)
+        active.append(Flight(f"a{i:05d}", net.node_ids[o], net.node_ids[d], tp.node_ids, tr,
+                             tr.departure_s, tr.arrival_s, tp.route.length_m, 1.0, 0, "mwis",
+                             "greedy", -1))
+    req_pairs = [tuple(rng.choice(len(net.aerodrome_ids), 2, replace=False))
+                 for _ in range(per_epoch)]
+    planner = Planner(net, cfg, "mwis", solve_mwis=_greedy)
+    planner.active = list(active)
+    reports = []
+    n = 0
+    for e in range(epochs):
+        t = t0 + 30.0 * e
+        # The same origin-destination pairs every epoch: epoch 0 fills the route cache.
+        for o, d in req_pairs:
+            planner.submit(FlightRequest(f"r{n:05d}", net.aerodrome_ids[o], net.aerodrome_ids[d],
+                                         t, t, t + 60.0))
+            n += 1
+        reports.append(planner.plan(t, e).report)
+        # Keep the airborne count near n_active: approvals replace flights, not add to them.
+        planner.active = planner.active[-n_active:] if len(planner.active) > n_active else planner.active
+    return net, reports
+
+
+def kernel_throughput(n_pairs: int, repeats: int, seed: int) -> float:
+    rng = np.random.default_rng(seed)
+    t0a = rng.uniform(0, 100, n_pairs)
+    t0b = rng.uniform(0, 100, n_pairs)
+    arr = [t0a, t0a + rng.uniform(1, 100, n_pairs), rng.normal(0, 1000, (n_pairs, 3)),
+           rng.normal(0, 10, (n_pairs, 3)), t0b, t0b + rng.uniform(1, 100, n_pairs),
+           rng.normal(0, 1000, (n_pairs, 3)), rng.normal(0, 10, (n_pairs, 3))]
+    best = float("inf")
+    for _ in range(repeats):
+        t = time.perf_counter()
+        segment_pair_min_distance(*arr)
+        best = min(best, time.perf_counter() - t)
+    return n_pairs / best
+
+
+def _machine() -> str:
+    model = platform.processor() or "unknown"
+    try:
+        out = subprocess.run(["lscpu"], capture_output=True, text=True, check=False).stdout
+        for line in out.splitlines():
+            if line.startswith("Model name:"):
+                model = line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return f"{model}, {os.cpu_count()} cores, numpy {np.__version__}"
+
+
+def _commit() -> str:
+    try:
+        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
+                              text=True, check=False, cwd=Path(__file__).parent).stdout.strip()
+    except OSError:
+        return "unknown"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--network", help="paper-scale network file (default config/networks/singapore.yaml)")
+    ap.add_argument("--paper-epochs", type=int, default=120)
+    ap.add_argument("--city-epochs", type=int, default=4)
+    ap.add_argument("--city-nodes", type=int, default=2000)
+    ap.add_argument("--city-aerodromes", type=int, default=100)
+    ap.add_argument("--city-active", type=int, default=1500)
+    ap.add_argument("--city-requests", type=int, default=100)
+    ap.add_argument("--kernel-pairs", type=int, default=2_000_000)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--skip", action="append", default=[], choices=["paper", "city", "kernel"])
+    args = ap.parse_args(argv)
+
+    print(f"machine: {_machine()}; commit {_commit()}")
+    print(_header())
+    if "paper" not in args.skip:
+        path = _find_network(args.network)
+        net, reps = paper_scale(path, args.paper_epochs, 10, args.seed)
+        warm = reps[10:] if len(reps) > 20 else reps
+        print(_phase_row(f"paper {len(net.node_ids)}n ep>=10", warm))
+        act = [r.active_flights for r in warm]
+        cand = [r.candidates for r in warm]
+        print(f"  paper scale: {net.name}, {len(net.node_ids)} nodes, {len(net.aerodrome_ids)} "
+              f"aerodromes; {len(warm)} epochs after warm-up; active flights median "
+              f"{statistics.median(act):.0f} (max {max(act)}); candidates/epoch median "
+              f"{statistics.median(cand):.0f}; target median cycle < 20 ms")
+    if "city" not in args.skip:
+        net, reps = city_scale(args.city_nodes, args.city_aerodromes, args.city_active,
+                               args.city_requests, args.city_epochs, args.seed)
+        print(_phase_row("city cold cache (ep 0)", reps[:1]))
+        if len(reps) > 1:
+            print(_phase_row("city warm cache (ep>=1)", reps[1:]))
+        r = reps[-1]
+        print(f"  city scale: {net.name}, {len(net.node_ids)} nodes, {net.n_edges} corridors; "
+              f"{args.city_requests} requests/epoch, active flights at plan "
+              f"{reps[0].active_flights - reps[0].approved}; last epoch: {r.candidates} candidates, "
+              f"{r.discarded} discarded, {r.conflict_edges} conflict edges; target cycle < 1 s")
+    if "kernel" not in args.skip:
+        rate = kernel_throughput(args.kernel_pairs, 5, args.seed)
+        print(f"  kernel: segment_pair_min_distance {rate / 1e6:.1f} million exact segment-pair "
+              f"checks/s ({args.kernel_pairs} pairs per call, best of 5); target >= 5 million/s")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
