@@ -85,3 +85,16 @@ def test_no_node_or_corridor_inside_an_airport_zone(net):
     for z in zones.values():
         assert haversine_m(lat, lon, z.lat, z.lon).min() > z.radius_m, z.name
         assert haversine_m(seg_lat, seg_lon, z.lat, z.lon).min() > z.radius_m, z.name
+
+
+def test_committed_files_are_what_the_generator_script_writes(tmp_path):
+    # config/networks/singapore.* must not drift from scripts/build_singapore_network.py
+    import importlib.util
+
+    script = CONFIG.parents[1] / "scripts" / "build_singapore_network.py"
+    spec = importlib.util.spec_from_file_location("build_singapore_network", script)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    assert module.main(["--out-dir", str(tmp_path)]) == 0
+    for name in ("singapore.yaml", "singapore.graphml"):
+        assert (tmp_path / name).read_text() == (CONFIG / name).read_text(), name
