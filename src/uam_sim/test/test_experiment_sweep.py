@@ -1,0 +1,163 @@
+"""uam_sim.experiment: small sweeps (two rates, two methods, one seed, short runs)."""
+
+import json
+import os
+from pathlib import Path
+
+import pytest
+import yaml
+
+from uam_sim.demand import RequestGenerator
+from uam_sim.experiment import (ExperimentError, average_airborne, load_config, load_network_spec,
+                                main, make_config, run_experiment, run_scenario, run_sweep)
+
+REPO = Path(__file__).resolve().parents[3]
+NET = {"synthetic": {"n_nodes": 30, "n_aerodromes": 5, "seed": 2}}
+TIMING = {"solve_time_s", "planning_time_s", "wall_s", "real_time_factor", "solve_time_mean_s",
+          "solve_time_max_s"}
+
+
+def small(out, **kw):
+    base = dict(network=NET, methods=["fifo", "greedy"], rates=[2, 6], seeds=[0],
+                duration_s=300.0, out=str(out), workers=1, include_qpu=False,
+                tts={"enabled": False})
+    base.update(kw)
+    return make_config(base)
+
+
+def strip_timing(cell):
+    """A cell without wall-clock fields (the only thing allowed to differ between runs)."""
+    c = json.loads(json.dumps(cell))
+    for row in [c["summary"], *c["epochs"]]:
+        for k in TIMING & set(row):
+            row[k] = None
+    return c
+
+
+@pytest.fixture(scope="module")
+def serial(tmp_path_factory):
+    cfg = small(tmp_path_factory.mktemp("serial"))
+    return cfg, run_sweep(cfg, progress=False)
+
+
+def test_every_cell_is_present_and_consistent(serial):
+    cfg, sweep = serial
+    keys = [(c["summary"]["method"], c["summary"]["rate"], c["summary"]["seed"]) for c in sweep.cells]
+    assert keys == [(m, r, 0) for m in ("fifo", "greedy") for r in (2, 6)]
+    assert len(sweep.computed) == 4 and sweep.reused == []
+    for c in sweep.cells:
+        s = c["summary"]
+        assert s["epochs"] == len(c["epochs"]) == 10          # t = 0, 30, ..., 270 < 300
+        assert s["requests"] == 10 * s["rate"]
+        assert s["approved"] == len(c["flights"]) == c["epochs"][-1]["approved_cum"]
+        assert s["requests"] == s["approved"] + s["expired"] + s["pending_end"] + s["rejected"]
+        assert s["approved"] > 0
+        assert all(e["selected"] <= e["eligible"] for e in c["epochs"])
+        assert (Path(cfg.out) / "cells" / f"{c['key']}.json").exists()
+
+
+def test_methods_see_identical_demand(serial):
+    cfg, sweep = serial
+    net = load_network_spec(NET)
+    for rate in (2, 6):
+        gen = RequestGenerator(net.aerodrome_ids, rate, seed=0)
+        issued = {r.request_id: r for i in range(10) for r in gen.requests_for_epoch(i)}
+        for c in sweep.cells:
+            if c["summary"]["rate"] != rate:
+                continue
+            for f in c["flights"]:
+                r = issued[f["request_id"]]
+                assert (f["origin"], f["destination"]) == (r.origin_id, r.destination_id)
+                assert r.earliest_departure_s <= f["departure_s"] <= r.latest_departure_s
+
+
+def test_audit_runs_and_finds_no_loss(serial):
+    _, sweep = serial
+    for c in sweep.cells:
+        assert c["audit"]["losses"] == 0
+        assert c["audit"]["min_separation_m"] is None or c["audit"]["min_separation_m"] >= 100.0
+    assert sum(c["audit"]["pairs_checked"] for c in sweep.cells) > 0
+
+
+def test_parallel_equals_serial(serial, tmp_path):
+    cfg, sweep = serial
+    par = run_sweep(small(tmp_path, workers=2), progress=False)
+    assert len(par.computed) == 4
+    assert [strip_timing(c) for c in par.cells] == [strip_timing(c) for c in sweep.cells]
+
+
+def test_resumed_run_recomputes_nothing(serial):
+    cfg, sweep = serial
+    cells = Path(cfg.out) / "cells"
+    before = {p.name: p.stat().st_mtime_ns for p in cells.glob("*.json")}
+    again = run_sweep(cfg, progress=False)
+    assert again.computed == [] and len(again.reused) == 4
+    assert {p.name: p.stat().st_mtime_ns for p in cells.glob("*.json")} == before
+    assert [c["key"] for c in again.cells] == [c["key"] for c in sweep.cells]
+    # a changed parameter changes the key: only the affected cells run again
+    more = run_sweep(small(cfg.out, methods=["fifo", "greedy"], rates=[2, 6, 4]), progress=False)
+    assert sorted(more.computed) == [("fifo", 4, 0), ("greedy", 4, 0)]
+    longer = run_sweep(small(cfg.out, duration_s=330.0, methods=["fifo"], rates=[2]), progress=False)
+    assert longer.computed == [("fifo", 2, 0)]
+
+
+def test_figures_report_and_tables_are_written(tmp_path):
+    cfg = small(tmp_path, tts={"enabled": True, "instances": 20, "reads": 10,
+                               "backends": ["greedy"]})
+    out = run_experiment(cfg, progress=False)
+    for name in ("cumulative_approved", "approved_per_rate", "aircraft_in_air", "mwis_size",
+                 "solve_time"):
+        p = tmp_path / "figures" / f"{name}.png"
+        assert p.exists() and p.stat().st_size > 5000
+    runs = (tmp_path / "runs.csv").read_text().splitlines()
+    assert len(runs) == 1 + 4
+    assert len((tmp_path / "epochs.csv").read_text().splitlines()) == 1 + 4 * 10
+    report = (tmp_path / "REPORT.md").read_text()
+    assert "Losses of separation: **0**" in report
+    assert "figures/cumulative_approved.png" in report
+    assert "Compared with the paper's statements" in report
+    assert (tmp_path / "instances.jsonl").exists()
+    from uam_solvers.instances import load_corpus
+    corpus = load_corpus(tmp_path / "instances.jsonl")
+    assert corpus and all(e.problem.n <= cfg.corpus_max_vertices for e in corpus)
+
+
+def test_scenario_is_deterministic_and_same_seed_same_approvals():
+    net = load_network_spec(NET)
+    cfg = make_config({"audit": False})
+    a = run_scenario(net, "greedy", 4, 1, 240.0, cfg)
+    b = run_scenario(net, "greedy", 4, 1, 240.0, cfg)
+    assert a.decisions() == b.decisions() and a.decisions()
+    assert a.audit == {}
+
+
+def test_average_airborne_is_integrated_exactly():
+    # flights [0, 100], [50, 250] (clipped to 200), [300, 400] (outside) over 200 s
+    assert average_airborne([0, 50, 300], [100, 250, 400], 200.0) == pytest.approx((100 + 150) / 200)
+    assert average_airborne([], [], 10.0) == 0.0
+
+
+def test_config_file_flags_and_errors(tmp_path):
+    cfg = load_config(REPO / "config/experiment.yaml")
+    assert cfg.rates == [1, 2, 4, 6, 8, 10, 15, 20] and cfg.seeds == [0, 1, 2, 3, 4]
+    assert (cfg.duration_s, cfg.separation_m, cfg.k, cfg.epoch_s) == (3500.0, 100.0, 5, 30.0)
+    assert cfg.methods == ["fifo", "greedy", "exact", "sa", "tabu", "qpu-emulator"]
+    cfg = load_config(REPO / "config/experiment.yaml", rates="1,2.5", seeds="3,7", methods="fifo")
+    assert (cfg.rates, cfg.seeds, cfg.methods) == ([1, 2.5], [3, 7], ["fifo"])
+    with pytest.raises(ExperimentError, match="durations"):
+        make_config({"durations": 5})
+    with pytest.raises(ExperimentError, match="rates: item 'x'"):
+        make_config({"rates": "1,x"})
+    with pytest.raises(ExperimentError, match="duration_s"):
+        make_config({"duration_s": -1})
+
+
+def test_command_line_runs_a_small_sweep(tmp_path):
+    conf = tmp_path / "exp.yaml"
+    conf.write_text(yaml.safe_dump({"network": NET, "include_qpu": False, "seeds": 5}))
+    rc = main(["--config", str(conf), "--rates", "2", "--methods", "fifo", "--seeds", "1",
+               "--duration", "120", "--workers", "1", "--out", str(tmp_path / "res"),
+               "--no-tts", "--no-progress"])
+    assert rc == 0
+    assert (tmp_path / "res" / "REPORT.md").exists()
+    assert len(list((tmp_path / "res" / "cells").glob("*.json"))) == 1
