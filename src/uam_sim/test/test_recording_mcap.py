@@ -262,3 +262,27 @@ def test_rerun_cli_reads_the_recording(recording, tmp_path):
                           capture_output=True, text=True, timeout=120)
     assert conv.returncode == 0, conv.stdout + conv.stderr
     assert rrd.stat().st_size > 0
+
+
+def test_exact_cdr_size_matches_what_dds_delivers():
+    """rmw_serialize pads some messages with junk; the recorder writes the exact CDR.
+
+    The expected lengths were measured from raw DDS subscriptions (Fast DDS, Jazzy): an empty
+    MwisInstance is 28 bytes (header + six counts), serialize_message returns 32.
+    """
+    from rosbags.typesys import Stores, get_typestore, get_types_from_msg
+
+    from uam_sim.recording import cdr_size, serialize_exact
+
+    assert cdr_size(MwisInstance()) == 28
+    assert cdr_size(MwisInstance(edges_u=[7])) == 32
+    assert cdr_size(MwisInstance(weights=[1.0])) == 40  # float64 data aligned to 8 after the count
+    assert cdr_size(PlanningReport()) == 149
+    typestore = get_typestore(Stores.ROS2_JAZZY)
+    for _topic, _qos, msg in sample_messages() + [("", None, m) for m in (
+            PlanningReport(), MwisInstance(), FlightPlan(), FleetState(), EpochSync(), PoseArray())]:
+        name = type(msg).__module__.split(".")[0] + "/msg/" + type(msg).__name__
+        typestore.register(get_types_from_msg(message_definition(name), name))
+        data = serialize_exact(msg)
+        assert len(data) == cdr_size(msg)
+        typestore.deserialize_cdr(data, name)  # rosbags checks the length strictly

@@ -11,7 +11,9 @@ What a reader of the file can rely on (checked by ``test_recording_*.py``):
   list that rosbag2 Jazzy writes: ``history``/``reliability``/``durability``/``liveliness`` as
   lower-case names, durations as ``{sec, nsec}``) and ``topic_type_hash`` (the ``RIHS01_...``
   type hash of the installed interface, read from its ``.json`` type description);
-- the message bytes are the CDR that ``rclpy.serialization.serialize_message`` produces;
+- the message bytes are CDR as received from DDS (the recorder node subscribes raw, as rosbag2
+  does); a message object given to :meth:`McapRecorder.write` is serialized with rclpy and
+  trimmed to its exact CDR length (:func:`serialize_exact`);
 - chunked and compressed (zstd by default), with message indexes, chunk indexes, statistics,
   summary offsets and CRCs; on :meth:`McapRecorder.close` a ``rosbag2`` metadata record with key
   ``serialized_metadata`` (the bag metadata YAML, version 9) is written, as rosbag2 does.
@@ -310,6 +312,85 @@ def sim_stamp_ns(msg: Any) -> int | None:
 
 
 # --------------------------------------------------------------------------------------------
+# Exact CDR size (rmw_serialize over-estimates it)
+# --------------------------------------------------------------------------------------------
+
+_PRIMITIVE_SIZE = {"boolean": 1, "octet": 1, "char": 1, "uint8": 1, "int8": 1, "int16": 2,
+                   "uint16": 2, "int32": 4, "uint32": 4, "float": 4, "int64": 8, "uint64": 8,
+                   "double": 8}
+_SEQ_RE = re.compile(r"^sequence<([^,>]+)(?:,\s*\d+)?>$")
+_ARRAY_RE = re.compile(r"^(.+)\[(\d+)\]$")
+
+
+def _align(pos: int, n: int) -> int:
+    return pos + (-pos) % n
+
+
+def _cdr_advance(pos: int, type_str: str, value: Any) -> int:
+    """Offset after serializing ``value`` of rosidl type ``type_str`` at payload offset ``pos``."""
+    if type_str in _PRIMITIVE_SIZE:
+        size = _PRIMITIVE_SIZE[type_str]
+        return _align(pos, size) + size
+    if type_str.startswith("string"):
+        return _align(pos, 4) + 4 + len(value.encode("utf-8")) + 1
+    if type_str.startswith("wstring"):
+        raise RecordingError("wstring fields are not supported by the exact CDR size")
+    m = _SEQ_RE.match(type_str)
+    if m:
+        pos = _align(pos, 4) + 4  # element count
+        return _cdr_elements(pos, m.group(1).strip(), value)
+    m = _ARRAY_RE.match(type_str)
+    if m:
+        return _cdr_elements(pos, m.group(1), value)
+    return _cdr_message(pos, value)  # a nested message: no alignment of its own in XCDR1
+
+
+def _cdr_elements(pos: int, elem: str, values: Any) -> int:
+    n = len(values)
+    if n == 0:
+        return pos  # an empty sequence is not aligned for its (absent) elements
+    if elem in _PRIMITIVE_SIZE:
+        size = _PRIMITIVE_SIZE[elem]
+        return _align(pos, size) + n * size
+    for v in values:
+        pos = _cdr_advance(pos, elem, v)
+    return pos
+
+
+def _cdr_message(pos: int, msg: Any) -> int:
+    for name, type_str in msg.get_fields_and_field_types().items():
+        pos = _cdr_advance(pos, type_str, getattr(msg, name))
+    return pos
+
+
+def cdr_size(msg: Any) -> int:
+    """Exact length [bytes] of a message's CDR (XCDR1) serialization, encapsulation included.
+
+    ``rclpy.serialization.serialize_message`` returns a buffer of rmw's *estimated* size, which
+    for some messages (e.g. an empty ``float64[]`` before other fields) is a few bytes longer
+    than the CDR written, with uninitialised bytes at the end; the bytes received from DDS are
+    exact. A message with no fields still serializes one byte.
+    """
+    if not msg.get_fields_and_field_types():
+        return 4 + 1
+    return 4 + _cdr_message(0, msg)
+
+
+def serialize_exact(msg: Any) -> bytes:
+    """``serialize_message`` trimmed to the exact CDR length (what a DDS subscriber receives)."""
+    from rclpy.serialization import serialize_message
+
+    data = serialize_message(msg)
+    try:
+        n = cdr_size(msg)
+    except RecordingError:
+        return data
+    if n > len(data):  # never cut bytes the serializer wrote; keep its buffer as it is
+        return data
+    return data[:n]
+
+
+# --------------------------------------------------------------------------------------------
 # The writer
 # --------------------------------------------------------------------------------------------
 
@@ -426,8 +507,7 @@ class McapRecorder:
         if isinstance(msg_or_bytes, (bytes, bytearray, memoryview)):
             data = bytes(msg_or_bytes)
         else:
-            from rclpy.serialization import serialize_message
-            data = serialize_message(msg_or_bytes)
+            data = serialize_exact(msg_or_bytes)
         self._writer.add_message(channel_id=self._channels[topic], log_time=log_time_ns,
                                  data=data, publish_time=publish_time_ns,
                                  sequence=self._sequence[topic])

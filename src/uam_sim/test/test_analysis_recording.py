@@ -1,0 +1,138 @@
+"""Analysis of a synthetic recording: hand-counted outcomes, a hand-computed closest approach."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+
+pytest.importorskip("uam_msgs.msg", reason="needs the built workspace (source scripts/env.sh)")
+
+from builtin_interfaces.msg import Time  # noqa: E402
+from geometry_msgs.msg import Point  # noqa: E402
+from rclpy.qos import DurabilityPolicy, QoSProfile  # noqa: E402
+from uam_msgs.msg import (FleetState, FlightPlan, FlightRequest, MwisInstance,  # noqa: E402
+                          PlanningReport, VehicleState, Waypoint)
+
+from uam_sim.analysis import instances_from_mcap, main, recorded_instances, summarize  # noqa: E402
+from uam_sim.recording import McapRecorder  # noqa: E402
+
+NS = 1_000_000_000
+
+
+def t(sec: float) -> Time:
+    return Time(sec=int(sec), nanosec=int(round((sec - int(sec)) * 1e9)))
+
+
+def plan(rid: str, outcome: int, wps=(), reason: str = "", stamp: float = 0.0) -> FlightPlan:
+    p = FlightPlan(request_id=rid, outcome=outcome, reason=reason,
+                   waypoints=[Waypoint(position=Point(x=float(x), y=float(y), z=float(z)), time=t(ts))
+                              for ts, x, y, z in wps])
+    p.header.stamp = t(stamp)
+    return p
+
+
+# Flights (time s, east m, north m, up m):
+#   r1 flies east at 10 m/s, z = 100: (10 t, 0, 100)
+#   r2 flies north at 10 m/s, z = 150, in two segments: (500, -500 + 10 t, 150)
+#   r3 flies east 5 km north of r1
+# r1 - r2: |d|^2 = 2 (10 t - 500)^2 + 50^2, so the closest approach is 50 m at t = 50 s.
+FLIGHTS = {
+    "r1": [(0, 0, 0, 100), (100, 1000, 0, 100)],
+    "r2": [(0, 500, -500, 150), (50, 500, 0, 150), (100, 500, 500, 150)],
+    "r3": [(0, 0, 5000, 100), (100, 1000, 5000, 100)],
+}
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory):
+    path = tmp_path_factory.mktemp("an") / "synthetic.mcap"
+    with McapRecorder(path) as rec:
+        rec.add_topic("/uam/requests", FlightRequest)
+        rec.add_topic("/uam/flight_plans", FlightPlan,
+                      QoSProfile(depth=1000, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        rec.add_topic("/uam/planning_reports", PlanningReport)
+        rec.add_topic("/uam/fleet_state", FleetState)
+        for i in range(1, 7):  # r1..r6
+            rec.write("/uam/requests", FlightRequest(request_id=f"r{i}", request_time=t(0)), 0)
+        for rid, wps in FLIGHTS.items():
+            rec.write("/uam/flight_plans", plan(rid, FlightPlan.OUTCOME_APPROVED, wps), 0)
+        rec.write("/uam/flight_plans", plan("r4", FlightPlan.OUTCOME_REJECTED, reason="unknown aerodrome 'Z'"), 0)
+        rec.write("/uam/flight_plans", plan("r5", FlightPlan.OUTCOME_EXPIRED, reason="no slot"), 0)
+        rec.write("/uam/flight_plans", plan("r1", FlightPlan.OUTCOME_APPROVED, FLIGHTS["r1"]), 1)  # a repeat
+        # r6 has no plan: undecided
+        report = PlanningReport(epoch_index=0, vertices=4, edges=4, approved=3, solve_time_s=0.004,
+                                backend_used="exact",
+                                instance=MwisInstance(weights=[1.0, 0.8, 0.5, 1.0], edges_u=[0, 0, 1, 2],
+                                                      edges_v=[1, 2, 2, 3],
+                                                      vertex_request_ids=["r1", "r1", "r1", "r2"],
+                                                      vertex_candidate_index=[0, 1, 2, 0], selected=[0, 3]))
+        rec.write("/uam/planning_reports", report, 0)
+        empty = PlanningReport(epoch_index=1, solve_time_s=0.0, fallback=True, backend_used="greedy")
+        empty.header.stamp = t(30)
+        rec.write("/uam/planning_reports", empty, 30 * NS)
+        # fleet states at t = 0..4 s with 3, 3, 2, 2, 0 vehicles: time-average over [0, 4] = 2.5
+        for k, n in enumerate([3, 3, 2, 2, 0]):
+            fs = FleetState(step_index=k, vehicles=[VehicleState(vehicle_id=f"v{j}") for j in range(n)])
+            fs.header.stamp = t(k)
+            rec.write("/uam/fleet_state", fs, k * NS)
+    return path
+
+
+def test_counts_and_average_active_aircraft(recording):
+    s = summarize(recording)
+    assert (s.requests, s.approved, s.rejected, s.expired, s.undecided) == (6, 3, 1, 1, 1)
+    assert s.duplicate_decisions == 1 and s.plans_without_request == 0
+    assert s.average_active_aircraft == pytest.approx(2.5)
+    assert s.max_active_aircraft == 3 and s.fleet_steps == 5
+    assert [e.epoch_index for e in s.epochs] == [0, 1]
+    assert s.epochs[0].selected == 2 and s.epochs[1].fallback
+    assert s.mwis_vertices["count"] == 1 and s.mwis_vertices["max"] == 4  # empty epochs left out
+    assert s.solve_time_s["median"] == pytest.approx(0.004)
+    assert s.fallbacks == 1
+    assert s.rejection_reasons == {"unknown aerodrome 'Z'": 1, "no slot": 1}
+
+
+def test_safety_audit_finds_the_hand_computed_closest_approach(recording):
+    s = summarize(recording, separation_m=100.0)
+    assert s.audit.min_separation_m == pytest.approx(50.0, abs=1e-9)
+    assert sorted(s.audit.closest_pair) == ["r1", "r2"]
+    assert len(s.audit.losses) == 1
+    a, b, d, when = s.audit.losses[0]
+    assert sorted([a, b]) == ["r1", "r2"] and d == pytest.approx(50.0) and when == pytest.approx(50.0)
+    assert s.audit.pairs_checked == 3
+    relaxed = summarize(recording, separation_m=40.0)
+    assert relaxed.audit.ok and relaxed.audit.min_separation_m == pytest.approx(50.0)
+
+
+def test_rosbags_decoder_gives_the_same_summary(recording):
+    a = summarize(recording, reader="rclpy").to_dict()
+    b = summarize(recording, reader="rosbags").to_dict()
+    a.pop("reader"), b.pop("reader")
+    assert a == b
+
+
+def test_summary_is_json_serialisable(recording):
+    d = json.loads(summarize(recording).to_json())
+    assert d["approved"] == 3 and d["audit"]["ok"] is False
+    assert math.isclose(d["audit"]["min_separation_m"], 50.0)
+
+
+def test_instances_come_back_as_mwis_problems(recording):
+    problems = instances_from_mcap(recording)
+    assert len(problems) == 1
+    p = problems[0]
+    assert list(p.weights) == [1.0, 0.8, 0.5, 1.0]
+    assert [tuple(e) for e in p.edges] == [(0, 1), (0, 2), (1, 2), (2, 3)]
+    inst = recorded_instances(recording)[0]
+    assert inst.vertex_request_ids == ["r1", "r1", "r1", "r2"] and inst.selected == [0, 3]
+
+
+def test_command_line_prints_summary_and_exit_code_flags_a_loss(recording, capsys):
+    assert main([str(recording)]) == 2  # the 50 m approach is a loss at 100 m
+    out = capsys.readouterr().out
+    assert "approved       3" in out and "50.0 m" in out and "LOSS OF SEPARATION" in out
+    assert main([str(recording), "--separation-m", "40", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["audit"]["ok"] is True
+    assert main([str(recording) + ".missing"]) == 1

@@ -1,0 +1,432 @@
+"""Analysis of a recorded run: the run's summary and an independent safety audit.
+
+``python -m uam_sim.analysis run.mcap`` (installed as ``ros2 run uam_sim analyze run.mcap``)
+prints the summary; ``--json`` prints :class:`RunSummary` as JSON instead.
+
+What it reads (topics as the node graph publishes them):
+
+- ``/uam/requests`` (FlightRequest): the requests, counted once per ``request_id``;
+- ``/uam/flight_plans`` (FlightPlan): each request's decision (approved / rejected / expired);
+  the approved plans' waypoints are the flights as flown (the simulator moves each vehicle along
+  its plan's piecewise-linear 4D trajectory);
+- ``/uam/fleet_state`` (FleetState): airborne vehicles per step, for the time-average of the
+  number of active aircraft;
+- ``/uam/planning_reports`` (PlanningReport): per-epoch MWIS sizes, selections, solve times.
+
+The safety audit takes the approved plans' waypoints and finds, for every pair of flights, the
+exact closest point of approach over their common time (piecewise-linear in 4D), with
+``uam_planner.audit.audit_flights`` (a brute-force implementation separate from the planner's
+separation kernel).
+
+Two decoders: ``reader="rclpy"`` (mcap's reader + ``rclpy.serialization``; tolerates a file cut
+short by a crash) and ``reader="rosbags"`` (the independent ``rosbags`` library, types built from
+the definitions embedded in the file; needs a complete file). The summary code only reads fields,
+so both must give the same summary.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Iterable, Iterator
+
+import numpy as np
+
+OUTCOME_APPROVED, OUTCOME_REJECTED, OUTCOME_EXPIRED = 0, 1, 2
+TOPIC_REQUESTS = "/uam/requests"
+TOPIC_PLANS = "/uam/flight_plans"
+TOPIC_REPORTS = "/uam/planning_reports"
+TOPIC_FLEET = "/uam/fleet_state"
+ANALYSED_TOPICS = (TOPIC_REQUESTS, TOPIC_PLANS, TOPIC_REPORTS, TOPIC_FLEET)
+
+
+def _t(stamp: Any) -> float:
+    return int(stamp.sec) + int(stamp.nanosec) * 1e-9
+
+
+@dataclass
+class EpochStats:
+    """One planning epoch as reported. Times in seconds (t_s: simulation time)."""
+
+    epoch_index: int
+    t_s: float
+    eligible_requests: int
+    vertices: int
+    edges: int
+    selected: int
+    approved: int
+    expired: int
+    rejected: int
+    active_flights: int
+    objective: float
+    solve_time_s: float
+    backend_used: str
+    fallback: bool
+
+
+@dataclass
+class SafetyAudit:
+    """Closest approach between every pair of approved flights, as flown."""
+
+    separation_m: float
+    min_separation_m: float          # inf when no two flights are ever airborne together
+    closest_pair: list | None        # [request_id, request_id] at the minimum
+    losses: list                     # [request_id, request_id, distance_m, t_s] below separation_m
+    pairs_checked: int
+
+    @property
+    def ok(self) -> bool:
+        return not self.losses
+
+
+@dataclass
+class RunSummary:
+    """A run's numbers; ``to_json()`` / ``asdict`` give plain JSON types."""
+
+    path: str
+    reader: str
+    complete_file: bool
+    sim_start_s: float
+    sim_end_s: float
+    requests: int
+    approved: int
+    rejected: int
+    expired: int
+    undecided: int                   # requests without any plan in the recording
+    duplicate_decisions: int         # plans beyond the first for a request (should be 0)
+    plans_without_request: int       # plans whose request is not in the recording
+    average_active_aircraft: float   # time-average of airborne vehicles over the fleet states
+    max_active_aircraft: int
+    fleet_steps: int
+    epochs: list = field(default_factory=list)        # EpochStats
+    mwis_vertices: dict = field(default_factory=dict)  # min/median/max over epochs with an instance
+    mwis_selected: dict = field(default_factory=dict)
+    solve_time_s: dict = field(default_factory=dict)
+    fallbacks: int = 0
+    rejection_reasons: dict = field(default_factory=dict)
+    audit: SafetyAudit | None = None
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        if self.audit is not None:
+            d["audit"]["ok"] = self.audit.ok
+        return _jsonable(d)
+
+    def to_json(self, **kw: Any) -> str:
+        return json.dumps(self.to_dict(), **kw)
+
+
+def _jsonable(x: Any) -> Any:
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, float) and not math.isfinite(x):
+        return None  # JSON has no inf/nan: null means "none" (e.g. no pair ever airborne together)
+    if isinstance(x, np.generic):
+        return _jsonable(x.item())
+    return x
+
+
+def _stats(values: list[float]) -> dict:
+    if not values:
+        return {"count": 0, "min": None, "median": None, "max": None, "mean": None}
+    a = np.asarray(values, dtype=np.float64)
+    return {"count": int(a.size), "min": float(a.min()), "median": float(np.median(a)),
+            "max": float(a.max()), "mean": float(a.mean())}
+
+
+# --------------------------------------------------------------------------------------------
+# Decoding
+# --------------------------------------------------------------------------------------------
+
+def iter_decoded(path: str | Path, reader: str = "rclpy",
+                 topics: Iterable[str] = ANALYSED_TOPICS) -> Iterator[tuple[str, int, Any]]:
+    """(topic, log_time_ns, message) of the given topics, in log-time order.
+
+    ``reader``: "rclpy" (mcap + rclpy deserialization; a torn file yields what was written) or
+    "rosbags" (the independent rosbags library; needs a complete file).
+    """
+    topics = set(topics)
+    if reader == "rclpy":
+        from .recording import deserialize, is_complete, read_messages, read_messages_tolerant
+        if is_complete(path):
+            records = read_messages(path, topics=sorted(topics))
+        else:  # crash-cut file: file order is log order here, but sort to be sure
+            records = sorted((r for r in read_messages_tolerant(path) if r.topic in topics),
+                             key=lambda r: r.log_time_ns)
+        for rec in records:
+            yield rec.topic, rec.log_time_ns, deserialize(rec)
+    elif reader == "rosbags":
+        from rosbags.highlevel import AnyReader
+        from rosbags.typesys import Stores, get_typestore
+
+        with AnyReader([Path(path)], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as r:
+            conns = [c for c in r.connections if c.topic in topics]
+            for conn, timestamp, raw in r.messages(connections=conns):
+                yield conn.topic, timestamp, r.deserialize(raw, conn.msgtype)
+    else:
+        raise ValueError(f"reader: {reader!r} is not 'rclpy' or 'rosbags'")
+
+
+# --------------------------------------------------------------------------------------------
+# Summary
+# --------------------------------------------------------------------------------------------
+
+def trajectory_of(plan: Any) -> tuple[np.ndarray, np.ndarray]:
+    """(times_s (p,), points_m (p, 3)) of a FlightPlan's waypoints."""
+    times = np.array([_t(w.time) for w in plan.waypoints], dtype=np.float64)
+    points = np.array([(w.position.x, w.position.y, w.position.z) for w in plan.waypoints],
+                      dtype=np.float64).reshape(-1, 3)
+    return times, points
+
+
+def audit_plans(plans: list[Any], separation_m: float = 100.0) -> SafetyAudit:
+    """Exact minimum separation between every pair of approved plans (see module docstring)."""
+    from uam_planner.audit import audit_flights
+
+    flights, labels = [], []
+    for p in plans:
+        times, points = trajectory_of(p)
+        if len(times) < 2:
+            continue
+        if np.any(np.diff(times) <= 0):
+            raise ValueError(f"flight plan {p.request_id!r}: waypoint times are not increasing: {times}")
+        flights.append((times, points))
+        labels.append(str(p.request_id))
+    res = audit_flights(flights, separation_m=separation_m, labels=labels)
+    return SafetyAudit(separation_m=float(separation_m), min_separation_m=float(res.min_separation_m),
+                       closest_pair=list(res.pair_of_min) if res.pair_of_min else None,
+                       losses=[[a, b, float(d), float(t)] for a, b, d, t in res.losses],
+                       pairs_checked=int(res.pairs_checked))
+
+
+def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m: float = 100.0,
+                       path: str = "", reader: str = "", complete_file: bool = True) -> RunSummary:
+    """The summary of a stream of (topic, log_time_ns, message), e.g. from :func:`iter_decoded`.
+
+    Complexity: linear in the messages, plus the audit (quadratic in overlapping flights).
+    """
+    request_ids: set[str] = set()
+    decisions: dict[str, Any] = {}
+    duplicates = 0
+    fleet_t: list[float] = []
+    fleet_n: list[int] = []
+    epochs: list[EpochStats] = []
+    t_min, t_max = math.inf, -math.inf
+    for topic, log_ns, msg in messages:
+        t_min, t_max = min(t_min, log_ns * 1e-9), max(t_max, log_ns * 1e-9)
+        if topic == TOPIC_REQUESTS:
+            request_ids.add(str(msg.request_id))
+        elif topic == TOPIC_PLANS:
+            rid = str(msg.request_id)
+            if rid in decisions:
+                duplicates += 1  # a late-joining subscriber may get a latched plan twice
+            else:
+                decisions[rid] = msg
+        elif topic == TOPIC_FLEET:
+            fleet_t.append(_t(msg.header.stamp))
+            fleet_n.append(len(msg.vehicles))
+        elif topic == TOPIC_REPORTS:
+            epochs.append(EpochStats(
+                epoch_index=int(msg.epoch_index), t_s=_t(msg.header.stamp),
+                eligible_requests=int(msg.eligible_requests), vertices=int(msg.vertices),
+                edges=int(msg.edges), selected=len(msg.instance.selected),
+                approved=int(msg.approved), expired=int(msg.expired), rejected=int(msg.rejected),
+                active_flights=int(msg.active_flights), objective=float(msg.objective),
+                solve_time_s=float(msg.solve_time_s), backend_used=str(msg.backend_used),
+                fallback=bool(msg.fallback)))
+    outcomes = [int(p.outcome) for p in decisions.values()]
+    approved_plans = [p for p in decisions.values() if int(p.outcome) == OUTCOME_APPROVED]
+    reasons: dict[str, int] = {}
+    for p in decisions.values():
+        if int(p.outcome) != OUTCOME_APPROVED:
+            reasons[str(p.reason)] = reasons.get(str(p.reason), 0) + 1
+
+    avg_active = 0.0
+    if fleet_t:
+        order = np.argsort(fleet_t, kind="stable")
+        t = np.asarray(fleet_t)[order]
+        n = np.asarray(fleet_n, dtype=np.float64)[order]
+        if len(t) > 1 and t[-1] > t[0]:
+            # each step's count holds until the next step (sample-and-hold time average)
+            avg_active = float(np.sum(n[:-1] * np.diff(t)) / (t[-1] - t[0]))
+        else:
+            avg_active = float(n.mean())
+    with_instance = [e for e in epochs if e.vertices > 0]
+    return RunSummary(
+        path=str(path), reader=reader, complete_file=complete_file,
+        sim_start_s=t_min if math.isfinite(t_min) else 0.0,
+        sim_end_s=t_max if math.isfinite(t_max) else 0.0,
+        requests=len(request_ids),
+        approved=outcomes.count(OUTCOME_APPROVED),
+        rejected=outcomes.count(OUTCOME_REJECTED),
+        expired=outcomes.count(OUTCOME_EXPIRED),
+        undecided=len(request_ids - set(decisions)),
+        duplicate_decisions=duplicates,
+        plans_without_request=len(set(decisions) - request_ids),
+        average_active_aircraft=avg_active,
+        max_active_aircraft=int(max(fleet_n)) if fleet_n else 0,
+        fleet_steps=len(fleet_t),
+        epochs=sorted(epochs, key=lambda e: e.epoch_index),
+        mwis_vertices=_stats([e.vertices for e in with_instance]),
+        mwis_selected=_stats([e.selected for e in with_instance]),
+        solve_time_s=_stats([e.solve_time_s for e in with_instance]),
+        fallbacks=sum(e.fallback for e in epochs),
+        rejection_reasons=reasons,
+        audit=audit_plans(approved_plans, separation_m),
+    )
+
+
+def summarize(path: str | Path, separation_m: float = 100.0, reader: str = "rclpy") -> RunSummary:
+    """Read a recording and return its :class:`RunSummary` (see the module docstring)."""
+    from .recording import is_complete
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"recording: no file at {path}")
+    return summarize_messages(iter_decoded(path, reader), separation_m, str(path), reader,
+                              is_complete(path))
+
+
+# --------------------------------------------------------------------------------------------
+# MWIS instances
+# --------------------------------------------------------------------------------------------
+
+@dataclass
+class RecordedInstance:
+    """An MWIS instance as the planner solved it in one epoch, with its answer."""
+
+    epoch_index: int
+    t_s: float
+    problem: Any                      # uam_solvers.base.MwisProblem
+    vertex_request_ids: list
+    vertex_candidate_index: list
+    selected: list
+    objective: float
+    solve_time_s: float
+    backend_used: str
+
+
+def recorded_instances(path: str | Path, reader: str = "rclpy") -> list[RecordedInstance]:
+    """Every non-empty MWIS instance of the PlanningReports, in epoch order.
+
+    The problem's clique groups are the vertices of each request (at most one candidate per
+    request), in addition to the recorded edges.
+    """
+    from uam_solvers.base import MwisProblem
+
+    out = []
+    for _topic, _t_ns, msg in iter_decoded(path, reader, topics=(TOPIC_REPORTS,)):
+        inst = msg.instance
+        weights = np.asarray(inst.weights, dtype=np.float64)
+        if weights.size == 0:
+            continue
+        edges = np.stack([np.asarray(inst.edges_u, dtype=np.int64),
+                          np.asarray(inst.edges_v, dtype=np.int64)], axis=1).reshape(-1, 2)
+        rids = [str(r) for r in inst.vertex_request_ids]
+        groups: dict[str, list[int]] = {}
+        for i, r in enumerate(rids):
+            groups.setdefault(r, []).append(i)
+        problem = MwisProblem.from_arrays(weights, edges, groups=list(groups.values()) if rids else None)
+        out.append(RecordedInstance(
+            epoch_index=int(msg.epoch_index), t_s=_t(msg.header.stamp), problem=problem,
+            vertex_request_ids=rids, vertex_candidate_index=[int(c) for c in inst.vertex_candidate_index],
+            selected=[int(s) for s in inst.selected], objective=float(msg.objective),
+            solve_time_s=float(msg.solve_time_s), backend_used=str(msg.backend_used)))
+    return sorted(out, key=lambda r: r.epoch_index)
+
+
+def instances_from_mcap(path: str | Path, reader: str = "rclpy") -> list:
+    """The MWIS instances of a recording as ``uam_solvers.base.MwisProblem`` objects."""
+    return [r.problem for r in recorded_instances(path, reader)]
+
+
+# --------------------------------------------------------------------------------------------
+# Command line
+# --------------------------------------------------------------------------------------------
+
+def _fmt_stats(s: dict, unit: str = "", scale: float = 1.0, digits: int = 1) -> str:
+    if not s.get("count"):
+        return "-"
+    f = f"{{:.{digits}f}}"
+    return (f"min {f.format(s['min'] * scale)}{unit}, median {f.format(s['median'] * scale)}{unit}, "
+            f"max {f.format(s['max'] * scale)}{unit} over {s['count']} epochs")
+
+
+def format_summary(s: RunSummary, epochs: bool = True) -> str:
+    """A human-readable report of a RunSummary."""
+    lines = [
+        f"Recording        {s.path}{'' if s.complete_file else '  (INCOMPLETE: cut short, read what was written)'}",
+        f"Simulation time  {s.sim_start_s:.1f} s .. {s.sim_end_s:.1f} s",
+        f"Requests         {s.requests}",
+        f"  approved       {s.approved}",
+        f"  rejected       {s.rejected}",
+        f"  expired        {s.expired}",
+        f"  undecided      {s.undecided}",
+    ]
+    if s.duplicate_decisions or s.plans_without_request:
+        lines.append(f"  (duplicate decisions {s.duplicate_decisions}, plans without request "
+                     f"{s.plans_without_request})")
+    for reason, n in sorted(s.rejection_reasons.items(), key=lambda kv: -kv[1]):
+        lines.append(f"    {n:5d} x {reason or '(no reason given)'}")
+    lines += [
+        f"Active aircraft  average {s.average_active_aircraft:.2f} (time-average over "
+        f"{s.fleet_steps} fleet states), max {s.max_active_aircraft}",
+        f"MWIS vertices    {_fmt_stats(s.mwis_vertices, digits=0)}",
+        f"MWIS selected    {_fmt_stats(s.mwis_selected, digits=0)}",
+        f"Solve time       {_fmt_stats(s.solve_time_s, ' ms', 1e3, 2)}",
+        f"Fallbacks        {s.fallbacks}",
+    ]
+    a = s.audit
+    if a is not None:
+        pair = f" ({a.closest_pair[0]} / {a.closest_pair[1]})" if a.closest_pair else ""
+        dist = "no two flights airborne together" if not math.isfinite(a.min_separation_m) \
+            else f"{a.min_separation_m:.1f} m{pair}"
+        verdict = "OK" if a.ok else f"LOSS OF SEPARATION in {len(a.losses)} pair(s)"
+        lines.append(f"Safety audit     {verdict}: minimum separation {dist}, required "
+                     f"{a.separation_m:.0f} m, {a.pairs_checked} overlapping pairs checked")
+        for rid_a, rid_b, d, t in a.losses[:20]:
+            lines.append(f"    {rid_a} / {rid_b}: {d:.1f} m at t = {t:.1f} s")
+    if epochs and s.epochs:
+        lines.append("")
+        lines.append(f"{'epoch':>5} {'t [s]':>8} {'elig':>5} {'vert':>5} {'edges':>6} {'sel':>4} "
+                     f"{'appr':>5} {'exp':>4} {'active':>6} {'solve [ms]':>10}  backend")
+        for e in s.epochs:
+            lines.append(f"{e.epoch_index:5d} {e.t_s:8.1f} {e.eligible_requests:5d} {e.vertices:5d} "
+                         f"{e.edges:6d} {e.selected:4d} {e.approved:5d} {e.expired:4d} "
+                         f"{e.active_flights:6d} {e.solve_time_s * 1e3:10.2f}  {e.backend_used}"
+                         f"{' (fallback)' if e.fallback else ''}")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command line: print the summary of a recording (exit 2 if the audit finds a loss)."""
+    ap = argparse.ArgumentParser(prog="analyze", description=__doc__.split("\n\n")[0])
+    ap.add_argument("recording", help="the .mcap file of a run")
+    ap.add_argument("--separation-m", type=float, default=100.0,
+                    help="separation minimum for the safety audit [m] (default 100)")
+    ap.add_argument("--reader", choices=("rclpy", "rosbags"), default="rclpy",
+                    help="decoder: rclpy (default, tolerates torn files) or rosbags (independent)")
+    ap.add_argument("--json", action="store_true", help="print the summary as JSON")
+    ap.add_argument("--no-epochs", action="store_true", help="leave out the per-epoch table")
+    # ros2 run appends --ros-args ...; ignore it
+    args, _unknown = ap.parse_known_args(argv)
+    try:
+        summary = summarize(args.recording, args.separation_m, args.reader)
+    except (FileNotFoundError, ValueError) as exc:
+        print(f"analyze: {exc}", file=sys.stderr)
+        return 1
+    if args.json:
+        print(summary.to_json(indent=2))
+    else:
+        print(format_summary(summary, epochs=not args.no_epochs))
+    return 0 if summary.audit is None or summary.audit.ok else 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
