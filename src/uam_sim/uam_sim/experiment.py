@@ -294,7 +294,8 @@ def _groups_from_ids(ids: Sequence[str]) -> list:
 
 
 def run_scenario(network, method: str, rate: float, seed: int, duration_s: float,
-                 config: ExperimentConfig | None = None, demand=None) -> ScenarioResult:
+                 config: ExperimentConfig | None = None, demand=None,
+                 observer=None) -> ScenarioResult:
     """Run one scenario in process: requests from the seeded generator, one planner, one method.
 
     Args:
@@ -307,6 +308,9 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
             every demand instant at or before t are submitted before the epoch at t is planned.
         config: ExperimentConfig (planning parameters, time limit, solver options).
         demand: optional object with ``requests_at(t_s, interval_index)`` replacing the generator.
+        observer: optional callable(t_s, epoch_index, submitted, rejected, EpochResult) called
+            after each epoch with the requests submitted before it and the (request, reason)
+            pairs refused (e.g. to record the run as the node graph would).
     Returns: ScenarioResult. Cost: one planning cycle per epoch plus an O(F^2) audit.
     """
     cfg = config if config is not None else ExperimentConfig()
@@ -324,14 +328,19 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
     for e in range(n_epochs):
         t = e * cfg.epoch_s
         # every demand instant up to t, in time order (equal spacing when interval_s == epoch_s)
+        submitted, refused = [], []
         while next_interval * cfg.interval_s <= t + 1e-9 and next_interval * cfg.interval_s < duration_s:
             for req in demand.requests_at(next_interval * cfg.interval_s, next_interval):
                 n_requests += 1
+                submitted.append(req)
                 reason = planner.submit(req)
                 if reason is not None:
                     rejections.append((req.request_id, reason))
+                    refused.append((req, reason))
             next_interval += 1
         res = planner.plan(t, e)
+        if observer is not None:
+            observer(t, e, submitted, refused, res)
         rep = res.report
         approved_cum += len(res.approved)
         expired_cum += len(res.expired)
@@ -682,22 +691,93 @@ def run_experiment(cfg: ExperimentConfig, progress: bool = True, figures: bool =
 
 # ---- MCAP recordings --------------------------------------------------------------------------
 
-def summarise_mcaps(paths: Sequence[str], out: Path) -> Path:
-    """Metrics of node-graph recordings through uam_sim.analysis, written to <out>/mcap_runs.csv."""
+def cell_from_summary(summary, instances=(), label: str = "", seed: int = 0,
+                      interval_s: float = 30.0) -> dict:
+    """A cell (the dict the figures and report read) from a recording's analysis RunSummary.
+
+    The method is the backend the planner used (``fifo`` when no epoch names one, as the FIFO
+    policy uses none); the rate is the requests per interval over the recorded epochs; ``seed``
+    labels the recording. Flights are not listed (the audit holds their count).
+    """
+    eps = list(summary.epochs)
+    used = [e.backend_used for e in eps if e.backend_used and e.vertices > 0]
+    method = max(set(used), key=used.count) if used else "fifo"
+    n_epochs = max(len(eps), 1)
+    rate = _rate(round(summary.requests / n_epochs, 2))
+    duration = (eps[-1].t_s + interval_s) if eps else max(summary.sim_end_s - summary.sim_start_s, 1.0)
+    rows, cum, cum_exp = [], 0, 0
+    for e in eps:
+        cum += e.approved
+        cum_exp += e.expired
+        rows.append({"epoch": e.epoch_index, "t_s": e.t_s, "eligible": e.eligible_requests,
+                     "vertices": e.vertices, "edges": e.edges, "selected": e.selected if method != "fifo" else e.approved,
+                     "approved_cum": cum, "expired": e.expired, "expired_cum": cum_exp,
+                     "active": e.active_flights, "objective": e.objective,
+                     "solve_time_s": e.solve_time_s, "proven_optimal": False,
+                     "fallback": bool(e.fallback), "backend_used": e.backend_used})
+    a = summary.audit
+    audit = {}
+    if a is not None:
+        ms = a.min_separation_m if a.min_separation_m is not None and math.isfinite(a.min_separation_m) else None
+        audit = {"min_separation_m": ms, "pair_of_min": a.closest_pair, "losses": len(a.losses),
+                 "loss_pairs": [list(x) for x in a.losses[:20]], "pairs_checked": a.pairs_checked}
+    mwis_eps = [r for r in rows if r["vertices"] > 0]
+    st = np.array([r["solve_time_s"] for r in mwis_eps]) if mwis_eps else np.zeros(0)
+    s = {"method": method, "rate": rate, "seed": int(seed), "duration_s": float(duration),
+         "epochs": len(eps), "requests": summary.requests, "rejected": summary.rejected,
+         "approved": summary.approved, "expired": summary.expired,
+         "pending_end": summary.undecided,
+         "approval_rate": summary.approved / summary.requests if summary.requests else float("nan"),
+         "avg_airborne": summary.average_active_aircraft,
+         "mean_vertices": float(np.mean([r["vertices"] for r in rows])) if rows else 0.0,
+         "max_vertices": int(max((r["vertices"] for r in rows), default=0)),
+         "mean_selected": float(np.mean([r["selected"] for r in rows])) if rows else 0.0,
+         "mean_eligible": float(np.mean([r["eligible"] for r in rows])) if rows else 0.0,
+         "solve_time_mean_s": float(st.mean()) if st.size else 0.0,
+         "solve_time_max_s": float(st.max()) if st.size else 0.0,
+         "proven_optimal_share": float("nan"), "fallbacks": summary.fallbacks,
+         "min_separation_m": audit.get("min_separation_m"), "losses": audit.get("losses"),
+         "wall_s": float("nan"), "real_time_factor": float("nan"), "source": summary.path}
+    insts = [{"epoch": i, "weights": [float(w) for w in p.weights],
+              "edges": np.asarray(p.edges).reshape(-1, 2).tolist(),
+              "groups": [np.asarray(g).tolist() for g in p.groups]} for i, p in enumerate(instances)]
+    return {"key": f"mcap_{label or Path(summary.path).stem}", "params": {"source": summary.path},
+            "summary": s, "epochs": rows, "flights": [], "audit": audit, "instances": insts,
+            "rejections": []}
+
+
+def study_from_mcaps(paths: Sequence[str], cfg: ExperimentConfig, figures: bool = True) -> dict:
+    """The same tables, corpus, TTS, figures and report from node-graph recordings.
+
+    Needs uam_sim.analysis. Each recording becomes one cell (seed = its position in ``paths``).
+    """
     try:
         from . import analysis
     except ImportError as exc:
         raise ExperimentError(f"--from-mcap needs uam_sim.analysis, which is not available ({exc})")
-    rows = []
-    for p in paths:
-        summary = analysis.analyze_mcap(p) if hasattr(analysis, "analyze_mcap") \
-            else analysis.summarize_mcap(p)
-        row = asdict(summary) if hasattr(summary, "__dataclass_fields__") else dict(summary)
-        rows.append({"file": str(p), **{k: v for k, v in row.items()
-                                         if isinstance(v, (int, float, str, bool)) or v is None}})
-    path = Path(out) / "mcap_runs.csv"
-    _write_csv(path, rows)
-    return path
+    t0 = time.perf_counter()
+    cells = []
+    for i, p in enumerate(paths):
+        summary = analysis.summarize(p, separation_m=cfg.separation_m)
+        inst = [x for x in analysis.instances_from_mcap(p) if x.n <= cfg.corpus_max_vertices]
+        cells.append(cell_from_summary(summary, inst, label=Path(p).stem, seed=i,
+                                       interval_s=cfg.interval_s))
+    sweep = SweepResult(cfg, cells, [], [], time.perf_counter() - t0)
+    Path(cfg.out).mkdir(parents=True, exist_ok=True)
+    tables = write_tables(sweep)
+    corpus_path, entries = write_corpus(sweep)
+    tts = run_tts(cfg, entries) if entries else {"status": "skipped",
+                                                 "reason": "no MWIS instance was recorded"}
+    figs = {}
+    if figures:
+        from .figures import make_figures
+        figs = make_figures(cells, cfg, tts, Path(cfg.out))
+    outputs = {"sweep": sweep, "tables": tables, "corpus": corpus_path, "tts": tts,
+               "figures": figs, "wall_s": time.perf_counter() - t0}
+    if figures:
+        from .report import write_report
+        outputs["report"] = write_report(sweep, outputs, machine_info(), Path(cfg.out))
+    return outputs
 
 
 # ---- command line --------------------------------------------------------------------------------
@@ -726,10 +806,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list | None = None) -> int:
     args = build_parser().parse_args(argv)
-    if args.from_mcap:
-        path = summarise_mcaps(args.from_mcap, Path(args.out or "results"))
-        print(f"wrote {path}")
-        return 0
     over = {k: getattr(args, k) for k in ("network", "rates", "methods", "seeds", "duration_s",
                                           "time_limit_s", "workers", "out", "demand_file")}
     try:
@@ -748,8 +824,11 @@ def main(argv: list | None = None) -> int:
     except (ExperimentError, OSError, yaml.YAMLError) as exc:
         print(f"experiment: {exc}", file=sys.stderr)
         return 2
-    outputs = run_experiment(cfg, progress=not args.no_progress, figures=not args.no_figures,
-                             report=not args.no_figures)
+    if args.from_mcap:
+        outputs = study_from_mcaps(args.from_mcap, cfg, figures=not args.no_figures)
+    else:
+        outputs = run_experiment(cfg, progress=not args.no_progress, figures=not args.no_figures,
+                                 report=not args.no_figures)
     sweep = outputs["sweep"]
     print(f"{len(sweep.cells)} cells ({len(sweep.computed)} computed, {len(sweep.reused)} reused) "
           f"in {outputs['wall_s']:.1f} s; results in {cfg.out}")

@@ -180,7 +180,7 @@ def write_report(sweep, outputs: dict, machine: dict, out: Path) -> Path:
     seps = [s for s in seps if s is not None]
     losses = sum(c["audit"].get("losses", 0) for c in cells if c.get("audit"))
     audited = sum(1 for c in cells if c.get("audit"))
-    flights = sum(len(c["flights"]) for c in cells)
+    flights = sum(int(c["summary"]["approved"]) for c in cells)
     L += ["## Safety audit", "",
           f"The independent exact closest-approach audit (`uam_planner.audit.audit_flights`) ran "
           f"on {audited} of {len(cells)} runs over {flights} flown flights in total. Minimum "
