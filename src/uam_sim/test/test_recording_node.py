@@ -1,0 +1,122 @@
+"""The recorder node in-process: it records what was published and closes on the run's end."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+
+pytest.importorskip("uam_msgs.msg", reason="needs the built workspace (source scripts/env.sh)")
+
+from builtin_interfaces.msg import Time  # noqa: E402
+from geometry_msgs.msg import Point, Pose, PoseArray  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.node import Node  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from rosgraph_msgs.msg import Clock  # noqa: E402
+from uam_msgs.msg import (EpochSync, FleetState, FlightPlan, FlightRequest,  # noqa: E402
+                          PlanningReport, VehicleState, Waypoint)
+
+from uam_sim.nodes.recorder_node import RECORDED_TOPICS, RecorderNode  # noqa: E402
+from uam_sim.recording import is_complete, read_messages  # noqa: E402
+
+pytestmark = pytest.mark.ros
+ROOT = Path(__file__).resolve().parents[3]
+NS = 1_000_000_000
+
+
+def t(sec: int) -> Time:
+    return Time(sec=sec, nanosec=0)
+
+
+def test_records_every_topic_and_closes_on_the_simulators_finish(ros_context, spin_until, tmp_path):
+    out = tmp_path / "rec" / "run.mcap"
+    recorder = RecorderNode(context=ros_context, parameter_overrides=[
+        Parameter("output", value=str(out)), Parameter("rerun", value="save"),
+        Parameter("network", value=str(ROOT / "config" / "networks" / "tiny.yaml"))])
+    talker = Node("talker", context=ros_context)
+    pubs = {topic: talker.create_publisher(cls, topic, qos) for topic, (cls, qos) in RECORDED_TOPICS.items()}
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(recorder)
+    executor.add_node(talker)
+    try:
+        assert spin_until(executor, lambda: all(p.get_subscription_count() >= 1 for p in pubs.values()), 20)
+        for k in range(5):
+            pubs["/clock"].publish(Clock(clock=t(k)))
+            fs = FleetState(step_index=k, vehicles=[VehicleState(vehicle_id="r1", position=Point(x=10.0 * k))])
+            fs.header.stamp = t(k)
+            pubs["/uam/fleet_state"].publish(fs)
+            pa = PoseArray(poses=[Pose()])
+            pa.header.stamp = t(k)
+            pubs["/uam/fleet_poses"].publish(pa)
+        pubs["/uam/requests"].publish(FlightRequest(request_id="r1", request_time=t(0)))
+        plan = FlightPlan(request_id="r1", outcome=FlightPlan.OUTCOME_APPROVED,
+                          waypoints=[Waypoint(position=Point(), time=t(0)),
+                                     Waypoint(position=Point(x=100.0), time=t(10))])
+        plan.header.stamp = t(0)
+        pubs["/uam/flight_plans"].publish(plan)
+        report = PlanningReport(approved=1)
+        report.header.stamp = t(0)
+        pubs["/uam/planning_reports"].publish(report)
+        assert spin_until(executor, lambda: recorder.messages_written == 18, 20)
+        assert not recorder.finished
+        # a planner's EpochSync does not end the run; the simulator's finished one does
+        pubs["/uam/epoch_sync"].publish(EpochSync(sender="planner", finished=True, epoch_time=t(5)))
+        pubs["/uam/epoch_sync"].publish(EpochSync(sender="simulator", finished=True, epoch_time=t(5)))
+        assert spin_until(executor, lambda: recorder.finished, 20)
+    finally:
+        executor.shutdown()
+        recorder.destroy_node()
+        talker.destroy_node()
+
+    assert is_complete(out)
+    msgs = list(read_messages(out))
+    counts = {}
+    for m in msgs:
+        counts[m.topic] = counts.get(m.topic, 0) + 1
+    assert counts == {"/clock": 5, "/uam/fleet_state": 5, "/uam/fleet_poses": 5, "/uam/requests": 1,
+                      "/uam/flight_plans": 1, "/uam/planning_reports": 1, "/uam/epoch_sync": 2}
+    # log time = the message's simulation stamp
+    fleet_times = [m.log_time_ns for m in msgs if m.topic == "/uam/fleet_state"]
+    assert fleet_times == [k * NS for k in range(5)]
+    # offered QoS as the publisher offered it (asked from the graph)
+    plans_qos = yaml.safe_load(next(m.qos_yaml for m in msgs if m.topic == "/uam/flight_plans"))
+    assert plans_qos[0]["durability"] == "transient_local" and plans_qos[0]["reliability"] == "reliable"
+    rrd = out.with_suffix(".rrd")
+    assert rrd.exists() and rrd.stat().st_size > 0
+
+
+def test_sigterm_closes_the_file_properly(tmp_path):
+    """A recorder process stopped with SIGTERM leaves a complete file listing every topic."""
+    out = tmp_path / "term.mcap"
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(ROOT / "src" / "uam_sim") + os.pathsep + str(ROOT / "src" / "uam_planner") \
+        + os.pathsep + env.get("PYTHONPATH", "")
+    proc = subprocess.Popen([sys.executable, "-m", "uam_sim.nodes.recorder_node", "--ros-args",
+                             "-p", f"output:={out}"], env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    try:
+        # wait until the node is up (it logs once its subscriptions exist)
+        lines = []
+        for line in proc.stdout:
+            lines.append(line)
+            if "recording 7 topics" in line:
+                break
+        assert out.exists(), "".join(lines)
+        proc.send_signal(signal.SIGTERM)
+        rest, _ = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, "".join(lines) + rest
+    assert is_complete(out)
+    from mcap.reader import make_reader
+    with open(out, "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert {c.topic for c in summary.channels.values()} == set(RECORDED_TOPICS)

@@ -1,0 +1,206 @@
+"""Recorder node: every /uam/* topic and /clock into one .mcap file (as rosbag2), plus Rerun.
+
+``ros2 run uam_sim recorder --ros-args -p output:=runs/run.mcap -p rerun:=save
+-p network:=config/networks/tiny.yaml``
+
+It subscribes raw (CDR bytes as DDS delivers them, like rosbag2), so the bytes in the file are
+exactly the bytes on the wire. Log time and publish time of each message are its simulation
+time: the message's own stamp (``header.stamp``, ``clock``, ``epoch_time``, ``request_time``)
+when it has one, else the latest ``/clock`` received. (rosbag2 with ``--use-sim-time`` stamps
+the receive time on the /clock timeline; taking the message's own stamp gives the same time
+without the race between a message and the clock tick that announced it.)
+
+The offered QoS written for each topic is what its publishers offer (asked from the graph when
+the topic's first message arrives, as rosbag2 does); topics that never carried a message are
+still listed, with the QoS the recorder subscribed with.
+
+It stops and closes the file (summary, footer) when the simulator announces the end of the run
+(EpochSync with ``finished`` from sender "simulator"), on Ctrl-C and on SIGTERM. While running it
+finishes a chunk at least every ``flush_period_s`` of wall time, so a crash loses at most that.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import rclpy
+from geometry_msgs.msg import PoseArray
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.clock import Clock as RclClock
+from rclpy.clock import ClockType
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
+from rosgraph_msgs.msg import Clock
+from uam_msgs.msg import EpochSync, FleetState, FlightPlan, FlightRequest, PlanningReport
+
+from uam_sim.recording import McapRecorder, sim_stamp_ns
+from uam_sim.rerun_log import MODES as RERUN_MODES
+from uam_sim.rerun_log import RerunLogger
+
+_QOS_VOLATILE = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10000,
+                           reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+# Only for topics whose publishers offer transient local (a transient-local reader does not match
+# a volatile writer); it makes a late recorder still get every plan.
+_QOS_LATCHED = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=20000,
+                          reliability=ReliabilityPolicy.RELIABLE,
+                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+#: topic -> (message class, subscription QoS)
+RECORDED_TOPICS = {
+    "/clock": (Clock, _QOS_VOLATILE),
+    "/uam/requests": (FlightRequest, _QOS_VOLATILE),
+    "/uam/flight_plans": (FlightPlan, _QOS_LATCHED),
+    "/uam/planning_reports": (PlanningReport, _QOS_VOLATILE),
+    "/uam/fleet_state": (FleetState, _QOS_VOLATILE),
+    "/uam/fleet_poses": (PoseArray, _QOS_VOLATILE),
+    "/uam/epoch_sync": (EpochSync, _QOS_LATCHED),
+}
+
+
+class RecorderNode(Node):
+    """Records the run; see the module docstring. ``finished`` turns true once the file is closed."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__("recorder", **kwargs)
+        self.declare_parameter("output", "run.mcap", ParameterDescriptor(
+            description="the .mcap file to write (parent directories are created; replaced if it exists)"))
+        self.declare_parameter("rerun", "off", ParameterDescriptor(
+            description="Rerun logging: 'off', 'save' (an .rrd file), 'spawn' (start a viewer) or "
+                        "'connect' (stream to a running viewer at rerun_url)"))
+        self.declare_parameter("rerun_rrd", "", ParameterDescriptor(
+            description="the .rrd file for rerun:=save; empty = the output path with .rrd"))
+        self.declare_parameter("rerun_url", "", ParameterDescriptor(
+            description="viewer gRPC url for rerun:=connect; empty = Rerun's default"))
+        self.declare_parameter("network", "", ParameterDescriptor(
+            description="network file (config/networks/*.yaml) drawn in Rerun as static data; empty = none"))
+        self.declare_parameter("compression", "zstd", ParameterDescriptor(
+            description="MCAP chunk compression: 'zstd', 'lz4' or 'none'"))
+        self.declare_parameter("chunk_size_bytes", 256 * 1024, ParameterDescriptor(
+            description="uncompressed size after which an MCAP chunk is finished [bytes]",
+            integer_range=[IntegerRange(from_value=1024, to_value=1 << 30)]))
+        self.declare_parameter("flush_period_s", 1.0, ParameterDescriptor(
+            description="wall time after which the open chunk is written out, the most a crash loses [s]",
+            floating_point_range=[FloatingPointRange(from_value=0.01, to_value=3600.0)]))
+        g = self.get_parameter
+        output = str(g("output").value)
+        if not output.endswith(".mcap"):
+            raise ValueError(f"parameter output: {output!r} must end with .mcap")
+        rerun_mode = str(g("rerun").value)
+        if rerun_mode not in RERUN_MODES:
+            raise ValueError(f"parameter rerun: {rerun_mode!r} is not one of {RERUN_MODES}")
+        rrd = str(g("rerun_rrd").value) or str(Path(output).with_suffix(".rrd"))
+        network = None
+        network_path = str(g("network").value)
+        if network_path:
+            from uam_planner.network import load_network
+            network = load_network(network_path)
+
+        self.output = Path(output)
+        self.rrd_path = Path(rrd) if rerun_mode == "save" else None
+        self.recorder = McapRecorder(output, chunk_size_bytes=int(g("chunk_size_bytes").value),
+                                     compression=str(g("compression").value),
+                                     flush_period_s=float(g("flush_period_s").value))
+        self.rerun = RerunLogger(rerun_mode, rrd, network=network,
+                                 connect_url=str(g("rerun_url").value) or None)
+        self.finished = False
+        self.messages_written = 0
+        self._clock_ns = 0
+        self._dirty = False
+        for topic, (cls, qos) in RECORDED_TOPICS.items():
+            self.create_subscription(cls, topic, self._make_callback(topic, cls), qos, raw=True)
+        steady = RclClock(clock_type=ClockType.STEADY_TIME)
+        self._flush_timer = self.create_timer(float(g("flush_period_s").value), self._on_flush_timer,
+                                              clock=steady)
+        self.get_logger().info(f"recording {len(RECORDED_TOPICS)} topics to {self.output}"
+                               + (f", Rerun {rerun_mode}" + (f" to {rrd}" if rerun_mode == "save" else "")
+                                  if rerun_mode != "off" else ""))
+
+    def _make_callback(self, topic: str, cls: type):
+        def callback(data: bytes) -> None:
+            self._on_message(topic, cls, data)
+        return callback
+
+    def _register(self, topic: str, cls: type) -> None:
+        """Add the topic's channel with the QoS its publishers offer (as rosbag2 records it)."""
+        offered = []
+        try:
+            offered = [info.qos_profile for info in self.get_publishers_info_by_topic(topic)]
+        except Exception as exc:  # noqa: BLE001 - graph queries can fail during shutdown
+            self.get_logger().debug(f"no publisher info for {topic}: {exc}")
+        self.recorder.add_topic(topic, cls, RECORDED_TOPICS[topic][1], offered_qos_profiles=offered or None)
+
+    def _on_message(self, topic: str, cls: type, data: bytes) -> None:
+        if self.finished:
+            return
+        msg = deserialize_message(data, cls)
+        if topic == "/clock":
+            self._clock_ns = max(self._clock_ns, int(msg.clock.sec) * 1_000_000_000 + int(msg.clock.nanosec))
+        stamp = sim_stamp_ns(msg)
+        log_ns = stamp if stamp is not None else self._clock_ns
+        if topic not in self.recorder.topics:
+            self._register(topic, cls)
+        self.recorder.write(topic, data, log_time_ns=max(0, log_ns))
+        self.messages_written += 1
+        self._dirty = True
+        if self.rerun.enabled:
+            if topic == "/uam/fleet_state":
+                self.rerun.log_fleet_state_msg(msg)
+            elif topic == "/uam/flight_plans":
+                self.rerun.log_flight_plan_msg(msg)
+            elif topic == "/uam/planning_reports":
+                self.rerun.log_planning_report_msg(msg)
+        if topic == "/uam/epoch_sync" and msg.finished and msg.sender == "simulator":
+            self.get_logger().info("the simulator ended the run: closing the recording")
+            self.close()
+
+    def _on_flush_timer(self) -> None:
+        if self._dirty and not self.finished:
+            self.recorder.flush()
+            self._dirty = False
+
+    def close(self) -> None:
+        """Close the MCAP file (listing every topic) and the Rerun sink. Idempotent."""
+        if self.finished:
+            return
+        self.finished = True
+        try:
+            for topic, (cls, _qos) in RECORDED_TOPICS.items():
+                if topic not in self.recorder.topics:
+                    self._register(topic, cls)
+            self.recorder.close()
+        finally:
+            self.rerun.close()
+        self.get_logger().info(f"wrote {self.messages_written} messages to {self.output}"
+                               + (f" and {self.rrd_path}" if self.rrd_path else ""))
+
+
+def main(args=None) -> int:
+    rclpy.init(args=args)  # rclpy's handlers turn SIGINT and SIGTERM into a shutdown
+    node = None
+    rc = 0
+    try:
+        node = RecorderNode()
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        while rclpy.ok() and not node.finished:
+            executor.spin_once(timeout_sec=0.1)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (ValueError, OSError) as exc:
+        print(f"recorder: {exc}", file=sys.stderr)
+        rc = 2
+    finally:
+        if node is not None:
+            try:
+                node.close()
+            finally:
+                node.destroy_node()
+        rclpy.try_shutdown()
+    return rc
+
+
+if __name__ == "__main__":
+    sys.exit(main())
