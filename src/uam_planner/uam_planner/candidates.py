@@ -194,6 +194,18 @@ class CandidateCache:
     def __len__(self) -> int:
         return len(self._store)
 
+    def precompute(self, pairs=None) -> int:
+        """Fill the cache for ``pairs`` of (origin, destination) node indices (default: every
+        ordered pair of distinct aerodromes, a(a-1) pairs of k searches each). Returns the number
+        of pairs computed now. Use at start-up so that no epoch pays for a route search."""
+        if pairs is None:
+            ai = [int(i) for i in self.network.aerodrome_indices]
+            pairs = [(o, d) for o in ai for d in ai if o != d]
+        before = self.misses
+        for o, d in pairs:
+            self.templates(o, d)
+        return self.misses - before
+
     def routes(self, origin_index: int, destination_index: int) -> list[CandidateRoute]:
         return [t.route for t in self.templates(origin_index, destination_index)]
 

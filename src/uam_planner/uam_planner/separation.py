@@ -42,10 +42,10 @@ from .trajectory import Trajectory
 DEFAULT_SEPARATION_M = 100.0
 _MAX_PAIRS_PER_CHUNK = 1 << 20
 # Broad-phase defaults, tuned on the city-scale benchmark (python -m uam_planner.bench): cells of
-# 4 separations and time buckets of 2 cells' flight time balance the number of cell keys per piece
+# 12 separations and time buckets of one cell's flight time balance the number of cell keys per piece
 # (sorting cost) against the pairs that share a cell without coming near (filtering cost).
-DEFAULT_CELL_SEPARATIONS = 4.0
-DEFAULT_BUCKET_CELLS = 2.0
+DEFAULT_CELL_SEPARATIONS = 12.0
+DEFAULT_BUCKET_CELLS = 1.0
 
 
 def segment_pair_min_distance(t0a, t1a, p0a, va, t0b, t1b, p0b, vb) -> np.ndarray:
@@ -202,7 +202,7 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
         groups_a: optional (n_a,) labels, only with ``trajs_b=None``: pairs within one group are
             skipped (the candidates of one request exclude each other anyway).
         cell_m, bucket_s: broad-phase cell size [m] (>= separation) and
-            time bucket [s] (defaults: 4 x separation, and the time to fly 2 cells at the
+            time bucket [s] (defaults: 12 x separation, and the time to fly one cell at the
             median segment speed).
         return_distances: also return each pair's exact minimum distance [m].
         stats: optional dict that receives broad-phase counts (segments, pieces, keys, pairs
