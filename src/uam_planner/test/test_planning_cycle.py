@@ -189,3 +189,22 @@ def test_config_validation_names_the_field():
         PlanningConfig(k=0)
     with pytest.raises(ValueError, match="policy"):
         Planner(corridor_network(), policy="best")
+
+
+def test_precomputed_routes_fill_the_cache_and_change_nothing():
+    net = generate_network(45, 6, seed=3)
+    p = Planner(net, PlanningConfig(precompute_routes=True), "mwis")
+    assert len(p.cache) == 6 * 5
+    before = p.cache.misses
+    rng = np.random.default_rng(1)
+    for i in range(5):
+        o, d = rng.choice(net.aerodrome_ids, 2, replace=False)
+        p.submit(req(f"r{i}", o, d, 0.0))
+    with_pre = [(f.request_id, f.route_node_ids) for f in p.plan(0.0, 0).approved]
+    assert p.cache.misses == before
+    q = Planner(net, PlanningConfig(), "mwis")
+    rng = np.random.default_rng(1)
+    for i in range(5):
+        o, d = rng.choice(net.aerodrome_ids, 2, replace=False)
+        q.submit(req(f"r{i}", o, d, 0.0))
+    assert [(f.request_id, f.route_node_ids) for f in q.plan(0.0, 0).approved] == with_pre

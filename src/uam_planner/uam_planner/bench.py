@@ -75,9 +75,7 @@ def paper_scale(network_path: Path, epochs: int, per_epoch: int, seed: int,
                 precompute: bool = False):
     from .network import load_network
     net = load_network(network_path)
-    planner = Planner(net, PlanningConfig(), "mwis", solve_mwis=_greedy)
-    if precompute:
-        planner.cache.precompute()
+    planner = Planner(net, PlanningConfig(precompute_routes=precompute), "mwis", solve_mwis=_greedy)
     rng = np.random.default_rng(seed)
     reports = []
     n = 0
