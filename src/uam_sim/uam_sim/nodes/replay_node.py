@@ -1,0 +1,143 @@
+"""Replay node: re-publish a recording with its original timing, /clock included.
+
+``ros2 run uam_sim replay run.mcap --ros-args -p rate:=10.0``
+
+Every recorded topic is published with its recorded type and the QoS its publishers offered
+(reliability and durability; see ``uam_sim.replay.replay_qos``), the CDR bytes as recorded. A
+message recorded at log time t is published (t - t_first) / rate wall seconds after the start;
+``rate:=0`` publishes everything as fast as possible. Because /clock is replayed too, nodes and
+viewers running with ``use_sim_time`` follow the recorded simulation time. The node exits when
+everything is published (unless ``exit_when_done:=false``).
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+import rclpy
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.clock import Clock as RclClock
+from rclpy.clock import ClockType
+from rclpy.duration import Duration
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.utilities import remove_ros_args
+
+from uam_sim.recording import QosSpec, message_class
+from uam_sim.replay import load_plan
+
+_BATCH = 500  # messages per timer tick at most, so the executor stays responsive at rate 0
+
+
+def qos_profile(spec: QosSpec) -> QoSProfile:
+    """An rclpy QoSProfile from a recorded QosSpec."""
+    profile = QoSProfile(
+        history=HistoryPolicy.KEEP_ALL if spec.history == "keep_all" else HistoryPolicy.KEEP_LAST,
+        depth=max(1, int(spec.depth)),
+        reliability=ReliabilityPolicy.BEST_EFFORT if spec.reliability == "best_effort" else ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if spec.durability == "transient_local" else DurabilityPolicy.VOLATILE,
+    )
+    if spec.lifespan_ns:
+        profile.lifespan = Duration(nanoseconds=spec.lifespan_ns)
+    return profile
+
+
+class ReplayNode(Node):
+    """Publishes a recording (parameter ``recording`` or the ``path`` argument); ``done`` when finished."""
+
+    def __init__(self, path: str | None = None, **kwargs) -> None:
+        super().__init__("replay", **kwargs)
+        self.declare_parameter("recording", "", ParameterDescriptor(
+            description="the .mcap file to replay (the command line's first argument sets it too)"))
+        self.declare_parameter("rate", 1.0, ParameterDescriptor(
+            description="playback speed: 1 = original timing, 10 = ten times faster, 0 = as fast as possible",
+            floating_point_range=[FloatingPointRange(from_value=0.0, to_value=1e9)]))
+        self.declare_parameter("start_delay_s", 1.0, ParameterDescriptor(
+            description="wall time to wait after creating the publishers before the first message "
+                        "(lets subscribers discover them) [s]",
+            floating_point_range=[FloatingPointRange(from_value=0.0, to_value=3600.0)]))
+        self.declare_parameter("wait_for_subscribers", 0, ParameterDescriptor(
+            description="start only once every replayed topic has at least this many subscribers "
+                        "(and start_delay_s has passed); 0 = do not wait",
+            integer_range=[IntegerRange(from_value=0, to_value=1000)]))
+        self.declare_parameter("topics", [""], ParameterDescriptor(
+            description="topics to replay; empty = every recorded topic"))
+        self.declare_parameter("exit_when_done", True, ParameterDescriptor(
+            description="stop the node once everything is published"))
+        g = self.get_parameter
+        path = path or str(g("recording").value)
+        if not path:
+            raise ValueError("recording: give the .mcap file as the first argument or -p recording:=FILE")
+        rate = float(g("rate").value)
+        topics = [t for t in (g("topics").value or []) if t]
+        self.plan = load_plan(path, rate=rate, topics=topics)
+        self.exit_when_done = bool(g("exit_when_done").value)
+        self._steady = RclClock(clock_type=ClockType.STEADY_TIME)
+        self._replay_publishers = {}
+        for topic, info in self.plan.topics.items():
+            self._replay_publishers[topic] = self.create_publisher(message_class(info.type_name), topic,
+                                                            qos_profile(info.qos))
+        self.published = 0
+        self._start: float | None = None
+        self._delay_s = float(g("start_delay_s").value)
+        self._wait_for = int(g("wait_for_subscribers").value)
+        self._created = time.monotonic()
+        # a steady wall-clock timer: replay timing must not follow the /clock it publishes itself
+        self._timer = self.create_timer(0.001, self._on_timer, clock=self._steady)
+        self.get_logger().info(
+            f"replaying {self.plan.total} messages on {len(self.plan.topics)} topics from {path} "
+            f"at rate {rate:g} ({'as fast as possible' if rate == 0 else f'{self.plan.duration_s:.1f} s'})")
+
+    @property
+    def done(self) -> bool:
+        return self.plan.done
+
+    def _on_timer(self) -> None:
+        now = time.monotonic()
+        if self._start is None:
+            if now - self._created < self._delay_s:
+                return
+            if self._wait_for and any(p.get_subscription_count() < self._wait_for
+                                      for p in self._replay_publishers.values()):
+                return
+            self._start = now
+        for i in self.plan.due(now - self._start, limit=_BATCH):
+            self._replay_publishers[self.plan.topic_of[i]].publish(self.plan.data[i])
+            self.published += 1
+        if self.plan.done:
+            self._timer.cancel()
+            self.get_logger().info(f"replay done: {self.published} messages published")
+
+
+def main(args=None) -> int:
+    argv = sys.argv if args is None else args
+    rclpy.init(args=argv)
+    node = None
+    rc = 0
+    try:
+        positional = [a for a in remove_ros_args(argv)[1:] if not a.startswith("-")]
+        node = ReplayNode(positional[0] if positional else None)
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        while rclpy.ok() and not (node.done and node.exit_when_done):
+            executor.spin_once(timeout_sec=0.1)
+        # give transient-local and reliable readers a moment to take the last messages
+        end = time.monotonic() + 0.5
+        while rclpy.ok() and time.monotonic() < end:
+            executor.spin_once(timeout_sec=0.05)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (ValueError, OSError) as exc:
+        print(f"replay: {exc}", file=sys.stderr)
+        rc = 2
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return rc
+
+
+if __name__ == "__main__":
+    sys.exit(main())
