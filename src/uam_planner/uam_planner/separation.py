@@ -442,14 +442,3 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
     dist = dist[order][first]
     return (pairs, dist) if return_distances else pairs
 
-
-def count_segment_pair_checks(trajs_a, trajs_b=None) -> int:
-    """Number of time-overlapping segment pairs an all-pairs check would evaluate (for benchmarks)."""
-    sa = _as_segment_set(trajs_a)
-    sb = sa if trajs_b is None else _as_segment_set(trajs_b)
-    order = np.argsort(sb.t0_s)
-    t0s = sb.t0_s[order]
-    # Segments of b starting before a's end, minus those ending before a's start.
-    started = np.searchsorted(t0s, sa.t1_s, side="right")
-    ended = np.searchsorted(np.sort(sb.t1_s), sa.t0_s, side="left")
-    return int((started - ended).sum())
