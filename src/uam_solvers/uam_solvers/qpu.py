@@ -1,0 +1,516 @@
+"""Quantum annealing backends: a D-Wave Advantage QPU ("qpu") and its offline emulator.
+
+Pipeline (both backends, `embedded_solve`):
+
+1. the MWIS QUBO of `uam_solvers.qubo` (lambda = 2) as a dimod BQM over variables 0..n-1;
+2. minor embedding onto the sampler's graph with minorminer, inside dwave-system's
+   EmbeddingComposite. minorminer is seeded (option embedding_seed, default 0, independent of
+   the solve seed so one graph always gets the same embedding) and its embeddings are cached per
+   (graph structure, target graph, embedding parameters) for the life of the process, because
+   finding one takes seconds for a 50-vertex conflict graph on Pegasus P16;
+3. chain strength: dwave-system's `uniform_torque_compensation` (prefactor 1.414, the Ocean
+   default): sqrt(mean squared coupling x mean degree) x prefactor, strong enough to keep chains
+   intact without flattening the problem's energy scale under the QPU's auto-scaling. A number
+   in option chain_strength overrides it;
+4. sampling: annealing_time 1 us, 100 reads (paper), parameters passed only when the sampler
+   declares them in its `parameters`;
+5. unembedding with majority-vote chain-break resolution; then every read is refined by one-flip
+   steepest descent and repaired into an independent set, and the best read is returned.
+
+Statistics: those of `refine_and_repair` (reads, feasible and optimal fractions, ...), chain
+lengths (max, mean), qubits used, chain strength, chain-break fraction (mean fraction of broken
+chains per read) and the fraction of reads with any broken chain, plus timing:
+
+* `qpu`: the sampler's own timing from sampleset.info["timing"] in microseconds (QPU access,
+  programming, anneal time per sample, sampling, readout per sample, ...) as stats
+  "qpu_<key>_us"; when the sampler reports none, stats["qpu_timing"] says so;
+* `qpu-emulator`: never reports QPU times: stats["qpu_timing"] = "none (emulator)".
+
+Availability of `qpu`: a D-Wave token in DWAVE_API_TOKEN or a dwave-cloud-client configuration
+file (`dwave config create`); otherwise `available()` is (False, NO_TOKEN_MESSAGE) and `solve`
+raises BackendUnavailable with that text before any network call. The sampler is injectable
+(constructor argument or option sampler_factory, a callable returning a structured dimod
+sampler), so tests run the whole pipeline with `AdvantageStandInSampler`, a clearly named
+stand-in on the real Advantage topology.
+
+Topology note: an Advantage system is a Pegasus P16 graph (5,640 qubits, 40,484 couplers in the
+ideal graph), but every real chip has a few inactive qubits and couplers; the stand-in and the
+emulator use the ideal graph unless given `missing_qubits`, so an embedding found here may use
+qubits that a given QPU lacks (the `qpu` backend embeds on the live chip's own graph).
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import os
+import threading
+import time
+from typing import Any, Callable, Iterable, Mapping
+
+import dimod
+import numpy as np
+
+from uam_solvers.annealing import _float_option, _int_option, common_options, sampleset_to_array
+from uam_solvers.base import (
+    Backend,
+    BackendUnavailable,
+    MwisInputError,
+    MwisProblem,
+    MwisResult,
+    make_result,
+)
+from uam_solvers.qubo import mwis_qubo, refine_and_repair
+
+__all__ = [
+    "ADVANTAGE_PEGASUS_SIZE",
+    "AdvantageStandInSampler",
+    "NO_TOKEN_MESSAGE",
+    "QpuBackend",
+    "QpuEmulatorBackend",
+    "advantage_graph",
+    "dwave_token_configured",
+    "embedded_solve",
+]
+
+ADVANTAGE_PEGASUS_SIZE = 16
+DEFAULT_ANNEALING_TIME_US = 1.0
+DEFAULT_CHAIN_STRENGTH_PREFACTOR = 1.414
+NO_TOKEN_MESSAGE = "no D-Wave token: set DWAVE_API_TOKEN or run `dwave config create`"
+
+_QPU_OPTIONS = {"annealing_time_us", "chain_strength", "chain_strength_prefactor",
+                "embedding_seed", "embedding_timeout_s", "embedding_tries", "sampler_factory",
+                "solver", "num_sweeps"}
+
+
+# --------------------------------------------------------------------------------------------
+# Topology and the stand-in sampler
+# --------------------------------------------------------------------------------------------
+
+@functools.lru_cache(maxsize=4)
+def _pegasus_structure(size: int, missing: tuple[int, ...]) -> tuple[tuple, tuple]:
+    try:
+        from dwave.graphs import pegasus_graph  # Ocean >= 9.x; dwave_networkx is deprecated
+    except ImportError:  # pragma: no cover - older Ocean
+        from dwave_networkx import pegasus_graph
+    graph = pegasus_graph(size)
+    if missing:
+        graph.remove_nodes_from(missing)
+    nodes = tuple(sorted(graph.nodes))
+    edges = tuple(sorted((min(u, v), max(u, v)) for u, v in graph.edges))
+    return nodes, edges
+
+
+def advantage_graph(missing_qubits: Iterable[int] = ()) -> tuple[list[int], list[tuple[int, int]]]:
+    """(nodes, edges) of the ideal Advantage topology, Pegasus P16 (5,640 qubits, 40,484
+    couplers), minus `missing_qubits` (real chips lack a few). Cached per process."""
+    nodes, edges = _pegasus_structure(ADVANTAGE_PEGASUS_SIZE, tuple(sorted(set(missing_qubits))))
+    return list(nodes), list(edges)
+
+
+class AdvantageStandInSampler(dimod.Sampler, dimod.Structured):
+    """STAND-IN for dwave.system.DWaveSampler: simulated annealing on the Advantage graph.
+
+    NOT a quantum annealer. It exists so the `qpu` pipeline (embedding, chain strength,
+    parameters, unembedding, chain-break statistics, descent, repair) runs in tests and CI
+    without hardware. Its surface mirrors DWaveSampler: `properties` (topology, qubits, couplers,
+    annealing_time_range, num_reads_range, h_range, j_range, chip_id), `parameters`,
+    `nodelist`, `edgelist`, `adjacency`, and `sample(bqm, num_reads=..., annealing_time=...)`,
+    which checks the BQM fits the graph and the parameters are in range, then runs simulated
+    annealing (annealing_time is only checked and recorded, it has no physical meaning here).
+
+    Every call's parameters are appended to `calls` so tests can assert what the pipeline passed.
+    It returns no timing information unless `timing` is given (a dict, for a test that checks the
+    pipeline copies a sampler's timing into its statistics); then it is returned as
+    info["timing"] verbatim, and info["stand_in"] is always True. Beyond DWaveSampler's
+    parameters it accepts `seed` (so runs are reproducible) and `num_sweeps`.
+
+    missing_qubits: qubits to remove, to mimic a real chip's inactive qubits.
+    """
+
+    def __init__(self, missing_qubits: Iterable[int] = (), num_sweeps: int = 1000,
+                 timing: Mapping[str, float] | None = None):
+        self._nodelist, self._edgelist = advantage_graph(missing_qubits)
+        self.num_sweeps = int(num_sweeps)
+        self.timing = dict(timing) if timing is not None else None
+        self.calls: list[dict] = []
+        self._nodes = set(self._nodelist)
+        self._edges = set(self._edgelist)
+        self._properties = {
+            "chip_id": "AdvantageStandInSampler (simulated annealing, not a QPU)",
+            "stand_in": True,
+            "topology": {"type": "pegasus", "shape": [ADVANTAGE_PEGASUS_SIZE]},
+            "qubits": self._nodelist,
+            "couplers": [list(e) for e in self._edgelist],
+            "num_qubits": ADVANTAGE_PEGASUS_SIZE * (ADVANTAGE_PEGASUS_SIZE - 1) * 24,
+            "annealing_time_range": [0.5, 2000.0],
+            "default_annealing_time": 20.0,
+            "num_reads_range": [1, 10000],
+            "h_range": [-4.0, 4.0],
+            "j_range": [-1.0, 1.0],
+            "extended_j_range": [-2.0, 1.0],
+        }
+        self._parameters = {
+            "num_reads": ["num_reads_range"],
+            "annealing_time": ["annealing_time_range"],
+            "answer_mode": [],
+            "auto_scale": [],
+            "seed": [],
+            "num_sweeps": [],
+        }
+
+    @property
+    def nodelist(self) -> list:
+        return self._nodelist
+
+    @property
+    def edgelist(self) -> list:
+        return self._edgelist
+
+    @property
+    def properties(self) -> dict:
+        return self._properties
+
+    @property
+    def parameters(self) -> dict:
+        return self._parameters
+
+    def sample(self, bqm, num_reads: int = 1, annealing_time: float | None = None,
+               seed: int | None = None, num_sweeps: int | None = None, **parameters):
+        from dwave.samplers import SimulatedAnnealingSampler
+
+        unknown = set(parameters) - set(self.parameters)
+        if unknown:
+            raise ValueError(f"AdvantageStandInSampler: unknown parameters {sorted(unknown)}")
+        low, high = self.properties["num_reads_range"]
+        if not (low <= num_reads <= high):
+            raise ValueError(f"num_reads={num_reads} is outside num_reads_range {[low, high]}")
+        if annealing_time is not None:
+            low, high = self.properties["annealing_time_range"]
+            if not (low <= annealing_time <= high):
+                raise ValueError(
+                    f"annealing_time={annealing_time} us is outside {[low, high]}")
+        for v in bqm.variables:
+            if v not in self._nodes:
+                raise dimod.exceptions.BinaryQuadraticModelStructureError(
+                    f"variable {v!r} is not a qubit of the Advantage graph")
+        for u, v in bqm.quadratic:
+            if (min(u, v), max(u, v)) not in self._edges:
+                raise dimod.exceptions.BinaryQuadraticModelStructureError(
+                    f"interaction ({u!r}, {v!r}) is not a coupler of the Advantage graph")
+        self.calls.append(dict(num_reads=num_reads, annealing_time=annealing_time, seed=seed,
+                               num_qubits=bqm.num_variables, **parameters))
+        sampleset = SimulatedAnnealingSampler().sample(
+            bqm, num_reads=num_reads, seed=seed,
+            num_sweeps=self.num_sweeps if num_sweeps is None else num_sweeps)
+        info = {"stand_in": True}
+        if self.timing is not None:
+            info["timing"] = dict(self.timing)
+        return dimod.SampleSet(sampleset.record, sampleset.variables, info, sampleset.vartype)
+
+
+def _emulator_sampler(missing_qubits: Iterable[int] = ()):
+    """dimod.StructureComposite(SimulatedAnnealingSampler) on the Advantage graph."""
+    import dimod
+    from dwave.samplers import SimulatedAnnealingSampler
+
+    nodes, edges = advantage_graph(missing_qubits)
+    return dimod.StructureComposite(SimulatedAnnealingSampler(), nodes, edges)
+
+
+# --------------------------------------------------------------------------------------------
+# Embedding cache
+# --------------------------------------------------------------------------------------------
+
+_EMBEDDING_CACHE: dict[tuple, dict] = {}
+_TARGET_KEYS: dict[int, tuple[Any, str]] = {}
+_CACHE_LOCK = threading.Lock()
+_EMBEDDING_CACHE_MAX = 256
+
+
+def _target_key(target_edgelist) -> str:
+    """Digest of a target graph, memoised by object (the object is kept so its id stays unique)."""
+    entry = _TARGET_KEYS.get(id(target_edgelist))
+    if entry is not None and entry[0] is target_edgelist:
+        return entry[1]
+    edges = np.sort(np.asarray(list(target_edgelist), dtype=np.int64).reshape(-1, 2), axis=1)
+    edges = edges[np.lexsort((edges[:, 1], edges[:, 0]))]
+    digest = hashlib.sha1(edges.tobytes()).hexdigest()
+    _TARGET_KEYS[id(target_edgelist)] = (target_edgelist, digest)
+    return digest
+
+
+def cached_find_embedding(source_edgelist, target_edgelist, **parameters) -> dict:
+    """minorminer.find_embedding, memoised per (source graph, target graph, parameters).
+
+    Same signature as minorminer.find_embedding, so it plugs into EmbeddingComposite. Results
+    depend only on the graphs and parameters (random_seed included) unless minorminer's timeout
+    binds. An empty embedding (failure) is not cached.
+    """
+    import minorminer
+
+    source = sorted({(min(u, v), max(u, v)) for u, v in source_edgelist})
+    key = (tuple(source), _target_key(target_edgelist), tuple(sorted(parameters.items())))
+    with _CACHE_LOCK:
+        if key in _EMBEDDING_CACHE:
+            return {v: list(chain) for v, chain in _EMBEDDING_CACHE[key].items()}
+    embedding = minorminer.find_embedding(source_edgelist, target_edgelist, **parameters)
+    embedding = {v: list(chain) for v, chain in embedding.items()}
+    if embedding:
+        with _CACHE_LOCK:
+            if len(_EMBEDDING_CACHE) >= _EMBEDDING_CACHE_MAX:
+                _EMBEDDING_CACHE.pop(next(iter(_EMBEDDING_CACHE)))
+            _EMBEDDING_CACHE[key] = embedding
+    return {v: list(chain) for v, chain in embedding.items()}
+
+
+# --------------------------------------------------------------------------------------------
+# The shared pipeline
+# --------------------------------------------------------------------------------------------
+
+_TIMING_KEYS = ("qpu_access_time", "qpu_programming_time", "qpu_anneal_time_per_sample",
+                "qpu_sampling_time", "qpu_readout_time_per_sample",
+                "qpu_delay_time_per_sample", "qpu_access_overhead_time",
+                "total_post_processing_time", "post_processing_overhead_time")
+
+
+def embedded_solve(problem: MwisProblem, child, *, backend: str, seed: int, time_limit_s: float,
+                   options: Mapping[str, Any], report_qpu_timing: bool,
+                   sampler_parameters: Mapping[str, Any]) -> MwisResult:
+    """Embed the MWIS QUBO on `child` (a structured dimod sampler), sample, unembed, refine.
+
+    Args:
+        problem: the MWIS problem.
+        child: structured sampler (DWaveSampler, AdvantageStandInSampler, StructureComposite).
+        backend: name for the result.
+        seed: solve seed, passed to the child only if it declares a "seed" parameter.
+        time_limit_s: also the default minorminer timeout (at least 1 s).
+        options: common options (num_reads, lambda, optimum) and chain_strength,
+            chain_strength_prefactor, embedding_seed, embedding_timeout_s, embedding_tries.
+        report_qpu_timing: copy sampleset.info["timing"] into the statistics (qpu only).
+        sampler_parameters: wanted sampler parameters (annealing_time, num_sweeps, ...); each is
+            passed only if the child declares it.
+
+    Returns:
+        MwisResult (proven_optimal False) with the statistics listed in the module docstring.
+    """
+    import dimod
+    from dwave.embedding.chain_breaks import majority_vote
+    from dwave.embedding.chain_strength import uniform_torque_compensation
+    from dwave.system import EmbeddingComposite
+
+    started = time.perf_counter()
+    parsed = common_options(options, _QPU_OPTIONS)
+    if problem.n == 0:
+        return make_result(problem, np.zeros(0, dtype=np.int32), proven_optimal=True,
+                           solve_time_s=time.perf_counter() - started, backend=backend,
+                           stats={"reads": 0})
+    prefactor = _float_option(options, "chain_strength_prefactor",
+                              DEFAULT_CHAIN_STRENGTH_PREFACTOR)
+    chain_strength_option = options.get("chain_strength", "uniform_torque_compensation")
+    if chain_strength_option in ("uniform_torque_compensation", "utc", None):
+        chain_strength = functools.partial(uniform_torque_compensation, prefactor=prefactor)
+        chain_strength_rule = f"uniform_torque_compensation(prefactor={prefactor})"
+    else:
+        chain_strength = _float_option(options, "chain_strength", None)
+        chain_strength_rule = "fixed"
+    embedding_parameters = {
+        "random_seed": _int_option(options, "embedding_seed", 0, 0),
+        "timeout": _float_option(options, "embedding_timeout_s", max(1.0, float(time_limit_s))),
+        "tries": _int_option(options, "embedding_tries", 10, 1),
+    }
+
+    qubo = mwis_qubo(problem, parsed["lambda"])
+    bqm = qubo.to_bqm()
+    params = {"num_reads": parsed["num_reads"], **sampler_parameters}
+    declared = getattr(child, "parameters", {}) or {}
+    if "seed" in declared:
+        params["seed"] = int(seed) % 2**32
+    passed = {k: v for k, v in params.items() if k in declared}
+    not_passed = sorted(k for k in params if k not in declared)
+
+    composite = EmbeddingComposite(child, find_embedding=cached_find_embedding,
+                                   embedding_parameters=embedding_parameters)
+    sample_start = time.perf_counter()
+    try:
+        sampleset = composite.sample(bqm, chain_strength=chain_strength,
+                                     chain_break_method=majority_vote,
+                                     chain_break_fraction=True, return_embedding=True, **passed)
+        sampleset.resolve()
+    except ValueError as exc:
+        if "no embedding found" in str(exc):
+            raise RuntimeError(
+                f"{backend}: minorminer found no embedding of the {problem.n}-vertex conflict "
+                f"graph ({len(problem.all_edges())} edges) within "
+                f"{embedding_parameters['timeout']} s; raise options['embedding_timeout_s'] "
+                f"or use a classical backend") from None
+        raise
+    sample_time = time.perf_counter() - sample_start
+
+    raw = sampleset_to_array(sampleset, problem.n)
+    post_start = time.perf_counter()
+    selected, stats = refine_and_repair(problem, qubo, raw, optimum=parsed["optimum"])
+    context = sampleset.info.get("embedding_context", {})
+    chains = context.get("embedding", {})
+    lengths = np.array([len(chain) for chain in chains.values()], dtype=np.int64)
+    counts = np.asarray(sampleset.record.num_occurrences, dtype=np.float64)
+    breaks = np.asarray(sampleset.record.chain_break_fraction, dtype=np.float64)
+    used_strength = context.get("chain_strength")
+    if isinstance(used_strength, Mapping):
+        used_strength = max(used_strength.values()) if used_strength else None
+    if used_strength is None and (not lengths.size or lengths.max() <= 1):
+        # every chain is one qubit: dwave-system skips chain couplings altogether
+        used_strength = 0.0
+        chain_strength_rule = "none needed (every chain is a single qubit)"
+    stats.update({
+        "lambda": parsed["lambda"],
+        "num_reads": parsed["num_reads"],
+        "chain_length_max": int(lengths.max()) if lengths.size else 0,
+        "chain_length_mean": float(lengths.mean()) if lengths.size else 0.0,
+        "qubits_used": int(lengths.sum()),
+        "chain_strength": float(used_strength) if used_strength is not None else float("nan"),
+        "chain_strength_rule": chain_strength_rule,
+        "chain_break_method": "majority_vote",
+        "chain_break_fraction": float(np.average(breaks, weights=counts)),
+        "reads_with_broken_chains": float(np.average(breaks > 0, weights=counts)),
+        "embedding_seed": embedding_parameters["random_seed"],
+        "sampler": type(child).__name__,
+        "sampler_is_stand_in": bool(getattr(child, "properties", {}).get("stand_in", False)),
+        "sampler_parameters": ",".join(f"{k}={v}" for k, v in sorted(passed.items())),
+        "sample_time_s": sample_time,
+    })
+    if not_passed:
+        stats["sampler_parameters_not_supported"] = ",".join(not_passed)
+    timing = sampleset.info.get("timing") if report_qpu_timing else None
+    if not report_qpu_timing:
+        stats["qpu_timing"] = "none (emulator)"
+    elif not timing:
+        stats["qpu_timing"] = "none reported by the sampler"
+    else:
+        stats["qpu_timing"] = "sampler info['timing'], microseconds"
+        for key in _TIMING_KEYS:
+            if key in timing:
+                stats[f"{key}_us"] = float(timing[key])
+    if parsed["ignored"]:
+        stats["ignored_options"] = ",".join(parsed["ignored"])
+    stats["postprocess_time_s"] = time.perf_counter() - post_start
+    return make_result(problem, selected, proven_optimal=False,
+                       solve_time_s=time.perf_counter() - started, backend=backend, stats=stats)
+
+
+# --------------------------------------------------------------------------------------------
+# Backends
+# --------------------------------------------------------------------------------------------
+
+def dwave_token_configured() -> tuple[bool, str]:
+    """Whether a D-Wave token is configured, without any network call.
+
+    Looks at DWAVE_API_TOKEN, then at the dwave-cloud-client configuration (files found by
+    dwave.cloud.config.load_config, the same ones `dwave config create` writes).
+    Returns (True, where) or (False, NO_TOKEN_MESSAGE or the configuration error).
+    """
+    if os.environ.get("DWAVE_API_TOKEN"):
+        return True, "DWAVE_API_TOKEN"
+    try:
+        from dwave.cloud.config import load_config
+    except ImportError as exc:
+        return False, f"dwave-cloud-client is not installed ({exc})"
+    try:
+        config = load_config()
+    except Exception as exc:  # noqa: BLE001 - a broken config file is a reason to report
+        return False, f"{NO_TOKEN_MESSAGE} (reading the dwave configuration failed: {exc})"
+    if config.get("token"):
+        return True, "dwave configuration file"
+    return False, NO_TOKEN_MESSAGE
+
+
+class QpuBackend(Backend):
+    """D-Wave Advantage QPU through dwave-system (DWaveSampler in an EmbeddingComposite).
+
+    sampler_factory: callable returning the structured child sampler to use instead of
+    DWaveSampler (tests pass AdvantageStandInSampler); the option of the same name overrides it
+    per call. Options: num_reads (100), annealing_time_us (1.0), chain_strength (a number, or the
+    default "uniform_torque_compensation"), chain_strength_prefactor (1.414), lambda (2.0),
+    optimum, embedding_seed (0), embedding_timeout_s (max(1, time_limit_s)), embedding_tries
+    (10), solver (DWaveSampler solver selection, e.g. a name).
+    """
+
+    name = "qpu"
+    description = ("D-Wave Advantage QPU (DWaveSampler + minorminer embedding), 1 us anneals, "
+                   "100 reads, majority-vote chains, descent + repair; needs a D-Wave token")
+
+    def __init__(self, sampler_factory: Callable[[], Any] | None = None):
+        self.sampler_factory = sampler_factory
+        self._child = None
+
+    def available(self) -> tuple[bool, str]:
+        if self.sampler_factory is not None:
+            return True, ""
+        ok, where = dwave_token_configured()
+        return (True, "") if ok else (False, where)
+
+    def _child_sampler(self, options: Mapping[str, Any]):
+        factory = options.get("sampler_factory") or self.sampler_factory
+        if factory is not None:
+            if not callable(factory):
+                raise MwisInputError(
+                    f"options['sampler_factory'] must be callable, got {factory!r}")
+            return factory()
+        ok, reason = dwave_token_configured()
+        if not ok:
+            raise BackendUnavailable(reason)
+        if self._child is None:
+            from dwave.system import DWaveSampler
+
+            solver = options.get("solver")
+            self._child = DWaveSampler(solver=solver) if solver else DWaveSampler()
+        return self._child
+
+    def solve(self, problem: MwisProblem, *, time_limit_s: float, seed: int,
+              options: Mapping[str, Any]) -> MwisResult:
+        options = dict(options or {})
+        child = self._child_sampler(options)  # raises BackendUnavailable at once without token
+        annealing_time = _float_option(options, "annealing_time_us", DEFAULT_ANNEALING_TIME_US)
+        return embedded_solve(problem, child, backend=self.name, seed=seed,
+                              time_limit_s=time_limit_s, options=options,
+                              report_qpu_timing=True,
+                              sampler_parameters={"annealing_time": annealing_time})
+
+
+class QpuEmulatorBackend(Backend):
+    """The `qpu` pipeline offline: simulated annealing on a simulated Advantage (Pegasus P16).
+
+    The child is dimod.StructureComposite(SimulatedAnnealingSampler) on the ideal P16 graph
+    (minus `missing_qubits`), so embeddings, chain lengths and chain breaks can be studied
+    without hardware. It never reports QPU times (stats["qpu_timing"] = "none (emulator)").
+    Options as for `qpu`, plus num_sweeps (simulated annealing sweeps per read, default 1000);
+    annealing_time_us is not used.
+    """
+
+    name = "qpu-emulator"
+    description = ("the qpu embedding pipeline on a simulated Advantage graph (Pegasus P16, "
+                   "simulated annealing); chain statistics, no QPU times")
+
+    def __init__(self, missing_qubits: Iterable[int] = ()):
+        self.missing_qubits = tuple(missing_qubits)
+        self._child = None
+
+    def available(self) -> tuple[bool, str]:
+        try:
+            import dwave.samplers  # noqa: F401
+            import dwave.system  # noqa: F401
+            import minorminer  # noqa: F401
+        except ImportError as exc:
+            return False, f"missing Ocean package ({exc})"
+        return True, ""
+
+    def solve(self, problem: MwisProblem, *, time_limit_s: float, seed: int,
+              options: Mapping[str, Any]) -> MwisResult:
+        options = dict(options or {})
+        if self._child is None:
+            self._child = _emulator_sampler(self.missing_qubits)
+        num_sweeps = _int_option(options, "num_sweeps", 1000, 1)
+        return embedded_solve(problem, self._child, backend=self.name, seed=seed,
+                              time_limit_s=time_limit_s, options=options,
+                              report_qpu_timing=False,
+                              sampler_parameters={"num_sweeps": num_sweeps})
