@@ -351,7 +351,6 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
     # Per-piece arrays of b indexed by global item id (b items are offset by na).
     if single:
         P_t0, P_t1, P_xlo, P_xhi, P_ylo, P_yhi = pa.t0, pa.t1, pa.xlo, pa.xhi, pa.ylo, pa.yhi
-        P_seg = pa.seg
     else:
         P_t0 = np.concatenate((pa.t0, pb.t0))
         P_t1 = np.concatenate((pa.t1, pb.t1))
@@ -359,10 +358,14 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
         P_xhi = np.concatenate((pa.xhi, pb.xhi))
         P_ylo = np.concatenate((pa.ylo, pb.ylo))
         P_yhi = np.concatenate((pa.yhi, pb.yhi))
-        P_seg = np.concatenate((pa.seg, pb.seg))
     P_p0 = pa.p0 if single else np.concatenate((pa.p0, pb.p0))
     P_traj = np.concatenate((sa.traj[pa.seg], sb.traj[pb.seg])) if not single else sa.traj[pa.seg]
     P_v = sa.v_mps[pa.seg] if single else np.concatenate((sa.v_mps[pa.seg], sb.v_mps[pb.seg]))
+
+    # The same per-piece values in sorted-key order.
+    S_t0, S_t1 = P_t0[items], P_t1[items]
+    S_xlo, S_xhi, S_ylo, S_yhi = P_xlo[items], P_xhi[items], P_ylo[items], P_yhi[items]
+    S_traj = P_traj[items] if single else None
 
     clock.append(time.perf_counter())
     out_pairs = []
@@ -382,32 +385,31 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
         lrep = np.repeat(lp, nr)
         rpos = np.repeat(rf, nr) + (np.arange(cnt, dtype=np.int64) - np.repeat(np.cumsum(nr) - nr, nr))
         start = stop
-        i = items[lrep]
-        j = items[rpos]
-        kl = lrep
+        l, r = lrep, rpos
         if single:
-            ti = P_traj[i]
-            tj = P_traj[j]
+            ti = S_traj[l]
+            tj = S_traj[r]
             ok = ti != tj
             if groups is not None:
                 ok &= groups[ti] != groups[tj]
-            i, j, kl = i[ok], j[ok], kl[ok]
-        # Filters in order of selectivity, compressing after each so later gathers are cheap.
+            l, r = l[ok], r[ok]
+        # Filters in order of selectivity, compressing after each so later gathers are cheap
+        # (on arrays in sorted-key order, so the gathers walk memory nearly sequentially).
         # Each keeps a pair only in its canonical cell (the one holding the low corner of the
         # intersection of the two boxes), so a pair sharing several cells is checked once.
-        lo = np.maximum(P_t0[i], P_t0[j])
-        ok = lo <= np.minimum(P_t1[i], P_t1[j])
-        ok &= np.floor((lo - tt0) / bucket).astype(np.int64) == kt[kl]
-        i, j, kl = i[ok], j[ok], kl[ok]
-        lo = np.maximum(P_xlo[i], P_xlo[j])
-        ok = lo <= np.minimum(P_xhi[i], P_xhi[j])
-        ok &= np.floor((lo - x0) / cell).astype(np.int64) == kx[kl]
-        i, j, kl = i[ok], j[ok], kl[ok]
-        lo = np.maximum(P_ylo[i], P_ylo[j])
-        ok = lo <= np.minimum(P_yhi[i], P_yhi[j])
-        ok &= np.floor((lo - y0) / cell).astype(np.int64) == ky[kl]
-        i = i[ok]
-        j = j[ok]
+        lo = np.maximum(S_t0[l], S_t0[r])
+        ok = lo <= np.minimum(S_t1[l], S_t1[r])
+        ok &= np.floor((lo - tt0) / bucket).astype(np.int64) == kt[l]
+        l, r = l[ok], r[ok]
+        lo = np.maximum(S_xlo[l], S_xlo[r])
+        ok = lo <= np.minimum(S_xhi[l], S_xhi[r])
+        ok &= np.floor((lo - x0) / cell).astype(np.int64) == kx[l]
+        l, r = l[ok], r[ok]
+        lo = np.maximum(S_ylo[l], S_ylo[r])
+        ok = lo <= np.minimum(S_yhi[l], S_yhi[r])
+        ok &= np.floor((lo - y0) / cell).astype(np.int64) == ky[l]
+        i = items[l[ok]]
+        j = items[r[ok]]
         n_exact += int(i.size)
         if i.size == 0:
             continue
