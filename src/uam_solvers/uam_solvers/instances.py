@@ -264,8 +264,9 @@ def generate_corpus_entries(n_instances: int, min_vertices: int = 5, max_vertice
                             seed: int = 0, k: int = 5, **instance_options) -> list[CorpusEntry]:
     """Seeded paper-shaped instances with sizes spread evenly over [min_vertices, max_vertices].
 
-    Sizes cycle through every value of the range (shuffled), so 600 instances of 5..50 vertices
-    hold each size 13 or 14 times. Instance i has n_vertices v_i and ceil(v_i / k) requests
+    Instance sizes are min + floor(i * span / N) for i < N (span = max - min + 1), shuffled: 600
+    instances of 5..50 vertices hold each size 13 or 14 times, and 12 instances still span the
+    range (5, 8, 12, ..., 47). Instance i has n_vertices v_i and ceil(v_i / k) requests
     (1 to 10 for 5..50 vertices with k = 5) and its own seed spawned from `seed`.
     instance_options go to `paper_instance`. Names are "paper-<seed>-<i>-v<v_i>".
 
@@ -275,8 +276,9 @@ def generate_corpus_entries(n_instances: int, min_vertices: int = 5, max_vertice
     min_vertices = _check_int("min_vertices", min_vertices, 1)
     max_vertices = _check_int("max_vertices", max_vertices, min_vertices)
     rng = np.random.default_rng(seed)
-    sizes = np.resize(np.arange(min_vertices, max_vertices + 1), n_instances)
-    sizes = rng.permutation(sizes)
+    span = max_vertices - min_vertices + 1
+    # evenly spread: instance i gets size min + floor(i * span / N), then shuffled
+    sizes = rng.permutation(min_vertices + (np.arange(n_instances) * span) // max(n_instances, 1))
     child_seeds = np.random.SeedSequence(seed).generate_state(max(n_instances, 1), dtype=np.uint32)
     entries = []
     for i, (size, child) in enumerate(zip(sizes.tolist(), child_seeds.tolist())):

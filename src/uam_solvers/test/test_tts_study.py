@@ -1,0 +1,113 @@
+"""Time-to-solution formula and the TTS study command line."""
+
+import csv
+import json
+import math
+
+import numpy as np
+import pytest
+
+import uam_solvers.registry as registry
+from uam_solvers.base import Backend, MwisInputError, MwisProblem, make_result
+from uam_solvers.instances import CorpusEntry, load_corpus, paper_instance, save_corpus
+from uam_solvers.qubo import feasible_mask
+from uam_solvers.tts import CSV_COLUMNS, main, run_study, time_to_solution
+
+
+def brute_force(problem):
+    n = problem.n
+    x = ((np.arange(2**n)[:, None] >> np.arange(n)) & 1).astype(np.int8)
+    ok = feasible_mask(x, problem.all_edges())
+    return float(np.where(ok, x @ problem.weights, -np.inf).max())
+
+
+def test_tts_formula_hand_values():
+    assert time_to_solution(0.02, 1.0) == (0.02, "optimal every run")
+    # log(0.01) / log(0.5) = 6.6439 runs
+    value, rule = time_to_solution(0.02, 0.5)
+    assert rule == "formula" and value == pytest.approx(0.02 * 6.643856189774724)
+    # p = 0.1: log(0.01) / log(0.9) = 43.71 runs
+    assert time_to_solution(1.0, 0.1)[0] == pytest.approx(math.log(0.01) / math.log(0.9))
+    assert time_to_solution(0.02, 0.0) == (None, "not reached")
+    # a deterministic backend that misses the optimum counts 10 s, whatever its t_c
+    assert time_to_solution(0.001, 0.0, deterministic=True) == (10.0, "deterministic miss penalty")
+    assert time_to_solution(0.001, 1.0, deterministic=True) == (0.001, "optimal every run")
+    # p_opt above the target: one run already suffices
+    assert time_to_solution(0.3, 0.995) == (0.3, "single run suffices")
+    with pytest.raises(MwisInputError, match="p_opt"):
+        time_to_solution(0.1, 1.5)
+    with pytest.raises(MwisInputError, match="t_c_s"):
+        time_to_solution(-1.0, 0.5)
+
+
+class _EmptyAnswer(Backend):
+    """Test double: always answers the empty set (never optimal on a graph with weight)."""
+
+    description = "test double"
+
+    def __init__(self, name):
+        self.name = name
+
+    def solve(self, problem, *, time_limit_s, seed, options):
+        return make_result(problem, [], proven_optimal=False, solve_time_s=0.0,
+                           backend=self.name, stats={})
+
+
+def test_study_separates_not_reached_from_deterministic_penalty(monkeypatch):
+    real = registry.get_backend
+    doubles = {"never-stochastic": _EmptyAnswer("never-stochastic"),
+               "never-deterministic": _EmptyAnswer("never-deterministic")}
+    monkeypatch.setattr(registry, "get_backend", lambda name: doubles.get(name) or real(name))
+    problem = MwisProblem.from_arrays([0.6, 1.0, 0.7, 0.5], [[0, 1], [1, 2], [2, 3]])
+    entries = [CorpusEntry("path", problem, optimum=1.5)]
+    rows, skipped = run_study(entries, ["never-stochastic", "never-deterministic", "greedy"],
+                              repetitions=2, deterministic={"never-deterministic", "greedy"},
+                              log=lambda msg: None)
+    assert skipped == []
+    by_name = {r.backend: r for r in rows}
+    assert by_name["never-stochastic"].tts99_s is None
+    assert by_name["never-stochastic"].rule == "not reached"
+    assert by_name["never-deterministic"].tts99_s == 10.0
+    assert not by_name["never-deterministic"].reached
+    # greedy (GWMIN) takes vertex 1 first here, then 3: the optimum {1, 3}
+    assert by_name["greedy"].p_opt == 1.0 and by_name["greedy"].reached
+    assert by_name["greedy"].tts99_s == pytest.approx(by_name["greedy"].t_c_s)
+
+
+def test_cli_on_a_tiny_corpus_writes_csv_and_png(tmp_path, capsys):
+    problems = [paper_instance(2, seed=s, n_vertices=8) for s in range(3)]
+    corpus = save_corpus(tmp_path / "tiny.jsonl", problems, names=["a", "b", "c"],
+                         optima=[brute_force(p) for p in problems])
+    out = tmp_path / "out"
+    assert main(["--corpus", str(corpus), "--backends", "greedy,sa,tabu", "--repetitions", "2",
+                 "--num-reads", "5", "--out", str(out)]) == 0
+    with (out / "tts.csv").open() as handle:
+        rows = list(csv.DictReader(handle))
+    assert list(rows[0]) == CSV_COLUMNS
+    assert len(rows) == 3 * 3
+    assert {r["backend"] for r in rows} == {"greedy", "sa", "tabu"}
+    for row in rows:
+        assert row["repetitions"] == "2"
+        assert 0.0 <= float(row["p_opt"]) <= 1.0
+        assert float(row["t_c_s"]) > 0
+        if row["backend"] in ("sa", "tabu"):
+            assert row["num_reads"] == "5" and row["read_opt_fraction"] != ""
+        if row["reached"] == "True":
+            assert float(row["tts99_s"]) >= float(row["t_c_s"]) - 1e-12
+    png = (out / "tts_boxplot.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 5000
+    meta = json.loads((out / "tts_meta.json").read_text())
+    assert meta["repetitions"] == 2 and meta["num_reads"] == 5
+    printed = capsys.readouterr().out
+    assert "median TTS" in printed and "greedy" in printed
+
+
+def test_cli_generate_writes_a_corpus_with_proven_optima(tmp_path):
+    corpus = tmp_path / "gen.jsonl"
+    assert main(["--generate", "4", "--min-vertices", "5", "--max-vertices", "12",
+                 "--corpus", str(corpus), "--out", str(tmp_path / "o"),
+                 "--generate-only"]) == 0
+    entries = load_corpus(corpus)
+    assert [e.problem.n for e in sorted(entries, key=lambda e: e.problem.n)] == [5, 7, 9, 11]
+    for entry in entries:
+        assert entry.optimum == pytest.approx(brute_force(entry.problem))

@@ -1,0 +1,387 @@
+"""Time-to-solution (TTS) study of MWIS backends, as in the paper's solver comparison.
+
+    python -m uam_solvers.tts --corpus corpus.jsonl --backends greedy,exact,sa,tabu \\
+        --repetitions 10 --out results/tts
+    python -m uam_solvers.tts --generate 100 --corpus corpus.jsonl --out results/tts
+
+For every instance of the corpus and every backend, R runs are made (seeds seed, seed+1, ...),
+each a direct call of the backend on the instance's conflict graph (no reductions, no component
+split, no fallback: the solver itself is measured, as in the paper). Definitions:
+
+* one *run* of an annealing backend (sa, tabu, qpu, qpu-emulator) is one call with num_reads
+  reads (paper: 10,000 reads per annealing run in its TTS study, so that is the default here; use
+  --num-reads to shrink it); its answer is the best of its reads after descent and repair;
+* t_c: mean wall time of one run in seconds (time.perf_counter around the call; each backend
+  makes one untimed warm-up call first, so imports and one-time set-up are not counted);
+* p_opt: fraction of the R runs whose answer is a valid independent set reaching the proven
+  optimum (objective >= optimum - 1e-9 relative). The optimum comes from the corpus field
+  "optimum" or else from the `exact` backend (CP-SAT), which must prove optimality; instances
+  without a proven optimum are reported and skipped;
+* TTS(0.99) = t_c * log(1 - 0.99) / log(1 - p_opt), the expected time to see the optimum at least
+  once with 99 % probability. When p_opt >= 0.99 one run already meets the target, so TTS = t_c
+  (p_opt = 1 gives t_c). A deterministic backend (greedy, exact, kamis, gurobi) that misses the
+  optimum in any run counts 10 s, as in the paper. A stochastic backend with p_opt = 0 has no TTS:
+  it is "not reached", counted separately and left out of the box plot (never shown as a number).
+  For annealers the per-read fraction of optimal answers is also written (read_opt_fraction).
+
+Outputs in --out: tts.csv (tidy, one row per instance and backend: instance, n_vertices,
+n_edges, backend, repetitions, num_reads, t_c_s, p_opt, tts99_s, reached, rule, optimum,
+best_objective, read_opt_fraction, invalid_runs), tts_boxplot.png (TTS per backend, log scale,
+not-reached counts under the labels), tts_meta.json (arguments, corpus, machine), and a summary
+printed to stdout.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import os
+import platform
+import sys
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from uam_solvers.base import MwisInputError, MwisProblem, check_selection
+from uam_solvers.instances import (
+    CorpusEntry,
+    generate_corpus_entries,
+    read_instances,
+    save_corpus,
+)
+
+TARGET_PROBABILITY = 0.99
+DETERMINISTIC_PENALTY_S = 10.0
+DEFAULT_STUDY_NUM_READS = 10_000
+ANNEALING_BACKENDS = frozenset({"sa", "tabu", "qpu", "qpu-emulator"})
+DETERMINISTIC_BACKENDS = frozenset({"greedy", "exact", "kamis", "gurobi"})
+
+CSV_COLUMNS = ["instance", "n_vertices", "n_edges", "backend", "repetitions", "num_reads",
+               "t_c_s", "p_opt", "tts99_s", "reached", "rule", "optimum", "best_objective",
+               "read_opt_fraction", "invalid_runs"]
+
+__all__ = [
+    "ANNEALING_BACKENDS",
+    "CSV_COLUMNS",
+    "DETERMINISTIC_BACKENDS",
+    "TtsRow",
+    "main",
+    "plot_tts",
+    "proven_optimum",
+    "run_study",
+    "time_to_solution",
+    "write_csv",
+]
+
+
+def time_to_solution(t_c_s: float, p_opt: float, deterministic: bool = False,
+                     target: float = TARGET_PROBABILITY,
+                     penalty_s: float = DETERMINISTIC_PENALTY_S) -> tuple[float | None, str]:
+    """TTS(target) = t_c log(1 - target) / log(1 - p_opt), with the paper's conventions.
+
+    Args:
+        t_c_s: mean wall time of one run, seconds (>= 0).
+        p_opt: fraction of runs that reached the optimum, in [0, 1].
+        deterministic: the backend gives the same answer every run.
+        target: the success probability aimed at (0.99).
+        penalty_s: what a deterministic backend that misses the optimum counts (paper: 10 s).
+
+    Returns:
+        (tts_s, rule): rule is "optimal every run" (p_opt = 1: t_c), "single run suffices"
+        (target <= p_opt < 1: t_c), "formula", "deterministic miss penalty" (penalty_s), or
+        "not reached" (stochastic, p_opt = 0: tts_s is None).
+    """
+    if not (t_c_s >= 0 and math.isfinite(t_c_s)):
+        raise MwisInputError(f"t_c_s must be a finite number >= 0, got {t_c_s!r}")
+    if not (0.0 <= p_opt <= 1.0):
+        raise MwisInputError(f"p_opt must lie in [0, 1], got {p_opt!r}")
+    if not (0.0 < target < 1.0):
+        raise MwisInputError(f"target must lie in (0, 1), got {target!r}")
+    if p_opt >= 1.0:
+        return float(t_c_s), "optimal every run"
+    if deterministic:
+        return float(penalty_s), "deterministic miss penalty"
+    if p_opt <= 0.0:
+        return None, "not reached"
+    if p_opt >= target:
+        return float(t_c_s), "single run suffices"
+    return float(t_c_s * math.log(1.0 - target) / math.log(1.0 - p_opt)), "formula"
+
+
+@dataclass
+class TtsRow:
+    """One instance x backend result of the study (a CSV row)."""
+
+    instance: str
+    n_vertices: int
+    n_edges: int
+    backend: str
+    repetitions: int
+    num_reads: int | None
+    t_c_s: float
+    p_opt: float
+    tts99_s: float | None
+    reached: bool
+    rule: str
+    optimum: float
+    best_objective: float
+    read_opt_fraction: float | None
+    invalid_runs: int
+
+
+def proven_optimum(problem: MwisProblem, time_limit_s: float = 600.0) -> float | None:
+    """The optimum proven by the `exact` backend (CP-SAT), or None if it cannot prove it."""
+    from uam_solvers.registry import get_backend
+
+    result = get_backend("exact").solve(problem, time_limit_s=time_limit_s, seed=0, options={})
+    return float(result.objective) if result.proven_optimal else None
+
+
+def _reaches(objective: float, optimum: float) -> bool:
+    return objective >= optimum - 1e-9 * max(1.0, abs(optimum))
+
+
+def _backend_options(name: str, num_reads: int, optimum: float) -> dict:
+    if name in ANNEALING_BACKENDS:
+        return {"num_reads": int(num_reads), "optimum": float(optimum)}
+    return {}
+
+
+def run_study(entries: Sequence[CorpusEntry], backends: Sequence[str], repetitions: int,
+              num_reads: int = DEFAULT_STUDY_NUM_READS, time_limit_s: float = 60.0,
+              seed: int = 0, optimum_time_limit_s: float = 600.0,
+              deterministic: Iterable[str] = DETERMINISTIC_BACKENDS,
+              log=print) -> tuple[list[TtsRow], list[str]]:
+    """Run every backend R times on every instance; return (rows, skipped instance names).
+
+    Backends are looked up with uam_solvers.registry.get_backend and must be available.
+    Complexity: instances x backends x repetitions backend calls, plus one CP-SAT solve per
+    instance without a stored optimum.
+    """
+    from uam_solvers.registry import get_backend
+
+    if repetitions < 1:
+        raise MwisInputError(f"repetitions must be >= 1, got {repetitions}")
+    if num_reads < 1:
+        raise MwisInputError(f"num_reads must be >= 1, got {num_reads}")
+    deterministic = set(deterministic)
+    solvers = {}
+    for name in backends:
+        backend = get_backend(name)
+        backend.require_available()
+        solvers[name] = backend
+    rows: list[TtsRow] = []
+    skipped: list[str] = []
+    warmed: set[str] = set()
+    for index, entry in enumerate(entries):
+        problem = entry.problem
+        optimum = entry.optimum
+        if optimum is None:
+            optimum = proven_optimum(problem, optimum_time_limit_s)
+            if optimum is None:
+                log(f"skip {entry.name}: exact could not prove the optimum within "
+                    f"{optimum_time_limit_s} s")
+                skipped.append(entry.name)
+                continue
+        for name, backend in solvers.items():
+            options = _backend_options(name, num_reads, optimum)
+            if name not in warmed:  # imports and one-time set-up are not part of t_c
+                backend.solve(problem, time_limit_s=time_limit_s, seed=seed, options=options)
+                warmed.add(name)
+            times, hits, invalid, best, read_fractions = [], 0, 0, -math.inf, []
+            for rep in range(repetitions):
+                start = time.perf_counter()
+                result = backend.solve(problem, time_limit_s=time_limit_s, seed=seed + rep,
+                                       options=options)
+                times.append(time.perf_counter() - start)
+                ok, _ = check_selection(problem, result.selected)
+                if not ok:
+                    invalid += 1
+                    continue
+                objective = problem.objective(result.selected)
+                best = max(best, objective)
+                hits += _reaches(objective, optimum)
+                if "optimal_fraction" in result.stats:
+                    read_fractions.append(float(result.stats["optimal_fraction"]))
+            t_c = float(np.mean(times))
+            p_opt = hits / repetitions
+            tts, rule = time_to_solution(t_c, p_opt, deterministic=name in deterministic)
+            rows.append(TtsRow(
+                instance=entry.name, n_vertices=problem.n, n_edges=len(problem.all_edges()),
+                backend=name, repetitions=repetitions,
+                num_reads=num_reads if name in ANNEALING_BACKENDS else None,
+                t_c_s=t_c, p_opt=p_opt, tts99_s=tts,
+                reached=rule not in ("not reached", "deterministic miss penalty"),
+                rule=rule, optimum=float(optimum), best_objective=float(best),
+                read_opt_fraction=float(np.mean(read_fractions)) if read_fractions else None,
+                invalid_runs=invalid))
+        if (index + 1) % 10 == 0 or index + 1 == len(entries):
+            log(f"[{index + 1}/{len(entries)}] instances done")
+    return rows, skipped
+
+
+def write_csv(path: str | Path, rows: Sequence[TtsRow]) -> Path:
+    """Tidy CSV of the rows (CSV_COLUMNS); missing values are empty cells."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("w", newline="", encoding="utf-8") as handle:
+        writer = csv.DictWriter(handle, fieldnames=CSV_COLUMNS)
+        writer.writeheader()
+        for row in rows:
+            record = asdict(row)
+            writer.writerow({k: ("" if record[k] is None else record[k]) for k in CSV_COLUMNS})
+    return path
+
+
+def _by_backend(rows: Sequence[TtsRow], backends: Sequence[str]) -> dict[str, list[TtsRow]]:
+    grouped = {name: [] for name in backends}
+    for row in rows:
+        grouped.setdefault(row.backend, []).append(row)
+    return grouped
+
+
+def plot_tts(path: str | Path, rows: Sequence[TtsRow], backends: Sequence[str]) -> Path:
+    """Box plot of TTS(0.99) per backend on a log scale, like the paper's figure.
+
+    Deterministic misses are drawn at their 10 s penalty; not-reached instances are not drawn,
+    their count is written under the backend's label.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    grouped = _by_backend(rows, backends)
+    names = list(grouped)
+    data, labels = [], []
+    for name in names:
+        values = [r.tts99_s for r in grouped[name] if r.tts99_s is not None]
+        missing = sum(r.tts99_s is None for r in grouped[name])
+        data.append(values if values else [np.nan])
+        labels.append(name + (f"\n({missing} not reached)" if missing else ""))
+    fig, ax = plt.subplots(figsize=(1.6 + 1.4 * len(names), 4.2))
+    ax.boxplot(data, showfliers=True)
+    ax.set_xticks(range(1, len(names) + 1), labels)
+    ax.set_yscale("log")
+    ax.set_ylabel("TTS(0.99) [s]")
+    n_instances = len({r.instance for r in rows})
+    ax.set_title(f"Time to solution, {n_instances} instances")
+    ax.axhline(DETERMINISTIC_PENALTY_S, color="0.6", lw=0.8, ls="--",
+               label=f"{DETERMINISTIC_PENALTY_S:g} s: deterministic miss (paper's convention)")
+    ax.legend(loc="upper left", fontsize=8, frameon=False)
+    ax.grid(True, axis="y", which="major", alpha=0.3)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def summary_table(rows: Sequence[TtsRow], backends: Sequence[str]) -> str:
+    """One line per backend: instances, median and p95 TTS, not reached, mean p_opt, t_c."""
+    lines = [f"{'backend':<14}{'inst':>6}{'median TTS':>13}{'p95 TTS':>11}{'not reached':>13}"
+             f"{'10 s pen.':>10}{'mean p_opt':>12}{'median t_c':>13}"]
+    for name, group in _by_backend(rows, backends).items():
+        if not group:
+            continue
+        tts = np.array([r.tts99_s for r in group if r.tts99_s is not None], dtype=float)
+        missing = sum(r.tts99_s is None for r in group)
+        penalty = sum(r.rule == "deterministic miss penalty" for r in group)
+        med = f"{np.median(tts):.4g} s" if tts.size else "-"
+        p95 = f"{np.percentile(tts, 95):.4g} s" if tts.size else "-"
+        lines.append(f"{name:<14}{len(group):>6}{med:>13}{p95:>11}{missing:>13}{penalty:>10}"
+                     f"{np.mean([r.p_opt for r in group]):>12.3f}"
+                     f"{np.median([r.t_c_s for r in group]) * 1e3:>10.2f} ms")
+    return "\n".join(lines)
+
+
+def _parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(
+        prog="python -m uam_solvers.tts",
+        description="Time-to-solution study of MWIS backends (paper's TTS(0.99)).")
+    parser.add_argument("--corpus", type=Path,
+                        help="corpus file (JSON Lines, docs/mwis-corpus-format.md); with "
+                             "--generate it is written first (default OUT/corpus.jsonl)")
+    parser.add_argument("--backends", default="greedy,exact,sa,tabu",
+                        help="comma-separated backend names (default greedy,exact,sa,tabu)")
+    parser.add_argument("--repetitions", type=int, default=10, help="runs per instance (R)")
+    parser.add_argument("--num-reads", type=int, default=DEFAULT_STUDY_NUM_READS,
+                        help="reads per annealing run (paper: 10000)")
+    parser.add_argument("--time-limit-s", type=float, default=60.0,
+                        help="time limit handed to each run (s)")
+    parser.add_argument("--seed", type=int, default=0, help="first run's seed")
+    parser.add_argument("--out", type=Path, required=True, help="output directory")
+    parser.add_argument("--generate", type=int, metavar="N",
+                        help="generate N seeded paper-shaped instances first")
+    parser.add_argument("--generate-seed", type=int, default=0, help="seed of --generate")
+    parser.add_argument("--min-vertices", type=int, default=5)
+    parser.add_argument("--max-vertices", type=int, default=50)
+    parser.add_argument("--limit", type=int, help="use only the first N instances")
+    parser.add_argument("--generate-only", action="store_true",
+                        help="write the generated corpus (with proven optima) and stop")
+    args = parser.parse_args(argv)
+    if args.generate is None and args.corpus is None:
+        parser.error("give --corpus FILE, or --generate N")
+    return args
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = _parse_args(argv)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    backends = [b.strip() for b in args.backends.split(",") if b.strip()]
+    if args.generate is not None:
+        corpus_path = args.corpus or out / "corpus.jsonl"
+        entries = generate_corpus_entries(args.generate, args.min_vertices, args.max_vertices,
+                                          seed=args.generate_seed)
+        # store proven optima so later studies on the same corpus skip CP-SAT
+        with_optima = []
+        for entry in entries:
+            optimum = proven_optimum(entry.problem)
+            with_optima.append(CorpusEntry(entry.name, entry.problem, entry.source, optimum))
+        save_corpus(corpus_path, with_optima)
+        print(f"wrote {len(with_optima)} instances ({args.min_vertices}-{args.max_vertices} "
+              f"vertices, seed {args.generate_seed}) to {corpus_path}")
+        if args.generate_only:
+            return 0
+    else:
+        corpus_path = args.corpus
+    entries = read_instances(corpus_path)
+    if args.limit is not None:
+        entries = entries[:args.limit]
+    started = time.perf_counter()
+    rows, skipped = run_study(entries, backends, args.repetitions, num_reads=args.num_reads,
+                              time_limit_s=args.time_limit_s, seed=args.seed,
+                              log=lambda msg: print(msg, file=sys.stderr))
+    csv_path = write_csv(out / "tts.csv", rows)
+    png_path = plot_tts(out / "tts_boxplot.png", rows, backends)
+    meta = {
+        "corpus": str(corpus_path), "instances": len(entries), "skipped": skipped,
+        "backends": backends, "repetitions": args.repetitions, "num_reads": args.num_reads,
+        "time_limit_s": args.time_limit_s, "seed": args.seed,
+        "target_probability": TARGET_PROBABILITY,
+        "deterministic_penalty_s": DETERMINISTIC_PENALTY_S,
+        "machine": {"platform": platform.platform(), "python": platform.python_version(),
+                    "cpus": os.cpu_count(), "processor": platform.processor()},
+        "wall_time_s": time.perf_counter() - started,
+    }
+    (out / "tts_meta.json").write_text(json.dumps(meta, indent=2) + "\n")
+    sizes = [e.problem.n for e in entries]
+    print(f"TTS(0.99) study: {len(entries)} instances ({min(sizes, default=0)}-"
+          f"{max(sizes, default=0)} vertices), R = {args.repetitions}, "
+          f"{args.num_reads} reads per annealing run")
+    print(summary_table(rows, backends))
+    if skipped:
+        print(f"skipped (no proven optimum): {len(skipped)}")
+    print(f"wrote {csv_path} and {png_path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
