@@ -53,10 +53,22 @@ def test_component_split_shares_time_by_size():
     e = [[0, 1], [1, 2]] + [[3 + i, 4 + i] for i in range(5)]
     p = MwisProblem.from_arrays(np.ones(9), e)
     child = BruteForce()
-    ComponentSplit(child).solve(p, time_limit_s=9.0, seed=0, options={})
+    ComponentSplit(child, batch_below=0).solve(p, time_limit_s=9.0, seed=0, options={})
     assert [c[0] for c in child.calls] == [3, 6]
     assert child.calls[0][1] == pytest.approx(3.0, rel=0.05)
     assert child.calls[1][1] == pytest.approx(9.0, rel=0.05)  # whatever is left
+
+
+def test_small_or_batching_children_get_one_call_for_all_components():
+    e = [[0, 1], [1, 2]] + [[3 + i, 4 + i] for i in range(5)]
+    p = MwisProblem.from_arrays(np.ones(9), e)
+    child = BruteForce()
+    r = ComponentSplit(child).solve(p, time_limit_s=1.0, seed=0, options={})  # 9 <= 64 vertices
+    assert [c[0] for c in child.calls] == [9] and r.objective == 5.0
+    batching = BruteForce()
+    batching.batch_components = True
+    r = ComponentSplit(batching, batch_below=0).solve(p, time_limit_s=1.0, seed=0, options={})
+    assert [c[0] for c in batching.calls] == [9] and r.objective == 5.0
 
 
 def test_induced_subproblem_keeps_edges_and_groups():
@@ -67,13 +79,14 @@ def test_induced_subproblem_keeps_edges_and_groups():
     assert [g.tolist() for g in sub.groups] == [[0, 1]]
 
 
-@pytest.mark.parametrize("layer", ["components", "reduce", "both"])
+@pytest.mark.parametrize("layer", ["components", "split-each", "reduce", "both"])
 def test_layers_never_change_the_optimum(layer):
-    rng = np.random.default_rng({"components": 1, "reduce": 2, "both": 3}[layer])
+    rng = np.random.default_rng({"components": 1, "split-each": 4, "reduce": 2, "both": 3}[layer])
     for trial in range(150):
         p = _random_problem(rng, int(rng.integers(1, 15)))
         child = BruteForce()
         wrapped = {"components": ComponentSplit(child), "reduce": Reduce(child),
+                   "split-each": ComponentSplit(child, batch_below=0),
                    "both": Reduce(ComponentSplit(child))}[layer]
         r = wrapped.solve(p, time_limit_s=5.0, seed=0, options={})
         assert p.is_independent(r.selected), trial

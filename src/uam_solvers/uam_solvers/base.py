@@ -10,6 +10,7 @@ Nothing here imports rclpy; the solver node converts messages to these types.
 """
 from __future__ import annotations
 
+import functools
 import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
@@ -160,12 +161,15 @@ class MwisProblem:
 
     @cached_property
     def _all_edges(self) -> np.ndarray:
-        parts = [self.edges.astype(np.int64)]
-        for g in self.groups:
-            iu, ju = np.triu_indices(g.size, k=1)
-            parts.append(np.stack([g[iu], g[ju]], axis=1).astype(np.int64))
-        out = _normalise_edges(np.concatenate(parts, axis=0)) if len(parts) > 1 else parts[0]
-        out = out.astype(np.int32)
+        if not self.groups:
+            out = self.edges
+        else:
+            parts = [self.edges.astype(np.int64)]
+            for g in self.groups:
+                iu, ju = _triu(g.size)
+                parts.append(np.stack([g[iu], g[ju]], axis=1).astype(np.int64))
+            out = _normalise_edges(np.concatenate(parts, axis=0)).astype(np.int32)
+        out = out.view()
         out.setflags(write=False)
         return out
 
@@ -174,18 +178,25 @@ class MwisProblem:
         return self._all_edges
 
     @cached_property
+    def _csr(self) -> tuple[np.ndarray, np.ndarray]:
+        indptr, indices = csr_from_edges(self.n, self.all_edges())
+        indptr.setflags(write=False)
+        indices.setflags(write=False)
+        return indptr, indices
+
+    def csr(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(indptr, indices)`` of the symmetric adjacency of the full conflict graph (groups
+        included), neighbours sorted; numpy only (cheaper than scipy on small graphs)."""
+        return self._csr
+
+    @cached_property
     def _adjacency(self) -> sp.csr_matrix:
-        e = self.all_edges()
-        n = self.n
-        data = np.ones(2 * e.shape[0], dtype=np.int8)
-        rows = np.concatenate([e[:, 0], e[:, 1]])
-        cols = np.concatenate([e[:, 1], e[:, 0]])
-        a = sp.csr_matrix((data, (rows, cols)), shape=(n, n))
-        a.sort_indices()
-        return a
+        indptr, indices = self.csr()
+        return sp.csr_matrix((np.ones(indices.size, dtype=np.int8), indices, indptr),
+                             shape=(self.n, self.n))
 
     def adjacency(self) -> sp.csr_matrix:
-        """Symmetric (n, n) CSR adjacency of the full conflict graph (groups included), sorted indices."""
+        """Symmetric (n, n) scipy CSR adjacency of the full conflict graph (groups included)."""
         return self._adjacency
 
     def is_independent(self, selected: Any) -> bool:
@@ -196,6 +207,23 @@ class MwisProblem:
         """Sum of the weights of ``selected`` in float64 (no independence check)."""
         idx = np.asarray(selected, dtype=np.int64).reshape(-1)
         return float(math.fsum(self.weights[idx].tolist())) if idx.size else 0.0
+
+
+@functools.lru_cache(maxsize=64)
+def _triu(k: int) -> tuple[np.ndarray, np.ndarray]:
+    return np.triu_indices(k, k=1)
+
+
+def csr_from_edges(n: int, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(indptr int64, indices int32)`` of the symmetric adjacency of unique u < v ``edges``,
+    each row's neighbours sorted. O(m log m)."""
+    e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    rows = np.concatenate([e[:, 0], e[:, 1]])
+    cols = np.concatenate([e[:, 1], e[:, 0]])
+    order = np.lexsort((cols, rows))
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(np.bincount(rows, minlength=n), out=indptr[1:])
+    return indptr, cols[order].astype(np.int32)
 
 
 def _normalise_edges(e: np.ndarray) -> np.ndarray:
@@ -321,6 +349,9 @@ class Backend(ABC):
 
     name: str = "backend"
     description: str = ""
+    #: True for backends with a large fixed cost per call (ComponentSplit then hands them all
+    #: non-trivial components in one call rather than one call per component).
+    batch_components: bool = False
 
     def available(self) -> tuple[bool, str]:
         """``(True, "")`` when the backend can run here, else ``(False, reason)``."""

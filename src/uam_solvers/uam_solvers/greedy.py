@@ -22,9 +22,8 @@ import time
 from typing import Any, Mapping
 
 import numpy as np
-import scipy.sparse as sp
 
-from .base import Backend, MwisProblem, MwisResult, make_result
+from .base import Backend, MwisProblem, MwisResult, csr_from_edges, make_result
 
 __all__ = ["greedy_mwis", "GreedyBackend", "RULES"]
 
@@ -32,18 +31,14 @@ RULES = ("gwmin", "gwmin2", "gwmax")
 
 
 def _csr(n: int, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """indptr, indices of the symmetric adjacency (duplicates removed)."""
+    """indptr, indices of the symmetric adjacency (pairs normalised, duplicates removed)."""
     e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
     if e.shape[0]:
         lo = np.minimum(e[:, 0], e[:, 1])
         hi = np.maximum(e[:, 0], e[:, 1])
         e = np.unique(np.stack([lo, hi], axis=1), axis=0)
         e = e[e[:, 0] != e[:, 1]]
-    rows = np.concatenate([e[:, 0], e[:, 1]])
-    cols = np.concatenate([e[:, 1], e[:, 0]])
-    a = sp.csr_matrix((np.ones(rows.size, dtype=np.int8), (rows, cols)), shape=(n, n))
-    a.sort_indices()
-    return a.indptr, a.indices
+    return csr_from_edges(n, e)
 
 
 def greedy_mwis(weights: Any, edges: Any, rule: str = "gwmin") -> np.ndarray:
