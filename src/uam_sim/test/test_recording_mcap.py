@@ -137,8 +137,9 @@ def test_rosbag2_metadata_record_describes_the_bag(recording):
 
     with open(recording, "rb") as f:
         records = list(make_reader(f).iter_metadata())
-    meta = yaml.safe_load(records[0].metadata["serialized_metadata"])
-    assert records[0].name == "rosbag2"
+    assert [r.name for r in records] == ["rosbag2", "rosbag2"]  # an empty one first, the final last
+    assert yaml.safe_load(records[0].metadata["serialized_metadata"])["version"] == 9
+    meta = yaml.safe_load(records[-1].metadata["serialized_metadata"])
     assert meta["version"] == 9 and meta["storage_identifier"] == "mcap"
     assert meta["message_count"] == 8
     counts = {t["topic_metadata"]["name"]: t["message_count"] for t in meta["topics_with_message_count"]}
@@ -242,6 +243,16 @@ def test_torn_recording_still_yields_the_chunks_written_before_the_cut(tmp_path)
     cut.write_bytes(data[: len(data) // 2 + 20])
     got_cut = [deserialize(m).clock.sec for m in read_messages_tolerant(cut)]
     assert got_cut in (list(range(50)), list(range(100)), list(range(150)))
+    # recover rewrites it into a complete file that every reader opens
+    from rosbags.highlevel import AnyReader
+
+    from uam_sim.recording import recover
+    fixed = tmp_path / "fixed.mcap"
+    assert recover(path, fixed) == 200
+    assert is_complete(fixed)
+    with AnyReader([fixed]) as reader:
+        assert reader.message_count == 200
+        assert reader.topics["/clock"].msgtype == "rosgraph_msgs/msg/Clock"
 
 
 def _rerun_cli() -> str | None:

@@ -16,7 +16,8 @@ What a reader of the file can rely on (checked by ``test_recording_*.py``):
   trimmed to its exact CDR length (:func:`serialize_exact`);
 - chunked and compressed (zstd by default), with message indexes, chunk indexes, statistics,
   summary offsets and CRCs; on :meth:`McapRecorder.close` a ``rosbag2`` metadata record with key
-  ``serialized_metadata`` (the bag metadata YAML, version 9) is written, as rosbag2 does.
+  ``serialized_metadata`` (the bag metadata YAML, version 9) is written, as rosbag2 does (and an
+  empty one at the start, so that a crash-cut file still declares metadata version 9).
 
 Crash safety: chunks are finished and written to the file when they reach ``chunk_size_bytes``
 and at least every ``flush_period_s`` seconds of wall time (checked on each write; the recorder
@@ -394,6 +395,46 @@ def serialize_exact(msg: Any) -> bytes:
 # The writer
 # --------------------------------------------------------------------------------------------
 
+def bag_metadata_yaml(file_name: str, topics: dict, counts: dict, start_ns: int | None,
+                      end_ns: int | None) -> str:
+    """The rosbag2 bag metadata (version 9) that goes into the ``rosbag2`` metadata record.
+
+    ``topics``: topic -> {"type", "qos" (offered_qos_profiles YAML), "hash"}; ``counts``: topic ->
+    messages. Key order and names as rosbag2 writes ``metadata.yaml``.
+    """
+    start = start_ns or 0
+    duration = (end_ns - start_ns) if start_ns is not None and end_ns is not None else 0
+    count = sum(counts.values())
+    entries = []
+    for topic, info in topics.items():
+        entries.append({
+            "topic_metadata": {
+                "name": topic,
+                "type": info["type"],
+                "serialization_format": MESSAGE_ENCODING,
+                "offered_qos_profiles": yaml.safe_load(info["qos"]) or [],
+                "type_description_hash": info.get("hash", ""),
+            },
+            "message_count": int(counts.get(topic, 0)),
+        })
+    meta = {
+        "version": ROSBAG2_METADATA_VERSION,
+        "storage_identifier": "mcap",
+        "duration": {"nanoseconds": duration},
+        "starting_time": {"nanoseconds_since_epoch": start},
+        "message_count": count,
+        "topics_with_message_count": entries,
+        "compression_format": "",
+        "compression_mode": "",
+        "relative_file_paths": [file_name],
+        "files": [{"path": file_name, "starting_time": {"nanoseconds_since_epoch": start},
+                   "duration": {"nanoseconds": duration}, "message_count": count}],
+        "custom_data": {},
+        "ros_distro": os.environ.get("ROS_DISTRO", "jazzy"),
+    }
+    return yaml.safe_dump(meta, sort_keys=False, default_flow_style=False)
+
+
 _COMPRESSION = {"zstd": "ZSTD", "lz4": "LZ4", "none": "NONE", "": "NONE"}
 
 
@@ -442,6 +483,10 @@ class McapRecorder:
         self._start_ns: int | None = None
         self._end_ns: int | None = None
         self._closed = False
+        # rosbag2 reads the metadata version from this record; without one it parses the QoS
+        # as version 8 (integers) and fails on ours. The final record is written on close; this
+        # early one makes a crash-cut file (which rosbag2 reads by scanning) parse too.
+        self._writer.add_metadata("rosbag2", {"serialized_metadata": self._bag_metadata_yaml()})
 
     # -- topics ---------------------------------------------------------------------------
 
@@ -532,37 +577,7 @@ class McapRecorder:
     # -- closing ----------------------------------------------------------------------------
 
     def _bag_metadata_yaml(self) -> str:
-        start = self._start_ns or 0
-        duration = (self._end_ns - self._start_ns) if self._start_ns is not None else 0
-        count = sum(self._counts.values())
-        topics = []
-        for topic, info in self._topics.items():
-            topics.append({
-                "topic_metadata": {
-                    "name": topic,
-                    "type": info["type"],
-                    "serialization_format": MESSAGE_ENCODING,
-                    "offered_qos_profiles": yaml.safe_load(info["qos"]),
-                    "type_description_hash": info["hash"],
-                },
-                "message_count": self._counts[topic],
-            })
-        meta = {
-            "version": ROSBAG2_METADATA_VERSION,
-            "storage_identifier": "mcap",
-            "duration": {"nanoseconds": duration},
-            "starting_time": {"nanoseconds_since_epoch": start},
-            "message_count": count,
-            "topics_with_message_count": topics,
-            "compression_format": "",
-            "compression_mode": "",
-            "relative_file_paths": [self.path.name],
-            "files": [{"path": self.path.name, "starting_time": {"nanoseconds_since_epoch": start},
-                       "duration": {"nanoseconds": duration}, "message_count": count}],
-            "custom_data": {},
-            "ros_distro": os.environ.get("ROS_DISTRO", "jazzy"),
-        }
-        return yaml.safe_dump(meta, sort_keys=False, default_flow_style=False)
+        return bag_metadata_yaml(self.path.name, self._topics, self._counts, self._start_ns, self._end_ns)
 
     def close(self) -> None:
         """Write the rosbag2 metadata record, summary and footer, and close the file. Idempotent."""
@@ -659,3 +674,94 @@ def deserialize(record: RecordedMessage) -> Any:
     """The rclpy message object of a recorded message (imports rclpy)."""
     from rclpy.serialization import deserialize_message
     return deserialize_message(record.data, message_class(record.type_name))
+
+
+def recover(src: str | os.PathLike, dst: str | os.PathLike, compression: str = "zstd") -> int:
+    """Rewrite a recording cut short by a crash into a complete file; returns the messages kept.
+
+    Schemas, channels (with their metadata) and messages written before the cut are copied as
+    they are, in file order; the new file gets indexes, statistics, summary and footer, so every
+    reader (rerun, rosbags, ros2 bag) opens it. Works on complete files too (a plain copy).
+    """
+    from mcap.writer import CompressionType, Writer
+
+    if Path(src).resolve() == Path(dst).resolve():
+        raise RecordingError(f"dst: must differ from src ({src})")
+    schema_ids: dict[int, int] = {}
+    channel_ids: dict[int, int] = {}
+    topics: dict[str, dict] = {}
+    counts: dict[str, int] = {}
+    start = end = None
+    count = 0
+    with open(dst, "wb") as out:
+        writer = Writer(out, chunk_size=256 * 1024,
+                        compression=getattr(CompressionType, _COMPRESSION[compression.lower()]))
+        writer.start(profile=ROS2_PROFILE, library=library_string())
+        # read the messages first: the tolerant reader stops at the tear
+        from mcap.exceptions import McapError
+        from mcap.reader import NonSeekingReader
+        with open(src, "rb") as f:
+            it = NonSeekingReader(f, validate_crcs=True).iter_messages(log_time_order=False)
+            while True:
+                try:
+                    schema, channel, message = next(it)
+                except StopIteration:
+                    break
+                except (McapError, EOFError, ValueError, OSError, KeyError, struct.error):
+                    break
+                if schema is not None and schema.id not in schema_ids:
+                    schema_ids[schema.id] = writer.register_schema(schema.name, schema.encoding, schema.data)
+                if channel.id not in channel_ids:
+                    channel_ids[channel.id] = writer.register_channel(
+                        channel.topic, channel.message_encoding,
+                        schema_ids.get(channel.schema_id, 0), dict(channel.metadata))
+                writer.add_message(channel_ids[channel.id], message.log_time, message.data,
+                                   message.publish_time, message.sequence)
+                count += 1
+                topics.setdefault(channel.topic, {
+                    "type": schema.name if schema else "",
+                    "qos": channel.metadata.get("offered_qos_profiles", ""),
+                    "hash": channel.metadata.get("topic_type_hash", "")})
+                counts[channel.topic] = counts.get(channel.topic, 0) + 1
+                start = message.log_time if start is None else min(start, message.log_time)
+                end = message.log_time if end is None else max(end, message.log_time)
+        writer.add_metadata("rosbag2", {"serialized_metadata": bag_metadata_yaml(
+            Path(dst).name, topics, counts, start, end)})
+        writer.finish()
+    return count
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m uam_sim.recording recover TORN.mcap FIXED.mcap`` | ``... info FILE.mcap``."""
+    import argparse
+    import sys
+
+    ap = argparse.ArgumentParser(prog="python -m uam_sim.recording")
+    sub = ap.add_subparsers(dest="command", required=True)
+    rec = sub.add_parser("recover", help="rewrite a crash-cut recording into a complete file")
+    rec.add_argument("src")
+    rec.add_argument("dst")
+    info = sub.add_parser("info", help="topics, types and message counts")
+    info.add_argument("path")
+    args = ap.parse_args(argv)
+    try:
+        if args.command == "recover":
+            n = recover(args.src, args.dst)
+            print(f"recovered {n} messages into {args.dst}")
+            return 0
+        counts: dict[tuple[str, str], int] = {}
+        complete = is_complete(args.path)
+        for m in (read_messages(args.path) if complete else read_messages_tolerant(args.path)):
+            counts[(m.topic, m.type_name)] = counts.get((m.topic, m.type_name), 0) + 1
+        print(f"{args.path}: {'complete' if complete else 'INCOMPLETE (no summary: crash-cut)'}")
+        for (topic, type_name), n in sorted(counts.items()):
+            print(f"  {topic:28s} {type_name:36s} {n:8d}")
+        return 0
+    except (OSError, RecordingError) as exc:
+        print(f"recording: {exc}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    import sys
+    sys.exit(main())

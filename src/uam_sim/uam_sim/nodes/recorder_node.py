@@ -29,6 +29,7 @@ from geometry_msgs.msg import PoseArray
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.clock import Clock as RclClock
 from rclpy.clock import ClockType
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -43,7 +44,8 @@ from uam_sim.rerun_log import RerunLogger
 _QOS_VOLATILE = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10000,
                            reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 # Only for topics whose publishers offer transient local (a transient-local reader does not match
-# a volatile writer); it makes a late recorder still get every plan.
+# a volatile writer: the recorder then logs an incompatible-QoS error naming the topic); it makes
+# a recorder that starts late still get every request, plan, report and epoch handshake.
 _QOS_LATCHED = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=20000,
                           reliability=ReliabilityPolicy.RELIABLE,
                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -51,9 +53,9 @@ _QOS_LATCHED = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=20000,
 #: topic -> (message class, subscription QoS)
 RECORDED_TOPICS = {
     "/clock": (Clock, _QOS_VOLATILE),
-    "/uam/requests": (FlightRequest, _QOS_VOLATILE),
+    "/uam/requests": (FlightRequest, _QOS_LATCHED),
     "/uam/flight_plans": (FlightPlan, _QOS_LATCHED),
-    "/uam/planning_reports": (PlanningReport, _QOS_VOLATILE),
+    "/uam/planning_reports": (PlanningReport, _QOS_LATCHED),
     "/uam/fleet_state": (FleetState, _QOS_VOLATILE),
     "/uam/fleet_poses": (PoseArray, _QOS_VOLATILE),
     "/uam/epoch_sync": (EpochSync, _QOS_LATCHED),
@@ -110,7 +112,9 @@ class RecorderNode(Node):
         self._clock_ns = 0
         self._dirty = False
         for topic, (cls, qos) in RECORDED_TOPICS.items():
-            self.create_subscription(cls, topic, self._make_callback(topic, cls), qos, raw=True)
+            self.create_subscription(
+                cls, topic, self._make_callback(topic, cls), qos, raw=True,
+                event_callbacks=SubscriptionEventCallbacks(incompatible_qos=self._make_qos_warning(topic)))
         steady = RclClock(clock_type=ClockType.STEADY_TIME)
         self._flush_timer = self.create_timer(float(g("flush_period_s").value), self._on_flush_timer,
                                               clock=steady)
@@ -122,6 +126,14 @@ class RecorderNode(Node):
         def callback(data: bytes) -> None:
             self._on_message(topic, cls, data)
         return callback
+
+    def _make_qos_warning(self, topic: str):
+        def warn(event) -> None:
+            self.get_logger().error(
+                f"{topic}: a publisher's QoS is incompatible with the recorder's "
+                f"({RECORDED_TOPICS[topic][1].durability.name.lower()} reader; last policy "
+                f"{event.last_policy_kind}); its messages are NOT recorded")
+        return warn
 
     def _register(self, topic: str, cls: type) -> None:
         """Add the topic's channel with the QoS its publishers offer (as rosbag2 records it)."""
@@ -182,8 +194,8 @@ def main(args=None) -> int:
     node = None
     rc = 0
     try:
-        node = RecorderNode()
         executor = SingleThreadedExecutor()
+        node = RecorderNode()
         executor.add_node(node)
         while rclpy.ok() and not node.finished:
             executor.spin_once(timeout_sec=0.1)
@@ -192,6 +204,9 @@ def main(args=None) -> int:
     except (ValueError, OSError) as exc:
         print(f"recorder: {exc}", file=sys.stderr)
         rc = 2
+    except Exception:  # noqa: BLE001 - a signal during start-up invalidates the context mid-call
+        if rclpy.ok():
+            raise
     finally:
         if node is not None:
             try:

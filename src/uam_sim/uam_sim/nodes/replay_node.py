@@ -118,8 +118,8 @@ def main(args=None) -> int:
     rc = 0
     try:
         positional = [a for a in remove_ros_args(argv)[1:] if not a.startswith("-")]
-        node = ReplayNode(positional[0] if positional else None)
         executor = SingleThreadedExecutor()
+        node = ReplayNode(positional[0] if positional else None)
         executor.add_node(node)
         while rclpy.ok() and not (node.done and node.exit_when_done):
             executor.spin_once(timeout_sec=0.1)
@@ -132,6 +132,9 @@ def main(args=None) -> int:
     except (ValueError, OSError) as exc:
         print(f"replay: {exc}", file=sys.stderr)
         rc = 2
+    except Exception:  # noqa: BLE001 - a signal during start-up invalidates the context mid-call
+        if rclpy.ok():
+            raise
     finally:
         if node is not None:
             node.destroy_node()
