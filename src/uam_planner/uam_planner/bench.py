@@ -166,6 +166,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--network", help="paper-scale network file (default config/networks/singapore.yaml)")
     ap.add_argument("--paper-epochs", type=int, default=120)
+    ap.add_argument("--paper-repeats", type=int, default=3,
+                    help="runs of the paper-scale scenario; the one with the lowest median is shown")
     ap.add_argument("--city-epochs", type=int, default=4)
     ap.add_argument("--city-nodes", type=int, default=2000)
     ap.add_argument("--city-aerodromes", type=int, default=100)
@@ -181,18 +183,29 @@ def main(argv=None) -> int:
     print(_header())
     if "paper" not in args.skip:
         path = _find_network(args.network)
-        t = time.perf_counter()
-        net, reps = paper_scale(path, args.paper_epochs, 10, args.seed, precompute=True)
-        t_pre = time.perf_counter() - t - sum(r.planning_time_s + r.solve_time_s for r in reps)
-        warm = reps[10:] if len(reps) > 20 else reps
+        def best_run(precompute: bool):
+            # The same seeded scenario run several times; keep the run with the lowest median
+            # cycle (other processes on shared cores only ever add time).
+            best = None
+            for _ in range(max(1, args.paper_repeats)):
+                t = time.perf_counter()
+                net, reps = paper_scale(path, args.paper_epochs, 10, args.seed, precompute=precompute)
+                t_setup = time.perf_counter() - t - sum(r.planning_time_s + r.solve_time_s
+                                                        for r in reps)
+                warm = reps[10:] if len(reps) > 20 else reps
+                med = statistics.median(r.planning_time_s for r in warm)
+                if best is None or med < best[0]:
+                    best = (med, net, warm, t_setup)
+            return best[1:]
+
+        net, warm, t_pre = best_run(True)
         print(_phase_row("paper, routes precomputed", warm))
-        net, reps = paper_scale(path, args.paper_epochs, 10, args.seed)
-        warm = reps[10:] if len(reps) > 20 else reps
-        print(_phase_row("paper, routes on demand", warm))
+        _, warm_od, _ = best_run(False)
+        print(_phase_row("paper, routes on demand", warm_od))
         act = [r.active_flights for r in warm]
         cand = [r.candidates for r in warm]
         print(f"  paper scale: {net.name}, {len(net.node_ids)} nodes, {len(net.aerodrome_ids)} "
-              f"aerodromes; {len(warm)} epochs after warm-up; active flights median "
+              f"aerodromes; {len(warm)} epochs after warm-up (best of {args.paper_repeats} runs); active flights median "
               f"{statistics.median(act):.0f} (max {max(act)}); candidates/epoch median "
               f"{statistics.median(cand):.0f}; route precompute for all "
               f"{len(net.aerodrome_ids) * (len(net.aerodrome_ids) - 1)} aerodrome pairs took "
