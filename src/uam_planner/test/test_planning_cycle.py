@@ -208,3 +208,17 @@ def test_precomputed_routes_fill_the_cache_and_change_nothing():
         o, d = rng.choice(net.aerodrome_ids, 2, replace=False)
         q.submit(req(f"r{i}", o, d, 0.0))
     assert [(f.request_id, f.route_node_ids) for f in q.plan(0.0, 0).approved] == with_pre
+
+
+def test_new_config_rebuilds_the_route_cache_only_when_routes_change():
+    net = generate_network(45, 6, seed=3)
+    p = Planner(net, PlanningConfig(), "mwis")
+    cache = p.cache
+    p.config = PlanningConfig(backend="greedy", seed=5)
+    assert p.cache is cache
+    p.config = PlanningConfig(k=3)
+    assert p.cache is not cache and p.cache.k == 3
+    p.record_rejection()
+    assert p.plan(0.0, 0).report.rejected == 1
+    with pytest.raises(TypeError, match="PlanningConfig"):
+        p.config = {"k": 3}

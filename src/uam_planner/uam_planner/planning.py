@@ -437,19 +437,41 @@ class Planner:
         if policy not in POLICIES:
             raise ValueError(f"policy must be one of {POLICIES}, got {policy!r}")
         self.network = network
+        self._config = None
         self.config = config if config is not None else PlanningConfig()
         self.policy = policy
-        if solve_mwis is None and policy == "mwis":
-            solve_mwis = default_solve_mwis(self.config)
-        self.solve_mwis = solve_mwis
-        self.cache = CandidateCache(network, self.config.k, self.config.penalty_factor,
-                                    self.config.speed_mps)
-        if self.config.precompute_routes:
-            self.cache.precompute()
+        # The default reads self.config at each call, so a new backend takes effect next epoch.
+        self.solve_mwis = solve_mwis if solve_mwis is not None else self._default_solve
         self.pending: list[FlightRequest] = []
         self.active: list[Flight] = []
         self._known_ids: set[str] = set()
         self._rejected_since_plan = 0
+
+    @property
+    def config(self) -> PlanningConfig:
+        """The PlanningConfig; assigning a new one rebuilds the route cache only if k,
+        penalty_factor or speed_mps changed."""
+        return self._config
+
+    @config.setter
+    def config(self, cfg: PlanningConfig) -> None:
+        if not isinstance(cfg, PlanningConfig):
+            raise TypeError(f"config must be a PlanningConfig, got {type(cfg).__name__}")
+        old = self._config
+        self._config = cfg
+        route_fields = ("k", "penalty_factor", "speed_mps")
+        if old is None or any(getattr(old, f) != getattr(cfg, f) for f in route_fields):
+            self.cache = CandidateCache(self.network, cfg.k, cfg.penalty_factor, cfg.speed_mps)
+            if cfg.precompute_routes:
+                self.cache.precompute()
+
+    def _default_solve(self, weights, edges, groups):
+        return default_solve_mwis(self._config)(weights, edges, groups)
+
+    def record_rejection(self) -> None:
+        """Count a request rejected before ``submit`` (e.g. a malformed message) in the next
+        epoch's report."""
+        self._rejected_since_plan += 1
 
     def validate(self, request: FlightRequest) -> str | None:
         """Why ``request`` cannot be accepted (naming the field and value), or None."""
