@@ -102,8 +102,8 @@ def test_resumed_run_recomputes_nothing(serial):
 
 
 def test_figures_report_and_tables_are_written(tmp_path):
-    cfg = small(tmp_path, tts={"enabled": True, "instances": 20, "reads": 10,
-                               "backends": ["greedy"]})
+    cfg = small(tmp_path, tts={"enabled": True, "instances": 6, "reads": 10, "repetitions": 2,
+                               "backends": ["greedy", "exact", "sa"], "backend_instances": {"sa": 2}})
     out = run_experiment(cfg, progress=False)
     for name in ("cumulative_approved", "approved_per_rate", "aircraft_in_air", "mwis_size",
                  "solve_time"):
@@ -117,6 +117,14 @@ def test_figures_report_and_tables_are_written(tmp_path):
     assert "figures/cumulative_approved.png" in report
     assert "Compared with the paper's statements" in report
     assert (tmp_path / "instances.jsonl").exists()
+    tts = out["tts"]
+    if tts["status"] == "ok":  # uam_solvers.tts present
+        assert (tmp_path / "figures" / "tts.png").exists() and (tmp_path / "tts.csv").exists()
+        per_backend = {b: sum(r["backend"] == b for r in tts["rows"]) for b in ("greedy", "exact", "sa")}
+        assert per_backend == {"greedy": 6, "exact": 6, "sa": 2}
+        # exact is the reference optimum: it reaches it in every run
+        assert all(r["p_opt"] == 1.0 for r in tts["rows"] if r["backend"] == "exact")
+        assert "TTS(0.99) per backend" in report
     from uam_solvers.instances import load_corpus
     corpus = load_corpus(tmp_path / "instances.jsonl")
     assert corpus and all(e.problem.n <= cfg.corpus_max_vertices for e in corpus)
