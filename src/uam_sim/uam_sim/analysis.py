@@ -421,10 +421,13 @@ def main(argv: list[str] | None = None) -> int:
     except (FileNotFoundError, ValueError) as exc:
         print(f"analyze: {exc}", file=sys.stderr)
         return 1
-    if args.json:
-        print(summary.to_json(indent=2))
-    else:
-        print(format_summary(summary, epochs=not args.no_epochs))
+    try:
+        if args.json:
+            print(summary.to_json(indent=2))
+        else:
+            print(format_summary(summary, epochs=not args.no_epochs))
+    except BrokenPipeError:  # e.g. piped into `head`
+        sys.stderr.close()
     return 0 if summary.audit is None or summary.audit.ok else 2
 
 

@@ -14,14 +14,17 @@ The offered QoS written for each topic is what its publishers offer (asked from 
 the topic's first message arrives, as rosbag2 does); topics that never carried a message are
 still listed, with the QoS the recorder subscribed with.
 
-It stops and closes the file (summary, footer) when the simulator announces the end of the run
-(EpochSync with ``finished`` from sender "simulator"), on Ctrl-C and on SIGTERM. While running it
+It stops and closes the file (summary, footer) when the simulator has announced the end of the run
+(EpochSync with ``finished`` from sender "simulator") and no message has arrived for
+``finish_quiet_s`` (messages of other topics can still be on their way when the announcement
+arrives; at most ``finish_timeout_s``), on Ctrl-C and on SIGTERM. While running it
 finishes a chunk at least every ``flush_period_s`` of wall time, so a crash loses at most that.
 """
 
 from __future__ import annotations
 
 import sys
+import time
 from pathlib import Path
 
 import rclpy
@@ -86,6 +89,13 @@ class RecorderNode(Node):
         self.declare_parameter("flush_period_s", 1.0, ParameterDescriptor(
             description="wall time after which the open chunk is written out, the most a crash loses [s]",
             floating_point_range=[FloatingPointRange(from_value=0.01, to_value=3600.0)]))
+        self.declare_parameter("finish_quiet_s", 0.5, ParameterDescriptor(
+            description="after the simulator's end of run, close once no message has arrived for this "
+                        "long (messages of other topics may still be on their way) [s wall]",
+            floating_point_range=[FloatingPointRange(from_value=0.0, to_value=60.0)]))
+        self.declare_parameter("finish_timeout_s", 10.0, ParameterDescriptor(
+            description="after the simulator's end of run, close at the latest after this long [s wall]",
+            floating_point_range=[FloatingPointRange(from_value=0.0, to_value=3600.0)]))
         g = self.get_parameter
         output = str(g("output").value)
         if not output.endswith(".mcap"):
@@ -108,16 +118,23 @@ class RecorderNode(Node):
         self.rerun = RerunLogger(rerun_mode, rrd, network=network,
                                  connect_url=str(g("rerun_url").value) or None)
         self.finished = False
+        self.finish_requested = False
+        self._finish_quiet_s = float(g("finish_quiet_s").value)
+        self._finish_timeout_s = float(g("finish_timeout_s").value)
+        self._finish_requested_at = 0.0
+        self._last_rx = time.monotonic()
         self.messages_written = 0
         self._clock_ns = 0
         self._dirty = False
+        self._recorded_subs = {}
         for topic, (cls, qos) in RECORDED_TOPICS.items():
-            self.create_subscription(
+            self._recorded_subs[topic] = self.create_subscription(
                 cls, topic, self._make_callback(topic, cls), qos, raw=True,
                 event_callbacks=SubscriptionEventCallbacks(incompatible_qos=self._make_qos_warning(topic)))
         steady = RclClock(clock_type=ClockType.STEADY_TIME)
         self._flush_timer = self.create_timer(float(g("flush_period_s").value), self._on_flush_timer,
                                               clock=steady)
+        self._finish_timer = self.create_timer(0.05, self._maybe_close, clock=steady, autostart=False)
         self.get_logger().info(f"recording {len(RECORDED_TOPICS)} topics to {self.output}"
                                + (f", Rerun {rerun_mode}" + (f" to {rrd}" if rerun_mode == "save" else "")
                                   if rerun_mode != "off" else ""))
@@ -147,6 +164,29 @@ class RecorderNode(Node):
     def _on_message(self, topic: str, cls: type, data: bytes) -> None:
         if self.finished:
             return
+        self._last_rx = time.monotonic()
+        msg = self._write(topic, cls, data)
+        if topic == "/uam/epoch_sync" and msg.finished and msg.sender == "simulator" \
+                and not self.finish_requested:
+            self.get_logger().info("the simulator ended the run: closing the recording once the "
+                                   "last messages are in")
+            self.finish_requested = True
+            self._finish_requested_at = time.monotonic()
+            self._finish_timer.reset()
+        if self.finish_requested:
+            self._maybe_close()
+
+    def _maybe_close(self) -> None:
+        """After the end of the run: write what is queued, close once quiet or on the timeout."""
+        if self.finished or not self.finish_requested:
+            return
+        if self._drain():
+            self._last_rx = time.monotonic()
+        now = time.monotonic()
+        if now - self._last_rx >= self._finish_quiet_s or now - self._finish_requested_at >= self._finish_timeout_s:
+            self.close()
+
+    def _write(self, topic: str, cls: type, data: bytes):
         msg = deserialize_message(data, cls)
         if topic == "/clock":
             self._clock_ns = max(self._clock_ns, int(msg.clock.sec) * 1_000_000_000 + int(msg.clock.nanosec))
@@ -164,9 +204,28 @@ class RecorderNode(Node):
                 self.rerun.log_flight_plan_msg(msg)
             elif topic == "/uam/planning_reports":
                 self.rerun.log_planning_report_msg(msg)
-        if topic == "/uam/epoch_sync" and msg.finished and msg.sender == "simulator":
-            self.get_logger().info("the simulator ended the run: closing the recording")
-            self.close()
+        return msg
+
+    def _drain(self) -> int:
+        """Write every message already delivered to our subscriptions but not yet taken.
+
+        The end of the run can overtake messages of other topics still queued here (an executor
+        serves each subscription once per wait, so a busy one lags); they belong in the file.
+        """
+        drained = 0
+        for topic, sub in self._recorded_subs.items():
+            cls = RECORDED_TOPICS[topic][0]
+            while True:
+                try:
+                    with sub.handle:
+                        taken = sub.handle.take_message(sub.msg_type, True)
+                except Exception:  # noqa: BLE001 - destroyed handle or shut-down context: nothing left
+                    break
+                if taken is None:
+                    break
+                self._write(topic, cls, taken[0])
+                drained += 1
+        return drained
 
     def _on_flush_timer(self) -> None:
         if self._dirty and not self.finished:
@@ -178,7 +237,11 @@ class RecorderNode(Node):
         if self.finished:
             return
         self.finished = True
+        self._finish_timer.cancel()
         try:
+            drained = self._drain()
+            if drained:
+                self.get_logger().info(f"wrote {drained} messages still queued at the end")
             for topic, (cls, _qos) in RECORDED_TOPICS.items():
                 if topic not in self.recorder.topics:
                     self._register(topic, cls)
