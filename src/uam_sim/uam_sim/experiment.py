@@ -793,6 +793,23 @@ def study_from_mcaps(paths: Sequence[str], cfg: ExperimentConfig, figures: bool 
     return outputs
 
 
+def format_timing_table(cells) -> str:
+    """Per method and rate: cells, mean wall time per run [s], mean real-time factor."""
+    lines = [f"{'method':<14}{'rate':>6}{'cells':>7}{'wall/run [s]':>14}{'real-time x':>13}"]
+    groups: dict = {}
+    for c in cells:
+        s = c["summary"]
+        groups.setdefault((s["method"], s["rate"]), []).append(s)
+    for (m, r), ss in groups.items():
+        w = [x["wall_s"] for x in ss if x.get("wall_s") == x.get("wall_s")]
+        f = [x["real_time_factor"] for x in ss if x.get("real_time_factor") == x.get("real_time_factor")]
+        lines.append(f"{m:<14}{r:>6}{len(ss):>7}{(np.mean(w) if w else float('nan')):>14.2f}"
+                     f"{(np.mean(f) if f else float('nan')):>13.0f}")
+    total = sum(x["summary"].get("wall_s") or 0.0 for x in cells)
+    lines.append(f"sum of per-run wall times: {total:.1f} s")
+    return "\n".join(lines)
+
+
 # ---- command line --------------------------------------------------------------------------------
 
 def build_parser() -> argparse.ArgumentParser:
@@ -843,6 +860,7 @@ def main(argv: list | None = None) -> int:
         outputs = run_experiment(cfg, progress=not args.no_progress, figures=not args.no_figures,
                                  report=not args.no_figures)
     sweep = outputs["sweep"]
+    print(format_timing_table(sweep.cells))
     print(f"{len(sweep.cells)} cells ({len(sweep.computed)} computed, {len(sweep.reused)} reused) "
           f"in {outputs['wall_s']:.1f} s; results in {cfg.out}")
     losses = sum((c["summary"].get("losses") or 0) for c in sweep.cells)
