@@ -29,6 +29,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import re
 import sys
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -107,7 +108,7 @@ class RunSummary:
     mwis_selected: dict = field(default_factory=dict)
     solve_time_s: dict = field(default_factory=dict)
     fallbacks: int = 0
-    rejection_reasons: dict = field(default_factory=dict)
+    rejection_reasons: dict = field(default_factory=dict)  # reason (numbers as N) -> count
     audit: SafetyAudit | None = None
 
     def to_dict(self) -> dict:
@@ -130,6 +131,9 @@ def _jsonable(x: Any) -> Any:
     if isinstance(x, np.generic):
         return _jsonable(x.item())
     return x
+
+
+_REASON_NUMBER = re.compile(r"(?<![\w'.])\d+(?:\.\d+)?(?![\w'])")
 
 
 def _stats(values: list[float]) -> dict:
@@ -245,7 +249,8 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m: f
     reasons: dict[str, int] = {}
     for p in decisions.values():
         if int(p.outcome) != OUTCOME_APPROVED:
-            reasons[str(p.reason)] = reasons.get(str(p.reason), 0) + 1
+            key = _REASON_NUMBER.sub("N", str(p.reason))  # "... by 270 s" and "... by 300 s" together
+            reasons[key] = reasons.get(key, 0) + 1
 
     avg_active = 0.0
     if fleet_t:
