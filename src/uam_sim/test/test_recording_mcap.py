@@ -273,6 +273,9 @@ def test_rerun_cli_reads_the_recording(recording, tmp_path):
                           capture_output=True, text=True, timeout=120)
     assert conv.returncode == 0, conv.stdout + conv.stderr
     assert rrd.stat().st_size > 0
+    printed = subprocess.run([cli, "rrd", "print", str(rrd)], capture_output=True, text=True, timeout=120)
+    # decoded by reflection from the embedded definitions, not just kept as raw bytes
+    assert "uam_msgs.msg.FleetState:message" in printed.stdout + printed.stderr
 
 
 def test_exact_cdr_size_matches_what_dds_delivers():
