@@ -153,12 +153,14 @@ def kernel_throughput(n_pairs: int, repeats: int, seed: int) -> float:
     arr = [t0a, t0a + rng.uniform(1, 100, n_pairs), rng.normal(0, 1000, (n_pairs, 3)),
            rng.normal(0, 10, (n_pairs, 3)), t0b, t0b + rng.uniform(1, 100, n_pairs),
            rng.normal(0, 1000, (n_pairs, 3)), rng.normal(0, 10, (n_pairs, 3))]
-    best = float("inf")
+    best = best_cpu = float("inf")
     for _ in range(repeats):
         t = time.perf_counter()
+        c = time.process_time()
         segment_pair_min_distance(*arr)
+        best_cpu = min(best_cpu, time.process_time() - c)
         best = min(best, time.perf_counter() - t)
-    return n_pairs / best
+    return n_pairs / best, n_pairs / best_cpu
 
 
 def _machine() -> str:
@@ -241,9 +243,10 @@ def main(argv=None) -> int:
               f"{reps[0].active_flights - reps[0].approved}; last epoch: {r.candidates} candidates, "
               f"{r.discarded} discarded, {r.conflict_edges} conflict edges; target cycle < 1 s")
     if "kernel" not in args.skip:
-        rate = kernel_throughput(args.kernel_pairs, 5, args.seed)
+        rate, rate_cpu = kernel_throughput(args.kernel_pairs, 7, args.seed)
         print(f"  kernel: segment_pair_min_distance {rate / 1e6:.1f} million exact segment-pair "
-              f"checks/s ({args.kernel_pairs} pairs per call, best of 5); target >= 5 million/s")
+              f"checks/s by wall time, {rate_cpu / 1e6:.1f} million/s by CPU time "
+              f"({args.kernel_pairs} pairs per call, best of 7); target >= 5 million/s")
     return 0
 
 
