@@ -136,3 +136,17 @@ def test_command_line_prints_summary_and_exit_code_flags_a_loss(recording, capsy
     assert main([str(recording), "--separation-m", "40", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["audit"]["ok"] is True
     assert main([str(recording) + ".missing"]) == 1
+
+
+def test_fleet_state_digest_reads_stamp_and_count_from_the_cdr():
+    from uam_sim.analysis import _fleet_state_digest
+    from uam_sim.recording import serialize_exact
+
+    for frame in ("", "e", "enu", "a-longer-frame"):
+        for n in (0, 1, 7):
+            fs = FleetState(step_index=123456789012, vehicles=[VehicleState(vehicle_id=str(j)) for j in range(n)])
+            fs.header.stamp = Time(sec=42, nanosec=5)
+            fs.header.frame_id = frame
+            d = _fleet_state_digest(serialize_exact(fs))
+            assert (d.header.stamp.sec, d.header.stamp.nanosec, d.step_index, len(d.vehicles)) == \
+                (42, 5, 123456789012, n)

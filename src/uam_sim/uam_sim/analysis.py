@@ -30,9 +30,11 @@ import argparse
 import json
 import math
 import re
+import struct
 import sys
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any, Iterable, Iterator
 
 import numpy as np
@@ -148,12 +150,36 @@ def _stats(values: list[float]) -> dict:
 # Decoding
 # --------------------------------------------------------------------------------------------
 
+def _fleet_state_digest(data: bytes) -> Any | None:
+    """Stamp and vehicle count of a FleetState read straight from its little-endian CDR.
+
+    Layout (XCDR1, offsets from the payload after the 4-byte encapsulation header): stamp sec
+    int32 @0, nanosec uint32 @4, frame_id string (uint32 length incl. NUL, bytes) @8, step_index
+    uint64 aligned to 8, vehicles count uint32. Returns None for big-endian data (the caller
+    deserializes fully then). Avoids building every VehicleState object: O(1) per message.
+    """
+    if len(data) < 16 or data[1] != 1:
+        return None
+    sec, nanosec, n_frame = struct.unpack_from("<iII", data, 4)
+    pos = 12 + n_frame                  # payload offset after frame_id
+    pos += (-pos) % 8                   # align step_index
+    step_index, = struct.unpack_from("<Q", data, 4 + pos)
+    pos += 8
+    pos += (-pos) % 4
+    count, = struct.unpack_from("<I", data, 4 + pos)
+    return SimpleNamespace(header=SimpleNamespace(stamp=SimpleNamespace(sec=sec, nanosec=nanosec)),
+                           step_index=step_index, vehicles=range(count))
+
+
 def iter_decoded(path: str | Path, reader: str = "rclpy",
-                 topics: Iterable[str] = ANALYSED_TOPICS) -> Iterator[tuple[str, int, Any]]:
+                 topics: Iterable[str] = ANALYSED_TOPICS,
+                 fleet_digest_only: bool = False) -> Iterator[tuple[str, int, Any]]:
     """(topic, log_time_ns, message) of the given topics, in log-time order.
 
     ``reader``: "rclpy" (mcap + rclpy deserialization; a torn file yields what was written) or
-    "rosbags" (the independent rosbags library; needs a complete file).
+    "rosbags" (the independent rosbags library, every message decoded in full; needs a complete
+    file). ``fleet_digest_only`` (rclpy reader): FleetStates come back as their stamp,
+    step_index and a ``vehicles`` range of the right length only, read from the CDR directly.
     """
     topics = set(topics)
     if reader == "rclpy":
@@ -164,6 +190,11 @@ def iter_decoded(path: str | Path, reader: str = "rclpy",
             records = sorted((r for r in read_messages_tolerant(path) if r.topic in topics),
                              key=lambda r: r.log_time_ns)
         for rec in records:
+            if rec.topic == TOPIC_FLEET and fleet_digest_only:
+                digest = _fleet_state_digest(rec.data)
+                if digest is not None:
+                    yield rec.topic, rec.log_time_ns, digest
+                    continue
             yield rec.topic, rec.log_time_ns, deserialize(rec)
     elif reader == "rosbags":
         from rosbags.highlevel import AnyReader
@@ -294,8 +325,8 @@ def summarize(path: str | Path, separation_m: float = 100.0, reader: str = "rclp
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"recording: no file at {path}")
-    return summarize_messages(iter_decoded(path, reader), separation_m, str(path), reader,
-                              is_complete(path))
+    return summarize_messages(iter_decoded(path, reader, fleet_digest_only=True), separation_m,
+                              str(path), reader, is_complete(path))
 
 
 # --------------------------------------------------------------------------------------------

@@ -731,8 +731,68 @@ def recover(src: str | os.PathLike, dst: str | os.PathLike, compression: str = "
     return count
 
 
+def benchmark(path: str | os.PathLike, steps: int = 3500, vehicles: int = 70, seed: int = 0) -> dict:
+    """Write and read back a paper-scale synthetic recording; wall times [s] of each part.
+
+    ``steps`` fleet states (plus the same number of poses and clock ticks) with ``vehicles``
+    airborne vehicles each, one planning report per 30 steps. Imports rclpy and uam_msgs.
+    """
+    import numpy as np
+    from builtin_interfaces.msg import Time
+    from geometry_msgs.msg import Point, Pose, PoseArray, Vector3
+    from rosgraph_msgs.msg import Clock
+    from uam_msgs.msg import FleetState, PlanningReport, VehicleState
+
+    rng = np.random.default_rng(seed)
+    pos = rng.uniform(0, 20000, size=(steps, vehicles, 3))
+    msgs = []
+    t0 = time.perf_counter()
+    for k in range(steps):
+        stamp = Time(sec=k)
+        fs = FleetState(step_index=k, vehicles=[
+            VehicleState(vehicle_id=f"r{j:05d}", position=Point(x=p[0], y=p[1], z=p[2]),
+                         velocity=Vector3(x=20.0)) for j, p in enumerate(pos[k].tolist())])
+        fs.header.stamp = stamp
+        pa = PoseArray(poses=[Pose(position=Point(x=p[0], y=p[1], z=p[2])) for p in pos[k].tolist()])
+        pa.header.stamp = stamp
+        msgs.append((k, Clock(clock=stamp), fs, pa))
+    build_s = time.perf_counter() - t0
+    from rclpy.serialization import serialize_message
+    t0 = time.perf_counter()
+    cdr = [(k, serialize_message(c), serialize_message(f), serialize_message(p)) for k, c, f, p in msgs]
+    serialize_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    with McapRecorder(path) as rec:
+        rec.add_topic("/clock", Clock)
+        rec.add_topic("/uam/fleet_state", FleetState)
+        rec.add_topic("/uam/fleet_poses", PoseArray)
+        rec.add_topic("/uam/planning_reports", PlanningReport)
+        for k, c, f, p in cdr:
+            ns = k * 1_000_000_000
+            rec.write("/clock", c, ns)
+            rec.write("/uam/fleet_state", f, ns)
+            rec.write("/uam/fleet_poses", p, ns)
+            if k % 30 == 0:
+                rep = PlanningReport(epoch_index=k // 30)
+                rep.header.stamp = Time(sec=k)
+                rec.write("/uam/planning_reports", rep, ns)
+    write_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    n_read = sum(1 for _ in read_messages(path))
+    read_s = time.perf_counter() - t0
+    from .analysis import summarize
+    t0 = time.perf_counter()
+    summary = summarize(path)
+    analyze_s = time.perf_counter() - t0
+    return {"messages": n_read, "file_MB": Path(path).stat().st_size / 1e6,
+            "build_msgs_s": build_s, "serialize_s": serialize_s, "write_s": write_s,
+            "read_s": read_s, "analyze_s": analyze_s,
+            "write_msgs_per_s": n_read / write_s if write_s > 0 else float("inf"),
+            "fleet_steps": summary.fleet_steps}
+
+
 def main(argv: list[str] | None = None) -> int:
-    """``python -m uam_sim.recording recover TORN.mcap FIXED.mcap`` | ``... info FILE.mcap``."""
+    """``python -m uam_sim.recording recover TORN.mcap FIXED.mcap`` | ``info FILE.mcap`` | ``bench``."""
     import argparse
     import sys
 
@@ -743,8 +803,24 @@ def main(argv: list[str] | None = None) -> int:
     rec.add_argument("dst")
     info = sub.add_parser("info", help="topics, types and message counts")
     info.add_argument("path")
+    bench = sub.add_parser("bench", help="write and read a paper-scale synthetic recording; print times")
+    bench.add_argument("--steps", type=int, default=3500)
+    bench.add_argument("--vehicles", type=int, default=70)
+    bench.add_argument("--out", default="", help="file to write (default: a temporary file)")
     args = ap.parse_args(argv)
     try:
+        if args.command == "bench":
+            import tempfile
+            with tempfile.TemporaryDirectory() as tmp:
+                r = benchmark(args.out or Path(tmp) / "bench.mcap", args.steps, args.vehicles)
+            print(f"{'messages':24s} {r['messages']:10d}")
+            print(f"{'file size [MB]':24s} {r['file_MB']:10.2f}")
+            for key, label in (("build_msgs_s", "build messages [s]"), ("serialize_s", "serialize (rclpy) [s]"),
+                               ("write_s", "write MCAP [s]"), ("read_s", "read back [s]"),
+                               ("analyze_s", "analysis [s]")):
+                print(f"{label:24s} {r[key]:10.3f}")
+            print(f"{'write rate [msg/s]':24s} {r['write_msgs_per_s']:10.0f}")
+            return 0
         if args.command == "recover":
             n = recover(args.src, args.dst)
             print(f"recovered {n} messages into {args.dst}")
