@@ -91,8 +91,9 @@ def test_records_every_topic_and_closes_on_the_simulators_finish(ros_context, sp
     assert rrd.exists() and rrd.stat().st_size > 0
 
 
-def test_sigterm_closes_the_file_properly(tmp_path):
-    """A recorder process stopped with SIGTERM leaves a complete file listing every topic."""
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
+def test_sigterm_and_ctrl_c_close_the_file_properly(tmp_path, sig):
+    """A recorder process stopped with SIGTERM or Ctrl-C leaves a complete file listing every topic."""
     out = tmp_path / "term.mcap"
     env = dict(os.environ)
     env["PYTHONPATH"] = str(ROOT / "src" / "uam_sim") + os.pathsep + str(ROOT / "src" / "uam_planner") \
@@ -108,7 +109,7 @@ def test_sigterm_closes_the_file_properly(tmp_path):
             if "recording 7 topics" in line:
                 break
         assert out.exists(), "".join(lines)
-        proc.send_signal(signal.SIGTERM)
+        proc.send_signal(sig)
         rest, _ = proc.communicate(timeout=60)
     finally:
         if proc.poll() is None:

@@ -53,6 +53,10 @@ _QOS_LATCHED = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=20000,
                           reliability=ReliabilityPolicy.RELIABLE,
                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
+# Recorder nodes of this process with an open file. main() closes them whatever happens, even
+# when Ctrl-C lands between the file being opened and the node being returned to it.
+_OPENED: list = []
+
 #: topic -> (message class, subscription QoS)
 RECORDED_TOPICS = {
     "/clock": (Clock, _QOS_VOLATILE),
@@ -112,21 +116,27 @@ class RecorderNode(Node):
 
         self.output = Path(output)
         self.rrd_path = Path(rrd) if rerun_mode == "save" else None
+        self.finished = False
+        self.messages_written = 0
+        self._recorded_subs = {}
+        self._finish_timer = None
         self.recorder = McapRecorder(output, chunk_size_bytes=int(g("chunk_size_bytes").value),
                                      compression=str(g("compression").value),
                                      flush_period_s=float(g("flush_period_s").value))
-        self.rerun = RerunLogger(rerun_mode, rrd, network=network,
-                                 connect_url=str(g("rerun_url").value) or None)
-        self.finished = False
+        try:
+            self.rerun = RerunLogger(rerun_mode, rrd, network=network,
+                                     connect_url=str(g("rerun_url").value) or None)
+        except BaseException:
+            self.recorder.close()
+            raise
+        _OPENED.append(self)
         self.finish_requested = False
         self._finish_quiet_s = float(g("finish_quiet_s").value)
         self._finish_timeout_s = float(g("finish_timeout_s").value)
         self._finish_requested_at = 0.0
         self._last_rx = time.monotonic()
-        self.messages_written = 0
         self._clock_ns = 0
         self._dirty = False
-        self._recorded_subs = {}
         for topic, (cls, qos) in RECORDED_TOPICS.items():
             self._recorded_subs[topic] = self.create_subscription(
                 cls, topic, self._make_callback(topic, cls), qos, raw=True,
@@ -237,7 +247,10 @@ class RecorderNode(Node):
         if self.finished:
             return
         self.finished = True
-        self._finish_timer.cancel()
+        if self in _OPENED:
+            _OPENED.remove(self)
+        if self._finish_timer is not None:
+            self._finish_timer.cancel()
         try:
             drained = self._drain()
             if drained:
@@ -271,12 +284,16 @@ def main(args=None) -> int:
         if rclpy.ok():
             raise
     finally:
-        if node is not None:
-            try:
-                node.close()
-            finally:
-                node.destroy_node()
-        rclpy.try_shutdown()
+        try:
+            if node is not None:
+                try:
+                    node.close()
+                finally:
+                    node.destroy_node()
+        finally:
+            while _OPENED:  # (close is idempotent)
+                _OPENED.pop().close()
+            rclpy.try_shutdown()
     return rc
 
 
