@@ -99,6 +99,10 @@ def test_resumed_run_recomputes_nothing(serial):
     assert sorted(more.computed) == [("fifo", 4, 0), ("greedy", 4, 0)]
     longer = run_sweep(small(cfg.out, duration_s=330.0, methods=["fifo"], rates=[2]), progress=False)
     assert longer.computed == [("fifo", 2, 0)]
+    # collecting without computing lists what is missing and runs nothing
+    partial = run_sweep(small(cfg.out, rates=[2, 8]), progress=False, compute=False)
+    assert partial.computed == [] and len(partial.cells) == 2
+    assert sorted(partial.missing) == [("fifo", 8, 0), ("greedy", 8, 0)]
 
 
 def test_figures_report_and_tables_are_written(tmp_path):

@@ -482,6 +482,7 @@ class SweepResult:
     computed: list
     reused: list
     wall_s: float
+    missing: list = field(default_factory=list)
 
 
 def sweep_methods(cfg: ExperimentConfig) -> list:
@@ -498,8 +499,12 @@ def sweep_methods(cfg: ExperimentConfig) -> list:
     return methods
 
 
-def run_sweep(cfg: ExperimentConfig, progress: bool = True) -> SweepResult:
-    """Run every missing cell (parallel over cfg.workers processes), reuse the finished ones."""
+def run_sweep(cfg: ExperimentConfig, progress: bool = True, compute: bool = True) -> SweepResult:
+    """Run every missing cell (parallel over cfg.workers processes), reuse the finished ones.
+
+    ``compute=False`` only collects the finished cells (the missing ones are listed in
+    ``SweepResult.missing``), e.g. to report on a sweep that is still running.
+    """
     t0 = time.perf_counter()
     out = Path(cfg.out)
     cells_dir = out / "cells"
@@ -516,6 +521,9 @@ def run_sweep(cfg: ExperimentConfig, progress: bool = True) -> SweepResult:
         else:
             todo.append((m, r, s))
     reused = list(found)
+    if not compute:
+        return SweepResult(cfg, [found[c] for c in grid if c in found], [], reused,
+                           time.perf_counter() - t0, missing=todo)
     bar = None
     if progress and todo:
         from tqdm import tqdm
@@ -682,10 +690,13 @@ def machine_info() -> dict:
 
 
 def run_experiment(cfg: ExperimentConfig, progress: bool = True, figures: bool = True,
-                   report: bool = True) -> dict:
-    """The whole study: sweep, tables, corpus, TTS, figures and REPORT.md. Returns the outputs."""
+                   report: bool = True, compute: bool = True) -> dict:
+    """The whole study: sweep, tables, corpus, TTS, figures and REPORT.md. Returns the outputs.
+
+    ``compute=False``: use only the cells already finished (see :func:`run_sweep`).
+    """
     t0 = time.perf_counter()
-    sweep = run_sweep(cfg, progress=progress)
+    sweep = run_sweep(cfg, progress=progress, compute=compute)
     tables = write_tables(sweep)
     corpus_path, entries = write_corpus(sweep)
     tts = run_tts(cfg, entries) if entries else {"status": "skipped",
@@ -829,6 +840,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-tts", action="store_true", help="skip the TTS study")
     p.add_argument("--no-figures", action="store_true", help="skip figures and report")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--no-compute", action="store_true",
+                   help="only collect finished cells (report on a partial sweep)")
     p.add_argument("--from-mcap", nargs="+", metavar="FILE",
                    help="summarise node-graph recordings instead of running the sweep")
     return p
@@ -858,7 +871,7 @@ def main(argv: list | None = None) -> int:
         outputs = study_from_mcaps(args.from_mcap, cfg, figures=not args.no_figures)
     else:
         outputs = run_experiment(cfg, progress=not args.no_progress, figures=not args.no_figures,
-                                 report=not args.no_figures)
+                                 report=not args.no_figures, compute=not args.no_compute)
     sweep = outputs["sweep"]
     print(format_timing_table(sweep.cells))
     print(f"{len(sweep.cells)} cells ({len(sweep.computed)} computed, {len(sweep.reused)} reused) "

@@ -162,6 +162,10 @@ def write_report(sweep, outputs: dict, machine: dict, out: Path) -> Path:
           f"from earlier runs); sweep wall time {sweep.wall_s:.1f} s with {cfg.workers} worker(s); "
           f"whole study (incl. TTS, figures) {outputs.get('wall_s', 0):.1f} s; sum of per-cell "
           f"run times {wall_total:.1f} s", ""]
+    if getattr(sweep, "missing", None):
+        L += [f"**Partial sweep:** {len(sweep.missing)} configured cells are not finished and are "
+              f"left out of everything below: " + ", ".join(f"{m}/r{r}/s{s}" for m, r, s in sweep.missing[:40])
+              + (" ..." if len(sweep.missing) > 40 else ""), ""]
     full = {"workers": cfg.workers, **{k: v for k, v in asdict(cfg).items() if k != "tts"}}
     L += ["<details><summary>All parameters</summary>", "", "```", *(f"{k}: {v}" for k, v in full.items()),
           f"tts: {cfg.tts}", "```", "</details>", ""]
