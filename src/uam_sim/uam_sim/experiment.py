@@ -521,6 +521,9 @@ def run_sweep(cfg: ExperimentConfig, progress: bool = True, compute: bool = True
         else:
             todo.append((m, r, s))
     reused = list(found)
+    # seeds outermost: an interrupted sweep has every (method, rate) for the first seeds
+    seed_rank = {sd: i for i, sd in enumerate(cfg.seeds)}
+    todo.sort(key=lambda c: seed_rank[c[2]])
     if not compute:
         return SweepResult(cfg, [found[c] for c in grid if c in found], [], reused,
                            time.perf_counter() - t0, missing=todo)
