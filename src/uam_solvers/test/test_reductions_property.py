@@ -110,8 +110,8 @@ def test_sparse_path_matches_dense_path(monkeypatch):
     import uam_solvers.reductions as red_mod
 
     rng = np.random.default_rng(5)
-    for _ in range(40):
-        p = _random_problem(rng, int(rng.integers(5, 14)))
+    for _ in range(80):
+        p = _random_problem(rng, int(rng.integers(5, 60)))
         dense = reduce_problem(p)
         monkeypatch.setattr(red_mod, "_DENSE_MAX", 0)
         sparse = reduce_problem(p)

@@ -141,12 +141,7 @@ class MwisProblem:
             raise MwisInputError(f"edges[{i}]: ({int(e64[i, 0])}, {int(e64[i, 1])}) is a self-loop")
         norm = _normalise_edges(e64)
 
-        gs: list[np.ndarray] = []
-        for gi, g in enumerate(groups or ()):
-            idx = _as_index_array(g, f"groups[{gi}]", n)
-            idx = np.unique(idx)
-            if idx.size >= 2:
-                gs.append(idx.astype(np.int32))
+        gs = _normalise_groups(groups, n)
         return cls(weights=w, edges=norm.astype(np.int32), groups=tuple(gs))
 
     @property
@@ -165,9 +160,14 @@ class MwisProblem:
             out = self.edges
         else:
             parts = [self.edges.astype(np.int64)]
+            # Groups bucketed by size: one vectorised pair expansion per distinct size.
+            by_size: dict[int, list[np.ndarray]] = {}
             for g in self.groups:
-                iu, ju = _triu(g.size)
-                parts.append(np.stack([g[iu], g[ju]], axis=1).astype(np.int64))
+                by_size.setdefault(int(g.size), []).append(g)
+            for k, gl in by_size.items():
+                mat = np.stack(gl).astype(np.int64)
+                iu, ju = _triu(k)
+                parts.append(np.stack([mat[:, iu].ravel(), mat[:, ju].ravel()], axis=1))
             out = _normalise_edges(np.concatenate(parts, axis=0)).astype(np.int32)
         out = out.view()
         out.setflags(write=False)
@@ -209,6 +209,36 @@ class MwisProblem:
         return float(math.fsum(self.weights[idx].tolist())) if idx.size else 0.0
 
 
+def _normalise_groups(groups: Sequence[Any] | None, n: int) -> list[np.ndarray]:
+    """Validate clique groups (indices in [0, n)), drop duplicates inside each, keep those of
+    size >= 2 as sorted int32 arrays. Vectorised over all groups. Raises MwisInputError."""
+    if not groups:
+        return []
+    arrays = []
+    for gi, g in enumerate(groups):
+        a = np.asarray(g)
+        if a.size and (a.ndim != 1 or a.dtype.kind not in "iuf"):
+            _as_index_array(a, f"groups[{gi}]", n)  # raises with the group's name
+        arrays.append(a.reshape(-1))
+    lengths = np.array([a.size for a in arrays], dtype=np.int64)
+    if lengths.sum() == 0:
+        return []
+    flat = np.concatenate(arrays)
+    try:
+        idx = _as_index_array(flat, "groups", n)
+    except MwisInputError:
+        # Re-check group by group so the message names groups[i][j].
+        for gi, a in enumerate(arrays):
+            _as_index_array(a, f"groups[{gi}]", n)
+        raise
+    gid = np.repeat(np.arange(lengths.size, dtype=np.int64), lengths)
+    key = np.unique(gid * max(n, 1) + idx)
+    gid, v = key // max(n, 1), key % max(n, 1)
+    counts = np.bincount(gid, minlength=lengths.size)
+    pieces = np.split(v.astype(np.int32), np.cumsum(counts)[:-1])
+    return [p for p in pieces if p.size >= 2]
+
+
 @functools.lru_cache(maxsize=64)
 def _triu(k: int) -> tuple[np.ndarray, np.ndarray]:
     return np.triu_indices(k, k=1)
@@ -220,7 +250,7 @@ def csr_from_edges(n: int, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
     rows = np.concatenate([e[:, 0], e[:, 1]])
     cols = np.concatenate([e[:, 1], e[:, 0]])
-    order = np.lexsort((cols, rows))
+    order = np.argsort(rows * max(n, 1) + cols, kind="stable")
     indptr = np.zeros(n + 1, dtype=np.int64)
     np.cumsum(np.bincount(rows, minlength=n), out=indptr[1:])
     return indptr, cols[order].astype(np.int32)
@@ -230,9 +260,11 @@ def _normalise_edges(e: np.ndarray) -> np.ndarray:
     """Sort each pair to u < v and drop duplicates (lexicographic order). O(m log m)."""
     if e.shape[0] == 0:
         return np.zeros((0, 2), dtype=np.int64)
-    lo = np.minimum(e[:, 0], e[:, 1])
-    hi = np.maximum(e[:, 0], e[:, 1])
-    return np.unique(np.stack([lo, hi], axis=1), axis=0)
+    lo = np.minimum(e[:, 0], e[:, 1]).astype(np.int64)
+    hi = np.maximum(e[:, 0], e[:, 1]).astype(np.int64)
+    base = int(hi.max()) + 1
+    key = np.unique(lo * base + hi)  # 1-D unique is far faster than unique(axis=0)
+    return np.stack([key // base, key % base], axis=1)
 
 
 def check_selection(problem: MwisProblem, selected: Any) -> tuple[bool, str]:

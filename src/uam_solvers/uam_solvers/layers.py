@@ -42,12 +42,15 @@ def induced_subproblem(problem: MwisProblem, vertices: np.ndarray) -> MwisProble
     keep = (new_index[e[:, 0]] >= 0) & (new_index[e[:, 1]] >= 0)
     # new_index is increasing on vertices, so u < v and lexicographic order are preserved.
     sub_edges = new_index[e[keep]].astype(np.int32).reshape(-1, 2)
-    groups = []
-    for g in problem.groups:
-        ng = new_index[g]
-        ng = ng[ng >= 0]
-        if ng.size >= 2:
-            groups.append(ng.astype(np.int32))
+    groups: list[np.ndarray] = []
+    if problem.groups:
+        lengths = np.fromiter((g.size for g in problem.groups), dtype=np.int64, count=len(problem.groups))
+        mapped = new_index[np.concatenate(problem.groups)]
+        gid = np.repeat(np.arange(lengths.size), lengths)
+        keep_v = mapped >= 0
+        counts = np.bincount(gid[keep_v], minlength=lengths.size)
+        pieces = np.split(mapped[keep_v].astype(np.int32), np.cumsum(counts)[:-1])
+        groups = [g for g in pieces if g.size >= 2]  # order preserved, so still sorted
     return MwisProblem(weights=problem.weights[vertices].copy(), edges=sub_edges, groups=tuple(groups))
 
 
