@@ -110,3 +110,18 @@ def test_registry_names_resolve_to_these_classes():
     assert isinstance(get_backend("sa"), SimulatedAnnealingBackend)
     assert isinstance(get_backend("tabu"), TabuBackend)
     assert get_backend("sa").available() == (True, "")
+
+
+@pytest.mark.parametrize("backend_cls", BACKENDS)
+def test_an_expired_time_limit_stops_after_the_first_reads(backend_cls):
+    problem = paper_instance(4, seed=2)
+    result = backend_cls().solve(problem, time_limit_s=1e-9, seed=0, options={"num_reads": 100})
+    assert result.stats["interrupted"] is True
+    assert 1 <= result.stats["reads"] < 100
+    assert problem.is_independent(result.selected)
+
+
+def test_tabu_refuses_graphs_above_its_dense_matrix_limit():
+    problem = paper_instance(2, seed=0)  # 10 vertices
+    with pytest.raises(MwisInputError, match="max_vertices"):
+        TabuBackend().solve(problem, time_limit_s=1.0, seed=0, options={"max_vertices": 9})

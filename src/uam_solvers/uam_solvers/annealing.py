@@ -19,12 +19,16 @@ options dict can serve several backends):
   tuned for this QUBO; "auto" uses dwave-samplers' own default range).
 * tabu: tenure (int), num_restarts (int, default 0), lower_bound_z (int, default
   `TABU_DEFAULT_LOWER_BOUND_Z`, the number of variable updates of each tabu search), timeout_ms
-  (per read; default: the time limit shared over the reads).
+  (per read; default: the time limit shared over the reads), max_vertices (default
+  `TABU_MAX_VERTICES` = 3000: TabuSampler works on a dense n x n matrix, so larger graphs are
+  refused with an error, which the validation layer turns into a greedy fallback).
 
 Time limit: simulated annealing stops between reads once time_limit_s has passed (the reads done
 so far are used; stats["interrupted"] says so, and only then is the answer not reproducible);
-tabu gets a per-read timeout of time_limit_s / num_reads (with the default search length this
-rarely binds on instances up to a few hundred vertices, so results are reproducible).
+tabu runs its reads in calls of TABU_READ_BUDGET // n reads (all 100 at once up to 20 vertices)
+and stops between calls when another call as long as the last would end past time_limit_s, and each read also gets a timeout of
+time_limit_s / num_reads (with the default search length neither binds on instances up to a few
+hundred vertices, so results are reproducible).
 
 Statistics: those of `uam_solvers.qubo.refine_and_repair` (reads, best_objective,
 feasible_fraction_raw, feasible_fraction, optimal_fraction, energies) plus sampler settings and
@@ -36,7 +40,15 @@ from __future__ import annotations
 import time
 from typing import Any, Mapping
 
+import dimod
 import numpy as np
+
+try:  # imported here so the first solve does not pay for it
+    from dwave.samplers import SimulatedAnnealingSampler, TabuSampler
+    _SAMPLERS_IMPORT_ERROR = None
+except ImportError as exc:  # pragma: no cover - dwave-samplers is a dependency
+    SimulatedAnnealingSampler = TabuSampler = None
+    _SAMPLERS_IMPORT_ERROR = exc
 
 from uam_solvers.base import Backend, MwisInputError, MwisProblem, MwisResult, make_result
 from uam_solvers.qubo import DEFAULT_LAMBDA, mwis_qubo, refine_and_repair
@@ -59,6 +71,10 @@ SA_DEFAULT_SWEEPS = 300
 SA_DEFAULT_BETA_RANGE = (1.0, 10.0)
 TABU_DEFAULT_LOWER_BOUND_Z = 10000
 TABU_DEFAULT_RESTARTS = 0
+#: reads per TabuSampler call are TABU_READ_BUDGET // n (at least 1): about 0.1 s of work per call
+TABU_READ_BUDGET = 2000
+#: TabuSampler builds a dense n x n matrix: refuse larger graphs (options["max_vertices"])
+TABU_MAX_VERTICES = 3000
 
 _COMMON_OPTIONS = {"num_reads", "lambda", "optimum"}
 
@@ -173,10 +189,8 @@ class SimulatedAnnealingBackend(_QuboSamplerBackend):
     backend_options = {"num_sweeps", "beta_range"}
 
     def available(self) -> tuple[bool, str]:
-        try:
-            import dwave.samplers  # noqa: F401
-        except ImportError as exc:
-            return False, f"dwave-samplers is not installed ({exc})"
+        if _SAMPLERS_IMPORT_ERROR is not None:
+            return False, f"dwave-samplers is not installed ({_SAMPLERS_IMPORT_ERROR})"
         return True, ""
 
     @staticmethod
@@ -186,8 +200,6 @@ class SimulatedAnnealingBackend(_QuboSamplerBackend):
         return float(max(np.abs(linear).max(initial=0.0), np.abs(quadratic).max(initial=0.0)))
 
     def _sample(self, bqm, num_reads, seed, time_limit_s, options):
-        from dwave.samplers import SimulatedAnnealingSampler
-
         num_sweeps = _int_option(options, "num_sweeps", SA_DEFAULT_SWEEPS, 1)
         beta_range = options.get("beta_range")
         if beta_range is None:
@@ -239,35 +251,57 @@ class TabuBackend(_QuboSamplerBackend):
     name = "tabu"
     description = ("tabu search on the MWIS QUBO (dwave-samplers), 100 reads, "
                    "steepest descent + repair; heuristic")
-    backend_options = {"tenure", "num_restarts", "lower_bound_z", "timeout_ms"}
+    backend_options = {"tenure", "num_restarts", "lower_bound_z", "timeout_ms", "max_vertices"}
 
     def available(self) -> tuple[bool, str]:
-        try:
-            import dwave.samplers  # noqa: F401
-        except ImportError as exc:
-            return False, f"dwave-samplers is not installed ({exc})"
+        if _SAMPLERS_IMPORT_ERROR is not None:
+            return False, f"dwave-samplers is not installed ({_SAMPLERS_IMPORT_ERROR})"
         return True, ""
 
     def _sample(self, bqm, num_reads, seed, time_limit_s, options):
-        from dwave.samplers import TabuSampler
-
+        n = bqm.num_variables
+        max_vertices = _int_option(options, "max_vertices", TABU_MAX_VERTICES, 1)
+        if n > max_vertices:
+            # TabuSampler works on a dense n x n matrix (8 n^2 bytes, several copies)
+            raise MwisInputError(
+                f"problem has {n} vertices; tabu builds a dense n x n QUBO matrix and is "
+                f"limited to options['max_vertices'] = {max_vertices}")
         tenure = _int_option(options, "tenure", None, 0)
         num_restarts = _int_option(options, "num_restarts", TABU_DEFAULT_RESTARTS, 0)
         lower_bound_z = _int_option(options, "lower_bound_z", TABU_DEFAULT_LOWER_BOUND_Z, 1)
         default_timeout = max(1, int(time_limit_s * 1000.0 / num_reads))
         timeout_ms = _int_option(options, "timeout_ms", default_timeout, 1)
-        if tenure is not None and tenure >= bqm.num_variables:
-            tenure = max(0, bqm.num_variables - 1)  # TabuSampler requires tenure < n
-        # coefficient_z_first = 1 makes lower_bound_z the search length on instances up to
-        # lower_bound_z variables (the sampler's default is 10,000 updates per variable)
-        sampleset = TabuSampler().sample(
-            bqm, num_reads=num_reads, seed=seed, tenure=tenure, num_restarts=num_restarts,
-            lower_bound_z=lower_bound_z, coefficient_z_first=1, coefficient_z_restart=1,
-            timeout=timeout_ms)
+        if tenure is not None and tenure >= n:
+            tenure = max(0, n - 1)  # TabuSampler requires tenure < n
+        # Reads go in calls of a size fixed by n (about 0.1 s of work each), seeded seed + call
+        # index, so the answer does not depend on timing unless the time limit stops the calls.
+        per_call = max(1, min(num_reads, TABU_READ_BUDGET // max(n, 1)))
+        deadline = time.perf_counter() + time_limit_s
+        samplesets = []
+        done = 0
+        call = 0
+        while done < num_reads:
+            reads = min(per_call, num_reads - done)
+            call_start = time.perf_counter()
+            # coefficient_z_first = 1 makes lower_bound_z the search length on instances up to
+            # lower_bound_z variables (the sampler's default is 10,000 updates per variable)
+            samplesets.append(TabuSampler().sample(
+                bqm, num_reads=reads, seed=(seed + call) % 2**32, tenure=tenure,
+                num_restarts=num_restarts, lower_bound_z=lower_bound_z, coefficient_z_first=1,
+                coefficient_z_restart=1, timeout=timeout_ms))
+            done += reads
+            call += 1
+            # stop when the next call, as long as this one, would end past the deadline
+            now = time.perf_counter()
+            if now + (now - call_start) > deadline:
+                break
+        sampleset = dimod.concatenate(samplesets) if len(samplesets) > 1 else samplesets[0]
         stats = {
             "num_restarts": num_restarts,
             "lower_bound_z": lower_bound_z,
             "timeout_ms_per_read": timeout_ms,
             "tenure": -1 if tenure is None else tenure,
+            "sampler_calls": call,
+            "interrupted": done < num_reads,
         }
         return sampleset, stats

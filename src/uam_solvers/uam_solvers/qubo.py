@@ -34,6 +34,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import dimod
 import numpy as np
 import scipy.sparse as sp
 
@@ -78,8 +79,6 @@ class QuboArrays:
 
     def to_bqm(self):
         """The same QUBO as a dimod BinaryQuadraticModel (BINARY), variables 0..n-1."""
-        import dimod
-
         upper = sp.triu(self.coupling, k=1).tocoo()
         return dimod.BinaryQuadraticModel.from_numpy_vectors(
             self.linear, (upper.row, upper.col, upper.data), self.offset, dimod.BINARY)
@@ -87,8 +86,6 @@ class QuboArrays:
     @classmethod
     def from_bqm(cls, bqm) -> "QuboArrays":
         """Arrays of a BINARY (or SPIN, converted) BQM whose variables are exactly 0..n-1."""
-        import dimod
-
         if bqm.vartype is not dimod.BINARY:
             bqm = bqm.change_vartype(dimod.BINARY, inplace=False)
         n = bqm.num_variables
