@@ -114,7 +114,7 @@ def test_registry_names_resolve_to_these_classes():
 
 @pytest.mark.parametrize("backend_cls", BACKENDS)
 def test_an_expired_time_limit_stops_after_the_first_reads(backend_cls):
-    problem = paper_instance(4, seed=2)
+    problem = paper_instance(8, seed=2)  # 40 vertices: tabu makes calls of 50 reads
     result = backend_cls().solve(problem, time_limit_s=1e-9, seed=0, options={"num_reads": 100})
     assert result.stats["interrupted"] is True
     assert 1 <= result.stats["reads"] < 100
