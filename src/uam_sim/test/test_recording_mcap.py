@@ -211,7 +211,8 @@ def test_sim_stamp_of_each_type():
     assert stamps["/uam/requests"] == 30_000_000_000
     assert stamps["/uam/epoch_sync"] == 60_000_000_000
     assert stamps["/uam/fleet_poses"] == 61_000_000_000
-    assert sim_stamp_ns(FleetState()) is None  # zero header stamp = no stamp
+    assert sim_stamp_ns(FleetState()) == 0  # the first step of a run is at time 0
+    assert sim_stamp_ns(Point()) is None  # a type without a stamp
 
 
 def test_torn_recording_still_yields_the_chunks_written_before_the_cut(tmp_path):
@@ -268,6 +269,7 @@ def test_rerun_cli_reads_the_recording(recording, tmp_path):
     assert "/uam/fleet_state" in info.stdout + info.stderr
     check = subprocess.run([cli, "mcap", "check", str(recording)], capture_output=True, text=True, timeout=120)
     assert check.returncode == 0, check.stdout + check.stderr
+    assert "PROBLEM" not in check.stdout + check.stderr, check.stdout
     rrd = tmp_path / "run.rrd"
     conv = subprocess.run([cli, "mcap", "convert", str(recording), "-o", str(rrd)],
                           capture_output=True, text=True, timeout=120)

@@ -295,10 +295,11 @@ def _time_ns(stamp: Any) -> int:
 
 
 def sim_stamp_ns(msg: Any) -> int | None:
-    """The simulation time a message carries [ns], or None if it carries none.
+    """The simulation time a message carries [ns], or None if its type carries none.
 
     ``header.stamp`` (FleetState, FlightPlan, PlanningReport, PoseArray), ``clock`` (/clock),
-    ``epoch_time`` (EpochSync), ``request_time`` (FlightRequest). A zero stamp counts as none.
+    ``epoch_time`` (EpochSync), ``request_time`` (FlightRequest). A zero stamp is simulation
+    time 0 (the first step of a run), not a missing one.
     """
     for path in (("header", "stamp"), ("clock",), ("epoch_time",), ("request_time",)):
         obj = msg
@@ -307,8 +308,7 @@ def sim_stamp_ns(msg: Any) -> int | None:
             if obj is None:
                 break
         if obj is not None and hasattr(obj, "sec") and hasattr(obj, "nanosec"):
-            ns = _time_ns(obj)
-            return ns if ns > 0 or path == ("clock",) else None
+            return _time_ns(obj)
     return None
 
 
