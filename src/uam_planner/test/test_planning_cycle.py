@@ -222,3 +222,18 @@ def test_new_config_rebuilds_the_route_cache_only_when_routes_change():
     assert p.plan(0.0, 0).report.rejected == 1
     with pytest.raises(TypeError, match="PlanningConfig"):
         p.config = {"k": 3}
+
+
+def test_solver_own_fallback_is_reported():
+    net = generate_network(40, 5, seed=2)
+
+    class Late(Answer):
+        fallback = True
+        message = "time limit reached; greedy answer"
+        proven_optimal = False
+
+    p = Planner(net, policy="mwis", solve_mwis=lambda w, e, g: Late(np.array([0]), backend="greedy"))
+    p.submit(req("r0", net.aerodrome_ids[0], net.aerodrome_ids[1], 0.0))
+    rep = p.plan(0.0, 0).report
+    assert rep.fallback and rep.fallback_reason == "time limit reached; greedy answer"
+    assert rep.backend_used == "greedy" and rep.approved == 1
