@@ -90,7 +90,10 @@ stop_all() {
   local deadline=$((SECONDS + 10))
   for pid in "${PIDS[@]}"; do
     while kill -0 "$pid" 2>/dev/null && (( SECONDS < deadline )); do sleep 0.1; done
-    kill -KILL "$pid" 2>/dev/null || true
+    if kill -0 "$pid" 2>/dev/null; then
+      echo "run_fleet: process $pid did not stop within 10 s; killing it" >&2
+      kill -KILL "$pid" 2>/dev/null || true
+    fi
   done
   wait 2>/dev/null || true
 }
@@ -102,8 +105,9 @@ start uam_solvers solver solver --params-file config/solver.yaml -p "default_bac
 start uam_planner planner planner --params-file config/planner.yaml -p "network:=$NETWORK" \
   -p "policy:=$POLICY" -p "backend:=$BACKEND"
 start uam_sim request_generator request_generator --params-file config/request_generator.yaml \
-  -p "network:=$NETWORK" -p "rate:=$RATE" -p "seed:=$SEED" -p "demand_file:=$DEMAND"
+  -p "network:=$NETWORK" -p "rate:=$RATE" -p "seed:=$SEED" ${DEMAND:+-p "demand_file:=$DEMAND"}
 start uam_sim recorder recorder -p "output:=$MCAP" -p "network:=$NETWORK" -p "rerun:=$RERUN" -p "rerun_rrd:=$RRD"
+REC_PID=${PIDS[-1]}
 start uam_sim simulator simulator --params-file config/simulator.yaml -p "duration_s:=$DURATION" \
   -p "mode:=$MODE" -p "real_time_factor:=$RTF"
 SIM_PID=${PIDS[-1]}
@@ -111,11 +115,11 @@ T0=$SECONDS
 SIM_RC=0
 wait "$SIM_PID" || SIM_RC=$?
 if (( INTERRUPTED == 0 )); then
-  # The others exit by themselves on the simulator's `finished`; give them a moment, then stop them.
-  deadline=$((SECONDS + 15))
-  for pid in "${PIDS[@]}"; do
-    while kill -0 "$pid" 2>/dev/null && (( SECONDS < deadline )); do sleep 0.1; done
-  done
+  # The recorder closes the file by itself once the simulator announced the end and the last
+  # messages are in; planner and generator exit on that announcement too; the solver is a server
+  # and is stopped here.
+  deadline=$((SECONDS + 60))
+  while kill -0 "$REC_PID" 2>/dev/null && (( SECONDS < deadline )); do sleep 0.1; done
   stop_all INT
 fi
 trap - INT TERM

@@ -91,7 +91,7 @@ def test_every_request_decided_once_safe_and_equal_to_in_process_run(ros_context
 
 def test_planner_falls_back_to_greedy_when_solver_absent(ros_context, spin_until):
     obs, _ = _run(ros_context, spin_until, rate=3.0, seed=5, duration_s=120.0, with_solver=False,
-                  planner_extra={"solver_timeout_margin_s": 0.5})
+                  planner_extra={"solver_timeout_margin_s": 0.5, "solver_startup_timeout_s": 0.5})
     with_graph = [r for r in obs.reports if r.vertices > 0]
     assert with_graph, "some epoch had candidates"
     assert all(r.fallback and r.backend_used == "greedy" for r in with_graph)

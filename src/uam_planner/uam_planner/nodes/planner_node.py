@@ -20,13 +20,15 @@ The planning itself is uam_planner.planning.Planner, shared with the in-process 
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 import threading
+from functools import partial
 from types import SimpleNamespace
 
 import numpy as np
 import rclpy
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
@@ -36,17 +38,8 @@ from uam_msgs.srv import SolveMwis
 
 from uam_planner.network import load_network
 from uam_planner.nodes import messages as m
+from uam_solvers.nodes.params import check, declare
 from uam_planner.planning import POLICIES, Planner, PlanningConfig, default_solve_mwis
-
-
-def _desc(text: str, lo: float | None = None, hi: float | None = None, integer: bool = False) -> ParameterDescriptor:
-    d = ParameterDescriptor(description=text)
-    if lo is not None:
-        if integer:
-            d.integer_range = [IntegerRange(from_value=int(lo), to_value=int(hi))]
-        else:
-            d.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi))]
-    return d
 
 
 class PlannerNode(Node):
@@ -57,25 +50,24 @@ class PlannerNode(Node):
         if not any(p.name == "use_sim_time" for p in kwargs["parameter_overrides"]):
             kwargs["parameter_overrides"].append(Parameter("use_sim_time", Parameter.Type.BOOL, True))
         super().__init__("planner", **kwargs)
-        p = self.declare_parameter
-        p("network", "", _desc("routing network file (.yaml, .geojson, .graphml), e.g. config/networks/singapore.yaml"))
-        p("policy", "mwis", _desc("planning policy: 'mwis' (conflict graph + MWIS) or 'fifo' (shortest FIFO baseline)"))
-        p("backend", "exact", _desc("MWIS backend asked of the solver service (see `ros2 run uam_solvers backends`)"))
-        p("time_limit_s", 5.0, _desc("MWIS solve time limit [s]", 0.001, 3600.0))
-        p("solver_timeout_margin_s", 5.0, _desc("extra wall time [s] to wait for the solver service before the local greedy fallback", 0.0, 3600.0))
-        p("use_solver_service", True, _desc("call /uam/solve_mwis; false solves in-process with the same backend"))
-        p("seed", 0, _desc("seed passed to stochastic MWIS backends", 0, 2**31 - 1, integer=True))
-        p("epoch_s", 30.0, _desc("time between planning epochs [s] (the simulator announces epochs)", 0.001, 86400.0))
-        p("separation_m", 100.0, _desc("separation minimum [m]", 0.001, 100000.0))
-        p("k", 5, _desc("candidate routes per request", 1, 100, integer=True))
-        p("penalty_factor", 5.0, _desc("penalised Dijkstra factor for diverse candidates", 0.0, 1000.0))
-        p("speed_mps", 10.0, _desc("cruise speed [m/s]", 0.001, 1000.0))
-        p("wait_for_generator", True, _desc("in lockstep, plan epoch k only after the request generator acknowledged it"))
-        params = {name: self.get_parameter(name).value for name in (
-            "network", "policy", "backend", "time_limit_s", "seed", "epoch_s", "separation_m", "k",
-            "penalty_factor", "speed_mps")}
-        if params["policy"] not in POLICIES:
-            raise ValueError(f"parameter policy: {params['policy']!r} is not one of {POLICIES}")
+        d = partial(declare, self)
+        params = {
+            "network": d("network", "", "routing network file (.yaml, .geojson, .graphml), e.g. config/networks/singapore.yaml"),
+            "policy": d("policy", "mwis", "planning policy: conflict graph + MWIS, or the shortest-FIFO baseline", choices=POLICIES),
+            "backend": d("backend", "exact", "MWIS backend asked of the solver service (`ros2 run uam_solvers backends` lists them)"),
+            "time_limit_s": d("time_limit_s", 5.0, "MWIS solve time limit [s]", 0.001, 3600.0),
+            "seed": d("seed", 0, "seed passed to stochastic MWIS backends", 0, 2**31 - 1),
+            "epoch_s": d("epoch_s", 30.0, "time between planning epochs [s] (the simulator announces epochs)", 0.001, 86400.0),
+            "separation_m": d("separation_m", 100.0, "separation minimum [m]", 0.001, 100000.0),
+            "k": d("k", 5, "candidate routes per request", 1, 100),
+            "penalty_factor": d("penalty_factor", 5.0, "penalised Dijkstra factor for diverse candidates", 0.0, 1000.0),
+            "speed_mps": d("speed_mps", 10.0, "cruise speed [m/s]", 0.001, 1000.0),
+        }
+        d("solver_timeout_margin_s", 5.0, "extra wall time [s] to wait for the solver service before the local greedy fallback", 0.0, 3600.0)
+        d("solver_startup_timeout_s", 30.0, "wall time [s] to wait for the solver service at the first epoch "
+          "(nodes start in any order); later a missing service means the local greedy fallback at once", 0.0, 3600.0)
+        d("use_solver_service", True, "call /uam/solve_mwis; false solves in-process with the same backend")
+        d("wait_for_generator", True, "in lockstep, plan epoch k only after the request generator acknowledged it")
         if not params["network"]:
             raise ValueError("parameter network: empty; give a network file, e.g. config/networks/singapore.yaml")
         self.network = load_network(params["network"])
@@ -98,6 +90,7 @@ class PlannerNode(Node):
         self.create_subscription(EpochSync, m.TOPIC_SYNC, self._on_sync, m.QOS_LATCHED,
                                  callback_group=self._plan_group)
         self._client = self.create_client(SolveMwis, m.SERVICE_SOLVE, callback_group=self._client_group)
+        self._startup_waited = False  # the first epoch waits for the solver to come up
 
         self._announced: dict[int, float] = {}       # simulator: epoch -> time [s]
         self._generator_acks: dict[int, int] = {}    # generator: epoch -> requests published so far
@@ -123,11 +116,21 @@ class PlannerNode(Node):
                 except (UnknownBackendError, TypeError):
                     return SetParametersResult(successful=False, reason=(
                         f"backend: unknown backend {prm.value!r}; known: {', '.join(backend_names())}"))
+        for prm in params:
+            try:
+                if prm.name == "time_limit_s":
+                    check("time_limit_s", prm.value, 1.0, 0.001, 3600.0)
+                elif prm.name == "seed":
+                    check("seed", prm.value, 0, 0, 2**31 - 1)
+                elif prm.name == "solver_timeout_margin_s":
+                    check(prm.name, prm.value, 1.0, 0.0, 3600.0)
+            except ValueError as exc:
+                return SetParametersResult(successful=False, reason=str(exc))
         for prm in params:  # accepted: backend, time limit and seed take effect at the next epoch
             if prm.name in ("backend", "time_limit_s", "seed"):
                 with self._lock:
-                    fields = {"backend": prm.value} if prm.name == "backend" else {prm.name: prm.value}
-                    self.config = PlanningConfig(**{**self.config.__dict__, **fields})
+                    fields = {prm.name: float(prm.value) if prm.name == "time_limit_s" else prm.value}
+                    self.config = dataclasses.replace(self.config, **fields)
                     self.planner.config = self.config
         return SetParametersResult(successful=True)
 
@@ -136,10 +139,14 @@ class PlannerNode(Node):
         """Injected into Planner: solve via /uam/solve_mwis; raise so the cycle falls back to greedy."""
         if not self.get_parameter("use_solver_service").value:
             return default_solve_mwis(self.config)(weights, edges, groups)
+        if not self._client.service_is_ready() and not self._startup_waited:
+            self._startup_waited = True
+            self._client.wait_for_service(timeout_sec=self.get_parameter("solver_startup_timeout_s").value)
         if not self._client.service_is_ready():
             msg = f"solver service {m.SERVICE_SOLVE} is not available"
             self.get_logger().warning(msg + "; solving with greedy locally")
             raise RuntimeError(msg)
+        self._startup_waited = True
         vertex_group = np.full(len(weights), -1, dtype=np.int64)
         for gid, members in enumerate(groups or ()):
             vertex_group[np.asarray(members, dtype=np.int64)] = gid
@@ -185,7 +192,7 @@ class PlannerNode(Node):
             if reason is None:
                 reason = self.planner.submit(req)
             else:
-                self.planner._rejected_since_plan += 1
+                self.planner.record_rejection()
             if reason is not None:
                 epoch = max(self._next_epoch - 1, 0)
                 self._publish_plan(m.unapproved_plan(

@@ -14,9 +14,9 @@ from __future__ import annotations
 
 import math
 import sys
+from functools import partial
 
 import rclpy
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -24,6 +24,7 @@ from uam_msgs.msg import EpochSync, FlightRequest
 
 from uam_planner.network import load_network
 from uam_planner.nodes import messages as m
+from uam_solvers.nodes.params import declare
 from uam_sim.demand import DemandSchedule, RequestGenerator, load_demand
 
 
@@ -33,35 +34,20 @@ class RequestGeneratorNode(Node):
         if not any(p.name == "use_sim_time" for p in kwargs["parameter_overrides"]):
             kwargs["parameter_overrides"].append(Parameter("use_sim_time", Parameter.Type.BOOL, True))
         super().__init__("request_generator", **kwargs)
-        self.declare_parameter("network", "", ParameterDescriptor(
-            description="routing network file; its aerodromes are the origins and destinations"))
-        self.declare_parameter("rate", 10.0, ParameterDescriptor(
-            description="requests per interval (paper: 1 to 20 per 30 s); fractional rates allowed",
-            floating_point_range=[FloatingPointRange(from_value=0.0, to_value=10000.0)]))
-        self.declare_parameter("interval_s", 30.0, ParameterDescriptor(
-            description="time between request batches [s]; must match the simulator's epoch_s",
-            floating_point_range=[FloatingPointRange(from_value=0.001, to_value=86400.0)]))
-        self.declare_parameter("window_s", 60.0, ParameterDescriptor(
-            description="latest departure - earliest departure of each request [s]",
-            floating_point_range=[FloatingPointRange(from_value=0.0, to_value=86400.0)]))
-        self.declare_parameter("seed", 0, ParameterDescriptor(
-            description="random seed of the request stream",
-            integer_range=[IntegerRange(from_value=0, to_value=2**31 - 1)]))
-        self.declare_parameter("demand_file", "", ParameterDescriptor(
-            description="optional YAML demand file to replay instead of random requests (docs/demand-format.md)"))
-        net_path = self.get_parameter("network").value
+        d = partial(declare, self)
+        net_path = d("network", "", "routing network file; its aerodromes are the origins and destinations")
+        rate = d("rate", 10.0, "requests per interval (paper: 1 to 20 per 30 s); fractional rates allowed", 0.0, 10000.0)
+        interval = d("interval_s", 30.0, "time between request batches [s]; must match the simulator's epoch_s", 0.001, 86400.0)
+        window = d("window_s", 60.0, "latest departure - earliest departure of each request [s]", 0.0, 86400.0)
+        seed = d("seed", 0, "random seed of the request stream", 0, 2**31 - 1)
+        demand_file = d("demand_file", "", "optional YAML demand file to replay instead of random requests (docs/demand-format.md)")
         if not net_path:
             raise ValueError("parameter network: empty; give a network file, e.g. config/networks/singapore.yaml")
         network = load_network(net_path)
-        interval = float(self.get_parameter("interval_s").value)
-        demand_file = self.get_parameter("demand_file").value
         if demand_file:
-            self.source = DemandSchedule(load_demand(demand_file, network.aerodrome_ids,
-                                                     float(self.get_parameter("window_s").value)), interval)
+            self.source = DemandSchedule(load_demand(demand_file, network.aerodrome_ids, window), interval)
         else:
-            self.source = RequestGenerator(network.aerodrome_ids, float(self.get_parameter("rate").value),
-                                           interval, float(self.get_parameter("window_s").value),
-                                           int(self.get_parameter("seed").value))
+            self.source = RequestGenerator(network.aerodrome_ids, rate, interval, window, seed)
         self.interval_s = interval
         self._pub = self.create_publisher(FlightRequest, m.TOPIC_REQUESTS, m.QOS_LATCHED)
         self._sync_pub = self.create_publisher(EpochSync, m.TOPIC_SYNC, m.QOS_LATCHED)
@@ -71,8 +57,8 @@ class RequestGeneratorNode(Node):
         self.finished = False
         self.get_logger().info(
             "replaying " + demand_file if demand_file else
-            f"random demand: {self.get_parameter('rate').value:g} requests per {interval:g} s, "
-            f"seed {self.get_parameter('seed').value}, {len(network.aerodrome_ids)} aerodromes")
+            f"random demand: {rate:g} requests per {interval:g} s, seed {seed}, "
+            f"{len(network.aerodrome_ids)} aerodromes")
 
     def _on_sync(self, msg: EpochSync) -> None:
         if msg.sender != "simulator":

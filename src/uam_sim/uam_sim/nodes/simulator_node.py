@@ -22,10 +22,10 @@ from __future__ import annotations
 import math
 import sys
 import time
+from functools import partial
 
 import rclpy
 from geometry_msgs.msg import Point, Pose, PoseArray, Quaternion, Vector3
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, DurabilityPolicy, HistoryPolicy
@@ -33,6 +33,7 @@ from rosgraph_msgs.msg import Clock
 from uam_msgs.msg import EpochSync, FleetState, FlightPlan, VehicleState
 
 from uam_planner.nodes import messages as m
+from uam_solvers.nodes.params import declare
 from uam_sim.fleet import Fleet
 
 MODES = ("lockstep", "realtime")
@@ -49,39 +50,24 @@ def _yaw_quaternion(vx: float, vy: float) -> Quaternion:
 class SimulatorNode(Node):
     def __init__(self, **kwargs):
         super().__init__("simulator", **kwargs)
-        self.declare_parameter("step_s", 1.0, ParameterDescriptor(
-            description="simulation step [s]", floating_point_range=[FloatingPointRange(from_value=0.001, to_value=3600.0)]))
-        self.declare_parameter("duration_s", 3500.0, ParameterDescriptor(
-            description="simulated time after which the run ends [s]",
-            floating_point_range=[FloatingPointRange(from_value=0.0, to_value=10_000_000.0)]))
-        self.declare_parameter("epoch_s", 30.0, ParameterDescriptor(
-            description="time between planning epochs [s]; a multiple of step_s",
-            floating_point_range=[FloatingPointRange(from_value=0.001, to_value=86400.0)]))
-        self.declare_parameter("mode", "lockstep", ParameterDescriptor(
-            description="'lockstep' (as fast as the planner allows, CPU-independent result) or 'realtime' (paced)"))
-        self.declare_parameter("real_time_factor", 1.0, ParameterDescriptor(
-            description="in realtime mode: simulated seconds per wall second",
-            floating_point_range=[FloatingPointRange(from_value=0.001, to_value=100000.0)]))
-        self.declare_parameter("expected_subscribers", 2, ParameterDescriptor(
-            description="start only when this many nodes subscribe to /uam/epoch_sync (planner, generator, recorder)",
-            integer_range=[IntegerRange(from_value=0, to_value=100)]))
-        self.declare_parameter("ack_timeout_s", 120.0, ParameterDescriptor(
-            description="wall time [s] to wait for an epoch acknowledgement before ending the run with an error",
-            floating_point_range=[FloatingPointRange(from_value=0.1, to_value=86400.0)]))
-        g = self.get_parameter
-        self.step_s = float(g("step_s").value)
-        self.duration_s = float(g("duration_s").value)
-        self.epoch_s = float(g("epoch_s").value)
-        self.mode = g("mode").value
-        if self.mode not in MODES:
-            raise ValueError(f"parameter mode: {self.mode!r} is not one of {MODES}")
+        d = partial(declare, self)
+        self.step_s = d("step_s", 1.0, "simulation step [s]", 0.001, 3600.0)
+        self.duration_s = d("duration_s", 3500.0, "simulated time after which the run ends [s]", 0.0, 1e7)
+        self.epoch_s = d("epoch_s", 30.0, "time between planning epochs [s]; a multiple of step_s", 0.001, 86400.0)
+        self.mode = d("mode", "lockstep", "'lockstep': as fast as the planner allows, result independent of CPU "
+                      "speed; 'realtime': paced at real_time_factor", choices=MODES)
+        self.rtf = d("real_time_factor", 1.0, "in realtime mode: simulated seconds per wall second", 0.001, 1e5)
+        self.expected_subscribers = d("expected_subscribers", 2, "start only when this many nodes subscribe to "
+                                      "/uam/epoch_sync (planner, request_generator, recorder)", 0, 100)
+        self.expected_stream_subscribers = d(
+            "expected_stream_subscribers", 0, "also wait until this many nodes subscribe to /uam/fleet_state and "
+            "/uam/fleet_poses (1 with the recorder), so a recording starts at t = 0", 0, 100)
+        self.ack_timeout_s = d("ack_timeout_s", 120.0, "wall time [s] to wait for an epoch acknowledgement "
+                               "before ending the run with an error", 0.1, 86400.0)
         ratio = self.epoch_s / self.step_s
         if not math.isclose(ratio, round(ratio), rel_tol=0, abs_tol=1e-9):
             raise ValueError(f"parameter epoch_s: {self.epoch_s} is not a multiple of step_s {self.step_s}")
         self.steps_per_epoch = int(round(ratio))
-        self.rtf = float(g("real_time_factor").value)
-        self.expected_subscribers = int(g("expected_subscribers").value)
-        self.ack_timeout_s = float(g("ack_timeout_s").value)
 
         self._clock_pub = self.create_publisher(Clock, "/clock", QOS_CLOCK)
         self._fleet_pub = self.create_publisher(FleetState, m.TOPIC_FLEET, m.QOS_STREAM)
@@ -148,7 +134,9 @@ class SimulatorNode(Node):
         if self.finished:
             return
         if not self.started:
-            if self._sync_pub.get_subscription_count() < self.expected_subscribers:
+            if (self._sync_pub.get_subscription_count() < self.expected_subscribers
+                    or self._fleet_pub.get_subscription_count() < self.expected_stream_subscribers
+                    or self._pose_pub.get_subscription_count() < self.expected_stream_subscribers):
                 return
             self.started = True
             self._wall_start = time.monotonic()

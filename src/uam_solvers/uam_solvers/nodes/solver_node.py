@@ -23,12 +23,13 @@ import sys
 import numpy as np
 import rclpy
 from diagnostic_msgs.msg import KeyValue
-from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult, FloatingPointRange, IntegerRange
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from uam_msgs.srv import SolveMwis
 
+from uam_solvers.nodes.params import check, declare
 from uam_solvers import MwisInputError, MwisProblem, solve_problem
 from uam_solvers.registry import UnknownBackendError, backend_names, get_backend
 
@@ -72,16 +73,11 @@ class SolverNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__("solver", **kwargs)
-        self.declare_parameter("default_backend", "exact", ParameterDescriptor(
-            description="MWIS backend used when a request names none; one of: " + ", ".join(backend_names())))
-        self.declare_parameter("default_time_limit_s", 10.0, ParameterDescriptor(
-            description="solve time limit [s] used when a request gives 0",
-            floating_point_range=[FloatingPointRange(from_value=0.001, to_value=3600.0)]))
-        self.declare_parameter("max_vertices", 20000, ParameterDescriptor(
-            description="graphs with more vertices are refused",
-            integer_range=[IntegerRange(from_value=1, to_value=10_000_000)]))
-        self.declare_parameter("layers", True, ParameterDescriptor(
-            description="split into components and apply exact reductions around the backend"))
+        declare(self, "default_backend", "exact",
+                "MWIS backend used when a request names none; one of: " + ", ".join(backend_names()))
+        declare(self, "default_time_limit_s", 10.0, "solve time limit [s] used when a request gives 0", 0.001, 3600.0)
+        declare(self, "max_vertices", 20000, "graphs with more vertices are refused", 1, 10_000_000)
+        declare(self, "layers", True, "split into components and apply exact reductions around the backend")
         problem = self._check_backend(self.get_parameter("default_backend").value)
         if problem:
             raise ValueError(f"parameter default_backend: {problem}")
@@ -103,7 +99,13 @@ class SolverNode(Node):
         return "" if ok else f"backend {name!r} is unavailable here: {reason}"
 
     def _on_set_parameters(self, params) -> SetParametersResult:
+        limits = {"default_time_limit_s": (1.0, 0.001, 3600.0), "max_vertices": (1, 1, 10_000_000)}
         for p in params:
+            if p.name in limits:
+                try:
+                    check(p.name, p.value, *limits[p.name])
+                except ValueError as exc:
+                    return SetParametersResult(successful=False, reason=str(exc))
             if p.name == "default_backend":
                 problem = self._check_backend(p.value)
                 if problem:
