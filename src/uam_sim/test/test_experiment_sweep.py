@@ -173,3 +173,44 @@ def test_command_line_runs_a_small_sweep(tmp_path):
     assert rc == 0
     assert (tmp_path / "res" / "REPORT.md").exists()
     assert len(list((tmp_path / "res" / "cells").glob("*.json"))) == 1
+
+
+def test_sweep_audit_hand_computed_closest_approach():
+    from uam_planner.trajectory import Trajectory
+    from uam_sim.experiment import sweep_audit
+    import numpy as np
+    # r1 east at 10 m/s, z = 100; r2 north at 10 m/s, z = 150, two segments; r3 5 km away.
+    # |d|^2 = 2 (10 t - 500)^2 + 50^2: closest 50 m at t = 50 s.
+    r1 = Trajectory(np.array([0.0, 100.0]), np.array([[0, 0, 100], [1000, 0, 100]], float))
+    r2 = Trajectory(np.array([0.0, 50.0, 100.0]),
+                    np.array([[500, -500, 150], [500, 0, 150], [500, 500, 150]], float))
+    r3 = Trajectory(np.array([0.0, 100.0]), np.array([[0, 5000, 100], [1000, 5000, 100]], float))
+    later = Trajectory(np.array([200.0, 300.0]), np.array([[0, 0, 100], [1000, 0, 100]], float))
+    a = sweep_audit([r1, r2, r3, later], 100.0, ["r1", "r2", "r3", "r4"])
+    assert a["min_separation_m"] == pytest.approx(50.0)
+    assert a["min_time_s"] == pytest.approx(50.0)
+    assert a["pair_of_min"] == ["r1", "r2"]
+    assert a["losses"] == 1 and a["loss_pairs"][0][:2] == ["r1", "r2"]
+    assert a["pairs_checked"] == 3          # r4 shares no time with the others
+    assert sweep_audit([r1], 100.0)["min_separation_m"] is None
+
+
+def test_sweep_audit_agrees_with_the_brute_force_audit():
+    from uam_planner.audit import audit_flights
+    from uam_sim.experiment import sweep_audit
+    net = load_network_spec(NET)
+    flown = []
+    run_scenario(net, "greedy", 8, 3, 900.0, make_config({"audit": False}),
+                 observer=lambda t, e, s, r, res: flown.extend(res.approved))
+    trajs, labels = [f.trajectory for f in flown], [f.request_id for f in flown]
+    assert len(trajs) > 30
+    for sep in (100.0, 400.0):   # 400 m: many "losses", to compare the pair sets
+        a = sweep_audit(trajs, sep, labels, chunk_pairs=5000, max_listed=10**6)
+        b = audit_flights(trajs, sep, labels)
+        assert a["min_separation_m"] == pytest.approx(b.min_separation_m, abs=1e-6)
+        assert a["pairs_checked"] == b.pairs_checked
+        near = lambda d: abs(d - sep) < 1e-6  # noqa: E731  (ties at the threshold: rounding)
+        sa = {frozenset(x[:2]) for x in a["loss_pairs"] if not near(x[2])}
+        sb = {frozenset(x[:2]) for x in b.losses if not near(x[2])}
+        assert sa == sb
+    assert sep == 400.0 and sa  # the comparison saw losses
