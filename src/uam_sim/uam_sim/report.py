@@ -186,8 +186,12 @@ def write_report(sweep, outputs: dict, machine: dict, out: Path) -> Path:
     audited = sum(1 for c in cells if c.get("audit"))
     flights = sum(int(c["summary"]["approved"]) for c in cells)
     L += ["## Safety audit", "",
-          f"The independent exact closest-approach audit (`uam_planner.audit.audit_flights`) ran "
-          f"on {audited} of {len(cells)} runs over {flights} flown flights in total. Minimum "
+          f"The exact closest-approach audit ran on {audited} of {len(cells)} runs over {flights} "
+          f"flown flights in total: every pair of straight segments of different flights that "
+          f"share time, closest approach in closed form (`uam_sim.experiment.sweep_audit`, a "
+          f"vectorised time sweep independent of the planner's separation kernel; its tests hold "
+          f"it equal to the brute-force `uam_planner.audit.audit_flights`; recordings are audited "
+          f"by `uam_sim.analysis` with the latter). Minimum "
           f"separation seen: **{_f(min(seps) if seps else None, 2)} m** (minimum required "
           f"{cfg.separation_m:g} m). Losses of separation: **{losses}**"
           + (" (as required)." if losses == 0 else " - THIS IS A SAFETY FAILURE."), ""]
