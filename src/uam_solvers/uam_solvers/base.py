@@ -232,11 +232,23 @@ def _normalise_groups(groups: Sequence[Any] | None, n: int) -> list[np.ndarray]:
             _as_index_array(a, f"groups[{gi}]", n)
         raise
     gid = np.repeat(np.arange(lengths.size, dtype=np.int64), lengths)
-    key = np.unique(gid * max(n, 1) + idx)
+    key = sorted_unique(gid * max(n, 1) + idx)
     gid, v = key // max(n, 1), key % max(n, 1)
     counts = np.bincount(gid, minlength=lengths.size)
     pieces = np.split(v.astype(np.int32), np.cumsum(counts)[:-1])
     return [p for p in pieces if p.size >= 2]
+
+
+def sorted_unique(values: np.ndarray) -> np.ndarray:
+    """Sorted unique values of a 1-D integer array by sort-and-compare: several times faster
+    here than numpy 2's hash-based ``np.unique`` on 10^5 keys. O(m log m)."""
+    a = np.sort(np.asarray(values).reshape(-1), kind="stable")
+    if a.size == 0:
+        return a
+    keep = np.empty(a.size, dtype=bool)
+    keep[0] = True
+    np.not_equal(a[1:], a[:-1], out=keep[1:])
+    return a[keep]
 
 
 @functools.lru_cache(maxsize=64)
@@ -263,7 +275,7 @@ def _normalise_edges(e: np.ndarray) -> np.ndarray:
     lo = np.minimum(e[:, 0], e[:, 1]).astype(np.int64)
     hi = np.maximum(e[:, 0], e[:, 1]).astype(np.int64)
     base = int(hi.max()) + 1
-    key = np.unique(lo * base + hi)  # 1-D unique is far faster than unique(axis=0)
+    key = sorted_unique(lo * base + hi)
     return np.stack([key // base, key % base], axis=1)
 
 
@@ -384,6 +396,9 @@ class Backend(ABC):
     #: True for backends with a large fixed cost per call (ComponentSplit then hands them all
     #: non-trivial components in one call rather than one call per component).
     batch_components: bool = False
+    #: True for backends that apply MWIS reductions of their own (KaMIS, CHILS); the Reduce
+    #: layer then passes large graphs straight through instead of paying for a second pass.
+    reduces_itself: bool = False
 
     def available(self) -> tuple[bool, str]:
         """``(True, "")`` when the backend can run here, else ``(False, reason)``."""

@@ -29,8 +29,7 @@ __all__ = ["KamisBackend", "ChilsBackend"]
 
 
 def _csr(problem: MwisProblem) -> tuple[np.ndarray, np.ndarray]:
-    a = problem.adjacency()
-    return a.indptr, a.indices
+    return problem.csr()
 
 
 def _available() -> tuple[bool, str]:
@@ -54,6 +53,7 @@ class KamisBackend(Backend):
     """KaMIS weighted branch-and-reduce; options ``resolution``, ``finish_fraction`` (0.9)."""
 
     name = "kamis"
+    reduces_itself = True
     description = "KaMIS branch-and-reduce (chszlablib), exact when it finishes within the limit"
 
     def available(self) -> tuple[bool, str]:
@@ -94,6 +94,7 @@ class ChilsBackend(Backend):
 
     name = "chils"
     batch_components = True  # ~70 ms set-up per call
+    reduces_itself = True
     description = "CHILS concurrent local search (chszlablib), best heuristic for large graphs"
 
     def available(self) -> tuple[bool, str]:
