@@ -3,6 +3,10 @@
 Each vehicle flies its piecewise-linear trajectory exactly (constant speed per segment, as
 planned); the simulator samples the fleet at fixed steps. A vehicle is airborne from its
 departure to its arrival time inclusive and is dropped after it landed.
+
+Sampling is vectorised over the fleet: the flights' waypoints are kept in padded arrays
+(rebuilt only when a flight is added or lands), so one sample costs a few numpy operations
+whatever the fleet size.
 """
 
 from __future__ import annotations
@@ -19,16 +23,20 @@ PHASE_LANDING = 2
 
 
 @dataclass(frozen=True)
-class VehicleSample:
-    """One airborne vehicle at one time. Positions [m] and velocities [m/s] in ENU."""
+class FleetSample:
+    """The airborne vehicles at one time, one row each, sorted by id. ENU metres and m/s."""
 
-    vehicle_id: str
-    position_m: np.ndarray
-    velocity_mps: np.ndarray
-    phase: int
-    segment_index: int
-    distance_flown_m: float
-    distance_remaining_m: float
+    t_s: float
+    vehicle_ids: list
+    positions_m: np.ndarray       # (v, 3)
+    velocities_mps: np.ndarray    # (v, 3)
+    phases: np.ndarray            # (v,) PHASE_*
+    segment_indices: np.ndarray   # (v,)
+    flown_m: np.ndarray           # (v,) distance flown since departure
+    remaining_m: np.ndarray       # (v,) distance left to the destination
+
+    def __len__(self) -> int:
+        return len(self.vehicle_ids)
 
 
 class Fleet:
@@ -36,11 +44,12 @@ class Fleet:
 
     ``add(vehicle_id, trajectory)`` registers a flight; ``sample(t_s)`` returns the airborne
     vehicles at ``t_s`` sorted by id and forgets the ones that landed before ``t_s``.
-    O(v log p) per sample for v vehicles of p waypoints.
+    O(v p) per sample for v flights of at most p waypoints, vectorised.
     """
 
     def __init__(self):
-        self._flights: dict[str, tuple[Trajectory, np.ndarray]] = {}
+        self._flights: dict[str, Trajectory] = {}
+        self._arrays = None
         self.total_added = 0
 
     def __len__(self) -> int:
@@ -49,29 +58,51 @@ class Fleet:
     def add(self, vehicle_id: str, trajectory: Trajectory) -> None:
         if vehicle_id in self._flights:
             raise ValueError(f"vehicle_id: {vehicle_id!r} is already flying")
-        seg_len = np.linalg.norm(np.diff(trajectory.points_m, axis=0), axis=1)
-        self._flights[vehicle_id] = (trajectory, np.concatenate([[0.0], np.cumsum(seg_len)]))
+        self._flights[vehicle_id] = trajectory
+        self._arrays = None
         self.total_added += 1
 
-    def sample(self, t_s: float) -> list[VehicleSample]:
-        out: list[VehicleSample] = []
-        landed = []
-        for vid in sorted(self._flights):
-            traj, cum = self._flights[vid]
-            times, points = traj.times_s, traj.points_m
-            if t_s > times[-1]:
-                landed.append(vid)
-                continue
-            if t_s < times[0]:
-                continue
-            seg = int(min(np.searchsorted(times, t_s, side="right") - 1, len(times) - 2))
-            frac = (t_s - times[seg]) / (times[seg + 1] - times[seg])
-            pos = points[seg] + frac * (points[seg + 1] - points[seg])
-            vel = (points[seg + 1] - points[seg]) / (times[seg + 1] - times[seg])
-            n_seg = len(times) - 1
-            phase = PHASE_TAKEOFF if seg == 0 else (PHASE_LANDING if seg == n_seg - 1 else PHASE_CRUISE)
-            flown = float(cum[seg] + frac * (cum[seg + 1] - cum[seg]))
-            out.append(VehicleSample(vid, pos, vel, phase, seg, flown, float(cum[-1] - flown)))
-        for vid in landed:
-            del self._flights[vid]
-        return out
+    def _build(self):
+        ids = sorted(self._flights)
+        v = len(ids)
+        p = max((len(self._flights[i].times_s) for i in ids), default=2)
+        T = np.full((v, p), np.inf)
+        P = np.zeros((v, p, 3))
+        C = np.zeros((v, p))
+        nseg = np.zeros(v, dtype=np.int64)
+        for row, vid in enumerate(ids):
+            traj = self._flights[vid]
+            k = len(traj.times_s)
+            T[row, :k] = traj.times_s
+            P[row, :k] = traj.points_m
+            P[row, k:] = traj.points_m[-1]
+            seg_len = np.linalg.norm(np.diff(traj.points_m, axis=0), axis=1)
+            C[row, 1:k] = np.cumsum(seg_len)
+            C[row, k:] = C[row, k - 1]
+            nseg[row] = k - 1
+        arrival = T[np.arange(v), nseg] if v else np.zeros(0)
+        self._arrays = (ids, T, P, C, nseg, arrival)
+
+    def sample(self, t_s: float) -> FleetSample:
+        if self._arrays is None:
+            self._build()
+        ids, T, P, C, nseg, arrival = self._arrays
+        landed = arrival < t_s
+        if landed.any():
+            for row in np.flatnonzero(landed):
+                del self._flights[ids[row]]
+            self._build()
+            ids, T, P, C, nseg, arrival = self._arrays
+        rows = np.flatnonzero(T[:, 0] <= t_s) if len(ids) else np.zeros(0, dtype=np.int64)
+        seg = np.minimum((T[rows] <= t_s).sum(axis=1) - 1, nseg[rows] - 1)
+        t0, t1 = T[rows, seg], T[rows, seg + 1]
+        frac = (t_s - t0) / (t1 - t0)
+        p0, p1 = P[rows, seg], P[rows, seg + 1]
+        pos = p0 + frac[:, None] * (p1 - p0)
+        vel = (p1 - p0) / (t1 - t0)[:, None]
+        c0, c1 = C[rows, seg], C[rows, seg + 1]
+        flown = c0 + frac * (c1 - c0)
+        total = C[rows, nseg[rows]]
+        phase = np.where(seg == 0, PHASE_TAKEOFF, np.where(seg == nseg[rows] - 1, PHASE_LANDING, PHASE_CRUISE))
+        return FleetSample(float(t_s), [ids[r] for r in rows], pos, vel, phase.astype(np.uint8),
+                           seg.astype(np.int64), flown, total - flown)

@@ -25,26 +25,22 @@ import time
 from functools import partial
 
 import rclpy
-from geometry_msgs.msg import Point, Pose, PoseArray, Quaternion, Vector3
+from geometry_msgs.msg import PoseArray
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, DurabilityPolicy, HistoryPolicy
 from rosgraph_msgs.msg import Clock
-from uam_msgs.msg import EpochSync, FleetState, FlightPlan, VehicleState
+from uam_msgs.msg import EpochSync, FleetState, FlightPlan
 
 from uam_planner.nodes import messages as m
 from uam_solvers.nodes.params import declare
+from uam_sim.cdr import encode_fleet_state, encode_pose_array, yaw_quaternions
 from uam_sim.fleet import Fleet
 
 MODES = ("lockstep", "realtime")
 # Like rclpy's ClockQoS but reliable, so recordings hold every tick; best-effort readers still match.
 QOS_CLOCK = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE,
                        durability=DurabilityPolicy.VOLATILE)
-
-
-def _yaw_quaternion(vx: float, vy: float) -> Quaternion:
-    yaw = math.atan2(vy, vx) if (vx or vy) else 0.0
-    return Quaternion(x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2))
 
 
 class SimulatorNode(Node):
@@ -179,23 +175,15 @@ class SimulatorNode(Node):
         t = self.t_s
         stamp = m.to_time(t)
         self._clock_pub.publish(Clock(clock=stamp))
-        samples = self.fleet.sample(t)
-        self.active_samples.append(len(samples))
-        fleet = FleetState(step_index=self.step_index)
-        fleet.header.stamp = stamp
-        fleet.header.frame_id = m.FRAME_ID
-        poses = PoseArray()
-        poses.header = fleet.header
-        for s in samples:
-            px, py, pz = (float(v) for v in s.position_m)
-            vx, vy, vz = (float(v) for v in s.velocity_mps)
-            fleet.vehicles.append(VehicleState(
-                vehicle_id=s.vehicle_id, position=Point(x=px, y=py, z=pz), velocity=Vector3(x=vx, y=vy, z=vz),
-                phase=s.phase, segment_index=s.segment_index, distance_flown_m=s.distance_flown_m,
-                distance_remaining_m=s.distance_remaining_m))
-            poses.poses.append(Pose(position=Point(x=px, y=py, z=pz), orientation=_yaw_quaternion(vx, vy)))
-        self._fleet_pub.publish(fleet)
-        self._pose_pub.publish(poses)
+        fs = self.fleet.sample(t)
+        self.active_samples.append(len(fs))
+        # Serialized directly from the fleet arrays (uam_sim.cdr): same bytes as the message objects,
+        # a fraction of the cost (see uam_sim/cdr.py).
+        self._fleet_pub.publish(encode_fleet_state(
+            stamp.sec, stamp.nanosec, m.FRAME_ID, self.step_index, fs.vehicle_ids, fs.positions_m,
+            fs.velocities_mps, fs.phases, fs.segment_indices, fs.flown_m, fs.remaining_m))
+        self._pose_pub.publish(encode_pose_array(
+            stamp.sec, stamp.nanosec, m.FRAME_ID, fs.positions_m, yaw_quaternions(fs.velocities_mps)))
 
     def _finish(self) -> None:
         if self.finished:
