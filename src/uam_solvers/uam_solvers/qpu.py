@@ -211,7 +211,6 @@ class AdvantageStandInSampler(dimod.Sampler, dimod.Structured):
 
 def _emulator_sampler(missing_qubits: Iterable[int] = ()):
     """dimod.StructureComposite(SimulatedAnnealingSampler) on the Advantage graph."""
-    import dimod
     from dwave.samplers import SimulatedAnnealingSampler
 
     nodes, edges = advantage_graph(missing_qubits)
@@ -294,7 +293,6 @@ def embedded_solve(problem: MwisProblem, child, *, backend: str, seed: int, time
     Returns:
         MwisResult (proven_optimal False) with the statistics listed in the module docstring.
     """
-    import dimod
     from dwave.embedding.chain_breaks import majority_vote
     from dwave.embedding.chain_strength import uniform_torque_compensation
     from dwave.system import EmbeddingComposite
