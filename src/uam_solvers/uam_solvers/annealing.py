@@ -122,7 +122,7 @@ def sampleset_to_array(sampleset, n: int) -> np.ndarray:
     """
     record = sampleset.record
     values = np.asarray(record.sample)
-    if values.size and values.min() < 0:  # SPIN -> BINARY
+    if sampleset.vartype is dimod.SPIN:
         values = (values > 0).astype(np.int8)
     columns = np.asarray(list(sampleset.variables), dtype=np.int64)
     out = np.zeros((values.shape[0], n), dtype=np.int8)

@@ -229,6 +229,8 @@ def large_instance(n_vertices: int, seed: int, k: int = 5, mean_interactions: fl
     conflict_prob = _check_prob("conflict_prob", conflict_prob)
     block_prob = _check_prob("block_prob", block_prob)
     block_fill = _check_prob("block_fill", block_fill)
+    if not (detour_max > 0.02 and math.isfinite(detour_max)):
+        raise MwisInputError(f"detour_max must be a finite number > 0.02, got {detour_max!r}")
     n_requests = -(-n_vertices // k)
     rng = np.random.default_rng(seed)
     weights = _candidate_weights(rng, n_requests, k, detour_max)

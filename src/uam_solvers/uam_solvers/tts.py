@@ -16,7 +16,9 @@ split, no fallback: the solver itself is measured, as in the paper). Definitions
 * p_opt: fraction of the R runs whose answer is a valid independent set reaching the proven
   optimum (objective >= optimum - 1e-9 relative). The optimum comes from the corpus field
   "optimum" or else from the `exact` backend (CP-SAT), which must prove optimality; instances
-  without a proven optimum are reported and skipped;
+  without a proven optimum are reported and skipped. CP-SAT proves optimality for weights
+  rounded to 10^-6 of the largest; its answer is a real independent set, so any answer at least
+  as heavy in float counts as optimal;
 * TTS(0.99) = t_c * log(1 - 0.99) / log(1 - p_opt), the expected time to see the optimum at least
   once with 99 % probability. When p_opt >= 0.99 one run already meets the target, so TTS = t_c
   (p_opt = 1 gives t_c). A deterministic backend (greedy, exact, kamis, gurobi) that misses the
