@@ -129,6 +129,8 @@ def test_figures_report_and_tables_are_written(tmp_path):
         # exact is the reference optimum: it reaches it in every run
         assert all(r["p_opt"] == 1.0 for r in tts["rows"] if r["backend"] == "exact")
         assert "TTS(0.99) per backend" in report
+        again = run_experiment(cfg, progress=False, figures=False, report=False)
+        assert again["sweep"].computed == [] and again["tts"].get("reused") is True
     from uam_solvers.instances import load_corpus
     corpus = load_corpus(tmp_path / "instances.jsonl")
     assert corpus and all(e.problem.n <= cfg.corpus_max_vertices for e in corpus)

@@ -731,8 +731,23 @@ def run_tts(cfg: ExperimentConfig, entries: list) -> dict:
             backends.append(b)
         else:
             unavailable[b] = why
-    t0 = time.perf_counter()
     caps = dict(t.get("backend_instances") or {})
+    # a finished study of the same sample and settings is reused (like a finished cell)
+    study_key = hashlib.sha256(json.dumps(
+        {"names": [e.name for e in sample], "backends": backends, "caps": caps,
+         "reads": int(t["reads"]), "repetitions": int(t.get("repetitions", 5)),
+         "seed": int(t.get("seed", 0)), "time_limit_s": float(t.get("time_limit_s", 10.0))},
+        sort_keys=True).encode()).hexdigest()
+    cache = out / "tts_study.json"
+    if cache.exists():
+        try:
+            cached = json.loads(cache.read_text(encoding="utf-8"))
+        except (OSError, json.JSONDecodeError):
+            cached = {}
+        if cached.get("key") == study_key:
+            cached["result"]["reused"] = True
+            return cached["result"]
+    t0 = time.perf_counter()
     rows, skipped = [], []
     for b in backends:
         # a slow backend may be studied on a seeded sub-sample of the same sample
@@ -746,11 +761,13 @@ def run_tts(cfg: ExperimentConfig, entries: list) -> dict:
     wall = time.perf_counter() - t0
     tts_mod.write_csv(out / "tts.csv", rows)
     rows = [asdict(r) if hasattr(r, "__dataclass_fields__") else dict(r) for r in rows]
-    return {"status": "ok", "rows": rows, "csv": str(out / "tts.csv"), "corpus": str(corpus),
-            "instances": len(sample), "skipped": skipped, "backends": backends,
-            "unavailable": unavailable, "reads": int(t["reads"]),
-            "repetitions": int(t.get("repetitions", 5)), "p": 0.99, "wall_s": wall,
-            "backend_instances": caps}
+    result = {"status": "ok", "rows": rows, "csv": str(out / "tts.csv"), "corpus": str(corpus),
+              "instances": len(sample), "skipped": skipped, "backends": backends,
+              "unavailable": unavailable, "reads": int(t["reads"]),
+              "repetitions": int(t.get("repetitions", 5)), "p": 0.99, "wall_s": wall,
+              "backend_instances": caps}
+    _write_json_atomic(cache, {"key": study_key, "result": result})
+    return result
 
 
 def machine_info() -> dict:
