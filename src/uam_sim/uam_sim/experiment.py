@@ -702,11 +702,16 @@ def sample_tts_corpus(entries: list, n: int, min_v: int, max_v: int, seed: int) 
 def run_tts(cfg: ExperimentConfig, entries: list) -> dict:
     """The TTS(p) study on a sample of the collected instances, through uam_solvers.tts.
 
+    ``tts.source_seeds`` (optional list) restricts the pool to the runs of those seeds, so the
+    study can start before the other seeds' runs finish and its sample does not change with them.
     Returns {"status": "ok"|"skipped", "reason", "csv", "rows", "corpus", "instances", ...}.
     """
     t = cfg.tts
     if not t.get("enabled", True):
         return {"status": "skipped", "reason": "disabled in the configuration (tts.enabled: false)"}
+    if t.get("source_seeds") is not None:
+        wanted = {int(x) for x in t["source_seeds"]}
+        entries = [e for e in entries if int(e.name.rsplit("-s", 1)[1].split("-")[0]) in wanted]
     sample = sample_tts_corpus(entries, int(t["instances"]), int(t["min_vertices"]),
                                int(t["max_vertices"]), int(t.get("seed", 0)))
     if not sample:
