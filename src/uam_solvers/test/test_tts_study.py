@@ -80,7 +80,8 @@ def test_cli_on_a_tiny_corpus_writes_csv_and_png(tmp_path, capsys):
                          optima=[brute_force(p) for p in problems])
     out = tmp_path / "out"
     assert main(["--corpus", str(corpus), "--backends", "greedy,sa,tabu", "--repetitions", "2",
-                 "--num-reads", "5", "--out", str(out)]) == 0
+                 "--num-reads", "5", "--out", str(out),
+                 "--backend-options", '{"sa": {"num_sweeps": 50}}']) == 0
     with (out / "tts.csv").open() as handle:
         rows = list(csv.DictReader(handle))
     assert list(rows[0]) == CSV_COLUMNS
@@ -98,6 +99,7 @@ def test_cli_on_a_tiny_corpus_writes_csv_and_png(tmp_path, capsys):
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 5000
     meta = json.loads((out / "tts_meta.json").read_text())
     assert meta["repetitions"] == 2 and meta["num_reads"] == 5
+    assert meta["backend_options"] == {"sa": {"num_sweeps": 50}}
     printed = capsys.readouterr().out
     assert "median TTS" in printed and "greedy" in printed
 

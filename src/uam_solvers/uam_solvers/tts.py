@@ -45,7 +45,7 @@ import sys
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Iterable, Sequence
+from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
@@ -148,18 +148,25 @@ def _reaches(objective: float, optimum: float) -> bool:
     return objective >= optimum - 1e-9 * max(1.0, abs(optimum))
 
 
-def _backend_options(name: str, num_reads: int, optimum: float) -> dict:
+def _backend_options(name: str, num_reads: int, optimum: float,
+                     extra: Mapping[str, Mapping] | None = None) -> dict:
+    options = {}
     if name in ANNEALING_BACKENDS:
-        return {"num_reads": int(num_reads), "optimum": float(optimum)}
-    return {}
+        options = {"num_reads": int(num_reads), "optimum": float(optimum)}
+    options.update((extra or {}).get(name, {}))
+    return options
 
 
 def run_study(entries: Sequence[CorpusEntry], backends: Sequence[str], repetitions: int,
               num_reads: int = DEFAULT_STUDY_NUM_READS, time_limit_s: float = 60.0,
               seed: int = 0, optimum_time_limit_s: float = 600.0,
               deterministic: Iterable[str] = DETERMINISTIC_BACKENDS,
+              backend_options: Mapping[str, Mapping] | None = None,
               log=print) -> tuple[list[TtsRow], list[str]]:
     """Run every backend R times on every instance; return (rows, skipped instance names).
+
+    backend_options: extra options per backend name, e.g. {"sa": {"num_sweeps": 1000}}
+    (annealers always get num_reads and the instance's optimum).
 
     Backends are looked up with uam_solvers.registry.get_backend and must be available.
     Complexity: instances x backends x repetitions backend calls, plus one CP-SAT solve per
@@ -191,7 +198,7 @@ def run_study(entries: Sequence[CorpusEntry], backends: Sequence[str], repetitio
                 skipped.append(entry.name)
                 continue
         for name, backend in solvers.items():
-            options = _backend_options(name, num_reads, optimum)
+            options = _backend_options(name, num_reads, optimum, backend_options)
             if name not in warmed:  # imports and one-time set-up are not part of t_c
                 backend.solve(problem, time_limit_s=time_limit_s, seed=seed, options=options)
                 warmed.add(name)
@@ -326,11 +333,18 @@ def _parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     parser.add_argument("--min-vertices", type=int, default=5)
     parser.add_argument("--max-vertices", type=int, default=50)
     parser.add_argument("--limit", type=int, help="use only the first N instances")
+    parser.add_argument("--backend-options", type=json.loads, default={},
+                        help='JSON object of extra options per backend, e.g. '
+                             '\'{"sa": {"num_sweeps": 1000}}\'')
     parser.add_argument("--generate-only", action="store_true",
                         help="write the generated corpus (with proven optima) and stop")
     args = parser.parse_args(argv)
     if args.generate is None and args.corpus is None:
         parser.error("give --corpus FILE, or --generate N")
+    if not isinstance(args.backend_options, dict) or not all(
+            isinstance(v, dict) for v in args.backend_options.values()):
+        parser.error("--backend-options must be a JSON object of objects, "
+                     f"got {args.backend_options!r}")
     return args
 
 
@@ -361,6 +375,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     started = time.perf_counter()
     rows, skipped = run_study(entries, backends, args.repetitions, num_reads=args.num_reads,
                               time_limit_s=args.time_limit_s, seed=args.seed,
+                              backend_options=args.backend_options,
                               log=lambda msg: print(msg, file=sys.stderr))
     csv_path = write_csv(out / "tts.csv", rows)
     png_path = plot_tts(out / "tts_boxplot.png", rows, backends)
@@ -368,6 +383,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "corpus": str(corpus_path), "instances": len(entries), "skipped": skipped,
         "backends": backends, "repetitions": args.repetitions, "num_reads": args.num_reads,
         "time_limit_s": args.time_limit_s, "seed": args.seed,
+        "backend_options": args.backend_options,
         "target_probability": TARGET_PROBABILITY,
         "deterministic_penalty_s": DETERMINISTIC_PENALTY_S,
         "machine": {"platform": platform.platform(), "python": platform.python_version(),
