@@ -75,22 +75,25 @@ export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$(( (RANDOM % 80) + 20 ))}"
 echo "run_fleet: policy $POLICY, backend $BACKEND, rate $RATE per 30 s, ${DURATION} s, seed $SEED, network $NETWORK"
 echo "run_fleet: outputs in $OUT (ROS_DOMAIN_ID=$ROS_DOMAIN_ID)"
 
-PIDS=()
+PIDS=() NAMES=()
 start() {  # start <pkg> <exe> <log name> [ros args...]
   local pkg=$1 exe=$2 name=$3; shift 3
   local cmd
   if command -v ros2 >/dev/null 2>&1; then cmd=(ros2 run "$pkg" "$exe")
   else cmd=("$ROOT/install/$pkg/lib/$pkg/$exe"); fi
   "${cmd[@]}" --ros-args "$@" >"$OUT/$name.log" 2>&1 &
-  PIDS+=($!)
+  PIDS+=($!) NAMES+=("$name")
+}
+alive() {  # a child that exited stays a zombie until reaped, and kill -0 still succeeds on it
+  [[ -r /proc/$1/stat ]] && [[ "$(cut -d' ' -f3 /proc/$1/stat 2>/dev/null)" != Z ]]
 }
 stop_all() {
   local sig=${1:-INT}
   for pid in "${PIDS[@]}"; do kill -"$sig" "$pid" 2>/dev/null || true; done
   local deadline=$((SECONDS + 10))
   for pid in "${PIDS[@]}"; do
-    while kill -0 "$pid" 2>/dev/null && (( SECONDS < deadline )); do sleep 0.1; done
-    if kill -0 "$pid" 2>/dev/null; then
+    while alive "$pid" && (( SECONDS < deadline )); do sleep 0.1; done
+    if alive "$pid"; then
       echo "run_fleet: process $pid did not stop within 10 s; killing it" >&2
       kill -KILL "$pid" 2>/dev/null || true
     fi
@@ -106,20 +109,33 @@ start uam_planner planner planner --params-file config/planner.yaml -p "network:
   -p "policy:=$POLICY" -p "backend:=$BACKEND"
 start uam_sim request_generator request_generator --params-file config/request_generator.yaml \
   -p "network:=$NETWORK" -p "rate:=$RATE" -p "seed:=$SEED" ${DEMAND:+-p "demand_file:=$DEMAND"}
-start uam_sim recorder recorder -p "output:=$MCAP" -p "network:=$NETWORK" -p "rerun:=$RERUN" -p "rerun_rrd:=$RRD"
+start uam_sim recorder recorder -p "output:=$MCAP" -p "network:=$NETWORK" -p "rerun:='$RERUN'" -p "rerun_rrd:=$RRD"
 REC_PID=${PIDS[-1]}
 start uam_sim simulator simulator --params-file config/simulator.yaml -p "duration_s:=$DURATION" \
   -p "mode:=$MODE" -p "real_time_factor:=$RTF"
 SIM_PID=${PIDS[-1]}
 T0=$SECONDS
 SIM_RC=0
-wait "$SIM_PID" || SIM_RC=$?
+# Watch the graph: a node that dies while the simulator runs ends the run with its log's tail.
+while alive "$SIM_PID" && (( INTERRUPTED == 0 )); do
+  for i in "${!PIDS[@]}"; do
+    if [[ "${PIDS[$i]}" != "$SIM_PID" && "${NAMES[$i]}" != solver ]] && ! alive "${PIDS[$i]}" \
+        && ! grep -q "run finished" "$OUT/simulator.log" 2>/dev/null; then
+      echo "run_fleet: node '${NAMES[$i]}' exited before the end of the run; its log ($OUT/${NAMES[$i]}.log) ends with:" >&2
+      tail -n 5 "$OUT/${NAMES[$i]}.log" >&2
+      stop_all INT
+      exit 1
+    fi
+  done
+  sleep 0.5 & wait $! || true
+done
+wait "$SIM_PID" 2>/dev/null || SIM_RC=$?
 if (( INTERRUPTED == 0 )); then
   # The recorder closes the file by itself once the simulator announced the end and the last
   # messages are in; planner and generator exit on that announcement too; the solver is a server
   # and is stopped here.
   deadline=$((SECONDS + 60))
-  while kill -0 "$REC_PID" 2>/dev/null && (( SECONDS < deadline )); do sleep 0.1; done
+  while alive "$REC_PID" && (( SECONDS < deadline )); do sleep 0.1; done
   stop_all INT
 fi
 trap - INT TERM
