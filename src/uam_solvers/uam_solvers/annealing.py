@@ -26,9 +26,9 @@ options dict can serve several backends):
 Time limit: simulated annealing stops between reads once time_limit_s has passed (the reads done
 so far are used; stats["interrupted"] says so, and only then is the answer not reproducible);
 tabu runs its reads in calls of TABU_READ_BUDGET // n reads (all 100 at once up to 20 vertices)
-and stops between calls when another call as long as the last would end past time_limit_s, and each read also gets a timeout of
-time_limit_s / num_reads (with the default search length neither binds on instances up to a few
-hundred vertices, so results are reproducible).
+and stops between calls when another call as long as the last would end past time_limit_s; each
+read also gets a timeout of time_limit_s / num_reads. With the default search length neither
+binds on instances up to a few hundred vertices, so results are reproducible.
 
 Statistics: those of `uam_solvers.qubo.refine_and_repair` (reads, best_objective,
 feasible_fraction_raw, feasible_fraction, optimal_fraction, energies) plus sampler settings and
@@ -71,7 +71,7 @@ SA_DEFAULT_SWEEPS = 300
 SA_DEFAULT_BETA_RANGE = (1.0, 10.0)
 TABU_DEFAULT_LOWER_BOUND_Z = 10000
 TABU_DEFAULT_RESTARTS = 0
-#: reads per TabuSampler call are TABU_READ_BUDGET // n (at least 1): about 0.1 s of work per call
+#: reads per TabuSampler call are TABU_READ_BUDGET // n (at least 1): a fraction of a second each
 TABU_READ_BUDGET = 2000
 #: TabuSampler builds a dense n x n matrix: refuse larger graphs (options["max_vertices"])
 TABU_MAX_VERTICES = 3000
