@@ -116,3 +116,33 @@ def test_default_pipeline_on_hand_checked_graph_for_each_builtin_backend():
         assert not r.fallback
     r = uam_solvers.solve(w, edges, groups, backend="exact", layers=False)
     assert r.objective == pytest.approx(1.9) and r.proven_optimal
+
+
+def test_label_propagation_components_match_scipy():
+    from scipy.sparse.csgraph import connected_components
+
+    from uam_solvers.layers import _components
+
+    rng = np.random.default_rng(8)
+    for _ in range(30):
+        p = _random_problem(rng, int(rng.integers(1, 120)))
+        count, labels = _components(p)
+        ref_count, ref = connected_components(p.adjacency(), directed=False)
+        assert count == ref_count
+        # Same partition: labels map one-to-one onto scipy's.
+        pairs = set(zip(labels.tolist(), ref.tolist()))
+        assert len(pairs) == count
+
+
+def test_reduce_hands_large_graphs_to_self_reducing_backends_unchanged():
+    child = BruteForce()
+    child.reduces_itself = True
+    # Path 0-1-2 plus an isolated vertex 3: reducible, but above the threshold it is passed on.
+    p = MwisProblem.from_arrays([1.0, 3.0, 1.0, 0.5], [[0, 1], [1, 2]])
+    r = Reduce(ComponentSplit(child), self_reduce_above=2).solve(p, time_limit_s=1.0, seed=0, options={})
+    assert r.objective == 3.5
+    assert child.calls[0][0] == 3  # ComponentSplit took the isolated vertex, Reduce did nothing
+    assert "kernel_vertices" not in r.stats
+    child.calls.clear()
+    r = Reduce(ComponentSplit(child)).solve(p, time_limit_s=1.0, seed=0, options={})
+    assert r.objective == 3.5 and r.stats["kernel_vertices"] == 3
