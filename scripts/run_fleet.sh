@@ -71,7 +71,16 @@ EOF
 mkdir -p "$OUT"
 OUT="$(cd "$OUT" && pwd)"
 MCAP="$OUT/run.mcap" RRD="$OUT/run.rrd"
-export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$(( (RANDOM % 80) + 20 ))}"
+if [[ -z "${ROS_DOMAIN_ID:-}" ]]; then
+  # Claim a domain id nobody else on this machine uses (the test harness takes the same lock files),
+  # so two runs, or a run and a test session, never hear each other. Held until this script exits.
+  for id in $(seq 20 100); do
+    exec {DOMAIN_LOCK_FD}>"/tmp/uam-ros-domain-$id.lock"
+    if flock -n "$DOMAIN_LOCK_FD"; then export ROS_DOMAIN_ID=$id; break; fi
+    exec {DOMAIN_LOCK_FD}>&-
+  done
+  [[ -n "${ROS_DOMAIN_ID:-}" ]] || die "no free ROS domain id in 20..100"
+fi
 echo "run_fleet: policy $POLICY, backend $BACKEND, rate $RATE per 30 s, ${DURATION} s, seed $SEED, network $NETWORK"
 echo "run_fleet: outputs in $OUT (ROS_DOMAIN_ID=$ROS_DOMAIN_ID)"
 

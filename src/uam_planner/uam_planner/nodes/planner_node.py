@@ -62,6 +62,8 @@ class PlannerNode(Node):
             "k": d("k", 5, "candidate routes per request", 1, 100),
             "penalty_factor": d("penalty_factor", 5.0, "penalised Dijkstra factor for diverse candidates", 0.0, 1000.0),
             "speed_mps": d("speed_mps", 10.0, "cruise speed [m/s]", 0.001, 1000.0),
+            "precompute_routes": d("precompute_routes", True, "compute every aerodrome pair's candidate routes "
+                                   "at start-up (1-2 s for Singapore) instead of on first use; same routes"),
         }
         d("solver_timeout_margin_s", 5.0, "extra wall time [s] to wait for the solver service before the local greedy fallback", 0.0, 3600.0)
         d("solver_startup_timeout_s", 30.0, "wall time [s] to wait for the solver service at the first epoch "
@@ -74,7 +76,7 @@ class PlannerNode(Node):
         self.config = PlanningConfig(
             epoch_s=params["epoch_s"], separation_m=params["separation_m"], k=params["k"],
             penalty_factor=params["penalty_factor"], speed_mps=params["speed_mps"], backend=params["backend"],
-            time_limit_s=params["time_limit_s"], seed=params["seed"])
+            time_limit_s=params["time_limit_s"], seed=params["seed"], precompute_routes=params["precompute_routes"])
         self.policy = params["policy"]
         self.planner = Planner(self.network, self.config, self.policy, solve_mwis=self._solve_mwis)
         self.add_on_set_parameters_callback(self._on_set_parameters)
