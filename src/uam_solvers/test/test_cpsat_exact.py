@@ -28,6 +28,10 @@ def test_hand_checked_graphs():
 def test_edges_inside_groups_are_not_duplicated_as_constraints():
     p = MwisProblem.from_arrays(np.ones(5), [[0, 1], [1, 2], [3, 4]], groups=[[0, 1, 2]])
     assert uncovered_edges(p).tolist() == [[3, 4]]
+    # Overlapping groups take the general path.
+    q = MwisProblem.from_arrays(np.ones(5), [[0, 1], [1, 3], [2, 4], [0, 4]],
+                                groups=[[0, 1, 2], [2, 3, 4], [1, 3]])
+    assert uncovered_edges(q).tolist() == [[0, 4]]
 
 
 def test_objective_is_recomputed_from_float_weights():
