@@ -69,6 +69,7 @@ __all__ = [
     "QpuBackend",
     "QpuEmulatorBackend",
     "advantage_graph",
+    "cached_find_embedding",
     "dwave_token_configured",
     "embedded_solve",
 ]
