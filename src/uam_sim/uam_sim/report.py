@@ -247,7 +247,14 @@ def write_report(sweep, outputs: dict, machine: dict, out: Path) -> Path:
          f"over epochs with a non-empty graph, pooled over the MWIS methods and seeds.") if ms else "")
     fig("solve_time", "Solve time per epoch",
         ["method", "epochs", "median_s", "p95_s", "max_s", "share_under_0.1s", "share_proven_optimal",
-         "fallbacks"])
+         "fallbacks"],
+        note="Wall time of `uam_solvers.solve` per epoch with a non-empty conflict graph (the "
+             "default pipeline: component split, exact reductions, the backend, validation). "
+             "'proven optimal' means the pipeline proved it: the exact backend, or reductions "
+             "and small components solved the whole graph, which is why heuristics show it too. "
+             "A fallback is an epoch where the backend failed or ran past its time limit and "
+             "greedy answered instead (logged in epochs.csv); those epochs depend on machine "
+             "load, so their runs are not reproducible bit for bit.")
     if figs.get("tts"):
         fig("tts", f"TTS({tts.get('p', 0.99) if isinstance(tts, dict) else 0.99}) per backend",
             ["backend", "instances", "median_s", "p25_s", "p75_s", "max_s", "not_reached",
