@@ -42,8 +42,12 @@ def make_observer(context):
 
 
 def build_graph(context, *, network=TINY, rate=2.0, seed=3, duration_s=300.0, policy="mwis", backend="exact",
-                with_solver=True, planner_extra=None, expected_subscribers=3):
-    """The graph's nodes on one multi-threaded executor; returns (executor, nodes dict, observer)."""
+                with_solver=True, planner_extra=None, expected_subscribers=3, record_to=None):
+    """The graph's nodes on one multi-threaded executor; returns (executor, nodes dict, observer).
+
+    The simulator starts once planner, generator, itself (and the recorder, with ``record_to``)
+    subscribe to /uam/epoch_sync and, with ``record_to``, the recorder to the fleet streams.
+    """
     from uam_planner.nodes.planner_node import PlannerNode
     from uam_sim.nodes.request_generator_node import RequestGeneratorNode
     from uam_sim.nodes.simulator_node import SimulatorNode
@@ -56,10 +60,16 @@ def build_graph(context, *, network=TINY, rate=2.0, seed=3, duration_s=300.0, po
         network=network, policy=policy, backend=backend, **(planner_extra or {})))
     nodes["generator"] = RequestGeneratorNode(context=context, parameter_overrides=params(
         network=network, rate=float(rate), seed=int(seed)))
+    if record_to is not None:
+        from uam_sim.nodes.recorder_node import RecorderNode
+        nodes["recorder"] = RecorderNode(context=context, parameter_overrides=params(
+            output=str(record_to), network=network, rerun="off"))
+        expected_subscribers += 1
     observer_node, obs = make_observer(context)
     nodes["observer"] = observer_node
     nodes["simulator"] = SimulatorNode(context=context, parameter_overrides=params(
-        duration_s=float(duration_s), expected_subscribers=int(expected_subscribers)))
+        duration_s=float(duration_s), expected_subscribers=int(expected_subscribers),
+        expected_stream_subscribers=0 if record_to is None else 1))
     executor = MultiThreadedExecutor(num_threads=4, context=context)
     for n in nodes.values():
         executor.add_node(n)

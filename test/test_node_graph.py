@@ -27,6 +27,8 @@ def _run(ros_context, spin_until, timeout_s=120.0, **kw):
     try:
         assert spin_until(executor, lambda: nodes["simulator"].finished, timeout_s=timeout_s), \
             f"run did not finish; simulator at t={nodes['simulator'].t_s}"
+        if "recorder" in nodes:  # closes the file by itself once the last messages are in
+            assert spin_until(executor, lambda: nodes["recorder"].finished, timeout_s=30)
         n_expected = nodes["generator"].published
         assert spin_until(executor, lambda: len(obs.requests) >= n_expected, timeout_s=10)
         n_states = len(nodes["simulator"].active_samples)
@@ -54,9 +56,10 @@ def _in_process_approvals(rate, seed, duration_s, backend, policy="mwis", epoch_
     return approved
 
 
-def test_every_request_decided_once_safe_and_equal_to_in_process_run(ros_context, spin_until):
+def test_every_request_decided_once_safe_and_equal_to_in_process_run(ros_context, spin_until, tmp_path):
     rate, seed, duration = 3.0, 11, 300.0
-    obs, nodes = _run(ros_context, spin_until, rate=rate, seed=seed, duration_s=duration)
+    obs, nodes = _run(ros_context, spin_until, rate=rate, seed=seed, duration_s=duration,
+                      record_to=tmp_path / "run.mcap")
     request_ids = [r.request_id for r in obs.requests]
     assert len(request_ids) == len(set(request_ids)) > 0
     decided = collections.Counter(p.request_id for p in obs.plans)
@@ -87,6 +90,18 @@ def test_every_request_decided_once_safe_and_equal_to_in_process_run(ros_context
     assert [f.step_index for f in obs.fleet] == sorted(f.step_index for f in obs.fleet)
     assert len(obs.fleet) == duration + 1  # t = 0, 1, ..., 300 s
     assert max(len(f.vehicles) for f in obs.fleet) >= 1
+    # The recording, decoded by the independent rosbags reader, holds the same run.
+    from uam_sim.analysis import summarize
+    summary = summarize(tmp_path / "run.mcap", reader="rosbags")
+    assert summary.complete_file
+    assert summary.requests == len(request_ids)
+    assert summary.approved == len(approved)
+    assert summary.expired == sum(p.outcome == FlightPlan.OUTCOME_EXPIRED for p in obs.plans)
+    assert summary.rejected == 0 and summary.duplicate_decisions == 0
+    assert summary.fleet_steps == len(obs.fleet)
+    assert len(summary.epochs) == len(obs.reports)
+    assert summary.audit.ok and summary.audit.pairs_checked > 0
+    assert summary.audit.min_separation_m == pytest.approx(audit.min_separation_m, abs=1e-6)
 
 
 def test_planner_falls_back_to_greedy_when_solver_absent(ros_context, spin_until):
