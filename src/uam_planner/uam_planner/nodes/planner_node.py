@@ -38,6 +38,7 @@ from uam_msgs.srv import SolveMwis
 
 from uam_planner.network import load_network
 from uam_planner.nodes import messages as m
+from uam_solvers.nodes.runtime import report_cpu_time
 from uam_solvers.nodes.params import check, declare
 from uam_planner.planning import POLICIES, Planner, PlanningConfig, default_solve_mwis
 
@@ -264,6 +265,7 @@ def main(args=None) -> int:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+        report_cpu_time("planner")
     return 0
 
 

@@ -28,6 +28,7 @@ import time
 from pathlib import Path
 
 import rclpy
+from uam_solvers.nodes.runtime import report_cpu_time
 from geometry_msgs.msg import PoseArray
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.clock import Clock as RclClock
@@ -294,6 +295,7 @@ def main(args=None) -> int:
             while _OPENED:  # (close is idempotent)
                 _OPENED.pop().close()
             rclpy.try_shutdown()
+            report_cpu_time("recorder")
     return rc
 
 

@@ -24,6 +24,7 @@ from uam_msgs.msg import EpochSync, FlightRequest
 
 from uam_planner.network import load_network
 from uam_planner.nodes import messages as m
+from uam_solvers.nodes.runtime import report_cpu_time
 from uam_solvers.nodes.params import declare
 from uam_sim.demand import DemandSchedule, RequestGenerator, load_demand
 
@@ -98,6 +99,7 @@ def main(args=None) -> int:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+        report_cpu_time("request_generator")
     return 0
 
 

@@ -33,6 +33,7 @@ from rosgraph_msgs.msg import Clock
 from uam_msgs.msg import EpochSync, FleetState, FlightPlan
 
 from uam_planner.nodes import messages as m
+from uam_solvers.nodes.runtime import report_cpu_time
 from uam_solvers.nodes.params import declare
 from uam_sim.cdr import encode_fleet_state, encode_pose_array, yaw_quaternions
 from uam_sim.fleet import Fleet
@@ -225,6 +226,7 @@ def main(args=None) -> int:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+        report_cpu_time("simulator")
     return rc
 
 

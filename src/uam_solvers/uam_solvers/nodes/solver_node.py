@@ -29,6 +29,7 @@ from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from uam_msgs.srv import SolveMwis
 
+from uam_solvers.nodes.runtime import report_cpu_time
 from uam_solvers.nodes.params import check, declare
 from uam_solvers import MwisInputError, MwisProblem, solve_problem
 from uam_solvers.registry import UnknownBackendError, backend_names, get_backend
@@ -167,6 +168,7 @@ def main(args=None) -> int:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+        report_cpu_time("solver")
     return 0
 
 
