@@ -107,7 +107,11 @@ stop_all() {
       kill -KILL "$pid" 2>/dev/null || true
     fi
   done
-  wait 2>/dev/null || true
+  local i rc
+  for i in "${!PIDS[@]}"; do
+    rc=0; wait "${PIDS[$i]}" 2>/dev/null || rc=$?
+    (( rc == 0 )) || echo "run_fleet: node '${NAMES[$i]}' exited with code $rc" >&2
+  done
 }
 interrupted() { echo; echo "run_fleet: interrupted; stopping every node"; stop_all INT; trap - INT TERM; INTERRUPTED=1; }
 INTERRUPTED=0

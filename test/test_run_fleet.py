@@ -60,6 +60,7 @@ def test_sigterm_mid_run_stops_every_node_and_keeps_the_recording(tmp_path, ros_
     assert "Safety audit" in output and "OK" in output
     assert _node_processes(out) == []
     assert "killing it" not in output, output  # every node stopped on SIGINT by itself
+    assert "exited with code" not in output, output  # ... and cleanly
     # closed properly: summary and footer present, messages of every kind inside
     with open(out / "run.mcap", "rb") as f:
         reader = make_reader(f)

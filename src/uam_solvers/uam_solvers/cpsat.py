@@ -116,6 +116,9 @@ class CpSatBackend(Backend):
         # The limit covers model building too (a 10,000-vertex model takes ~0.5 s in Python).
         solver.parameters.max_time_in_seconds = max(float(time_limit_s) - (time.perf_counter() - t0), 1e-3)
         solver.parameters.num_workers = num_workers
+        # CP-SAT otherwise installs its own SIGINT handler for the solve and leaves SIGINT at its
+        # default afterwards, so a later Ctrl-C kills the host process (a ROS node) outright.
+        solver.parameters.catch_sigint_signal = False
         solver.parameters.random_seed = int(seed) % (2**31)
         # CP-SAT's presolve costs ~4 ms even on 30 vertices, several times the search itself on
         # an already reduced kernel; it pays off on big graphs.

@@ -38,7 +38,7 @@ from uam_msgs.srv import SolveMwis
 
 from uam_planner.network import load_network
 from uam_planner.nodes import messages as m
-from uam_solvers.nodes.runtime import report_cpu_time
+from uam_solvers.nodes.runtime import init_with_stop_event, report_cpu_time_at_exit
 from uam_solvers.nodes.params import check, declare
 from uam_planner.planning import POLICIES, Planner, PlanningConfig, default_solve_mwis
 
@@ -248,13 +248,14 @@ class PlannerNode(Node):
 
 
 def main(args=None) -> int:
-    rclpy.init(args=args)
+    report_cpu_time_at_exit("planner")
+    stop = init_with_stop_event(args)
     node = None
     try:
         node = PlannerNode()
         executor = MultiThreadedExecutor(num_threads=3)
         executor.add_node(node)
-        while rclpy.ok() and not node.finished:
+        while rclpy.ok() and not node.finished and not stop.is_set():
             executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
@@ -265,7 +266,6 @@ def main(args=None) -> int:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
-        report_cpu_time("planner")
     return 0
 
 

@@ -28,7 +28,7 @@ import time
 from pathlib import Path
 
 import rclpy
-from uam_solvers.nodes.runtime import report_cpu_time
+from uam_solvers.nodes.runtime import report_cpu_time_at_exit
 from geometry_msgs.msg import PoseArray
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.clock import Clock as RclClock
@@ -267,6 +267,7 @@ class RecorderNode(Node):
 
 
 def main(args=None) -> int:
+    report_cpu_time_at_exit("recorder")
     rclpy.init(args=args)  # rclpy's handlers turn SIGINT and SIGTERM into a shutdown
     node = None
     rc = 0
@@ -295,7 +296,6 @@ def main(args=None) -> int:
             while _OPENED:  # (close is idempotent)
                 _OPENED.pop().close()
             rclpy.try_shutdown()
-            report_cpu_time("recorder")
     return rc
 
 

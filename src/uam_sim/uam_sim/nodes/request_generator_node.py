@@ -24,7 +24,7 @@ from uam_msgs.msg import EpochSync, FlightRequest
 
 from uam_planner.network import load_network
 from uam_planner.nodes import messages as m
-from uam_solvers.nodes.runtime import report_cpu_time
+from uam_solvers.nodes.runtime import init_with_stop_event, report_cpu_time_at_exit
 from uam_solvers.nodes.params import declare
 from uam_sim.demand import DemandSchedule, RequestGenerator, load_demand
 
@@ -82,13 +82,14 @@ class RequestGeneratorNode(Node):
 
 
 def main(args=None) -> int:
-    rclpy.init(args=args)
+    report_cpu_time_at_exit("request_generator")
+    stop = init_with_stop_event(args)
     node = None
     try:
         node = RequestGeneratorNode()
         executor = SingleThreadedExecutor()
         executor.add_node(node)
-        while rclpy.ok() and not node.finished:
+        while rclpy.ok() and not node.finished and not stop.is_set():
             executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
@@ -99,7 +100,6 @@ def main(args=None) -> int:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
-        report_cpu_time("request_generator")
     return 0
 
 

@@ -33,7 +33,7 @@ from rosgraph_msgs.msg import Clock
 from uam_msgs.msg import EpochSync, FleetState, FlightPlan
 
 from uam_planner.nodes import messages as m
-from uam_solvers.nodes.runtime import report_cpu_time
+from uam_solvers.nodes.runtime import init_with_stop_event, report_cpu_time_at_exit
 from uam_solvers.nodes.params import declare
 from uam_sim.cdr import encode_fleet_state, encode_pose_array, yaw_quaternions
 from uam_sim.fleet import Fleet
@@ -203,14 +203,15 @@ class SimulatorNode(Node):
 
 
 def main(args=None) -> int:
-    rclpy.init(args=args)
+    report_cpu_time_at_exit("simulator")
+    stop = init_with_stop_event(args)
     node = None
     rc = 0
     try:
         node = SimulatorNode()
         executor = SingleThreadedExecutor()
         executor.add_node(node)
-        while rclpy.ok() and not node.finished:
+        while rclpy.ok() and not node.finished and not stop.is_set():
             executor.spin_once(timeout_sec=0.1)
         # let the final announcement reach the others
         end = time.monotonic() + 1.0
@@ -226,7 +227,6 @@ def main(args=None) -> int:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
-        report_cpu_time("simulator")
     return rc
 
 

@@ -29,7 +29,7 @@ from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from uam_msgs.srv import SolveMwis
 
-from uam_solvers.nodes.runtime import report_cpu_time
+from uam_solvers.nodes.runtime import init_with_stop_event, report_cpu_time_at_exit
 from uam_solvers.nodes.params import check, declare
 from uam_solvers import MwisInputError, MwisProblem, solve_problem
 from uam_solvers.registry import UnknownBackendError, backend_names, get_backend
@@ -152,13 +152,15 @@ class SolverNode(Node):
 
 
 def main(args=None) -> int:
-    rclpy.init(args=args)
+    report_cpu_time_at_exit("solver")
+    stop = init_with_stop_event(args)
     node = None
     try:
         node = SolverNode()
         executor = MultiThreadedExecutor(num_threads=4)
         executor.add_node(node)
-        executor.spin()
+        while rclpy.ok() and not stop.is_set():
+            executor.spin_once(timeout_sec=0.2)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except ValueError as exc:
@@ -168,7 +170,6 @@ def main(args=None) -> int:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
-        report_cpu_time("solver")
     return 0
 
 

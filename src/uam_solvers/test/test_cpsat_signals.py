@@ -1,0 +1,29 @@
+"""A CP-SAT solve must leave the host process's Ctrl-C handling alone (nodes rely on it to close
+recordings and shut down cleanly)."""
+
+from __future__ import annotations
+
+import pathlib
+import subprocess
+import sys
+
+SRC = pathlib.Path(__file__).resolve().parents[1]
+
+SCRIPT = """
+import os, signal, time
+from uam_solvers import solve
+solve([1.0, 2.0, 1.5], [[0, 1], [1, 2]], backend="exact", time_limit_s=1.0)
+try:
+    os.kill(os.getpid(), signal.SIGINT)
+    time.sleep(5)
+    print("not interrupted")
+except KeyboardInterrupt:
+    print("handled by python")
+"""
+
+
+def test_sigint_after_an_exact_solve_reaches_python():
+    out = subprocess.run([sys.executable, "-c", SCRIPT], capture_output=True, text=True, timeout=120,
+                         env={"PYTHONPATH": str(SRC), "PATH": "/usr/bin:/bin"})
+    assert out.returncode == 0, (out.returncode, out.stderr[-2000:])
+    assert "handled by python" in out.stdout
