@@ -255,11 +255,12 @@ def tts_figure(tts: dict, path: Path) -> dict:
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
     ax.boxplot([np.maximum(by[m], 1e-7) if by[m] else [np.nan] for m in names], widths=0.6)
     ax.set_xticks(np.arange(1, len(names) + 1),
-                  [m + (f"\n({missed[m]} not reached)" if missed.get(m) else "") for m in names])
+                  [m + f"\nn={len(by[m]) + missed.get(m, 0)}"
+                   + (f", {missed[m]} not reached" if missed.get(m) else "") for m in names])
     ax.axhline(0.1, color="r", ls="--", lw=1)
     ax.set_yscale("log")
     ax.set_ylabel(f"TTS({tts.get('p', 0.99)}) [s]")
-    ax.set_title(f"Time to solution, {tts.get('instances', '?')} instances from the runs")
+    ax.set_title(f"Time to solution, instances sampled from the runs (n per backend)")
     ax.grid(alpha=0.3, which="both")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
