@@ -159,7 +159,7 @@ def write_report(sweep, outputs: dict, machine: dict, out: Path) -> Path:
           f"Python {machine.get('python')}",
           f"- commit: `{machine.get('commit')}`",
           f"- cells: {len(cells)} ({len(sweep.computed)} computed now, {len(sweep.reused)} reused "
-          f"from earlier runs); sweep wall time {sweep.wall_s:.1f} s with {cfg.workers} worker(s); "
+          f"from earlier runs); this invocation: sweep wall time {sweep.wall_s:.1f} s with {cfg.workers} worker(s), "
           f"whole study (incl. TTS, figures) {outputs.get('wall_s', 0):.1f} s; sum of per-cell "
           f"run times {wall_total:.1f} s", ""]
     if getattr(sweep, "missing", None):
