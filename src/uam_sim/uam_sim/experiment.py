@@ -14,7 +14,14 @@ cell is written to ``<out>/cells/<cell-key>.json`` atomically and skipped next t
 
 After the cells: ``runs.csv`` (one row per cell), ``epochs.csv`` (one row per epoch per cell),
 ``flights.csv``, the MWIS instances of the runs as a corpus (``instances.jsonl``), the TTS study on
-a sample of them, the figures (:mod:`uam_sim.figures`) and ``REPORT.md`` (:mod:`uam_sim.report`).
+a sample of them (``tts.csv``, reused when its sample and settings are unchanged), the figures
+(:mod:`uam_sim.figures`) and ``REPORT.md`` (:mod:`uam_sim.report`). Every run is audited for loss
+of separation by :func:`sweep_audit` (exact, all flight pairs); the command exits 1 on any loss.
+
+Other modes: ``--no-compute`` reports on the finished cells of a partial sweep; ``--from-mcap
+FILES`` computes the same tables, figures and report from node-graph recordings (through
+:mod:`uam_sim.analysis`). The cell key covers every parameter but not the code: after changing
+the planning core or a backend, use a new ``--out`` (or delete ``<out>/cells``).
 """
 
 from __future__ import annotations
