@@ -1,7 +1,6 @@
 """uam_sim.experiment: small sweeps (two rates, two methods, one seed, short runs)."""
 
 import json
-import os
 from pathlib import Path
 
 import pytest
