@@ -132,7 +132,7 @@ SIM_RC=0
 # Watch the graph: a node that dies while the simulator runs ends the run with its log's tail.
 while alive "$SIM_PID" && (( INTERRUPTED == 0 )); do
   for i in "${!PIDS[@]}"; do
-    if [[ "${PIDS[$i]}" != "$SIM_PID" && "${NAMES[$i]}" != solver ]] && ! alive "${PIDS[$i]}" \
+    if (( INTERRUPTED == 0 )) && [[ "${PIDS[$i]}" != "$SIM_PID" && "${NAMES[$i]}" != solver ]] && ! alive "${PIDS[$i]}" \
         && ! grep -q "run finished" "$OUT/simulator.log" 2>/dev/null; then
       echo "run_fleet: node '${NAMES[$i]}' exited before the end of the run; its log ($OUT/${NAMES[$i]}.log) ends with:" >&2
       tail -n 5 "$OUT/${NAMES[$i]}.log" >&2

@@ -27,10 +27,8 @@ from functools import partial
 from types import SimpleNamespace
 
 import numpy as np
-import rclpy
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from uam_msgs.msg import EpochSync, FlightPlan, FlightRequest, PlanningReport
@@ -38,7 +36,7 @@ from uam_msgs.srv import SolveMwis
 
 from uam_planner.network import load_network
 from uam_planner.nodes import messages as m
-from uam_solvers.nodes.runtime import init_with_stop_event, report_cpu_time_at_exit
+from uam_solvers.nodes.runtime import run_node
 from uam_solvers.nodes.params import check, declare
 from uam_planner.planning import POLICIES, Planner, PlanningConfig, default_solve_mwis
 
@@ -248,25 +246,7 @@ class PlannerNode(Node):
 
 
 def main(args=None) -> int:
-    report_cpu_time_at_exit("planner")
-    stop = init_with_stop_event(args)
-    node = None
-    try:
-        node = PlannerNode()
-        executor = MultiThreadedExecutor(num_threads=3)
-        executor.add_node(node)
-        while rclpy.ok() and not node.finished and not stop.is_set():
-            executor.spin_once(timeout_sec=0.1)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except ValueError as exc:
-        print(f"planner: {exc}", file=sys.stderr)
-        return 2
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(PlannerNode, "planner", args, threads=3)
 
 
 if __name__ == "__main__":

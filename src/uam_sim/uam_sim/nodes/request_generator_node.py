@@ -16,15 +16,13 @@ import math
 import sys
 from functools import partial
 
-import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from uam_msgs.msg import EpochSync, FlightRequest
 
 from uam_planner.network import load_network
 from uam_planner.nodes import messages as m
-from uam_solvers.nodes.runtime import init_with_stop_event, report_cpu_time_at_exit
+from uam_solvers.nodes.runtime import run_node
 from uam_solvers.nodes.params import declare
 from uam_sim.demand import DemandSchedule, RequestGenerator, load_demand
 
@@ -82,25 +80,7 @@ class RequestGeneratorNode(Node):
 
 
 def main(args=None) -> int:
-    report_cpu_time_at_exit("request_generator")
-    stop = init_with_stop_event(args)
-    node = None
-    try:
-        node = RequestGeneratorNode()
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        while rclpy.ok() and not node.finished and not stop.is_set():
-            executor.spin_once(timeout_sec=0.1)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except ValueError as exc:
-        print(f"request_generator: {exc}", file=sys.stderr)
-        return 2
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(RequestGeneratorNode, "request_generator", args)
 
 
 if __name__ == "__main__":

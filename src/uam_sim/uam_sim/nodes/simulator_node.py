@@ -24,16 +24,14 @@ import sys
 import time
 from functools import partial
 
-import rclpy
 from geometry_msgs.msg import PoseArray
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, DurabilityPolicy, HistoryPolicy
 from rosgraph_msgs.msg import Clock
 from uam_msgs.msg import EpochSync, FleetState, FlightPlan
 
 from uam_planner.nodes import messages as m
-from uam_solvers.nodes.runtime import init_with_stop_event, report_cpu_time_at_exit
+from uam_solvers.nodes.runtime import run_node
 from uam_solvers.nodes.params import declare
 from uam_sim.cdr import encode_fleet_state, encode_pose_array, yaw_quaternions
 from uam_sim.fleet import Fleet
@@ -90,6 +88,11 @@ class SimulatorNode(Node):
         self.get_logger().info(
             f"simulator: {self.mode}, step {self.step_s:g} s, epoch {self.epoch_s:g} s, duration {self.duration_s:g} s; "
             f"waiting for {self.expected_subscribers} subscriber(s) of {m.TOPIC_SYNC}")
+
+    @property
+    def exit_code(self) -> int:
+        """1 when the run ended on an error (no acknowledgement from the planner), else 0."""
+        return 1 if self.error else 0
 
     @property
     def t_s(self) -> float:
@@ -203,31 +206,7 @@ class SimulatorNode(Node):
 
 
 def main(args=None) -> int:
-    report_cpu_time_at_exit("simulator")
-    stop = init_with_stop_event(args)
-    node = None
-    rc = 0
-    try:
-        node = SimulatorNode()
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        while rclpy.ok() and not node.finished and not stop.is_set():
-            executor.spin_once(timeout_sec=0.1)
-        # let the final announcement reach the others
-        end = time.monotonic() + 1.0
-        while rclpy.ok() and time.monotonic() < end:
-            executor.spin_once(timeout_sec=0.05)
-        rc = 1 if node.error else 0
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except ValueError as exc:
-        print(f"simulator: {exc}", file=sys.stderr)
-        rc = 2
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return rc
+    return run_node(SimulatorNode, "simulator", args, linger_s=1.0)
 
 
 if __name__ == "__main__":

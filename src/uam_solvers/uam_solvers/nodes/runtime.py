@@ -43,3 +43,38 @@ def init_with_stop_event(args=None):
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda _signum, _frame: stop.set())
     return stop
+
+
+def run_node(make_node, name: str, args=None, *, threads: int = 1, linger_s: float = 0.0) -> int:
+    """The main() of a node: init, spin until the node is ``finished`` or a signal, clean up.
+
+    ``make_node()`` builds the node (a ValueError from it is a configuration error: printed,
+    exit code 2). ``threads`` > 1 spins a MultiThreadedExecutor (needed where a callback waits
+    on a service answer). After the loop, ``linger_s`` more seconds are spun so final messages
+    leave. The exit code is the node's ``exit_code`` attribute if it has one, else 0.
+    """
+    import rclpy
+    from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
+
+    report_cpu_time_at_exit(name)
+    stop = init_with_stop_event(args)
+    node = None
+    try:
+        node = make_node()
+        executor = MultiThreadedExecutor(num_threads=threads) if threads > 1 else SingleThreadedExecutor()
+        executor.add_node(node)
+        while rclpy.ok() and not getattr(node, "finished", False) and not stop.is_set():
+            executor.spin_once(timeout_sec=0.1)
+        end = time.monotonic() + linger_s
+        while rclpy.ok() and time.monotonic() < end and not stop.is_set():
+            executor.spin_once(timeout_sec=0.05)
+        return int(getattr(node, "exit_code", 0))
+    except (KeyboardInterrupt, ExternalShutdownException):
+        return 0
+    except ValueError as exc:
+        print(f"{name}: {exc}", file=sys.stderr)
+        return 2
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()

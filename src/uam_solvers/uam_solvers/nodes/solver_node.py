@@ -21,15 +21,13 @@ import math
 import sys
 
 import numpy as np
-import rclpy
 from diagnostic_msgs.msg import KeyValue
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import ReentrantCallbackGroup
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from uam_msgs.srv import SolveMwis
 
-from uam_solvers.nodes.runtime import init_with_stop_event, report_cpu_time_at_exit
+from uam_solvers.nodes.runtime import run_node
 from uam_solvers.nodes.params import check, declare
 from uam_solvers import MwisInputError, MwisProblem, solve_problem
 from uam_solvers.registry import UnknownBackendError, backend_names, get_backend
@@ -152,25 +150,7 @@ class SolverNode(Node):
 
 
 def main(args=None) -> int:
-    report_cpu_time_at_exit("solver")
-    stop = init_with_stop_event(args)
-    node = None
-    try:
-        node = SolverNode()
-        executor = MultiThreadedExecutor(num_threads=4)
-        executor.add_node(node)
-        while rclpy.ok() and not stop.is_set():
-            executor.spin_once(timeout_sec=0.2)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except ValueError as exc:
-        print(f"solver: {exc}", file=sys.stderr)
-        return 2
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(SolverNode, "solver", args, threads=4)
 
 
 if __name__ == "__main__":
