@@ -101,6 +101,14 @@ def test_every_request_decided_once_safe_and_equal_to_in_process_run(ros_context
     assert summary.fleet_steps == len(obs.fleet)
     assert len(summary.epochs) == len(obs.reports)
     assert summary.audit.ok and summary.audit.pairs_checked > 0
+    # The MWIS instances come back out of the recording for the TTS study, as solved.
+    from uam_solvers.instances import read_instances
+    entries = read_instances(tmp_path / "run.mcap")
+    solved = [r for r in obs.reports if r.vertices > 0]
+    assert len(entries) == len(solved)
+    for entry, report in zip(entries, solved):
+        assert entry.problem.n == report.vertices
+        assert entry.problem.objective(list(report.instance.selected)) == pytest.approx(report.objective)
     assert summary.audit.min_separation_m == pytest.approx(audit.min_separation_m, abs=1e-6)
 
 

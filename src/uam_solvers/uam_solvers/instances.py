@@ -23,9 +23,8 @@ study (5 to 50 vertices); `large_instance` gives up to 10,000+ vertices with loc
 
 Corpus files are JSON Lines, one instance per line; see docs/mwis-corpus-format.md and
 `save_corpus` / `load_corpus`. `read_instances` picks a reader by file suffix from
-`CORPUS_READERS`: this is the extension point for instances pulled out of planner recordings
-(an ``.mcap`` reader registered there by uam_sim once the recording format exists; it is not
-implemented here).
+`CORPUS_READERS` maps a file suffix to a reader: ``.jsonl``/``.json`` corpora, and ``.mcap``
+planner recordings (the MWIS instance of every PlanningReport, read through uam_sim.analysis).
 """
 
 from __future__ import annotations
@@ -418,13 +417,25 @@ def load_corpus(path: str | Path) -> list[CorpusEntry]:
     return entries
 
 
-#: Readers by file suffix for `read_instances`. Extension point: a reader of planner recordings
-#: (".mcap", the planning reports carry each epoch's MWIS instance) belongs to uam_sim, which
-#: knows the recording format; it registers itself here as CORPUS_READERS[".mcap"] = reader,
-#: reader(path) -> list[CorpusEntry]. Not implemented in this package.
+def _read_mcap(path: Path) -> list[CorpusEntry]:
+    """MWIS instances of a planner recording (the PlanningReports' instances, one per epoch).
+
+    The recording format belongs to uam_sim, which depends on this package, so it is imported
+    only when a recording is read (``python -m uam_solvers.tts --corpus run.mcap``).
+    """
+    try:
+        from uam_sim.analysis import recorded_instances
+    except ImportError as exc:
+        raise MwisInputError(f"{path}: reading .mcap recordings needs the uam_sim package ({exc})") from None
+    return [CorpusEntry(f"{path.stem}-epoch{r.epoch_index}", r.problem, source=f"{path}#epoch={r.epoch_index}")
+            for r in recorded_instances(path)]
+
+
+#: Readers by file suffix for `read_instances` (extension point: reader(path) -> list[CorpusEntry]).
 CORPUS_READERS: dict[str, Callable[[Path], list[CorpusEntry]]] = {
     ".jsonl": load_corpus,
     ".json": load_corpus,
+    ".mcap": _read_mcap,
 }
 
 
@@ -435,7 +446,7 @@ def read_instances(path: str | Path) -> list[CorpusEntry]:
     if reader is None:
         raise MwisInputError(
             f"no corpus reader for suffix {path.suffix!r} of {path}; known: "
-            f"{sorted(CORPUS_READERS)} (.mcap recordings need a reader registered by uam_sim)")
+            f"{sorted(CORPUS_READERS)}")
     return reader(path)
 
 
