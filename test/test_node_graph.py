@@ -33,6 +33,10 @@ def _run(ros_context, spin_until, timeout_s=120.0, **kw):
         assert spin_until(executor, lambda: len(obs.requests) >= n_expected, timeout_s=10)
         n_states = len(nodes["simulator"].active_samples)
         assert spin_until(executor, lambda: len(obs.fleet) >= n_states, timeout_s=10)
+        n_epochs = len(nodes["planner"]._announced)
+        assert spin_until(executor, lambda: len(obs.reports) >= n_epochs, timeout_s=10)
+        n_plans = nodes["planner"].plans_published
+        assert spin_until(executor, lambda: len(obs.plans) >= n_plans, timeout_s=10)
         assert not nodes["simulator"].error
         return obs, nodes
     finally:
@@ -125,7 +129,7 @@ def test_planner_falls_back_to_greedy_when_solver_absent(ros_context, spin_until
 
 
 def test_bad_requests_are_rejected_with_reason_and_graph_keeps_running(ros_context, spin_until):
-    from uam_msgs.msg import FlightRequest
+    from uam_msgs.msg import EpochSync, FlightRequest
 
     from uam_planner.nodes import messages as m
 
@@ -145,10 +149,9 @@ def test_bad_requests_are_rejected_with_reason_and_graph_keeps_running(ros_conte
         for r in bad:
             pub.publish(r)
         # the simulator waits for a 4th /uam/epoch_sync subscriber: this one
-        bad_node.create_subscription(type(nodes["simulator"]._sync_pub.msg_type()), m.TOPIC_SYNC,
+        bad_node.create_subscription(EpochSync, m.TOPIC_SYNC,
                                      lambda _: None, m.QOS_LATCHED)
         assert spin_until(executor, lambda: nodes["simulator"].finished, timeout_s=120)
-        by_id = {p.request_id: p for p in obs.plans}
         assert spin_until(executor, lambda: all(b.request_id in {p.request_id for p in obs.plans} for b in bad), 10)
         by_id = {p.request_id: p for p in obs.plans}
         assert by_id["bad1"].outcome == FlightPlan.OUTCOME_REJECTED and "origin_id" in by_id["bad1"].reason \
@@ -156,7 +159,7 @@ def test_bad_requests_are_rejected_with_reason_and_graph_keeps_running(ros_conte
         assert by_id["bad2"].outcome == FlightPlan.OUTCOME_REJECTED and "same as origin" in by_id["bad2"].reason
         assert by_id["bad3"].outcome == FlightPlan.OUTCOME_REJECTED and "latest_departure" in by_id["bad3"].reason
         # the run went on: the good requests were planned in every epoch after the bad ones
-        assert len(obs.reports) == 5
+        assert spin_until(executor, lambda: len(obs.reports) == 5, 10), len(obs.reports)
         assert any(p.outcome == FlightPlan.OUTCOME_APPROVED for p in obs.plans)
     finally:
         bad_node.destroy_node()

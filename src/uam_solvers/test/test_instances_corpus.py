@@ -131,7 +131,7 @@ def test_load_corpus_errors_name_line_and_field(tmp_path):
         load_corpus(path)
 
 
-def test_read_instances_refuses_unknown_suffix_and_names_the_extension_point(tmp_path):
-    with pytest.raises(MwisInputError, match="mcap"):
-        read_instances(tmp_path / "run.mcap")
-    assert ".jsonl" in CORPUS_READERS
+def test_read_instances_refuses_unknown_suffix_and_names_the_known_ones(tmp_path):
+    with pytest.raises(MwisInputError, match=r"'\.xyz'.*\.jsonl.*\.mcap"):
+        read_instances(tmp_path / "run.xyz")
+    assert {".jsonl", ".json", ".mcap"} <= set(CORPUS_READERS)

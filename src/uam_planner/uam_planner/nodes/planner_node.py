@@ -184,8 +184,9 @@ class PlannerNode(Node):
             self.requests_received += 1
             try:
                 req = m.request_from_msg(msg)
-                reason = None
-                if req.latest_departure_s < self._last_t_s:
+                # What is wrong with the request itself first, then whether it came too late.
+                reason = self.planner.validate(req)
+                if reason is None and req.latest_departure_s < self._last_t_s:
                     reason = (f"latest_departure: {req.latest_departure_s:g} s is before the current "
                               f"simulation time {self._last_t_s:g} s")
             except ValueError as exc:
