@@ -100,14 +100,15 @@ stop_all() {
   local sig=${1:-INT}
   for pid in "${PIDS[@]}"; do kill -"$sig" "$pid" 2>/dev/null || true; done
   local deadline=$((SECONDS + 10))
-  for pid in "${PIDS[@]}"; do
-    while alive "$pid" && (( SECONDS < deadline )); do sleep 0.1; done
-    if alive "$pid"; then
-      echo "run_fleet: process $pid did not stop within 10 s; killing it" >&2
-      kill -KILL "$pid" 2>/dev/null || true
+  local i
+  for i in "${!PIDS[@]}"; do
+    while alive "${PIDS[$i]}" && (( SECONDS < deadline )); do sleep 0.1; done
+    if alive "${PIDS[$i]}"; then
+      echo "run_fleet: node '${NAMES[$i]}' (pid ${PIDS[$i]}) did not stop within 10 s; killing it" >&2
+      kill -KILL "${PIDS[$i]}" 2>/dev/null || true
     fi
   done
-  local i rc
+  local rc
   for i in "${!PIDS[@]}"; do
     rc=0; wait "${PIDS[$i]}" 2>/dev/null || rc=$?
     (( rc == 0 )) || echo "run_fleet: node '${NAMES[$i]}' exited with code $rc" >&2

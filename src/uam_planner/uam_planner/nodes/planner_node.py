@@ -23,6 +23,7 @@ from __future__ import annotations
 import dataclasses
 import sys
 import threading
+import time
 from functools import partial
 from types import SimpleNamespace
 
@@ -81,6 +82,7 @@ class PlannerNode(Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
         self._lock = threading.RLock()
+        self.stopping = threading.Event()  # set on shutdown: a callback waiting on the solver gives up
         self._plan_group = MutuallyExclusiveCallbackGroup()
         self._client_group = ReentrantCallbackGroup()
         self._plan_pub = self.create_publisher(FlightPlan, m.TOPIC_PLANS, m.QOS_LATCHED)
@@ -160,11 +162,16 @@ class PlannerNode(Node):
         future = self._client.call_async(req)
         future.add_done_callback(lambda _f: done.set())
         timeout = self.config.time_limit_s + self.get_parameter("solver_timeout_margin_s").value
-        if not done.wait(timeout):
-            self._client.remove_pending_request(future)
-            msg = f"solver service {m.SERVICE_SOLVE} did not answer within {timeout:.1f} s"
-            self.get_logger().warning(msg + "; solving with greedy locally")
-            raise TimeoutError(msg)
+        deadline = time.monotonic() + timeout
+        while not done.wait(0.05):
+            if self.stopping.is_set():
+                self._client.remove_pending_request(future)
+                raise RuntimeError("the planner is shutting down")
+            if time.monotonic() > deadline:
+                self._client.remove_pending_request(future)
+                msg = f"solver service {m.SERVICE_SOLVE} did not answer within {timeout:.1f} s"
+                self.get_logger().warning(msg + "; solving with greedy locally")
+                raise TimeoutError(msg)
         res = future.result()
         if res is None or not res.success:
             msg = f"solver service refused or failed: {getattr(res, 'message', 'no response')}"

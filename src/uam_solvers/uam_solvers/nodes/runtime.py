@@ -51,7 +51,8 @@ def run_node(make_node, name: str, args=None, *, threads: int = 1, linger_s: flo
     ``make_node()`` builds the node (a ValueError from it is a configuration error: printed,
     exit code 2). ``threads`` > 1 spins a MultiThreadedExecutor (needed where a callback waits
     on a service answer). After the loop, ``linger_s`` more seconds are spun so final messages
-    leave. The exit code is the node's ``exit_code`` attribute if it has one, else 0.
+    leave. The exit code is the node's ``exit_code`` attribute if it has one, else 0. A node with a
+    ``stopping`` threading.Event gets it set when the loop ends, for callbacks that wait.
     """
     import rclpy
     from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
@@ -68,6 +69,10 @@ def run_node(make_node, name: str, args=None, *, threads: int = 1, linger_s: flo
         end = time.monotonic() + linger_s
         while rclpy.ok() and time.monotonic() < end and not stop.is_set():
             executor.spin_once(timeout_sec=0.05)
+        # A callback may still be waiting (e.g. the planner on a solver that already stopped);
+        # tell it, so the executor's worker threads end and the process can exit at once.
+        if hasattr(node, "stopping"):
+            node.stopping.set()
         return int(getattr(node, "exit_code", 0))
     except (KeyboardInterrupt, ExternalShutdownException):
         return 0
