@@ -77,6 +77,10 @@ def build_graph(context, *, network=TINY, rate=2.0, seed=3, duration_s=300.0, po
 
 
 def shutdown(executor, nodes):
-    executor.shutdown()
+    for n in nodes.values():
+        if hasattr(n, "stopping"):
+            n.stopping.set()  # a planner callback waiting on the solver gives up
+        executor.remove_node(n)
+    executor.shutdown(timeout_sec=10)
     for n in nodes.values():
         n.destroy_node()
