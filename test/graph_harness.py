@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import pathlib
 from dataclasses import dataclass, field
 
@@ -84,3 +85,14 @@ def shutdown(executor, nodes):
     executor.shutdown(timeout_sec=10)
     for n in nodes.values():
         n.destroy_node()
+    # Callbacks that were mid-flight when the nodes went away end with rclpy's "destruction was
+    # requested" error; collect those tasks now (inside the test, where output is captured)
+    # instead of at interpreter exit, where rclpy prints them after pytest's summary.
+    with executor._tasks_lock:
+        tasks = [t for t, _entity, _node in executor._tasks]
+        executor._tasks.clear()
+    for task in tasks:
+        if task.done():
+            task.exception()  # marks it retrieved
+    del tasks
+    gc.collect()
