@@ -391,6 +391,20 @@ def _groups_from_ids(ids: Sequence[str]) -> list:
     return [g for g in groups.values() if len(g) > 1]
 
 
+def _epoch_statistics(epochs: Sequence[dict]) -> dict:
+    """Per-run means of the epoch rows (graph size, selection, eligible requests) and the solve
+    times of the epochs that had a conflict graph; shared by in-process runs and recordings."""
+    st = np.array([r["solve_time_s"] for r in epochs if r["vertices"] > 0], dtype=np.float64)
+    return {
+        "mean_vertices": float(np.mean([r["vertices"] for r in epochs])) if epochs else 0.0,
+        "max_vertices": int(max((r["vertices"] for r in epochs), default=0)),
+        "mean_selected": float(np.mean([r["selected"] for r in epochs])) if epochs else 0.0,
+        "mean_eligible": float(np.mean([r["eligible"] for r in epochs])) if epochs else 0.0,
+        "solve_time_mean_s": float(st.mean()) if st.size else 0.0,
+        "solve_time_max_s": float(st.max()) if st.size else 0.0,
+    }
+
+
 def run_scenario(network, method: str, rate: float, seed: int, duration_s: float,
                  config: ExperimentConfig | None = None, demand=None,
                  observer=None) -> ScenarioResult:
@@ -471,7 +485,6 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
     for f in flights:
         del f["_traj"]
     mwis_epochs = [r for r in epochs if r["vertices"] > 0]
-    st = np.array([r["solve_time_s"] for r in mwis_epochs]) if mwis_epochs else np.zeros(0)
     summary = {
         "method": method, "rate": _rate(rate), "seed": int(seed), "duration_s": float(duration_s),
         "epochs": n_epochs, "requests": n_requests, "rejected": len(rejections),
@@ -480,12 +493,7 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
         "approval_rate": approved_cum / n_requests if n_requests else float("nan"),
         "avg_airborne": average_airborne([f["departure_s"] for f in flights],
                                          [f["arrival_s"] for f in flights], duration_s),
-        "mean_vertices": float(np.mean([r["vertices"] for r in epochs])) if epochs else 0.0,
-        "max_vertices": int(max((r["vertices"] for r in epochs), default=0)),
-        "mean_selected": float(np.mean([r["selected"] for r in epochs])) if epochs else 0.0,
-        "mean_eligible": float(np.mean([r["eligible"] for r in epochs])) if epochs else 0.0,
-        "solve_time_mean_s": float(st.mean()) if st.size else 0.0,
-        "solve_time_max_s": float(st.max()) if st.size else 0.0,
+        **_epoch_statistics(epochs),
         "proven_optimal_share": (float(np.mean([r["proven_optimal"] for r in mwis_epochs]))
                                  if mwis_epochs and policy == "mwis" else float("nan")),
         "fallbacks": int(sum(r["fallback"] for r in epochs)),
@@ -860,20 +868,13 @@ def cell_from_summary(summary, instances=(), label: str = "", seed: int = 0,
         ms = a.min_separation_m if a.min_separation_m is not None and math.isfinite(a.min_separation_m) else None
         audit = {"min_separation_m": ms, "pair_of_min": a.closest_pair, "losses": len(a.losses),
                  "loss_pairs": [list(x) for x in a.losses[:20]], "pairs_checked": a.pairs_checked}
-    mwis_eps = [r for r in rows if r["vertices"] > 0]
-    st = np.array([r["solve_time_s"] for r in mwis_eps]) if mwis_eps else np.zeros(0)
     s = {"method": method, "rate": rate, "seed": int(seed), "duration_s": float(duration),
          "epochs": len(eps), "requests": summary.requests, "rejected": summary.rejected,
          "approved": summary.approved, "expired": summary.expired,
          "pending_end": summary.undecided,
          "approval_rate": summary.approved / summary.requests if summary.requests else float("nan"),
          "avg_airborne": summary.average_active_aircraft,
-         "mean_vertices": float(np.mean([r["vertices"] for r in rows])) if rows else 0.0,
-         "max_vertices": int(max((r["vertices"] for r in rows), default=0)),
-         "mean_selected": float(np.mean([r["selected"] for r in rows])) if rows else 0.0,
-         "mean_eligible": float(np.mean([r["eligible"] for r in rows])) if rows else 0.0,
-         "solve_time_mean_s": float(st.mean()) if st.size else 0.0,
-         "solve_time_max_s": float(st.max()) if st.size else 0.0,
+         **_epoch_statistics(rows),
          "proven_optimal_share": float("nan"), "fallbacks": summary.fallbacks,
          "min_separation_m": audit.get("min_separation_m"), "losses": audit.get("losses"),
          "wall_s": float("nan"), "real_time_factor": float("nan"), "source": summary.path}

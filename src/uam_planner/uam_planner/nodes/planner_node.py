@@ -73,12 +73,12 @@ class PlannerNode(Node):
         if not params["network"]:
             raise ValueError("parameter network: empty; give a network file, e.g. config/networks/singapore.yaml")
         self.network = load_network(params["network"])
-        self.config = PlanningConfig(
+        config = PlanningConfig(
             epoch_s=params["epoch_s"], separation_m=params["separation_m"], k=params["k"],
             penalty_factor=params["penalty_factor"], speed_mps=params["speed_mps"], backend=params["backend"],
             time_limit_s=params["time_limit_s"], seed=params["seed"], precompute_routes=params["precompute_routes"])
         self.policy = params["policy"]
-        self.planner = Planner(self.network, self.config, self.policy, solve_mwis=self._solve_mwis)
+        self.planner = Planner(self.network, config, self.policy, solve_mwis=self._solve_mwis)
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
         self._lock = threading.RLock()
@@ -105,6 +105,11 @@ class PlannerNode(Node):
         self.get_logger().info(
             f"planner ready: network {self.network.name!r} ({len(self.network.node_ids)} nodes, "
             f"{len(self.network.aerodrome_ids)} aerodromes), policy {self.policy}, backend {self.config.backend}")
+
+    @property
+    def config(self) -> PlanningConfig:
+        """The planner's current configuration (backend, time limit and seed can change at run time)."""
+        return self.planner.config
 
     # ---- parameters --------------------------------------------------------------------------
     def _on_set_parameters(self, params) -> SetParametersResult:
@@ -133,8 +138,7 @@ class PlannerNode(Node):
             if prm.name in ("backend", "time_limit_s", "seed"):
                 with self._lock:
                     fields = {prm.name: float(prm.value) if prm.name == "time_limit_s" else prm.value}
-                    self.config = dataclasses.replace(self.config, **fields)
-                    self.planner.config = self.config
+                    self.planner.config = dataclasses.replace(self.planner.config, **fields)
         return SetParametersResult(successful=True)
 
     # ---- MWIS through the service --------------------------------------------------------------

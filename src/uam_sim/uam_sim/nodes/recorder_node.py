@@ -27,14 +27,11 @@ import sys
 import time
 from pathlib import Path
 
-import rclpy
-from uam_solvers.nodes.runtime import report_cpu_time_at_exit
 from geometry_msgs.msg import PoseArray
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.clock import Clock as RclClock
 from rclpy.clock import ClockType
 from rclpy.event_handler import SubscriptionEventCallbacks
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
@@ -44,6 +41,7 @@ from uam_msgs.msg import EpochSync, FleetState, FlightPlan, FlightRequest, Plann
 from uam_sim.recording import McapRecorder, sim_stamp_ns
 from uam_sim.rerun_log import MODES as RERUN_MODES
 from uam_sim.rerun_log import RerunLogger
+from uam_solvers.nodes.runtime import run_node
 
 _QOS_VOLATILE = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10000,
                            reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
@@ -53,10 +51,6 @@ _QOS_VOLATILE = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10000,
 _QOS_LATCHED = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=20000,
                           reliability=ReliabilityPolicy.RELIABLE,
                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
-
-# Recorder nodes of this process with an open file. main() closes them whatever happens, even
-# when Ctrl-C lands between the file being opened and the node being returned to it.
-_OPENED: list = []
 
 #: topic -> (message class, subscription QoS)
 RECORDED_TOPICS = {
@@ -130,7 +124,6 @@ class RecorderNode(Node):
         except BaseException:
             self.recorder.close()
             raise
-        _OPENED.append(self)
         self.finish_requested = False
         self._finish_quiet_s = float(g("finish_quiet_s").value)
         self._finish_timeout_s = float(g("finish_timeout_s").value)
@@ -248,8 +241,6 @@ class RecorderNode(Node):
         if self.finished:
             return
         self.finished = True
-        if self in _OPENED:
-            _OPENED.remove(self)
         if self._finish_timer is not None:
             self._finish_timer.cancel()
         try:
@@ -267,36 +258,7 @@ class RecorderNode(Node):
 
 
 def main(args=None) -> int:
-    report_cpu_time_at_exit("recorder")
-    rclpy.init(args=args)  # rclpy's handlers turn SIGINT and SIGTERM into a shutdown
-    node = None
-    rc = 0
-    try:
-        executor = SingleThreadedExecutor()
-        node = RecorderNode()
-        executor.add_node(node)
-        while rclpy.ok() and not node.finished:
-            executor.spin_once(timeout_sec=0.1)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (ValueError, OSError) as exc:
-        print(f"recorder: {exc}", file=sys.stderr)
-        rc = 2
-    except Exception:  # noqa: BLE001 - a signal during start-up invalidates the context mid-call
-        if rclpy.ok():
-            raise
-    finally:
-        try:
-            if node is not None:
-                try:
-                    node.close()
-                finally:
-                    node.destroy_node()
-        finally:
-            while _OPENED:  # (close is idempotent)
-                _OPENED.pop().close()
-            rclpy.try_shutdown()
-    return rc
+    return run_node(RecorderNode, "recorder", args)
 
 
 if __name__ == "__main__":

@@ -15,18 +15,17 @@ from __future__ import annotations
 import sys
 import time
 
-import rclpy
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.clock import Clock as RclClock
 from rclpy.clock import ClockType
 from rclpy.duration import Duration
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.utilities import remove_ros_args
 
 from uam_sim.recording import QosSpec, message_class
 from uam_sim.replay import load_plan
+from uam_solvers.nodes.runtime import run_node
 
 _BATCH = 500  # messages per timer tick at most, so the executor stays responsive at rate 0
 
@@ -94,6 +93,11 @@ class ReplayNode(Node):
     def done(self) -> bool:
         return self.plan.done
 
+    @property
+    def finished(self) -> bool:
+        """Everything is published and the node should exit (``exit_when_done``)."""
+        return self.plan.done and self.exit_when_done
+
     def _on_timer(self) -> None:
         now = time.monotonic()
         if self._start is None:
@@ -113,33 +117,9 @@ class ReplayNode(Node):
 
 def main(args=None) -> int:
     argv = sys.argv if args is None else args
-    rclpy.init(args=argv)
-    node = None
-    rc = 0
-    try:
-        positional = [a for a in remove_ros_args(argv)[1:] if not a.startswith("-")]
-        executor = SingleThreadedExecutor()
-        node = ReplayNode(positional[0] if positional else None)
-        executor.add_node(node)
-        while rclpy.ok() and not (node.done and node.exit_when_done):
-            executor.spin_once(timeout_sec=0.1)
-        # give transient-local and reliable readers a moment to take the last messages
-        end = time.monotonic() + 0.5
-        while rclpy.ok() and time.monotonic() < end:
-            executor.spin_once(timeout_sec=0.05)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (ValueError, OSError) as exc:
-        print(f"replay: {exc}", file=sys.stderr)
-        rc = 2
-    except Exception:  # noqa: BLE001 - a signal during start-up invalidates the context mid-call
-        if rclpy.ok():
-            raise
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return rc
+    positional = [a for a in remove_ros_args(argv)[1:] if not a.startswith("-")]
+    # linger: give transient-local and reliable readers a moment to take the last messages
+    return run_node(lambda: ReplayNode(positional[0] if positional else None), "replay", argv, linger_s=0.5)
 
 
 if __name__ == "__main__":

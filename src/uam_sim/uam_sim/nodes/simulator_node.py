@@ -74,7 +74,6 @@ class SimulatorNode(Node):
         self.fleet = Fleet()
         self.step_index = 0                 # t = step_index * step_s
         self.plans_received = 0
-        self.approved_received = 0
         self._planner_acks: dict[int, int] = {}
         self._waiting_epoch: int | None = None
         self._wait_started = 0.0
@@ -104,7 +103,6 @@ class SimulatorNode(Node):
         if plan.outcome == FlightPlan.OUTCOME_APPROVED:
             try:
                 self.fleet.add(plan.request_id, m.trajectory_from_plan(plan))
-                self.approved_received += 1
             except ValueError as exc:
                 self.get_logger().error(f"cannot fly plan {plan.request_id!r}: {exc}")
         self._maybe_resume()
@@ -167,7 +165,6 @@ class SimulatorNode(Node):
         if k is not None:
             self._waiting_epoch = k
             self._wait_started = time.monotonic()
-            self._clock_pub.publish(Clock(clock=m.to_time(self.t_s)))
             self._sync_pub.publish(EpochSync(epoch_index=k, epoch_time=m.to_time(self.t_s), sender="simulator"))
             if self._acked(k):  # (only after a restart of the planner with latched acks)
                 self._maybe_resume()
@@ -200,7 +197,7 @@ class SimulatorNode(Node):
         sim = min(self.t_s, self.duration_s)
         avg = sum(self.active_samples) / len(self.active_samples) if self.active_samples else 0.0
         self.get_logger().info(
-            f"run finished at t={sim:g} s: {self.approved_received} approved flights flown, "
+            f"run finished at t={sim:g} s: {self.fleet.total_added} approved flights flown, "
             f"{self.plans_received} plans received, average airborne {avg:.2f}; wall {wall:.2f} s, "
             f"real-time factor {sim / wall if wall > 0 else float('inf'):.1f}")
 

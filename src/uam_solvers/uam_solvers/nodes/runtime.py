@@ -48,11 +48,13 @@ def init_with_stop_event(args=None):
 def run_node(make_node, name: str, args=None, *, threads: int = 1, linger_s: float = 0.0) -> int:
     """The main() of a node: init, spin until the node is ``finished`` or a signal, clean up.
 
-    ``make_node()`` builds the node (a ValueError from it is a configuration error: printed,
-    exit code 2). ``threads`` > 1 spins a MultiThreadedExecutor (needed where a callback waits
+    ``make_node()`` builds the node (a ValueError or OSError from it is a configuration error,
+    e.g. a bad parameter or a missing file: printed, exit code 2). ``threads`` > 1 spins a MultiThreadedExecutor (needed where a callback waits
     on a service answer). After the loop, ``linger_s`` more seconds are spun so final messages
     leave. The exit code is the node's ``exit_code`` attribute if it has one, else 0. A node with a
-    ``stopping`` threading.Event gets it set when the loop ends, for callbacks that wait.
+    ``stopping`` threading.Event gets it set when the loop ends, for callbacks that wait; a node
+    with a ``close()`` method (e.g. an open recording) gets it called before it is destroyed,
+    however the loop ended.
     """
     import rclpy
     from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
@@ -76,10 +78,14 @@ def run_node(make_node, name: str, args=None, *, threads: int = 1, linger_s: flo
         return int(getattr(node, "exit_code", 0))
     except (KeyboardInterrupt, ExternalShutdownException):
         return 0
-    except ValueError as exc:
+    except (ValueError, OSError) as exc:
         print(f"{name}: {exc}", file=sys.stderr)
         return 2
     finally:
         if node is not None:
-            node.destroy_node()
+            try:
+                if hasattr(node, "close"):
+                    node.close()
+            finally:
+                node.destroy_node()
         rclpy.try_shutdown()
