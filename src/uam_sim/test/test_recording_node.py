@@ -22,6 +22,7 @@ from rosgraph_msgs.msg import Clock  # noqa: E402
 from uam_msgs.msg import (EpochSync, FleetState, FlightPlan, FlightRequest,  # noqa: E402
                           PlanningReport, VehicleState, Waypoint)
 
+from uam_bringup.contract import resolved  # noqa: E402
 from uam_sim.nodes.recorder_node import RECORDED_TOPICS, RecorderNode  # noqa: E402
 from uam_sim.recording import is_complete, read_messages  # noqa: E402
 
@@ -40,7 +41,7 @@ def test_records_every_topic_and_closes_on_the_simulators_finish(ros_context, sp
         Parameter("output", value=str(out)), Parameter("rerun", value="save"),
         Parameter("network", value=str(ROOT / "config" / "networks" / "tiny.yaml"))])
     talker = Node("talker", context=ros_context)
-    pubs = {topic: talker.create_publisher(cls, topic, qos) for topic, (cls, qos) in RECORDED_TOPICS.items()}
+    pubs = {resolved(topic): talker.create_publisher(cls, topic, qos) for topic, (cls, qos) in RECORDED_TOPICS.items()}
     executor = SingleThreadedExecutor(context=ros_context)
     executor.add_node(recorder)
     executor.add_node(talker)
@@ -119,4 +120,4 @@ def test_sigterm_and_ctrl_c_close_the_file_properly(tmp_path, sig):
     from mcap.reader import make_reader
     with open(out, "rb") as f:
         summary = make_reader(f).get_summary()
-    assert {c.topic for c in summary.channels.values()} == set(RECORDED_TOPICS)
+    assert {c.topic for c in summary.channels.values()} == set(map(resolved, RECORDED_TOPICS))
