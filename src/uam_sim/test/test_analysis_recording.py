@@ -15,8 +15,9 @@ from rclpy.qos import DurabilityPolicy, QoSProfile  # noqa: E402
 from uam_msgs.msg import (FleetState, FlightPlan, FlightRequest, MwisInstance,  # noqa: E402
                           PlanningReport, VehicleState, Waypoint)
 
-from uam_sim.analysis import instances_from_mcap, main, recorded_instances, summarize  # noqa: E402
-from uam_sim.recording import McapRecorder  # noqa: E402
+from uam_sim.analysis import main, summarize  # noqa: E402
+from uam_sim.mcap_writer import McapRecorder  # noqa: E402
+from uam_sim.recorded_instances import instances_from_mcap, recorded_instances  # noqa: E402
 
 NS = 1_000_000_000
 
@@ -139,8 +140,8 @@ def test_command_line_prints_summary_and_exit_code_flags_a_loss(recording, capsy
 
 
 def test_fleet_state_digest_reads_stamp_and_count_from_the_cdr():
-    from uam_sim.analysis import _fleet_state_digest
-    from uam_sim.recording import serialize_exact
+    from uam_sim.cdr import fleet_state_digest as _fleet_state_digest
+    from uam_sim.cdr import serialize_exact
 
     for frame in ("", "e", "enu", "a-longer-frame"):
         for n in (0, 1, 7):
@@ -157,7 +158,7 @@ def test_pruned_audit_equals_brute_force_on_random_flights():
     import numpy as np
     from uam_planner.audit import audit_flights
 
-    from uam_sim.analysis import audit_trajectories
+    from uam_sim.audit import audit_trajectories
 
     rng = np.random.default_rng(7)
     for trial in range(20):

@@ -23,7 +23,7 @@ from uam_msgs.msg import (EpochSync, FleetState, FlightPlan, FlightRequest,  # n
                           PlanningReport, VehicleState, Waypoint)
 
 from uam_sim.nodes.recorder_node import RECORDED_TOPICS, RecorderNode  # noqa: E402
-from uam_sim.recording import is_complete, read_messages  # noqa: E402
+from uam_sim.mcap_reader import is_complete, read_messages  # noqa: E402
 
 pytestmark = pytest.mark.ros
 ROOT = Path(__file__).resolve().parents[3]

@@ -15,7 +15,8 @@ from rosgraph_msgs.msg import Clock  # noqa: E402
 from uam_msgs.msg import FleetState, FlightPlan  # noqa: E402
 
 from uam_sim.nodes.replay_node import ReplayNode  # noqa: E402
-from uam_sim.recording import McapRecorder, read_messages  # noqa: E402
+from uam_sim.mcap_reader import read_messages  # noqa: E402
+from uam_sim.mcap_writer import McapRecorder  # noqa: E402
 from uam_sim.replay import load_plan  # noqa: E402
 
 NS = 1_000_000_000

@@ -23,6 +23,9 @@ Two decoders: ``reader="rclpy"`` (mcap's reader + ``rclpy.serialization``; toler
 short by a crash) and ``reader="rosbags"`` (the independent ``rosbags`` library, types built from
 the definitions embedded in the file; needs a complete file). The summary code only reads fields,
 so both must give the same summary.
+
+The audit itself is :mod:`uam_sim.audit`; decoding is :func:`uam_sim.mcap_reader.iter_decoded`;
+the recorded MWIS instances are :mod:`uam_sim.recorded_instances`.
 """
 
 from __future__ import annotations
@@ -31,14 +34,15 @@ import argparse
 import json
 import math
 import re
-import struct
 import sys
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from types import SimpleNamespace
-from typing import Any, Iterable, Iterator
+from typing import Any, Iterable
 
 import numpy as np
+
+from .audit import SafetyAudit, _t, audit_plans
+from .mcap_reader import is_complete, iter_decoded
 
 OUTCOME_APPROVED, OUTCOME_REJECTED, OUTCOME_EXPIRED = 0, 1, 2
 TOPIC_REQUESTS = "/uam/requests"
@@ -46,10 +50,6 @@ TOPIC_PLANS = "/uam/flight_plans"
 TOPIC_REPORTS = "/uam/planning_reports"
 TOPIC_FLEET = "/uam/fleet_state"
 ANALYSED_TOPICS = (TOPIC_REQUESTS, TOPIC_PLANS, TOPIC_REPORTS, TOPIC_FLEET)
-
-
-def _t(stamp: Any) -> float:
-    return int(stamp.sec) + int(stamp.nanosec) * 1e-9
 
 
 @dataclass
@@ -70,21 +70,6 @@ class EpochStats:
     solve_time_s: float
     backend_used: str
     fallback: bool
-
-
-@dataclass
-class SafetyAudit:
-    """Closest approach between every pair of approved flights, as flown."""
-
-    separation_m: float
-    min_separation_m: float          # inf when no two flights are ever airborne together
-    closest_pair: list | None        # [request_id, request_id] at the minimum
-    losses: list                     # [request_id, request_id, distance_m, t_s] below separation_m, by time
-    pairs_checked: int               # pairs whose closest approach was computed exactly
-
-    @property
-    def ok(self) -> bool:
-        return not self.losses
 
 
 @dataclass
@@ -148,138 +133,8 @@ def _stats(values: list[float]) -> dict:
 
 
 # --------------------------------------------------------------------------------------------
-# Decoding
-# --------------------------------------------------------------------------------------------
-
-def _fleet_state_digest(data: bytes) -> Any | None:
-    """Stamp and vehicle count of a FleetState read straight from its little-endian CDR.
-
-    Layout (XCDR1, offsets from the payload after the 4-byte encapsulation header): stamp sec
-    int32 @0, nanosec uint32 @4, frame_id string (uint32 length incl. NUL, bytes) @8, step_index
-    uint64 aligned to 8, vehicles count uint32. Returns None for big-endian data (the caller
-    deserializes fully then). Avoids building every VehicleState object: O(1) per message.
-    """
-    if len(data) < 16 or data[1] != 1:
-        return None
-    sec, nanosec, n_frame = struct.unpack_from("<iII", data, 4)
-    pos = 12 + n_frame                  # payload offset after frame_id
-    pos += (-pos) % 8                   # align step_index
-    step_index, = struct.unpack_from("<Q", data, 4 + pos)
-    pos += 8
-    pos += (-pos) % 4
-    count, = struct.unpack_from("<I", data, 4 + pos)
-    return SimpleNamespace(header=SimpleNamespace(stamp=SimpleNamespace(sec=sec, nanosec=nanosec)),
-                           step_index=step_index, vehicles=range(count))
-
-
-def iter_decoded(path: str | Path, reader: str = "rclpy",
-                 topics: Iterable[str] = ANALYSED_TOPICS,
-                 fleet_digest_only: bool = False) -> Iterator[tuple[str, int, Any]]:
-    """(topic, log_time_ns, message) of the given topics, in log-time order.
-
-    ``reader``: "rclpy" (mcap + rclpy deserialization; a torn file yields what was written) or
-    "rosbags" (the independent rosbags library, every message decoded in full; needs a complete
-    file). ``fleet_digest_only`` (rclpy reader): FleetStates come back as their stamp,
-    step_index and a ``vehicles`` range of the right length only, read from the CDR directly.
-    """
-    topics = set(topics)
-    if reader == "rclpy":
-        from .recording import deserialize, is_complete, read_messages, read_messages_tolerant
-        if is_complete(path):
-            records = read_messages(path, topics=sorted(topics))
-        else:  # crash-cut file: file order is log order here, but sort to be sure
-            records = sorted((r for r in read_messages_tolerant(path) if r.topic in topics),
-                             key=lambda r: r.log_time_ns)
-        for rec in records:
-            if rec.topic == TOPIC_FLEET and fleet_digest_only:
-                digest = _fleet_state_digest(rec.data)
-                if digest is not None:
-                    yield rec.topic, rec.log_time_ns, digest
-                    continue
-            yield rec.topic, rec.log_time_ns, deserialize(rec)
-    elif reader == "rosbags":
-        from rosbags.highlevel import AnyReader
-        from rosbags.typesys import Stores, get_typestore
-
-        with AnyReader([Path(path)], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as r:
-            conns = [c for c in r.connections if c.topic in topics]
-            for conn, timestamp, raw in r.messages(connections=conns):
-                yield conn.topic, timestamp, r.deserialize(raw, conn.msgtype)
-    else:
-        raise ValueError(f"reader: {reader!r} is not 'rclpy' or 'rosbags'")
-
-
-# --------------------------------------------------------------------------------------------
 # Summary
 # --------------------------------------------------------------------------------------------
-
-def trajectory_of(plan: Any) -> tuple[np.ndarray, np.ndarray]:
-    """(times_s (p,), points_m (p, 3)) of a FlightPlan's waypoints."""
-    times = np.array([_t(w.time) for w in plan.waypoints], dtype=np.float64)
-    points = np.array([(w.position.x, w.position.y, w.position.z) for w in plan.waypoints],
-                      dtype=np.float64).reshape(-1, 3)
-    return times, points
-
-
-def audit_trajectories(flights: list[tuple[np.ndarray, np.ndarray]], labels: list[str],
-                       separation_m: float = 100.0) -> SafetyAudit:
-    """Exact minimum separation and every loss of separation among piecewise-linear 4D flights.
-
-    ``flights``: (times_s (p,), points_m (p, 3)) per flight, times increasing. The exact closest
-    approach of a pair is ``uam_planner.audit.pair_min_distance`` (brute force over the pair's
-    time-overlapping segment pairs). Pairs are taken in increasing order of a lower bound on
-    their distance (the gap between the two flights' bounding boxes; pairs never airborne
-    together are skipped) and the search stops once the bound reaches both the separation
-    minimum and the smallest distance found: every loss and the true minimum are still found,
-    because no skipped pair can be closer than its bound. Complexity O(F^2) for the bounds (numpy)
-    plus O(s_a + s_b) per evaluated pair.
-    """
-    from uam_planner.audit import pair_min_distance
-
-    n = len(flights)
-    if n < 2:
-        return SafetyAudit(float(separation_m), math.inf, None, [], 0)
-    t0 = np.array([f[0][0] for f in flights])
-    t1 = np.array([f[0][-1] for f in flights])
-    lo = np.array([f[1].min(axis=0) for f in flights])
-    hi = np.array([f[1].max(axis=0) for f in flights])
-    iu, ju = np.triu_indices(n, k=1)
-    together = (t0[iu] <= t1[ju]) & (t0[ju] <= t1[iu])
-    iu, ju = iu[together], ju[together]
-    gap = np.maximum(0.0, np.maximum(lo[iu] - hi[ju], lo[ju] - hi[iu]))  # per axis, (k, 3)
-    bound = np.sqrt((gap * gap).sum(axis=1))
-    order = np.argsort(bound, kind="stable")
-    # plain Python floats for the pure-Python kernel (converting numpy scalars per pair is slow)
-    plain = [([float(t) for t in times], [tuple(map(float, p)) for p in points]) for times, points in flights]
-    best, best_pair, losses, checked = math.inf, None, [], 0
-    for k in order:
-        if bound[k] >= separation_m and bound[k] >= best:
-            break
-        i, j = int(iu[k]), int(ju[k])
-        d, t = pair_min_distance(plain[i], plain[j])
-        checked += 1
-        if d < best:
-            best, best_pair = d, [labels[i], labels[j]]
-        if d < separation_m:
-            losses.append([labels[i], labels[j], float(d), float(t)])
-    losses.sort(key=lambda x: (x[3], x[0], x[1]))
-    return SafetyAudit(separation_m=float(separation_m), min_separation_m=float(best),
-                       closest_pair=best_pair, losses=losses, pairs_checked=checked)
-
-
-def audit_plans(plans: list[Any], separation_m: float = 100.0) -> SafetyAudit:
-    """Exact minimum separation between every pair of approved plans (see :func:`audit_trajectories`)."""
-    flights, labels = [], []
-    for p in plans:
-        times, points = trajectory_of(p)
-        if len(times) < 2:
-            continue
-        if np.any(np.diff(times) <= 0):
-            raise ValueError(f"flight plan {p.request_id!r}: waypoint times are not increasing: {times}")
-        flights.append((times, points))
-        labels.append(str(p.request_id))
-    return audit_trajectories(flights, labels, separation_m)
-
 
 def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m: float = 100.0,
                        path: str = "", reader: str = "", complete_file: bool = True) -> RunSummary:
@@ -361,66 +216,11 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m: f
 
 def summarize(path: str | Path, separation_m: float = 100.0, reader: str = "rclpy") -> RunSummary:
     """Read a recording and return its :class:`RunSummary` (see the module docstring)."""
-    from .recording import is_complete
-
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"recording: no file at {path}")
-    return summarize_messages(iter_decoded(path, reader, fleet_digest_only=True), separation_m,
+    return summarize_messages(iter_decoded(path, reader, ANALYSED_TOPICS, fleet_digest_only=True), separation_m,
                               str(path), reader, is_complete(path))
-
-
-# --------------------------------------------------------------------------------------------
-# MWIS instances
-# --------------------------------------------------------------------------------------------
-
-@dataclass
-class RecordedInstance:
-    """An MWIS instance as the planner solved it in one epoch, with its answer."""
-
-    epoch_index: int
-    t_s: float
-    problem: Any                      # uam_solvers.base.MwisProblem
-    vertex_request_ids: list
-    vertex_candidate_index: list
-    selected: list
-    objective: float
-    solve_time_s: float
-    backend_used: str
-
-
-def recorded_instances(path: str | Path, reader: str = "rclpy") -> list[RecordedInstance]:
-    """Every non-empty MWIS instance of the PlanningReports, in epoch order.
-
-    The problem's clique groups are the vertices of each request (at most one candidate per
-    request), in addition to the recorded edges.
-    """
-    from uam_solvers.base import MwisProblem
-
-    out = []
-    for _topic, _t_ns, msg in iter_decoded(path, reader, topics=(TOPIC_REPORTS,)):
-        inst = msg.instance
-        weights = np.asarray(inst.weights, dtype=np.float64)
-        if weights.size == 0:
-            continue
-        edges = np.stack([np.asarray(inst.edges_u, dtype=np.int64),
-                          np.asarray(inst.edges_v, dtype=np.int64)], axis=1).reshape(-1, 2)
-        rids = [str(r) for r in inst.vertex_request_ids]
-        groups: dict[str, list[int]] = {}
-        for i, r in enumerate(rids):
-            groups.setdefault(r, []).append(i)
-        problem = MwisProblem.from_arrays(weights, edges, groups=list(groups.values()) if rids else None)
-        out.append(RecordedInstance(
-            epoch_index=int(msg.epoch_index), t_s=_t(msg.header.stamp), problem=problem,
-            vertex_request_ids=rids, vertex_candidate_index=[int(c) for c in inst.vertex_candidate_index],
-            selected=[int(s) for s in inst.selected], objective=float(msg.objective),
-            solve_time_s=float(msg.solve_time_s), backend_used=str(msg.backend_used)))
-    return sorted(out, key=lambda r: r.epoch_index)
-
-
-def instances_from_mcap(path: str | Path, reader: str = "rclpy") -> list:
-    """The MWIS instances of a recording as ``uam_solvers.base.MwisProblem`` objects."""
-    return [r.problem for r in recorded_instances(path, reader)]
 
 
 # --------------------------------------------------------------------------------------------

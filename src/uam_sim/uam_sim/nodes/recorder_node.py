@@ -38,7 +38,8 @@ from rclpy.serialization import deserialize_message
 from rosgraph_msgs.msg import Clock
 from uam_msgs.msg import EpochSync, FleetState, FlightPlan, FlightRequest, PlanningReport
 
-from uam_sim.recording import McapRecorder, sim_stamp_ns
+from uam_sim.mcap_writer import McapRecorder
+from uam_sim.stamps import sim_stamp_ns
 from uam_sim.rerun_log import MODES as RERUN_MODES
 from uam_sim.rerun_log import RerunLogger
 from uam_solvers.nodes.runtime import run_node
