@@ -75,7 +75,7 @@ def recording(tmp_path_factory):
         rec.write("/uam/planning_reports", empty, 30 * NS)
         # fleet states at t = 0..4 s with 3, 3, 2, 2, 0 vehicles: time-average over [0, 4] = 2.5
         for k, n in enumerate([3, 3, 2, 2, 0]):
-            fs = FleetState(step_index=k, vehicles=[VehicleState(vehicle_id=f"v{j}") for j in range(n)])
+            fs = FleetState(step_index=k, vehicles=[VehicleState(vehicle_id=f"r{j + 1}") for j in range(n)])
             fs.header.stamp = t(k)
             rec.write("/uam/fleet_state", fs, k * NS)
     return path

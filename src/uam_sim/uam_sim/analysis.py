@@ -42,7 +42,10 @@ from typing import Any, Iterable
 import numpy as np
 
 from .audit import SafetyAudit, _t, audit_plans
-from .mcap_reader import is_complete, iter_decoded
+from .mcap_reader import is_complete, iter_decoded, read_metadata
+
+#: the MCAP metadata record the recorder node writes with its check of what it received
+RECORDER_CHECK = "uam_recorder_check"
 
 OUTCOME_APPROVED, OUTCOME_REJECTED, OUTCOME_EXPIRED = 0, 1, 2
 TOPIC_REQUESTS = "/uam/requests"
@@ -86,8 +89,8 @@ class RunSummary:
     rejected: int
     expired: int
     undecided: int                   # requests without any plan in the recording
-    duplicate_decisions: int         # plans beyond the first for a request (should be 0)
-    plans_without_request: int       # plans whose request is not in the recording
+    duplicate_decisions: int         # plans beyond the first for a request (identical repeats included)
+    plans_without_request: int       # request ids with a plan but no request in the recording
     average_active_aircraft: float   # time-average of airborne vehicles over the fleet states
     max_active_aircraft: int
     fleet_steps: int
@@ -98,11 +101,24 @@ class RunSummary:
     fallbacks: int = 0
     rejection_reasons: dict = field(default_factory=dict)  # reason (numbers as N) -> count
     audit: SafetyAudit | None = None
+    #: request id -> its distinct decisions in order ("approved", "rejected", "expired"), for every
+    #: id decided more than one way (a re-sent or forged id); every approved plan is audited
+    conflicting_decisions: dict = field(default_factory=dict)
+    #: why the recording cannot be trusted to hold the whole run (then the audit is not "OK")
+    problems: list = field(default_factory=list)
+    #: what the recorder itself found (its ``uam_recorder_check`` metadata), {} if none
+    recorder_check: dict = field(default_factory=dict)
+
+    @property
+    def verified(self) -> bool:
+        """True when the recording holds every plan it should (no entry in ``problems``)."""
+        return not self.problems
 
     def to_dict(self) -> dict:
         d = asdict(self)
         if self.audit is not None:
             d["audit"]["ok"] = self.audit.ok
+        d["verified"] = self.verified
         return _jsonable(d)
 
     def to_json(self, **kw: Any) -> str:
@@ -136,17 +152,77 @@ def _stats(values: list[float]) -> dict:
 # Summary
 # --------------------------------------------------------------------------------------------
 
+_OUTCOME_NAMES = {OUTCOME_APPROVED: "approved", OUTCOME_REJECTED: "rejected", OUTCOME_EXPIRED: "expired"}
+
+
+def _plan_key(p: Any) -> tuple:
+    """What makes two plan messages the same decision (a latched plan delivered twice)."""
+    return (str(p.request_id), int(p.outcome), str(p.reason), int(p.epoch_index),
+            tuple((_t(w.time), float(w.position.x), float(w.position.y), float(w.position.z))
+                  for w in p.waypoints))
+
+
+def _vehicle_ids(msg: Any) -> list:
+    ids = getattr(msg, "vehicle_ids", None)  # a digest read from the CDR (uam_sim.cdr)
+    return list(ids) if ids is not None else [str(v.vehicle_id) for v in msg.vehicles]
+
+
+def _few(ids, n: int = 5) -> str:
+    ids = sorted(ids)
+    return ", ".join(repr(i) for i in ids[:n]) + (f" and {len(ids) - n} more" if len(ids) > n else "")
+
+
+def integrity_problems(epochs: list, approved: list, flown_ids: set, max_active: int,
+                       audit: SafetyAudit | None, conflicting: dict) -> list[str]:
+    """Why a recording cannot be trusted to hold the whole run (empty when it can).
+
+    ``approved``: (request id, epoch index) of every approved plan held. Checks: ids decided more
+    than one way; the planning reports' announced approvals against the approved plans held,
+    epoch by epoch; vehicles in the fleet states with no approved plan; flights that
+    flew together while the audit checked no pair.
+    """
+    problems = []
+    if conflicting:
+        problems.append(f"{len(conflicting)} request id(s) have conflicting decisions ({_few(conflicting)}); "
+                        "every approved plan is audited")
+    announced = sum(e.approved for e in epochs)
+    if epochs and announced != len(approved):
+        per_epoch: dict[int, list] = {}
+        for rid, epoch in approved:
+            per_epoch.setdefault(epoch, []).append(rid)
+        reported = {e.epoch_index: e.approved for e in epochs}
+        detail = [f"epoch {k}: {reported.get(k, 0)} announced, {len(per_epoch.get(k, []))} held"
+                  + (f" ({_few(per_epoch[k])})" if per_epoch.get(k) else "")
+                  for k in sorted(set(reported) | set(per_epoch))
+                  if reported.get(k, 0) != len(per_epoch.get(k, []))]
+        problems.append(f"planning reports announce {announced} approvals but the recording holds "
+                        f"{len(approved)} approved plans ({'; '.join(detail[:5])})")
+    unplanned = flown_ids - {rid for rid, _epoch in approved}
+    if unplanned:
+        problems.append(f"{len(unplanned)} vehicle(s) in the fleet states have no approved plan in the "
+                        f"recording: {_few(unplanned)}")
+    if audit is not None and max_active >= 2 and audit.pairs_checked == 0:
+        problems.append(f"the fleet states show {max_active} aircraft airborne together, but 0 pairs "
+                        "of approved plans were checked")
+    return problems
+
+
 def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m: float = 100.0,
                        path: str = "", reader: str = "", complete_file: bool = True) -> RunSummary:
     """The summary of a stream of (topic, log_time_ns, message), e.g. from :func:`iter_decoded`.
 
+    Every distinct plan counts, whatever its id: identical repeats (a latched plan delivered
+    twice) are counted once; an id decided more than one way is listed in
+    ``conflicting_decisions`` and each of its approved plans is audited (labelled ``id#2``, ...).
     Complexity: linear in the messages, plus the audit (quadratic in overlapping flights).
     """
     request_ids: set[str] = set()
-    decisions: dict[str, Any] = {}
+    decisions: dict[str, list] = {}  # request id -> distinct plans, in arrival order
+    seen: set[tuple] = set()
     duplicates = 0
     fleet_t: list[float] = []
     fleet_n: list[int] = []
+    flown: set[str] = set()
     epochs: list[EpochStats] = []
     t_min, t_max = math.inf, -math.inf
     for topic, log_ns, msg in messages:
@@ -156,12 +232,16 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m: f
         elif topic == TOPIC_PLANS:
             rid = str(msg.request_id)
             if rid in decisions:
-                duplicates += 1  # a late-joining subscriber may get a latched plan twice
-            else:
-                decisions[rid] = msg
+                duplicates += 1
+            key = _plan_key(msg)
+            if key not in seen:
+                seen.add(key)
+                decisions.setdefault(rid, []).append(msg)
         elif topic == TOPIC_FLEET:
+            ids = _vehicle_ids(msg)
             fleet_t.append(_t(msg.header.stamp))
-            fleet_n.append(len(msg.vehicles))
+            fleet_n.append(len(ids))
+            flown.update(ids)
         elif topic == TOPIC_REPORTS:
             epochs.append(EpochStats(
                 epoch_index=int(msg.epoch_index), t_s=_t(msg.header.stamp),
@@ -171,10 +251,18 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m: f
                 active_flights=int(msg.active_flights), objective=float(msg.objective),
                 solve_time_s=float(msg.solve_time_s), backend_used=str(msg.backend_used),
                 fallback=bool(msg.fallback)))
-    outcomes = [int(p.outcome) for p in decisions.values()]
-    approved_plans = [p for p in decisions.values() if int(p.outcome) == OUTCOME_APPROVED]
+    plans = [p for ps in decisions.values() for p in ps]
+    outcomes = [int(p.outcome) for p in plans]
+    conflicting = {rid: [_OUTCOME_NAMES.get(int(p.outcome), str(int(p.outcome))) for p in ps]
+                   for rid, ps in decisions.items() if len(ps) > 1}
+    approved_plans, labels = [], []
+    for rid, ps in decisions.items():
+        mine = [p for p in ps if int(p.outcome) == OUTCOME_APPROVED]
+        for k, p in enumerate(mine):
+            approved_plans.append(p)
+            labels.append(rid if k == 0 else f"{rid}#{k + 1}")
     reasons: dict[str, int] = {}
-    for p in decisions.values():
+    for p in plans:
         if int(p.outcome) != OUTCOME_APPROVED:
             key = _REASON_NUMBER.sub("N", str(p.reason))  # "... by 270 s" and "... by 300 s" together
             reasons[key] = reasons.get(key, 0) + 1
@@ -190,6 +278,8 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m: f
         else:
             avg_active = float(n.mean())
     with_instance = [e for e in epochs if e.vertices > 0]
+    max_active = int(max(fleet_n)) if fleet_n else 0
+    audit = audit_plans(approved_plans, separation_m, labels=labels)
     return RunSummary(
         path=str(path), reader=reader, complete_file=complete_file,
         sim_start_s=t_min if math.isfinite(t_min) else 0.0,
@@ -202,7 +292,7 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m: f
         duplicate_decisions=duplicates,
         plans_without_request=len(set(decisions) - request_ids),
         average_active_aircraft=avg_active,
-        max_active_aircraft=int(max(fleet_n)) if fleet_n else 0,
+        max_active_aircraft=max_active,
         fleet_steps=len(fleet_t),
         epochs=sorted(epochs, key=lambda e: e.epoch_index),
         mwis_vertices=_stats([e.vertices for e in with_instance]),
@@ -210,7 +300,10 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m: f
         solve_time_s=_stats([e.solve_time_s for e in with_instance]),
         fallbacks=sum(e.fallback for e in epochs),
         rejection_reasons=reasons,
-        audit=audit_plans(approved_plans, separation_m),
+        audit=audit,
+        conflicting_decisions=conflicting,
+        problems=integrity_problems(epochs, [(str(p.request_id), int(p.epoch_index)) for p in approved_plans], flown,
+                                    max_active, audit, conflicting),
     )
 
 
@@ -219,8 +312,12 @@ def summarize(path: str | Path, separation_m: float = 100.0, reader: str = "rclp
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"recording: no file at {path}")
-    return summarize_messages(iter_decoded(path, reader, ANALYSED_TOPICS, fleet_digest_only=True), separation_m,
-                              str(path), reader, is_complete(path))
+    summary = summarize_messages(iter_decoded(path, reader, ANALYSED_TOPICS, fleet_digest_only=True),
+                                 separation_m, str(path), reader, is_complete(path))
+    summary.recorder_check = read_metadata(path, RECORDER_CHECK)
+    if summary.recorder_check.get("ok") == "false":
+        summary.problems.append(f"the recorder found: {summary.recorder_check.get('verdict', '?')}")
+    return summary
 
 
 # --------------------------------------------------------------------------------------------
@@ -249,6 +346,8 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
     if s.duplicate_decisions or s.plans_without_request:
         lines.append(f"  (duplicate decisions {s.duplicate_decisions}, plans without request "
                      f"{s.plans_without_request})")
+    for rid, outs in sorted(s.conflicting_decisions.items())[:20]:
+        lines.append(f"    CONFLICTING decisions for {rid!r}: {', '.join(outs)}")
     for reason, n in sorted(s.rejection_reasons.items(), key=lambda kv: -kv[1]):
         lines.append(f"    {n:5d} x {reason or '(no reason given)'}")
     lines += [
@@ -264,11 +363,16 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
         pair = f" ({a.closest_pair[0]} / {a.closest_pair[1]})" if a.closest_pair else ""
         dist = "no two flights airborne together" if not math.isfinite(a.min_separation_m) \
             else f"{a.min_separation_m:.1f} m{pair}"
-        verdict = "OK" if a.ok else f"LOSS OF SEPARATION in {len(a.losses)} pair(s)"
+        verdict = (f"LOSS OF SEPARATION in {len(a.losses)} pair(s)" if not a.ok
+                   else "OK" if s.verified else "NOT VERIFIED (the recording lacks plans it should hold)")
         lines.append(f"Safety audit     {verdict}: minimum separation {dist}, required "
                      f"{a.separation_m:.0f} m, {a.pairs_checked} overlapping pairs checked")
         for rid_a, rid_b, d, t in a.losses[:20]:
             lines.append(f"    {rid_a} / {rid_b}: {d:.1f} m at t = {t:.1f} s")
+    for problem in s.problems:
+        lines.append(f"Recording check  {problem}")
+    if s.recorder_check:
+        lines.append(f"Recorder check   {s.recorder_check.get('verdict', '')}")
     if epochs and s.epochs:
         lines.append("")
         lines.append(f"{'epoch':>5} {'t [s]':>8} {'elig':>5} {'vert':>5} {'edges':>6} {'sel':>4} "
@@ -282,7 +386,8 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Command line: print the summary of a recording (exit 2 if the audit finds a loss)."""
+    """Command line: print the summary of a recording (exit 2 if the audit finds a loss, 3 if the
+    recording lacks plans it should hold, so its audit cannot be trusted)."""
     ap = argparse.ArgumentParser(prog="analyze", description=__doc__.split("\n\n")[0])
     ap.add_argument("recording", help="the .mcap file of a run")
     ap.add_argument("--separation-m", type=float, default=100.0,
@@ -305,7 +410,9 @@ def main(argv: list[str] | None = None) -> int:
             print(format_summary(summary, epochs=not args.no_epochs))
     except BrokenPipeError:  # e.g. piped into `head`
         sys.stderr.close()
-    return 0 if summary.audit is None or summary.audit.ok else 2
+    if summary.audit is not None and not summary.audit.ok:
+        return 2
+    return 0 if summary.verified else 3
 
 
 if __name__ == "__main__":

@@ -94,18 +94,24 @@ def audit_trajectories(flights: list[tuple[np.ndarray, np.ndarray]], labels: lis
                        closest_pair=best_pair, losses=losses, pairs_checked=checked)
 
 
-def audit_plans(plans: list[Any], separation_m: float = 100.0) -> SafetyAudit:
-    """Exact minimum separation between every pair of approved plans (see :func:`audit_trajectories`)."""
-    flights, labels = [], []
-    for p in plans:
+def audit_plans(plans: list[Any], separation_m: float = 100.0,
+                labels: Sequence[str] | None = None) -> SafetyAudit:
+    """Exact minimum separation between every pair of approved plans (see :func:`audit_trajectories`).
+
+    ``labels`` name the plans in the result (default: their request ids; give distinct labels
+    when two plans share an id).
+    """
+    names = [str(p.request_id) for p in plans] if labels is None else list(labels)
+    flights, kept = [], []
+    for p, name in zip(plans, names):
         times, points = trajectory_of(p)
         if len(times) < 2:
             continue
         if np.any(np.diff(times) <= 0):
             raise ValueError(f"flight plan {p.request_id!r}: waypoint times are not increasing: {times}")
         flights.append((times, points))
-        labels.append(str(p.request_id))
-    return audit_trajectories(flights, labels, separation_m)
+        kept.append(name)
+    return audit_trajectories(flights, kept, separation_m)
 
 
 def sweep_audit(trajectories: Sequence, separation_m: float, labels: Sequence | None = None,

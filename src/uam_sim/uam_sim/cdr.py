@@ -189,13 +189,32 @@ def serialize_exact(msg: Any) -> bytes:
 # Reading fields straight from CDR bytes (no message objects)
 # --------------------------------------------------------------------------------------------
 
-def fleet_state_digest(data: bytes) -> Any | None:
-    """Stamp and vehicle count of a FleetState read straight from its little-endian CDR.
+def leading_stamp_ns(data: bytes) -> int | None:
+    """The stamp [ns] of a message whose first field is a ``builtin_interfaces/Time`` or a
+    ``std_msgs/Header`` (FleetState, PoseArray, FlightPlan, PlanningReport, /clock), read from
+    its little-endian CDR at the fixed offset 4 (sec int32, nanosec uint32); None for big-endian
+    or short data. O(1): the recorder stamps every message without deserializing it."""
+    if len(data) < 12 or data[1] != 1:
+        return None
+    sec, nanosec = struct.unpack_from("<iI", data, 4)
+    return sec * 1_000_000_000 + nanosec
+
+
+#: bytes of a VehicleState after its vehicle_id, from the 8-aligned end of the id: Point and
+#: Vector3 (6 float64), phase uint8 (+3 padding), segment_index uint32, two float64
+_VEHICLE_TAIL = 48 + 4 + 4 + 16
+
+
+def fleet_state_digest(data: bytes, positions: bool = False) -> Any | None:
+    """Stamp, step, vehicle ids (and positions) of a FleetState read straight from its CDR.
 
     Layout (XCDR1, offsets from the payload after the 4-byte encapsulation header): stamp sec
     int32 @0, nanosec uint32 @4, frame_id string (uint32 length incl. NUL, bytes) @8, step_index
-    uint64 aligned to 8, vehicles count uint32. Returns None for big-endian data (the caller
-    deserializes fully then). Avoids building every VehicleState object: O(1) per message.
+    uint64 aligned to 8, vehicles count uint32, then per vehicle its vehicle_id string (aligned
+    to 4) and a fixed tail aligned to 8 (position x, y, z first). Returns a namespace with
+    ``header.stamp``, ``step_index``, ``vehicle_ids``, ``vehicles`` (the ids: only their count
+    is used) and, with ``positions``, ``positions_m`` (n, 3); None for big-endian data (the
+    caller deserializes fully then). O(vehicles) struct reads, no VehicleState objects.
     """
     if len(data) < 16 or data[1] != 1:
         return None
@@ -206,5 +225,19 @@ def fleet_state_digest(data: bytes) -> Any | None:
     pos += 8
     pos += (-pos) % 4
     count, = struct.unpack_from("<I", data, 4 + pos)
-    return SimpleNamespace(header=SimpleNamespace(stamp=SimpleNamespace(sec=sec, nanosec=nanosec)),
-                           step_index=step_index, vehicles=range(count))
+    pos += 4
+    ids, xyz = [], []
+    for _ in range(count):
+        pos += (-pos) % 4
+        n, = struct.unpack_from("<I", data, 4 + pos)
+        ids.append(data[8 + pos:8 + pos + n - 1].decode("utf-8"))
+        pos += 4 + n
+        pos += (-pos) % 8
+        if positions:
+            xyz.append(struct.unpack_from("<3d", data, 4 + pos))
+        pos += _VEHICLE_TAIL
+    out = SimpleNamespace(header=SimpleNamespace(stamp=SimpleNamespace(sec=sec, nanosec=nanosec)),
+                          step_index=step_index, vehicle_ids=ids, vehicles=ids)
+    if positions:
+        out.positions_m = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
+    return out

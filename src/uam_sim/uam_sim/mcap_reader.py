@@ -79,6 +79,20 @@ def is_complete(path: str | os.PathLike) -> bool:
         return False
 
 
+def read_metadata(path: str | os.PathLike, name: str) -> dict[str, str]:
+    """The MCAP metadata record ``name`` of a complete recording ({} if absent or torn)."""
+    from mcap.reader import make_reader
+
+    try:
+        with open(path, "rb") as f:
+            for record in make_reader(f).iter_metadata():
+                if record.name == name:
+                    return dict(record.metadata)
+    except Exception:  # noqa: BLE001 - a torn file has no summary to find metadata by
+        return {}
+    return {}
+
+
 def deserialize(record: RecordedMessage) -> Any:
     """The rclpy message object of a recorded message (imports rclpy)."""
     from rclpy.serialization import deserialize_message

@@ -204,6 +204,12 @@ class McapRecorder:
     def _bag_metadata_yaml(self) -> str:
         return bag_metadata_yaml(self.path.name, self._topics, self._counts, self._start_ns, self._end_ns)
 
+    def add_metadata(self, name: str, data: dict) -> None:
+        """An MCAP metadata record ``name`` (values written as strings), e.g. the recorder's check
+        of what it received (read back by :func:`uam_sim.mcap_reader.read_metadata`)."""
+        self._check_open()
+        self._writer.add_metadata(name, {str(k): str(v) for k, v in data.items()})
+
     def close(self) -> None:
         """Write the rosbag2 metadata record, summary and footer, and close the file. Idempotent."""
         if self._closed:
