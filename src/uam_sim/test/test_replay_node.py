@@ -83,12 +83,13 @@ def test_a_replayed_run_recorded_again_gives_the_same_summary(ros_context, spin_
     from uam_msgs.msg import EpochSync, FlightRequest, PlanningReport, Waypoint
 
     from uam_sim.analysis import summarize
+    from uam_bringup.contract import resolved
     from uam_sim.nodes.recorder_node import RECORDED_TOPICS, RecorderNode
 
     original = tmp_path / "original.mcap"
     with McapRecorder(original) as rec:
         for topic, (cls, qos) in RECORDED_TOPICS.items():
-            rec.add_topic(topic, cls, qos)
+            rec.add_topic(resolved(topic), cls, qos)
         for i, (x0, y0) in enumerate([(0.0, 0.0), (0.0, 150.0)]):
             rid = f"r{i}"
             rec.write("/uam/requests", FlightRequest(request_id=rid, request_time=Time(sec=0)), 0)

@@ -39,43 +39,28 @@ import sys
 import time
 from pathlib import Path
 
-from geometry_msgs.msg import PoseArray
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.clock import Clock as RclClock
 from rclpy.clock import ClockType
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
-from rosgraph_msgs.msg import Clock
-from uam_msgs.msg import EpochSync, FleetState, FlightPlan, FlightRequest, PlanningReport
+from uam_msgs.msg import FlightPlan
 
 from uam_sim.cdr import fleet_state_digest, leading_stamp_ns
+from uam_sim.mcap_schema import message_class
 from uam_sim.mcap_writer import McapRecorder
 from uam_sim.stamps import sim_stamp_ns
 from uam_sim.rerun_log import MODES as RERUN_MODES
 from uam_sim.rerun_log import RerunLogger
-from uam_solvers.nodes.runtime import run_node
 
-_QOS_VOLATILE = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10000,
-                           reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
-# Only for topics whose publishers offer transient local (a transient-local reader does not match
-# a volatile writer: the recorder then logs an incompatible-QoS error naming the topic); it makes
-# a recorder that starts late still get every request, plan, report and epoch handshake.
-_QOS_LATCHED = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=20000,
-                          reliability=ReliabilityPolicy.RELIABLE,
-                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
+from uam_bringup import contract as c
+from uam_bringup.qos import profile
+from uam_bringup.runtime import run_node
 
-#: topic -> (message class, subscription QoS)
-RECORDED_TOPICS = {
-    "/clock": (Clock, _QOS_VOLATILE),
-    "/uam/requests": (FlightRequest, _QOS_LATCHED),
-    "/uam/flight_plans": (FlightPlan, _QOS_LATCHED),
-    "/uam/planning_reports": (PlanningReport, _QOS_LATCHED),
-    "/uam/fleet_state": (FleetState, _QOS_VOLATILE),
-    "/uam/fleet_poses": (PoseArray, _QOS_VOLATILE),
-    "/uam/epoch_sync": (EpochSync, _QOS_LATCHED),
-}
+#: topic (relative, see uam_bringup.contract) -> (message class, subscription QoS)
+RECORDED_TOPICS = {topic: (message_class(type_name), profile(spec))
+                   for topic, (type_name, spec) in c.RECORDED_TOPICS.items()}
 
 
 def _starts_with_stamp(cls: type) -> bool:
@@ -184,6 +169,8 @@ class RecorderNode(Node):
         self._dirty = False
         self.check = ApprovalCheck()
         self._stamp_first = {topic: _starts_with_stamp(cls) for topic, (cls, _qos) in RECORDED_TOPICS.items()}
+        # recorded under the names they resolve to (namespace and remapping applied)
+        self._names = {topic: self.resolve_topic_name(topic) for topic in RECORDED_TOPICS}
         for topic, (cls, qos) in RECORDED_TOPICS.items():
             self._recorded_subs[topic] = self.create_subscription(
                 cls, topic, self._make_callback(topic, cls), qos, raw=True,
@@ -216,14 +203,14 @@ class RecorderNode(Node):
             offered = [info.qos_profile for info in self.get_publishers_info_by_topic(topic)]
         except Exception as exc:  # noqa: BLE001 - graph queries can fail during shutdown
             self.get_logger().debug(f"no publisher info for {topic}: {exc}")
-        self.recorder.add_topic(topic, cls, RECORDED_TOPICS[topic][1], offered_qos_profiles=offered or None)
+        self.recorder.add_topic(self._names[topic], cls, RECORDED_TOPICS[topic][1], offered_qos_profiles=offered or None)
 
     def _on_message(self, topic: str, cls: type, data: bytes) -> None:
         if self.finished:
             return
         self._last_rx = time.monotonic()
         msg = self._write(topic, cls, data)
-        if topic == "/uam/epoch_sync" and msg.finished and msg.sender == "simulator" \
+        if topic == c.TOPIC_SYNC and msg.finished and msg.sender == "simulator" \
                 and not self.finish_requested:
             self.get_logger().info("the simulator ended the run: closing the recording once the "
                                    "last messages are in")
@@ -251,30 +238,30 @@ class RecorderNode(Node):
         if stamp is None:
             msg = deserialize_message(data, cls)
             stamp = sim_stamp_ns(msg)
-        if topic == "/clock":
+        if topic == c.TOPIC_CLOCK and stamp is not None:
             self._clock_ns = max(self._clock_ns, stamp)
         log_ns = stamp if stamp is not None else self._clock_ns
-        if topic not in self.recorder.topics:
+        if self._names[topic] not in self.recorder.topics:
             self._register(topic, cls)
-        self.recorder.write(topic, data, log_time_ns=max(0, log_ns))
+        self.recorder.write(self._names[topic], data, log_time_ns=max(0, log_ns))
         self.messages_written += 1
         self._dirty = True
-        if topic in ("/uam/flight_plans", "/uam/planning_reports", "/uam/epoch_sync") and msg is None:
+        if topic in (c.TOPIC_PLANS, c.TOPIC_REPORTS, c.TOPIC_SYNC) and msg is None:
             msg = deserialize_message(data, cls)
-        if topic == "/uam/flight_plans":
+        if topic == c.TOPIC_PLANS:
             self.check.on_plan(msg)
-        elif topic == "/uam/planning_reports":
+        elif topic == c.TOPIC_REPORTS:
             self.check.on_report(msg)
         if self.rerun.enabled:
-            if topic == "/uam/fleet_state":
+            if topic == c.TOPIC_FLEET:
                 digest = fleet_state_digest(data, positions=True)
                 if digest is None:  # big-endian bytes: decode in full
                     self.rerun.log_fleet_state_msg(deserialize_message(data, cls))
                 else:
                     self.rerun.log_fleet(log_ns * 1e-9, digest.vehicle_ids, digest.positions_m)
-            elif topic == "/uam/flight_plans":
+            elif topic == c.TOPIC_PLANS:
                 self.rerun.log_flight_plan_msg(msg)
-            elif topic == "/uam/planning_reports":
+            elif topic == c.TOPIC_REPORTS:
                 self.rerun.log_planning_report_msg(msg)
         return msg
 
@@ -316,7 +303,7 @@ class RecorderNode(Node):
             if drained:
                 self.get_logger().info(f"wrote {drained} messages still queued at the end")
             for topic, (cls, _qos) in RECORDED_TOPICS.items():
-                if topic not in self.recorder.topics:
+                if self._names[topic] not in self.recorder.topics:
                     self._register(topic, cls)
             check = self.check.result()
             self.recorder.add_metadata("uam_recorder_check", check)
