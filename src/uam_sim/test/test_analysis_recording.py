@@ -175,3 +175,13 @@ def test_pruned_audit_equals_brute_force_on_random_flights():
             assert ours.min_separation_m == pytest.approx(ref.min_separation_m, abs=1e-9), trial
             assert {tuple(sorted(x[:2])) for x in ours.losses} == {tuple(sorted(x[:2])) for x in ref.losses}
             assert ours.pairs_checked <= ref.pairs_checked
+
+
+def test_the_solver_librarys_corpus_reader_reads_recordings_through_the_entry_point(recording):
+    """uam_solvers.instances reads .mcap corpora without importing uam_sim (no upward import):
+    uam_sim declares the reader as an entry point."""
+    from uam_solvers.instances import read_instances
+
+    entries = read_instances(recording)
+    assert [e.name for e in entries] == ["synthetic-epoch0"]
+    assert list(entries[0].problem.weights) == list(instances_from_mcap(recording)[0].weights)
