@@ -130,6 +130,8 @@ def test_sighup_stops_every_node(tmp_path, ros_domain_id):
     proc = _start(tmp_path / "run", dict(os.environ, ROS_DOMAIN_ID=str(ros_domain_id)), log)
     try:
         nodes = _running(proc, log)
+        mcap = tmp_path / "run" / "run.mcap"
+        assert _wait_for(lambda: mcap.exists() and mcap.stat().st_size > 20_000, 60)
         proc.send_signal(signal.SIGHUP)
         assert proc.wait(timeout=90) == 130, log.read_text()
     finally:

@@ -83,7 +83,11 @@ def test_stamps_ids_and_positions_are_read_from_the_cdr_without_deserializing():
     from uam_msgs.msg import FlightPlan, PlanningReport
     from uam_sim.cdr import fleet_state_digest, leading_stamp_ns, serialize_exact
 
-    for frame, ids in (("", []), ("enu", ["a"]), ("e", ["r00001_000", "x" * 13, "é", "b7"])):
+    cases = (("", []), ("enu", ["a"]), ("e", ["r00001_000", "x" * 13, "é", "b7"]),
+             ("enu", [f"r{i:05d}_000" for i in range(40)]),          # one length: strided path
+             ("en", ["x"] + [f"r{i:05d}_000" for i in range(5)]),    # general, then strided
+             ("enu", ["é1", "é2", "é3"]))                            # one length, not ASCII
+    for frame, ids in cases:
         pos = np.arange(3.0 * len(ids)).reshape(-1, 3) * 1.5 - 7.0
         vel = np.ones((len(ids), 3))
         data = encode_fleet_state(77, 123, frame, 5, ids, pos, vel, np.zeros(len(ids), np.uint8),

@@ -205,6 +205,16 @@ def leading_stamp_ns(data: bytes) -> int | None:
 _VEHICLE_TAIL = 48 + 4 + 4 + 16
 
 
+def _equal_length_run(data: bytes, pos: int, n: int, r: int) -> bool:
+    """True if the r vehicle records from 8-aligned payload offset ``pos`` all have an id of the
+    length n (incl. NUL), i.e. they are records of one stride (checked with a strided view)."""
+    stride = _align(4 + n, 8) + _VEHICLE_TAIL
+    if n == 0 or 4 + pos + r * stride > len(data):
+        return False
+    lengths = np.ndarray((r,), dtype="<u4", buffer=data, offset=4 + pos, strides=(stride,))
+    return bool(np.all(lengths == n))
+
+
 def fleet_state_digest(data: bytes, positions: bool = False) -> Any | None:
     """Stamp, step, vehicle ids (and positions) of a FleetState read straight from its CDR.
 
@@ -214,7 +224,9 @@ def fleet_state_digest(data: bytes, positions: bool = False) -> Any | None:
     to 4) and a fixed tail aligned to 8 (position x, y, z first). Returns a namespace with
     ``header.stamp``, ``step_index``, ``vehicle_ids``, ``vehicles`` (the ids: only their count
     is used) and, with ``positions``, ``positions_m`` (n, 3); None for big-endian data (the
-    caller deserializes fully then). O(vehicles) struct reads, no VehicleState objects.
+    caller deserializes fully then). No VehicleState objects: when the ids have one length (the
+    simulator's do), the records have one stride and are read as strided numpy views, else one
+    struct read per vehicle (measured: ~2 ms per 130-vehicle message in Python, loaded machine).
     """
     if len(data) < 16 or data[1] != 1:
         return None
@@ -226,18 +238,33 @@ def fleet_state_digest(data: bytes, positions: bool = False) -> Any | None:
     pos += (-pos) % 4
     count, = struct.unpack_from("<I", data, 4 + pos)
     pos += 4
-    ids, xyz = [], []
-    for _ in range(count):
+    ids: list = []
+    xyz: list = []
+    k = 0
+    while k < count:
         pos += (-pos) % 4
         n, = struct.unpack_from("<I", data, 4 + pos)
+        if pos % 8 == 0 and _equal_length_run(data, pos, n, count - k):
+            # the simulator's ids all have one length: the rest are records of one stride
+            r, stride, tail = count - k, _align(4 + n, 8) + _VEHICLE_TAIL, _align(4 + n, 8)
+            names = np.ndarray((r,), dtype=f"S{n - 1}", buffer=data, offset=4 + pos + 4, strides=(stride,))
+            try:
+                ids += names.astype(f"U{n - 1}").tolist() if n > 1 else [""] * r
+            except UnicodeDecodeError:
+                ids += [b.decode("utf-8") for b in names.tolist()]
+            if positions:
+                xyz.append(np.ndarray((r, 3), dtype="<f8", buffer=data, offset=4 + pos + tail,
+                                      strides=(stride, 8)))
+            break
         ids.append(data[8 + pos:8 + pos + n - 1].decode("utf-8"))
         pos += 4 + n
         pos += (-pos) % 8
         if positions:
-            xyz.append(struct.unpack_from("<3d", data, 4 + pos))
+            xyz.append(np.asarray(struct.unpack_from("<3d", data, 4 + pos)).reshape(1, 3))
         pos += _VEHICLE_TAIL
+        k += 1
     out = SimpleNamespace(header=SimpleNamespace(stamp=SimpleNamespace(sec=sec, nanosec=nanosec)),
                           step_index=step_index, vehicle_ids=ids, vehicles=ids)
     if positions:
-        out.positions_m = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
+        out.positions_m = np.concatenate(xyz).astype(np.float64) if xyz else np.zeros((0, 3))
     return out
