@@ -23,7 +23,8 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.utilities import remove_ros_args
 
-from uam_sim.recording import QosSpec, message_class
+from uam_sim.mcap_schema import message_class
+from uam_sim.qos_yaml import QosSpec
 from uam_sim.replay import load_plan
 from uam_bringup.runtime import run_node
 
