@@ -6,18 +6,24 @@ prints the summary; ``--json`` prints :class:`RunSummary` as JSON instead.
 What it reads (topics as the node graph publishes them):
 
 - ``/uam/requests`` (FlightRequest): the requests, counted once per ``request_id``;
-- ``/uam/flight_plans`` (FlightPlan): each request's decision (approved / rejected / expired);
-  the approved plans' waypoints are the flights as flown (the simulator moves each vehicle along
-  its plan's piecewise-linear 4D trajectory);
+- ``/uam/flight_plans`` (FlightPlan): every distinct decision (approved / rejected / expired),
+  whatever its id: an id decided more than one way is flagged, and every approved plan is
+  audited; the approved plans' waypoints are the flights as flown (the simulator moves each
+  vehicle along its plan's piecewise-linear 4D trajectory);
 - ``/uam/fleet_state`` (FleetState): airborne vehicles per step, for the time-average of the
-  number of active aircraft;
+  number of active aircraft and to check that every vehicle flown has an approved plan;
 - ``/uam/planning_reports`` (PlanningReport): per-epoch MWIS sizes, selections, solve times.
 
 The safety audit takes the approved plans' waypoints and finds the exact closest point of
 approach over the common time of pairs of flights (piecewise-linear in 4D), with
 ``uam_planner.audit.pair_min_distance`` (a brute-force kernel separate from the planner's
 separation code); pairs are visited in order of a bounding-box lower bound so that far-apart
-pairs are skipped without changing the result (see :func:`audit_trajectories`).
+pairs are skipped without changing the result (see :func:`uam_sim.audit.audit_trajectories`).
+
+It refuses to call a recording "OK" that lacks plans it should hold (:func:`integrity_problems`:
+reports announcing approvals whose plans are missing, vehicles flown without a plan, aircraft
+airborne together with no pair checked, conflicting decisions, or the recorder's own check
+failing): the verdict is then NOT VERIFIED and the command exits 3.
 
 Two decoders: ``reader="rclpy"`` (mcap's reader + ``rclpy.serialization``; tolerates a file cut
 short by a crash) and ``reader="rosbags"`` (the independent ``rosbags`` library, types built from
