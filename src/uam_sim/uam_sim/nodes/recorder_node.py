@@ -47,6 +47,7 @@ from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from uam_msgs.msg import FlightPlan
 
+from uam_sim.analysis import request_key
 from uam_sim.cdr import fleet_state_digest, leading_stamp_ns
 from uam_sim.mcap_schema import message_class
 from uam_sim.mcap_writer import McapRecorder
@@ -81,7 +82,7 @@ class ApprovalCheck:
 
     def on_plan(self, msg) -> None:
         if int(msg.outcome) == FlightPlan.OUTCOME_APPROVED:
-            self.received.setdefault(int(msg.epoch_index), set()).add(str(msg.request_id))
+            self.received.setdefault(int(msg.epoch_index), set()).add(request_key(msg))
 
     def result(self) -> dict:
         """{"ok", "announced_approvals", "approved_plans", "verdict"} (values as strings)."""
