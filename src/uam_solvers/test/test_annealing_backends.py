@@ -90,9 +90,10 @@ def test_empty_graph_and_bad_options(backend_cls):
         backend_cls().solve(problem, time_limit_s=1.0, seed=0, options={"num_reads": 0})
     with pytest.raises(MwisInputError, match="lambda"):
         backend_cls().solve(problem, time_limit_s=1.0, seed=0, options={"lambda": -1})
-    result = backend_cls().solve(problem, time_limit_s=1.0, seed=0,
-                                 options={"num_reads": 2, "not_an_option": 1})
-    assert result.stats["ignored_options"] == "not_an_option"
+    # issue 11: an unknown option is an error for every backend, no longer silently ignored
+    with pytest.raises(MwisInputError, match="not_an_option"):
+        backend_cls().solve(problem, time_limit_s=1.0, seed=0,
+                            options={"num_reads": 2, "not_an_option": 1})
 
 
 def test_sa_options_reach_the_sampler():

@@ -89,10 +89,13 @@ def solve_problem(
     layers: bool = True,
 ) -> MwisResult:
     """Solve an already validated problem with the default pipeline (see :func:`build_pipeline`)."""
-    if not (time_limit_s > 0):
-        raise MwisInputError(f"time_limit_s: {time_limit_s!r} must be > 0")
+    from .options import check_seed, check_time_limit
+
+    time_limit_s = check_time_limit(time_limit_s)
+    seed = check_seed(seed)
     pipeline = build_pipeline(backend, layers=layers)
-    return pipeline.solve(problem, time_limit_s=float(time_limit_s), seed=int(seed), options=dict(options or {}))
+    options = pipeline.validate_options(options)  # before any solve: errors, never a fallback
+    return pipeline.solve(problem, time_limit_s=time_limit_s, seed=seed, options=options)
 
 
 def solve(
@@ -115,5 +118,9 @@ def solve(
     Output: an MwisResult whose ``selected`` is always an independent set of the input graph.
     Raises MwisInputError (bad arrays), UnknownBackendError, BackendUnavailable.
     """
+    from .options import check_seed, check_time_limit
+
+    check_time_limit(time_limit_s)  # argument errors first, before the arrays are converted
+    check_seed(seed)
     problem = MwisProblem.from_arrays(weights, edges, groups, max_vertices=max_vertices)
     return solve_problem(problem, backend, time_limit_s, seed, options, layers)

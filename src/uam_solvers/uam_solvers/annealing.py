@@ -52,6 +52,7 @@ except ImportError as exc:  # pragma: no cover - dwave-samplers is a dependency
     _SAMPLERS_IMPORT_ERROR = exc
 
 from uam_solvers.base import Backend, MwisInputError, MwisProblem, MwisResult, make_result
+from uam_solvers.options import Option
 from uam_solvers.qubo import DEFAULT_LAMBDA, mwis_qubo, refine_and_repair
 
 __all__ = [
@@ -78,6 +79,42 @@ TABU_READ_BUDGET = 2000
 TABU_MAX_VERTICES = 3000
 
 _COMMON_OPTIONS = {"num_reads", "lambda", "optimum"}
+
+
+def _positive(value):
+    if not value > 0:
+        raise ValueError("must be > 0")
+    return value
+
+
+def _beta_range(value):
+    if isinstance(value, str):
+        if value != "auto":
+            raise ValueError("must be 'auto' or (hot, cold)")
+        return value
+    try:
+        hot, cold = (float(b) for b in value)
+    except (TypeError, ValueError):
+        raise ValueError("must be two numbers (hot, cold)") from None
+    if not (0 < hot <= cold and np.isfinite(cold)):
+        raise ValueError("must satisfy 0 < hot <= cold")
+    return value
+
+
+#: Options every QUBO backend declares (sa, tabu, qpu, qpu-emulator).
+COMMON_OPTIONS_SPEC = {
+    "num_reads": Option("num_reads", "int", DEFAULT_NUM_READS, "reads (samples) per solve",
+                        lo=1, hi=1_000_000),
+    "lambda": Option("lambda", "float", DEFAULT_LAMBDA, "QUBO penalty per conflicting pair",
+                     validator=_positive),
+    "optimum": Option("optimum", "float", None, "known optimum of this problem: adds "
+                      "stats['optimal_fraction'] (share of reads reaching it)", nullable=True),
+}
+
+
+def given(options: Mapping[str, Any]) -> dict:
+    """Validated options without the None ("backend decides") entries."""
+    return {k: v for k, v in options.items() if v is not None}
 
 
 def _int_option(options: Mapping[str, Any], key: str, default: int | None, minimum: int
@@ -154,7 +191,7 @@ class _QuboSamplerBackend(Backend):
     def solve(self, problem: MwisProblem, *, time_limit_s: float, seed: int,
               options: Mapping[str, Any]) -> MwisResult:
         started = time.perf_counter()
-        options = dict(options or {})
+        options = given(self.validate_options(options))
         parsed = common_options(options, self.backend_options)
         if problem.n == 0:
             return empty_result(problem, self.name, started)
@@ -188,6 +225,14 @@ class SimulatedAnnealingBackend(_QuboSamplerBackend):
     description = ("simulated annealing on the MWIS QUBO (dwave-samplers), 100 reads, "
                    "steepest descent + repair; heuristic")
     backend_options = {"num_sweeps", "beta_range"}
+    options_spec = {
+        **COMMON_OPTIONS_SPEC,
+        "num_sweeps": Option("num_sweeps", "int", SA_DEFAULT_SWEEPS, "sweeps per read",
+                             lo=1, hi=10**7),
+        "beta_range": Option("beta_range", "any", None, "(hot, cold) inverse temperatures or "
+                             "'auto' (None: the tuned range scaled to the QUBO)", nullable=True,
+                             validator=_beta_range),
+    }
 
     def available(self) -> tuple[bool, str]:
         if _SAMPLERS_IMPORT_ERROR is not None:
@@ -253,6 +298,19 @@ class TabuBackend(_QuboSamplerBackend):
     description = ("tabu search on the MWIS QUBO (dwave-samplers), 100 reads, "
                    "steepest descent + repair; heuristic")
     backend_options = {"tenure", "num_restarts", "lower_bound_z", "timeout_ms", "max_vertices"}
+    options_spec = {
+        **COMMON_OPTIONS_SPEC,
+        "tenure": Option("tenure", "int", None, "tabu tenure (None: min(20, n/4) up to 200 "
+                         "vertices, n/10 above)", lo=0, hi=10**6, nullable=True),
+        "num_restarts": Option("num_restarts", "int", TABU_DEFAULT_RESTARTS, "restarts per read",
+                               lo=0, hi=10**6),
+        "lower_bound_z": Option("lower_bound_z", "int", TABU_DEFAULT_LOWER_BOUND_Z,
+                                "variable updates per tabu search", lo=1, hi=10**9),
+        "timeout_ms": Option("timeout_ms", "int", None, "per-read timeout (None: the time limit "
+                             "shared over the reads)", lo=1, hi=10**8, nullable=True),
+        "max_vertices": Option("max_vertices", "int", TABU_MAX_VERTICES, "largest graph tabu "
+                               "samples whole (dense n x n matrix)", lo=1, hi=10**6),
+    }
 
     def available(self) -> tuple[bool, str]:
         if _SAMPLERS_IMPORT_ERROR is not None:

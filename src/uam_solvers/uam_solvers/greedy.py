@@ -24,6 +24,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from .base import Backend, MwisProblem, MwisResult, csr_from_edges, make_result
+from .options import Option
 
 __all__ = ["greedy_mwis", "GreedyBackend", "RULES"]
 
@@ -144,6 +145,8 @@ class GreedyBackend(Backend):
 
     name = "greedy"
     description = "Sakai-Togasaki-Yamazaki greedy (GWMIN/GWMIN2/GWMAX), O(m log n), fallback of every backend"
+    options_spec = {"rule": Option("rule", "str", "gwmin", "greedy rule (Sakai et al. 2003)",
+                                   choices=RULES)}
 
     def solve(
         self,
@@ -153,10 +156,7 @@ class GreedyBackend(Backend):
         seed: int = 0,
         options: Mapping[str, Any] | None = None,
     ) -> MwisResult:
-        options = dict(options or {})
-        rule = str(options.pop("rule", "gwmin"))
-        if options:
-            raise ValueError(f"options: unknown option(s) {sorted(options)} for backend 'greedy' (known: rule)")
+        rule = self.validate_options(options)["rule"]
         t0 = time.perf_counter()
         sel = greedy_mwis(problem.weights, problem.all_edges(), rule=rule)
         dt = time.perf_counter() - t0

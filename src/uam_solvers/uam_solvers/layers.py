@@ -127,6 +127,13 @@ class Layer(Backend):
     def available(self) -> tuple[bool, str]:
         return self.child.available()
 
+    @property
+    def options_spec(self):  # the innermost backend's options
+        return self.child.options_spec
+
+    def validate_options(self, options):
+        return self.child.validate_options(options)
+
 
 class ComponentSplit(Layer):
     """Solve each connected component of the conflict graph on its own.

@@ -51,7 +51,9 @@ from typing import Any, Callable, Iterable, Mapping
 import dimod
 import numpy as np
 
-from uam_solvers.annealing import _float_option, _int_option, common_options, sampleset_to_array
+from uam_solvers.annealing import (COMMON_OPTIONS_SPEC, _float_option, _int_option, _positive,
+                                   common_options, given, sampleset_to_array)
+from uam_solvers.options import Option
 from uam_solvers.base import (
     Backend,
     BackendUnavailable,
@@ -83,6 +85,38 @@ _QPU_OPTIONS = {"annealing_time_us", "chain_strength", "chain_strength_prefactor
                 "embedding_seed", "embedding_timeout_s", "embedding_tries", "sampler_factory",
                 "solver", "num_sweeps"}
 
+
+def _chain_strength(value):
+    if value in ("uniform_torque_compensation", "utc"):
+        return value
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not (
+            np.isfinite(value) and value > 0):
+        raise ValueError("must be 'uniform_torque_compensation' or a finite number > 0")
+    return float(value)
+
+
+def _callable(value):
+    if not callable(value):
+        raise ValueError("must be callable (returning a structured dimod sampler)")
+    return value
+
+
+#: Options of the embedding pipeline shared by qpu and qpu-emulator.
+EMBEDDED_OPTIONS_SPEC = {
+    **COMMON_OPTIONS_SPEC,
+    "chain_strength": Option("chain_strength", "any", "uniform_torque_compensation",
+                             "chain coupling: a number or 'uniform_torque_compensation'",
+                             validator=_chain_strength),
+    "chain_strength_prefactor": Option("chain_strength_prefactor", "float",
+                                       1.414, "prefactor of uniform torque compensation",
+                                       validator=_positive),
+    "embedding_seed": Option("embedding_seed", "int", 0, "minorminer random seed", lo=0,
+                             hi=2**31 - 1),
+    "embedding_timeout_s": Option("embedding_timeout_s", "float", None, "minorminer timeout "
+                                  "(None: max(1, time limit))", nullable=True, lo=0.001,
+                                  hi=86_400.0),
+    "embedding_tries": Option("embedding_tries", "int", 10, "minorminer tries", lo=1, hi=1000),
+}
 
 # --------------------------------------------------------------------------------------------
 # Topology and the stand-in sampler
@@ -299,6 +333,7 @@ def embedded_solve(problem: MwisProblem, child, *, backend: str, seed: int, time
     from dwave.system import EmbeddingComposite
 
     started = time.perf_counter()
+    options = given(options)
     parsed = common_options(options, _QPU_OPTIONS)
     if problem.n == 0:
         return make_result(problem, np.zeros(0, dtype=np.int32), proven_optimal=True,
@@ -437,6 +472,18 @@ class QpuBackend(Backend):
     name = "qpu"
     description = ("D-Wave Advantage QPU (DWaveSampler + minorminer embedding), 1 us anneals, "
                    "100 reads, majority-vote chains, descent + repair; needs a D-Wave token")
+    options_spec = {
+        **EMBEDDED_OPTIONS_SPEC,
+        "annealing_time_us": Option("annealing_time_us", "float", DEFAULT_ANNEALING_TIME_US,
+                                    "anneal time per read, microseconds", lo=0.5, hi=2000.0),
+        "sampler_factory": Option("sampler_factory", "any", None, "callable returning the "
+                                  "structured child sampler instead of DWaveSampler (tests: "
+                                  "AdvantageStandInSampler)", nullable=True, validator=_callable),
+        "solver": Option("solver", "str", None, "DWaveSampler solver selection (e.g. a name)",
+                         nullable=True),
+        "num_sweeps": Option("num_sweeps", "int", None, "sweeps per read, only for a stand-in "
+                             "sampler that declares it", lo=1, hi=10**7, nullable=True),
+    }
 
     def __init__(self, sampler_factory: Callable[[], Any] | None = None):
         self.sampler_factory = sampler_factory
@@ -467,13 +514,15 @@ class QpuBackend(Backend):
 
     def solve(self, problem: MwisProblem, *, time_limit_s: float, seed: int,
               options: Mapping[str, Any]) -> MwisResult:
-        options = dict(options or {})
+        options = given(self.validate_options(options))
         child = self._child_sampler(options)  # raises BackendUnavailable at once without token
         annealing_time = _float_option(options, "annealing_time_us", DEFAULT_ANNEALING_TIME_US)
         return embedded_solve(problem, child, backend=self.name, seed=seed,
                               time_limit_s=time_limit_s, options=options,
                               report_qpu_timing=True,
-                              sampler_parameters={"annealing_time": annealing_time})
+                              sampler_parameters={"annealing_time": annealing_time,
+                                                  **({"num_sweeps": options["num_sweeps"]}
+                                                     if "num_sweeps" in options else {})})
 
 
 class QpuEmulatorBackend(Backend):
@@ -489,6 +538,11 @@ class QpuEmulatorBackend(Backend):
     name = "qpu-emulator"
     description = ("the qpu embedding pipeline on a simulated Advantage graph (Pegasus P16, "
                    "simulated annealing); chain statistics, no QPU times")
+    options_spec = {
+        **EMBEDDED_OPTIONS_SPEC,
+        "num_sweeps": Option("num_sweeps", "int", 1000, "simulated annealing sweeps per read",
+                             lo=1, hi=10**7),
+    }
 
     def __init__(self, missing_qubits: Iterable[int] = ()):
         self.missing_qubits = tuple(missing_qubits)
@@ -505,7 +559,7 @@ class QpuEmulatorBackend(Backend):
 
     def solve(self, problem: MwisProblem, *, time_limit_s: float, seed: int,
               options: Mapping[str, Any]) -> MwisResult:
-        options = dict(options or {})
+        options = given(self.validate_options(options))
         if self._child is None:
             self._child = _emulator_sampler(self.missing_qubits)
         num_sweeps = _int_option(options, "num_sweeps", 1000, 1)
