@@ -458,6 +458,10 @@ class Backend(ABC):
     #: True for backends that apply MWIS reductions of their own (KaMIS, CHILS); the Reduce
     #: layer then passes large graphs straight through instead of paying for a second pass.
     reduces_itself: bool = False
+    #: Largest problem the solve service runs in-process for this backend: only where the
+    #: backend is known to return well within any time limit at that size (default: never,
+    #: every solve goes to a worker process that can be killed).
+    inline_max_vertices: int = 0
     #: Declared options, name -> :class:`uam_solvers.options.Option` (type, default, range).
     options_spec: Mapping[str, Any] = {}
 
