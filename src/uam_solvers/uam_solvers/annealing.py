@@ -109,7 +109,15 @@ COMMON_OPTIONS_SPEC = {
                      validator=_positive),
     "optimum": Option("optimum", "float", None, "known optimum of this problem: adds "
                       "stats['optimal_fraction'] (share of reads reaching it)", nullable=True),
+    "subproblem_size": Option("subproblem_size", "int", None, "variables per subproblem when a "
+                              "large graph is decomposed (None: the backend's default)",
+                              lo=2, hi=100_000, nullable=True),
 }
+
+#: sa samples graphs up to this size whole; larger ones are decomposed (uam_solvers.decompose)
+SA_DECOMPOSE_ABOVE = 2000
+#: default subproblem size of the decomposition for sa and tabu
+DEFAULT_SUBPROBLEM_SIZE = 200
 
 
 def given(options: Mapping[str, Any]) -> dict:
@@ -184,6 +192,30 @@ class _QuboSamplerBackend(Backend):
 
     backend_options: set[str] = set()
 
+    def _decompose_above(self, options: Mapping[str, Any]) -> int:
+        """Graphs with more vertices are decomposed (subclasses)."""
+        return 10**9
+
+    def _sample_sub(self, sub_bqm, seed: int, remaining_s: float, num_reads: int,
+                    options: Mapping[str, Any]):
+        """Sample one subproblem BQM of the decomposition (subclasses)."""
+        raise NotImplementedError
+
+    def _decomposed(self, problem, parsed, options, time_limit_s, seed, started):
+        from uam_solvers.decompose import decomposed_solve
+
+        size = options.get("subproblem_size", DEFAULT_SUBPROBLEM_SIZE)
+        reads = min(parsed["num_reads"], 10)  # per subproblem: the best of a few reads is kept
+        # the final refine/repair costs ~0.1 s at 10^4 vertices: keep it inside the limit
+        budget = max(time_limit_s - (time.perf_counter() - started) - 0.05 - 1e-5 * problem.n, 1e-3)
+        selected, stats = decomposed_solve(
+            problem, lambda sub, s, rem: self._sample_sub(sub, s, rem, reads, options),
+            size=size, time_limit_s=budget, seed=int(seed) % 2**32, lam=parsed["lambda"])
+        stats.update({"lambda": parsed["lambda"], "num_reads_per_subproblem": reads})
+        return make_result(problem, selected, proven_optimal=False,
+                           solve_time_s=time.perf_counter() - started, backend=self.name,
+                           stats=stats)
+
     def _sample(self, bqm, num_reads: int, seed: int, time_limit_s: float,
                 options: Mapping[str, Any]) -> tuple[Any, dict]:
         raise NotImplementedError
@@ -195,6 +227,8 @@ class _QuboSamplerBackend(Backend):
         parsed = common_options(options, self.backend_options)
         if problem.n == 0:
             return empty_result(problem, self.name, started)
+        if problem.n > self._decompose_above(options):
+            return self._decomposed(problem, parsed, options, time_limit_s, seed, started)
         qubo = mwis_qubo(problem, parsed["lambda"])
         bqm = qubo.to_bqm()
         sample_start = time.perf_counter()
@@ -244,6 +278,18 @@ class SimulatedAnnealingBackend(_QuboSamplerBackend):
         """max(lambda, max weight) of an MWIS QUBO: the largest |bias|."""
         linear, (_, _, quadratic), _ = bqm.to_numpy_vectors()
         return float(max(np.abs(linear).max(initial=0.0), np.abs(quadratic).max(initial=0.0)))
+
+    def _decompose_above(self, options):
+        return SA_DECOMPOSE_ABOVE
+
+    def _sample_sub(self, sub_bqm, seed, remaining_s, num_reads, options):
+        num_sweeps = options.get("num_sweeps", SA_DEFAULT_SWEEPS)
+        scale = 2.0 / max(self._energy_scale(sub_bqm), 1e-12)
+        deadline = time.perf_counter() + remaining_s
+        return SimulatedAnnealingSampler().sample(
+            sub_bqm, num_reads=num_reads, num_sweeps=num_sweeps,
+            beta_range=tuple(b * scale for b in SA_DEFAULT_BETA_RANGE), seed=seed,
+            interrupt_function=lambda: time.perf_counter() > deadline)
 
     def _sample(self, bqm, num_reads, seed, time_limit_s, options):
         num_sweeps = _int_option(options, "num_sweeps", SA_DEFAULT_SWEEPS, 1)
@@ -309,7 +355,8 @@ class TabuBackend(_QuboSamplerBackend):
         "timeout_ms": Option("timeout_ms", "int", None, "per-read timeout (None: the time limit "
                              "shared over the reads)", lo=1, hi=10**8, nullable=True),
         "max_vertices": Option("max_vertices", "int", TABU_MAX_VERTICES, "largest graph tabu "
-                               "samples whole (dense n x n matrix)", lo=1, hi=10**6),
+                               "samples whole (dense n x n matrix); larger graphs are "
+                               "decomposed into subproblems", lo=1, hi=10**6),
     }
 
     def available(self) -> tuple[bool, str]:
@@ -317,14 +364,21 @@ class TabuBackend(_QuboSamplerBackend):
             return False, f"dwave-samplers is not installed ({_SAMPLERS_IMPORT_ERROR})"
         return True, ""
 
+    def _decompose_above(self, options):
+        # TabuSampler works on a dense n x n matrix (8 n^2 bytes, several copies): larger
+        # graphs are decomposed into subproblems instead
+        return options.get("max_vertices", TABU_MAX_VERTICES)
+
+    def _sample_sub(self, sub_bqm, seed, remaining_s, num_reads, options):
+        n = sub_bqm.num_variables
+        tenure = options.get("tenure", max(1, min(20, n // 4)))
+        timeout_ms = max(1, int(min(100.0, remaining_s * 1000.0 / (2 * num_reads))))
+        return TabuSampler().sample(sub_bqm, num_reads=num_reads, seed=seed,
+                                    tenure=min(tenure, max(n - 1, 0)), timeout=timeout_ms,
+                                    num_restarts=options.get("num_restarts", TABU_DEFAULT_RESTARTS))
+
     def _sample(self, bqm, num_reads, seed, time_limit_s, options):
         n = bqm.num_variables
-        max_vertices = _int_option(options, "max_vertices", TABU_MAX_VERTICES, 1)
-        if n > max_vertices:
-            # TabuSampler works on a dense n x n matrix (8 n^2 bytes, several copies)
-            raise MwisInputError(
-                f"problem has {n} vertices; tabu builds a dense n x n QUBO matrix and is "
-                f"limited to options['max_vertices'] = {max_vertices}")
         # the sampler's default tenure, min(20, n / 4), is too short for large graphs: n / 10
         # above 200 vertices gains ~10 % objective on 1,000-vertex paper-shaped graphs
         tenure = _int_option(options, "tenure", n // 10 if n > 200 else None, 0)

@@ -64,7 +64,8 @@ DEFAULT_MARGIN_S = 0.4
 _PRELOAD = ["uam_solvers", "uam_solvers.layers", "uam_solvers.registry", "uam_solvers.greedy",
             "uam_solvers.cpsat", "uam_solvers.chszla", "uam_solvers.auto", "uam_solvers.annealing",
             "numpy", "scipy.sparse", "ortools.sat.python.cp_model", "chszlablib._kamis_wmis",
-            "chszlablib._chils", "chszlablib._learnandreduce"]
+            "chszlablib._chils", "dwave.samplers", "dwave.system", "minorminer",
+            "uam_solvers.qpu", "uam_solvers.decompose"]
 
 
 # ---------------------------------------------------------------------------------------------

@@ -116,6 +116,9 @@ EMBEDDED_OPTIONS_SPEC = {
                                   "(None: max(1, time limit))", nullable=True, lo=0.001,
                                   hi=86_400.0),
     "embedding_tries": Option("embedding_tries", "int", 10, "minorminer tries", lo=1, hi=1000),
+    "max_direct_vertices": Option("max_direct_vertices", "int", 100, "larger graphs are "
+                                  "decomposed into subproblems instead of embedded whole",
+                                  lo=1, hi=100_000),
 }
 
 # --------------------------------------------------------------------------------------------
@@ -308,6 +311,74 @@ _TIMING_KEYS = ("qpu_access_time", "qpu_programming_time", "qpu_anneal_time_per_
                 "total_post_processing_time", "post_processing_overhead_time")
 
 
+#: graphs above this many vertices are decomposed rather than embedded whole: minorminer held
+#: the GIL for 26 s on a 10,000-vertex graph, and conflict graphs much above ~100 vertices
+#: (cliques of 5 plus conflicts) rarely embed on P16 within seconds
+QPU_DIRECT_MAX_VERTICES = 100
+#: vertices per subproblem when decomposing for the QPU (embeds within ~1 s)
+QPU_SUBPROBLEM_SIZE = 30
+
+
+def fits_target(problem: MwisProblem, child) -> tuple[bool, str]:
+    """Necessary conditions for an embedding on the child's graph: at most as many vertices as
+    qubits and edges as couplers (a minor has no more of either). (True, "") or (False, why)."""
+    qubits = len(getattr(child, "nodelist", ()) or ())
+    couplers = len(getattr(child, "edgelist", ()) or ())
+    m = int(problem.all_edges().shape[0])
+    if qubits and problem.n > qubits:
+        return False, f"{problem.n} vertices > {qubits} qubits of the target graph: cannot embed"
+    if couplers and m > couplers:
+        return False, f"{m} edges > {couplers} couplers of the target graph: cannot embed"
+    return True, ""
+
+
+def _decomposed_embedded(problem, child, *, backend, seed, time_limit_s, started, parsed,
+                         options, passed, chain_strength, embedding_parameters, reason):
+    """Energy-impact decomposition (uam_solvers.decompose) with every subproblem embedded and
+    sampled on ``child``; each embedding gets at most the time left."""
+    from dwave.embedding.chain_breaks import majority_vote
+    from dwave.system import EmbeddingComposite
+
+    from uam_solvers.decompose import decomposed_solve
+
+    deadline = started + time_limit_s
+    sub_params = dict(passed)
+    sub_params["num_reads"] = min(int(parsed["num_reads"]), 20)  # per subproblem
+    stats_box = {"embedding_failures": 0}
+
+    def sample_sub(sub_bqm, sub_seed, remaining_s):
+        emb = dict(embedding_parameters)
+        # minorminer holds the GIL and uses its whole timeout; sampling needs the rest
+        emb["timeout"] = max(min(float(emb["timeout"]), 0.4 * remaining_s), 0.01)
+        emb["tries"] = 1
+        composite = EmbeddingComposite(child, find_embedding=cached_find_embedding,
+                                       embedding_parameters=emb)
+        params = dict(sub_params)
+        if "seed" in params:
+            params["seed"] = sub_seed
+        try:
+            return composite.sample(sub_bqm, chain_strength=chain_strength,
+                                    chain_break_method=majority_vote, **params)
+        except ValueError:  # no embedding within the time left: skip this subproblem
+            stats_box["embedding_failures"] += 1
+            return None
+
+    size = options.get("subproblem_size", QPU_SUBPROBLEM_SIZE)
+    budget = max(deadline - time.perf_counter() - 0.05 - 1e-5 * problem.n, 1e-3)
+    selected, stats = decomposed_solve(problem, sample_sub, size=size, time_limit_s=budget,
+                                       seed=int(seed) % 2**32, lam=parsed["lambda"],
+                                       min_iteration_s=0.05)
+    stats.update({
+        "lambda": parsed["lambda"], "decomposition_reason": reason,
+        "embedding_failures": stats_box["embedding_failures"],
+        "sampler": type(child).__name__,
+        "sampler_is_stand_in": bool(getattr(child, "properties", {}).get("stand_in", False)),
+        "qpu_timing": "none (decomposed; per-subproblem timing not aggregated)",
+    })
+    return make_result(problem, selected, proven_optimal=False,
+                       solve_time_s=time.perf_counter() - started, backend=backend, stats=stats)
+
+
 def embedded_solve(problem: MwisProblem, child, *, backend: str, seed: int, time_limit_s: float,
                    options: Mapping[str, Any], report_qpu_timing: bool,
                    sampler_parameters: Mapping[str, Any]) -> MwisResult:
@@ -354,14 +425,26 @@ def embedded_solve(problem: MwisProblem, child, *, backend: str, seed: int, time
         "tries": _int_option(options, "embedding_tries", 10, 1),
     }
 
-    qubo = mwis_qubo(problem, parsed["lambda"])
-    bqm = qubo.to_bqm()
     params = {"num_reads": parsed["num_reads"], **sampler_parameters}
     declared = getattr(child, "parameters", {}) or {}
     if "seed" in declared:
         params["seed"] = int(seed) % 2**32
     passed = {k: v for k, v in params.items() if k in declared}
     not_passed = sorted(k for k in params if k not in declared)
+
+    fits, why = fits_target(problem, child)
+    direct_max = options.get("max_direct_vertices", QPU_DIRECT_MAX_VERTICES)
+    if not fits or problem.n > direct_max:
+        # refused at once (no minorminer call that can never succeed): decompose instead
+        return _decomposed_embedded(problem, child, backend=backend, seed=seed,
+                                    time_limit_s=time_limit_s, started=started, parsed=parsed,
+                                    options=options, passed=passed, chain_strength=chain_strength,
+                                    embedding_parameters=embedding_parameters,
+                                    reason=why or f"{problem.n} vertices > max_direct_vertices "
+                                    f"= {direct_max}")
+
+    qubo = mwis_qubo(problem, parsed["lambda"])
+    bqm = qubo.to_bqm()
 
     composite = EmbeddingComposite(child, find_embedding=cached_find_embedding,
                                    embedding_parameters=embedding_parameters)
