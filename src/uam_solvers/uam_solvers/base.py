@@ -30,6 +30,7 @@ __all__ = [
     "integer_weights",
     "make_result",
     "brute_force_mwis",
+    "induced_subproblem",
 ]
 
 
@@ -294,8 +295,19 @@ def _normalise_groups(groups: Sequence[Any] | None, n: int) -> list[np.ndarray]:
     key = sorted_unique(gid * max(n, 1) + idx)
     gid, v = key // max(n, 1), key % max(n, 1)
     counts = np.bincount(gid, minlength=lengths.size)
-    pieces = np.split(v.astype(np.int32), np.cumsum(counts)[:-1])
-    return [p for p in pieces if p.size >= 2]
+    return _pieces(v.astype(np.int32), counts)
+
+
+def _pieces(flat: np.ndarray, counts: np.ndarray) -> list[np.ndarray]:
+    """Consecutive slices of ``flat`` of the given lengths, those of length >= 2 only. Plain
+    slicing: np.split costs ~1 ms per call on the 10-group graphs of one epoch."""
+    ends = np.cumsum(counts).tolist()
+    out, start = [], 0
+    for end in ends:
+        if end - start >= 2:
+            out.append(flat[start:end])
+        start = end
+    return out
 
 
 def sorted_unique(values: np.ndarray) -> np.ndarray:
@@ -500,6 +512,30 @@ class Backend(ABC):
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} {self.name!r}>"
+
+
+def induced_subproblem(problem: MwisProblem, vertices: np.ndarray) -> MwisProblem:
+    """The subgraph induced by sorted ``vertices`` (original indices), re-indexed 0..k-1.
+
+    Listed edges and clique groups are restricted (groups shrinking below 2 vertices vanish), so
+    group structure survives for solvers that use it. O(n + m + sum |group|).
+    """
+    vertices = np.asarray(vertices, dtype=np.int64)
+    new_index = np.full(problem.n, -1, dtype=np.int64)
+    new_index[vertices] = np.arange(vertices.size)
+    e = problem.edges
+    keep = (new_index[e[:, 0]] >= 0) & (new_index[e[:, 1]] >= 0)
+    # new_index is increasing on vertices, so u < v and lexicographic order are preserved.
+    sub_edges = new_index[e[keep]].astype(np.int32).reshape(-1, 2)
+    groups: list[np.ndarray] = []
+    if problem.groups:
+        lengths = np.fromiter((g.size for g in problem.groups), dtype=np.int64, count=len(problem.groups))
+        mapped = new_index[np.concatenate(problem.groups)]
+        gid = np.repeat(np.arange(lengths.size), lengths)
+        keep_v = mapped >= 0
+        counts = np.bincount(gid[keep_v], minlength=lengths.size)
+        groups = _pieces(mapped[keep_v].astype(np.int32), counts)  # order kept: still sorted
+    return MwisProblem(weights=problem.weights[vertices].copy(), edges=sub_edges, groups=tuple(groups))
 
 
 def brute_force_mwis(problem: MwisProblem, max_vertices: int = 22) -> tuple[np.ndarray, float]:

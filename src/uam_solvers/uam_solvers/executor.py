@@ -60,6 +60,8 @@ log = logging.getLogger("uam_solvers")
 
 #: Time a worker may run past the limit before it is killed [s]: covers sending the answer back.
 DEFAULT_MARGIN_S = 0.4
+#: above this many vertices the fallback answer is computed while the worker runs
+PRECOMPUTE_FALLBACK_ABOVE = 20_000
 
 _PRELOAD = ["uam_solvers", "uam_solvers.layers", "uam_solvers.registry", "uam_solvers.greedy",
             "uam_solvers.cpsat", "uam_solvers.chszla", "uam_solvers.auto", "uam_solvers.annealing",
@@ -311,10 +313,19 @@ class SolveService:
             self.counts["worker-crashed"] += 1
             return self._fallback(problem, instance.name, t0, "worker-crashed", waited,
                                   f"sending the job to the worker failed ({exc})")
+        precomputed = None
+        if problem.n > PRECOMPUTE_FALLBACK_ABOVE:
+            # large graph: the fallback answer takes ~0.5-1 s here, so it is computed while the
+            # worker runs, and a kill at the deadline answers at once
+            from .greedy import fallback_selection
+
+            precomputed = fallback_selection(problem)
         if not worker.conn.poll(max(deadline + self.margin_s - time.perf_counter(), 0.0)):
-            self._replace(worker)  # kill: no CPU or memory left behind
+            worker.kill()  # no CPU or memory left behind
+            threading.Thread(target=self._replace, args=(worker,), daemon=True).start()
             self.counts["killed"] += 1
-            return self._fallback(problem, instance.name, t0, "killed", waited,
+            return self._fallback(problem, instance.name, t0, "killed", waited, precomputed=precomputed,
+                                  reason=
                                   f"backend {instance.name!r} exceeded its time limit: still "
                                   f"running after {time.perf_counter() - t0:.3f} s (limit "
                                   f"{limit:g} s + margin {self.margin_s:g} s); worker killed")
@@ -396,11 +407,11 @@ class SolveService:
 
     @staticmethod
     def _fallback(problem: MwisProblem, requested: str, t0: float, how: str, waited: float,
-                  reason: str) -> MwisResult:
+                  reason: str, precomputed: tuple | None = None) -> MwisResult:
         from .greedy import fallback_selection
 
         log.warning("MWIS fallback to greedy: %s", reason)
-        sel, rule = fallback_selection(problem)
+        sel, rule = precomputed if precomputed is not None else fallback_selection(problem)
         out = make_result(problem, sel, proven_optimal=problem.all_edges().shape[0] == 0,
                           solve_time_s=time.perf_counter() - t0, backend="greedy",
                           stats={"rule": rule, "requested_backend": requested, "executor": how,

@@ -181,10 +181,16 @@ def local_max_greedy(n: int, indptr: np.ndarray, indices: np.ndarray, weights: n
     machine under load, against well under a second here); its guarantee is GWMIN's in spirit,
     not in proof. Returns sorted int32 vertices.
     """
-    w = np.asarray(weights, dtype=np.float64)
     indptr = np.asarray(indptr, dtype=np.int64)
-    indices = np.asarray(indices, dtype=np.int64)
     rows = np.repeat(np.arange(n, dtype=np.int64), np.diff(indptr))
+    return _local_max(n, rows, np.asarray(indices, dtype=np.int64), weights)
+
+
+def _local_max(n: int, rows: np.ndarray, indices: np.ndarray, weights) -> np.ndarray:
+    """:func:`local_max_greedy` on directed pairs (rows[k], indices[k]), both directions of
+    every edge present; duplicate pairs are harmless (degrees then count them twice, which
+    only changes the order of picks, not independence or maximality)."""
+    w = np.asarray(weights, dtype=np.float64)
     alive = np.ones(n, dtype=bool)
     chosen = np.zeros(n, dtype=bool)
     while alive.any():
@@ -215,5 +221,16 @@ def fallback_selection(problem: MwisProblem) -> tuple[np.ndarray, str]:
     (bounded time). Returns (selected, rule name)."""
     if problem.n <= FAST_FALLBACK_ABOVE:
         return greedy_mwis(problem.weights, problem.all_edges()), "gwmin"
-    indptr, indices = problem.csr()
-    return local_max_greedy(problem.n, indptr, indices, problem.weights), "local-max gwmin key"
+    # listed edges plus group pairs, not deduplicated (sorting 10^6 pairs would double the cost)
+    parts = [problem.edges.astype(np.int64)]
+    by_size: dict[int, list[np.ndarray]] = {}
+    for g in problem.groups:
+        by_size.setdefault(int(g.size), []).append(g)
+    for k, gl in by_size.items():
+        mat = np.stack(gl).astype(np.int64)
+        iu, ju = np.triu_indices(k, k=1)
+        parts.append(np.stack([mat[:, iu].ravel(), mat[:, ju].ravel()], axis=1))
+    e = np.concatenate(parts, axis=0)
+    rows = np.concatenate([e[:, 0], e[:, 1]])
+    cols = np.concatenate([e[:, 1], e[:, 0]])
+    return _local_max(problem.n, rows, cols, problem.weights), "local-max gwmin key"
