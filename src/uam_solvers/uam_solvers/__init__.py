@@ -10,6 +10,13 @@ The default pipeline is ``ValidateFallback(Reduce(ComponentSplit(backend)))``: s
 graph into connected components, apply exact reductions, solve what is left with the named
 backend, then check the answer is an independent set of the input graph and fall back to greedy
 when it is not (or the backend raised or ran past its time limit).
+
+Backend ``auto`` (:mod:`uam_solvers.auto`) picks KaMIS, CP-SAT or CHILS by size and claims
+optimality only when proven. Options are declared per backend (``backend.options_spec``,
+dimod-style ``backend.parameters``); an unknown or malformed option is an MwisInputError.
+
+Deadlines that hold even for solvers holding the GIL: :class:`uam_solvers.executor.SolveService`
+(worker processes killed at the limit + margin, lanes by size); ``solve`` here runs in-process.
 """
 from __future__ import annotations
 
@@ -46,6 +53,10 @@ def __getattr__(attr: str):
         from .registry import UnknownBackendError
 
         return UnknownBackendError
+    if attr == "SolveService":
+        from .executor import SolveService
+
+        return SolveService
     raise AttributeError(f"module 'uam_solvers' has no attribute {attr!r}")
 
 __all__ = [
@@ -55,6 +66,7 @@ __all__ = [
     "MwisProblem",
     "MwisResult",
     "UnknownBackendError",
+    "SolveService",
     "check_selection",
     "get_backend",
     "list_backends",

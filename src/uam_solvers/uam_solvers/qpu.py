@@ -508,8 +508,6 @@ def embedded_solve(problem: MwisProblem, child, *, backend: str, seed: int, time
         for key in _TIMING_KEYS:
             if key in timing:
                 stats[f"{key}_us"] = float(timing[key])
-    if parsed["ignored"]:
-        stats["ignored_options"] = ",".join(parsed["ignored"])
     stats["postprocess_time_s"] = time.perf_counter() - post_start
     return make_result(problem, selected, proven_optimal=False,
                        solve_time_s=time.perf_counter() - started, backend=backend, stats=stats)
