@@ -60,7 +60,7 @@ log = logging.getLogger("uam_solvers")
 
 #: Time a worker may run past the limit before it is killed [s]: covers sending the answer back.
 DEFAULT_MARGIN_S = 0.4
-#: above this many vertices the fallback answer is computed while the worker runs
+#: above this many vertices the worker sends the fallback answer before it solves
 PRECOMPUTE_FALLBACK_ABOVE = 20_000
 
 _PRELOAD = ["uam_solvers", "uam_solvers.layers", "uam_solvers.registry", "uam_solvers.greedy",
@@ -107,6 +107,19 @@ def _load_backend(spec) -> Backend:
     return _load(spec)()
 
 
+def _warm_up() -> None:
+    """Pay every first-call cost once when the worker starts (entry-point scan, CP-SAT, KaMIS
+    and CHILS set-up: measured ~3 s on the first CHILS solve of a fresh worker under load)."""
+    from .registry import _entry_points, get_backend
+
+    _entry_points()
+    tiny = MwisProblem.from_arrays([1.0, 2.0, 1.5, 1.0], [[0, 1], [1, 2], [2, 3]])
+    for name in ("greedy", "exact", "kamis", "chils", "auto"):
+        backend = get_backend(name)
+        if backend.available()[0]:
+            backend.solve(tiny, time_limit_s=0.01, seed=0, options={})
+
+
 def _worker_main(conn) -> None:
     """Serve jobs from ``conn`` until it closes: (backend spec, packed problem, limit, seed,
     options, layers) -> ("ok", MwisResult) or ("error", text, is_input_error)."""
@@ -121,10 +134,25 @@ def _worker_main(conn) -> None:
             return
         if job is None:
             return
+        if job == "warm":
+            try:
+                _warm_up()
+                conn.send(("warm", ""))
+            except BaseException as exc:  # noqa: BLE001 - reported, the worker still serves
+                conn.send(("warm", f"{type(exc).__name__}: {exc}"))
+            continue
         spec, packed, limit_s, seed, options, layers = job
+        t0 = time.perf_counter()
         try:
             backend = _load_backend(spec)
             problem = _unpack(*packed)
+            if problem.n > PRECOMPUTE_FALLBACK_ABOVE:
+                # best-so-far for the parent in case this solve is killed (~0.6 s at 10^5)
+                from .greedy import fallback_selection
+
+                sel, rule = fallback_selection(problem)
+                conn.send(("partial", sel, rule))
+                limit_s = max(limit_s - (time.perf_counter() - t0), 1e-3)
             inner = Reduce(ComponentSplit(backend)) if layers else backend
             result = inner.solve(problem, time_limit_s=limit_s, seed=seed, options=options)
             result.stats = {k: v for k, v in result.stats.items()
@@ -148,6 +176,17 @@ class _Worker:
                                    name=f"uam-solver-{lane}")
         self.process.start()
         child.close()
+
+    def warm(self, timeout_s: float = 60.0) -> None:
+        """Run the warm-up job (first-call costs) and wait for it."""
+        try:
+            self.conn.send("warm")
+            if self.conn.poll(timeout_s):
+                reply = self.conn.recv()
+                if reply[1]:
+                    log.warning("solver worker warm-up: %s", reply[1])
+        except (EOFError, OSError) as exc:
+            log.warning("solver worker warm-up failed: %s", exc)
 
     @property
     def pid(self) -> int | None:
@@ -231,9 +270,22 @@ class SolveService:
         self._closed = False
         self.counts = {"inline": 0, "worker": 0, "killed": 0, "worker-crashed": 0,
                        "no-free-worker": 0}
+        from .registry import backend_names, get_backend
+
+        # First-call costs in this process are not a request's: the entry-point scan and each
+        # backend's availability check (imports of OR-Tools, chszlablib: ~1 s under load).
+        for name in backend_names():
+            try:
+                get_backend(name).available()
+            except Exception:  # noqa: BLE001 - a broken backend is reported when requested
+                pass
+        started = []
         for lane, size in self._size.items():
             for _ in range(size):
-                self._idle[lane].append(_Worker(self._ctx, lane))
+                started.append(_Worker(self._ctx, lane))
+        for worker in started:
+            worker.warm()
+        self._idle = {lane: [w for w in started if w.lane == lane] for lane in self._size}
         _LIVE.add(self)
 
     # -- public API -----------------------------------------------------------------------
@@ -309,32 +361,42 @@ class SolveService:
         try:
             worker.conn.send((spec, _pack(problem), remaining, seed, opts, bool(layers)))
         except (OSError, ValueError) as exc:
-            self._replace(worker)
+            self._replace_in_background(worker)
             self.counts["worker-crashed"] += 1
             return self._fallback(problem, instance.name, t0, "worker-crashed", waited,
                                   f"sending the job to the worker failed ({exc})")
+        # On large graphs the worker first sends the fallback answer ("partial"), then the
+        # solve's; a kill at the deadline then answers at once with that best-so-far.
         precomputed = None
-        if problem.n > PRECOMPUTE_FALLBACK_ABOVE:
-            # large graph: the fallback answer takes ~0.5-1 s here, so it is computed while the
-            # worker runs, and a kill at the deadline answers at once
-            from .greedy import fallback_selection
-
-            precomputed = fallback_selection(problem)
-        if not worker.conn.poll(max(deadline + self.margin_s - time.perf_counter(), 0.0)):
+        reply = None
+        try:
+            while True:
+                if not worker.conn.poll(max(deadline + self.margin_s - time.perf_counter(), 0.0)):
+                    break
+                reply = worker.conn.recv()
+                if reply[0] != "partial":
+                    break
+                precomputed, reply = (reply[1], reply[2]), None
+        except (EOFError, OSError) as exc:
+            reply = exc
+        if reply is None:
             worker.kill()  # no CPU or memory left behind
-            threading.Thread(target=self._replace, args=(worker,), daemon=True).start()
+            self._replace_in_background(worker)
             self.counts["killed"] += 1
             return self._fallback(problem, instance.name, t0, "killed", waited, precomputed=precomputed,
                                   reason=
                                   f"backend {instance.name!r} exceeded its time limit: still "
                                   f"running after {time.perf_counter() - t0:.3f} s (limit "
-                                  f"{limit:g} s + margin {self.margin_s:g} s); worker killed")
+                                  f"{limit:g} s + margin {self.margin_s:g} s); worker killed"
+                                  + ("; answer: the worker's greedy answer computed before the "
+                                     "solve" if precomputed is not None else ""))
         try:
-            reply = worker.conn.recv()
+            if isinstance(reply, BaseException):
+                raise reply
         except (EOFError, OSError) as exc:
             worker.process.join(1.0)
             code = worker.process.exitcode
-            self._replace(worker)
+            self._replace_in_background(worker)
             self.counts["worker-crashed"] += 1
             return self._fallback(problem, instance.name, t0, "worker-crashed", waited,
                                   f"worker process of backend {instance.name!r} died "
@@ -390,6 +452,13 @@ class SolveService:
             self._idle[worker.lane].append(worker)
             self._cond.notify()
 
+    def _replace_in_background(self, worker: _Worker) -> None:
+        """Kill ``worker`` now; start and warm its replacement on a thread (the caller's answer
+        does not wait for it)."""
+        worker.kill()
+        threading.Thread(target=self._replace, args=(worker,), daemon=True,
+                         name="uam-solver-replace").start()
+
     def _replace(self, worker: _Worker) -> None:
         """Kill ``worker`` and put a fresh one in its lane."""
         worker.kill()
@@ -398,6 +467,7 @@ class SolveService:
             if self._closed:
                 return
         fresh = _Worker(self._ctx, worker.lane)
+        fresh.warm()
         with self._cond:
             if self._closed:
                 fresh.stop()
@@ -412,7 +482,8 @@ class SolveService:
 
         log.warning("MWIS fallback to greedy: %s", reason)
         sel, rule = precomputed if precomputed is not None else fallback_selection(problem)
-        out = make_result(problem, sel, proven_optimal=problem.all_edges().shape[0] == 0,
+        # (edges and groups listed, not all_edges(): that costs ~0.5 s at 10^6 edges)
+        out = make_result(problem, sel, proven_optimal=problem.m == 0 and not problem.groups,
                           solve_time_s=time.perf_counter() - t0, backend="greedy",
                           stats={"rule": rule, "requested_backend": requested, "executor": how,
                                  "queue_wait_s": waited}, message=reason)
