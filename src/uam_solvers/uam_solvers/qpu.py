@@ -349,7 +349,7 @@ def _decomposed_embedded(problem, child, *, backend, seed, time_limit_s, started
     def sample_sub(sub_bqm, sub_seed, remaining_s):
         emb = dict(embedding_parameters)
         # minorminer holds the GIL and uses its whole timeout; sampling needs the rest
-        emb["timeout"] = max(min(float(emb["timeout"]), 0.4 * remaining_s), 0.01)
+        emb["timeout"] = max(min(float(emb["timeout"]), 0.3 * remaining_s, 1.0), 0.01)
         emb["tries"] = 1
         composite = EmbeddingComposite(child, find_embedding=cached_find_embedding,
                                        embedding_parameters=emb)
@@ -367,7 +367,9 @@ def _decomposed_embedded(problem, child, *, backend, seed, time_limit_s, started
     budget = max(deadline - time.perf_counter() - 0.05 - 1e-5 * problem.n, 1e-3)
     selected, stats = decomposed_solve(problem, sample_sub, size=size, time_limit_s=budget,
                                        seed=int(seed) % 2**32, lam=parsed["lambda"],
-                                       min_iteration_s=0.05)
+                                       # an embedding + anneal takes ~0.5-1 s under load:
+                                       # none is started that could not finish
+                                       min_iteration_s=min(0.6, 0.3 * budget))
     stats.update({
         "lambda": parsed["lambda"], "decomposition_reason": reason,
         "embedding_failures": stats_box["embedding_failures"],
