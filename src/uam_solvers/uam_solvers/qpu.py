@@ -252,7 +252,9 @@ def _emulator_sampler(missing_qubits: Iterable[int] = ()):
     from dwave.samplers import SimulatedAnnealingSampler
 
     nodes, edges = advantage_graph(missing_qubits)
-    return dimod.StructureComposite(SimulatedAnnealingSampler(), nodes, edges)
+    sampler = dimod.StructureComposite(SimulatedAnnealingSampler(), nodes, edges)
+    sampler.pegasus_shape = ADVANTAGE_PEGASUS_SIZE  # its properties carry no topology
+    return sampler
 
 
 # --------------------------------------------------------------------------------------------
@@ -332,12 +334,44 @@ def fits_target(problem: MwisProblem, child) -> tuple[bool, str]:
     return True, ""
 
 
+_REGIONS: dict[int, tuple[Any, list]] = {}
+
+
+def embedding_region(child, rows: int = 4) -> list:
+    """Couplers of a corner of the child's Pegasus graph (``rows`` x ``rows`` unit cells: about
+    370 qubits of P16), the target of subproblem embeddings: minorminer embeds a 30-vertex
+    conflict subgraph there in ~0.5 s under load, where the whole 5,640-qubit graph made every
+    embedding of the decomposition time out. Other topologies: the whole edge list. Cached
+    per child object."""
+    entry = _REGIONS.get(id(child))
+    if entry is not None and entry[0] is child:
+        return entry[1]
+    edges = list(child.edgelist)
+    topology = (getattr(child, "properties", {}) or {}).get("topology", {})
+    if not topology and hasattr(child, "pegasus_shape"):
+        topology = {"type": "pegasus", "shape": [child.pegasus_shape]}
+    if topology.get("type") == "pegasus":
+        try:
+            from dwave.graphs import pegasus_coordinates
+        except ImportError:  # pragma: no cover - older Ocean
+            from dwave_networkx import pegasus_coordinates
+        coords = pegasus_coordinates(int(topology["shape"][0]))
+        keep = set()
+        for v in child.nodelist:
+            u, w, k, z = coords.linear_to_pegasus(v)
+            if w < rows and z < rows:
+                keep.add(v)
+        edges = [(a, b) for a, b in edges if a in keep and b in keep]
+    _REGIONS[id(child)] = (child, edges)
+    return edges
+
+
 def _decomposed_embedded(problem, child, *, backend, seed, time_limit_s, started, parsed,
                          options, passed, chain_strength, embedding_parameters, reason):
     """Energy-impact decomposition (uam_solvers.decompose) with every subproblem embedded and
     sampled on ``child``; each embedding gets at most the time left."""
     from dwave.embedding.chain_breaks import majority_vote
-    from dwave.system import EmbeddingComposite
+    from dwave.system import FixedEmbeddingComposite
 
     from uam_solvers.decompose import decomposed_solve
 
@@ -346,20 +380,36 @@ def _decomposed_embedded(problem, child, *, backend, seed, time_limit_s, started
     sub_params["num_reads"] = min(int(parsed["num_reads"]), 20)  # per subproblem
     stats_box = {"embedding_failures": 0}
 
+    region = embedding_region(child)
+    region_qubits = sorted({q for e in region for q in e})
+
     def sample_sub(sub_bqm, sub_seed, remaining_s):
         emb = dict(embedding_parameters)
         # minorminer holds the GIL and uses its whole timeout; sampling needs the rest
         emb["timeout"] = max(min(float(emb["timeout"]), 0.3 * remaining_s, 1.0), 0.01)
         emb["tries"] = 1
-        composite = EmbeddingComposite(child, find_embedding=cached_find_embedding,
-                                       embedding_parameters=emb)
+        source = [(u, v) for u, v in sub_bqm.quadratic]
+        embedding = cached_find_embedding(source, region, **emb) if source else {}
+        if source and not embedding:  # no embedding within the time left: skip it
+            stats_box["embedding_failures"] += 1
+            return None
+        used = {q for chain in embedding.values() for q in chain}
+        free = iter(q for q in region_qubits if q not in used)
+        for v in sub_bqm.variables:  # isolated variables are not in minorminer's answer
+            if v not in embedding:
+                q = next(free, None)
+                if q is None:
+                    stats_box["embedding_failures"] += 1
+                    return None
+                embedding[v] = [q]
         params = dict(sub_params)
         if "seed" in params:
             params["seed"] = sub_seed
         try:
-            return composite.sample(sub_bqm, chain_strength=chain_strength,
-                                    chain_break_method=majority_vote, **params)
-        except ValueError:  # no embedding within the time left: skip this subproblem
+            return FixedEmbeddingComposite(child, embedding=embedding).sample(
+                sub_bqm, chain_strength=chain_strength, chain_break_method=majority_vote,
+                **params)
+        except ValueError:
             stats_box["embedding_failures"] += 1
             return None
 
