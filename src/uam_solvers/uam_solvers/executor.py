@@ -11,7 +11,7 @@ Rules (all parameters of the constructor):
 * **In-process** (no process hop, ~no overhead): a solve whose problem has at most
   ``backend.inline_max_vertices`` vertices (after the service's own ``inline_max_vertices`` cap).
   Backends set that where they are known to return well within any limit at that size
-  (greedy: 2,000; exact: 64; kamis: 256; auto: 1,000; everything else 0, i.e. always a
+  (greedy: 2,000; exact, kamis and auto: 64; everything else 0, i.e. always a
   worker). These run under the thread guard of :class:`uam_solvers.layers.ValidateFallback`.
 * **Lanes**: every other solve goes to a warm worker of the *small* lane
   (``small_workers`` processes, problems of at most ``small_lane_max_vertices`` vertices) or of
