@@ -40,8 +40,16 @@ def _wait_for_workers(service, count, timeout_s=10.0):
     assert len(service.worker_pids()) == count
 
 
+def _wait_busy(service, timeout_s=10.0):
+    end = time.monotonic() + timeout_s
+    while not service._busy and time.monotonic() < end:
+        time.sleep(0.01)
+    assert service._busy
+
+
 def test_gil_holding_backend_is_killed_at_the_deadline(service):
     problem = paper_instance(6, seed=1)
+    _wait_for_workers(service, 2)
     before = set(service.worker_pids())
     t0 = time.perf_counter()
     r = service.solve(problem, backend=tb.GilHoldingBackend(), time_limit_s=0.5)
@@ -62,8 +70,9 @@ def test_small_request_does_not_wait_behind_a_large_one(service):
     box = {}
     t = threading.Thread(target=lambda: box.setdefault(
         "large", service.solve(large, backend=tb.GilHoldingBackend(), time_limit_s=3.0)))
+    _wait_for_workers(service, 2)  # a worker killed by an earlier test is replaced
     t.start()
-    time.sleep(0.3)  # let the large solve occupy its worker
+    _wait_busy(service)  # the large solve occupies its worker
     t0 = time.perf_counter()
     r = service.solve(small, backend=tb.WorkerPidBackend(), time_limit_s=2.0)
     small_wall = time.perf_counter() - t0
@@ -77,8 +86,9 @@ def test_no_free_worker_means_fallback_within_the_limit(service):
     box = {}
     t = threading.Thread(target=lambda: box.setdefault(
         "first", service.solve(large, backend=tb.GilHoldingBackend(), time_limit_s=2.0)))
+    _wait_for_workers(service, 2)
     t.start()
-    time.sleep(0.3)
+    _wait_busy(service)
     t0 = time.perf_counter()
     r = service.solve(large, backend=tb.WorkerPidBackend(), time_limit_s=0.5)
     assert time.perf_counter() - t0 < 0.5 + 1.0
