@@ -29,11 +29,12 @@ class CrashingBackend(Backend):
 
 
 class WorkerPidBackend(Backend):
-    """Answers the empty set and reports its process id (to see where a solve ran)."""
+    """Answers the empty set and reports its process id and the seed it got (to see where a
+    solve ran and what reached it)."""
 
     name = "test-pid"
-    description = "test: reports the solving process id"
+    description = "test: reports the solving process id and seed"
 
     def solve(self, problem, *, time_limit_s, seed, options):
         return make_result(problem, [], proven_optimal=False, solve_time_s=0.0, backend=self.name,
-                           stats={"pid": os.getpid()})
+                           stats={"pid": os.getpid(), "seed": seed})
