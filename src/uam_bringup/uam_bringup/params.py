@@ -209,9 +209,13 @@ PLANNER = (
 )
 
 SOLVER = (
-    Param("default_backend", "exact", "MWIS backend used when a request names none", read_only=False,
+    Param("default_backend", "auto", "MWIS backend used when a request names none", read_only=False,
           check=backend_problem),
-    Param("default_time_limit_s", 10.0, "solve time limit [s] used when a request gives 0", 0.001, 3600.0,
+    Param("default_time_limit_s", 10.0, "solve time limit [s] used when a request gives 0; at most "
+          "max_time_limit_s", 0.001, 3600.0, read_only=False),
+    # Every solve holds a worker process for up to its limit: an unbounded limit (1e9 s was
+    # accepted) would let one request hold its lane for good.
+    Param("max_time_limit_s", 60.0, "requests asking a longer time limit [s] are refused", 0.01, 3600.0,
           read_only=False),
     # A lower bound that serves every planner graph of the paper's scenarios (hundreds of vertices):
     # a tiny value would refuse every epoch and push the planner to its greedy fallback.

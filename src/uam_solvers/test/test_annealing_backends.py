@@ -90,9 +90,10 @@ def test_empty_graph_and_bad_options(backend_cls):
         backend_cls().solve(problem, time_limit_s=1.0, seed=0, options={"num_reads": 0})
     with pytest.raises(MwisInputError, match="lambda"):
         backend_cls().solve(problem, time_limit_s=1.0, seed=0, options={"lambda": -1})
-    result = backend_cls().solve(problem, time_limit_s=1.0, seed=0,
-                                 options={"num_reads": 2, "not_an_option": 1})
-    assert result.stats["ignored_options"] == "not_an_option"
+    # issue 11: an unknown option is an error for every backend, no longer silently ignored
+    with pytest.raises(MwisInputError, match="not_an_option"):
+        backend_cls().solve(problem, time_limit_s=1.0, seed=0,
+                            options={"num_reads": 2, "not_an_option": 1})
 
 
 def test_sa_options_reach_the_sampler():
@@ -121,7 +122,10 @@ def test_an_expired_time_limit_stops_after_the_first_reads(backend_cls):
     assert problem.is_independent(result.selected)
 
 
-def test_tabu_refuses_graphs_above_its_dense_matrix_limit():
+def test_tabu_decomposes_graphs_above_its_dense_matrix_limit():
+    # issue 11: no longer refused; decomposed into subproblems that fit the dense matrix
     problem = paper_instance(2, seed=0)  # 10 vertices
-    with pytest.raises(MwisInputError, match="max_vertices"):
-        TabuBackend().solve(problem, time_limit_s=1.0, seed=0, options={"max_vertices": 9})
+    result = TabuBackend().solve(problem, time_limit_s=0.5, seed=0,
+                                 options={"max_vertices": 9, "subproblem_size": 5})
+    assert result.stats["decomposed"] is True and result.stats["subproblem_vertices"] == 5
+    assert problem.is_independent(result.selected)

@@ -1,11 +1,17 @@
 """The solver node in-process: answers clients, refuses malformed requests with a message naming
-the problem and keeps serving, switches backend by parameter, serves concurrently."""
+the problem and keeps serving, switches backend by parameter, bounds time limits, serves a small
+request while a large one runs in its worker process, says how each solve ran, and leaves no
+worker process behind (issue 11, Deliver 2)."""
 
 from __future__ import annotations
 
-import threading
+import os
+import sys
 
+import psutil
 import pytest
+
+sys.path.insert(0, os.path.dirname(__file__))  # before any worker starts: workers import from it
 
 rclpy = pytest.importorskip("rclpy", reason="needs the built workspace (scripts/test.sh sources it)")
 
@@ -33,7 +39,8 @@ def solver_setup(ros_context, spin_until):
     executor = MultiThreadedExecutor(num_threads=4, context=ros_context)
     executor.add_node(node)
     executor.add_node(client_node)
-    assert spin_until(executor, client.service_is_ready, timeout_s=10)
+    # the service is offered once the worker processes are up (5-12 s under load)
+    assert spin_until(executor, client.service_is_ready, timeout_s=90), node.start_error
 
     def call(**fields):
         req = SolveMwis.Request(**{"weights": WEIGHTS, "edges_u": EDGES_U, "edges_v": EDGES_V, **fields})
@@ -103,37 +110,88 @@ def test_backend_options_reach_the_backend(solver_setup):
     assert not bad.success or bad.fallback  # an unknown rule is refused or falls back, never silently used
 
 
-def test_a_slow_solve_does_not_block_other_requests(solver_setup, spin_until, monkeypatch):
-    """A backend blocked on an event holds one request; another request is answered meanwhile."""
-    import uam_solvers
-    import uam_solvers.registry
-    from uam_solvers.base import Backend
-    from uam_solvers.greedy import GreedyBackend
-    from uam_solvers.registry import get_backend
+# Test backends by name, as entry points would add them (workers import them by module path).
+TEST_BACKENDS = {"test-gil-hog": "solver_test_backends:GilHoldingBackend",
+                 "test-pid": "solver_test_backends:WorkerPidBackend"}
 
-    gate = threading.Event()
 
-    class Blocking(Backend):
-        name = "blocking-test"
-        description = "waits for the test's gate, then solves greedily"
+@pytest.fixture
+def test_backends(monkeypatch):
+    import uam_solvers.registry as registry
 
-        def solve(self, problem, *, time_limit_s, seed, options):
-            gate.wait(30)
-            return GreedyBackend().solve(problem, time_limit_s=time_limit_s, seed=seed, options=options)
+    table = registry._table
+    monkeypatch.setattr(registry, "_table", lambda: {**table(), **TEST_BACKENDS})
 
-    def lookup(name):
-        return Blocking() if name == "blocking-test" else get_backend(name)
 
-    monkeypatch.setattr(uam_solvers, "get_backend", lookup)
-    monkeypatch.setattr(uam_solvers.registry, "get_backend", lookup)  # the node checks names there
-    _, call, executor, client = solver_setup
+def _alive(pid: int) -> bool:
     try:
-        slow = client.call_async(SolveMwis.Request(weights=WEIGHTS, edges_u=EDGES_U, edges_v=EDGES_V,
-                                                   backend="blocking-test", time_limit_s=60.0))
-        fast = call(backend="greedy")
-        assert fast.success and not slow.done()
-        gate.set()
-        assert spin_until(executor, slow.done, timeout_s=30)
-        assert slow.result().success
-    finally:
-        gate.set()
+        return psutil.Process(pid).status() != psutil.STATUS_ZOMBIE
+    except psutil.NoSuchProcess:
+        return False
+
+
+def test_a_small_request_is_answered_while_a_large_one_runs(solver_setup, spin_until, test_backends):
+    """Finding: six 40 s solves made a tiny request wait 39 s; over-limit solves kept running.
+    A large solve that holds the GIL occupies the large lane; a small request sent meanwhile is
+    answered by the small lane's worker first; the large one is killed at its limit and answered
+    with the flagged greedy answer, saying so."""
+    node, call, executor, client = solver_setup
+    # without layers: the reductions would solve an edgeless graph before any backend runs
+    assert node.set_parameters([Parameter("layers", value=False)])[0].successful
+    svc = node.solve_service
+    pids_before = set(svc.worker_pids())
+    large = client.call_async(SolveMwis.Request(weights=[1.0] * 2001, backend="test-gil-hog",
+                                                time_limit_s=4.0))
+    assert spin_until(executor, lambda: bool(svc._busy) or large.done(), timeout_s=30)
+    assert not large.done()
+    small = call(backend="test-pid", seed=1234)
+    assert not large.done()  # answered while the large solve still runs
+    stats = {kv.key: kv.value for kv in small.stats}
+    assert small.success and not small.fallback and stats["executor"] == "worker"
+    assert "ran worker" in small.message and "queue_wait_s" in stats
+    assert int(stats["pid"]) in pids_before and stats["seed"] == "1234"  # the request's seed reached it
+    assert spin_until(executor, large.done, timeout_s=30)
+    res = large.result()
+    stats = {kv.key: kv.value for kv in res.stats}
+    assert res.success and res.fallback and res.backend_used == "greedy"
+    assert stats["executor"] == "killed" and stats["requested_backend"] == "test-gil-hog"
+    assert "exceeded its time limit" in res.message and "ran killed" in res.message
+    assert len(res.selected) == 2001  # no edges: the greedy answer takes every vertex
+    killed = pids_before - set(svc.worker_pids())
+    assert killed and not any(_alive(pid) for pid in killed)  # nothing left running
+
+
+def test_time_limits_are_bounded(solver_setup):
+    """Finding: a time limit of 1e9 s was accepted."""
+    node, call, _, _ = solver_setup
+    for limit, words in [(1e9, ["time_limit_s", "1000000000.0", "max_time_limit_s=60"]),
+                         (float("inf"), ["time_limit_s", "inf"]), (-1.0, ["time_limit_s", "-1.0"])]:
+        res = call(time_limit_s=limit)
+        assert not res.success and list(res.selected) == []
+        for w in words:
+            assert w in res.message, (w, res.message)
+    assert node.set_parameters([Parameter("max_time_limit_s", value=2.0)])[0].successful
+    res = call(time_limit_s=2.5)
+    assert not res.success and "2.5" in res.message and "max_time_limit_s=2" in res.message
+    res = call()  # 0: the default (10 s) now exceeds the bound, and the answer says which parameter
+    assert not res.success and "default_time_limit_s=10" in res.message
+    assert call(time_limit_s=1.5).success
+    refused = node.set_parameters([Parameter("max_time_limit_s", value=1e6)])[0]
+    assert not refused.successful and "max_time_limit_s" in refused.reason and "1000000.0" in refused.reason
+    assert node.get_parameter("max_time_limit_s").value == 2.0
+
+
+def test_inline_solves_say_so(solver_setup):
+    _, call, _, _ = solver_setup
+    res = call(backend="exact")
+    stats = {kv.key: kv.value for kv in res.stats}
+    assert res.success and stats["executor"] == "inline" and "ran inline" in res.message
+
+
+def test_closing_the_node_stops_every_worker_process(solver_setup):
+    node, _, _, _ = solver_setup
+    pids = node.solve_service.worker_pids()
+    assert len(pids) == 2 and all(_alive(pid) for pid in pids)
+    node.close()
+    assert node.solve_service is None
+    assert not any(_alive(pid) for pid in pids)

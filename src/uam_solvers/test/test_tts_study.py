@@ -113,3 +113,56 @@ def test_cli_generate_writes_a_corpus_with_proven_optima(tmp_path):
     assert [e.problem.n for e in sorted(entries, key=lambda e: e.problem.n)] == [5, 7, 9, 11]
     for entry in entries:
         assert entry.optimum == pytest.approx(brute_force(entry.problem))
+
+
+# ---- issue 11: the paper's TTS, trial = one read -------------------------------------------
+
+from uam_solvers.tts import reads_needed, wilson_interval  # noqa: E402
+
+
+def test_wilson_interval_hand_values():
+    # 10 of 1000: the textbook Wilson 95 % interval is [0.00544, 0.01831]
+    lo, hi = wilson_interval(10, 1000)
+    assert lo == pytest.approx(0.005441, abs=1e-5) and hi == pytest.approx(0.018309, abs=1e-5)
+    lo, hi = wilson_interval(0, 100)
+    assert lo == pytest.approx(0.0, abs=1e-12) and hi == pytest.approx(0.03699, abs=1e-4)
+    assert wilson_interval(0, 0) == (0.0, 1.0)
+
+
+def test_reads_needed_bounds_p_near_one_percent_within_a_factor_one_and_a_half():
+    n = reads_needed(0.01, 1.5)
+    lo, hi = wilson_interval(round(0.01 * n), n)
+    assert lo >= 0.01 / 1.5 and hi <= 0.015
+    lo, hi = wilson_interval(round(0.01 * (n // 2)), n // 2)
+    assert not (lo >= 0.01 / 1.5 and hi <= 0.015)
+
+
+class _OnePercentReads(Backend):
+    """Every call's best read is optimal, but only 1 % of its reads are (an annealer)."""
+
+    name = "one-percent"
+    description = "test double"
+
+    def solve(self, problem, *, time_limit_s, seed, options):
+        return make_result(problem, [1, 3], proven_optimal=False, solve_time_s=0.0,
+                           backend=self.name,
+                           stats={"reads": options["num_reads"], "optimal_fraction": 0.01})
+
+
+def test_per_read_p_opt_is_the_share_of_reads_not_of_calls(monkeypatch):
+    real = registry.get_backend
+    monkeypatch.setattr(registry, "get_backend",
+                        lambda name: _OnePercentReads() if name == "one-percent" else real(name))
+    monkeypatch.setattr("uam_solvers.tts.ANNEALING_BACKENDS", frozenset({"one-percent"}))
+    problem = MwisProblem.from_arrays([0.6, 1.0, 0.7, 0.5], [[0, 1], [1, 2], [2, 3]])
+    rows, _ = run_study([CorpusEntry("path", problem, optimum=1.5)], ["one-percent"],
+                        repetitions=3, num_reads=1000, log=lambda msg: None)
+    row = rows[0]
+    assert row.p_opt == 1.0  # per call: every call's best read is optimal
+    assert row.reads_total == 3000 and row.read_hits == 30 and row.p_read == pytest.approx(0.01)
+    assert row.p_read_lo < 0.01 < row.p_read_hi and row.ci_within_factor is True
+    assert row.trial_time == "read (wall time per read)"
+    assert row.t_read_s == pytest.approx(row.t_c_s / 1000, rel=1e-6)
+    # TTS per read: t_read log(0.01) / log(0.99) = 458.2 t_read; interval ordered
+    assert row.tts99_read_s == pytest.approx(row.t_read_s * 458.21, rel=1e-3)
+    assert row.tts99_read_lo_s < row.tts99_read_s < row.tts99_read_hi_s

@@ -10,6 +10,13 @@ The default pipeline is ``ValidateFallback(Reduce(ComponentSplit(backend)))``: s
 graph into connected components, apply exact reductions, solve what is left with the named
 backend, then check the answer is an independent set of the input graph and fall back to greedy
 when it is not (or the backend raised or ran past its time limit).
+
+Backend ``auto`` (:mod:`uam_solvers.auto`) picks KaMIS, CP-SAT or CHILS by size and claims
+optimality only when proven. Options are declared per backend (``backend.options_spec``,
+dimod-style ``backend.parameters``); an unknown or malformed option is an MwisInputError.
+
+Deadlines that hold even for solvers holding the GIL: :class:`uam_solvers.executor.SolveService`
+(worker processes killed at the limit + margin, lanes by size); ``solve`` here runs in-process.
 """
 from __future__ import annotations
 
@@ -46,6 +53,10 @@ def __getattr__(attr: str):
         from .registry import UnknownBackendError
 
         return UnknownBackendError
+    if attr == "SolveService":
+        from .executor import SolveService
+
+        return SolveService
     raise AttributeError(f"module 'uam_solvers' has no attribute {attr!r}")
 
 __all__ = [
@@ -55,6 +66,7 @@ __all__ = [
     "MwisProblem",
     "MwisResult",
     "UnknownBackendError",
+    "SolveService",
     "check_selection",
     "get_backend",
     "list_backends",
@@ -89,10 +101,13 @@ def solve_problem(
     layers: bool = True,
 ) -> MwisResult:
     """Solve an already validated problem with the default pipeline (see :func:`build_pipeline`)."""
-    if not (time_limit_s > 0):
-        raise MwisInputError(f"time_limit_s: {time_limit_s!r} must be > 0")
+    from .options import check_seed, check_time_limit
+
+    time_limit_s = check_time_limit(time_limit_s)
+    seed = check_seed(seed)
     pipeline = build_pipeline(backend, layers=layers)
-    return pipeline.solve(problem, time_limit_s=float(time_limit_s), seed=int(seed), options=dict(options or {}))
+    options = pipeline.validate_options(options)  # before any solve: errors, never a fallback
+    return pipeline.solve(problem, time_limit_s=time_limit_s, seed=seed, options=options)
 
 
 def solve(
@@ -115,5 +130,9 @@ def solve(
     Output: an MwisResult whose ``selected`` is always an independent set of the input graph.
     Raises MwisInputError (bad arrays), UnknownBackendError, BackendUnavailable.
     """
+    from .options import check_seed, check_time_limit
+
+    check_time_limit(time_limit_s)  # argument errors first, before the arrays are converted
+    check_seed(seed)
     problem = MwisProblem.from_arrays(weights, edges, groups, max_vertices=max_vertices)
     return solve_problem(problem, backend, time_limit_s, seed, options, layers)

@@ -37,9 +37,9 @@ from . import solve
 from .base import MwisProblem
 from .registry import get_backend
 
-SMALL_BACKENDS = ("greedy", "exact", "kamis", "chils", "sa", "tabu", "qpu-emulator")
-LARGE_BACKENDS = ("greedy", "exact", "kamis", "chils", "sa", "tabu")
-LARGE_DEFAULT = "chils"
+SMALL_BACKENDS = ("auto", "greedy", "exact", "kamis", "chils", "sa", "tabu", "qpu-emulator")
+LARGE_BACKENDS = ("auto", "greedy", "exact", "kamis", "chils", "sa", "tabu", "qpu-emulator")
+LARGE_DEFAULT = "auto"
 CHILS_SMALL_LIMIT_S = 0.1
 
 
@@ -119,6 +119,10 @@ def small_benchmark(n_instances: int, seed: int, backends, small_limit_s: float,
         unproven += not r.proven_optimal
     out(f"optimum: exact (CP-SAT, layers off, 30 s limit) proved {len(problems) - unproven}/"
         f"{len(problems)}")
+    kamis_direct(problems[0], 1.0)
+    kam_t = np.asarray([kamis_direct(p, 10.0)[1] for p in problems])
+    out(f"KaMIS branch-and-reduce called directly: median {np.median(kam_t) * 1e3:.3f} ms "
+        "(the reference of the 'x KaMIS' column: per-instance time ratio, median)")
     # Warm up imports and thread pools so the first instance does not pay them.
     warm = problems[0]
     rows = []
@@ -150,24 +154,32 @@ def small_benchmark(n_instances: int, seed: int, backends, small_limit_s: float,
             row.note = f"first {len(subset)} instances, limit {qpu_limit_s:g} s"
         rows.append(row)
     out("")
-    out("| backend | instances | median ms | p95 ms | median CPU ms | optimal | proven | fallbacks | solved by reductions | note |")
-    out("|---|---:|---:|---:|---:|---:|---:|---:|---:|---|")
+    out("| backend | instances | median ms | p95 ms | median CPU ms | x KaMIS | optimal | proven | fallbacks | solved by reductions | note |")
+    out("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|")
     for r in rows:
         if not r.count:
-            out(f"| {r.backend} | 0 | - | - | - | - | - | - | - | {r.note} |")
+            out(f"| {r.backend} | 0 | - | - | - | - | - | - | - | - | {r.note} |")
             continue
         t = np.asarray(r.times_s) * 1e3
         cpu_ms = np.median(np.asarray(r.cpu_s)) * 1e3
+        ratio = np.median(np.asarray(r.times_s) / kam_t[:r.count])
         out(f"| {r.backend} | {r.count} | {np.median(t):.2f} | {np.percentile(t, 95):.2f} | {cpu_ms:.2f} | "
+            f"{ratio:.2f} | "
             f"{100 * r.optimal / r.count:.1f} % | {100 * r.proven / r.count:.1f} % | {r.fallbacks} | "
             f"{100 * r.kernel_empty / r.count:.1f} % | {r.note} |")
     return rows
 
 
 def large_benchmark(sizes, limits, seed: int, backends, out=print) -> dict:
+    """Every backend on large graphs through the SolveService (worker processes killed at
+    limit + margin), so the wall column shows the deadline each caller gets."""
+    from .executor import SolveService
     from .instances import large_instance
 
     results = {}
+    svc = SolveService(large_workers=1)
+    out("\n(large instances: solved through `uam_solvers.executor.SolveService`; wall = the "
+        "caller's time, limit + 0.4 s margin enforced by killing the worker)")
     for n in sizes:
         p = large_instance(n, seed)
         out(f"\n## Large instance: large_instance({n}, seed={seed}): {p.n} vertices, "
@@ -180,7 +192,9 @@ def large_benchmark(sizes, limits, seed: int, backends, out=print) -> dict:
                 continue
             per[name] = {}
             for limit in limits:
-                r, dt = _solve_arrays(p, name, limit, 0)
+                t0 = time.perf_counter()
+                r = svc.solve(p, backend=name, time_limit_s=limit, seed=0)
+                dt = time.perf_counter() - t0
                 per[name][limit] = (r.objective, dt, r.proven_optimal, r.fallback, r.message)
         best = max((v[limit][0] for v in per.values() for limit in limits if limit in v), default=0.0)
         head = " | ".join(f"objective {lim:g} s | gap {lim:g} s | wall {lim:g} s" for lim in limits)
@@ -208,7 +222,124 @@ def large_benchmark(sizes, limits, seed: int, backends, out=print) -> dict:
             out(f"\nlarge-graph default `{LARGE_DEFAULT}` at {limits[0]:g} s: gap {gap:.3f} % "
                 f"({verdict} 0.5 % of the best found)")
         results[n] = (best, per)
+    svc.close()
     return results
+
+
+# ---- reference solvers called directly (no layers, no validation): the yardsticks ----------
+
+def kamis_direct(p: MwisProblem, limit_s: float) -> tuple[float, float, bool]:
+    """chszlablib KaMIS branch-and-reduce on the CSR: (objective, wall s incl. CSR and integer
+    weights, finished before 0.9 of the limit)."""
+    from chszlablib._kamis_wmis import branch_reduce
+
+    from .base import integer_weights
+
+    t0 = time.perf_counter()
+    ip, ix = p.csr()
+    wi, _ = integer_weights(p.weights, min(10**6, (2**31 - 1) // max(p.n, 1)))
+    _, verts = branch_reduce(ip.astype(np.int32), ix.astype(np.int32), wi.astype(np.int32),
+                             float(limit_s), 0)
+    dt = time.perf_counter() - t0
+    return p.objective(np.asarray(verts, dtype=np.int64)), dt, dt < 0.9 * limit_s
+
+
+def chils_direct(p: MwisProblem, limit_s: float) -> tuple[float, float]:
+    """chszlablib CHILS (one search) on the CSR: (objective, wall s)."""
+    from chszlablib._chils import mwis
+
+    from .base import integer_weights
+
+    t0 = time.perf_counter()
+    ip, ix = p.csr()
+    wi, _ = integer_weights(p.weights, 10**6)
+    _, verts = mwis(ip.astype(np.int64), ix.astype(np.int32), wi.astype(np.int64), float(limit_s),
+                    1, 0)
+    return p.objective(np.asarray(verts, dtype=np.int64)), time.perf_counter() - t0
+
+
+def cpsat_direct(p: MwisProblem, limit_s: float) -> tuple[float, float, bool]:
+    """The exact backend's CP-SAT model without layers: (objective, wall s, proven)."""
+    t0 = time.perf_counter()
+    r = get_backend("exact").solve(p, time_limit_s=limit_s, seed=0, options={})
+    return r.objective, time.perf_counter() - t0, r.proven_optimal
+
+
+def target_benchmark(n_small: int, seed: int, mid_sizes, mid_seeds: int, out=print) -> None:
+    """The issue's targets for ``auto``, each against the references in the same run,
+    interleaved instance by instance so machine load hits both alike."""
+    from .instances import large_instance
+
+    problems = _corpus(n_small, seed)
+    get_backend("auto").solve(problems[0], time_limit_s=1.0, seed=0, options={})  # warm up
+    kamis_direct(problems[0], 1.0)
+    t_auto, t_kam, proven = [], [], 0
+    for p in problems:
+        _, dt_k, _ = kamis_direct(p, 10.0)
+        r, dt_a = _solve_arrays(p, "auto", 1.0, 0)
+        t_auto.append(dt_a)
+        t_kam.append(dt_k)
+        proven += r.proven_optimal
+    out(f"\n## Targets of `auto` (issue 11)\n\n5-50 vertices ({len(problems)} corpus instances, "
+        f"`uam_solvers.solve` from the arrays, end to end): median {np.median(t_auto) * 1e3:.3f} ms "
+        f"(target <= 1 ms), p95 {np.percentile(t_auto, 95) * 1e3:.3f} ms; proven {proven}/"
+        f"{len(problems)}; KaMIS branch-and-reduce called directly: median "
+        f"{np.median(t_kam) * 1e3:.3f} ms; median ratio auto / KaMIS "
+        f"{np.median(np.asarray(t_auto) / np.asarray(t_kam)):.2f}")
+    out("\n| vertices (large_instance) | instances | auto median ms | auto proven | KaMIS direct "
+        "median ms | KaMIS finished | CP-SAT direct median ms | CP-SAT proven | median ratio auto/KaMIS "
+        "(both proven) | auto = best objective |")
+    out("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for n in mid_sizes:
+        rows = []
+        for s in range(mid_seeds):
+            p = large_instance(n, seed + s)
+            ok, dk, fk = kamis_direct(p, 10.0)
+            oc, dc, pc = cpsat_direct(p, 10.0)
+            r, da = _solve_arrays(p, "auto", 10.0, 0)
+            best = max(ok, oc, r.objective)
+            rows.append((da, r.proven_optimal, dk, fk, dc, pc, r.objective >= best - 1e-9))
+        a = np.array(rows, dtype=float)
+        both = (a[:, 1] > 0) & (a[:, 3] > 0)
+        ratio = f"{np.median(a[both, 0] / a[both, 2]):.2f}" if both.any() else "-"
+        out(f"| {n} | {mid_seeds} | {np.median(a[:, 0]) * 1e3:.2f} | {int(a[:, 1].sum())} | "
+            f"{np.median(a[:, 2]) * 1e3:.2f} | {int(a[:, 3].sum())} | {np.median(a[:, 4]) * 1e3:.2f} | "
+            f"{int(a[:, 5].sum())} | {ratio} | {int(a[:, 6].sum())}/{mid_seeds} |")
+
+
+def scale_benchmark(seed: int, out=print) -> None:
+    """10,000 vertices: auto (1 s) against CHILS, KaMIS and CP-SAT called directly (1 s), best
+    known = best of everything incl. CHILS 10 s; 100,000 vertices: auto through the solve
+    service with a 1 s limit (valid answer within limit + 0.5 s)."""
+    from .executor import SolveService
+    from .instances import large_instance
+
+    p = large_instance(10_000, seed)
+    runs = {}
+    r, dt = _solve_arrays(p, "auto", 1.0, 0)
+    runs["auto 1 s (solve)"] = (r.objective, dt)
+    runs["CHILS direct 1 s"] = chils_direct(p, 1.0)
+    runs["CHILS direct 10 s"] = chils_direct(p, 10.0)
+    o, d, _ = kamis_direct(p, 1.0)
+    runs["KaMIS direct 1 s"] = (o, d)
+    o, d, _ = cpsat_direct(p, 1.0)
+    runs["CP-SAT direct 1 s"] = (o, d)
+    best = max(v[0] for v in runs.values())
+    out(f"\n## 10,000 vertices (large_instance(10000, seed={seed}), {p.all_edges().shape[0]} edges)"
+        f"\n\nbest known: {best:.6f} (best of the runs below)\n")
+    out("| run | objective | gap to best known | wall s |\n|---|---:|---:|---:|")
+    for name, (obj, dt) in runs.items():
+        out(f"| {name} | {obj:.4f} | {100 * (best - obj) / best:.4f} % | {dt:.2f} |")
+    big = large_instance(100_000, seed)
+    with SolveService(large_workers=1) as svc:
+        svc.solve(large_instance(3000, seed), backend="auto", time_limit_s=0.5)  # warm worker
+        t0 = time.perf_counter()
+        r = svc.solve(big, backend="auto", time_limit_s=1.0)
+        dt = time.perf_counter() - t0
+    out(f"\n100,000 vertices ({big.all_edges().shape[0]} edges), auto through SolveService, 1 s "
+        f"limit: wall {dt:.2f} s (target <= 1.5 s), valid {big.is_independent(r.selected)}, "
+        f"objective {r.objective:.2f}, executor {r.stats.get('executor')}, fallback {r.fallback}"
+        + (f" ({r.message[:90]})" if r.fallback else ""))
 
 
 def main(argv=None) -> int:
@@ -226,12 +357,20 @@ def main(argv=None) -> int:
     ap.add_argument("--large-backends", default=",".join(LARGE_BACKENDS))
     ap.add_argument("--skip-small", action="store_true")
     ap.add_argument("--skip-large", action="store_true")
+    ap.add_argument("--skip-targets", action="store_true")
+    ap.add_argument("--target-instances", type=int, default=200)
+    ap.add_argument("--mid-sizes", default="15,50,100,200,500")
+    ap.add_argument("--mid-seeds", type=int, default=5)
     args = ap.parse_args(argv)
     if args.quick:
         args.instances, args.qpu_subset = 60, 10
         args.large_sizes, args.large_limits = "1000", "1"
     print("# MWIS solver benchmark (python -m uam_solvers.bench " + " ".join(argv or sys.argv[1:]) + ")")
     print(_machine())
+    if not args.skip_targets:
+        target_benchmark(args.target_instances, args.seed,
+                         [int(v) for v in args.mid_sizes.split(",") if v], args.mid_seeds)
+        scale_benchmark(args.seed)
     if not args.skip_small:
         small_benchmark(args.instances, args.seed, [b for b in args.backends.split(",") if b],
                         args.small_limit, args.qpu_subset, args.qpu_limit)

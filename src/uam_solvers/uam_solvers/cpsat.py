@@ -23,6 +23,7 @@ import numpy as np
 
 from .base import Backend, MwisProblem, MwisResult, integer_weights, make_result
 from .greedy import greedy_mwis
+from .options import Option
 
 __all__ = ["CpSatBackend", "uncovered_edges", "PRESOLVE_MIN_VERTICES"]
 
@@ -66,6 +67,18 @@ class CpSatBackend(Backend):
 
     name = "exact"
     description = "OR-Tools CP-SAT exact MWIS (at-most-one per group and edge), proves optimality"
+    inline_max_vertices = 64  # after reductions: well under 10 ms (CP-SAT stops at its limit)
+    options_spec = {
+        "num_workers": Option("num_workers", "int", 1, "CP-SAT search workers (1: deterministic)",
+                              lo=1, hi=64),
+        "resolution": Option("resolution", "int", 10**6,
+                             "integer weight of the heaviest vertex (weights scaled to integers)",
+                             lo=1, hi=10**12),
+        "hint": Option("hint", "bool", None, "greedy solution hint (None: on above "
+                       f"{PRESOLVE_MIN_VERTICES} vertices)", nullable=True),
+        "presolve": Option("presolve", "bool", None, "CP-SAT presolve (None: on above "
+                           f"{PRESOLVE_MIN_VERTICES} vertices)", nullable=True),
+    }
 
     def available(self) -> tuple[bool, str]:
         try:
@@ -79,14 +92,9 @@ class CpSatBackend(Backend):
         self.require_available()
         from ortools.sat.python import cp_model, cp_model_helper
 
-        options = dict(options or {})
-        num_workers = int(options.pop("num_workers", 1))
-        resolution = int(options.pop("resolution", 10**6))
-        hint = options.pop("hint", None)
-        presolve = options.pop("presolve", None)
-        if options:
-            raise ValueError(f"options: unknown option(s) {sorted(options)} for backend 'exact' "
-                             "(known: num_workers, resolution, hint, presolve)")
+        opts = self.validate_options(options)
+        num_workers, resolution = opts["num_workers"], opts["resolution"]
+        hint, presolve = opts["hint"], opts["presolve"]
         t0 = time.perf_counter()
         n = problem.n
         wi, scale = integer_weights(problem.weights, resolution)

@@ -24,6 +24,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from .base import Backend, MwisProblem, MwisResult, csr_from_edges, make_result
+from .options import Option
 
 __all__ = ["greedy_mwis", "GreedyBackend", "RULES"]
 
@@ -144,6 +145,9 @@ class GreedyBackend(Backend):
 
     name = "greedy"
     description = "Sakai-Togasaki-Yamazaki greedy (GWMIN/GWMIN2/GWMAX), O(m log n), fallback of every backend"
+    inline_max_vertices = 2000  # pure Python, O(m log n): ~0.1 s at 2,000 vertices
+    options_spec = {"rule": Option("rule", "str", "gwmin", "greedy rule (Sakai et al. 2003)",
+                                   choices=RULES)}
 
     def solve(
         self,
@@ -153,10 +157,7 @@ class GreedyBackend(Backend):
         seed: int = 0,
         options: Mapping[str, Any] | None = None,
     ) -> MwisResult:
-        options = dict(options or {})
-        rule = str(options.pop("rule", "gwmin"))
-        if options:
-            raise ValueError(f"options: unknown option(s) {sorted(options)} for backend 'greedy' (known: rule)")
+        rule = self.validate_options(options)["rule"]
         t0 = time.perf_counter()
         sel = greedy_mwis(problem.weights, problem.all_edges(), rule=rule)
         dt = time.perf_counter() - t0
@@ -164,3 +165,72 @@ class GreedyBackend(Backend):
             problem, sel, proven_optimal=problem.all_edges().shape[0] == 0, solve_time_s=dt,
             backend=self.name, stats={"rule": rule},
         )
+
+
+def local_max_greedy(n: int, indptr: np.ndarray, indices: np.ndarray, weights: np.ndarray,
+                     ) -> np.ndarray:
+    """A maximal independent set by rounds of local maxima of the GWMIN key, vectorised.
+
+    Each round computes, in the graph that is left, the key w(v) / (d(v) + 1) of every alive
+    vertex and selects every vertex whose key beats all of its alive neighbours' (ties: lower
+    index wins), then removes the selected vertices and their neighbours. Selected vertices of
+    one round are pairwise non-adjacent, so the result is independent; the loop ends when no
+    vertex is alive, so it is maximal. Deterministic. O(m) numpy work per round; rounds are few
+    on conflict graphs (about 10 on 100,000 vertices). This is the fallback on large graphs:
+    :func:`greedy_mwis` is pure Python (about 19 s on 100,000 vertices and 10^6 edges on this
+    machine under load, against well under a second here); its guarantee is GWMIN's in spirit,
+    not in proof. Returns sorted int32 vertices.
+    """
+    indptr = np.asarray(indptr, dtype=np.int64)
+    rows = np.repeat(np.arange(n, dtype=np.int64), np.diff(indptr))
+    return _local_max(n, rows, np.asarray(indices, dtype=np.int64), weights)
+
+
+def _local_max(n: int, rows: np.ndarray, indices: np.ndarray, weights) -> np.ndarray:
+    """:func:`local_max_greedy` on directed pairs (rows[k], indices[k]), both directions of
+    every edge present; duplicate pairs are harmless (degrees then count them twice, which
+    only changes the order of picks, not independence or maximality)."""
+    w = np.asarray(weights, dtype=np.float64)
+    alive = np.ones(n, dtype=bool)
+    chosen = np.zeros(n, dtype=bool)
+    while alive.any():
+        live_edge = alive[rows] & alive[indices]
+        r, c = rows[live_edge], indices[live_edge]
+        deg = np.bincount(r, minlength=n)
+        key = w / (deg + 1.0)
+        # r loses to c when key[c] > key[r], or equal keys and c < r
+        loses = (key[c] > key[r]) | ((key[c] == key[r]) & (c < r))
+        beaten = np.zeros(n, dtype=bool)
+        beaten[r[loses]] = True
+        pick = alive & ~beaten
+        chosen |= pick
+        alive &= ~pick
+        gone = np.zeros(n, dtype=bool)
+        gone[c[pick[r]]] = True
+        alive &= ~gone
+    return np.flatnonzero(chosen).astype(np.int32)
+
+
+#: Above this many vertices the fallback answer comes from :func:`local_max_greedy`.
+FAST_FALLBACK_ABOVE = 5000
+
+
+def fallback_selection(problem: MwisProblem) -> tuple[np.ndarray, str]:
+    """The fallback answer of every layer and of the solve service: GWMIN (:func:`greedy_mwis`,
+    the paper's greedy) up to FAST_FALLBACK_ABOVE vertices, :func:`local_max_greedy` above
+    (bounded time). Returns (selected, rule name)."""
+    if problem.n <= FAST_FALLBACK_ABOVE:
+        return greedy_mwis(problem.weights, problem.all_edges()), "gwmin"
+    # listed edges plus group pairs, not deduplicated (sorting 10^6 pairs would double the cost)
+    parts = [problem.edges.astype(np.int64)]
+    by_size: dict[int, list[np.ndarray]] = {}
+    for g in problem.groups:
+        by_size.setdefault(int(g.size), []).append(g)
+    for k, gl in by_size.items():
+        mat = np.stack(gl).astype(np.int64)
+        iu, ju = np.triu_indices(k, k=1)
+        parts.append(np.stack([mat[:, iu].ravel(), mat[:, ju].ravel()], axis=1))
+    e = np.concatenate(parts, axis=0)
+    rows = np.concatenate([e[:, 0], e[:, 1]])
+    cols = np.concatenate([e[:, 1], e[:, 0]])
+    return _local_max(problem.n, rows, cols, problem.weights), "local-max gwmin key"

@@ -15,6 +15,7 @@ import numpy as np
 
 from .base import Backend, BackendUnavailable, MwisProblem, MwisResult, make_result
 from .cpsat import uncovered_edges
+from .options import Option
 
 __all__ = ["GurobiBackend"]
 
@@ -24,6 +25,11 @@ class GurobiBackend(Backend):
 
     name = "gurobi"
     description = "Gurobi MIP exact MWIS (needs gurobipy and a licence), the paper's exact solver"
+    options_spec = {
+        "threads": Option("threads", "int", 1, "Gurobi threads", lo=1, hi=64),
+        "mip_gap": Option("mip_gap", "float", 0.0, "relative MIP gap (0: proven optimal)",
+                          lo=0.0, hi=1.0),
+    }
 
     def available(self) -> tuple[bool, str]:
         try:
@@ -40,12 +46,8 @@ class GurobiBackend(Backend):
         import gurobipy as gp
         from gurobipy import GRB
 
-        options = dict(options or {})
-        threads = int(options.pop("threads", 1))
-        mip_gap = float(options.pop("mip_gap", 0.0))
-        if options:
-            raise ValueError(f"options: unknown option(s) {sorted(options)} for backend 'gurobi' "
-                             "(known: threads, mip_gap)")
+        opts = self.validate_options(options)
+        threads, mip_gap = opts["threads"], opts["mip_gap"]
         t0 = time.perf_counter()
         n = problem.n
         with gp.Env(empty=True) as env:

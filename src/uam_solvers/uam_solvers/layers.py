@@ -21,37 +21,13 @@ from typing import Any, Mapping
 import numpy as np
 from scipy.sparse.csgraph import connected_components
 
-from .base import Backend, MwisProblem, MwisResult, check_selection, make_result
+from .base import (Backend, MwisProblem, MwisResult, check_selection, induced_subproblem,
+                   make_result)
 from .reductions import complete_maximal, reduce_problem
 
 __all__ = ["ComponentSplit", "Reduce", "ValidateFallback", "induced_subproblem", "Layer"]
 
 log = logging.getLogger("uam_solvers")
-
-
-def induced_subproblem(problem: MwisProblem, vertices: np.ndarray) -> MwisProblem:
-    """The subgraph induced by sorted ``vertices`` (original indices), re-indexed 0..k-1.
-
-    Listed edges and clique groups are restricted (groups shrinking below 2 vertices vanish), so
-    group structure survives for solvers that use it. O(n + m + sum |group|).
-    """
-    vertices = np.asarray(vertices, dtype=np.int64)
-    new_index = np.full(problem.n, -1, dtype=np.int64)
-    new_index[vertices] = np.arange(vertices.size)
-    e = problem.edges
-    keep = (new_index[e[:, 0]] >= 0) & (new_index[e[:, 1]] >= 0)
-    # new_index is increasing on vertices, so u < v and lexicographic order are preserved.
-    sub_edges = new_index[e[keep]].astype(np.int32).reshape(-1, 2)
-    groups: list[np.ndarray] = []
-    if problem.groups:
-        lengths = np.fromiter((g.size for g in problem.groups), dtype=np.int64, count=len(problem.groups))
-        mapped = new_index[np.concatenate(problem.groups)]
-        gid = np.repeat(np.arange(lengths.size), lengths)
-        keep_v = mapped >= 0
-        counts = np.bincount(gid[keep_v], minlength=lengths.size)
-        pieces = np.split(mapped[keep_v].astype(np.int32), np.cumsum(counts)[:-1])
-        groups = [g for g in pieces if g.size >= 2]  # order preserved, so still sorted
-    return MwisProblem(weights=problem.weights[vertices].copy(), edges=sub_edges, groups=tuple(groups))
 
 
 class _Worker:
@@ -123,9 +99,20 @@ class Layer(Backend):
         # Properties of the innermost backend that outer layers look at.
         self.batch_components = getattr(child, "batch_components", False)
         self.reduces_itself = getattr(child, "reduces_itself", False)
+        self.inline_max_vertices = getattr(child, "inline_max_vertices", 0)
+        self.reduce_min_vertices = getattr(child, "reduce_min_vertices", 0)
+        self.split_min_vertices = getattr(child, "split_min_vertices", 0)
+        self.split_max_vertices = getattr(child, "split_max_vertices", 1 << 62)
 
     def available(self) -> tuple[bool, str]:
         return self.child.available()
+
+    @property
+    def options_spec(self):  # the innermost backend's options
+        return self.child.options_spec
+
+    def validate_options(self, options):
+        return self.child.validate_options(options)
 
 
 class ComponentSplit(Layer):
@@ -152,6 +139,10 @@ class ComponentSplit(Layer):
         if n == 0:
             return make_result(problem, [], proven_optimal=True, solve_time_s=0.0, backend=self.name,
                                stats={"components": 0})
+        if n < getattr(self.child, "split_min_vertices", 0) or \
+                n > getattr(self.child, "split_max_vertices", 1 << 62):
+            # the child handles small graphs whole faster than a split costs (auto: KaMIS)
+            return self.child.solve(problem, time_limit_s=time_limit_s, seed=seed, options=options)
         ncomp, labels = _components(problem)
         sizes = np.bincount(labels, minlength=ncomp)
         e = problem.all_edges()
@@ -237,6 +228,8 @@ class Reduce(Layer):
         t0 = time.perf_counter()
         if getattr(self.child, "reduces_itself", False) and problem.n > self.self_reduce_above:
             return self.child.solve(problem, time_limit_s=time_limit_s, seed=seed, options=options)
+        if problem.n < getattr(self.child, "reduce_min_vertices", 0):
+            return self.child.solve(problem, time_limit_s=time_limit_s, seed=seed, options=options)
         red = reduce_problem(problem)
         stats = dict(red.counts)
         proven = True
@@ -288,7 +281,13 @@ class ValidateFallback(Layer):
                 box["error"] = exc
 
         allowed_s = time_limit_s + max(self.margin_s, self.margin_fraction * time_limit_s)
-        finished = _run_in_worker(run, allowed_s)
+        if problem.n <= getattr(self.child, "inline_max_vertices", 0):
+            # known to return within the limit at this size: no thread hand-off (which costs
+            # milliseconds on a loaded machine, more than the solve of a 50-vertex graph)
+            run()
+            finished = True
+        else:
+            finished = _run_in_worker(run, allowed_s)
         elapsed = time.perf_counter() - t0
         reason = ""
         if not finished:
@@ -319,13 +318,17 @@ class ValidateFallback(Layer):
                               fallback=bool(res.fallback), message=res.message)
         log.warning("MWIS fallback to %s: %s", self.fallback.name, reason)
         try:
-            fb = self.fallback.solve(problem, time_limit_s=time_limit_s, seed=seed, options={})
-            ok, why = check_selection(problem, fb.selected)
+            from .greedy import FAST_FALLBACK_ABOVE, GreedyBackend, fallback_selection
+
+            if isinstance(self.fallback, GreedyBackend) and problem.n > FAST_FALLBACK_ABOVE:
+                sel, rule = fallback_selection(problem)  # bounded time on large graphs
+                stats, proven = {"rule": rule}, False
+            else:
+                fb = self.fallback.solve(problem, time_limit_s=time_limit_s, seed=seed, options={})
+                sel, stats, proven = fb.selected, dict(fb.stats), bool(fb.proven_optimal)
+            ok, why = check_selection(problem, sel)
             if not ok:
                 raise RuntimeError(why)
-            sel = fb.selected
-            stats = dict(fb.stats)
-            proven = bool(fb.proven_optimal)
         except Exception as exc:  # noqa: BLE001 - last resort: the empty set is always independent
             log.error("MWIS fallback %s failed too: %s", self.fallback.name, exc)
             reason += f"; fallback {self.fallback.name!r} failed ({exc}), returning the empty set"

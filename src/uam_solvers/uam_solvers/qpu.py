@@ -51,7 +51,9 @@ from typing import Any, Callable, Iterable, Mapping
 import dimod
 import numpy as np
 
-from uam_solvers.annealing import _float_option, _int_option, common_options, sampleset_to_array
+from uam_solvers.annealing import (COMMON_OPTIONS_SPEC, _float_option, _int_option, _positive,
+                                   common_options, given, sampleset_to_array)
+from uam_solvers.options import Option
 from uam_solvers.base import (
     Backend,
     BackendUnavailable,
@@ -83,6 +85,41 @@ _QPU_OPTIONS = {"annealing_time_us", "chain_strength", "chain_strength_prefactor
                 "embedding_seed", "embedding_timeout_s", "embedding_tries", "sampler_factory",
                 "solver", "num_sweeps"}
 
+
+def _chain_strength(value):
+    if value in ("uniform_torque_compensation", "utc"):
+        return value
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not (
+            np.isfinite(value) and value > 0):
+        raise ValueError("must be 'uniform_torque_compensation' or a finite number > 0")
+    return float(value)
+
+
+def _callable(value):
+    if not callable(value):
+        raise ValueError("must be callable (returning a structured dimod sampler)")
+    return value
+
+
+#: Options of the embedding pipeline shared by qpu and qpu-emulator.
+EMBEDDED_OPTIONS_SPEC = {
+    **COMMON_OPTIONS_SPEC,
+    "chain_strength": Option("chain_strength", "any", "uniform_torque_compensation",
+                             "chain coupling: a number or 'uniform_torque_compensation'",
+                             validator=_chain_strength),
+    "chain_strength_prefactor": Option("chain_strength_prefactor", "float",
+                                       1.414, "prefactor of uniform torque compensation",
+                                       validator=_positive),
+    "embedding_seed": Option("embedding_seed", "int", 0, "minorminer random seed", lo=0,
+                             hi=2**31 - 1),
+    "embedding_timeout_s": Option("embedding_timeout_s", "float", None, "minorminer timeout "
+                                  "(None: max(1, time limit))", nullable=True, lo=0.001,
+                                  hi=86_400.0),
+    "embedding_tries": Option("embedding_tries", "int", 10, "minorminer tries", lo=1, hi=1000),
+    "max_direct_vertices": Option("max_direct_vertices", "int", 100, "larger graphs are "
+                                  "decomposed into subproblems instead of embedded whole",
+                                  lo=1, hi=100_000),
+}
 
 # --------------------------------------------------------------------------------------------
 # Topology and the stand-in sampler
@@ -215,7 +252,9 @@ def _emulator_sampler(missing_qubits: Iterable[int] = ()):
     from dwave.samplers import SimulatedAnnealingSampler
 
     nodes, edges = advantage_graph(missing_qubits)
-    return dimod.StructureComposite(SimulatedAnnealingSampler(), nodes, edges)
+    sampler = dimod.StructureComposite(SimulatedAnnealingSampler(), nodes, edges)
+    sampler.pegasus_shape = ADVANTAGE_PEGASUS_SIZE  # its properties carry no topology
+    return sampler
 
 
 # --------------------------------------------------------------------------------------------
@@ -274,6 +313,124 @@ _TIMING_KEYS = ("qpu_access_time", "qpu_programming_time", "qpu_anneal_time_per_
                 "total_post_processing_time", "post_processing_overhead_time")
 
 
+#: graphs above this many vertices are decomposed rather than embedded whole: minorminer held
+#: the GIL for 26 s on a 10,000-vertex graph, and conflict graphs much above ~100 vertices
+#: (cliques of 5 plus conflicts) rarely embed on P16 within seconds
+QPU_DIRECT_MAX_VERTICES = 100
+#: vertices per subproblem when decomposing for the QPU (embeds within ~1 s)
+QPU_SUBPROBLEM_SIZE = 30
+
+
+def fits_target(problem: MwisProblem, child) -> tuple[bool, str]:
+    """Necessary conditions for an embedding on the child's graph: at most as many vertices as
+    qubits and edges as couplers (a minor has no more of either). (True, "") or (False, why)."""
+    qubits = len(getattr(child, "nodelist", ()) or ())
+    couplers = len(getattr(child, "edgelist", ()) or ())
+    m = int(problem.all_edges().shape[0])
+    if qubits and problem.n > qubits:
+        return False, f"{problem.n} vertices > {qubits} qubits of the target graph: cannot embed"
+    if couplers and m > couplers:
+        return False, f"{m} edges > {couplers} couplers of the target graph: cannot embed"
+    return True, ""
+
+
+_REGIONS: dict[int, tuple[Any, list]] = {}
+
+
+def embedding_region(child, rows: int = 4) -> list:
+    """Couplers of a corner of the child's Pegasus graph (``rows`` x ``rows`` unit cells: about
+    370 qubits of P16), the target of subproblem embeddings: minorminer embeds a 30-vertex
+    conflict subgraph there in ~0.5 s under load, where the whole 5,640-qubit graph made every
+    embedding of the decomposition time out. Other topologies: the whole edge list. Cached
+    per child object."""
+    entry = _REGIONS.get(id(child))
+    if entry is not None and entry[0] is child:
+        return entry[1]
+    edges = list(child.edgelist)
+    topology = (getattr(child, "properties", {}) or {}).get("topology", {})
+    if not topology and hasattr(child, "pegasus_shape"):
+        topology = {"type": "pegasus", "shape": [child.pegasus_shape]}
+    if topology.get("type") == "pegasus":
+        try:
+            from dwave.graphs import pegasus_coordinates
+        except ImportError:  # pragma: no cover - older Ocean
+            from dwave_networkx import pegasus_coordinates
+        coords = pegasus_coordinates(int(topology["shape"][0]))
+        keep = set()
+        for v in child.nodelist:
+            u, w, k, z = coords.linear_to_pegasus(v)
+            if w < rows and z < rows:
+                keep.add(v)
+        edges = [(a, b) for a, b in edges if a in keep and b in keep]
+    _REGIONS[id(child)] = (child, edges)
+    return edges
+
+
+def _decomposed_embedded(problem, child, *, backend, seed, time_limit_s, started, parsed,
+                         options, passed, chain_strength, embedding_parameters, reason):
+    """Energy-impact decomposition (uam_solvers.decompose) with every subproblem embedded and
+    sampled on ``child``; each embedding gets at most the time left."""
+    from dwave.embedding.chain_breaks import majority_vote
+    from dwave.system import FixedEmbeddingComposite
+
+    from uam_solvers.decompose import decomposed_solve
+
+    deadline = started + time_limit_s
+    sub_params = dict(passed)
+    sub_params["num_reads"] = min(int(parsed["num_reads"]), 20)  # per subproblem
+    stats_box = {"embedding_failures": 0}
+
+    region = embedding_region(child)
+    region_qubits = sorted({q for e in region for q in e})
+
+    def sample_sub(sub_bqm, sub_seed, remaining_s):
+        emb = dict(embedding_parameters)
+        # minorminer holds the GIL and uses its whole timeout; sampling needs the rest
+        emb["timeout"] = max(min(float(emb["timeout"]), 0.3 * remaining_s, 1.0), 0.01)
+        emb["tries"] = 1
+        source = [(u, v) for u, v in sub_bqm.quadratic]
+        embedding = cached_find_embedding(source, region, **emb) if source else {}
+        if source and not embedding:  # no embedding within the time left: skip it
+            stats_box["embedding_failures"] += 1
+            return None
+        used = {q for chain in embedding.values() for q in chain}
+        free = iter(q for q in region_qubits if q not in used)
+        for v in sub_bqm.variables:  # isolated variables are not in minorminer's answer
+            if v not in embedding:
+                q = next(free, None)
+                if q is None:
+                    stats_box["embedding_failures"] += 1
+                    return None
+                embedding[v] = [q]
+        params = dict(sub_params)
+        if "seed" in params:
+            params["seed"] = sub_seed
+        try:
+            return FixedEmbeddingComposite(child, embedding=embedding).sample(
+                sub_bqm, chain_strength=chain_strength, chain_break_method=majority_vote,
+                **params)
+        except ValueError:
+            stats_box["embedding_failures"] += 1
+            return None
+
+    size = options.get("subproblem_size", QPU_SUBPROBLEM_SIZE)
+    budget = max(deadline - time.perf_counter() - 0.05 - 1e-5 * problem.n, 1e-3)
+    selected, stats = decomposed_solve(problem, sample_sub, size=size, time_limit_s=budget,
+                                       seed=int(seed) % 2**32, lam=parsed["lambda"],
+                                       # an embedding + anneal takes ~0.5-1 s under load:
+                                       # none is started that could not finish
+                                       min_iteration_s=min(0.6, 0.3 * budget))
+    stats.update({
+        "lambda": parsed["lambda"], "decomposition_reason": reason,
+        "embedding_failures": stats_box["embedding_failures"],
+        "sampler": type(child).__name__,
+        "sampler_is_stand_in": bool(getattr(child, "properties", {}).get("stand_in", False)),
+        "qpu_timing": "none (decomposed; per-subproblem timing not aggregated)",
+    })
+    return make_result(problem, selected, proven_optimal=False,
+                       solve_time_s=time.perf_counter() - started, backend=backend, stats=stats)
+
+
 def embedded_solve(problem: MwisProblem, child, *, backend: str, seed: int, time_limit_s: float,
                    options: Mapping[str, Any], report_qpu_timing: bool,
                    sampler_parameters: Mapping[str, Any]) -> MwisResult:
@@ -299,6 +456,7 @@ def embedded_solve(problem: MwisProblem, child, *, backend: str, seed: int, time
     from dwave.system import EmbeddingComposite
 
     started = time.perf_counter()
+    options = given(options)
     parsed = common_options(options, _QPU_OPTIONS)
     if problem.n == 0:
         return make_result(problem, np.zeros(0, dtype=np.int32), proven_optimal=True,
@@ -319,14 +477,26 @@ def embedded_solve(problem: MwisProblem, child, *, backend: str, seed: int, time
         "tries": _int_option(options, "embedding_tries", 10, 1),
     }
 
-    qubo = mwis_qubo(problem, parsed["lambda"])
-    bqm = qubo.to_bqm()
     params = {"num_reads": parsed["num_reads"], **sampler_parameters}
     declared = getattr(child, "parameters", {}) or {}
     if "seed" in declared:
         params["seed"] = int(seed) % 2**32
     passed = {k: v for k, v in params.items() if k in declared}
     not_passed = sorted(k for k in params if k not in declared)
+
+    fits, why = fits_target(problem, child)
+    direct_max = options.get("max_direct_vertices", QPU_DIRECT_MAX_VERTICES)
+    if not fits or problem.n > direct_max:
+        # refused at once (no minorminer call that can never succeed): decompose instead
+        return _decomposed_embedded(problem, child, backend=backend, seed=seed,
+                                    time_limit_s=time_limit_s, started=started, parsed=parsed,
+                                    options=options, passed=passed, chain_strength=chain_strength,
+                                    embedding_parameters=embedding_parameters,
+                                    reason=why or f"{problem.n} vertices > max_direct_vertices "
+                                    f"= {direct_max}")
+
+    qubo = mwis_qubo(problem, parsed["lambda"])
+    bqm = qubo.to_bqm()
 
     composite = EmbeddingComposite(child, find_embedding=cached_find_embedding,
                                    embedding_parameters=embedding_parameters)
@@ -390,8 +560,6 @@ def embedded_solve(problem: MwisProblem, child, *, backend: str, seed: int, time
         for key in _TIMING_KEYS:
             if key in timing:
                 stats[f"{key}_us"] = float(timing[key])
-    if parsed["ignored"]:
-        stats["ignored_options"] = ",".join(parsed["ignored"])
     stats["postprocess_time_s"] = time.perf_counter() - post_start
     return make_result(problem, selected, proven_optimal=False,
                        solve_time_s=time.perf_counter() - started, backend=backend, stats=stats)
@@ -437,6 +605,18 @@ class QpuBackend(Backend):
     name = "qpu"
     description = ("D-Wave Advantage QPU (DWaveSampler + minorminer embedding), 1 us anneals, "
                    "100 reads, majority-vote chains, descent + repair; needs a D-Wave token")
+    options_spec = {
+        **EMBEDDED_OPTIONS_SPEC,
+        "annealing_time_us": Option("annealing_time_us", "float", DEFAULT_ANNEALING_TIME_US,
+                                    "anneal time per read, microseconds", lo=0.5, hi=2000.0),
+        "sampler_factory": Option("sampler_factory", "any", None, "callable returning the "
+                                  "structured child sampler instead of DWaveSampler (tests: "
+                                  "AdvantageStandInSampler)", nullable=True, validator=_callable),
+        "solver": Option("solver", "str", None, "DWaveSampler solver selection (e.g. a name)",
+                         nullable=True),
+        "num_sweeps": Option("num_sweeps", "int", None, "sweeps per read, only for a stand-in "
+                             "sampler that declares it", lo=1, hi=10**7, nullable=True),
+    }
 
     def __init__(self, sampler_factory: Callable[[], Any] | None = None):
         self.sampler_factory = sampler_factory
@@ -467,13 +647,15 @@ class QpuBackend(Backend):
 
     def solve(self, problem: MwisProblem, *, time_limit_s: float, seed: int,
               options: Mapping[str, Any]) -> MwisResult:
-        options = dict(options or {})
+        options = given(self.validate_options(options))
         child = self._child_sampler(options)  # raises BackendUnavailable at once without token
         annealing_time = _float_option(options, "annealing_time_us", DEFAULT_ANNEALING_TIME_US)
         return embedded_solve(problem, child, backend=self.name, seed=seed,
                               time_limit_s=time_limit_s, options=options,
                               report_qpu_timing=True,
-                              sampler_parameters={"annealing_time": annealing_time})
+                              sampler_parameters={"annealing_time": annealing_time,
+                                                  **({"num_sweeps": options["num_sweeps"]}
+                                                     if "num_sweeps" in options else {})})
 
 
 class QpuEmulatorBackend(Backend):
@@ -489,6 +671,11 @@ class QpuEmulatorBackend(Backend):
     name = "qpu-emulator"
     description = ("the qpu embedding pipeline on a simulated Advantage graph (Pegasus P16, "
                    "simulated annealing); chain statistics, no QPU times")
+    options_spec = {
+        **EMBEDDED_OPTIONS_SPEC,
+        "num_sweeps": Option("num_sweeps", "int", 1000, "simulated annealing sweeps per read",
+                             lo=1, hi=10**7),
+    }
 
     def __init__(self, missing_qubits: Iterable[int] = ()):
         self.missing_qubits = tuple(missing_qubits)
@@ -505,7 +692,7 @@ class QpuEmulatorBackend(Backend):
 
     def solve(self, problem: MwisProblem, *, time_limit_s: float, seed: int,
               options: Mapping[str, Any]) -> MwisResult:
-        options = dict(options or {})
+        options = given(self.validate_options(options))
         if self._child is None:
             self._child = _emulator_sampler(self.missing_qubits)
         num_sweeps = _int_option(options, "num_sweeps", 1000, 1)

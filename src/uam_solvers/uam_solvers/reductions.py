@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from .base import MwisProblem
+from .base import MwisProblem, induced_subproblem
 
 __all__ = ["Reduction", "reduce_problem", "complete_maximal"]
 
@@ -194,8 +194,6 @@ def reduce_problem(problem: MwisProblem, max_rounds: int = 64) -> Reduction:
             dirty = hoods.neighbours(before & ~alive) & alive
             focus = (dirty | hoods.neighbours(dirty)) & alive
     kept = np.flatnonzero(alive)
-    from .layers import induced_subproblem  # local import: layers imports this module
-
     kernel = induced_subproblem(problem, kept)
     counts["kernel_vertices"] = int(kept.size)
     f = np.concatenate(forced).astype(np.int64) if forced else np.zeros(0, dtype=np.int64)

@@ -25,6 +25,7 @@ __all__ = ["BUILTIN_BACKENDS", "ENTRY_POINT_GROUP", "UnknownBackendError", "get_
 ENTRY_POINT_GROUP = "uam_solvers.backends"
 
 BUILTIN_BACKENDS: dict[str, str] = {
+    "auto": "uam_solvers.auto:AutoBackend",
     "greedy": "uam_solvers.greedy:GreedyBackend",
     "exact": "uam_solvers.cpsat:CpSatBackend",
     "kamis": "uam_solvers.chszla:KamisBackend",

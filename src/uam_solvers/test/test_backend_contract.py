@@ -1,0 +1,86 @@
+"""The contract every registered backend keeps (built-in and entry points), through the solve
+service (issue 11): a valid independent set, the objective recomputed from the weights, the
+time limit held, options validated."""
+import time
+
+import numpy as np
+import pytest
+
+import uam_solvers.registry as registry
+from uam_solvers import MwisInputError
+from uam_solvers.executor import SolveService
+from uam_solvers.instances import large_instance, paper_instance
+from uam_solvers.qpu import AdvantageStandInSampler, QpuBackend
+
+LIMIT_S = 1.0
+
+
+@pytest.fixture(scope="module")
+def service():
+    svc = SolveService(small_workers=1, large_workers=1, margin_s=0.4)
+    yield svc
+    svc.close()
+
+
+@pytest.fixture(autouse=True)
+def entry_point(monkeypatch):
+    """One backend advertised as an entry point (as a third-party package would)."""
+    monkeypatch.setattr(registry, "_entry_points",
+                        lambda: {"contract-entry-point": "uam_solvers.greedy:GreedyBackend"})
+
+
+def _names():
+    real = registry._entry_points
+    registry._entry_points = lambda: {"contract-entry-point": "uam_solvers.greedy:GreedyBackend"}
+    try:
+        return registry.backend_names()
+    finally:
+        registry._entry_points = real
+
+
+def _backend(name):
+    # qpu has no D-Wave token here: its real pipeline (embedding, chains, unembedding) runs on
+    # the stand-in sampler with the Advantage topology, a simulated annealer, not a QPU
+    return QpuBackend(sampler_factory=AdvantageStandInSampler) if name == "qpu" else name
+
+
+def _runnable(name):
+    backend = _backend(name)
+    backend = registry.get_backend(backend) if isinstance(backend, str) else backend
+    return backend.available()
+
+
+PROBLEMS = {"paper-8": paper_instance(8, seed=11), "large-400": large_instance(400, seed=12)}
+
+
+@pytest.mark.parametrize("name", _names())
+@pytest.mark.parametrize("which", list(PROBLEMS))
+def test_backend_contract(service, name, which):
+    ok, why = _runnable(name)
+    if not ok:
+        pytest.skip(f"{name} unavailable here: {why}")
+    problem = PROBLEMS[which]
+    t0 = time.perf_counter()
+    r = service.solve(problem, backend=_backend(name), time_limit_s=LIMIT_S, seed=0)
+    wall = time.perf_counter() - t0
+    assert problem.is_independent(r.selected)
+    assert r.objective == pytest.approx(float(np.sum(problem.weights[r.selected])), rel=1e-12)
+    assert wall < LIMIT_S + 1.0, f"{name} took {wall:.2f} s with a {LIMIT_S} s limit"
+    assert r.stats["executor"] in ("inline", "worker", "killed", "no-free-worker")
+    if r.proven_optimal:
+        assert not r.fallback
+
+
+@pytest.mark.parametrize("name", _names())
+def test_backend_options_are_validated(service, name):
+    ok, why = _runnable(name)
+    if not ok:
+        pytest.skip(f"{name} unavailable here: {why}")
+    with pytest.raises(MwisInputError, match=r"options\['bogus'\]"):
+        service.solve(PROBLEMS["paper-8"], backend=_backend(name), time_limit_s=LIMIT_S,
+                      options={"bogus": 1})
+    for key, spec in registry.get_backend(name).options_spec.items():
+        if spec.kind in ("int", "float"):
+            with pytest.raises(MwisInputError, match=rf"options\[{key!r}\]"):
+                service.solve(PROBLEMS["paper-8"], backend=_backend(name), time_limit_s=LIMIT_S,
+                              options={key: "not a number"})

@@ -1,0 +1,502 @@
+"""Solves whose deadlines hold: a solve service with warm worker processes.
+
+A thread cannot stop a solver that holds the GIL (chszlablib's KaMIS and CHILS, minorminer) or
+one that ignores its time limit; a process can be killed. :class:`SolveService` therefore runs
+solves in worker processes and kills a worker whose solve is still running at
+``time_limit_s + margin_s``; the caller then gets the fallback answer (greedy, flagged) at once,
+the killed process leaves no CPU or memory behind, and a fresh worker replaces it.
+
+Rules (all parameters of the constructor):
+
+* **In-process** (no process hop, ~no overhead): a solve whose problem has at most
+  ``backend.inline_max_vertices`` vertices (after the service's own ``inline_max_vertices`` cap).
+  Backends set that where they are known to return well within any limit at that size
+  (greedy: 2,000; exact, kamis and auto: 64; everything else 0, i.e. always a
+  worker). These run under the thread guard of :class:`uam_solvers.layers.ValidateFallback`.
+* **Lanes**: every other solve goes to a warm worker of the *small* lane
+  (``small_workers`` processes, problems of at most ``small_lane_max_vertices`` vertices) or of
+  the *large* lane (``large_workers`` processes), so a small request never waits behind large
+  ones. A request that finds no free worker in its lane waits, and the wait counts against its
+  time limit; when the limit passes first it gets the fallback answer, flagged.
+* **Bounds**: problems above ``max_vertices`` and time limits above ``max_time_limit_s`` are
+  refused with an MwisInputError naming the field and value.
+* **Answer**: the worker's answer is checked in this process (independent in the input graph,
+  objective recomputed); an invalid answer, an exception in the worker, a crashed worker or a
+  kill all give the fallback answer with ``fallback=True`` and the reason in ``message``.
+  ``stats["executor"]`` says how the solve ran: ``inline``, ``worker``, ``killed``,
+  ``worker-crashed`` or ``no-free-worker``; ``stats["queue_wait_s"]`` the wait for a worker.
+
+Workers are forked from a ``forkserver`` that has imported uam_solvers (no import cost per
+worker; forking a fresh worker after a kill takes tens of ms) and die with their parent
+(``PR_SET_PDEATHSIG`` on Linux, and the forkserver exits when this process does).
+
+Usage (what the solver node does)::
+
+    service = SolveService(large_workers=2)
+    result = service.solve(problem, backend="auto", time_limit_s=1.0, seed=0, options={})
+    service.close()   # kills the workers
+"""
+from __future__ import annotations
+
+import atexit
+import ctypes
+import logging
+import multiprocessing as mp
+import os
+import signal
+import threading
+import time
+import weakref
+from typing import Any, Mapping
+
+import numpy as np
+
+from .base import Backend, MwisInputError, MwisProblem, MwisResult, check_selection, make_result
+from .options import check_seed, check_time_limit
+
+__all__ = ["SolveService", "DEFAULT_MARGIN_S"]
+
+log = logging.getLogger("uam_solvers")
+
+#: Time a worker may run past the limit before it is killed [s]: covers sending the answer back.
+DEFAULT_MARGIN_S = 0.4
+#: above this many vertices the worker sends the fallback answer before it solves
+PRECOMPUTE_FALLBACK_ABOVE = 20_000
+
+_PRELOAD = ["uam_solvers", "uam_solvers.layers", "uam_solvers.registry", "uam_solvers.greedy",
+            "uam_solvers.cpsat", "uam_solvers.chszla", "uam_solvers.auto", "uam_solvers.annealing",
+            "numpy", "scipy.sparse", "ortools.sat.python.cp_model", "chszlablib._kamis_wmis",
+            "chszlablib._chils", "dwave.samplers", "dwave.system", "minorminer",
+            "uam_solvers.qpu", "uam_solvers.decompose"]
+
+
+# ---------------------------------------------------------------------------------------------
+# The worker process
+# ---------------------------------------------------------------------------------------------
+
+def _die_with_parent() -> None:
+    """Ask Linux to SIGKILL this process when its parent (the forkserver) exits."""
+    try:
+        libc = ctypes.CDLL("libc.so.6", use_errno=True)
+        libc.prctl(1, signal.SIGKILL, 0, 0, 0)  # PR_SET_PDEATHSIG
+    except OSError:  # not Linux: the worker ends when its pipe closes
+        pass
+
+
+def _pack(problem: MwisProblem) -> tuple:
+    """The problem's arrays only (no cached derived data), groups concatenated."""
+    if problem.groups:
+        lengths = np.fromiter((g.size for g in problem.groups), dtype=np.int64,
+                              count=len(problem.groups))
+        flat = np.concatenate(problem.groups)
+    else:
+        lengths, flat = np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int32)
+    return problem.weights, problem.edges, flat, lengths
+
+
+def _unpack(weights, edges, flat, lengths) -> MwisProblem:
+    groups = tuple(np.split(flat, np.cumsum(lengths)[:-1])) if lengths.size else ()
+    return MwisProblem(weights=weights, edges=edges, groups=groups)
+
+
+def _load_backend(spec) -> Backend:
+    if isinstance(spec, Backend):
+        return spec
+    from .registry import _load
+
+    return _load(spec)()
+
+
+def _warm_up() -> None:
+    """Pay every first-call cost once when the worker starts (entry-point scan, CP-SAT, KaMIS
+    and CHILS set-up: measured ~3 s on the first CHILS solve of a fresh worker under load)."""
+    from .registry import _entry_points, get_backend
+
+    _entry_points()
+    tiny = MwisProblem.from_arrays([1.0, 2.0, 1.5, 1.0], [[0, 1], [1, 2], [2, 3]])
+    for name in ("greedy", "exact", "kamis", "chils", "auto"):
+        backend = get_backend(name)
+        if backend.available()[0]:
+            backend.solve(tiny, time_limit_s=0.01, seed=0, options={})
+
+
+def _worker_main(conn) -> None:
+    """Serve jobs from ``conn`` until it closes: (backend spec, packed problem, limit, seed,
+    options, layers) -> ("ok", MwisResult) or ("error", text, is_input_error)."""
+    _die_with_parent()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides when a worker stops
+    from .layers import ComponentSplit, Reduce
+
+    while True:
+        try:
+            job = conn.recv()
+        except (EOFError, OSError):
+            return
+        if job is None:
+            return
+        if job == "warm":
+            try:
+                _warm_up()
+                conn.send(("warm", ""))
+            except BaseException as exc:  # noqa: BLE001 - reported, the worker still serves
+                conn.send(("warm", f"{type(exc).__name__}: {exc}"))
+            continue
+        spec, packed, limit_s, seed, options, layers = job
+        t0 = time.perf_counter()
+        try:
+            backend = _load_backend(spec)
+            problem = _unpack(*packed)
+            if problem.n > PRECOMPUTE_FALLBACK_ABOVE:
+                # best-so-far for the parent in case this solve is killed (~0.6 s at 10^5)
+                from .greedy import fallback_selection
+
+                sel, rule = fallback_selection(problem)
+                conn.send(("partial", sel, rule))
+                limit_s = max(limit_s - (time.perf_counter() - t0), 1e-3)
+            inner = Reduce(ComponentSplit(backend)) if layers else backend
+            result = inner.solve(problem, time_limit_s=limit_s, seed=seed, options=options)
+            result.stats = {k: v for k, v in result.stats.items()
+                            if isinstance(v, (int, float, str, bool, np.integer, np.floating))}
+            reply = ("ok", result)
+        except BaseException as exc:  # noqa: BLE001 - every failure is reported to the parent
+            reply = ("error", f"{type(exc).__name__}: {exc}", isinstance(exc, MwisInputError))
+        try:
+            conn.send(reply)
+        except (EOFError, OSError):
+            return
+
+
+class _Worker:
+    """One worker process and the parent's end of its pipe."""
+
+    def __init__(self, ctx, lane: str):
+        self.lane = lane
+        self.conn, child = ctx.Pipe(duplex=True)
+        self.process = ctx.Process(target=_worker_main, args=(child,), daemon=True,
+                                   name=f"uam-solver-{lane}")
+        self.process.start()
+        child.close()
+
+    def warm(self, timeout_s: float = 60.0) -> None:
+        """Run the warm-up job (first-call costs) and wait for it."""
+        try:
+            self.conn.send("warm")
+            if self.conn.poll(timeout_s):
+                reply = self.conn.recv()
+                if reply[1]:
+                    log.warning("solver worker warm-up: %s", reply[1])
+        except (EOFError, OSError) as exc:
+            log.warning("solver worker warm-up failed: %s", exc)
+
+    @property
+    def pid(self) -> int | None:
+        return self.process.pid
+
+    def kill(self) -> None:
+        try:
+            self.process.kill()
+        except (OSError, ValueError):
+            pass
+        self.process.join(5.0)
+        try:
+            self.conn.close()
+        except OSError:
+            pass
+
+    def stop(self) -> None:
+        try:
+            self.conn.send(None)
+        except (OSError, ValueError):
+            pass
+        self.process.join(0.5)
+        if self.process.is_alive():
+            self.kill()
+        else:
+            self.conn.close()
+
+
+# ---------------------------------------------------------------------------------------------
+# The service
+# ---------------------------------------------------------------------------------------------
+
+_LIVE: "weakref.WeakSet[SolveService]" = weakref.WeakSet()
+
+
+@atexit.register
+def _close_all() -> None:
+    for service in list(_LIVE):
+        service.close()
+
+
+class SolveService:
+    """Thread-safe MWIS solves with deadlines that hold (see the module docstring).
+
+    Args:
+        small_workers: worker processes of the small lane (>= 1).
+        large_workers: worker processes of the large lane (>= 1).
+        small_lane_max_vertices: problems up to this size use the small lane.
+        inline_max_vertices: cap on every backend's ``inline_max_vertices`` (0: never inline).
+        margin_s: how long past the limit a worker may run before it is killed [s].
+        max_time_limit_s: larger time limits are refused [s].
+        max_vertices: larger problems are refused.
+        start_method: multiprocessing start method ("forkserver"; "spawn" where there is none).
+    """
+
+    def __init__(self, *, small_workers: int = 1, large_workers: int = 1,
+                 small_lane_max_vertices: int = 2000, inline_max_vertices: int = 1000,
+                 margin_s: float = DEFAULT_MARGIN_S, max_time_limit_s: float = 60.0,
+                 max_vertices: int = 200_000, start_method: str | None = None):
+        for name, value, lo in (("small_workers", small_workers, 1),
+                                ("large_workers", large_workers, 1),
+                                ("small_lane_max_vertices", small_lane_max_vertices, 0),
+                                ("inline_max_vertices", inline_max_vertices, 0),
+                                ("max_vertices", max_vertices, 1)):
+            if isinstance(value, bool) or not isinstance(value, int) or value < lo or value > 10**8:
+                raise MwisInputError(f"{name}: {value!r} must be an integer in [{lo}, 1e8]")
+        self.max_time_limit_s = check_time_limit(max_time_limit_s, "max_time_limit_s")
+        self.margin_s = check_time_limit(margin_s, "margin_s", max_s=60.0)
+        self.small_lane_max_vertices = small_lane_max_vertices
+        self.inline_max_vertices = inline_max_vertices
+        self.max_vertices = max_vertices
+        if start_method is None:
+            start_method = "forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn"
+        self._ctx = mp.get_context(start_method)
+        if start_method == "forkserver":
+            self._ctx.set_forkserver_preload(_PRELOAD)
+        self._size = {"small": small_workers, "large": large_workers}
+        self._idle: dict[str, list[_Worker]] = {"small": [], "large": []}
+        self._busy: set[_Worker] = set()
+        self._cond = threading.Condition()
+        self._closed = False
+        self.counts = {"inline": 0, "worker": 0, "killed": 0, "worker-crashed": 0,
+                       "no-free-worker": 0}
+        from .registry import backend_names, get_backend
+
+        # First-call costs in this process are not a request's: the entry-point scan and each
+        # backend's availability check (imports of OR-Tools, chszlablib: ~1 s under load).
+        for name in backend_names():
+            try:
+                get_backend(name).available()
+            except Exception:  # noqa: BLE001 - a broken backend is reported when requested
+                pass
+        started = []
+        for lane, size in self._size.items():
+            for _ in range(size):
+                started.append(_Worker(self._ctx, lane))
+        for worker in started:
+            worker.warm()
+        self._idle = {lane: [w for w in started if w.lane == lane] for lane in self._size}
+        _LIVE.add(self)
+
+    # -- public API -----------------------------------------------------------------------
+
+    def worker_pids(self) -> list[int]:
+        """Process ids of the live workers (idle and busy)."""
+        with self._cond:
+            workers = [w for lane in self._idle.values() for w in lane] + list(self._busy)
+        return [w.pid for w in workers if w.process.is_alive()]
+
+    def close(self) -> None:
+        """Stop every worker (killing busy ones); later solves raise RuntimeError."""
+        with self._cond:
+            if self._closed:
+                return
+            self._closed = True
+            workers = [w for lane in self._idle.values() for w in lane] + list(self._busy)
+            self._idle = {"small": [], "large": []}
+            self._cond.notify_all()
+        for w in workers:
+            w.stop() if w not in self._busy else w.kill()
+        _LIVE.discard(self)
+
+    def __enter__(self) -> "SolveService":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def solve(self, problem: MwisProblem, backend: str | Backend = "auto",
+              time_limit_s: float = 1.0, seed: int = 0,
+              options: Mapping[str, Any] | None = None, layers: bool = True) -> MwisResult:
+        """Solve ``problem`` and return within ``time_limit_s + margin_s`` (plus the fallback's
+        own time, well under a second even at 10^5 vertices).
+
+        Raises MwisInputError (bad limit, seed, size or options: nothing is solved),
+        UnknownBackendError, BackendUnavailable; every solver failure becomes a flagged
+        fallback answer instead.
+        """
+        from . import build_pipeline
+        from .registry import _table, get_backend
+
+        t0 = time.perf_counter()
+        limit = check_time_limit(time_limit_s, max_s=self.max_time_limit_s)
+        seed = check_seed(seed)
+        if problem.n > self.max_vertices:
+            raise MwisInputError(f"weights: {problem.n} vertices exceed the limit "
+                                 f"max_vertices={self.max_vertices}")
+        if isinstance(backend, str):
+            instance = get_backend(backend)
+            spec: Any = _table()[backend]
+        else:
+            instance = spec = backend
+        instance.require_available()
+        opts = instance.validate_options(options)
+        inline_max = min(int(getattr(instance, "inline_max_vertices", 0)), self.inline_max_vertices)
+        if problem.n <= inline_max or not _picklable(opts):
+            res = build_pipeline(instance, layers=layers).solve(
+                problem, time_limit_s=limit, seed=seed, options=opts)
+            res.stats["executor"] = "inline"
+            self.counts["inline"] += 1
+            return res
+        lane = "small" if problem.n <= self.small_lane_max_vertices else "large"
+        deadline = t0 + limit
+        worker = self._acquire(lane, deadline)
+        waited = time.perf_counter() - t0
+        if worker is None:
+            self.counts["no-free-worker"] += 1
+            return self._fallback(problem, instance.name, t0, "no-free-worker", waited,
+                                  f"no free {lane}-lane worker within the time limit "
+                                  f"{limit:g} s (all busy)")
+        remaining = max(deadline - time.perf_counter(), 1e-3)
+        try:
+            worker.conn.send((spec, _pack(problem), remaining, seed, opts, bool(layers)))
+        except (OSError, ValueError) as exc:
+            self._replace_in_background(worker)
+            self.counts["worker-crashed"] += 1
+            return self._fallback(problem, instance.name, t0, "worker-crashed", waited,
+                                  f"sending the job to the worker failed ({exc})")
+        # On large graphs the worker first sends the fallback answer ("partial"), then the
+        # solve's; a kill at the deadline then answers at once with that best-so-far.
+        precomputed = None
+        reply = None
+        try:
+            while True:
+                if not worker.conn.poll(max(deadline + self.margin_s - time.perf_counter(), 0.0)):
+                    break
+                reply = worker.conn.recv()
+                if reply[0] != "partial":
+                    break
+                precomputed, reply = (reply[1], reply[2]), None
+        except (EOFError, OSError) as exc:
+            reply = exc
+        if reply is None:
+            worker.kill()  # no CPU or memory left behind
+            self._replace_in_background(worker)
+            self.counts["killed"] += 1
+            return self._fallback(problem, instance.name, t0, "killed", waited, precomputed=precomputed,
+                                  reason=
+                                  f"backend {instance.name!r} exceeded its time limit: still "
+                                  f"running after {time.perf_counter() - t0:.3f} s (limit "
+                                  f"{limit:g} s + margin {self.margin_s:g} s); worker killed"
+                                  + ("; answer: the worker's greedy answer computed before the "
+                                     "solve" if precomputed is not None else ""))
+        try:
+            if isinstance(reply, BaseException):
+                raise reply
+        except (EOFError, OSError) as exc:
+            worker.process.join(1.0)
+            code = worker.process.exitcode
+            self._replace_in_background(worker)
+            self.counts["worker-crashed"] += 1
+            return self._fallback(problem, instance.name, t0, "worker-crashed", waited,
+                                  f"worker process of backend {instance.name!r} died "
+                                  f"(exit code {code}, {type(exc).__name__})")
+        self._release(worker)
+        if reply[0] == "error":
+            if reply[2]:  # a bad option or input found by the backend itself: the caller's error
+                raise MwisInputError(reply[1])
+            return self._fallback(problem, instance.name, t0, "worker", waited,
+                                  f"backend {instance.name!r} raised {reply[1]}")
+        res = reply[1]
+        ok, why = check_selection(problem, res.selected)
+        if not ok:
+            return self._fallback(problem, instance.name, t0, "worker", waited,
+                                  f"backend {instance.name!r} returned an invalid answer: {why}")
+        elapsed = time.perf_counter() - t0
+        out = make_result(problem, res.selected, proven_optimal=res.proven_optimal,
+                          solve_time_s=elapsed, backend=res.backend,
+                          stats={**res.stats, "executor": "worker", "queue_wait_s": waited},
+                          message=res.message)
+        self.counts["worker"] += 1
+        return out
+
+    def solve_arrays(self, weights, edges, groups=None, **kwargs) -> MwisResult:
+        """:meth:`solve` from plain arrays (validated by MwisProblem.from_arrays)."""
+        problem = MwisProblem.from_arrays(weights, edges, groups, max_vertices=self.max_vertices)
+        return self.solve(problem, **kwargs)
+
+    # -- internals ------------------------------------------------------------------------
+
+    def _acquire(self, lane: str, deadline: float) -> _Worker | None:
+        with self._cond:
+            while True:
+                if self._closed:
+                    raise RuntimeError("SolveService is closed")
+                if self._idle[lane]:
+                    worker = self._idle[lane].pop()
+                    if not worker.process.is_alive():
+                        worker = _Worker(self._ctx, lane)
+                    self._busy.add(worker)
+                    return worker
+                remaining = deadline - time.perf_counter()
+                if remaining <= 0:
+                    return None
+                self._cond.wait(remaining)
+
+    def _release(self, worker: _Worker) -> None:
+        with self._cond:
+            self._busy.discard(worker)
+            if self._closed:
+                worker.stop()
+                return
+            self._idle[worker.lane].append(worker)
+            self._cond.notify()
+
+    def _replace_in_background(self, worker: _Worker) -> None:
+        """Kill ``worker`` now; start and warm its replacement on a thread (the caller's answer
+        does not wait for it)."""
+        worker.kill()
+        threading.Thread(target=self._replace, args=(worker,), daemon=True,
+                         name="uam-solver-replace").start()
+
+    def _replace(self, worker: _Worker) -> None:
+        """Kill ``worker`` and put a fresh one in its lane."""
+        worker.kill()
+        with self._cond:
+            self._busy.discard(worker)
+            if self._closed:
+                return
+        fresh = _Worker(self._ctx, worker.lane)
+        fresh.warm()
+        with self._cond:
+            if self._closed:
+                fresh.stop()
+                return
+            self._idle[worker.lane].append(fresh)
+            self._cond.notify()
+
+    @staticmethod
+    def _fallback(problem: MwisProblem, requested: str, t0: float, how: str, waited: float,
+                  reason: str, precomputed: tuple | None = None) -> MwisResult:
+        from .greedy import fallback_selection
+
+        log.warning("MWIS fallback to greedy: %s", reason)
+        sel, rule = precomputed if precomputed is not None else fallback_selection(problem)
+        # (edges and groups listed, not all_edges(): that costs ~0.5 s at 10^6 edges)
+        out = make_result(problem, sel, proven_optimal=problem.m == 0 and not problem.groups,
+                          solve_time_s=time.perf_counter() - t0, backend="greedy",
+                          stats={"rule": rule, "requested_backend": requested, "executor": how,
+                                 "queue_wait_s": waited}, message=reason)
+        out.fallback = True
+        return out
+
+
+def _picklable(options: Mapping[str, Any]) -> bool:
+    """Options that cannot cross a process boundary (a sampler factory closure) run inline."""
+    import pickle
+
+    try:
+        pickle.dumps(dict(options))
+    except Exception:  # noqa: BLE001 - any pickling failure means "not picklable"
+        return False
+    return True
