@@ -114,7 +114,7 @@ def top_down_eye(network: Any, fov_y_deg: float = 55.0) -> tuple[tuple, tuple]:
     lo, hi = enu[:, :2].min(axis=0), enu[:, :2].max(axis=0)
     centre = (lo + hi) / 2
     extent = float(max(hi - lo)) if len(enu) > 1 else 1000.0
-    height = 0.62 * max(extent, 100.0) / np.tan(np.radians(fov_y_deg) / 2)
+    height = 0.5 * max(extent, 100.0) / np.tan(np.radians(fov_y_deg) / 2)
     target = (float(centre[0]), float(centre[1]), 0.0)
     return (target[0], target[1], float(height)), target
 
