@@ -156,7 +156,11 @@ def make_movie(paths: Sequence[str | Path], out: str | Path, network: Any = None
     pad = 0.05 * max(hi - lo)
     cmap = plt.get_cmap("plasma")
 
-    fig, axes = plt.subplots(1, len(runs), figsize=(6.4 * len(runs), 6.4), squeeze=False)
+    aspect = float((hi[1] - lo[1] + 2 * pad) / (hi[0] - lo[0] + 2 * pad))
+    panel_w = 6.0
+    fig, axes = plt.subplots(1, len(runs), figsize=(panel_w * len(runs) + 1.2, panel_w * aspect + 0.9),
+                             squeeze=False)
+    fig.subplots_adjust(left=0.01, right=0.9, bottom=0.02, top=0.86, wspace=0.03)
     fig.patch.set_facecolor("#111318")
     artists = []
     segs = np.stack(list(counter.segments.values()))
@@ -169,11 +173,20 @@ def make_movie(paths: Sequence[str | Path], out: str | Path, network: Any = None
         ax.set_yticks([])
         lines = LineCollection(segs, colors="#444a55", linewidths=1.0)
         ax.add_collection(lines)
-        dots = ax.scatter([], [], s=14, c="#ffffff", edgecolors="none", zorder=3)
-        title = ax.set_title(run.label, color="white")
+        dots = ax.scatter(np.zeros(0), np.zeros(0), s=10, c="#ffffff", edgecolors="none", zorder=3)
+        for spine in ax.spines.values():
+            spine.set_color("#333844")
+        title = ax.set_title(run.label, color="white", fontsize=11)
         artists.append((lines, dots, title, run))
-    sm = plt.cm.ScalarMappable(cmap=cmap, norm=plt.Normalize(0, vmax))
-    cbar = fig.colorbar(sm, ax=list(axes[0]), fraction=0.025, pad=0.02)
+    # Used corridors start a quarter up the colour map, so that one flight already stands out
+    # from the unused (grey) ones on the dark background.
+    def use_colors(uses: np.ndarray) -> np.ndarray:
+        return cmap(0.25 + 0.75 * np.clip(uses / vmax, 0, 1))
+
+    sm = plt.cm.ScalarMappable(cmap=matplotlib.colors.ListedColormap(cmap(np.linspace(0.25, 1.0, 256))),
+                               norm=plt.Normalize(0, vmax))
+    cax = fig.add_axes([0.92, 0.1, 0.015, 0.7])
+    cbar = fig.colorbar(sm, cax=cax)
     cbar.set_label("flights that used the corridor so far", color="white")
     cbar.ax.yaxis.set_tick_params(color="white", labelcolor="white")
 
@@ -182,14 +195,13 @@ def make_movie(paths: Sequence[str | Path], out: str | Path, network: Any = None
         out = []
         for lines, dots, title, run in artists:
             uses = counter.uses_until(run, t)
-            colors = np.where(uses[:, None] > 0, cmap(np.clip(uses / vmax, 0, 1)),
-                              matplotlib.colors.to_rgba("#444a55"))
+            colors = np.where(uses[:, None] > 0, use_colors(uses), matplotlib.colors.to_rgba("#444a55"))
             lines.set_color(colors)
-            lines.set_linewidth(1.0 + 3.0 * np.clip(uses / vmax, 0, 1))
+            lines.set_linewidth(np.where(uses > 0, 1.5 + 3.5 * np.clip(uses / vmax, 0, 1), 0.8))
             pos = positions_at(run, t)
             dots.set_offsets(pos if len(pos) else np.zeros((0, 2)))
             approved = sum(1 for d in run.decided_s if d <= t)
-            title.set_text(f"{run.label}   t = {t:5.0f} s   approved {approved}   airborne {len(pos)}")
+            title.set_text(f"{run.label}\nt = {t:.0f} s   approved {approved}   airborne {len(pos)}")
             out += [lines, dots, title]
         return out
 
@@ -205,7 +217,9 @@ def make_movie(paths: Sequence[str | Path], out: str | Path, network: Any = None
                   savefig_kwargs={"facecolor": fig.get_facecolor()})
     else:
         matplotlib.rcParams["animation.ffmpeg_path"] = ffmpeg
-        writer = animation.FFMpegWriter(fps=fps, codec="libx264", extra_args=["-pix_fmt", "yuv420p"])
+        writer = animation.FFMpegWriter(fps=fps, codec="libx264", extra_args=[
+            # H.264 in yuv420p needs even frame sizes: pad by one pixel where needed
+            "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2", "-pix_fmt", "yuv420p"])
         anim.save(str(out), writer=writer, dpi=dpi, savefig_kwargs={"facecolor": fig.get_facecolor()})
     plt.close(fig)
     return out
