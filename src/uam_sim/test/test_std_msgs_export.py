@@ -94,6 +94,20 @@ def test_scenario_start_parses_iso_times_and_names_bad_values():
             scenario_start_ns(bad)
 
 
+def test_fix_period_thins_the_fixes_and_is_checked():
+    from uam_planner.network import load_network
+
+    net = load_network(TINY)
+    pos = [[0.0, 0.0, 120.0], [10.0, 0.0, 120.0]]
+    every = ViewExporter(net, fix_period_s=0)
+    fives = ViewExporter(net)
+    for k, expected in ((0, 2), (1, 0), (5, 2)):
+        assert len(every.fleet_messages(k * SEC, ["a", "b"], pos)) == 1 + 2
+        assert len(fives.fleet_messages(k * SEC, ["a", "b"], pos)) == 1 + expected
+    with pytest.raises(ValueError, match="fix_period_s: -1"):
+        ViewExporter(net, fix_period_s=-1)
+
+
 def test_vehicle_topics_are_valid_ros_names():
     assert vehicle_topic("r00001_002") == "/uam/view/fix/r00001_002"
     assert vehicle_topic("7-a.b") == "/uam/view/fix/v7_a_b"
@@ -163,10 +177,13 @@ def test_rosbags_reads_every_view_message_with_utc_stamps(run_mcap):
     fleet = {t: v for t, v in fleet_sizes.items() if not isinstance(t, tuple)}
     assert counts["sensor_msgs/msg/PointCloud2"] == len(fleet) == 161
     assert counts["visualization_msgs/msg/MarkerArray"] == 1 + result.summary["approved"]
-    assert sum(len(v) for v in fleet.values()) == counts["sensor_msgs/msg/NavSatFix"] > 0
+    # fixes every 5 s of simulation time (the default fix period), one per airborne vehicle
+    due = {t for t in fleet if t % (5 * SEC) == 0}
+    assert sum(len(fleet[t]) for t in due) == counts["sensor_msgs/msg/NavSatFix"] > 0
+    assert {t for t, _ in fixes} <= due
     for t_ns, pos in fleet.items():   # the cloud is the fleet (float32 precision)
         np.testing.assert_allclose(clouds[t_ns], np.array(pos).reshape(-1, 3), atol=1e-3)
-        if pos:   # each fix is its vehicle's ENU position on the Earth
+        if pos and t_ns in due:   # each fix is its vehicle's ENU position on the Earth
             lla = enu_to_geodetic(np.array(pos), net.origin_lat_lon_alt)
             got = np.array([fixes[(t_ns, vid)] for vid in ids[("ids", t_ns)]])
             np.testing.assert_allclose(got, lla, atol=1e-9)
