@@ -26,16 +26,19 @@ def record_run(path, method: str = "greedy", network=None, rate: float = 4.0, se
     a recording can end with aircraft in the air. Returns (ScenarioResult, network).
     """
     from uam_msgs.msg import FleetState, FlightPlan, FlightRequest, PlanningReport
-    from uam_planner.network import load_network
-    from uam_planner.nodes import messages as m
     from rclpy.serialization import serialize_message
+    from uam_planner.network import load_network
+    try:   # the ROS contract's conversions (uam_bringup), or where they lived before it
+        from uam_bringup import conversions as m
+    except ImportError:
+        from uam_planner.nodes import messages as m
 
     from uam_sim.cdr import encode_fleet_state
     from uam_sim.experiment import make_config, run_scenario
     from uam_sim.fleet import Fleet
     from uam_sim.recording import McapRecorder, deserialize, RecordedMessage
     from uam_sim.rerun_log import RerunLogger
-    from uam_sim.std_msgs_export import ViewExporter
+    from uam_sim.std_msgs_export import FRAME_ID, ViewExporter
 
     net = network if network is not None else load_network(TINY)
     cfg = make_config({"network": str(TINY), "out": str(Path(path).parent / "res"), "include_qpu": False,
@@ -65,7 +68,7 @@ def record_run(path, method: str = "greedy", network=None, rate: float = 4.0, se
             fleet.add(rid, traj)
         s = fleet.sample(float(k))
         events.append((k * NS, 3, "/uam/fleet_state", encode_fleet_state(
-            k, 0, m.FRAME_ID, k, s.vehicle_ids, s.positions_m, s.velocities_mps, s.phases,
+            k, 0, FRAME_ID, k, s.vehicle_ids, s.positions_m, s.velocities_mps, s.phases,
             s.segment_indices, s.flown_m, s.remaining_m)))
     events.sort(key=lambda e: (e[0], e[1]))
     types = {"/uam/requests": FlightRequest, "/uam/flight_plans": FlightPlan,

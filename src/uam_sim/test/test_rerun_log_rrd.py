@@ -86,8 +86,12 @@ def test_rrd_verifies_and_contains_the_entities(rrd):
     assert "Points3D:positions" in fleet and "LineStrips3D:strips" in fleet
     assert "GeoPoints:positions" in "".join(c for c in chunks if c.startswith("/geo/fleet"))
     assert "r2" not in fleet  # rejected plans draw no route
-    # the blueprint travels in the file
+    # the blueprint travels in the file, with its views
     assert "Blueprint" in text
+    data = subprocess.run([_cli(), "rrd", "print", "-vvv", str(path)], capture_output=True, text=True,
+                          timeout=120).stdout
+    for view in ("Network (top-down)", "Geographic", "Flights", "MWIS size", "Solve time [s]"):
+        assert view in data, view
 
 
 def test_blueprint_lays_out_the_views():
