@@ -143,3 +143,21 @@ def test_mismatched_ids_and_positions_are_refused(tmp_path):
     with pytest.raises(ValueError, match="2 ids for 1 positions"):
         logger.log_fleet(0.0, ["a", "b"], [[0, 0, 0]])
     logger.close()
+
+
+@pytest.mark.skipif(_cli() is None, reason="rerun CLI not installed")
+def test_a_recording_becomes_an_rrd_with_the_view(tmp_path):
+    """``python -m uam_sim.rerun_log RUN.mcap --network NET`` for runs recorded without Rerun."""
+    pytest.importorskip("uam_msgs.msg", reason="needs the built workspace (source scripts/env.sh)")
+    from uam_sim.rerun_log import main
+    from view_runs import TINY, record_run
+
+    mcap = tmp_path / "run.mcap"
+    record_run(mcap, "greedy", duration_s=60.0, views=False)
+    assert main([str(mcap), "--network", str(TINY)]) == 0
+    rrd = mcap.with_suffix(".rrd")
+    text = subprocess.run([_cli(), "rrd", "print", "-vv", str(rrd)], capture_output=True, text=True,
+                          timeout=120).stdout
+    for entity in ("/world/network/corridors", "/world/fleet", "/geo/fleet", "/metrics/approved_cumulative"):
+        assert f"entity_path: {entity}" in text, entity
+    assert main([str(tmp_path / "missing.mcap")]) == 1

@@ -209,3 +209,27 @@ def test_rerun_mcap_convert_yields_points_and_geo_points(run_mcap, tmp_path):
     assert fixes and all("GeoPoints:positions" in by_entity[e] for e in fixes)
     assert "ros2_timestamp" in by_entity[TOPIC_FLEET_CLOUD]   # the UTC header stamps, as a timeline
     assert TOPIC_NETWORK in by_entity
+
+
+def test_views_are_added_to_an_older_recording(tmp_path):
+    """``python -m uam_sim.std_msgs_export`` copies a recording made without view topics and adds
+    them; ``--log-time utc`` shifts every message by the scenario start."""
+    from uam_sim.recording import read_messages
+    from uam_sim.std_msgs_export import main
+
+    src = tmp_path / "old.mcap"
+    result, _ = record_run(src, "greedy", duration_s=60.0, views=False)
+    before = [(m.topic, m.log_time_ns, m.data) for m in read_messages(src)]
+    assert not any(t.startswith("/uam/view/") for t, _, _ in before)
+    for mode, shift in (("sim", 0), ("utc", START_NS)):
+        dst = tmp_path / f"views_{mode}.mcap"
+        assert main([str(src), str(dst), "--network", str(TINY), "--log-time", mode]) == 0
+        after = list(read_messages(dst))
+        kept = [(m.topic, m.log_time_ns - shift, m.data) for m in after if not m.topic.startswith("/uam/view/")]
+        assert sorted(kept) == sorted(before)           # the project's messages, unchanged
+        views = [m for m in after if m.topic.startswith("/uam/view/")]
+        assert {m.topic for m in views} >= {TOPIC_NETWORK, TOPIC_FLEET_CLOUD, TOPIC_ROUTES}
+        assert sum(m.topic == TOPIC_ROUTES for m in views) == result.summary["approved"]
+        assert min(m.log_time_ns for m in after) == shift   # t = 0 is the scenario start in utc mode
+    with pytest.raises(SystemExit):   # dst missing: argparse names it
+        main([str(src)])
