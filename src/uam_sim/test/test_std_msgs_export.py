@@ -169,7 +169,8 @@ def test_rosbags_reads_every_view_message_with_utc_stamps(run_mcap):
                 assert msg.header.frame_id == "enu" and msg.width == len(clouds[t_ns])
             elif conn.msgtype == "sensor_msgs/msg/NavSatFix":
                 assert lo[0] <= msg.latitude <= hi[0] and lo[1] <= msg.longitude <= hi[1], conn.topic
-                fixes[(t_ns, msg.header.frame_id)] = (msg.latitude, msg.longitude, msg.altitude)
+                assert msg.header.frame_id == ""
+                fixes[(t_ns, conn.topic)] = (msg.latitude, msg.longitude, msg.altitude)
             elif conn.topic == TOPIC_ROUTES:
                 (m,) = msg.markers
                 assert m.type == MARKER_LINE_STRIP and len(m.points) >= 2 and m.lifetime.sec > 0
@@ -185,7 +186,7 @@ def test_rosbags_reads_every_view_message_with_utc_stamps(run_mcap):
         np.testing.assert_allclose(clouds[t_ns], np.array(pos).reshape(-1, 3), atol=1e-3)
         if pos and t_ns in due:   # each fix is its vehicle's ENU position on the Earth
             lla = enu_to_geodetic(np.array(pos), net.origin_lat_lon_alt)
-            got = np.array([fixes[(t_ns, vid)] for vid in ids[("ids", t_ns)]])
+            got = np.array([fixes[(t_ns, vehicle_topic(vid))] for vid in ids[("ids", t_ns)]])
             np.testing.assert_allclose(got, lla, atol=1e-9)
 
 

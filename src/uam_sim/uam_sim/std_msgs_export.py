@@ -21,10 +21,12 @@ topic                     type                                content
                                                               every step while airborne
 ========================  ==================================  ===========================================
 
-Frames: every message is in frame ``enu`` (the network's local east-north-up frame, the frame of
-the project's own messages); it is the only frame, so no transform is needed (choose ``enu`` as
-the display frame in Foxglove's 3D panel). NavSatFix carries WGS84 latitude/longitude [deg] and
-altitude [m] computed from the network's origin.
+Frames: the cloud and the markers are in frame ``enu`` (the network's local east-north-up frame,
+the frame of the project's own messages); it is the only frame, so no transform is needed (choose
+``enu`` as the display frame in Foxglove's 3D panel). NavSatFix carries WGS84 latitude/longitude
+[deg] and altitude [m] computed from the network's origin, with an empty frame_id (the topic names
+the vehicle; a frame per vehicle that no transform reaches makes Rerun's MCAP import show an
+error on its 3D view, tried).
 
 Stamps: header stamps are real UTC, ``scenario_start_utc`` + simulation time (default
 :data:`DEFAULT_SCENARIO_START_UTC`, a fixed instant so that recordings are deterministic). Rerun
@@ -348,8 +350,10 @@ class ViewExporter:
             for vid, (lat, lon, alt) in zip(vehicle_ids, lla.tolist()):
                 if not (math.isfinite(lat) and math.isfinite(lon)):
                     continue
+                # frame_id left empty: the vehicle is named by the topic, and a frame named after
+                # it (a frame no transform reaches) makes Rerun's MCAP import flag the 3D view
                 out.append(ViewMessage(vehicle_topic(vid), TYPE_NAV_SAT_FIX,
-                                       encode_nav_sat_fix(stamp, str(vid), lat, lon, alt), sim_time_ns))
+                                       encode_nav_sat_fix(stamp, "", lat, lon, alt), sim_time_ns))
         return out
 
     def fleet_state_messages(self, msg: Any) -> list[ViewMessage]:
