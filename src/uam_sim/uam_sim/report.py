@@ -229,7 +229,7 @@ def write_report(sweep, outputs: dict, machine: dict, out: Path) -> Path:
     L += ["## Safety audit", "",
           f"The exact closest-approach audit ran on {audited} of {len(cells)} runs over {flights} "
           f"flown flights in total: every pair of straight segments of different flights that "
-          f"share time, closest approach in closed form (`uam_sim.experiment.sweep_audit`, a "
+          f"share time, closest approach in closed form (`uam_sim.audit.sweep_audit`, a "
           f"vectorised time sweep independent of the planner's separation kernel; its tests hold "
           f"it equal to the brute-force `uam_planner.audit.audit_flights`; recordings are audited "
           f"by `uam_sim.analysis` with the latter). Minimum "
