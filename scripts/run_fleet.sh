@@ -15,6 +15,7 @@
 #   --mode M           lockstep | realtime (default lockstep)
 #   --rtf X            real-time factor in realtime mode (default 1)
 #   --rerun M          off | save | spawn | connect (default save: a .rrd next to the MCAP)
+#   --foxglove-port N  serve a live Foxglove WebSocket view on port N (default 0 = off; docs/views.md)
 #   --out DIR          output folder (default a new folder $UAM_RUNS_DIR/<date>-<policy>-<backend>-r<rate>-s<seed>-XXXX,
 #                      UAM_RUNS_DIR defaulting to runs/; unique even for runs started in the same second)
 # Ctrl-C, SIGTERM and SIGHUP stop every node cleanly; the recording is closed properly. If this
@@ -25,7 +26,7 @@ ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
 
 BACKEND=exact POLICY=mwis RATE=10 DURATION=3500 SEED=0 NETWORK=config/networks/singapore.yaml
-DEMAND="" MODE=lockstep RTF=1 RERUN=save OUT=""
+DEMAND="" MODE=lockstep RTF=1 RERUN=save OUT="" FOXGLOVE_PORT=0
 die() { echo "run_fleet: $*" >&2; exit 2; }
 while [[ $# -gt 0 ]]; do
   case "$1" in
@@ -39,6 +40,7 @@ while [[ $# -gt 0 ]]; do
     --mode) MODE="${2:?--mode needs a value}"; shift 2;;
     --rtf) RTF="${2:?--rtf needs a value}"; shift 2;;
     --rerun) RERUN="${2:?--rerun needs a value}"; shift 2;;
+    --foxglove-port) FOXGLOVE_PORT="${2:?--foxglove-port needs a value}"; shift 2;;
     --out) OUT="${2:?--out needs a value}"; shift 2;;
     -h|--help) sed -n '2,25p' "$0"; exit 0;;
     *) die "unknown option '$1' (see --help)";;
@@ -50,6 +52,7 @@ done
 [[ "$RATE" =~ ^[0-9]+(\.[0-9]+)?$ ]] || die "--rate: '$RATE' is not a number >= 0"
 [[ "$DURATION" =~ ^[0-9]+(\.[0-9]+)?$ ]] || die "--duration: '$DURATION' is not a number of seconds"
 [[ "$SEED" =~ ^[0-9]+$ ]] || die "--seed: '$SEED' is not an integer >= 0"
+[[ "$FOXGLOVE_PORT" =~ ^[0-9]+$ ]] && (( FOXGLOVE_PORT <= 65535 )) || die "--foxglove-port: '$FOXGLOVE_PORT' is not a port 0..65535"
 [[ "$RTF" =~ ^[0-9]+(\.[0-9]+)?$ ]] || die "--rtf: '$RTF' is not a positive number"
 [[ -f "$NETWORK" ]] || die "--network: no file '$NETWORK'"
 [[ -z "$DEMAND" || -f "$DEMAND" ]] || die "--demand: no file '$DEMAND'"
@@ -140,7 +143,7 @@ start uam_planner planner planner --params-file config/planner.yaml -p "network:
   -p "policy:=$POLICY" -p "backend:=$BACKEND" -p "seed:=$SEED"
 start uam_sim request_generator request_generator --params-file config/request_generator.yaml \
   -p "network:=$NETWORK" -p "rate:=$RATE" -p "seed:=$SEED" ${DEMAND:+-p "demand_file:=$DEMAND"}
-start uam_sim recorder recorder -p "output:=$MCAP" -p "network:=$NETWORK" -p "rerun:='$RERUN'" -p "rerun_rrd:=$RRD"
+start uam_sim recorder recorder -p "output:=$MCAP" -p "network:=$NETWORK" -p "rerun:='$RERUN'" -p "rerun_rrd:=$RRD" -p "foxglove_port:=$FOXGLOVE_PORT"
 REC_PID=${PIDS[-1]}
 start uam_sim simulator simulator --params-file config/simulator.yaml -p "duration_s:=$DURATION" \
   -p "mode:=$MODE" -p "real_time_factor:=$RTF"

@@ -39,6 +39,31 @@ if [[ "$ROS_MODE" == system && ! -f /opt/ros/jazzy/setup.bash ]]; then
 fi
 echo "[setup] ROS 2 Jazzy from: $([[ $ROS_MODE == system ]] && echo /opt/ros/jazzy || echo 'PyPI wheels in .venv')"
 
+# ---------------------------------------------------------------- 0b. Debian packages
+# The headless Rerun viewer test (src/uam_sim/test/test_rerun_view_screenshot.py) runs the viewer
+# binary of the rerun-sdk wheel under Xvfb, rendering with Mesa's software Vulkan (lavapipe).
+# Installed only when missing (dpkg says so), so a second run costs nothing. Versions are not
+# pinned: Debian's mirrors keep only the newest point release of a package, so an exact pin would
+# break at the next security update (tested with xvfb 2:21.1.7-3+deb12u13, mesa-vulkan-drivers
+# 22.3.6-1+deb12u2 on Debian 12). UAM_APT=0 skips this step (the viewer test then fails and says why).
+APT_PKGS=(xvfb mesa-vulkan-drivers)
+if [[ "${UAM_APT:-1}" != 0 ]] && command -v dpkg-query >/dev/null; then
+  step "Debian packages (${APT_PKGS[*]})"
+  MISSING=()
+  for p in "${APT_PKGS[@]}"; do
+    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || MISSING+=("$p")
+  done
+  if (( ${#MISSING[@]} )); then
+    SUDO=(); [[ $(id -u) != 0 ]] && SUDO=(sudo)
+    "${SUDO[@]}" env DEBIAN_FRONTEND=noninteractive apt-get update -qq \
+      || fail "apt-get update failed (needed to install ${MISSING[*]}; set UAM_APT=0 to skip)"
+    "${SUDO[@]}" env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${MISSING[@]}" \
+      || fail "apt-get could not install ${MISSING[*]} (set UAM_APT=0 to skip)"
+  else
+    echo "[setup]   up to date"
+  fi
+fi
+
 # ---------------------------------------------------------------- 1. venv
 step "python interpreter"
 PY="${PYTHON:-python3}"

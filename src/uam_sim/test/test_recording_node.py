@@ -80,8 +80,20 @@ def test_records_every_topic_and_closes_on_the_simulators_finish(ros_context, sp
     counts = {}
     for m in msgs:
         counts[m.topic] = counts.get(m.topic, 0) + 1
-    assert counts == {"/clock": 5, "/uam/fleet_state": 5, "/uam/fleet_poses": 5, "/uam/requests": 1,
-                      "/uam/flight_plans": 1, "/uam/planning_reports": 1, "/uam/epoch_sync": 2}
+    views = {k: v for k, v in counts.items() if k.startswith("/uam/view/")}
+    assert {k: v for k, v in counts.items() if k not in views} == {
+        "/clock": 5, "/uam/fleet_state": 5, "/uam/fleet_poses": 5, "/uam/requests": 1,
+        "/uam/flight_plans": 1, "/uam/planning_reports": 1, "/uam/epoch_sync": 2}
+    # the run in standard types (views on by default): the network once, a cloud per fleet
+    # state, the approved route, and vehicle r1's fix at t = 0 (one every 5 s)
+    assert views == {"/uam/view/network": 1, "/uam/view/fleet": 5, "/uam/view/routes": 1,
+                     "/uam/view/fix/r1": 1}
+    from rosbags.typesys import Stores, get_typestore
+    ts = get_typestore(Stores.ROS2_JAZZY)
+    clouds = [m for m in msgs if m.topic == "/uam/view/fleet"]
+    last = ts.deserialize_cdr(clouds[-1].data, "sensor_msgs/msg/PointCloud2")
+    assert last.header.stamp.sec == 1736121600 + 4 and last.width == 1   # 2025-01-06T00:00:04Z
+    assert [m.log_time_ns for m in clouds] == [k * NS for k in range(5)]
     # log time = the message's simulation stamp
     fleet_times = [m.log_time_ns for m in msgs if m.topic == "/uam/fleet_state"]
     assert fleet_times == [k * NS for k in range(5)]

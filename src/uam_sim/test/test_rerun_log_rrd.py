@@ -22,10 +22,11 @@ def _cli() -> str | None:
 
 
 def tiny_network():
-    """Duck-typed Network: 2 aerodromes and 1 waypoint, 2 corridors."""
+    """Duck-typed Network: 2 aerodromes and 1 waypoint, 2 corridors, near Singapore."""
     return NS(enu_m=np.array([[0.0, 0.0, 5.0], [1000.0, 0.0, 120.0], [2000.0, 0.0, 5.0]]),
               edges=np.array([[0, 1], [1, 2]]), is_aerodrome=np.array([True, False, True]),
-              names=("Aerodrome A", "W1", "Aerodrome B"), node_ids=("A", "W1", "B"))
+              names=("Aerodrome A", "W1", "Aerodrome B"), node_ids=("A", "W1", "B"),
+              origin_lat_lon_alt=(1.29, 103.85, 0.0))
 
 
 def stamp(s: float):
@@ -74,11 +75,56 @@ def test_rrd_verifies_and_contains_the_entities(rrd):
                              timeout=120)
     assert printed.returncode == 0, printed.stderr
     text = printed.stdout + printed.stderr
-    for entity in ("world/network/corridors", "world/network/aerodromes", "world/vehicles",
-                   "world/routes/r1", "metrics/approved_cumulative", "metrics/solve_time_s"):
+    for entity in ("world/network/corridors", "world/network/aerodromes", "world/fleet",
+                   "geo/network/corridors", "geo/fleet", "metrics/approved_cumulative",
+                   "metrics/solve_time_s", "metrics/pending_requests"):
         assert entity in text, entity
     assert "sim_time" in text
-    assert "world/routes/r2" not in text  # rejected plans draw no route
+    chunks = text.split("entity_path: ")
+    fleet = "".join(c for c in chunks if c.startswith("/world/fleet"))
+    # aircraft and their routes share the entity (instance k = aircraft k and its route)
+    assert "Points3D:positions" in fleet and "LineStrips3D:strips" in fleet
+    assert "GeoPoints:positions" in "".join(c for c in chunks if c.startswith("/geo/fleet"))
+    assert "r2" not in fleet  # rejected plans draw no route
+    # the blueprint travels in the file, with its views
+    assert "Blueprint" in text
+    data = subprocess.run([_cli(), "rrd", "print", "-vvv", str(path)], capture_output=True, text=True,
+                          timeout=120).stdout
+    for view in ("Network (top-down)", "Geographic", "Flights", "MWIS size", "Solve time [s]"):
+        assert view in data, view
+
+
+def test_blueprint_lays_out_the_views():
+    from uam_sim.rerun_log import make_blueprint, map_zoom, top_down_eye
+
+    net = tiny_network()
+    position, target = top_down_eye(net)
+    assert target == (1000.0, 0.0, 0.0) and position[:2] == (1000.0, 0.0) and position[2] > 1000.0
+    # at that web-map zoom the 2 km network spans the 200 px pane
+    metres_per_px = 156543.03 * np.cos(np.radians(1.29)) / 2 ** map_zoom(net)
+    assert 2000.0 / metres_per_px == pytest.approx(200.0)
+    bp = make_blueprint(net)
+    names = []
+
+    def walk(part):
+        names.append(str(getattr(part, "name", "")))
+        for child in getattr(part, "contents", None) or []:
+            walk(child)
+    walk(bp.root_container)
+    assert {"Network (top-down)", "Geographic", "Flights", "MWIS size", "Solve time [s]"} <= set(names)
+
+
+def test_corridor_levels_colour_corridors_and_default_to_one_level():
+    from uam_sim.rerun_log import LEVEL_COLORS, corridor_levels, level_colors
+
+    net = tiny_network()
+    assert corridor_levels(net).tolist() == [0, 0]
+    net.corridor_levels = ["FL2", "FL1"]
+    assert corridor_levels(net).tolist() == [1, 0]
+    assert level_colors(corridor_levels(net)).tolist() == [list(LEVEL_COLORS[1]), list(LEVEL_COLORS[0])]
+    net.corridor_levels = [1]
+    with pytest.raises(ValueError, match="corridor_levels: 1 levels for 2 corridors"):
+        corridor_levels(net)
 
 
 def test_off_mode_does_nothing_and_bad_mode_is_refused(tmp_path):
@@ -97,3 +143,21 @@ def test_mismatched_ids_and_positions_are_refused(tmp_path):
     with pytest.raises(ValueError, match="2 ids for 1 positions"):
         logger.log_fleet(0.0, ["a", "b"], [[0, 0, 0]])
     logger.close()
+
+
+@pytest.mark.skipif(_cli() is None, reason="rerun CLI not installed")
+def test_a_recording_becomes_an_rrd_with_the_view(tmp_path):
+    """``python -m uam_sim.rerun_log RUN.mcap --network NET`` for runs recorded without Rerun."""
+    pytest.importorskip("uam_msgs.msg", reason="needs the built workspace (source scripts/env.sh)")
+    from uam_sim.rerun_log import main
+    from view_runs import TINY, record_run
+
+    mcap = tmp_path / "run.mcap"
+    record_run(mcap, "greedy", duration_s=60.0, views=False)
+    assert main([str(mcap), "--network", str(TINY)]) == 0
+    rrd = mcap.with_suffix(".rrd")
+    text = subprocess.run([_cli(), "rrd", "print", "-vv", str(rrd)], capture_output=True, text=True,
+                          timeout=120).stdout
+    for entity in ("/world/network/corridors", "/world/fleet", "/geo/fleet", "/metrics/approved_cumulative"):
+        assert f"entity_path: {entity}" in text, entity
+    assert main([str(tmp_path / "missing.mcap")]) == 1

@@ -1,17 +1,31 @@
-"""Rerun logging of a run: the network, the fleet on a ``sim_time`` timeline, routes and metrics.
+"""Rerun logging of a run: the network, the fleet on a ``sim_time`` timeline, routes, metrics, and
+the blueprint (the layout of the viewer) that goes with every recording, live or ``.rrd``.
 
-Entity layout (ENU metres, z up):
+The blueprint (:func:`make_blueprint`) shows, side by side:
 
-- ``world/network/corridors`` (static): one 2-point LineStrips3D per corridor;
-- ``world/network/aerodromes`` (static): Points3D labelled with the aerodrome names;
+- **Network (top-down)**: a 3D view whose camera looks straight down on the network (north up),
+  corridors coloured by flight level (one colour when the network has no levels), vertiports
+  labelled, aircraft as points whose size is in UI points (visible at any zoom), and the routes of
+  the airborne flights as thin lines. Clicking an aircraft selects it *and* its route (they are
+  instance ``k`` of the same entity, see ``world/fleet`` below), which Rerun highlights;
+- **Geographic**: the same network and fleet as GeoPoints / GeoLineStrings on a map
+  (OpenStreetMap tiles when the viewer is online; the points are drawn without tiles too);
+- **Metrics** on the ``sim_time`` timeline: approved (cumulative), airborne and pending flights;
+  MWIS size (conflict-graph vertices) and selected vertices; MWIS solve time [s].
+
+Entity layout (ENU metres, z up; geographic entities in WGS84 degrees):
+
+- ``world/network/corridors`` (static): one 2-point LineStrips3D per corridor, coloured by level;
+- ``world/network/aerodromes`` (static): Points3D labelled with the vertiport names;
 - ``world/network/waypoints`` (static): the other network nodes, small grey points;
-- ``world/vehicles``: Points3D of the airborne vehicles at each simulation step, labelled with
-  their vehicle ids (the request ids);
-- ``world/routes/<request_id>``: the approved 4D route of a flight as a LineStrips3D, logged at
-  the decision time and cleared when the vehicle has landed (it left the fleet state);
-- ``metrics/approved_cumulative``, ``metrics/active_aircraft``, ``metrics/mwis_vertices``,
-  ``metrics/mwis_selected``, ``metrics/solve_time_s``, ``metrics/pending_requests``: Scalars
-  once per planning epoch.
+- ``world/fleet``: Points3D of the airborne aircraft at each simulation step (labels = vehicle
+  ids, shown on hover) and, on the same entity, LineStrips3D of their approved routes in the same
+  instance order (re-logged only when the set of airborne flights changes);
+- ``geo/network/corridors``, ``geo/network/aerodromes`` (static), ``geo/fleet``: the same in
+  latitude/longitude (only with a network, whose origin places ENU on the Earth);
+- ``metrics/approved_cumulative``, ``metrics/active_aircraft``, ``metrics/pending_requests``,
+  ``metrics/mwis_vertices``, ``metrics/mwis_selected``, ``metrics/solve_time_s``: Scalars once
+  per planning epoch.
 
 Every time-varying entity is logged on the ``sim_time`` timeline (a duration, seconds of
 simulation time). Modes: ``"off"`` (nothing, rerun is not even imported), ``"save"`` (an .rrd
@@ -19,6 +33,8 @@ file), ``"spawn"`` (start a local viewer and stream to it), ``"connect"`` (strea
 viewer at ``connect_url``, default ``rerun+http://127.0.0.1:9876/proxy``).
 
 The ``log_*_msg`` methods take ROS messages (duck-typed, so this module never imports rclpy).
+``python -m uam_sim.rerun_log RUN.mcap --network NET.yaml --out RUN.rrd`` turns a recording into
+an .rrd with the same content and blueprint (for runs recorded without Rerun).
 """
 
 from __future__ import annotations
@@ -32,19 +48,124 @@ import numpy as np
 MODES = ("off", "save", "spawn", "connect")
 TIMELINE = "sim_time"
 
-_AERODROME_COLOR = (255, 170, 0)
-_CORRIDOR_COLOR = (90, 140, 200)
-_WAYPOINT_COLOR = (150, 150, 150)
-_VEHICLE_COLOR = (230, 40, 60)
-_ROUTE_COLOR = (60, 200, 90)
+#: Colours (RGB) of the view; tests look for these colours in screenshots.
+AERODROME_COLOR = (255, 170, 0)
+CORRIDOR_COLOR = (90, 140, 200)
+WAYPOINT_COLOR = (150, 150, 150)
+VEHICLE_COLOR = (255, 40, 200)
+ROUTE_COLOR = (60, 200, 90, 150)
+#: Corridor colours by flight level (level 0, 1, ...), cycled when there are more levels.
+LEVEL_COLORS = ((90, 140, 200), (0, 200, 200), (160, 110, 230), (230, 200, 60), (120, 200, 90))
+
+#: Sizes in UI points (constant on screen at any zoom); Rerun takes negative radii as UI points.
+VEHICLE_RADIUS_UI = 5.0
+AERODROME_RADIUS_UI = 5.0
+WAYPOINT_RADIUS_UI = 1.5
+CORRIDOR_RADIUS_UI = 1.5
+ROUTE_RADIUS_UI = 1.0
+
+#: Attribute names under which a network may carry one flight level per corridor.
+LEVEL_ATTRIBUTES = ("edge_levels", "corridor_levels", "edge_level")
+
+
+def _ui(points: float) -> float:
+    return -abs(float(points))
 
 
 def _stamp_s(stamp: Any) -> float:
     return int(stamp.sec) + int(stamp.nanosec) * 1e-9
 
 
+def corridor_levels(network: Any) -> np.ndarray:
+    """Flight level index (0, 1, ...) of each corridor of a network; all 0 when it has no levels.
+
+    Reads the first of :data:`LEVEL_ATTRIBUTES` the network has (one value per edge; any
+    hashable level labels, numbered in sorted order). Raises ValueError if its length differs
+    from the number of corridors.
+    """
+    n_edges = int(np.asarray(network.edges).reshape(-1, 2).shape[0])
+    for name in LEVEL_ATTRIBUTES:
+        values = getattr(network, name, None)
+        if values is None:
+            continue
+        values = list(values)
+        if len(values) != n_edges:
+            raise ValueError(f"network.{name}: {len(values)} levels for {n_edges} corridors")
+        order = {v: i for i, v in enumerate(sorted(set(values)))}
+        return np.array([order[v] for v in values], dtype=np.int64)
+    return np.zeros(n_edges, dtype=np.int64)
+
+
+def level_colors(levels: np.ndarray) -> np.ndarray:
+    """(m, 3) uint8 colours of corridors with the given level indices (:data:`LEVEL_COLORS`)."""
+    palette = np.asarray(LEVEL_COLORS, dtype=np.uint8)
+    return palette[np.asarray(levels, dtype=np.int64) % len(palette)]
+
+
+def _node_labels(network: Any) -> list[str]:
+    ids = list(network.node_ids)
+    names = list(getattr(network, "names", None) or ids)
+    return [str(n) if n else str(i) for n, i in zip(names, ids)]
+
+
+def top_down_eye(network: Any, fov_y_deg: float = 55.0) -> tuple[tuple, tuple]:
+    """Camera position and look target (ENU m) that frame the whole network from straight above."""
+    enu = np.asarray(network.enu_m, dtype=np.float64).reshape(-1, 3)
+    lo, hi = enu[:, :2].min(axis=0), enu[:, :2].max(axis=0)
+    centre = (lo + hi) / 2
+    extent = float(max(hi - lo)) if len(enu) > 1 else 1000.0
+    height = 0.5 * max(extent, 100.0) / np.tan(np.radians(fov_y_deg) / 2)
+    target = (float(centre[0]), float(centre[1]), 0.0)
+    return (target[0], target[1], float(height)), target
+
+
+def map_zoom(network: Any, pane_px: float = 200.0) -> float:
+    """Web-map zoom level at which the network's extent fits a map pane of ``pane_px`` pixels."""
+    enu = np.asarray(network.enu_m, dtype=np.float64).reshape(-1, 3)
+    extent = float(max(np.ptp(enu[:, 0]), np.ptp(enu[:, 1]), 200.0))
+    lat = float(network.origin_lat_lon_alt[0])
+    # 156543 m/px at zoom 0 on the equator (256 px tiles), halving per zoom level.
+    return float(np.clip(np.log2(156543.03 * np.cos(np.radians(lat)) * pane_px / extent), 1.0, 18.0))
+
+
+def make_blueprint(network: Any = None) -> Any:
+    """The viewer layout sent with every recording (see the module docstring)."""
+    import rerun.blueprint as rrb
+
+    eye = None
+    if network is not None:
+        position, target = top_down_eye(network)
+        eye = rrb.EyeControls3D(kind=rrb.Eye3DKind.Orbital, position=position, look_target=target,
+                                eye_up=(0.0, 1.0, 0.0))
+    top_down = rrb.Spatial3DView(name="Network (top-down)", origin="world", contents="$origin/**",
+                                 eye_controls=eye, line_grid=rrb.LineGrid3D(visible=False),
+                                 background=(18, 18, 24))
+    geo = rrb.MapView(name="Geographic", origin="geo", contents="$origin/**",
+                      zoom=map_zoom(network) if network is not None else None,
+                      background=rrb.MapProvider.OpenStreetMap)
+    # The plots show the run from its start up to the time cursor (not a window around it).
+    axis = rrb.TimeAxis(view_range=rrb.TimeRange(start=rrb.TimeRangeBoundary.infinite(),
+                                                 end=rrb.TimeRangeBoundary.cursor_relative(seconds=0.0)))
+    flights = rrb.TimeSeriesView(name="Flights", origin="metrics", axis_x=axis, contents=[
+        "$origin/approved_cumulative", "$origin/active_aircraft", "$origin/pending_requests"])
+    mwis = rrb.TimeSeriesView(name="MWIS size", origin="metrics", axis_x=axis, contents=[
+        "$origin/mwis_vertices", "$origin/mwis_selected"])
+    solve = rrb.TimeSeriesView(name="Solve time [s]", origin="metrics", axis_x=axis,
+                               contents=["$origin/solve_time_s"])
+    return rrb.Blueprint(
+        rrb.Horizontal(top_down, rrb.Vertical(geo, flights, mwis, solve, row_shares=[3, 2, 2, 2]),
+                       column_shares=[3, 2]),
+        rrb.BlueprintPanel(state="collapsed"),
+        rrb.SelectionPanel(state="collapsed"),
+        # "following": the time cursor goes to the newest data, live and in a file (the end of
+        # the run, whose metrics then show the whole run; press play from the start to replay).
+        rrb.TimePanel(state="collapsed", timeline=TIMELINE, play_state="following"),
+        auto_views=False,
+    )
+
+
 class RerunLogger:
-    """Log a fleet run to Rerun.
+    """Log a fleet run to Rerun, with the blueprint of :func:`make_blueprint`.
 
     Args:
         mode: "off" | "save" | "spawn" | "connect".
@@ -67,23 +188,28 @@ class RerunLogger:
         self.rrd_path = Path(rrd_path) if rrd_path else None
         self._rec = None
         self._rr = None
-        self._airborne: set[str] = set()
-        self._routes: set[str] = set()
+        self._network = network
+        self._origin = None if network is None else tuple(network.origin_lat_lon_alt)
+        self._routes: dict[str, np.ndarray] = {}
+        self._fleet_ids: tuple[str, ...] | None = None
         self._approved_total = 0
+        self._report_approved = 0
         if mode == "off":
             return
         import rerun as rr
 
         self._rr = rr
         self._rec = rr.RecordingStream(app_id, recording_id=recording_id)
+        blueprint = make_blueprint(network)
         if mode == "save":
             self.rrd_path.parent.mkdir(parents=True, exist_ok=True)
-            self._rec.save(str(self.rrd_path))
+            self._rec.save(str(self.rrd_path), default_blueprint=blueprint)
         elif mode == "spawn":
-            self._rec.spawn()
+            self._rec.spawn(default_blueprint=blueprint)
         else:
-            self._rec.connect_grpc(connect_url)
+            self._rec.connect_grpc(connect_url, default_blueprint=blueprint)
         self._rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        self._log_series_styles()
         if network is not None:
             self.log_network(network)
 
@@ -99,58 +225,94 @@ class RerunLogger:
     def _at(self, t_s: float) -> None:
         self._rec.set_time(TIMELINE, duration=float(t_s))
 
+    def _lat_lon(self, enu_m: np.ndarray) -> np.ndarray:
+        from uam_planner.geo import enu_to_geodetic
+        return enu_to_geodetic(np.asarray(enu_m, dtype=np.float64).reshape(-1, 3), self._origin)[:, :2]
+
     # -- static data ----------------------------------------------------------------------
 
+    def _log_series_styles(self) -> None:
+        rr = self._rr
+        for name, label, color in (("approved_cumulative", "approved (cumulative)", (60, 200, 90)),
+                                   ("active_aircraft", "airborne or scheduled", VEHICLE_COLOR),
+                                   ("pending_requests", "pending requests", (230, 200, 60)),
+                                   ("mwis_vertices", "MWIS size (vertices)", (90, 140, 200)),
+                                   ("mwis_selected", "selected vertices", (60, 200, 90)),
+                                   ("solve_time_s", "solve time [s]", (230, 120, 60))):
+            self._rec.log(f"metrics/{name}", rr.SeriesLines(names=label, colors=color, widths=2.0),
+                          static=True)
+
     def log_network(self, network: Any) -> None:
-        """Corridors, aerodromes and waypoints of a Network (ENU metres), as static data."""
+        """Corridors (coloured by level), vertiports and waypoints of a Network, as static data."""
         if not self.enabled:
             return
         rr = self._rr
         enu = np.asarray(network.enu_m, dtype=np.float64)
         edges = np.asarray(network.edges, dtype=np.int64).reshape(-1, 2)
         strips = enu[edges] if len(edges) else np.zeros((0, 2, 3))
+        colors = level_colors(corridor_levels(network))
         self._rec.log("world/network/corridors",
-                      rr.LineStrips3D(list(strips), colors=_CORRIDOR_COLOR, radii=4.0), static=True)
+                      rr.LineStrips3D(list(strips), colors=colors, radii=_ui(CORRIDOR_RADIUS_UI)),
+                      static=True)
         is_aero = np.asarray(network.is_aerodrome, dtype=bool)
-        names = list(getattr(network, "names", None) or network.node_ids)
-        labels = [names[i] for i in np.flatnonzero(is_aero)]
+        all_labels = _node_labels(network)
+        labels = [all_labels[i] for i in np.flatnonzero(is_aero)]
         self._rec.log("world/network/aerodromes",
-                      rr.Points3D(enu[is_aero], labels=labels, colors=_AERODROME_COLOR, radii=40.0,
-                                  show_labels=True), static=True)
+                      rr.Points3D(enu[is_aero], labels=labels, colors=AERODROME_COLOR,
+                                  radii=_ui(AERODROME_RADIUS_UI), show_labels=True,
+                                  point_shading="flat"), static=True)
         self._rec.log("world/network/waypoints",
-                      rr.Points3D(enu[~is_aero], colors=_WAYPOINT_COLOR, radii=10.0), static=True)
+                      rr.Points3D(enu[~is_aero], colors=WAYPOINT_COLOR, radii=_ui(WAYPOINT_RADIUS_UI)),
+                      static=True)
+        if getattr(network, "origin_lat_lon_alt", None) is None:
+            return
+        self._origin = tuple(network.origin_lat_lon_alt)
+        lat_lon = self._lat_lon(enu)
+        self._rec.log("geo/network/corridors",
+                      rr.GeoLineStrings(lat_lon=list(lat_lon[edges]) if len(edges) else [],
+                                        colors=colors, radii=_ui(CORRIDOR_RADIUS_UI)), static=True)
+        self._rec.log("geo/network/aerodromes",
+                      rr.GeoPoints(lat_lon=lat_lon[is_aero], colors=AERODROME_COLOR,
+                                   radii=_ui(AERODROME_RADIUS_UI)), static=True)
 
     # -- time-varying data ------------------------------------------------------------------
 
     def log_fleet(self, t_s: float, vehicle_ids: Sequence[str], positions_m: Any) -> None:
-        """The airborne vehicles at simulation time ``t_s`` [s]; clears routes of landed ones."""
+        """The airborne aircraft at simulation time ``t_s`` [s] (ENU metres, one row per id).
+
+        Their routes are re-logged on the same entity, in the same order, whenever the set of
+        airborne flights changes (so instance k is aircraft k and its route).
+        """
         if not self.enabled:
             return
         rr = self._rr
         pos = np.asarray(positions_m, dtype=np.float64).reshape(-1, 3)
-        ids = [str(v) for v in vehicle_ids]
+        ids = tuple(str(v) for v in vehicle_ids)
         if len(ids) != len(pos):
             raise ValueError(f"vehicle_ids: {len(ids)} ids for {len(pos)} positions")
         self._at(t_s)
-        self._rec.log("world/vehicles", rr.Points3D(pos, labels=ids, colors=_VEHICLE_COLOR,
-                                                    radii=30.0))
-        now = set(ids)
-        for landed in sorted(self._airborne - now):
-            if landed in self._routes:
-                self._rec.log(f"world/routes/{landed}", rr.Clear(recursive=False))
-                self._routes.discard(landed)
-        self._airborne = now
+        self._rec.log("world/fleet", rr.Points3D(pos, labels=list(ids), colors=VEHICLE_COLOR,
+                                                 radii=_ui(VEHICLE_RADIUS_UI), show_labels=False,
+                                                 point_shading="flat"))
+        if ids != self._fleet_ids:
+            strips = []
+            for vid, p in zip(ids, pos):
+                route = self._routes.get(vid)
+                strips.append(route if route is not None and len(route) >= 2 else np.stack([p, p]))
+            self._rec.log("world/fleet", rr.LineStrips3D(strips, colors=ROUTE_COLOR,
+                                                         radii=_ui(ROUTE_RADIUS_UI)))
+            for landed in set(self._fleet_ids or ()) - set(ids):
+                self._routes.pop(landed, None)
+            self._fleet_ids = ids
+        if self._origin is not None:
+            self._rec.log("geo/fleet", rr.GeoPoints(lat_lon=self._lat_lon(pos), colors=VEHICLE_COLOR,
+                                                    radii=_ui(VEHICLE_RADIUS_UI)))
 
     def log_route(self, t_s: float, request_id: str, points_m: Any) -> None:
-        """An approved flight's route (waypoints, ENU metres) from decision time ``t_s`` [s]."""
+        """An approved flight's route (waypoints, ENU metres), drawn while the flight is airborne."""
         if not self.enabled:
             return
-        pts = np.asarray(points_m, dtype=np.float64).reshape(-1, 3)
-        self._at(t_s)
-        self._rec.log(f"world/routes/{request_id}",
-                      self._rr.LineStrips3D([pts], colors=_ROUTE_COLOR, radii=6.0,
-                                            labels=[str(request_id)]))
-        self._routes.add(str(request_id))
+        self._routes[str(request_id)] = np.asarray(points_m, dtype=np.float64).reshape(-1, 3)
 
     def log_epoch(self, t_s: float, *, approved_cumulative: int, active_aircraft: int,
                   mwis_vertices: int, mwis_selected: int, solve_time_s: float,
@@ -191,7 +353,7 @@ class RerunLogger:
         """A uam_msgs/PlanningReport: the epoch's metrics (approvals counted from the reports)."""
         if not self.enabled:
             return
-        self._report_approved = getattr(self, "_report_approved", 0) + int(msg.approved)
+        self._report_approved += int(msg.approved)
         self.log_epoch(_stamp_s(msg.header.stamp),
                        approved_cumulative=self._report_approved,
                        active_aircraft=int(msg.active_flights),
@@ -213,3 +375,60 @@ class RerunLogger:
 
     def __exit__(self, *exc: Any) -> None:
         self.close()
+
+
+TOPIC_FLEET = "/uam/fleet_state"
+TOPIC_PLANS = "/uam/flight_plans"
+TOPIC_REPORTS = "/uam/planning_reports"
+
+
+def log_recording(mcap_path: str | os.PathLike, rrd_path: str | os.PathLike, network: Any = None) -> int:
+    """Replay a recording's fleet states, flight plans and reports into an .rrd; returns messages.
+
+    Messages go to the logger in log-time order, as the recorder node would have sent them live.
+    Decodes with rclpy (the workspace must be sourced).
+    """
+    from .analysis import iter_decoded
+
+    n = 0
+    with RerunLogger("save", rrd_path, network=network) as logger:
+        for topic, _t_ns, msg in iter_decoded(mcap_path, topics=(TOPIC_FLEET, TOPIC_PLANS, TOPIC_REPORTS)):
+            if topic == TOPIC_FLEET:
+                logger.log_fleet_state_msg(msg)
+            elif topic == TOPIC_PLANS:
+                logger.log_flight_plan_msg(msg)
+            else:
+                logger.log_planning_report_msg(msg)
+            n += 1
+    return n
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m uam_sim.rerun_log RUN.mcap [--network NET.yaml] [--out RUN.rrd]``."""
+    import argparse
+    import sys
+
+    ap = argparse.ArgumentParser(prog="python -m uam_sim.rerun_log",
+                                 description="turn a run's MCAP recording into a Rerun .rrd with the view")
+    ap.add_argument("mcap")
+    ap.add_argument("--network", default="", help="network file the run used (draws the network and "
+                    "places the fleet on the map); empty = fleet and metrics only")
+    ap.add_argument("--out", default="", help="the .rrd to write (default: the MCAP path with .rrd)")
+    args = ap.parse_args(argv)
+    out = args.out or str(Path(args.mcap).with_suffix(".rrd"))
+    try:
+        network = None
+        if args.network:
+            from uam_planner.network import load_network
+            network = load_network(args.network)
+        n = log_recording(args.mcap, out, network)
+    except (OSError, ValueError) as exc:
+        print(f"rerun_log: {exc}", file=sys.stderr)
+        return 1
+    print(f"wrote {out} from {n} messages of {args.mcap}")
+    return 0
+
+
+if __name__ == "__main__":
+    import sys
+    sys.exit(main())

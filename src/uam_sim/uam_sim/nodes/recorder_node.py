@@ -20,6 +20,12 @@ per-step messages are never deserialized (Rerun gets fleet positions from
 :func:`uam_sim.cdr.fleet_state_digest`); plans and reports, a few hundred a run, are deserialized
 for the check below.
 
+Views for generic viewers (issue 12, :mod:`uam_sim.std_msgs_export`): with ``views`` on (the
+default) the fleet, routes and network are also written in standard types (``/uam/view/*``:
+PointCloud2, NavSatFix, MarkerArray), stamped in real UTC from ``scenario_start_utc``, for
+Foxglove and Rerun's MCAP import; ``foxglove_port`` > 0 serves a live Foxglove WebSocket view
+(:mod:`uam_sim.foxglove_live`).
+
 It checks what it received against what was announced: the approvals the planning reports
 announce, epoch by epoch, against the approved plans received. At the close it logs the result
 (a warning on a mismatch) and writes it into the file as the MCAP metadata record
@@ -54,6 +60,7 @@ from uam_sim.mcap_writer import McapRecorder
 from uam_sim.stamps import sim_stamp_ns
 from uam_sim.rerun_log import MODES as RERUN_MODES
 from uam_sim.rerun_log import RerunLogger
+from uam_sim.std_msgs_export import DEFAULT_SCENARIO_START_UTC, ViewExporter
 
 from uam_bringup import contract as c
 from uam_bringup.qos import profile
@@ -132,6 +139,18 @@ class RecorderNode(Node):
         self.declare_parameter("finish_timeout_s", 10.0, ParameterDescriptor(
             read_only=True, description="after the simulator's end of run, close at the latest after this long [s wall]",
             floating_point_range=[FloatingPointRange(from_value=0.0, to_value=3600.0)]))
+        self.declare_parameter("views", True, ParameterDescriptor(
+            description="also write the run in standard types for generic viewers (/uam/view/*: "
+                        "PointCloud2, NavSatFix, MarkerArray; docs/views.md)"))
+        self.declare_parameter("scenario_start_utc", DEFAULT_SCENARIO_START_UTC, ParameterDescriptor(
+            description="ISO 8601 instant of simulation time 0; the view topics' header stamps are "
+                        "this plus the simulation time (log times stay simulation time)"))
+        self.declare_parameter("view_fix_period_s", 5.0, ParameterDescriptor(
+            description="NavSatFix per vehicle every this many simulated seconds; 0 = every step [s]",
+            floating_point_range=[FloatingPointRange(from_value=0.0, to_value=3600.0)]))
+        self.declare_parameter("foxglove_port", 0, ParameterDescriptor(
+            description="serve a live Foxglove WebSocket view on this port (0 = off; 8765 is "
+                        "Foxglove's default)", integer_range=[IntegerRange(from_value=0, to_value=65535)]))
         g = self.get_parameter
         output = str(g("output").value)
         if not output.endswith(".mcap"):
@@ -155,12 +174,28 @@ class RecorderNode(Node):
         self.recorder = McapRecorder(output, chunk_size_bytes=int(g("chunk_size_bytes").value),
                                      compression=str(g("compression").value),
                                      flush_period_s=float(g("flush_period_s").value))
+        self.views = None
+        self.foxglove = None
+        self.rerun = None
         try:
             self.rerun = RerunLogger(rerun_mode, rrd, network=network,
                                      connect_url=str(g("rerun_url").value) or None)
+            if bool(g("views").value):
+                self.views = ViewExporter(network, str(g("scenario_start_utc").value),
+                                          fix_period_s=float(g("view_fix_period_s").value))
+            if int(g("foxglove_port").value) > 0:
+                from uam_sim.foxglove_live import FoxgloveLive
+                self.foxglove = FoxgloveLive(network, port=int(g("foxglove_port").value),
+                                             scenario_start_utc=str(g("scenario_start_utc").value))
         except BaseException:
             self.recorder.close()
+            if self.rerun is not None:
+                self.rerun.close()
             raise
+        self.view_messages_written = 0
+        if self.views is not None:
+            for vm in self.views.network_messages(0):
+                self._write_view(vm)
         self.finish_requested = False
         self._finish_quiet_s = float(g("finish_quiet_s").value)
         self._finish_timeout_s = float(g("finish_timeout_s").value)
@@ -253,18 +288,41 @@ class RecorderNode(Node):
             self.check.on_plan(msg)
         elif topic == c.TOPIC_REPORTS:
             self.check.on_report(msg)
-        if self.rerun.enabled:
-            if topic == c.TOPIC_FLEET:
-                digest = fleet_state_digest(data, positions=True)
-                if digest is None:  # big-endian bytes: decode in full
-                    self.rerun.log_fleet_state_msg(deserialize_message(data, cls))
-                else:
-                    self.rerun.log_fleet(log_ns * 1e-9, digest.vehicle_ids, digest.positions_m)
-            elif topic == c.TOPIC_PLANS:
-                self.rerun.log_flight_plan_msg(msg)
-            elif topic == c.TOPIC_REPORTS:
-                self.rerun.log_planning_report_msg(msg)
+        if not (self.rerun.enabled or self.views is not None or self.foxglove is not None):
+            return msg
+        if topic == c.TOPIC_FLEET:
+            digest = fleet_state_digest(data, positions=True)
+            if digest is None:  # big-endian bytes: decode in full
+                full = deserialize_message(data, cls)
+                ids = [v.vehicle_id for v in full.vehicles]
+                pos = [(v.position.x, v.position.y, v.position.z) for v in full.vehicles]
+            else:
+                ids, pos = digest.vehicle_ids, digest.positions_m
+            self.rerun.log_fleet(log_ns * 1e-9, ids, pos)
+            if self.views is not None:
+                for vm in self.views.fleet_messages(log_ns, ids, pos):
+                    self._write_view(vm)
+            if self.foxglove is not None:
+                self.foxglove.on_fleet(log_ns, ids, pos)
+        elif topic == c.TOPIC_PLANS:
+            self.rerun.log_flight_plan_msg(msg)
+            if self.views is not None:
+                for vm in self.views.plan_messages(msg):
+                    self._write_view(vm)
+            if self.foxglove is not None:
+                self.foxglove.on_flight_plan(msg)
+        elif topic == c.TOPIC_REPORTS:
+            self.rerun.log_planning_report_msg(msg)
+            if self.foxglove is not None:
+                self.foxglove.on_planning_report(msg)
         return msg
+
+    def _write_view(self, vm) -> None:
+        """One view message (uam_sim.std_msgs_export.ViewMessage) at its simulation time."""
+        if vm.topic not in self.recorder.topics:
+            self.recorder.add_topic(vm.topic, vm.type_name)
+        self.recorder.write(vm.topic, vm.data, log_time_ns=max(0, vm.sim_time_ns))
+        self.view_messages_written += 1
 
     def _drain(self) -> int:
         """Write every message already delivered to our subscriptions but not yet taken.
@@ -313,6 +371,8 @@ class RecorderNode(Node):
             self.recorder.close()
         finally:
             self.rerun.close()
+            if self.foxglove is not None:
+                self.foxglove.close()
         self.get_logger().info(f"wrote {self.messages_written} messages to {self.output}"
                                + (f" and {self.rrd_path}" if self.rrd_path else ""))
 

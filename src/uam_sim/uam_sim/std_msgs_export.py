@@ -1,0 +1,493 @@
+"""The run in standard ROS message types, so generic viewers draw it without our message package.
+
+Rerun's MCAP import and Foxglove's 3D and Map panels know ``sensor_msgs`` and
+``visualization_msgs`` but not ``uam_msgs``. :class:`ViewExporter` turns what the recorder sees
+(fleet states, flight plans, the network) into these messages, written next to the project's
+own topics in the same recording:
+
+========================  ==================================  ===========================================
+topic                     type                                content
+========================  ==================================  ===========================================
+``/uam/view/network``     visualization_msgs/msg/MarkerArray  corridors (one LINE_LIST per flight level,
+                                                              coloured as in Rerun), vertiports
+                                                              (SPHERE_LIST) and their names (TEXT); once,
+                                                              at the start of the run
+``/uam/view/routes``      visualization_msgs/msg/MarkerArray  each approved route (LINE_STRIP) from its
+                                                              decision time, with a lifetime that ends at
+                                                              the flight's arrival
+``/uam/view/fleet``       sensor_msgs/msg/PointCloud2         the airborne aircraft (x, y, z float32, ENU
+                                                              metres) every simulation step
+``/uam/view/fix/<id>``    sensor_msgs/msg/NavSatFix           one topic per vehicle: its WGS84 position
+                                                              every step while airborne
+========================  ==================================  ===========================================
+
+Frames: the cloud and the markers are in frame ``enu`` (the network's local east-north-up frame,
+the frame of the project's own messages); it is the only frame, so no transform is needed (choose
+``enu`` as the display frame in Foxglove's 3D panel). NavSatFix carries WGS84 latitude/longitude
+[deg] and altitude [m] computed from the network's origin, with an empty frame_id (the topic names
+the vehicle; a frame per vehicle that no transform reaches makes Rerun's MCAP import show an
+error on its 3D view, tried).
+
+Stamps: header stamps are real UTC, ``scenario_start_utc`` + simulation time (default
+:data:`DEFAULT_SCENARIO_START_UTC`, a fixed instant so that recordings are deterministic). Rerun
+puts Unix-range header stamps on its ``ros2_timestamp`` timeline.
+
+The CDR bytes are written directly (as :mod:`uam_sim.cdr` does for the simulator's messages);
+a test holds them equal to rclpy's serialization of the same messages. No rclpy import here.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import struct
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from typing import Any, Iterable, Sequence
+
+import numpy as np
+
+from .cdr import _ENCAPSULATION, _Writer
+
+#: The default scenario start: Monday 6 January 2025, 08:00 in Singapore (00:00 UTC).
+DEFAULT_SCENARIO_START_UTC = "2025-01-06T00:00:00Z"
+FRAME_ID = "enu"
+
+TOPIC_NETWORK = "/uam/view/network"
+TOPIC_ROUTES = "/uam/view/routes"
+TOPIC_FLEET_CLOUD = "/uam/view/fleet"
+TOPIC_FIX_PREFIX = "/uam/view/fix/"
+
+TYPE_MARKER_ARRAY = "visualization_msgs/msg/MarkerArray"
+TYPE_POINT_CLOUD2 = "sensor_msgs/msg/PointCloud2"
+TYPE_NAV_SAT_FIX = "sensor_msgs/msg/NavSatFix"
+
+# visualization_msgs/Marker constants
+MARKER_LINE_STRIP = 4
+MARKER_LINE_LIST = 5
+MARKER_SPHERE_LIST = 7
+MARKER_TEXT_VIEW_FACING = 9
+MARKER_ADD = 0
+MARKER_DELETEALL = 3
+# sensor_msgs/PointField.FLOAT32, sensor_msgs/NavSatStatus
+POINTFIELD_FLOAT32 = 7
+NAVSAT_STATUS_FIX = 0
+NAVSAT_SERVICE_GPS = 1
+
+_NS = 1_000_000_000
+_TOKEN_RE = re.compile(r"[^A-Za-z0-9_]")
+
+
+def scenario_start_ns(text: str) -> int:
+    """Nanoseconds since the Unix epoch of an ISO 8601 instant with a time zone.
+
+    ``"2025-01-06T00:00:00Z"`` or ``"2025-01-06T08:00:00+08:00"``. Raises ValueError naming
+    ``scenario_start_utc`` and the value if it does not parse, has no zone, or is before 1990
+    (viewers take earlier stamps for relative times).
+    """
+    try:
+        when = datetime.fromisoformat(str(text).replace("Z", "+00:00"))
+    except ValueError:
+        raise ValueError(f"scenario_start_utc: {text!r} is not an ISO 8601 time like "
+                         f"{DEFAULT_SCENARIO_START_UTC!r}") from None
+    if when.tzinfo is None:
+        raise ValueError(f"scenario_start_utc: {text!r} has no time zone (end it with 'Z' for UTC)")
+    if when.year < 1990 or when.year >= 2100:
+        raise ValueError(f"scenario_start_utc: {text!r} must lie in 1990..2099")
+    delta = when.astimezone(timezone.utc) - datetime(1970, 1, 1, tzinfo=timezone.utc)
+    return (delta.days * 86400 + delta.seconds) * _NS + delta.microseconds * 1000
+
+
+def vehicle_topic(vehicle_id: str) -> str:
+    """The NavSatFix topic of a vehicle: its id with characters ROS names refuse replaced by '_'."""
+    token = _TOKEN_RE.sub("_", str(vehicle_id)) or "_"
+    if token[0].isdigit():
+        token = "v" + token
+    return TOPIC_FIX_PREFIX + token
+
+
+# --------------------------------------------------------------------------------------------
+# CDR encoders
+# --------------------------------------------------------------------------------------------
+
+class _W(_Writer):
+    __slots__ = ()
+
+    def f64s(self, values: Iterable[float]) -> None:
+        vals = [float(v) for v in values]
+        self.align(8)
+        self.buf += struct.pack(f"<{len(vals)}d", *vals)
+
+    def f32s(self, values: Iterable[float]) -> None:
+        vals = [float(v) for v in values]
+        self.align(4)
+        self.buf += struct.pack(f"<{len(vals)}f", *vals)
+
+    def u8(self, v: int) -> None:
+        self.buf += struct.pack("<B", int(v))
+
+    def i8(self, v: int) -> None:
+        self.buf += struct.pack("<b", int(v))
+
+    def u16(self, v: int) -> None:
+        self.align(2)
+        self.buf += struct.pack("<H", int(v))
+
+    def octets(self, data: bytes) -> None:
+        self.u32(len(data))
+        self.buf += data
+
+
+def _split_ns(t_ns: int) -> tuple[int, int]:
+    return int(t_ns // _NS), int(t_ns % _NS)
+
+
+def encode_point_cloud(stamp_ns: int, frame_id: str, positions_m: Any) -> bytes:
+    """Serialized sensor_msgs/PointCloud2 of (n, 3) points: fields x, y, z float32, one row."""
+    pts = np.ascontiguousarray(np.asarray(positions_m, dtype="<f4").reshape(-1, 3))
+    n = pts.shape[0]
+    w = _W()
+    w.header(*_split_ns(stamp_ns), frame_id)
+    w.u32(1)            # height
+    w.u32(n)            # width
+    w.u32(3)            # fields
+    for offset, name in ((0, "x"), (4, "y"), (8, "z")):
+        w.string(name)
+        w.u32(offset)
+        w.u8(POINTFIELD_FLOAT32)
+        w.u32(1)
+    w.u8(0)             # is_bigendian
+    w.u32(12)           # point_step
+    w.u32(12 * n)       # row_step
+    w.octets(pts.tobytes())
+    w.u8(1)             # is_dense
+    return _ENCAPSULATION + bytes(w.buf)
+
+
+_FIX_BODY = struct.Struct("<12dB")   # latitude, longitude, altitude, covariance[9], covariance type
+
+
+def encode_nav_sat_fix(stamp_ns: int, frame_id: str, lat_deg: float, lon_deg: float,
+                       alt_m: float) -> bytes:
+    """Serialized sensor_msgs/NavSatFix: a GPS fix (status FIX), covariance unknown.
+
+    Written with one precompiled struct per part rather than field by field: the recorder
+    writes one per airborne vehicle and step, and this is ~4x faster than the generic writer.
+    """
+    sec, nsec = _split_ns(stamp_ns)
+    fid = frame_id.encode("utf-8") + b"\x00"
+    head = struct.pack("<iII", sec, nsec, len(fid)) + fid
+    p = len(head)                        # payload offset of NavSatStatus.status (int8)
+    pad2 = (p + 1) % 2                   # service (uint16) aligned to 2
+    p += 1 + pad2 + 2
+    pad8 = (-p) % 8                      # latitude (float64) aligned to 8
+    return b"".join((_ENCAPSULATION, head, struct.pack("<b", NAVSAT_STATUS_FIX), b"\x00" * pad2,
+                     struct.pack("<H", NAVSAT_SERVICE_GPS), b"\x00" * pad8,
+                     _FIX_BODY.pack(float(lat_deg), float(lon_deg), float(alt_m), *([0.0] * 9), 0)))
+
+
+@dataclass
+class Marker:
+    """The fields of visualization_msgs/Marker this project uses (the rest are left empty).
+
+    ``scale`` [m] (x = line width for lines, text height for text); ``color`` RGBA in 0..1;
+    ``points`` (n, 3) [m]; ``lifetime_s`` 0 = forever.
+    """
+
+    ns: str
+    id: int
+    type: int
+    stamp_ns: int
+    frame_id: str = FRAME_ID
+    action: int = MARKER_ADD
+    position: tuple = (0.0, 0.0, 0.0)
+    scale: tuple = (1.0, 1.0, 1.0)
+    color: tuple = (1.0, 1.0, 1.0, 1.0)
+    lifetime_s: float = 0.0
+    points: Any = field(default_factory=lambda: np.zeros((0, 3)))
+    text: str = ""
+
+
+def encode_marker_array(markers: Sequence[Marker]) -> bytes:
+    """Serialized visualization_msgs/MarkerArray."""
+    w = _W()
+    w.u32(len(markers))
+    for m in markers:
+        w.header(*_split_ns(m.stamp_ns), m.frame_id)
+        w.string(m.ns)
+        w.i32(int(m.id))
+        w.i32(int(m.type))
+        w.i32(int(m.action))
+        w.f64s(m.position)
+        w.f64s((0.0, 0.0, 0.0, 1.0))        # orientation
+        w.f64s(m.scale)
+        w.f32s(m.color)
+        life_ns = max(0, int(round(float(m.lifetime_s) * _NS)))
+        w.i32(life_ns // _NS)
+        w.u32(life_ns % _NS)
+        w.u8(0)                             # frame_locked
+        pts = np.asarray(m.points, dtype="<f8").reshape(-1, 3)
+        w.u32(pts.shape[0])
+        if pts.shape[0]:
+            w.align(8)
+            w.buf += np.ascontiguousarray(pts).tobytes()
+        w.u32(0)                            # colors
+        w.string("")                        # texture_resource
+        w.header(0, 0, "")                  # texture (sensor_msgs/CompressedImage)
+        w.string("")                        # texture.format
+        w.u32(0)                            # texture.data
+        w.u32(0)                            # uv_coordinates
+        w.string(m.text)
+        w.string("")                        # mesh_resource
+        w.string("")                        # mesh_file.filename
+        w.u32(0)                            # mesh_file.data
+        w.u8(0)                             # mesh_use_embedded_materials
+    return _ENCAPSULATION + bytes(w.buf)
+
+
+# --------------------------------------------------------------------------------------------
+# The exporter
+# --------------------------------------------------------------------------------------------
+
+def _rgba(rgb: Sequence[int], alpha: float = 1.0) -> tuple:
+    return (rgb[0] / 255.0, rgb[1] / 255.0, rgb[2] / 255.0, float(alpha))
+
+
+@dataclass(frozen=True)
+class ViewMessage:
+    """One message to write: topic, type name, CDR bytes, and the simulation time [ns] it belongs to."""
+
+    topic: str
+    type_name: str
+    data: bytes
+    sim_time_ns: int
+
+
+class ViewExporter:
+    """Standard-message views of a run (see the module docstring).
+
+    Args:
+        network: the run's ``uam_planner.network.Network`` or None (then no network markers and
+            no geographic fixes: the ENU frame has no place on the Earth).
+        scenario_start_utc: ISO 8601 instant of simulation time 0.
+        geo_fixes: write the per-vehicle NavSatFix topics.
+        fix_period_s: write the fixes at simulation times that are multiples of this [s] (the
+            fleet cloud goes out every step); 0 = every fleet state. Fixes are one message per
+            vehicle, the bulk of the view topics: every 5 s keeps the recorder's cost per step
+            near that of the cloud (BENCHMARKS.md).
+    Methods return :class:`ViewMessage` lists; the caller registers unknown topics (type in the
+    message) and writes them.
+    """
+
+    def __init__(self, network: Any = None, scenario_start_utc: str = DEFAULT_SCENARIO_START_UTC,
+                 geo_fixes: bool = True, fix_period_s: float = 5.0) -> None:
+        if not (fix_period_s >= 0 and math.isfinite(fix_period_s)):
+            raise ValueError(f"fix_period_s: {fix_period_s!r} must be a finite number >= 0")
+        self.network = network
+        self.fix_period_ns = int(round(fix_period_s * _NS))
+        self.start_ns = scenario_start_ns(scenario_start_utc)
+        self.geo_fixes = bool(geo_fixes) and network is not None
+        self._route_ids: dict[str, int] = {}
+
+    def stamp_ns(self, sim_time_ns: int) -> int:
+        """UTC stamp [ns since the Unix epoch] of a simulation time [ns]."""
+        return self.start_ns + int(sim_time_ns)
+
+    def network_messages(self, sim_time_ns: int = 0) -> list[ViewMessage]:
+        """The network's MarkerArray (empty list without a network)."""
+        if self.network is None:
+            return []
+        from .rerun_log import AERODROME_COLOR, LEVEL_COLORS, _node_labels, corridor_levels
+
+        net = self.network
+        stamp = self.stamp_ns(sim_time_ns)
+        enu = np.asarray(net.enu_m, dtype=np.float64)
+        edges = np.asarray(net.edges, dtype=np.int64).reshape(-1, 2)
+        levels = corridor_levels(net)
+        markers = [Marker("corridors", -1, MARKER_LINE_LIST, stamp, action=MARKER_DELETEALL)]
+        for level in sorted(set(levels.tolist())):
+            sel = edges[levels == level]
+            markers.append(Marker("corridors", int(level), MARKER_LINE_LIST, stamp,
+                                  scale=(15.0, 0.0, 0.0),
+                                  color=_rgba(LEVEL_COLORS[level % len(LEVEL_COLORS)], 0.9),
+                                  points=enu[sel].reshape(-1, 3)))
+        aero = np.flatnonzero(np.asarray(net.is_aerodrome, dtype=bool))
+        markers.append(Marker("vertiports", 0, MARKER_SPHERE_LIST, stamp, scale=(120.0, 120.0, 120.0),
+                              color=_rgba(AERODROME_COLOR), points=enu[aero]))
+        labels = _node_labels(net)
+        for k, i in enumerate(aero):
+            markers.append(Marker("vertiport_names", int(k), MARKER_TEXT_VIEW_FACING, stamp,
+                                  position=tuple(enu[i] + (0.0, 0.0, 150.0)), scale=(0.0, 0.0, 150.0),
+                                  color=_rgba((255, 255, 255)), text=labels[i]))
+        return [ViewMessage(TOPIC_NETWORK, TYPE_MARKER_ARRAY, encode_marker_array(markers), sim_time_ns)]
+
+    def plan_messages(self, plan: Any) -> list[ViewMessage]:
+        """The route marker of an approved uam_msgs/FlightPlan (duck-typed); [] for others."""
+        if int(plan.outcome) != 0 or not plan.waypoints:
+            return []
+        t_ns = int(plan.header.stamp.sec) * _NS + int(plan.header.stamp.nanosec)
+        arrival_ns = int(plan.arrival_time.sec) * _NS + int(plan.arrival_time.nanosec)
+        rid = self._route_ids.setdefault(str(plan.request_id), len(self._route_ids))
+        pts = [(w.position.x, w.position.y, w.position.z) for w in plan.waypoints]
+        from .rerun_log import ROUTE_COLOR
+        marker = Marker("routes", rid, MARKER_LINE_STRIP, self.stamp_ns(t_ns), scale=(6.0, 0.0, 0.0),
+                        color=_rgba(ROUTE_COLOR[:3], 0.8),
+                        lifetime_s=max(arrival_ns - t_ns, 1) / _NS, points=pts, text=str(plan.request_id))
+        return [ViewMessage(TOPIC_ROUTES, TYPE_MARKER_ARRAY, encode_marker_array([marker]), t_ns)]
+
+    def fleet_messages(self, sim_time_ns: int, vehicle_ids: Sequence[str], positions_m: Any) -> list[ViewMessage]:
+        """The fleet's PointCloud2 and (with a network, when a fix is due) one NavSatFix per vehicle."""
+        pos = np.asarray(positions_m, dtype=np.float64).reshape(-1, 3)
+        if len(vehicle_ids) != len(pos):
+            raise ValueError(f"vehicle_ids: {len(vehicle_ids)} ids for {len(pos)} positions")
+        stamp = self.stamp_ns(sim_time_ns)
+        out = [ViewMessage(TOPIC_FLEET_CLOUD, TYPE_POINT_CLOUD2, encode_point_cloud(stamp, FRAME_ID, pos),
+                           sim_time_ns)]
+        due = self.fix_period_ns == 0 or int(sim_time_ns) % self.fix_period_ns == 0
+        if self.geo_fixes and due and len(pos):
+            from uam_planner.geo import enu_to_geodetic
+            lla = enu_to_geodetic(pos, self.network.origin_lat_lon_alt)
+            for vid, (lat, lon, alt) in zip(vehicle_ids, lla.tolist()):
+                if not (math.isfinite(lat) and math.isfinite(lon)):
+                    continue
+                # frame_id left empty: the vehicle is named by the topic, and a frame named after
+                # it (a frame no transform reaches) makes Rerun's MCAP import flag the 3D view
+                out.append(ViewMessage(vehicle_topic(vid), TYPE_NAV_SAT_FIX,
+                                       encode_nav_sat_fix(stamp, "", lat, lon, alt), sim_time_ns))
+        return out
+
+    def fleet_state_messages(self, msg: Any) -> list[ViewMessage]:
+        """:meth:`fleet_messages` of a uam_msgs/FleetState (duck-typed)."""
+        t_ns = int(msg.header.stamp.sec) * _NS + int(msg.header.stamp.nanosec)
+        ids = [v.vehicle_id for v in msg.vehicles]
+        pos = [(v.position.x, v.position.y, v.position.z) for v in msg.vehicles]
+        return self.fleet_messages(t_ns, ids, pos)
+
+
+def write_views(src: str, dst: str, network: Any = None,
+                scenario_start_utc: str = DEFAULT_SCENARIO_START_UTC, geo_fixes: bool = True,
+                log_time: str = "sim") -> int:
+    """Copy a recording and add the view topics; returns the view messages added.
+
+    ``log_time``: "sim" keeps the recording's log times (simulation time) and gives the view
+    messages theirs; "utc" shifts every message's log and publish time by the scenario start, so
+    a player's timeline shows real dates. Decodes with rclpy.
+    """
+    from .recording import McapRecorder, deserialize, parse_offered_qos, read_messages
+
+    if log_time not in ("sim", "utc"):
+        raise ValueError(f"log_time: {log_time!r} is not 'sim' or 'utc'")
+    views = ViewExporter(network, scenario_start_utc, geo_fixes)
+    shift = views.start_ns if log_time == "utc" else 0
+    n = 0
+    with McapRecorder(dst) as rec:
+        def put(vm: ViewMessage) -> None:
+            if vm.topic not in rec.topics:
+                rec.add_topic(vm.topic, vm.type_name)
+            rec.write(vm.topic, vm.data, vm.sim_time_ns + shift)
+
+        for vm in views.network_messages(0):
+            put(vm)
+            n += 1
+        for r in read_messages(src):
+            if r.topic not in rec.topics:
+                rec.add_topic(r.topic, r.type_name, offered_qos_profiles=parse_offered_qos(r.qos_yaml) or None)
+            rec.write(r.topic, r.data, r.log_time_ns + shift, r.publish_time_ns + shift)
+            if r.topic == "/uam/fleet_state":
+                extra = views.fleet_state_messages(deserialize(r))
+            elif r.topic == "/uam/flight_plans":
+                extra = views.plan_messages(deserialize(r))
+            else:
+                continue
+            for vm in extra:
+                put(vm)
+                n += 1
+    return n
+
+
+def benchmark(network: Any, steps: int = 500, vehicles: int = 70, seed: int = 0) -> list[dict]:
+    """Cost per simulation step of the view topics and of Rerun's fleet logging (wall ms).
+
+    ``steps`` fleet states of ``vehicles`` aircraft at random ENU positions; the view messages
+    are encoded and written to a temporary MCAP, once with fixes every step and once every 5 s.
+    """
+    import tempfile
+    import time
+
+    from .recording import McapRecorder
+    from .rerun_log import RerunLogger
+
+    rng = np.random.default_rng(seed)
+    ids = [f"r{j:05d}_000" for j in range(vehicles)]
+    pos = rng.uniform(-10000, 10000, size=(steps, vehicles, 3))
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for period in (0.0, 5.0):
+            ex = ViewExporter(network, fix_period_s=period)
+            t0 = time.perf_counter()
+            msgs = [ex.fleet_messages(k * _NS, ids, pos[k]) for k in range(steps)]
+            encode_s = time.perf_counter() - t0
+            with McapRecorder(f"{tmp}/views_{period}.mcap") as rec:
+                t0 = time.perf_counter()
+                for out in msgs:
+                    for vm in out:
+                        if vm.topic not in rec.topics:
+                            rec.add_topic(vm.topic, vm.type_name)
+                        rec.write(vm.topic, vm.data, vm.sim_time_ns)
+                write_s = time.perf_counter() - t0
+            rows.append({"what": f"view topics, fixes every {period:g} s", "msgs_per_step":
+                         sum(len(m) for m in msgs) / steps, "ms_per_step": 1e3 * (encode_s + write_s) / steps})
+        with RerunLogger("save", f"{tmp}/x.rrd", network=network) as logger:
+            t0 = time.perf_counter()
+            for k in range(steps):
+                if k % 50 == 0:   # the airborne set changes: routes are re-logged
+                    ids = ids[1:] + [f"z{k:05d}"]
+                logger.log_fleet(float(k), ids, pos[k])
+            rr_s = time.perf_counter() - t0
+        rows.append({"what": "Rerun log_fleet (.rrd)", "msgs_per_step": float("nan"),
+                     "ms_per_step": 1e3 * rr_s / steps})
+    return rows
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m uam_sim.std_msgs_export RUN.mcap OUT.mcap [--network NET.yaml]`` | ``--bench``."""
+    import argparse
+    import sys
+
+    ap = argparse.ArgumentParser(prog="python -m uam_sim.std_msgs_export",
+                                 description="copy a recording and add the standard-message view topics")
+    ap.add_argument("src", nargs="?")
+    ap.add_argument("dst", nargs="?")
+    ap.add_argument("--bench", action="store_true", help="print the cost per step of the views "
+                    "(with --network, default the Singapore network) and exit")
+    ap.add_argument("--network", default="", help="the run's network file (needed for markers and fixes)")
+    ap.add_argument("--scenario-start-utc", default=DEFAULT_SCENARIO_START_UTC)
+    ap.add_argument("--no-fixes", action="store_true", help="leave out the per-vehicle NavSatFix topics")
+    ap.add_argument("--log-time", choices=("sim", "utc"), default="sim")
+    args = ap.parse_args(argv)
+    if not args.bench and not (args.src and args.dst):
+        ap.error("src and dst are required (or --bench)")
+    try:
+        network = None
+        if args.network or args.bench:
+            from pathlib import Path
+
+            from uam_planner.network import load_network
+            default = Path(__file__).resolve().parents[3] / "config" / "networks" / "singapore.yaml"
+            network = load_network(args.network or default)
+        if args.bench:
+            for row in benchmark(network):
+                print(f"{row['what']:34s} {row['msgs_per_step']:6.1f} msgs/step {row['ms_per_step']:7.2f} ms/step")
+            return 0
+        n = write_views(args.src, args.dst, network, args.scenario_start_utc, not args.no_fixes,
+                        args.log_time)
+    except (OSError, ValueError) as exc:
+        print(f"std_msgs_export: {exc}", file=sys.stderr)
+        return 1
+    print(f"wrote {args.dst} with {n} view messages")
+    return 0
+
+
+if __name__ == "__main__":
+    import sys
+    sys.exit(main())
