@@ -36,7 +36,7 @@ from .conflict_graph import ConflictGraph, build_conflict_graph
 from .separation import SegmentSet, conflicting_pairs
 from .trajectory import Trajectory
 
-POLICIES = ("mwis", "fifo")
+POLICIES = ("mwis", "fifo", "firstfit")  # firstfit: uam_planner.first_fit
 
 
 @dataclass(frozen=True)
@@ -423,7 +423,7 @@ class Planner:
     Args:
         network: the Network.
         config: PlanningConfig (default: paper defaults).
-        policy: "mwis" or "fifo".
+        policy: "mwis", "fifo" or "firstfit" (uam_planner.first_fit).
         solve_mwis: callable(weights, edges, groups) for the MWIS policy; default calls
             ``uam_solvers.solve`` with ``config.backend``.
 
@@ -517,6 +517,8 @@ class Planner:
             raise ValueError(f"t_s must be finite, got {t_s!r}")
         self.active = [f for f in self.active if f.arrival_s >= t_s]
         fn = plan_epoch_mwis if self.policy == "mwis" else plan_epoch_fifo
+        if self.policy == "firstfit":  # lazy: first_fit builds on this module
+            from .first_fit import plan_epoch_firstfit as fn
         result = fn(t_s, epoch_index, self.pending, self.active, self.network, self.config,
                     self.solve_mwis, self.cache)
         self.pending = list(result.waiting)

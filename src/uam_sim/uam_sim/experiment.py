@@ -50,7 +50,9 @@ from uam_planner.planning import Planner, PlanningConfig
 from .demand import DemandSchedule, RequestGenerator, load_demand
 
 CELL_FORMAT = "uam-experiment-cell/1"
-DEFAULT_METHODS = ("fifo", "greedy", "exact", "sa", "tabu", "qpu-emulator")
+DEFAULT_METHODS = ("fifo", "firstfit", "greedy", "exact", "sa", "tabu", "qpu-emulator")
+# methods that are planner policies, not MWIS backends (firstfit: uam_planner.first_fit)
+BASELINES = ("fifo", "firstfit")
 DEFAULT_RATES = (1, 2, 4, 6, 8, 10, 15, 20)
 REPO_ROOT = Path(__file__).resolve().parents[3]
 
@@ -65,7 +67,8 @@ class ExperimentConfig:
 
     Attributes:
         network: path of a network file, or {"synthetic": {n_nodes, n_aerodromes, seed}}.
-        methods: "fifo" (shortest FIFO) or an MWIS backend name per entry.
+        methods: "fifo" (shortest FIFO), "firstfit" (first conflict-free candidate in arrival
+            order) or an MWIS backend name per entry.
         include_qpu: add the "qpu" backend when it is available (a D-Wave token is configured).
         rates: requests per interval (the swept variable).
         seeds: seed list (an int n in YAML or flags means seeds 0..n-1).
@@ -412,7 +415,7 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
 
     Args:
         network: a uam_planner Network.
-        method: "fifo" for the shortest-FIFO baseline, else an MWIS backend name.
+        method: "fifo" / "firstfit" for the baselines, else an MWIS backend name.
         rate: requests per interval (see RequestGenerator; fractional allowed).
         seed: demand seed (also the solver seed); the same seed gives the same requests whatever
             the method, so methods are compared on identical demand.
@@ -427,16 +430,17 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
     """
     cfg = config if config is not None else ExperimentConfig()
     t_wall = time.perf_counter()
-    policy = "fifo" if method == "fifo" else "mwis"
-    pcfg = cfg.planning_config("greedy" if method == "fifo" else method, seed)
+    policy = method if method in BASELINES else "mwis"
+    pcfg = cfg.planning_config("greedy" if method in BASELINES else method, seed)
     planner = Planner(network, pcfg, policy=policy,
-                      solve_mwis=None if policy == "fifo" else _solver(method, cfg, seed))
+                      solve_mwis=None if policy in BASELINES else _solver(method, cfg, seed))
     if demand is None:
         demand = RequestGenerator(network.aerodrome_ids, rate, cfg.interval_s, cfg.window_s, seed)
     n_epochs = int(math.ceil(duration_s / cfg.epoch_s - 1e-9))
     next_interval = 0
     epochs, flights, instances, rejections = [], [], [], []
     n_requests = approved_cum = expired_cum = 0
+    earliest_s: dict = {}
     for e in range(n_epochs):
         t = e * cfg.epoch_s
         # every demand instant up to t, in time order (equal spacing when interval_s == epoch_s)
@@ -445,6 +449,7 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
             for req in demand.requests_at(next_interval * cfg.interval_s, next_interval):
                 n_requests += 1
                 submitted.append(req)
+                earliest_s[req.request_id] = req.earliest_departure_s  # for the delay analysis
                 reason = planner.submit(req)
                 if reason is not None:
                     rejections.append((req.request_id, reason))
@@ -459,6 +464,7 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
         for f in res.approved:
             flights.append({"request_id": f.request_id, "origin": f.origin_id,
                             "destination": f.destination_id, "epoch": e,
+                            "earliest_departure_s": earliest_s.get(f.request_id),
                             "departure_s": f.departure_s, "arrival_s": f.arrival_s,
                             "length_m": f.length_m, "weight": f.weight,
                             "candidate_index": int(f.candidate_index),
@@ -516,7 +522,7 @@ def cell_params(cfg: ExperimentConfig, method: str, rate, seed: int) -> dict:
     for name in ("duration_s", "epoch_s", "interval_s", "window_s", "separation_m", "k",
                  "penalty_factor", "speed_mps", "corpus_max_vertices", "audit"):
         params[name] = getattr(cfg, name)
-    if method != "fifo":
+    if method not in BASELINES:
         params["time_limit_s"] = cfg.time_limit_s
         params["solver_options"] = cfg.solver_options.get(method) or {}
     if cfg.demand_file:
