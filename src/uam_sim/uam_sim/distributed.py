@@ -58,7 +58,7 @@ def compute_cell(cfg_dict: dict, method: str, rate, seed: int) -> dict:
         return run_cell(cfg_dict, method, rate, seed, scratch)
 
 
-def _client(scheduler: str, n_workers: int):
+def _client(scheduler: str, n_workers: int, connect_timeout_s: float = 30.0):
     try:
         from distributed import Client, LocalCluster
     except ImportError as exc:  # pinned in requirements.txt; say how to get it
@@ -69,14 +69,15 @@ def _client(scheduler: str, n_workers: int):
                                dashboard_address=None)
         return Client(cluster), cluster
     try:
-        return Client(scheduler, timeout="30s"), None
+        return Client(scheduler, timeout=f"{float(connect_timeout_s)}s"), None
     except (OSError, TimeoutError) as exc:
         raise DistributedError(f"scheduler: cannot reach {scheduler!r} ({exc})") from exc
 
 
 def run_cells(cfg_dict: dict, todo: Sequence[tuple], expected_keys: dict, cells_dir,
               scheduler: str = LOCAL, n_workers: int = 2,
-              on_done: Callable[[tuple, dict], None] | None = None) -> dict:
+              on_done: Callable[[tuple, dict], None] | None = None,
+              connect_timeout_s: float = 30.0) -> dict:
     """Run the cells ``todo`` [(method, rate, seed)] on a Dask cluster; return {cell: cell dict}.
 
     Args:
@@ -87,6 +88,7 @@ def run_cells(cfg_dict: dict, todo: Sequence[tuple], expected_keys: dict, cells_
         scheduler: "local" or a scheduler address.
         n_workers: processes of the LocalCluster (ignored for an address).
         on_done: called with (cell, cell dict) as each cell is written (progress bars).
+        connect_timeout_s: how long to try to reach a scheduler address [s].
     Raises DistributedError on a key mismatch or an unreachable scheduler; a cell that raises
     on a worker re-raises here (the cells written before stay, so the sweep resumes).
     """
@@ -97,7 +99,7 @@ def run_cells(cfg_dict: dict, todo: Sequence[tuple], expected_keys: dict, cells_
     scheduler = validate_scheduler(scheduler) or LOCAL
     cells_dir = Path(cells_dir)
     cells_dir.mkdir(parents=True, exist_ok=True)
-    client, cluster = _client(scheduler, n_workers)
+    client, cluster = _client(scheduler, n_workers, connect_timeout_s)
     done: dict = {}
     try:
         futs = {}
