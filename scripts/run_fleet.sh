@@ -15,8 +15,11 @@
 #   --mode M           lockstep | realtime (default lockstep)
 #   --rtf X            real-time factor in realtime mode (default 1)
 #   --rerun M          off | save | spawn | connect (default save: a .rrd next to the MCAP)
-#   --out DIR          output folder (default runs/<date>-<policy>-<backend>-r<rate>-s<seed>)
-# Ctrl-C stops every node cleanly; the recording is closed properly.
+#   --out DIR          output folder (default a new folder $UAM_RUNS_DIR/<date>-<policy>-<backend>-r<rate>-s<seed>-XXXX,
+#                      UAM_RUNS_DIR defaulting to runs/; unique even for runs started in the same second)
+# Ctrl-C, SIGTERM and SIGHUP stop every node cleanly; the recording is closed properly. If this
+# script is killed outright (SIGKILL), every node gets SIGTERM from the kernel (each is started
+# under `setpriv --pdeathsig TERM`) and still closes its files.
 set -Eeuo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
@@ -37,7 +40,7 @@ while [[ $# -gt 0 ]]; do
     --rtf) RTF="${2:?--rtf needs a value}"; shift 2;;
     --rerun) RERUN="${2:?--rerun needs a value}"; shift 2;;
     --out) OUT="${2:?--out needs a value}"; shift 2;;
-    -h|--help) sed -n '2,21p' "$0"; exit 0;;
+    -h|--help) sed -n '2,25p' "$0"; exit 0;;
     *) die "unknown option '$1' (see --help)";;
   esac
 done
@@ -67,7 +70,12 @@ if not ok:
     sys.exit(f"run_fleet: --backend: {sys.argv[1]!r} is unavailable here: {why}")
 EOF
 
-[[ -n "$OUT" ]] || OUT="runs/$(date +%Y%m%d-%H%M%S)-$POLICY-$BACKEND-r$RATE-s$SEED"
+if [[ -z "$OUT" ]]; then
+  # mktemp creates the folder atomically with a random suffix: two runs started in the same second
+  # never share a folder (and never write one MCAP file together)
+  mkdir -p "${UAM_RUNS_DIR:-runs}"
+  OUT="$(mktemp -d "${UAM_RUNS_DIR:-runs}/$(date +%Y%m%d-%H%M%S)-$POLICY-$BACKEND-r$RATE-s$SEED-XXXX")"
+fi
 mkdir -p "$OUT"
 OUT="$(cd "$OUT" && pwd)"
 MCAP="$OUT/run.mcap" RRD="$OUT/run.rrd"
@@ -85,12 +93,21 @@ echo "run_fleet: policy $POLICY, backend $BACKEND, rate $RATE per 30 s, ${DURATI
 echo "run_fleet: outputs in $OUT (ROS_DOMAIN_ID=$ROS_DOMAIN_ID)"
 
 PIDS=() NAMES=()
+# Each node is the installed executable itself (what `ros2 run` would start, without the ros2
+# process in between, which would not pass the parent-death signal on), under setpriv so that the
+# kernel sends it SIGTERM if this script dies, even by SIGKILL.
+WATCH_PARENT=()
+if setpriv --pdeathsig TERM true 2>/dev/null; then WATCH_PARENT=(setpriv --pdeathsig TERM --)
+else echo "run_fleet: setpriv --pdeathsig is unavailable; if this script is killed, stop the nodes by hand" >&2; fi
 start() {  # start <pkg> <exe> <log name> [ros args...]
   local pkg=$1 exe=$2 name=$3; shift 3
-  local cmd
-  if command -v ros2 >/dev/null 2>&1; then cmd=(ros2 run "$pkg" "$exe")
-  else cmd=("$ROOT/install/$pkg/lib/$pkg/$exe"); fi
-  "${cmd[@]}" --ros-args "$@" >"$OUT/$name.log" 2>&1 &
+  # the domain lock stays with this script: a node must not inherit its descriptor (a solver left
+  # running would otherwise keep the domain id claimed)
+  if [[ -n "${DOMAIN_LOCK_FD:-}" ]]; then
+    "${WATCH_PARENT[@]}" "$ROOT/install/$pkg/lib/$pkg/$exe" --ros-args "$@" >"$OUT/$name.log" 2>&1 {DOMAIN_LOCK_FD}>&- &
+  else
+    "${WATCH_PARENT[@]}" "$ROOT/install/$pkg/lib/$pkg/$exe" --ros-args "$@" >"$OUT/$name.log" 2>&1 &
+  fi
   PIDS+=($!) NAMES+=("$name")
 }
 alive() {  # a child that exited stays a zombie until reaped, and kill -0 still succeeds on it
@@ -114,9 +131,9 @@ stop_all() {
     (( rc == 0 )) || echo "run_fleet: node '${NAMES[$i]}' exited with code $rc" >&2
   done
 }
-interrupted() { echo; echo "run_fleet: interrupted; stopping every node"; stop_all INT; trap - INT TERM; INTERRUPTED=1; }
+interrupted() { echo; echo "run_fleet: interrupted; stopping every node"; stop_all INT; trap - INT TERM HUP; INTERRUPTED=1; }
 INTERRUPTED=0
-trap interrupted INT TERM
+trap interrupted INT TERM HUP
 
 start uam_solvers solver solver --params-file config/solver.yaml -p "default_backend:=$BACKEND"
 start uam_planner planner planner --params-file config/planner.yaml -p "network:=$NETWORK" \
@@ -152,17 +169,20 @@ if (( INTERRUPTED == 0 )); then
   while alive "$REC_PID" && (( SECONDS < deadline )); do sleep 0.1; done
   stop_all INT
 fi
-trap - INT TERM
+trap - INT TERM HUP
 echo "run_fleet: node graph finished in $((SECONDS - T0)) s wall (simulator exit code $SIM_RC)"
 grep -h "run finished" "$OUT/simulator.log" || true
 echo "run_fleet: recording: $MCAP"
 [[ "$RERUN" == save && -f "$RRD" ]] && echo "run_fleet: rerun:     $RRD   (view: rerun $RRD)"
 echo "run_fleet: node logs: $OUT/*.log"
+ANALYSIS_RC=0
 if [[ -f "$MCAP" ]]; then
-  python -m uam_sim.analysis "$MCAP" | tee "$OUT/summary.txt"
+  # exit code 2: a loss of separation; 3: the recording lacks plans it should hold (not verified)
+  python -m uam_sim.analysis "$MCAP" | tee "$OUT/summary.txt" || ANALYSIS_RC=$?
 else
   echo "run_fleet: no recording was written; see $OUT/recorder.log" >&2
   exit 1
 fi
 (( INTERRUPTED == 0 )) || exit 130
+(( ANALYSIS_RC == 0 )) || exit "$ANALYSIS_RC"
 exit "$SIM_RC"

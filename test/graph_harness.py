@@ -31,14 +31,15 @@ def make_observer(context):
     import rclpy
     from uam_msgs.msg import FleetState, FlightPlan, FlightRequest, PlanningReport
 
-    from uam_planner.nodes import messages as m
+    from uam_bringup import contract as c
+    from uam_bringup import qos
 
     obs = Observer()
     node = rclpy.create_node("test_observer", context=context)
-    node.create_subscription(FlightPlan, m.TOPIC_PLANS, obs.plans.append, m.QOS_LATCHED)
-    node.create_subscription(PlanningReport, m.TOPIC_REPORTS, obs.reports.append, m.QOS_LATCHED)
-    node.create_subscription(FlightRequest, m.TOPIC_REQUESTS, obs.requests.append, m.QOS_LATCHED)
-    node.create_subscription(FleetState, m.TOPIC_FLEET, obs.fleet.append, m.QOS_STREAM)
+    node.create_subscription(FlightPlan, c.TOPIC_PLANS, obs.plans.append, qos.QOS_LATCHED)
+    node.create_subscription(PlanningReport, c.TOPIC_REPORTS, obs.reports.append, qos.QOS_LATCHED)
+    node.create_subscription(FlightRequest, c.TOPIC_REQUESTS, obs.requests.append, qos.QOS_LATCHED)
+    node.create_subscription(FleetState, c.TOPIC_FLEET, obs.fleet.append, qos.QOS_STREAM)
     return node, obs
 
 

@@ -15,7 +15,7 @@ from uam_msgs.msg import FlightPlan  # noqa: E402
 
 from uam_planner.audit import audit_flights  # noqa: E402
 from uam_planner.network import load_network  # noqa: E402
-from uam_planner.nodes.messages import trajectory_from_plan  # noqa: E402
+from uam_bringup.conversions import trajectory_from_plan  # noqa: E402
 from uam_planner.planning import Planner, PlanningConfig  # noqa: E402
 from uam_sim.demand import RequestGenerator  # noqa: E402
 
@@ -131,13 +131,15 @@ def test_planner_falls_back_to_greedy_when_solver_absent(ros_context, spin_until
 def test_bad_requests_are_rejected_with_reason_and_graph_keeps_running(ros_context, spin_until):
     from uam_msgs.msg import EpochSync, FlightRequest
 
-    from uam_planner.nodes import messages as m
+    from uam_bringup import contract as c
+    from uam_bringup import conversions as m
+    from uam_bringup import qos
 
     executor, nodes, obs = build_graph(ros_context, rate=2.0, seed=1, duration_s=120.0, expected_subscribers=4)
     bad_node = rclpy.create_node("bad_client", context=ros_context)
     executor.add_node(bad_node)
     try:
-        pub = bad_node.create_publisher(FlightRequest, m.TOPIC_REQUESTS, m.QOS_LATCHED)
+        pub = bad_node.create_publisher(FlightRequest, c.TOPIC_REQUESTS, qos.QOS_LATCHED)
         bad = [
             FlightRequest(request_id="bad1", origin_id="NOPE", destination_id="A",
                           earliest_departure=m.to_time(0), latest_departure=m.to_time(60)),
@@ -149,8 +151,8 @@ def test_bad_requests_are_rejected_with_reason_and_graph_keeps_running(ros_conte
         for r in bad:
             pub.publish(r)
         # the simulator waits for a 4th /uam/epoch_sync subscriber: this one
-        bad_node.create_subscription(EpochSync, m.TOPIC_SYNC,
-                                     lambda _: None, m.QOS_LATCHED)
+        bad_node.create_subscription(EpochSync, c.TOPIC_SYNC,
+                                     lambda _: None, qos.QOS_LATCHED)
         assert spin_until(executor, lambda: nodes["simulator"].finished, timeout_s=120)
         assert spin_until(executor, lambda: all(b.request_id in {p.request_id for p in obs.plans} for b in bad), 10)
         by_id = {p.request_id: p for p in obs.plans}

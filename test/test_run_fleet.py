@@ -70,3 +70,98 @@ def test_sigterm_mid_run_stops_every_node_and_keeps_the_recording(tmp_path, ros_
     assert counts.get("/uam/fleet_state", 0) > 10
     assert counts.get("/uam/flight_plans", 0) > 0
     assert counts.get("/uam/requests", 0) > 0
+
+
+def _node_children(pid: int) -> dict[int, str]:
+    """pid -> command line of the node processes started by the run_fleet.sh process ``pid``."""
+    ps = subprocess.run(["ps", "-o", "pid=,args=", "--ppid", str(pid)], capture_output=True, text=True).stdout
+    out = {}
+    for line in ps.splitlines():
+        child, _, args = line.strip().partition(" ")
+        if "/lib/uam_" in args:
+            out[int(child)] = args
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def _start(out: pathlib.Path | None, env: dict, log: pathlib.Path, duration: str = "100000") -> subprocess.Popen:
+    args = ["bash", str(ROOT / "scripts" / "run_fleet.sh"), "--network", "config/networks/tiny.yaml",
+            "--rate", "2", "--duration", duration, "--rerun", "off"]
+    if duration == "100000":
+        args += ["--mode", "realtime", "--rtf", "20"]
+    if out is not None:
+        args += ["--out", str(out)]
+    return subprocess.Popen(args, cwd=ROOT, env=env, stdout=log.open("w"), stderr=subprocess.STDOUT)
+
+
+def _running(proc: subprocess.Popen, log: pathlib.Path) -> dict[int, str]:
+    """Wait until the five nodes run and the simulator started; returns them."""
+    assert _wait_for(lambda: "outputs in" in log.read_text(), 120), log.read_text()
+    out = pathlib.Path(log.read_text().split("outputs in ", 1)[1].split(" (")[0])
+    assert _wait_for(lambda: "starting the run" in (out / "simulator.log").read_text()
+                     if (out / "simulator.log").exists() else False, 90), log.read_text()
+    nodes = _node_children(proc.pid)
+    assert len(nodes) == 5, nodes
+    return nodes
+
+
+def test_two_runs_started_in_the_same_second_without_out_get_their_own_folders(tmp_path):
+    env = {k: v for k, v in os.environ.items() if k != "ROS_DOMAIN_ID"}  # each claims its own domain
+    env["UAM_RUNS_DIR"] = str(tmp_path / "runs")
+    logs = [tmp_path / "a.log", tmp_path / "b.log"]
+    procs = [_start(None, env, log, duration="60") for log in logs]
+    for proc, log in zip(procs, logs):
+        assert proc.wait(timeout=300) == 0, log.read_text()
+    folders = sorted((tmp_path / "runs").iterdir())
+    assert len(folders) == 2, folders
+    for folder in folders:
+        assert "Safety audit     OK" in (folder / "summary.txt").read_text()
+
+
+def test_sighup_stops_every_node(tmp_path, ros_domain_id):
+    log = tmp_path / "run.log"
+    proc = _start(tmp_path / "run", dict(os.environ, ROS_DOMAIN_ID=str(ros_domain_id)), log)
+    try:
+        nodes = _running(proc, log)
+        mcap = tmp_path / "run" / "run.mcap"
+        assert _wait_for(lambda: mcap.exists() and mcap.stat().st_size > 20_000, 60)
+        proc.send_signal(signal.SIGHUP)
+        assert proc.wait(timeout=90) == 130, log.read_text()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert not [pid for pid in nodes if _alive(pid)], nodes
+    assert "killing it" not in log.read_text()
+
+
+def test_a_killed_run_fleet_stops_every_node_and_no_node_holds_the_domain_lock(tmp_path):
+    """SIGKILL cannot be trapped: the kernel's parent-death signal stops the nodes, which still
+    close the recording; no node inherited the descriptor that holds the domain id's lock."""
+    from mcap.reader import make_reader
+
+    env = {k: v for k, v in os.environ.items() if k != "ROS_DOMAIN_ID"}  # run_fleet claims a domain
+    log = tmp_path / "run.log"
+    proc = _start(tmp_path / "run", env, log)
+    try:
+        nodes = _running(proc, log)
+        for pid in nodes:
+            fds = os.listdir(f"/proc/{pid}/fd")
+            held = [os.readlink(f"/proc/{pid}/fd/{fd}") for fd in fds
+                    if "uam-ros-domain-" in os.readlink(f"/proc/{pid}/fd/{fd}")]
+            assert not held, f"{nodes[pid]} holds {held}"
+        proc.kill()
+        proc.wait(timeout=10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert _wait_for(lambda: not any(_alive(pid) for pid in nodes), 30), \
+        [nodes[pid] for pid in nodes if _alive(pid)]
+    with open(tmp_path / "run" / "run.mcap", "rb") as f:
+        assert make_reader(f).get_summary() is not None  # the recorder closed the file on SIGTERM

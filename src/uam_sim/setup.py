@@ -25,5 +25,7 @@ setup(
             "analyze = uam_sim.analysis:main",
             "experiment = uam_sim.experiment:main",
         ],
+        # uam_solvers.instances reads .mcap corpora through this (it cannot import uam_sim)
+        "uam_solvers.corpus_readers": ["mcap = uam_sim.recorded_instances:corpus_entries"],
     },
 )

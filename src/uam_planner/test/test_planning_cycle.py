@@ -82,10 +82,11 @@ class Answer:
 
 
 @pytest.mark.parametrize("solver, reason", [
-    (lambda w, e, g: Answer(np.arange(len(w))), "share an edge"),
-    (lambda w, e, g: Answer(np.array([len(w) + 3])), "outside"),
-    (lambda w, e, g: Answer(np.array([0, 0])), "more than once"),
-    (lambda w, e, g: Answer(np.array([0.5])), "dtype"),
+    # the reasons of the one answer checker, uam_solvers.check_selection
+    (lambda w, e, g: Answer(np.arange(len(w))), "conflict"),
+    (lambda w, e, g: Answer(np.array([len(w) + 3])), "out of range"),
+    (lambda w, e, g: Answer(np.array([0, 0])), "duplicate"),
+    (lambda w, e, g: Answer(np.array([0.5])), "integer"),
     (lambda w, e, g: 1 / 0, "ZeroDivisionError"),
     (lambda w, e, g: object(), "no 'selected'"),
 ])
@@ -237,3 +238,55 @@ def test_solver_own_fallback_is_reported():
     rep = p.plan(0.0, 0).report
     assert rep.fallback and rep.fallback_reason == "time limit reached; greedy answer"
     assert rep.backend_used == "greedy" and rep.approved == 1
+
+
+def _requests(net, n, t, seed=0):
+    rng = np.random.default_rng(seed)
+    out = []
+    for i in range(n):
+        o, d = rng.choice(net.aerodrome_ids, 2, replace=False)
+        out.append(req(f"r{t:g}_{i}", str(o), str(d), t))
+    return out
+
+
+@pytest.mark.parametrize("policy", ["mwis", "fifo"])
+def test_prepare_then_commit_gives_what_plan_gives(policy):
+    """The node prepares an epoch, awaits the solver, then commits: the same flights as plan()."""
+    import uam_solvers
+    from uam_planner.planning import call_solver
+
+    net = generate_network(40, 5, seed=2)
+    cfg = PlanningConfig(backend="exact")
+    a, b = Planner(net, cfg, policy), Planner(net, cfg, policy)
+    for k in range(4):
+        for r in _requests(net, 6, 30.0 * k, seed=k):
+            assert a.submit(r) is None and b.submit(r) is None
+        ra = a.plan(30.0 * k, k)
+        prep = b.prepare(30.0 * k, k)
+        other = _requests(net, 1, 30.0 * k, seed=99 + k)[0]
+        late = req(f"late{k}", other.origin_id, other.destination_id, 30.0 * k)
+        assert b.submit(late) is None  # arrives while the solver works: waits for the next epoch
+        assert a.submit(late) is None
+        answer = None
+        if prep.needs_solver:
+            answer = call_solver(lambda w, e, g: uam_solvers.solve(w, e, groups=g, backend="exact"), prep.graph)
+        rb = b.commit(prep, answer)
+        assert [(f.request_id, f.route_node_ids) for f in ra.approved] == \
+            [(f.request_id, f.route_node_ids) for f in rb.approved]
+        assert [r.request_id for r in a.pending] == [r.request_id for r in b.pending]
+        assert f"late{k}" in {r.request_id for r in b.pending}
+
+
+def test_commit_checks_the_answer_in_one_place_and_falls_back():
+    net = generate_network(40, 5, seed=2)
+    p = Planner(net, PlanningConfig(backend="exact"), "mwis")
+    for r in _requests(net, 8, 0.0):
+        p.submit(r)
+    prep = p.prepare(0.0, 0)
+    assert prep.needs_solver
+    with pytest.raises(RuntimeError):
+        p.prepare(0.0, 0)  # one prepared epoch at a time
+    res = p.commit(prep, "solver service uam/solve_mwis did not answer within 1.0 s")
+    assert res.report.fallback and res.report.backend_used == "greedy"
+    assert "did not answer" in res.report.fallback_reason
+    assert res.approved and audit_flights(res.approved, 100.0).ok

@@ -13,14 +13,14 @@ request, by candidate index, and each request's candidates form a clique. So wal
 vertices in index order and taking every vertex none of whose neighbours is taken yet is
 first-fit exactly: a request's first free candidate is taken, and the clique then blocks its
 other candidates. The answer is independent by construction and is checked again by the planning
-cycle like any solver's.
+cycle like any solver's. The Planner's "firstfit" policy is ``plan_epoch_mwis`` with
+:func:`first_fit_select` as its solver, relabelled by :func:`as_firstfit`; this module imports
+nothing of the planner, so the planner can import it without a cycle.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Callable, Sequence
-
 import numpy as np
 
 POLICY = "firstfit"
@@ -64,18 +64,11 @@ def first_fit_select(weights, edges, groups=None) -> FirstFitAnswer:
     return FirstFitAnswer(selected=np.flatnonzero(taken).astype(np.int64))
 
 
-def plan_epoch_firstfit(t_s: float, epoch_index: int, pending: Sequence, active: Sequence,
-                        network, config, solve_mwis: Callable | None, cache):
-    """One first-fit epoch; same inputs and outputs as ``plan_epoch_mwis``.
-
-    ``solve_mwis`` is ignored (the selection is :func:`first_fit_select`). The report carries the
-    instance first-fit walked (vertices, edges) with ``policy`` and ``backend_used`` "firstfit";
-    the flights' ``method`` and ``backend`` are "firstfit".
-    """
-    from .planning import plan_epoch_mwis
-
-    res = plan_epoch_mwis(t_s, epoch_index, pending, active, network, config, first_fit_select,
-                          cache)
+def as_firstfit(res):
+    """Label an EpochResult of ``plan_epoch_mwis(..., first_fit_select, ...)`` as first-fit: the
+    report keeps the instance first-fit walked (vertices, edges) with ``policy`` and
+    ``backend_requested`` "firstfit" (``backend_used`` is already "firstfit"); the flights'
+    ``method`` and ``backend`` become "firstfit". Returns ``res``."""
     rep = res.report
     rep.policy = POLICY
     rep.backend_requested = POLICY

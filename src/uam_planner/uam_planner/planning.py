@@ -33,6 +33,7 @@ import numpy as np
 
 from .candidates import CandidateCache, RouteTemplate
 from .conflict_graph import ConflictGraph, build_conflict_graph
+from .first_fit import as_firstfit, first_fit_select
 from .separation import SegmentSet, conflicting_pairs
 from .trajectory import Trajectory
 
@@ -166,51 +167,45 @@ def _fallback_greedy(weights: np.ndarray, edges: np.ndarray) -> np.ndarray:
 def check_selection(selected, graph: ConflictGraph) -> str:
     """Why ``selected`` is not a valid answer for ``graph`` ('' when valid).
 
-    Valid: integer vertex indices in range, no repeats, no edge with both ends selected, at most
-    one vertex per request. O(v + e).
+    The one answer checker is ``uam_solvers.check_selection`` (vertex indices in range, no
+    repeats, no edge, at most one candidate per request: the request cliques are groups).
     """
-    sel = np.asarray(selected)
-    if sel.ndim != 1:
-        return f"selected has shape {sel.shape}, expected a 1-D array"
-    if sel.size and sel.dtype.kind not in "iu":
-        return f"selected has dtype {sel.dtype}, expected integers"
-    sel = sel.astype(np.int64)
-    n = graph.n_vertices
-    if sel.size and (sel.min() < 0 or sel.max() >= n):
-        bad = sel[(sel < 0) | (sel >= n)][0]
-        return f"selected vertex {int(bad)} is outside [0, {n - 1}]"
-    chosen = np.zeros(n, dtype=bool)
-    chosen[sel] = True
-    if int(chosen.sum()) != sel.size:
-        return "selected lists a vertex more than once"
-    e = graph.edges
-    both = chosen[e[:, 0]] & chosen[e[:, 1]] if e.shape[0] else np.zeros(0, bool)
-    if both.any():
-        u, v = e[np.argmax(both)]
-        return f"selected vertices {int(u)} and {int(v)} share an edge (not independent)"
-    req = graph.vertex_request[sel]
-    if np.unique(req).size != req.size:
-        return "selected holds two candidates of one request"
-    return ""
+    from uam_solvers.base import MwisProblem
+    from uam_solvers.base import check_selection as check
+
+    problem = MwisProblem.from_arrays(graph.weights, graph.edges, graph.groups)
+    return check(problem, selected)[1]
 
 
-def _solve_checked(graph: ConflictGraph, solve_mwis: Callable, report: EpochReport) -> np.ndarray:
-    """Call the injected solver, check its answer, fall back to greedy; fill the report."""
+def call_solver(solve_mwis: Callable, graph: ConflictGraph):
+    """Call the injected solve function on ``graph``; an exception is returned, not raised."""
+    try:
+        return solve_mwis(graph.weights, graph.edges, graph.groups)
+    except Exception as exc:  # any solver failure must not stop planning; commit reports it
+        return exc
+
+
+def checked_selection(graph: ConflictGraph, answer, report: EpochReport) -> np.ndarray:
+    """The one place a solver answer is checked and replaced by greedy; fills the report.
+
+    ``answer``: what the solve function returned (an object with ``selected`` and optionally
+    backend, proven_optimal, fallback, message), or the exception it raised / a reason string
+    (e.g. from the planner node: the service is absent or late). An invalid or missing answer
+    is replaced by the greedy MWIS, marked as a fallback with the reason.
+    """
     if graph.n_vertices == 0:
         return np.zeros(0, dtype=np.int64)
-    t = time.perf_counter()
-    reason = ""
-    result = None
-    try:
-        result = solve_mwis(graph.weights, graph.edges, graph.groups)
-        selected = getattr(result, "selected", None)
+    selected = None
+    if isinstance(answer, BaseException):
+        reason = f"solver raised {type(answer).__name__}: {answer}"
+    elif isinstance(answer, str):
+        reason = answer or "no solver answer"
+    else:
+        selected = getattr(answer, "selected", None)
         if selected is None:
-            reason = f"solver answer {type(result).__name__} has no 'selected'"
+            reason = f"solver answer {type(answer).__name__} has no 'selected'"
         else:
             reason = check_selection(selected, graph)
-    except Exception as exc:  # any solver failure must not stop planning; it is reported
-        reason = f"solver raised {type(exc).__name__}: {exc}"
-    report.solve_time_s = time.perf_counter() - t
     if reason:
         selected = _fallback_greedy(graph.weights, graph.edges)
         report.backend_used = "greedy"
@@ -220,11 +215,11 @@ def _solve_checked(graph: ConflictGraph, solve_mwis: Callable, report: EpochRepo
         assert check_selection(selected, graph) == "", "greedy fallback returned an invalid set"
     else:
         selected = np.asarray(selected, dtype=np.int64)
-        report.backend_used = str(getattr(result, "backend", "") or report.backend_requested)
-        report.proven_optimal = bool(getattr(result, "proven_optimal", False))
-        report.fallback = bool(getattr(result, "fallback", False))
+        report.backend_used = str(getattr(answer, "backend", "") or report.backend_requested)
+        report.proven_optimal = bool(getattr(answer, "proven_optimal", False))
+        report.fallback = bool(getattr(answer, "fallback", False))
         if report.fallback:
-            report.fallback_reason = str(getattr(result, "message", "") or "solver fell back")
+            report.fallback_reason = str(getattr(answer, "message", "") or "solver fell back")
     return np.sort(selected)
 
 
@@ -273,25 +268,36 @@ def _airborne(active: Sequence[Flight], t_s: float) -> list:
     return [f for f in active if f.arrival_s >= t_s]
 
 
-def plan_epoch_mwis(t_s: float, epoch_index: int, pending: Sequence[FlightRequest],
-                    active: Sequence[Flight], network, config: PlanningConfig,
-                    solve_mwis: Callable, cache: CandidateCache) -> EpochResult:
-    """One MWIS planning epoch at time ``t_s`` [s].
+@dataclass
+class PreparedEpoch:
+    """An epoch prepared up to its conflict graph; :func:`commit_epoch` turns an answer into
+    approvals. For the FIFO policy (no solver) everything is decided in prepare (``result``)."""
 
-    Args:
-        t_s: epoch time [s]; approved flights depart at t_s.
-        epoch_index: epoch number, copied to the report and the flights.
-        pending: requests not yet decided, in arrival order.
-        active: approved flights (those that landed before t_s are ignored).
-        network: the Network (ids in requests are its node ids).
-        config: PlanningConfig.
-        solve_mwis: callable(weights, edges, groups) -> object with ``selected`` (and optionally
-            backend, proven_optimal, fallback, message); its answer is checked, and replaced by
-            greedy (marked as a fallback in the report) if it raises or is invalid.
-        cache: CandidateCache built for this network and config.
-    Returns: EpochResult. Approved flights never lose separation with each other or with
-    ``active``: every conflict is an edge and the answer is checked to be independent.
-    """
+    t_s: float
+    epoch_index: int
+    pending: list
+    report: EpochReport
+    graph: ConflictGraph | None = None
+    eligible: list = field(default_factory=list)
+    tmpls: list = field(default_factory=list)
+    trajs: list = field(default_factory=list)
+    req_of: list = field(default_factory=list)
+    airborne_count: int = 0
+    prepare_s: float = 0.0
+    phases: dict = field(default_factory=dict)
+    result: EpochResult | None = None
+
+    @property
+    def needs_solver(self) -> bool:
+        """True when commit needs an MWIS answer for ``graph``."""
+        return self.result is None and self.graph is not None and self.graph.n_vertices > 0
+
+
+def prepare_epoch_mwis(t_s: float, epoch_index: int, pending: Sequence[FlightRequest],
+                       active: Sequence[Flight], network, config: PlanningConfig,
+                       cache: CandidateCache) -> PreparedEpoch:
+    """Steps 1-6 of an MWIS epoch at ``t_s`` [s]: eligible requests, candidates, trajectories,
+    deconfliction and the conflict graph (``PreparedEpoch.graph``), still to be solved."""
     t_start = time.perf_counter()
     phases = {}
     report = EpochReport(epoch_index=int(epoch_index), t_s=float(t_s), policy="mwis",
@@ -318,17 +324,32 @@ def plan_epoch_mwis(t_s: float, epoch_index: int, pending: Sequence[FlightReques
         np.fromiter((tp.route.candidate_index for tp in tmpls), dtype=np.int64, count=len(tmpls)),
         np.fromiter((tp.route.weight for tp in tmpls), dtype=np.float64, count=len(tmpls)),
         len(eligible), [f.trajectory for f in airborne], config.separation_m, timings=phases)
-    t4 = time.perf_counter()
+    return PreparedEpoch(t_s=float(t_s), epoch_index=int(epoch_index), pending=list(pending), report=report,
+                         graph=graph, eligible=eligible, tmpls=tmpls, trajs=trajs, req_of=req_of,
+                         airborne_count=len(airborne), prepare_s=time.perf_counter() - t_start,
+                         phases=phases)
 
-    selected = _solve_checked(graph, solve_mwis, report)
+
+def commit_epoch(prep: PreparedEpoch, answer, config: PlanningConfig, solve_s: float = 0.0) -> EpochResult:
+    """Step 7: the checked answer (see :func:`checked_selection`) becomes flights departing at t.
+
+    ``answer``: the solver's answer, an exception or a reason string (ignored when the graph is
+    empty or for FIFO); ``solve_s``: wall time spent getting it [s], for the report.
+    """
+    if prep.result is not None:
+        return prep.result
+    graph, report, phases, eligible = prep.graph, prep.report, prep.phases, prep.eligible
+    t4 = time.perf_counter()
+    selected = checked_selection(graph, answer, report)
     t5 = time.perf_counter()
-    phases["solve_s"] = t5 - t4
+    phases["solve_s"] = float(solve_s) + (t5 - t4)
+    report.solve_time_s = phases["solve_s"]
 
     approved = []
     for v in selected.tolist():
         src = int(graph.vertex_source[v])
-        approved.append(_flight(eligible[req_of[src]], tmpls[src], trajs[src], "mwis",
-                                report.backend_used, epoch_index))
+        approved.append(_flight(eligible[prep.req_of[src]], prep.tmpls[src], prep.trajs[src], "mwis",
+                                report.backend_used, prep.epoch_index))
     # Vertices follow the eligible order, so sorted vertices give approvals in arrival order.
 
     report.eligible = len(eligible)
@@ -342,12 +363,38 @@ def plan_epoch_mwis(t_s: float, epoch_index: int, pending: Sequence[FlightReques
     report.vertex_request_ids = [eligible[i].request_id for i in graph.vertex_request.tolist()]
     report.vertex_candidate_index = graph.vertex_candidate
     report.selected = selected.astype(np.int32)
-    result = _finish(t_s, config, pending, approved, len(airborne), report)
+    result = _finish(prep.t_s, config, prep.pending, approved, prep.airborne_count, report)
     t6 = time.perf_counter()
     phases["finish_s"] = t6 - t5
-    report.planning_time_s = (t6 - t_start) - phases["solve_s"]
+    # planning time: prepare and finish; waiting between them (e.g. for the service) is solve time
+    report.planning_time_s = prep.prepare_s + (t6 - t5)
     report.phase_times_s = phases
     return result
+
+
+def plan_epoch_mwis(t_s: float, epoch_index: int, pending: Sequence[FlightRequest],
+                    active: Sequence[Flight], network, config: PlanningConfig,
+                    solve_mwis: Callable, cache: CandidateCache) -> EpochResult:
+    """One MWIS planning epoch at time ``t_s`` [s]: prepare, solve, commit.
+
+    Args:
+        t_s: epoch time [s]; approved flights depart at t_s.
+        epoch_index: epoch number, copied to the report and the flights.
+        pending: requests not yet decided, in arrival order.
+        active: approved flights (those that landed before t_s are ignored).
+        network: the Network (ids in requests are its node ids).
+        config: PlanningConfig.
+        solve_mwis: callable(weights, edges, groups) -> object with ``selected`` (and optionally
+            backend, proven_optimal, fallback, message); its answer is checked, and replaced by
+            greedy (marked as a fallback in the report) if it raises or is invalid.
+        cache: CandidateCache built for this network and config.
+    Returns: EpochResult. Approved flights never lose separation with each other or with
+    ``active``: every conflict is an edge and the answer is checked to be independent.
+    """
+    prep = prepare_epoch_mwis(t_s, epoch_index, pending, active, network, config, cache)
+    t = time.perf_counter()
+    answer = call_solver(solve_mwis, prep.graph) if prep.needs_solver else None
+    return commit_epoch(prep, answer, config, time.perf_counter() - t)
 
 
 def plan_epoch_fifo(t_s: float, epoch_index: int, pending: Sequence[FlightRequest],
@@ -446,6 +493,7 @@ class Planner:
         self.active: list[Flight] = []
         self._known_ids: set[str] = set()
         self._rejected_since_plan = 0
+        self._prepared: PreparedEpoch | None = None
 
     @property
     def config(self) -> PlanningConfig:
@@ -511,18 +559,58 @@ class Planner:
         self.pending.append(request)
         return None
 
-    def plan(self, t_s: float, epoch_index: int) -> EpochResult:
-        """Run one planning epoch at ``t_s`` [s] and update the planner's state."""
+    def prepare(self, t_s: float, epoch_index: int) -> PreparedEpoch:
+        """Prepare the epoch at ``t_s`` [s] up to its conflict graph; finish with :meth:`commit`.
+
+        Requests submitted between prepare and commit wait for the next epoch. One prepared
+        epoch at a time.
+        """
         if not math.isfinite(t_s):
             raise ValueError(f"t_s must be finite, got {t_s!r}")
+        if self._prepared is not None:
+            raise RuntimeError(f"epoch {self._prepared.epoch_index} is prepared but not committed")
         self.active = [f for f in self.active if f.arrival_s >= t_s]
-        fn = plan_epoch_mwis if self.policy == "mwis" else plan_epoch_fifo
-        if self.policy == "firstfit":  # lazy: first_fit builds on this module
-            from .first_fit import plan_epoch_firstfit as fn
-        result = fn(t_s, epoch_index, self.pending, self.active, self.network, self.config,
-                    self.solve_mwis, self.cache)
-        self.pending = list(result.waiting)
+        if self.policy == "mwis":
+            prep = prepare_epoch_mwis(t_s, epoch_index, self.pending, self.active, self.network, self.config,
+                                      self.cache)
+        else:
+            args = (t_s, epoch_index, self.pending, self.active, self.network, self.config)
+            res = plan_epoch_fifo(*args, None, self.cache) if self.policy == "fifo" else \
+                as_firstfit(plan_epoch_mwis(*args, first_fit_select, self.cache))  # uam_planner.first_fit
+            prep = PreparedEpoch(t_s=float(t_s), epoch_index=int(epoch_index), pending=list(self.pending),
+                                 report=res.report, result=res)
+        self._prepared = prep
+        return prep
+
+    def commit(self, prep: PreparedEpoch, answer=None, solve_s: float = 0.0) -> EpochResult:
+        """Commit a prepared epoch with the solver's ``answer`` (checked here, greedy fallback)
+        and update the planner's state: waiting requests stay, approvals become active."""
+        if prep is not self._prepared:
+            raise RuntimeError("commit: this epoch was not prepared by this planner (or is committed)")
+        self._prepared = None
+        result = commit_epoch(prep, answer, self.config, solve_s)
+        arrived_since = self.pending[len(prep.pending):]
+        self.pending = list(result.waiting) + arrived_since
         self.active = self.active + list(result.approved)
         result.report.rejected = self._rejected_since_plan
         self._rejected_since_plan = 0
         return result
+
+    def plan(self, t_s: float, epoch_index: int) -> EpochResult:
+        """Run one planning epoch at ``t_s`` [s] (prepare, solve with ``solve_mwis``, commit)."""
+        prep = self.prepare(t_s, epoch_index)
+        t = time.perf_counter()
+        answer = call_solver(self.solve_mwis, prep.graph) if prep.needs_solver else None
+        return self.commit(prep, answer, time.perf_counter() - t)
+
+    def restore(self, flights: Sequence[Flight], decided_ids: Sequence[str] = ()) -> None:
+        """Resume after a restart: ``flights`` are flying (they become active, their ids taken) and
+        ``decided_ids`` were decided before (their ids are taken, nothing is planned for them)."""
+        self.active = list(flights)
+        self._known_ids.update(f.request_id for f in flights)
+        self._known_ids.update(decided_ids)
+        self.pending = [r for r in self.pending if r.request_id not in self._known_ids]
+
+    def is_known(self, request_id: str) -> bool:
+        """True once ``request_id`` was accepted (or restored): a later request with it is a duplicate."""
+        return request_id in self._known_ids

@@ -15,8 +15,9 @@ from rclpy.qos import DurabilityPolicy, QoSProfile  # noqa: E402
 from uam_msgs.msg import (FleetState, FlightPlan, FlightRequest, MwisInstance,  # noqa: E402
                           PlanningReport, VehicleState, Waypoint)
 
-from uam_sim.analysis import instances_from_mcap, main, recorded_instances, summarize  # noqa: E402
-from uam_sim.recording import McapRecorder  # noqa: E402
+from uam_sim.analysis import main, summarize  # noqa: E402
+from uam_sim.mcap_writer import McapRecorder  # noqa: E402
+from uam_sim.recorded_instances import instances_from_mcap, recorded_instances  # noqa: E402
 
 NS = 1_000_000_000
 
@@ -74,7 +75,7 @@ def recording(tmp_path_factory):
         rec.write("/uam/planning_reports", empty, 30 * NS)
         # fleet states at t = 0..4 s with 3, 3, 2, 2, 0 vehicles: time-average over [0, 4] = 2.5
         for k, n in enumerate([3, 3, 2, 2, 0]):
-            fs = FleetState(step_index=k, vehicles=[VehicleState(vehicle_id=f"v{j}") for j in range(n)])
+            fs = FleetState(step_index=k, vehicles=[VehicleState(vehicle_id=f"r{j + 1}") for j in range(n)])
             fs.header.stamp = t(k)
             rec.write("/uam/fleet_state", fs, k * NS)
     return path
@@ -139,8 +140,8 @@ def test_command_line_prints_summary_and_exit_code_flags_a_loss(recording, capsy
 
 
 def test_fleet_state_digest_reads_stamp_and_count_from_the_cdr():
-    from uam_sim.analysis import _fleet_state_digest
-    from uam_sim.recording import serialize_exact
+    from uam_sim.cdr import fleet_state_digest as _fleet_state_digest
+    from uam_sim.cdr import serialize_exact
 
     for frame in ("", "e", "enu", "a-longer-frame"):
         for n in (0, 1, 7):
@@ -157,7 +158,7 @@ def test_pruned_audit_equals_brute_force_on_random_flights():
     import numpy as np
     from uam_planner.audit import audit_flights
 
-    from uam_sim.analysis import audit_trajectories
+    from uam_sim.audit import audit_trajectories
 
     rng = np.random.default_rng(7)
     for trial in range(20):
@@ -174,3 +175,13 @@ def test_pruned_audit_equals_brute_force_on_random_flights():
             assert ours.min_separation_m == pytest.approx(ref.min_separation_m, abs=1e-9), trial
             assert {tuple(sorted(x[:2])) for x in ours.losses} == {tuple(sorted(x[:2])) for x in ref.losses}
             assert ours.pairs_checked <= ref.pairs_checked
+
+
+def test_the_solver_librarys_corpus_reader_reads_recordings_through_the_entry_point(recording):
+    """uam_solvers.instances reads .mcap corpora without importing uam_sim (no upward import):
+    uam_sim declares the reader as an entry point."""
+    from uam_solvers.instances import read_instances
+
+    entries = read_instances(recording)
+    assert [e.name for e in entries] == ["synthetic-epoch0"]
+    assert list(entries[0].problem.weights) == list(instances_from_mcap(recording)[0].weights)

@@ -7,7 +7,8 @@ from pathlib import Path
 import pytest
 
 from uam_sim.distributed import DistributedError, run_cells, validate_scheduler
-from uam_sim.experiment import cell_key, cell_params, make_config, run_sweep
+from uam_sim.experiment import make_config, run_sweep
+from uam_sim.sweep import cell_key, cell_params
 
 NET = {"synthetic": {"n_nodes": 30, "n_aerodromes": 5, "seed": 2}}
 TIMING = {"solve_time_s", "planning_time_s", "wall_s", "real_time_factor", "solve_time_mean_s",

@@ -2,8 +2,10 @@
 
 from uam_planner.planning import Planner
 from uam_sim.demand import RequestGenerator
-from uam_sim.experiment import (DEFAULT_METHODS, cell_params, load_network_spec, make_config,
-                                run_sweep)
+from uam_sim.experiment import make_config, run_sweep
+from uam_sim.experiment_config import DEFAULT_METHODS
+from uam_sim.network_spec import load_network_spec
+from uam_sim.sweep import cell_params
 
 NET = {"synthetic": {"n_nodes": 30, "n_aerodromes": 5, "seed": 2}}
 

@@ -7,11 +7,11 @@ import pytest
 pytest.importorskip("uam_msgs.msg", reason="needs the built workspace (source scripts/env.sh)")
 
 from uam_msgs.msg import FlightPlan, FlightRequest, PlanningReport  # noqa: E402
-from uam_planner.nodes import messages as m  # noqa: E402
+from uam_bringup import conversions as m  # noqa: E402
 
-from uam_sim.experiment import (load_network_spec, main, make_config, run_scenario,  # noqa: E402
-                                study_from_mcaps)
-from uam_sim.recording import McapRecorder  # noqa: E402
+from uam_sim.experiment import main, make_config, run_scenario, study_from_mcaps  # noqa: E402
+from uam_sim.mcap_writer import McapRecorder  # noqa: E402
+from uam_sim.network_spec import load_network_spec  # noqa: E402
 
 NET = {"synthetic": {"n_nodes": 30, "n_aerodromes": 5, "seed": 2}}
 NS = 1_000_000_000

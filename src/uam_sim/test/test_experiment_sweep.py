@@ -7,8 +7,10 @@ import pytest
 import yaml
 
 from uam_sim.demand import RequestGenerator
-from uam_sim.experiment import (ExperimentError, average_airborne, load_config, load_network_spec,
-                                main, make_config, run_experiment, run_scenario, run_sweep)
+from uam_sim.experiment import (ExperimentError, load_config, main, make_config, run_experiment,
+                                run_scenario, run_sweep)
+from uam_sim.network_spec import load_network_spec
+from uam_sim.scenario import average_airborne
 
 REPO = Path(__file__).resolve().parents[3]
 NET = {"synthetic": {"n_nodes": 30, "n_aerodromes": 5, "seed": 2}}
@@ -127,7 +129,7 @@ def test_figures_report_and_tables_are_written(tmp_path):
         assert per_backend == {"greedy": 6, "exact": 6, "sa": 2}
         # exact is the reference optimum: it reaches it in every run
         assert all(r["p_opt"] == 1.0 for r in tts["rows"] if r["backend"] == "exact")
-        assert "TTS(0.99) per backend" in report
+        assert "TTS(0.99) per call and per read" in report
         again = run_experiment(cfg, progress=False, figures=False, report=False)
         assert again["sweep"].computed == [] and again["tts"].get("reused") is True
     from uam_solvers.instances import load_corpus
@@ -154,7 +156,7 @@ def test_config_file_flags_and_errors(tmp_path):
     cfg = load_config(REPO / "config/experiment.yaml")
     assert cfg.rates == [1, 2, 4, 6, 8, 10, 15, 20] and cfg.seeds == [0, 1, 2, 3, 4]
     assert (cfg.duration_s, cfg.separation_m, cfg.k, cfg.epoch_s) == (3500.0, 100.0, 5, 30.0)
-    assert cfg.methods == ["fifo", "greedy", "exact", "sa", "tabu", "qpu-emulator"]
+    assert cfg.methods == ["fifo", "firstfit", "greedy", "exact", "sa", "tabu", "qpu-emulator"]
     cfg = load_config(REPO / "config/experiment.yaml", rates="1,2.5", seeds="3,7", methods="fifo")
     assert (cfg.rates, cfg.seeds, cfg.methods) == ([1, 2.5], [3, 7], ["fifo"])
     with pytest.raises(ExperimentError, match="durations"):
@@ -178,7 +180,7 @@ def test_command_line_runs_a_small_sweep(tmp_path):
 
 def test_sweep_audit_hand_computed_closest_approach():
     from uam_planner.trajectory import Trajectory
-    from uam_sim.experiment import sweep_audit
+    from uam_sim.audit import sweep_audit
     import numpy as np
     # r1 east at 10 m/s, z = 100; r2 north at 10 m/s, z = 150, two segments; r3 5 km away.
     # |d|^2 = 2 (10 t - 500)^2 + 50^2: closest 50 m at t = 50 s.
@@ -198,7 +200,7 @@ def test_sweep_audit_hand_computed_closest_approach():
 
 def test_sweep_audit_agrees_with_the_brute_force_audit():
     from uam_planner.audit import audit_flights
-    from uam_sim.experiment import sweep_audit
+    from uam_sim.audit import sweep_audit
     net = load_network_spec(NET)
     flown = []
     run_scenario(net, "greedy", 8, 3, 900.0, make_config({"audit": False}),

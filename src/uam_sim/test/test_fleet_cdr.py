@@ -72,3 +72,33 @@ def test_direct_cdr_equals_rclpy_serialization():
         pose_bytes = encode_pose_array(int(t), 500_000_000, "enu", s.positions_m, quats)
         assert len(pose_bytes) == len(serialize_message(poses))
         assert deserialize_message(pose_bytes, PoseArray) == poses
+
+
+def test_stamps_ids_and_positions_are_read_from_the_cdr_without_deserializing():
+    """What the recorder and the analysis read from raw bytes equals the deserialized message."""
+    pytest.importorskip("uam_msgs.msg", reason="needs the built workspace (source scripts/env.sh)")
+    from builtin_interfaces.msg import Time
+    from geometry_msgs.msg import PoseArray
+    from rosgraph_msgs.msg import Clock
+    from uam_msgs.msg import FlightPlan, PlanningReport
+    from uam_sim.cdr import fleet_state_digest, leading_stamp_ns, serialize_exact
+
+    cases = (("", []), ("enu", ["a"]), ("e", ["r00001_000", "x" * 13, "é", "b7"]),
+             ("enu", [f"r{i:05d}_000" for i in range(40)]),          # one length: strided path
+             ("en", ["x"] + [f"r{i:05d}_000" for i in range(5)]),    # general, then strided
+             ("enu", ["é1", "é2", "é3"]))                            # one length, not ASCII
+    for frame, ids in cases:
+        pos = np.arange(3.0 * len(ids)).reshape(-1, 3) * 1.5 - 7.0
+        vel = np.ones((len(ids), 3))
+        data = encode_fleet_state(77, 123, frame, 5, ids, pos, vel, np.zeros(len(ids), np.uint8),
+                                  np.arange(len(ids), dtype=np.uint32), np.ones(len(ids)), np.ones(len(ids)))
+        d = fleet_state_digest(data, positions=True)
+        assert d.vehicle_ids == ids and d.step_index == 5
+        np.testing.assert_array_equal(d.positions_m, pos)
+        assert leading_stamp_ns(data) == 77 * 10**9 + 123
+    for msg in (Clock(clock=Time(sec=9, nanosec=8)), PoseArray(), FlightPlan(request_id="x"),
+                PlanningReport(epoch_index=3)):
+        stamp = msg.clock if isinstance(msg, Clock) else msg.header.stamp
+        stamp.sec, stamp.nanosec = 9, 8
+        assert leading_stamp_ns(serialize_exact(msg)) == 9_000_000_008
+    assert leading_stamp_ns(b"\x00\x00\x00\x00" + bytes(8)) is None  # big-endian: not read

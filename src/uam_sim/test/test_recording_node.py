@@ -22,8 +22,9 @@ from rosgraph_msgs.msg import Clock  # noqa: E402
 from uam_msgs.msg import (EpochSync, FleetState, FlightPlan, FlightRequest,  # noqa: E402
                           PlanningReport, VehicleState, Waypoint)
 
+from uam_bringup.contract import resolved  # noqa: E402
 from uam_sim.nodes.recorder_node import RECORDED_TOPICS, RecorderNode  # noqa: E402
-from uam_sim.recording import is_complete, read_messages  # noqa: E402
+from uam_sim.mcap_reader import is_complete, read_messages  # noqa: E402
 
 pytestmark = pytest.mark.ros
 ROOT = Path(__file__).resolve().parents[3]
@@ -40,7 +41,7 @@ def test_records_every_topic_and_closes_on_the_simulators_finish(ros_context, sp
         Parameter("output", value=str(out)), Parameter("rerun", value="save"),
         Parameter("network", value=str(ROOT / "config" / "networks" / "tiny.yaml"))])
     talker = Node("talker", context=ros_context)
-    pubs = {topic: talker.create_publisher(cls, topic, qos) for topic, (cls, qos) in RECORDED_TOPICS.items()}
+    pubs = {resolved(topic): talker.create_publisher(cls, topic, qos) for topic, (cls, qos) in RECORDED_TOPICS.items()}
     executor = SingleThreadedExecutor(context=ros_context)
     executor.add_node(recorder)
     executor.add_node(talker)
@@ -119,4 +120,64 @@ def test_sigterm_and_ctrl_c_close_the_file_properly(tmp_path, sig):
     from mcap.reader import make_reader
     with open(out, "rb") as f:
         summary = make_reader(f).get_summary()
-    assert {c.topic for c in summary.channels.values()} == set(RECORDED_TOPICS)
+    assert {c.topic for c in summary.channels.values()} == set(map(resolved, RECORDED_TOPICS))
+
+
+def test_recorder_checks_announced_approvals_and_never_deserializes_fleet_states(
+        ros_context, spin_until, tmp_path, monkeypatch):
+    """Reports announce 2 approvals, 1 approved plan arrives: the recording says so (metadata),
+    and the analysis will not call it OK. Stamps of /clock, fleet states and poses are read from
+    the CDR bytes: those messages are never deserialized (they were most of the recorder's CPU)."""
+    import uam_sim.nodes.recorder_node as recorder_module
+    from uam_bringup import contract as c
+    from uam_sim.analysis import summarize
+    from uam_sim.mcap_reader import read_metadata
+
+    decoded = []
+    real = recorder_module.deserialize_message
+
+    def counting(data, cls):
+        decoded.append(cls.__name__)
+        return real(data, cls)
+
+    monkeypatch.setattr(recorder_module, "deserialize_message", counting)
+    out = tmp_path / "run.mcap"
+    recorder = RecorderNode(context=ros_context, parameter_overrides=[
+        Parameter("output", value=str(out)), Parameter("rerun", value="save")])
+    talker = Node("talker", context=ros_context)
+    pubs = {topic: talker.create_publisher(cls, topic, qos) for topic, (cls, qos) in RECORDED_TOPICS.items()}
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(recorder)
+    executor.add_node(talker)
+    try:
+        assert spin_until(executor, lambda: all(p.get_subscription_count() >= 1 for p in pubs.values()), 20)
+        for k in range(3):
+            pubs[c.TOPIC_CLOCK].publish(Clock(clock=t(k)))
+            fs = FleetState(step_index=k, vehicles=[VehicleState(vehicle_id=v) for v in ("r1", "r2")])
+            fs.header.stamp = t(k)
+            pubs[c.TOPIC_FLEET].publish(fs)
+            pa = PoseArray(poses=[Pose(), Pose()])
+            pa.header.stamp = t(k)
+            pubs[c.TOPIC_POSES].publish(pa)
+        plan = FlightPlan(request_id="r1", outcome=FlightPlan.OUTCOME_APPROVED,
+                          waypoints=[Waypoint(position=Point(), time=t(0)),
+                                     Waypoint(position=Point(x=100.0), time=t(10))])
+        plan.header.stamp = t(0)
+        pubs[c.TOPIC_PLANS].publish(plan)
+        report = PlanningReport(approved=2)
+        report.header.stamp = t(0)
+        pubs[c.TOPIC_REPORTS].publish(report)
+        assert spin_until(executor, lambda: recorder.messages_written == 11, 20)
+        pubs[c.TOPIC_SYNC].publish(EpochSync(sender="simulator", finished=True, epoch_time=t(3)))
+        assert spin_until(executor, lambda: recorder.finished, 20)
+    finally:
+        executor.shutdown()
+        recorder.destroy_node()
+        talker.destroy_node()
+
+    assert not {"FleetState", "PoseArray", "Clock"} & set(decoded), decoded
+    check = read_metadata(out, "uam_recorder_check")
+    assert check["ok"] == "false" and check["announced_approvals"] == "2" and check["approved_plans"] == "1"
+    assert "2 approvals" in check["verdict"] and "1 approved plan" in check["verdict"]
+    s = summarize(out)
+    assert not s.verified and any("the recorder found" in p for p in s.problems)

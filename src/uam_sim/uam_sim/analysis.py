@@ -23,6 +23,9 @@ Two decoders: ``reader="rclpy"`` (mcap's reader + ``rclpy.serialization``; toler
 short by a crash) and ``reader="rosbags"`` (the independent ``rosbags`` library, types built from
 the definitions embedded in the file; needs a complete file). The summary code only reads fields,
 so both must give the same summary.
+
+The audit itself is :mod:`uam_sim.audit`; decoding is :func:`uam_sim.mcap_reader.iter_decoded`;
+the recorded MWIS instances are :mod:`uam_sim.recorded_instances`.
 """
 
 from __future__ import annotations
@@ -31,14 +34,18 @@ import argparse
 import json
 import math
 import re
-import struct
 import sys
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from types import SimpleNamespace
-from typing import Any, Iterable, Iterator
+from typing import Any, Iterable
 
 import numpy as np
+
+from .audit import SafetyAudit, _t, audit_plans
+from .mcap_reader import is_complete, iter_decoded, read_metadata
+
+#: the MCAP metadata record the recorder node writes with its check of what it received
+RECORDER_CHECK = "uam_recorder_check"
 
 OUTCOME_APPROVED, OUTCOME_REJECTED, OUTCOME_EXPIRED = 0, 1, 2
 TOPIC_REQUESTS = "/uam/requests"
@@ -46,10 +53,6 @@ TOPIC_PLANS = "/uam/flight_plans"
 TOPIC_REPORTS = "/uam/planning_reports"
 TOPIC_FLEET = "/uam/fleet_state"
 ANALYSED_TOPICS = (TOPIC_REQUESTS, TOPIC_PLANS, TOPIC_REPORTS, TOPIC_FLEET)
-
-
-def _t(stamp: Any) -> float:
-    return int(stamp.sec) + int(stamp.nanosec) * 1e-9
 
 
 @dataclass
@@ -73,21 +76,6 @@ class EpochStats:
 
 
 @dataclass
-class SafetyAudit:
-    """Closest approach between every pair of approved flights, as flown."""
-
-    separation_m: float
-    min_separation_m: float          # inf when no two flights are ever airborne together
-    closest_pair: list | None        # [request_id, request_id] at the minimum
-    losses: list                     # [request_id, request_id, distance_m, t_s] below separation_m, by time
-    pairs_checked: int               # pairs whose closest approach was computed exactly
-
-    @property
-    def ok(self) -> bool:
-        return not self.losses
-
-
-@dataclass
 class RunSummary:
     """A run's numbers; ``to_json()`` / ``asdict`` give plain JSON types."""
 
@@ -101,8 +89,8 @@ class RunSummary:
     rejected: int
     expired: int
     undecided: int                   # requests without any plan in the recording
-    duplicate_decisions: int         # plans beyond the first for a request (should be 0)
-    plans_without_request: int       # plans whose request is not in the recording
+    duplicate_decisions: int         # plans beyond the first for a request (identical repeats included)
+    plans_without_request: int       # request ids with a plan but no request in the recording
     average_active_aircraft: float   # time-average of airborne vehicles over the fleet states
     max_active_aircraft: int
     fleet_steps: int
@@ -113,11 +101,24 @@ class RunSummary:
     fallbacks: int = 0
     rejection_reasons: dict = field(default_factory=dict)  # reason (numbers as N) -> count
     audit: SafetyAudit | None = None
+    #: request id -> its distinct decisions in order ("approved", "rejected", "expired"), for every
+    #: id decided more than one way (a re-sent or forged id); every approved plan is audited
+    conflicting_decisions: dict = field(default_factory=dict)
+    #: why the recording cannot be trusted to hold the whole run (then the audit is not "OK")
+    problems: list = field(default_factory=list)
+    #: what the recorder itself found (its ``uam_recorder_check`` metadata), {} if none
+    recorder_check: dict = field(default_factory=dict)
+
+    @property
+    def verified(self) -> bool:
+        """True when the recording holds every plan it should (no entry in ``problems``)."""
+        return not self.problems
 
     def to_dict(self) -> dict:
         d = asdict(self)
         if self.audit is not None:
             d["audit"]["ok"] = self.audit.ok
+        d["verified"] = self.verified
         return _jsonable(d)
 
     def to_json(self, **kw: Any) -> str:
@@ -148,150 +149,80 @@ def _stats(values: list[float]) -> dict:
 
 
 # --------------------------------------------------------------------------------------------
-# Decoding
-# --------------------------------------------------------------------------------------------
-
-def _fleet_state_digest(data: bytes) -> Any | None:
-    """Stamp and vehicle count of a FleetState read straight from its little-endian CDR.
-
-    Layout (XCDR1, offsets from the payload after the 4-byte encapsulation header): stamp sec
-    int32 @0, nanosec uint32 @4, frame_id string (uint32 length incl. NUL, bytes) @8, step_index
-    uint64 aligned to 8, vehicles count uint32. Returns None for big-endian data (the caller
-    deserializes fully then). Avoids building every VehicleState object: O(1) per message.
-    """
-    if len(data) < 16 or data[1] != 1:
-        return None
-    sec, nanosec, n_frame = struct.unpack_from("<iII", data, 4)
-    pos = 12 + n_frame                  # payload offset after frame_id
-    pos += (-pos) % 8                   # align step_index
-    step_index, = struct.unpack_from("<Q", data, 4 + pos)
-    pos += 8
-    pos += (-pos) % 4
-    count, = struct.unpack_from("<I", data, 4 + pos)
-    return SimpleNamespace(header=SimpleNamespace(stamp=SimpleNamespace(sec=sec, nanosec=nanosec)),
-                           step_index=step_index, vehicles=range(count))
-
-
-def iter_decoded(path: str | Path, reader: str = "rclpy",
-                 topics: Iterable[str] = ANALYSED_TOPICS,
-                 fleet_digest_only: bool = False) -> Iterator[tuple[str, int, Any]]:
-    """(topic, log_time_ns, message) of the given topics, in log-time order.
-
-    ``reader``: "rclpy" (mcap + rclpy deserialization; a torn file yields what was written) or
-    "rosbags" (the independent rosbags library, every message decoded in full; needs a complete
-    file). ``fleet_digest_only`` (rclpy reader): FleetStates come back as their stamp,
-    step_index and a ``vehicles`` range of the right length only, read from the CDR directly.
-    """
-    topics = set(topics)
-    if reader == "rclpy":
-        from .recording import deserialize, is_complete, read_messages, read_messages_tolerant
-        if is_complete(path):
-            records = read_messages(path, topics=sorted(topics))
-        else:  # crash-cut file: file order is log order here, but sort to be sure
-            records = sorted((r for r in read_messages_tolerant(path) if r.topic in topics),
-                             key=lambda r: r.log_time_ns)
-        for rec in records:
-            if rec.topic == TOPIC_FLEET and fleet_digest_only:
-                digest = _fleet_state_digest(rec.data)
-                if digest is not None:
-                    yield rec.topic, rec.log_time_ns, digest
-                    continue
-            yield rec.topic, rec.log_time_ns, deserialize(rec)
-    elif reader == "rosbags":
-        from rosbags.highlevel import AnyReader
-        from rosbags.typesys import Stores, get_typestore
-
-        with AnyReader([Path(path)], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as r:
-            conns = [c for c in r.connections if c.topic in topics]
-            for conn, timestamp, raw in r.messages(connections=conns):
-                yield conn.topic, timestamp, r.deserialize(raw, conn.msgtype)
-    else:
-        raise ValueError(f"reader: {reader!r} is not 'rclpy' or 'rosbags'")
-
-
-# --------------------------------------------------------------------------------------------
 # Summary
 # --------------------------------------------------------------------------------------------
 
-def trajectory_of(plan: Any) -> tuple[np.ndarray, np.ndarray]:
-    """(times_s (p,), points_m (p, 3)) of a FlightPlan's waypoints."""
-    times = np.array([_t(w.time) for w in plan.waypoints], dtype=np.float64)
-    points = np.array([(w.position.x, w.position.y, w.position.z) for w in plan.waypoints],
-                      dtype=np.float64).reshape(-1, 3)
-    return times, points
+_OUTCOME_NAMES = {OUTCOME_APPROVED: "approved", OUTCOME_REJECTED: "rejected", OUTCOME_EXPIRED: "expired"}
 
 
-def audit_trajectories(flights: list[tuple[np.ndarray, np.ndarray]], labels: list[str],
-                       separation_m: float = 100.0) -> SafetyAudit:
-    """Exact minimum separation and every loss of separation among piecewise-linear 4D flights.
+def _plan_key(p: Any) -> tuple:
+    """What makes two plan messages the same decision (a latched plan delivered twice)."""
+    return (str(p.request_id), int(p.outcome), str(p.reason), int(p.epoch_index),
+            tuple((_t(w.time), float(w.position.x), float(w.position.y), float(w.position.z))
+                  for w in p.waypoints))
 
-    ``flights``: (times_s (p,), points_m (p, 3)) per flight, times increasing. The exact closest
-    approach of a pair is ``uam_planner.audit.pair_min_distance`` (brute force over the pair's
-    time-overlapping segment pairs). Pairs are taken in increasing order of a lower bound on
-    their distance (the gap between the two flights' bounding boxes; pairs never airborne
-    together are skipped) and the search stops once the bound reaches both the separation
-    minimum and the smallest distance found: every loss and the true minimum are still found,
-    because no skipped pair can be closer than its bound. Complexity O(F^2) for the bounds (numpy)
-    plus O(s_a + s_b) per evaluated pair.
+
+def _vehicle_ids(msg: Any) -> list:
+    ids = getattr(msg, "vehicle_ids", None)  # a digest read from the CDR (uam_sim.cdr)
+    return list(ids) if ids is not None else [str(v.vehicle_id) for v in msg.vehicles]
+
+
+def _few(ids, n: int = 5) -> str:
+    ids = sorted(ids)
+    return ", ".join(repr(i) for i in ids[:n]) + (f" and {len(ids) - n} more" if len(ids) > n else "")
+
+
+def integrity_problems(epochs: list, approved: list, flown_ids: set, max_active: int,
+                       audit: SafetyAudit | None, conflicting: dict) -> list[str]:
+    """Why a recording cannot be trusted to hold the whole run (empty when it can).
+
+    ``approved``: (request id, epoch index) of every approved plan held. Checks: ids decided more
+    than one way; the planning reports' announced approvals against the approved plans held,
+    epoch by epoch; vehicles in the fleet states with no approved plan; flights that
+    flew together while the audit checked no pair.
     """
-    from uam_planner.audit import pair_min_distance
-
-    n = len(flights)
-    if n < 2:
-        return SafetyAudit(float(separation_m), math.inf, None, [], 0)
-    t0 = np.array([f[0][0] for f in flights])
-    t1 = np.array([f[0][-1] for f in flights])
-    lo = np.array([f[1].min(axis=0) for f in flights])
-    hi = np.array([f[1].max(axis=0) for f in flights])
-    iu, ju = np.triu_indices(n, k=1)
-    together = (t0[iu] <= t1[ju]) & (t0[ju] <= t1[iu])
-    iu, ju = iu[together], ju[together]
-    gap = np.maximum(0.0, np.maximum(lo[iu] - hi[ju], lo[ju] - hi[iu]))  # per axis, (k, 3)
-    bound = np.sqrt((gap * gap).sum(axis=1))
-    order = np.argsort(bound, kind="stable")
-    # plain Python floats for the pure-Python kernel (converting numpy scalars per pair is slow)
-    plain = [([float(t) for t in times], [tuple(map(float, p)) for p in points]) for times, points in flights]
-    best, best_pair, losses, checked = math.inf, None, [], 0
-    for k in order:
-        if bound[k] >= separation_m and bound[k] >= best:
-            break
-        i, j = int(iu[k]), int(ju[k])
-        d, t = pair_min_distance(plain[i], plain[j])
-        checked += 1
-        if d < best:
-            best, best_pair = d, [labels[i], labels[j]]
-        if d < separation_m:
-            losses.append([labels[i], labels[j], float(d), float(t)])
-    losses.sort(key=lambda x: (x[3], x[0], x[1]))
-    return SafetyAudit(separation_m=float(separation_m), min_separation_m=float(best),
-                       closest_pair=best_pair, losses=losses, pairs_checked=checked)
-
-
-def audit_plans(plans: list[Any], separation_m: float = 100.0) -> SafetyAudit:
-    """Exact minimum separation between every pair of approved plans (see :func:`audit_trajectories`)."""
-    flights, labels = [], []
-    for p in plans:
-        times, points = trajectory_of(p)
-        if len(times) < 2:
-            continue
-        if np.any(np.diff(times) <= 0):
-            raise ValueError(f"flight plan {p.request_id!r}: waypoint times are not increasing: {times}")
-        flights.append((times, points))
-        labels.append(str(p.request_id))
-    return audit_trajectories(flights, labels, separation_m)
+    problems = []
+    if conflicting:
+        problems.append(f"{len(conflicting)} request id(s) have conflicting decisions ({_few(conflicting)}); "
+                        "every approved plan is audited")
+    announced = sum(e.approved for e in epochs)
+    if epochs and announced != len(approved):
+        per_epoch: dict[int, list] = {}
+        for rid, epoch in approved:
+            per_epoch.setdefault(epoch, []).append(rid)
+        reported = {e.epoch_index: e.approved for e in epochs}
+        detail = [f"epoch {k}: {reported.get(k, 0)} announced, {len(per_epoch.get(k, []))} held"
+                  + (f" ({_few(per_epoch[k])})" if per_epoch.get(k) else "")
+                  for k in sorted(set(reported) | set(per_epoch))
+                  if reported.get(k, 0) != len(per_epoch.get(k, []))]
+        problems.append(f"planning reports announce {announced} approvals but the recording holds "
+                        f"{len(approved)} approved plans ({'; '.join(detail[:5])})")
+    unplanned = flown_ids - {rid for rid, _epoch in approved}
+    if unplanned:
+        problems.append(f"{len(unplanned)} vehicle(s) in the fleet states have no approved plan in the "
+                        f"recording: {_few(unplanned)}")
+    if audit is not None and max_active >= 2 and audit.pairs_checked == 0:
+        problems.append(f"the fleet states show {max_active} aircraft airborne together, but 0 pairs "
+                        "of approved plans were checked")
+    return problems
 
 
 def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m: float = 100.0,
                        path: str = "", reader: str = "", complete_file: bool = True) -> RunSummary:
     """The summary of a stream of (topic, log_time_ns, message), e.g. from :func:`iter_decoded`.
 
+    Every distinct plan counts, whatever its id: identical repeats (a latched plan delivered
+    twice) are counted once; an id decided more than one way is listed in
+    ``conflicting_decisions`` and each of its approved plans is audited (labelled ``id#2``, ...).
     Complexity: linear in the messages, plus the audit (quadratic in overlapping flights).
     """
     request_ids: set[str] = set()
-    decisions: dict[str, Any] = {}
+    decisions: dict[str, list] = {}  # request id -> distinct plans, in arrival order
+    seen: set[tuple] = set()
     duplicates = 0
     fleet_t: list[float] = []
     fleet_n: list[int] = []
+    flown: set[str] = set()
     epochs: list[EpochStats] = []
     t_min, t_max = math.inf, -math.inf
     for topic, log_ns, msg in messages:
@@ -301,12 +232,16 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m: f
         elif topic == TOPIC_PLANS:
             rid = str(msg.request_id)
             if rid in decisions:
-                duplicates += 1  # a late-joining subscriber may get a latched plan twice
-            else:
-                decisions[rid] = msg
+                duplicates += 1
+            key = _plan_key(msg)
+            if key not in seen:
+                seen.add(key)
+                decisions.setdefault(rid, []).append(msg)
         elif topic == TOPIC_FLEET:
+            ids = _vehicle_ids(msg)
             fleet_t.append(_t(msg.header.stamp))
-            fleet_n.append(len(msg.vehicles))
+            fleet_n.append(len(ids))
+            flown.update(ids)
         elif topic == TOPIC_REPORTS:
             epochs.append(EpochStats(
                 epoch_index=int(msg.epoch_index), t_s=_t(msg.header.stamp),
@@ -316,10 +251,18 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m: f
                 active_flights=int(msg.active_flights), objective=float(msg.objective),
                 solve_time_s=float(msg.solve_time_s), backend_used=str(msg.backend_used),
                 fallback=bool(msg.fallback)))
-    outcomes = [int(p.outcome) for p in decisions.values()]
-    approved_plans = [p for p in decisions.values() if int(p.outcome) == OUTCOME_APPROVED]
+    plans = [p for ps in decisions.values() for p in ps]
+    outcomes = [int(p.outcome) for p in plans]
+    conflicting = {rid: [_OUTCOME_NAMES.get(int(p.outcome), str(int(p.outcome))) for p in ps]
+                   for rid, ps in decisions.items() if len(ps) > 1}
+    approved_plans, labels = [], []
+    for rid, ps in decisions.items():
+        mine = [p for p in ps if int(p.outcome) == OUTCOME_APPROVED]
+        for k, p in enumerate(mine):
+            approved_plans.append(p)
+            labels.append(rid if k == 0 else f"{rid}#{k + 1}")
     reasons: dict[str, int] = {}
-    for p in decisions.values():
+    for p in plans:
         if int(p.outcome) != OUTCOME_APPROVED:
             key = _REASON_NUMBER.sub("N", str(p.reason))  # "... by 270 s" and "... by 300 s" together
             reasons[key] = reasons.get(key, 0) + 1
@@ -335,6 +278,8 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m: f
         else:
             avg_active = float(n.mean())
     with_instance = [e for e in epochs if e.vertices > 0]
+    max_active = int(max(fleet_n)) if fleet_n else 0
+    audit = audit_plans(approved_plans, separation_m, labels=labels)
     return RunSummary(
         path=str(path), reader=reader, complete_file=complete_file,
         sim_start_s=t_min if math.isfinite(t_min) else 0.0,
@@ -347,7 +292,7 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m: f
         duplicate_decisions=duplicates,
         plans_without_request=len(set(decisions) - request_ids),
         average_active_aircraft=avg_active,
-        max_active_aircraft=int(max(fleet_n)) if fleet_n else 0,
+        max_active_aircraft=max_active,
         fleet_steps=len(fleet_t),
         epochs=sorted(epochs, key=lambda e: e.epoch_index),
         mwis_vertices=_stats([e.vertices for e in with_instance]),
@@ -355,72 +300,24 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m: f
         solve_time_s=_stats([e.solve_time_s for e in with_instance]),
         fallbacks=sum(e.fallback for e in epochs),
         rejection_reasons=reasons,
-        audit=audit_plans(approved_plans, separation_m),
+        audit=audit,
+        conflicting_decisions=conflicting,
+        problems=integrity_problems(epochs, [(str(p.request_id), int(p.epoch_index)) for p in approved_plans], flown,
+                                    max_active, audit, conflicting),
     )
 
 
 def summarize(path: str | Path, separation_m: float = 100.0, reader: str = "rclpy") -> RunSummary:
     """Read a recording and return its :class:`RunSummary` (see the module docstring)."""
-    from .recording import is_complete
-
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"recording: no file at {path}")
-    return summarize_messages(iter_decoded(path, reader, fleet_digest_only=True), separation_m,
-                              str(path), reader, is_complete(path))
-
-
-# --------------------------------------------------------------------------------------------
-# MWIS instances
-# --------------------------------------------------------------------------------------------
-
-@dataclass
-class RecordedInstance:
-    """An MWIS instance as the planner solved it in one epoch, with its answer."""
-
-    epoch_index: int
-    t_s: float
-    problem: Any                      # uam_solvers.base.MwisProblem
-    vertex_request_ids: list
-    vertex_candidate_index: list
-    selected: list
-    objective: float
-    solve_time_s: float
-    backend_used: str
-
-
-def recorded_instances(path: str | Path, reader: str = "rclpy") -> list[RecordedInstance]:
-    """Every non-empty MWIS instance of the PlanningReports, in epoch order.
-
-    The problem's clique groups are the vertices of each request (at most one candidate per
-    request), in addition to the recorded edges.
-    """
-    from uam_solvers.base import MwisProblem
-
-    out = []
-    for _topic, _t_ns, msg in iter_decoded(path, reader, topics=(TOPIC_REPORTS,)):
-        inst = msg.instance
-        weights = np.asarray(inst.weights, dtype=np.float64)
-        if weights.size == 0:
-            continue
-        edges = np.stack([np.asarray(inst.edges_u, dtype=np.int64),
-                          np.asarray(inst.edges_v, dtype=np.int64)], axis=1).reshape(-1, 2)
-        rids = [str(r) for r in inst.vertex_request_ids]
-        groups: dict[str, list[int]] = {}
-        for i, r in enumerate(rids):
-            groups.setdefault(r, []).append(i)
-        problem = MwisProblem.from_arrays(weights, edges, groups=list(groups.values()) if rids else None)
-        out.append(RecordedInstance(
-            epoch_index=int(msg.epoch_index), t_s=_t(msg.header.stamp), problem=problem,
-            vertex_request_ids=rids, vertex_candidate_index=[int(c) for c in inst.vertex_candidate_index],
-            selected=[int(s) for s in inst.selected], objective=float(msg.objective),
-            solve_time_s=float(msg.solve_time_s), backend_used=str(msg.backend_used)))
-    return sorted(out, key=lambda r: r.epoch_index)
-
-
-def instances_from_mcap(path: str | Path, reader: str = "rclpy") -> list:
-    """The MWIS instances of a recording as ``uam_solvers.base.MwisProblem`` objects."""
-    return [r.problem for r in recorded_instances(path, reader)]
+    summary = summarize_messages(iter_decoded(path, reader, ANALYSED_TOPICS, fleet_digest_only=True),
+                                 separation_m, str(path), reader, is_complete(path))
+    summary.recorder_check = read_metadata(path, RECORDER_CHECK)
+    if summary.recorder_check.get("ok") == "false":
+        summary.problems.append(f"the recorder found: {summary.recorder_check.get('verdict', '?')}")
+    return summary
 
 
 # --------------------------------------------------------------------------------------------
@@ -449,6 +346,8 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
     if s.duplicate_decisions or s.plans_without_request:
         lines.append(f"  (duplicate decisions {s.duplicate_decisions}, plans without request "
                      f"{s.plans_without_request})")
+    for rid, outs in sorted(s.conflicting_decisions.items())[:20]:
+        lines.append(f"    CONFLICTING decisions for {rid!r}: {', '.join(outs)}")
     for reason, n in sorted(s.rejection_reasons.items(), key=lambda kv: -kv[1]):
         lines.append(f"    {n:5d} x {reason or '(no reason given)'}")
     lines += [
@@ -464,11 +363,16 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
         pair = f" ({a.closest_pair[0]} / {a.closest_pair[1]})" if a.closest_pair else ""
         dist = "no two flights airborne together" if not math.isfinite(a.min_separation_m) \
             else f"{a.min_separation_m:.1f} m{pair}"
-        verdict = "OK" if a.ok else f"LOSS OF SEPARATION in {len(a.losses)} pair(s)"
+        verdict = (f"LOSS OF SEPARATION in {len(a.losses)} pair(s)" if not a.ok
+                   else "OK" if s.verified else "NOT VERIFIED (the recording lacks plans it should hold)")
         lines.append(f"Safety audit     {verdict}: minimum separation {dist}, required "
                      f"{a.separation_m:.0f} m, {a.pairs_checked} overlapping pairs checked")
         for rid_a, rid_b, d, t in a.losses[:20]:
             lines.append(f"    {rid_a} / {rid_b}: {d:.1f} m at t = {t:.1f} s")
+    for problem in s.problems:
+        lines.append(f"Recording check  {problem}")
+    if s.recorder_check:
+        lines.append(f"Recorder check   {s.recorder_check.get('verdict', '')}")
     if epochs and s.epochs:
         lines.append("")
         lines.append(f"{'epoch':>5} {'t [s]':>8} {'elig':>5} {'vert':>5} {'edges':>6} {'sel':>4} "
@@ -482,7 +386,8 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Command line: print the summary of a recording (exit 2 if the audit finds a loss)."""
+    """Command line: print the summary of a recording (exit 2 if the audit finds a loss, 3 if the
+    recording lacks plans it should hold, so its audit cannot be trusted)."""
     ap = argparse.ArgumentParser(prog="analyze", description=__doc__.split("\n\n")[0])
     ap.add_argument("recording", help="the .mcap file of a run")
     ap.add_argument("--separation-m", type=float, default=100.0,
@@ -505,7 +410,9 @@ def main(argv: list[str] | None = None) -> int:
             print(format_summary(summary, epochs=not args.no_epochs))
     except BrokenPipeError:  # e.g. piped into `head`
         sys.stderr.close()
-    return 0 if summary.audit is None or summary.audit.ok else 2
+    if summary.audit is not None and not summary.audit.ok:
+        return 2
+    return 0 if summary.verified else 3
 
 
 if __name__ == "__main__":

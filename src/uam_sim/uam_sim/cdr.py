@@ -11,7 +11,10 @@ to ``rclpy.serialization.serialize_message`` of the equivalent message objects.
 
 from __future__ import annotations
 
+import re
 import struct
+from types import SimpleNamespace
+from typing import Any
 
 import numpy as np
 
@@ -97,3 +100,171 @@ def yaw_quaternions(velocities_mps) -> np.ndarray:
     q[:, 2] = np.sin(yaw / 2)
     q[:, 3] = np.cos(yaw / 2)
     return q
+
+
+# --------------------------------------------------------------------------------------------
+# Exact CDR size (rmw_serialize over-estimates it)
+# --------------------------------------------------------------------------------------------
+
+class CdrError(ValueError):
+    """A message the hand-written CDR code cannot handle; the message names the field type."""
+
+
+_PRIMITIVE_SIZE = {"boolean": 1, "octet": 1, "char": 1, "uint8": 1, "int8": 1, "int16": 2,
+                   "uint16": 2, "int32": 4, "uint32": 4, "float": 4, "int64": 8, "uint64": 8,
+                   "double": 8}
+_SEQ_RE = re.compile(r"^sequence<([^,>]+)(?:,\s*\d+)?>$")
+_ARRAY_RE = re.compile(r"^(.+)\[(\d+)\]$")
+
+
+def _align(pos: int, n: int) -> int:
+    return pos + (-pos) % n
+
+
+def _cdr_advance(pos: int, type_str: str, value: Any) -> int:
+    """Offset after serializing ``value`` of rosidl type ``type_str`` at payload offset ``pos``."""
+    if type_str in _PRIMITIVE_SIZE:
+        size = _PRIMITIVE_SIZE[type_str]
+        return _align(pos, size) + size
+    if type_str.startswith("string"):
+        return _align(pos, 4) + 4 + len(value.encode("utf-8")) + 1
+    if type_str.startswith("wstring"):
+        raise CdrError("wstring fields are not supported by the exact CDR size")
+    m = _SEQ_RE.match(type_str)
+    if m:
+        pos = _align(pos, 4) + 4  # element count
+        return _cdr_elements(pos, m.group(1).strip(), value)
+    m = _ARRAY_RE.match(type_str)
+    if m:
+        return _cdr_elements(pos, m.group(1), value)
+    return _cdr_message(pos, value)  # a nested message: no alignment of its own in XCDR1
+
+
+def _cdr_elements(pos: int, elem: str, values: Any) -> int:
+    n = len(values)
+    if n == 0:
+        return pos  # an empty sequence is not aligned for its (absent) elements
+    if elem in _PRIMITIVE_SIZE:
+        size = _PRIMITIVE_SIZE[elem]
+        return _align(pos, size) + n * size
+    for v in values:
+        pos = _cdr_advance(pos, elem, v)
+    return pos
+
+
+def _cdr_message(pos: int, msg: Any) -> int:
+    for name, type_str in msg.get_fields_and_field_types().items():
+        pos = _cdr_advance(pos, type_str, getattr(msg, name))
+    return pos
+
+
+def cdr_size(msg: Any) -> int:
+    """Exact length [bytes] of a message's CDR (XCDR1) serialization, encapsulation included.
+
+    ``rclpy.serialization.serialize_message`` returns a buffer of rmw's *estimated* size, which
+    for some messages (e.g. an empty ``float64[]`` before other fields) is a few bytes longer
+    than the CDR written, with uninitialised bytes at the end; the bytes received from DDS are
+    exact. A message with no fields still serializes one byte.
+    """
+    if not msg.get_fields_and_field_types():
+        return 4 + 1
+    return 4 + _cdr_message(0, msg)
+
+
+def serialize_exact(msg: Any) -> bytes:
+    """``serialize_message`` trimmed to the exact CDR length (what a DDS subscriber receives)."""
+    from rclpy.serialization import serialize_message
+
+    data = serialize_message(msg)
+    try:
+        n = cdr_size(msg)
+    except CdrError:
+        return data
+    if n > len(data):  # never cut bytes the serializer wrote; keep its buffer as it is
+        return data
+    return data[:n]
+
+
+# --------------------------------------------------------------------------------------------
+# Reading fields straight from CDR bytes (no message objects)
+# --------------------------------------------------------------------------------------------
+
+def leading_stamp_ns(data: bytes) -> int | None:
+    """The stamp [ns] of a message whose first field is a ``builtin_interfaces/Time`` or a
+    ``std_msgs/Header`` (FleetState, PoseArray, FlightPlan, PlanningReport, /clock), read from
+    its little-endian CDR at the fixed offset 4 (sec int32, nanosec uint32); None for big-endian
+    or short data. O(1): the recorder stamps every message without deserializing it."""
+    if len(data) < 12 or data[1] != 1:
+        return None
+    sec, nanosec = struct.unpack_from("<iI", data, 4)
+    return sec * 1_000_000_000 + nanosec
+
+
+#: bytes of a VehicleState after its vehicle_id, from the 8-aligned end of the id: Point and
+#: Vector3 (6 float64), phase uint8 (+3 padding), segment_index uint32, two float64
+_VEHICLE_TAIL = 48 + 4 + 4 + 16
+
+
+def _equal_length_run(data: bytes, pos: int, n: int, r: int) -> bool:
+    """True if the r vehicle records from 8-aligned payload offset ``pos`` all have an id of the
+    length n (incl. NUL), i.e. they are records of one stride (checked with a strided view)."""
+    stride = _align(4 + n, 8) + _VEHICLE_TAIL
+    if n == 0 or 4 + pos + r * stride > len(data):
+        return False
+    lengths = np.ndarray((r,), dtype="<u4", buffer=data, offset=4 + pos, strides=(stride,))
+    return bool(np.all(lengths == n))
+
+
+def fleet_state_digest(data: bytes, positions: bool = False) -> Any | None:
+    """Stamp, step, vehicle ids (and positions) of a FleetState read straight from its CDR.
+
+    Layout (XCDR1, offsets from the payload after the 4-byte encapsulation header): stamp sec
+    int32 @0, nanosec uint32 @4, frame_id string (uint32 length incl. NUL, bytes) @8, step_index
+    uint64 aligned to 8, vehicles count uint32, then per vehicle its vehicle_id string (aligned
+    to 4) and a fixed tail aligned to 8 (position x, y, z first). Returns a namespace with
+    ``header.stamp``, ``step_index``, ``vehicle_ids``, ``vehicles`` (the ids: only their count
+    is used) and, with ``positions``, ``positions_m`` (n, 3); None for big-endian data (the
+    caller deserializes fully then). No VehicleState objects: when the ids have one length (the
+    simulator's do), the records have one stride and are read as strided numpy views, else one
+    struct read per vehicle (measured: ~2 ms per 130-vehicle message in Python, loaded machine).
+    """
+    if len(data) < 16 or data[1] != 1:
+        return None
+    sec, nanosec, n_frame = struct.unpack_from("<iII", data, 4)
+    pos = 12 + n_frame                  # payload offset after frame_id
+    pos += (-pos) % 8                   # align step_index
+    step_index, = struct.unpack_from("<Q", data, 4 + pos)
+    pos += 8
+    pos += (-pos) % 4
+    count, = struct.unpack_from("<I", data, 4 + pos)
+    pos += 4
+    ids: list = []
+    xyz: list = []
+    k = 0
+    while k < count:
+        pos += (-pos) % 4
+        n, = struct.unpack_from("<I", data, 4 + pos)
+        if pos % 8 == 0 and _equal_length_run(data, pos, n, count - k):
+            # the simulator's ids all have one length: the rest are records of one stride
+            r, stride, tail = count - k, _align(4 + n, 8) + _VEHICLE_TAIL, _align(4 + n, 8)
+            names = np.ndarray((r,), dtype=f"S{n - 1}", buffer=data, offset=4 + pos + 4, strides=(stride,))
+            try:
+                ids += names.astype(f"U{n - 1}").tolist() if n > 1 else [""] * r
+            except UnicodeDecodeError:
+                ids += [b.decode("utf-8") for b in names.tolist()]
+            if positions:
+                xyz.append(np.ndarray((r, 3), dtype="<f8", buffer=data, offset=4 + pos + tail,
+                                      strides=(stride, 8)))
+            break
+        ids.append(data[8 + pos:8 + pos + n - 1].decode("utf-8"))
+        pos += 4 + n
+        pos += (-pos) % 8
+        if positions:
+            xyz.append(np.asarray(struct.unpack_from("<3d", data, 4 + pos)).reshape(1, 3))
+        pos += _VEHICLE_TAIL
+        k += 1
+    out = SimpleNamespace(header=SimpleNamespace(stamp=SimpleNamespace(sec=sec, nanosec=nanosec)),
+                          step_index=step_index, vehicle_ids=ids, vehicles=ids)
+    if positions:
+        out.positions_m = np.concatenate(xyz).astype(np.float64) if xyz else np.zeros((0, 3))
+    return out

@@ -3,7 +3,7 @@
     python -m uam_sim.experiment --config config/experiment.yaml --scheduler tcp://HOST:8786
     python -m uam_sim.experiment --config config/experiment.yaml --scheduler local --workers 4
 
-Each cell is a pure function of its parameters (``uam_sim.experiment.run_cell``), so cells can run
+Each cell is a pure function of its parameters (``uam_sim.sweep.run_cell``), so cells can run
 anywhere: a worker computes a cell in a scratch directory of its own and sends the cell back;
 the *driver* (the process that runs the sweep) writes it to ``<out>/cells/<key>.json`` atomically
 as each one finishes. So the workers need no shared file system and no ROS, only the project's
@@ -52,7 +52,7 @@ def compute_cell(cfg_dict: dict, method: str, rate, seed: int) -> dict:
 
     Top-level so Dask can pickle it by reference; imports the runner on the worker.
     """
-    from uam_sim.experiment import run_cell
+    from uam_sim.sweep import run_cell
 
     with tempfile.TemporaryDirectory(prefix="uam-cell-") as scratch:
         return run_cell(cfg_dict, method, rate, seed, scratch)
@@ -94,7 +94,7 @@ def run_cells(cfg_dict: dict, todo: Sequence[tuple], expected_keys: dict, cells_
     """
     from distributed import as_completed
 
-    from uam_sim.experiment import _write_json_atomic
+    from uam_sim.files import write_json_atomic
 
     scheduler = validate_scheduler(scheduler) or LOCAL
     cells_dir = Path(cells_dir)
@@ -116,7 +116,7 @@ def run_cells(cfg_dict: dict, todo: Sequence[tuple], expected_keys: dict, cells_
                     f"cell {c}: the worker computed key {cell.get('key')!r}, the driver expects "
                     f"{expected_keys[c]!r}; the worker runs another commit or has other network "
                     f"or demand files (the cell key hashes them)")
-            _write_json_atomic(cells_dir / f"{cell['key']}.json", cell)
+            write_json_atomic(cells_dir / f"{cell['key']}.json", cell)
             done[c] = cell
             if on_done is not None:
                 on_done(c, cell)

@@ -26,8 +26,7 @@ import numpy as np  # noqa: E402
 
 METHOD_ORDER = ("fifo", "firstfit", "greedy", "exact", "sa", "tabu", "qpu-emulator", "qpu", "kamis",
                 "chils")
-# methods that are planner policies rather than MWIS solvers (no MWIS instance of their own)
-BASELINES = ("fifo", "firstfit")
+from .experiment_config import BASELINES  # noqa: E402  (planner policies, not MWIS solvers)
 # marker, line style and colour per method, so methods that overlap (exact, sa, tabu and the
 # emulator often approve the same flights) stay distinguishable in print and in greyscale
 STYLE = {"fifo": ("o", "-", "tab:blue"), "firstfit": ("s", "--", "tab:orange"),
@@ -529,7 +528,7 @@ def flight_metrics(cell, network=None, top=None) -> dict:
 
 def _network(cfg):
     try:
-        from .experiment import load_network_spec
+        from .network_spec import load_network_spec
         return load_network_spec(cfg.network)
     except Exception:  # a recording's network may not be loadable here; skip the corridor part
         return None

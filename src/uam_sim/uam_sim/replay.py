@@ -15,7 +15,8 @@ from typing import Sequence
 
 import numpy as np
 
-from .recording import QosSpec, parse_offered_qos, read_messages, read_messages_tolerant, is_complete
+from .mcap_reader import is_complete, read_messages, read_messages_tolerant
+from .qos_yaml import QosSpec, parse_offered_qos
 
 
 def schedule_offsets_s(log_times_ns: Sequence[int], rate: float) -> np.ndarray:

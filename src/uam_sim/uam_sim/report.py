@@ -356,7 +356,7 @@ def write_report(sweep, outputs: dict, machine: dict, out: Path) -> Path:
     L += ["## Safety audit", "",
           f"The exact closest-approach audit ran on {audited} of {len(cells)} runs over {flights} "
           f"flown flights in total: every pair of straight segments of different flights that "
-          f"share time, closest approach in closed form (`uam_sim.experiment.sweep_audit`, a "
+          f"share time, closest approach in closed form (`uam_sim.audit.sweep_audit`, a "
           f"vectorised time sweep independent of the planner's separation kernel; its tests hold "
           f"it equal to the brute-force `uam_planner.audit.audit_flights`). Minimum "
           f"separation seen: **{_f(min(seps) if seps else None, 2)} m** (minimum required "
@@ -481,7 +481,7 @@ def write_report(sweep, outputs: dict, machine: dict, out: Path) -> Path:
                  f"corridor per run at rate {cor['map_rate']}, seeds pooled. The paper argues "
                  "that MWIS spreads traffic away from the central corridors.")
         if "fifo" in methods:
-            from .experiment import load_network_spec
+            from .network_spec import load_network_spec
             net = load_network_spec(cfg.network)
             top = cor["top_mask"]
             rows = []

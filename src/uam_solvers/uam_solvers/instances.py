@@ -420,15 +420,17 @@ def load_corpus(path: str | Path) -> list[CorpusEntry]:
 def _read_mcap(path: Path) -> list[CorpusEntry]:
     """MWIS instances of a planner recording (the PlanningReports' instances, one per epoch).
 
-    The recording format belongs to uam_sim, which depends on this package, so it is imported
-    only when a recording is read (``python -m uam_solvers.tts --corpus run.mcap``).
+    The recording format belongs to uam_sim, which depends on this package: uam_sim provides the
+    reader as the entry point ``mcap`` of group ``uam_solvers.corpus_readers`` (its setup.py), so
+    this package finds it at run time without importing a package above it.
     """
-    try:
-        from uam_sim.analysis import recorded_instances
-    except ImportError as exc:
-        raise MwisInputError(f"{path}: reading .mcap recordings needs the uam_sim package ({exc})") from None
-    return [CorpusEntry(f"{path.stem}-epoch{r.epoch_index}", r.problem, source=f"{path}#epoch={r.epoch_index}")
-            for r in recorded_instances(path)]
+    from importlib.metadata import entry_points
+
+    found = list(entry_points(group="uam_solvers.corpus_readers", name="mcap"))
+    if not found:
+        raise MwisInputError(f"{path}: reading .mcap recordings needs the uam_sim package "
+                             "(no 'mcap' entry point in group 'uam_solvers.corpus_readers')")
+    return found[0].load()(path)
 
 
 #: Readers by file suffix for `read_instances` (extension point: reader(path) -> list[CorpusEntry]).

@@ -25,9 +25,7 @@ import sys
 import threading
 import time
 from functools import partial
-from types import SimpleNamespace
 
-import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.node import Node
@@ -36,9 +34,11 @@ from uam_msgs.msg import EpochSync, FlightPlan, FlightRequest, PlanningReport
 from uam_msgs.srv import SolveMwis
 
 from uam_planner.network import load_network
-from uam_planner.nodes import messages as m
-from uam_solvers.nodes.runtime import run_node
-from uam_solvers.nodes.params import check, declare
+from uam_bringup import contract as c
+from uam_bringup import conversions as m
+from uam_bringup import qos
+from uam_bringup.runtime import run_node
+from uam_bringup.params import check, declare
 from uam_planner.planning import POLICIES, Planner, PlanningConfig, default_solve_mwis
 
 
@@ -85,14 +85,14 @@ class PlannerNode(Node):
         self.stopping = threading.Event()  # set on shutdown: a callback waiting on the solver gives up
         self._plan_group = MutuallyExclusiveCallbackGroup()
         self._client_group = ReentrantCallbackGroup()
-        self._plan_pub = self.create_publisher(FlightPlan, m.TOPIC_PLANS, m.QOS_LATCHED)
-        self._report_pub = self.create_publisher(PlanningReport, m.TOPIC_REPORTS, m.QOS_LATCHED)
-        self._sync_pub = self.create_publisher(EpochSync, m.TOPIC_SYNC, m.QOS_LATCHED)
-        self.create_subscription(FlightRequest, m.TOPIC_REQUESTS, self._on_request, m.QOS_LATCHED,
+        self._plan_pub = self.create_publisher(FlightPlan, c.TOPIC_PLANS, qos.QOS_LATCHED)
+        self._report_pub = self.create_publisher(PlanningReport, c.TOPIC_REPORTS, qos.QOS_LATCHED)
+        self._sync_pub = self.create_publisher(EpochSync, c.TOPIC_SYNC, qos.QOS_LATCHED)
+        self.create_subscription(FlightRequest, c.TOPIC_REQUESTS, self._on_request, qos.QOS_LATCHED,
                                  callback_group=self._plan_group)
-        self.create_subscription(EpochSync, m.TOPIC_SYNC, self._on_sync, m.QOS_LATCHED,
+        self.create_subscription(EpochSync, c.TOPIC_SYNC, self._on_sync, qos.QOS_LATCHED,
                                  callback_group=self._plan_group)
-        self._client = self.create_client(SolveMwis, m.SERVICE_SOLVE, callback_group=self._client_group)
+        self._client = self.create_client(SolveMwis, c.SERVICE_SOLVE, callback_group=self._client_group)
         self._startup_waited = False  # the first epoch waits for the solver to come up
 
         self._announced: dict[int, float] = {}       # simulator: epoch -> time [s]
@@ -150,18 +150,12 @@ class PlannerNode(Node):
             self._startup_waited = True
             self._client.wait_for_service(timeout_sec=self.get_parameter("solver_startup_timeout_s").value)
         if not self._client.service_is_ready():
-            msg = f"solver service {m.SERVICE_SOLVE} is not available"
+            msg = f"solver service {c.SERVICE_SOLVE} is not available"
             self.get_logger().warning(msg + "; solving with greedy locally")
             raise RuntimeError(msg)
         self._startup_waited = True
-        vertex_group = np.full(len(weights), -1, dtype=np.int64)
-        for gid, members in enumerate(groups or ()):
-            vertex_group[np.asarray(members, dtype=np.int64)] = gid
-        edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
-        req = SolveMwis.Request(
-            weights=[float(w) for w in weights], edges_u=[int(u) for u in edges[:, 0]],
-            edges_v=[int(v) for v in edges[:, 1]], vertex_group=[int(g) for g in vertex_group],
-            backend=self.config.backend, time_limit_s=float(self.config.time_limit_s), seed=int(self.config.seed))
+        req = m.solve_request(weights, edges, groups, self.config.backend, self.config.time_limit_s,
+                              self.config.seed)
         done = threading.Event()
         future = self._client.call_async(req)
         future.add_done_callback(lambda _f: done.set())
@@ -173,7 +167,7 @@ class PlannerNode(Node):
                 raise RuntimeError("the planner is shutting down")
             if time.monotonic() > deadline:
                 self._client.remove_pending_request(future)
-                msg = f"solver service {m.SERVICE_SOLVE} did not answer within {timeout:.1f} s"
+                msg = f"solver service {c.SERVICE_SOLVE} did not answer within {timeout:.1f} s"
                 self.get_logger().warning(msg + "; solving with greedy locally")
                 raise TimeoutError(msg)
         res = future.result()
@@ -181,9 +175,7 @@ class PlannerNode(Node):
             msg = f"solver service refused or failed: {getattr(res, 'message', 'no response')}"
             self.get_logger().warning(msg + "; solving with greedy locally")
             raise RuntimeError(msg)
-        return SimpleNamespace(selected=np.asarray(res.selected, dtype=np.int64), objective=res.objective,
-                               proven_optimal=res.proven_optimal, backend=res.backend_used,
-                               fallback=res.fallback, message=res.message, solve_time_s=res.solve_time_s)
+        return m.solve_answer(res)
 
     # ---- requests ----------------------------------------------------------------------------
     def _publish_plan(self, plan: FlightPlan) -> None:

@@ -14,6 +14,18 @@ The offered QoS written for each topic is what its publishers offer (asked from 
 the topic's first message arrives, as rosbag2 does); topics that never carried a message are
 still listed, with the QoS the recorder subscribed with.
 
+Stamps are read straight from the CDR bytes where the type starts with a stamp (/clock,
+FleetState, PoseArray, FlightPlan, PlanningReport: :func:`uam_sim.cdr.leading_stamp_ns`), so the
+per-step messages are never deserialized (Rerun gets fleet positions from
+:func:`uam_sim.cdr.fleet_state_digest`); plans and reports, a few hundred a run, are deserialized
+for the check below.
+
+It checks what it received against what was announced: the approvals the planning reports
+announce, epoch by epoch, against the approved plans received. At the close it logs the result
+(a warning on a mismatch) and writes it into the file as the MCAP metadata record
+``uam_recorder_check`` (``ok``, ``announced_approvals``, ``approved_plans``, ``verdict``), which
+``uam_sim.analysis`` reads.
+
 It stops and closes the file (summary, footer) when the simulator has announced the end of the run
 (EpochSync with ``finished`` from sender "simulator") and no message has arrived for
 ``finish_quiet_s`` (messages of other topics can still be on their way when the announcement
@@ -27,41 +39,65 @@ import sys
 import time
 from pathlib import Path
 
-from geometry_msgs.msg import PoseArray
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.clock import Clock as RclClock
 from rclpy.clock import ClockType
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
-from rosgraph_msgs.msg import Clock
-from uam_msgs.msg import EpochSync, FleetState, FlightPlan, FlightRequest, PlanningReport
+from uam_msgs.msg import FlightPlan
 
-from uam_sim.recording import McapRecorder, sim_stamp_ns
+from uam_sim.cdr import fleet_state_digest, leading_stamp_ns
+from uam_sim.mcap_schema import message_class
+from uam_sim.mcap_writer import McapRecorder
+from uam_sim.stamps import sim_stamp_ns
 from uam_sim.rerun_log import MODES as RERUN_MODES
 from uam_sim.rerun_log import RerunLogger
-from uam_solvers.nodes.runtime import run_node
 
-_QOS_VOLATILE = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10000,
-                           reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
-# Only for topics whose publishers offer transient local (a transient-local reader does not match
-# a volatile writer: the recorder then logs an incompatible-QoS error naming the topic); it makes
-# a recorder that starts late still get every request, plan, report and epoch handshake.
-_QOS_LATCHED = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=20000,
-                          reliability=ReliabilityPolicy.RELIABLE,
-                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
+from uam_bringup import contract as c
+from uam_bringup.qos import profile
+from uam_bringup.runtime import run_node
 
-#: topic -> (message class, subscription QoS)
-RECORDED_TOPICS = {
-    "/clock": (Clock, _QOS_VOLATILE),
-    "/uam/requests": (FlightRequest, _QOS_LATCHED),
-    "/uam/flight_plans": (FlightPlan, _QOS_LATCHED),
-    "/uam/planning_reports": (PlanningReport, _QOS_LATCHED),
-    "/uam/fleet_state": (FleetState, _QOS_VOLATILE),
-    "/uam/fleet_poses": (PoseArray, _QOS_VOLATILE),
-    "/uam/epoch_sync": (EpochSync, _QOS_LATCHED),
-}
+#: topic (relative, see uam_bringup.contract) -> (message class, subscription QoS)
+RECORDED_TOPICS = {topic: (message_class(type_name), profile(spec))
+                   for topic, (type_name, spec) in c.RECORDED_TOPICS.items()}
+
+
+def _starts_with_stamp(cls: type) -> bool:
+    """True if the type's first field is a Time or a Header (its stamp sits at a fixed CDR offset)."""
+    fields = list(cls.get_fields_and_field_types().values())
+    return bool(fields) and fields[0] in ("builtin_interfaces/Time", "std_msgs/Header")
+
+
+class ApprovalCheck:
+    """Approvals announced by the planning reports vs approved plans received, per epoch."""
+
+    def __init__(self) -> None:
+        self.announced: dict[int, int] = {}      # epoch index -> approvals its report announced
+        self.received: dict[int, set] = {}       # epoch index -> request ids of approved plans
+
+    def on_report(self, msg) -> None:
+        self.announced[int(msg.epoch_index)] = int(msg.approved)  # a repeated report counts once
+
+    def on_plan(self, msg) -> None:
+        if int(msg.outcome) == FlightPlan.OUTCOME_APPROVED:
+            self.received.setdefault(int(msg.epoch_index), set()).add(str(msg.request_id))
+
+    def result(self) -> dict:
+        """{"ok", "announced_approvals", "approved_plans", "verdict"} (values as strings)."""
+        announced = sum(self.announced.values())
+        received = sum(len(v) for v in self.received.values())
+        bad = [k for k in sorted(set(self.announced) | set(self.received))
+               if self.announced.get(k, 0) != len(self.received.get(k, ()))]
+        if not bad:
+            verdict = f"every announced approval arrived: {announced} approvals, {received} approved plans"
+        else:
+            verdict = (f"the planning reports announce {announced} approvals but {received} approved "
+                       f"plan(s) arrived; epochs differing: "
+                       + ", ".join(f"{k} ({self.announced.get(k, 0)} announced, "
+                                   f"{len(self.received.get(k, ()))} received)" for k in bad[:10]))
+        return {"ok": "false" if bad else "true", "announced_approvals": str(announced),
+                "approved_plans": str(received), "verdict": verdict}
 
 
 class RecorderNode(Node):
@@ -131,6 +167,10 @@ class RecorderNode(Node):
         self._last_rx = time.monotonic()
         self._clock_ns = 0
         self._dirty = False
+        self.check = ApprovalCheck()
+        self._stamp_first = {topic: _starts_with_stamp(cls) for topic, (cls, _qos) in RECORDED_TOPICS.items()}
+        # recorded under the names they resolve to (namespace and remapping applied)
+        self._names = {topic: self.resolve_topic_name(topic) for topic in RECORDED_TOPICS}
         for topic, (cls, qos) in RECORDED_TOPICS.items():
             self._recorded_subs[topic] = self.create_subscription(
                 cls, topic, self._make_callback(topic, cls), qos, raw=True,
@@ -163,14 +203,14 @@ class RecorderNode(Node):
             offered = [info.qos_profile for info in self.get_publishers_info_by_topic(topic)]
         except Exception as exc:  # noqa: BLE001 - graph queries can fail during shutdown
             self.get_logger().debug(f"no publisher info for {topic}: {exc}")
-        self.recorder.add_topic(topic, cls, RECORDED_TOPICS[topic][1], offered_qos_profiles=offered or None)
+        self.recorder.add_topic(self._names[topic], cls, RECORDED_TOPICS[topic][1], offered_qos_profiles=offered or None)
 
     def _on_message(self, topic: str, cls: type, data: bytes) -> None:
         if self.finished:
             return
         self._last_rx = time.monotonic()
         msg = self._write(topic, cls, data)
-        if topic == "/uam/epoch_sync" and msg.finished and msg.sender == "simulator" \
+        if topic == c.TOPIC_SYNC and msg.finished and msg.sender == "simulator" \
                 and not self.finish_requested:
             self.get_logger().info("the simulator ended the run: closing the recording once the "
                                    "last messages are in")
@@ -191,22 +231,37 @@ class RecorderNode(Node):
             self.close()
 
     def _write(self, topic: str, cls: type, data: bytes):
-        msg = deserialize_message(data, cls)
-        if topic == "/clock":
-            self._clock_ns = max(self._clock_ns, int(msg.clock.sec) * 1_000_000_000 + int(msg.clock.nanosec))
-        stamp = sim_stamp_ns(msg)
+        """Write one message; returns it deserialized, or None for the per-step types (their
+        stamp is read from the bytes: deserializing every FleetState was most of the CPU)."""
+        msg = None
+        stamp = leading_stamp_ns(data) if self._stamp_first.get(topic) else None
+        if stamp is None:
+            msg = deserialize_message(data, cls)
+            stamp = sim_stamp_ns(msg)
+        if topic == c.TOPIC_CLOCK and stamp is not None:
+            self._clock_ns = max(self._clock_ns, stamp)
         log_ns = stamp if stamp is not None else self._clock_ns
-        if topic not in self.recorder.topics:
+        if self._names[topic] not in self.recorder.topics:
             self._register(topic, cls)
-        self.recorder.write(topic, data, log_time_ns=max(0, log_ns))
+        self.recorder.write(self._names[topic], data, log_time_ns=max(0, log_ns))
         self.messages_written += 1
         self._dirty = True
+        if topic in (c.TOPIC_PLANS, c.TOPIC_REPORTS, c.TOPIC_SYNC) and msg is None:
+            msg = deserialize_message(data, cls)
+        if topic == c.TOPIC_PLANS:
+            self.check.on_plan(msg)
+        elif topic == c.TOPIC_REPORTS:
+            self.check.on_report(msg)
         if self.rerun.enabled:
-            if topic == "/uam/fleet_state":
-                self.rerun.log_fleet_state_msg(msg)
-            elif topic == "/uam/flight_plans":
+            if topic == c.TOPIC_FLEET:
+                digest = fleet_state_digest(data, positions=True)
+                if digest is None:  # big-endian bytes: decode in full
+                    self.rerun.log_fleet_state_msg(deserialize_message(data, cls))
+                else:
+                    self.rerun.log_fleet(log_ns * 1e-9, digest.vehicle_ids, digest.positions_m)
+            elif topic == c.TOPIC_PLANS:
                 self.rerun.log_flight_plan_msg(msg)
-            elif topic == "/uam/planning_reports":
+            elif topic == c.TOPIC_REPORTS:
                 self.rerun.log_planning_report_msg(msg)
         return msg
 
@@ -248,8 +303,12 @@ class RecorderNode(Node):
             if drained:
                 self.get_logger().info(f"wrote {drained} messages still queued at the end")
             for topic, (cls, _qos) in RECORDED_TOPICS.items():
-                if topic not in self.recorder.topics:
+                if self._names[topic] not in self.recorder.topics:
                     self._register(topic, cls)
+            check = self.check.result()
+            self.recorder.add_metadata("uam_recorder_check", check)
+            (self.get_logger().info if check["ok"] == "true" else self.get_logger().warning)(
+                f"recorder check: {check['verdict']}")
             self.recorder.close()
         finally:
             self.rerun.close()

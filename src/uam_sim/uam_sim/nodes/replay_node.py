@@ -23,9 +23,10 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.utilities import remove_ros_args
 
-from uam_sim.recording import QosSpec, message_class
+from uam_sim.mcap_schema import message_class
+from uam_sim.qos_yaml import QosSpec
 from uam_sim.replay import load_plan
-from uam_solvers.nodes.runtime import run_node
+from uam_bringup.runtime import run_node
 
 _BATCH = 500  # messages per timer tick at most, so the executor stays responsive at rate 0
 

@@ -21,9 +21,11 @@ from rclpy.parameter import Parameter
 from uam_msgs.msg import EpochSync, FlightRequest
 
 from uam_planner.network import load_network
-from uam_planner.nodes import messages as m
-from uam_solvers.nodes.runtime import run_node
-from uam_solvers.nodes.params import declare
+from uam_bringup import contract as c
+from uam_bringup import conversions as m
+from uam_bringup import qos
+from uam_bringup.runtime import run_node
+from uam_bringup.params import declare
 from uam_sim.demand import DemandSchedule, RequestGenerator, load_demand
 
 
@@ -48,9 +50,9 @@ class RequestGeneratorNode(Node):
         else:
             self.source = RequestGenerator(network.aerodrome_ids, rate, interval, window, seed)
         self.interval_s = interval
-        self._pub = self.create_publisher(FlightRequest, m.TOPIC_REQUESTS, m.QOS_LATCHED)
-        self._sync_pub = self.create_publisher(EpochSync, m.TOPIC_SYNC, m.QOS_LATCHED)
-        self.create_subscription(EpochSync, m.TOPIC_SYNC, self._on_sync, m.QOS_LATCHED)
+        self._pub = self.create_publisher(FlightRequest, c.TOPIC_REQUESTS, qos.QOS_LATCHED)
+        self._sync_pub = self.create_publisher(EpochSync, c.TOPIC_SYNC, qos.QOS_LATCHED)
+        self.create_subscription(EpochSync, c.TOPIC_SYNC, self._on_sync, qos.QOS_LATCHED)
         self._done_epochs: set[int] = set()
         self.published = 0
         self.finished = False

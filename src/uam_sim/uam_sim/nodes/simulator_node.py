@@ -26,20 +26,18 @@ from functools import partial
 
 from geometry_msgs.msg import PoseArray
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy, DurabilityPolicy, HistoryPolicy
 from rosgraph_msgs.msg import Clock
 from uam_msgs.msg import EpochSync, FleetState, FlightPlan
 
-from uam_planner.nodes import messages as m
-from uam_solvers.nodes.runtime import run_node
-from uam_solvers.nodes.params import declare
+from uam_bringup import contract as c
+from uam_bringup import conversions as m
+from uam_bringup import qos
+from uam_bringup.runtime import run_node
+from uam_bringup.params import declare
 from uam_sim.cdr import encode_fleet_state, encode_pose_array, yaw_quaternions
 from uam_sim.fleet import Fleet
 
 MODES = ("lockstep", "realtime")
-# Like rclpy's ClockQoS but reliable, so recordings hold every tick; best-effort readers still match.
-QOS_CLOCK = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE,
-                       durability=DurabilityPolicy.VOLATILE)
 
 
 class SimulatorNode(Node):
@@ -64,12 +62,12 @@ class SimulatorNode(Node):
             raise ValueError(f"parameter epoch_s: {self.epoch_s} is not a multiple of step_s {self.step_s}")
         self.steps_per_epoch = int(round(ratio))
 
-        self._clock_pub = self.create_publisher(Clock, "/clock", QOS_CLOCK)
-        self._fleet_pub = self.create_publisher(FleetState, m.TOPIC_FLEET, m.QOS_STREAM)
-        self._pose_pub = self.create_publisher(PoseArray, m.TOPIC_POSES, m.QOS_STREAM)
-        self._sync_pub = self.create_publisher(EpochSync, m.TOPIC_SYNC, m.QOS_LATCHED)
-        self.create_subscription(FlightPlan, m.TOPIC_PLANS, self._on_plan, m.QOS_LATCHED)
-        self.create_subscription(EpochSync, m.TOPIC_SYNC, self._on_sync, m.QOS_LATCHED)
+        self._clock_pub = self.create_publisher(Clock, c.TOPIC_CLOCK, qos.QOS_CLOCK)
+        self._fleet_pub = self.create_publisher(FleetState, c.TOPIC_FLEET, qos.QOS_STREAM)
+        self._pose_pub = self.create_publisher(PoseArray, c.TOPIC_POSES, qos.QOS_STREAM)
+        self._sync_pub = self.create_publisher(EpochSync, c.TOPIC_SYNC, qos.QOS_LATCHED)
+        self.create_subscription(FlightPlan, c.TOPIC_PLANS, self._on_plan, qos.QOS_LATCHED)
+        self.create_subscription(EpochSync, c.TOPIC_SYNC, self._on_sync, qos.QOS_LATCHED)
 
         self.fleet = Fleet()
         self.step_index = 0                 # t = step_index * step_s
@@ -86,7 +84,7 @@ class SimulatorNode(Node):
         self._timer = self.create_timer(period, self._on_timer)  # wall clock: this node owns sim time
         self.get_logger().info(
             f"simulator: {self.mode}, step {self.step_s:g} s, epoch {self.epoch_s:g} s, duration {self.duration_s:g} s; "
-            f"waiting for {self.expected_subscribers} subscriber(s) of {m.TOPIC_SYNC}")
+            f"waiting for {self.expected_subscribers} subscriber(s) of {c.TOPIC_SYNC}")
 
     @property
     def exit_code(self) -> int:
@@ -181,10 +179,10 @@ class SimulatorNode(Node):
         # Serialized directly from the fleet arrays (uam_sim.cdr): same bytes as the message objects,
         # a fraction of the cost (see uam_sim/cdr.py).
         self._fleet_pub.publish(encode_fleet_state(
-            stamp.sec, stamp.nanosec, m.FRAME_ID, self.step_index, fs.vehicle_ids, fs.positions_m,
+            stamp.sec, stamp.nanosec, c.FRAME_ID, self.step_index, fs.vehicle_ids, fs.positions_m,
             fs.velocities_mps, fs.phases, fs.segment_indices, fs.flown_m, fs.remaining_m))
         self._pose_pub.publish(encode_pose_array(
-            stamp.sec, stamp.nanosec, m.FRAME_ID, fs.positions_m, yaw_quaternions(fs.velocities_mps)))
+            stamp.sec, stamp.nanosec, c.FRAME_ID, fs.positions_m, yaw_quaternions(fs.velocities_mps)))
 
     def _finish(self) -> None:
         if self.finished:

@@ -20,20 +20,18 @@ from __future__ import annotations
 import math
 import sys
 
-import numpy as np
 from diagnostic_msgs.msg import KeyValue
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from uam_msgs.srv import SolveMwis
 
-from uam_solvers.nodes.runtime import run_node
-from uam_solvers.nodes.params import check, declare
-from uam_solvers import MwisInputError, MwisProblem, solve_problem
+from uam_bringup import contract as c
+from uam_bringup.conversions import problem_from_solve_request
+from uam_bringup.runtime import run_node
+from uam_bringup.params import check, declare
+from uam_solvers import MwisInputError, solve_problem
 from uam_solvers.registry import UnknownBackendError, backend_names, get_backend
-
-SERVICE_NAME = "/uam/solve_mwis"
-
 
 def parse_option(value: str):
     """Backend option values arrive as strings: 'true'/'false', ints and floats are converted."""
@@ -46,25 +44,6 @@ def parse_option(value: str):
         except ValueError:
             pass
     return value
-
-
-def problem_from_request(request: SolveMwis.Request, max_vertices: int) -> MwisProblem:
-    """Validate a SolveMwis request into an MwisProblem; MwisInputError names the bad field."""
-    n = len(request.weights)
-    if len(request.edges_u) != len(request.edges_v):
-        raise MwisInputError(
-            f"edges_u/edges_v: lengths differ ({len(request.edges_u)} != {len(request.edges_v)})")
-    if len(request.vertex_group) not in (0, n):
-        raise MwisInputError(
-            f"vertex_group: length {len(request.vertex_group)} must be 0 or len(weights) = {n}")
-    edges = np.stack([np.asarray(request.edges_u, dtype=np.int64),
-                      np.asarray(request.edges_v, dtype=np.int64)], axis=1).reshape(-1, 2)
-    groups = None
-    if len(request.vertex_group):
-        g = np.asarray(request.vertex_group, dtype=np.int64)
-        groups = [np.flatnonzero(g == gid) for gid in np.unique(g[g >= 0])]
-    return MwisProblem.from_arrays(np.asarray(request.weights, dtype=np.float64), edges, groups,
-                                   max_vertices=max_vertices)
 
 
 class SolverNode(Node):
@@ -82,9 +61,9 @@ class SolverNode(Node):
             raise ValueError(f"parameter default_backend: {problem}")
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._group = ReentrantCallbackGroup()
-        self.create_service(SolveMwis, SERVICE_NAME, self._on_solve, callback_group=self._group)
+        self.create_service(SolveMwis, c.SERVICE_SOLVE, self._on_solve, callback_group=self._group)
         self.get_logger().info(
-            f"serving {SERVICE_NAME}; default backend {self.get_parameter('default_backend').value!r}")
+            f"serving {c.SERVICE_SOLVE}; default backend {self.get_parameter('default_backend').value!r}")
 
     @staticmethod
     def _check_backend(name) -> str:
@@ -120,7 +99,7 @@ class SolverNode(Node):
             problem_text = self._check_backend(backend)
             if problem_text:
                 raise MwisInputError(f"backend: {problem_text}")
-            problem = problem_from_request(request, int(self.get_parameter("max_vertices").value))
+            problem = problem_from_solve_request(request, int(self.get_parameter("max_vertices").value))
             options = {kv.key: parse_option(kv.value) for kv in request.options}
             result = solve_problem(problem, backend=backend, time_limit_s=float(limit), seed=int(request.seed),
                                    options=options, layers=bool(self.get_parameter("layers").value))

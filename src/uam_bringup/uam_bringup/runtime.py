@@ -1,5 +1,4 @@
-"""Process-level helpers shared by the nodes of every package (uam_solvers is the package the
-others depend on)."""
+"""Process-level helpers shared by the nodes of every package: a node's main(), signals, CPU report."""
 
 from __future__ import annotations
 

@@ -1,0 +1,63 @@
+"""The ROS contract of the UAM node graph: topic and service names, QoS, frame and wire limits.
+
+rclpy-free (QoS as :class:`uam_sim.recording.QosSpec`, turned into rclpy profiles by
+:mod:`uam_bringup.qos`), so the analysis of a recording and the tests can read it without ROS.
+
+Names are *relative*: a node started in a namespace (``--ros-args -r __ns:=/fleet2``) or a
+launch file's ``PushRosNamespace`` moves the whole graph, and a remapping of ``uam/requests``
+moves that one topic for every node. In the default namespace they resolve to ``/uam/...``,
+the names recordings carry. ``/clock`` stays absolute: rclpy's time source listens there.
+"""
+
+from __future__ import annotations
+
+from uam_sim.recording import QosSpec
+
+FRAME_ID = "enu"
+
+# ---- topics and services (relative) -------------------------------------------------------------
+TOPIC_REQUESTS = "uam/requests"
+TOPIC_PLANS = "uam/flight_plans"
+TOPIC_REPORTS = "uam/planning_reports"
+TOPIC_FLEET = "uam/fleet_state"
+TOPIC_POSES = "uam/fleet_poses"
+TOPIC_SYNC = "uam/epoch_sync"
+TOPIC_CLOCK = "/clock"
+SERVICE_SOLVE = "uam/solve_mwis"
+SERVICE_PLAN_EPOCH = "uam/plan_epoch"
+SERVICE_RELEASE_DEMAND = "uam/release_demand"
+
+
+def resolved(name: str, namespace: str = "/") -> str:
+    """The absolute name ``name`` resolves to in ``namespace`` (no remapping), e.g. for recordings."""
+    if name.startswith("/"):
+        return name
+    ns = namespace.rstrip("/")
+    return f"{ns}/{name}"
+
+
+# ---- QoS ----------------------------------------------------------------------------------------
+# Nothing of the run may be lost, and a late subscriber (viewer, recorder) still gets every plan.
+# (KEEP_LAST with a deep history rather than KEEP_ALL: a KEEP_ALL writer blocks when a reader lags.)
+QOS_LATCHED = QosSpec(history="keep_last", depth=20000, reliability="reliable", durability="transient_local")
+# High-rate streams (fleet state every step): reliable so recordings are complete.
+QOS_STREAM = QosSpec(history="keep_last", depth=1000, reliability="reliable", durability="volatile")
+# Like rclpy's ClockQoS but reliable, so recordings hold every tick; best-effort readers still match.
+QOS_CLOCK = QosSpec(history="keep_last", depth=100, reliability="reliable", durability="volatile")
+# Recorder's reader of volatile streams: deep, so a busy recorder does not drop messages.
+QOS_RECORD_VOLATILE = QosSpec(history="keep_last", depth=10000, reliability="reliable", durability="volatile")
+# Requests from operators: transient local so a planner that starts (or restarts) late still gets
+# every request; the planner's reader history bounds what a flood can queue.
+QOS_REQUESTS = QOS_LATCHED
+
+#: topic -> (message type ``pkg/msg/Type``, QoS of the recorder's subscription). A transient-local
+#: reader does not match a volatile writer, so each topic is read with its writers' durability.
+RECORDED_TOPICS: dict[str, tuple[str, QosSpec]] = {
+    TOPIC_CLOCK: ("rosgraph_msgs/msg/Clock", QOS_RECORD_VOLATILE),
+    TOPIC_REQUESTS: ("uam_msgs/msg/FlightRequest", QOS_LATCHED),
+    TOPIC_PLANS: ("uam_msgs/msg/FlightPlan", QOS_LATCHED),
+    TOPIC_REPORTS: ("uam_msgs/msg/PlanningReport", QOS_LATCHED),
+    TOPIC_FLEET: ("uam_msgs/msg/FleetState", QOS_RECORD_VOLATILE),
+    TOPIC_POSES: ("geometry_msgs/msg/PoseArray", QOS_RECORD_VOLATILE),
+    TOPIC_SYNC: ("uam_msgs/msg/EpochSync", QOS_LATCHED),
+}

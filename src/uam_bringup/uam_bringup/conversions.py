@@ -1,0 +1,217 @@
+"""Conversions between uam_msgs messages and the libraries' types. rclpy-free.
+
+Reading is duck-typed: any object with the message's field names works, so the same functions
+read generated messages, messages decoded from a recording by ``rosbags`` or ``mcap_ros2``, and
+plain namespaces. Building messages imports the generated classes lazily (only the nodes do it).
+
+The library works in float seconds and numpy arrays; the messages carry builtin_interfaces/Time
+and geometry_msgs. Shared by every node of the graph so they agree.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from uam_bringup.contract import FRAME_ID
+from uam_planner.planning import EpochReport, Flight
+from uam_planner.planning import FlightRequest as LibRequest
+from uam_planner.trajectory import Trajectory
+
+NS_PER_S = 1_000_000_000
+
+
+# ---- time ----------------------------------------------------------------------------------------
+
+def time_fields(t_s: float) -> tuple[int, int]:
+    """Simulation seconds -> (sec, nanosec), rounded to the nanosecond."""
+    if not math.isfinite(t_s):
+        raise ValueError(f"time {t_s!r} is not finite")
+    total_ns = int(round(t_s * 1e9))
+    return total_ns // NS_PER_S, total_ns % NS_PER_S
+
+
+def to_time(t_s: float):
+    """Simulation seconds -> builtin_interfaces/Time (rounded to the nanosecond)."""
+    from builtin_interfaces.msg import Time
+
+    sec, nanosec = time_fields(t_s)
+    return Time(sec=sec, nanosec=nanosec)
+
+
+def stamp_ns(stamp: Any) -> int:
+    """builtin_interfaces/Time (or anything with ``sec`` and ``nanosec``) -> nanoseconds."""
+    return int(stamp.sec) * NS_PER_S + int(stamp.nanosec)
+
+
+def from_time(stamp: Any) -> float:
+    """builtin_interfaces/Time (or anything with ``sec`` and ``nanosec``) -> seconds."""
+    return int(stamp.sec) + int(stamp.nanosec) * 1e-9
+
+
+# ---- requests ------------------------------------------------------------------------------------
+
+def request_to_msg(req: LibRequest, operator_id: str = ""):
+    """uam_msgs/FlightRequest of a library request (its id unscoped, see :func:`scoped_id`)."""
+    from uam_msgs.msg import FlightRequest
+
+    msg = FlightRequest(
+        request_id=req.request_id, origin_id=req.origin_id, destination_id=req.destination_id,
+        request_time=to_time(req.request_time_s), earliest_departure=to_time(req.earliest_departure_s),
+        latest_departure=to_time(req.latest_departure_s))
+    if operator_id and hasattr(msg, "operator_id"):
+        msg.operator_id = operator_id
+    return msg
+
+
+def request_from_msg(msg: Any, request_id: str | None = None) -> LibRequest:
+    """Library request of a FlightRequest message; ``request_id`` replaces the message's id
+    (the planner node passes the operator-scoped id)."""
+    return LibRequest(
+        request_id=msg.request_id if request_id is None else request_id,
+        origin_id=msg.origin_id, destination_id=msg.destination_id,
+        request_time_s=from_time(msg.request_time), earliest_departure_s=from_time(msg.earliest_departure),
+        latest_departure_s=from_time(msg.latest_departure))
+
+
+# ---- plans ---------------------------------------------------------------------------------------
+
+def _plan_header(plan, t_s: float) -> None:
+    plan.header.stamp = to_time(t_s)
+    plan.header.frame_id = FRAME_ID
+
+
+def approved_plan(flight: Flight, t_s: float, policy: str, request_id: str | None = None):
+    """FlightPlan message for an approved flight decided at ``t_s`` [s]."""
+    from geometry_msgs.msg import Point
+    from uam_msgs.msg import FlightPlan, Waypoint
+
+    traj = flight.trajectory
+    plan = FlightPlan(
+        request_id=flight.request_id if request_id is None else request_id,
+        outcome=FlightPlan.OUTCOME_APPROVED, reason="",
+        origin_id=flight.origin_id, destination_id=flight.destination_id, epoch_index=int(flight.epoch_index),
+        departure_time=to_time(flight.departure_s), arrival_time=to_time(flight.arrival_s),
+        route_node_ids=list(flight.route_node_ids),
+        waypoints=[Waypoint(position=Point(x=float(p[0]), y=float(p[1]), z=float(p[2])), time=to_time(float(t)))
+                   for t, p in zip(traj.times_s, traj.points_m)],
+        length_m=float(flight.length_m), weight=float(flight.weight), candidate_index=int(flight.candidate_index),
+        method=policy, backend=flight.backend or "")
+    _plan_header(plan, t_s)
+    return plan
+
+
+def unapproved_plan(request_id: str, origin_id: str, destination_id: str, outcome: int, reason: str,
+                    t_s: float, epoch_index: int, policy: str):
+    """FlightPlan message for a rejected or expired request."""
+    from uam_msgs.msg import FlightPlan
+
+    plan = FlightPlan(request_id=request_id, outcome=outcome, reason=reason, origin_id=origin_id,
+                      destination_id=destination_id, epoch_index=int(epoch_index), method=policy)
+    _plan_header(plan, t_s)
+    return plan
+
+
+def plan_waypoints(plan: Any) -> tuple[np.ndarray, np.ndarray]:
+    """(times_s (p,), points_m (p, 3)) of a FlightPlan's waypoints."""
+    times = np.array([from_time(w.time) for w in plan.waypoints], dtype=np.float64)
+    points = np.array([[w.position.x, w.position.y, w.position.z] for w in plan.waypoints],
+                      dtype=np.float64).reshape(-1, 3)
+    return times, points
+
+
+def trajectory_from_plan(plan: Any) -> Trajectory:
+    """The 4D trajectory of an approved FlightPlan (waypoint times and ENU positions)."""
+    return Trajectory(*plan_waypoints(plan))
+
+
+def flight_from_plan(plan: Any, request_id: str | None = None) -> Flight:
+    """The library Flight of an approved FlightPlan (e.g. to restore a restarted planner)."""
+    traj = trajectory_from_plan(plan)
+    return Flight(request_id=plan.request_id if request_id is None else request_id,
+                  origin_id=plan.origin_id, destination_id=plan.destination_id,
+                  route_node_ids=tuple(plan.route_node_ids), trajectory=traj,
+                  departure_s=from_time(plan.departure_time), arrival_s=from_time(plan.arrival_time),
+                  length_m=float(plan.length_m), weight=float(plan.weight),
+                  candidate_index=int(plan.candidate_index), method=str(plan.method),
+                  backend=str(plan.backend), epoch_index=int(plan.epoch_index))
+
+
+# ---- reports -------------------------------------------------------------------------------------
+
+def report_to_msg(report: EpochReport):
+    """PlanningReport message (with the MWIS instance as solved) from the library's EpochReport."""
+    from uam_msgs.msg import MwisInstance, PlanningReport
+
+    edges = np.asarray(report.edges_array, dtype=np.int64).reshape(-1, 2)
+    msg = PlanningReport(
+        epoch_index=int(report.epoch_index), policy=report.policy, pending_requests=int(report.pending),
+        eligible_requests=int(report.eligible), candidates=int(report.candidates),
+        candidates_discarded=int(report.discarded), vertices=int(report.vertices), edges=int(report.edges),
+        conflict_edges=int(report.conflict_edges), approved=int(report.approved), rejected=int(report.rejected),
+        expired=int(report.expired), active_flights=int(report.active_flights),
+        instance=MwisInstance(
+            weights=[float(w) for w in report.weights],
+            edges_u=[int(u) for u in edges[:, 0]], edges_v=[int(v) for v in edges[:, 1]],
+            vertex_request_ids=[str(r) for r in report.vertex_request_ids],
+            vertex_candidate_index=[int(c) for c in report.vertex_candidate_index],
+            selected=[int(s) for s in report.selected]),
+        objective=float(report.objective), solve_time_s=float(report.solve_time_s),
+        planning_time_s=float(report.planning_time_s), proven_optimal=bool(report.proven_optimal),
+        backend_requested=report.backend_requested, backend_used=report.backend_used,
+        fallback=bool(report.fallback), fallback_reason=report.fallback_reason)
+    msg.header.stamp = to_time(report.t_s)
+    msg.header.frame_id = FRAME_ID
+    return msg
+
+
+# ---- MWIS service --------------------------------------------------------------------------------
+
+def solve_request(weights, edges, groups, backend: str, time_limit_s: float, seed: int):
+    """uam_msgs/SolveMwis.Request of a conflict graph (``groups``: vertex lists, one per request)."""
+    from uam_msgs.srv import SolveMwis
+
+    vertex_group = np.full(len(weights), -1, dtype=np.int64)
+    for gid, members in enumerate(groups or ()):
+        vertex_group[np.asarray(members, dtype=np.int64)] = gid
+    edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    return SolveMwis.Request(
+        weights=[float(w) for w in weights], edges_u=[int(u) for u in edges[:, 0]],
+        edges_v=[int(v) for v in edges[:, 1]], vertex_group=[int(g) for g in vertex_group],
+        backend=backend, time_limit_s=float(time_limit_s), seed=int(seed))
+
+
+def problem_from_solve_request(request: Any, max_vertices: int):
+    """Validate a SolveMwis request into a uam_solvers.MwisProblem; MwisInputError names the field."""
+    from uam_solvers import MwisInputError, MwisProblem
+
+    n = len(request.weights)
+    if len(request.edges_u) != len(request.edges_v):
+        raise MwisInputError(
+            f"edges_u/edges_v: lengths differ ({len(request.edges_u)} != {len(request.edges_v)})")
+    if len(request.vertex_group) not in (0, n):
+        raise MwisInputError(
+            f"vertex_group: length {len(request.vertex_group)} must be 0 or len(weights) = {n}")
+    edges = np.stack([np.asarray(request.edges_u, dtype=np.int64),
+                      np.asarray(request.edges_v, dtype=np.int64)], axis=1).reshape(-1, 2)
+    groups = None
+    if len(request.vertex_group):
+        g = np.asarray(request.vertex_group, dtype=np.int64)
+        groups = [np.flatnonzero(g == gid) for gid in np.unique(g[g >= 0])]
+    return MwisProblem.from_arrays(np.asarray(request.weights, dtype=np.float64), edges, groups,
+                                   max_vertices=max_vertices)
+
+
+def solve_answer(response: Any):
+    """The planning cycle's view of a successful SolveMwis response (selected, objective, ...).
+
+    The answer is not trusted here: the planning cycle checks it against the graph it sent.
+    """
+    from types import SimpleNamespace
+
+    return SimpleNamespace(selected=np.asarray(response.selected, dtype=np.int64), objective=response.objective,
+                           proven_optimal=response.proven_optimal, backend=response.backend_used,
+                           fallback=response.fallback, message=response.message,
+                           solve_time_s=response.solve_time_s)

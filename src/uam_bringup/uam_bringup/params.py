@@ -1,0 +1,280 @@
+"""Every node's parameters, one table per node: declaration, run-time changes and docs.
+
+A :class:`Param` says a parameter's name, default (whose type is the parameter's type), meaning,
+range or choices, and whether it may change while the node runs. :func:`declare_table` declares
+a node's table (descriptions and ranges in the ``ParameterDescriptor``; ``read_only`` for those
+that cannot change), validates the start-up values and installs one parameter callback that
+refuses, with a reason naming the parameter and the value, any change to a read-only parameter
+and any value out of its range; accepted changes are handed to the node's ``on_change``.
+``python -m uam_bringup.params`` prints the tables as Markdown (docs/parameters.md).
+
+Numbers given as integers where a float is expected (``-p duration_s:=600``) are accepted: float
+parameters are declared with dynamic typing and converted here.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass
+from typing import Any, Callable
+
+INT32_MAX = 2**31 - 1
+
+
+@dataclass(frozen=True)
+class Param:
+    """One parameter: its default fixes its type; ``lo``/``hi`` bound numbers, ``choices`` strings;
+    ``read_only``: set at start-up only; ``check``: an extra rule, value -> '' or why not."""
+
+    name: str
+    default: Any
+    description: str
+    lo: float | None = None
+    hi: float | None = None
+    choices: tuple | None = None
+    read_only: bool = True
+    check: Callable[[Any], str] | None = None
+
+    def validate(self, value):
+        """The value converted to the parameter's type; ValueError naming parameter and value."""
+        return check(self.name, value, self.default, self.lo, self.hi, self.choices, self.check)
+
+    def text(self) -> str:
+        t = self.description
+        if self.lo is not None or self.hi is not None:
+            t += f" (range [{self.lo if self.lo is not None else '-inf'}, {self.hi if self.hi is not None else 'inf'}])"
+        if self.choices:
+            t += f" (one of: {', '.join(map(str, self.choices))})"
+        return t
+
+
+def check(name: str, value, default, lo=None, hi=None, choices=None, rule=None):
+    """Validate ``value`` of parameter ``name`` against the default's type, a range and choices."""
+    if isinstance(default, bool):
+        if not isinstance(value, bool):
+            raise ValueError(f"parameter {name}: {value!r} is not true or false")
+    elif isinstance(default, float):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise ValueError(f"parameter {name}: {value!r} is not a finite number")
+        value = float(value)
+    elif isinstance(default, int):
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ValueError(f"parameter {name}: {value!r} is not an integer")
+    elif isinstance(default, str):
+        if not isinstance(value, str):
+            raise ValueError(f"parameter {name}: {value!r} is not a string")
+    if lo is not None and value < lo:
+        raise ValueError(f"parameter {name}: {value!r} is below the minimum {lo}")
+    if hi is not None and value > hi:
+        raise ValueError(f"parameter {name}: {value!r} is above the maximum {hi}")
+    if choices is not None and value not in choices:
+        raise ValueError(f"parameter {name}: {value!r} is not one of {', '.join(map(str, choices))}")
+    if rule is not None:
+        why = rule(value)
+        if why:
+            raise ValueError(f"parameter {name}: {why}")
+    return value
+
+
+def declare(node, name: str, default, description: str, lo=None, hi=None, choices=None, read_only=False):
+    """Declare one parameter (outside a table) and return its validated value."""
+    p = Param(name, default, description, lo, hi, tuple(choices) if choices else None, read_only)
+    return p.validate(node.declare_parameter(name, default, _descriptor(p)).value)
+
+
+def _descriptor(p: Param):
+    from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+
+    desc = ParameterDescriptor(description=p.text(), read_only=p.read_only,
+                               dynamic_typing=isinstance(p.default, float))
+    if isinstance(p.default, int) and not isinstance(p.default, bool) and p.lo is not None and p.hi is not None:
+        desc.integer_range = [IntegerRange(from_value=int(p.lo), to_value=int(p.hi), step=0)]
+    if p.choices:
+        desc.additional_constraints = "one of: " + ", ".join(map(str, p.choices))
+    return desc
+
+
+def declare_table(node, table: tuple[Param, ...], on_change: Callable[[str, Any], None] | None = None) -> dict:
+    """Declare ``table`` on ``node``; return {name: validated value}. Installs the change callback.
+
+    A bad start-up value raises ValueError (naming the parameter and the value) before the node
+    does anything else. At run time a change is refused (the set_parameters result says why) if
+    the parameter is read-only or the value fails its check; else ``on_change(name, value)``
+    is called with the converted value, after every parameter of the call passed.
+    """
+    from rcl_interfaces.msg import SetParametersResult
+
+    specs = {p.name: p for p in table}
+    values = {p.name: p.validate(node.declare_parameter(p.name, p.default, _descriptor(p)).value)
+              for p in table}
+
+    def on_set(params):
+        accepted = []
+        for prm in params:
+            spec = specs.get(prm.name)
+            if spec is None:
+                continue  # e.g. use_sim_time: rclpy's own
+            if spec.read_only:
+                return SetParametersResult(successful=False, reason=(
+                    f"parameter {prm.name} is read-only: it is read at start-up only; restart the node "
+                    f"with the new value (asked: {prm.value!r})"))
+            try:
+                accepted.append((prm.name, spec.validate(prm.value)))
+            except ValueError as exc:
+                return SetParametersResult(successful=False, reason=str(exc))
+        for name, value in accepted:
+            values[name] = value
+            if on_change is not None:
+                on_change(name, value)
+        return SetParametersResult(successful=True)
+
+    node.add_on_set_parameters_callback(on_set)
+    return values
+
+
+# ---- the tables ------------------------------------------------------------------------------------
+
+def _backend_rule(name) -> str:
+    from uam_solvers.registry import UnknownBackendError, backend_names, get_backend
+
+    if not isinstance(name, str) or not name:
+        return f"{name!r} is not a backend name; known: {', '.join(backend_names())}"
+    try:
+        backend = get_backend(name)
+    except UnknownBackendError:
+        return f"unknown backend {name!r}; known: {', '.join(backend_names())}"
+    ok, reason = backend.available()
+    return "" if ok else f"backend {name!r} is unavailable here: {reason}"
+
+
+def _backend_name_rule(name) -> str:
+    """Known name (availability is the solver's business: it may run on another machine)."""
+    from uam_solvers.registry import UnknownBackendError, backend_names, get_backend
+
+    try:
+        get_backend(name)
+    except (UnknownBackendError, TypeError):
+        return f"unknown backend {name!r}; known: {', '.join(backend_names())}"
+    return ""
+
+
+def _id_rule(value: str) -> str:
+    from uam_bringup.wire import ID_PATTERN, MAX_ID_LENGTH
+
+    if not ID_PATTERN.fullmatch(value):
+        return (f"{value[:MAX_ID_LENGTH]!r} must be 1 to {MAX_ID_LENGTH} characters of "
+                "letters, digits, '_', '-' and '.'")
+    return ""
+
+
+def _nonempty(what: str) -> Callable[[str], str]:
+    return lambda v: "" if v else f"empty; give {what}"
+
+
+PLANNER = (
+    Param("network", "", "routing network file (.yaml, .geojson, .graphml), e.g. config/networks/singapore.yaml",
+          check=_nonempty("a network file, e.g. config/networks/singapore.yaml")),
+    Param("policy", "mwis", "planning policy: conflict graph + MWIS, or the shortest-FIFO baseline",
+          choices=("mwis", "fifo")),
+    Param("backend", "exact", "MWIS backend asked of the solver service (`ros2 run uam_solvers backends` lists "
+          "them); takes effect at the next epoch", read_only=False, check=_backend_name_rule),
+    Param("time_limit_s", 5.0, "MWIS solve time limit [s]; takes effect at the next epoch", 0.001, 3600.0,
+          read_only=False),
+    Param("seed", 0, "seed of stochastic MWIS backends (run_fleet.sh passes the run's --seed)", 0, INT32_MAX,
+          read_only=False),
+    Param("separation_m", 100.0, "separation minimum [m]", 0.001, 100000.0),
+    Param("k", 5, "candidate routes per request", 1, 100),
+    Param("penalty_factor", 5.0, "penalised Dijkstra factor for diverse candidates", 0.0, 1000.0),
+    Param("speed_mps", 10.0, "cruise speed [m/s]", 0.001, 1000.0),
+    Param("precompute_routes", True, "compute every aerodrome pair's candidate routes at start-up (1-2 s for "
+          "Singapore) instead of on first use; same routes"),
+    Param("solver_timeout_margin_s", 5.0, "extra wall time [s] to wait for the solver service before the local "
+          "greedy fallback", 0.0, 3600.0, read_only=False),
+    Param("solver_startup_timeout_s", 30.0, "wall time [s] to wait for the solver service at the first epoch "
+          "(nodes start in any order); later a missing service means the local greedy fallback at once",
+          0.0, 3600.0, read_only=False),
+    Param("use_solver_service", True, "call uam/solve_mwis; false solves in-process with the same backend"),
+    Param("request_wait_timeout_s", 10.0, "wall time [s] an epoch waits for the requests the demand source "
+          "released for it (named in the epoch call) before planning without the missing ones", 0.0, 3600.0,
+          read_only=False),
+    Param("max_pending", 5000, "requests waiting for a decision, all operators together; more are refused "
+          "with the reason", 1, 10_000_000),
+    Param("max_pending_per_operator", 500, "requests waiting for a decision per operator_id; more are "
+          "refused with the reason", 1, 10_000_000),
+    Param("max_window_s", 3600.0, "latest_departure may be at most this far after the current simulation "
+          "time [s]; later windows are refused", 0.0, 1e7),
+    Param("max_request_lead_s", 60.0, "request_time may be at most this far after the current simulation "
+          "time [s] (a request from the future)", 0.0, 1e7),
+)
+
+SOLVER = (
+    Param("default_backend", "exact", "MWIS backend used when a request names none", read_only=False,
+          check=_backend_rule),
+    Param("default_time_limit_s", 10.0, "solve time limit [s] used when a request gives 0", 0.001, 3600.0,
+          read_only=False),
+    # A lower bound that serves every planner graph of the paper's scenarios (hundreds of vertices):
+    # a tiny value would refuse every epoch and push the planner to its greedy fallback.
+    Param("max_vertices", 20000, "graphs with more vertices are refused", 1000, 10_000_000, read_only=False),
+    Param("layers", True, "split into components and apply exact reductions around the backend",
+          read_only=False),
+)
+
+SIMULATOR = (
+    Param("step_s", 1.0, "simulation step [s]", 0.001, 3600.0),
+    Param("duration_s", 3500.0, "simulated time after which the run ends [s]; epochs at t < duration_s",
+          0.0, 1e7),
+    Param("epoch_s", 30.0, "time between planning epochs [s], a multiple of step_s; the one place the epoch "
+          "length is configured (the planner gets it in each epoch call)", 0.001, 86400.0),
+    Param("mode", "lockstep", "'lockstep': as fast as the planner allows, result independent of CPU speed; "
+          "'realtime': paced at real_time_factor", choices=("lockstep", "realtime")),
+    Param("real_time_factor", 1.0, "in realtime mode: simulated seconds per wall second", 0.001, 1e5,
+          read_only=False),
+    Param("use_demand_service", True, "at each epoch, ask the request generator (uam/release_demand) to "
+          "publish the epoch's requests and pass their ids to the planner; false: requests come only "
+          "from outside, as they arrive"),
+    Param("wait_for_subscribers", ["recorder"], "start only once these nodes (by name) subscribe to "
+          "uam/fleet_state, so a recording starts at t = 0; [''] for none"),
+    Param("ack_timeout_s", 120.0, "wall time [s] to wait for an epoch's outcome (or the services at start) "
+          "before ending the run with an error", 0.1, 86400.0),
+)
+
+REQUEST_GENERATOR = (
+    Param("network", "", "routing network file; its aerodromes are the origins and destinations",
+          check=_nonempty("a network file, e.g. config/networks/singapore.yaml")),
+    Param("rate", 10.0, "requests per interval (paper: 1 to 20 per 30 s); fractional rates allowed", 0.0, 10000.0),
+    Param("interval_s", 30.0, "time between request batches [s] (demand instants; each is released at the "
+          "first epoch at or after it)", 0.001, 86400.0),
+    Param("window_s", 60.0, "latest departure - earliest departure of each request [s]", 0.0, 86400.0),
+    Param("seed", 0, "random seed of the request stream", 0, INT32_MAX),
+    Param("demand_file", "", "optional YAML demand file to replay instead of random requests "
+          "(docs/demand-format.md)"),
+    Param("operator_id", "generator", "operator id the requests are published under (ids are unique per "
+          "operator)", check=_id_rule),
+)
+
+TABLES = {"planner": PLANNER, "solver": SOLVER, "simulator": SIMULATOR, "request_generator": REQUEST_GENERATOR}
+
+
+def markdown() -> str:
+    """The tables as Markdown (docs/parameters.md is this text)."""
+    out = ["# Node parameters", "",
+           "Generated by `python -m uam_bringup.params` from `src/uam_bringup/uam_bringup/params.py`, the "
+           "tables the nodes declare. *read-only*: read at start-up only; a change at run time is refused.",
+           ""]
+    for node, table in TABLES.items():
+        out += [f"## {node}", "", "| parameter | default | changes at run time | meaning |", "|---|---|---|---|"]
+        for p in table:
+            out.append(f"| `{p.name}` | `{p.default!r}` | {'yes' if not p.read_only else 'read-only'} | "
+                       f"{p.text().replace('|', '/')} |")
+        out.append("")
+    return "\n".join(out)
+
+
+def main(argv=None) -> int:
+    sys.stdout.write(markdown())
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

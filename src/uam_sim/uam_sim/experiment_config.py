@@ -1,0 +1,169 @@
+"""The parameters of the paper's study (:class:`ExperimentConfig`), read from YAML and flags and
+checked: a bad value raises :class:`ExperimentError` naming the field and the value."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from uam_planner.planning import PlanningConfig
+
+DEFAULT_METHODS = ("fifo", "firstfit", "greedy", "exact", "sa", "tabu", "qpu-emulator")
+# methods that are planner policies, not MWIS backends (firstfit: uam_planner.first_fit)
+BASELINES = ("fifo", "firstfit")
+DEFAULT_RATES = (1, 2, 4, 6, 8, 10, 15, 20)
+REPO_ROOT = Path(__file__).resolve().parents[3]
+
+
+class ExperimentError(ValueError):
+    """Bad experiment configuration; the message names the field and the value."""
+
+
+@dataclass
+class ExperimentConfig:
+    """Every parameter of a sweep (paper defaults). Times in seconds, distances in metres.
+
+    Attributes:
+        network: path of a network file, or {"synthetic": {n_nodes, n_aerodromes, seed}}.
+        methods: "fifo" (shortest FIFO), "firstfit" (first conflict-free candidate in arrival
+            order) or an MWIS backend name per entry.
+        include_qpu: add the "qpu" backend when it is available (a D-Wave token is configured).
+        rates: requests per interval (the swept variable).
+        seeds: seed list (an int n in YAML or flags means seeds 0..n-1).
+        duration_s: simulated time per run; epochs at 0, epoch_s, ... < duration_s.
+        epoch_s, interval_s, window_s: planning epoch, demand interval, departure window.
+        separation_m, k, penalty_factor, speed_mps: planning parameters.
+        time_limit_s: MWIS time budget per epoch.
+        solver_options: backend name -> options mapping passed to uam_solvers.solve.
+        demand_file: optional demand file replayed instead of random demand (rates then only label
+            the cells).
+        corpus_max_vertices: MWIS instances up to this size are kept for the corpus.
+        audit: run the independent exact separation audit on every cell.
+        out: output directory.
+        workers: processes for the cells (1 = serial in this process).
+        cumulative_rates: rates shown in the cumulative-approvals figure (default: up to 4 spread).
+        tts: TTS study settings: enabled, instances (sampled from the runs' MWIS instances),
+            min_vertices, max_vertices, reads (per annealing run), repetitions (runs per instance
+            and backend), backends, backend_instances (backend -> a smaller seeded sub-sample
+            for slow backends), seed, time_limit_s (per run); TTS(0.99) via uam_solvers.tts.
+    """
+
+    network: Any = "config/networks/singapore.yaml"
+    methods: list = field(default_factory=lambda: list(DEFAULT_METHODS))
+    include_qpu: bool = True
+    rates: list = field(default_factory=lambda: list(DEFAULT_RATES))
+    seeds: list = field(default_factory=lambda: list(range(5)))
+    duration_s: float = 3500.0
+    epoch_s: float = 30.0
+    interval_s: float = 30.0
+    window_s: float = 60.0
+    separation_m: float = 100.0
+    k: int = 5
+    penalty_factor: float = 5.0
+    speed_mps: float = 10.0
+    time_limit_s: float = 10.0
+    solver_options: dict = field(default_factory=dict)
+    demand_file: str | None = None
+    corpus_max_vertices: int = 60
+    audit: bool = True
+    out: str = "results"
+    workers: int = 2
+    cumulative_rates: list | None = None
+    tts: dict = field(default_factory=lambda: {
+        "enabled": True, "instances": 629, "min_vertices": 5, "max_vertices": 50, "reads": 100,
+        "repetitions": 5, "backend_instances": {"qpu-emulator": 60},
+        "backends": ["exact", "greedy", "sa", "tabu", "qpu-emulator"], "p": 0.99, "seed": 0,
+        "time_limit_s": 10.0})
+
+    def planning_config(self, backend: str, seed: int) -> PlanningConfig:
+        return PlanningConfig(epoch_s=self.epoch_s, separation_m=self.separation_m, k=self.k,
+                              penalty_factor=self.penalty_factor, speed_mps=self.speed_mps,
+                              backend=backend, time_limit_s=self.time_limit_s, seed=int(seed))
+
+
+def _num_list(name: str, value, cast=float) -> list:
+    if isinstance(value, str):
+        value = [v for v in value.split(",") if v.strip()]
+    if not isinstance(value, (list, tuple)) or not value:
+        raise ExperimentError(f"{name}: {value!r} must be a non-empty list")
+    out = []
+    for v in value:
+        try:
+            x = cast(v)
+        except (TypeError, ValueError):
+            raise ExperimentError(f"{name}: item {v!r} is not a number") from None
+        if isinstance(x, float) and (not math.isfinite(x) or x < 0):
+            raise ExperimentError(f"{name}: item {v!r} must be finite and >= 0")
+        out.append(x)
+    return out
+
+
+def _seeds(value) -> list:
+    if isinstance(value, bool):
+        raise ExperimentError(f"seeds: {value!r} is not a count or a list")
+    if isinstance(value, int) or (isinstance(value, str) and value.strip().isdigit()):
+        n = int(value)
+        if n < 1:
+            raise ExperimentError(f"seeds: {value!r} must be >= 1")
+        return list(range(n))
+    seeds = _num_list("seeds", value, int)
+    if any(s < 0 for s in seeds):
+        raise ExperimentError(f"seeds: {value!r} must be >= 0")
+    return seeds
+
+
+def rate_label(x: float):
+    return int(x) if float(x).is_integer() else float(x)
+
+
+def make_config(data: dict | None = None, **overrides) -> ExperimentConfig:
+    """An ExperimentConfig from a mapping (the YAML file) and overrides (flags; None = unset)."""
+    data = dict(data or {})
+    data.update({k: v for k, v in overrides.items() if v is not None})
+    names = {f.name for f in fields(ExperimentConfig)}
+    unknown = set(data) - names
+    if unknown:
+        raise ExperimentError(f"unknown parameter {sorted(unknown)[0]!r} (known: {sorted(names)})")
+    cfg = ExperimentConfig()
+    tts = dict(cfg.tts)
+    tts.update(data.pop("tts", None) or {})
+    cfg = replace(cfg, **data, tts=tts)
+    methods = cfg.methods.split(",") if isinstance(cfg.methods, str) else list(cfg.methods)
+    if not methods or not all(isinstance(m, str) and m for m in methods):
+        raise ExperimentError(f"methods: {cfg.methods!r} must be a non-empty list of names")
+    cfg.methods = [m.strip() for m in methods]
+    cfg.rates = [rate_label(r) for r in _num_list("rates", cfg.rates)]
+    cfg.seeds = _seeds(cfg.seeds)
+    for name in ("duration_s", "epoch_s", "interval_s", "window_s", "separation_m", "speed_mps",
+                 "time_limit_s"):
+        v = getattr(cfg, name)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+            raise ExperimentError(f"{name}: {v!r} must be a positive finite number")
+    if isinstance(cfg.workers, bool) or not isinstance(cfg.workers, int) or cfg.workers < 1:
+        raise ExperimentError(f"workers: {cfg.workers!r} must be an integer >= 1")
+    if cfg.cumulative_rates is not None:
+        cfg.cumulative_rates = [rate_label(r) for r in _num_list("cumulative_rates", cfg.cumulative_rates)]
+    if not isinstance(cfg.solver_options, dict):
+        raise ExperimentError(f"solver_options: {cfg.solver_options!r} must be a mapping")
+    cfg.planning_config("greedy", 0)  # validates k, penalty_factor
+    return cfg
+
+
+def load_config(path, **overrides) -> ExperimentConfig:
+    """Read a YAML experiment file (see config/experiment.yaml) and apply overrides."""
+    path = Path(path)
+    data = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+    if not isinstance(data, dict):
+        raise ExperimentError(f"{path}: expected a mapping of parameters, got {type(data).__name__}")
+    return make_config(data, **overrides)
+
+
+def resolve_path(path: str) -> Path:
+    p = Path(path)
+    if not p.is_absolute() and not p.exists() and (REPO_ROOT / p).exists():
+        p = REPO_ROOT / p
+    return p

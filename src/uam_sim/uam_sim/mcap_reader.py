@@ -1,0 +1,135 @@
+"""Reading recordings: complete files (indexed, log-time order) and files cut short by a crash.
+
+Imports no rclpy unless messages are deserialized (:func:`deserialize`, :func:`iter_decoded`).
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterable, Iterator, Sequence
+
+from .cdr import fleet_state_digest
+from .mcap_schema import message_class
+
+#: The topic whose messages ``iter_decoded(fleet_digest_only=True)`` reads as digests.
+FLEET_STATE_TOPIC = "/uam/fleet_state"
+
+
+@dataclass
+class RecordedMessage:
+    """One message as stored: topic, type name, CDR bytes, log and publish time [ns]."""
+
+    topic: str
+    type_name: str
+    data: bytes
+    log_time_ns: int
+    publish_time_ns: int
+    qos_yaml: str = ""
+
+
+def read_messages(path: str | os.PathLike, topics: Sequence[str] | None = None) -> Iterator[RecordedMessage]:
+    """Messages of a complete recording in log-time order (mcap's indexed reader)."""
+    from mcap.reader import make_reader
+
+    with open(path, "rb") as f:
+        reader = make_reader(f)
+        for schema, channel, message in reader.iter_messages(topics=list(topics) if topics else None,
+                                                             log_time_order=True):
+            yield RecordedMessage(channel.topic, schema.name if schema else "", message.data,
+                                  message.log_time, message.publish_time,
+                                  channel.metadata.get("offered_qos_profiles", ""))
+
+
+def read_messages_tolerant(path: str | os.PathLike) -> Iterator[RecordedMessage]:
+    """Messages of a recording that may be cut short (no summary, no footer), in file order.
+
+    Uses mcap's non-seeking reader and stops quietly at the first torn or missing record; every
+    message in a chunk written completely before the cut is returned.
+    """
+    from mcap.exceptions import McapError
+    from mcap.reader import NonSeekingReader
+
+    with open(path, "rb") as f:
+        reader = NonSeekingReader(f, validate_crcs=True)
+        it = reader.iter_messages(log_time_order=False)  # the ordered mode buffers to the end
+        while True:
+            try:
+                schema, channel, message = next(it)
+            except StopIteration:
+                return
+            except (McapError, EOFError, ValueError, OSError, KeyError, struct.error):
+                return  # the torn tail of a crashed recording
+            yield RecordedMessage(channel.topic, schema.name if schema else "", message.data,
+                                  message.log_time, message.publish_time,
+                                  channel.metadata.get("offered_qos_profiles", ""))
+
+
+def is_complete(path: str | os.PathLike) -> bool:
+    """True if the file ends with a valid footer and summary (it was closed properly)."""
+    from mcap.reader import make_reader
+
+    try:
+        with open(path, "rb") as f:
+            summary = make_reader(f).get_summary()
+        return summary is not None
+    except Exception:  # noqa: BLE001 - any failure to read the summary means "not complete"
+        return False
+
+
+def read_metadata(path: str | os.PathLike, name: str) -> dict[str, str]:
+    """The MCAP metadata record ``name`` of a complete recording ({} if absent or torn)."""
+    from mcap.reader import make_reader
+
+    try:
+        with open(path, "rb") as f:
+            for record in make_reader(f).iter_metadata():
+                if record.name == name:
+                    return dict(record.metadata)
+    except Exception:  # noqa: BLE001 - a torn file has no summary to find metadata by
+        return {}
+    return {}
+
+
+def deserialize(record: RecordedMessage) -> Any:
+    """The rclpy message object of a recorded message (imports rclpy)."""
+    from rclpy.serialization import deserialize_message
+    return deserialize_message(record.data, message_class(record.type_name))
+
+
+def iter_decoded(path: str | Path, reader: str = "rclpy",
+                 topics: Iterable[str] | None = None,
+                 fleet_digest_only: bool = False) -> Iterator[tuple[str, int, Any]]:
+    """(topic, log_time_ns, message) of the given topics (None: every topic), in log-time order.
+
+    ``reader``: "rclpy" (mcap + rclpy deserialization; a torn file yields what was written) or
+    "rosbags" (the independent rosbags library, every message decoded in full; needs a complete
+    file). ``fleet_digest_only`` (rclpy reader): FleetStates come back as their stamp,
+    step_index and a ``vehicles`` range of the right length only, read from the CDR directly.
+    """
+    wanted = None if topics is None else set(topics)
+    if reader == "rclpy":
+        if is_complete(path):
+            records = read_messages(path, topics=sorted(wanted) if wanted is not None else None)
+        else:  # crash-cut file: file order is log order here, but sort to be sure
+            records = sorted((r for r in read_messages_tolerant(path) if wanted is None or r.topic in wanted),
+                             key=lambda r: r.log_time_ns)
+        for rec in records:
+            if rec.topic == FLEET_STATE_TOPIC and fleet_digest_only:
+                digest = fleet_state_digest(rec.data)
+                if digest is not None:
+                    yield rec.topic, rec.log_time_ns, digest
+                    continue
+            yield rec.topic, rec.log_time_ns, deserialize(rec)
+    elif reader == "rosbags":
+        from rosbags.highlevel import AnyReader
+        from rosbags.typesys import Stores, get_typestore
+
+        with AnyReader([Path(path)], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as r:
+            conns = [c for c in r.connections if wanted is None or c.topic in wanted]
+            for conn, timestamp, raw in r.messages(connections=conns):
+                yield conn.topic, timestamp, r.deserialize(raw, conn.msgtype)
+    else:
+        raise ValueError(f"reader: {reader!r} is not 'rclpy' or 'rosbags'")

@@ -1,0 +1,201 @@
+"""One scenario in process (a cell of the study): the seeded request generator feeding one
+:class:`~uam_planner.planning.Planner` epoch by epoch, with one method, audited at the end."""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from uam_planner.planning import Planner
+
+from .audit import sweep_audit
+from .demand import RequestGenerator
+from .experiment_config import BASELINES, ExperimentConfig, rate_label
+
+
+@dataclass
+class ScenarioResult:
+    """One cell's outcome.
+
+    Attributes:
+        method, rate, seed, duration_s: the cell.
+        summary: one tidy row (counts, average aircraft in the air, solve-time stats, audit).
+        epochs: one row per epoch (t_s, counts so far, MWIS size, solve time, fallback, ...).
+        flights: one row per approved flight (ids, epoch, earliest departure, departure/arrival,
+            route, weight).
+        audit: the exact separation audit over all flown flights (min_separation_m, losses,
+            pairs_checked) or {} when disabled.
+        instances: MWIS instances (weights, edges incl. clique edges, groups) of this run with
+            1..corpus_max_vertices vertices, with their epoch index.
+        rejections: (request_id, reason) of requests the planner refused at submission.
+        wall_s: wall time of the run.
+    """
+
+    method: str
+    rate: float
+    seed: int
+    duration_s: float
+    summary: dict
+    epochs: list
+    flights: list
+    audit: dict
+    instances: list
+    rejections: list
+    wall_s: float
+
+    def decisions(self) -> dict:
+        """request id -> (epoch, candidate) of each approval: what must match across runs."""
+        return {f["request_id"]: (f["epoch"], f["candidate_index"]) for f in self.flights}
+
+
+def _solver(method: str, cfg: ExperimentConfig, seed: int):
+    import uam_solvers
+    options = dict(cfg.solver_options.get(method) or {})
+
+    def solve(weights, edges, groups):
+        return uam_solvers.solve(weights, edges, groups=groups, backend=method,
+                                 time_limit_s=cfg.time_limit_s, seed=int(seed), options=options)
+    return solve
+
+
+def average_airborne(departures_s, arrivals_s, duration_s: float) -> float:
+    """Time-average number of aircraft in the air over [0, duration_s], integrated exactly.
+
+    Each flight counts for the part of [departure, arrival] inside the window. O(F).
+    """
+    d = np.asarray(departures_s, dtype=np.float64)
+    a = np.asarray(arrivals_s, dtype=np.float64)
+    if d.size == 0:
+        return 0.0
+    inside = np.clip(np.minimum(a, duration_s) - np.maximum(d, 0.0), 0.0, None)
+    return float(inside.sum() / duration_s)
+
+
+def groups_from_ids(ids: Sequence[str]) -> list:
+    groups: dict = {}
+    for v, rid in enumerate(ids):
+        groups.setdefault(rid, []).append(v)
+    return [g for g in groups.values() if len(g) > 1]
+
+
+def epoch_statistics(epochs: Sequence[dict]) -> dict:
+    """Per-run means of the epoch rows (graph size, selection, eligible requests) and the solve
+    times of the epochs that had a conflict graph; shared by in-process runs and recordings."""
+    st = np.array([r["solve_time_s"] for r in epochs if r["vertices"] > 0], dtype=np.float64)
+    return {
+        "mean_vertices": float(np.mean([r["vertices"] for r in epochs])) if epochs else 0.0,
+        "max_vertices": int(max((r["vertices"] for r in epochs), default=0)),
+        "mean_selected": float(np.mean([r["selected"] for r in epochs])) if epochs else 0.0,
+        "mean_eligible": float(np.mean([r["eligible"] for r in epochs])) if epochs else 0.0,
+        "solve_time_mean_s": float(st.mean()) if st.size else 0.0,
+        "solve_time_max_s": float(st.max()) if st.size else 0.0,
+    }
+
+
+def run_scenario(network, method: str, rate: float, seed: int, duration_s: float,
+                 config: ExperimentConfig | None = None, demand=None,
+                 observer=None) -> ScenarioResult:
+    """Run one scenario in process: requests from the seeded generator, one planner, one method.
+
+    Args:
+        network: a uam_planner Network.
+        method: "fifo" / "firstfit" for the baselines, else an MWIS backend name.
+        rate: requests per interval (see RequestGenerator; fractional allowed).
+        seed: demand seed (also the solver seed); the same seed gives the same requests whatever
+            the method, so methods are compared on identical demand.
+        duration_s: simulated time; epochs run at t = i * epoch_s < duration_s, and the requests of
+            every demand instant at or before t are submitted before the epoch at t is planned.
+        config: ExperimentConfig (planning parameters, time limit, solver options).
+        demand: optional object with ``requests_at(t_s, interval_index)`` replacing the generator.
+        observer: optional callable(t_s, epoch_index, submitted, rejected, EpochResult) called
+            after each epoch with the requests submitted before it and the (request, reason)
+            pairs refused (e.g. to record the run as the node graph would).
+    Returns: ScenarioResult. Cost: one planning cycle per epoch plus an O(F^2) audit.
+    """
+    cfg = config if config is not None else ExperimentConfig()
+    t_wall = time.perf_counter()
+    policy = method if method in BASELINES else "mwis"
+    pcfg = cfg.planning_config("greedy" if method in BASELINES else method, seed)
+    planner = Planner(network, pcfg, policy=policy,
+                      solve_mwis=None if policy in BASELINES else _solver(method, cfg, seed))
+    if demand is None:
+        demand = RequestGenerator(network.aerodrome_ids, rate, cfg.interval_s, cfg.window_s, seed)
+    n_epochs = int(math.ceil(duration_s / cfg.epoch_s - 1e-9))
+    next_interval = 0
+    epochs, flights, instances, rejections = [], [], [], []
+    n_requests = approved_cum = expired_cum = 0
+    earliest_s: dict = {}
+    for e in range(n_epochs):
+        t = e * cfg.epoch_s
+        # every demand instant up to t, in time order (equal spacing when interval_s == epoch_s)
+        submitted, refused = [], []
+        while next_interval * cfg.interval_s <= t + 1e-9 and next_interval * cfg.interval_s < duration_s:
+            for req in demand.requests_at(next_interval * cfg.interval_s, next_interval):
+                n_requests += 1
+                submitted.append(req)
+                earliest_s[req.request_id] = req.earliest_departure_s  # for the delay analysis
+                reason = planner.submit(req)
+                if reason is not None:
+                    rejections.append((req.request_id, reason))
+                    refused.append((req, reason))
+            next_interval += 1
+        res = planner.plan(t, e)
+        if observer is not None:
+            observer(t, e, submitted, refused, res)
+        rep = res.report
+        approved_cum += len(res.approved)
+        expired_cum += len(res.expired)
+        for f in res.approved:
+            flights.append({"request_id": f.request_id, "origin": f.origin_id,
+                            "destination": f.destination_id, "epoch": e,
+                            "earliest_departure_s": earliest_s.get(f.request_id),
+                            "departure_s": f.departure_s, "arrival_s": f.arrival_s,
+                            "length_m": f.length_m, "weight": f.weight,
+                            "candidate_index": int(f.candidate_index),
+                            "route": " ".join(f.route_node_ids), "_traj": f.trajectory})
+        epochs.append({"epoch": e, "t_s": t, "requests_cum": n_requests, "pending": rep.pending,
+                       "eligible": rep.eligible, "candidates": rep.candidates,
+                       "discarded": rep.discarded, "vertices": rep.vertices, "edges": rep.edges,
+                       "conflict_edges": rep.conflict_edges, "selected": len(res.approved),
+                       "approved_cum": approved_cum, "expired": len(res.expired),
+                       "expired_cum": expired_cum, "active": rep.active_flights,
+                       "objective": rep.objective, "solve_time_s": rep.solve_time_s,
+                       "planning_time_s": rep.planning_time_s,
+                       "proven_optimal": bool(rep.proven_optimal), "fallback": bool(rep.fallback),
+                       "backend_used": rep.backend_used})
+        if policy == "mwis" and 0 < rep.vertices <= cfg.corpus_max_vertices:
+            instances.append({"epoch": e, "weights": [float(w) for w in rep.weights],
+                              "edges": np.asarray(rep.edges_array).reshape(-1, 2).tolist(),
+                              "groups": groups_from_ids(rep.vertex_request_ids)})
+
+    audit = {}
+    if cfg.audit:
+        audit = sweep_audit([f["_traj"] for f in flights], cfg.separation_m,
+                            labels=[f["request_id"] for f in flights])
+    for f in flights:
+        del f["_traj"]
+    mwis_epochs = [r for r in epochs if r["vertices"] > 0]
+    summary = {
+        "method": method, "rate": rate_label(rate), "seed": int(seed), "duration_s": float(duration_s),
+        "epochs": n_epochs, "requests": n_requests, "rejected": len(rejections),
+        "approved": approved_cum, "expired": expired_cum,
+        "pending_end": n_requests - len(rejections) - approved_cum - expired_cum,
+        "approval_rate": approved_cum / n_requests if n_requests else float("nan"),
+        "avg_airborne": average_airborne([f["departure_s"] for f in flights],
+                                         [f["arrival_s"] for f in flights], duration_s),
+        **epoch_statistics(epochs),
+        "proven_optimal_share": (float(np.mean([r["proven_optimal"] for r in mwis_epochs]))
+                                 if mwis_epochs and policy == "mwis" else float("nan")),
+        "fallbacks": int(sum(r["fallback"] for r in epochs)),
+        "min_separation_m": audit.get("min_separation_m"),
+        "losses": audit.get("losses"),
+    }
+    wall = time.perf_counter() - t_wall
+    summary["wall_s"] = wall
+    summary["real_time_factor"] = duration_s / wall if wall > 0 else float("inf")
+    return ScenarioResult(method, rate_label(rate), int(seed), float(duration_s), summary, epochs,
+                          flights, audit, instances, rejections, wall)

@@ -1,0 +1,148 @@
+"""The sweep of the study: cells (method, rate, seed) keyed by a hash of their parameters, run
+in parallel over processes, written atomically and reused when finished (an interrupted sweep
+resumes)."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from .demand import DemandSchedule, load_demand
+from .experiment_config import BASELINES, ExperimentConfig, make_config, rate_label, resolve_path
+from .files import write_json_atomic
+from .network_spec import load_network_spec, network_identity
+from .scenario import run_scenario
+
+CELL_FORMAT = "uam-experiment-cell/1"
+
+
+def cell_params(cfg: ExperimentConfig, method: str, rate, seed: int) -> dict:
+    """Every parameter that affects a cell's result (its key is the hash of this)."""
+    params = {"format": CELL_FORMAT, "method": method, "rate": rate_label(rate), "seed": int(seed),
+              "network": network_identity(cfg.network)}
+    for name in ("duration_s", "epoch_s", "interval_s", "window_s", "separation_m", "k",
+                 "penalty_factor", "speed_mps", "corpus_max_vertices", "audit"):
+        params[name] = getattr(cfg, name)
+    if method not in BASELINES:
+        params["time_limit_s"] = cfg.time_limit_s
+        params["solver_options"] = cfg.solver_options.get(method) or {}
+    if cfg.demand_file:
+        params["demand"] = hashlib.sha256(resolve_path(cfg.demand_file).read_bytes()).hexdigest()
+    return params
+
+
+def cell_key(params: dict) -> str:
+    digest = hashlib.sha256(json.dumps(params, sort_keys=True).encode()).hexdigest()[:16]
+    return f"{params['method']}_r{params['rate']}_s{params['seed']}_{digest}"
+
+
+def _read_cell(path: Path, key: str) -> dict | None:
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError):
+        return None
+    return data if data.get("key") == key else None
+
+
+def run_cell(cfg_dict: dict, method: str, rate, seed: int, cells_dir: str) -> dict:
+    """Run one cell and write it to ``cells_dir/<key>.json`` atomically; returns the cell dict.
+
+    Top-level so a process pool can call it; loads (and caches) the network in the worker.
+    """
+    cfg = make_config(cfg_dict)
+    params = cell_params(cfg, method, rate, seed)
+    key = cell_key(params)
+    net = load_network_spec(cfg.network)
+    demand = None
+    if cfg.demand_file:
+        demand = DemandSchedule(load_demand(resolve_path(cfg.demand_file), net.aerodrome_ids),
+                                cfg.interval_s)
+    res = run_scenario(net, method, rate, seed, cfg.duration_s, cfg, demand=demand)
+    cell = {"key": key, "params": params, "summary": res.summary, "epochs": res.epochs,
+            "flights": res.flights, "audit": res.audit, "instances": res.instances,
+            "rejections": res.rejections}
+    write_json_atomic(Path(cells_dir) / f"{key}.json", cell)
+    return cell
+
+
+@dataclass
+class SweepResult:
+    """Cells in sweep order (method, rate, seed), and which were computed or reused."""
+
+    config: ExperimentConfig
+    cells: list
+    computed: list
+    reused: list
+    wall_s: float
+    missing: list = field(default_factory=list)
+
+
+def sweep_methods(cfg: ExperimentConfig) -> list:
+    """The configured methods, plus "qpu" when include_qpu and the backend is available here."""
+    methods = list(cfg.methods)
+    if cfg.include_qpu and "qpu" not in methods:
+        try:
+            from uam_solvers.registry import get_backend
+            ok, _ = get_backend("qpu").available()
+        except Exception:  # an absent or broken optional backend just stays out of the sweep
+            ok = False
+        if ok:
+            methods.append("qpu")
+    return methods
+
+
+def run_sweep(cfg: ExperimentConfig, progress: bool = True, compute: bool = True) -> SweepResult:
+    """Run every missing cell (parallel over cfg.workers processes), reuse the finished ones.
+
+    ``compute=False`` only collects the finished cells (the missing ones are listed in
+    ``SweepResult.missing``), e.g. to report on a sweep that is still running.
+    """
+    t0 = time.perf_counter()
+    out = Path(cfg.out)
+    cells_dir = out / "cells"
+    cells_dir.mkdir(parents=True, exist_ok=True)
+    cfg_dict = asdict(cfg)
+    grid = [(m, r, s) for m in sweep_methods(cfg) for r in cfg.rates for s in cfg.seeds]
+    found: dict = {}
+    todo = []
+    for m, r, s in grid:
+        key = cell_key(cell_params(cfg, m, r, s))
+        cell = _read_cell(cells_dir / f"{key}.json", key)
+        if cell is not None:
+            found[(m, r, s)] = cell
+        else:
+            todo.append((m, r, s))
+    reused = list(found)
+    # seeds outermost: an interrupted sweep has every (method, rate) for the first seeds
+    seed_rank = {sd: i for i, sd in enumerate(cfg.seeds)}
+    todo.sort(key=lambda c: seed_rank[c[2]])
+    if not compute:
+        return SweepResult(cfg, [found[c] for c in grid if c in found], [], reused,
+                           time.perf_counter() - t0, missing=todo)
+    bar = None
+    if progress and todo:
+        from tqdm import tqdm
+        bar = tqdm(total=len(todo), desc="cells", unit="cell")
+    if cfg.workers <= 1 or len(todo) <= 1:
+        for m, r, s in todo:
+            found[(m, r, s)] = run_cell(cfg_dict, m, r, s, str(cells_dir))
+            if bar:
+                bar.update(1)
+    else:
+        import multiprocessing as mp
+        with ProcessPoolExecutor(max_workers=min(cfg.workers, len(todo)),
+                                 mp_context=mp.get_context("spawn")) as pool:
+            futs = {pool.submit(run_cell, cfg_dict, m, r, s, str(cells_dir)): (m, r, s)
+                    for m, r, s in todo}
+            for fut in as_completed(futs):
+                found[futs[fut]] = fut.result()
+                if bar:
+                    bar.update(1)
+    if bar:
+        bar.close()
+    return SweepResult(cfg, [found[c] for c in grid], list(todo), reused,
+                       time.perf_counter() - t0)
