@@ -47,15 +47,14 @@ def validate_scheduler(value) -> str | None:
     raise ValueError(f"scheduler: {value!r} must be 'local' or an address like tcp://HOST:8786")
 
 
-def compute_cell(cfg_dict: dict, method: str, rate, seed: int) -> dict:
-    """Run one cell on a worker in a scratch directory and return the cell dict (not kept there).
+def compute_cell(cell_fn: Callable, cfg_dict: dict, method: str, rate, seed: int) -> dict:
+    """Run ``cell_fn`` (``uam_sim.sweep.run_cell``) for one cell on a worker in a scratch
+    directory and return the cell dict (not kept there).
 
-    Top-level so Dask can pickle it by reference; imports the runner on the worker.
+    Top-level so Dask pickles it (and ``cell_fn``) by reference; the worker imports the runner.
     """
-    from uam_sim.sweep import run_cell
-
     with tempfile.TemporaryDirectory(prefix="uam-cell-") as scratch:
-        return run_cell(cfg_dict, method, rate, seed, scratch)
+        return cell_fn(cfg_dict, method, rate, seed, scratch)
 
 
 def _client(scheduler: str, n_workers: int, connect_timeout_s: float = 30.0):
@@ -75,7 +74,7 @@ def _client(scheduler: str, n_workers: int, connect_timeout_s: float = 30.0):
 
 
 def run_cells(cfg_dict: dict, todo: Sequence[tuple], expected_keys: dict, cells_dir,
-              scheduler: str = LOCAL, n_workers: int = 2,
+              cell_fn: Callable, scheduler: str = LOCAL, n_workers: int = 2,
               on_done: Callable[[tuple, dict], None] | None = None,
               connect_timeout_s: float = 30.0) -> dict:
     """Run the cells ``todo`` [(method, rate, seed)] on a Dask cluster; return {cell: cell dict}.
@@ -85,6 +84,8 @@ def run_cells(cfg_dict: dict, todo: Sequence[tuple], expected_keys: dict, cells_
         todo: cells to compute, in submission order (the runner puts seeds outermost).
         expected_keys: cell -> the key the driver computed; a worker's must match.
         cells_dir: where the driver writes each finished cell (atomically, as it arrives).
+        cell_fn: the cell runner, ``uam_sim.sweep.run_cell(cfg_dict, method, rate, seed, dir)``
+            (passed in so this module does not import the sweep that uses it).
         scheduler: "local" or a scheduler address.
         n_workers: processes of the LocalCluster (ignored for an address).
         on_done: called with (cell, cell dict) as each cell is written (progress bars).
@@ -94,7 +95,7 @@ def run_cells(cfg_dict: dict, todo: Sequence[tuple], expected_keys: dict, cells_
     """
     from distributed import as_completed
 
-    from uam_sim.files import write_json_atomic
+    from .files import write_json_atomic
 
     scheduler = validate_scheduler(scheduler) or LOCAL
     cells_dir = Path(cells_dir)
@@ -105,7 +106,7 @@ def run_cells(cfg_dict: dict, todo: Sequence[tuple], expected_keys: dict, cells_
         futs = {}
         for m, r, s in todo:
             # pure=False: never deduplicate or cache; each cell is computed once, as submitted
-            f = client.submit(compute_cell, cfg_dict, m, r, s, pure=False,
+            f = client.submit(compute_cell, cell_fn, cfg_dict, m, r, s, pure=False,
                               key=f"cell-{expected_keys[(m, r, s)]}-{os.getpid()}")
             futs[f] = (m, r, s)
         for fut in as_completed(list(futs)):

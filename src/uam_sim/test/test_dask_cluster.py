@@ -6,9 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from uam_sim.distributed import DistributedError, run_cells, validate_scheduler
-from uam_sim.experiment import make_config, run_sweep
-from uam_sim.sweep import cell_key, cell_params
+from uam_sim.dask_cluster import DistributedError, run_cells, validate_scheduler
+from uam_sim.experiment import ExperimentError, make_config, run_sweep
+from uam_sim.sweep import cell_key, cell_params, run_cell
 
 NET = {"synthetic": {"n_nodes": 30, "n_aerodromes": 5, "seed": 2}}
 TIMING = {"solve_time_s", "planning_time_s", "wall_s", "real_time_factor", "solve_time_mean_s",
@@ -38,7 +38,7 @@ def test_local_cluster_gives_the_serial_cells_and_resumes(tmp_path):
     todo = [(m, r, s) for m in cfg.methods for r in cfg.rates for s in cfg.seeds]
     keys = {c: cell_key(cell_params(cfg, *c)) for c in todo}
     done_order = []
-    cells = run_cells(asdict(cfg), todo, keys, Path(cfg.out) / "cells", scheduler="local",
+    cells = run_cells(asdict(cfg), todo, keys, Path(cfg.out) / "cells", run_cell, scheduler="local",
                       n_workers=2, on_done=lambda c, _cell: done_order.append(c))
     assert sorted(done_order) == sorted(todo)
     assert [strip_timing(cells[c]) for c in todo] == [strip_timing(c) for c in serial.cells]
@@ -49,7 +49,23 @@ def test_local_cluster_gives_the_serial_cells_and_resumes(tmp_path):
     bad = dict(keys)
     bad[todo[0]] = "fifo_r2_s0_0000000000000000"
     with pytest.raises(DistributedError, match=r"cell \('fifo', 2, 0\): the worker computed key"):
-        run_cells(asdict(cfg), todo[:1], bad, tmp_path / "bad", scheduler="local", n_workers=1)
+        run_cells(asdict(cfg), todo[:1], bad, tmp_path / "bad", run_cell, scheduler="local",
+                  n_workers=1)
+
+
+@pytest.mark.slow  # a LocalCluster again, through run_sweep
+def test_sweep_uses_the_cluster_when_asked_and_config_is_checked(tmp_path):
+    serial = run_sweep(small(tmp_path / "serial", methods=["firstfit"], rates=[2, 4]), progress=False)
+    local = run_sweep(small(tmp_path / "local", methods=["firstfit"], rates=[2, 4], scheduler="local",
+                            workers=2), progress=False)
+    assert len(local.computed) == 2
+    assert [strip_timing(c) for c in local.cells] == [strip_timing(c) for c in serial.cells]
+    with pytest.raises(ExperimentError, match="scheduler: 'host:8786'"):
+        small(tmp_path, scheduler="host:8786")
+    with pytest.raises(ExperimentError, match="airspace_mode: 'slots' is not available"):
+        small(tmp_path, airspace_mode="slots")
+    with pytest.raises(ExperimentError, match="airspace_mode: 'fast' is not one of"):
+        small(tmp_path, airspace_mode="fast")
 
 
 def test_scheduler_values_are_checked():
@@ -66,4 +82,4 @@ def test_unreachable_scheduler_is_a_clear_error(tmp_path):
     c = ("fifo", 2, 0)
     with pytest.raises(DistributedError, match="scheduler: cannot reach 'tcp://127.0.0.1:9'"):
         run_cells(asdict(cfg), [c], {c: cell_key(cell_params(cfg, *c))}, tmp_path / "cells",
-                  scheduler="tcp://127.0.0.1:9", connect_timeout_s=2.0)
+                  run_cell, scheduler="tcp://127.0.0.1:9", connect_timeout_s=2.0)
