@@ -8,6 +8,7 @@ import pytest
 
 from uam_planner.network import network_from_enu
 from uam_sim.experiment import make_config, run_experiment
+from uam_sim.report import report_from_tables
 from uam_sim.figures import (central_corridors, corridor_use_m, flight_metrics, per_read_tts,
                              warmup_time_s)
 
@@ -69,8 +70,9 @@ def test_small_study_has_every_figure_and_paired_section(tmp_path):
     cfg = make_config(dict(network={"synthetic": {"n_nodes": 30, "n_aerodromes": 5, "seed": 2}},
                            methods=["fifo", "firstfit", "greedy", "exact"], rates=[2, 6],
                            seeds=[0], duration_s=300.0, out=str(tmp_path), workers=1,
-                           include_qpu=False, tts={"enabled": False},
-                           cumulative_rates=[2, 6]))
+                           include_qpu=False, cumulative_rates=[2, 6],
+                           tts={"enabled": True, "instances": 4, "reads": 10, "repetitions": 2,
+                                "backends": ["exact", "sa"], "backend_instances": {}}))
     out = run_experiment(cfg, progress=False)
     for name in ("cumulative_approved", "approval_rate_vs_load", "active_over_time",
                  "delay_detour", "corridors_centrality", "mwis_size", "solve_time"):
@@ -86,3 +88,16 @@ def test_small_study_has_every_figure_and_paired_section(tmp_path):
     n_mwis_instances = sum(1 for c in out["sweep"].cells if c["summary"]["method"] in ("greedy", "exact")
                            for e in c["epochs"] if e["vertices"] > 0)
     assert sum(r["instances"] for r in out["figures"]["mwis_size"]["table"]) == n_mwis_instances
+    # every number of the report comes back from the tables (gzipped ones too)
+    import gzip
+    import shutil
+    copy = tmp_path / "copy"
+    copy.mkdir()
+    for name in ("runs.csv", "tts.csv", "report_inputs.json"):
+        shutil.copy(tmp_path / name, copy / name)
+    for name in ("epochs.csv", "flights.csv"):
+        with open(tmp_path / name, "rb") as src, gzip.open(copy / f"{name}.gz", "wb") as dst:
+            shutil.copyfileobj(src, dst)
+    again = report_from_tables(copy)
+    assert again.read_text() == report
+    assert "TTS(0.99) per call and per read" in report and "Per read:" in report

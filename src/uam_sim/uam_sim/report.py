@@ -313,8 +313,10 @@ def write_report(sweep, outputs: dict, machine: dict, out: Path) -> Path:
     mm = mwis_methods(cells)
     L = ["# UAM fleet planning study: results", "",
          "Written by `uam_sim.experiment` (the in-process runner). Every number below is computed "
-         "from the runs in this directory (`runs.csv`, `epochs.csv.gz`, `flights.csv.gz`, "
-         "`tts.csv`); rerun the command to regenerate:", "", f"    {STUDY_COMMAND}", "",
+         "from the tables in this directory (`runs.csv`, `epochs.csv`, `flights.csv`, `tts.csv`, "
+         f"gzipped where large, and `{INPUTS}`): `python -m uam_sim.report DIR` writes this report "
+         "and its figures again from them. The whole study (cells, TTS, tables, report):", "",
+         f"    {STUDY_COMMAND}", "",
          "Comparisons between methods are paired per seed (every method plans the same requests "
          "at one rate and seed) and given as mean difference [95 % CI] over seeds (Student t, "
          "`uam_sim.stats`); 'k+ / j-' counts the seeds with a positive / negative difference. A "
@@ -459,7 +461,7 @@ def write_report(sweep, outputs: dict, machine: dict, out: Path) -> Path:
              "delay (mean) [s]", "share delayed"],
             note="Detour = route length over the shortest route of the same origin and destination "
                  "(d/d* = 1/weight) - 1; delay = departure - earliest departure (0, 30 or 60 s with "
-                 "30 s epochs and a 60 s window). Per flight: `flights.csv.gz`.", nd=2)
+                 "30 s epochs and a 60 s window). Per flight: `flights.csv`.", nd=2)
         if "fifo" in methods:
             rows = []
             for m in [x for x in methods if x != "fifo"]:
@@ -517,7 +519,7 @@ def write_report(sweep, outputs: dict, machine: dict, out: Path) -> Path:
              "backends that never prove optimality themselves (annealers), the share of epochs "
              "proven optimal is the share the pipeline solved without calling them. A fallback is "
              "an epoch where the backend failed or ran past its time limit and greedy answered "
-             "(`epochs.csv.gz`); those depend on machine load.")
+             "(`epochs.csv`); those depend on machine load.")
     if figs.get("tts"):
         reads = tts.get("reads")
         pr = [r for r in figs["tts"]["table"] if r["per_read_median_s"] == r["per_read_median_s"]]
@@ -581,4 +583,114 @@ def write_report(sweep, outputs: dict, machine: dict, out: Path) -> Path:
           "report's paired comparisons run per mode unchanged.", ""]
     path = Path(out) / "REPORT.md"
     path.write_text("\n".join(L), encoding="utf-8")
+    _write_inputs(Path(out), sweep, outputs, machine)
     return path
+
+
+# ---- the report again from the tidy tables ----------------------------------------------------
+
+INPUTS = "report_inputs.json"
+
+
+def _write_inputs(out: Path, sweep, outputs: dict, machine: dict) -> None:
+    """What the report needs besides the CSVs (configuration, machine, sweep counts and times,
+    TTS settings), so :func:`report_from_tables` can write the same report from the tables."""
+    import json
+    tts = {k: v for k, v in (outputs.get("tts") or {}).items() if k != "rows"}
+    data = {"config": asdict(sweep.config), "machine": machine,
+            "sweep": {"computed": len(sweep.computed), "reused": len(sweep.reused),
+                      "wall_s": sweep.wall_s, "missing": [list(m) for m in getattr(sweep, "missing", [])]},
+            "wall_s": outputs.get("wall_s", 0.0), "tts": tts}
+    (out / INPUTS).write_text(json.dumps(data, indent=1, default=str), encoding="utf-8")
+
+
+def _parse(v: str):
+    """A CSV field back to the value written: '' -> None, True/False, int, float, else text
+    (text with '_' or spaces stays text: ids like r00001_002 or routes)."""
+    if v == "":
+        return None
+    if v in ("True", "False"):
+        return v == "True"
+    if "_" in v or " " in v:
+        return v
+    for cast in (int, float):
+        try:
+            return cast(v)
+        except ValueError:
+            pass
+    return v
+
+
+def _read_csv(d: Path, name: str) -> list:
+    import csv
+    import gzip
+    for p, opener in ((d / name, open), (d / f"{name}.gz", gzip.open)):
+        if p.exists():
+            with opener(p, "rt", encoding="utf-8", newline="") as fh:
+                return [{k: _parse(v) for k, v in row.items()} for row in csv.DictReader(fh)]
+    return []
+
+
+def cells_from_tables(d: Path) -> list:
+    """The cells (summary, epochs, flights, audit) rebuilt from runs.csv, epochs.csv[.gz] and
+    flights.csv[.gz] in ``d``, in the order of runs.csv."""
+    runs = _read_csv(d, "runs.csv")
+    if not runs:
+        raise FileNotFoundError(f"{d}: no runs.csv")
+    by: dict = {}
+    for name, field in (("epochs.csv", "epochs"), ("flights.csv", "flights")):
+        for row in _read_csv(d, name):
+            tag = (row.pop("method"), row.pop("rate"), row.pop("seed"))
+            by.setdefault((field, tag), []).append(row)
+    cells = []
+    for s in runs:
+        tag = (s["method"], s["rate"], s["seed"])
+        cells.append({"key": f"{tag[0]}_r{tag[1]}_s{tag[2]}", "summary": s,
+                      "epochs": by.get(("epochs", tag), []), "flights": by.get(("flights", tag), []),
+                      "audit": {"min_separation_m": s.get("min_separation_m"),
+                                "losses": s.get("losses") or 0} if s.get("losses") is not None else {},
+                      "instances": [], "rejections": []})
+    return cells
+
+
+def report_from_tables(d, figures: bool = True) -> Path:
+    """Write ``d/REPORT.md`` (and the figures) again from the tables and ``report_inputs.json``
+    of a finished study (e.g. docs/paper-study): every number of the report comes from them."""
+    import json
+    from types import SimpleNamespace
+
+    from .experiment_config import make_config
+    from .figures import make_figures
+    d = Path(d)
+    inputs = json.loads((d / INPUTS).read_text(encoding="utf-8"))
+    cfg = make_config(inputs["config"])  # as run (its "out" is printed); files go to d
+    cells = cells_from_tables(d)
+    tts = dict(inputs.get("tts") or {})
+    if tts.get("status") == "ok":
+        tts["rows"] = _read_csv(d, "tts.csv")
+    sw = inputs["sweep"]
+    sweep = SimpleNamespace(config=cfg, cells=cells, computed=[None] * sw["computed"],
+                            reused=[None] * sw["reused"], wall_s=sw["wall_s"],
+                            missing=[tuple(m) for m in sw.get("missing", [])])
+    figs = make_figures(cells, cfg, tts, d) if figures else {}
+    return write_report(sweep, {"figures": figs, "tts": tts, "wall_s": inputs.get("wall_s", 0.0)},
+                        inputs["machine"], d)
+
+
+def main(argv=None) -> int:
+    """``python -m uam_sim.report DIR``: the report of a finished study again from its tables."""
+    import argparse
+    p = argparse.ArgumentParser(prog="uam_sim.report", description=report_from_tables.__doc__)
+    p.add_argument("dir", help="study directory with runs.csv, epochs.csv[.gz], flights.csv[.gz], "
+                               f"tts.csv and {INPUTS}")
+    args = p.parse_args(argv)
+    try:
+        print(report_from_tables(args.dir))
+    except (OSError, ValueError) as exc:
+        print(f"uam_sim.report: {exc}", file=__import__("sys").stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
