@@ -9,7 +9,7 @@
 #   --policy P         mwis | fifo (default mwis)
 #   --rate R           requests per 30 s (default 10, the paper's middle rate)
 #   --duration S       simulated seconds (default 3500)
-#   --seed N           demand seed (default 0)
+#   --seed N           seed of the demand and of stochastic solvers (default 0)
 #   --network FILE     routing network (default config/networks/singapore.yaml)
 #   --demand FILE      replay a demand file instead of random requests
 #   --mode M           lockstep | realtime (default lockstep)
@@ -137,7 +137,7 @@ trap interrupted INT TERM HUP
 
 start uam_solvers solver solver --params-file config/solver.yaml -p "default_backend:=$BACKEND"
 start uam_planner planner planner --params-file config/planner.yaml -p "network:=$NETWORK" \
-  -p "policy:=$POLICY" -p "backend:=$BACKEND"
+  -p "policy:=$POLICY" -p "backend:=$BACKEND" -p "seed:=$SEED"
 start uam_sim request_generator request_generator --params-file config/request_generator.yaml \
   -p "network:=$NETWORK" -p "rate:=$RATE" -p "seed:=$SEED" ${DEMAND:+-p "demand_file:=$DEMAND"}
 start uam_sim recorder recorder -p "output:=$MCAP" -p "network:=$NETWORK" -p "rerun:='$RERUN'" -p "rerun_rrd:=$RRD"

@@ -44,38 +44,82 @@ def make_observer(context):
 
 
 def build_graph(context, *, network=TINY, rate=2.0, seed=3, duration_s=300.0, policy="mwis", backend="exact",
-                with_solver=True, planner_extra=None, expected_subscribers=3, record_to=None):
+                with_solver=True, with_planner=True, planner_extra=None, simulator_extra=None, generator_extra=None,
+                record_to=None, threads=4):
     """The graph's nodes on one multi-threaded executor; returns (executor, nodes dict, observer).
 
-    The simulator starts once planner, generator, itself (and the recorder, with ``record_to``)
-    subscribe to /uam/epoch_sync and, with ``record_to``, the recorder to the fleet streams.
+    Readiness is the epoch protocol: the simulator starts once the planner's and the generator's
+    services are up (and, with ``record_to``, once the recorder subscribes to the fleet state).
+    The run's ``seed`` goes to the generator and the planner (stochastic backends), as
+    scripts/run_fleet.sh does.
     """
-    from uam_planner.nodes.planner_node import PlannerNode
-    from uam_sim.nodes.request_generator_node import RequestGeneratorNode
-    from uam_sim.nodes.simulator_node import SimulatorNode
-    from uam_solvers.nodes.solver_node import SolverNode
-
     nodes = {}
     if with_solver:
-        nodes["solver"] = SolverNode(context=context, parameter_overrides=params(default_backend=backend))
-    nodes["planner"] = PlannerNode(context=context, parameter_overrides=params(
-        network=network, policy=policy, backend=backend, **(planner_extra or {})))
+        nodes["solver"] = make_solver(context, backend)
+    if with_planner:
+        nodes["planner"] = make_planner(context, network=network, policy=policy, backend=backend, seed=seed,
+                                        **(planner_extra or {}))
+    from uam_sim.nodes.request_generator_node import RequestGeneratorNode
     nodes["generator"] = RequestGeneratorNode(context=context, parameter_overrides=params(
-        network=network, rate=float(rate), seed=int(seed)))
+        network=network, rate=float(rate), seed=int(seed), **(generator_extra or {})))
     if record_to is not None:
         from uam_sim.nodes.recorder_node import RecorderNode
         nodes["recorder"] = RecorderNode(context=context, parameter_overrides=params(
             output=str(record_to), network=network, rerun="off"))
-        expected_subscribers += 1
     observer_node, obs = make_observer(context)
     nodes["observer"] = observer_node
+    from uam_sim.nodes.simulator_node import SimulatorNode
     nodes["simulator"] = SimulatorNode(context=context, parameter_overrides=params(
-        duration_s=float(duration_s), expected_subscribers=int(expected_subscribers),
-        expected_stream_subscribers=0 if record_to is None else 1))
-    executor = MultiThreadedExecutor(num_threads=4, context=context)
+        duration_s=float(duration_s), wait_for_subscribers=["recorder"] if record_to is not None else [""],
+        **(simulator_extra or {})))
+    executor = MultiThreadedExecutor(num_threads=threads, context=context)
     for n in nodes.values():
         executor.add_node(n)
     return executor, nodes, obs
+
+
+def make_solver(context, backend="exact"):
+    from uam_solvers.nodes.solver_node import SolverNode
+    return SolverNode(context=context, parameter_overrides=params(default_backend=backend))
+
+
+def make_planner(context, *, network=TINY, policy="mwis", backend="exact", seed=3, **extra):
+    from uam_planner.nodes.planner_node import PlannerNode
+    return PlannerNode(context=context, parameter_overrides=params(
+        network=network, policy=policy, backend=backend, seed=int(seed), **extra))
+
+
+def run_to_end(executor, nodes, obs, spin_until, timeout_s=120.0):
+    """Spin until the simulator ended the run and the observer holds every plan and report."""
+    sim = nodes["simulator"]
+    assert spin_until(executor, lambda: sim.finished, timeout_s=timeout_s), f"run did not finish; t={sim.t_s}"
+    assert not sim.error, sim.error
+    if "recorder" in nodes:  # closes the file by itself once the last messages are in
+        assert spin_until(executor, lambda: nodes["recorder"].finished, timeout_s=30)
+    n_requests = nodes["generator"].published
+    assert spin_until(executor, lambda: len(obs.requests) >= n_requests, timeout_s=10)
+    assert spin_until(executor, lambda: len(obs.fleet) >= len(sim.active_samples), timeout_s=10)
+    if "planner" in nodes:
+        planner = nodes["planner"]
+        assert spin_until(executor, lambda: len(obs.reports) >= planner.epochs_planned, timeout_s=10)
+        assert spin_until(executor, lambda: len(obs.plans) >= planner.plans_published, timeout_s=10)
+    return obs
+
+
+def decisions(plans, operator_id="generator") -> dict:
+    """request id -> (epoch, candidate) of the approvals of one operator (what must match a run)."""
+    from uam_msgs.msg import FlightPlan
+    return {p.request_id: (int(p.epoch_index), int(p.candidate_index)) for p in plans
+            if p.outcome == FlightPlan.OUTCOME_APPROVED and p.operator_id == operator_id}
+
+
+def in_process(rate, seed, duration_s, backend, policy="mwis", epoch_s=30.0, network=TINY, time_limit_s=5.0):
+    """The same scenario through uam_sim.experiment's in-process runner."""
+    from uam_planner.network import load_network
+    from uam_sim.experiment import make_config, run_scenario
+    method = "fifo" if policy == "fifo" else backend
+    cfg = make_config(epoch_s=float(epoch_s), time_limit_s=float(time_limit_s), audit=False)
+    return run_scenario(load_network(network), method, rate, seed, duration_s, cfg)
 
 
 def shutdown(executor, nodes):

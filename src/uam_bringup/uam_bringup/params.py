@@ -135,7 +135,7 @@ def declare_table(node, table: tuple[Param, ...], on_change: Callable[[str, Any]
 
 # ---- the tables ------------------------------------------------------------------------------------
 
-def _backend_rule(name) -> str:
+def backend_problem(name) -> str:
     from uam_solvers.registry import UnknownBackendError, backend_names, get_backend
 
     if not isinstance(name, str) or not name:
@@ -191,9 +191,9 @@ PLANNER = (
           "Singapore) instead of on first use; same routes"),
     Param("solver_timeout_margin_s", 5.0, "extra wall time [s] to wait for the solver service before the local "
           "greedy fallback", 0.0, 3600.0, read_only=False),
-    Param("solver_startup_timeout_s", 30.0, "wall time [s] to wait for the solver service at the first epoch "
-          "(nodes start in any order); later a missing service means the local greedy fallback at once",
-          0.0, 3600.0, read_only=False),
+    Param("solver_startup_timeout_s", 30.0, "wall time [s] to wait at start-up for the solver service before "
+          "offering uam/plan_epoch (nodes start in any order); later a missing service means the local greedy "
+          "fallback at once", 0.0, 3600.0),
     Param("use_solver_service", True, "call uam/solve_mwis; false solves in-process with the same backend"),
     Param("request_wait_timeout_s", 10.0, "wall time [s] an epoch waits for the requests the demand source "
           "released for it (named in the epoch call) before planning without the missing ones", 0.0, 3600.0,
@@ -210,7 +210,7 @@ PLANNER = (
 
 SOLVER = (
     Param("default_backend", "exact", "MWIS backend used when a request names none", read_only=False,
-          check=_backend_rule),
+          check=backend_problem),
     Param("default_time_limit_s", 10.0, "solve time limit [s] used when a request gives 0", 0.001, 3600.0,
           read_only=False),
     # A lower bound that serves every planner graph of the paper's scenarios (hundreds of vertices):
@@ -233,10 +233,11 @@ SIMULATOR = (
     Param("use_demand_service", True, "at each epoch, ask the request generator (uam/release_demand) to "
           "publish the epoch's requests and pass their ids to the planner; false: requests come only "
           "from outside, as they arrive"),
-    Param("wait_for_subscribers", ["recorder"], "start only once these nodes (by name) subscribe to "
-          "uam/fleet_state, so a recording starts at t = 0; [''] for none"),
-    Param("ack_timeout_s", 120.0, "wall time [s] to wait for an epoch's outcome (or the services at start) "
-          "before ending the run with an error", 0.1, 86400.0),
+    Param("wait_for_subscribers", [""], "start only once these nodes (by name) subscribe to "
+          "uam/fleet_state, so a recording starts at t = 0 (config/simulator.yaml: [recorder]); [''] for none"),
+    Param("ack_timeout_s", 120.0, "wall time [s] to wait for an epoch's outcome before ending the run with "
+          "an error (at start it waits for the services as long as it takes, saying what it waits for)",
+          0.1, 86400.0),
 )
 
 REQUEST_GENERATOR = (

@@ -122,3 +122,32 @@ def test_flights_that_flew_together_with_no_pair_checked_are_flagged(tmp_path):
     s = summarize(path)
     assert s.audit.pairs_checked == 0 and s.max_active_aircraft == 2
     assert any("0 pairs" in p for p in s.problems) and any("r2" in p for p in s.problems)
+
+
+def test_requests_are_keyed_by_operator_and_a_refused_duplicate_is_not_a_decision(tmp_path):
+    """Two operators may use the same request_id; the vehicles fly under the scoped key; an
+    OUTCOME_DUPLICATE answer (a reused id refused) neither hides nor changes the decision."""
+    path = tmp_path / "operators.mcap"
+    with _open(path) as rec:
+        for op in ("generator", "console"):
+            rec.write("/uam/requests", FlightRequest(operator_id=op, request_id="r1"), 0)
+        a = _plan("r1", APPROVED, north_m=0.0)
+        a.operator_id = "generator"
+        b = _plan("r1", APPROVED, north_m=500.0)
+        b.operator_id = "console"
+        dup = _plan("r1", FlightPlan.OUTCOME_DUPLICATE, reason="request id already taken")
+        dup.operator_id = "generator"
+        for p in (a, b, dup):
+            rec.write("/uam/flight_plans", p, 0)
+        _report(rec, 0, approved=2)
+        _fleet(rec, ["console/r1", "generator/r1"])
+    s = summarize(path)
+    assert (s.requests, s.approved, s.conflicting_decisions, s.duplicate_requests_refused) == (2, 2, {}, 1)
+    assert s.problems == [] and s.audit.pairs_checked == 1 and s.audit.ok
+    assert sorted(s.audit.closest_pair) == ["console/r1", "generator/r1"]
+
+
+def test_the_key_separator_is_the_contracts():
+    wire = pytest.importorskip("uam_bringup.wire")
+    from uam_sim.analysis import SCOPE_SEPARATOR
+    assert wire.scoped_id("op", "r1") == f"op{SCOPE_SEPARATOR}r1"

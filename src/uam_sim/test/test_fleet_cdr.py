@@ -102,3 +102,30 @@ def test_stamps_ids_and_positions_are_read_from_the_cdr_without_deserializing():
         stamp.sec, stamp.nanosec = 9, 8
         assert leading_stamp_ns(serialize_exact(msg)) == 9_000_000_008
     assert leading_stamp_ns(b"\x00\x00\x00\x00" + bytes(8)) is None  # big-endian: not read
+
+
+@pytest.mark.parametrize("frame_id", ["enu", "a-frame-id-of-odd-length"])
+def test_direct_cdr_with_ids_of_every_length_mod_8(frame_id):
+    """The vectorised encoder pads after each id by its length; ids of lengths 1..17 (and the
+    scoped ids the simulator flies) decode exactly as rclpy serializes them."""
+    pytest.importorskip("rclpy", reason="needs the built workspace")
+    from geometry_msgs.msg import Point, Vector3
+    from rclpy.serialization import deserialize_message, serialize_message
+    from uam_msgs.msg import FleetState, VehicleState
+
+    ids = ["x" * k for k in range(1, 18)] + ["generator/r00012_003", "médecin/é"]
+    n = len(ids)
+    rng = np.random.default_rng(1)
+    pos, vel = rng.normal(size=(n, 3)), rng.normal(size=(n, 3))
+    phases, segs = rng.integers(0, 3, n), rng.integers(0, 9, n)
+    flown, rem = rng.uniform(0, 1e4, n), rng.uniform(0, 1e4, n)
+    for _ in range(2):  # the second time the ids come from the cache
+        ours = encode_fleet_state(7, 123, frame_id, 42, ids, pos, vel, phases, segs, flown, rem)
+        msg = FleetState(step_index=42, vehicles=[VehicleState(
+            vehicle_id=ids[i], position=Point(x=pos[i, 0], y=pos[i, 1], z=pos[i, 2]),
+            velocity=Vector3(x=vel[i, 0], y=vel[i, 1], z=vel[i, 2]), phase=int(phases[i]),
+            segment_index=int(segs[i]), distance_flown_m=float(flown[i]), distance_remaining_m=float(rem[i]))
+            for i in range(n)])
+        msg.header.stamp.sec, msg.header.stamp.nanosec, msg.header.frame_id = 7, 123, frame_id
+        assert len(ours) == len(serialize_message(msg))
+        assert deserialize_message(ours, FleetState) == msg

@@ -5,19 +5,26 @@ prints the summary; ``--json`` prints :class:`RunSummary` as JSON instead.
 
 What it reads (topics as the node graph publishes them):
 
-- ``/uam/requests`` (FlightRequest): the requests, counted once per ``request_id``;
-- ``/uam/flight_plans`` (FlightPlan): each request's decision (approved / rejected / expired);
-  the approved plans' waypoints are the flights as flown (the simulator moves each vehicle along
-  its plan's piecewise-linear 4D trajectory);
+- ``/uam/requests`` (FlightRequest): the requests, counted once per ``operator_id/request_id``
+  (:func:`request_key`, the key the simulator names its vehicles by);
+- ``/uam/flight_plans`` (FlightPlan): every distinct decision (approved / rejected / expired),
+  whatever its id: an id decided more than one way is flagged, and every approved plan is
+  audited; the approved plans' waypoints are the flights as flown (the simulator moves each
+  vehicle along its plan's piecewise-linear 4D trajectory);
 - ``/uam/fleet_state`` (FleetState): airborne vehicles per step, for the time-average of the
-  number of active aircraft;
+  number of active aircraft and to check that every vehicle flown has an approved plan;
 - ``/uam/planning_reports`` (PlanningReport): per-epoch MWIS sizes, selections, solve times.
 
 The safety audit takes the approved plans' waypoints and finds the exact closest point of
 approach over the common time of pairs of flights (piecewise-linear in 4D), with
 ``uam_planner.audit.pair_min_distance`` (a brute-force kernel separate from the planner's
 separation code); pairs are visited in order of a bounding-box lower bound so that far-apart
-pairs are skipped without changing the result (see :func:`audit_trajectories`).
+pairs are skipped without changing the result (see :func:`uam_sim.audit.audit_trajectories`).
+
+It refuses to call a recording "OK" that lacks plans it should hold (:func:`integrity_problems`:
+reports announcing approvals whose plans are missing, vehicles flown without a plan, aircraft
+airborne together with no pair checked, conflicting decisions, or the recorder's own check
+failing): the verdict is then NOT VERIFIED and the command exits 3.
 
 Two decoders: ``reader="rclpy"`` (mcap's reader + ``rclpy.serialization``; tolerates a file cut
 short by a crash) and ``reader="rosbags"`` (the independent ``rosbags`` library, types built from
@@ -48,6 +55,10 @@ from .mcap_reader import is_complete, iter_decoded, read_metadata
 RECORDER_CHECK = "uam_recorder_check"
 
 OUTCOME_APPROVED, OUTCOME_REJECTED, OUTCOME_EXPIRED = 0, 1, 2
+OUTCOME_DUPLICATE = 3  # not a decision: a reused (operator_id, request_id) was refused
+#: Between operator_id and request_id in a request's key, as the node graph scopes ids (and names
+#: vehicles); uam_bringup.wire.scoped_id uses the same (a test holds them equal).
+SCOPE_SEPARATOR = "/"
 TOPIC_REQUESTS = "/uam/requests"
 TOPIC_PLANS = "/uam/flight_plans"
 TOPIC_REPORTS = "/uam/planning_reports"
@@ -108,6 +119,9 @@ class RunSummary:
     problems: list = field(default_factory=list)
     #: what the recorder itself found (its ``uam_recorder_check`` metadata), {} if none
     recorder_check: dict = field(default_factory=dict)
+    #: requests refused as reusing a taken (operator_id, request_id): OUTCOME_DUPLICATE answers,
+    #: which are not decisions (the earlier request's decision stands)
+    duplicate_requests_refused: int = 0
 
     @property
     def verified(self) -> bool:
@@ -155,9 +169,16 @@ def _stats(values: list[float]) -> dict:
 _OUTCOME_NAMES = {OUTCOME_APPROVED: "approved", OUTCOME_REJECTED: "rejected", OUTCOME_EXPIRED: "expired"}
 
 
+def request_key(msg: Any) -> str:
+    """A request's or plan's key: ``operator_id/request_id`` (ids are unique per operator), or the
+    bare request_id for messages without an operator (recordings made before operators)."""
+    operator = str(getattr(msg, "operator_id", "") or "")
+    return f"{operator}{SCOPE_SEPARATOR}{msg.request_id}" if operator else str(msg.request_id)
+
+
 def _plan_key(p: Any) -> tuple:
     """What makes two plan messages the same decision (a latched plan delivered twice)."""
-    return (str(p.request_id), int(p.outcome), str(p.reason), int(p.epoch_index),
+    return (request_key(p), int(p.outcome), str(p.reason), int(p.epoch_index),
             tuple((_t(w.time), float(w.position.x), float(w.position.y), float(w.position.z))
                   for w in p.waypoints))
 
@@ -219,7 +240,7 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m: f
     request_ids: set[str] = set()
     decisions: dict[str, list] = {}  # request id -> distinct plans, in arrival order
     seen: set[tuple] = set()
-    duplicates = 0
+    duplicates = refused_duplicates = 0
     fleet_t: list[float] = []
     fleet_n: list[int] = []
     flown: set[str] = set()
@@ -228,9 +249,12 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m: f
     for topic, log_ns, msg in messages:
         t_min, t_max = min(t_min, log_ns * 1e-9), max(t_max, log_ns * 1e-9)
         if topic == TOPIC_REQUESTS:
-            request_ids.add(str(msg.request_id))
+            request_ids.add(request_key(msg))
         elif topic == TOPIC_PLANS:
-            rid = str(msg.request_id)
+            if int(msg.outcome) == OUTCOME_DUPLICATE:
+                refused_duplicates += 1
+                continue
+            rid = request_key(msg)
             if rid in decisions:
                 duplicates += 1
             key = _plan_key(msg)
@@ -302,7 +326,8 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m: f
         rejection_reasons=reasons,
         audit=audit,
         conflicting_decisions=conflicting,
-        problems=integrity_problems(epochs, [(str(p.request_id), int(p.epoch_index)) for p in approved_plans], flown,
+        duplicate_requests_refused=refused_duplicates,
+        problems=integrity_problems(epochs, [(request_key(p), int(p.epoch_index)) for p in approved_plans], flown,
                                     max_active, audit, conflicting),
     )
 
@@ -346,6 +371,8 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
     if s.duplicate_decisions or s.plans_without_request:
         lines.append(f"  (duplicate decisions {s.duplicate_decisions}, plans without request "
                      f"{s.plans_without_request})")
+    if s.duplicate_requests_refused:
+        lines.append(f"  (requests refused as reusing a taken id: {s.duplicate_requests_refused})")
     for rid, outs in sorted(s.conflicting_decisions.items())[:20]:
         lines.append(f"    CONFLICTING decisions for {rid!r}: {', '.join(outs)}")
     for reason, n in sorted(s.rejection_reasons.items(), key=lambda kv: -kv[1]):

@@ -55,28 +55,59 @@ class _Writer:
         self.string(frame_id)
 
 
+# The fixed part of a VehicleState after its id: position and velocity (6 float64), phase (uint8,
+# then 3 bytes of padding to align the uint32), segment_index (uint32), distance flown and remaining
+# (2 float64). 72 bytes, a multiple of 8: every vehicle after the first starts 8-aligned.
+_VEHICLE_FIXED = np.dtype([("pv", "<f8", (6,)), ("phase", "u1"), ("pad", "V3"), ("segment", "<u4"),
+                           ("distances", "<f8", (2,))])
+assert _VEHICLE_FIXED.itemsize == 72
+
+
+def _id_block(vehicle_id: str, offset: int) -> bytes:
+    """A vehicle id as CDR starting at ``offset`` (4-aligned): length, bytes, NUL, then padding up
+    to the 8-alignment of the position that follows."""
+    data = vehicle_id.encode("utf-8")
+    end = offset + 4 + len(data) + 1
+    return struct.pack("<I", len(data) + 1) + data + b"\x00" + b"\x00" * ((-end) % 8)
+
+
+_ID_BLOCKS: dict[str, bytes] = {}  # id -> its block at an 8-aligned offset (ids repeat every step)
+
+
 def encode_fleet_state(sec: int, nanosec: int, frame_id: str, step_index: int, vehicle_ids, positions_m,
                        velocities_mps, phases, segment_indices, flown_m, remaining_m) -> bytes:
-    """Serialized uam_msgs/FleetState. Arrays have one row per vehicle (positions (n, 3) ENU m)."""
+    """Serialized uam_msgs/FleetState. Arrays have one row per vehicle (positions (n, 3) ENU m).
+
+    The fixed part of all vehicles is one numpy structured array; only the ids (whose length sets
+    the padding) are joined in Python, each cached: ~10x faster than packing field by field
+    (BENCHMARKS.md, node graph)."""
     w = _Writer()
     w.header(sec, nanosec, frame_id)
     w.u64(step_index)
     n = len(vehicle_ids)
     w.u32(n)
-    pos = np.asarray(positions_m, dtype="<f8").reshape(n, 3)
-    vel = np.asarray(velocities_mps, dtype="<f8").reshape(n, 3)
-    pv = np.concatenate([pos, vel], axis=1)
-    buf = w.buf
-    for i in range(n):
-        w.string(vehicle_ids[i])
-        w.align(8)
-        buf += pv[i].tobytes()
-        buf += struct.pack("<B", int(phases[i]))
-        w.align(4)
-        buf += struct.pack("<I", int(segment_indices[i]))
-        w.align(8)
-        buf += struct.pack("<dd", float(flown_m[i]), float(remaining_m[i]))
-    return _ENCAPSULATION + bytes(buf)
+    if n == 0:
+        return _ENCAPSULATION + bytes(w.buf)
+    fixed = np.zeros(n, dtype=_VEHICLE_FIXED)
+    fixed["pv"][:, :3] = np.asarray(positions_m, dtype=np.float64).reshape(n, 3)
+    fixed["pv"][:, 3:] = np.asarray(velocities_mps, dtype=np.float64).reshape(n, 3)
+    fixed["phase"] = np.asarray(phases, dtype=np.uint8)
+    fixed["segment"] = np.asarray(segment_indices, dtype=np.uint32)
+    fixed["distances"][:, 0] = flown_m
+    fixed["distances"][:, 1] = remaining_m
+    raw = memoryview(fixed.tobytes())
+    parts = [_ENCAPSULATION, bytes(w.buf), _id_block(vehicle_ids[0], len(w.buf)), raw[:72]]
+    blocks = _ID_BLOCKS
+    for i in range(1, n):
+        vid = vehicle_ids[i]
+        block = blocks.get(vid)
+        if block is None:
+            if len(blocks) > 100_000:  # bounded: a long run flies many more vehicles than are airborne
+                blocks.clear()
+            block = blocks[vid] = _id_block(vid, 0)
+        parts.append(block)
+        parts.append(raw[72 * i: 72 * (i + 1)])
+    return b"".join(parts)
 
 
 def encode_pose_array(sec: int, nanosec: int, frame_id: str, positions_m, orientations_xyzw) -> bytes:

@@ -79,9 +79,9 @@ def test_refuses_malformed_requests_and_keeps_serving(solver_setup, fields, word
 
 def test_refuses_graphs_over_the_size_limit(solver_setup):
     node, call, _, _ = solver_setup
-    node.set_parameters([Parameter("max_vertices", value=3)])
-    res = call()
-    assert not res.success and "max_vertices=3" in res.message
+    assert node.set_parameters([Parameter("max_vertices", value=1000)])[0].successful  # the smallest allowed
+    res = call(weights=[1.0] * 1001, edges_u=[0], edges_v=[1])
+    assert not res.success and "max_vertices=1000" in res.message
 
 
 def test_switches_default_backend_by_parameter_and_refuses_unknown_names(solver_setup):
@@ -106,7 +106,7 @@ def test_backend_options_reach_the_backend(solver_setup):
 def test_a_slow_solve_does_not_block_other_requests(solver_setup, spin_until, monkeypatch):
     """A backend blocked on an event holds one request; another request is answered meanwhile."""
     import uam_solvers
-    import uam_solvers.nodes.solver_node as solver_mod
+    import uam_solvers.registry
     from uam_solvers.base import Backend
     from uam_solvers.greedy import GreedyBackend
     from uam_solvers.registry import get_backend
@@ -125,7 +125,7 @@ def test_a_slow_solve_does_not_block_other_requests(solver_setup, spin_until, mo
         return Blocking() if name == "blocking-test" else get_backend(name)
 
     monkeypatch.setattr(uam_solvers, "get_backend", lookup)
-    monkeypatch.setattr(solver_mod, "get_backend", lookup)
+    monkeypatch.setattr(uam_solvers.registry, "get_backend", lookup)  # the node checks names there
     _, call, executor, client = solver_setup
     try:
         slow = client.call_async(SolveMwis.Request(weights=WEIGHTS, edges_u=EDGES_U, edges_v=EDGES_V,

@@ -1,45 +1,55 @@
-"""Planner node: keeps the pending requests and runs the planning cycle at each epoch.
+"""Planner node: decides requests as they arrive and plans an epoch when the simulator asks.
 
     ros2 run uam_planner planner --ros-args --params-file config/planner.yaml
 
-Subscribes /uam/requests (FlightRequest) and /uam/epoch_sync (EpochSync); publishes
-/uam/flight_plans (FlightPlan, reliable + transient local), /uam/planning_reports
-(PlanningReport) and its own EpochSync acknowledgements; calls /uam/solve_mwis (SolveMwis).
+Subscribes uam/requests (FlightRequest); serves uam/plan_epoch (PlanEpoch); calls
+uam/solve_mwis (SolveMwis); publishes uam/flight_plans (every decision), uam/planning_reports
+and its progress on uam/epoch_sync (for the recorder). Names and QoS: uam_bringup.contract;
+parameters: uam_bringup.params.PLANNER (docs/parameters.md).
 
-Lockstep: when the simulator announces epoch k at time t, the planner waits for the request
-generator's acknowledgement of epoch k and for every request it counted, then plans, publishes
-the plans and the report, and acknowledges epoch k with the number of plans published so far, so
-the simulator moves on only when the epoch's outcome is complete.
+On arrival every request is accepted (queued) or refused at once with a reason that names the
+field (those that come before the first epoch call, when the simulation time is not known yet,
+are decided at that call, in arrival order) (uam_bringup.wire, then the planning library's checks): ids bounded in length and
+characters and unique per operator, times well-formed and plausible, per-operator quota and a
+queue limit. A second request with a taken (operator_id, request_id) gets an
+OUTCOME_DUPLICATE answer, which is not a decision: the first decision stands. Nothing is counted
+to decide when to plan.
 
-A request with an unknown aerodrome, the same origin and destination, or an impossible time
-window is answered at once with a rejected plan whose reason names the field. If the solver
-service is absent, late or fails, the planning cycle falls back to greedy locally, logs a warning
-and marks the report; every answer is checked, so no conflicting pair is ever approved.
+The epoch protocol: the simulator asks to plan epoch k at time t, naming the requests the
+demand source released for it; the planner waits (asynchronously) until each has arrived or
+``request_wait_timeout_s`` passed, prepares the epoch (conflict graph), awaits the solver service
+(asynchronously; ``time_limit_s + solver_timeout_margin_s`` at most), commits the checked answer
+(the planning library is the one place that checks it and falls back to greedy) and answers with
+the epoch's plans and report. Asking again for the epoch in progress or the last one returns its
+outcome; nothing is planned twice. A planner started mid-run answers STATUS_NEED_STATE and
+resumes from the state the simulator then sends (flights in the air, requests decided).
 The planning itself is uam_planner.planning.Planner, shared with the in-process experiment runner.
 """
 
 from __future__ import annotations
 
+import collections
 import dataclasses
+import math
 import sys
 import threading
 import time
-from functools import partial
 
-from rcl_interfaces.msg import SetParametersResult
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.task import Future
 from uam_msgs.msg import EpochSync, FlightPlan, FlightRequest, PlanningReport
-from uam_msgs.srv import SolveMwis
+from uam_msgs.srv import PlanEpoch, SolveMwis
 
-from uam_planner.network import load_network
 from uam_bringup import contract as c
 from uam_bringup import conversions as m
-from uam_bringup import qos
+from uam_bringup import qos, wire
+from uam_bringup.params import PLANNER, declare_table
 from uam_bringup.runtime import run_node
-from uam_bringup.params import check, declare
-from uam_planner.planning import POLICIES, Planner, PlanningConfig, default_solve_mwis
+from uam_planner.network import load_network
+from uam_planner.planning import Planner, PlanningConfig, call_solver, default_solve_mwis
 
 
 class PlannerNode(Node):
@@ -50,207 +60,311 @@ class PlannerNode(Node):
         if not any(p.name == "use_sim_time" for p in kwargs["parameter_overrides"]):
             kwargs["parameter_overrides"].append(Parameter("use_sim_time", Parameter.Type.BOOL, True))
         super().__init__("planner", **kwargs)
-        d = partial(declare, self)
-        params = {
-            "network": d("network", "", "routing network file (.yaml, .geojson, .graphml), e.g. config/networks/singapore.yaml"),
-            "policy": d("policy", "mwis", "planning policy: conflict graph + MWIS, or the shortest-FIFO baseline", choices=POLICIES),
-            "backend": d("backend", "exact", "MWIS backend asked of the solver service (`ros2 run uam_solvers backends` lists them)"),
-            "time_limit_s": d("time_limit_s", 5.0, "MWIS solve time limit [s]", 0.001, 3600.0),
-            "seed": d("seed", 0, "seed passed to stochastic MWIS backends", 0, 2**31 - 1),
-            "epoch_s": d("epoch_s", 30.0, "time between planning epochs [s] (the simulator announces epochs)", 0.001, 86400.0),
-            "separation_m": d("separation_m", 100.0, "separation minimum [m]", 0.001, 100000.0),
-            "k": d("k", 5, "candidate routes per request", 1, 100),
-            "penalty_factor": d("penalty_factor", 5.0, "penalised Dijkstra factor for diverse candidates", 0.0, 1000.0),
-            "speed_mps": d("speed_mps", 10.0, "cruise speed [m/s]", 0.001, 1000.0),
-            "precompute_routes": d("precompute_routes", True, "compute every aerodrome pair's candidate routes "
-                                   "at start-up (1-2 s for Singapore) instead of on first use; same routes"),
-        }
-        d("solver_timeout_margin_s", 5.0, "extra wall time [s] to wait for the solver service before the local greedy fallback", 0.0, 3600.0)
-        d("solver_startup_timeout_s", 30.0, "wall time [s] to wait for the solver service at the first epoch "
-          "(nodes start in any order); later a missing service means the local greedy fallback at once", 0.0, 3600.0)
-        d("use_solver_service", True, "call /uam/solve_mwis; false solves in-process with the same backend")
-        d("wait_for_generator", True, "in lockstep, plan epoch k only after the request generator acknowledged it")
-        if not params["network"]:
-            raise ValueError("parameter network: empty; give a network file, e.g. config/networks/singapore.yaml")
-        self.network = load_network(params["network"])
-        config = PlanningConfig(
-            epoch_s=params["epoch_s"], separation_m=params["separation_m"], k=params["k"],
-            penalty_factor=params["penalty_factor"], speed_mps=params["speed_mps"], backend=params["backend"],
-            time_limit_s=params["time_limit_s"], seed=params["seed"], precompute_routes=params["precompute_routes"])
-        self.policy = params["policy"]
-        self.planner = Planner(self.network, config, self.policy, solve_mwis=self._solve_mwis)
-        self.add_on_set_parameters_callback(self._on_set_parameters)
-
         self._lock = threading.RLock()
-        self.stopping = threading.Event()  # set on shutdown: a callback waiting on the solver gives up
-        self._plan_group = MutuallyExclusiveCallbackGroup()
-        self._client_group = ReentrantCallbackGroup()
+        self.p = declare_table(self, PLANNER, on_change=self._on_change)
+        self.network = load_network(self.p["network"])
+        config = PlanningConfig(
+            separation_m=self.p["separation_m"], k=self.p["k"], penalty_factor=self.p["penalty_factor"],
+            speed_mps=self.p["speed_mps"], backend=self.p["backend"], time_limit_s=self.p["time_limit_s"],
+            seed=self.p["seed"], precompute_routes=self.p["precompute_routes"])
+        self.policy = self.p["policy"]
+        self.planner = Planner(self.network, config, self.policy)
+
+        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self._group = ReentrantCallbackGroup()  # the epoch service awaits; arrivals must go on meanwhile
         self._plan_pub = self.create_publisher(FlightPlan, c.TOPIC_PLANS, qos.QOS_LATCHED)
         self._report_pub = self.create_publisher(PlanningReport, c.TOPIC_REPORTS, qos.QOS_LATCHED)
         self._sync_pub = self.create_publisher(EpochSync, c.TOPIC_SYNC, qos.QOS_LATCHED)
-        self.create_subscription(FlightRequest, c.TOPIC_REQUESTS, self._on_request, qos.QOS_LATCHED,
-                                 callback_group=self._plan_group)
-        self.create_subscription(EpochSync, c.TOPIC_SYNC, self._on_sync, qos.QOS_LATCHED,
-                                 callback_group=self._plan_group)
-        self._client = self.create_client(SolveMwis, c.SERVICE_SOLVE, callback_group=self._client_group)
-        self._startup_waited = False  # the first epoch waits for the solver to come up
+        self.create_subscription(FlightRequest, c.TOPIC_REQUESTS, self._on_request, qos.QOS_REQUESTS)
+        self.create_subscription(EpochSync, c.TOPIC_SYNC, self._on_sync, qos.QOS_LATCHED)
+        self._client = self.create_client(SolveMwis, c.SERVICE_SOLVE, callback_group=self._group)
+        self._service = None  # offered once the solver is up (or its start-up wait is over)
+        self._started_at = time.monotonic()
+        self._ready_timer = self.create_timer(0.05, self._offer_service_when_ready, clock=self._steady)
 
-        self._announced: dict[int, float] = {}       # simulator: epoch -> time [s]
-        self._generator_acks: dict[int, int] = {}    # generator: epoch -> requests published so far
+        self._taken: set[str] = set()            # scoped ids decided or waiting: a reuse is a duplicate
+        self._held: list | None = []             # requests that came before the first epoch call
+        self._waiting_per_operator: collections.Counter = collections.Counter()
+        self._waiters: list[tuple[set, Future]] = []
         self._next_epoch = 0
-        self._last_t_s = float("-inf")
+        self._next_epoch_s = 0.0                 # time of the next epoch: what arrivals are checked against
+        self._last_epoch_s = 0.0                 # time of the last epoch planned: the stamp of refusals
+        self._inflight: tuple[int, Future] | None = None
+        self._last: tuple[int, PlanEpoch.Response] | None = None
+        self._refusal_logged_at = float("-inf")
+        self._refused_unlogged = 0
         self.requests_received = 0
         self.plans_published = 0
+        self.epochs_planned = 0
         self.finished = False
         self.get_logger().info(
-            f"planner ready: network {self.network.name!r} ({len(self.network.node_ids)} nodes, "
-            f"{len(self.network.aerodrome_ids)} aerodromes), policy {self.policy}, backend {self.config.backend}")
+            f"planner: network {self.network.name!r} ({len(self.network.node_ids)} nodes, "
+            f"{len(self.network.aerodrome_ids)} aerodromes), policy {self.policy}, backend {self.config.backend}, "
+            f"seed {self.config.seed}")
 
     @property
     def config(self) -> PlanningConfig:
         """The planner's current configuration (backend, time limit and seed can change at run time)."""
         return self.planner.config
 
-    # ---- parameters --------------------------------------------------------------------------
-    def _on_set_parameters(self, params) -> SetParametersResult:
-        fixed = {"network", "policy", "epoch_s", "separation_m", "k", "penalty_factor", "speed_mps"}
-        for prm in params:
-            if prm.name in fixed:
-                return SetParametersResult(successful=False, reason=f"{prm.name} cannot change during a run")
-            if prm.name == "backend":
-                from uam_solvers.registry import UnknownBackendError, backend_names, get_backend
-                try:
-                    get_backend(prm.value)
-                except (UnknownBackendError, TypeError):
-                    return SetParametersResult(successful=False, reason=(
-                        f"backend: unknown backend {prm.value!r}; known: {', '.join(backend_names())}"))
-        for prm in params:
-            try:
-                if prm.name == "time_limit_s":
-                    check("time_limit_s", prm.value, 1.0, 0.001, 3600.0)
-                elif prm.name == "seed":
-                    check("seed", prm.value, 0, 0, 2**31 - 1)
-                elif prm.name == "solver_timeout_margin_s":
-                    check(prm.name, prm.value, 1.0, 0.0, 3600.0)
-            except ValueError as exc:
-                return SetParametersResult(successful=False, reason=str(exc))
-        for prm in params:  # accepted: backend, time limit and seed take effect at the next epoch
-            if prm.name in ("backend", "time_limit_s", "seed"):
-                with self._lock:
-                    fields = {prm.name: float(prm.value) if prm.name == "time_limit_s" else prm.value}
-                    self.planner.config = dataclasses.replace(self.planner.config, **fields)
-        return SetParametersResult(successful=True)
+    def _on_change(self, name: str, value) -> None:
+        if name in ("backend", "time_limit_s", "seed"):  # take effect at the next epoch
+            with self._lock:
+                self.planner.config = dataclasses.replace(self.planner.config, **{name: value})
 
-    # ---- MWIS through the service --------------------------------------------------------------
-    def _solve_mwis(self, weights, edges, groups):
-        """Injected into Planner: solve via /uam/solve_mwis; raise so the cycle falls back to greedy."""
-        if not self.get_parameter("use_solver_service").value:
-            return default_solve_mwis(self.config)(weights, edges, groups)
-        if not self._client.service_is_ready() and not self._startup_waited:
-            self._startup_waited = True
-            self._client.wait_for_service(timeout_sec=self.get_parameter("solver_startup_timeout_s").value)
-        if not self._client.service_is_ready():
-            msg = f"solver service {c.SERVICE_SOLVE} is not available"
-            self.get_logger().warning(msg + "; solving with greedy locally")
-            raise RuntimeError(msg)
-        self._startup_waited = True
-        req = m.solve_request(weights, edges, groups, self.config.backend, self.config.time_limit_s,
-                              self.config.seed)
-        done = threading.Event()
-        future = self._client.call_async(req)
-        future.add_done_callback(lambda _f: done.set())
-        timeout = self.config.time_limit_s + self.get_parameter("solver_timeout_margin_s").value
-        deadline = time.monotonic() + timeout
-        while not done.wait(0.05):
-            if self.stopping.is_set():
-                self._client.remove_pending_request(future)
-                raise RuntimeError("the planner is shutting down")
-            if time.monotonic() > deadline:
-                self._client.remove_pending_request(future)
-                msg = f"solver service {c.SERVICE_SOLVE} did not answer within {timeout:.1f} s"
-                self.get_logger().warning(msg + "; solving with greedy locally")
-                raise TimeoutError(msg)
-        res = future.result()
-        if res is None or not res.success:
-            msg = f"solver service refused or failed: {getattr(res, 'message', 'no response')}"
-            self.get_logger().warning(msg + "; solving with greedy locally")
-            raise RuntimeError(msg)
-        return m.solve_answer(res)
+    def _offer_service_when_ready(self) -> None:
+        waited = time.monotonic() - self._started_at
+        if self.p["use_solver_service"] and not self._client.service_is_ready() \
+                and waited < self.p["solver_startup_timeout_s"]:
+            return
+        self._ready_timer.cancel()
+        self.destroy_timer(self._ready_timer)
+        self._service = self.create_service(PlanEpoch, c.SERVICE_PLAN_EPOCH, self._on_plan_epoch,
+                                            callback_group=self._group)
+        self.get_logger().info(f"serving {self.resolve_service_name(c.SERVICE_PLAN_EPOCH)}")
 
     # ---- requests ----------------------------------------------------------------------------
     def _publish_plan(self, plan: FlightPlan) -> None:
         self._plan_pub.publish(plan)
         self.plans_published += 1
 
+    def _answer(self, msg: FlightRequest, outcome: int, reason: str, ids_ok: bool) -> None:
+        reason = wire.bounded(reason)
+        origin = msg.origin_id if len(msg.origin_id) <= wire.MAX_NODE_ID_LENGTH else ""
+        dest = msg.destination_id if len(msg.destination_id) <= wire.MAX_NODE_ID_LENGTH else ""
+        plan = m.unapproved_plan(msg.request_id if ids_ok else "", origin, dest, outcome, reason,
+                                 self._last_epoch_s, max(self._next_epoch - 1, 0), self.policy)
+        plan.operator_id = msg.operator_id if ids_ok else ""
+        self._publish_plan(plan)
+        self.planner.record_rejection()
+        # at most one log line a second: rclpy's logger costs milliseconds a call, which a flood
+        # would turn into minutes (its own throttling pays that cost on every call too)
+        self._refused_unlogged += 1
+        now = time.monotonic()
+        if now - self._refusal_logged_at >= 1.0:
+            more = f" (and {self._refused_unlogged - 1} more since the last such line)" if self._refused_unlogged > 1 else ""
+            self.get_logger().warning(f"refused a request: {reason}{more}")
+            self._refusal_logged_at, self._refused_unlogged = now, 0
+
     def _on_request(self, msg: FlightRequest) -> None:
         with self._lock:
             self.requests_received += 1
-            try:
-                req = m.request_from_msg(msg)
-                # What is wrong with the request itself first, then whether it came too late.
-                reason = self.planner.validate(req)
-                if reason is None and req.latest_departure_s < self._last_t_s:
-                    reason = (f"latest_departure: {req.latest_departure_s:g} s is before the current "
-                              f"simulation time {self._last_t_s:g} s")
-            except ValueError as exc:
-                req, reason = None, f"request: {exc}"
-            if reason is None:
-                reason = self.planner.submit(req)
-            else:
-                self.planner.record_rejection()
-            if reason is not None:
-                epoch = max(self._next_epoch - 1, 0)
-                self._publish_plan(m.unapproved_plan(
-                    msg.request_id, msg.origin_id, msg.destination_id, FlightPlan.OUTCOME_REJECTED, reason,
-                    max(self._last_t_s, 0.0), epoch, self.policy))
-                self.get_logger().warning(f"rejected request {msg.request_id!r}: {reason}")
-            self._try_plan()
+            if self._held is not None:  # the simulation time is not known yet: decided at the first epoch
+                self._held.append(msg)
+                return
+            key = self._decide(msg)
+            if key is not None:
+                self._arrived(key)
 
-    # ---- epochs ------------------------------------------------------------------------------
+    def _decide_held(self, t_s: float, resumed: bool) -> None:
+        """Decide the requests that arrived before the first epoch call, in arrival order. After a
+        resume, those the simulator says were decided, or whose window has closed (they were decided
+        before the restart), come from the generator's latched history: nothing is answered twice."""
+        held, self._held = self._held or [], None
+        self._next_epoch_s = t_s
+        for msg in held:
+            if resumed:
+                key = wire.scoped_id(msg.operator_id, msg.request_id)
+                if key in self._taken or m.from_time(msg.latest_departure) < t_s:
+                    continue
+            self._decide(msg)
+
+    def _decide(self, msg: FlightRequest) -> str | None:
+        """Accept or refuse ``msg`` now; return its scoped id when the ids are valid."""
+        ids_ok = not (wire.check_id("operator_id", msg.operator_id) or wire.check_id("request_id", msg.request_id))
+        key = wire.scoped_id(msg.operator_id, msg.request_id) if ids_ok else None
+        if key is not None and key in self._taken:
+            self._answer(msg, FlightPlan.OUTCOME_DUPLICATE,
+                         f"request_id: {msg.request_id!r} of operator {msg.operator_id!r} is already taken; "
+                         "its decision stands", True)
+            return key
+        reason = wire.check_request(msg, self._next_epoch_s, max_window_s=self.p["max_window_s"],
+                                    max_request_lead_s=self.p["max_request_lead_s"])
+        if not reason:
+            if self._waiting_per_operator[msg.operator_id] >= self.p["max_pending_per_operator"]:
+                reason = (f"operator_id: {msg.operator_id!r} has {self._waiting_per_operator[msg.operator_id]} "
+                          "requests waiting, its quota (max_pending_per_operator); send more once they are decided")
+            elif len(self.planner.pending) >= self.p["max_pending"]:
+                reason = f"request: the planner's queue is full ({len(self.planner.pending)} waiting, max_pending)"
+        if not reason:
+            reason = self.planner.submit(m.request_from_msg(msg, request_id=key)) or ""
+            if not reason:
+                self._taken.add(key)
+                self._waiting_per_operator[msg.operator_id] += 1
+                return key
+        if key is not None:
+            self._taken.add(key)
+        self._answer(msg, FlightPlan.OUTCOME_REJECTED, reason, ids_ok)
+        return key
+
+    def _arrived(self, key: str) -> None:
+        for missing, fut in self._waiters:
+            missing.discard(key)
+            if not missing and not fut.done():
+                fut.set_result(True)
+
     def _on_sync(self, msg: EpochSync) -> None:
+        if msg.sender == "simulator" and msg.finished:
+            self.finished = True
+
+    # ---- the epoch protocol ------------------------------------------------------------------
+    async def _on_plan_epoch(self, request: PlanEpoch.Request, response: PlanEpoch.Response):
+        k = int(request.epoch_index)
         with self._lock:
-            if msg.sender == "simulator":
-                if msg.finished:
-                    self.finished = True
-                    return
-                self._announced.setdefault(msg.epoch_index, m.from_time(msg.epoch_time))
-            elif msg.sender == "request_generator":
-                self._generator_acks[msg.epoch_index] = int(msg.requests_published)
-            self._try_plan()
+            if self._last is not None and self._last[0] == k:
+                return self._last[1]
+            inflight = self._inflight
+        if inflight is not None and inflight[0] == k:
+            return await inflight[1]  # asked again while planning it: the same outcome
+        with self._lock:
+            if self._inflight is not None:
+                response.status = PlanEpoch.Response.STATUS_REFUSED
+                response.message = f"epoch {self._inflight[0]} is being planned; epoch {k} asked"
+                return response
+            if k != self._next_epoch:
+                if self._next_epoch == 0 and not request.resume:
+                    response.status = PlanEpoch.Response.STATUS_NEED_STATE
+                    response.message = f"planner started mid-run (epoch {k}): send the flights and decisions"
+                    return response
+                if not (self._next_epoch == 0 and request.resume):
+                    response.status = PlanEpoch.Response.STATUS_REFUSED
+                    response.message = f"epoch {k} asked, the next epoch is {self._next_epoch}"
+                    return response
+            t_s = m.from_time(request.epoch_time)
+            if not (math.isfinite(request.epoch_s) and request.epoch_s > 0):
+                response.status = PlanEpoch.Response.STATUS_REFUSED
+                response.message = f"epoch_s: {request.epoch_s!r} must be a positive number of seconds"
+                return response
+            if request.resume:
+                self._resume(request, t_s)
+            if self._held is not None:
+                self._decide_held(t_s, bool(request.resume))
+            if self.config.epoch_s != request.epoch_s:
+                self.planner.config = dataclasses.replace(self.planner.config, epoch_s=float(request.epoch_s))
+            done = Future()
+            self._inflight = (k, done)
+        try:
+            outcome = await self._plan(k, t_s, list(request.expected_request_ids), response)
+        finally:
+            with self._lock:
+                self._inflight = None
+        done.set_result(outcome)
+        return outcome
 
-    def _try_plan(self) -> None:
-        while self._next_epoch in self._announced:
-            k = self._next_epoch
-            if self.get_parameter("wait_for_generator").value:
-                expected = self._generator_acks.get(k)
-                if expected is None or self.requests_received < expected:
-                    return
-            self._plan(k, self._announced[k])
-            self._next_epoch += 1
+    def _resume(self, request: PlanEpoch.Request, t_s: float) -> None:
+        """A planner started mid-run takes the simulator's state: what flies, what was decided."""
+        flights = [m.flight_from_plan(p, request_id=wire.scoped_id(p.operator_id, p.request_id))
+                   for p in request.airborne]
+        decided = set(request.decided_request_ids)
+        self.planner.restore(flights, decided)
+        self._taken |= decided | {f.request_id for f in flights}
+        self._count_waiting()
+        self.get_logger().warning(
+            f"resumed at epoch {request.epoch_index} (t={t_s:g} s): {len(flights)} flights in the air, "
+            f"{len(decided)} requests decided before, {len(self.planner.pending)} waiting")
 
-    def _plan(self, k: int, t_s: float) -> None:
-        self._last_t_s = t_s
-        result = self.planner.plan(t_s, k)
-        report = result.report
-        for flight in result.approved:
-            self._publish_plan(m.approved_plan(flight, t_s, self.policy))
-        for req in result.expired:
-            self._publish_plan(m.unapproved_plan(
-                req.request_id, req.origin_id, req.destination_id, FlightPlan.OUTCOME_EXPIRED,
-                f"no conflict-free departure found by latest_departure {req.latest_departure_s:g} s",
-                t_s, k, self.policy))
-        self._report_pub.publish(m.report_to_msg(report))
-        if report.fallback:
-            self.get_logger().warning(f"epoch {k}: MWIS fallback to {report.backend_used}: {report.fallback_reason}")
-        self._sync_pub.publish(EpochSync(
-            epoch_index=k, epoch_time=m.to_time(t_s), sender="planner", plans_published=self.plans_published,
-            requests_received=self.requests_received))
-        self.get_logger().debug(
-            f"epoch {k} t={t_s:g}s: eligible {report.eligible}, approved {report.approved}, expired {report.expired}")
+    def _count_waiting(self) -> None:
+        self._waiting_per_operator = collections.Counter(
+            wire.split_scoped(r.request_id)[0] for r in self.planner.pending)
+
+    async def _wait_for(self, expected: list[str]) -> list[str]:
+        """Wait until every expected request arrived or request_wait_timeout_s; return the missing."""
+        with self._lock:
+            missing = set(expected) - self._taken
+            if not missing:
+                return []
+            fut = Future()
+            entry = (missing, fut)
+            self._waiters.append(entry)
+        timer = self.create_timer(self.p["request_wait_timeout_s"], lambda: fut.done() or fut.set_result(False),
+                                  callback_group=self._group, clock=self._steady)
+        try:
+            await fut
+        finally:
+            self.destroy_timer(timer)
+            with self._lock:
+                self._waiters.remove(entry)
+        return sorted(missing)
+
+    async def _plan(self, k: int, t_s: float, expected: list[str], response: PlanEpoch.Response):
+        missing = await self._wait_for(expected)
+        if missing:
+            self.get_logger().warning(f"epoch {k}: planning without {len(missing)} expected request(s) that did "
+                                      f"not arrive within {self.p['request_wait_timeout_s']:g} s: {missing[:5]}")
+        with self._lock:
+            prep = self.planner.prepare(t_s, k)
+        t0 = time.perf_counter()
+        answer = await self._solve(prep.graph) if prep.needs_solver else None
+        solve_s = time.perf_counter() - t0
+        with self._lock:
+            result = self.planner.commit(prep, answer, solve_s)
+            plans = [m.approved_plan(f, t_s, self.policy, request_id=wire.split_scoped(f.request_id)[1])
+                     for f in result.approved]
+            for plan, f in zip(plans, result.approved):
+                plan.operator_id = wire.split_scoped(f.request_id)[0]
+            for req in result.expired:
+                op, rid = wire.split_scoped(req.request_id)
+                plan = m.unapproved_plan(
+                    rid, req.origin_id, req.destination_id, FlightPlan.OUTCOME_EXPIRED,
+                    f"no conflict-free departure found by latest_departure {req.latest_departure_s:g} s",
+                    t_s, k, self.policy)
+                plan.operator_id = op
+                plans.append(plan)
+            for plan in plans:
+                self._publish_plan(plan)
+            report = m.report_to_msg(result.report)
+            self._report_pub.publish(report)
+            if result.report.fallback:
+                self.get_logger().warning(
+                    f"epoch {k}: MWIS fallback to {result.report.backend_used}: {result.report.fallback_reason}")
+            self._count_waiting()
+            self._next_epoch = k + 1
+            self._next_epoch_s = t_s + self.config.epoch_s
+            self._last_epoch_s = t_s
+            self.epochs_planned += 1
+            self._sync_pub.publish(EpochSync(
+                epoch_index=k, epoch_time=m.to_time(t_s), sender="planner", plans_published=self.plans_published,
+                requests_received=self.requests_received))
+            response.status = PlanEpoch.Response.STATUS_PLANNED
+            response.message = f"epoch {k}: {len(result.approved)} approved, {len(result.expired)} expired"
+            response.plans = plans
+            response.report = report
+            response.missing_request_ids = missing
+            self._last = (k, response)
+        return response
+
+    async def _solve(self, graph):
+        """The solver's answer for ``graph``, or why there is none (the commit then falls back)."""
+        cfg = self.config
+        if not self.p["use_solver_service"]:
+            return call_solver(default_solve_mwis(cfg), graph)
+        name = self.resolve_service_name(c.SERVICE_SOLVE)
+        if not self._client.service_is_ready():
+            self.get_logger().warning(f"solver service {name} is not available; solving with greedy locally")
+            return f"solver service {name} is not available"
+        timeout_s = cfg.time_limit_s + self.p["solver_timeout_margin_s"]
+        fut = self._client.call_async(m.solve_request(graph.weights, graph.edges, graph.groups, cfg.backend,
+                                                      cfg.time_limit_s, cfg.seed))
+        timer = self.create_timer(timeout_s, lambda: fut.done() or fut.cancel(), callback_group=self._group,
+                                  clock=self._steady)
+        try:
+            res = await fut
+        finally:
+            self.destroy_timer(timer)
+        if fut.cancelled():
+            self._client.remove_pending_request(fut)
+            msg = f"solver service {name} did not answer within {timeout_s:.1f} s"
+            self.get_logger().warning(msg + "; solving with greedy locally")
+            return msg
+        if res is None or not res.success:
+            msg = f"solver service refused or failed: {wire.bounded(getattr(res, 'message', 'no response'))}"
+            self.get_logger().warning(msg + "; solving with greedy locally")
+            return msg
+        return m.solve_answer(res)
 
 
 def main(args=None) -> int:
-    return run_node(PlannerNode, "planner", args, threads=3)
+    return run_node(PlannerNode, "planner", args)
 
 
 if __name__ == "__main__":

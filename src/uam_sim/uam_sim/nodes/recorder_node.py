@@ -47,6 +47,7 @@ from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from uam_msgs.msg import FlightPlan
 
+from uam_sim.analysis import request_key
 from uam_sim.cdr import fleet_state_digest, leading_stamp_ns
 from uam_sim.mcap_schema import message_class
 from uam_sim.mcap_writer import McapRecorder
@@ -81,7 +82,7 @@ class ApprovalCheck:
 
     def on_plan(self, msg) -> None:
         if int(msg.outcome) == FlightPlan.OUTCOME_APPROVED:
-            self.received.setdefault(int(msg.epoch_index), set()).add(str(msg.request_id))
+            self.received.setdefault(int(msg.epoch_index), set()).add(request_key(msg))
 
     def result(self) -> dict:
         """{"ok", "announced_approvals", "approved_plans", "verdict"} (values as strings)."""
@@ -106,30 +107,30 @@ class RecorderNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("recorder", **kwargs)
         self.declare_parameter("output", "run.mcap", ParameterDescriptor(
-            description="the .mcap file to write (parent directories are created; replaced if it exists)"))
+            read_only=True, description="the .mcap file to write (parent directories are created; replaced if it exists)"))
         self.declare_parameter("rerun", "off", ParameterDescriptor(
-            description="Rerun logging: 'off', 'save' (an .rrd file), 'spawn' (start a viewer) or "
+            read_only=True, description="Rerun logging: 'off', 'save' (an .rrd file), 'spawn' (start a viewer) or "
                         "'connect' (stream to a running viewer at rerun_url)"))
         self.declare_parameter("rerun_rrd", "", ParameterDescriptor(
-            description="the .rrd file for rerun:=save; empty = the output path with .rrd"))
+            read_only=True, description="the .rrd file for rerun:=save; empty = the output path with .rrd"))
         self.declare_parameter("rerun_url", "", ParameterDescriptor(
-            description="viewer gRPC url for rerun:=connect; empty = Rerun's default"))
+            read_only=True, description="viewer gRPC url for rerun:=connect; empty = Rerun's default"))
         self.declare_parameter("network", "", ParameterDescriptor(
-            description="network file (config/networks/*.yaml) drawn in Rerun as static data; empty = none"))
+            read_only=True, description="network file (config/networks/*.yaml) drawn in Rerun as static data; empty = none"))
         self.declare_parameter("compression", "zstd", ParameterDescriptor(
-            description="MCAP chunk compression: 'zstd', 'lz4' or 'none'"))
+            read_only=True, description="MCAP chunk compression: 'zstd', 'lz4' or 'none'"))
         self.declare_parameter("chunk_size_bytes", 256 * 1024, ParameterDescriptor(
-            description="uncompressed size after which an MCAP chunk is finished [bytes]",
+            read_only=True, description="uncompressed size after which an MCAP chunk is finished [bytes]",
             integer_range=[IntegerRange(from_value=1024, to_value=1 << 30)]))
         self.declare_parameter("flush_period_s", 1.0, ParameterDescriptor(
-            description="wall time after which the open chunk is written out, the most a crash loses [s]",
+            read_only=True, description="wall time after which the open chunk is written out, the most a crash loses [s]",
             floating_point_range=[FloatingPointRange(from_value=0.01, to_value=3600.0)]))
         self.declare_parameter("finish_quiet_s", 0.5, ParameterDescriptor(
-            description="after the simulator's end of run, close once no message has arrived for this "
+            read_only=True, description="after the simulator's end of run, close once no message has arrived for this "
                         "long (messages of other topics may still be on their way) [s wall]",
             floating_point_range=[FloatingPointRange(from_value=0.0, to_value=60.0)]))
         self.declare_parameter("finish_timeout_s", 10.0, ParameterDescriptor(
-            description="after the simulator's end of run, close at the latest after this long [s wall]",
+            read_only=True, description="after the simulator's end of run, close at the latest after this long [s wall]",
             floating_point_range=[FloatingPointRange(from_value=0.0, to_value=3600.0)]))
         g = self.get_parameter
         output = str(g("output").value)

@@ -1,20 +1,24 @@
-"""Simulator node: owns simulation time, moves the fleet, publishes /clock and the fleet state.
+"""Simulator node: owns simulation time, drives the epoch protocol, moves the fleet.
 
     ros2 run uam_sim simulator --ros-args --params-file config/simulator.yaml
 
-Publishes /clock (rosgraph_msgs/Clock; every other node runs with use_sim_time), /uam/fleet_state
-(uam_msgs/FleetState) and /uam/fleet_poses (geometry_msgs/PoseArray, for generic viewers) at
-every step, and announces planning epochs on /uam/epoch_sync. Subscribes /uam/flight_plans and
-flies every approved plan exactly as planned.
+Publishes /clock (rosgraph_msgs/Clock; every other node runs with use_sim_time), uam/fleet_state
+(uam_msgs/FleetState) and uam/fleet_poses (geometry_msgs/PoseArray, for generic viewers) at
+every step, and announces each epoch and the end of the run on uam/epoch_sync (for the recorder
+and observers). Parameters: uam_bringup.params.SIMULATOR (docs/parameters.md).
 
-Lockstep (mode "lockstep", the default): at each epoch time t the simulator announces the epoch
-and does not move past t until the planner has acknowledged it and every plan the planner
-counted has arrived; between epochs it steps as fast as it can. /clock alone cannot give this
-(rclpy takes /clock best effort, depth 1, and timers fire once after a jump), so a run's result
-does not depend on CPU speed only because of this handshake. Mode "realtime" keeps the same
-handshake but paces steps at `real_time_factor` x wall time, for watching live.
+The epoch protocol, at each epoch time t = k * epoch_s < duration_s: ask the demand source to
+release the epoch's requests (uam/release_demand; it answers with their ids), then ask the
+planner to plan epoch k at t (uam/plan_epoch, naming those ids), and fly the approvals of the
+answer exactly as planned; only then step on. Between epochs it steps as fast as it can
+(lockstep) or at ``real_time_factor`` x wall time (realtime): the result does not depend on CPU
+speed. It starts once the planner's and the demand source's services are up and the nodes named
+in ``wait_for_subscribers`` subscribe to the fleet state (explicit readiness, no counts). A call
+without an answer is asked again every ``resend_s`` (the planner answers a repeated epoch with
+the same outcome); a planner that restarted asks for the state (flights in the air, requests
+decided) and gets it. Plans on uam/flight_plans are not flown: only the planner's answers are.
 
-The run ends at `duration_s`: the simulator announces `finished`, and the other nodes exit.
+The run ends at ``duration_s``: the simulator announces ``finished``, and the other nodes exit.
 """
 
 from __future__ import annotations
@@ -22,41 +26,32 @@ from __future__ import annotations
 import math
 import sys
 import time
-from functools import partial
 
 from geometry_msgs.msg import PoseArray
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from uam_msgs.msg import EpochSync, FleetState, FlightPlan
+from uam_msgs.srv import PlanEpoch, ReleaseDemand
 
 from uam_bringup import contract as c
 from uam_bringup import conversions as m
-from uam_bringup import qos
+from uam_bringup import qos, wire
+from uam_bringup.params import SIMULATOR, declare_table
 from uam_bringup.runtime import run_node
-from uam_bringup.params import declare
 from uam_sim.cdr import encode_fleet_state, encode_pose_array, yaw_quaternions
 from uam_sim.fleet import Fleet
 
-MODES = ("lockstep", "realtime")
+RESEND_S = 2.0  # wall time after which an unanswered call is sent again (a restarted server lost it)
 
 
 class SimulatorNode(Node):
     def __init__(self, **kwargs):
         super().__init__("simulator", **kwargs)
-        d = partial(declare, self)
-        self.step_s = d("step_s", 1.0, "simulation step [s]", 0.001, 3600.0)
-        self.duration_s = d("duration_s", 3500.0, "simulated time after which the run ends [s]", 0.0, 1e7)
-        self.epoch_s = d("epoch_s", 30.0, "time between planning epochs [s]; a multiple of step_s", 0.001, 86400.0)
-        self.mode = d("mode", "lockstep", "'lockstep': as fast as the planner allows, result independent of CPU "
-                      "speed; 'realtime': paced at real_time_factor", choices=MODES)
-        self.rtf = d("real_time_factor", 1.0, "in realtime mode: simulated seconds per wall second", 0.001, 1e5)
-        self.expected_subscribers = d("expected_subscribers", 2, "start only when this many nodes subscribe to "
-                                      "/uam/epoch_sync (planner, request_generator, recorder)", 0, 100)
-        self.expected_stream_subscribers = d(
-            "expected_stream_subscribers", 0, "also wait until this many nodes subscribe to /uam/fleet_state and "
-            "/uam/fleet_poses (1 with the recorder), so a recording starts at t = 0", 0, 100)
-        self.ack_timeout_s = d("ack_timeout_s", 120.0, "wall time [s] to wait for an epoch acknowledgement "
-                               "before ending the run with an error", 0.1, 86400.0)
+        self.p = declare_table(self, SIMULATOR, on_change=self._on_change)
+        self.step_s, self.duration_s, self.epoch_s = self.p["step_s"], self.p["duration_s"], self.p["epoch_s"]
+        self.mode, self.rtf = self.p["mode"], self.p["real_time_factor"]
+        self.ack_timeout_s = self.p["ack_timeout_s"]
+        self.wait_for = [n for n in self.p["wait_for_subscribers"] if n]
         ratio = self.epoch_s / self.step_s
         if not math.isclose(ratio, round(ratio), rel_tol=0, abs_tol=1e-9):
             raise ValueError(f"parameter epoch_s: {self.epoch_s} is not a multiple of step_s {self.step_s}")
@@ -66,87 +61,170 @@ class SimulatorNode(Node):
         self._fleet_pub = self.create_publisher(FleetState, c.TOPIC_FLEET, qos.QOS_STREAM)
         self._pose_pub = self.create_publisher(PoseArray, c.TOPIC_POSES, qos.QOS_STREAM)
         self._sync_pub = self.create_publisher(EpochSync, c.TOPIC_SYNC, qos.QOS_LATCHED)
-        self.create_subscription(FlightPlan, c.TOPIC_PLANS, self._on_plan, qos.QOS_LATCHED)
-        self.create_subscription(EpochSync, c.TOPIC_SYNC, self._on_sync, qos.QOS_LATCHED)
+        self._plan_client = self.create_client(PlanEpoch, c.SERVICE_PLAN_EPOCH)
+        self._demand_client = self.create_client(ReleaseDemand, c.SERVICE_RELEASE_DEMAND) \
+            if self.p["use_demand_service"] else None
 
         self.fleet = Fleet()
         self.step_index = 0                 # t = step_index * step_s
         self.plans_received = 0
-        self._planner_acks: dict[int, int] = {}
+        self.fly_errors = 0                 # approved plans that could not be flown (should stay 0)
+        self._flying: dict[str, FlightPlan] = {}   # scoped id -> approved plan, while it may be airborne
+        self._decided: list[str] = []       # scoped ids of every request decided in an epoch answer
         self._waiting_epoch: int | None = None
+        self._expected: list[str] = []
+        self._call = None
+        self._call_sent = 0.0
+        self._resume = False
         self._wait_started = 0.0
         self.started = False
         self.finished = False
         self.error = ""
         self.active_samples: list[int] = []  # airborne vehicles at each step, for the summary
         self._wall_start = 0.0
+        self._last_wait_log = time.monotonic()
         period = self.step_s / self.rtf if self.mode == "realtime" else 0.02
         self._timer = self.create_timer(period, self._on_timer)  # wall clock: this node owns sim time
         self.get_logger().info(
             f"simulator: {self.mode}, step {self.step_s:g} s, epoch {self.epoch_s:g} s, duration {self.duration_s:g} s; "
-            f"waiting for {self.expected_subscribers} subscriber(s) of {c.TOPIC_SYNC}")
+            f"waiting for {self._plan_client.srv_name}"
+            + (f", {self._demand_client.srv_name}" if self._demand_client else "")
+            + (f" and subscriber(s) {', '.join(self.wait_for)}" if self.wait_for else ""))
+
+    def _on_change(self, name: str, value) -> None:
+        if name == "real_time_factor":
+            self.rtf = value
+            if self.started and self.mode == "realtime":
+                self._timer.timer_period_ns = int(self.step_s / value * 1e9)
 
     @property
     def exit_code(self) -> int:
-        """1 when the run ended on an error (no acknowledgement from the planner), else 0."""
+        """1 when the run ended on an error (no answer from the planner), else 0."""
         return 1 if self.error else 0
 
     @property
     def t_s(self) -> float:
         return self.step_index * self.step_s
 
-    # ---- inputs ------------------------------------------------------------------------------
-    def _on_plan(self, plan: FlightPlan) -> None:
-        self.plans_received += 1
-        if plan.outcome == FlightPlan.OUTCOME_APPROVED:
-            try:
-                self.fleet.add(plan.request_id, m.trajectory_from_plan(plan))
-            except ValueError as exc:
-                self.get_logger().error(f"cannot fly plan {plan.request_id!r}: {exc}")
-        self._maybe_resume()
+    # ---- readiness -----------------------------------------------------------------------------
+    def _missing(self) -> list[str]:
+        missing = []
+        if not self._plan_client.service_is_ready():
+            missing.append(self._plan_client.srv_name)
+        if self._demand_client is not None and not self._demand_client.service_is_ready():
+            missing.append(self._demand_client.srv_name)
+        if self.wait_for:
+            subscribers = {info.node_name for info in
+                           self.get_subscriptions_info_by_topic(self.resolve_topic_name(c.TOPIC_FLEET))}
+            missing += [f"subscriber {n}" for n in self.wait_for if n not in subscribers]
+        return missing
 
-    def _on_sync(self, msg: EpochSync) -> None:
-        if msg.sender == "planner":
-            self._planner_acks[int(msg.epoch_index)] = int(msg.plans_published)
-            self._maybe_resume()
+    # ---- the epoch protocol --------------------------------------------------------------------
+    def _start_epoch(self, k: int) -> None:
+        self._waiting_epoch = k
+        self._wait_started = time.monotonic()
+        self._expected = []
+        self._resume = False
+        self._sync_pub.publish(EpochSync(epoch_index=k, epoch_time=m.to_time(self.t_s), sender="simulator"))
+        if self._demand_client is not None:
+            self._send(self._demand_client, ReleaseDemand.Request(epoch_index=k, epoch_time=m.to_time(self.t_s)),
+                       self._on_demand)
+        else:
+            self._ask_planner()
+
+    def _send(self, client, request, on_done) -> None:
+        if self._call is not None and not self._call[1].done():
+            self._call[0].remove_pending_request(self._call[1])
+        fut = client.call_async(request)
+        self._call = (client, fut, request, on_done)
+        self._call_sent = time.monotonic()
+        k = self._waiting_epoch
+        fut.add_done_callback(lambda f: self._done(f, k, on_done))
+
+    def _done(self, fut, k, on_done) -> None:
+        if self.finished or k != self._waiting_epoch or self._call is None or fut is not self._call[1]:
+            return  # an answer to a call that was sent again, or after the end
+        if fut.cancelled() or fut.result() is None:
+            return
+        on_done(fut.result())
+
+    def _on_demand(self, res: ReleaseDemand.Response) -> None:
+        self._expected = list(res.request_ids)
+        self._ask_planner()
+
+    def _ask_planner(self) -> None:
+        t = self.t_s
+        req = PlanEpoch.Request(epoch_index=self._waiting_epoch, epoch_time=m.to_time(t), epoch_s=float(self.epoch_s),
+                                expected_request_ids=self._expected, resume=self._resume)
+        if self._resume:
+            req.airborne = [p for p in self._flying.values() if m.from_time(p.arrival_time) >= t]
+            req.decided_request_ids = list(self._decided)
+        self._send(self._plan_client, req, self._on_outcome)
+
+    def _on_outcome(self, res: PlanEpoch.Response) -> None:
+        if res.status == PlanEpoch.Response.STATUS_NEED_STATE:
+            self.get_logger().warning(f"the planner restarted: sending it the state at epoch {self._waiting_epoch}")
+            self._resume = True
+            self._ask_planner()
+            return
+        if res.status != PlanEpoch.Response.STATUS_PLANNED:
+            self.error = f"the planner refused epoch {self._waiting_epoch}: {wire.bounded(res.message)}"
+            self.get_logger().error(self.error + "; ending the run")
+            self._finish()
+            return
+        if res.missing_request_ids:
+            self.get_logger().warning(f"epoch {self._waiting_epoch} was planned without "
+                                      f"{len(res.missing_request_ids)} released request(s) that did not arrive")
+        t = self.t_s
+        self._flying = {k: p for k, p in self._flying.items() if m.from_time(p.arrival_time) >= t}
+        for plan in res.plans:
+            self.plans_received += 1
+            key = wire.scoped_id(plan.operator_id, plan.request_id)
+            self._decided.append(key)
+            if plan.outcome == FlightPlan.OUTCOME_APPROVED:
+                try:
+                    self.fleet.add(key, m.trajectory_from_plan(plan))
+                    self._flying[key] = plan
+                except ValueError as exc:
+                    self.fly_errors += 1
+                    self.get_logger().error(f"cannot fly plan {key!r}: {exc}")
+        self._call = None
+        self._waiting_epoch = None
+        self._publish_state()
+        self.step_index += 1
+        if self.mode == "lockstep":
+            self._run_until_blocked()
 
     # ---- stepping ------------------------------------------------------------------------------
     def _epoch_at(self, step_index: int) -> int | None:
         return step_index // self.steps_per_epoch if step_index % self.steps_per_epoch == 0 else None
 
-    def _acked(self, k: int) -> bool:
-        need = self._planner_acks.get(k)
-        return need is not None and self.plans_received >= need
-
-    def _maybe_resume(self) -> None:
-        if self._waiting_epoch is not None and self._acked(self._waiting_epoch):
-            self._waiting_epoch = None
-            self._publish_state()
-            self.step_index += 1
-            if self.mode == "lockstep":
-                self._run_until_blocked()
-
     def _on_timer(self) -> None:
         if self.finished:
             return
+        now = time.monotonic()
         if not self.started:
-            if (self._sync_pub.get_subscription_count() < self.expected_subscribers
-                    or self._fleet_pub.get_subscription_count() < self.expected_stream_subscribers
-                    or self._pose_pub.get_subscription_count() < self.expected_stream_subscribers):
+            missing = self._missing()
+            if missing:
+                if now - self._last_wait_log > 10.0:
+                    self._last_wait_log = now
+                    self.get_logger().info(f"waiting for {', '.join(missing)}")
                 return
             self.started = True
-            self._wall_start = time.monotonic()
-            self.get_logger().info("all subscribers present: starting the run")
+            self._wall_start = now
+            self.get_logger().info("planner and demand source ready: starting the run")
             if self.mode == "lockstep":
                 self._timer.timer_period_ns = int(0.5e9)  # from now on only a watchdog
             self._run_until_blocked()
             return
         if self._waiting_epoch is not None:
-            if time.monotonic() - self._wait_started > self.ack_timeout_s:
-                self.error = (f"no acknowledgement of epoch {self._waiting_epoch} from the planner within "
-                              f"{self.ack_timeout_s:g} s")
+            if now - self._wait_started > self.ack_timeout_s:
+                self.error = f"no answer for epoch {self._waiting_epoch} within {self.ack_timeout_s:g} s"
                 self.get_logger().error(self.error + "; ending the run")
                 self._finish()
+            elif self._call is not None and now - self._call_sent > RESEND_S:
+                client, _fut, request, on_done = self._call
+                self._send(client, request, on_done)  # answered again by the same epoch's outcome
             return
         if self.mode == "realtime":
             self._step_once()
@@ -160,12 +238,8 @@ class SimulatorNode(Node):
             self._finish()
             return
         k = self._epoch_at(self.step_index)
-        if k is not None:
-            self._waiting_epoch = k
-            self._wait_started = time.monotonic()
-            self._sync_pub.publish(EpochSync(epoch_index=k, epoch_time=m.to_time(self.t_s), sender="simulator"))
-            if self._acked(k):  # (only after a restart of the planner with latched acks)
-                self._maybe_resume()
+        if k is not None and self.t_s < self.duration_s - 1e-9:  # epochs at t < duration, as the runner
+            self._start_epoch(k)
             return
         self._publish_state()
         self.step_index += 1
@@ -188,6 +262,8 @@ class SimulatorNode(Node):
         if self.finished:
             return
         self.finished = True
+        if self._call is not None and not self._call[1].done():
+            self._call[0].remove_pending_request(self._call[1])
         self._sync_pub.publish(EpochSync(epoch_index=self.step_index // self.steps_per_epoch,
                                          epoch_time=m.to_time(min(self.t_s, self.duration_s)),
                                          sender="simulator", finished=True))

@@ -1,13 +1,9 @@
-"""Solver node: serves MWIS on /uam/solve_mwis with a selectable backend.
+"""Solver node: serves MWIS on uam/solve_mwis with a selectable backend.
 
     ros2 run uam_solvers solver --ros-args --params-file config/solver.yaml
 
-Parameters (all validated; changes at run time are checked by a parameter callback):
-    default_backend (string, "exact"): backend used when a request names none; an unknown or
-        unavailable name is refused with the list of known backends.
-    default_time_limit_s (double, 10.0): limit used when a request gives 0.
-    max_vertices (int, 20000): larger graphs are refused.
-    layers (bool, true): component split and exact reductions around the backend.
+Parameters: uam_bringup.params.SOLVER (docs/parameters.md); every change at run time is
+validated (a backend must be known and available, max_vertices at least 1000).
 
 Glue only: requests are converted to uam_solvers.MwisProblem and solved by uam_solvers.solve_problem
 (validation and greedy fallback included). Malformed requests get success=false with a message
@@ -21,7 +17,6 @@ import math
 import sys
 
 from diagnostic_msgs.msg import KeyValue
-from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from uam_msgs.srv import SolveMwis
@@ -29,9 +24,9 @@ from uam_msgs.srv import SolveMwis
 from uam_bringup import contract as c
 from uam_bringup.conversions import problem_from_solve_request
 from uam_bringup.runtime import run_node
-from uam_bringup.params import check, declare
+from uam_bringup.params import SOLVER, backend_problem, declare_table
 from uam_solvers import MwisInputError, solve_problem
-from uam_solvers.registry import UnknownBackendError, backend_names, get_backend
+
 
 def parse_option(value: str):
     """Backend option values arrive as strings: 'true'/'false', ints and floats are converted."""
@@ -51,44 +46,12 @@ class SolverNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__("solver", **kwargs)
-        declare(self, "default_backend", "exact",
-                "MWIS backend used when a request names none; one of: " + ", ".join(backend_names()))
-        declare(self, "default_time_limit_s", 10.0, "solve time limit [s] used when a request gives 0", 0.001, 3600.0)
-        declare(self, "max_vertices", 20000, "graphs with more vertices are refused", 1, 10_000_000)
-        declare(self, "layers", True, "split into components and apply exact reductions around the backend")
-        problem = self._check_backend(self.get_parameter("default_backend").value)
-        if problem:
-            raise ValueError(f"parameter default_backend: {problem}")
-        self.add_on_set_parameters_callback(self._on_set_parameters)
+        declare_table(self, SOLVER)  # every change validated (backend known and available, ranges)
         self._group = ReentrantCallbackGroup()
         self.create_service(SolveMwis, c.SERVICE_SOLVE, self._on_solve, callback_group=self._group)
         self.get_logger().info(
-            f"serving {c.SERVICE_SOLVE}; default backend {self.get_parameter('default_backend').value!r}")
-
-    @staticmethod
-    def _check_backend(name) -> str:
-        if not isinstance(name, str) or not name:
-            return f"{name!r} is not a backend name; known: {', '.join(backend_names())}"
-        try:
-            backend = get_backend(name)
-        except UnknownBackendError:
-            return f"unknown backend {name!r}; known: {', '.join(backend_names())}"
-        ok, reason = backend.available()
-        return "" if ok else f"backend {name!r} is unavailable here: {reason}"
-
-    def _on_set_parameters(self, params) -> SetParametersResult:
-        limits = {"default_time_limit_s": (1.0, 0.001, 3600.0), "max_vertices": (1, 1, 10_000_000)}
-        for p in params:
-            if p.name in limits:
-                try:
-                    check(p.name, p.value, *limits[p.name])
-                except ValueError as exc:
-                    return SetParametersResult(successful=False, reason=str(exc))
-            if p.name == "default_backend":
-                problem = self._check_backend(p.value)
-                if problem:
-                    return SetParametersResult(successful=False, reason=f"default_backend: {problem}")
-        return SetParametersResult(successful=True)
+            f"serving {self.resolve_service_name(c.SERVICE_SOLVE)}; default backend "
+            f"{self.get_parameter('default_backend').value!r}")
 
     def _on_solve(self, request: SolveMwis.Request, response: SolveMwis.Response) -> SolveMwis.Response:
         backend = request.backend or self.get_parameter("default_backend").value
@@ -96,7 +59,7 @@ class SolverNode(Node):
         try:
             if not math.isfinite(limit) or limit <= 0:
                 raise MwisInputError(f"time_limit_s: {request.time_limit_s!r} must be a positive number")
-            problem_text = self._check_backend(backend)
+            problem_text = backend_problem(backend)
             if problem_text:
                 raise MwisInputError(f"backend: {problem_text}")
             problem = problem_from_solve_request(request, int(self.get_parameter("max_vertices").value))

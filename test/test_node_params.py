@@ -1,0 +1,98 @@
+"""Node parameters: one table per node (uam_bringup.params) for declaration, run-time changes
+and docs; run-time changes validated, read-only ones refused."""
+
+from __future__ import annotations
+
+import pathlib
+
+import pytest
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+
+
+def test_docs_parameters_md_is_the_tables():
+    from uam_bringup.params import markdown
+    assert (ROOT / "docs" / "parameters.md").read_text() == markdown(), \
+        "docs/parameters.md is stale: python -m uam_bringup.params > docs/parameters.md"
+
+
+rclpy = pytest.importorskip("rclpy", reason="needs the built workspace (scripts/test.sh sources it)")
+from rclpy.parameter import Parameter  # noqa: E402
+
+from graph_harness import TINY, make_planner, make_solver, params  # noqa: E402
+
+
+def _set(node, **values):
+    return node.set_parameters([Parameter(k, value=v) for k, v in values.items()])[0]
+
+
+@pytest.mark.ros
+def test_solver_refuses_a_max_vertices_that_would_refuse_every_epoch(ros_context):
+    """Finding: `/solver max_vertices := 1` was accepted and every later epoch fell back to greedy."""
+    solver = make_solver(ros_context)
+    try:
+        res = _set(solver, max_vertices=1)
+        assert not res.successful and "max_vertices" in res.reason and "1" in res.reason
+        assert solver.get_parameter("max_vertices").value == 20000
+        assert _set(solver, max_vertices=50000).successful
+        assert solver.get_parameter("max_vertices").value == 50000
+        res = _set(solver, default_backend="no-such")
+        assert not res.successful and "no-such" in res.reason and "greedy" in res.reason
+    finally:
+        solver.destroy_node()
+
+
+@pytest.mark.ros
+def test_read_only_parameters_refuse_changes(ros_context, tmp_path):
+    """Finding: demand_file and output changes were accepted and silently ignored."""
+    from uam_sim.nodes.recorder_node import RecorderNode
+    from uam_sim.nodes.request_generator_node import RequestGeneratorNode
+
+    gen = RequestGeneratorNode(context=ros_context, parameter_overrides=params(network=TINY))
+    rec = RecorderNode(context=ros_context, parameter_overrides=params(output=str(tmp_path / "r.mcap")))
+    planner = make_planner(ros_context)
+    try:
+        for node, name, value in [(gen, "demand_file", "config/demand_example.yaml"), (gen, "seed", 3),
+                                  (rec, "output", str(tmp_path / "other.mcap")), (planner, "network", TINY),
+                                  (planner, "policy", "fifo"), (planner, "k", 3)]:
+            before = node.get_parameter(name).value
+            res = _set(node, **{name: value})
+            assert not res.successful and name in res.reason, (name, res.reason)
+            assert node.get_parameter(name).value == before
+    finally:
+        rec.close()
+        for n in (gen, rec, planner):
+            n.destroy_node()
+
+
+@pytest.mark.ros
+def test_run_time_parameters_are_validated_and_take_effect(ros_context):
+    planner = make_planner(ros_context)
+    try:
+        assert not _set(planner, time_limit_s=-1.0).successful
+        assert not _set(planner, seed=-4).successful
+        assert _set(planner, backend="greedy", time_limit_s=2, seed=9).successful
+        assert (planner.config.backend, planner.config.time_limit_s, planner.config.seed) == ("greedy", 2.0, 9)
+    finally:
+        planner.destroy_node()
+
+
+@pytest.mark.ros
+def test_each_node_declares_exactly_its_table(ros_context, tmp_path):
+    from uam_bringup.params import TABLES
+    from uam_sim.nodes.request_generator_node import RequestGeneratorNode
+    from uam_sim.nodes.simulator_node import SimulatorNode
+
+    nodes = {"planner": make_planner(ros_context), "solver": make_solver(ros_context),
+             "simulator": SimulatorNode(context=ros_context),
+             "request_generator": RequestGeneratorNode(context=ros_context, parameter_overrides=params(network=TINY))}
+    try:
+        for name, node in nodes.items():
+            declared = set(node.list_parameters([], 0).names) - {"use_sim_time", "start_type_description_service"}
+            assert declared == {p.name for p in TABLES[name]}, name
+            for p in TABLES[name]:
+                desc = node.describe_parameter(p.name)
+                assert desc.read_only == p.read_only and desc.description, (name, p.name)
+    finally:
+        for n in nodes.values():
+            n.destroy_node()
