@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .figures import BASELINES, NEVER_PROVING, flight_metrics, mean_ci
+from .figures import BASELINES, NEVER_PROVING, flight_metrics
 from .stats import compare
 
 # The command that regenerates the committed study (docs/paper-study).
