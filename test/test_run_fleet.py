@@ -29,7 +29,7 @@ def _wait_for(condition, timeout_s: float) -> bool:
 
 def _node_processes(out_dir: pathlib.Path) -> list[str]:
     """Node processes of this run still alive (matched by the run's output folder in their args)."""
-    ps = subprocess.run(["ps", "-eo", "pid,args"], capture_output=True, text=True, check=True).stdout
+    ps = subprocess.run(["ps", "-ww", "-eo", "pid,args"], capture_output=True, text=True, check=True).stdout
     return [line for line in ps.splitlines() if str(out_dir) in line and "/lib/uam_" in line]
 
 
@@ -74,7 +74,7 @@ def test_sigterm_mid_run_stops_every_node_and_keeps_the_recording(tmp_path, ros_
 
 def _node_children(pid: int) -> dict[int, str]:
     """pid -> command line of the node processes started by the run_fleet.sh process ``pid``."""
-    ps = subprocess.run(["ps", "-o", "pid=,args=", "--ppid", str(pid)], capture_output=True, text=True).stdout
+    ps = subprocess.run(["ps", "-ww", "-o", "pid=,args=", "--ppid", str(pid)], capture_output=True, text=True).stdout
     out = {}
     for line in ps.splitlines():
         child, _, args = line.strip().partition(" ")

@@ -33,10 +33,11 @@ import numpy as np
 
 from .candidates import CandidateCache, RouteTemplate
 from .conflict_graph import ConflictGraph, build_conflict_graph
+from .first_fit import as_firstfit, first_fit_select
 from .separation import SegmentSet, conflicting_pairs
 from .trajectory import Trajectory
 
-POLICIES = ("mwis", "fifo")
+POLICIES = ("mwis", "fifo", "firstfit")  # firstfit: uam_planner.first_fit
 
 
 @dataclass(frozen=True)
@@ -469,7 +470,7 @@ class Planner:
     Args:
         network: the Network.
         config: PlanningConfig (default: paper defaults).
-        policy: "mwis" or "fifo".
+        policy: "mwis", "fifo" or "firstfit" (uam_planner.first_fit).
         solve_mwis: callable(weights, edges, groups) for the MWIS policy; default calls
             ``uam_solvers.solve`` with ``config.backend``.
 
@@ -573,8 +574,9 @@ class Planner:
             prep = prepare_epoch_mwis(t_s, epoch_index, self.pending, self.active, self.network, self.config,
                                       self.cache)
         else:
-            res = plan_epoch_fifo(t_s, epoch_index, self.pending, self.active, self.network, self.config,
-                                  None, self.cache)
+            args = (t_s, epoch_index, self.pending, self.active, self.network, self.config)
+            res = plan_epoch_fifo(*args, None, self.cache) if self.policy == "fifo" else \
+                as_firstfit(plan_epoch_mwis(*args, first_fit_select, self.cache))  # uam_planner.first_fit
             prep = PreparedEpoch(t_s=float(t_s), epoch_index=int(epoch_index), pending=list(self.pending),
                                  report=res.report, result=res)
         self._prepared = prep

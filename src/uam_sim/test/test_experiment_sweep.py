@@ -129,7 +129,7 @@ def test_figures_report_and_tables_are_written(tmp_path):
         assert per_backend == {"greedy": 6, "exact": 6, "sa": 2}
         # exact is the reference optimum: it reaches it in every run
         assert all(r["p_opt"] == 1.0 for r in tts["rows"] if r["backend"] == "exact")
-        assert "TTS(0.99) per backend" in report
+        assert "TTS(0.99) per call and per read" in report
         again = run_experiment(cfg, progress=False, figures=False, report=False)
         assert again["sweep"].computed == [] and again["tts"].get("reused") is True
     from uam_solvers.instances import load_corpus
@@ -156,7 +156,7 @@ def test_config_file_flags_and_errors(tmp_path):
     cfg = load_config(REPO / "config/experiment.yaml")
     assert cfg.rates == [1, 2, 4, 6, 8, 10, 15, 20] and cfg.seeds == [0, 1, 2, 3, 4]
     assert (cfg.duration_s, cfg.separation_m, cfg.k, cfg.epoch_s) == (3500.0, 100.0, 5, 30.0)
-    assert cfg.methods == ["fifo", "greedy", "exact", "sa", "tabu", "qpu-emulator"]
+    assert cfg.methods == ["fifo", "firstfit", "greedy", "exact", "sa", "tabu", "qpu-emulator"]
     cfg = load_config(REPO / "config/experiment.yaml", rates="1,2.5", seeds="3,7", methods="fifo")
     assert (cfg.rates, cfg.seeds, cfg.methods) == ([1, 2.5], [3, 7], ["fifo"])
     with pytest.raises(ExperimentError, match="durations"):

@@ -81,11 +81,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--config", help="YAML experiment file (config/experiment.yaml)")
     p.add_argument("--network", help="network file (overrides the config)")
     p.add_argument("--rates", help="comma list of requests per interval, e.g. 1,2,4")
-    p.add_argument("--methods", help="comma list: fifo and MWIS backend names")
+    p.add_argument("--methods", help="comma list: fifo, firstfit and MWIS backend names")
     p.add_argument("--seeds", help="a count n (seeds 0..n-1) or a comma list of seeds")
     p.add_argument("--duration", type=float, dest="duration_s", help="simulated seconds per run")
     p.add_argument("--time-limit", type=float, dest="time_limit_s", help="MWIS time limit [s]")
-    p.add_argument("--workers", type=int, help="processes (1 = serial)")
+    p.add_argument("--workers", type=int, help="processes (1 = serial; more: a local Dask cluster)")
+    p.add_argument("--scheduler", help="Dask scheduler: 'local' (a LocalCluster of --workers "
+                   "processes) or an address tcp://HOST:8786 (see README, 'Beyond one machine')")
     p.add_argument("--out", help="output directory")
     p.add_argument("--demand", dest="demand_file", help="replay a demand file instead")
     p.add_argument("--tts-reads", type=int, help="reads per annealing run in the TTS study")
@@ -103,7 +105,8 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list | None = None) -> int:
     args = build_parser().parse_args(argv)
     over = {k: getattr(args, k) for k in ("network", "rates", "methods", "seeds", "duration_s",
-                                          "time_limit_s", "workers", "out", "demand_file")}
+                                          "time_limit_s", "workers", "out", "demand_file",
+                                          "scheduler")}
     try:
         base = yaml.safe_load(Path(args.config).read_text()) if args.config else {}
         base = base or {}

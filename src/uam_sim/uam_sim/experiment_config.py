@@ -12,8 +12,15 @@ import yaml
 
 from uam_planner.planning import PlanningConfig
 
-DEFAULT_METHODS = ("fifo", "greedy", "exact", "sa", "tabu", "qpu-emulator")
+DEFAULT_METHODS = ("fifo", "firstfit", "greedy", "exact", "sa", "tabu", "qpu-emulator")
+# methods that are planner policies, not MWIS backends (firstfit: uam_planner.first_fit)
+BASELINES = ("fifo", "firstfit")
 DEFAULT_RATES = (1, 2, 4, 6, 8, 10, 15, 20)
+# Airspace modes of the capacity study: the paper's airspace, + departure slots, + flight levels,
+# + both. Only "paper" is wired into the runner so far; the others are reserved names (the
+# expanded airspace is being built), refused with a clear error until they exist.
+AIRSPACE_MODES = ("paper", "slots", "levels", "both")
+AVAILABLE_AIRSPACE_MODES = ("paper",)
 REPO_ROOT = Path(__file__).resolve().parents[3]
 
 
@@ -27,7 +34,8 @@ class ExperimentConfig:
 
     Attributes:
         network: path of a network file, or {"synthetic": {n_nodes, n_aerodromes, seed}}.
-        methods: "fifo" (shortest FIFO) or an MWIS backend name per entry.
+        methods: "fifo" (shortest FIFO), "firstfit" (first conflict-free candidate in arrival
+            order) or an MWIS backend name per entry.
         include_qpu: add the "qpu" backend when it is available (a D-Wave token is configured).
         rates: requests per interval (the swept variable).
         seeds: seed list (an int n in YAML or flags means seeds 0..n-1).
@@ -41,7 +49,14 @@ class ExperimentConfig:
         corpus_max_vertices: MWIS instances up to this size are kept for the corpus.
         audit: run the independent exact separation audit on every cell.
         out: output directory.
-        workers: processes for the cells (1 = serial in this process).
+        workers: processes for the cells (1 = serial in this process); with more than one, a
+            Dask LocalCluster of that many single-threaded worker processes.
+        scheduler: None or "local" (a LocalCluster of ``workers`` processes; serial when
+            workers = 1), or a Dask scheduler address "tcp://HOST:8786" whose workers run the
+            cells (uam_sim.dask_cluster). Does not affect results, so not part of a cell's key.
+        airspace_mode: the airspace of every cell: "paper" (the paper's model); "slots",
+            "levels", "both" are reserved for the expanded airspace and refused until it exists.
+            A mode other than "paper" becomes part of each cell's key.
         cumulative_rates: rates shown in the cumulative-approvals figure (default: up to 4 spread).
         tts: TTS study settings: enabled, instances (sampled from the runs' MWIS instances),
             min_vertices, max_vertices, reads (per annealing run), repetitions (runs per instance
@@ -69,6 +84,8 @@ class ExperimentConfig:
     audit: bool = True
     out: str = "results"
     workers: int = 2
+    scheduler: str | None = None
+    airspace_mode: str = "paper"
     cumulative_rates: list | None = None
     tts: dict = field(default_factory=lambda: {
         "enabled": True, "instances": 629, "min_vertices": 5, "max_vertices": 50, "reads": 100,
@@ -142,6 +159,17 @@ def make_config(data: dict | None = None, **overrides) -> ExperimentConfig:
             raise ExperimentError(f"{name}: {v!r} must be a positive finite number")
     if isinstance(cfg.workers, bool) or not isinstance(cfg.workers, int) or cfg.workers < 1:
         raise ExperimentError(f"workers: {cfg.workers!r} must be an integer >= 1")
+    from .dask_cluster import validate_scheduler
+    try:
+        cfg.scheduler = validate_scheduler(cfg.scheduler)
+    except ValueError as exc:
+        raise ExperimentError(str(exc)) from None
+    if cfg.airspace_mode not in AIRSPACE_MODES:
+        raise ExperimentError(f"airspace_mode: {cfg.airspace_mode!r} is not one of {list(AIRSPACE_MODES)}")
+    if cfg.airspace_mode not in AVAILABLE_AIRSPACE_MODES:
+        raise ExperimentError(f"airspace_mode: {cfg.airspace_mode!r} is not available in the runner yet "
+                              f"(available: {list(AVAILABLE_AIRSPACE_MODES)}; the expanded airspace is "
+                              f"pending)")
     if cfg.cumulative_rates is not None:
         cfg.cumulative_rates = [rate_label(r) for r in _num_list("cumulative_rates", cfg.cumulative_rates)]
     if not isinstance(cfg.solver_options, dict):

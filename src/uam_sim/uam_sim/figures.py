@@ -24,7 +24,22 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-METHOD_ORDER = ("fifo", "greedy", "exact", "sa", "tabu", "qpu-emulator", "qpu", "kamis", "chils")
+METHOD_ORDER = ("fifo", "firstfit", "greedy", "exact", "sa", "tabu", "qpu-emulator", "qpu", "kamis",
+                "chils")
+from .experiment_config import BASELINES  # noqa: E402  (planner policies, not MWIS solvers)
+# marker, line style and colour per method, so methods that overlap (exact, sa, tabu and the
+# emulator often approve the same flights) stay distinguishable in print and in greyscale
+STYLE = {"fifo": ("o", "-", "tab:blue"), "firstfit": ("s", "--", "tab:orange"),
+         "greedy": ("^", "-.", "tab:green"), "exact": ("D", "-", "tab:red"),
+         "sa": ("v", ":", "tab:purple"), "tabu": ("P", "--", "tab:brown"),
+         "qpu-emulator": ("X", "-.", "tab:pink"), "qpu": ("*", ":", "tab:gray"),
+         "kamis": ("<", "--", "tab:olive"), "chils": (">", ":", "tab:cyan")}
+
+
+def style(m: str, i: int = 0) -> dict:
+    """matplotlib keyword arguments (marker, linestyle, colour) of a method."""
+    mk, ls, col = STYLE.get(m, ("o", "-", f"C{i % 10}"))
+    return {"marker": mk, "linestyle": ls, "color": col}
 
 
 def mean_ci(values, level: float = 0.95) -> tuple[float, float, float]:
@@ -51,7 +66,7 @@ def _rates(cells) -> list:
 
 
 def _label(m: str) -> str:
-    return "shortest FIFO" if m == "fifo" else f"MWIS {m}"
+    return {"fifo": "shortest FIFO", "firstfit": "first-fit"}.get(m, f"MWIS {m}")
 
 
 def select_rates(rates, wanted=None, n: int = 4) -> list:
@@ -65,7 +80,8 @@ def select_rates(rates, wanted=None, n: int = 4) -> list:
 
 
 def cumulative_figure(cells, path: Path, rates_shown=None) -> dict:
-    """Cumulative approved flights over time per method, one panel per rate (mean, 95 % CI)."""
+    """Cumulative approved flights over time per method, one panel per rate (mean, 95 % CI band),
+    each method with its own marker and line style."""
     rates = select_rates(_rates(cells), rates_shown)
     methods = _methods(cells)
     fig, axes = plt.subplots(1, len(rates), figsize=(4.2 * len(rates), 3.6), squeeze=False,
@@ -79,8 +95,12 @@ def cumulative_figure(cells, path: Path, rates_shown=None) -> dict:
             t = np.array([r["t_s"] for r in runs[0]["epochs"]])
             y = np.array([[r["approved_cum"] for r in c["epochs"]] for c in runs], dtype=float)
             stats = np.array([mean_ci(y[:, j]) for j in range(y.shape[1])])
-            line, = ax.plot(t, stats[:, 0], label=_label(m))
-            ax.fill_between(t, stats[:, 1], stats[:, 2], color=line.get_color(), alpha=0.2, lw=0)
+            i = methods.index(m)
+            # markers every ~10 % of the run, shifted per method so overlapping lines show all
+            every = max(len(t) // 10, 1)
+            line, = ax.plot(t, stats[:, 0], label=_label(m), ms=4, lw=1.2,
+                            markevery=(i * max(every // len(methods), 1) % every, every), **style(m, i))
+            ax.fill_between(t, stats[:, 1], stats[:, 2], color=line.get_color(), alpha=0.12, lw=0)
             table.append({"rate": rate, "method": m, "final_mean": stats[-1, 0],
                           "final_lo": stats[-1, 1], "final_hi": stats[-1, 2], "seeds": len(runs)})
         ax.set_title(f"{rate} requests / interval")
@@ -111,7 +131,7 @@ def _per_rate_lines(cells, key, path, ylabel, title) -> dict:
         if pts:
             p = np.array(pts, dtype=float)
             ax.errorbar(p[:, 0], p[:, 1], yerr=[p[:, 1] - p[:, 2], p[:, 3] - p[:, 1]],
-                        marker="o", ms=3, capsize=3, label=_label(m))
+                        ms=4, capsize=3, label=_label(m), **style(m, _methods(cells).index(m)))
     ax.set_xlabel("request rate [requests / interval]")
     ax.set_ylabel(ylabel)
     ax.set_title(title)
@@ -135,43 +155,138 @@ def approved_figure(cells, path: Path) -> dict:
                            "Approved flights")
 
 
+def approval_rate_figure(cells, path: Path, interval_s: float) -> dict:
+    """Approval rate (approved / requested) against offered load [requests per hour] per method
+    (mean, 95 % CI over seeds)."""
+    per_hour = 3600.0 / interval_s
+    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    table = []
+    methods = _methods(cells)
+    for i, m in enumerate(methods):
+        pts = []
+        for rate in _rates(cells):
+            vals = [c["summary"]["approval_rate"] for c in cells
+                    if c["summary"]["method"] == m and c["summary"]["rate"] == rate]
+            if vals:
+                mu, lo, hi = mean_ci(vals)
+                pts.append((rate * per_hour, mu, lo, hi))
+                table.append({"method": m, "rate": rate, "offered_per_h": rate * per_hour,
+                              "approval_rate": mu, "lo": lo, "hi": hi, "seeds": len(vals)})
+        if pts:
+            q = np.array(pts, dtype=float)
+            ax.errorbar(q[:, 0], q[:, 1], yerr=[q[:, 1] - q[:, 2], q[:, 3] - q[:, 1]], ms=4,
+                        capsize=3, label=_label(m), **style(m, i))
+    ax.set_xscale("log")
+    ax.set_xlabel("offered load [requests / hour] (log)")
+    ax.set_ylabel("approval rate (approved / requested)")
+    ax.set_title("Approval rate against offered load")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return {"path": str(path), "table": table}
+
+
+def warmup_time_s(t_s, active, steady_from: float = 0.5, level: float = 0.9) -> tuple[float, float]:
+    """(warm-up time [s], steady level) of an active-aircraft curve.
+
+    Steady level = mean of ``active`` over the last ``1 - steady_from`` of the run; the warm-up
+    ends at the first epoch where the curve, smoothed over 5 epochs (2.5 min), reaches ``level``
+    of it. nan when the curve never does or is empty.
+    """
+    t = np.asarray(t_s, dtype=float)
+    a = np.asarray(active, dtype=float)
+    if a.size == 0:
+        return float("nan"), float("nan")
+    steady = float(a[t >= steady_from * (t[-1] + (t[1] - t[0] if t.size > 1 else 0))].mean())
+    w = min(5, a.size)
+    smooth = np.convolve(a, np.ones(w) / w, mode="same")
+    hit = np.flatnonzero(smooth >= level * steady)
+    return (float(t[hit[0]]) if hit.size and steady > 0 else float("nan")), steady
+
+
+def active_over_time_figure(cells, path: Path, rates_shown=None) -> dict:
+    """Active (airborne) aircraft at each epoch over time per method, one panel per rate
+    (mean over seeds), with the warm-up time (see :func:`warmup_time_s`) per method."""
+    rates = select_rates(_rates(cells), rates_shown)
+    methods = _methods(cells)
+    fig, axes = plt.subplots(1, len(rates), figsize=(4.2 * len(rates), 3.6), squeeze=False)
+    table = []
+    for ax, rate in zip(axes[0], rates):
+        for i, m in enumerate(methods):
+            runs = [c for c in cells if c["summary"]["method"] == m and c["summary"]["rate"] == rate]
+            if not runs:
+                continue
+            t = np.array([r["t_s"] for r in runs[0]["epochs"]])
+            y = np.array([[r["active"] for r in c["epochs"]] for c in runs], dtype=float).mean(axis=0)
+            warm, steady = warmup_time_s(t, y)
+            every = max(len(t) // 10, 1)
+            ax.plot(t, y, label=_label(m), ms=4, lw=1.1, markevery=(i % every, every), **style(m, i))
+            table.append({"rate": rate, "method": m, "warmup_s": warm, "steady_active": steady,
+                          "seeds": len(runs)})
+        ax.set_title(f"{rate} requests / interval")
+        ax.set_xlabel("simulation time [s]")
+        ax.grid(alpha=0.3)
+    axes[0][0].set_ylabel("aircraft in the air (mean over seeds)")
+    axes[0][-1].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return {"path": str(path), "table": table}
+
+
 def mwis_size_figure(cells, path: Path, k: int, window_s: float, interval_s: float) -> dict:
-    """Conflict-graph vertices and MWIS size per epoch per rate (MWIS methods), with bounds."""
+    """MWIS variables (conflict-graph vertices) and MWIS size per epoch per rate, with bounds.
+
+    Log scale, every outlier shown. Pooled over the MWIS methods and seeds, over epochs with a
+    non-empty conflict graph (the epochs that have an MWIS instance at all).
+    """
     rates = _rates(cells)
-    mwis = [c for c in cells if c["summary"]["method"] != "fifo"]
+    mwis = [c for c in cells if c["summary"]["method"] not in BASELINES]
     per_instant = math.floor(window_s / interval_s + 1e-9) + 1
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.2))
     table = []
     vdata, sdata = [], []
     for rate in rates:
         eps = [r for c in mwis if c["summary"]["rate"] == rate for r in c["epochs"]]
-        v = np.array([r["vertices"] for r in eps], dtype=float)
+        v = np.array([r["vertices"] for r in eps if r["vertices"] > 0], dtype=float)
         s = np.array([r["selected"] for r in eps if r["vertices"] > 0], dtype=float)
         e = np.array([r["eligible"] for r in eps], dtype=float)
-        vdata.append(v if v.size else np.zeros(1))
-        sdata.append(s if s.size else np.zeros(1))
+        vdata.append(v if v.size else np.ones(1))
+        sdata.append(s if s.size else np.ones(1))
         bound = math.ceil(rate) * per_instant
-        table.append({"rate": rate, "vertices_mean": float(v.mean()) if v.size else 0.0,
+        table.append({"rate": rate, "instances": int(v.size),
+                      "vertices_mean": float(v.mean()) if v.size else 0.0,
+                      "vertices_median": float(np.median(v)) if v.size else 0.0,
+                      "vertices_p99": float(np.percentile(v, 99)) if v.size else 0.0,
                       "vertices_max": float(v.max()) if v.size else 0.0,
                       "vertex_bound": k * bound,
+                      "vertices_over_bound": (float(v.mean()) / (k * bound)) if v.size and bound else 0.0,
                       "selected_mean": float(s.mean()) if s.size else 0.0,
                       "selected_max": float(s.max()) if s.size else 0.0,
                       "eligible_mean": float(e.mean()) if e.size else 0.0,
                       "size_bound": bound,
                       "selected_over_bound": (float(s.mean()) / bound) if s.size and bound else 0.0})
     pos = np.arange(len(rates))
-    a1.boxplot(vdata, positions=pos, widths=0.6, showfliers=False)
-    a1.plot(pos, [t["vertex_bound"] for t in table], "r--", label=f"bound k x {per_instant} x rate")
-    a1.set_title("Conflict-graph vertices per epoch")
-    a2.boxplot(sdata, positions=pos, widths=0.6, showfliers=False)
+    flier = {"marker": ".", "markersize": 3, "alpha": 0.4}
+    a1.boxplot(vdata, positions=pos, widths=0.6, showfliers=True, flierprops=flier)
+    a1.plot(pos, [t["vertex_bound"] for t in table], "r--", marker="_",
+            label=f"bound k x {per_instant} x rate")
+    a1.plot(pos, [t["vertices_mean"] for t in table], "b:", marker="o", ms=4, label="mean")
+    a1.set_title("MWIS variables (conflict-graph vertices) per instance")
+    a1.set_ylabel("vertices (log)")
+    a2.boxplot(sdata, positions=pos, widths=0.6, showfliers=True, flierprops=flier)
     a2.plot(pos, [t["eligible_mean"] for t in table], "g:", marker="x",
             label="eligible requests (mean)")
-    a2.plot(pos, [t["size_bound"] for t in table], "r--", label=f"bound {per_instant} x rate")
-    a2.set_title("MWIS size (selected vertices) per epoch")
+    a2.plot(pos, [t["size_bound"] for t in table], "r--", marker="_", label=f"bound {per_instant} x rate")
+    a2.set_title("MWIS size (selected vertices) per instance")
+    a2.set_ylabel("selected vertices (log)")
     for ax in (a1, a2):
+        ax.set_yscale("log")
         ax.set_xticks(pos, [str(r) for r in rates])
         ax.set_xlabel("request rate [requests / interval]")
-        ax.grid(alpha=0.3)
+        ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -179,9 +294,16 @@ def mwis_size_figure(cells, path: Path, k: int, window_s: float, interval_s: flo
     return {"path": str(path), "table": table, "eligible_per_instant": per_instant}
 
 
+# backends whose proven_optimal flag is False whenever they ran on a non-empty graph, so a
+# proven-optimal epoch is one the reductions and component splitting solved without them
+NEVER_PROVING = ("sa", "tabu", "qpu-emulator", "qpu")
+
+
 def solve_time_figure(cells, path: Path) -> dict:
-    """Per-epoch MWIS solve-time distributions per backend (box plot, log scale)."""
-    methods = [m for m in _methods(cells) if m != "fifo"]
+    """Per-epoch MWIS solve-time distributions per backend (box plot with every outlier, log
+    scale), the share of epochs proven optimal and, for backends that never prove optimality
+    themselves, the share of epochs in which the backend was not called at all."""
+    methods = [m for m in _methods(cells) if m not in BASELINES]
     data, table = [], []
     for m in methods:
         eps = [r for c in cells if c["summary"]["method"] == m for r in c["epochs"]
@@ -196,10 +318,13 @@ def solve_time_figure(cells, path: Path) -> dict:
                       "max_s": float(t.max()) if t.size else float("nan"),
                       "share_under_0.1s": float((t < 0.1).mean()) if t.size else float("nan"),
                       "share_proven_optimal": float(opt.mean()) if t.size else float("nan"),
+                      "share_backend_not_called": (float(opt.mean()) if t.size else float("nan"))
+                      if m in NEVER_PROVING else float("nan"),
                       "fallbacks": int(fb.sum())})
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
     if data:
-        ax.boxplot(data, widths=0.6)
+        ax.boxplot(data, widths=0.6, showfliers=True,
+                   flierprops={"marker": ".", "markersize": 3, "alpha": 0.4})
         ax.set_xticks(np.arange(1, len(methods) + 1), methods)
     ax.set_yscale("log")
     ax.axhline(0.1, color="r", ls="--", lw=1, label="0.1 s")
@@ -220,11 +345,44 @@ def _tts_value(row):
     return None
 
 
+def _num(row, key):
+    v = row.get(key)
+    if v in (None, "") or (isinstance(v, float) and math.isnan(v)):
+        return None
+    return float(v)
+
+
+def per_read_tts(row, p: float = 0.99):
+    """TTS(p) per read as the paper defines it (one trial = one read), or None.
+
+    Uses the row's own per-read value when the TTS module recorded one (``tts99_per_read_s``),
+    else computes it from the recorded read statistics: t_read = t_c / num_reads (the call's
+    wall time spread over its reads, so fixed per-call costs are included), p_read =
+    read_opt_fraction, TTS = t_read log(1 - p) / log(1 - p_read), at least one read (t_read)
+    when p_read >= p; None when no read reached the optimum or the row has no read statistics
+    (deterministic backends).
+    """
+    own = _num(row, "tts99_per_read_s")
+    if own is not None:
+        return own
+    f, n, tc = _num(row, "read_opt_fraction"), _num(row, "num_reads"), _num(row, "t_c_s")
+    if f is None or not n or tc is None:
+        return None
+    from uam_solvers.tts import time_to_solution
+    v, _rule = time_to_solution(tc / n, f, deterministic=False, target=p)
+    return v
+
+
 def tts_figure(tts: dict, path: Path) -> dict:
-    """TTS(p) box plots per backend from the TTS study's rows (log scale)."""
+    """TTS(p) per call (one trial = one solver call of ``reads`` reads) and, for the annealers,
+    per read (one trial = one read, the paper's definition), box plots per backend (log scale,
+    every outlier shown)."""
     rows = tts.get("rows") or []
+    p = float(tts.get("p", 0.99))
     by: dict = {}
     missed: dict = {}
+    per_read: dict = {}
+    read_missed: dict = {}
     for r in rows:
         v = _tts_value(r)
         b = str(r.get("backend", "?"))
@@ -233,6 +391,13 @@ def tts_figure(tts: dict, path: Path) -> dict:
             by[b].append(v)
         else:
             missed[b] = missed.get(b, 0) + 1  # stochastic backend that never reached the optimum
+        if _num(r, "read_opt_fraction") is not None or _num(r, "tts99_per_read_s") is not None:
+            pr = per_read_tts(r, p)
+            per_read.setdefault(b, [])
+            if pr is not None and math.isfinite(pr):
+                per_read[b].append(pr)
+            else:
+                read_missed[b] = read_missed.get(b, 0) + 1
     if not by:
         return {}
     names = [m for m in METHOD_ORDER if m in by] + sorted(set(by) - set(METHOD_ORDER))
@@ -240,32 +405,239 @@ def tts_figure(tts: dict, path: Path) -> dict:
     for m in names:
         x = np.array(by[m], dtype=float)
         n_all = x.size + missed.get(m, 0)
-        rules = [r.get("rule") for r in rows if str(r.get("backend")) == m]
-        pe = [float(r["p_opt"]) for r in rows if str(r.get("backend")) == m and r.get("p_opt") is not None]
-        table.append({"backend": m, "instances": int(n_all),
-                      "median_s": float(np.median(x)) if x.size else float("nan"),
-                      "p25_s": float(np.percentile(x, 25)) if x.size else float("nan"),
-                      "p75_s": float(np.percentile(x, 75)) if x.size else float("nan"),
-                      "max_s": float(x.max()) if x.size else float("nan"),
-                      "not_reached": int(missed.get(m, 0)),
-                      "penalised": int(sum(r == "deterministic miss penalty" for r in rules)),
-                      "mean_p_opt": float(np.mean(pe)) if pe else float("nan"),
-                      # reached the optimum with 99 % confidence in under 0.1 s, over all instances
-                      "share_under_0.1s": float((x < 0.1).sum() / n_all) if n_all else float("nan")})
-    fig, ax = plt.subplots(figsize=(6.4, 4.2))
-    ax.boxplot([np.maximum(by[m], 1e-7) if by[m] else [np.nan] for m in names], widths=0.6)
+        mine = [r for r in rows if str(r.get("backend")) == m]
+        rules = [r.get("rule") for r in mine]
+        pe = [float(r["p_opt"]) for r in mine if r.get("p_opt") not in (None, "")]
+        pr = np.array(per_read.get(m, []), dtype=float)
+        fr = [_num(r, "read_opt_fraction") for r in mine]
+        fr = [f for f in fr if f is not None]
+        reads = [_num(r, "num_reads") for r in mine if _num(r, "num_reads")]
+        row = {"backend": m, "instances": int(n_all),
+               "median_s": float(np.median(x)) if x.size else float("nan"),
+               "p25_s": float(np.percentile(x, 25)) if x.size else float("nan"),
+               "p75_s": float(np.percentile(x, 75)) if x.size else float("nan"),
+               "max_s": float(x.max()) if x.size else float("nan"),
+               "not_reached": int(missed.get(m, 0)),
+               "penalised": int(sum(r == "deterministic miss penalty" for r in rules)),
+               "mean_p_opt": float(np.mean(pe)) if pe else float("nan"),
+               # reached the optimum with 99 % confidence in under 0.1 s, over all instances
+               "share_under_0.1s": float((x < 0.1).sum() / n_all) if n_all else float("nan"),
+               "reads_per_call": float(np.median(reads)) if reads else float("nan"),
+               "per_read_median_s": float(np.median(pr)) if pr.size else float("nan"),
+               "per_read_p25_s": float(np.percentile(pr, 25)) if pr.size else float("nan"),
+               "per_read_p75_s": float(np.percentile(pr, 75)) if pr.size else float("nan"),
+               "per_read_not_reached": int(read_missed.get(m, 0)),
+               "mean_p_read": float(np.mean(fr)) if fr else float("nan"),
+               "share_p_read_below_p": float(np.mean(np.array(fr) < p)) if fr else float("nan")}
+        if pr.size >= 2:
+            from scipy.stats import bootstrap
+            ci = bootstrap((pr,), np.median, confidence_level=0.95, n_resamples=2000,
+                           method="percentile", random_state=np.random.default_rng(0)).confidence_interval
+            row["per_read_median_lo"], row["per_read_median_hi"] = float(ci.low), float(ci.high)
+        table.append(row)
+    read_names = [m for m in names if per_read.get(m)]
+    fig, axes = plt.subplots(1, 2 if read_names else 1, figsize=(11 if read_names else 6.4, 4.2),
+                             squeeze=False)
+    flier = {"marker": ".", "markersize": 3, "alpha": 0.4}
+    ax = axes[0][0]
+    ax.boxplot([np.maximum(by[m], 1e-7) if by[m] else [np.nan] for m in names], widths=0.6,
+               showfliers=True, flierprops=flier)
     ax.set_xticks(np.arange(1, len(names) + 1),
                   [m + f"\nn={len(by[m]) + missed.get(m, 0)}"
                    + (f", {missed[m]} not reached" if missed.get(m) else "") for m in names])
-    ax.axhline(0.1, color="r", ls="--", lw=1)
-    ax.set_yscale("log")
-    ax.set_ylabel(f"TTS({tts.get('p', 0.99)}) [s]")
-    ax.set_title(f"Time to solution, instances sampled from the runs (n per backend)")
-    ax.grid(alpha=0.3, which="both")
+    ax.set_title("per call (trial = one solver call)")
+    ax.set_ylabel(f"TTS({p}) [s] (log)")
+    if read_names:
+        ax2 = axes[0][1]
+        ax2.boxplot([np.maximum(per_read[m], 1e-7) for m in read_names], widths=0.6,
+                    showfliers=True, flierprops=flier)
+        ax2.set_xticks(np.arange(1, len(read_names) + 1),
+                       [m + f"\nn={len(per_read[m]) + read_missed.get(m, 0)}"
+                        + (f", {read_missed[m]} not reached" if read_missed.get(m) else "")
+                        for m in read_names])
+        ax2.set_title("per read (trial = one read, the paper's TTS)")
+        ax2.sharey(ax)
+    for a in axes[0]:
+        a.axhline(0.1, color="r", ls="--", lw=1)
+        a.set_yscale("log")
+        a.grid(alpha=0.3, which="both")
+    fig.suptitle("Time to solution, instances sampled from the runs")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return {"path": str(path), "table": table}
+
+
+# ---- flights: delay, detour, corridors ---------------------------------------------------------
+
+def central_corridors(network, share: float = 0.10) -> tuple[np.ndarray, np.ndarray]:
+    """(edge betweenness centrality per corridor, bool mask of the ``share`` most central).
+
+    Centrality: networkx edge betweenness over length-weighted shortest paths between all node
+    pairs, normalised; the top ceil(share x corridors) by centrality (ties by corridor index).
+    """
+    import networkx as nx
+    g = network.graph
+    eb = nx.edge_betweenness_centrality(g, weight="length_m", normalized=True)
+    c = np.zeros(network.n_edges, dtype=float)
+    for (u, v), val in eb.items():
+        c[g.edges[u, v]["edge_index"]] = val
+    top = np.zeros(network.n_edges, dtype=bool)
+    n_top = max(int(math.ceil(share * network.n_edges)), 1)
+    top[np.lexsort((np.arange(c.size), -c))[:n_top]] = True
+    return c, top
+
+
+def corridor_use_m(network, flights) -> np.ndarray:
+    """Flown distance per corridor [m] of a run's flights (each flight's route node ids)."""
+    use = np.zeros(network.n_edges, dtype=float)
+    L = np.asarray(network.edge_length_m)
+    for f in flights:
+        ids = f["route"].split()
+        idx = [network.node_index(x) for x in ids]
+        for a, b in zip(idx[:-1], idx[1:]):
+            e = network.edge_index(a, b)
+            use[e] += L[e]
+    return use
+
+
+def flight_metrics(cell, network=None, top=None) -> dict:
+    """Per-run flight statistics: mean route length [m], mean detour [%] (route length over the
+    shortest route of the same origin-destination pair, from the weight d*/d: d/d* = 1/w), mean
+    delay [s] (departure - earliest departure), shares of flights on candidate 0 and with a
+    delay, and the share of flown distance on the central corridors (``top`` mask) when a
+    network is given."""
+    fl = cell.get("flights") or []
+    if not fl:
+        return {}
+    length = np.array([f["length_m"] for f in fl], dtype=float)
+    detour = 100.0 * (1.0 / np.array([f["weight"] for f in fl], dtype=float) - 1.0)
+    delay = np.array([f["departure_s"] - f["earliest_departure_s"] for f in fl
+                      if f.get("earliest_departure_s") not in (None, "")], dtype=float)
+    out = {"flights": len(fl), "route_length_mean_m": float(length.mean()),
+           "flown_km": float(length.sum() / 1000.0),
+           "detour_mean_pct": float(detour.mean()),
+           "shortest_share": float(np.mean([int(f["candidate_index"]) == 0 for f in fl])),
+           "delay_mean_s": float(delay.mean()) if delay.size else float("nan"),
+           "delayed_share": float((delay > 1e-6).mean()) if delay.size else float("nan")}
+    if network is not None and top is not None:
+        use = corridor_use_m(network, fl)
+        out["central_share"] = float(use[top].sum() / use.sum()) if use.sum() > 0 else float("nan")
+    return out
+
+
+def _network(cfg):
+    try:
+        from .network_spec import load_network_spec
+        return load_network_spec(cfg.network)
+    except Exception:  # a recording's network may not be loadable here; skip the corridor part
+        return None
+
+
+def flights_figure(cells, path: Path, rates_shown=None) -> dict:
+    """Delay and detour distributions per method (box plots, every outlier shown) at the shown
+    rates, and the per-run table of :func:`flight_metrics` (pooled flights)."""
+    rates = select_rates(_rates(cells), rates_shown, n=2)
+    methods = _methods(cells)
+    fig, axes = plt.subplots(2, len(rates), figsize=(5.2 * len(rates), 7), squeeze=False)
+    table = []
+    flier = {"marker": ".", "markersize": 3, "alpha": 0.3}
+    for j, rate in enumerate(rates):
+        det, dly, names = [], [], []
+        for m in methods:
+            fl = [f for c in cells if c["summary"]["method"] == m and c["summary"]["rate"] == rate
+                  for f in c.get("flights") or []]
+            if not fl:
+                continue
+            names.append(m)
+            det.append(100.0 * (1.0 / np.array([f["weight"] for f in fl]) - 1.0))
+            dly.append(np.array([f["departure_s"] - f["earliest_departure_s"] for f in fl
+                                 if f.get("earliest_departure_s") not in (None, "")], dtype=float))
+        if not names:
+            continue
+        axes[0][j].boxplot(det, widths=0.6, showfliers=True, flierprops=flier)
+        axes[0][j].set_title(f"route detour, {rate} requests / interval")
+        axes[0][j].set_ylabel("detour over the shortest route [%]")
+        axes[1][j].boxplot([d if d.size else [np.nan] for d in dly], widths=0.6, showfliers=True,
+                           flierprops=flier)
+        axes[1][j].set_title(f"departure delay, {rate} requests / interval")
+        axes[1][j].set_ylabel("departure - earliest departure [s]")
+        for a in (axes[0][j], axes[1][j]):
+            a.set_xticks(np.arange(1, len(names) + 1), names, fontsize=7)
+            a.grid(alpha=0.3)
+    for rate in _rates(cells):
+        for m in methods:
+            runs = [flight_metrics(c) for c in cells
+                    if c["summary"]["method"] == m and c["summary"]["rate"] == rate]
+            runs = [r for r in runs if r]
+            if runs:
+                table.append({"rate": rate, "method": m, **{
+                    k: float(np.mean([r[k] for r in runs])) for k in
+                    ("route_length_mean_m", "detour_mean_pct", "shortest_share", "delay_mean_s",
+                     "delayed_share")}, "seeds": len(runs)})
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return {"path": str(path), "table": table}
+
+
+def corridor_figure(cells, network, path: Path, rate=None, share: float = 0.10) -> dict:
+    """Corridor utilisation against centrality: maps of flown distance per corridor (FIFO and
+    each other method at one rate, seeds pooled) with the most central corridors outlined, and
+    per run the share of flown distance on the ``share`` most central corridors."""
+    cent, top = central_corridors(network, share)
+    methods = _methods(cells)
+    rates = _rates(cells)
+    rate = rate if rate in rates else (rates[len(rates) // 2] if rates else None)
+    shown = [m for m in ("fifo", "firstfit", "exact", "greedy") if m in methods] or methods[:3]
+    fig, axes = plt.subplots(1, len(shown) + 1, figsize=(4.4 * (len(shown) + 1), 4.4), squeeze=False)
+    xy = np.asarray(network.enu_m)[:, :2] / 1000.0
+    e = np.asarray(network.edges)
+    L = np.asarray(network.edge_length_m)
+    table = []
+    use_by = {}
+    for m in shown:
+        runs = [c for c in cells if c["summary"]["method"] == m and c["summary"]["rate"] == rate]
+        use_by[m] = sum((corridor_use_m(network, c.get("flights") or []) for c in runs),
+                        np.zeros(network.n_edges)) / max(len(runs), 1)
+    vmax = max(float((u / L).max()) for u in use_by.values()) if use_by else 1.0
+    for ax, m in zip(axes[0], shown):
+        flights_per_corridor = use_by[m] / L
+        for k in np.argsort(flights_per_corridor):
+            (a, b) = e[k]
+            w = 0.3 + 4.0 * flights_per_corridor[k] / max(vmax, 1e-9)
+            ax.plot(xy[[a, b], 0], xy[[a, b], 1], color=plt.cm.viridis(flights_per_corridor[k] / max(vmax, 1e-9)),
+                    lw=w, solid_capstyle="round", zorder=2)
+        for k in np.flatnonzero(top):
+            (a, b) = e[k]
+            ax.plot(xy[[a, b], 0], xy[[a, b], 1], color="r", lw=0.6, ls="--", zorder=3)
+        ax.set_title(f"{_label(m)}, rate {rate}: flights per corridor", fontsize=9)
+        ax.set_aspect("equal")
+        ax.set_xlabel("east [km]")
+    axes[0][0].set_ylabel("north [km]")
+    ax = axes[0][-1]
+    for i, m in enumerate(shown):
+        ax.scatter(cent, use_by[m] / L, s=8, alpha=0.6, label=_label(m),
+                   marker=style(m, i)["marker"], color=style(m, i)["color"])
+    ax.set_xlabel("corridor edge-betweenness centrality")
+    ax.set_ylabel(f"flights per corridor per run (rate {rate})")
+    ax.set_title("utilisation against centrality (red dashed: top 10 %)", fontsize=9)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    for r in rates:
+        for m in methods:
+            vals = [flight_metrics(c, network, top).get("central_share") for c in cells
+                    if c["summary"]["method"] == m and c["summary"]["rate"] == r]
+            vals = [v for v in vals if v is not None]
+            if vals:
+                mu, lo, hi = mean_ci(vals)
+                table.append({"rate": r, "method": m, "central_share": mu, "lo": lo, "hi": hi,
+                              "seeds": len(vals)})
+    return {"path": str(path), "table": table, "top_corridors": int(top.sum()),
+            "corridors": int(network.n_edges), "map_rate": rate, "top_mask": top}
 
 
 def make_figures(cells, cfg, tts: dict, out: Path) -> dict:
@@ -275,9 +647,16 @@ def make_figures(cells, cfg, tts: dict, out: Path) -> dict:
     figs = {
         "cumulative": cumulative_figure(cells, d / "cumulative_approved.png", cfg.cumulative_rates),
         "approved": approved_figure(cells, d / "approved_per_rate.png"),
+        "approval_rate": approval_rate_figure(cells, d / "approval_rate_vs_load.png", cfg.interval_s),
         "airborne": airborne_figure(cells, d / "aircraft_in_air.png"),
+        "active": active_over_time_figure(cells, d / "active_over_time.png", cfg.cumulative_rates),
     }
-    if any(c["summary"]["method"] != "fifo" for c in cells):
+    if any(c.get("flights") for c in cells):
+        figs["flights"] = flights_figure(cells, d / "delay_detour.png")
+        net = _network(cfg)
+        if net is not None:
+            figs["corridors"] = corridor_figure(cells, net, d / "corridors_centrality.png")
+    if any(c["summary"]["method"] not in BASELINES for c in cells):
         figs["mwis_size"] = mwis_size_figure(cells, d / "mwis_size.png", cfg.k, cfg.window_s,
                                              cfg.interval_s)
         figs["solve_time"] = solve_time_figure(cells, d / "solve_time.png")

@@ -14,7 +14,7 @@ from uam_planner.planning import Planner
 
 from .audit import sweep_audit
 from .demand import RequestGenerator
-from .experiment_config import ExperimentConfig, rate_label
+from .experiment_config import BASELINES, ExperimentConfig, rate_label
 
 
 @dataclass
@@ -25,7 +25,8 @@ class ScenarioResult:
         method, rate, seed, duration_s: the cell.
         summary: one tidy row (counts, average aircraft in the air, solve-time stats, audit).
         epochs: one row per epoch (t_s, counts so far, MWIS size, solve time, fallback, ...).
-        flights: one row per approved flight (ids, epoch, departure/arrival, route, weight).
+        flights: one row per approved flight (ids, epoch, earliest departure, departure/arrival,
+            route, weight).
         audit: the exact separation audit over all flown flights (min_separation_m, losses,
             pairs_checked) or {} when disabled.
         instances: MWIS instances (weights, edges incl. clique edges, groups) of this run with
@@ -102,7 +103,7 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
 
     Args:
         network: a uam_planner Network.
-        method: "fifo" for the shortest-FIFO baseline, else an MWIS backend name.
+        method: "fifo" / "firstfit" for the baselines, else an MWIS backend name.
         rate: requests per interval (see RequestGenerator; fractional allowed).
         seed: demand seed (also the solver seed); the same seed gives the same requests whatever
             the method, so methods are compared on identical demand.
@@ -117,16 +118,17 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
     """
     cfg = config if config is not None else ExperimentConfig()
     t_wall = time.perf_counter()
-    policy = "fifo" if method == "fifo" else "mwis"
-    pcfg = cfg.planning_config("greedy" if method == "fifo" else method, seed)
+    policy = method if method in BASELINES else "mwis"
+    pcfg = cfg.planning_config("greedy" if method in BASELINES else method, seed)
     planner = Planner(network, pcfg, policy=policy,
-                      solve_mwis=None if policy == "fifo" else _solver(method, cfg, seed))
+                      solve_mwis=None if policy in BASELINES else _solver(method, cfg, seed))
     if demand is None:
         demand = RequestGenerator(network.aerodrome_ids, rate, cfg.interval_s, cfg.window_s, seed)
     n_epochs = int(math.ceil(duration_s / cfg.epoch_s - 1e-9))
     next_interval = 0
     epochs, flights, instances, rejections = [], [], [], []
     n_requests = approved_cum = expired_cum = 0
+    earliest_s: dict = {}
     for e in range(n_epochs):
         t = e * cfg.epoch_s
         # every demand instant up to t, in time order (equal spacing when interval_s == epoch_s)
@@ -135,6 +137,7 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
             for req in demand.requests_at(next_interval * cfg.interval_s, next_interval):
                 n_requests += 1
                 submitted.append(req)
+                earliest_s[req.request_id] = req.earliest_departure_s  # for the delay analysis
                 reason = planner.submit(req)
                 if reason is not None:
                     rejections.append((req.request_id, reason))
@@ -149,6 +152,7 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
         for f in res.approved:
             flights.append({"request_id": f.request_id, "origin": f.origin_id,
                             "destination": f.destination_id, "epoch": e,
+                            "earliest_departure_s": earliest_s.get(f.request_id),
                             "departure_s": f.departure_s, "arrival_s": f.arrival_s,
                             "length_m": f.length_m, "weight": f.weight,
                             "candidate_index": int(f.candidate_index),

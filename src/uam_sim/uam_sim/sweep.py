@@ -7,12 +7,11 @@ from __future__ import annotations
 import hashlib
 import json
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from .demand import DemandSchedule, load_demand
-from .experiment_config import ExperimentConfig, make_config, rate_label, resolve_path
+from .experiment_config import BASELINES, ExperimentConfig, make_config, rate_label, resolve_path
 from .files import write_json_atomic
 from .network_spec import load_network_spec, network_identity
 from .scenario import run_scenario
@@ -27,9 +26,11 @@ def cell_params(cfg: ExperimentConfig, method: str, rate, seed: int) -> dict:
     for name in ("duration_s", "epoch_s", "interval_s", "window_s", "separation_m", "k",
                  "penalty_factor", "speed_mps", "corpus_max_vertices", "audit"):
         params[name] = getattr(cfg, name)
-    if method != "fifo":
+    if method not in BASELINES:
         params["time_limit_s"] = cfg.time_limit_s
         params["solver_options"] = cfg.solver_options.get(method) or {}
+    if cfg.airspace_mode != "paper":  # paper-mode keys stay as they were, so old cells resume
+        params["airspace_mode"] = cfg.airspace_mode
     if cfg.demand_file:
         params["demand"] = hashlib.sha256(resolve_path(cfg.demand_file).read_bytes()).hexdigest()
     return params
@@ -96,7 +97,12 @@ def sweep_methods(cfg: ExperimentConfig) -> list:
 
 
 def run_sweep(cfg: ExperimentConfig, progress: bool = True, compute: bool = True) -> SweepResult:
-    """Run every missing cell (parallel over cfg.workers processes), reuse the finished ones.
+    """Run every missing cell, reuse the finished ones.
+
+    Serial in this process when ``cfg.workers`` is 1 and no scheduler address is given; else on a
+    Dask cluster (:mod:`uam_sim.dask_cluster`): a LocalCluster of ``cfg.workers`` processes, or
+    the cluster of ``cfg.scheduler``. Either way each cell is written as it finishes, by this
+    process, so an interrupted sweep resumes.
 
     ``compute=False`` only collects the finished cells (the missing ones are listed in
     ``SweepResult.missing``), e.g. to report on a sweep that is still running.
@@ -127,21 +133,19 @@ def run_sweep(cfg: ExperimentConfig, progress: bool = True, compute: bool = True
     if progress and todo:
         from tqdm import tqdm
         bar = tqdm(total=len(todo), desc="cells", unit="cell")
-    if cfg.workers <= 1 or len(todo) <= 1:
+    remote = cfg.scheduler not in (None, "local")
+    if not remote and (cfg.workers <= 1 or len(todo) <= 1):
         for m, r, s in todo:
             found[(m, r, s)] = run_cell(cfg_dict, m, r, s, str(cells_dir))
             if bar:
                 bar.update(1)
-    else:
-        import multiprocessing as mp
-        with ProcessPoolExecutor(max_workers=min(cfg.workers, len(todo)),
-                                 mp_context=mp.get_context("spawn")) as pool:
-            futs = {pool.submit(run_cell, cfg_dict, m, r, s, str(cells_dir)): (m, r, s)
-                    for m, r, s in todo}
-            for fut in as_completed(futs):
-                found[futs[fut]] = fut.result()
-                if bar:
-                    bar.update(1)
+    elif todo:
+        from .dask_cluster import run_cells
+        keys = {c: cell_key(cell_params(cfg, *c)) for c in todo}
+        found.update(run_cells(cfg_dict, todo, keys, cells_dir, run_cell,
+                               scheduler=cfg.scheduler or "local",
+                               n_workers=min(cfg.workers, len(todo)),
+                               on_done=(lambda _c, _cell: bar.update(1)) if bar else None))
     if bar:
         bar.close()
     return SweepResult(cfg, [found[c] for c in grid], list(todo), reused,

@@ -1,0 +1,175 @@
+"""Paired per-seed statistics for the study's comparisons.
+
+Every method at one (rate, seed) plans the *same* requests (the demand is a function of the seed
+alone), so two methods are compared seed by seed: d_s = x_A(s) - x_B(s), and the report gives
+the mean paired difference with a 95 % confidence interval over seeds. Pairing removes the
+between-seed variation of the demand (at rate 20 the approvals of one method vary by about
++-40 flights between seeds, while the paired difference of two methods varies far less), which
+is why unpaired CIs that overlap can still hide a clear difference, and why overlapping CIs of
+two means are no evidence of "no difference" either.
+
+Interval: Student t on the differences, ``mean(d) +- t_{0.975, n-1} sd(d) / sqrt(n)``
+(``scipy.stats.t``). With the study's 5 seeds it assumes roughly normal differences; it is the
+usual choice for so few pairs, since a bootstrap interval from 5 values is too narrow (the
+percentile bootstrap's coverage is well below 95 % at n = 5). ``method="bootstrap"`` gives the
+BCa bootstrap of the mean instead (``scipy.stats.bootstrap``, seeded, 9,999 resamples) for
+larger seed counts. A difference is called *supported* only when its interval excludes 0; the
+count of seeds with a positive difference is reported beside it, so one seed carrying the mean
+is visible.
+
+Relative differences are computed per seed too: 100 (x_A - x_B) / x_B [%].
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Iterable, Sequence
+
+import numpy as np
+
+LEVEL = 0.95
+BOOTSTRAP_RESAMPLES = 9_999
+
+
+class StatsError(ValueError):
+    """Bad input to a statistic; the message names the argument and the value."""
+
+
+@dataclass(frozen=True)
+class Paired:
+    """A paired comparison over seeds.
+
+    Attributes:
+        mean: mean of the per-seed differences (units of the metric, or % when relative).
+        lo, hi: the confidence interval of the mean difference (nan when n < 2).
+        n: number of paired seeds.
+        positive, negative: seeds with a difference > 0 / < 0.
+        level: confidence level; method: "t" or "bootstrap".
+        diffs: the per-seed differences, in seed order.
+        seeds: the seeds, in the same order.
+    """
+
+    mean: float
+    lo: float
+    hi: float
+    n: int
+    positive: int
+    negative: int
+    level: float = LEVEL
+    method: str = "t"
+    diffs: tuple = field(default=(), repr=False)
+    seeds: tuple = field(default=(), repr=False)
+
+    @property
+    def supported(self) -> bool:
+        """True when the interval excludes 0 (a difference in a definite direction)."""
+        return self.n >= 2 and (self.lo > 0 or self.hi < 0)
+
+    @property
+    def sign(self) -> int:
+        """+1 / -1 when the interval lies above / below 0, else 0."""
+        if not self.supported:
+            return 0
+        return 1 if self.lo > 0 else -1
+
+    def text(self, nd: int = 1, unit: str = "") -> str:
+        """'+12.0 [-24.0, +48.0]' (with a unit appended to each number when given)."""
+        u = f" {unit}" if unit and unit != "%" else unit
+        if self.n < 2:
+            return f"{self.mean:+.{nd}f}{u} (n = {self.n}, no interval)"
+        return f"{self.mean:+.{nd}f}{u} [{self.lo:+.{nd}f}, {self.hi:+.{nd}f}]{u if u else ''}"
+
+
+def _clean(name: str, values) -> np.ndarray:
+    x = np.asarray(list(values), dtype=np.float64)
+    if x.ndim != 1:
+        raise StatsError(f"{name}: expected a 1-D sequence, got shape {x.shape}")
+    return x
+
+
+def mean_interval(values: Sequence[float], level: float = LEVEL, method: str = "t",
+                  seed: int = 0) -> tuple[float, float, float]:
+    """(mean, low, high) of a sample: Student t (default) or BCa bootstrap interval.
+
+    NaN entries are dropped; fewer than 2 values give (mean, nan, nan); identical values give a
+    zero-width interval.
+    """
+    if not 0 < level < 1:
+        raise StatsError(f"level: {level!r} must lie in (0, 1)")
+    if method not in ("t", "bootstrap"):
+        raise StatsError(f"method: {method!r} must be 't' or 'bootstrap'")
+    x = _clean("values", values)
+    x = x[~np.isnan(x)]
+    if x.size == 0:
+        return math.nan, math.nan, math.nan
+    m = float(x.mean())
+    if x.size < 2:
+        return m, math.nan, math.nan
+    if np.all(x == x[0]):
+        return m, m, m
+    if method == "t":
+        from scipy.stats import t as student_t
+        half = float(student_t.ppf(0.5 + level / 2, x.size - 1) * x.std(ddof=1) / math.sqrt(x.size))
+        return m, m - half, m + half
+    from scipy.stats import bootstrap
+    res = bootstrap((x,), np.mean, confidence_level=level, n_resamples=BOOTSTRAP_RESAMPLES,
+                    method="BCa", random_state=np.random.default_rng(seed))
+    return m, float(res.confidence_interval.low), float(res.confidence_interval.high)
+
+
+def paired(a: dict, b: dict, relative: bool = False, level: float = LEVEL,
+           method: str = "t") -> Paired:
+    """Paired comparison of two per-seed results ``{seed: value}`` on their common seeds.
+
+    ``relative``: per-seed 100 (a - b) / b [%] (seeds with b == 0 are left out).
+    Raises StatsError when no seed is common to both.
+    """
+    seeds = sorted(set(a) & set(b))
+    if not seeds:
+        raise StatsError(f"paired: no common seed (a has {sorted(a)}, b has {sorted(b)})")
+    if relative:
+        seeds = [s for s in seeds if b[s]]
+        d = np.array([100.0 * (a[s] - b[s]) / b[s] for s in seeds], dtype=np.float64)
+    else:
+        d = np.array([a[s] - b[s] for s in seeds], dtype=np.float64)
+    m, lo, hi = mean_interval(d, level, method)
+    return Paired(mean=m, lo=lo, hi=hi, n=len(seeds), positive=int((d > 0).sum()),
+                  negative=int((d < 0).sum()), level=level, method=method,
+                  diffs=tuple(d.tolist()), seeds=tuple(seeds))
+
+
+def per_seed(cells: Iterable[dict], method: str, rate, metric) -> dict:
+    """``{seed: value}`` of one method at one rate; ``metric`` is a summary key or a function
+    of the cell."""
+    out = {}
+    for c in cells:
+        s = c["summary"]
+        if s["method"] == method and s["rate"] == rate:
+            out[int(s["seed"])] = float(metric(c) if callable(metric) else s[metric])
+    return out
+
+
+def compare(cells: Sequence[dict], a: str, b: str, metric="approved", rates=None,
+            level: float = LEVEL, method: str = "t") -> list:
+    """Rows of method ``a`` against method ``b`` per rate: means of both, the paired difference
+    (count) and the paired relative difference [%], each with its interval.
+
+    Rates where either method has no run are skipped.
+    """
+    rates = sorted({c["summary"]["rate"] for c in cells}) if rates is None else rates
+    rows = []
+    for r in rates:
+        xa, xb = per_seed(cells, a, r, metric), per_seed(cells, b, r, metric)
+        if not (set(xa) & set(xb)):
+            continue
+        d = paired(xa, xb, level=level, method=method)
+        rel = paired(xa, xb, relative=True, level=level, method=method)
+        common = d.seeds
+        rows.append({"a": a, "b": b, "rate": r, "mean_a": float(np.mean([xa[s] for s in common])),
+                     "mean_b": float(np.mean([xb[s] for s in common])),
+                     "diff": d.mean, "diff_lo": d.lo, "diff_hi": d.hi,
+                     "rel_pct": rel.mean, "rel_lo": rel.lo, "rel_hi": rel.hi,
+                     "seeds": d.n, "positive": d.positive, "negative": d.negative,
+                     "supported": d.supported, "paired": d, "paired_rel": rel})
+    return rows
