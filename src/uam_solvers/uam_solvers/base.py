@@ -20,6 +20,8 @@ from typing import Any, Iterable, Mapping, Sequence
 import numpy as np
 import scipy.sparse as sp
 
+from .errors import BackendUnavailable, MwisInputError  # re-exported: the library's public errors
+
 __all__ = [
     "MwisInputError",
     "MwisProblem",
@@ -37,13 +39,6 @@ __all__ = [
 #: Largest total weight accepted: objectives are float64 sums (max ~1.8e308).
 MAX_TOTAL_WEIGHT = 1e300
 
-
-class MwisInputError(ValueError):
-    """Malformed MWIS input; the message names the field and the offending value."""
-
-
-class BackendUnavailable(RuntimeError):
-    """The backend cannot run here (missing package, missing credentials); message says why."""
 
 
 def _as_index_array(values: Any, field_name: str, n: int) -> np.ndarray:

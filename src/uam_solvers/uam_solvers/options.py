@@ -14,7 +14,7 @@ import numbers
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping
 
-from .base import MwisInputError
+from .errors import MwisInputError
 
 __all__ = ["Option", "parse_options", "check_time_limit", "check_seed", "MAX_TIME_LIMIT_S"]
 
