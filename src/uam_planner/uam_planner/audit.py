@@ -7,6 +7,11 @@ interpolated between the two ends of the overlap, r(s) = r_lo + s (r_hi - r_lo) 
 and its minimum norm is found with plain Python floats. The time-overlapping segment pairs of two
 flights are walked with two pointers, so a pair of flights costs O(s_a + s_b).
 
+Both separation models are audited: the paper's sphere (3D distance below the minimum) and the
+cylinder (horizontal distance below H while the vertical distance is below V): for the cylinder
+the window of s where |dz(s)| < V is found first and the horizontal distance minimised over it.
+Pass the run's model (``separation_m`` may be a number, the sphere, or a SeparationModel).
+
 Use it in tests, analysis and reports; it is not meant for the planning hot path.
 """
 
@@ -16,7 +21,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, Sequence
 
-from .separation import DEFAULT_SEPARATION_M
+from .separation import DEFAULT_SEPARATION_M, as_separation_model
 
 
 @dataclass
@@ -59,10 +64,38 @@ def _at(times, points, k: int, t: float) -> tuple[float, float, float]:
     return (a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]), a[2] + f * (b[2] - a[2]))
 
 
-def pair_min_distance(a, b) -> tuple[float, float]:
+def _min_in_window(r_lo, dr, dims: int, vertical_m: float | None) -> tuple[float, float]:
+    """Minimum over s in [0, 1] of |(r_lo + s dr)[:dims]| (and the s of it), restricted, when
+    ``vertical_m`` is given, to the s where |r_lo[2] + s dr[2]| < vertical_m; (inf, nan) if that
+    set is empty."""
+    s_lo, s_hi = 0.0, 1.0
+    if vertical_m is not None:
+        z0, dz = r_lo[2], dr[2]
+        if dz == 0.0:
+            if not abs(z0) < vertical_m:
+                return math.inf, math.nan
+        else:
+            a, b = (-vertical_m - z0) / dz, (vertical_m - z0) / dz
+            a, b = min(a, b), max(a, b)
+            # A window shorter than 1e-9 of the overlap is a touch at |dz| = V that rounding may
+            # put on either side of V (a climb ending one level below another flight): no loss.
+            if not (a < 1.0 - 1e-9 and b > 1e-9):
+                return math.inf, math.nan
+            s_lo, s_hi = max(a, 0.0), min(b, 1.0)
+    dd = sum(dr[c] * dr[c] for c in range(dims))
+    s = s_lo
+    if dd > 0.0:
+        s = -sum(r_lo[c] * dr[c] for c in range(dims)) / dd
+        s = min(s_hi, max(s_lo, s))
+    return math.sqrt(sum((r_lo[c] + s * dr[c]) ** 2 for c in range(dims))), s
+
+
+def pair_min_distance(a, b, vertical_m: float | None = None) -> tuple[float, float]:
     """(minimum distance [m], time [s] of it) of two trajectories over their common time.
 
     ``a`` and ``b``: Trajectory, Flight or (times_s, points_m). (inf, nan) if never together.
+    With ``vertical_m`` (the cylinder's V [m]) the distance is horizontal and only the times at
+    which the vertical distance is below ``vertical_m`` count.
     """
     ta, pa = _waypoints(a)
     tb, pb = _waypoints(b)
@@ -76,12 +109,7 @@ def pair_min_distance(a, b) -> tuple[float, float]:
             a_hi, b_hi = _at(ta, pa, i, hi), _at(tb, pb, j, hi)
             r_lo = [a_lo[c] - b_lo[c] for c in range(3)]
             dr = [(a_hi[c] - b_hi[c]) - r_lo[c] for c in range(3)]
-            dd = dr[0] * dr[0] + dr[1] * dr[1] + dr[2] * dr[2]
-            s = 0.0
-            if dd > 0.0:
-                s = -(r_lo[0] * dr[0] + r_lo[1] * dr[1] + r_lo[2] * dr[2]) / dd
-                s = min(1.0, max(0.0, s))
-            dist = math.sqrt(sum((r_lo[c] + s * dr[c]) ** 2 for c in range(3)))
+            dist, s = _min_in_window(r_lo, dr, 3 if vertical_m is None else 2, vertical_m)
             if dist < best:
                 best, best_t = dist, lo + s * (hi - lo)
         # advance the segment that ends first (both if they end together)
@@ -93,16 +121,21 @@ def pair_min_distance(a, b) -> tuple[float, float]:
     return best, best_t
 
 
-def audit_flights(flights: Sequence[Any], separation_m: float = DEFAULT_SEPARATION_M,
+def audit_flights(flights: Sequence[Any], separation_m=DEFAULT_SEPARATION_M,
                   labels: Sequence[Any] | None = None) -> AuditResult:
     """Check every pair of flights for loss of separation, by brute force.
 
     Args:
         flights: Flights (anything with ``.trajectory``), Trajectories or (times_s, points_m).
-        separation_m: separation minimum [m]; a loss is a distance strictly below it.
+        separation_m: separation minimum [m] (the paper's sphere; a loss is a distance strictly
+            below it) or a ``SeparationModel`` (for the cylinder, ``min_separation_m`` and the
+            losses' distances are horizontal distances while vertically closer than V).
         labels: names for the report; default each flight's ``request_id`` or its index.
     Returns: AuditResult. Complexity O(F^2 + sum over overlapping pairs of (s_a + s_b)), pure Python.
     """
+    model = as_separation_model(separation_m)
+    separation_m = model.separation_m
+    vertical_m = model.vertical_separation_m if model.kind == "cylinder" else None
     items = list(flights)
     if labels is None:
         labels = [getattr(f, "request_id", i) for i, f in enumerate(items)]
@@ -118,7 +151,7 @@ def audit_flights(flights: Sequence[Any], separation_m: float = DEFAULT_SEPARATI
             if spans[i][1] < spans[j][0] or spans[j][1] < spans[i][0]:
                 continue
             checked += 1
-            d, t = pair_min_distance(items[i], items[j])
+            d, t = pair_min_distance(items[i], items[j], vertical_m)
             if d < best:
                 best, best_pair = d, (labels[i], labels[j])
             if d < separation_m:
