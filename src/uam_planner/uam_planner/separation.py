@@ -215,18 +215,17 @@ def _relative_motion(t0a, t1a, p0a, va, t0b, t1b, p0b, vb):
     return lo, span, r, va - vb
 
 
-# A vertical window that only touches an end of the common interval (|dz| reaches V exactly at
-# a waypoint, as when a climb ends one level below another flight) is kept if it misses by less
-# than this [s]: rounding puts such touches on either side, and the planner must err towards a
-# conflict (the audit, conversely, ignores windows shorter than 1e-9 of the overlap).
-_WINDOW_TOLERANCE_S = 1e-9
+# Strict at the ends of the common interval: a window that only touches an end (|dz| reaches V
+# exactly at a waypoint, as when one flight starts its descent right under another flight one
+# level up) is no loss. Where rounding could put such a touch on either side, the audit ignores
+# windows shorter than 1e-9 of the overlap, so the planner's kernel never misses what it finds.
+_WINDOW_TOLERANCE_S = 0.0
 
 
 def _vertical_window(rz, dvz, span, vertical_m):
     """The part [wl, wh] of [0, span] where |rz + dvz tau| < vertical_m, and whether it is
-    non-empty (open in the strict inequality, closed where it meets the ends of [0, span];
-    conservative by ``_WINDOW_TOLERANCE_S`` at those ends). Two flat segments exactly
-    ``vertical_m`` apart (two flight levels) never have a window."""
+    non-empty (open in the strict inequality, closed where it meets the ends of [0, span]).
+    Two flat segments exactly ``vertical_m`` apart (two flight levels) never have a window."""
     with np.errstate(divide="ignore", invalid="ignore"):
         moving = dvz != 0.0
         a = np.where(moving, (-vertical_m - rz) / np.where(moving, dvz, 1.0), -np.inf)
