@@ -172,3 +172,20 @@ def test_at_flight_levels_the_planner_kernel_errs_towards_conflict():
     assert want <= got and len(want) > 10
     for i, j in got - want:   # extras are touches: no loss interval of positive length
         assert all(e - s < 1e-6 for s, e in loss_intervals_s(flights[i], flights[j], CYL))
+
+
+@pytest.mark.parametrize("model", [CYL, SPHERE])
+def test_shifted_candidates_give_the_same_pairs_as_every_shifted_trajectory(model):
+    rng = np.random.default_rng(5)
+    base = random_flights(rng, 40, [60.0, 90.0, 120.0, 150.0, 5.0])
+    active = random_flights(rng, 60, [60.0, 90.0, 120.0, 150.0, 5.0])
+    counts = rng.integers(0, 8, len(base))               # 0..7 slots per template
+    first = np.concatenate(([0], np.cumsum(counts)))
+    shift = np.concatenate([5.0 * np.arange(c) for c in counts])
+    explicit = [base[j].shifted(float(shift[c])) for j in range(len(base))
+                for c in range(first[j], first[j + 1])]
+    want = conflicting_pairs(explicit, active, separation_m=model)
+    got = conflicting_pairs(base, active, separation_m=model, shifts_a=(first, shift))
+    assert got.tolist() == want.tolist() and len(want) > 20
+    with pytest.raises(ValueError, match="shifts_a"):
+        conflicting_pairs(base, active, shifts_a=(first[:-1], shift))

@@ -51,7 +51,8 @@ import numpy as np
 
 from .candidates import (DEFAULT_CLIMB_RATE_MPS, DEFAULT_DESCENT_RATE_MPS, CandidateCache,
                          RouteTemplate)
-from .conflict_graph import ActiveFlightIndex, ConflictGraph, build_conflict_graph
+from .conflict_graph import (ActiveFlightIndex, ConflictGraph, ShiftedCandidates,
+                             build_conflict_graph)
 from .separation import (DEFAULT_VERTICAL_SEPARATION_M, SEPARATION_MODELS, SegmentSet,
                          SeparationModel, conflicting_pairs)
 from .trajectory import Trajectory
@@ -354,6 +355,17 @@ class _Candidates:
     def trajectories(self) -> list:
         return [tp.trajectory(dep) for tp, dep in zip(self.tmpls, self.departures_s)]
 
+    def shifted(self) -> ShiftedCandidates:
+        """The same candidates as one base trajectory per template (at its first slot) and
+        departure shifts: the slots of one template are consecutive."""
+        n = len(self.tmpls)
+        starts = [c for c in range(n) if c == 0 or self.tmpls[c] is not self.tmpls[c - 1]]
+        first = np.asarray(starts + [n], dtype=np.int64)
+        deps = np.asarray(self.departures_s, dtype=np.float64)
+        base = [self.tmpls[c].trajectory(self.departures_s[c]) for c in starts]
+        shift = deps - np.repeat(deps[first[:-1]], np.diff(first)) if n else deps
+        return ShiftedCandidates(base, first, shift)
+
 
 def _paper_weights(config: PlanningConfig, network) -> bool:
     return config.airspace.departure_slot_s <= 0.0 and not network.layered
@@ -455,7 +467,9 @@ def plan_epoch_mwis(t_s: float, epoch_index: int, pending: Sequence[FlightReques
     tmpls, req_of = cands.tmpls, cands.req_of
     t2 = time.perf_counter()
     phases["candidates_s"] = t2 - t1
-    trajs = cands.trajectories()
+    # With slots, the candidates of one template differ only by a time shift: deconflict them
+    # per template (ShiftedCandidates) and build trajectories only for the survivors.
+    trajs = cands.shifted() if config.airspace.departure_slot_s > 0.0 else cands.trajectories()
     t3 = time.perf_counter()
     phases["trajectories_s"] = t3 - t2
 

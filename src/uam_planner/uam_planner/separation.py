@@ -420,7 +420,8 @@ def _cut_pieces(s: SegmentSet, cell_m: float, bucket_s: float, half_m: float,
 
 def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPARATION_M,
                       groups_a=None, cell_m: float | None = None, bucket_s: float | None = None,
-                      return_distances: bool = False, stats: dict | None = None):
+                      return_distances: bool = False, stats: dict | None = None,
+                      shifts_a=None):
     """Pairs of trajectories that lose separation at some time (exact, continuous time).
 
     Args:
@@ -438,6 +439,13 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
             cylinder: the minimum horizontal distance while vertically closer than V).
         stats: optional dict that receives broad-phase counts (segments, pieces, keys, pairs
             sharing a cell, exact checks) and wall times, for benchmarks.
+        shifts_a: optional ``(first, shift_s)``, only with ``trajs_b``: trajectory j of a stands
+            for the candidates ``first[j] .. first[j+1]-1``, candidate c being trajectory j
+            flown ``shift_s[c] >= 0`` seconds later (departure slots). The broad phase then runs
+            once per trajectory of a, its pieces' time ranges stretched by the largest shift,
+            and the exact check once per candidate of each surviving pair; the pairs returned
+            are (candidate, j into b). The same answer as listing every shifted trajectory,
+            for a fraction of the broad-phase work.
     Returns:
         (k, 2) int64 array of trajectory index pairs (i into a, j into b; i < j within one set),
         sorted lexicographically; with ``return_distances`` also (k,) float64 distances.
@@ -458,14 +466,35 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
             raise ValueError(f"groups_a must have shape ({sa.n_trajectories},), got {groups.shape}")
 
     empty = np.zeros((0, 2), dtype=np.int64)
+    slack_traj = None
+    if shifts_a is not None:
+        if single:
+            raise ValueError("shifts_a is only supported with trajs_b")
+        first = np.asarray(shifts_a[0], dtype=np.int64)
+        shift = np.asarray(shifts_a[1], dtype=np.float64)
+        if first.shape != (sa.n_trajectories + 1,) or first[0] != 0 or \
+                np.any(np.diff(first) < 0) or first[-1] != shift.shape[0]:
+            raise ValueError(f"shifts_a: first must be ({sa.n_trajectories + 1},) non-decreasing "
+                             f"offsets from 0 to len(shift_s)={shift.shape[0]}")
+        if shift.size and not (np.all(np.isfinite(shift)) and shift.min() >= 0.0):
+            raise ValueError("shifts_a: shift_s must be finite and >= 0")
+        slack_traj = np.zeros(sa.n_trajectories)
+        nonempty = np.flatnonzero(np.diff(first) > 0)
+        if nonempty.size:
+            slack_traj[nonempty] = np.maximum.reduceat(shift, first[nonempty])
     if len(sa) == 0 or len(sb) == 0:
         return (empty, np.zeros(0)) if return_distances else empty
     if not single:
         # Only the common time window can hold a conflict.
-        sa = sa.window(sb.t0_s.min(), sb.t1_s.max())
+        if slack_traj is None:
+            sa = sa.window(sb.t0_s.min(), sb.t1_s.max())
+        else:
+            keep = (sa.t1_s + slack_traj[sa.traj] >= sb.t0_s.min()) & (sa.t0_s <= sb.t1_s.max())
+            sa = sa if bool(keep.all()) else sa.take(keep)
         if len(sa) == 0:
             return (empty, np.zeros(0)) if return_distances else empty
-        sb = sb.window(sa.t0_s.min(), sa.t1_s.max())
+        hi_a = sa.t1_s.max() if slack_traj is None else (sa.t1_s + slack_traj[sa.traj]).max()
+        sb = sb.window(sa.t0_s.min(), hi_a)
         if len(sb) == 0:
             return (empty, np.zeros(0)) if return_distances else empty
 
@@ -487,6 +516,8 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
     pa = _cut_pieces(sa, cell, bucket, half, half_z)
     pb = pa if single else _cut_pieces(sb, cell, bucket, half, half_z)
     na = pa.t0.shape[0]
+    # a's pieces occupy their boxes until t1 plus their trajectory's largest shift
+    pa_t1_sweep = pa.t1 if slack_traj is None else pa.t1 + slack_traj[sa.traj[pa.seg]]
     clock.append(time.perf_counter())
 
     # Global grid origin shared by both sets so keys agree.
@@ -498,22 +529,23 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
     for axis, span_cells in (
             ("x", (max(pa.xhi.max(), pb.xhi.max()) - x0) / cell),
             ("y", (max(pa.yhi.max(), pb.yhi.max()) - y0) / cell),
-            ("t", (max(pa.t1.max(), pb.t1.max()) - tt0) / bucket)):
+            ("t", (max(pa_t1_sweep.max(), pb.t1.max()) - tt0) / bucket)):
         if not span_cells < float(1 << 62):
             raise ValueError(f"conflicting_pairs: the extent along {axis} spans {span_cells:.3g} "
                              f"broad-phase cells (cell_m={cell} m, bucket_s={bucket} s), more than "
                              f"int64 cell indices hold; use a larger cell_m or bucket_s")
 
-    def ranges(p: _Pieces):
+    def ranges(p: _Pieces, t1=None):
+        t1 = p.t1 if t1 is None else t1
         ix0 = np.floor((p.xlo - x0) / cell).astype(np.int64)
         ix1 = np.floor((p.xhi - x0) / cell).astype(np.int64)
         iy0 = np.floor((p.ylo - y0) / cell).astype(np.int64)
         iy1 = np.floor((p.yhi - y0) / cell).astype(np.int64)
         it0 = np.floor((p.t0 - tt0) / bucket).astype(np.int64)
-        it1 = np.floor((p.t1 - tt0) / bucket).astype(np.int64)
+        it1 = np.floor((t1 - tt0) / bucket).astype(np.int64)
         return ix0, ix1, iy0, iy1, it0, it1
 
-    ra = ranges(pa)
+    ra = ranges(pa, pa_t1_sweep)
     rb = ra if single else ranges(pb)
     nx = int(max(ra[1].max(), rb[1].max())) + 1
     ny = int(max(ra[3].max(), rb[3].max())) + 1
@@ -631,8 +663,11 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
     P_v = sa.v_mps[pa.seg] if single else np.concatenate((sa.v_mps[pa.seg], sb.v_mps[pb.seg]))
 
     # The same per-piece values in sorted-key order.
-    S_t0, S_t1 = P_t0[items], P_t1[items]
+    S_t0 = P_t0[items]
+    S_t1 = P_t1[items] if slack_traj is None else \
+        np.concatenate((pa_t1_sweep, pb.t1))[items]
     S_xlo, S_xhi, S_ylo, S_yhi = P_xlo[items], P_xhi[items], P_ylo[items], P_yhi[items]
+    S_zlo, S_zhi = P_zlo[items], P_zhi[items]
     S_traj = P_traj[items] if single else None
 
     clock.append(time.perf_counter())
@@ -665,6 +700,11 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
         # (on arrays in sorted-key order, so the gathers walk memory nearly sequentially).
         # Each keeps a pair only in its canonical cell (the one holding the low corner of the
         # intersection of the two boxes), so a pair sharing several cells is checked once.
+        # z is not in the keys: first drop pieces whose z ranges, inflated by half the vertical
+        # reach, do not overlap with positive length (a loss needs |dz| strictly below the
+        # reach); at flight levels this removes most pairs sharing a cell
+        ok = np.maximum(S_zlo[l], S_zlo[r]) < np.minimum(S_zhi[l], S_zhi[r])
+        l, r = l[ok], r[ok]
         lo = np.maximum(S_t0[l], S_t0[r])
         ok = lo <= np.minimum(S_t1[l], S_t1[r])
         ok &= np.floor((lo - tt0) / bucket).astype(np.int64) == kt[l]
@@ -678,20 +718,34 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
         ok &= np.floor((lo - y0) / cell).astype(np.int64) == ky[l]
         i = items[l[ok]]
         j = items[r[ok]]
-        # z is not in the keys; pieces whose inflated z ranges are apart cannot lose separation
-        # (flight levels), so they skip the exact kernel
-        ok = np.maximum(P_zlo[i], P_zlo[j]) <= np.minimum(P_zhi[i], P_zhi[j])
-        i, j = i[ok], j[ok]
         n_exact += int(i.size)
         if i.size == 0:
             continue
-        d = model.segment_measure(P_t0[i], P_t1[i], P_p0[i], P_v[i],
-                                  P_t0[j], P_t1[j], P_p0[j], P_v[j])
-        lose = d < separation_m
-        if not lose.any():
-            continue
-        a_idx = P_traj[i[lose]]
-        b_idx = P_traj[j[lose]]
+        if slack_traj is None:
+            d = model.segment_measure(P_t0[i], P_t1[i], P_p0[i], P_v[i],
+                                      P_t0[j], P_t1[j], P_p0[j], P_v[j])
+            lose = d < separation_m
+            if not lose.any():
+                continue
+            a_idx = P_traj[i[lose]]
+            b_idx = P_traj[j[lose]]
+        else:
+            # one exact check per candidate (shift) of a's trajectory
+            ta = P_traj[i]
+            cnt = first[ta + 1] - first[ta]
+            cand = np.repeat(first[ta], cnt) + (np.arange(int(cnt.sum()), dtype=np.int64)
+                                                - np.repeat(np.cumsum(cnt) - cnt, cnt))
+            i = np.repeat(i, cnt)
+            j = np.repeat(j, cnt)
+            dt = shift[cand]
+            n_exact += int(i.size) - int(cnt.size)
+            d = model.segment_measure(P_t0[i] + dt, P_t1[i] + dt, P_p0[i], P_v[i],
+                                      P_t0[j], P_t1[j], P_p0[j], P_v[j])
+            lose = d < separation_m
+            if not lose.any():
+                continue
+            a_idx = cand[lose]
+            b_idx = P_traj[j[lose]]
         if single:
             a_idx, b_idx = np.minimum(a_idx, b_idx), np.maximum(a_idx, b_idx)
         out_pairs.append(np.stack((a_idx, b_idx), axis=1))
@@ -707,7 +761,8 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
     pairs = np.concatenate(out_pairs)
     dist = np.concatenate(out_dist)
     # Unique pairs with their minimum distance.
-    nbt = int(max(sa.n_trajectories, sb.n_trajectories)) + 1
+    nbt = int(max(sa.n_trajectories, sb.n_trajectories,
+                  0 if slack_traj is None else shift.shape[0])) + 1
     code = pairs[:, 0] * nbt + pairs[:, 1]
     order = np.lexsort((dist, code))
     code = code[order]
