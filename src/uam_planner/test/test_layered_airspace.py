@@ -178,3 +178,57 @@ def test_bad_airspace_config_names_the_field():
                       (dict(climb_rate_mps=0.0), "climb_rate_mps")):
         with pytest.raises(ValueError, match=field):
             AirspaceConfig(**kw)
+
+
+def test_layered_yaml_round_trip_and_singapore_layered_file(tmp_path):
+    from pathlib import Path
+
+    import scipy.sparse
+    from scipy.sparse.csgraph import connected_components
+
+    from uam_planner.network import load_network, save_network_yaml
+    n = net(pads={"A": [[0, 0], [0, 150]]})
+    save_network_yaml(n, tmp_path / "n.yaml")
+    again = load_network(tmp_path / "n.yaml")
+    assert again.levels_m == (60.0, 90.0, 120.0, 150.0) and again.direction_rule == "semicircular"
+    assert again.pads_m == {"A": ((0.0, 0.0), (0.0, 150.0))}
+    np.testing.assert_allclose(again.pads_of(again.node_index("B")), [[0.0, 0.0]])
+
+    root = Path(__file__).resolve().parents[3] / "config" / "networks"
+    paper = load_network(root / "singapore.yaml")
+    sg = load_network(root / "singapore-layered.yaml")
+    assert not paper.layered and sg.layered
+    assert sg.node_ids == paper.node_ids and np.array_equal(sg.edges, paper.edges)
+    assert sg.levels_m == (60.0, 90.0, 120.0, 150.0)
+    assert set(sg.pads_m) == set(sg.aerodrome_ids)
+    assert all(len(p) == 4 for p in sg.pads_m.values())
+    # with vertiports as terminals every vertiport still reaches every other: the corridors
+    # without the aerodromes form one component holding every aerodrome's access nodes
+    corridor = ~sg.is_aerodrome[sg.edges].any(axis=1)
+    e = sg.edges[corridor]
+    adj = scipy.sparse.coo_array((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(sg.n_nodes,) * 2)
+    _, label = connected_components(adj, directed=False)
+    access = sg.edges[~corridor]
+    ends = np.where(sg.is_aerodrome[access[:, 0]], access[:, 1], access[:, 0])
+    assert len(set(label[ends].tolist())) == 1
+
+
+def test_generate_network_with_levels_and_pads():
+    from uam_planner.synthetic import generate_network
+    g = generate_network(300, 20, seed=1, levels_m=[60, 90, 120, 150], pads_per_vertiport=4)
+    assert g.layered and g.name.endswith("-layered") and len(g.pads_m) == 20
+    pads = g.pads_of(0)
+    d = np.linalg.norm(pads[:, None] - pads[None], axis=2)
+    assert d[d > 0].min() == pytest.approx(150.0)            # a 150 m square
+    assert not generate_network(300, 20, seed=1).layered     # default unchanged
+    with pytest.raises(NetworkError, match="pads_per_vertiport"):
+        generate_network(300, 20, seed=1, pads_per_vertiport=2)
+    # a layered city plans without losses of separation in the cylinder model
+    cfg = PlanningConfig(airspace=AirspaceConfig("cylinder", departure_slot_s=10.0))
+    p = Planner(g, cfg, "mwis")
+    rng = np.random.default_rng(0)
+    for i in range(30):
+        o, dd = rng.choice(20, 2, replace=False)
+        p.submit(req(f"r{i}", g.aerodrome_ids[o], g.aerodrome_ids[dd]))
+    flights = p.plan(0.0, 0).approved + p.plan(30.0, 1).approved
+    assert len(flights) >= 25 and audit_flights(flights, cfg.separation).ok

@@ -24,6 +24,14 @@ from typing import Any, Sequence
 from .separation import DEFAULT_SEPARATION_M, as_separation_model
 
 
+# Flights exactly the minimum apart keep separation (the inequality is strict), and such exact
+# ties are common by construction: two departures one slot apart on one route at the same speed
+# trail each other by slot x speed (5 s x 10 m/s x 2 = 100 m). Rounding puts a tie a few 1e-14
+# of H on either side, differently in the planner's kernel and here, so distances within this
+# relative margin below the minimum count as ties, not losses.
+_TIE_RELATIVE = 1e-9
+
+
 @dataclass
 class AuditResult:
     """Outcome of an audit.
@@ -128,7 +136,7 @@ def audit_flights(flights: Sequence[Any], separation_m=DEFAULT_SEPARATION_M,
     Args:
         flights: Flights (anything with ``.trajectory``), Trajectories or (times_s, points_m).
         separation_m: separation minimum [m] (the paper's sphere; a loss is a distance strictly
-            below it) or a ``SeparationModel`` (for the cylinder, ``min_separation_m`` and the
+            below it, by more than 1e-9 of it: closer than that is an exact tie rounded) or a ``SeparationModel`` (for the cylinder, ``min_separation_m`` and the
             losses' distances are horizontal distances while vertically closer than V).
         labels: names for the report; default each flight's ``request_id`` or its index.
     Returns: AuditResult. Complexity O(F^2 + sum over overlapping pairs of (s_a + s_b)), pure Python.
@@ -154,6 +162,6 @@ def audit_flights(flights: Sequence[Any], separation_m=DEFAULT_SEPARATION_M,
             d, t = pair_min_distance(items[i], items[j], vertical_m)
             if d < best:
                 best, best_pair = d, (labels[i], labels[j])
-            if d < separation_m:
+            if d < separation_m * (1.0 - _TIE_RELATIVE):
                 losses.append((labels[i], labels[j], d, t))
     return AuditResult(best, best_pair, losses, checked)
