@@ -13,7 +13,7 @@ on the same requests (the two files have the same aerodrome ids). ``city``: a ge
 
 Prints per mode: requests, approved (share), expired, peak and mean airborne, MWIS vertices
 (median, max), planning cycle without the solve (median, max, ms) and the audit of every pair of
-approved flights in the run's separation model (uam_planner.audit, brute force). ``--instances
+approved flights in the run's separation model (uam_planner.audit.sweep_audit: every time-overlapping segment pair, no spatial pruning). ``--instances
 FILE`` writes each epoch's MWIS instance (weights, edges, groups) as JSON lines for the solver
 study. Wall times depend on the machine's load; the approvals do not.
 """
@@ -34,7 +34,7 @@ ROOT = Path(__file__).resolve().parents[1]
 for pkg in ("uam_planner", "uam_solvers", "uam_sim"):
     sys.path.insert(0, str(ROOT / "src" / pkg))
 
-from uam_planner.audit import audit_flights  # noqa: E402
+from uam_planner.audit import sweep_audit  # noqa: E402
 from uam_planner.network import load_network  # noqa: E402
 from uam_planner.planning import AirspaceConfig, Planner, PlanningConfig  # noqa: E402
 from uam_sim.demand import RequestGenerator  # noqa: E402
@@ -75,7 +75,7 @@ def run(net, cfg: PlanningConfig, demand, duration_s: float, instances_path=None
     airborne = ((dep[None, :] <= grid[:, None]) & (arr[None, :] >= grid[:, None])).sum(axis=1) \
         if flights else np.zeros(1)
     t_audit = time.perf_counter()
-    audit = audit_flights(flights, cfg.separation)
+    audit = sweep_audit(flights, cfg.separation)
     return {"requests": n_req, "approved": len(flights), "expired": expired,
             "peak_airborne": int(airborne.max()), "mean_airborne": float(airborne.mean()),
             "vertices_median": statistics.median(vertices), "vertices_max": max(vertices),

@@ -165,3 +165,101 @@ def audit_flights(flights: Sequence[Any], separation_m=DEFAULT_SEPARATION_M,
             if d < separation_m * (1.0 - _TIE_RELATIVE):
                 losses.append((labels[i], labels[j], d, t))
     return AuditResult(best, best_pair, losses, checked)
+
+
+def sweep_audit(flights: Sequence[Any], separation_m=DEFAULT_SEPARATION_M,
+                labels: Sequence[Any] | None = None, chunk_pairs: int = 4_000_000) -> AuditResult:
+    """The same audit as :func:`audit_flights` for thousands of flights, in numpy.
+
+    Every pair of straight segments of different flights whose time intervals overlap is
+    checked (a time sweep over the segments sorted by start time, no spatial pruning, so
+    nothing depends on the planner's broad phase), with the parametrisation of
+    :func:`pair_min_distance` (relative position interpolated between the ends of the overlap,
+    s in [0, 1]; for the cylinder the window of s where |dz| < V first) and the same tie rule.
+    ``min_separation_m`` and ``losses`` (one entry per losing flight pair, at its closest
+    approach) as in :func:`audit_flights`; ``pairs_checked`` counts flight pairs that share
+    time. O(S log S + P) for S segments and P time-overlapping segment pairs, chunked.
+    """
+    import numpy as np
+
+    model = as_separation_model(separation_m)
+    H = model.separation_m
+    V = model.vertical_separation_m if model.kind == "cylinder" else None
+    items = list(flights)
+    if labels is None:
+        labels = [getattr(f, "request_id", i) for i, f in enumerate(items)]
+    t0s, t1s, p0s, p1s, fl = [], [], [], [], []
+    for k, f in enumerate(items):
+        tr = getattr(f, "trajectory", f)
+        t = np.asarray(tr.times_s, dtype=np.float64)
+        p = np.asarray(tr.points_m, dtype=np.float64).reshape(-1, 3)
+        t0s.append(t[:-1]); t1s.append(t[1:]); p0s.append(p[:-1]); p1s.append(p[1:])
+        fl.append(np.full(t.size - 1, k, dtype=np.int64))
+    if len(items) < 2:
+        return AuditResult(math.inf, None, [], 0)
+    t0 = np.concatenate(t0s); t1 = np.concatenate(t1s)
+    p0 = np.concatenate(p0s); p1 = np.concatenate(p1s); f = np.concatenate(fl)
+    order = np.argsort(t0, kind="stable")
+    t0, t1, p0, p1, f = t0[order], t1[order], p0[order], p1[order], f[order]
+    end = np.searchsorted(t0, t1, side="right")
+    counts = np.maximum(end - np.arange(t0.size) - 1, 0)
+    cum = np.cumsum(counts)
+    best, best_pair = math.inf, None
+    loss: dict = {}
+    pair_codes = []
+    n = len(items)
+    start = 0
+    while start < t0.size:
+        base = cum[start - 1] if start else 0
+        stop = max(int(np.searchsorted(cum, base + chunk_pairs, side="right")), start + 1)
+        c = counts[start:stop]
+        i = np.repeat(np.arange(start, stop), c)
+        j = i + 1 + (np.arange(int(c.sum())) - np.repeat(np.cumsum(c) - c, c))
+        start = stop
+        keep = f[i] != f[j]
+        i, j = i[keep], j[keep]
+        if i.size == 0:
+            continue
+        lo = np.maximum(t0[i], t0[j])
+        hi = np.minimum(t1[i], t1[j])
+
+        def at(k, t):
+            w = ((t - t0[k]) / (t1[k] - t0[k]))[:, None]
+            return p0[k] + w * (p1[k] - p0[k])
+        r_lo = at(i, lo) - at(j, lo)
+        dr = (at(i, hi) - at(j, hi)) - r_lo
+        s_lo = np.zeros(i.size)
+        s_hi = np.ones(i.size)
+        ok = np.ones(i.size, dtype=bool)
+        dims = 3
+        if V is not None:
+            dims = 2
+            z0, dz = r_lo[:, 2], dr[:, 2]
+            moving = dz != 0.0
+            with np.errstate(divide="ignore", invalid="ignore"):
+                a = np.where(moving, (-V - z0) / np.where(moving, dz, 1.0), -np.inf)
+                b = np.where(moving, (V - z0) / np.where(moving, dz, 1.0), np.inf)
+            a, b = np.minimum(a, b), np.maximum(a, b)
+            ok = np.where(moving, (a < 1.0 - 1e-9) & (b > 1e-9), np.abs(z0) < V)
+            s_lo = np.maximum(a, 0.0)
+            s_hi = np.minimum(b, 1.0)
+        rr, dd_ = r_lo[:, :dims], dr[:, :dims]
+        dd = np.einsum("ij,ij->i", dd_, dd_)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = np.where(dd > 0.0, -np.einsum("ij,ij->i", rr, dd_) / np.where(dd > 0, dd, 1.0), s_lo)
+        s = np.minimum(np.maximum(s, s_lo), np.maximum(s_hi, s_lo))
+        d = np.linalg.norm(rr + s[:, None] * dd_, axis=1)
+        d = np.where(ok, d, np.inf)
+        fa, fb = np.minimum(f[i], f[j]), np.maximum(f[i], f[j])
+        pair_codes.append(np.unique(fa * n + fb))
+        k = int(np.argmin(d))
+        if d[k] < best:
+            best, best_pair = float(d[k]), (labels[fa[k]], labels[fb[k]])
+        for x in np.flatnonzero(d < H * (1.0 - _TIE_RELATIVE)).tolist():
+            key = (int(fa[x]), int(fb[x]))
+            tt = float(lo[x] + s[x] * (hi[x] - lo[x]))
+            if key not in loss or d[x] < loss[key][0]:
+                loss[key] = (float(d[x]), tt)
+    checked = int(np.unique(np.concatenate(pair_codes)).size) if pair_codes else 0
+    losses = [(labels[a], labels[b], dist, tt) for (a, b), (dist, tt) in sorted(loss.items())]
+    return AuditResult(best, best_pair, losses, checked)
