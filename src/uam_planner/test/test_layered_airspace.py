@@ -193,6 +193,9 @@ def test_layered_yaml_round_trip_and_singapore_layered_file(tmp_path):
     assert again.levels_m == (60.0, 90.0, 120.0, 150.0) and again.direction_rule == "semicircular"
     assert again.pads_m == {"A": ((0.0, 0.0), (0.0, 150.0))}
     np.testing.assert_allclose(again.pads_of(again.node_index("B")), [[0.0, 0.0]])
+    from uam_planner.network import save_network_geojson
+    with pytest.raises(NetworkError, match="layered"):
+        save_network_geojson(n, tmp_path / "n.geojson")
 
     root = Path(__file__).resolve().parents[3] / "config" / "networks"
     paper = load_network(root / "singapore.yaml")

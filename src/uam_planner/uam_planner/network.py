@@ -913,6 +913,9 @@ def save_network_graphml(net: Network, path) -> None:
     """Write the network as GraphML (node key = id; attrs lat, lon, alt_m, aerodrome, name;
     edge attr length_m, informational; graph attrs name, origin_lat, origin_lon, origin_alt_m and,
     if any, no_fly_zones as a JSON string)."""
+    if net.layered:
+        raise NetworkError(f"save_network_graphml: network {net.name!r} is layered (levels, pads); only the "
+                           f"YAML format holds those, use save_network_yaml")
     o = net.origin_lat_lon_alt
     g = nx.Graph(name=net.name, origin_lat=o[0], origin_lon=o[1], origin_alt_m=o[2])
     if net.no_fly_zones:
@@ -930,6 +933,9 @@ def save_network_geojson(net: Network, path) -> None:
     """Write the network as a GeoJSON FeatureCollection: a Point per node ([lon, lat, alt_m];
     properties id, name, aerodrome, alt_m) and a LineString per corridor (properties from, to,
     length_m); top-level members name, origin and (if any) no_fly_zones."""
+    if net.layered:
+        raise NetworkError(f"save_network_geojson: network {net.name!r} is layered (levels, pads); only the "
+                           f"YAML format holds those, use save_network_yaml")
     o = net.origin_lat_lon_alt
     features = []
     for i, node_id in enumerate(net.node_ids):
