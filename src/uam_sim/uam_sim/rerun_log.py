@@ -2,13 +2,16 @@
 
 Entity layout (ENU metres, z up):
 
-- ``world/network/corridors`` (static): one 2-point LineStrips3D per corridor;
+- ``world/network/corridors`` (static): one 2-point LineStrips3D per corridor; on a layered
+  network (flight levels) one per corridor and level, at the level's height and in the level's
+  colour (:data:`LEVEL_COLORS`);
 - ``world/network/aerodromes`` (static): Points3D labelled with the aerodrome names;
 - ``world/network/waypoints`` (static): the other network nodes, small grey points;
 - ``world/vehicles``: Points3D of the airborne vehicles at each simulation step, labelled with
   their vehicle ids (the request ids);
 - ``world/routes/<request_id>``: the approved 4D route of a flight as a LineStrips3D, logged at
-  the decision time and cleared when the vehicle has landed (it left the fleet state);
+  the decision time and cleared when the vehicle has landed (it left the fleet state); on a
+  layered network in the colour of its cruise level (:func:`flight_level_index`);
 - ``metrics/approved_cumulative``, ``metrics/active_aircraft``, ``metrics/mwis_vertices``,
   ``metrics/mwis_selected``, ``metrics/solve_time_s``, ``metrics/pending_requests``: Scalars
   once per planning epoch.
@@ -37,6 +40,17 @@ _CORRIDOR_COLOR = (90, 140, 200)
 _WAYPOINT_COLOR = (150, 150, 150)
 _VEHICLE_COLOR = (230, 40, 60)
 _ROUTE_COLOR = (60, 200, 90)
+#: Colours of flight levels 0, 1, ... (lowest first), cycled when there are more levels.
+LEVEL_COLORS = ((90, 140, 200), (0, 200, 200), (160, 110, 230), (230, 200, 60), (120, 200, 90))
+
+
+def flight_level_index(points_m: Any, levels_m: Sequence[float]) -> int:
+    """Index of the cruise level of a flight on a layered network (the level nearest its highest
+    waypoint: flights climb to one level and keep it to the descent); -1 without levels."""
+    pts = np.asarray(points_m, dtype=np.float64).reshape(-1, 3)
+    if not len(levels_m) or not len(pts):
+        return -1
+    return int(np.argmin(np.abs(np.asarray(levels_m, dtype=np.float64) - pts[:, 2].max())))
 
 
 def _stamp_s(stamp: Any) -> float:
@@ -69,6 +83,7 @@ class RerunLogger:
         self._rr = None
         self._airborne: set[str] = set()
         self._routes: set[str] = set()
+        self._levels_m: tuple = ()
         self._approved_total = 0
         if mode == "off":
             return
@@ -109,8 +124,21 @@ class RerunLogger:
         enu = np.asarray(network.enu_m, dtype=np.float64)
         edges = np.asarray(network.edges, dtype=np.int64).reshape(-1, 2)
         strips = enu[edges] if len(edges) else np.zeros((0, 2, 3))
-        self._rec.log("world/network/corridors",
-                      rr.LineStrips3D(list(strips), colors=_CORRIDOR_COLOR, radii=4.0), static=True)
+        self._levels_m = tuple(float(z) for z in (getattr(network, "levels_m", None) or ()))
+        if self._levels_m:  # layered: every corridor at every level, coloured by level
+            per_level = []
+            for z in self._levels_m:
+                s_z = strips.copy()
+                s_z[:, :, 2] = z
+                per_level.append(s_z)
+            colors = [LEVEL_COLORS[i % len(LEVEL_COLORS)] for i in range(len(self._levels_m))
+                      for _ in range(len(strips))]
+            self._rec.log("world/network/corridors",
+                          rr.LineStrips3D(list(np.concatenate(per_level)), colors=colors, radii=4.0),
+                          static=True)
+        else:
+            self._rec.log("world/network/corridors",
+                          rr.LineStrips3D(list(strips), colors=_CORRIDOR_COLOR, radii=4.0), static=True)
         is_aero = np.asarray(network.is_aerodrome, dtype=bool)
         names = list(getattr(network, "names", None) or network.node_ids)
         labels = [names[i] for i in np.flatnonzero(is_aero)]
@@ -147,8 +175,10 @@ class RerunLogger:
             return
         pts = np.asarray(points_m, dtype=np.float64).reshape(-1, 3)
         self._at(t_s)
+        level = flight_level_index(pts, self._levels_m)
+        color = _ROUTE_COLOR if level < 0 else LEVEL_COLORS[level % len(LEVEL_COLORS)]
         self._rec.log(f"world/routes/{request_id}",
-                      self._rr.LineStrips3D([pts], colors=_ROUTE_COLOR, radii=6.0,
+                      self._rr.LineStrips3D([pts], colors=color, radii=6.0,
                                             labels=[str(request_id)]))
         self._routes.add(str(request_id))
 
