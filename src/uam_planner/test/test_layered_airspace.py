@@ -235,3 +235,17 @@ def test_generate_network_with_levels_and_pads():
         p.submit(req(f"r{i}", g.aerodrome_ids[o], g.aerodrome_ids[dd]))
     flights = p.plan(0.0, 0).approved + p.plan(30.0, 1).approved
     assert len(flights) >= 25 and audit_flights(flights, cfg.separation).ok
+
+
+def test_a_request_with_no_route_avoiding_other_vertiports_is_rejected_at_submit():
+    # D is reachable only through C: fine in the paper's model, not with vertiports as terminals
+    ids = ["A", "C", "D", "m"]
+    enu = [(0, 0, 5), (1000, 0, 5), (2000, 0, 5), (500, 0, 120)]
+    edges = [("A", "m"), ("m", "C"), ("C", "D")]
+    layered = network_from_enu("dead-end", ids, enu, [True, True, True, False], edges,
+                               airspace=LEVELS)
+    p = Planner(layered, PlanningConfig(k=1), "mwis")
+    reason = p.submit(req("r1", "A", "D"))
+    assert reason is not None and "without passing through another vertiport" in reason
+    assert p.submit(req("r2", "A", "C")) is None
+    assert [f.request_id for f in p.plan(0.0, 0).approved] == ["r2"]

@@ -730,6 +730,13 @@ class Planner:
         if request.latest_departure_s < request.earliest_departure_s:
             return (f"latest_departure_s: {request.latest_departure_s!r} is before "
                     f"earliest_departure_s {request.earliest_departure_s!r}")
+        if net.layered:
+            # vertiports are terminals: a pair may have no route that avoids the others (the
+            # Network only guarantees reachability through them); the routes are cached anyway
+            try:
+                self.cache.templates(net.index[request.origin_id], net.index[request.destination_id])
+            except ValueError as exc:
+                return f"destination_id: {exc}"
         return None
 
     def submit(self, request: FlightRequest) -> str | None:
