@@ -38,7 +38,6 @@ import time
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from rclpy.task import Future
 from uam_msgs.msg import EpochSync, FlightPlan, FlightRequest, PlanningReport
 from uam_msgs.srv import PlanEpoch, SolveMwis
@@ -56,9 +55,9 @@ class PlannerNode(Node):
     """ROS glue around uam_planner.planning.Planner."""
 
     def __init__(self, **kwargs):
-        kwargs.setdefault("parameter_overrides", [])
-        if not any(p.name == "use_sim_time" for p in kwargs["parameter_overrides"]):
-            kwargs["parameter_overrides"].append(Parameter("use_sim_time", Parameter.Type.BOOL, True))
+        # No use_sim_time: the node takes simulation time from the epoch protocol, never from a
+        # clock, and a /clock subscription would cost it a callback per simulated second (about
+        # 3 CPU s of a paper run; BENCHMARKS.md).
         super().__init__("planner", **kwargs)
         self._lock = threading.RLock()
         self.p = declare_table(self, PLANNER, on_change=self._on_change)

@@ -18,7 +18,6 @@ from __future__ import annotations
 import sys
 
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from uam_msgs.msg import EpochSync, FlightRequest
 from uam_msgs.srv import ReleaseDemand
 
@@ -33,9 +32,9 @@ from uam_sim.demand import DemandSchedule, RequestGenerator, load_demand
 
 class RequestGeneratorNode(Node):
     def __init__(self, **kwargs):
-        kwargs.setdefault("parameter_overrides", [])
-        if not any(p.name == "use_sim_time" for p in kwargs["parameter_overrides"]):
-            kwargs["parameter_overrides"].append(Parameter("use_sim_time", Parameter.Type.BOOL, True))
+        # No use_sim_time: the node takes simulation time from the epoch protocol, never from a
+        # clock, and a /clock subscription would cost it a callback per simulated second (about
+        # 3 CPU s of a paper run; BENCHMARKS.md).
         super().__init__("request_generator", **kwargs)
         p = declare_table(self, REQUEST_GENERATOR)
         network = load_network(p["network"])

@@ -2,7 +2,8 @@
 
     ros2 run uam_sim simulator --ros-args --params-file config/simulator.yaml
 
-Publishes /clock (rosgraph_msgs/Clock; every other node runs with use_sim_time), uam/fleet_state
+Publishes /clock (rosgraph_msgs/Clock, for recordings and viewers with use_sim_time; the nodes
+of the graph take time from the epoch protocol instead), uam/fleet_state
 (uam_msgs/FleetState) and uam/fleet_poses (geometry_msgs/PoseArray, for generic viewers) at
 every step, and announces each epoch and the end of the run on uam/epoch_sync (for the recorder
 and observers). Parameters: uam_bringup.params.SIMULATOR (docs/parameters.md).
