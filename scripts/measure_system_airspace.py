@@ -18,7 +18,9 @@ generator is seeded). ``city``: ``generate_network(--nodes, --vertiports, seed 0
 Prints per run: requests, approved (share), expired, airborne at peak (sampled every 5 s) and
 time-average, MWIS vertices (median, max), the planning cycle without the solve (median, max:
 the report's ``planning_time_s``, i.e. prepare + commit without waiting for the solver), the
-solve time, and the audit. ``--instances FILE`` writes the expanded run's MWIS instances with at
+solve time, and the audit. CPU time of the cycle without the solve is measured too (the
+process's CPU time per epoch, from one observer call to the next, minus the CPU time spent inside
+``uam_solvers.solve``), because on this shared machine wall times are inflated by other load. ``--instances FILE`` writes the expanded run's MWIS instances with at
 least ``--instances-min-vertices`` vertices as a uam-mwis-corpus/1 JSON Lines file
 (``uam_solvers.instances.load_corpus`` reads it). Wall times depend on the machine's load; the
 approvals do not.
@@ -53,20 +55,52 @@ def airborne_peak(flights, duration_s: float, step_s: float = 5.0) -> int:
     return int((np.searchsorted(dep, grid, "right") - np.searchsorted(arr, grid, "left")).max())
 
 
-class InstanceWriter:
-    """Observer of run_scenario keeping the MWIS instances of at least ``min_vertices``."""
+class CpuClock:
+    """CPU seconds per epoch without the solve: wraps ``uam_solvers.solve`` (which the runner's
+    solve function calls) to sum its CPU time, and takes the process CPU time at each epoch's
+    observer call. ``time.process_time`` counts every thread of the process."""
 
-    def __init__(self, min_vertices: int, source: str):
+    def __init__(self):
+        import uam_solvers
+
+        self.solve_cpu_s = 0.0
+        self._last = time.process_time()
+        self._last_solve = 0.0
+        self.per_epoch_s = []
+        inner = uam_solvers.solve
+
+        def solve(*a, **kw):
+            t = time.process_time()
+            try:
+                return inner(*a, **kw)
+            finally:
+                self.solve_cpu_s += time.process_time() - t
+        uam_solvers.solve = solve
+
+    def tick(self) -> None:
+        now = time.process_time()
+        self.per_epoch_s.append((now - self._last) - (self.solve_cpu_s - self._last_solve))
+        self._last, self._last_solve = now, self.solve_cpu_s
+
+
+class InstanceWriter:
+    """Observer of run_scenario keeping the MWIS instances of at least ``min_vertices`` (and
+    ticking the CPU clock)."""
+
+    def __init__(self, min_vertices: int, source: str, clock: CpuClock | None = None):
         self.min_vertices = min_vertices
         self.source = source
         self.entries = []
+        self.clock = clock
 
     def __call__(self, t_s, epoch_index, submitted, refused, result) -> None:
         from uam_solvers.base import MwisProblem
         from uam_solvers.instances import CorpusEntry
 
+        if self.clock is not None:
+            self.clock.tick()
         rep = result.report
-        if rep.vertices < self.min_vertices:
+        if self.min_vertices is None or rep.vertices < self.min_vertices:
             return
         groups = groups_from_ids(rep.vertex_request_ids)
         edges = np.asarray(rep.edges_array, dtype=np.int64).reshape(-1, 2)
@@ -79,6 +113,9 @@ def run(label: str, network_spec, rate: float, args, airspace: dict, observer=No
     cfg = make_config({"network": network_spec, "duration_s": args.duration, "audit": True,
                        "time_limit_s": args.time_limit, **airspace})
     net = load_network_spec(network_spec)
+    if observer is None:
+        observer = InstanceWriter(None, "")
+    observer.clock = CpuClock()
     t0 = time.perf_counter()
     res = run_scenario(net, args.method, rate, args.seed, args.duration, cfg, observer=observer)
     wall = time.perf_counter() - t0
@@ -94,11 +131,14 @@ def run(label: str, network_spec, rate: float, args, airspace: dict, observer=No
            "solve_median_ms": 1e3 * statistics.median(solves) if solves else 0.0,
            "losses": a.get("losses"), "min_sep": a.get("min_separation_m"),
            "pairs": a.get("pairs_checked"), "model": a.get("separation_model", "sphere"),
-           "wall_s": wall, "fallbacks": s["fallbacks"]}
+           "wall_s": wall, "fallbacks": s["fallbacks"],
+           "cpu_median_ms": 1e3 * statistics.median(observer.clock.per_epoch_s),
+           "cpu_max_ms": 1e3 * max(observer.clock.per_epoch_s)}
     print(f"{label}: {out['requests']} requests, {out['approved']} approved "
           f"({100 * out['share']:.1f} %), {out['expired']} expired; airborne peak {out['peak']}, "
           f"mean {out['mean']:.0f}; MWIS vertices median {out['v_median']:.0f}, max {out['v_max']}; "
-          f"cycle without solve median {out['cycle_median_ms']:.0f} ms, max {out['cycle_max_ms']:.0f} ms; "
+          f"cycle without solve median {out['cycle_median_ms']:.0f} ms, max {out['cycle_max_ms']:.0f} ms wall, "
+          f"CPU median {out['cpu_median_ms']:.0f} ms, max {out['cpu_max_ms']:.0f} ms; "
           f"solve median {out['solve_median_ms']:.0f} ms ({args.method}, {out['fallbacks']} fallbacks); "
           f"audit ({out['model']}): {out['losses']} losses in {out['pairs']} pairs, min "
           f"{out['min_sep'] if out['min_sep'] is None else round(out['min_sep'], 1)} m; "
