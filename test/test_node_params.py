@@ -96,3 +96,27 @@ def test_each_node_declares_exactly_its_table(ros_context, tmp_path):
     finally:
         for n in nodes.values():
             n.destroy_node()
+
+
+def test_launch_file_starts_the_nodes_and_parameter_files_of_run_fleet():
+    """launch/uam.launch.py (for /opt/ros/jazzy; launch_ros is not on PyPI, so it is read, not run)
+    starts the same executables with the same parameter files as scripts/run_fleet.sh."""
+    import ast
+    import re
+
+    tree = ast.parse((ROOT / "src" / "uam_bringup" / "launch" / "uam.launch.py").read_text())
+    launched = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Call) and getattr(node.func, "id", "") == "Node":
+            kw = {k.arg: k.value for k in node.keywords}
+            launched.add((kw["package"].value, kw["executable"].value))
+    files = {m.group(1) for m in re.finditer(r'params_file\("(\w+)"\)', (ROOT / "src" / "uam_bringup" / "launch"
+                                                                           / "uam.launch.py").read_text())}
+    script = (ROOT / "scripts" / "run_fleet.sh").read_text()
+    started = set(re.findall(r"^start (\w+) (\w+) ", script, re.M))
+    script_files = set(re.findall(r"--params-file config/(\w+)\.yaml", script))
+    assert launched == started and len(started) == 5
+    assert files == script_files == {"solver", "planner", "request_generator", "simulator"}
+    # the run's seed goes to both the demand and the planner, in both
+    assert re.search(r'"seed": a\["seed"\]', (ROOT / "src" / "uam_bringup" / "launch" / "uam.launch.py").read_text())
+    assert script.count('-p "seed:=$SEED"') == 2

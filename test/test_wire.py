@@ -142,13 +142,14 @@ def test_a_flood_is_bounded_and_legitimate_requests_are_still_served(ros_context
     """Finding: 10,000 valid requests in 3 s left 36 of 121 legitimate requests approved, the
     rest rejected as "latest_departure before the current simulation time"."""
     n_flood, quota = 1500, 40
-    flood = [_req(f"f{i:05d}", origin="A", dest="B", t=0.0, latest=50.0, operator="flood") for i in range(n_flood)]
+    flood = [_req(f"f{i:05d}", origin="A", dest="B", t=0.0, latest=900.0, operator="flood") for i in range(n_flood)]
     obs, nodes = _run_with(ros_context, spin_until, flood, planner_extra={"max_pending_per_operator": quota},
-                           answers=n_flood)
+                           answers=n_flood - 2 * quota)
     theirs = [p for p in obs.plans if p.operator_id == "flood"]
     refused = [p for p in theirs if p.outcome == FlightPlan.OUTCOME_REJECTED]
-    # at most `quota` of theirs wait at any time: a few more are accepted as earlier ones are decided
-    assert len(theirs) == n_flood and n_flood - 2 * quota <= len(refused) < n_flood - quota // 2
+    # at most `quota` of theirs wait at any time (a few more are accepted as earlier ones are
+    # decided; those still waiting at the end have no answer yet)
+    assert n_flood - 2 * quota <= len(refused) <= n_flood - quota
     assert all(p.reason.startswith("operator_id") and "quota" in p.reason for p in refused)
     gen = [p for p in obs.plans if p.operator_id == "generator"]
     assert gen and not any(p.outcome == FlightPlan.OUTCOME_REJECTED for p in gen), \
@@ -159,4 +160,5 @@ def test_a_flood_is_bounded_and_legitimate_requests_are_still_served(ros_context
     assert approved
     decided = {p.request_id for p in gen}
     last_epoch_t = 120.0
-    assert all(rid in decided for rid, t in requested.items() if t + 60.0 < last_epoch_t)
+    late = [(rid, t) for rid, t in requested.items() if t + 60.0 < last_epoch_t and rid not in decided]
+    assert not late, (late, len(obs.plans), nodes["planner"].plans_published)

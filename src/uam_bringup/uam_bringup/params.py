@@ -204,7 +204,7 @@ PLANNER = (
           "offering uam/plan_epoch (nodes start in any order); later a missing service means the local greedy "
           "fallback at once", 0.0, 3600.0),
     Param("use_solver_service", True, "call uam/solve_mwis; false solves in-process with the same backend"),
-    Param("request_wait_timeout_s", 10.0, "wall time [s] an epoch waits for the requests the demand source "
+    Param("request_wait_timeout_s", 60.0, "wall time [s] an epoch waits for the requests the demand source "
           "released for it (named in the epoch call) before planning without the missing ones", 0.0, 3600.0,
           read_only=False),
     Param("max_pending", 5000, "requests waiting for a decision, all operators together; more are refused "

@@ -20,8 +20,8 @@ demand source released for it; the planner waits (asynchronously) until each has
 ``request_wait_timeout_s`` passed, prepares the epoch (conflict graph), awaits the solver service
 (asynchronously; ``time_limit_s + solver_timeout_margin_s`` at most), commits the checked answer
 (the planning library is the one place that checks it and falls back to greedy) and answers with
-the epoch's plans and report. Asking again for the epoch in progress or the last one returns its
-outcome; nothing is planned twice. A planner started mid-run answers STATUS_NEED_STATE and
+the epoch's plans and report. Asking again for the last epoch returns its outcome, for the epoch
+in progress STATUS_IN_PROGRESS (the first call gets the outcome); nothing is planned twice. A planner started mid-run answers STATUS_NEED_STATE and
 resumes from the state the simulator then sends (flights in the air, requests decided).
 The planning itself is uam_planner.planning.Planner, shared with the in-process experiment runner.
 """
@@ -91,7 +91,7 @@ class PlannerNode(Node):
         self._next_epoch = 0
         self._next_epoch_s = 0.0                 # time of the next epoch: what arrivals are checked against
         self._last_epoch_s = 0.0                 # time of the last epoch planned: the stamp of refusals
-        self._inflight: tuple[int, Future] | None = None
+        self._inflight: int | None = None       # the epoch being planned
         self._last: tuple[int, PlanEpoch.Response] | None = None
         self._refusal_logged_at = float("-inf")
         self._refused_unlogged = 0
@@ -216,13 +216,12 @@ class PlannerNode(Node):
         with self._lock:
             if self._last is not None and self._last[0] == k:
                 return self._last[1]
-            inflight = self._inflight
-        if inflight is not None and inflight[0] == k:
-            return await inflight[1]  # asked again while planning it: the same outcome
-        with self._lock:
             if self._inflight is not None:
-                response.status = PlanEpoch.Response.STATUS_REFUSED
-                response.message = f"epoch {self._inflight[0]} is being planned; epoch {k} asked"
+                # answered at once: a waiting repeat would be one more suspended task that the
+                # executor resumes at every wake-up
+                same = self._inflight == k
+                response.status = PlanEpoch.Response.STATUS_IN_PROGRESS if same else PlanEpoch.Response.STATUS_REFUSED
+                response.message = f"epoch {self._inflight} is being planned" + ("" if same else f"; epoch {k} asked")
                 return response
             if k != self._next_epoch:
                 if self._next_epoch == 0 and not request.resume:
@@ -244,15 +243,12 @@ class PlannerNode(Node):
                 self._decide_held(t_s, bool(request.resume))
             if self.config.epoch_s != request.epoch_s:
                 self.planner.config = dataclasses.replace(self.planner.config, epoch_s=float(request.epoch_s))
-            done = Future()
-            self._inflight = (k, done)
+            self._inflight = k
         try:
-            outcome = await self._plan(k, t_s, list(request.expected_request_ids), response)
+            return await self._plan(k, t_s, list(request.expected_request_ids), response)
         finally:
             with self._lock:
                 self._inflight = None
-        done.set_result(outcome)
-        return outcome
 
     def _resume(self, request: PlanEpoch.Request, t_s: float) -> None:
         """A planner started mid-run takes the simulator's state: what flies, what was decided."""

@@ -15,9 +15,10 @@ answer exactly as planned; only then step on. Between epochs it steps as fast as
 (lockstep) or at ``real_time_factor`` x wall time (realtime): the result does not depend on CPU
 speed. It starts once the planner's and the demand source's services are up and the nodes named
 in ``wait_for_subscribers`` subscribe to the fleet state (explicit readiness, no counts). A call
-without an answer is asked again every ``resend_s`` (the planner answers a repeated epoch with
-the same outcome); a planner that restarted asks for the state (flights in the air, requests
-decided) and gets it. Plans on uam/flight_plans are not flown: only the planner's answers are.
+without an answer is sent again every RESEND_S, the earlier ones kept (the planner answers a
+repeat of the epoch in progress with STATUS_IN_PROGRESS, and whichever call it answers counts); a
+planner that restarted lost the first call, answers the repeat with STATUS_NEED_STATE and gets
+the state (flights in the air, requests decided). Plans on uam/flight_plans are not flown: only the planner's answers are.
 
 The run ends at ``duration_s``: the simulator announces ``finished``, and the other nodes exit.
 """
@@ -75,6 +76,8 @@ class SimulatorNode(Node):
         self._waiting_epoch: int | None = None
         self._expected: list[str] = []
         self._call = None
+        self._calls: list = []              # outstanding calls of the current stage
+        self._stage = 0                     # one stage per call (release, plan, resume), answered once
         self._call_sent = 0.0
         self._resume = False
         self._wait_started = 0.0
@@ -133,21 +136,33 @@ class SimulatorNode(Node):
         else:
             self._ask_planner()
 
-    def _send(self, client, request, on_done) -> None:
-        if self._call is not None and not self._call[1].done():
-            self._call[0].remove_pending_request(self._call[1])
+    def _send(self, client, request, on_done, again: bool = False) -> None:
+        """Call ``client``; ``on_done`` gets the first useful answer of this stage. A call sent
+        ``again`` (no answer within RESEND_S) keeps the earlier ones: whichever answers counts."""
+        if not again:
+            self._stage += 1
+            self._calls = []
         fut = client.call_async(request)
+        self._calls.append(fut)
         self._call = (client, fut, request, on_done)
         self._call_sent = time.monotonic()
-        k = self._waiting_epoch
-        fut.add_done_callback(lambda f: self._done(f, k, on_done))
+        stage = self._stage
+        fut.add_done_callback(lambda f: self._done(f, stage, on_done))
 
-    def _done(self, fut, k, on_done) -> None:
-        if self.finished or k != self._waiting_epoch or self._call is None or fut is not self._call[1]:
-            return  # an answer to a call that was sent again, or after the end
+    def _done(self, fut, stage, on_done) -> None:
+        if self.finished or stage != self._stage:
+            return  # a later answer of a stage already answered, or after the end
         if fut.cancelled() or fut.result() is None:
             return
-        on_done(fut.result())
+        res = fut.result()
+        if getattr(res, "status", None) == PlanEpoch.Response.STATUS_IN_PROGRESS:
+            return  # an earlier call of this stage gets the outcome
+        self._stage += 1  # answered: the other calls of this stage are ignored
+        for other in self._calls:
+            if other is not fut and not other.done():
+                self._call[0].remove_pending_request(other)
+        self._calls = []
+        on_done(res)
 
     def _on_demand(self, res: ReleaseDemand.Response) -> None:
         self._expected = list(res.request_ids)
@@ -225,7 +240,7 @@ class SimulatorNode(Node):
                 self._finish()
             elif self._call is not None and now - self._call_sent > RESEND_S:
                 client, _fut, request, on_done = self._call
-                self._send(client, request, on_done)  # answered again by the same epoch's outcome
+                self._send(client, request, on_done, again=True)  # a restarted server lost the first
             return
         if self.mode == "realtime":
             self._step_once()
@@ -263,8 +278,9 @@ class SimulatorNode(Node):
         if self.finished:
             return
         self.finished = True
-        if self._call is not None and not self._call[1].done():
-            self._call[0].remove_pending_request(self._call[1])
+        for fut in self._calls:
+            if not fut.done():
+                self._call[0].remove_pending_request(fut)
         self._sync_pub.publish(EpochSync(epoch_index=self.step_index // self.steps_per_epoch,
                                          epoch_time=m.to_time(min(self.t_s, self.duration_s)),
                                          sender="simulator", finished=True))
