@@ -197,13 +197,6 @@ def _few(ids, n: int = 5) -> str:
     return ", ".join(repr(i) for i in ids[:n]) + (f" and {len(ids) - n} more" if len(ids) > n else "")
 
 
-def _vehicle_id(plan: Any) -> str:
-    """The vehicle id the simulator flies an approved plan under: ``operator_id/request_id``
-    (ids are unique per operator; recordings from before operator ids: the request id)."""
-    operator = str(getattr(plan, "operator_id", "") or "")
-    return f"{operator}/{plan.request_id}" if operator else str(plan.request_id)
-
-
 def integrity_problems(epochs: list, approved: list, flown_ids: set, max_active: int,
                        audit: SafetyAudit | None, conflicting: dict) -> list[str]:
     """Why a recording cannot be trusted to hold the whole run (empty when it can).
