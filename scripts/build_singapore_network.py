@@ -5,6 +5,10 @@ Singapore's real geography.
 Usage (from the repository root):
     .venv/bin/python scripts/build_singapore_network.py [--plot results/singapore_network.png]
 
+It also writes config/networks/singapore-layered.yaml: the same nodes and corridors as a layered
+network (docs/network-format.md): vertiports as route terminals with LAYERED_PADS_M pads each,
+cruise levels LAYERED_LEVELS_M and the semicircular direction rule.
+
 How the network is made (all data is in this file):
 - AERODROMES: vertiports at town centres, business districts and hospitals. Coordinates are
   public: MRT station coordinates from OneMap (Singapore Land Authority) as mirrored in public
@@ -48,6 +52,11 @@ MIN_SPACING_M = 350.0             # shorter corridors next to a crossing are mer
 ZONE_MARGIN_M = 150.0             # way points are pushed this far outside a zone's radius
 ACCESS_LINKS = 2                  # corridor nodes each aerodrome is joined to
 ACCESS_MAX_M = 2500.0             # longest aerodrome access link (horizontal)
+# Layered variant: four cruise levels 30 m apart (the cylinder's V), eastbound tracks on 60 and
+# 120 m, westbound on 90 and 150 m; four pads per vertiport on a 150 m square (level index i
+# uses pad i), so flights leaving for different levels climb more than H = 100 m apart.
+LAYERED_LEVELS_M = [60.0, 90.0, 120.0, 150.0]
+LAYERED_PADS_M = [[-75.0, -75.0], [75.0, -75.0], [75.0, 75.0], [-75.0, 75.0]]
 
 # name, lat, lon, radius_m. Reference points: Wikipedia (from the AIP). Radius: Changi 5 km (the
 # CAAS 5 km rule around aerodromes); the air bases 3 km, which covers each runway with at least
@@ -409,6 +418,25 @@ Stats: {n} nodes ({a} aerodromes), {m} corridors, corridor length {lmin:.0f}-{lm
 (median {lmed:.0f} m, access links included)."""
 
 
+LAYERED_HEADER = """
+Layered variant (singapore-layered.yaml): the same nodes and corridors; vertiports are route
+terminals (no route passes through one it does not use); four pads per vertiport on a 150 m
+square; cruise levels 60/90/120/150 m with the semicircular rule (tracks 0-180 deg on 60/120 m,
+180-360 deg on 90/150 m). Corridor node altitudes are kept but unused: flights cruise at levels."""
+
+
+def layered_network(net):
+    """The layered variant of ``net``: same nodes and corridors, levels and pads added."""
+    from uam_planner.network import network_to_dict, network_from_dict
+    d = network_to_dict(net)
+    d["name"] = net.name + "-layered"
+    d["airspace"] = {"levels_m": LAYERED_LEVELS_M, "direction_rule": "semicircular"}
+    for node in d["nodes"]:
+        if node["aerodrome"]:
+            node["pads_m"] = [list(p) for p in LAYERED_PADS_M]
+    return network_from_dict(d)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out-dir", default=str(ROOT / "config" / "networks"))
@@ -429,6 +457,15 @@ def main(argv=None) -> int:
     save_network_graphml(net, out / "singapore.graphml")
     again = load_network(out / "singapore.yaml")
     assert np.allclose(again.enu_m, net.enu_m) and np.array_equal(again.edges, net.edges)
+    layered = layered_network(net)
+    save_network_yaml(layered, out / "singapore-layered.yaml", header=header + LAYERED_HEADER,
+                      corridor_routes=routes,
+                      extra={"description": "Singapore corridors as a layered network: "
+                                            "vertiports with 4 pads, levels 60/90/120/150 m, "
+                                            "semicircular rule"})
+    again = load_network(out / "singapore-layered.yaml")
+    assert again.levels_m == layered.levels_m and again.pads_m == layered.pads_m
+    print(f"{layered}: {len(layered.pads_m)} vertiports with {len(LAYERED_PADS_M)} pads")
     print(f"{net}: {n_cross} crossings made junctions; corridor lengths (no access links) "
           f"min {lengths[corr].min():.0f} m, median {np.median(lengths[corr]):.0f} m, "
           f"max {lengths[corr].max():.0f} m, mean {lengths[corr].mean():.0f} m")

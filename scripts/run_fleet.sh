@@ -10,7 +10,15 @@
 #   --rate R           requests per 30 s (default 10, the paper's middle rate)
 #   --duration S       simulated seconds (default 3500)
 #   --seed N           seed of the demand and of stochastic solvers (default 0)
-#   --network FILE     routing network (default config/networks/singapore.yaml)
+#   --network FILE     routing network (default config/networks/singapore.yaml; e.g.
+#                      config/networks/singapore-layered.yaml: vertiports with pads, 4 flight levels)
+#   --separation M     sphere | cylinder: loss of separation as the paper's 3D minimum (default)
+#                      or horizontal < H while vertical < V
+#   --separation-m H   separation minimum, the cylinder's horizontal H [m] (default 100)
+#   --vertical-separation-m V   the cylinder's vertical minimum [m] (default 30)
+#   --slot-s S         departure slots of S seconds inside the epoch (default 0: the paper's rule,
+#                      depart at the epoch time)
+#   --climb-rate R, --descent-rate R   vertical rates at vertiports of a layered network [m/s] (5, 3)
 #   --demand FILE      replay a demand file instead of random requests
 #   --mode M           lockstep | realtime (default lockstep)
 #   --rtf X            real-time factor in realtime mode (default 1)
@@ -27,6 +35,7 @@ cd "$ROOT"
 
 BACKEND=exact POLICY=mwis RATE=10 DURATION=3500 SEED=0 NETWORK=config/networks/singapore.yaml
 DEMAND="" MODE=lockstep RTF=1 RERUN=save OUT="" FOXGLOVE_PORT=0
+SEPARATION=sphere SEPARATION_M=100 VERTICAL_M=30 SLOT_S=0 CLIMB=5 DESCENT=3
 die() { echo "run_fleet: $*" >&2; exit 2; }
 while [[ $# -gt 0 ]]; do
   case "$1" in
@@ -42,7 +51,13 @@ while [[ $# -gt 0 ]]; do
     --rerun) RERUN="${2:?--rerun needs a value}"; shift 2;;
     --foxglove-port) FOXGLOVE_PORT="${2:?--foxglove-port needs a value}"; shift 2;;
     --out) OUT="${2:?--out needs a value}"; shift 2;;
-    -h|--help) sed -n '2,25p' "$0"; exit 0;;
+    --separation) SEPARATION="${2:?--separation needs a value}"; shift 2;;
+    --separation-m) SEPARATION_M="${2:?--separation-m needs a value}"; shift 2;;
+    --vertical-separation-m) VERTICAL_M="${2:?--vertical-separation-m needs a value}"; shift 2;;
+    --slot-s) SLOT_S="${2:?--slot-s needs a value}"; shift 2;;
+    --climb-rate) CLIMB="${2:?--climb-rate needs a value}"; shift 2;;
+    --descent-rate) DESCENT="${2:?--descent-rate needs a value}"; shift 2;;
+    -h|--help) sed -n '2,33p' "$0"; exit 0;;
     *) die "unknown option '$1' (see --help)";;
   esac
 done
@@ -54,6 +69,13 @@ done
 [[ "$SEED" =~ ^[0-9]+$ ]] || die "--seed: '$SEED' is not an integer >= 0"
 [[ "$FOXGLOVE_PORT" =~ ^[0-9]+$ ]] && (( FOXGLOVE_PORT <= 65535 )) || die "--foxglove-port: '$FOXGLOVE_PORT' is not a port 0..65535"
 [[ "$RTF" =~ ^[0-9]+(\.[0-9]+)?$ ]] || die "--rtf: '$RTF' is not a positive number"
+[[ "$SEPARATION" == sphere || "$SEPARATION" == cylinder ]] || die "--separation: '$SEPARATION' is not sphere or cylinder"
+for _flag in "separation-m:$SEPARATION_M" "vertical-separation-m:$VERTICAL_M" "slot-s:$SLOT_S" \
+             "climb-rate:$CLIMB" "descent-rate:$DESCENT"; do
+  [[ "${_flag#*:}" =~ ^[0-9]+(\.[0-9]+)?$ ]] || die "--${_flag%%:*}: '${_flag#*:}' is not a number >= 0"
+done
+# as floats: ROS parameters typed double refuse an integer given on the command line
+f() { [[ "$1" == *.* ]] && echo "$1" || echo "$1.0"; }
 [[ -f "$NETWORK" ]] || die "--network: no file '$NETWORK'"
 [[ -z "$DEMAND" || -f "$DEMAND" ]] || die "--demand: no file '$DEMAND'"
 
@@ -93,6 +115,8 @@ if [[ -z "${ROS_DOMAIN_ID:-}" ]]; then
   [[ -n "${ROS_DOMAIN_ID:-}" ]] || die "no free ROS domain id in 20..100"
 fi
 echo "run_fleet: policy $POLICY, backend $BACKEND, rate $RATE per 30 s, ${DURATION} s, seed $SEED, network $NETWORK"
+if [[ "$SEPARATION" == cylinder ]]; then _sep="cylinder H $SEPARATION_M m, V $VERTICAL_M m"; else _sep="sphere $SEPARATION_M m"; fi
+echo "run_fleet: airspace: separation $_sep, departure slot $SLOT_S s"
 echo "run_fleet: outputs in $OUT (ROS_DOMAIN_ID=$ROS_DOMAIN_ID)"
 
 PIDS=() NAMES=()
@@ -139,11 +163,16 @@ INTERRUPTED=0
 trap interrupted INT TERM HUP
 
 start uam_solvers solver solver --params-file config/solver.yaml -p "default_backend:=$BACKEND"
+AIRSPACE=(-p "separation_model:=$SEPARATION" -p "separation_m:=$(f "$SEPARATION_M")"
+          -p "vertical_separation_m:=$(f "$VERTICAL_M")" -p "departure_slot_s:=$(f "$SLOT_S")")
 start uam_planner planner planner --params-file config/planner.yaml -p "network:=$NETWORK" \
-  -p "policy:=$POLICY" -p "backend:=$BACKEND" -p "seed:=$SEED"
+  -p "policy:=$POLICY" -p "backend:=$BACKEND" -p "seed:=$SEED" "${AIRSPACE[@]}" \
+  -p "climb_rate_mps:=$(f "$CLIMB")" -p "descent_rate_mps:=$(f "$DESCENT")"
 start uam_sim request_generator request_generator --params-file config/request_generator.yaml \
   -p "network:=$NETWORK" -p "rate:=$RATE" -p "seed:=$SEED" ${DEMAND:+-p "demand_file:=$DEMAND"}
-start uam_sim recorder recorder -p "output:=$MCAP" -p "network:=$NETWORK" -p "rerun:='$RERUN'" -p "rerun_rrd:=$RRD" -p "foxglove_port:=$FOXGLOVE_PORT"
+# the recorder writes the run's airspace into the MCAP (uam_airspace metadata): the analysis audits in it
+start uam_sim recorder recorder -p "output:=$MCAP" -p "network:=$NETWORK" -p "rerun:='$RERUN'" -p "rerun_rrd:=$RRD" \
+  -p "foxglove_port:=$FOXGLOVE_PORT" "${AIRSPACE[@]}"
 REC_PID=${PIDS[-1]}
 start uam_sim simulator simulator --params-file config/simulator.yaml -p "duration_s:=$DURATION" \
   -p "mode:=$MODE" -p "real_time_factor:=$RTF"

@@ -45,7 +45,7 @@ def make_observer(context):
 
 def build_graph(context, *, network=TINY, rate=2.0, seed=3, duration_s=300.0, policy="mwis", backend="exact",
                 with_solver=True, with_planner=True, planner_extra=None, simulator_extra=None, generator_extra=None,
-                record_to=None, threads=4):
+                record_to=None, threads=4, recorder_extra=None):
     """The graph's nodes on one multi-threaded executor; returns (executor, nodes dict, observer).
 
     Readiness is the epoch protocol: the simulator starts once the planner's and the generator's
@@ -65,7 +65,7 @@ def build_graph(context, *, network=TINY, rate=2.0, seed=3, duration_s=300.0, po
     if record_to is not None:
         from uam_sim.nodes.recorder_node import RecorderNode
         nodes["recorder"] = RecorderNode(context=context, parameter_overrides=params(
-            output=str(record_to), network=network, rerun="off"))
+            output=str(record_to), network=network, rerun="off", **(recorder_extra or {})))
     observer_node, obs = make_observer(context)
     nodes["observer"] = observer_node
     from uam_sim.nodes.simulator_node import SimulatorNode
@@ -113,12 +113,14 @@ def decisions(plans, operator_id="generator") -> dict:
             if p.outcome == FlightPlan.OUTCOME_APPROVED and p.operator_id == operator_id}
 
 
-def in_process(rate, seed, duration_s, backend, policy="mwis", epoch_s=30.0, network=TINY, time_limit_s=5.0):
-    """The same scenario through uam_sim.experiment's in-process runner."""
+def in_process(rate, seed, duration_s, backend, policy="mwis", epoch_s=30.0, network=TINY, time_limit_s=5.0,
+               **airspace):
+    """The same scenario through uam_sim.experiment's in-process runner (``airspace``: its
+    separation_model, vertical_separation_m, departure_slot_s, ... options)."""
     from uam_planner.network import load_network
     from uam_sim.experiment import make_config, run_scenario
     method = "fifo" if policy == "fifo" else backend
-    cfg = make_config(epoch_s=float(epoch_s), time_limit_s=float(time_limit_s), audit=False)
+    cfg = make_config(epoch_s=float(epoch_s), time_limit_s=float(time_limit_s), audit=False, **airspace)
     return run_scenario(load_network(network), method, rate, seed, duration_s, cfg)
 
 

@@ -35,6 +35,10 @@ ARGS = {
     "rerun": ("save", "off, save, spawn or connect"),
     "out": ("runs/launch", "output folder (run.mcap, run.rrd)"),
     "namespace": ("", "namespace of the whole graph"),
+    "separation": ("sphere", "separation model: sphere (the paper's) or cylinder"),
+    "separation_m": ("100.0", "separation minimum, the cylinder's horizontal H [m]"),
+    "vertical_separation_m": ("30.0", "the cylinder's vertical minimum V [m]"),
+    "slot_s": ("0.0", "departure slot [s]; 0 = depart at the epoch time (the paper's rule)"),
 }
 
 
@@ -48,14 +52,18 @@ def generate_launch_description() -> LaunchDescription:
     network = PythonExpression(["'", a["network"], "' or '", cfg, "/networks/singapore.yaml'"])
     mcap = PathJoinSubstitution([a["out"], "run.mcap"])
     rrd = PathJoinSubstitution([a["out"], "run.rrd"])
+    # the planner's airspace; the recorder writes it into the MCAP for the analysis' audit
+    airspace = {"separation_model": a["separation"], "separation_m": a["separation_m"],
+                "vertical_separation_m": a["vertical_separation_m"], "departure_slot_s": a["slot_s"]}
     recorder = Node(package="uam_sim", executable="recorder", name="recorder", output="screen",
-                    parameters=[{"output": mcap, "network": network, "rerun": a["rerun"], "rerun_rrd": rrd}])
+                    parameters=[{"output": mcap, "network": network, "rerun": a["rerun"], "rerun_rrd": rrd,
+                                 **airspace}])
     nodes = [
         Node(package="uam_solvers", executable="solver", name="solver", output="screen",
              parameters=[params_file("solver"), {"default_backend": a["backend"]}]),
         Node(package="uam_planner", executable="planner", name="planner", output="screen",
              parameters=[params_file("planner"), {"network": network, "policy": a["policy"],
-                                                   "backend": a["backend"], "seed": a["seed"]}]),
+                                                   "backend": a["backend"], "seed": a["seed"], **airspace}]),
         Node(package="uam_sim", executable="request_generator", name="request_generator", output="screen",
              parameters=[params_file("request_generator"), {"network": network, "rate": a["rate"],
                                                              "seed": a["seed"], "demand_file": a["demand_file"]}]),

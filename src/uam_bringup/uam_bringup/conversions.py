@@ -215,3 +215,16 @@ def solve_answer(response: Any):
                            proven_optimal=response.proven_optimal, backend=response.backend_used,
                            fallback=response.fallback, message=response.message,
                            solve_time_s=response.solve_time_s)
+
+
+def plan_level_m(plan: Any) -> float:
+    """The cruise level [m] of an approved FlightPlan on a layered network: its highest waypoint z.
+
+    A layered flight climbs vertically from its pad to one level, keeps it over the corridors and
+    descends at the destination (level changes only at vertiports), so the level is the highest z
+    of the plan; FlightPlan has no level field because the waypoints already say it. NaN for a
+    plan without waypoints. (On a paper network this is the highest corridor node's altitude.)
+    """
+    if not plan.waypoints:
+        return float("nan")
+    return float(max(w.position.z for w in plan.waypoints))

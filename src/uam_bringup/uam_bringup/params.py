@@ -183,7 +183,16 @@ PLANNER = (
           read_only=False),
     Param("seed", 0, "seed of stochastic MWIS backends (run_fleet.sh passes the run's --seed)", 0, INT32_MAX,
           read_only=False),
-    Param("separation_m", 100.0, "separation minimum [m]", 0.001, 100000.0),
+    Param("separation_m", 100.0, "separation minimum [m]: the sphere's radius, or the cylinder's horizontal minimum H",
+          0.001, 100000.0),
+    Param("separation_model", "sphere", "loss of separation: 'sphere' (the paper's: 3D distance < separation_m) or "
+          "'cylinder' (horizontal distance < separation_m while vertical distance < vertical_separation_m)",
+          choices=("sphere", "cylinder")),
+    Param("vertical_separation_m", 30.0, "the cylinder's vertical minimum V [m] (unused by the sphere)", 0.001, 10000.0),
+    Param("departure_slot_s", 0.0, "departure slots [s]: a request may depart at max(t, earliest) + i * slot up to "
+          "min(t + epoch, latest); 0 = the paper's rule (depart at the epoch time t)", 0.0, 86400.0),
+    Param("climb_rate_mps", 5.0, "vertical climb rate at the vertiports of a layered network [m/s]", 0.001, 100.0),
+    Param("descent_rate_mps", 3.0, "vertical descent rate at the vertiports of a layered network [m/s]", 0.001, 100.0),
     Param("k", 5, "candidate routes per request", 1, 100),
     Param("penalty_factor", 5.0, "penalised Dijkstra factor for diverse candidates", 0.0, 1000.0),
     Param("speed_mps", 10.0, "cruise speed [m/s]", 0.001, 1000.0),

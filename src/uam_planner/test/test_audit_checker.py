@@ -35,3 +35,25 @@ def test_audit_crossing_with_offset_and_disjoint_times():
     res = audit_flights([a, b, late], 100.0)
     assert res.ok and res.pairs_checked == 1
     assert res.min_separation_m == pytest.approx(100.0 * math.sqrt(2.0))
+
+
+@pytest.mark.parametrize("kind", ["sphere", "cylinder"])
+def test_sweep_audit_matches_the_pair_walk(kind):
+    from uam_planner.audit import audit_flights, sweep_audit
+    from uam_planner.separation import SeparationModel
+    from uam_planner.trajectory import Trajectory
+    rng = np.random.default_rng(11)
+    flights = []
+    for _ in range(50):
+        p, q = rng.uniform(-1500, 1500, (2, 2))
+        z = rng.uniform(0.0, 160.0, 3)
+        t0 = rng.uniform(0, 100)
+        dur = np.linalg.norm(q - p) / 10 + 5
+        flights.append(Trajectory(np.array([t0, t0 + dur / 2, t0 + dur]),
+                                  np.array([(*p, z[0]), (*((p + q) / 2), z[1]), (*q, z[2])])))
+    model = SeparationModel(kind, 100.0, 30.0)
+    a = audit_flights(flights, model, labels=list(range(50)))
+    b = sweep_audit(flights, model, labels=list(range(50)), chunk_pairs=100)
+    assert {(i, j) for i, j, _, _ in a.losses} == {(i, j) for i, j, _, _ in b.losses}
+    assert len(a.losses) > 10 and b.pairs_checked == a.pairs_checked
+    assert b.min_separation_m == pytest.approx(a.min_separation_m)

@@ -9,6 +9,24 @@ every weight lies in (0, 1].
 Routes depend only on (o, d), the network and (k, penalty_factor), never on time, so
 ``CandidateCache`` computes them once per pair and also keeps each route's waypoint positions and
 relative waypoint times at the cruise speed, so a trajectory departing at t is one addition.
+
+Layered networks (``Network.levels_m`` declared; the paper's model otherwise):
+
+- vertiports are terminals: the route search blocks every corridor that touches an aerodrome
+  other than the request's origin and destination, so no route passes through one;
+- each route is flown at one cruise level (level changes happen only at vertiports, i.e. a
+  flight keeps its level from the top of its climb to the start of its descent), taken from the
+  levels that the network's direction rule allows for the flight's track (bearing from origin
+  to destination): ``semicircular`` gives tracks in [0, 180) degrees the levels of even index,
+  the others those of odd index; ``none`` allows every level;
+- a flight climbs vertically from a pad of its origin to its level at ``climb_rate_mps``, cruises
+  at ``speed_mps`` from the pad to the corridor nodes of its route and on to a pad of its
+  destination, and descends vertically at ``descent_rate_mps``. The pad of a candidate at level
+  index i is pad i mod (number of pads) at each end, so flights to different levels leave from
+  different pads where a vertiport has several;
+- z is the altitude above the reference surface (the level's value, the aerodrome's ``alt_m``),
+  not ENU up, so two levels are exactly their difference apart everywhere (ENU up would add the
+  Earth's curvature, up to 8 m at 10 km, and break exact vertical separation).
 """
 
 from __future__ import annotations
@@ -37,6 +55,10 @@ class CandidateRoute:
     length_m: float
     weight: float
     candidate_index: int
+
+
+DEFAULT_CLIMB_RATE_MPS = 5.0
+DEFAULT_DESCENT_RATE_MPS = 3.0
 
 
 class _PenalisedGraph:
@@ -84,8 +106,13 @@ def _validate_k_penalty(k, penalty_factor):
 
 
 def _routes(graph: _PenalisedGraph, network, o: int, d: int, k: int,
-            penalty_factor: float) -> list[CandidateRoute]:
+            penalty_factor: float, terminals: bool = False) -> list[CandidateRoute]:
     cost = graph.length.copy()
+    if terminals:
+        # Vertiports are terminals: corridors touching any other aerodrome are closed.
+        other = network.is_aerodrome.copy()
+        other[[o, d]] = False
+        cost[other[network.edges[:, 0]] | other[network.edges[:, 1]]] = np.inf
     seen: set[tuple[int, ...]] = set()
     paths: list[tuple[tuple[int, ...], float]] = []
     limit = np.inf
@@ -96,8 +123,9 @@ def _routes(graph: _PenalisedGraph, network, o: int, d: int, k: int,
         _, pred = dijkstra(graph.matrix(cost), directed=True, indices=o, return_predecessors=True,
                            limit=limit)
         if pred[d] < 0:
+            via = " without passing through another vertiport" if terminals else ""
             raise ValueError(f"destination node {network.node_ids[d]!r} is unreachable from "
-                             f"origin {network.node_ids[o]!r}")
+                             f"origin {network.node_ids[o]!r}{via}")
         path = [d]
         while path[-1] != o:
             path.append(int(pred[path[-1]]))
@@ -132,7 +160,8 @@ def candidate_routes(network, origin_id: str, destination_id: str, k: int = 5,
     d = network.node_index(destination_id)
     if o == d:
         raise ValueError(f"origin_id and destination_id are the same node {origin_id!r}")
-    return _routes(_PenalisedGraph(network), network, o, d, k, penalty_factor)
+    return _routes(_PenalisedGraph(network), network, o, d, k, penalty_factor,
+                   terminals=network.layered)
 
 
 @dataclass(frozen=True)
@@ -140,6 +169,9 @@ class RouteTemplate:
     """A candidate route ready to fly: waypoints and times relative to departure.
 
     ``segments_rel`` holds (t0_s, t1_s, p0_m, v_mps) with times relative to departure.
+    In a layered network ``level_index`` / ``level_m`` give the cruise level (index into
+    ``Network.levels_m`` and its altitude [m]) and the waypoints include the vertical climb and
+    descent at the pads; in the paper's model they are -1 and nan.
     """
 
     route: CandidateRoute
@@ -147,6 +179,8 @@ class RouteTemplate:
     points_m: np.ndarray
     rel_times_s: np.ndarray
     segments_rel: tuple
+    level_index: int = -1
+    level_m: float = float("nan")
 
     @property
     def duration_s(self) -> float:
@@ -178,10 +212,16 @@ class CandidateCache:
     """
 
     def __init__(self, network, k: int = 5, penalty_factor: float = 5.0,
-                 speed_mps: float = DEFAULT_SPEED_MPS):
+                 speed_mps: float = DEFAULT_SPEED_MPS,
+                 climb_rate_mps: float = DEFAULT_CLIMB_RATE_MPS,
+                 descent_rate_mps: float = DEFAULT_DESCENT_RATE_MPS):
         _validate_k_penalty(k, penalty_factor)
-        if not (np.isfinite(speed_mps) and speed_mps > 0.0):
-            raise ValueError(f"speed_mps must be positive and finite, got {speed_mps!r}")
+        for name, v in (("speed_mps", speed_mps), ("climb_rate_mps", climb_rate_mps),
+                        ("descent_rate_mps", descent_rate_mps)):
+            if not (np.isfinite(v) and v > 0.0):
+                raise ValueError(f"{name} must be positive and finite, got {v!r}")
+        self.climb_rate_mps = float(climb_rate_mps)
+        self.descent_rate_mps = float(descent_rate_mps)
         self.network = network
         self.k = int(k)
         self.penalty_factor = float(penalty_factor)
@@ -219,7 +259,12 @@ class CandidateCache:
         if key[0] == key[1]:
             raise ValueError(f"origin and destination are the same node "
                              f"{self.network.node_ids[key[0]]!r}")
-        routes = _routes(self._graph, self.network, key[0], key[1], self.k, self.penalty_factor)
+        routes = _routes(self._graph, self.network, key[0], key[1], self.k, self.penalty_factor,
+                         terminals=self.network.layered)
+        if self.network.layered:
+            got = tuple(self._layered(key[0], key[1], routes))
+            self._store[key] = got
+            return got
         out = []
         for r in routes:
             pts = np.ascontiguousarray(self.network.enu_m[np.asarray(r.node_indices)], dtype=np.float64)
@@ -234,3 +279,50 @@ class CandidateCache:
         got = tuple(out)
         self._store[key] = got
         return got
+
+    def allowed_levels(self, origin_index: int, destination_index: int) -> list[int]:
+        """Indices into ``levels_m`` that the direction rule gives the flight's track."""
+        net = self.network
+        n = len(net.levels_m)
+        if net.direction_rule == "none":
+            return list(range(n))
+        d = net.enu_m[destination_index, :2] - net.enu_m[origin_index, :2]
+        track_deg = float(np.degrees(np.arctan2(d[0], d[1]))) % 360.0
+        first = 0 if track_deg < 180.0 else 1
+        return list(range(first, n, 2))
+
+    def _layered(self, o: int, d: int, routes) -> list[RouteTemplate]:
+        """One template per (route, allowed level): pad climb, cruise, pad descent."""
+        net = self.network
+        xy = net.enu_m[:, :2]
+        alt = net.lat_lon_alt[:, 2]
+        pads_o, pads_d = net.pads_of(o), net.pads_of(d)
+        out = []
+        for li in self.allowed_levels(o, d):
+            level = float(net.levels_m[li])
+            po = xy[o] + pads_o[li % len(pads_o)]
+            pd = xy[d] + pads_d[li % len(pads_d)]
+            for r in routes:
+                mid = xy[np.asarray(r.node_indices[1:-1], dtype=np.int64)].reshape(-1, 2)
+                horiz = np.concatenate(([po], mid, [pd]))
+                pts = np.concatenate((
+                    [(po[0], po[1], alt[o])],
+                    np.column_stack((horiz, np.full(horiz.shape[0], level))),
+                    [(pd[0], pd[1], alt[d])]))
+                pts = np.ascontiguousarray(pts, dtype=np.float64)
+                legs = np.linalg.norm(np.diff(horiz, axis=0), axis=1)
+                if np.any(legs <= 0.0):
+                    raise ValueError(f"route {[net.node_ids[i] for i in r.node_indices]} has a pad "
+                                     f"on a corridor node (zero-length leg)")
+                dur = np.concatenate(([(level - alt[o]) / self.climb_rate_mps],
+                                      legs / self.speed_mps,
+                                      [(level - alt[d]) / self.descent_rate_mps]))
+                rel = np.concatenate(([0.0], np.cumsum(dur)))
+                t0 = rel[:-1]
+                t1 = rel[1:]
+                v = (pts[1:] - pts[:-1]) / (t1 - t0)[:, None]
+                for a in (pts, rel, v):
+                    a.setflags(write=False)
+                out.append(RouteTemplate(r, tuple(net.node_ids[i] for i in r.node_indices),
+                                         pts, rel, (t0, t1, pts[:-1], v), li, level))
+        return out

@@ -42,7 +42,14 @@ __all__ = [
     "network_from_dict",
     "ALT_RANGE_M",
     "MIN_CORRIDOR_LENGTH_M",
+    "DIRECTION_RULES",
 ]
+
+#: Rules that give flight levels to directions: ``semicircular`` (a flight whose track from
+#: origin to destination lies in [0, 180) degrees, east of north, flies the levels of even index
+#: in ``levels_m``, the others the levels of odd index) or ``none`` (every level in either
+#: direction).
+DIRECTION_RULES = ("semicircular", "none")
 
 #: Accepted node altitude range, metres above the reference surface.
 ALT_RANGE_M = (-500.0, 10000.0)
@@ -92,6 +99,16 @@ class Network:
         edge_length_m: (m,) float64 Euclidean 3D corridor length between ENU end points.
         no_fly_zones: restricted circles (default none); construction checks that no node lies
             inside one and no corridor crosses one.
+        levels_m: cruise flight levels [m above the reference surface], strictly increasing, or
+            () for the paper's model (one cruise altitude per corridor node, aerodromes usable
+            as way points). A network with levels is *layered*: aerodromes are vertiports, the
+            terminals of routes (no route passes through one it does not start or end at), and
+            a flight climbs vertically from a pad to one level, cruises at it and descends
+            vertically to a pad (see ``uam_planner.candidates``).
+        direction_rule: one of ``DIRECTION_RULES`` (layered networks only; default
+            ``semicircular``).
+        pads_m: ``{aerodrome id: ((east_m, north_m), ...)}`` pad offsets [m] from the
+            aerodrome's position; an aerodrome not listed has one pad at (0, 0).
 
     Derived (computed on construction): ``index`` (id -> index), ``aerodrome_ids``,
     ``aerodrome_indices``, ``graph`` (networkx.Graph over indices 0..n-1; node attrs ``id``,
@@ -115,6 +132,9 @@ class Network:
     edges: np.ndarray
     edge_length_m: np.ndarray
     no_fly_zones: tuple[NoFlyZone, ...] = ()
+    levels_m: tuple[float, ...] = ()
+    direction_rule: str = "semicircular"
+    pads_m: Mapping[str, tuple] = field(default_factory=dict)
     index: dict[str, int] = field(init=False, repr=False)
     aerodrome_ids: tuple[str, ...] = field(init=False, repr=False)
     aerodrome_indices: np.ndarray = field(init=False, repr=False)
@@ -209,6 +229,8 @@ class Network:
 
         zones = tuple(self.no_fly_zones)
         _check_no_fly_zones(zones, node_ids, enu, edges, origin)
+        levels, rule, pads = _check_airspace(self.levels_m, self.direction_rule, self.pads_m,
+                                             index, is_aerodrome, lla)
 
         graph = nx.Graph(name=str(self.name))
         graph.add_nodes_from(
@@ -227,6 +249,9 @@ class Network:
         set_(self, "edges", _readonly(edges))
         set_(self, "edge_length_m", _readonly(length))
         set_(self, "no_fly_zones", zones)
+        set_(self, "levels_m", levels)
+        set_(self, "direction_rule", rule)
+        set_(self, "pads_m", pads)
         set_(self, "index", index)
         set_(self, "aerodrome_ids", tuple(node_ids[i] for i in aerodrome_indices))
         set_(self, "aerodrome_indices", _readonly(aerodrome_indices))
@@ -243,6 +268,16 @@ class Network:
     def n_edges(self) -> int:
         """Number of corridors."""
         return len(self.edges)
+
+    @property
+    def layered(self) -> bool:
+        """True if the network declares flight levels (vertiports, levels, pads)."""
+        return bool(self.levels_m)
+
+    def pads_of(self, node_index: int) -> np.ndarray:
+        """(p, 2) pad offsets [m] (east, north) of an aerodrome; one pad at (0, 0) by default."""
+        return np.asarray(self.pads_m.get(self.node_ids[int(node_index)], ((0.0, 0.0),)),
+                          dtype=np.float64).reshape(-1, 2)
 
     def node_index(self, node_id: str) -> int:
         """Index of the node with id ``node_id``; NetworkError naming the id if unknown. O(1)."""
@@ -282,11 +317,58 @@ class Network:
         # validated again and keeps read-only arrays and the derived fields.
         return (Network, (self.name, self.node_ids, self.names, self.is_aerodrome,
                           self.lat_lon_alt, self.enu_m, self.origin_lat_lon_alt, self.edges,
-                          self.edge_length_m, self.no_fly_zones))
+                          self.edge_length_m, self.no_fly_zones, self.levels_m,
+                          self.direction_rule, dict(self.pads_m)))
 
     def __repr__(self) -> str:
+        levels = f", levels_m={list(self.levels_m)}" if self.levels_m else ""
         return (f"Network(name={self.name!r}, nodes={self.n_nodes}, corridors={self.n_edges}, "
-                f"aerodromes={len(self.aerodrome_ids)})")
+                f"aerodromes={len(self.aerodrome_ids)}{levels})")
+
+
+def _check_airspace(levels_m, direction_rule, pads_m, index, is_aerodrome, lla):
+    """Validate levels, direction rule and pads; return them normalised (tuple, str, dict)."""
+    if levels_m is None:
+        levels_m = ()
+    if not isinstance(levels_m, (list, tuple, np.ndarray)):
+        raise NetworkError(f"airspace.levels_m: {levels_m!r} is not a list of altitudes")
+    levels = tuple(_number(v, f"airspace.levels_m[{k}]") for k, v in enumerate(levels_m))
+    for k in range(1, len(levels)):
+        if not levels[k] > levels[k - 1]:
+            raise NetworkError(f"airspace.levels_m[{k}]: {levels[k]!r} is not above "
+                               f"levels_m[{k - 1}] {levels[k - 1]!r} (strictly increasing)")
+    if levels:
+        top = float(lla[is_aerodrome, 2].max())
+        if not levels[0] > top:
+            raise NetworkError(f"airspace.levels_m[0]: {levels[0]!r} is not above the highest "
+                               f"aerodrome altitude {top!r} m")
+    if direction_rule not in DIRECTION_RULES:
+        raise NetworkError(f"airspace.direction_rule: {direction_rule!r} is not one of "
+                           f"{list(DIRECTION_RULES)}")
+    if direction_rule == "semicircular" and len(levels) == 1:
+        raise NetworkError("airspace.direction_rule: 'semicircular' needs at least 2 levels, "
+                           "got 1 (use 'none')")
+    pads = {}
+    for node_id, offsets in dict(pads_m or {}).items():
+        where = f"nodes (id {node_id!r}).pads_m"
+        if node_id not in index:
+            raise NetworkError(f"{where}: {node_id!r} is not a node id")
+        if not is_aerodrome[index[node_id]]:
+            raise NetworkError(f"{where}: node {node_id!r} is not an aerodrome")
+        if not levels:
+            raise NetworkError(f"{where}: pads need a layered network (airspace.levels_m)")
+        if not isinstance(offsets, (list, tuple, np.ndarray)) or len(offsets) == 0:
+            raise NetworkError(f"{where}: {offsets!r} is not a non-empty list of [east_m, north_m]")
+        out = []
+        for k, off in enumerate(offsets):
+            if not isinstance(off, (list, tuple, np.ndarray)) or len(off) != 2:
+                raise NetworkError(f"{where}[{k}]: {off!r} is not [east_m, north_m]")
+            pt = (_number(off[0], f"{where}[{k}][0]"), _number(off[1], f"{where}[{k}][1]"))
+            if pt in out:
+                raise NetworkError(f"{where}[{k}]: {list(pt)} duplicates pad {out.index(pt)}")
+            out.append(pt)
+        pads[node_id] = tuple(out)
+    return levels, str(direction_rule), pads
 
 
 def _segment_point_distance_xy(a: np.ndarray, b: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -388,9 +470,25 @@ def _check_corridor_pairs(pairs: np.ndarray, node_ids: Sequence[str], enu: np.nd
             f"corridor ({length[k]:.3g} m; the end points coincide)")
 
 
+def _parse_airspace(airspace) -> tuple[tuple, str]:
+    """(levels_m, direction_rule) from the ``airspace`` mapping of the file formats."""
+    if airspace is None:
+        return (), "semicircular"
+    if not isinstance(airspace, Mapping):
+        raise NetworkError(f"airspace: {airspace!r} is not a mapping {{levels_m, direction_rule}}")
+    unknown = set(airspace) - _AIRSPACE_KEYS
+    if unknown:
+        raise NetworkError(f"airspace.{sorted(unknown)[0]}: unknown field; allowed: "
+                           f"{sorted(_AIRSPACE_KEYS)}")
+    if "levels_m" not in airspace:
+        raise NetworkError("airspace.levels_m: missing")
+    return airspace["levels_m"], airspace.get("direction_rule", "semicircular")
+
+
 def _assemble(name: str, node_ids: Sequence[str], names: Sequence[str], is_aerodrome,
               lla: np.ndarray, enu: np.ndarray, origin, pairs: np.ndarray,
-              field_name: str, no_fly_zones: tuple[NoFlyZone, ...] = ()) -> Network:
+              field_name: str, no_fly_zones: tuple[NoFlyZone, ...] = (), levels_m=(),
+              direction_rule: str = "semicircular", pads_m=None) -> Network:
     _check_corridor_pairs(pairs, node_ids, enu, field_name)
     edges = _canonical_edges(pairs) if len(pairs) else np.zeros((0, 2), dtype=np.int64)
     length = np.linalg.norm(enu[edges[:, 1]] - enu[edges[:, 0]], axis=1) if len(edges) else \
@@ -398,10 +496,11 @@ def _assemble(name: str, node_ids: Sequence[str], names: Sequence[str], is_aerod
     return Network(name=name, node_ids=tuple(node_ids), names=tuple(names),
                    is_aerodrome=np.asarray(is_aerodrome, dtype=bool), lat_lon_alt=lla,
                    enu_m=enu, origin_lat_lon_alt=tuple(float(v) for v in origin),
-                   edges=edges, edge_length_m=length, no_fly_zones=no_fly_zones)
+                   edges=edges, edge_length_m=length, no_fly_zones=no_fly_zones,
+                   levels_m=levels_m, direction_rule=direction_rule, pads_m=pads_m or {})
 
 
-_NODE_KEYS = {"id", "lat", "lon", "alt_m", "aerodrome", "name"}
+_NODE_KEYS = {"id", "lat", "lon", "alt_m", "aerodrome", "name", "pads_m"}
 _CORRIDOR_KEYS = {"from", "to", "route"}
 
 
@@ -440,7 +539,7 @@ def _parse_origin(origin: Any, where: str = "origin") -> tuple[float, float, flo
 
 
 def build_network(name: str, nodes: list[dict], corridors: list[dict], origin=None,
-                  no_fly_zones=None) -> Network:
+                  no_fly_zones=None, airspace=None) -> Network:
     """Build and validate a network from plain dictionaries (the YAML schema).
 
     Args:
@@ -453,6 +552,9 @@ def build_network(name: str, nodes: list[dict], corridors: list[dict], origin=No
             latitude and longitude of the nodes at altitude 0 m.
         no_fly_zones: optional list of ``{name, lat, lon, radius_m}`` (or :class:`NoFlyZone`);
             no node may lie inside and no corridor may cross one.
+        airspace: optional ``{levels_m: [m, ...], direction_rule: 'semicircular' | 'none'}``
+            (a layered network); aerodrome nodes may then carry ``pads_m: [[east_m, north_m],
+            ...]``.
 
     Returns the :class:`Network`; raises :class:`NetworkError` naming the field and the value.
     O(n + m log m).
@@ -464,6 +566,7 @@ def build_network(name: str, nodes: list[dict], corridors: list[dict], origin=No
     if not isinstance(corridors, (list, tuple)):
         raise NetworkError(f"corridors: expected a list, got {type(corridors).__name__}")
     n = len(nodes)
+    pads: dict = {}
     node_ids: list[str] = []
     names: list[str] = []
     aerodrome = np.zeros(n, dtype=bool)
@@ -504,6 +607,8 @@ def build_network(name: str, nodes: list[dict], corridors: list[dict], origin=No
         index[node_id] = i
         node_ids.append(node_id)
         names.append(label)
+        if "pads_m" in node:
+            pads[node_id] = node["pads_m"]
 
     pairs = np.zeros((len(corridors), 2), dtype=np.int64)
     for k, cor in enumerate(corridors):
@@ -531,13 +636,15 @@ def build_network(name: str, nodes: list[dict], corridors: list[dict], origin=No
     else:
         origin_t = _parse_origin(origin)
     enu = geodetic_to_enu(lla, origin_t)
+    levels, rule = _parse_airspace(airspace)
     return _assemble(name, node_ids, names, aerodrome, lla, enu, origin_t, pairs, "corridors",
-                     zones)
+                     zones, levels, rule, pads)
 
 
 def network_from_enu(name: str, node_ids: Sequence[str], enu_m, is_aerodrome,
                      edges_as_id_pairs: Iterable[tuple[str, str]], names: Sequence[str] | None = None,
-                     origin_lat_lon_alt=DEFAULT_ENU_ORIGIN, no_fly_zones=None) -> Network:
+                     origin_lat_lon_alt=DEFAULT_ENU_ORIGIN, no_fly_zones=None, airspace=None,
+                     pads_m=None) -> Network:
     """Build a network straight from local ENU coordinates (synthetic networks, tests).
 
     Args:
@@ -549,6 +656,8 @@ def network_from_enu(name: str, node_ids: Sequence[str], enu_m, is_aerodrome,
         names: optional human names.
         origin_lat_lon_alt: geodetic origin of the ENU frame (default central Singapore).
         no_fly_zones: optional list of ``{name, lat, lon, radius_m}`` or :class:`NoFlyZone`.
+        airspace, pads_m: optional levels and direction rule, and ``{aerodrome id: [[east_m,
+            north_m], ...]}`` pads (a layered network, see :class:`Network`).
 
     The geodetic coordinates are derived from ENU (the exact inverse transform); ``enu_m`` is kept
     as given. Raises :class:`NetworkError`. O(n + m log m).
@@ -581,8 +690,9 @@ def network_from_enu(name: str, node_ids: Sequence[str], enu_m, is_aerodrome,
             pairs[k, j] = index[pair[j]]
     lla = enu_to_geodetic(enu, origin)
     names = [""] * n if names is None else list(names)
+    levels, rule = _parse_airspace(airspace)
     return _assemble(name, node_ids, names, is_aerodrome, lla, enu, origin, pairs,
-                     "edges_as_id_pairs", _parse_no_fly_zones(no_fly_zones))
+                     "edges_as_id_pairs", _parse_no_fly_zones(no_fly_zones), levels, rule, pads_m)
 
 
 # -- dictionaries and files --------------------------------------------------------------------
@@ -603,6 +713,12 @@ def network_to_dict(net: Network) -> dict:
     }
     if net.no_fly_zones:
         d["no_fly_zones"] = _zones_to_list(net.no_fly_zones)
+    if net.levels_m:
+        d["airspace"] = {"levels_m": [float(v) for v in net.levels_m],
+                         "direction_rule": net.direction_rule}
+        for entry in nodes:
+            if entry["id"] in net.pads_m:
+                entry["pads_m"] = [[float(a), float(b)] for a, b in net.pads_m[entry["id"]]]
     d["nodes"] = nodes
     d["corridors"] = [{"from": net.node_ids[u], "to": net.node_ids[v]}
                       for u, v in net.edges.tolist()]
@@ -614,7 +730,9 @@ def _zones_to_list(zones: Sequence[NoFlyZone]) -> list[dict]:
              "radius_m": float(z.radius_m)} for z in zones]
 
 
-_TOP_KEYS = {"name", "origin", "no_fly_zones", "nodes", "corridors", "description", "cruise_alt_m"}
+_TOP_KEYS = {"name", "origin", "no_fly_zones", "nodes", "corridors", "description", "cruise_alt_m",
+             "airspace"}
+_AIRSPACE_KEYS = {"levels_m", "direction_rule"}
 
 
 def network_from_dict(data: Any, default_name: str = "network") -> Network:
@@ -630,7 +748,8 @@ def network_from_dict(data: Any, default_name: str = "network") -> Network:
         if key not in data:
             raise NetworkError(f"{key}: missing")
     return build_network(data.get("name", default_name), data["nodes"], data["corridors"],
-                         origin=data.get("origin"), no_fly_zones=data.get("no_fly_zones"))
+                         origin=data.get("origin"), no_fly_zones=data.get("no_fly_zones"),
+                         airspace=data.get("airspace"))
 
 
 def _load_yaml(path: Path) -> Network:
@@ -781,6 +900,8 @@ def save_network_yaml(net: Network, path, header: str | None = None,
     if "no_fly_zones" in d:
         lines.append("no_fly_zones:")
         lines += [f"  - {dump(z)}" for z in d["no_fly_zones"]]
+    if "airspace" in d:
+        lines.append(f"airspace: {dump(d['airspace'])}")
     lines.append("nodes:")
     lines += [f"  - {dump(node)}" for node in d["nodes"]]
     lines.append("corridors:")
@@ -792,6 +913,9 @@ def save_network_graphml(net: Network, path) -> None:
     """Write the network as GraphML (node key = id; attrs lat, lon, alt_m, aerodrome, name;
     edge attr length_m, informational; graph attrs name, origin_lat, origin_lon, origin_alt_m and,
     if any, no_fly_zones as a JSON string)."""
+    if net.layered:
+        raise NetworkError(f"save_network_graphml: network {net.name!r} is layered (levels, pads); only the "
+                           f"YAML format holds those, use save_network_yaml")
     o = net.origin_lat_lon_alt
     g = nx.Graph(name=net.name, origin_lat=o[0], origin_lon=o[1], origin_alt_m=o[2])
     if net.no_fly_zones:
@@ -809,6 +933,9 @@ def save_network_geojson(net: Network, path) -> None:
     """Write the network as a GeoJSON FeatureCollection: a Point per node ([lon, lat, alt_m];
     properties id, name, aerodrome, alt_m) and a LineString per corridor (properties from, to,
     length_m); top-level members name, origin and (if any) no_fly_zones."""
+    if net.layered:
+        raise NetworkError(f"save_network_geojson: network {net.name!r} is layered (levels, pads); only the "
+                           f"YAML format holds those, use save_network_yaml")
     o = net.origin_lat_lon_alt
     features = []
     for i, node_id in enumerate(net.node_ids):

@@ -16,6 +16,24 @@ One epoch at time t:
 each eligible request gets its shortest route if that route keeps separation with every active
 flight and every flight approved before it in this epoch; otherwise it waits (until it expires).
 
+Airspace with room (``AirspaceConfig``; the defaults are the paper's model): the separation
+model (the paper's sphere or a cylinder), departure slots and, on a layered network (one that
+declares flight levels), vertiports as terminals, one cruise level per flight and vertical climb
+and descent (see ``uam_planner.candidates``). With ``departure_slot_s > 0`` a candidate is
+(route, level, departure time): the departure times of a request at epoch t are
+``lo, lo + slot, lo + 2 slot, ...`` up to ``hi``, with ``lo = max(t, earliest_departure_s)`` and
+``hi = min(t + epoch_s, latest_departure_s)``, and a request is eligible when that window is not
+empty. ``departure_slot_s = 0`` is the paper's rule: depart at the epoch time t.
+
+Weights: in the paper's model w = d*/d (d* the request's shortest route length). With levels or
+slots a candidate's weight is w = T* / (T + delay): T its flight time (climb, cruise, descent),
+T* the least T among the request's candidates at this epoch, delay its departure minus ``lo``. So
+the best candidate has w = 1, and w falls with detour (a longer route or a higher level makes T
+longer) and with delay, both measured in the same unit (seconds of the passenger's arrival
+later than the best), so a 30 s detour and a 30 s wait cost the same; w = d*/d again when levels
+and slots cost nothing (one level, no climb, slot 0). The MWIS then prefers many flights to few,
+then early and direct ones.
+
 ``Planner`` holds the pending requests and active flights between epochs; the ROS planner node and
 the in-process experiment runner both drive it, so they approve the same flights for the same
 inputs. Wall time is measured only for reports (``solve_time_s``, ``planning_time_s``); no
@@ -31,10 +49,13 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from .candidates import CandidateCache, RouteTemplate
-from .conflict_graph import ConflictGraph, build_conflict_graph
+from .candidates import (DEFAULT_CLIMB_RATE_MPS, DEFAULT_DESCENT_RATE_MPS, CandidateCache,
+                         RouteTemplate)
+from .conflict_graph import (ActiveFlightIndex, ConflictGraph, ShiftedCandidates,
+                             build_conflict_graph)
+from .separation import (DEFAULT_VERTICAL_SEPARATION_M, SEPARATION_MODELS, SegmentSet,
+                         SeparationModel, conflicting_pairs)
 from .first_fit import as_firstfit, first_fit_select
-from .separation import SegmentSet, conflicting_pairs
 from .trajectory import Trajectory
 
 POLICIES = ("mwis", "fifo", "firstfit")  # firstfit: uam_planner.first_fit
@@ -69,6 +90,47 @@ class Flight:
     method: str
     backend: str
     epoch_index: int
+    route_index: int = 0
+    level_m: float = float("nan")
+
+
+def _positive(owner: str, name: str, v, allow_zero: bool = False) -> None:
+    if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
+            or not math.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
+        what = "finite and >= 0" if allow_zero else "a positive finite number"
+        raise ValueError(f"{owner}.{name} must be {what}, got {v!r}")
+
+
+@dataclass(frozen=True)
+class AirspaceConfig:
+    """The airspace mode; the defaults are the paper's model.
+
+    Attributes:
+        separation_model: ``'sphere'`` (the paper's single 3D minimum ``separation_m``) or
+            ``'cylinder'`` (horizontal distance < ``PlanningConfig.separation_m`` while the
+            vertical distance < ``vertical_separation_m``).
+        vertical_separation_m: the cylinder's vertical minimum V [m] (unused by the sphere).
+        departure_slot_s: slot width [s] of the departure times inside the epoch and the
+            request's window; 0 = the paper's rule (depart at the epoch time).
+        climb_rate_mps, descent_rate_mps: vertical speeds [m/s] at the vertiports of a layered
+            network (unused otherwise).
+
+    Levels, direction rule and pads come from the network (``Network.levels_m``, ...).
+    """
+
+    separation_model: str = "sphere"
+    vertical_separation_m: float = DEFAULT_VERTICAL_SEPARATION_M
+    departure_slot_s: float = 0.0
+    climb_rate_mps: float = DEFAULT_CLIMB_RATE_MPS
+    descent_rate_mps: float = DEFAULT_DESCENT_RATE_MPS
+
+    def __post_init__(self):
+        if self.separation_model not in SEPARATION_MODELS:
+            raise ValueError(f"AirspaceConfig.separation_model must be one of "
+                             f"{SEPARATION_MODELS}, got {self.separation_model!r}")
+        for name in ("vertical_separation_m", "climb_rate_mps", "descent_rate_mps"):
+            _positive("AirspaceConfig", name, getattr(self, name))
+        _positive("AirspaceConfig", "departure_slot_s", self.departure_slot_s, allow_zero=True)
 
 
 @dataclass(frozen=True)
@@ -87,6 +149,8 @@ class PlanningConfig:
         precompute_routes: compute every aerodrome pair's candidate routes when the Planner is
             built (a(a-1) x k Dijkstra searches; about 1 s for the 26-aerodrome Singapore
             network), so that no epoch pays for a route search.
+        airspace: AirspaceConfig (separation model, departure slots, vertical rates); default
+            the paper's model.
     """
 
     epoch_s: float = 30.0
@@ -98,8 +162,19 @@ class PlanningConfig:
     time_limit_s: float = 10.0
     seed: int = 0
     precompute_routes: bool = False
+    airspace: AirspaceConfig = AirspaceConfig()
+
+    @property
+    def separation(self) -> SeparationModel:
+        """The SeparationModel of this config (sphere of ``separation_m`` by default)."""
+        a = self.airspace
+        return SeparationModel(a.separation_model, float(self.separation_m),
+                               float(a.vertical_separation_m))
 
     def __post_init__(self):
+        if not isinstance(self.airspace, AirspaceConfig):
+            raise ValueError(f"PlanningConfig.airspace must be an AirspaceConfig, got "
+                             f"{type(self.airspace).__name__}")
         for name in ("epoch_s", "separation_m", "speed_mps", "time_limit_s"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
@@ -235,8 +310,89 @@ def default_solve_mwis(config: PlanningConfig) -> Callable:
 
 # ---- the two policies ---------------------------------------------------------------------------
 
-def _eligible(t_s: float, pending: Sequence[FlightRequest]) -> list:
+def _eligible(t_s: float, pending: Sequence[FlightRequest], config: PlanningConfig) -> list:
+    if config.airspace.departure_slot_s > 0.0:
+        # any departure in [max(t, earliest), min(t + epoch_s, latest)]
+        hi = t_s + config.epoch_s
+        return [r for r in pending if r.earliest_departure_s <= hi and r.latest_departure_s >= t_s
+                and max(t_s, r.earliest_departure_s) <= min(hi, r.latest_departure_s)]
     return [r for r in pending if r.earliest_departure_s <= t_s <= r.latest_departure_s]
+
+
+def departure_slots_s(t_s: float, request: FlightRequest, config: PlanningConfig) -> np.ndarray:
+    """Departure times [s] a request may take at the epoch at ``t_s``.
+
+    Paper rule (``departure_slot_s == 0``): [t_s]. Otherwise lo, lo + slot, ... <= hi with
+    lo = max(t_s, earliest_departure_s), hi = min(t_s + epoch_s, latest_departure_s); empty when
+    lo > hi. E.g. t = 0, epoch 30 s, slot 5 s, window [0, 60]: 0, 5, ..., 30 (7 slots).
+    """
+    slot = float(config.airspace.departure_slot_s)
+    if slot <= 0.0:
+        return np.array([float(t_s)])
+    lo = max(float(t_s), float(request.earliest_departure_s))
+    hi = min(float(t_s) + config.epoch_s, float(request.latest_departure_s))
+    if lo > hi:
+        return np.zeros(0)
+    n = int(math.floor((hi - lo) / slot + 1e-9)) + 1
+    return lo + slot * np.arange(n, dtype=np.float64)
+
+
+@dataclass
+class _Candidates:
+    """The flat candidate list of one epoch: template, departure time, weight and request."""
+
+    tmpls: list
+    departures_s: list
+    weights: list
+    req_of: list
+    index_in_request: list
+
+    def trajectories(self) -> list:
+        return [tp.trajectory(dep) for tp, dep in zip(self.tmpls, self.departures_s)]
+
+    def shifted(self) -> ShiftedCandidates:
+        """The same candidates as one base trajectory per template (at its first slot) and
+        departure shifts: the slots of one template are consecutive."""
+        n = len(self.tmpls)
+        starts = [c for c in range(n) if c == 0 or self.tmpls[c] is not self.tmpls[c - 1]]
+        first = np.asarray(starts + [n], dtype=np.int64)
+        deps = np.asarray(self.departures_s, dtype=np.float64)
+        base = [self.tmpls[c].trajectory(self.departures_s[c]) for c in starts]
+        shift = deps - np.repeat(deps[first[:-1]], np.diff(first)) if n else deps
+        return ShiftedCandidates(base, first, shift)
+
+
+def _paper_weights(config: PlanningConfig, network) -> bool:
+    return config.airspace.departure_slot_s <= 0.0 and not network.layered
+
+
+def _epoch_candidates(t_s: float, eligible: Sequence[FlightRequest], network, config,
+                      cache: CandidateCache, best_only: bool = False) -> _Candidates:
+    """Every (template, departure) candidate of the eligible requests, in request order; with
+    ``best_only`` only each request's best one (shortest route, lowest allowed level, first
+    slot: weight 1)."""
+    paper = _paper_weights(config, network)
+    out = _Candidates([], [], [], [], [])
+    for i, r in enumerate(eligible):
+        ts = cache.templates(network.node_index(r.origin_id), network.node_index(r.destination_id))
+        slots = departure_slots_s(t_s, r, config)
+        if best_only:
+            ts = ts[:1]
+            slots = slots[:1]
+        best_t = min(tp.duration_s for tp in ts)
+        c = 0
+        for tp in ts:
+            for dep in slots.tolist():
+                out.tmpls.append(tp)
+                out.departures_s.append(dep)
+                if paper:
+                    out.weights.append(tp.route.weight)
+                else:
+                    out.weights.append(best_t / (tp.duration_s + (dep - float(slots[0]))))
+                out.req_of.append(i)
+                out.index_in_request.append(c)
+                c += 1
+    return out
 
 
 def _finish(t_s, config, pending, approved, active_count, report) -> EpochResult:
@@ -255,13 +411,14 @@ def _finish(t_s, config, pending, approved, active_count, report) -> EpochResult
 
 
 def _flight(req: FlightRequest, tmpl: RouteTemplate, traj: Trajectory, method: str, backend: str,
-            epoch_index: int) -> Flight:
+            epoch_index: int, weight: float, candidate_index: int) -> Flight:
     r = tmpl.route
     return Flight(request_id=req.request_id, origin_id=req.origin_id,
                   destination_id=req.destination_id, route_node_ids=tmpl.node_ids,
                   trajectory=traj, departure_s=traj.departure_s, arrival_s=traj.arrival_s,
-                  length_m=r.length_m, weight=r.weight, candidate_index=r.candidate_index,
-                  method=method, backend=backend, epoch_index=int(epoch_index))
+                  length_m=r.length_m, weight=float(weight), candidate_index=int(candidate_index),
+                  method=method, backend=backend, epoch_index=int(epoch_index),
+                  route_index=int(r.candidate_index), level_m=float(tmpl.level_m))
 
 
 def _airborne(active: Sequence[Flight], t_s: float) -> list:
@@ -282,6 +439,8 @@ class PreparedEpoch:
     tmpls: list = field(default_factory=list)
     trajs: list = field(default_factory=list)
     req_of: list = field(default_factory=list)
+    weights: list = field(default_factory=list)
+    index_in_request: list = field(default_factory=list)
     airborne_count: int = 0
     prepare_s: float = 0.0
     phases: dict = field(default_factory=dict)
@@ -295,37 +454,43 @@ class PreparedEpoch:
 
 def prepare_epoch_mwis(t_s: float, epoch_index: int, pending: Sequence[FlightRequest],
                        active: Sequence[Flight], network, config: PlanningConfig,
-                       cache: CandidateCache) -> PreparedEpoch:
+                       cache: CandidateCache, active_index=None) -> PreparedEpoch:
     """Steps 1-6 of an MWIS epoch at ``t_s`` [s]: eligible requests, candidates, trajectories,
-    deconfliction and the conflict graph (``PreparedEpoch.graph``), still to be solved."""
+    deconfliction and the conflict graph (``PreparedEpoch.graph``), still to be solved.
+
+    Arguments as :func:`plan_epoch_mwis`; ``active_index``: optional ActiveFlightIndex holding
+    ``active`` (kept across epochs by the Planner, so the active flights' segments are not
+    rebuilt every epoch).
+    """
     t_start = time.perf_counter()
     phases = {}
     report = EpochReport(epoch_index=int(epoch_index), t_s=float(t_s), policy="mwis",
                          pending=len(pending), backend_requested=config.backend)
-    eligible = _eligible(t_s, pending)
+    eligible = _eligible(t_s, pending, config)
     airborne = _airborne(active, t_s)
     t1 = time.perf_counter()
     phases["eligible_s"] = t1 - t_start
 
-    tmpls: list[RouteTemplate] = []
-    req_of: list[int] = []
-    for i, r in enumerate(eligible):
-        ts = cache.templates(network.node_index(r.origin_id), network.node_index(r.destination_id))
-        tmpls.extend(ts)
-        req_of.extend([i] * len(ts))
+    cands = _epoch_candidates(t_s, eligible, network, config, cache)
+    tmpls, req_of = cands.tmpls, cands.req_of
     t2 = time.perf_counter()
     phases["candidates_s"] = t2 - t1
-    trajs = [tp.trajectory(t_s) for tp in tmpls]
+    # With slots, the candidates of one template differ only by a time shift: deconflict them
+    # per template (ShiftedCandidates) and build trajectories only for the survivors.
+    trajs = cands.shifted() if config.airspace.departure_slot_s > 0.0 else cands.trajectories()
     t3 = time.perf_counter()
     phases["trajectories_s"] = t3 - t2
 
+    active_set = active_index.segments(airborne, t_s) if active_index is not None \
+        else [f.trajectory for f in airborne]
     graph = build_conflict_graph(
         trajs, np.asarray(req_of, dtype=np.int64),
-        np.fromiter((tp.route.candidate_index for tp in tmpls), dtype=np.int64, count=len(tmpls)),
-        np.fromiter((tp.route.weight for tp in tmpls), dtype=np.float64, count=len(tmpls)),
-        len(eligible), [f.trajectory for f in airborne], config.separation_m, timings=phases)
+        np.asarray(cands.index_in_request, dtype=np.int64),
+        np.asarray(cands.weights, dtype=np.float64),
+        len(eligible), active_set, config.separation, timings=phases)
     return PreparedEpoch(t_s=float(t_s), epoch_index=int(epoch_index), pending=list(pending), report=report,
                          graph=graph, eligible=eligible, tmpls=tmpls, trajs=trajs, req_of=req_of,
+                         weights=cands.weights, index_in_request=cands.index_in_request,
                          airborne_count=len(airborne), prepare_s=time.perf_counter() - t_start,
                          phases=phases)
 
@@ -349,7 +514,8 @@ def commit_epoch(prep: PreparedEpoch, answer, config: PlanningConfig, solve_s: f
     for v in selected.tolist():
         src = int(graph.vertex_source[v])
         approved.append(_flight(eligible[prep.req_of[src]], prep.tmpls[src], prep.trajs[src], "mwis",
-                                report.backend_used, prep.epoch_index))
+                                report.backend_used, prep.epoch_index, prep.weights[src],
+                                prep.index_in_request[src]))
     # Vertices follow the eligible order, so sorted vertices give approvals in arrival order.
 
     report.eligible = len(eligible)
@@ -374,11 +540,13 @@ def commit_epoch(prep: PreparedEpoch, answer, config: PlanningConfig, solve_s: f
 
 def plan_epoch_mwis(t_s: float, epoch_index: int, pending: Sequence[FlightRequest],
                     active: Sequence[Flight], network, config: PlanningConfig,
-                    solve_mwis: Callable, cache: CandidateCache) -> EpochResult:
+                    solve_mwis: Callable, cache: CandidateCache,
+                    active_index=None) -> EpochResult:
     """One MWIS planning epoch at time ``t_s`` [s]: prepare, solve, commit.
 
     Args:
-        t_s: epoch time [s]; approved flights depart at t_s.
+        t_s: epoch time [s]; approved flights depart at t_s (paper rule) or at a departure
+            slot in [t_s, t_s + epoch_s] (``config.airspace.departure_slot_s > 0``).
         epoch_index: epoch number, copied to the report and the flights.
         pending: requests not yet decided, in arrival order.
         active: approved flights (those that landed before t_s are ignored).
@@ -388,10 +556,14 @@ def plan_epoch_mwis(t_s: float, epoch_index: int, pending: Sequence[FlightReques
             backend, proven_optimal, fallback, message); its answer is checked, and replaced by
             greedy (marked as a fallback in the report) if it raises or is invalid.
         cache: CandidateCache built for this network and config.
-    Returns: EpochResult. Approved flights never lose separation with each other or with
-    ``active``: every conflict is an edge and the answer is checked to be independent.
+        active_index: optional ActiveFlightIndex holding ``active`` (kept across epochs by the
+            Planner, so the active flights' segments are not rebuilt every epoch).
+    Returns: EpochResult. Approved flights never lose separation (in ``config.separation``)
+    with each other or with ``active``: every conflict is an edge and the answer is checked to
+    be independent.
     """
-    prep = prepare_epoch_mwis(t_s, epoch_index, pending, active, network, config, cache)
+    prep = prepare_epoch_mwis(t_s, epoch_index, pending, active, network, config, cache,
+                              active_index)
     t = time.perf_counter()
     answer = call_solver(solve_mwis, prep.graph) if prep.needs_solver else None
     return commit_epoch(prep, answer, config, time.perf_counter() - t)
@@ -399,40 +571,44 @@ def plan_epoch_mwis(t_s: float, epoch_index: int, pending: Sequence[FlightReques
 
 def plan_epoch_fifo(t_s: float, epoch_index: int, pending: Sequence[FlightRequest],
                     active: Sequence[Flight], network, config: PlanningConfig,
-                    solve_mwis: Callable | None, cache: CandidateCache) -> EpochResult:
+                    solve_mwis: Callable | None, cache: CandidateCache,
+                    active_index=None) -> EpochResult:
     """One shortest-FIFO epoch; same inputs and outputs as :func:`plan_epoch_mwis`.
 
     In the order of ``pending`` (arrival order), each eligible request gets its shortest route if
     it keeps separation with every active flight and every flight approved before it in this
     epoch; otherwise it waits. ``solve_mwis`` is ignored. The report's instance is empty;
     ``vertices`` counts the shortest routes that survive the active flights and ``edges`` /
-    ``conflict_edges`` the conflicting pairs among them.
+    ``conflict_edges`` the conflicting pairs among them. With levels or slots the "shortest
+    route" is each request's best candidate (shortest route, lowest allowed level, first slot).
     """
     t_start = time.perf_counter()
     phases = {}
     report = EpochReport(epoch_index=int(epoch_index), t_s=float(t_s), policy="fifo",
                          pending=len(pending))
-    eligible = _eligible(t_s, pending)
+    eligible = _eligible(t_s, pending, config)
     airborne = _airborne(active, t_s)
     t1 = time.perf_counter()
     phases["eligible_s"] = t1 - t_start
-    tmpls = [cache.templates(network.node_index(r.origin_id),
-                             network.node_index(r.destination_id))[0] for r in eligible]
+    cands = _epoch_candidates(t_s, eligible, network, config, cache, best_only=True)
+    tmpls = cands.tmpls
     t2 = time.perf_counter()
     phases["candidates_s"] = t2 - t1
-    trajs = [tp.trajectory(t_s) for tp in tmpls]
+    trajs = cands.trajectories()
     t3 = time.perf_counter()
     phases["trajectories_s"] = t3 - t2
     cand_set = SegmentSet.from_trajectories(trajs)
-    active_set = SegmentSet.from_trajectories([f.trajectory for f in airborne])
+    active_set = active_index.segments(airborne, t_s) if active_index is not None \
+        else SegmentSet.from_trajectories([f.trajectory for f in airborne])
+    sep = config.separation
     discarded = np.zeros(len(trajs), dtype=bool)
     if len(trajs) and len(active_set):
-        pairs = conflicting_pairs(cand_set, active_set, config.separation_m)
+        pairs = conflicting_pairs(cand_set, active_set, sep)
         discarded[pairs[:, 0]] = True
     t4 = time.perf_counter()
     phases["deconfliction_s"] = t4 - t3
     surv = np.flatnonzero(~discarded)
-    conflicts = conflicting_pairs([trajs[i] for i in surv], None, config.separation_m) \
+    conflicts = conflicting_pairs([trajs[i] for i in surv], None, sep) \
         if surv.size > 1 else np.zeros((0, 2), dtype=np.int64)
     t5 = time.perf_counter()
     phases["conflicts_s"] = t5 - t4
@@ -445,7 +621,8 @@ def plan_epoch_fifo(t_s: float, epoch_index: int, pending: Sequence[FlightReques
         if any(taken[j] for j in partners.get(i, ())):
             continue
         taken[i] = True
-        approved.append(_flight(eligible[i], tmpls[i], trajs[i], "fifo", "", epoch_index))
+        approved.append(_flight(eligible[i], tmpls[i], trajs[i], "fifo", "", epoch_index,
+                                cands.weights[i], cands.index_in_request[i]))
     t6 = time.perf_counter()
     phases["graph_s"] = t6 - t5
     phases["solve_s"] = 0.0
@@ -491,6 +668,9 @@ class Planner:
         self.solve_mwis = solve_mwis if solve_mwis is not None else self._default_solve
         self.pending: list[FlightRequest] = []
         self.active: list[Flight] = []
+        # the active flights' segments, kept across epochs (rebuilt only if ``active`` is
+        # replaced by a list that is not the previous one minus landed flights plus approvals)
+        self.active_index = ActiveFlightIndex()
         self._known_ids: set[str] = set()
         self._rejected_since_plan = 0
         self._prepared: PreparedEpoch | None = None
@@ -498,7 +678,7 @@ class Planner:
     @property
     def config(self) -> PlanningConfig:
         """The PlanningConfig; assigning a new one rebuilds the route cache only if k,
-        penalty_factor or speed_mps changed."""
+        penalty_factor, speed_mps or the vertical rates changed."""
         return self._config
 
     @config.setter
@@ -508,8 +688,12 @@ class Planner:
         old = self._config
         self._config = cfg
         route_fields = ("k", "penalty_factor", "speed_mps")
-        if old is None or any(getattr(old, f) != getattr(cfg, f) for f in route_fields):
-            self.cache = CandidateCache(self.network, cfg.k, cfg.penalty_factor, cfg.speed_mps)
+        vertical = ("climb_rate_mps", "descent_rate_mps")
+        if old is None or any(getattr(old, f) != getattr(cfg, f) for f in route_fields) or \
+                any(getattr(old.airspace, f) != getattr(cfg.airspace, f) for f in vertical):
+            self.cache = CandidateCache(self.network, cfg.k, cfg.penalty_factor, cfg.speed_mps,
+                                        cfg.airspace.climb_rate_mps,
+                                        cfg.airspace.descent_rate_mps)
             if cfg.precompute_routes:
                 self.cache.precompute()
 
@@ -547,6 +731,13 @@ class Planner:
         if request.latest_departure_s < request.earliest_departure_s:
             return (f"latest_departure_s: {request.latest_departure_s!r} is before "
                     f"earliest_departure_s {request.earliest_departure_s!r}")
+        if net.layered:
+            # vertiports are terminals: a pair may have no route that avoids the others (the
+            # Network only guarantees reachability through them); the routes are cached anyway
+            try:
+                self.cache.templates(net.index[request.origin_id], net.index[request.destination_id])
+            except ValueError as exc:
+                return f"destination_id: {exc}"
         return None
 
     def submit(self, request: FlightRequest) -> str | None:
@@ -572,11 +763,11 @@ class Planner:
         self.active = [f for f in self.active if f.arrival_s >= t_s]
         if self.policy == "mwis":
             prep = prepare_epoch_mwis(t_s, epoch_index, self.pending, self.active, self.network, self.config,
-                                      self.cache)
+                                      self.cache, self.active_index)
         else:
             args = (t_s, epoch_index, self.pending, self.active, self.network, self.config)
-            res = plan_epoch_fifo(*args, None, self.cache) if self.policy == "fifo" else \
-                as_firstfit(plan_epoch_mwis(*args, first_fit_select, self.cache))  # uam_planner.first_fit
+            res = plan_epoch_fifo(*args, None, self.cache, self.active_index) if self.policy == "fifo" else \
+                as_firstfit(plan_epoch_mwis(*args, first_fit_select, self.cache, self.active_index))  # uam_planner.first_fit
             prep = PreparedEpoch(t_s=float(t_s), epoch_index=int(epoch_index), pending=list(self.pending),
                                  report=res.report, result=res)
         self._prepared = prep

@@ -146,6 +146,171 @@ def segment_pair_min_distance(t0a, t1a, p0a, va, t0b, t1b, p0b, vb) -> np.ndarra
     return out
 
 
+SEPARATION_MODELS = ("sphere", "cylinder")
+DEFAULT_VERTICAL_SEPARATION_M = 30.0
+
+
+@dataclass(frozen=True)
+class SeparationModel:
+    """What counts as a loss of separation between two aircraft at one instant.
+
+    Attributes:
+        kind: ``'sphere'`` (the paper's model, default): the 3D distance is below
+            ``separation_m``; ``'cylinder'``: the horizontal distance is below ``separation_m``
+            (H) and the vertical distance below ``vertical_separation_m`` (V), at the same time.
+        separation_m: the sphere's radius, or the cylinder's horizontal minimum H [m].
+        vertical_separation_m: the cylinder's vertical minimum V [m]; unused by the sphere.
+
+    Both are strict: aircraft exactly H apart horizontally, or exactly V apart vertically (two
+    flight levels 30 m apart with V = 30 m), keep separation.
+    """
+
+    kind: str = "sphere"
+    separation_m: float = DEFAULT_SEPARATION_M
+    vertical_separation_m: float = DEFAULT_VERTICAL_SEPARATION_M
+
+    def __post_init__(self):
+        if self.kind not in SEPARATION_MODELS:
+            raise ValueError(f"separation model kind must be one of {SEPARATION_MODELS}, "
+                             f"got {self.kind!r}")
+        for name in ("separation_m", "vertical_separation_m"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) \
+                    or not np.isfinite(v) or v <= 0:
+                raise ValueError(f"SeparationModel.{name} must be positive and finite, got {v!r}")
+
+    @property
+    def vertical_reach_m(self) -> float:
+        """Vertical distance [m] below which a loss is possible (the broad phase's z margin)."""
+        return float(self.separation_m if self.kind == "sphere" else self.vertical_separation_m)
+
+    def segment_measure(self, t0a, t1a, p0a, va, t0b, t1b, p0b, vb) -> np.ndarray:
+        """Per segment pair, a distance [m] that is below ``separation_m`` exactly when the pair
+        loses separation: the exact minimum 3D distance (sphere) or the exact minimum horizontal
+        distance over the times when the vertical distance is below V (cylinder; +inf if never).
+        Same inputs as :func:`segment_pair_min_distance`."""
+        if self.kind == "sphere":
+            return segment_pair_min_distance(t0a, t1a, p0a, va, t0b, t1b, p0b, vb)
+        return segment_pair_min_horizontal_m(t0a, t1a, p0a, va, t0b, t1b, p0b, vb,
+                                             self.vertical_separation_m)
+
+
+def as_separation_model(separation) -> SeparationModel:
+    """A SeparationModel from a model or a number (the paper's sphere of that radius [m])."""
+    if isinstance(separation, SeparationModel):
+        return separation
+    if isinstance(separation, bool) or not isinstance(separation, (int, float, np.floating,
+                                                                   np.integer)) \
+            or not np.isfinite(separation) or separation <= 0:
+        raise ValueError(f"separation_m must be positive and finite, got {separation!r}")
+    return SeparationModel("sphere", float(separation))
+
+
+def _relative_motion(t0a, t1a, p0a, va, t0b, t1b, p0b, vb):
+    """Common interval start lo, its length span (< 0: no overlap), relative position at lo and
+    relative velocity, for arrays of segment pairs."""
+    lo = np.maximum(t0a, t0b)
+    span = np.minimum(t1a, t1b) - lo
+    r = (p0a + va * (lo - t0a)[:, None]) - (p0b + vb * (lo - t0b)[:, None])
+    return lo, span, r, va - vb
+
+
+# Strict at the ends of the common interval: a window that only touches an end (|dz| reaches V
+# exactly at a waypoint, as when one flight starts its descent right under another flight one
+# level up) is no loss. Where rounding could put such a touch on either side, the audit ignores
+# windows shorter than 1e-9 of the overlap, so the planner's kernel never misses what it finds.
+_WINDOW_TOLERANCE_S = 0.0
+
+
+def _vertical_window(rz, dvz, span, vertical_m):
+    """The part [wl, wh] of [0, span] where |rz + dvz tau| < vertical_m, and whether it is
+    non-empty (open in the strict inequality, closed where it meets the ends of [0, span]).
+    Two flat segments exactly ``vertical_m`` apart (two flight levels) never have a window."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        moving = dvz != 0.0
+        a = np.where(moving, (-vertical_m - rz) / np.where(moving, dvz, 1.0), -np.inf)
+        b = np.where(moving, (vertical_m - rz) / np.where(moving, dvz, 1.0), np.inf)
+    vl = np.minimum(a, b)
+    vh = np.maximum(a, b)
+    still_ok = np.abs(rz) < vertical_m
+    ok = np.where(moving, (vl < span + _WINDOW_TOLERANCE_S) & (vh > -_WINDOW_TOLERANCE_S),
+                  still_ok) & (span >= 0.0)
+    return np.maximum(vl, 0.0), np.minimum(vh, span), ok
+
+
+def segment_pair_min_horizontal_m(t0a, t1a, p0a, va, t0b, t1b, p0b, vb,
+                                  vertical_m: float) -> np.ndarray:
+    """Cylinder kernel: per pair, the exact minimum horizontal distance [m] over the common
+    times at which the vertical distance is below ``vertical_m`` [m]; +inf if there is no such
+    time (or no common time).
+
+    Over the common interval the relative motion is linear, so |dz(tau)| < V holds on one open
+    interval of tau (closed form, or all/none when dz is constant) and the squared horizontal
+    distance is a quadratic whose minimum over that interval is at the clamped closest point of
+    approach. The pair loses separation (horizontal < H while |dz| < V) exactly when this
+    minimum is below H: the interval where the horizontal distance is below H then meets the
+    vertical interval. Inputs as in :func:`segment_pair_min_distance`. O(n).
+    """
+    arrs = [np.asarray(x, dtype=np.float64) for x in (t0a, t1a, p0a, va, t0b, t1b, p0b, vb)]
+    n = arrs[0].shape[0]
+    out = np.full(n, np.inf)
+    for s in range(0, n, _KERNEL_BLOCK):
+        e = min(n, s + _KERNEL_BLOCK)
+        lo, span, r, dv = _relative_motion(*(x[s:e] for x in arrs))
+        wl, wh, ok = _vertical_window(r[:, 2], dv[:, 2], span, float(vertical_m))
+        rx, ry, dx, dy = r[:, 0], r[:, 1], dv[:, 0], dv[:, 1]
+        aa = dx * dx + dy * dy
+        tau = np.divide(-(rx * dx + ry * dy), aa, out=np.zeros_like(aa), where=aa > 0.0)
+        tau = np.minimum(np.maximum(tau, wl), np.maximum(wh, wl))
+        d = np.hypot(rx + dx * tau, ry + dy * tau)
+        out[s:e] = np.where(ok, d, np.inf)
+    return out
+
+
+def loss_intervals_s(a: Trajectory, b: Trajectory, separation=DEFAULT_SEPARATION_M) -> list:
+    """The time intervals [s] during which trajectories ``a`` and ``b`` lose separation.
+
+    Per time-overlapping segment pair, in closed form: the open interval where the horizontal
+    distance (sphere: the 3D distance) is below ``separation_m`` is the root interval of a
+    quadratic; for the cylinder it is intersected with the open interval where |dz| is below V.
+    Returns a sorted list of merged (start_s, end_s) tuples (a touching-only contact at one
+    instant gives start == end). O(s_a * s_b).
+    """
+    model = as_separation_model(separation)
+    t0a, t1a, p0a, va = a.segments()
+    t0b, t1b, p0b, vb = b.segments()
+    ia, ib = np.meshgrid(np.arange(t0a.shape[0]), np.arange(t0b.shape[0]), indexing="ij")
+    ia, ib = ia.ravel(), ib.ravel()
+    lo, span, r, dv = _relative_motion(t0a[ia], t1a[ia], p0a[ia], va[ia],
+                                       t0b[ib], t1b[ib], p0b[ib], vb[ib])
+    dims = 3 if model.kind == "sphere" else 2
+    H = model.separation_m
+    qa = np.einsum("ij,ij->i", dv[:, :dims], dv[:, :dims])
+    qb = np.einsum("ij,ij->i", r[:, :dims], dv[:, :dims])
+    qc = np.einsum("ij,ij->i", r[:, :dims], r[:, :dims]) - H * H
+    with np.errstate(divide="ignore", invalid="ignore"):
+        disc = qb * qb - qa * qc
+        root = np.sqrt(np.maximum(disc, 0.0))
+        hl = np.where(qa > 0, (-qb - root) / qa, np.where(qc < 0, -np.inf, np.inf))
+        hh = np.where(qa > 0, (-qb + root) / qa, np.where(qc < 0, np.inf, -np.inf))
+    h_ok = np.where(qa > 0, disc > 0, qc < 0)
+    if model.kind == "cylinder":
+        wl, wh, v_ok = _vertical_window(r[:, 2], dv[:, 2], span, model.vertical_separation_m)
+    else:
+        wl, wh, v_ok = np.zeros_like(span), span, span >= 0.0
+    start = np.maximum(hl, wl)
+    end = np.minimum(hh, wh)
+    ok = h_ok & v_ok & (start < end) | (h_ok & v_ok & (span == 0.0) & (hl < 0) & (hh > 0))
+    iv = sorted(zip((lo + start)[ok].tolist(), (lo + np.maximum(end, start))[ok].tolist()))
+    merged = []
+    for s0, s1 in iv:
+        if merged and s0 <= merged[-1][1]:
+            merged[-1] = (merged[-1][0], max(merged[-1][1], s1))
+        else:
+            merged.append((s0, s1))
+    return merged
+
+
 @dataclass(frozen=True)
 class SegmentSet:
     """The segments of a set of trajectories, flattened into arrays.
@@ -224,9 +389,12 @@ class _Pieces:
     xhi: np.ndarray
     ylo: np.ndarray
     yhi: np.ndarray
+    zlo: np.ndarray      # z range inflated by half the vertical reach
+    zhi: np.ndarray
 
 
-def _cut_pieces(s: SegmentSet, cell_m: float, bucket_s: float, half_m: float) -> _Pieces:
+def _cut_pieces(s: SegmentSet, cell_m: float, bucket_s: float, half_m: float,
+                half_z_m: float) -> _Pieces:
     """Cut each segment into pieces at most cell_m long and bucket_s in duration."""
     dur = s.t1_s - s.t0_s
     length = np.linalg.norm(s.v_mps, axis=1) * dur
@@ -243,37 +411,49 @@ def _cut_pieces(s: SegmentSet, cell_m: float, bucket_s: float, half_m: float) ->
     p0 = s.p0_m[seg] + v * (t0 - base_t0)[:, None]
     x1 = p0[:, 0] + v[:, 0] * (t1 - t0)
     y1 = p0[:, 1] + v[:, 1] * (t1 - t0)
+    z1 = p0[:, 2] + v[:, 2] * (t1 - t0)
     return _Pieces(seg, t0, t1, p0,
                    np.minimum(p0[:, 0], x1) - half_m, np.maximum(p0[:, 0], x1) + half_m,
-                   np.minimum(p0[:, 1], y1) - half_m, np.maximum(p0[:, 1], y1) + half_m)
+                   np.minimum(p0[:, 1], y1) - half_m, np.maximum(p0[:, 1], y1) + half_m,
+                   np.minimum(p0[:, 2], z1) - half_z_m, np.maximum(p0[:, 2], z1) + half_z_m)
 
 
 def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPARATION_M,
                       groups_a=None, cell_m: float | None = None, bucket_s: float | None = None,
-                      return_distances: bool = False, stats: dict | None = None):
-    """Pairs of trajectories that lose separation (come closer than ``separation_m``) at some time.
+                      return_distances: bool = False, stats: dict | None = None,
+                      shifts_a=None):
+    """Pairs of trajectories that lose separation at some time (exact, continuous time).
 
     Args:
         trajs_a: sequence of Trajectory (or a SegmentSet).
         trajs_b: a second set, or None to find pairs within ``trajs_a``.
-        separation_m: separation minimum [m]; a pair conflicts when its exact minimum distance is
-            strictly below it.
+        separation_m: separation minimum [m] (the paper's sphere: a pair conflicts when its exact
+            minimum 3D distance is strictly below it), or a :class:`SeparationModel` (sphere or
+            cylinder).
         groups_a: optional (n_a,) labels, only with ``trajs_b=None``: pairs within one group are
             skipped (the candidates of one request exclude each other anyway).
         cell_m, bucket_s: broad-phase cell size [m] (>= separation) and
             time bucket [s] (defaults: 12 x separation, and the time to fly one cell at the
             median segment speed).
-        return_distances: also return each pair's exact minimum distance [m].
+        return_distances: also return each pair's exact minimum distance [m] (for the
+            cylinder: the minimum horizontal distance while vertically closer than V).
         stats: optional dict that receives broad-phase counts (segments, pieces, keys, pairs
             sharing a cell, exact checks) and wall times, for benchmarks.
+        shifts_a: optional ``(first, shift_s)``, only with ``trajs_b``: trajectory j of a stands
+            for the candidates ``first[j] .. first[j+1]-1``, candidate c being trajectory j
+            flown ``shift_s[c] >= 0`` seconds later (departure slots). The broad phase then runs
+            once per trajectory of a, its pieces' time ranges stretched by the largest shift,
+            and the exact check once per candidate of each surviving pair; the pairs returned
+            are (candidate, j into b). The same answer as listing every shifted trajectory,
+            for a fraction of the broad-phase work.
     Returns:
         (k, 2) int64 array of trajectory index pairs (i into a, j into b; i < j within one set),
         sorted lexicographically; with ``return_distances`` also (k,) float64 distances.
     Complexity: O(N log N) in the number of piece keys plus the exact kernel over the pairs that
     share a space-time cell (see the module docstring).
     """
-    if not (np.isfinite(separation_m) and separation_m > 0.0):
-        raise ValueError(f"separation_m must be positive and finite, got {separation_m!r}")
+    model = as_separation_model(separation_m)
+    separation_m = model.separation_m
     single = trajs_b is None
     sa = _as_segment_set(trajs_a)
     sb = sa if single else _as_segment_set(trajs_b)
@@ -286,14 +466,35 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
             raise ValueError(f"groups_a must have shape ({sa.n_trajectories},), got {groups.shape}")
 
     empty = np.zeros((0, 2), dtype=np.int64)
+    slack_traj = None
+    if shifts_a is not None:
+        if single:
+            raise ValueError("shifts_a is only supported with trajs_b")
+        first = np.asarray(shifts_a[0], dtype=np.int64)
+        shift = np.asarray(shifts_a[1], dtype=np.float64)
+        if first.shape != (sa.n_trajectories + 1,) or first[0] != 0 or \
+                np.any(np.diff(first) < 0) or first[-1] != shift.shape[0]:
+            raise ValueError(f"shifts_a: first must be ({sa.n_trajectories + 1},) non-decreasing "
+                             f"offsets from 0 to len(shift_s)={shift.shape[0]}")
+        if shift.size and not (np.all(np.isfinite(shift)) and shift.min() >= 0.0):
+            raise ValueError("shifts_a: shift_s must be finite and >= 0")
+        slack_traj = np.zeros(sa.n_trajectories)
+        nonempty = np.flatnonzero(np.diff(first) > 0)
+        if nonempty.size:
+            slack_traj[nonempty] = np.maximum.reduceat(shift, first[nonempty])
     if len(sa) == 0 or len(sb) == 0:
         return (empty, np.zeros(0)) if return_distances else empty
     if not single:
         # Only the common time window can hold a conflict.
-        sa = sa.window(sb.t0_s.min(), sb.t1_s.max())
+        if slack_traj is None:
+            sa = sa.window(sb.t0_s.min(), sb.t1_s.max())
+        else:
+            keep = (sa.t1_s + slack_traj[sa.traj] >= sb.t0_s.min()) & (sa.t0_s <= sb.t1_s.max())
+            sa = sa if bool(keep.all()) else sa.take(keep)
         if len(sa) == 0:
             return (empty, np.zeros(0)) if return_distances else empty
-        sb = sb.window(sa.t0_s.min(), sa.t1_s.max())
+        hi_a = sa.t1_s.max() if slack_traj is None else (sa.t1_s + slack_traj[sa.traj]).max()
+        sb = sb.window(sa.t0_s.min(), hi_a)
         if len(sb) == 0:
             return (empty, np.zeros(0)) if return_distances else empty
 
@@ -310,35 +511,55 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
     if not (np.isfinite(bucket) and bucket > 0.0):
         raise ValueError(f"bucket_s must be positive and finite, got {bucket_s!r}")
     half = 0.5 * float(separation_m)
+    half_z = 0.5 * model.vertical_reach_m
 
-    pa = _cut_pieces(sa, cell, bucket, half)
-    pb = pa if single else _cut_pieces(sb, cell, bucket, half)
+    pa = _cut_pieces(sa, cell, bucket, half, half_z)
+    pb = pa if single else _cut_pieces(sb, cell, bucket, half, half_z)
     na = pa.t0.shape[0]
+    # a's pieces occupy their boxes until t1 plus their trajectory's largest shift
+    pa_t1_sweep = pa.t1 if slack_traj is None else pa.t1 + slack_traj[sa.traj[pa.seg]]
     clock.append(time.perf_counter())
 
     # Global grid origin shared by both sets so keys agree.
     x0 = min(pa.xlo.min(), pb.xlo.min())
     y0 = min(pa.ylo.min(), pb.ylo.min())
     tt0 = min(pa.t0.min(), pb.t0.min())
+    # Refuse extents whose cell indices would not even fit int64 (the float -> int conversion
+    # below would wrap); up to that, a too-large combined cell code is widened further down.
+    for axis, span_cells in (
+            ("x", (max(pa.xhi.max(), pb.xhi.max()) - x0) / cell),
+            ("y", (max(pa.yhi.max(), pb.yhi.max()) - y0) / cell),
+            ("t", (max(pa_t1_sweep.max(), pb.t1.max()) - tt0) / bucket)):
+        if not span_cells < float(1 << 62):
+            raise ValueError(f"conflicting_pairs: the extent along {axis} spans {span_cells:.3g} "
+                             f"broad-phase cells (cell_m={cell} m, bucket_s={bucket} s), more than "
+                             f"int64 cell indices hold; use a larger cell_m or bucket_s")
 
-    def ranges(p: _Pieces):
+    def ranges(p: _Pieces, t1=None):
+        t1 = p.t1 if t1 is None else t1
         ix0 = np.floor((p.xlo - x0) / cell).astype(np.int64)
         ix1 = np.floor((p.xhi - x0) / cell).astype(np.int64)
         iy0 = np.floor((p.ylo - y0) / cell).astype(np.int64)
         iy1 = np.floor((p.yhi - y0) / cell).astype(np.int64)
         it0 = np.floor((p.t0 - tt0) / bucket).astype(np.int64)
-        it1 = np.floor((p.t1 - tt0) / bucket).astype(np.int64)
+        it1 = np.floor((t1 - tt0) / bucket).astype(np.int64)
         return ix0, ix1, iy0, iy1, it0, it1
 
-    ra = ranges(pa)
+    ra = ranges(pa, pa_t1_sweep)
     rb = ra if single else ranges(pb)
     nx = int(max(ra[1].max(), rb[1].max())) + 1
     ny = int(max(ra[3].max(), rb[3].max())) + 1
 
+    nt = int(max(ra[5].max(), rb[5].max())) + 1
     n_items = na + (0 if single else pb.t0.shape[0])
     item_bits = max(int(n_items).bit_length(), 1)
-    max_code = ((int(max(ra[5].max(), rb[5].max())) + 1) * ny * nx) * 2
+    # Python ints: the code of the last cell must fit int64 before any int64 arithmetic.
+    max_code = (nt * ny * nx) * 2
     packed = max_code.bit_length() + item_bits <= 63
+    # Beyond int64 (e.g. 1e9 m and 1e12 s of extent) the single cell code would wrap around and
+    # pieces of different cells would share a key or pieces of one cell be split, silently
+    # missing conflicts; then cells are sorted by their (t, y, x) coordinates instead.
+    widened = max_code.bit_length() > 63
 
     def expand(r, side: int, offset: int):
         ix0, ix1, iy0, iy1, it0, it1 = r
@@ -354,8 +575,10 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
         it, iy = np.divmod(rest, cyi)
         iy += iy0[item]
         it += it0[item]
-        code = ((it * ny + iy) * nx + ix) * 2 + side
         item += offset
+        if widened:
+            return (it, iy, ix), item
+        code = ((it * ny + iy) * nx + ix) * 2 + side
         if packed:
             # one int64 holds (cell, side, item): a plain sort beats an argsort several-fold
             code <<= item_bits
@@ -368,21 +591,36 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
         codes, items = ka, ia
     else:
         kb, ib = expand(rb, 1, na)
-        codes = np.concatenate((ka, kb))
-        items = None if packed else np.concatenate((ia, ib))
+        if widened:
+            codes = tuple(np.concatenate((u, w)) for u, w in zip(ka, kb))
+            items = np.concatenate((ia, ib))
+        else:
+            codes = np.concatenate((ka, kb))
+            items = None if packed else np.concatenate((ia, ib))
     clock.append(time.perf_counter())
-    if packed:
-        codes.sort()
-        items = codes & ((1 << item_bits) - 1)
-        keys = codes >> item_bits
-    else:
-        order = np.argsort(codes)
-        keys = codes[order]
+    if widened:
+        it_, iy_, ix_ = codes
+        side_ = (items >= na).astype(np.int64) if not single else np.zeros_like(items)
+        order = np.lexsort((items, side_, ix_, iy_, it_))
+        kt, ky, kx = it_[order], iy_[order], ix_[order]
         items = items[order]
-    cell_key = keys >> 1
-    # cell coordinates of each sorted entry (for the canonical-cell test)
-    rest, kx = np.divmod(cell_key, nx)
-    kt, ky = np.divmod(rest, ny)
+        new_cell = np.ones(kt.shape[0], dtype=bool)
+        new_cell[1:] = (kt[1:] != kt[:-1]) | (ky[1:] != ky[:-1]) | (kx[1:] != kx[:-1])
+        cell_key = np.cumsum(new_cell) - 1          # dense cell ranks fit int64 always
+        keys = cell_key * 2 + side_[order]
+    else:
+        if packed:
+            codes.sort()
+            items = codes & ((1 << item_bits) - 1)
+            keys = codes >> item_bits
+        else:
+            order = np.argsort(codes)
+            keys = codes[order]
+            items = items[order]
+        cell_key = keys >> 1
+        # cell coordinates of each sorted entry (for the canonical-cell test)
+        rest, kx = np.divmod(cell_key, nx)
+        kt, ky = np.divmod(rest, ny)
     m = keys.shape[0]
     bounds = np.flatnonzero(np.diff(cell_key)) + 1
     g_start = np.concatenate(([0], bounds))
@@ -410,6 +648,7 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
     # Per-piece arrays of b indexed by global item id (b items are offset by na).
     if single:
         P_t0, P_t1, P_xlo, P_xhi, P_ylo, P_yhi = pa.t0, pa.t1, pa.xlo, pa.xhi, pa.ylo, pa.yhi
+        P_zlo, P_zhi = pa.zlo, pa.zhi
     else:
         P_t0 = np.concatenate((pa.t0, pb.t0))
         P_t1 = np.concatenate((pa.t1, pb.t1))
@@ -417,13 +656,18 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
         P_xhi = np.concatenate((pa.xhi, pb.xhi))
         P_ylo = np.concatenate((pa.ylo, pb.ylo))
         P_yhi = np.concatenate((pa.yhi, pb.yhi))
+        P_zlo = np.concatenate((pa.zlo, pb.zlo))
+        P_zhi = np.concatenate((pa.zhi, pb.zhi))
     P_p0 = pa.p0 if single else np.concatenate((pa.p0, pb.p0))
     P_traj = np.concatenate((sa.traj[pa.seg], sb.traj[pb.seg])) if not single else sa.traj[pa.seg]
     P_v = sa.v_mps[pa.seg] if single else np.concatenate((sa.v_mps[pa.seg], sb.v_mps[pb.seg]))
 
     # The same per-piece values in sorted-key order.
-    S_t0, S_t1 = P_t0[items], P_t1[items]
+    S_t0 = P_t0[items]
+    S_t1 = P_t1[items] if slack_traj is None else \
+        np.concatenate((pa_t1_sweep, pb.t1))[items]
     S_xlo, S_xhi, S_ylo, S_yhi = P_xlo[items], P_xhi[items], P_ylo[items], P_yhi[items]
+    S_zlo, S_zhi = P_zlo[items], P_zhi[items]
     S_traj = P_traj[items] if single else None
 
     clock.append(time.perf_counter())
@@ -456,6 +700,11 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
         # (on arrays in sorted-key order, so the gathers walk memory nearly sequentially).
         # Each keeps a pair only in its canonical cell (the one holding the low corner of the
         # intersection of the two boxes), so a pair sharing several cells is checked once.
+        # z is not in the keys: first drop pieces whose z ranges, inflated by half the vertical
+        # reach, do not overlap with positive length (a loss needs |dz| strictly below the
+        # reach); at flight levels this removes most pairs sharing a cell
+        ok = np.maximum(S_zlo[l], S_zlo[r]) < np.minimum(S_zhi[l], S_zhi[r])
+        l, r = l[ok], r[ok]
         lo = np.maximum(S_t0[l], S_t0[r])
         ok = lo <= np.minimum(S_t1[l], S_t1[r])
         ok &= np.floor((lo - tt0) / bucket).astype(np.int64) == kt[l]
@@ -472,13 +721,31 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
         n_exact += int(i.size)
         if i.size == 0:
             continue
-        d = segment_pair_min_distance(P_t0[i], P_t1[i], P_p0[i], P_v[i],
+        if slack_traj is None:
+            d = model.segment_measure(P_t0[i], P_t1[i], P_p0[i], P_v[i],
                                       P_t0[j], P_t1[j], P_p0[j], P_v[j])
-        lose = d < separation_m
-        if not lose.any():
-            continue
-        a_idx = P_traj[i[lose]]
-        b_idx = P_traj[j[lose]]
+            lose = d < separation_m
+            if not lose.any():
+                continue
+            a_idx = P_traj[i[lose]]
+            b_idx = P_traj[j[lose]]
+        else:
+            # one exact check per candidate (shift) of a's trajectory
+            ta = P_traj[i]
+            cnt = first[ta + 1] - first[ta]
+            cand = np.repeat(first[ta], cnt) + (np.arange(int(cnt.sum()), dtype=np.int64)
+                                                - np.repeat(np.cumsum(cnt) - cnt, cnt))
+            i = np.repeat(i, cnt)
+            j = np.repeat(j, cnt)
+            dt = shift[cand]
+            n_exact += int(i.size) - int(cnt.size)
+            d = model.segment_measure(P_t0[i] + dt, P_t1[i] + dt, P_p0[i], P_v[i],
+                                      P_t0[j], P_t1[j], P_p0[j], P_v[j])
+            lose = d < separation_m
+            if not lose.any():
+                continue
+            a_idx = cand[lose]
+            b_idx = P_traj[j[lose]]
         if single:
             a_idx, b_idx = np.minimum(a_idx, b_idx), np.maximum(a_idx, b_idx)
         out_pairs.append(np.stack((a_idx, b_idx), axis=1))
@@ -494,7 +761,8 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
     pairs = np.concatenate(out_pairs)
     dist = np.concatenate(out_dist)
     # Unique pairs with their minimum distance.
-    nbt = int(max(sa.n_trajectories, sb.n_trajectories)) + 1
+    nbt = int(max(sa.n_trajectories, sb.n_trajectories,
+                  0 if slack_traj is None else shift.shape[0])) + 1
     code = pairs[:, 0] * nbt + pairs[:, 1]
     order = np.lexsort((dist, code))
     code = code[order]

@@ -53,9 +53,21 @@ def _corridor_edges(xy: np.ndarray, spacing_m: float) -> np.ndarray:
     return np.unique(np.concatenate([keep, mst_edges]).astype(np.int64), axis=0)
 
 
+def pad_offsets_m(n_pads: int, spacing_m: float = 150.0) -> list[list[float]]:
+    """``n_pads`` pad offsets [m] (east, north) on a circle, neighbours ``spacing_m`` apart
+    (one pad: [[0, 0]]; four: a square of side ``spacing_m``)."""
+    if n_pads == 1:
+        return [[0.0, 0.0]]
+    radius = spacing_m / (2.0 * math.sin(math.pi / n_pads))
+    ang = 2.0 * math.pi * np.arange(n_pads) / n_pads + math.pi / 4.0
+    return [[float(radius * math.cos(a)), float(radius * math.sin(a))] for a in ang]
+
+
 def generate_network(n_nodes: int, n_aerodromes: int, seed: int, extent_m: float | None = None,
                      cruise_alt_m: float = 120.0, name: str | None = None,
-                     origin_lat_lon_alt=DEFAULT_ENU_ORIGIN) -> Network:
+                     origin_lat_lon_alt=DEFAULT_ENU_ORIGIN, levels_m=None,
+                     direction_rule: str = "semicircular", pads_per_vertiport: int = 1,
+                     pad_spacing_m: float = 150.0) -> Network:
     """Generate a random, connected, planar-ish corridor network.
 
     Args:
@@ -68,6 +80,12 @@ def generate_network(n_nodes: int, n_aerodromes: int, seed: int, extent_m: float
         cruise_alt_m: altitude of the corridor way points, metres.
         name: network name; default ``synthetic-n{n_nodes}-a{n_aerodromes}-s{seed}``.
         origin_lat_lon_alt: geodetic origin of the ENU frame (default central Singapore).
+        levels_m: cruise levels [m] (e.g. [60, 90, 120, 150]) for a layered network (vertiports
+            as terminals, see :class:`Network`); default None, the paper's single cruise
+            altitude.
+        direction_rule: the layered network's rule (``semicircular`` or ``none``).
+        pads_per_vertiport: pads per aerodrome (layered only), on a circle with neighbours
+            ``pad_spacing_m`` [m] apart (see :func:`pad_offsets_m`).
 
     Returns a :class:`Network` whose first ``n_aerodromes`` nodes are the aerodromes
     (ids ``A000``...) followed by the corridor way points (ids ``N0000``...). Corridor way points
@@ -84,6 +102,15 @@ def generate_network(n_nodes: int, n_aerodromes: int, seed: int, extent_m: float
     if n_nodes < n_aerodromes + 1:
         raise NetworkError(f"n_nodes: {n_nodes} must exceed n_aerodromes ({n_aerodromes}) by at "
                            f"least 1 corridor node")
+    if isinstance(pads_per_vertiport, bool) or not isinstance(pads_per_vertiport, (int, np.integer)) \
+            or pads_per_vertiport < 1:
+        raise NetworkError(f"pads_per_vertiport: {pads_per_vertiport!r} is not an integer >= 1")
+    if pads_per_vertiport > 1 and not levels_m:
+        raise NetworkError(f"pads_per_vertiport: {pads_per_vertiport} pads need levels_m "
+                           f"(a layered network)")
+    if not (isinstance(pad_spacing_m, (int, float)) and math.isfinite(pad_spacing_m)
+            and pad_spacing_m > 0):
+        raise NetworkError(f"pad_spacing_m: {pad_spacing_m!r} is not a positive finite number")
     if not (isinstance(cruise_alt_m, (int, float)) and math.isfinite(cruise_alt_m)
             and cruise_alt_m > 0):
         raise NetworkError(f"cruise_alt_m: {cruise_alt_m!r} is not a positive finite number")
@@ -121,8 +148,15 @@ def generate_network(n_nodes: int, n_aerodromes: int, seed: int, extent_m: float
     is_aerodrome[:n_aerodromes] = True
     edges = np.concatenate([access, corridor_edges])
     pairs = [(ids[u], ids[v]) for u, v in edges.tolist()]
-    return network_from_enu(name or f"synthetic-n{n_nodes}-a{n_aerodromes}-s{seed}", ids, enu,
-                            is_aerodrome, pairs, origin_lat_lon_alt=origin_lat_lon_alt)
+    airspace = pads = None
+    if levels_m:
+        airspace = {"levels_m": list(levels_m), "direction_rule": direction_rule}
+        offsets = pad_offsets_m(int(pads_per_vertiport), float(pad_spacing_m))
+        pads = {ids[i]: offsets for i in range(n_aerodromes)} if pads_per_vertiport > 1 else None
+    default = f"synthetic-n{n_nodes}-a{n_aerodromes}-s{seed}" + ("-layered" if levels_m else "")
+    return network_from_enu(name or default, ids, enu, is_aerodrome, pairs,
+                            origin_lat_lon_alt=origin_lat_lon_alt, airspace=airspace,
+                            pads_m=pads)
 
 
 def _benchmark(argv=None) -> int:

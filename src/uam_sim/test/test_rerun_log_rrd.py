@@ -161,3 +161,25 @@ def test_a_recording_becomes_an_rrd_with_the_view(tmp_path):
     for entity in ("/world/network/corridors", "/world/fleet", "/geo/fleet", "/metrics/approved_cumulative"):
         assert f"entity_path: {entity}" in text, entity
     assert main([str(tmp_path / "missing.mcap")]) == 1
+def test_levels_of_a_layered_network_are_drawn_in_their_colours():
+    from uam_sim.rerun_log import LEVEL_COLORS, flight_level_index
+
+    # hand-computed: climb from a 5 m pad to 90 m, cruise, descend: level 1 of (60, 90, 120)
+    route = [[0, 0, 5], [0, 0, 90], [1000, 0, 90], [2000, 0, 90], [2000, 0, 5]]
+    assert flight_level_index(route, (60.0, 90.0, 120.0)) == 1
+    assert flight_level_index(route, ()) == -1
+    logged = {}
+    fake_rr = NS(LineStrips3D=lambda strips, **kw: ("strips", [np.asarray(x) for x in strips], kw),
+                 Points3D=lambda *a, **kw: ("points", a, kw))
+    logger = RerunLogger("off")
+    logger._rr = fake_rr
+    logger._rec = NS(log=lambda entity, arch, static=False: logged.__setitem__(entity, arch),
+                     set_time=lambda *a, **kw: None)
+    net = tiny_network()
+    net.levels_m = (60.0, 90.0, 120.0)
+    logger.log_network(net)
+    _, strips, kw = logged["world/network/corridors"]
+    assert len(strips) == 3 * 2  # 2 corridors at each of 3 levels
+    assert sorted({float(s[0, 2]) for s in strips}) == [60.0, 90.0, 120.0]
+    assert all(s[0, 2] == s[1, 2] for s in strips)
+    assert tuple(kw["colors"][0]) == LEVEL_COLORS[0] and tuple(kw["colors"][-1]) == LEVEL_COLORS[2]

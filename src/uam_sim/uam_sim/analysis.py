@@ -20,6 +20,10 @@ approach over the common time of pairs of flights (piecewise-linear in 4D), with
 ``uam_planner.audit.pair_min_distance`` (a brute-force kernel separate from the planner's
 separation code); pairs are visited in order of a bounding-box lower bound so that far-apart
 pairs are skipped without changing the result (see :func:`uam_sim.audit.audit_trajectories`).
+The audit uses the run's separation model: the sphere of the paper or the cylinder (horizontal
+H while vertically closer than V), as recorded in the ``uam_airspace`` metadata record
+(:data:`uam_sim.audit.AIRSPACE_METADATA`; recordings without it: the sphere of 100 m), unless
+the caller names a model (``--separation``, ``--separation-m``, ``--vertical-separation-m``).
 
 It refuses to call a recording "OK" that lacks plans it should hold (:func:`integrity_problems`:
 reports announcing approvals whose plans are missing, vehicles flown without a plan, aircraft
@@ -48,7 +52,7 @@ from typing import Any, Iterable
 
 import numpy as np
 
-from .audit import SafetyAudit, _t, audit_plans
+from .audit import AIRSPACE_METADATA, SafetyAudit, _t, audit_plans, separation_from_metadata
 from .mcap_reader import is_complete, iter_decoded, read_metadata
 
 #: the MCAP metadata record the recorder node writes with its check of what it received
@@ -228,13 +232,14 @@ def integrity_problems(epochs: list, approved: list, flown_ids: set, max_active:
     return problems
 
 
-def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m: float = 100.0,
+def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=100.0,
                        path: str = "", reader: str = "", complete_file: bool = True) -> RunSummary:
     """The summary of a stream of (topic, log_time_ns, message), e.g. from :func:`iter_decoded`.
 
     Every distinct plan counts, whatever its id: identical repeats (a latched plan delivered
     twice) are counted once; an id decided more than one way is listed in
     ``conflicting_decisions`` and each of its approved plans is audited (labelled ``id#2``, ...).
+    ``separation_m``: the audit's separation model (a number: the sphere; or a SeparationModel).
     Complexity: linear in the messages, plus the audit (quadratic in overlapping flights).
     """
     request_ids: set[str] = set()
@@ -332,11 +337,19 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m: f
     )
 
 
-def summarize(path: str | Path, separation_m: float = 100.0, reader: str = "rclpy") -> RunSummary:
-    """Read a recording and return its :class:`RunSummary` (see the module docstring)."""
+def summarize(path: str | Path, separation_m=None, reader: str = "rclpy",
+              default_separation=100.0) -> RunSummary:
+    """Read a recording and return its :class:`RunSummary` (see the module docstring).
+
+    ``separation_m``: the audit's model (number = sphere, or a SeparationModel); None = the
+    run's own, from the recording's ``uam_airspace`` metadata, else ``default_separation``.
+    """
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"recording: no file at {path}")
+    if separation_m is None:
+        separation_m = separation_from_metadata(read_metadata(path, AIRSPACE_METADATA),
+                                                default_separation)
     summary = summarize_messages(iter_decoded(path, reader, ANALYSED_TOPICS, fleet_digest_only=True),
                                  separation_m, str(path), reader, is_complete(path))
     summary.recorder_check = read_metadata(path, RECORDER_CHECK)
@@ -393,7 +406,7 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
         verdict = (f"LOSS OF SEPARATION in {len(a.losses)} pair(s)" if not a.ok
                    else "OK" if s.verified else "NOT VERIFIED (the recording lacks plans it should hold)")
         lines.append(f"Safety audit     {verdict}: minimum separation {dist}, required "
-                     f"{a.separation_m:.0f} m, {a.pairs_checked} overlapping pairs checked")
+                     f"{a.describe_minimum()}, {a.pairs_checked} overlapping pairs checked")
         for rid_a, rid_b, d, t in a.losses[:20]:
             lines.append(f"    {rid_a} / {rid_b}: {d:.1f} m at t = {t:.1f} s")
     for problem in s.problems:
@@ -412,13 +425,33 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
     return "\n".join(lines)
 
 
+def _separation_from_flags(args):
+    """The model the flags name (their unset parts from the recording), or None (the run's)."""
+    if args.separation is None and args.separation_m is None and args.vertical_separation_m is None:
+        return None
+    from uam_planner.separation import DEFAULT_VERTICAL_SEPARATION_M, SeparationModel
+
+    recorded = separation_from_metadata(read_metadata(args.recording, AIRSPACE_METADATA)) \
+        if Path(args.recording).is_file() else separation_from_metadata({})
+    kind = args.separation or recorded.kind
+    h = args.separation_m if args.separation_m is not None else recorded.separation_m
+    v = args.vertical_separation_m if args.vertical_separation_m is not None else (
+        recorded.vertical_separation_m if recorded.kind == "cylinder" else DEFAULT_VERTICAL_SEPARATION_M)
+    return SeparationModel(kind, float(h), float(v))
+
+
 def main(argv: list[str] | None = None) -> int:
     """Command line: print the summary of a recording (exit 2 if the audit finds a loss, 3 if the
     recording lacks plans it should hold, so its audit cannot be trusted)."""
     ap = argparse.ArgumentParser(prog="analyze", description=__doc__.split("\n\n")[0])
     ap.add_argument("recording", help="the .mcap file of a run")
-    ap.add_argument("--separation-m", type=float, default=100.0,
-                    help="separation minimum for the safety audit [m] (default 100)")
+    ap.add_argument("--separation", choices=("sphere", "cylinder"), default=None,
+                    help="separation model of the audit (default: the run's, from the recording's "
+                         "uam_airspace metadata; recordings without it: sphere)")
+    ap.add_argument("--separation-m", type=float, default=None,
+                    help="separation minimum (the cylinder's horizontal H) [m] (default: the run's, else 100)")
+    ap.add_argument("--vertical-separation-m", type=float, default=None,
+                    help="the cylinder's vertical minimum V [m] (default: the run's, else 30)")
     ap.add_argument("--reader", choices=("rclpy", "rosbags"), default="rclpy",
                     help="decoder: rclpy (default, tolerates torn files) or rosbags (independent)")
     ap.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -426,7 +459,8 @@ def main(argv: list[str] | None = None) -> int:
     # ros2 run appends --ros-args ...; ignore it
     args, _unknown = ap.parse_known_args(argv)
     try:
-        summary = summarize(args.recording, args.separation_m, args.reader)
+        separation = _separation_from_flags(args)
+        summary = summarize(args.recording, separation, args.reader)
     except (FileNotFoundError, ValueError) as exc:
         print(f"analyze: {exc}", file=sys.stderr)
         return 1

@@ -9,6 +9,13 @@ Two implementations, both independent of the planner's separation code:
   by :mod:`uam_sim.scenario`, where runs have hundreds of long flights).
 
 Tests hold both equal to the brute force ``uam_planner.audit.audit_flights``.
+
+Both audit in the run's separation model: ``separation_m`` is a number (the paper's sphere of
+that radius) or a ``uam_planner.separation.SeparationModel`` (the cylinder: horizontal distance
+below H while the vertical distance is below V; distances reported are then horizontal). A
+distance within 1e-9 of the minimum below it is an exact tie rounded (e.g. two departures two
+5 s slots apart on one route trail each other by exactly 100 m), not a loss, as in
+``uam_planner.audit``.
 """
 
 from __future__ import annotations
@@ -18,6 +25,50 @@ from dataclasses import dataclass
 from typing import Any, Sequence
 
 import numpy as np
+
+# as uam_planner.audit: a distance this close (relative) below the minimum is a rounded exact tie
+TIE_RELATIVE = 1e-9
+
+
+def _model(separation):
+    from uam_planner.separation import as_separation_model
+    return as_separation_model(separation)
+
+
+#: the MCAP metadata record that says which airspace a run was planned in (the recorder writes
+#: it from its parameters, run_fleet.sh giving it the planner's values); the analysis audits in it
+AIRSPACE_METADATA = "uam_airspace"
+
+
+def airspace_metadata(separation_model: str = "sphere", separation_m: float = 100.0,
+                      vertical_separation_m: float = 30.0, departure_slot_s: float = 0.0) -> dict:
+    """The ``uam_airspace`` metadata of a run (strings, as MCAP metadata holds them); the
+    values are checked as the planner checks them (ValueError naming the field)."""
+    from uam_planner.separation import SeparationModel
+
+    SeparationModel(separation_model, float(separation_m), float(vertical_separation_m))
+    if not math.isfinite(float(departure_slot_s)) or float(departure_slot_s) < 0:
+        raise ValueError(f"departure_slot_s must be finite and >= 0, got {departure_slot_s!r}")
+    return {"separation_model": str(separation_model), "separation_m": repr(float(separation_m)),
+            "vertical_separation_m": repr(float(vertical_separation_m)),
+            "departure_slot_s": repr(float(departure_slot_s))}
+
+
+def separation_from_metadata(meta: dict, default=100.0):
+    """The SeparationModel recorded in a ``uam_airspace`` metadata record, or ``default`` (a
+    number = the sphere, or a model) when the record is absent (recordings made before it).
+    A malformed record raises ValueError naming the field."""
+    from uam_planner.separation import SeparationModel
+
+    if not meta:
+        return _model(default)
+    try:
+        kind = meta["separation_model"]
+        h = float(meta["separation_m"])
+        v = float(meta.get("vertical_separation_m", "30.0"))
+    except (KeyError, ValueError) as exc:
+        raise ValueError(f"recording metadata {AIRSPACE_METADATA}: {exc!r} in {meta!r}") from None
+    return SeparationModel(kind, h, v)
 
 
 def _t(stamp: Any) -> float:
@@ -33,7 +84,17 @@ class SafetyAudit:
     min_separation_m: float          # inf when no two flights are ever airborne together
     closest_pair: list | None        # [request_id, request_id] at the minimum
     losses: list                     # [request_id, request_id, distance_m, t_s] below separation_m, by time
-    pairs_checked: int               # pairs whose closest approach was computed exactly
+    pairs_checked: int               # pairs whose closest approach was computed exactly (cylinder:
+                                     # plus pairs proven V or more apart vertically by their boxes)
+    separation_model: str = "sphere"  # 'sphere' (3D distances) or 'cylinder' (horizontal distances)
+    vertical_separation_m: float = 0.0  # the cylinder's V [m]; 0 for the sphere
+
+    def describe_minimum(self) -> str:
+        """The required minimum in words, e.g. '100 m' or '100 m horizontal within 30 m vertical'."""
+        if self.separation_model == "cylinder":
+            return (f"{self.separation_m:.0f} m horizontal within {self.vertical_separation_m:.0f} m "
+                    "vertical (cylinder)")
+        return f"{self.separation_m:.0f} m"
 
     @property
     def ok(self) -> bool:
@@ -49,7 +110,7 @@ def trajectory_of(plan: Any) -> tuple[np.ndarray, np.ndarray]:
 
 
 def audit_trajectories(flights: list[tuple[np.ndarray, np.ndarray]], labels: list[str],
-                       separation_m: float = 100.0) -> SafetyAudit:
+                       separation_m=100.0) -> SafetyAudit:
     """Exact minimum separation and every loss of separation among piecewise-linear 4D flights.
 
     ``flights``: (times_s (p,), points_m (p, 3)) per flight, times increasing. The exact closest
@@ -60,12 +121,23 @@ def audit_trajectories(flights: list[tuple[np.ndarray, np.ndarray]], labels: lis
     minimum and the smallest distance found: every loss and the true minimum are still found,
     because no skipped pair can be closer than its bound. Complexity O(F^2) for the bounds (numpy)
     plus O(s_a + s_b) per evaluated pair.
+
+    ``separation_m``: a number (sphere) or a SeparationModel. For the cylinder the bound is the
+    horizontal gap of the boxes, pairs whose boxes are V or more apart vertically are never
+    vertically close (checked by that bound alone: counted in ``pairs_checked``, no distance),
+    and distances are horizontal while vertically closer than V.
     """
     from uam_planner.audit import pair_min_distance
 
+    model = _model(separation_m)
+    separation_m = model.separation_m
+    cylinder = model.kind == "cylinder"
+    vertical_m = model.vertical_separation_m if cylinder else None
+    kind = dict(separation_model=model.kind,
+                vertical_separation_m=float(model.vertical_separation_m) if cylinder else 0.0)
     n = len(flights)
     if n < 2:
-        return SafetyAudit(float(separation_m), math.inf, None, [], 0)
+        return SafetyAudit(float(separation_m), math.inf, None, [], 0, **kind)
     t0 = np.array([f[0][0] for f in flights])
     t1 = np.array([f[0][-1] for f in flights])
     lo = np.array([f[1].min(axis=0) for f in flights])
@@ -74,32 +146,39 @@ def audit_trajectories(flights: list[tuple[np.ndarray, np.ndarray]], labels: lis
     together = (t0[iu] <= t1[ju]) & (t0[ju] <= t1[iu])
     iu, ju = iu[together], ju[together]
     gap = np.maximum(0.0, np.maximum(lo[iu] - hi[ju], lo[ju] - hi[iu]))  # per axis, (k, 3)
+    checked = 0
+    if cylinder:
+        # boxes V or more apart vertically: never vertically within V, so no distance counts;
+        # such a pair is checked by that bound alone (counted as checked)
+        close = gap[:, 2] < vertical_m
+        checked = int((~close).sum())
+        iu, ju, gap = iu[close], ju[close], gap[close, :2]
     bound = np.sqrt((gap * gap).sum(axis=1))
     order = np.argsort(bound, kind="stable")
     # plain Python floats for the pure-Python kernel (converting numpy scalars per pair is slow)
     plain = [([float(t) for t in times], [tuple(map(float, p)) for p in points]) for times, points in flights]
-    best, best_pair, losses, checked = math.inf, None, [], 0
+    best, best_pair, losses = math.inf, None, []
     for k in order:
         if bound[k] >= separation_m and bound[k] >= best:
             break
         i, j = int(iu[k]), int(ju[k])
-        d, t = pair_min_distance(plain[i], plain[j])
+        d, t = pair_min_distance(plain[i], plain[j], vertical_m)
         checked += 1
         if d < best:
             best, best_pair = d, [labels[i], labels[j]]
-        if d < separation_m:
+        if d < separation_m * (1.0 - TIE_RELATIVE):
             losses.append([labels[i], labels[j], float(d), float(t)])
     losses.sort(key=lambda x: (x[3], x[0], x[1]))
     return SafetyAudit(separation_m=float(separation_m), min_separation_m=float(best),
-                       closest_pair=best_pair, losses=losses, pairs_checked=checked)
+                       closest_pair=best_pair, losses=losses, pairs_checked=checked, **kind)
 
 
-def audit_plans(plans: list[Any], separation_m: float = 100.0,
+def audit_plans(plans: list[Any], separation_m=100.0,
                 labels: Sequence[str] | None = None) -> SafetyAudit:
     """Exact minimum separation between every pair of approved plans (see :func:`audit_trajectories`).
 
     ``labels`` name the plans in the result (default: their request ids; give distinct labels
-    when two plans share an id).
+    when two plans share an id). ``separation_m``: a number (sphere) or a SeparationModel.
     """
     names = [str(p.request_id) for p in plans] if labels is None else list(labels)
     flights, kept = [], []
@@ -114,7 +193,7 @@ def audit_plans(plans: list[Any], separation_m: float = 100.0,
     return audit_trajectories(flights, kept, separation_m)
 
 
-def sweep_audit(trajectories: Sequence, separation_m: float, labels: Sequence | None = None,
+def sweep_audit(trajectories: Sequence, separation_m, labels: Sequence | None = None,
                 chunk_pairs: int = 2_000_000, max_listed: int = 20) -> dict:
     """Exact minimum separation over every pair of flights, by a time sweep over segments.
 
@@ -128,7 +207,10 @@ def sweep_audit(trajectories: Sequence, separation_m: float, labels: Sequence | 
 
     Args:
         trajectories: objects with ``times_s`` (p,) and ``points_m`` (p, 3).
-        separation_m: a loss is a distance strictly below it.
+        separation_m: a number (the sphere: a loss is a 3D distance strictly below it, ties
+            within 1e-9 excepted) or a SeparationModel; the cylinder is audited by
+            ``uam_planner.audit.sweep_audit`` (the same time sweep with the window where
+            |dz| < V), converted to this function's result.
         labels: names for the pairs (default: indices).
     Returns: {"min_separation_m" (None if no two flights share time), "pair_of_min", "losses"
     (count of flight pairs with a loss), "loss_pairs" (up to max_listed, closest first: label,
@@ -137,6 +219,10 @@ def sweep_audit(trajectories: Sequence, separation_m: float, labels: Sequence | 
     Complexity: O(S log S + P) for S segments and P time-overlapping segment pairs.
     """
     labels = list(labels) if labels is not None else list(range(len(trajectories)))
+    model = _model(separation_m)
+    if model.kind != "sphere":
+        return _sweep_audit_model(trajectories, model, labels, max_listed)
+    separation_m = model.separation_m
     t0s, t1s, p0s, vs, fl = [], [], [], [], []
     for k, tr in enumerate(trajectories):
         t = np.asarray(tr.times_s, dtype=np.float64)
@@ -189,7 +275,7 @@ def sweep_audit(trajectories: Sequence, separation_m: float, labels: Sequence | 
         k = int(np.argmin(d))
         if d[k] < best:
             best, best_pair, best_t = float(d[k]), (labels[a[k]], labels[b[k]]), float(lo[k] + tau[k])
-        for x in np.flatnonzero(d < separation_m).tolist():
+        for x in np.flatnonzero(d < separation_m * (1.0 - TIE_RELATIVE)).tolist():
             key = (int(a[x]), int(b[x]))
             if key not in loss or d[x] < loss[key][0]:
                 loss[key] = (float(d[x]), float(lo[x] + tau[x]))
@@ -200,3 +286,20 @@ def sweep_audit(trajectories: Sequence, separation_m: float, labels: Sequence | 
     return {"min_separation_m": best, "pair_of_min": list(best_pair), "min_time_s": best_t,
             "losses": len(loss), "loss_pairs": loss_pairs[:max_listed], "pairs_checked": len(flight_pairs),
             "segment_pairs": n_seg_pairs}
+
+
+def _sweep_audit_model(trajectories: Sequence, model, labels: list, max_listed: int) -> dict:
+    """:func:`sweep_audit`'s result for a non-sphere model, by ``uam_planner.audit.sweep_audit``."""
+    from uam_planner.audit import sweep_audit as planner_sweep
+
+    res = planner_sweep(list(trajectories), model, labels=labels)
+    if res.pairs_checked == 0:
+        return {"min_separation_m": None, "pair_of_min": None, "losses": 0, "loss_pairs": [],
+                "pairs_checked": 0, "segment_pairs": 0, "separation_model": model.kind}
+    loss_pairs = sorted(([a, b, float(d), float(t)] for a, b, d, t in res.losses), key=lambda x: x[2])
+    best = res.min_separation_m
+    return {"min_separation_m": float(best) if math.isfinite(best) else None,
+            "pair_of_min": list(res.pair_of_min) if res.pair_of_min else None,
+            "losses": len(res.losses), "loss_pairs": loss_pairs[:max_listed],
+            "pairs_checked": res.pairs_checked, "separation_model": model.kind,
+            "vertical_separation_m": float(model.vertical_separation_m)}

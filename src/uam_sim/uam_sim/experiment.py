@@ -90,6 +90,16 @@ def build_parser() -> argparse.ArgumentParser:
                    "processes) or an address tcp://HOST:8786 (see README, 'Beyond one machine')")
     p.add_argument("--out", help="output directory")
     p.add_argument("--demand", dest="demand_file", help="replay a demand file instead")
+    p.add_argument("--separation", dest="separation_model", choices=("sphere", "cylinder"),
+                   help="separation model: the paper's sphere (default) or the cylinder")
+    p.add_argument("--vertical-separation-m", type=float, dest="vertical_separation_m",
+                   help="the cylinder's vertical minimum [m] (default 30)")
+    p.add_argument("--slot-s", type=float, dest="departure_slot_s",
+                   help="departure slot [s] inside the epoch; 0 = the paper's rule (default)")
+    p.add_argument("--climb-rate", type=float, dest="climb_rate_mps",
+                   help="climb rate at vertiports of a layered network [m/s] (default 5)")
+    p.add_argument("--descent-rate", type=float, dest="descent_rate_mps",
+                   help="descent rate at vertiports of a layered network [m/s] (default 3)")
     p.add_argument("--tts-reads", type=int, help="reads per annealing run in the TTS study")
     p.add_argument("--tts-instances", type=int, help="instances in the TTS study")
     p.add_argument("--no-tts", action="store_true", help="skip the TTS study")
@@ -106,7 +116,9 @@ def main(argv: list | None = None) -> int:
     args = build_parser().parse_args(argv)
     over = {k: getattr(args, k) for k in ("network", "rates", "methods", "seeds", "duration_s",
                                           "time_limit_s", "workers", "out", "demand_file",
-                                          "scheduler")}
+                                          "scheduler",
+                                          "separation_model", "vertical_separation_m",
+                                          "departure_slot_s", "climb_rate_mps", "descent_rate_mps")}
     try:
         base = yaml.safe_load(Path(args.config).read_text()) if args.config else {}
         base = base or {}

@@ -10,7 +10,7 @@ from typing import Any
 
 import yaml
 
-from uam_planner.planning import PlanningConfig
+from uam_planner.planning import AirspaceConfig, PlanningConfig
 
 DEFAULT_METHODS = ("fifo", "firstfit", "greedy", "exact", "sa", "tabu", "qpu-emulator")
 # methods that are planner policies, not MWIS backends (firstfit: uam_planner.first_fit)
@@ -33,8 +33,10 @@ class ExperimentConfig:
     """Every parameter of a sweep (paper defaults). Times in seconds, distances in metres.
 
     Attributes:
-        network: path of a network file, or {"synthetic": {n_nodes, n_aerodromes, seed}}.
-        methods: "fifo" (shortest FIFO), "firstfit" (first conflict-free candidate in arrival
+        network: path of a network file (e.g. config/networks/singapore-layered.yaml), or
+            {"synthetic": {n_nodes, n_aerodromes, seed, ...}} with any argument of
+            ``uam_planner.synthetic.generate_network`` (levels_m, pads_per_vertiport, ...).
+                methods: "fifo" (shortest FIFO), "firstfit" (first conflict-free candidate in arrival
             order) or an MWIS backend name per entry.
         include_qpu: add the "qpu" backend when it is available (a D-Wave token is configured).
         rates: requests per interval (the swept variable).
@@ -42,6 +44,9 @@ class ExperimentConfig:
         duration_s: simulated time per run; epochs at 0, epoch_s, ... < duration_s.
         epoch_s, interval_s, window_s: planning epoch, demand interval, departure window.
         separation_m, k, penalty_factor, speed_mps: planning parameters.
+        separation_model, vertical_separation_m, departure_slot_s, climb_rate_mps,
+            descent_rate_mps: the airspace mode (``uam_planner.planning.AirspaceConfig``; the
+            defaults are the paper's model: sphere, departure at the epoch time).
         time_limit_s: MWIS time budget per epoch.
         solver_options: backend name -> options mapping passed to uam_solvers.solve.
         demand_file: optional demand file replayed instead of random demand (rates then only label
@@ -77,6 +82,11 @@ class ExperimentConfig:
     k: int = 5
     penalty_factor: float = 5.0
     speed_mps: float = 10.0
+    separation_model: str = "sphere"
+    vertical_separation_m: float = AirspaceConfig.vertical_separation_m
+    departure_slot_s: float = 0.0
+    climb_rate_mps: float = AirspaceConfig.climb_rate_mps
+    descent_rate_mps: float = AirspaceConfig.descent_rate_mps
     time_limit_s: float = 10.0
     solver_options: dict = field(default_factory=dict)
     demand_file: str | None = None
@@ -93,10 +103,28 @@ class ExperimentConfig:
         "backends": ["exact", "greedy", "sa", "tabu", "qpu-emulator"], "p": 0.99, "seed": 0,
         "time_limit_s": 10.0})
 
+    def airspace(self) -> AirspaceConfig:
+        """The AirspaceConfig of these parameters (raises ValueError naming a bad field)."""
+        return AirspaceConfig(separation_model=self.separation_model,
+                              vertical_separation_m=self.vertical_separation_m,
+                              departure_slot_s=self.departure_slot_s,
+                              climb_rate_mps=self.climb_rate_mps,
+                              descent_rate_mps=self.descent_rate_mps)
+
+    @property
+    def paper_airspace(self) -> bool:
+        """True for the paper's airspace model (sphere, departure at the epoch time)."""
+        return self.airspace() == AirspaceConfig()
+
+    def separation(self):
+        """The run's SeparationModel (what the planner keeps and the audit checks)."""
+        return self.planning_config("greedy", 0).separation
+
     def planning_config(self, backend: str, seed: int) -> PlanningConfig:
         return PlanningConfig(epoch_s=self.epoch_s, separation_m=self.separation_m, k=self.k,
                               penalty_factor=self.penalty_factor, speed_mps=self.speed_mps,
-                              backend=backend, time_limit_s=self.time_limit_s, seed=int(seed))
+                              backend=backend, time_limit_s=self.time_limit_s, seed=int(seed),
+                              airspace=self.airspace())
 
 
 def _num_list(name: str, value, cast=float) -> list:
@@ -174,7 +202,10 @@ def make_config(data: dict | None = None, **overrides) -> ExperimentConfig:
         cfg.cumulative_rates = [rate_label(r) for r in _num_list("cumulative_rates", cfg.cumulative_rates)]
     if not isinstance(cfg.solver_options, dict):
         raise ExperimentError(f"solver_options: {cfg.solver_options!r} must be a mapping")
-    cfg.planning_config("greedy", 0)  # validates k, penalty_factor
+    try:
+        cfg.planning_config("greedy", 0)  # validates k, penalty_factor and the airspace
+    except ValueError as exc:
+        raise ExperimentError(str(exc).replace("AirspaceConfig.", "").replace("PlanningConfig.", "")) from None
     return cfg
 
 

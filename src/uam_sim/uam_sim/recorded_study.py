@@ -76,7 +76,7 @@ def study_from_mcaps(paths: Sequence[str], cfg: ExperimentConfig, figures: bool 
     t0 = time.perf_counter()
     cells = []
     for i, p in enumerate(paths):
-        summary = summarize(p, separation_m=cfg.separation_m)
+        summary = summarize(p, None, default_separation=cfg.separation())  # the run's own model when recorded
         inst = [x for x in instances_from_mcap(p) if x.n <= cfg.corpus_max_vertices]
         cells.append(cell_from_summary(summary, inst, label=Path(p).stem, seed=i,
                                        interval_s=cfg.interval_s))

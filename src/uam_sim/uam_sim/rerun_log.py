@@ -102,6 +102,15 @@ def level_colors(levels: np.ndarray) -> np.ndarray:
     return palette[np.asarray(levels, dtype=np.int64) % len(palette)]
 
 
+def flight_level_index(points_m: Any, levels_m: Sequence[float]) -> int:
+    """Index of the cruise level of a flight on a layered network (the level nearest its highest
+    waypoint: flights climb to one level and keep it to the descent); -1 without levels."""
+    pts = np.asarray(points_m, dtype=np.float64).reshape(-1, 3)
+    if not len(levels_m) or not len(pts):
+        return -1
+    return int(np.argmin(np.abs(np.asarray(levels_m, dtype=np.float64) - pts[:, 2].max())))
+
+
 def _node_labels(network: Any) -> list[str]:
     ids = list(network.node_ids)
     names = list(getattr(network, "names", None) or ids)
@@ -251,8 +260,15 @@ class RerunLogger:
         edges = np.asarray(network.edges, dtype=np.int64).reshape(-1, 2)
         strips = enu[edges] if len(edges) else np.zeros((0, 2, 3))
         colors = level_colors(corridor_levels(network))
+        levels_m = tuple(float(z) for z in (getattr(network, "levels_m", None) or ()))
+        if levels_m and len(strips):  # layered network: every corridor at every flight level
+            world_strips = np.concatenate([np.concatenate([s[..., :2], np.full(s.shape[:-1] + (1,), z)], axis=-1)
+                                           for s, z in ((strips, z) for z in levels_m)])
+            world_colors = np.repeat(level_colors(np.arange(len(levels_m))), len(strips), axis=0)
+        else:
+            world_strips, world_colors = strips, colors
         self._rec.log("world/network/corridors",
-                      rr.LineStrips3D(list(strips), colors=colors, radii=_ui(CORRIDOR_RADIUS_UI)),
+                      rr.LineStrips3D(list(world_strips), colors=world_colors, radii=_ui(CORRIDOR_RADIUS_UI)),
                       static=True)
         is_aero = np.asarray(network.is_aerodrome, dtype=bool)
         all_labels = _node_labels(network)

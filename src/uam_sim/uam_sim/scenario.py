@@ -156,6 +156,7 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
                             "departure_s": f.departure_s, "arrival_s": f.arrival_s,
                             "length_m": f.length_m, "weight": f.weight,
                             "candidate_index": int(f.candidate_index),
+                            "route_index": int(f.route_index), "level_m": float(f.level_m),
                             "route": " ".join(f.route_node_ids), "_traj": f.trajectory})
         epochs.append({"epoch": e, "t_s": t, "requests_cum": n_requests, "pending": rep.pending,
                        "eligible": rep.eligible, "candidates": rep.candidates,
@@ -174,7 +175,8 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
 
     audit = {}
     if cfg.audit:
-        audit = sweep_audit([f["_traj"] for f in flights], cfg.separation_m,
+        # in the run's separation model (the paper's sphere, or the cylinder)
+        audit = sweep_audit([f["_traj"] for f in flights], cfg.separation(),
                             labels=[f["request_id"] for f in flights])
     for f in flights:
         del f["_traj"]

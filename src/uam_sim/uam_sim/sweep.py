@@ -26,6 +26,10 @@ def cell_params(cfg: ExperimentConfig, method: str, rate, seed: int) -> dict:
     for name in ("duration_s", "epoch_s", "interval_s", "window_s", "separation_m", "k",
                  "penalty_factor", "speed_mps", "corpus_max_vertices", "audit"):
         params[name] = getattr(cfg, name)
+    if not cfg.paper_airspace:  # paper-mode cells keep the keys they had before airspace modes
+        for name in ("separation_model", "vertical_separation_m", "departure_slot_s",
+                     "climb_rate_mps", "descent_rate_mps"):
+            params[name] = getattr(cfg, name)
     if method not in BASELINES:
         params["time_limit_s"] = cfg.time_limit_s
         params["solver_options"] = cfg.solver_options.get(method) or {}

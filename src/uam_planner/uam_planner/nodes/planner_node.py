@@ -48,7 +48,7 @@ from uam_bringup import qos, wire
 from uam_bringup.params import PLANNER, declare_table
 from uam_bringup.runtime import run_node
 from uam_planner.network import load_network
-from uam_planner.planning import Planner, PlanningConfig, call_solver, default_solve_mwis
+from uam_planner.planning import AirspaceConfig, Planner, PlanningConfig, call_solver, default_solve_mwis
 
 
 class PlannerNode(Node):
@@ -65,7 +65,10 @@ class PlannerNode(Node):
         config = PlanningConfig(
             separation_m=self.p["separation_m"], k=self.p["k"], penalty_factor=self.p["penalty_factor"],
             speed_mps=self.p["speed_mps"], backend=self.p["backend"], time_limit_s=self.p["time_limit_s"],
-            seed=self.p["seed"], precompute_routes=self.p["precompute_routes"])
+            seed=self.p["seed"], precompute_routes=self.p["precompute_routes"],
+            airspace=AirspaceConfig(**{f: self.p[f] for f in (
+                "separation_model", "vertical_separation_m", "departure_slot_s", "climb_rate_mps",
+                "descent_rate_mps")}))
         self.policy = self.p["policy"]
         self.planner = Planner(self.network, config, self.policy)
 
@@ -98,8 +101,9 @@ class PlannerNode(Node):
         self.finished = False
         self.get_logger().info(
             f"planner: network {self.network.name!r} ({len(self.network.node_ids)} nodes, "
-            f"{len(self.network.aerodrome_ids)} aerodromes), policy {self.policy}, backend {self.config.backend}, "
-            f"seed {self.config.seed}")
+            f"{len(self.network.aerodrome_ids)} aerodromes{', layered' if self.network.layered else ''}), "
+            f"policy {self.policy}, backend {self.config.backend}, seed {self.config.seed}, separation "
+            f"{self.config.separation.kind}, departure slot {self.config.airspace.departure_slot_s:g} s")
 
     @property
     def config(self) -> PlanningConfig:

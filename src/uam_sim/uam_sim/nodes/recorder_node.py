@@ -54,6 +54,7 @@ from rclpy.serialization import deserialize_message
 from uam_msgs.msg import FlightPlan
 
 from uam_sim.analysis import request_key
+from uam_sim.audit import AIRSPACE_METADATA, airspace_metadata
 from uam_sim.cdr import fleet_state_digest, leading_stamp_ns
 from uam_sim.mcap_schema import message_class
 from uam_sim.mcap_writer import McapRecorder
@@ -151,7 +152,19 @@ class RecorderNode(Node):
         self.declare_parameter("foxglove_port", 0, ParameterDescriptor(
             description="serve a live Foxglove WebSocket view on this port (0 = off; 8765 is "
                         "Foxglove's default)", integer_range=[IntegerRange(from_value=0, to_value=65535)]))
+        # the airspace the run is planned in (run_fleet.sh passes the planner's values), written to
+        # the MCAP's uam_airspace metadata so that the analysis audits in the run's model
+        self.declare_parameter("separation_model", "sphere", ParameterDescriptor(
+            read_only=True, description="the run's separation model, 'sphere' or 'cylinder' (as the planner's)"))
+        self.declare_parameter("separation_m", 100.0, ParameterDescriptor(
+            read_only=True, dynamic_typing=True, description="the run's separation minimum (cylinder: H) [m]"))
+        self.declare_parameter("vertical_separation_m", 30.0, ParameterDescriptor(
+            read_only=True, dynamic_typing=True, description="the run's vertical minimum V of the cylinder [m]"))
+        self.declare_parameter("departure_slot_s", 0.0, ParameterDescriptor(
+            read_only=True, dynamic_typing=True, description="the run's departure slot [s] (0 = the paper's rule)"))
         g = self.get_parameter
+        airspace = airspace_metadata(str(g("separation_model").value), float(g("separation_m").value),
+                                     float(g("vertical_separation_m").value), float(g("departure_slot_s").value))
         output = str(g("output").value)
         if not output.endswith(".mcap"):
             raise ValueError(f"parameter output: {output!r} must end with .mcap")
@@ -177,6 +190,7 @@ class RecorderNode(Node):
         self.views = None
         self.foxglove = None
         self.rerun = None
+        self.recorder.add_metadata(AIRSPACE_METADATA, airspace)
         try:
             self.rerun = RerunLogger(rerun_mode, rrd, network=network,
                                      connect_url=str(g("rerun_url").value) or None)
