@@ -170,7 +170,8 @@ def test_levels_of_a_layered_network_are_drawn_in_their_colours():
     assert flight_level_index(route, ()) == -1
     logged = {}
     fake_rr = NS(LineStrips3D=lambda strips, **kw: ("strips", [np.asarray(x) for x in strips], kw),
-                 Points3D=lambda *a, **kw: ("points", a, kw))
+                 Points3D=lambda *a, **kw: ("points", a, kw),
+                 GeoLineStrings=lambda **kw: ("geo-strips", kw), GeoPoints=lambda *a, **kw: ("geo-points", a, kw))
     logger = RerunLogger("off")
     logger._rr = fake_rr
     logger._rec = NS(log=lambda entity, arch, static=False: logged.__setitem__(entity, arch),
