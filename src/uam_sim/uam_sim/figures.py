@@ -36,6 +36,15 @@ STYLE = {"fifo": ("o", "-", "tab:blue"), "firstfit": ("s", "--", "tab:orange"),
          "kamis": ("<", "--", "tab:olive"), "chils": (">", ":", "tab:cyan")}
 
 
+def _finish_panels(fig, axes, ylabel: str, path) -> None:
+    """Shared end of the per-rate panel figures: y label on the first panel, legend on the last, save."""
+    axes[0][0].set_ylabel(ylabel)
+    axes[0][-1].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def style(m: str, i: int = 0) -> dict:
     """matplotlib keyword arguments (marker, linestyle, colour) of a method."""
     mk, ls, col = STYLE.get(m, ("o", "-", f"C{i % 10}"))
@@ -106,11 +115,7 @@ def cumulative_figure(cells, path: Path, rates_shown=None) -> dict:
         ax.set_title(f"{rate} requests / interval")
         ax.set_xlabel("simulation time [s]")
         ax.grid(alpha=0.3)
-    axes[0][0].set_ylabel("cumulative approved flights")
-    axes[0][-1].legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _finish_panels(fig, axes, "cumulative approved flights", path)
     return {"path": str(path), "table": table}
 
 
@@ -228,11 +233,7 @@ def active_over_time_figure(cells, path: Path, rates_shown=None) -> dict:
         ax.set_title(f"{rate} requests / interval")
         ax.set_xlabel("simulation time [s]")
         ax.grid(alpha=0.3)
-    axes[0][0].set_ylabel("aircraft in the air (mean over seeds)")
-    axes[0][-1].legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _finish_panels(fig, axes, "aircraft in the air (mean over seeds)", path)
     return {"path": str(path), "table": table}
 
 
