@@ -62,8 +62,6 @@ def test_sweep_uses_the_cluster_when_asked_and_config_is_checked(tmp_path):
     assert [strip_timing(c) for c in local.cells] == [strip_timing(c) for c in serial.cells]
     with pytest.raises(ExperimentError, match="scheduler: 'host:8786'"):
         small(tmp_path, scheduler="host:8786")
-    with pytest.raises(ExperimentError, match="airspace_mode: 'slots' is not available"):
-        small(tmp_path, airspace_mode="slots")
     with pytest.raises(ExperimentError, match="airspace_mode: 'fast' is not one of"):
         small(tmp_path, airspace_mode="fast")
 

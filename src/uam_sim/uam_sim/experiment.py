@@ -39,7 +39,7 @@ from pathlib import Path
 
 import yaml
 
-from .experiment_config import ExperimentConfig, ExperimentError, load_config, make_config
+from .experiment_config import AIRSPACE_MODES, ExperimentConfig, ExperimentError, load_config, make_config
 from .machine import machine_info
 from .recorded_study import study_from_mcaps
 from .scenario import run_scenario
@@ -90,6 +90,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "processes) or an address tcp://HOST:8786 (see README, 'Beyond one machine')")
     p.add_argument("--out", help="output directory")
     p.add_argument("--demand", dest="demand_file", help="replay a demand file instead")
+    p.add_argument("--airspace-mode", dest="airspace_mode", choices=AIRSPACE_MODES,
+                   help="paper (default), slots, levels or both (uam_sim.experiment_config.AIRSPACE_PRESETS)")
     p.add_argument("--separation", dest="separation_model", choices=("sphere", "cylinder"),
                    help="separation model: the paper's sphere (default) or the cylinder")
     p.add_argument("--vertical-separation-m", type=float, dest="vertical_separation_m",
@@ -116,7 +118,7 @@ def main(argv: list | None = None) -> int:
     args = build_parser().parse_args(argv)
     over = {k: getattr(args, k) for k in ("network", "rates", "methods", "seeds", "duration_s",
                                           "time_limit_s", "workers", "out", "demand_file",
-                                          "scheduler",
+                                          "scheduler", "airspace_mode",
                                           "separation_model", "vertical_separation_m",
                                           "departure_slot_s", "climb_rate_mps", "descent_rate_mps")}
     try:

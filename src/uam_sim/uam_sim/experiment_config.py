@@ -17,10 +17,22 @@ DEFAULT_METHODS = ("fifo", "firstfit", "greedy", "exact", "sa", "tabu", "qpu-emu
 BASELINES = ("fifo", "firstfit")
 DEFAULT_RATES = (1, 2, 4, 6, 8, 10, 15, 20)
 # Airspace modes of the capacity study: the paper's airspace, + departure slots, + flight levels,
-# + both. Only "paper" is wired into the runner so far; the others are reserved names (the
-# expanded airspace is being built), refused with a clear error until they exist.
+# + both. Each mode is a preset of the airspace fields (filled in where the configuration does not
+# give them) and says whether the network is the layered one (cruise levels, vertiport pads).
+# Levels need the cylinder model: a 100 m sphere would make levels 30 m apart conflict.
 AIRSPACE_MODES = ("paper", "slots", "levels", "both")
-AVAILABLE_AIRSPACE_MODES = ("paper",)
+AVAILABLE_AIRSPACE_MODES = AIRSPACE_MODES
+#: the departure slot [s] of the slot modes unless departure_slot_s is given
+MODE_SLOT_S = 5.0
+#: cruise levels [m] and pads per vertiport that a synthetic network gets in the layered modes
+MODE_LEVELS_M = (60.0, 90.0, 120.0, 150.0)
+MODE_PADS_PER_VERTIPORT = 4
+AIRSPACE_PRESETS = {
+    "paper": {"layered": False, "separation_model": "sphere", "departure_slot_s": 0.0},
+    "slots": {"layered": False, "separation_model": "sphere", "departure_slot_s": MODE_SLOT_S},
+    "levels": {"layered": True, "separation_model": "cylinder", "departure_slot_s": 0.0},
+    "both": {"layered": True, "separation_model": "cylinder", "departure_slot_s": MODE_SLOT_S},
+}
 REPO_ROOT = Path(__file__).resolve().parents[3]
 
 
@@ -59,9 +71,13 @@ class ExperimentConfig:
         scheduler: None or "local" (a LocalCluster of ``workers`` processes; serial when
             workers = 1), or a Dask scheduler address "tcp://HOST:8786" whose workers run the
             cells (uam_sim.dask_cluster). Does not affect results, so not part of a cell's key.
-        airspace_mode: the airspace of every cell: "paper" (the paper's model); "slots",
-            "levels", "both" are reserved for the expanded airspace and refused until it exists.
-            A mode other than "paper" becomes part of each cell's key.
+        airspace_mode: the airspace of every cell (``AIRSPACE_PRESETS``): "paper" (the paper's
+            model: one cruise altitude, 100 m sphere, departure at the epoch time); "slots" (+
+            departure slots every ``MODE_SLOT_S`` s of the window); "levels" (+ the layered
+            network: cruise levels, vertiport pads, cylinder separation); "both". The preset fills
+            separation_model and departure_slot_s where they are not given (given values must
+            agree with the mode), and the network becomes its layered form in "levels"/"both"
+            (see :func:`mode_network`). A mode other than "paper" becomes part of each cell's key.
         cumulative_rates: rates shown in the cumulative-approvals figure (default: up to 4 spread).
         tts: TTS study settings: enabled, instances (sampled from the runs' MWIS instances),
             min_vertices, max_vertices, reads (per annealing run), repetitions (runs per instance
@@ -194,10 +210,8 @@ def make_config(data: dict | None = None, **overrides) -> ExperimentConfig:
         raise ExperimentError(str(exc)) from None
     if cfg.airspace_mode not in AIRSPACE_MODES:
         raise ExperimentError(f"airspace_mode: {cfg.airspace_mode!r} is not one of {list(AIRSPACE_MODES)}")
-    if cfg.airspace_mode not in AVAILABLE_AIRSPACE_MODES:
-        raise ExperimentError(f"airspace_mode: {cfg.airspace_mode!r} is not available in the runner yet "
-                              f"(available: {list(AVAILABLE_AIRSPACE_MODES)}; the expanded airspace is "
-                              f"pending)")
+    if cfg.airspace_mode != "paper":
+        cfg = _apply_mode(cfg, given=set(data))
     if cfg.cumulative_rates is not None:
         cfg.cumulative_rates = [rate_label(r) for r in _num_list("cumulative_rates", cfg.cumulative_rates)]
     if not isinstance(cfg.solver_options, dict):
@@ -207,6 +221,60 @@ def make_config(data: dict | None = None, **overrides) -> ExperimentConfig:
     except ValueError as exc:
         raise ExperimentError(str(exc).replace("AirspaceConfig.", "").replace("PlanningConfig.", "")) from None
     return cfg
+
+
+def mode_network(network, mode: str):
+    """The network a mode flies on: the flat one for "paper"/"slots", the layered one for
+    "levels"/"both". A synthetic spec gets (or must not have) ``levels_m`` and pads; a file
+    ``X.yaml`` is replaced by its layered sibling ``X-layered.yaml`` (a file that already declares
+    levels is kept). Raises ExperimentError naming the network when no such form exists."""
+    layered = AIRSPACE_PRESETS[mode]["layered"]
+    if isinstance(network, dict):
+        spec = dict(network.get("synthetic") or {})
+        if layered:
+            spec.setdefault("levels_m", list(MODE_LEVELS_M))
+            spec.setdefault("pads_per_vertiport", MODE_PADS_PER_VERTIPORT)
+        elif spec.get("levels_m"):
+            raise ExperimentError(f"network: {network!r} declares levels_m, which airspace_mode "
+                                  f"{mode!r} does not fly (use 'levels' or 'both')")
+        return {"synthetic": spec}
+    from uam_planner.network import load_network
+    path = resolve_path(str(network))
+    if not path.exists():
+        raise ExperimentError(f"network: file {str(network)!r} does not exist")
+    is_layered = bool(load_network(path).levels_m)
+    if layered == is_layered:
+        return str(network)
+    if layered:
+        sibling = Path(str(network)).with_name(Path(str(network)).stem + "-layered.yaml")
+        if resolve_path(str(sibling)).exists():
+            return str(sibling)
+        raise ExperimentError(f"network: {str(network)!r} has no cruise levels and no layered form "
+                              f"{str(sibling)!r} exists, which airspace_mode {mode!r} needs")
+    raise ExperimentError(f"network: {str(network)!r} is a layered network; airspace_mode {mode!r} "
+                          f"flies the flat one (give that file)")
+
+
+def _apply_mode(cfg: ExperimentConfig, given: set) -> ExperimentConfig:
+    """Fill the airspace fields from the mode's preset and check the given ones agree with it."""
+    mode = cfg.airspace_mode
+    preset = AIRSPACE_PRESETS[mode]
+    changes = {}
+    if "separation_model" in given:
+        if cfg.separation_model != preset["separation_model"]:
+            raise ExperimentError(f"separation_model: {cfg.separation_model!r} disagrees with "
+                                  f"airspace_mode {mode!r} (which flies {preset['separation_model']!r})")
+    else:
+        changes["separation_model"] = preset["separation_model"]
+    slots = preset["departure_slot_s"] > 0
+    if "departure_slot_s" in given:
+        if (float(cfg.departure_slot_s) > 0) != slots:
+            raise ExperimentError(f"departure_slot_s: {cfg.departure_slot_s!r} disagrees with "
+                                  f"airspace_mode {mode!r} ({'slots' if slots else 'no slots'})")
+    else:
+        changes["departure_slot_s"] = preset["departure_slot_s"]
+    changes["network"] = mode_network(cfg.network, mode)
+    return replace(cfg, **changes)
 
 
 def load_config(path, **overrides) -> ExperimentConfig:
