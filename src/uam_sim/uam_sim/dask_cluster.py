@@ -76,12 +76,13 @@ def _client(scheduler: str, n_workers: int, connect_timeout_s: float = 30.0):
 def run_cells(cfg_dict: dict, todo: Sequence[tuple], expected_keys: dict, cells_dir,
               cell_fn: Callable, scheduler: str = LOCAL, n_workers: int = 2,
               on_done: Callable[[tuple, dict], None] | None = None,
-              connect_timeout_s: float = 30.0) -> dict:
+              connect_timeout_s: float = 30.0, cell_configs: dict | None = None) -> dict:
     """Run the cells ``todo`` [(method, rate, seed)] on a Dask cluster; return {cell: cell dict}.
 
     Args:
         cfg_dict: the sweep's ExperimentConfig as a dict (``dataclasses.asdict``).
-        todo: cells to compute, in submission order (the runner puts seeds outermost).
+        todo: cells to compute, in submission order (the runner puts seeds outermost): tuples
+            ending in (method, rate, seed), e.g. (arm-and-mode index, method, rate, seed).
         expected_keys: cell -> the key the driver computed; a worker's must match.
         cells_dir: where the driver writes each finished cell (atomically, as it arrives).
         cell_fn: the cell runner, ``uam_sim.sweep.run_cell(cfg_dict, method, rate, seed, dir)``
@@ -90,6 +91,8 @@ def run_cells(cfg_dict: dict, todo: Sequence[tuple], expected_keys: dict, cells_
         n_workers: processes of the LocalCluster (ignored for an address).
         on_done: called with (cell, cell dict) as each cell is written (progress bars).
         connect_timeout_s: how long to try to reach a scheduler address [s].
+        cell_configs: cell -> its own config dict (a study of several sweeps in one pool);
+            ``cfg_dict`` is used for cells not in it.
     Raises DistributedError on a key mismatch or an unreachable scheduler; a cell that raises
     on a worker re-raises here (the cells written before stay, so the sweep resumes).
     """
@@ -104,11 +107,13 @@ def run_cells(cfg_dict: dict, todo: Sequence[tuple], expected_keys: dict, cells_
     done: dict = {}
     try:
         futs = {}
-        for m, r, s in todo:
+        for c in todo:
+            m, r, s = c[-3:]
+            conf = cfg_dict if cell_configs is None or c not in cell_configs else cell_configs[c]
             # pure=False: never deduplicate or cache; each cell is computed once, as submitted
-            f = client.submit(compute_cell, cell_fn, cfg_dict, m, r, s, pure=False,
-                              key=f"cell-{expected_keys[(m, r, s)]}-{os.getpid()}")
-            futs[f] = (m, r, s)
+            f = client.submit(compute_cell, cell_fn, conf, m, r, s, pure=False,
+                              key=f"cell-{expected_keys[c]}-{os.getpid()}")
+            futs[f] = c
         for fut in as_completed(list(futs)):
             c = futs[fut]
             cell = fut.result()
