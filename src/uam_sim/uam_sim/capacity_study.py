@@ -189,7 +189,8 @@ def tidy_tables(results: list) -> dict:
             fl = c["flights"]
             peak = _airborne_peak(fl, s["duration_s"])
             verts = [e["vertices"] for e in c["epochs"]]
-            runs.append({**tag, "network": _network_label(sweep.config.network),
+            runs.append({**tag, "network": _network_label(arm.network),
+                         "network_flown": _network_label(sweep.config.network),
                          "separation_model": sweep.config.separation_model,
                          "departure_slot_s": sweep.config.departure_slot_s,
                          **{k: v for k, v in s.items() if k not in ("method", "rate", "seed")},
