@@ -6,7 +6,7 @@
 #
 # usage: scripts/run_fleet.sh [options]
 #   --backend NAME     MWIS backend of the solver (default exact; `--backend list` lists them)
-#   --policy P         mwis | fifo (default mwis)
+#   --policy P         mwis | fifo | firstfit (default mwis)
 #   --rate R           requests per 30 s (default 10, the paper's middle rate)
 #   --duration S       simulated seconds (default 3500)
 #   --seed N           seed of the demand and of stochastic solvers (default 0)
@@ -61,7 +61,7 @@ while [[ $# -gt 0 ]]; do
     *) die "unknown option '$1' (see --help)";;
   esac
 done
-[[ "$POLICY" == mwis || "$POLICY" == fifo ]] || die "--policy: '$POLICY' is not mwis or fifo"
+[[ "$POLICY" == mwis || "$POLICY" == fifo || "$POLICY" == firstfit ]] || die "--policy: '$POLICY' is not mwis, fifo or firstfit"
 [[ "$MODE" == lockstep || "$MODE" == realtime ]] || die "--mode: '$MODE' is not lockstep or realtime"
 [[ "$RERUN" =~ ^(off|save|spawn|connect)$ ]] || die "--rerun: '$RERUN' is not off, save, spawn or connect"
 [[ "$RATE" =~ ^[0-9]+(\.[0-9]+)?$ ]] || die "--rate: '$RATE' is not a number >= 0"

@@ -119,7 +119,7 @@ def in_process(rate, seed, duration_s, backend, policy="mwis", epoch_s=30.0, net
     separation_model, vertical_separation_m, departure_slot_s, ... options)."""
     from uam_planner.network import load_network
     from uam_sim.experiment import make_config, run_scenario
-    method = "fifo" if policy == "fifo" else backend
+    method = policy if policy in ("fifo", "firstfit") else backend
     cfg = make_config(epoch_s=float(epoch_s), time_limit_s=float(time_limit_s), audit=False, **airspace)
     return run_scenario(load_network(network), method, rate, seed, duration_s, cfg)
 

@@ -91,6 +91,20 @@ def test_every_request_decided_once_safe_and_equal_to_in_process_run(ros_context
     assert summary.audit.min_separation_m == pytest.approx(audit.min_separation_m, abs=1e-6)
 
 
+@pytest.mark.parametrize("policy", ["fifo", "firstfit"])
+def test_the_baseline_policies_run_in_the_graph_as_in_process(ros_context, spin_until, policy):
+    """The planner node's baselines (shortest FIFO, first-fit over the k candidates) approve the
+    same flights on the same routes as the in-process runner's."""
+    rate, seed, duration = 3.0, 5, 240.0
+    obs, _nodes = _run(ros_context, spin_until, rate=rate, seed=seed, duration_s=duration, policy=policy)
+    approved = [p for p in obs.plans if p.outcome == FlightPlan.OUTCOME_APPROVED]
+    assert approved
+    graph = {p.request_id: tuple(p.route_node_ids) for p in approved}
+    lib = {k: v[1] for k, v in _in_process_approvals(rate, seed, duration, "greedy", policy=policy).items()}
+    assert graph == lib
+    assert not any(r.fallback for r in obs.reports)
+
+
 def test_planner_falls_back_to_greedy_when_solver_absent(ros_context, spin_until):
     obs, _ = _run(ros_context, spin_until, rate=3.0, seed=5, duration_s=120.0, with_solver=False,
                   planner_extra={"solver_timeout_margin_s": 0.5, "solver_startup_timeout_s": 0.5})

@@ -175,8 +175,9 @@ def _nonempty(what: str) -> Callable[[str], str]:
 PLANNER = (
     Param("network", "", "routing network file (.yaml, .geojson, .graphml), e.g. config/networks/singapore.yaml",
           check=_nonempty("a network file, e.g. config/networks/singapore.yaml")),
-    Param("policy", "mwis", "planning policy: conflict graph + MWIS, or the shortest-FIFO baseline",
-          choices=("mwis", "fifo")),
+    Param("policy", "mwis", "planning policy: conflict graph + MWIS, the shortest-FIFO baseline, or "
+          "first-fit (arrival order, the first conflict-free of the same k candidates)",
+          choices=("mwis", "fifo", "firstfit")),
     Param("backend", "exact", "MWIS backend asked of the solver service (`ros2 run uam_solvers backends` lists "
           "them); takes effect at the next epoch", read_only=False, check=_backend_name_rule),
     Param("time_limit_s", 5.0, "MWIS solve time limit [s]; takes effect at the next epoch", 0.001, 3600.0,

@@ -345,7 +345,7 @@ def write_report(sweep, outputs: dict, machine: dict, out: Path) -> Path:
           "candidates; the others are MWIS backends)",
           f"- rates (requests per {cfg.interval_s:g} s): {cfg.rates}; seeds: {cfg.seeds}",
           f"- duration {cfg.duration_s:g} s, epoch {cfg.epoch_s:g} s, departure window "
-          f"{cfg.window_s:g} s, separation {cfg.separation_m:g} m, k = {cfg.k} candidates, "
+          f"{cfg.window_s:g} s, separation {_separation_text(cfg)}, k = {cfg.k} candidates, "
           f"penalty factor {cfg.penalty_factor:g}, speed {cfg.speed_mps:g} m/s, MWIS time limit "
           f"{cfg.time_limit_s:g} s, solver options {cfg.solver_options or '{}'}",
           f"- demand: {'file ' + str(cfg.demand_file) if cfg.demand_file else 'seeded random (uam_sim.demand.RequestGenerator; the same requests for every method at one rate and seed)'}",
@@ -589,16 +589,14 @@ def write_report(sweep, outputs: dict, machine: dict, out: Path) -> Path:
     extra = beyond_paper(cells)
     if extra:
         L += ["## Beyond the paper's statements", ""] + [f"- {text}" for text in extra] + [""]
-    L += ["## The expanded airspace: pending", "",
-          "The paper's open question - with time slots and flight levels (the capacity issue) and "
-          "MWIS instances of thousands of vertices, does the solver decide the throughput? - is "
-          "not answered here yet: the expanded airspace modes (paper, + slots, + levels, + both) "
-          "and the synthetic city network are being built and are not wired into the runner. "
-          "`config/experiment.yaml` has the keys for them: `airspace_mode` (validated; only "
-          "`paper` is accepted until the modes exist, and any other mode becomes part of each "
-          "cell's key, so paper-mode cells stay valid) and `network` (a file or a synthetic city, "
-          "`{synthetic: {...}}`). The paired comparisons above then run per mode and network "
-          "unchanged.", ""]
+    L += ["## The expanded airspace", "",
+          "The paper's open question - with departure slots and flight levels and MWIS instances "
+          "of hundreds to thousands of vertices, does the solver decide the throughput? - is "
+          "answered by the capacity study (`python -m uam_sim.capacity_study --config "
+          "config/capacity-study.yaml`; committed in `docs/capacity-study/`, its REPORT.md), "
+          "which runs the same cells as this study in the airspace modes paper, + slots, "
+          "+ levels and + both (`airspace_mode`, `uam_sim.experiment_config.AIRSPACE_PRESETS`) "
+          "on Singapore and a synthetic city, with the same paired per-seed statistics.", ""]
     path = Path(out) / "REPORT.md"
     path.write_text("\n".join(L), encoding="utf-8")
     _write_inputs(Path(out), sweep, outputs, machine)
@@ -608,6 +606,20 @@ def write_report(sweep, outputs: dict, machine: dict, out: Path) -> Path:
 # ---- the report again from the tidy tables ----------------------------------------------------
 
 INPUTS = "report_inputs.json"
+
+
+def _separation_text(cfg) -> str:
+    """The separation model in words: the paper's sphere, or the cylinder with its vertical minimum;
+    and the departure rule (the epoch time, or slots)."""
+    if getattr(cfg, "separation_model", "sphere") == "cylinder":
+        text = (f"{cfg.separation_m:g} m horizontally while within {cfg.vertical_separation_m:g} m "
+                f"vertically (cylinder model)")
+    else:
+        text = f"{cfg.separation_m:g} m in 3D (the paper's sphere model)"
+    slot = float(getattr(cfg, "departure_slot_s", 0.0) or 0.0)
+    mode = getattr(cfg, "airspace_mode", "paper")
+    return text + (f", departures in {slot:g} s slots" if slot > 0 else ", departure at the epoch time") + \
+        f", airspace mode {mode}"
 
 
 def _write_inputs(out: Path, sweep, outputs: dict, machine: dict) -> None:
