@@ -143,8 +143,10 @@ def run_capacity_sweep(cfg: CapacityConfig, compute: bool = True, progress: bool
             todo.append(cell)
             cfg_dicts[cell] = d
             keys[cell] = cell_key(cell_params(ecfg, m, r, s))
-    # seeds outermost, then the cheap arms first: an interrupted study has whole seeds
-    todo.sort(key=lambda c: (c[3], c[0]))
+    # arms in the file's order (the first arm is the core of the study), seeds outermost within
+    # an arm: an interrupted study has the first arms whole and the next one with whole seeds
+    arm_rank = {ci: [a.name for a in cfg.arms].index(arm.name) for ci, (arm, _m, _c) in enumerate(combos)}
+    todo.sort(key=lambda c: (arm_rank[c[0]], c[3], c[0]))
     if compute and todo:
         bar = None
         if progress:
