@@ -1,5 +1,5 @@
 # Thin wrappers around scripts/: each target sets up whatever is missing first.
-.PHONY: setup test demo bench clean
+.PHONY: setup test demo bench clean study
 
 setup:
 	bash scripts/setup.sh
@@ -12,6 +12,11 @@ test:
 # 10 requests per 30 s, 600 s simulated, exact MWIS), recorded to MCAP + Rerun, then analysed.
 demo:
 	bash scripts/run_fleet.sh --duration 600 --rate 10 --backend exact
+
+# Both studies from scratch (hours on 2 cores; BENCHMARKS.md has the wall times): the paper's
+# study and the capacity study, each resumable.
+study: setup
+	bash -c 'source scripts/env.sh && python -m uam_sim.experiment --config config/experiment.yaml --out results/study --workers 2 && python -m uam_sim.capacity_study --config config/capacity-study.yaml --out results/capacity --workers 2'
 
 clean:
 	rm -rf build install log

@@ -17,7 +17,10 @@ One job per module (imports only point down this list's layers; ``test/test_laye
   (one cell in process), ``sweep`` (cells, keys, resumption, processes), ``files`` (atomic JSON,
   CSV), ``tables`` (CSV tables, corpus, timing table), ``tts_study``, ``recorded_study``
   (``--from-mcap``), ``machine``, ``figures``, ``report``, and ``experiment`` (the command line and
-  :func:`~uam_sim.experiment.run_experiment`; re-exports the study's entry points).
+  :func:`~uam_sim.experiment.run_experiment`; re-exports the study's entry points);
+- the capacity study (airspace modes x arms on top of the study's cells): ``capacity_study``
+  (arms, one pool, tables, instance-size study; ``python -m uam_sim.capacity_study``) and
+  ``capacity_report`` (report and figures from its tables).
 
 ``nodes/`` holds the ROS glue (generator, simulator, recorder, replay).
 """
