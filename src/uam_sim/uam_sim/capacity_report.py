@@ -335,17 +335,21 @@ def _report_text(runs, epochs, flights, inst, inputs, figs, d) -> str:
     rows = []
     for a in cfg.get("arms", []):
         net = a["network"] if isinstance(a["network"], str) else json.dumps(a["network"])
+        seeds = sorted(runs[runs.arm == a["name"]].seed.unique())
         rows.append([a["name"], f"`{net}`", ", ".join(a["modes"]), ", ".join(a["methods"]),
-                     ", ".join(str(r) for r in a["rates"])])
-    L.append(_table(rows, ["arm", "network", "airspace modes", "methods", "rates (requests / 30 s)"]))
-    n_seeds = runs.seed.nunique()
-    L.append(f"\n{n_seeds} seeds (0..{n_seeds - 1}) per cell, {base.get('duration_s', 3500):g} s "
+                     ", ".join(str(r) for r in a["rates"]), ", ".join(str(x) for x in seeds)])
+    L.append(_table(rows, ["arm", "network", "airspace modes", "methods", "rates (requests / 30 s)",
+                           "seeds run"]))
+    L.append(f"\nSeeds as listed per arm (the core arm 5; the secondary arms fewer, to fit the 2-core "
+             f"budget), {base.get('duration_s', 3500):g} s "
              f"simulated per run, epoch 30 s, window 60 s, k = 5 candidate routes, 10 m/s, "
              f"separation 100 m (horizontal in the cylinder modes, with 30 m vertically), MWIS "
              f"time limit {base.get('time_limit_s', 2):g} s per epoch. {len(runs)} runs"
              + (f", {inputs.get('missing_cells')} cells missing" if inputs.get("missing_cells") else "")
              + f". Machine: {mach.get('cpu', '?')}, {mach.get('cores', '?')} cores, commit "
-             f"{str(mach.get('commit', '?'))[:10]}.\n")
+             f"{str(mach.get('commit', '?'))[:10]}. Sum of the runs' wall times "
+             f"{runs.wall_s.sum() / 3600:.1f} h (the machine was shared, so wall times and solve "
+             f"times are inflated; approvals are not).\n")
     L.append("Airspace modes (`uam_sim.experiment_config.AIRSPACE_PRESETS`): " + "; ".join(
         f"**{m}** = {MODE_TEXT[m]}" for m in MODES) + ". The layered modes fly the layered form of "
         "the network (Singapore: `singapore-layered.yaml`, the same corridors with vertiports as "
