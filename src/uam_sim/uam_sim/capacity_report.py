@@ -56,6 +56,8 @@ def _fmt(x, nd=1) -> str:
 
 
 def _ci(p, nd=1) -> str:
+    if p.n < 2 or not math.isfinite(p.lo):
+        return f"{p.mean:+,.{nd}f} ({p.n} seed{'s' if p.n != 1 else ''}: no interval)"
     return f"{p.mean:+,.{nd}f} [{p.lo:+,.{nd}f}, {p.hi:+,.{nd}f}] ({p.positive}+ / {p.negative}-)"
 
 
@@ -371,7 +373,12 @@ def _report_text(runs, epochs, flights, inst, inputs, figs, d) -> str:
              "absent (no token): `qpu-emulator` is classical annealing on a Pegasus embedding of "
              "decomposed subproblems, with no QPU times.\n"
              "- Every backend runs behind the same layers in the loop (component split, exact "
-             "reductions, answer check and greedy fallback).\n")
+             "reductions, answer check and greedy fallback).\n"
+             "- Shortest FIFO keeps the paper's rule in every mode: the shortest route at its "
+             "lowest allowed level, departing at the first slot (the epoch time) or waiting for "
+             "the next epoch; it does not search the slots, so its slots - paper difference is 0 "
+             "by construction. First-fit is the baseline that uses the slots and the "
+             "alternatives without optimising.\n")
     L.append("## Safety audit\n")
     losses = int(runs.losses.fillna(0).sum())
     pairs = int(runs.pairs_checked.fillna(0).sum())
