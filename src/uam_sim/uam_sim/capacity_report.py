@@ -99,25 +99,29 @@ def _style(m, i):
 
 
 def approvals_figure(runs: pd.DataFrame, path: Path) -> Path:
-    """Approved flights per airspace mode, one panel per (arm, rate), a line per method (mean and
-    95 % CI over seeds)."""
+    """Approved flights per airspace mode, one panel per (network, rate) (arms on the same network
+    share a panel, e.g. the annealers beside the core methods), a line per method (mean and 95 % CI
+    over seeds, slightly offset per method so the bars do not hide each other)."""
     plt = _plt()
     from .figures import mean_ci
-    panels = [(a, r) for a in runs.arm.unique() for r in sorted(runs[runs.arm == a].rate.unique())]
-    fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.6), squeeze=False)
-    for ax, (arm, rate) in zip(axes[0], panels):
-        sub = runs[(runs.arm == arm) & (runs.rate == rate)]
+    panels = [(n, r) for n in dict.fromkeys(runs.network) for r in sorted(runs[runs.network == n].rate.unique())]
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.6 * len(panels), 3.8), squeeze=False)
+    for ax, (net, rate) in zip(axes[0], panels):
+        sub = runs[(runs.network == net) & (runs.rate == rate)]
         modes = _modes(sub)
-        for i, m in enumerate(_order(sub.method)):
-            ys = [mean_ci(sub[(sub["mode"] == md) & (sub.method == m)].approved) for md in modes]
-            x = np.arange(len(modes)) + (i - 2) * 0.04
+        methods = _order(sub.method)
+        for i, m in enumerate(methods):
+            s = sub[sub.method == m]
+            xs = [j for j, md in enumerate(modes) if (s["mode"] == md).any()]
+            ys = [mean_ci(s[s["mode"] == modes[j]].approved) for j in xs]
+            x = np.array(xs, dtype=float) + (i - (len(methods) - 1) / 2) * 0.05
             ax.errorbar(x, [y[0] for y in ys], yerr=[[y[0] - y[1] for y in ys], [y[2] - y[0] for y in ys]],
                         label=m, capsize=2, markersize=5, **_style(m, i))
         ax.set_xticks(range(len(modes)), modes)
-        ax.set_title(f"{arm}, rate {rate} / 30 s", fontsize=9)
+        ax.set_title(f"{net}, rate {rate} / 30 s", fontsize=8)
         ax.grid(alpha=0.3)
-    axes[0][0].set_ylabel("approved flights per run (3,500 s)")
-    axes[0][-1].legend(fontsize=7)
+        ax.legend(fontsize=6)
+    axes[0][0].set_ylabel("approved flights per run")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
