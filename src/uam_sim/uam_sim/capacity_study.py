@@ -335,6 +335,13 @@ def instance_study(cfg: CapacityConfig, results: list) -> list:
     return rows
 
 
+class _ConfigOnly:
+    """Stands in for a SweepResult where only its ``config`` is needed (the instance study)."""
+
+    def __init__(self, config):
+        self.config = config
+
+
 # -- the whole study ---------------------------------------------------------------------------
 
 def run_capacity_study(cfg: CapacityConfig, compute: bool = True, progress: bool = True,
@@ -379,6 +386,8 @@ def main(argv=None) -> int:
     ap.add_argument("--duration", type=float, default=None, help="override base.duration_s")
     ap.add_argument("--no-compute", action="store_true", help="only collect finished cells")
     ap.add_argument("--no-instances", action="store_true", help="skip the instance-size study")
+    ap.add_argument("--instances-only", action="store_true",
+                    help="only the instance-size study (instances.csv; re-runs its source cell)")
     ap.add_argument("--no-progress", action="store_true")
     args = ap.parse_args(argv)
     try:
@@ -392,6 +401,12 @@ def main(argv=None) -> int:
     except ExperimentError as exc:
         print(f"capacity_study: {exc}", file=sys.stderr)
         return 2
+    if args.instances_only:
+        rows = instance_study(cfg, [(a, m, _ConfigOnly(c)) for a, m, c in cfg.combos()])
+        Path(cfg.out).mkdir(parents=True, exist_ok=True)
+        write_csv(Path(cfg.out) / "instances.csv", rows)
+        print(f"instance study: {len(rows)} rows in {Path(cfg.out) / 'instances.csv'}")
+        return 0
     res = run_capacity_study(cfg, compute=not args.no_compute, progress=not args.no_progress,
                              instances=not args.no_instances)
     print(f"capacity study: {sum(len(sw.cells) for _a, _m, sw in res['results'])} cells "
