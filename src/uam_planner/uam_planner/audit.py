@@ -42,12 +42,14 @@ class AuditResult:
         pair_of_min: the labels (request ids, or indices) of the pair at that distance, or None.
         losses: (label_i, label_j, distance_m, time_s) for every pair closer than the separation.
         pairs_checked: flight pairs with a common airborne time.
+        min_time_s: time [s] of the closest approach (nan when unknown or never together).
     """
 
     min_separation_m: float
     pair_of_min: tuple | None
     losses: list = field(default_factory=list)
     pairs_checked: int = 0
+    min_time_s: float = math.nan
 
     @property
     def ok(self) -> bool:
@@ -151,7 +153,7 @@ def audit_flights(flights: Sequence[Any], separation_m=DEFAULT_SEPARATION_M,
     for f in items:
         times, _ = _waypoints(f)
         spans.append((times[0], times[-1]))
-    best, best_pair = math.inf, None
+    best, best_pair, best_t = math.inf, None, math.nan
     losses = []
     checked = 0
     for i in range(len(items)):
@@ -161,10 +163,10 @@ def audit_flights(flights: Sequence[Any], separation_m=DEFAULT_SEPARATION_M,
             checked += 1
             d, t = pair_min_distance(items[i], items[j], vertical_m)
             if d < best:
-                best, best_pair = d, (labels[i], labels[j])
+                best, best_pair, best_t = d, (labels[i], labels[j]), t
             if d < separation_m * (1.0 - _TIE_RELATIVE):
                 losses.append((labels[i], labels[j], d, t))
-    return AuditResult(best, best_pair, losses, checked)
+    return AuditResult(best, best_pair, losses, checked, best_t)
 
 
 def sweep_audit(flights: Sequence[Any], separation_m=DEFAULT_SEPARATION_M,
@@ -204,7 +206,7 @@ def sweep_audit(flights: Sequence[Any], separation_m=DEFAULT_SEPARATION_M,
     end = np.searchsorted(t0, t1, side="right")
     counts = np.maximum(end - np.arange(t0.size) - 1, 0)
     cum = np.cumsum(counts)
-    best, best_pair = math.inf, None
+    best, best_pair, best_t = math.inf, None, math.nan
     loss: dict = {}
     pair_codes = []
     n = len(items)
@@ -255,6 +257,7 @@ def sweep_audit(flights: Sequence[Any], separation_m=DEFAULT_SEPARATION_M,
         k = int(np.argmin(d))
         if d[k] < best:
             best, best_pair = float(d[k]), (labels[fa[k]], labels[fb[k]])
+            best_t = float(lo[k] + s[k] * (hi[k] - lo[k]))
         for x in np.flatnonzero(d < H * (1.0 - _TIE_RELATIVE)).tolist():
             key = (int(fa[x]), int(fb[x]))
             tt = float(lo[x] + s[x] * (hi[x] - lo[x]))
@@ -262,4 +265,4 @@ def sweep_audit(flights: Sequence[Any], separation_m=DEFAULT_SEPARATION_M,
                 loss[key] = (float(d[x]), tt)
     checked = int(np.unique(np.concatenate(pair_codes)).size) if pair_codes else 0
     losses = [(labels[a], labels[b], dist, tt) for (a, b), (dist, tt) in sorted(loss.items())]
-    return AuditResult(best, best_pair, losses, checked)
+    return AuditResult(best, best_pair, losses, checked, best_t)

@@ -194,112 +194,44 @@ def audit_plans(plans: list[Any], separation_m=100.0,
 
 
 def sweep_audit(trajectories: Sequence, separation_m, labels: Sequence | None = None,
-                chunk_pairs: int = 2_000_000, max_listed: int = 20) -> dict:
-    """Exact minimum separation over every pair of flights, by a time sweep over segments.
+                chunk_pairs: int = 4_000_000, max_listed: int = 20) -> dict:
+    """Exact minimum separation over every pair of flights, by a time sweep over segments, as the
+    study's tables want it (a dict).
 
-    A third implementation, independent of the planner's separation kernel (space-time grid
-    broad phase) and of ``uam_planner.audit`` (pure-Python pair walk, which is O(F^2 s) in
-    Python and too slow for 3500 s runs with hundreds of long flights): every pair of straight
-    segments of different flights whose time intervals overlap (touching counts) is checked
-    exactly - relative position at the start of the overlap, relative velocity, closest approach
-    clamped to the overlap - in numpy, chunked. No spatial pruning, so the minimum is the true
-    global minimum. Tests hold it equal to ``uam_planner.audit.audit_flights``.
+    The sweep is ``uam_planner.audit.sweep_audit`` (every pair of straight segments of different
+    flights whose time intervals overlap, closest approach clamped to the overlap, in numpy,
+    chunked; no spatial pruning, so it does not depend on the planner's broad phase; its tests
+    hold it equal to the brute-force ``uam_planner.audit.audit_flights``). One implementation
+    for the sphere and the cylinder; this function only converts its result.
 
     Args:
         trajectories: objects with ``times_s`` (p,) and ``points_m`` (p, 3).
         separation_m: a number (the sphere: a loss is a 3D distance strictly below it, ties
-            within 1e-9 excepted) or a SeparationModel; the cylinder is audited by
-            ``uam_planner.audit.sweep_audit`` (the same time sweep with the window where
-            |dz| < V), converted to this function's result.
+            within 1e-9 excepted) or a SeparationModel (the cylinder: horizontal distances while
+            vertically closer than V).
         labels: names for the pairs (default: indices).
-    Returns: {"min_separation_m" (None if no two flights share time), "pair_of_min", "losses"
-    (count of flight pairs with a loss), "loss_pairs" (up to max_listed, closest first: label,
-    label, distance_m, t_s),
-    "pairs_checked" (flight pairs with a common time), "segment_pairs"}.
+        chunk_pairs: segment pairs per numpy chunk (memory bound).
+    Returns: {"min_separation_m" (None if no two flights share time), "pair_of_min",
+    "min_time_s", "losses" (count of flight pairs with a loss), "loss_pairs" (up to max_listed,
+    closest first: label, label, distance_m, t_s), "pairs_checked" (flight pairs with a common
+    time), "separation_model"} (+ "vertical_separation_m" for the cylinder).
     Complexity: O(S log S + P) for S segments and P time-overlapping segment pairs.
     """
-    labels = list(labels) if labels is not None else list(range(len(trajectories)))
-    model = _model(separation_m)
-    if model.kind != "sphere":
-        return _sweep_audit_model(trajectories, model, labels, max_listed)
-    separation_m = model.separation_m
-    t0s, t1s, p0s, vs, fl = [], [], [], [], []
-    for k, tr in enumerate(trajectories):
-        t = np.asarray(tr.times_s, dtype=np.float64)
-        pts = np.asarray(tr.points_m, dtype=np.float64).reshape(-1, 3)
-        dt = np.diff(t)
-        t0s.append(t[:-1]); t1s.append(t[1:]); p0s.append(pts[:-1])
-        vs.append((pts[1:] - pts[:-1]) / dt[:, None])
-        fl.append(np.full(dt.size, k, dtype=np.int64))
-    empty = {"min_separation_m": None, "pair_of_min": None, "losses": 0, "loss_pairs": [],
-             "pairs_checked": 0, "segment_pairs": 0}
-    if len(trajectories) < 2:
-        return empty
-    t0 = np.concatenate(t0s); t1 = np.concatenate(t1s)
-    p0 = np.concatenate(p0s); v = np.concatenate(vs); f = np.concatenate(fl)
-    order = np.argsort(t0, kind="stable")
-    t0, t1, p0, v, f = t0[order], t1[order], p0[order], v[order], f[order]
-    # segment i overlaps the later-starting segments i+1 .. end[i]-1 (t0[j] <= t1[i])
-    end = np.searchsorted(t0, t1, side="right")
-    counts = np.maximum(end - np.arange(t0.size) - 1, 0)
-    best, best_pair, best_t = math.inf, None, math.nan
-    loss: dict = {}
-    flight_pairs = set()
-    n_seg_pairs = 0
-    start = 0
-    cum = np.cumsum(counts)
-    while start < t0.size:
-        # segments [start, stop) whose pairs fit one chunk
-        base = cum[start - 1] if start else 0
-        stop = int(np.searchsorted(cum, base + chunk_pairs, side="right"))
-        stop = max(stop, start + 1)
-        c = counts[start:stop]
-        i = np.repeat(np.arange(start, stop), c)
-        j = i + 1 + (np.arange(c.sum()) - np.repeat(np.cumsum(c) - c, c))
-        start = stop
-        keep = f[i] != f[j]
-        i, j = i[keep], j[keep]
-        if i.size == 0:
-            continue
-        n_seg_pairs += i.size
-        lo = np.maximum(t0[i], t0[j]); hi = np.minimum(t1[i], t1[j])
-        r = (p0[i] + v[i] * (lo - t0[i])[:, None]) - (p0[j] + v[j] * (lo - t0[j])[:, None])
-        dv = v[i] - v[j]
-        dd = np.einsum("ij,ij->i", dv, dv)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            tau = np.where(dd > 0, -np.einsum("ij,ij->i", r, dv) / dd, 0.0)
-        tau = np.clip(tau, 0.0, hi - lo)
-        d = np.linalg.norm(r + dv * tau[:, None], axis=1)
-        a, b = np.minimum(f[i], f[j]), np.maximum(f[i], f[j])
-        flight_pairs.update(zip(a.tolist(), b.tolist()))
-        k = int(np.argmin(d))
-        if d[k] < best:
-            best, best_pair, best_t = float(d[k]), (labels[a[k]], labels[b[k]]), float(lo[k] + tau[k])
-        for x in np.flatnonzero(d < separation_m * (1.0 - TIE_RELATIVE)).tolist():
-            key = (int(a[x]), int(b[x]))
-            if key not in loss or d[x] < loss[key][0]:
-                loss[key] = (float(d[x]), float(lo[x] + tau[x]))
-    if not flight_pairs:
-        return empty
-    loss_pairs = [[labels[a], labels[b], dist, tt] for (a, b), (dist, tt) in sorted(
-        loss.items(), key=lambda kv: kv[1][0])]
-    return {"min_separation_m": best, "pair_of_min": list(best_pair), "min_time_s": best_t,
-            "losses": len(loss), "loss_pairs": loss_pairs[:max_listed], "pairs_checked": len(flight_pairs),
-            "segment_pairs": n_seg_pairs}
-
-
-def _sweep_audit_model(trajectories: Sequence, model, labels: list, max_listed: int) -> dict:
-    """:func:`sweep_audit`'s result for a non-sphere model, by ``uam_planner.audit.sweep_audit``."""
     from uam_planner.audit import sweep_audit as planner_sweep
 
-    res = planner_sweep(list(trajectories), model, labels=labels)
+    labels = list(labels) if labels is not None else list(range(len(trajectories)))
+    model = _model(separation_m)
+    res = planner_sweep(list(trajectories), model, labels=labels, chunk_pairs=chunk_pairs)
+    extra = {"separation_model": model.kind}
+    if model.kind == "cylinder":
+        extra["vertical_separation_m"] = float(model.vertical_separation_m)
     if res.pairs_checked == 0:
         return {"min_separation_m": None, "pair_of_min": None, "losses": 0, "loss_pairs": [],
-                "pairs_checked": 0, "segment_pairs": 0, "separation_model": model.kind}
+                "pairs_checked": 0, **extra}
     loss_pairs = sorted(([a, b, float(d), float(t)] for a, b, d, t in res.losses), key=lambda x: x[2])
     best = res.min_separation_m
     return {"min_separation_m": float(best) if math.isfinite(best) else None,
             "pair_of_min": list(res.pair_of_min) if res.pair_of_min else None,
+            "min_time_s": float(res.min_time_s),
             "losses": len(res.losses), "loss_pairs": loss_pairs[:max_listed],
-            "pairs_checked": res.pairs_checked, "separation_model": model.kind,
-            "vertical_separation_m": float(model.vertical_separation_m)}
+            "pairs_checked": res.pairs_checked, **extra}
