@@ -382,7 +382,7 @@ def write_views(src: str, dst: str, network: Any = None,
     n = 0
     with McapRecorder(dst) as rec:
         def put(vm: ViewMessage) -> None:
-            if vm.topic not in rec.topics:
+            if not rec.has_topic(vm.topic):
                 rec.add_topic(vm.topic, vm.type_name)
             rec.write(vm.topic, vm.data, vm.sim_time_ns + shift)
 
@@ -390,7 +390,7 @@ def write_views(src: str, dst: str, network: Any = None,
             put(vm)
             n += 1
         for r in read_messages(src):
-            if r.topic not in rec.topics:
+            if not rec.has_topic(r.topic):
                 rec.add_topic(r.topic, r.type_name, offered_qos_profiles=parse_offered_qos(r.qos_yaml) or None)
             rec.write(r.topic, r.data, r.log_time_ns + shift, r.publish_time_ns + shift)
             if r.topic == "/uam/fleet_state":
@@ -431,7 +431,7 @@ def benchmark(network: Any, steps: int = 500, vehicles: int = 70, seed: int = 0)
                 t0 = time.perf_counter()
                 for out in msgs:
                     for vm in out:
-                        if vm.topic not in rec.topics:
+                        if not rec.has_topic(vm.topic):
                             rec.add_topic(vm.topic, vm.type_name)
                         rec.write(vm.topic, vm.data, vm.sim_time_ns)
                 write_s = time.perf_counter() - t0

@@ -291,7 +291,7 @@ class RecorderNode(Node):
         if topic == c.TOPIC_CLOCK and stamp is not None:
             self._clock_ns = max(self._clock_ns, stamp)
         log_ns = stamp if stamp is not None else self._clock_ns
-        if self._names[topic] not in self.recorder.topics:
+        if not self.recorder.has_topic(self._names[topic]):
             self._register(topic, cls)
         self.recorder.write(self._names[topic], data, log_time_ns=max(0, log_ns))
         self.messages_written += 1
@@ -333,7 +333,7 @@ class RecorderNode(Node):
 
     def _write_view(self, vm) -> None:
         """One view message (uam_sim.std_msgs_export.ViewMessage) at its simulation time."""
-        if vm.topic not in self.recorder.topics:
+        if not self.recorder.has_topic(vm.topic):
             self.recorder.add_topic(vm.topic, vm.type_name)
         self.recorder.write(vm.topic, vm.data, log_time_ns=max(0, vm.sim_time_ns))
         self.view_messages_written += 1
@@ -376,7 +376,7 @@ class RecorderNode(Node):
             if drained:
                 self.get_logger().info(f"wrote {drained} messages still queued at the end")
             for topic, (cls, _qos) in RECORDED_TOPICS.items():
-                if self._names[topic] not in self.recorder.topics:
+                if not self.recorder.has_topic(self._names[topic]):
                     self._register(topic, cls)
             check = self.check.result()
             self.recorder.add_metadata("uam_recorder_check", check)
