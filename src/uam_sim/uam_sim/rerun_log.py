@@ -46,6 +46,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from .stamps import stamp_s
+
 MODES = ("off", "save", "spawn", "connect")
 TIMELINE = "sim_time"
 
@@ -71,10 +73,6 @@ LEVEL_ATTRIBUTES = ("edge_levels", "corridor_levels", "edge_level")
 
 def _ui(points: float) -> float:
     return -abs(float(points))
-
-
-def _stamp_s(stamp: Any) -> float:
-    return int(stamp.sec) + int(stamp.nanosec) * 1e-9
 
 
 def _strips_arrow(strips: Sequence[np.ndarray]) -> Any:
@@ -418,7 +416,7 @@ class RerunLogger:
             return
         ids = [v.vehicle_id for v in msg.vehicles]
         pos = [(v.position.x, v.position.y, v.position.z) for v in msg.vehicles]
-        self.log_fleet(_stamp_s(msg.header.stamp), ids, pos)
+        self.log_fleet(stamp_s(msg.header.stamp), ids, pos)
 
     def log_flight_plan_msg(self, msg: Any) -> None:
         """A uam_msgs/FlightPlan: approved plans add a route and count towards the total."""
@@ -427,14 +425,14 @@ class RerunLogger:
         self._approved_total += 1
         pts = [(w.position.x, w.position.y, w.position.z) for w in msg.waypoints]
         if pts:
-            self.log_route(_stamp_s(msg.header.stamp), msg.request_id, pts)
+            self.log_route(stamp_s(msg.header.stamp), msg.request_id, pts)
 
     def log_planning_report_msg(self, msg: Any) -> None:
         """A uam_msgs/PlanningReport: the epoch's metrics (approvals counted from the reports)."""
         if not self.enabled:
             return
         self._report_approved += int(msg.approved)
-        self.log_epoch(_stamp_s(msg.header.stamp),
+        self.log_epoch(stamp_s(msg.header.stamp),
                        approved_cumulative=self._report_approved,
                        active_aircraft=int(msg.active_flights),
                        mwis_vertices=int(msg.vertices),

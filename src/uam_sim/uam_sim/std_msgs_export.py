@@ -49,6 +49,7 @@ from typing import Any, Iterable, Sequence
 import numpy as np
 
 from .cdr import _ENCAPSULATION, _Writer
+from .stamps import stamp_ns
 
 #: The default scenario start: Monday 6 January 2025, 08:00 in Singapore (00:00 UTC).
 DEFAULT_SCENARIO_START_UTC = "2025-01-06T00:00:00Z"
@@ -390,8 +391,8 @@ class ViewExporter:
         """The route marker of an approved uam_msgs/FlightPlan (duck-typed); [] for others."""
         if int(plan.outcome) != 0 or not plan.waypoints:
             return []
-        t_ns = int(plan.header.stamp.sec) * _NS + int(plan.header.stamp.nanosec)
-        arrival_ns = int(plan.arrival_time.sec) * _NS + int(plan.arrival_time.nanosec)
+        t_ns = stamp_ns(plan.header.stamp)
+        arrival_ns = stamp_ns(plan.arrival_time)
         rid = self._route_ids.setdefault(str(plan.request_id), len(self._route_ids))
         pts = [(w.position.x, w.position.y, w.position.z) for w in plan.waypoints]
         from .rerun_log import ROUTE_COLOR
@@ -450,7 +451,7 @@ class ViewExporter:
 
     def fleet_state_messages(self, msg: Any) -> list[ViewMessage]:
         """:meth:`fleet_messages` of a uam_msgs/FleetState (duck-typed)."""
-        t_ns = int(msg.header.stamp.sec) * _NS + int(msg.header.stamp.nanosec)
+        t_ns = stamp_ns(msg.header.stamp)
         ids = [v.vehicle_id for v in msg.vehicles]
         pos = [(v.position.x, v.position.y, v.position.z) for v in msg.vehicles]
         return self.fleet_messages(t_ns, ids, pos)
