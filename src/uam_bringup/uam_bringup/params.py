@@ -284,6 +284,13 @@ def _utc_rule(value: str) -> str:
     return ""
 
 
+def _recorded_topics_rule(value) -> str:
+    from uam_bringup.contract import RECORDED_TOPICS
+
+    unknown = [t for t in value if t and t not in RECORDED_TOPICS]
+    return f"{unknown!r} are not recorded topics; known: {', '.join(RECORDED_TOPICS)}" if unknown else ""
+
+
 RECORDER = (
     Param("output", "run.mcap", "the .mcap file to write (parent directories are created; replaced if it exists)",
           check=_mcap_path_rule),
@@ -317,6 +324,12 @@ RECORDER = (
     Param("separation_m", 100.0, "the run's separation minimum (cylinder: H) [m]", 0.001, 100000.0),
     Param("vertical_separation_m", 30.0, "the run's vertical minimum V of the cylinder [m]", 0.001, 10000.0),
     Param("departure_slot_s", 0.0, "the run's departure slot [s] (0 = the paper's rule)", 0.0, 86400.0),
+    Param("wait_for_publishers", [""], "subscribe to the simulator's topics (/clock, uam/fleet_state, "
+          "uam/fleet_poses) only once each of these recorded topics has a matched publisher: the simulator "
+          "starts when the recorder subscribes to the fleet state, so the run then starts only when the "
+          "recorder hears the planner and the demand source (run_fleet.sh: uam/flight_plans, "
+          "uam/planning_reports, uam/requests, uam/epoch_sync); [''] = subscribe to everything at once",
+          check=_recorded_topics_rule),
 )
 
 REPLAY = (

@@ -71,6 +71,10 @@ RECORDED_TOPICS = {topic: (message_class(type_name), profile(spec))
                    for topic, (type_name, spec) in c.RECORDED_TOPICS.items()}
 
 
+#: the topics only the simulator publishes (subscribed last when waiting for publishers)
+SIMULATOR_TOPICS = (c.TOPIC_CLOCK, c.TOPIC_FLEET, c.TOPIC_POSES)
+
+
 def _starts_with_stamp(cls: type) -> bool:
     """True if the type's first field is a Time or a Header (its stamp sits at a fixed CDR offset)."""
     fields = list(cls.get_fields_and_field_types().values())
@@ -166,17 +170,50 @@ class RecorderNode(Node):
         self._stamp_first = {topic: _starts_with_stamp(cls) for topic, (cls, _qos) in RECORDED_TOPICS.items()}
         # recorded under the names they resolve to (namespace and remapping applied)
         self._names = {topic: self.resolve_topic_name(topic) for topic in RECORDED_TOPICS}
-        for topic, (cls, qos) in RECORDED_TOPICS.items():
-            self._recorded_subs[topic] = self.create_subscription(
-                cls, topic, self._make_callback(topic, cls), qos, raw=True,
-                event_callbacks=SubscriptionEventCallbacks(incompatible_qos=self._make_qos_warning(topic)))
+        # Readiness (issue 9): the simulator starts once the recorder subscribes to the fleet state.
+        # Subscribing to it (and /clock, poses) only when the planner's and the demand source's
+        # topics have matched publishers means the run starts only once the recorder hears them:
+        # before, a run stopped early (or a short one under load) could record fleet states and
+        # none of the plans and requests, whose publishers the recorder had not matched yet.
+        self._wait_for_publishers = [t for t in p["wait_for_publishers"] if t]
+        late = SIMULATOR_TOPICS if self._wait_for_publishers else ()
+        for topic in RECORDED_TOPICS:
+            if topic not in late:
+                self._subscribe(topic)
         steady = RclClock(clock_type=ClockType.STEADY_TIME)
+        self._last_wait_log = time.monotonic()
+        self._ready_timer = self.create_timer(0.05, self._subscribe_when_heard, clock=steady) if late else None
         self._flush_timer = self.create_timer(p["flush_period_s"], self._on_flush_timer,
                                               clock=steady)
         self._finish_timer = self.create_timer(0.05, self._maybe_close, clock=steady, autostart=False)
         self.get_logger().info(f"recording {len(RECORDED_TOPICS)} topics to {self.output}"
                                + (f", Rerun {rerun_mode}" + (f" to {rrd}" if rerun_mode == "save" else "")
                                   if rerun_mode != "off" else ""))
+
+    def _subscribe(self, topic: str) -> None:
+        cls, qos = RECORDED_TOPICS[topic]
+        self._recorded_subs[topic] = self.create_subscription(
+            cls, topic, self._make_callback(topic, cls), qos, raw=True,
+            event_callbacks=SubscriptionEventCallbacks(incompatible_qos=self._make_qos_warning(topic)))
+
+    @property
+    def ready(self) -> bool:
+        """True once every recorded topic is subscribed (the simulator's last, see wait_for_publishers)."""
+        return len(self._recorded_subs) == len(RECORDED_TOPICS)
+
+    def _subscribe_when_heard(self) -> None:
+        missing = [t for t in self._wait_for_publishers if self._recorded_subs[t].get_publisher_count() == 0]
+        if missing:
+            if time.monotonic() - self._last_wait_log > 10.0:
+                self._last_wait_log = time.monotonic()
+                self.get_logger().info(f"waiting for publishers of {', '.join(missing)} before "
+                                       "subscribing to the fleet state (the simulator waits for that)")
+            return
+        self._ready_timer.cancel()
+        for topic in SIMULATOR_TOPICS:
+            self._subscribe(topic)
+        self.get_logger().info(f"publishers of {', '.join(self._wait_for_publishers)} matched: "
+                               "subscribed to the fleet state")
 
     def _make_callback(self, topic: str, cls: type):
         def callback(data: bytes) -> None:
@@ -316,6 +353,8 @@ class RecorderNode(Node):
         self.finished = True
         if self._finish_timer is not None:
             self._finish_timer.cancel()
+        if getattr(self, "_ready_timer", None) is not None:
+            self._ready_timer.cancel()
         try:
             drained = self._drain()
             if drained:

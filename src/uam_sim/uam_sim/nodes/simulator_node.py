@@ -121,6 +121,9 @@ class SimulatorNode(Node):
             subscribers = {info.node_name for info in
                            self.get_subscriptions_info_by_topic(self.resolve_topic_name(c.TOPIC_FLEET))}
             missing += [f"subscriber {n}" for n in self.wait_for if n not in subscribers]
+            # seen in the graph is not yet matched: the first (volatile) fleet states would be lost
+            if not missing and self._fleet_pub.get_subscription_count() < len(self.wait_for):
+                missing.append("the fleet state's subscribers to match")
         return missing
 
     # ---- the epoch protocol --------------------------------------------------------------------
