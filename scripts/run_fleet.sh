@@ -170,9 +170,12 @@ start uam_planner planner planner --params-file config/planner.yaml -p "network:
   -p "climb_rate_mps:=$(f "$CLIMB")" -p "descent_rate_mps:=$(f "$DESCENT")"
 start uam_sim request_generator request_generator --params-file config/request_generator.yaml \
   -p "network:=$NETWORK" -p "rate:=$RATE" -p "seed:=$SEED" ${DEMAND:+-p "demand_file:=$DEMAND"}
-# the recorder writes the run's airspace into the MCAP (uam_airspace metadata): the analysis audits in it
+# the recorder writes the run's airspace into the MCAP (uam_airspace metadata): the analysis audits in it.
+# It subscribes to the fleet state (which starts the simulator) only once it hears these topics'
+# publishers, so even a run stopped at once records the planner's and the generator's messages.
+RECORDER_WAITS="uam/flight_plans,uam/planning_reports,uam/requests,uam/epoch_sync"
 start uam_sim recorder recorder -p "output:=$MCAP" -p "network:=$NETWORK" -p "rerun:='$RERUN'" -p "rerun_rrd:=$RRD" \
-  -p "foxglove_port:=$FOXGLOVE_PORT" "${AIRSPACE[@]}"
+  -p "foxglove_port:=$FOXGLOVE_PORT" "${AIRSPACE[@]}" -p "wait_for_publishers:=[$RECORDER_WAITS]"
 REC_PID=${PIDS[-1]}
 start uam_sim simulator simulator --params-file config/simulator.yaml -p "duration_s:=$DURATION" \
   -p "mode:=$MODE" -p "real_time_factor:=$RTF"

@@ -83,9 +83,22 @@ def test_each_node_declares_exactly_its_table(ros_context, tmp_path):
     from uam_sim.nodes.request_generator_node import RequestGeneratorNode
     from uam_sim.nodes.simulator_node import SimulatorNode
 
+    from rosgraph_msgs.msg import Clock
+
+    from uam_sim.mcap_writer import McapRecorder
+    from uam_sim.nodes.recorder_node import RecorderNode
+    from uam_sim.nodes.replay_node import ReplayNode
+
+    recording = tmp_path / "in.mcap"
+    with McapRecorder(recording) as rec:
+        rec.add_topic("/clock", Clock)
+        rec.write("/clock", Clock(), 0)
     nodes = {"planner": make_planner(ros_context), "solver": make_solver(ros_context),
              "simulator": SimulatorNode(context=ros_context),
-             "request_generator": RequestGeneratorNode(context=ros_context, parameter_overrides=params(network=TINY))}
+             "request_generator": RequestGeneratorNode(context=ros_context, parameter_overrides=params(network=TINY)),
+             # the recorder and the replay had no table (issue 9): declared by hand, missing from the docs
+             "recorder": RecorderNode(context=ros_context, parameter_overrides=params(output=str(tmp_path / "r.mcap"))),
+             "replay": ReplayNode(str(recording), context=ros_context)}
     try:
         for name, node in nodes.items():
             declared = set(node.list_parameters([], 0).names) - {"use_sim_time", "start_type_description_service"}
@@ -94,6 +107,7 @@ def test_each_node_declares_exactly_its_table(ros_context, tmp_path):
                 desc = node.describe_parameter(p.name)
                 assert desc.read_only == p.read_only and desc.description, (name, p.name)
     finally:
+        nodes["recorder"].close()
         for n in nodes.values():
             n.destroy_node()
 
@@ -120,3 +134,32 @@ def test_launch_file_starts_the_nodes_and_parameter_files_of_run_fleet():
     # the run's seed goes to both the demand and the planner, in both
     assert re.search(r'"seed": a\["seed"\]', (ROOT / "src" / "uam_bringup" / "launch" / "uam.launch.py").read_text())
     assert script.count('-p "seed:=$SEED"') == 2
+
+
+@pytest.mark.ros
+def test_recorder_and_replay_refuse_bad_values_and_run_time_changes_naming_the_parameter(ros_context, tmp_path):
+    """The recorder's view settings were changeable at run time and silently ignored; bad start-up
+    values of the recorder and the replay are refused naming the parameter and the value."""
+    from uam_sim.nodes.recorder_node import RecorderNode
+    from uam_sim.nodes.replay_node import ReplayNode
+
+    for name, value, words in [("output", str(tmp_path / "x.bag"), "must end with .mcap"),
+                               ("rerun", "live", "'live' is not one of"),
+                               ("view_fix_period_s", -1.0, "below the minimum"),
+                               ("scenario_start_utc", "yesterday", "'yesterday'"),
+                               ("compression", "gzip", "'gzip' is not one of")]:
+        overrides = {"output": str(tmp_path / "r.mcap"), name: value}
+        with pytest.raises(ValueError) as err:
+            RecorderNode(context=ros_context, parameter_overrides=params(**overrides))
+        assert name in str(err.value) and words in str(err.value), (name, str(err.value))
+    with pytest.raises(ValueError) as err:
+        ReplayNode(str(tmp_path / "none.mcap"), context=ros_context, parameter_overrides=params(rate=-2.0))
+    assert "rate" in str(err.value) and "-2.0" in str(err.value)
+    rec = RecorderNode(context=ros_context, parameter_overrides=params(output=str(tmp_path / "r.mcap")))
+    try:
+        for name, value in [("views", False), ("view_fix_period_s", 1.0), ("foxglove_port", 8765)]:
+            res = _set(rec, **{name: value})
+            assert not res.successful and name in res.reason, (name, res.reason)
+    finally:
+        rec.close()
+        rec.destroy_node()

@@ -57,6 +57,9 @@ def generate_launch_description() -> LaunchDescription:
                 "vertical_separation_m": a["vertical_separation_m"], "departure_slot_s": a["slot_s"]}
     recorder = Node(package="uam_sim", executable="recorder", name="recorder", output="screen",
                     parameters=[{"output": mcap, "network": network, "rerun": a["rerun"], "rerun_rrd": rrd,
+                                 # as run_fleet.sh: the run starts once the recorder hears these
+                                 "wait_for_publishers": ["uam/flight_plans", "uam/planning_reports",
+                                                         "uam/requests", "uam/epoch_sync"],
                                  **airspace}])
     nodes = [
         Node(package="uam_solvers", executable="solver", name="solver", output="screen",

@@ -19,6 +19,8 @@ from uam_bringup.contract import FRAME_ID
 from uam_planner.planning import EpochReport, Flight
 from uam_planner.planning import FlightRequest as LibRequest
 from uam_planner.trajectory import Trajectory
+from uam_sim.stamps import stamp_ns as _stamp_ns
+from uam_sim.stamps import stamp_s
 
 NS_PER_S = 1_000_000_000
 
@@ -41,14 +43,13 @@ def to_time(t_s: float):
     return Time(sec=sec, nanosec=nanosec)
 
 
-def stamp_ns(stamp: Any) -> int:
-    """builtin_interfaces/Time (or anything with ``sec`` and ``nanosec``) -> nanoseconds."""
-    return int(stamp.sec) * NS_PER_S + int(stamp.nanosec)
+#: builtin_interfaces/Time -> nanoseconds (uam_sim.stamps.stamp_ns)
+stamp_ns = _stamp_ns
 
 
-def from_time(stamp: Any) -> float:
-    """builtin_interfaces/Time (or anything with ``sec`` and ``nanosec``) -> seconds."""
-    return int(stamp.sec) + int(stamp.nanosec) * 1e-9
+#: builtin_interfaces/Time (or anything with ``sec`` and ``nanosec``) -> seconds: the one helper
+#: (uam_sim.stamps.stamp_s), under the name the nodes use.
+from_time = stamp_s
 
 
 # ---- requests ------------------------------------------------------------------------------------

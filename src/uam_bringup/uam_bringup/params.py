@@ -19,6 +19,9 @@ import sys
 from dataclasses import dataclass
 from typing import Any, Callable
 
+from uam_sim.rerun_log import MODES as RERUN_MODES
+from uam_sim.std_msgs_export import DEFAULT_SCENARIO_START_UTC
+
 INT32_MAX = 2**31 - 1
 
 
@@ -268,7 +271,82 @@ REQUEST_GENERATOR = (
           "operator)", check=_id_rule),
 )
 
-TABLES = {"planner": PLANNER, "solver": SOLVER, "simulator": SIMULATOR, "request_generator": REQUEST_GENERATOR}
+def _mcap_path_rule(value: str) -> str:
+    return "" if value.endswith(".mcap") else f"{value!r} must end with .mcap"
+
+
+def _utc_rule(value: str) -> str:
+    from uam_sim.std_msgs_export import scenario_start_ns
+
+    try:
+        scenario_start_ns(value)
+    except ValueError as exc:
+        return str(exc).split(": ", 1)[-1]
+    return ""
+
+
+def _recorded_topics_rule(value) -> str:
+    from uam_bringup.contract import RECORDED_TOPICS
+
+    unknown = [t for t in value if t and t not in RECORDED_TOPICS]
+    return f"{unknown!r} are not recorded topics; known: {', '.join(RECORDED_TOPICS)}" if unknown else ""
+
+
+RECORDER = (
+    Param("output", "run.mcap", "the .mcap file to write (parent directories are created; replaced if it exists)",
+          check=_mcap_path_rule),
+    Param("rerun", "off", "Rerun logging: 'off', 'save' (an .rrd file), 'spawn' (start a viewer) or 'connect' "
+          "(stream to a running viewer at rerun_url)", choices=RERUN_MODES),
+    Param("rerun_rrd", "", "the .rrd file for rerun:=save; empty = the output path with .rrd"),
+    Param("rerun_url", "", "viewer gRPC url for rerun:=connect; empty = Rerun's default"),
+    Param("network", "", "network file (config/networks/*.yaml) drawn in Rerun and the views; empty = none"),
+    Param("compression", "zstd", "MCAP chunk compression", choices=("zstd", "lz4", "none")),
+    Param("chunk_size_bytes", 256 * 1024, "uncompressed size after which an MCAP chunk is finished [bytes]",
+          1024, 1 << 30),
+    Param("flush_period_s", 1.0, "wall time after which the open chunk is written out, the most a crash "
+          "loses [s]", 0.01, 3600.0),
+    Param("finish_quiet_s", 0.5, "after the simulator's end of run, close once no message has arrived for this "
+          "long (messages of other topics may still be on their way) [s wall]", 0.0, 60.0),
+    Param("finish_timeout_s", 10.0, "after the simulator's end of run, close at the latest after this long "
+          "[s wall]", 0.0, 3600.0),
+    Param("views", True, "also write the run in standard types for generic viewers (/uam/view/*: PointCloud2, "
+          "NavSatFix, MarkerArray; docs/views.md)"),
+    Param("scenario_start_utc", DEFAULT_SCENARIO_START_UTC, "ISO 8601 instant of simulation time 0; the view "
+          "topics' header stamps are this plus the simulation time (log times stay simulation time)",
+          check=_utc_rule),
+    Param("view_fix_period_s", 5.0, "NavSatFix per vehicle every this many simulated seconds; 0 = every "
+          "step [s]", 0.0, 3600.0),
+    Param("foxglove_port", 0, "serve a live Foxglove WebSocket view on this port (0 = off; 8765 is "
+          "Foxglove's default)", 0, 65535),
+    # the airspace the run is planned in (run_fleet.sh passes the planner's values), written to the
+    # MCAP's uam_airspace metadata so that the analysis audits in the run's model
+    Param("separation_model", "sphere", "the run's separation model (as the planner's)",
+          choices=("sphere", "cylinder")),
+    Param("separation_m", 100.0, "the run's separation minimum (cylinder: H) [m]", 0.001, 100000.0),
+    Param("vertical_separation_m", 30.0, "the run's vertical minimum V of the cylinder [m]", 0.001, 10000.0),
+    Param("departure_slot_s", 0.0, "the run's departure slot [s] (0 = the paper's rule)", 0.0, 86400.0),
+    Param("wait_for_publishers", [""], "subscribe to the simulator's topics (/clock, uam/fleet_state, "
+          "uam/fleet_poses) only once each of these recorded topics has a matched publisher: the simulator "
+          "starts when the recorder subscribes to the fleet state, so the run then starts only when the "
+          "recorder hears the planner and the demand source (run_fleet.sh: uam/flight_plans, "
+          "uam/planning_reports, uam/requests, uam/epoch_sync); [''] = subscribe to everything at once",
+          check=_recorded_topics_rule),
+)
+
+REPLAY = (
+    Param("recording", "", "the .mcap file to replay (the command line's first argument sets it too)"),
+    Param("rate", 1.0, "playback speed: 1 = original timing, 10 = ten times faster, 0 = as fast as possible",
+          0.0, 1e9),
+    Param("start_delay_s", 1.0, "wall time to wait after creating the publishers before the first message "
+          "(lets subscribers discover them) [s]", 0.0, 3600.0),
+    Param("wait_for_subscribers", 0, "start only once every replayed topic has at least this many subscribers "
+          "(and start_delay_s has passed); 0 = do not wait", 0, 1000),
+    Param("topics", [""], "topics to replay; [''] = every recorded topic"),
+    Param("exit_when_done", True, "stop the node once everything is published"),
+)
+
+TABLES = {"planner": PLANNER, "solver": SOLVER, "simulator": SIMULATOR, "request_generator": REQUEST_GENERATOR,
+          "recorder": RECORDER, "replay": REPLAY}
 
 
 def markdown() -> str:

@@ -44,7 +44,30 @@ def init_with_stop_event(args=None):
     return stop
 
 
-def run_node(make_node, name: str, args=None, *, threads: int = 1, linger_s: float = 0.0) -> int:
+def run_node(make_node, name: str, args=None, *, threads: int = 1, linger_s: float = 0.0,
+             events_executor: bool = False) -> int:
+    """:func:`_run_node`, under cProfile when ``UAM_PROFILE_DIR`` is set (the profile of the
+    main thread goes to ``$UAM_PROFILE_DIR/<name>.prof``, for ``python -m pstats``)."""
+    import os
+
+    out_dir = os.environ.get("UAM_PROFILE_DIR", "")
+    if not out_dir:
+        return _run_node(make_node, name, args, threads=threads, linger_s=linger_s,
+                         events_executor=events_executor)
+    import cProfile
+    from pathlib import Path
+
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
+    prof = cProfile.Profile()
+    try:
+        return prof.runcall(_run_node, make_node, name, args, threads=threads, linger_s=linger_s,
+                            events_executor=events_executor)
+    finally:
+        prof.dump_stats(str(Path(out_dir) / f"{name}.prof"))
+
+
+def _run_node(make_node, name: str, args=None, *, threads: int = 1, linger_s: float = 0.0,
+              events_executor: bool = False) -> int:
     """The main() of a node: init, spin until the node is ``finished`` or a signal, clean up.
 
     ``make_node()`` builds the node (a ValueError or OSError from it is a configuration error,
@@ -53,7 +76,10 @@ def run_node(make_node, name: str, args=None, *, threads: int = 1, linger_s: flo
     leave. The exit code is the node's ``exit_code`` attribute if it has one, else 0. A node with a
     ``stopping`` threading.Event gets it set when the loop ends, for callbacks that wait; a node
     with a ``close()`` method (e.g. an open recording) gets it called before it is destroyed,
-    however the loop ended.
+    however the loop ended. ``events_executor`` spins rclpy's C++ EventsExecutor instead of the
+    SingleThreadedExecutor: far less overhead per message (the recorder takes ~14,000 messages
+    a paper run; BENCHMARKS.md), but it does not run coroutine callbacks, so only for nodes
+    without async callbacks.
     """
     import rclpy
     from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
@@ -63,7 +89,11 @@ def run_node(make_node, name: str, args=None, *, threads: int = 1, linger_s: flo
     node = None
     try:
         node = make_node()
-        executor = MultiThreadedExecutor(num_threads=threads) if threads > 1 else SingleThreadedExecutor()
+        if events_executor:
+            from rclpy.experimental import EventsExecutor
+            executor = EventsExecutor()
+        else:
+            executor = MultiThreadedExecutor(num_threads=threads) if threads > 1 else SingleThreadedExecutor()
         executor.add_node(node)
         while rclpy.ok() and not getattr(node, "finished", False) and not stop.is_set():
             executor.spin_once(timeout_sec=0.1)

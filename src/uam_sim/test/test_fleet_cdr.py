@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from uam_planner.trajectory import Trajectory
-from uam_sim.cdr import encode_fleet_state, encode_pose_array, yaw_quaternions
+from uam_sim.cdr import encode_clock, encode_fleet_state, encode_pose_array, yaw_quaternions
 from uam_sim.fleet import PHASE_CRUISE, PHASE_LANDING, PHASE_TAKEOFF, Fleet
 
 
@@ -129,3 +129,15 @@ def test_direct_cdr_with_ids_of_every_length_mod_8(frame_id):
         msg.header.stamp.sec, msg.header.stamp.nanosec, msg.header.frame_id = 7, 123, frame_id
         assert len(ours) == len(serialize_message(msg))
         assert deserialize_message(ours, FleetState) == msg
+
+
+def test_clock_cdr_equals_rclpy_serialization():
+    pytest.importorskip("rosgraph_msgs.msg", reason="needs the built workspace")
+    from builtin_interfaces.msg import Time
+    from rclpy.serialization import deserialize_message, serialize_message
+    from rosgraph_msgs.msg import Clock
+
+    for sec, nanosec in ((0, 0), (3500, 0), (17, 999_999_999), (-1, 5)):
+        msg = Clock(clock=Time(sec=sec, nanosec=nanosec))
+        assert encode_clock(sec, nanosec) == serialize_message(msg)
+        assert deserialize_message(encode_clock(sec, nanosec), Clock) == msg

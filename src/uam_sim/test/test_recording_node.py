@@ -193,3 +193,56 @@ def test_recorder_checks_announced_approvals_and_never_deserializes_fleet_states
     assert "2 approvals" in check["verdict"] and "1 approved plan" in check["verdict"]
     s = summarize(out)
     assert not s.verified and any("the recorder found" in p for p in s.problems)
+
+
+def test_recorder_subscribes_to_the_fleet_state_only_once_it_hears_the_planner(ros_context, spin_until, tmp_path):
+    """Readiness race (issue 9): the simulator starts when the recorder subscribes to the fleet
+    state, but the recorder could still be unmatched with the planner's and the generator's
+    publishers; a run stopped early (SIGTERM in test_run_fleet.py, under load) then recorded fleet
+    states and no plans or requests. With wait_for_publishers the fleet-state subscription (what
+    the simulator waits for) appears only once those topics have matched publishers, and the
+    latched plan published before it is in the file."""
+    out = tmp_path / "run.mcap"
+    recorder = RecorderNode(context=ros_context, parameter_overrides=[
+        Parameter("output", value=str(out)),
+        Parameter("wait_for_publishers", value=["uam/flight_plans", "uam/requests"])])
+    simulator = Node("simulator_probe", context=ros_context)
+    fleet_pub = simulator.create_publisher(FleetState, "uam/fleet_state", RECORDED_TOPICS["uam/fleet_state"][1])
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(recorder)
+    executor.add_node(simulator)
+    planner = None
+    try:
+        spin_until(executor, lambda: False, 1.5)
+        assert fleet_pub.get_subscription_count() == 0 and not recorder.ready  # nobody to hear yet
+        planner = Node("planner_probe", context=ros_context)
+        plans = planner.create_publisher(FlightPlan, "uam/flight_plans", RECORDED_TOPICS["uam/flight_plans"][1])
+        requests = planner.create_publisher(FlightRequest, "uam/requests", RECORDED_TOPICS["uam/requests"][1])
+        plan = FlightPlan(request_id="r1", outcome=FlightPlan.OUTCOME_REJECTED)
+        plans.publish(plan)
+        requests.publish(FlightRequest(request_id="r1", request_time=t(0)))
+        executor.add_node(planner)
+        assert spin_until(executor, lambda: fleet_pub.get_subscription_count() == 1, 20)
+        assert recorder.ready
+        fs = FleetState(step_index=0)
+        fs.header.stamp = t(0)
+        fleet_pub.publish(fs)
+        assert spin_until(executor, lambda: recorder.messages_written >= 3, 20)
+    finally:
+        recorder.close()
+        executor.shutdown()
+        for n in (recorder, simulator, planner):
+            if n is not None:
+                n.destroy_node()
+    counts = {}
+    for r in read_messages(out):
+        counts[r.topic] = counts.get(r.topic, 0) + 1
+    assert counts.get("/uam/flight_plans") == 1 and counts.get("/uam/requests") == 1
+    assert counts.get("/uam/fleet_state") == 1
+
+
+def test_recorder_refuses_waiting_for_a_topic_it_does_not_record(ros_context, tmp_path):
+    with pytest.raises(ValueError, match="wait_for_publishers.*'uam/nope'"):
+        RecorderNode(context=ros_context, parameter_overrides=[
+            Parameter("output", value=str(tmp_path / "r.mcap")),
+            Parameter("wait_for_publishers", value=["uam/nope"])])

@@ -184,3 +184,70 @@ def test_levels_of_a_layered_network_are_drawn_in_their_colours():
     assert sorted({float(s[0, 2]) for s in strips}) == [60.0, 90.0, 120.0]
     assert all(s[0, 2] == s[1, 2] for s in strips)
     assert tuple(kw["colors"][0]) == LEVEL_COLORS[0] and tuple(kw["colors"][-1]) == LEVEL_COLORS[2]
+
+
+def _latest_at(path, entity: str) -> dict[float, dict]:
+    """What the viewer shows of ``entity`` at each logged sim_time [s]: every component's latest
+    value at or before that time (static values for all times), read back from the .rrd."""
+    import rerun as rr
+
+    rows = []           # (time s or None for static, order, component, value)
+    order = 0
+    for chunk in rr.chunk.RrdReader(path).stream():
+        if chunk.entity_path != entity:
+            continue
+        data = chunk.to_record_batch().to_pydict()
+        times = [None] * chunk.num_rows if chunk.is_static else [t.total_seconds() for t in data["sim_time"]]
+        for i, t in enumerate(times):
+            for name, values in data.items():
+                if ":" in name:
+                    rows.append((t, order, name, values[i]))
+                    order += 1
+    static = {name: v for t, _, name, v in rows if t is None}
+    out = {}
+    for t in sorted({t for t, *_ in rows if t is not None}):
+        state = dict(static)
+        for _t, _o, name, v in sorted((r for r in rows if r[0] is not None and r[0] <= t),
+                                      key=lambda r: (r[0], r[1])):
+            state[name] = v
+        out[t] = state
+    return out
+
+
+@pytest.mark.parametrize("batch_steps", [1, 4, 50])
+def test_batched_fleet_logging_shows_every_step_as_logged(tmp_path, batch_steps):
+    """However the positions are batched (send_columns), at every step the viewer shows that
+    step's positions with their labels, the aircraft colour and size, and the routes of exactly
+    the airborne flights (instance k = aircraft k), on the map too; close() sends the rest."""
+    from uam_sim.rerun_log import ROUTE_COLOR, VEHICLE_COLOR, VEHICLE_RADIUS_UI
+
+    path = tmp_path / "f.rrd"
+    rng = np.random.default_rng(3)
+    steps = []
+    with RerunLogger("save", path, network=tiny_network(), batch_steps=batch_steps, batch_wall_s=60.0) as lg:
+        lg.log_route(0.0, "a", [[0, 0, 5], [1000, 0, 120], [2000, 0, 5]])
+        for k in range(11):
+            ids = ["a", "b"] if k < 4 else (["b"] if k < 7 else ([] if k < 8 else ["c", "b"]))
+            pos = rng.uniform(0, 2000, size=(len(ids), 3))
+            lg.log_fleet(float(k), ids, pos)
+            steps.append((float(k), ids, pos))
+    shown = _latest_at(path, "/world/fleet")
+    geo = _latest_at(path, "/geo/fleet")
+    rgba = int.from_bytes(bytes(VEHICLE_COLOR) + b"\xff", "big")
+    for t, ids, pos in steps:
+        s = shown[t]
+        np.testing.assert_allclose(np.asarray(s["Points3D:positions"]).reshape(-1, 3), pos, rtol=1e-6)
+        assert s["Points3D:labels"] == ids
+        assert s["Points3D:colors"] == [rgba] and s["Points3D:radii"] == [-VEHICLE_RADIUS_UI]
+        assert s["Points3D:show_labels"] == [False]
+        strips = s["LineStrips3D:strips"]
+        assert len(strips) == len(ids)
+        for vid, p, strip in zip(ids, pos, strips):
+            if vid == "a":
+                assert np.asarray(strip).shape == (3, 3)
+            else:  # no route known: a point-sized strip at the aircraft
+                assert np.asarray(strip).shape == (2, 3)
+        assert s["LineStrips3D:colors"] == [int.from_bytes(bytes(ROUTE_COLOR), "big")]
+        assert len(geo[t]["GeoPoints:positions"]) == len(ids)
+        if ids:
+            assert -90 < geo[t]["GeoPoints:positions"][0][0] < 90

@@ -52,8 +52,9 @@ from typing import Any, Iterable
 
 import numpy as np
 
-from .audit import AIRSPACE_METADATA, SafetyAudit, _t, audit_plans, separation_from_metadata
+from .audit import AIRSPACE_METADATA, SafetyAudit, audit_plans, separation_from_metadata
 from .mcap_reader import is_complete, iter_decoded, read_metadata
+from .stamps import stamp_s
 
 #: the MCAP metadata record the recorder node writes with its check of what it received
 RECORDER_CHECK = "uam_recorder_check"
@@ -183,7 +184,7 @@ def request_key(msg: Any) -> str:
 def _plan_key(p: Any) -> tuple:
     """What makes two plan messages the same decision (a latched plan delivered twice)."""
     return (request_key(p), int(p.outcome), str(p.reason), int(p.epoch_index),
-            tuple((_t(w.time), float(w.position.x), float(w.position.y), float(w.position.z))
+            tuple((stamp_s(w.time), float(w.position.x), float(w.position.y), float(w.position.z))
                   for w in p.waypoints))
 
 
@@ -268,12 +269,12 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=10
                 decisions.setdefault(rid, []).append(msg)
         elif topic == TOPIC_FLEET:
             ids = _vehicle_ids(msg)
-            fleet_t.append(_t(msg.header.stamp))
+            fleet_t.append(stamp_s(msg.header.stamp))
             fleet_n.append(len(ids))
             flown.update(ids)
         elif topic == TOPIC_REPORTS:
             epochs.append(EpochStats(
-                epoch_index=int(msg.epoch_index), t_s=_t(msg.header.stamp),
+                epoch_index=int(msg.epoch_index), t_s=stamp_s(msg.header.stamp),
                 eligible_requests=int(msg.eligible_requests), vertices=int(msg.vertices),
                 edges=int(msg.edges), selected=len(msg.instance.selected),
                 approved=int(msg.approved), expired=int(msg.expired), rejected=int(msg.rejected),

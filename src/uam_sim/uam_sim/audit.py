@@ -26,6 +26,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from .stamps import stamp_s
+
 # as uam_planner.audit: a distance this close (relative) below the minimum is a rounded exact tie
 TIE_RELATIVE = 1e-9
 
@@ -71,11 +73,6 @@ def separation_from_metadata(meta: dict, default=100.0):
     return SeparationModel(kind, h, v)
 
 
-def _t(stamp: Any) -> float:
-    """builtin_interfaces/Time -> seconds."""
-    return int(stamp.sec) + int(stamp.nanosec) * 1e-9
-
-
 @dataclass
 class SafetyAudit:
     """Closest approach between every pair of approved flights, as flown."""
@@ -103,7 +100,7 @@ class SafetyAudit:
 
 def trajectory_of(plan: Any) -> tuple[np.ndarray, np.ndarray]:
     """(times_s (p,), points_m (p, 3)) of a FlightPlan's waypoints."""
-    times = np.array([_t(w.time) for w in plan.waypoints], dtype=np.float64)
+    times = np.array([stamp_s(w.time) for w in plan.waypoints], dtype=np.float64)
     points = np.array([(w.position.x, w.position.y, w.position.z) for w in plan.waypoints],
                       dtype=np.float64).reshape(-1, 3)
     return times, points

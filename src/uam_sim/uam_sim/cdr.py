@@ -110,6 +110,15 @@ def encode_fleet_state(sec: int, nanosec: int, frame_id: str, step_index: int, v
     return b"".join(parts)
 
 
+_CLOCK = struct.Struct("<4siI")
+
+
+def encode_clock(sec: int, nanosec: int) -> bytes:
+    """Serialized rosgraph_msgs/Clock (one builtin_interfaces/Time): published every step, and
+    converting a Clock object costs rclpy ~0.1-0.3 ms against ~0.05 ms for bytes (measured)."""
+    return _CLOCK.pack(_ENCAPSULATION, int(sec), int(nanosec))
+
+
 def encode_pose_array(sec: int, nanosec: int, frame_id: str, positions_m, orientations_xyzw) -> bytes:
     """Serialized geometry_msgs/PoseArray (positions (n, 3), quaternions (n, 4) as x, y, z, w)."""
     w = _Writer()

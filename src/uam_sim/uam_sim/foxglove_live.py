@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from .stamps import stamp_ns
 from .std_msgs_export import DEFAULT_SCENARIO_START_UTC, FRAME_ID, scenario_start_ns
 
 TOPIC_NETWORK = "/uam/live/network"
@@ -41,9 +42,6 @@ TOPIC_METRICS = "/uam/live/metrics"
 
 _NS = 1_000_000_000
 
-
-def _stamp_ns(stamp: Any) -> int:
-    return int(stamp.sec) * _NS + int(stamp.nanosec)
 
 
 class FoxgloveLive:
@@ -145,8 +143,8 @@ class FoxgloveLive:
 
         m = self._fg.messages
         self._approved += 1
-        t_ns = _stamp_ns(plan.header.stamp)
-        life_ns = max(_stamp_ns(plan.arrival_time) - t_ns, 1)
+        t_ns = stamp_ns(plan.header.stamp)
+        life_ns = max(stamp_ns(plan.arrival_time) - t_ns, 1)
         line = m.LinePrimitive(type=m.LinePrimitiveLineType.LineStrip, thickness=1.5, scale_invariant=True,
                                points=self._points([(w.position.x, w.position.y, w.position.z)
                                                     for w in plan.waypoints]),
@@ -176,12 +174,12 @@ class FoxgloveLive:
 
     def on_fleet_state(self, msg: Any) -> None:
         """A uam_msgs/FleetState (duck-typed)."""
-        self.on_fleet(_stamp_ns(msg.header.stamp), [v.vehicle_id for v in msg.vehicles],
+        self.on_fleet(stamp_ns(msg.header.stamp), [v.vehicle_id for v in msg.vehicles],
                       [(v.position.x, v.position.y, v.position.z) for v in msg.vehicles])
 
     def on_planning_report(self, msg: Any) -> None:
         """A uam_msgs/PlanningReport: the epoch's metrics as one JSON message."""
-        t_ns = _stamp_ns(msg.header.stamp)
+        t_ns = stamp_ns(msg.header.stamp)
         self._report_approved = getattr(self, "_report_approved", 0) + int(msg.approved)
         self._metrics_ch.log(json.dumps({
             "approved_cumulative": self._report_approved, "active_aircraft": int(msg.active_flights),

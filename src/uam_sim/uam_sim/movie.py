@@ -24,6 +24,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from .stamps import stamp_s
+
 TOPIC_PLANS = "/uam/flight_plans"
 _NS = 1_000_000_000
 
@@ -40,8 +42,6 @@ class RunPlans:
     requests: int = 0
 
 
-def _t(stamp: Any) -> float:
-    return int(stamp.sec) + int(stamp.nanosec) * 1e-9
 
 
 def read_plans(path: str | Path, label: str | None = None) -> RunPlans:
@@ -55,8 +55,8 @@ def read_plans(path: str | Path, label: str | None = None) -> RunPlans:
         if int(plan.outcome) != 0 or len(plan.waypoints) < 2:
             continue
         run.ids.append(str(plan.request_id))
-        run.decided_s.append(_t(plan.header.stamp))
-        run.times_s.append(np.array([_t(w.time) for w in plan.waypoints]))
+        run.decided_s.append(stamp_s(plan.header.stamp))
+        run.times_s.append(np.array([stamp_s(w.time) for w in plan.waypoints]))
         run.points_m.append(np.array([(w.position.x, w.position.y, w.position.z) for w in plan.waypoints]))
         if label is None and plan.method:
             run.label = plan.method.upper() + (f" ({plan.backend})" if plan.backend else "")

@@ -6,6 +6,7 @@ the YAML list rosbag2 Jazzy puts into a channel's metadata, :func:`parse_offered
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Any, Sequence
 
@@ -88,8 +89,13 @@ class QosSpec:
 
 def offered_qos_yaml(profiles: Sequence[Any]) -> str:
     """The ``offered_qos_profiles`` channel metadata: a YAML list of profiles (rosbag2 Jazzy)."""
-    return yaml.safe_dump([QosSpec.from_profile(p).to_dict() for p in profiles],
-                          sort_keys=False, default_flow_style=False)
+    return _qos_yaml(tuple(QosSpec.from_profile(p) for p in profiles))
+
+
+@functools.lru_cache(maxsize=256)
+def _qos_yaml(specs: tuple[QosSpec, ...]) -> str:
+    # cached: the recorder adds one channel per vehicle for the views, all with one profile
+    return yaml.safe_dump([s.to_dict() for s in specs], sort_keys=False, default_flow_style=False)
 
 
 def parse_offered_qos(text: str) -> list[QosSpec]:

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from .audit import _t
+from .stamps import stamp_s
 from .mcap_reader import iter_decoded
 
 TOPIC_REPORTS = "/uam/planning_reports"
@@ -56,7 +56,7 @@ def recorded_instances(path: str | Path, reader: str = "rclpy") -> list[Recorded
             groups.setdefault(r, []).append(i)
         problem = MwisProblem.from_arrays(weights, edges, groups=list(groups.values()) if rids else None)
         out.append(RecordedInstance(
-            epoch_index=int(msg.epoch_index), t_s=_t(msg.header.stamp), problem=problem,
+            epoch_index=int(msg.epoch_index), t_s=stamp_s(msg.header.stamp), problem=problem,
             vertex_request_ids=rids, vertex_candidate_index=[int(c) for c in inst.vertex_candidate_index],
             selected=[int(s) for s in inst.selected], objective=float(msg.objective),
             solve_time_s=float(msg.solve_time_s), backend_used=str(msg.backend_used)))

@@ -1,11 +1,20 @@
-"""The simulation time a ROS message carries, for its log time in a recording."""
+"""Stamps: a builtin_interfaces/Time in seconds or nanoseconds, and the simulation time a ROS
+message carries (its log time in a recording). The one place stamps are converted: the analysis,
+the audit, the Rerun logging, the movie and the nodes' conversions (uam_bringup.conversions)
+all use these. rclpy-free (duck-typed: anything with ``sec`` and ``nanosec``)."""
 
 from __future__ import annotations
 
 from typing import Any
 
 
-def _time_ns(stamp: Any) -> int:
+def stamp_s(stamp: Any) -> float:
+    """builtin_interfaces/Time (or anything with ``sec`` and ``nanosec``) -> seconds [s]."""
+    return int(stamp.sec) + int(stamp.nanosec) * 1e-9
+
+
+def stamp_ns(stamp: Any) -> int:
+    """builtin_interfaces/Time -> nanoseconds [ns] (exact)."""
     return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
 
@@ -23,5 +32,5 @@ def sim_stamp_ns(msg: Any) -> int | None:
             if obj is None:
                 break
         if obj is not None and hasattr(obj, "sec") and hasattr(obj, "nanosec"):
-            return _time_ns(obj)
+            return stamp_ns(obj)
     return None

@@ -45,7 +45,6 @@ import sys
 import time
 from pathlib import Path
 
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.clock import Clock as RclClock
 from rclpy.clock import ClockType
 from rclpy.event_handler import SubscriptionEventCallbacks
@@ -59,17 +58,21 @@ from uam_sim.cdr import fleet_state_digest, leading_stamp_ns
 from uam_sim.mcap_schema import message_class
 from uam_sim.mcap_writer import McapRecorder
 from uam_sim.stamps import sim_stamp_ns
-from uam_sim.rerun_log import MODES as RERUN_MODES
 from uam_sim.rerun_log import RerunLogger
-from uam_sim.std_msgs_export import DEFAULT_SCENARIO_START_UTC, ViewExporter
+from uam_sim.std_msgs_export import ViewExporter
 
 from uam_bringup import contract as c
+from uam_bringup.params import RECORDER, declare_table
 from uam_bringup.qos import profile
 from uam_bringup.runtime import run_node
 
 #: topic (relative, see uam_bringup.contract) -> (message class, subscription QoS)
 RECORDED_TOPICS = {topic: (message_class(type_name), profile(spec))
                    for topic, (type_name, spec) in c.RECORDED_TOPICS.items()}
+
+
+#: the topics only the simulator publishes (subscribed last when waiting for publishers)
+SIMULATOR_TOPICS = (c.TOPIC_CLOCK, c.TOPIC_FLEET, c.TOPIC_POSES)
 
 
 def _starts_with_stamp(cls: type) -> bool:
@@ -114,69 +117,17 @@ class RecorderNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__("recorder", **kwargs)
-        self.declare_parameter("output", "run.mcap", ParameterDescriptor(
-            read_only=True, description="the .mcap file to write (parent directories are created; replaced if it exists)"))
-        self.declare_parameter("rerun", "off", ParameterDescriptor(
-            read_only=True, description="Rerun logging: 'off', 'save' (an .rrd file), 'spawn' (start a viewer) or "
-                        "'connect' (stream to a running viewer at rerun_url)"))
-        self.declare_parameter("rerun_rrd", "", ParameterDescriptor(
-            read_only=True, description="the .rrd file for rerun:=save; empty = the output path with .rrd"))
-        self.declare_parameter("rerun_url", "", ParameterDescriptor(
-            read_only=True, description="viewer gRPC url for rerun:=connect; empty = Rerun's default"))
-        self.declare_parameter("network", "", ParameterDescriptor(
-            read_only=True, description="network file (config/networks/*.yaml) drawn in Rerun as static data; empty = none"))
-        self.declare_parameter("compression", "zstd", ParameterDescriptor(
-            read_only=True, description="MCAP chunk compression: 'zstd', 'lz4' or 'none'"))
-        self.declare_parameter("chunk_size_bytes", 256 * 1024, ParameterDescriptor(
-            read_only=True, description="uncompressed size after which an MCAP chunk is finished [bytes]",
-            integer_range=[IntegerRange(from_value=1024, to_value=1 << 30)]))
-        self.declare_parameter("flush_period_s", 1.0, ParameterDescriptor(
-            read_only=True, description="wall time after which the open chunk is written out, the most a crash loses [s]",
-            floating_point_range=[FloatingPointRange(from_value=0.01, to_value=3600.0)]))
-        self.declare_parameter("finish_quiet_s", 0.5, ParameterDescriptor(
-            read_only=True, description="after the simulator's end of run, close once no message has arrived for this "
-                        "long (messages of other topics may still be on their way) [s wall]",
-            floating_point_range=[FloatingPointRange(from_value=0.0, to_value=60.0)]))
-        self.declare_parameter("finish_timeout_s", 10.0, ParameterDescriptor(
-            read_only=True, description="after the simulator's end of run, close at the latest after this long [s wall]",
-            floating_point_range=[FloatingPointRange(from_value=0.0, to_value=3600.0)]))
-        self.declare_parameter("views", True, ParameterDescriptor(
-            description="also write the run in standard types for generic viewers (/uam/view/*: "
-                        "PointCloud2, NavSatFix, MarkerArray; docs/views.md)"))
-        self.declare_parameter("scenario_start_utc", DEFAULT_SCENARIO_START_UTC, ParameterDescriptor(
-            description="ISO 8601 instant of simulation time 0; the view topics' header stamps are "
-                        "this plus the simulation time (log times stay simulation time)"))
-        self.declare_parameter("view_fix_period_s", 5.0, ParameterDescriptor(
-            description="NavSatFix per vehicle every this many simulated seconds; 0 = every step [s]",
-            floating_point_range=[FloatingPointRange(from_value=0.0, to_value=3600.0)]))
-        self.declare_parameter("foxglove_port", 0, ParameterDescriptor(
-            description="serve a live Foxglove WebSocket view on this port (0 = off; 8765 is "
-                        "Foxglove's default)", integer_range=[IntegerRange(from_value=0, to_value=65535)]))
-        # the airspace the run is planned in (run_fleet.sh passes the planner's values), written to
-        # the MCAP's uam_airspace metadata so that the analysis audits in the run's model
-        self.declare_parameter("separation_model", "sphere", ParameterDescriptor(
-            read_only=True, description="the run's separation model, 'sphere' or 'cylinder' (as the planner's)"))
-        self.declare_parameter("separation_m", 100.0, ParameterDescriptor(
-            read_only=True, dynamic_typing=True, description="the run's separation minimum (cylinder: H) [m]"))
-        self.declare_parameter("vertical_separation_m", 30.0, ParameterDescriptor(
-            read_only=True, dynamic_typing=True, description="the run's vertical minimum V of the cylinder [m]"))
-        self.declare_parameter("departure_slot_s", 0.0, ParameterDescriptor(
-            read_only=True, dynamic_typing=True, description="the run's departure slot [s] (0 = the paper's rule)"))
-        g = self.get_parameter
-        airspace = airspace_metadata(str(g("separation_model").value), float(g("separation_m").value),
-                                     float(g("vertical_separation_m").value), float(g("departure_slot_s").value))
-        output = str(g("output").value)
-        if not output.endswith(".mcap"):
-            raise ValueError(f"parameter output: {output!r} must end with .mcap")
-        rerun_mode = str(g("rerun").value)
-        if rerun_mode not in RERUN_MODES:
-            raise ValueError(f"parameter rerun: {rerun_mode!r} is not one of {RERUN_MODES}")
-        rrd = str(g("rerun_rrd").value) or str(Path(output).with_suffix(".rrd"))
+        # one table (uam_bringup.params.RECORDER): declared read-only, checked at start-up
+        p = declare_table(self, RECORDER)
+        airspace = airspace_metadata(p["separation_model"], p["separation_m"], p["vertical_separation_m"],
+                                     p["departure_slot_s"])
+        output = p["output"]
+        rerun_mode = p["rerun"]
+        rrd = p["rerun_rrd"] or str(Path(output).with_suffix(".rrd"))
         network = None
-        network_path = str(g("network").value)
-        if network_path:
+        if p["network"]:
             from uam_planner.network import load_network
-            network = load_network(network_path)
+            network = load_network(p["network"])
 
         self.output = Path(output)
         self.rrd_path = Path(rrd) if rerun_mode == "save" else None
@@ -184,23 +135,21 @@ class RecorderNode(Node):
         self.messages_written = 0
         self._recorded_subs = {}
         self._finish_timer = None
-        self.recorder = McapRecorder(output, chunk_size_bytes=int(g("chunk_size_bytes").value),
-                                     compression=str(g("compression").value),
-                                     flush_period_s=float(g("flush_period_s").value))
+        self.recorder = McapRecorder(output, chunk_size_bytes=p["chunk_size_bytes"],
+                                     compression=p["compression"],
+                                     flush_period_s=p["flush_period_s"])
         self.views = None
         self.foxglove = None
         self.rerun = None
         self.recorder.add_metadata(AIRSPACE_METADATA, airspace)
         try:
             self.rerun = RerunLogger(rerun_mode, rrd, network=network,
-                                     connect_url=str(g("rerun_url").value) or None)
-            if bool(g("views").value):
-                self.views = ViewExporter(network, str(g("scenario_start_utc").value),
-                                          fix_period_s=float(g("view_fix_period_s").value))
-            if int(g("foxglove_port").value) > 0:
+                                     connect_url=p["rerun_url"] or None)
+            if p["views"]:
+                self.views = ViewExporter(network, p["scenario_start_utc"], fix_period_s=p["view_fix_period_s"])
+            if p["foxglove_port"] > 0:
                 from uam_sim.foxglove_live import FoxgloveLive
-                self.foxglove = FoxgloveLive(network, port=int(g("foxglove_port").value),
-                                             scenario_start_utc=str(g("scenario_start_utc").value))
+                self.foxglove = FoxgloveLive(network, port=p["foxglove_port"], scenario_start_utc=p["scenario_start_utc"])
         except BaseException:
             self.recorder.close()
             if self.rerun is not None:
@@ -211,8 +160,8 @@ class RecorderNode(Node):
             for vm in self.views.network_messages(0):
                 self._write_view(vm)
         self.finish_requested = False
-        self._finish_quiet_s = float(g("finish_quiet_s").value)
-        self._finish_timeout_s = float(g("finish_timeout_s").value)
+        self._finish_quiet_s = p["finish_quiet_s"]
+        self._finish_timeout_s = p["finish_timeout_s"]
         self._finish_requested_at = 0.0
         self._last_rx = time.monotonic()
         self._clock_ns = 0
@@ -221,17 +170,50 @@ class RecorderNode(Node):
         self._stamp_first = {topic: _starts_with_stamp(cls) for topic, (cls, _qos) in RECORDED_TOPICS.items()}
         # recorded under the names they resolve to (namespace and remapping applied)
         self._names = {topic: self.resolve_topic_name(topic) for topic in RECORDED_TOPICS}
-        for topic, (cls, qos) in RECORDED_TOPICS.items():
-            self._recorded_subs[topic] = self.create_subscription(
-                cls, topic, self._make_callback(topic, cls), qos, raw=True,
-                event_callbacks=SubscriptionEventCallbacks(incompatible_qos=self._make_qos_warning(topic)))
+        # Readiness (issue 9): the simulator starts once the recorder subscribes to the fleet state.
+        # Subscribing to it (and /clock, poses) only when the planner's and the demand source's
+        # topics have matched publishers means the run starts only once the recorder hears them:
+        # before, a run stopped early (or a short one under load) could record fleet states and
+        # none of the plans and requests, whose publishers the recorder had not matched yet.
+        self._wait_for_publishers = [t for t in p["wait_for_publishers"] if t]
+        late = SIMULATOR_TOPICS if self._wait_for_publishers else ()
+        for topic in RECORDED_TOPICS:
+            if topic not in late:
+                self._subscribe(topic)
         steady = RclClock(clock_type=ClockType.STEADY_TIME)
-        self._flush_timer = self.create_timer(float(g("flush_period_s").value), self._on_flush_timer,
+        self._last_wait_log = time.monotonic()
+        self._ready_timer = self.create_timer(0.05, self._subscribe_when_heard, clock=steady) if late else None
+        self._flush_timer = self.create_timer(p["flush_period_s"], self._on_flush_timer,
                                               clock=steady)
         self._finish_timer = self.create_timer(0.05, self._maybe_close, clock=steady, autostart=False)
         self.get_logger().info(f"recording {len(RECORDED_TOPICS)} topics to {self.output}"
                                + (f", Rerun {rerun_mode}" + (f" to {rrd}" if rerun_mode == "save" else "")
                                   if rerun_mode != "off" else ""))
+
+    def _subscribe(self, topic: str) -> None:
+        cls, qos = RECORDED_TOPICS[topic]
+        self._recorded_subs[topic] = self.create_subscription(
+            cls, topic, self._make_callback(topic, cls), qos, raw=True,
+            event_callbacks=SubscriptionEventCallbacks(incompatible_qos=self._make_qos_warning(topic)))
+
+    @property
+    def ready(self) -> bool:
+        """True once every recorded topic is subscribed (the simulator's last, see wait_for_publishers)."""
+        return len(self._recorded_subs) == len(RECORDED_TOPICS)
+
+    def _subscribe_when_heard(self) -> None:
+        missing = [t for t in self._wait_for_publishers if self._recorded_subs[t].get_publisher_count() == 0]
+        if missing:
+            if time.monotonic() - self._last_wait_log > 10.0:
+                self._last_wait_log = time.monotonic()
+                self.get_logger().info(f"waiting for publishers of {', '.join(missing)} before "
+                                       "subscribing to the fleet state (the simulator waits for that)")
+            return
+        self._ready_timer.cancel()
+        for topic in SIMULATOR_TOPICS:
+            self._subscribe(topic)
+        self.get_logger().info(f"publishers of {', '.join(self._wait_for_publishers)} matched: "
+                               "subscribed to the fleet state")
 
     def _make_callback(self, topic: str, cls: type):
         def callback(data: bytes) -> None:
@@ -291,7 +273,7 @@ class RecorderNode(Node):
         if topic == c.TOPIC_CLOCK and stamp is not None:
             self._clock_ns = max(self._clock_ns, stamp)
         log_ns = stamp if stamp is not None else self._clock_ns
-        if self._names[topic] not in self.recorder.topics:
+        if not self.recorder.has_topic(self._names[topic]):
             self._register(topic, cls)
         self.recorder.write(self._names[topic], data, log_time_ns=max(0, log_ns))
         self.messages_written += 1
@@ -333,7 +315,7 @@ class RecorderNode(Node):
 
     def _write_view(self, vm) -> None:
         """One view message (uam_sim.std_msgs_export.ViewMessage) at its simulation time."""
-        if vm.topic not in self.recorder.topics:
+        if not self.recorder.has_topic(vm.topic):
             self.recorder.add_topic(vm.topic, vm.type_name)
         self.recorder.write(vm.topic, vm.data, log_time_ns=max(0, vm.sim_time_ns))
         self.view_messages_written += 1
@@ -371,12 +353,14 @@ class RecorderNode(Node):
         self.finished = True
         if self._finish_timer is not None:
             self._finish_timer.cancel()
+        if getattr(self, "_ready_timer", None) is not None:
+            self._ready_timer.cancel()
         try:
             drained = self._drain()
             if drained:
                 self.get_logger().info(f"wrote {drained} messages still queued at the end")
             for topic, (cls, _qos) in RECORDED_TOPICS.items():
-                if self._names[topic] not in self.recorder.topics:
+                if not self.recorder.has_topic(self._names[topic]):
                     self._register(topic, cls)
             check = self.check.result()
             self.recorder.add_metadata("uam_recorder_check", check)
@@ -392,7 +376,7 @@ class RecorderNode(Node):
 
 
 def main(args=None) -> int:
-    return run_node(RecorderNode, "recorder", args)
+    return run_node(RecorderNode, "recorder", args, events_executor=True)
 
 
 if __name__ == "__main__":

@@ -15,7 +15,6 @@ from __future__ import annotations
 import sys
 import time
 
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.clock import Clock as RclClock
 from rclpy.clock import ClockType
 from rclpy.duration import Duration
@@ -26,6 +25,7 @@ from rclpy.utilities import remove_ros_args
 from uam_sim.mcap_schema import message_class
 from uam_sim.qos_yaml import QosSpec
 from uam_sim.replay import load_plan
+from uam_bringup.params import REPLAY, declare_table
 from uam_bringup.runtime import run_node
 
 _BATCH = 500  # messages per timer tick at most, so the executor stays responsive at rate 0
@@ -49,31 +49,14 @@ class ReplayNode(Node):
 
     def __init__(self, path: str | None = None, **kwargs) -> None:
         super().__init__("replay", **kwargs)
-        self.declare_parameter("recording", "", ParameterDescriptor(
-            description="the .mcap file to replay (the command line's first argument sets it too)"))
-        self.declare_parameter("rate", 1.0, ParameterDescriptor(
-            description="playback speed: 1 = original timing, 10 = ten times faster, 0 = as fast as possible",
-            floating_point_range=[FloatingPointRange(from_value=0.0, to_value=1e9)]))
-        self.declare_parameter("start_delay_s", 1.0, ParameterDescriptor(
-            description="wall time to wait after creating the publishers before the first message "
-                        "(lets subscribers discover them) [s]",
-            floating_point_range=[FloatingPointRange(from_value=0.0, to_value=3600.0)]))
-        self.declare_parameter("wait_for_subscribers", 0, ParameterDescriptor(
-            description="start only once every replayed topic has at least this many subscribers "
-                        "(and start_delay_s has passed); 0 = do not wait",
-            integer_range=[IntegerRange(from_value=0, to_value=1000)]))
-        self.declare_parameter("topics", [""], ParameterDescriptor(
-            description="topics to replay; empty = every recorded topic"))
-        self.declare_parameter("exit_when_done", True, ParameterDescriptor(
-            description="stop the node once everything is published"))
-        g = self.get_parameter
-        path = path or str(g("recording").value)
+        p = declare_table(self, REPLAY)   # uam_bringup.params.REPLAY, read-only
+        path = path or p["recording"]
         if not path:
             raise ValueError("recording: give the .mcap file as the first argument or -p recording:=FILE")
-        rate = float(g("rate").value)
-        topics = [t for t in (g("topics").value or []) if t]
+        rate = p["rate"]
+        topics = [t for t in (p["topics"] or []) if t]
         self.plan = load_plan(path, rate=rate, topics=topics)
-        self.exit_when_done = bool(g("exit_when_done").value)
+        self.exit_when_done = p["exit_when_done"]
         self._steady = RclClock(clock_type=ClockType.STEADY_TIME)
         self._replay_publishers = {}
         for topic, info in self.plan.topics.items():
@@ -81,8 +64,8 @@ class ReplayNode(Node):
                                                             qos_profile(info.qos))
         self.published = 0
         self._start: float | None = None
-        self._delay_s = float(g("start_delay_s").value)
-        self._wait_for = int(g("wait_for_subscribers").value)
+        self._delay_s = p["start_delay_s"]
+        self._wait_for = p["wait_for_subscribers"]
         self._created = time.monotonic()
         # a steady wall-clock timer: replay timing must not follow the /clock it publishes itself
         self._timer = self.create_timer(0.001, self._on_timer, clock=self._steady)

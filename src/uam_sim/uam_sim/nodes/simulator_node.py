@@ -40,7 +40,7 @@ from uam_bringup import conversions as m
 from uam_bringup import qos, wire
 from uam_bringup.params import SIMULATOR, declare_table
 from uam_bringup.runtime import run_node
-from uam_sim.cdr import encode_fleet_state, encode_pose_array, yaw_quaternions
+from uam_sim.cdr import encode_clock, encode_fleet_state, encode_pose_array, yaw_quaternions
 from uam_sim.fleet import Fleet
 
 RESEND_S = 2.0  # wall time after which an unanswered call is sent again (a restarted server lost it)
@@ -121,6 +121,9 @@ class SimulatorNode(Node):
             subscribers = {info.node_name for info in
                            self.get_subscriptions_info_by_topic(self.resolve_topic_name(c.TOPIC_FLEET))}
             missing += [f"subscriber {n}" for n in self.wait_for if n not in subscribers]
+            # seen in the graph is not yet matched: the first (volatile) fleet states would be lost
+            if not missing and self._fleet_pub.get_subscription_count() < len(self.wait_for):
+                missing.append("the fleet state's subscribers to match")
         return missing
 
     # ---- the epoch protocol --------------------------------------------------------------------
@@ -263,7 +266,7 @@ class SimulatorNode(Node):
     def _publish_state(self) -> None:
         t = self.t_s
         stamp = m.to_time(t)
-        self._clock_pub.publish(Clock(clock=stamp))
+        self._clock_pub.publish(encode_clock(stamp.sec, stamp.nanosec))
         fs = self.fleet.sample(t)
         self.active_samples.append(len(fs))
         # Serialized directly from the fleet arrays (uam_sim.cdr): same bytes as the message objects,
