@@ -100,6 +100,7 @@ class Layer(Backend):
         self.batch_components = getattr(child, "batch_components", False)
         self.reduces_itself = getattr(child, "reduces_itself", False)
         self.inline_max_vertices = getattr(child, "inline_max_vertices", 0)
+        self.thread_inline_max_vertices = getattr(child, "thread_inline_max_vertices", None)
         self.reduce_min_vertices = getattr(child, "reduce_min_vertices", 0)
         self.split_min_vertices = getattr(child, "split_min_vertices", 0)
         self.split_max_vertices = getattr(child, "split_max_vertices", 1 << 62)
@@ -281,7 +282,10 @@ class ValidateFallback(Layer):
                 box["error"] = exc
 
         allowed_s = time_limit_s + max(self.margin_s, self.margin_fraction * time_limit_s)
-        if problem.n <= getattr(self.child, "inline_max_vertices", 0):
+        inline_max = getattr(self.child, "thread_inline_max_vertices", None)
+        if inline_max is None:
+            inline_max = getattr(self.child, "inline_max_vertices", 0)
+        if problem.n <= inline_max:
             # known to return within the limit at this size: no thread hand-off (which costs
             # milliseconds on a loaded machine, more than the solve of a 50-vertex graph)
             run()
