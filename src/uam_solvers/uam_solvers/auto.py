@@ -1,32 +1,33 @@
 """The ``auto`` backend: exact where a proof is affordable, CHILS where it is not.
 
-Inside the default pipeline (``ValidateFallback(Reduce(ComponentSplit(auto)))``) the graph is
-first reduced by the exact rules of :mod:`uam_solvers.reductions` (up to ``self_reduce_above``
-= 256 vertices, where they pay; on large paper-shaped graphs they remove ~2 % of the vertices
-for ~0.4 s at 10,000 vertices, so large graphs skip them) and split into connected components;
-``auto`` then gets each non-trivial component (kernel) and chooses by its size:
+The outer layers of the default pipeline (Reduce, ComponentSplit) pass every graph through;
+``auto`` chooses by size and structure itself:
 
-* at most ``kamis_max_vertices`` (64) vertices (the whole graph: no Python reductions or split
-  below 65 vertices, KaMIS reduces and splits faster itself): KaMIS branch-and-reduce, which
-  returns before its time limit only when its search is complete; a return within half the
-  limit is taken as the proof. Measured: 0.2 ms at 15 and up to 47 ms at 50 paper-shaped
-  vertices (under load);
-* at most ``exact_max_vertices`` (200) vertices: CP-SAT (:class:`uam_solvers.cpsat.CpSatBackend`),
-  which honours its time limit and proves optimality (for the integer-scaled weights, see
-  :func:`uam_solvers.base.integer_weights`). When CP-SAT has not proven the optimum within
-  ``exact_fraction`` (0.5) of the component's time share, the rest of the share goes to CHILS
-  seeded nowhere (its own search) and the better answer is kept (unproven).
-* larger: CHILS (:class:`uam_solvers.chszla.ChilsBackend`, local search, never proven) for the
-  whole share minus ``safety_s``, so the answer is back within the limit.
+* up to ``bb_max_vertices`` (64): the exact clique branch and bound of
+  :mod:`uam_solvers.cliquebb` (Python-int bitsets, one branch per request; ``solve()`` runs it
+  straight from clean arrays). Measured: 0.6 ms median end to end on the 5-50 vertex corpus
+  against 1.6 ms for KaMIS called directly (BENCHMARKS.md). Past its node limit (~0.1 s),
+  KaMIS with the whole limit (it returned within ~50 ms on every such graph measured).
+* up to ``kamis_max_vertices`` (2,000) when requests interact little (mean interacting requests
+  per request <= ``kamis_max_partners`` = 8; the planner's graphs have 1.5-1.6 median, 6.7 max):
+  KaMIS branch-and-reduce on the whole graph (it reduces and splits faster than the Python
+  layers) with ``kamis_fraction`` (0.25) of the limit, at most ``kamis_max_share_s`` (1 s);
+  a return before 0.9 of that share is its completed search, a proof. Denser graphs are kept
+  from it because KaMIS overran its limit on them (1.5 s with 1 s on a 150-vertex dense
+  ``paper_instance``, 33 s on 250 vertices) and it holds the GIL, so nothing in-process could
+  stop it.
+* otherwise, up to 2,000 vertices: auto's own ``Reduce(ComponentSplit(...))`` (exact
+  reductions up to 256 vertices, connected components) and per component: branch and bound,
+  KaMIS up to 64 vertices, CP-SAT up to ``exact_max_vertices`` (200; it honours its limit and
+  proves optimality for the integer-scaled weights, CHILS gets the rest of the share when it
+  has not proven within ``exact_fraction``), CHILS above.
+* above 2,000 vertices: chszlablib's LearnAndReduce exact kernelisation with ``lr_fraction``
+  (0.2) of the limit, then CHILS with the rest on the kernel when it holds at most
+  ``lr_max_kernel_fraction`` (25 %) of the vertices, else on the whole graph (proven when the
+  kernel is empty: measured on the 10,000-vertex planner-shaped graph in 0.13 s).
 
-KaMIS is not used above 64 vertices: measured here it ignores its time limit on dense
-paper-shaped graphs (42 s with a 5 s limit on a 250-vertex ``paper_instance``); and
-chszlablib's LearnAndReduce kernelisation removed little of these graphs (about 5 % of a
-10,000-vertex ``large_instance``, 0.5-1 s) and costs up to 0.4 s on some 5-50 vertex ones, so it
-is not used either (BENCHMARKS.md).
-
-``proven_optimal`` is True only when KaMIS finished or CP-SAT reported OPTIMAL for every
-component.
+``proven_optimal`` is True only when the branch and bound completed, KaMIS finished, CP-SAT
+reported OPTIMAL for every component, or LearnAndReduce left nothing.
 """
 from __future__ import annotations
 
@@ -175,6 +176,9 @@ class AutoBackend(Backend):
         "lr_fraction": Option("lr_fraction", "float", 0.2, "share of the limit LearnAndReduce's "
                               "kernelisation gets above 2,000 vertices (0: CHILS on the whole "
                               "graph)", lo=0.0, hi=0.9),
+        "lr_max_kernel_fraction": Option("lr_max_kernel_fraction", "float", 0.25, "largest "
+                                         "kernel (share of the vertices) CHILS gets instead of "
+                                         "the whole graph", lo=0.0, hi=1.0),
         "num_concurrent": Option("num_concurrent", "int", 1, "CHILS concurrent searches",
                                  lo=1, hi=64),
         "safety_s": Option("safety_s", "float", 0.05, "time kept back from CHILS's limit for "
@@ -313,6 +317,12 @@ class AutoBackend(Backend):
             return self._solve_chils(problem, time_limit_s, seed, opts, t0)
         kernel, lift, removed = lr
         stats = {"lr_kernel_vertices": kernel.n, "lr_removed_vertices": removed}
+        if kernel.n > opts["lr_max_kernel_fraction"] * problem.n:
+            # little removed: CHILS on the whole graph did better than on such kernels (7,026-
+            # vertex city graph, kernel 34 %: 0.096 % below the best known against 0.007 %)
+            res = self._solve_chils(problem, time_limit_s, seed, opts, t0)
+            res.stats = {**res.stats, **stats}
+            return res
         if kernel.n == 0:
             sel = lift(np.zeros(0, dtype=np.int64))
             return make_result(problem, sel, proven_optimal=True,

@@ -273,14 +273,40 @@ def cpsat_direct(p: MwisProblem, limit_s: float) -> tuple[float, float, bool]:
     return r.objective, time.perf_counter() - t0, r.proven_optimal
 
 
-def _mid_row(label: str, problems, limit_s: float, cpsat: bool = True) -> str:
+#: Repeats of the short runs of the target tables (best of, interleaved): on this shared
+#: 2-core machine at load 8 single runs of a few milliseconds were inflated up to 40x at
+#: random by preemption (a 0.4 ms solve measured 17.9 ms once), which decided medians of 5.
+TARGET_REPEATS = 3
+
+
+def _kamis_and_auto(p: MwisProblem, limit_s: float, repeats: int):
+    """KaMIS direct and auto end to end on ``p``, interleaved, each the best of ``repeats``
+    runs while both took under 1 s (longer runs are not repeated): ((objective, wall s,
+    finished), (result, wall s)). Both sides run on a fresh copy of the problem, so neither
+    finds the other's CSR cached."""
+    def fresh() -> MwisProblem:
+        return MwisProblem(weights=p.weights, edges=p.edges, groups=p.groups)
+
+    best_k, best_a = None, None
+    for _ in range(max(1, repeats)):
+        k = kamis_direct(fresh(), limit_s)
+        a = _solve_arrays(p, "auto", limit_s, 0)
+        best_k = k if best_k is None or k[1] < best_k[1] else best_k
+        best_a = a if best_a is None or a[1] < best_a[1] else best_a
+        if k[1] > 1.0 or a[1] > 1.0:
+            break
+    return best_k, best_a
+
+
+def _mid_row(label: str, problems, limit_s: float, cpsat: bool = True,
+             repeats: int = TARGET_REPEATS) -> str:
     """One row of the 15-500 vertex target table: auto end to end against KaMIS and (when
-    ``cpsat``) CP-SAT called directly, interleaved instance by instance."""
+    ``cpsat``) CP-SAT called directly, interleaved instance by instance (short runs: best of
+    ``repeats``)."""
     rows = []
     for p in problems:
-        ok, dk, fk = kamis_direct(p, limit_s)
+        (ok, dk, fk), (r, da) = _kamis_and_auto(p, limit_s, repeats)
         oc, dc, pc = cpsat_direct(p, limit_s) if cpsat else (0.0, float("nan"), False)
-        r, da = _solve_arrays(p, "auto", limit_s, 0)
         best = max(ok, oc, r.objective)
         rows.append((da, r.proven_optimal, dk, fk, dc, pc, r.objective >= best - 1e-9))
     a = np.array(rows, dtype=float)
@@ -317,19 +343,19 @@ def target_benchmark(n_small: int, seed: int, mid_sizes, mid_seeds: int, corpora
         kamis_direct(warm, 1.0)
     t_auto, t_kam, proven = [], [], 0
     for p in problems:
-        _, dt_k, _ = kamis_direct(p, 10.0)
-        r, dt_a = _solve_arrays(p, "auto", 1.0, 0)
+        (_, dt_k, _), (r, dt_a) = _kamis_and_auto(p, 1.0, TARGET_REPEATS)
         t_auto.append(dt_a)
         t_kam.append(dt_k)
         proven += r.proven_optimal
     out(f"\n## Targets of `auto` (issue 11)\n\n5-50 vertices ({len(problems)} corpus instances, "
-        f"`uam_solvers.solve` from the arrays, end to end): median {np.median(t_auto) * 1e3:.3f} ms "
+        f"`uam_solvers.solve` from the arrays, end to end, best of {TARGET_REPEATS} interleaved "
+        f"runs per instance): median {np.median(t_auto) * 1e3:.3f} ms "
         f"(target <= 1 ms), p95 {np.percentile(t_auto, 95) * 1e3:.3f} ms; proven {proven}/"
         f"{len(problems)}; KaMIS branch-and-reduce called directly: median "
         f"{np.median(t_kam) * 1e3:.3f} ms; median ratio auto / KaMIS "
         f"{np.median(np.asarray(t_auto) / np.asarray(t_kam)):.2f}")
-    out("\n15-500 vertices, 10 s limit (target: auto proves the optimum, median within 2x of "
-        "KaMIS direct)\n")
+    out(f"\n15-500 vertices, 10 s limit (target: auto proves the optimum, median within 2x of "
+        f"KaMIS direct; runs under 1 s: best of {TARGET_REPEATS}, interleaved)\n")
     out("| family, vertices | instances | auto median ms | auto proven | KaMIS direct "
         "median ms | KaMIS finished | CP-SAT direct median ms | CP-SAT proven | median ratio auto/KaMIS "
         "(both proven) | auto = best objective |")
