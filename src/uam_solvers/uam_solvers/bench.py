@@ -446,6 +446,8 @@ def main(argv=None) -> int:
     ap.add_argument("--skip-small", action="store_true")
     ap.add_argument("--skip-large", action="store_true")
     ap.add_argument("--skip-targets", action="store_true")
+    ap.add_argument("--skip-scale", action="store_true",
+                    help="targets: leave out the 10,000 and 100,000 vertex runs")
     ap.add_argument("--target-instances", type=int, default=200)
     ap.add_argument("--mid-sizes", default="15,50,100,200,500")
     ap.add_argument("--mid-seeds", type=int, default=5)
@@ -462,7 +464,8 @@ def main(argv=None) -> int:
         corpora = _corpus_files(args.corpus)
         target_benchmark(args.target_instances, args.seed,
                          [int(v) for v in args.mid_sizes.split(",") if v], args.mid_seeds, corpora)
-        scale_benchmark(args.seed, corpora)
+        if not args.skip_scale:
+            scale_benchmark(args.seed, corpora)
     if not args.skip_small:
         small_benchmark(args.instances, args.seed, [b for b in args.backends.split(",") if b],
                         args.small_limit, args.qpu_subset, args.qpu_limit)

@@ -13,6 +13,7 @@ Each layer is itself a :class:`~uam_solvers.base.Backend`, so they nest:
 from __future__ import annotations
 
 import logging
+import math
 import queue
 import threading
 import time
@@ -315,7 +316,7 @@ class ValidateFallback(Layer):
             sel = np.unique(np.asarray(res.selected, dtype=np.int64)).astype(np.int32)
             obj = problem.objective(sel)
             stats = dict(res.stats)
-            if not np.isclose(float(res.objective), obj, rtol=1e-9, atol=1e-9):
+            if not math.isclose(float(res.objective), obj, rel_tol=1e-9, abs_tol=1e-9):
                 stats["reported_objective"] = float(res.objective)
             return MwisResult(selected=sel, objective=obj, proven_optimal=bool(res.proven_optimal),
                               solve_time_s=elapsed, backend=res.backend, stats=stats,
