@@ -20,6 +20,7 @@ Deadlines that hold even for solvers holding the GIL: :class:`uam_solvers.execut
 """
 from __future__ import annotations
 
+import time
 from typing import Any, Mapping, Sequence
 
 from .base import (
@@ -134,5 +135,19 @@ def solve(
 
     check_time_limit(time_limit_s)  # argument errors first, before the arrays are converted
     check_seed(seed)
+    if backend == "auto" and layers and (options is None or (isinstance(options, Mapping)
+                                                             and not options)):
+        # Fast path for the small graphs of one planning epoch: the auto backend's exact branch
+        # and bound straight from clean arrays (the same answer as through the pipeline, in
+        # about a third of the time); None for anything else, which takes the full path below.
+        from .auto import bb_node_limit
+        from .cliquebb import SMALL_MAX_VERTICES, solve_small_arrays
+
+        t0 = time.perf_counter()
+        cap = SMALL_MAX_VERTICES if max_vertices is None else min(SMALL_MAX_VERTICES, max_vertices)
+        res = solve_small_arrays(weights, edges, groups, bb_node_limit(time_limit_s), cap)
+        if res is not None:
+            res.solve_time_s = time.perf_counter() - t0
+            return res
     problem = MwisProblem.from_arrays(weights, edges, groups, max_vertices=max_vertices)
     return solve_problem(problem, backend, time_limit_s, seed, options, layers)

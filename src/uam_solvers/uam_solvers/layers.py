@@ -13,6 +13,7 @@ Each layer is itself a :class:`~uam_solvers.base.Backend`, so they nest:
 from __future__ import annotations
 
 import logging
+import math
 import queue
 import threading
 import time
@@ -100,6 +101,7 @@ class Layer(Backend):
         self.batch_components = getattr(child, "batch_components", False)
         self.reduces_itself = getattr(child, "reduces_itself", False)
         self.inline_max_vertices = getattr(child, "inline_max_vertices", 0)
+        self.thread_inline_max_vertices = getattr(child, "thread_inline_max_vertices", None)
         self.reduce_min_vertices = getattr(child, "reduce_min_vertices", 0)
         self.split_min_vertices = getattr(child, "split_min_vertices", 0)
         self.split_max_vertices = getattr(child, "split_max_vertices", 1 << 62)
@@ -281,7 +283,10 @@ class ValidateFallback(Layer):
                 box["error"] = exc
 
         allowed_s = time_limit_s + max(self.margin_s, self.margin_fraction * time_limit_s)
-        if problem.n <= getattr(self.child, "inline_max_vertices", 0):
+        inline_max = getattr(self.child, "thread_inline_max_vertices", None)
+        if inline_max is None:
+            inline_max = getattr(self.child, "inline_max_vertices", 0)
+        if problem.n <= inline_max:
             # known to return within the limit at this size: no thread hand-off (which costs
             # milliseconds on a loaded machine, more than the solve of a 50-vertex graph)
             run()
@@ -311,7 +316,7 @@ class ValidateFallback(Layer):
             sel = np.unique(np.asarray(res.selected, dtype=np.int64)).astype(np.int32)
             obj = problem.objective(sel)
             stats = dict(res.stats)
-            if not np.isclose(float(res.objective), obj, rtol=1e-9, atol=1e-9):
+            if not math.isclose(float(res.objective), obj, rel_tol=1e-9, abs_tol=1e-9):
                 stats["reported_objective"] = float(res.objective)
             return MwisResult(selected=sel, objective=obj, proven_optimal=bool(res.proven_optimal),
                               solve_time_s=elapsed, backend=res.backend, stats=stats,

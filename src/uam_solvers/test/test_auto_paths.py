@@ -1,0 +1,79 @@
+"""``auto`` beyond 64 vertices: KaMIS on the whole graph when requests interact little (and a
+proof only when it finished), its own split on dense graphs, LearnAndReduce + CHILS above
+2,000 vertices with optimality claimed only for an empty kernel."""
+import numpy as np
+import pytest
+
+import uam_solvers
+from uam_solvers.auto import interacting_partners, learn_and_reduce_kernel
+from uam_solvers.base import MwisProblem
+from uam_solvers.instances import paper_instance, planner_instance
+from uam_solvers.registry import get_backend
+
+
+def _kamis_optimum(p, limit_s=20.0):
+    res = get_backend("kamis").solve(p, time_limit_s=limit_s, seed=0, options={})
+    assert res.proven_optimal, "reference KaMIS did not finish"
+    return res.objective
+
+
+def test_interacting_partners_counts_requests_not_edges():
+    # requests {0,1}, {2,3}, {4}; 0-2 and 1-3 conflict (one pair of requests), 3-4 another
+    p = MwisProblem.from_arrays(np.ones(5), [[0, 2], [1, 3], [3, 4]], [[0, 1], [2, 3]])
+    assert interacting_partners(p) == pytest.approx(2 * 2 / 3)
+    assert interacting_partners(MwisProblem.from_arrays(np.ones(3), [], [[0, 1, 2]])) == 0.0
+
+
+@pytest.mark.parametrize("n", [120, 400])
+def test_sparse_graph_goes_to_kamis_whole_and_is_proven(n):
+    p = planner_instance(n, seed=1)
+    assert interacting_partners(p) <= 8.0
+    res = uam_solvers.solve(p.weights, p.edges, list(p.groups), backend="auto", time_limit_s=10.0)
+    assert res.stats["auto_method"] == "kamis" and res.proven_optimal
+    exact = uam_solvers.solve_problem(p, backend="exact", time_limit_s=30.0)
+    assert exact.proven_optimal
+    assert res.objective == pytest.approx(exact.objective, abs=1e-5)
+
+
+def test_dense_graph_skips_whole_graph_kamis():
+    # all 30 requests interact with probability 0.6: KaMIS overran its limit on such graphs
+    p = paper_instance(30, seed=0)
+    assert interacting_partners(p) > 8.0
+    res = uam_solvers.solve_problem(p, backend="auto", time_limit_s=1.0)
+    assert res.stats.get("auto_method") != "kamis"
+    assert p.is_independent(res.selected) and not res.fallback
+
+
+def test_no_kamis_share_means_the_split_path_with_the_same_optimum():
+    p = planner_instance(150, seed=2)
+    split = uam_solvers.solve_problem(p, backend="auto", time_limit_s=10.0,
+                                      options={"kamis_fraction": 0.0})
+    assert "components" in split.stats and split.stats["auto_method"] != "kamis"
+    assert split.proven_optimal
+    assert split.objective == pytest.approx(_kamis_optimum(p), abs=1e-5)
+
+
+def test_large_sparse_graph_is_solved_by_learn_and_reduce_and_the_proof_is_true():
+    p = planner_instance(2500, seed=3)
+    res = uam_solvers.solve_problem(p, backend="auto", time_limit_s=2.0)
+    assert res.stats["auto_method"].startswith("learn-and-reduce")
+    assert p.is_independent(res.selected)
+    best = _kamis_optimum(p)
+    if res.proven_optimal:
+        assert res.stats["lr_kernel_vertices"] == 0
+        assert res.objective == pytest.approx(best, abs=1e-4)
+    else:
+        assert res.objective <= best + 1e-4
+
+
+def test_learn_and_reduce_kernel_lifts_optimal_kernel_answers():
+    p = planner_instance(2200, seed=4)
+    out = learn_and_reduce_kernel(p, 1.0, seed=0)
+    assert out is not None
+    kernel, lift, removed = out
+    assert removed == p.n - kernel.n and removed > 0
+    ksel = (get_backend("kamis").solve(kernel, time_limit_s=20.0, seed=0, options={}).selected
+            if kernel.n else np.zeros(0, dtype=np.int64))
+    sel = lift(ksel)
+    assert p.is_independent(sel)
+    assert p.objective(sel) == pytest.approx(_kamis_optimum(p), abs=1e-4)
