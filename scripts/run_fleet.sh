@@ -24,6 +24,9 @@
 #   --rtf X            real-time factor in realtime mode (default 1)
 #   --rerun M          off | save | spawn | connect (default save: a .rrd next to the MCAP)
 #   --foxglove-port N  serve a live Foxglove WebSocket view on port N (default 0 = off; docs/views.md)
+#   --recorder-nice N  the recorder's nice value (default 10): it is not in the lockstep loop, so the
+#                      loop's nodes get the CPU first and the recorder drains its queue after
+#                      (its reader history holds the whole backlog; it checks what it received)
 #   --out DIR          output folder (default a new folder $UAM_RUNS_DIR/<date>-<policy>-<backend>-r<rate>-s<seed>-XXXX,
 #                      UAM_RUNS_DIR defaulting to runs/; unique even for runs started in the same second)
 # Ctrl-C, SIGTERM and SIGHUP stop every node cleanly; the recording is closed properly. If this
@@ -34,7 +37,7 @@ ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
 
 BACKEND=exact POLICY=mwis RATE=10 DURATION=3500 SEED=0 NETWORK=config/networks/singapore.yaml
-DEMAND="" MODE=lockstep RTF=1 RERUN=save OUT="" FOXGLOVE_PORT=0
+DEMAND="" MODE=lockstep RTF=1 RERUN=save OUT="" FOXGLOVE_PORT=0 RECORDER_NICE=10
 SEPARATION=sphere SEPARATION_M=100 VERTICAL_M=30 SLOT_S=0 CLIMB=5 DESCENT=3
 die() { echo "run_fleet: $*" >&2; exit 2; }
 while [[ $# -gt 0 ]]; do
@@ -50,6 +53,7 @@ while [[ $# -gt 0 ]]; do
     --rtf) RTF="${2:?--rtf needs a value}"; shift 2;;
     --rerun) RERUN="${2:?--rerun needs a value}"; shift 2;;
     --foxglove-port) FOXGLOVE_PORT="${2:?--foxglove-port needs a value}"; shift 2;;
+    --recorder-nice) RECORDER_NICE="${2:?--recorder-nice needs a value}"; shift 2;;
     --out) OUT="${2:?--out needs a value}"; shift 2;;
     --separation) SEPARATION="${2:?--separation needs a value}"; shift 2;;
     --separation-m) SEPARATION_M="${2:?--separation-m needs a value}"; shift 2;;
@@ -126,14 +130,16 @@ PIDS=() NAMES=()
 WATCH_PARENT=()
 if setpriv --pdeathsig TERM true 2>/dev/null; then WATCH_PARENT=(setpriv --pdeathsig TERM --)
 else echo "run_fleet: setpriv --pdeathsig is unavailable; if this script is killed, stop the nodes by hand" >&2; fi
-start() {  # start <pkg> <exe> <log name> [ros args...]
+start() {  # start <pkg> <exe> <log name> [ros args...]; NODE_NICE=N start ... lowers its priority
   local pkg=$1 exe=$2 name=$3; shift 3
+  local -a prio=()
+  [[ -n "${NODE_NICE:-}" ]] && prio=(nice -n "$NODE_NICE")
   # the domain lock stays with this script: a node must not inherit its descriptor (a solver left
   # running would otherwise keep the domain id claimed)
   if [[ -n "${DOMAIN_LOCK_FD:-}" ]]; then
-    "${WATCH_PARENT[@]}" "$ROOT/install/$pkg/lib/$pkg/$exe" --ros-args "$@" >"$OUT/$name.log" 2>&1 {DOMAIN_LOCK_FD}>&- &
+    "${WATCH_PARENT[@]}" "${prio[@]}" "$ROOT/install/$pkg/lib/$pkg/$exe" --ros-args "$@" >"$OUT/$name.log" 2>&1 {DOMAIN_LOCK_FD}>&- &
   else
-    "${WATCH_PARENT[@]}" "$ROOT/install/$pkg/lib/$pkg/$exe" --ros-args "$@" >"$OUT/$name.log" 2>&1 &
+    "${WATCH_PARENT[@]}" "${prio[@]}" "$ROOT/install/$pkg/lib/$pkg/$exe" --ros-args "$@" >"$OUT/$name.log" 2>&1 &
   fi
   PIDS+=($!) NAMES+=("$name")
 }
@@ -174,7 +180,7 @@ start uam_sim request_generator request_generator --params-file config/request_g
 # It subscribes to the fleet state (which starts the simulator) only once it hears these topics'
 # publishers, so even a run stopped at once records the planner's and the generator's messages.
 RECORDER_WAITS="uam/flight_plans,uam/planning_reports,uam/requests,uam/epoch_sync"
-start uam_sim recorder recorder -p "output:=$MCAP" -p "network:=$NETWORK" -p "rerun:='$RERUN'" -p "rerun_rrd:=$RRD" \
+NODE_NICE=$RECORDER_NICE start uam_sim recorder recorder -p "output:=$MCAP" -p "network:=$NETWORK" -p "rerun:='$RERUN'" -p "rerun_rrd:=$RRD" \
   -p "foxglove_port:=$FOXGLOVE_PORT" "${AIRSPACE[@]}" -p "wait_for_publishers:=[$RECORDER_WAITS]"
 REC_PID=${PIDS[-1]}
 start uam_sim simulator simulator --params-file config/simulator.yaml -p "duration_s:=$DURATION" \
