@@ -38,21 +38,12 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 
+from uam_sim.capacity_study import airborne_peak  # noqa: E402
 from uam_sim.experiment_config import make_config  # noqa: E402
 from uam_sim.network_spec import load_network_spec  # noqa: E402
 from uam_sim.scenario import groups_from_ids, run_scenario  # noqa: E402
 
 LEVELS_M = [60.0, 90.0, 120.0, 150.0]
-
-
-def airborne_peak(flights, duration_s: float, step_s: float = 5.0) -> int:
-    """Most flights airborne at once, sampled every ``step_s`` [s] over [0, duration_s]."""
-    if not flights:
-        return 0
-    dep = np.sort(np.array([f["departure_s"] for f in flights]))
-    arr = np.sort(np.array([f["arrival_s"] for f in flights]))
-    grid = np.arange(0.0, duration_s + step_s, step_s)
-    return int((np.searchsorted(dep, grid, "right") - np.searchsorted(arr, grid, "left")).max())
 
 
 class CpuClock:

@@ -189,7 +189,7 @@ def tidy_tables(results: list) -> dict:
             delays = [f["departure_s"] - f["earliest_departure_s"] for f in c["flights"]
                       if f.get("earliest_departure_s") is not None]
             fl = c["flights"]
-            peak = _airborne_peak(fl, s["duration_s"])
+            peak = airborne_peak(fl, s["duration_s"])
             verts = [e["vertices"] for e in c["epochs"]]
             runs.append({**tag, "network": _network_label(arm.network),
                          "network_flown": _network_label(sweep.config.network),
@@ -218,7 +218,7 @@ def tidy_tables(results: list) -> dict:
     return {"runs": runs, "epochs": epochs, "flights": flights}
 
 
-def _airborne_peak(flights, duration_s: float, step_s: float = 5.0) -> int:
+def airborne_peak(flights, duration_s: float, step_s: float = 5.0) -> int:
     """Most flights airborne at once, sampled every ``step_s`` [s]."""
     if not flights:
         return 0
