@@ -180,9 +180,11 @@ start uam_sim request_generator request_generator --params-file config/request_g
 # It subscribes to the fleet state (which starts the simulator) only once it hears these topics'
 # publishers, so even a run stopped at once records the planner's and the generator's messages.
 RECORDER_WAITS="uam/flight_plans,uam/planning_reports,uam/requests,uam/epoch_sync"
-NODE_NICE=$RECORDER_NICE start uam_sim recorder recorder -p "output:=$MCAP" -p "network:=$NETWORK" -p "rerun:='$RERUN'" -p "rerun_rrd:=$RRD" \
+NODE_NICE=$RECORDER_NICE
+start uam_sim recorder recorder -p "output:=$MCAP" -p "network:=$NETWORK" -p "rerun:='$RERUN'" -p "rerun_rrd:=$RRD" \
   -p "foxglove_port:=$FOXGLOVE_PORT" "${AIRSPACE[@]}" -p "wait_for_publishers:=[$RECORDER_WAITS]"
 REC_PID=${PIDS[-1]}
+NODE_NICE=
 start uam_sim simulator simulator --params-file config/simulator.yaml -p "duration_s:=$DURATION" \
   -p "mode:=$MODE" -p "real_time_factor:=$RTF"
 SIM_PID=${PIDS[-1]}

@@ -44,6 +44,9 @@ from uam_sim.cdr import encode_clock, encode_fleet_state, encode_pose_array, yaw
 from uam_sim.fleet import Fleet
 
 RESEND_S = 2.0  # wall time after which an unanswered call is sent again (a restarted server lost it)
+# Lockstep steps this many fleet steps per executor turn, so the answers of the next epoch's calls
+# (sent as soon as an epoch is flown) are handled while the fleet is stepped towards that epoch.
+STEPS_PER_TURN = 3
 
 
 class SimulatorNode(Node):
@@ -74,6 +77,9 @@ class SimulatorNode(Node):
         self._flying: dict[str, FlightPlan] = {}   # scoped id -> approved plan, while it may be airborne
         self._decided: list[str] = []       # scoped ids of every request decided in an epoch answer
         self._waiting_epoch: int | None = None
+        self._epoch_t = 0.0                 # simulation time of the epoch being asked for [s]
+        self._early = None                  # its outcome, when it came before the fleet reached it
+        self._step_timer = None             # lockstep: re-arms the stepping while not blocked
         self._expected: list[str] = []
         self._call = None
         self._calls: list = []              # outstanding calls of the current stage
@@ -127,14 +133,20 @@ class SimulatorNode(Node):
         return missing
 
     # ---- the epoch protocol --------------------------------------------------------------------
-    def _start_epoch(self, k: int) -> None:
+    def _start_epoch(self, k: int, t_s: float) -> None:
+        """Ask for epoch k at simulation time ``t_s``: release its demand, then plan it. In
+        lockstep this is sent as soon as epoch k-1 is flown, while the fleet is stepped from
+        t_{k-1} to t_k (the planner needs only its own approvals and the released requests), and
+        the outcome is flown when the fleet reaches t_k."""
         self._waiting_epoch = k
+        self._epoch_t = float(t_s)
+        self._early = None
         self._wait_started = time.monotonic()
         self._expected = []
         self._resume = False
-        self._sync_pub.publish(EpochSync(epoch_index=k, epoch_time=m.to_time(self.t_s), sender="simulator"))
+        self._sync_pub.publish(EpochSync(epoch_index=k, epoch_time=m.to_time(t_s), sender="simulator"))
         if self._demand_client is not None:
-            self._send(self._demand_client, ReleaseDemand.Request(epoch_index=k, epoch_time=m.to_time(self.t_s)),
+            self._send(self._demand_client, ReleaseDemand.Request(epoch_index=k, epoch_time=m.to_time(t_s)),
                        self._on_demand)
         else:
             self._ask_planner()
@@ -172,7 +184,7 @@ class SimulatorNode(Node):
         self._ask_planner()
 
     def _ask_planner(self) -> None:
-        t = self.t_s
+        t = self._epoch_t
         req = PlanEpoch.Request(epoch_index=self._waiting_epoch, epoch_time=m.to_time(t), epoch_s=float(self.epoch_s),
                                 expected_request_ids=self._expected, resume=self._resume)
         if self._resume:
@@ -191,9 +203,21 @@ class SimulatorNode(Node):
             self.get_logger().error(self.error + "; ending the run")
             self._finish()
             return
+        self._call = None
+        if self.step_index < self._waiting_epoch * self.steps_per_epoch:
+            self._early = res  # flown when the fleet reaches the epoch (_step_once)
+            return
+        self._fly(res)
+        if self.mode == "lockstep":
+            self._run_until_blocked()
+
+    def _fly(self, res: PlanEpoch.Response) -> None:
+        """Fly a planned epoch's approvals at its time (the fleet is there), then go on; in
+        lockstep ask for the next epoch at once."""
         if res.missing_request_ids:
             self.get_logger().warning(f"epoch {self._waiting_epoch} was planned without "
                                       f"{len(res.missing_request_ids)} released request(s) that did not arrive")
+        epoch = self._waiting_epoch
         t = self.t_s
         self._flying = {k: p for k, p in self._flying.items() if m.from_time(p.arrival_time) >= t}
         for plan in res.plans:
@@ -209,10 +233,12 @@ class SimulatorNode(Node):
                     self.get_logger().error(f"cannot fly plan {key!r}: {exc}")
         self._call = None
         self._waiting_epoch = None
+        self._early = None
         self._publish_state()
         self.step_index += 1
-        if self.mode == "lockstep":
-            self._run_until_blocked()
+        t_next = (epoch + 1) * self.epoch_s
+        if self.mode == "lockstep" and t_next < self.duration_s - 1e-9:
+            self._start_epoch(epoch + 1, t_next)
 
     # ---- stepping ------------------------------------------------------------------------------
     def _epoch_at(self, step_index: int) -> int | None:
@@ -234,9 +260,10 @@ class SimulatorNode(Node):
             self.get_logger().info("planner and demand source ready: starting the run")
             if self.mode == "lockstep":
                 self._timer.timer_period_ns = int(0.5e9)  # from now on only a watchdog
+                self._step_timer = self.create_timer(0.0, self._run_until_blocked)
             self._run_until_blocked()
             return
-        if self._waiting_epoch is not None:
+        if self._waiting_epoch is not None and self._call is not None:
             if now - self._wait_started > self.ack_timeout_s:
                 self.error = f"no answer for epoch {self._waiting_epoch} within {self.ack_timeout_s:g} s"
                 self.get_logger().error(self.error + "; ending the run")
@@ -248,9 +275,25 @@ class SimulatorNode(Node):
         if self.mode == "realtime":
             self._step_once()
 
+    def _blocked(self) -> bool:
+        """At an epoch's step whose outcome has not arrived yet (one that arrived early is flown
+        by the next step)."""
+        k = self._epoch_at(self.step_index)
+        return (k is not None and self.t_s < self.duration_s - 1e-9 and self._waiting_epoch == k
+                and self._early is None)
+
     def _run_until_blocked(self) -> None:
-        while not self.finished and self._waiting_epoch is None:
+        """Lockstep: step until the next epoch without an outcome (or the end), a few steps per
+        executor turn so the calls under way are answered meanwhile."""
+        for _ in range(STEPS_PER_TURN):
+            if self.finished or self._blocked():
+                break
             self._step_once()
+        if self._step_timer is not None:
+            if self.finished or self._blocked():
+                self._step_timer.cancel()
+            elif self._step_timer.is_canceled():
+                self._step_timer.reset()
 
     def _step_once(self) -> None:
         if self.t_s > self.duration_s + 1e-9:
@@ -258,7 +301,10 @@ class SimulatorNode(Node):
             return
         k = self._epoch_at(self.step_index)
         if k is not None and self.t_s < self.duration_s - 1e-9:  # epochs at t < duration, as the runner
-            self._start_epoch(k)
+            if self._waiting_epoch is None:
+                self._start_epoch(k, self.t_s)
+            elif self._waiting_epoch == k and self._early is not None:
+                self._fly(self._early)  # planned while the fleet was stepped here
             return
         self._publish_state()
         self.step_index += 1
@@ -281,6 +327,8 @@ class SimulatorNode(Node):
         if self.finished:
             return
         self.finished = True
+        if self._step_timer is not None:
+            self._step_timer.cancel()
         for fut in self._calls:
             if not fut.done():
                 self._call[0].remove_pending_request(fut)
