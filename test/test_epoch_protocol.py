@@ -133,7 +133,13 @@ def test_a_restarted_planner_resumes_without_replaying_what_flies(ros_context, s
     executor, nodes, obs = build_graph(ros_context, rate=rate, seed=seed, duration_s=duration)
     sim = nodes["simulator"]
     try:
-        assert spin_until(executor, lambda: sim.t_s >= 100.0, timeout_s=60)
+        # between two of its epochs: an in-process node destroyed while one of its coroutines is
+        # suspended (planning, awaiting the solver) would have that task touch its destroyed
+        # handles on the shared executor, which a killed planner process never does; the
+        # simulator's call in flight (it asks for the next epoch while stepping) is then
+        # answered by the new planner (STATUS_NEED_STATE, then the state)
+        assert spin_until(executor, lambda: sim.t_s >= 100.0 and nodes["planner"]._inflight is None,
+                          timeout_s=60)
         old = nodes.pop("planner")
         executor.remove_node(old)
         old.destroy_node()
