@@ -1,7 +1,6 @@
 """The capacity study (uam_sim.capacity_study / capacity_report): arms x airspace modes run as the
 paper study's cells, one pool for all of them, tables and a report computed from the tables."""
 
-import json
 
 import pytest
 import yaml
@@ -9,17 +8,9 @@ import yaml
 from uam_sim.capacity_report import write_capacity_report
 from uam_sim.capacity_study import load_capacity_config, run_capacity_study
 from uam_sim.experiment_config import ExperimentError
-
-TIMING = {"wall_s", "real_time_factor", "solve_time_s", "planning_time_s", "solve_time_mean_s",
-          "solve_time_max_s", "solve_time_median_s", "solve_time_p95_s"}
+from uam_sim.sweep import without_timing
 
 
-def strip_timing(cell):
-    c = json.loads(json.dumps(cell))
-    for row in [c["summary"], *c["epochs"]]:
-        for k in TIMING & set(row):
-            row[k] = None
-    return c
 
 
 def write(tmp_path, **over):
@@ -58,7 +49,7 @@ def test_the_study_runs_in_one_pool_resumes_and_reports_from_its_tables(tmp_path
                                                      workers=1), progress=False)
     pooled = run_capacity_study(load_capacity_config(write(tmp_path), out=str(tmp_path / "pool"),
                                                      workers=2), progress=False, instances=False)
-    cells = lambda res: [strip_timing(c) for _a, _m, sw in res["results"] for c in sw.cells]  # noqa: E731
+    cells = lambda res: [without_timing(c) for _a, _m, sw in res["results"] for c in sw.cells]  # noqa: E731
     assert len(cells(serial)) == 2 * 3 * 2 and cells(pooled) == cells(serial)
     runs = serial["tables"]["runs"]
     assert {r["mode"] for r in runs} == {"paper", "both"}

@@ -1,6 +1,5 @@
 """The sweep's cells on a local multi-worker Dask cluster equal the serial run's; bad input named."""
 
-import json
 from dataclasses import asdict
 from pathlib import Path
 
@@ -8,11 +7,9 @@ import pytest
 
 from uam_sim.dask_cluster import DistributedError, run_cells, validate_scheduler
 from uam_sim.experiment import ExperimentError, make_config, run_sweep
-from uam_sim.sweep import cell_key, cell_params, run_cell
+from uam_sim.sweep import cell_key, cell_params, run_cell, without_timing
 
 NET = {"synthetic": {"n_nodes": 30, "n_aerodromes": 5, "seed": 2}}
-TIMING = {"solve_time_s", "planning_time_s", "wall_s", "real_time_factor", "solve_time_mean_s",
-          "solve_time_max_s"}
 
 
 def small(out, **kw):
@@ -22,13 +19,6 @@ def small(out, **kw):
     base.update(kw)
     return make_config(base)
 
-
-def strip_timing(cell):
-    c = json.loads(json.dumps(cell))
-    for row in [c["summary"], *c["epochs"]]:
-        for k in TIMING & set(row):
-            row[k] = None
-    return c
 
 
 @pytest.mark.slow  # starts a 2-process LocalCluster (a few seconds on a quiet machine)
@@ -41,7 +31,7 @@ def test_local_cluster_gives_the_serial_cells_and_resumes(tmp_path):
     cells = run_cells(asdict(cfg), todo, keys, Path(cfg.out) / "cells", run_cell, scheduler="local",
                       n_workers=2, on_done=lambda c, _cell: done_order.append(c))
     assert sorted(done_order) == sorted(todo)
-    assert [strip_timing(cells[c]) for c in todo] == [strip_timing(c) for c in serial.cells]
+    assert [without_timing(cells[c]) for c in todo] == [without_timing(c) for c in serial.cells]
     # the driver wrote every cell: a sweep over the same directory resumes with nothing to do
     again = run_sweep(cfg, progress=False)
     assert again.computed == [] and len(again.reused) == len(todo)
@@ -59,7 +49,7 @@ def test_sweep_uses_the_cluster_when_asked_and_config_is_checked(tmp_path):
     local = run_sweep(small(tmp_path / "local", methods=["firstfit"], rates=[2, 4], scheduler="local",
                             workers=2), progress=False)
     assert len(local.computed) == 2
-    assert [strip_timing(c) for c in local.cells] == [strip_timing(c) for c in serial.cells]
+    assert [without_timing(c) for c in local.cells] == [without_timing(c) for c in serial.cells]
     with pytest.raises(ExperimentError, match="scheduler: 'host:8786'"):
         small(tmp_path, scheduler="host:8786")
     with pytest.raises(ExperimentError, match="airspace_mode: 'fast' is not one of"):

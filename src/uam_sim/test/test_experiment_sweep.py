@@ -1,6 +1,5 @@
 """uam_sim.experiment: small sweeps (two rates, two methods, one seed, short runs)."""
 
-import json
 from pathlib import Path
 
 import pytest
@@ -11,11 +10,10 @@ from uam_sim.experiment import (ExperimentError, load_config, main, make_config,
                                 run_scenario, run_sweep)
 from uam_sim.network_spec import load_network_spec
 from uam_sim.scenario import average_airborne
+from uam_sim.sweep import without_timing
 
 REPO = Path(__file__).resolve().parents[3]
 NET = {"synthetic": {"n_nodes": 30, "n_aerodromes": 5, "seed": 2}}
-TIMING = {"solve_time_s", "planning_time_s", "wall_s", "real_time_factor", "solve_time_mean_s",
-          "solve_time_max_s"}
 
 
 def small(out, **kw):
@@ -25,14 +23,6 @@ def small(out, **kw):
     base.update(kw)
     return make_config(base)
 
-
-def strip_timing(cell):
-    """A cell without wall-clock fields (the only thing allowed to differ between runs)."""
-    c = json.loads(json.dumps(cell))
-    for row in [c["summary"], *c["epochs"]]:
-        for k in TIMING & set(row):
-            row[k] = None
-    return c
 
 
 @pytest.fixture(scope="module")
@@ -84,7 +74,7 @@ def test_parallel_equals_serial(serial, tmp_path):
     cfg, sweep = serial
     par = run_sweep(small(tmp_path, workers=2), progress=False)
     assert len(par.computed) == 4
-    assert [strip_timing(c) for c in par.cells] == [strip_timing(c) for c in sweep.cells]
+    assert [without_timing(c) for c in par.cells] == [without_timing(c) for c in sweep.cells]
 
 
 def test_resumed_run_recomputes_nothing(serial):

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from .figures import STYLE, mean_ci, plt, save_figure
 from .stats import paired
 
 MODES = ["paper", "slots", "levels", "both"]
@@ -83,15 +84,7 @@ def compare(runs, arm, rate, a, b, col="approved", relative=False):
 
 # -- figures -------------------------------------------------------------------------------------
 
-def _plt():
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    return plt
-
-
 def _style(m, i):
-    from .figures import STYLE
     mk, ls, col = STYLE.get(m, ("o", "-", f"C{i % 10}"))
     if m == "auto":
         mk, ls, col = "D", "-", "black"
@@ -102,8 +95,6 @@ def approvals_figure(runs: pd.DataFrame, path: Path) -> Path:
     """Approved flights per airspace mode, one panel per (network, rate) (arms on the same network
     share a panel, e.g. the annealers beside the core methods), a line per method (mean and 95 % CI
     over seeds, slightly offset per method so the bars do not hide each other)."""
-    plt = _plt()
-    from .figures import mean_ci
     panels = [(n, r) for n in dict.fromkeys(runs.network) for r in sorted(runs[runs.network == n].rate.unique())]
     fig, axes = plt.subplots(1, len(panels), figsize=(4.6 * len(panels), 3.8), squeeze=False)
     for ax, (net, rate) in zip(axes[0], panels):
@@ -122,16 +113,13 @@ def approvals_figure(runs: pd.DataFrame, path: Path) -> Path:
         ax.grid(alpha=0.3)
         ax.legend(fontsize=6)
     axes[0][0].set_ylabel("approved flights per run")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)
     return path
 
 
 def approval_share_figure(runs: pd.DataFrame, path: Path, interval_s: float = 30.0) -> Path:
     """Share of requests approved against offered load [requests/h], per mode (auto or the best
     MWIS method present) and shortest FIFO."""
-    plt = _plt()
     nets = list(dict.fromkeys(runs.network))
     flat = runs.network
     fig, axes = plt.subplots(1, len(nets), figsize=(4.5 * len(nets), 3.6), squeeze=False)
@@ -150,9 +138,7 @@ def approval_share_figure(runs: pd.DataFrame, path: Path, interval_s: float = 30
         ax.grid(alpha=0.3)
         ax.legend(fontsize=6, ncol=2)
     axes[0][0].set_ylabel("requests approved [%]")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)
     return path
 
 
@@ -160,7 +146,6 @@ def variables_figure(epochs: pd.DataFrame, path: Path, k: int = 5, window_s: flo
                      interval_s: float = 30.0, slot_s: float = 5.0) -> Path:
     """MWIS variables (conflict-graph vertices) per epoch by mode and rate (box plots, log y,
     outliers shown) with the bound k x (eligible requests) x (departure times)."""
-    plt = _plt()
     ref = ref_method(epochs)
     e = epochs[(epochs.method == ref) & (epochs.vertices > 0)]
     arms = list(e.arm.unique()) or list(epochs.arm.unique())
@@ -184,16 +169,13 @@ def variables_figure(epochs: pd.DataFrame, path: Path, k: int = 5, window_s: flo
         ax.grid(alpha=0.3, axis="y")
     axes[0][0].set_ylabel("vertices (log)")
     axes[0][-1].legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)
     return path
 
 
 def size_figure(inst: pd.DataFrame, epochs: pd.DataFrame, path: Path) -> Path:
     """Solve time and optimality gap against instance size per backend (the instance study:
     same instances, same limit, deadlines enforced), and the in-loop solve time per epoch."""
-    plt = _plt()
     fig, axes = plt.subplots(1, 3, figsize=(14, 3.9))
     for i, b in enumerate(_order(inst.backend)):
         s = inst[inst.backend == b].sort_values("vertices")
@@ -227,15 +209,12 @@ def size_figure(inst: pd.DataFrame, epochs: pd.DataFrame, path: Path) -> Path:
     axes[2].set_title("every epoch of the sweep", fontsize=9)
     axes[2].legend(fontsize=6, markerscale=3)
     axes[2].grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)
     return path
 
 
 def active_figure(epochs: pd.DataFrame, path: Path) -> Path:
     """Aircraft in the air over time, mean over seeds, per mode (auto and fifo)."""
-    plt = _plt()
     panels = [(a, r) for a in epochs.arm.unique() for r in sorted(epochs[epochs.arm == a].rate.unique())]
     fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.4), squeeze=False)
     for ax, (arm, rate) in zip(axes[0], panels):
@@ -252,15 +231,12 @@ def active_figure(epochs: pd.DataFrame, path: Path) -> Path:
         ax.grid(alpha=0.3)
         ax.legend(fontsize=6)
     axes[0][0].set_ylabel("aircraft in the air")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)
     return path
 
 
 def delay_figure(flights: pd.DataFrame, path: Path) -> Path:
     """Departure delay (departure - earliest departure) per mode, auto, every rate pooled."""
-    plt = _plt()
     ref = ref_method(flights)
     f = flights[(flights.method == ref)]
     arms = list(f.arm.unique())
@@ -273,9 +249,7 @@ def delay_figure(flights: pd.DataFrame, path: Path) -> Path:
         ax.set_title(f"{arm}: departure delay ({ref})", fontsize=9)
         ax.grid(alpha=0.3, axis="y")
     axes[0][0].set_ylabel("delay [s]")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)
     return path
 
 

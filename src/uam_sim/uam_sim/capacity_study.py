@@ -21,7 +21,6 @@ from those tables alone.
 from __future__ import annotations
 
 import argparse
-import gzip
 import json
 import math
 import sys
@@ -32,7 +31,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from .experiment_config import (AIRSPACE_MODES, ExperimentConfig, ExperimentError, make_config)
+from .experiment_config import AIRSPACE_MODES, ExperimentError, make_config
 from .files import write_csv
 from .machine import machine_info
 from .sweep import cell_key, cell_params, run_cell, run_sweep
@@ -228,29 +227,9 @@ def airborne_peak(flights, duration_s: float, step_s: float = 5.0) -> int:
     return int((np.searchsorted(dep, grid, "right") - np.searchsorted(arr, grid, "left")).max())
 
 
-def write_gz_csv(path: Path, rows: list) -> Path:
-    """A gzipped CSV (mtime 0, so equal rows give equal bytes)."""
-    import csv
-    import io
-    cols: list = []
-    for r in rows:
-        for k in r:
-            if k not in cols:
-                cols.append(k)
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=cols)
-    w.writeheader()
-    for r in rows:
-        w.writerow(r)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "wb") as raw, gzip.GzipFile(fileobj=raw, mode="wb", mtime=0) as gz:
-        gz.write(buf.getvalue().encode("utf-8"))
-    return path
-
-
 # -- solve time and gap against instance size ----------------------------------------------------
 
-def source_instances(cfg: CapacityConfig, results: list) -> tuple[list, str]:
+def source_instances(cfg: CapacityConfig) -> tuple[list, str]:
     """Re-run the instance study's source cell with an observer and keep every MWIS instance
     (the cells keep none above corpus_max_vertices); returns ([(epoch, MwisProblem)], label)."""
     from uam_solvers.base import MwisProblem
@@ -261,11 +240,10 @@ def source_instances(cfg: CapacityConfig, results: list) -> tuple[list, str]:
     src = cfg.instances.get("source")
     if not src:
         return [], ""
-    match = [(arm, mode, sw) for arm, mode, sw in results
-             if arm.name == src["arm"] and mode == src["mode"]]
+    match = [ecfg for arm, mode, ecfg in cfg.combos() if arm.name == src["arm"] and mode == src["mode"]]
     if not match:
         raise ExperimentError(f"instances.source: no arm {src['arm']!r} in mode {src['mode']!r}")
-    ecfg = match[0][2].config
+    ecfg = match[0]
     found = []
 
     def keep(t_s, epoch, submitted, refused, result):
@@ -295,14 +273,14 @@ def sample_by_size(found: list, bins: list, per_bin: int, seed: int) -> list:
     return out
 
 
-def instance_study(cfg: CapacityConfig, results: list) -> list:
+def instance_study(cfg: CapacityConfig) -> list:
     """Every backend on the sampled instances with the same limit through a SolveService (the
     deadline holds for every backend); rows with objective, wall time, proven, gap to best known."""
     from uam_solvers.executor import SolveService
     from uam_solvers.registry import get_backend
 
     ic = cfg.instances
-    found, label = source_instances(cfg, results)
+    found, label = source_instances(cfg)
     sample = sample_by_size(found, list(ic["bins"]), int(ic["per_bin"]), int(ic["seed"]))
     backends = [b for b in ic["backends"] if get_backend(b).available()[0]]
     rows = []
@@ -335,13 +313,6 @@ def instance_study(cfg: CapacityConfig, results: list) -> list:
     return rows
 
 
-class _ConfigOnly:
-    """Stands in for a SweepResult where only its ``config`` is needed (the instance study)."""
-
-    def __init__(self, config):
-        self.config = config
-
-
 # -- the whole study ---------------------------------------------------------------------------
 
 def run_capacity_study(cfg: CapacityConfig, compute: bool = True, progress: bool = True,
@@ -352,11 +323,11 @@ def run_capacity_study(cfg: CapacityConfig, compute: bool = True, progress: bool
     missing = sum(len(sw.missing) for _a, _m, sw in results)
     tables = tidy_tables(results)
     write_csv(out / "runs.csv", tables["runs"])
-    write_gz_csv(out / "epochs.csv.gz", tables["epochs"])
-    write_gz_csv(out / "flights.csv.gz", tables["flights"])
+    write_csv(out / "epochs.csv.gz", tables["epochs"])
+    write_csv(out / "flights.csv.gz", tables["flights"])
     inst_rows = []
     if instances and compute:
-        inst_rows = instance_study(cfg, results)
+        inst_rows = instance_study(cfg)
         write_csv(out / "instances.csv", inst_rows)
     elif (out / "instances.csv").exists():
         from .capacity_report import read_csv
@@ -402,7 +373,7 @@ def main(argv=None) -> int:
         print(f"capacity_study: {exc}", file=sys.stderr)
         return 2
     if args.instances_only:
-        rows = instance_study(cfg, [(a, m, _ConfigOnly(c)) for a, m, c in cfg.combos()])
+        rows = instance_study(cfg)
         Path(cfg.out).mkdir(parents=True, exist_ok=True)
         write_csv(Path(cfg.out) / "instances.csv", rows)
         print(f"instance study: {len(rows)} rows in {Path(cfg.out) / 'instances.csv'}")

@@ -36,13 +36,18 @@ STYLE = {"fifo": ("o", "-", "tab:blue"), "firstfit": ("s", "--", "tab:orange"),
          "kamis": ("<", "--", "tab:olive"), "chils": (">", ":", "tab:cyan")}
 
 
+def save_figure(fig, path) -> None:
+    """Lay out, save (110 dpi) and close a figure: the end of every figure of the studies."""
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def _finish_panels(fig, axes, ylabel: str, path) -> None:
     """Shared end of the per-rate panel figures: y label on the first panel, legend on the last, save."""
     axes[0][0].set_ylabel(ylabel)
     axes[0][-1].legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def style(m: str, i: int = 0) -> dict:
@@ -142,9 +147,7 @@ def _per_rate_lines(cells, key, path, ylabel, title) -> dict:
     ax.set_title(title)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)
     return {"path": str(path), "table": table}
 
 
@@ -187,9 +190,7 @@ def approval_rate_figure(cells, path: Path, interval_s: float) -> dict:
     ax.set_title("Approval rate against offered load")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)
     return {"path": str(path), "table": table}
 
 
@@ -289,9 +290,7 @@ def mwis_size_figure(cells, path: Path, k: int, window_s: float, interval_s: flo
         ax.set_xlabel("request rate [requests / interval]")
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)
     return {"path": str(path), "table": table, "eligible_per_instant": per_instant}
 
 
@@ -333,9 +332,7 @@ def solve_time_figure(cells, path: Path) -> dict:
     ax.set_title("MWIS solve time (epochs with a non-empty graph)")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)
     return {"path": str(path), "table": table}
 
 
@@ -463,9 +460,7 @@ def tts_figure(tts: dict, path: Path) -> dict:
         a.set_yscale("log")
         a.grid(alpha=0.3, which="both")
     fig.suptitle("Time to solution, instances sampled from the runs")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)
     return {"path": str(path), "table": table}
 
 
@@ -576,9 +571,7 @@ def flights_figure(cells, path: Path, rates_shown=None) -> dict:
                     k: float(np.mean([r[k] for r in runs])) for k in
                     ("route_length_mean_m", "detour_mean_pct", "shortest_share", "delay_mean_s",
                      "delayed_share")}, "seeds": len(runs)})
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)
     return {"path": str(path), "table": table}
 
 
@@ -625,9 +618,7 @@ def corridor_figure(cells, network, path: Path, rate=None, share: float = 0.10) 
     ax.set_title("utilisation against centrality (red dashed: top 10 %)", fontsize=9)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)
     for r in rates:
         for m in methods:
             vals = [flight_metrics(c, network, top).get("central_share") for c in cells

@@ -40,6 +40,22 @@ def cell_params(cfg: ExperimentConfig, method: str, rate, seed: int) -> dict:
     return params
 
 
+#: the summary and epoch fields that are wall-clock measurements (the only ones allowed to differ
+#: between two runs of one cell)
+TIMING_FIELDS = frozenset({"wall_s", "real_time_factor", "solve_time_s", "planning_time_s",
+                           "solve_time_mean_s", "solve_time_max_s", "solve_time_median_s",
+                           "solve_time_p95_s"})
+
+
+def without_timing(cell: dict) -> dict:
+    """A copy of a cell with its wall-clock fields set to None (to compare two runs of it)."""
+    c = json.loads(json.dumps(cell))
+    for row in [c["summary"], *c["epochs"]]:
+        for k in TIMING_FIELDS & set(row):
+            row[k] = None
+    return c
+
+
 def cell_key(params: dict) -> str:
     digest = hashlib.sha256(json.dumps(params, sort_keys=True).encode()).hexdigest()[:16]
     return f"{params['method']}_r{params['rate']}_s{params['seed']}_{digest}"

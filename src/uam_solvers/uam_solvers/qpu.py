@@ -425,20 +425,23 @@ def _decomposed_embedded(problem, child, *, backend, seed, time_limit_s, started
     clique = clique_embedding(child, size)
     stats_box["clique_embedding"] = clique is not None
 
+    def sample_embedded(sub_bqm, sub_seed, embedding):
+        """Sample a subproblem on a fixed embedding (None when the embedding does not fit it)."""
+        params = dict(sub_params)
+        if "seed" in params:
+            params["seed"] = sub_seed
+        try:
+            return FixedEmbeddingComposite(child, embedding=embedding).sample(
+                sub_bqm, chain_strength=chain_strength, chain_break_method=majority_vote,
+                **params)
+        except ValueError:
+            stats_box["embedding_failures"] += 1
+            return None
+
     def sample_sub(sub_bqm, sub_seed, remaining_s):
         if clique is not None:
             # the subproblem's variables are 0..k-1 with k <= size: K_size's chains cover it
-            params = dict(sub_params)
-            if "seed" in params:
-                params["seed"] = sub_seed
-            embedding = {v: clique[int(v)] for v in sub_bqm.variables}
-            try:
-                return FixedEmbeddingComposite(child, embedding=embedding).sample(
-                    sub_bqm, chain_strength=chain_strength, chain_break_method=majority_vote,
-                    **params)
-            except ValueError:
-                stats_box["embedding_failures"] += 1
-                return None
+            return sample_embedded(sub_bqm, sub_seed, {v: clique[int(v)] for v in sub_bqm.variables})
         emb = dict(embedding_parameters)
         # minorminer holds the GIL and uses its whole timeout; sampling needs the rest
         emb["timeout"] = max(min(float(emb["timeout"]), 0.3 * remaining_s, 1.0), 0.01)
@@ -457,16 +460,7 @@ def _decomposed_embedded(problem, child, *, backend, seed, time_limit_s, started
                     stats_box["embedding_failures"] += 1
                     return None
                 embedding[v] = [q]
-        params = dict(sub_params)
-        if "seed" in params:
-            params["seed"] = sub_seed
-        try:
-            return FixedEmbeddingComposite(child, embedding=embedding).sample(
-                sub_bqm, chain_strength=chain_strength, chain_break_method=majority_vote,
-                **params)
-        except ValueError:
-            stats_box["embedding_failures"] += 1
-            return None
+        return sample_embedded(sub_bqm, sub_seed, embedding)
 
     budget = max(deadline - time.perf_counter() - 0.05 - 1e-5 * problem.n, 1e-3)
     selected, stats = decomposed_solve(problem, sample_sub, size=size, time_limit_s=budget,
