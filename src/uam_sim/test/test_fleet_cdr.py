@@ -41,6 +41,29 @@ def test_a_flight_cannot_be_added_twice():
         fleet.add("a", Trajectory([0.0, 1.0], [[0, 0, 0], [1, 0, 0]]))
 
 
+def test_a_fleet_of_flights_added_over_time_samples_each_flight_where_it_is():
+    """Flights added epoch by epoch, landing in between (the padded arrays are rebuilt only on
+    adds, landed rows masked): every sample holds exactly the flights airborne then, each at
+    its own trajectory's position."""
+    rng = np.random.default_rng(3)
+    fleet, flights = Fleet(), {}
+    for t in range(0, 400):
+        if t % 30 == 0:
+            for j in range(int(rng.integers(0, 6))):
+                k = int(rng.integers(2, 7))
+                times = t + 0.5 + np.cumsum(rng.uniform(1.0, 40.0, k)) - 1.0
+                tr = Trajectory(times, rng.normal(scale=500.0, size=(k, 3)))
+                vid = f"v{t:03d}_{j}"
+                fleet.add(vid, tr)
+                flights[vid] = tr
+        s = fleet.sample(float(t))
+        expected = sorted(v for v, tr in flights.items() if tr.is_airborne(float(t)))
+        assert s.vehicle_ids == expected, t
+        for i, vid in enumerate(s.vehicle_ids):
+            np.testing.assert_allclose(s.positions_m[i], flights[vid].position_at(float(t)), atol=1e-9)
+        assert len(fleet) == sum(1 for tr in flights.values() if tr.arrival_s >= t)
+
+
 def test_direct_cdr_equals_rclpy_serialization():
     rclpy = pytest.importorskip("rclpy", reason="needs the built workspace")
     from geometry_msgs.msg import Point, Pose, PoseArray, Quaternion, Vector3

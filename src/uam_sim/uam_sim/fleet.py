@@ -5,8 +5,8 @@ planned); the simulator samples the fleet at fixed steps. A vehicle is airborne 
 departure to its arrival time inclusive and is dropped after it landed.
 
 Sampling is vectorised over the fleet: the flights' waypoints are kept in padded arrays
-(rebuilt only when a flight is added or lands), so one sample costs a few numpy operations
-whatever the fleet size.
+(rebuilt only when flights were added), so one sample costs a few numpy operations whatever the
+fleet size.
 """
 
 from __future__ import annotations
@@ -45,10 +45,15 @@ class Fleet:
     ``add(vehicle_id, trajectory)`` registers a flight; ``sample(t_s)`` returns the airborne
     vehicles at ``t_s`` sorted by id and forgets the ones that landed before ``t_s``.
     O(v p) per sample for v flights of at most p waypoints, vectorised.
+
+    Each flight's arrays (times, points, cumulative distance) are computed once, when it is
+    added; the padded fleet arrays are rebuilt from them only when flights were added (once per
+    epoch in the simulator). A landed flight stays in them, masked out, until that rebuild:
+    rebuilding at every landing cost the simulator 1.5 s of a 3,500 s paper run (BENCHMARKS.md).
     """
 
     def __init__(self):
-        self._flights: dict[str, Trajectory] = {}
+        self._flights: dict[str, tuple] = {}   # id -> (times (k,), points (k, 3), cumulative m (k,))
         self._arrays = None
         self.total_added = 0
 
@@ -58,42 +63,45 @@ class Fleet:
     def add(self, vehicle_id: str, trajectory: Trajectory) -> None:
         if vehicle_id in self._flights:
             raise ValueError(f"vehicle_id: {vehicle_id!r} is already flying")
-        self._flights[vehicle_id] = trajectory
+        times = np.asarray(trajectory.times_s, dtype=np.float64)
+        points = np.asarray(trajectory.points_m, dtype=np.float64)
+        cum = np.zeros(times.shape[0])
+        cum[1:] = np.cumsum(np.sqrt(np.square(np.diff(points, axis=0)).sum(axis=1)))
+        self._flights[vehicle_id] = (times, points, cum)
         self._arrays = None
         self.total_added += 1
 
     def _build(self):
         ids = sorted(self._flights)
         v = len(ids)
-        p = max((len(self._flights[i].times_s) for i in ids), default=2)
+        p = max((self._flights[i][0].shape[0] for i in ids), default=2)
         T = np.full((v, p), np.inf)
-        P = np.zeros((v, p, 3))
-        C = np.zeros((v, p))
-        nseg = np.zeros(v, dtype=np.int64)
+        P = np.empty((v, p, 3))
+        C = np.empty((v, p))
+        nseg = np.empty(v, dtype=np.int64)
         for row, vid in enumerate(ids):
-            traj = self._flights[vid]
-            k = len(traj.times_s)
-            T[row, :k] = traj.times_s
-            P[row, :k] = traj.points_m
-            P[row, k:] = traj.points_m[-1]
-            seg_len = np.linalg.norm(np.diff(traj.points_m, axis=0), axis=1)
-            C[row, 1:k] = np.cumsum(seg_len)
-            C[row, k:] = C[row, k - 1]
+            times, points, cum = self._flights[vid]
+            k = times.shape[0]
+            T[row, :k] = times
+            P[row, :k] = points
+            P[row, k:] = points[-1]
+            C[row, :k] = cum
+            C[row, k:] = cum[-1]
             nseg[row] = k - 1
         arrival = T[np.arange(v), nseg] if v else np.zeros(0)
-        self._arrays = (ids, T, P, C, nseg, arrival)
+        # rows still in the fleet (a landed row is masked out until the next rebuild)
+        self._arrays = (ids, T, P, C, nseg, arrival, np.ones(v, dtype=bool))
 
     def sample(self, t_s: float) -> FleetSample:
         if self._arrays is None:
             self._build()
-        ids, T, P, C, nseg, arrival = self._arrays
-        landed = arrival < t_s
+        ids, T, P, C, nseg, arrival, alive = self._arrays
+        landed = alive & (arrival < t_s)
         if landed.any():
             for row in np.flatnonzero(landed):
                 del self._flights[ids[row]]
-            self._build()
-            ids, T, P, C, nseg, arrival = self._arrays
-        rows = np.flatnonzero(T[:, 0] <= t_s) if len(ids) else np.zeros(0, dtype=np.int64)
+            alive &= ~landed
+        rows = np.flatnonzero(alive & (T[:, 0] <= t_s))
         seg = np.minimum((T[rows] <= t_s).sum(axis=1) - 1, nseg[rows] - 1)
         t0, t1 = T[rows, seg], T[rows, seg + 1]
         frac = (t_s - t0) / (t1 - t0)
@@ -104,5 +112,5 @@ class Fleet:
         flown = c0 + frac * (c1 - c0)
         total = C[rows, nseg[rows]]
         phase = np.where(seg == 0, PHASE_TAKEOFF, np.where(seg == nseg[rows] - 1, PHASE_LANDING, PHASE_CRUISE))
-        return FleetSample(float(t_s), [ids[r] for r in rows], pos, vel, phase.astype(np.uint8),
+        return FleetSample(float(t_s), [ids[r] for r in rows.tolist()], pos, vel, phase.astype(np.uint8),
                            seg.astype(np.int64), flown, total - flown)
