@@ -42,8 +42,9 @@ def resolved(name: str, namespace: str = "/") -> str:
 QOS_LATCHED = QosSpec(history="keep_last", depth=20000, reliability="reliable", durability="transient_local")
 # High-rate streams (fleet state every step): reliable so recordings are complete.
 QOS_STREAM = QosSpec(history="keep_last", depth=1000, reliability="reliable", durability="volatile")
-# Like rclpy's ClockQoS but reliable, so recordings hold every tick; best-effort readers still match.
-QOS_CLOCK = QosSpec(history="keep_last", depth=100, reliability="reliable", durability="volatile")
+# Like rclpy's ClockQoS but reliable and deep (a tick is 12 bytes: depth 100 lost ticks while a recorder at
+# nice 10 lagged behind the run), so recordings hold every tick; best-effort readers still match.
+QOS_CLOCK = QosSpec(history="keep_last", depth=10000, reliability="reliable", durability="volatile")
 # Recorder's reader of volatile streams: deep, so a busy recorder does not drop messages.
 QOS_RECORD_VOLATILE = QosSpec(history="keep_last", depth=10000, reliability="reliable", durability="volatile")
 # Requests from operators: transient local so a planner that starts (or restarts) late still gets

@@ -44,6 +44,31 @@ def init_with_stop_event(args=None):
     return stop
 
 
+#: how long a node that ends waits for its subscribers to acknowledge what it published [s]
+ACK_TIMEOUT_S = 30.0
+
+
+def flush_publishers(node, timeout_s: float) -> bool:
+    """Wait (at most ``timeout_s`` in all) until every reliable subscriber has acknowledged what
+    ``node`` published; log the topics that were not. A reliable writer that goes away takes its
+    unacknowledged samples with it: a recorder that lags behind the run (it runs at nice 10 and
+    catches up after the end) then missed the last messages, the simulator's end-of-run
+    announcement among them, and waited for it until run_fleet.sh stopped it."""
+    from rclpy.duration import Duration
+
+    end = time.monotonic() + timeout_s
+    late = []
+    for pub in list(node.publishers):
+        try:
+            if not pub.wait_for_all_acked(Duration(nanoseconds=int(max(end - time.monotonic(), 0.0) * 1e9))):
+                late.append(pub.topic_name)
+        except Exception:  # noqa: BLE001 - a publisher destroyed meanwhile, or an rmw without acks
+            continue
+    if late:
+        node.get_logger().warning(f"not acknowledged within {timeout_s:g} s by every subscriber: {', '.join(late)}")
+    return not late
+
+
 def run_node(make_node, name: str, args=None, *, threads: int = 1, linger_s: float = 0.0,
              events_executor: bool = False) -> int:
     """:func:`_run_node`, under cProfile when ``UAM_PROFILE_DIR`` is set (the profile of the
@@ -76,7 +101,9 @@ def _run_node(make_node, name: str, args=None, *, threads: int = 1, linger_s: fl
     leave. The exit code is the node's ``exit_code`` attribute if it has one, else 0. A node with a
     ``stopping`` threading.Event gets it set when the loop ends, for callbacks that wait; a node
     with a ``close()`` method (e.g. an open recording) gets it called before it is destroyed,
-    however the loop ended. ``events_executor`` spins rclpy's C++ EventsExecutor instead of the
+    however the loop ended. A node that ends by itself waits (ACK_TIMEOUT_S at most) until its
+    reliable subscribers acknowledged everything it published (:func:`flush_publishers`).
+    ``events_executor`` spins rclpy's C++ EventsExecutor instead of the
     SingleThreadedExecutor: far less overhead per message (the recorder takes ~14,000 messages
     a paper run; BENCHMARKS.md), but it does not run coroutine callbacks, so only for nodes
     without async callbacks.
@@ -100,6 +127,8 @@ def _run_node(make_node, name: str, args=None, *, threads: int = 1, linger_s: fl
         end = time.monotonic() + linger_s
         while rclpy.ok() and time.monotonic() < end and not stop.is_set():
             executor.spin_once(timeout_sec=0.05)
+        if not stop.is_set():
+            flush_publishers(node, ACK_TIMEOUT_S)
         # A callback may still be waiting (e.g. the planner on a solver that already stopped);
         # tell it, so the executor's worker threads end and the process can exit at once.
         if hasattr(node, "stopping"):

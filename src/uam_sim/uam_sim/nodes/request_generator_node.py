@@ -83,7 +83,7 @@ class RequestGeneratorNode(Node):
 
 
 def main(args=None) -> int:
-    return run_node(RequestGeneratorNode, "request_generator", args)
+    return run_node(RequestGeneratorNode, "request_generator", args, events_executor=True)
 
 
 if __name__ == "__main__":

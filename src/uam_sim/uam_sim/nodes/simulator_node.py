@@ -92,6 +92,9 @@ class SimulatorNode(Node):
         self.error = ""
         self.active_samples: list[int] = []  # airborne vehicles at each step, for the summary
         self._wall_start = 0.0
+        self._cpu_start = 0.0
+        self._blocked_since: float | None = None  # lockstep: wall time since the fleet waits at an epoch
+        self.blocked_wall_s = 0.0           # wall time the fleet waited for epoch outcomes, for the summary
         self._last_wait_log = time.monotonic()
         period = self.step_s / self.rtf if self.mode == "realtime" else 0.02
         self._timer = self.create_timer(period, self._on_timer)  # wall clock: this node owns sim time
@@ -207,6 +210,9 @@ class SimulatorNode(Node):
         if self.step_index < self._waiting_epoch * self.steps_per_epoch:
             self._early = res  # flown when the fleet reaches the epoch (_step_once)
             return
+        if self._blocked_since is not None:
+            self.blocked_wall_s += time.monotonic() - self._blocked_since
+            self._blocked_since = None
         self._fly(res)
         if self.mode == "lockstep":
             self._run_until_blocked()
@@ -257,6 +263,7 @@ class SimulatorNode(Node):
                 return
             self.started = True
             self._wall_start = now
+            self._cpu_start = time.process_time()
             self.get_logger().info("planner and demand source ready: starting the run")
             if self.mode == "lockstep":
                 self._timer.timer_period_ns = int(0.5e9)  # from now on only a watchdog
@@ -291,6 +298,8 @@ class SimulatorNode(Node):
             self._step_once()
         if self._step_timer is not None:
             if self.finished or self._blocked():
+                if not self.finished and self._blocked_since is None:
+                    self._blocked_since = time.monotonic()
                 self._step_timer.cancel()
             elif self._step_timer.is_canceled():
                 self._step_timer.reset()
@@ -336,16 +345,18 @@ class SimulatorNode(Node):
                                          epoch_time=m.to_time(min(self.t_s, self.duration_s)),
                                          sender="simulator", finished=True))
         wall = time.monotonic() - self._wall_start if self.started else 0.0
+        cpu = time.process_time() - self._cpu_start if self.started else 0.0
         sim = min(self.t_s, self.duration_s)
         avg = sum(self.active_samples) / len(self.active_samples) if self.active_samples else 0.0
         self.get_logger().info(
             f"run finished at t={sim:g} s: {self.fleet.total_added} approved flights flown, "
-            f"{self.plans_received} plans received, average airborne {avg:.2f}; wall {wall:.2f} s, "
-            f"real-time factor {sim / wall if wall > 0 else float('inf'):.1f}")
+            f"{self.plans_received} plans received, average airborne {avg:.2f}; wall {wall:.2f} s "
+            f"(simulator cpu {cpu:.2f} s), real-time factor {sim / wall if wall > 0 else float('inf'):.1f}"
+            + (f"; waited {self.blocked_wall_s:.2f} s at epochs for the planner" if self.mode == "lockstep" else ""))
 
 
 def main(args=None) -> int:
-    return run_node(SimulatorNode, "simulator", args, linger_s=1.0)
+    return run_node(SimulatorNode, "simulator", args, linger_s=1.0, events_executor=True)
 
 
 if __name__ == "__main__":

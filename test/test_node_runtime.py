@@ -1,0 +1,100 @@
+"""The node runtime (uam_bringup.runtime): a node that ends delivers what it published first.
+
+A reliable writer that goes away takes its unacknowledged samples with it. The recorder runs at
+nice 10 and catches up after the run; when the simulator exited at once, the recorder sometimes
+missed its last messages (the end-of-run announcement among them) and then waited for it until
+run_fleet.sh stopped it 60 s later. Here the subscriber process is stopped (SIGSTOP) while the
+publisher publishes and ends, as a starved recorder would be, and resumed later.
+"""
+
+from __future__ import annotations
+
+import os
+import pathlib
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+pytest.importorskip("rclpy", reason="needs the built workspace (source scripts/env.sh)")
+
+N = 300
+
+SUBSCRIBER = """
+import sys, time, rclpy
+from rclpy.qos import QoSProfile, ReliabilityPolicy, HistoryPolicy
+from std_msgs.msg import UInt32
+rclpy.init()
+node = rclpy.create_node("slow_subscriber")
+got = []
+node.create_subscription(UInt32, "flush_probe", lambda m: got.append(m.data),
+                         QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10000, reliability=ReliabilityPolicy.RELIABLE))
+open(sys.argv[1] + ".ready", "w").close()
+end = time.monotonic() + float(sys.argv[2])
+while time.monotonic() < end and len(got) < {n}:
+    rclpy.spin_once(node, timeout_sec=0.05)
+open(sys.argv[1], "w").write(str(len(got)))
+""".replace("{n}", str(N))
+
+PUBLISHER = """
+import os, sys, time
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy, HistoryPolicy
+from std_msgs.msg import UInt32
+from uam_bringup.runtime import run_node
+go = sys.argv[1]
+class Pub(Node):
+    def __init__(self):
+        super().__init__("flush_publisher")
+        # a shallow writer history, as the clock's was: what is not acknowledged is overwritten or lost
+        self.pub = self.create_publisher(UInt32, "flush_probe",
+                                         QoSProfile(history=HistoryPolicy.KEEP_LAST, depth={n}, reliability=ReliabilityPolicy.RELIABLE))
+        self.finished = False
+        self.timer = self.create_timer(0.02, self.tick)
+    def tick(self):
+        if self.pub.get_subscription_count() and not os.path.exists(go + ".matched"):
+            open(go + ".matched", "w").close()
+        if os.path.exists(go):
+            for i in range({n}):
+                self.pub.publish(UInt32(data=i))
+            self.finished = True
+            self.timer.cancel()
+sys.exit(run_node(Pub, "flush_publisher", None))
+""".replace("{n}", str(N))
+
+
+def _wait_file(path: pathlib.Path, timeout_s: float) -> bool:
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        if path.exists():
+            return True
+        time.sleep(0.05)
+    return False
+
+
+def test_a_node_that_ends_waits_until_a_stopped_subscriber_has_acknowledged_its_messages(tmp_path, ros_domain_id):
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain_id))
+    count, go = tmp_path / "count", tmp_path / "go"
+    sub = subprocess.Popen([sys.executable, "-c", SUBSCRIBER, str(count), "20"], env=env)
+    pub = None
+    try:
+        assert _wait_file(pathlib.Path(str(count) + ".ready"), 30)
+        pub = subprocess.Popen([sys.executable, "-c", PUBLISHER, str(go)], env=env,
+                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        assert _wait_file(pathlib.Path(str(go) + ".matched"), 30), "the publisher never matched the subscriber"
+        time.sleep(0.5)
+        os.kill(sub.pid, signal.SIGSTOP)  # the subscriber gets no CPU, as a starved recorder
+        go.touch()
+        time.sleep(3.0)                   # the publisher has published and ended its loop
+        os.kill(sub.pid, signal.SIGCONT)
+        out, _ = pub.communicate(timeout=60)
+        assert pub.returncode == 0, out
+        sub.wait(timeout=90)
+        assert count.read_text() == str(N), f"the subscriber got {count.read_text()} of {N} messages"
+    finally:
+        for p in (sub, pub):
+            if p is not None and p.poll() is None:
+                os.kill(p.pid, signal.SIGCONT)
+                p.kill()
