@@ -24,9 +24,10 @@
 #   --rtf X            real-time factor in realtime mode (default 1)
 #   --rerun M          off | save | spawn | connect (default save: a .rrd next to the MCAP)
 #   --foxglove-port N  serve a live Foxglove WebSocket view on port N (default 0 = off; docs/views.md)
-#   --recorder-nice N  the recorder's nice value (default 10): it is not in the lockstep loop, so the
+#   --recorder-nice N  the recorder's nice value (default 19): it is not in the lockstep loop, so the
 #                      loop's nodes get the CPU first and the recorder drains its queue after
-#                      (its reader history holds the whole backlog; it checks what it received)
+#                      (its reader history holds the whole backlog, the simulator waits for its
+#                      acknowledgements before it exits, and it checks what it received)
 #   --out DIR          output folder (default a new folder $UAM_RUNS_DIR/<date>-<policy>-<backend>-r<rate>-s<seed>-XXXX,
 #                      UAM_RUNS_DIR defaulting to runs/; unique even for runs started in the same second)
 # Ctrl-C, SIGTERM and SIGHUP stop every node cleanly; the recording is closed properly. If this
@@ -37,7 +38,7 @@ ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
 
 BACKEND=exact POLICY=mwis RATE=10 DURATION=3500 SEED=0 NETWORK=config/networks/singapore.yaml
-DEMAND="" MODE=lockstep RTF=1 RERUN=save OUT="" FOXGLOVE_PORT=0 RECORDER_NICE=10
+DEMAND="" MODE=lockstep RTF=1 RERUN=save OUT="" FOXGLOVE_PORT=0 RECORDER_NICE=19
 SEPARATION=sphere SEPARATION_M=100 VERTICAL_M=30 SLOT_S=0 CLIMB=5 DESCENT=3
 die() { echo "run_fleet: $*" >&2; exit 2; }
 while [[ $# -gt 0 ]]; do

@@ -1,7 +1,7 @@
 """The node runtime (uam_bringup.runtime): a node that ends delivers what it published first.
 
 A reliable writer that goes away takes its unacknowledged samples with it. The recorder runs at
-nice 10 and catches up after the run; when the simulator exited at once, the recorder sometimes
+a low priority (nice) and catches up after the run; when the simulator exited at once, the recorder sometimes
 missed its last messages (the end-of-run announcement among them) and then waited for it until
 run_fleet.sh stopped it 60 s later. Here the subscriber process is stopped (SIGSTOP) while the
 publisher publishes and ends, as a starved recorder would be, and resumed later.

@@ -57,7 +57,7 @@ def generate_launch_description() -> LaunchDescription:
                 "vertical_separation_m": a["vertical_separation_m"], "departure_slot_s": a["slot_s"]}
     # as run_fleet.sh: the recorder is not in the lockstep loop, so it runs at a lower priority
     recorder = Node(package="uam_sim", executable="recorder", name="recorder", output="screen",
-                    prefix="nice -n 10",
+                    prefix="nice -n 19",
                     parameters=[{"output": mcap, "network": network, "rerun": a["rerun"], "rerun_rrd": rrd,
                                  # as run_fleet.sh: the run starts once the recorder hears these
                                  "wait_for_publishers": ["uam/flight_plans", "uam/planning_reports",

@@ -43,7 +43,7 @@ QOS_LATCHED = QosSpec(history="keep_last", depth=20000, reliability="reliable", 
 # High-rate streams (fleet state every step): reliable so recordings are complete.
 QOS_STREAM = QosSpec(history="keep_last", depth=1000, reliability="reliable", durability="volatile")
 # Like rclpy's ClockQoS but reliable and deep (a tick is 12 bytes: depth 100 lost ticks while a recorder at
-# nice 10 lagged behind the run), so recordings hold every tick; best-effort readers still match.
+# nice lagged behind the run), so recordings hold every tick; best-effort readers still match.
 QOS_CLOCK = QosSpec(history="keep_last", depth=10000, reliability="reliable", durability="volatile")
 # Recorder's reader of volatile streams: deep, so a busy recorder does not drop messages.
 QOS_RECORD_VOLATILE = QosSpec(history="keep_last", depth=10000, reliability="reliable", durability="volatile")

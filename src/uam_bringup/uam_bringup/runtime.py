@@ -51,7 +51,7 @@ ACK_TIMEOUT_S = 30.0
 def flush_publishers(node, timeout_s: float) -> bool:
     """Wait (at most ``timeout_s`` in all) until every reliable subscriber has acknowledged what
     ``node`` published; log the topics that were not. A reliable writer that goes away takes its
-    unacknowledged samples with it: a recorder that lags behind the run (it runs at nice 10 and
+    unacknowledged samples with it: a recorder that lags behind the run (it runs niced and
     catches up after the end) then missed the last messages, the simulator's end-of-run
     announcement among them, and waited for it until run_fleet.sh stopped it."""
     from rclpy.duration import Duration

@@ -30,8 +30,10 @@ def _plan(rid: str, outcome: int, north_m: float = 0.0, reason: str = "", stamp_
     return p
 
 
-def _fleet(rec: McapRecorder, ids: list[str], steps: int = 5) -> None:
+def _fleet(rec: McapRecorder, ids: list[str], steps: int = 5, skip=()) -> None:
     for k in range(steps):
+        if k in skip:
+            continue
         fs = FleetState(step_index=k, vehicles=[VehicleState(vehicle_id=v) for v in ids])
         fs.header.stamp = Time(sec=k)
         rec.write("/uam/fleet_state", fs, k * NS)
@@ -111,6 +113,27 @@ def test_a_recording_without_the_plans_it_should_hold_is_never_ok(tmp_path, caps
     assert main([str(path)]) == 3
     assert "NOT VERIFIED" in capsys.readouterr().out
     assert json.loads(s.to_json())["verified"] is False
+
+
+def test_fleet_states_lost_on_the_way_make_the_recording_unverified(tmp_path):
+    """Fleet states are published at every step: a gap between the first and the last held
+    (the transport dropped them for a lagging recorder) is flagged; a recording that starts
+    late or ends early is not."""
+    def recorded(name, skip=(), steps=8):
+        path = tmp_path / name
+        with _open(path) as rec:
+            rec.write("/uam/requests", FlightRequest(request_id="r1"), 0)
+            rec.write("/uam/flight_plans", _plan("r1", APPROVED), 0)
+            _report(rec, 0, approved=1)
+            _fleet(rec, ["r1"], steps=steps, skip=skip)
+        return summarize(path)
+
+    assert recorded("whole.mcap").problems == []
+    assert recorded("late.mcap", skip=(0, 1)).problems == []
+    s = recorded("gaps.mcap", skip=(3, 4, 6))
+    assert s.fleet_steps == 5
+    assert any("3 fleet state(s) are missing" in p and "3, 4, 6" in p for p in s.problems), s.problems
+    assert main([str(tmp_path / "gaps.mcap")]) == 3
 
 
 def test_flights_that_flew_together_with_no_pair_checked_are_flagged(tmp_path):

@@ -104,7 +104,7 @@ def test_stamps_ids_and_positions_are_read_from_the_cdr_without_deserializing():
     from geometry_msgs.msg import PoseArray
     from rosgraph_msgs.msg import Clock
     from uam_msgs.msg import FlightPlan, PlanningReport
-    from uam_sim.cdr import fleet_state_digest, leading_stamp_ns, serialize_exact
+    from uam_sim.cdr import fleet_state_digest, fleet_state_step_index, leading_stamp_ns, serialize_exact
 
     cases = (("", []), ("enu", ["a"]), ("e", ["r00001_000", "x" * 13, "é", "b7"]),
              ("enu", [f"r{i:05d}_000" for i in range(40)]),          # one length: strided path
@@ -116,7 +116,7 @@ def test_stamps_ids_and_positions_are_read_from_the_cdr_without_deserializing():
         data = encode_fleet_state(77, 123, frame, 5, ids, pos, vel, np.zeros(len(ids), np.uint8),
                                   np.arange(len(ids), dtype=np.uint32), np.ones(len(ids)), np.ones(len(ids)))
         d = fleet_state_digest(data, positions=True)
-        assert d.vehicle_ids == ids and d.step_index == 5
+        assert d.vehicle_ids == ids and d.step_index == 5 == fleet_state_step_index(data)
         np.testing.assert_array_equal(d.positions_m, pos)
         assert leading_stamp_ns(data) == 77 * 10**9 + 123
     for msg in (Clock(clock=Time(sec=9, nanosec=8)), PoseArray(), FlightPlan(request_id="x"),

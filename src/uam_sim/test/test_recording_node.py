@@ -137,7 +137,8 @@ def test_sigterm_and_ctrl_c_close_the_file_properly(tmp_path, sig):
 
 def test_recorder_checks_announced_approvals_and_never_deserializes_fleet_states(
         ros_context, spin_until, tmp_path, monkeypatch):
-    """Reports announce 2 approvals, 1 approved plan arrives: the recording says so (metadata),
+    """Reports announce 2 approvals, 1 approved plan arrives, and a fleet state is missing: the
+    recording says so (metadata),
     and the analysis will not call it OK. Stamps of /clock, fleet states and poses are read from
     the CDR bytes: those messages are never deserialized (they were most of the recorder's CPU)."""
     import uam_sim.nodes.recorder_node as recorder_module
@@ -165,7 +166,8 @@ def test_recorder_checks_announced_approvals_and_never_deserializes_fleet_states
         assert spin_until(executor, lambda: all(p.get_subscription_count() >= 1 for p in pubs.values()), 20)
         for k in range(3):
             pubs[c.TOPIC_CLOCK].publish(Clock(clock=t(k)))
-            fs = FleetState(step_index=k, vehicles=[VehicleState(vehicle_id=v) for v in ("r1", "r2")])
+            # step 2's fleet state never arrives (lost on the way): the check says so
+            fs = FleetState(step_index=(0, 1, 3)[k], vehicles=[VehicleState(vehicle_id=v) for v in ("r1", "r2")])
             fs.header.stamp = t(k)
             pubs[c.TOPIC_FLEET].publish(fs)
             pa = PoseArray(poses=[Pose(), Pose()])
@@ -191,6 +193,8 @@ def test_recorder_checks_announced_approvals_and_never_deserializes_fleet_states
     check = read_metadata(out, "uam_recorder_check")
     assert check["ok"] == "false" and check["announced_approvals"] == "2" and check["approved_plans"] == "1"
     assert "2 approvals" in check["verdict"] and "1 approved plan" in check["verdict"]
+    assert check["fleet_states"] == "3" and check["fleet_states_missing"] == "1"
+    assert "1 fleet state(s) missing" in check["verdict"] and "steps 2" in check["verdict"]
     s = summarize(out)
     assert not s.verified and any("the recorder found" in p for p in s.problems)
 

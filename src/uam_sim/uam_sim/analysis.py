@@ -198,14 +198,26 @@ def _few(ids, n: int = 5) -> str:
     return ", ".join(repr(i) for i in ids[:n]) + (f" and {len(ids) - n} more" if len(ids) > n else "")
 
 
+def missing_steps(step_indices) -> list[int]:
+    """The step indices missing between the first and the last of ``step_indices`` (fleet states
+    are published at every step, 0, 1, 2, ...; a recording may start late or end early, but a
+    gap means states were lost on the way)."""
+    steps = np.unique(np.asarray(list(step_indices), dtype=np.int64))
+    if steps.size < 2:
+        return []
+    gaps = np.flatnonzero(np.diff(steps) > 1)
+    return [int(k) for g in gaps for k in range(int(steps[g]) + 1, int(steps[g + 1]))]
+
+
 def integrity_problems(epochs: list, approved: list, flown_ids: set, max_active: int,
-                       audit: SafetyAudit | None, conflicting: dict) -> list[str]:
+                       audit: SafetyAudit | None, conflicting: dict, fleet_steps=()) -> list[str]:
     """Why a recording cannot be trusted to hold the whole run (empty when it can).
 
     ``approved``: (request id, epoch index) of every approved plan held. Checks: ids decided more
     than one way; the planning reports' announced approvals against the approved plans held,
     epoch by epoch; vehicles in the fleet states with no approved plan; flights that
-    flew together while the audit checked no pair.
+    flew together while the audit checked no pair; fleet states missing between the first and the
+    last held (``fleet_steps``: their step indices).
     """
     problems = []
     if conflicting:
@@ -230,6 +242,10 @@ def integrity_problems(epochs: list, approved: list, flown_ids: set, max_active:
     if audit is not None and max_active >= 2 and audit.pairs_checked == 0:
         problems.append(f"the fleet states show {max_active} aircraft airborne together, but 0 pairs "
                         "of approved plans were checked")
+    lost = missing_steps(fleet_steps)
+    if lost:
+        problems.append(f"{len(lost)} fleet state(s) are missing between the first and the last held "
+                        f"(steps {_few(lost)}): lost on the way to the recorder")
     return problems
 
 
@@ -249,6 +265,7 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=10
     duplicates = refused_duplicates = 0
     fleet_t: list[float] = []
     fleet_n: list[int] = []
+    fleet_steps: list[int] = []
     flown: set[str] = set()
     epochs: list[EpochStats] = []
     t_min, t_max = math.inf, -math.inf
@@ -271,6 +288,7 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=10
             ids = _vehicle_ids(msg)
             fleet_t.append(stamp_s(msg.header.stamp))
             fleet_n.append(len(ids))
+            fleet_steps.append(int(msg.step_index))
             flown.update(ids)
         elif topic == TOPIC_REPORTS:
             epochs.append(EpochStats(
@@ -334,7 +352,7 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=10
         conflicting_decisions=conflicting,
         duplicate_requests_refused=refused_duplicates,
         problems=integrity_problems(epochs, [(request_key(p), int(p.epoch_index)) for p in approved_plans], flown,
-                                    max_active, audit, conflicting),
+                                    max_active, audit, conflicting, fleet_steps),
     )
 
 

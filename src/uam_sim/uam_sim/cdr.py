@@ -255,6 +255,19 @@ def _equal_length_run(data: bytes, pos: int, n: int, r: int) -> bool:
     return bool(np.all(lengths == n))
 
 
+def fleet_state_step_index(data: bytes) -> int | None:
+    """The step_index of a FleetState read from its little-endian CDR (see
+    :func:`fleet_state_digest` for the layout); None for big-endian or short data. O(1)."""
+    if len(data) < 16 or data[1] != 1:
+        return None
+    n_frame, = struct.unpack_from("<I", data, 12)
+    pos = 12 + n_frame
+    pos += (-pos) % 8
+    if len(data) < 4 + pos + 8:
+        return None
+    return struct.unpack_from("<Q", data, 4 + pos)[0]
+
+
 def fleet_state_digest(data: bytes, positions: bool = False) -> Any | None:
     """Stamp, step, vehicle ids (and positions) of a FleetState read straight from its CDR.
 

@@ -52,9 +52,9 @@ from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from uam_msgs.msg import FlightPlan
 
-from uam_sim.analysis import request_key
+from uam_sim.analysis import missing_steps, request_key
 from uam_sim.audit import AIRSPACE_METADATA, airspace_metadata
-from uam_sim.cdr import fleet_state_digest, leading_stamp_ns
+from uam_sim.cdr import fleet_state_digest, fleet_state_step_index, leading_stamp_ns
 from uam_sim.mcap_schema import message_class
 from uam_sim.mcap_writer import McapRecorder
 from uam_sim.stamps import sim_stamp_ns
@@ -82,11 +82,18 @@ def _starts_with_stamp(cls: type) -> bool:
 
 
 class ApprovalCheck:
-    """Approvals announced by the planning reports vs approved plans received, per epoch."""
+    """Approvals announced by the planning reports vs approved plans received, per epoch; and
+    fleet states missing between the first and the last received (one is published per step)."""
 
     def __init__(self) -> None:
         self.announced: dict[int, int] = {}      # epoch index -> approvals its report announced
         self.received: dict[int, set] = {}       # epoch index -> request ids of approved plans
+        self.steps: list[int] = []               # step index of every fleet state received
+
+    def on_fleet_state(self, data: bytes) -> None:
+        step = fleet_state_step_index(data)
+        if step is not None:
+            self.steps.append(step)
 
     def on_report(self, msg) -> None:
         self.announced[int(msg.epoch_index)] = int(msg.approved)  # a repeated report counts once
@@ -108,8 +115,15 @@ class ApprovalCheck:
                        f"plan(s) arrived; epochs differing: "
                        + ", ".join(f"{k} ({self.announced.get(k, 0)} announced, "
                                    f"{len(self.received.get(k, ()))} received)" for k in bad[:10]))
-        return {"ok": "false" if bad else "true", "announced_approvals": str(announced),
-                "approved_plans": str(received), "verdict": verdict}
+        lost = missing_steps(self.steps)
+        if lost:
+            verdict += (f"; {len(lost)} fleet state(s) missing between the first and the last received "
+                        f"(steps {', '.join(map(str, lost[:10]))}{' ...' if len(lost) > 10 else ''})")
+        else:
+            verdict += f"; {len(self.steps)} fleet states, none missing"
+        return {"ok": "false" if bad or lost else "true", "announced_approvals": str(announced),
+                "approved_plans": str(received), "fleet_states": str(len(self.steps)),
+                "fleet_states_missing": str(len(lost)), "verdict": verdict}
 
 
 class RecorderNode(Node):
@@ -284,6 +298,8 @@ class RecorderNode(Node):
             self.check.on_plan(msg)
         elif topic == c.TOPIC_REPORTS:
             self.check.on_report(msg)
+        elif topic == c.TOPIC_FLEET:
+            self.check.on_fleet_state(data)
         if not (self.rerun.enabled or self.views is not None or self.foxglove is not None):
             return msg
         if topic == c.TOPIC_FLEET:
