@@ -163,3 +163,20 @@ def test_recorder_and_replay_refuse_bad_values_and_run_time_changes_naming_the_p
     finally:
         rec.close()
         rec.destroy_node()
+
+
+def test_an_integer_out_of_range_or_of_the_wrong_type_at_start_up_is_refused_naming_it(ros_context):
+    """rclpy checks an integer parameter's range and every parameter's type itself, with an
+    exception of its own: it reached run_node as a crash (traceback, exit code 1). It is refused
+    like every other bad value: a ValueError naming the parameter and the value (exit code 2)."""
+    from uam_planner.nodes.planner_node import PlannerNode
+    from uam_sim.nodes.simulator_node import SimulatorNode
+
+    tiny = str(ROOT / "config" / "networks" / "tiny.yaml")
+    for make, overrides, words in [
+            (PlannerNode, {"network": tiny, "k": 500}, "parameter k: 500 is above the maximum 100"),
+            (PlannerNode, {"network": tiny, "k": "five"}, "parameter k: 'five' is not an integer"),
+            (SimulatorNode, {"duration_s": "long"}, "parameter duration_s: 'long' is not a finite number")]:
+        with pytest.raises(ValueError) as err:
+            make(context=ros_context, parameter_overrides=params(**overrides))
+        assert words in str(err.value), str(err.value)

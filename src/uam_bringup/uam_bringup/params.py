@@ -80,10 +80,25 @@ def check(name: str, value, default, lo=None, hi=None, choices=None, rule=None):
     return value
 
 
+def _declared(node, p: "Param"):
+    """Declare ``p`` on ``node`` and return its validated start-up value. rclpy checks an integer
+    range and every type itself, with an exception of its own (a node's main() reported it as a
+    crash): those values are refused here like every other, naming the parameter and the value."""
+    from rclpy.exceptions import ParameterException
+
+    try:
+        value = node.declare_parameter(p.name, p.default, _descriptor(p)).value
+    except ParameterException as exc:
+        given = getattr(node, "_parameter_overrides", {}).get(p.name)
+        if given is not None:
+            p.validate(given.value)  # raises the ValueError naming the parameter and the value
+        raise ValueError(f"parameter {p.name}: {exc}") from exc
+    return p.validate(value)
+
+
 def declare(node, name: str, default, description: str, lo=None, hi=None, choices=None, read_only=False):
     """Declare one parameter (outside a table) and return its validated value."""
-    p = Param(name, default, description, lo, hi, tuple(choices) if choices else None, read_only)
-    return p.validate(node.declare_parameter(name, default, _descriptor(p)).value)
+    return _declared(node, Param(name, default, description, lo, hi, tuple(choices) if choices else None, read_only))
 
 
 def _descriptor(p: Param):
@@ -109,8 +124,7 @@ def declare_table(node, table: tuple[Param, ...], on_change: Callable[[str, Any]
     from rcl_interfaces.msg import SetParametersResult
 
     specs = {p.name: p for p in table}
-    values = {p.name: p.validate(node.declare_parameter(p.name, p.default, _descriptor(p)).value)
-              for p in table}
+    values = {p.name: _declared(node, p) for p in table}
 
     def on_set(params):
         accepted = []
