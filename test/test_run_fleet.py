@@ -145,6 +145,18 @@ def test_sighup_stops_every_node(tmp_path, ros_domain_id):
     # under heavy load a node's DDS teardown can take longer, and run_fleet then kills it)
 
 
+def _open_files(pid: int) -> list[str]:
+    """What the process's descriptors point to (a descriptor closed while listing is skipped:
+    the nodes open and close files, e.g. DDS shared memory, all the time)."""
+    out = []
+    for fd in os.listdir(f"/proc/{pid}/fd"):
+        try:
+            out.append(os.readlink(f"/proc/{pid}/fd/{fd}"))
+        except FileNotFoundError:
+            continue
+    return out
+
+
 def test_a_killed_run_fleet_stops_every_node_and_no_node_holds_the_domain_lock(tmp_path):
     """SIGKILL cannot be trapped: the kernel's parent-death signal stops the nodes, which still
     close the recording; no node inherited the descriptor that holds the domain id's lock."""
@@ -156,9 +168,7 @@ def test_a_killed_run_fleet_stops_every_node_and_no_node_holds_the_domain_lock(t
     try:
         nodes = _running(proc, log)
         for pid in nodes:
-            fds = os.listdir(f"/proc/{pid}/fd")
-            held = [os.readlink(f"/proc/{pid}/fd/{fd}") for fd in fds
-                    if "uam-ros-domain-" in os.readlink(f"/proc/{pid}/fd/{fd}")]
+            held = [target for target in _open_files(pid) if "uam-ros-domain-" in target]
             assert not held, f"{nodes[pid]} holds {held}"
         proc.kill()
         proc.wait(timeout=10)
