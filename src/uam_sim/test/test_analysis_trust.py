@@ -136,6 +136,17 @@ def test_fleet_states_lost_on_the_way_make_the_recording_unverified(tmp_path):
     assert main([str(tmp_path / "gaps.mcap")]) == 3
 
 
+def test_missing_steps_are_counted_and_only_the_first_listed_even_for_a_forged_step_index():
+    """A forged fleet state with step_index 2**64 - 1 (uint64 on the wire) is counted as a gap,
+    not listed step by step (which would never end) nor an overflow."""
+    from uam_sim.analysis import missing_steps
+
+    assert missing_steps([0, 1, 2]) == (0, [])
+    assert missing_steps([5, 0, 3, 1]) == (2, [2, 4])
+    count, listed = missing_steps([0, 1, 2**64 - 1])
+    assert count == 2**64 - 3 and listed == list(range(2, 12))
+
+
 def test_flights_that_flew_together_with_no_pair_checked_are_flagged(tmp_path):
     """Fleet states show two vehicles airborne at once, but only one plan is in the file."""
     path = tmp_path / "one-plan.mcap"

@@ -198,15 +198,25 @@ def _few(ids, n: int = 5) -> str:
     return ", ".join(repr(i) for i in ids[:n]) + (f" and {len(ids) - n} more" if len(ids) > n else "")
 
 
-def missing_steps(step_indices) -> list[int]:
-    """The step indices missing between the first and the last of ``step_indices`` (fleet states
-    are published at every step, 0, 1, 2, ...; a recording may start late or end early, but a
-    gap means states were lost on the way)."""
-    steps = np.unique(np.asarray(list(step_indices), dtype=np.int64))
+def missing_steps(step_indices, first: int = 10) -> tuple[int, list[int]]:
+    """How many step indices are missing between the first and the last of ``step_indices``, and
+    the first ``first`` of them (fleet states are published at every step, 0, 1, 2, ...; a
+    recording may start late or end early, but a gap means states were lost on the way). The
+    indices are uint64 from the wire: a forged one far ahead is counted, never listed."""
+    steps = np.unique(np.asarray(list(step_indices), dtype=np.uint64))
     if steps.size < 2:
-        return []
-    gaps = np.flatnonzero(np.diff(steps) > 1)
-    return [int(k) for g in gaps for k in range(int(steps[g]) + 1, int(steps[g + 1]))]
+        return 0, []
+    gap = np.diff(steps) - np.uint64(1)
+    at = np.flatnonzero(gap > 0)
+    listed: list[int] = []
+    for g in at[:first]:
+        listed += range(int(steps[g]) + 1, int(steps[g]) + 1 + min(int(gap[g]), first - len(listed)))
+    return sum(int(gap[g]) for g in at), listed[:first]
+
+
+def format_steps(count: int, listed: list[int]) -> str:
+    """The listed missing steps, "..." when there are more (for :func:`missing_steps`)."""
+    return ", ".join(map(str, listed)) + (" ..." if count > len(listed) else "")
 
 
 def integrity_problems(epochs: list, approved: list, flown_ids: set, max_active: int,
@@ -242,10 +252,10 @@ def integrity_problems(epochs: list, approved: list, flown_ids: set, max_active:
     if audit is not None and max_active >= 2 and audit.pairs_checked == 0:
         problems.append(f"the fleet states show {max_active} aircraft airborne together, but 0 pairs "
                         "of approved plans were checked")
-    lost = missing_steps(fleet_steps)
+    lost, listed = missing_steps(fleet_steps)
     if lost:
-        problems.append(f"{len(lost)} fleet state(s) are missing between the first and the last held "
-                        f"(steps {_few(lost)}): lost on the way to the recorder")
+        problems.append(f"{lost} fleet state(s) are missing between the first and the last held "
+                        f"(steps {format_steps(lost, listed)}): lost on the way to the recorder")
     return problems
 
 

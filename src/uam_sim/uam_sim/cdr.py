@@ -271,14 +271,20 @@ def _equal_length_run(data: bytes, pos: int, n: int, r: int) -> bool:
     return bool(np.all(lengths == n))
 
 
-def fleet_state_step_index(data: bytes) -> int | None:
-    """The step_index of a FleetState read from its little-endian CDR (see
-    :func:`fleet_state_digest` for the layout); None for big-endian or short data. O(1)."""
-    if len(data) < 16 or data[1] != 1:
-        return None
+def _step_index_at(data: bytes) -> int:
+    """Payload offset of a little-endian FleetState's step_index: after the stamp and the
+    frame_id string, aligned to 8 (see :func:`fleet_state_digest` for the layout)."""
     n_frame, = struct.unpack_from("<I", data, 12)
     pos = 12 + n_frame
-    pos += (-pos) % 8
+    return pos + (-pos) % 8
+
+
+def fleet_state_step_index(data: bytes) -> int | None:
+    """The step_index of a FleetState read from its little-endian CDR; None for big-endian or
+    short data. O(1)."""
+    if len(data) < 16 or data[1] != 1:
+        return None
+    pos = _step_index_at(data)
     if len(data) < 4 + pos + 8:
         return None
     return struct.unpack_from("<Q", data, 4 + pos)[0]
@@ -299,9 +305,8 @@ def fleet_state_digest(data: bytes, positions: bool = False) -> Any | None:
     """
     if len(data) < 16 or data[1] != 1:
         return None
-    sec, nanosec, n_frame = struct.unpack_from("<iII", data, 4)
-    pos = 12 + n_frame                  # payload offset after frame_id
-    pos += (-pos) % 8                   # align step_index
+    sec, nanosec = struct.unpack_from("<iI", data, 4)
+    pos = _step_index_at(data)
     step_index, = struct.unpack_from("<Q", data, 4 + pos)
     pos += 8
     pos += (-pos) % 4

@@ -52,7 +52,7 @@ from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from uam_msgs.msg import FlightPlan
 
-from uam_sim.analysis import missing_steps, request_key
+from uam_sim.analysis import format_steps, missing_steps, request_key
 from uam_sim.audit import AIRSPACE_METADATA, airspace_metadata
 from uam_sim.cdr import fleet_state_digest, fleet_state_step_index, leading_stamp_ns
 from uam_sim.mcap_schema import message_class
@@ -81,7 +81,7 @@ def _starts_with_stamp(cls: type) -> bool:
     return bool(fields) and fields[0] in ("builtin_interfaces/Time", "std_msgs/Header")
 
 
-class ApprovalCheck:
+class RecordingCheck:
     """Approvals announced by the planning reports vs approved plans received, per epoch; and
     fleet states missing between the first and the last received (one is published per step)."""
 
@@ -115,15 +115,15 @@ class ApprovalCheck:
                        f"plan(s) arrived; epochs differing: "
                        + ", ".join(f"{k} ({self.announced.get(k, 0)} announced, "
                                    f"{len(self.received.get(k, ()))} received)" for k in bad[:10]))
-        lost = missing_steps(self.steps)
+        lost, listed = missing_steps(self.steps)
         if lost:
-            verdict += (f"; {len(lost)} fleet state(s) missing between the first and the last received "
-                        f"(steps {', '.join(map(str, lost[:10]))}{' ...' if len(lost) > 10 else ''})")
+            verdict += (f"; {lost} fleet state(s) missing between the first and the last received "
+                        f"(steps {format_steps(lost, listed)})")
         else:
             verdict += f"; {len(self.steps)} fleet states, none missing"
         return {"ok": "false" if bad or lost else "true", "announced_approvals": str(announced),
                 "approved_plans": str(received), "fleet_states": str(len(self.steps)),
-                "fleet_states_missing": str(len(lost)), "verdict": verdict}
+                "fleet_states_missing": str(lost), "verdict": verdict}
 
 
 class RecorderNode(Node):
@@ -180,7 +180,7 @@ class RecorderNode(Node):
         self._last_rx = time.monotonic()
         self._clock_ns = 0
         self._dirty = False
-        self.check = ApprovalCheck()
+        self.check = RecordingCheck()
         self._stamp_first = {topic: _starts_with_stamp(cls) for topic, (cls, _qos) in RECORDED_TOPICS.items()}
         # recorded under the names they resolve to (namespace and remapping applied)
         self._names = {topic: self.resolve_topic_name(topic) for topic in RECORDED_TOPICS}
