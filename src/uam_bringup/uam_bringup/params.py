@@ -113,6 +113,23 @@ def _descriptor(p: Param):
     return desc
 
 
+#: rclpy's own parameters that would break a running node of this graph: refused at run time
+#: (and at start-up: :func:`check_builtins`). With use_sim_time the simulator's timers would wait
+#: for the /clock it publishes itself (frozen for good); the other nodes take simulation time from
+#: the epoch protocol and never need it.
+FROZEN_BUILTINS = {
+    "use_sim_time": "parameter use_sim_time: the nodes of this graph take simulation time from the epoch "
+                    "protocol; switching to /clock time would freeze the simulator's own timers",
+}
+
+
+def check_builtins(node) -> None:
+    """Refuse (ValueError naming it) a start-up value of a :data:`FROZEN_BUILTINS` parameter."""
+    for name, why in FROZEN_BUILTINS.items():
+        if node.has_parameter(name) and node.get_parameter(name).value not in (False, None):
+            raise ValueError(f"{why} (given at start-up: {node.get_parameter(name).value!r})")
+
+
 def declare_table(node, table: tuple[Param, ...], on_change: Callable[[str, Any], None] | None = None) -> dict:
     """Declare ``table`` on ``node``; return {name: validated value}. Installs the change callback.
 
@@ -124,14 +141,17 @@ def declare_table(node, table: tuple[Param, ...], on_change: Callable[[str, Any]
     from rcl_interfaces.msg import SetParametersResult
 
     specs = {p.name: p for p in table}
+    check_builtins(node)
     values = {p.name: _declared(node, p) for p in table}
 
     def on_set(params):
         accepted = []
         for prm in params:
             spec = specs.get(prm.name)
+            if prm.name in FROZEN_BUILTINS:
+                return SetParametersResult(successful=False, reason=FROZEN_BUILTINS[prm.name] + f" (asked: {prm.value!r})")
             if spec is None:
-                continue  # e.g. use_sim_time: rclpy's own
+                continue  # rclpy's own, harmless
             if spec.read_only:
                 return SetParametersResult(successful=False, reason=(
                     f"parameter {prm.name} is read-only: it is read at start-up only; restart the node "
@@ -233,6 +253,9 @@ PLANNER = (
           "time [s]; later windows are refused", 0.0, 1e7),
     Param("max_request_lead_s", 60.0, "request_time may be at most this far after the current simulation "
           "time [s] (a request from the future)", 0.0, 1e7),
+    Param("journal", "", "file where the planner journals its approvals (uam_bringup.journal), so a restarted "
+          "planner checks the simulator's claim of the flights in the air against its own record; '' for none "
+          "(run_fleet.sh writes <out>/planner-journal.jsonl)"),
 )
 
 SOLVER = (
@@ -266,8 +289,11 @@ SIMULATOR = (
           "from outside, as they arrive"),
     Param("wait_for_subscribers", [""], "start only once these nodes (by name) subscribe to "
           "uam/fleet_state, so a recording starts at t = 0 (config/simulator.yaml: [recorder]); [''] for none"),
+    Param("startup_timeout_s", 300.0, "wall time [s] to wait at start for the planner's and the demand source's "
+          "services (exactly one of each) and the subscribers named in wait_for_subscribers before ending the run "
+          "with an error", 0.1, 86400.0),
     Param("ack_timeout_s", 120.0, "wall time [s] to wait for an epoch's outcome before ending the run with "
-          "an error (at start it waits for the services as long as it takes, saying what it waits for)",
+          "an error",
           0.1, 86400.0),
 )
 

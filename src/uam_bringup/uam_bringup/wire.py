@@ -12,6 +12,7 @@ operator is (see README, "What an open ROS graph cannot protect against").
 
 from __future__ import annotations
 
+import hashlib
 import re
 from typing import Any
 
@@ -44,6 +45,21 @@ def check_id(field: str, value: Any) -> str:
         return (f"{field}: {echo(value)} must be 1 to {MAX_ID_LENGTH} characters of letters, digits, "
                 "'_', '-' and '.'")
     return ""
+
+
+def escaped_id(value: Any) -> str:
+    """``value`` itself when it is a valid id; else a stand-in that names it and is never a valid
+    id: ``!`` then the value with every character outside the id alphabet as ``%XX`` (its code
+    point), cut to MAX_ID_LENGTH characters, and ``~`` with 8 hex digits of its hash when cut (so
+    two different bad ids never share a stand-in, and one bad id always gets the same)."""
+    if isinstance(value, str) and ID_PATTERN.fullmatch(value):
+        return value
+    text = value if isinstance(value, str) else repr(value)
+    escaped = "".join(ch if ID_PATTERN.fullmatch(ch) else f"%{ord(ch):02X}" for ch in text[: MAX_ID_LENGTH * 2])
+    if len(escaped) > MAX_ID_LENGTH or len(text) > MAX_ID_LENGTH * 2:
+        digest = hashlib.sha256(text.encode("utf-8", "surrogatepass")).hexdigest()[:8]
+        escaped = escaped[:MAX_ID_LENGTH] + "~" + digest
+    return "!" + escaped
 
 
 def scoped_id(operator_id: str, request_id: str) -> str:

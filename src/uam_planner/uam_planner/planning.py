@@ -796,8 +796,10 @@ class Planner:
 
     def restore(self, flights: Sequence[Flight], decided_ids: Sequence[str] = ()) -> None:
         """Resume after a restart: ``flights`` are flying (they become active, their ids taken) and
-        ``decided_ids`` were decided before (their ids are taken, nothing is planned for them)."""
-        self.active = list(flights)
+        ``decided_ids`` were decided before (their ids are taken, nothing is planned for them).
+        Adds only: a flight already active stays as it is, whatever ``flights`` says."""
+        held = {f.request_id for f in self.active}
+        self.active = self.active + [f for f in flights if f.request_id not in held]
         self._known_ids.update(f.request_id for f in flights)
         self._known_ids.update(decided_ids)
         self.pending = [r for r in self.pending if r.request_id not in self._known_ids]

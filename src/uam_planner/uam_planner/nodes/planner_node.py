@@ -23,6 +23,14 @@ demand source released for it; the planner waits (asynchronously) until each has
 the epoch's plans and report. Asking again for the last epoch returns its outcome, for the epoch
 in progress STATUS_IN_PROGRESS (the first call gets the outcome); nothing is planned twice. A planner started mid-run answers STATUS_NEED_STATE and
 resumes from the state the simulator then sends (flights in the air, requests decided).
+
+What no caller can talk it out of (docs/security.md): it serves epochs only for the simulator
+it bound to at its first served call (the run token ``session``), only the next epoch, at the
+time ``epoch_index * epoch_s`` with the ``epoch_s`` of that first call, with at most
+``max_pending`` expected ids. A resume is taken only by a planner that holds nothing yet, and
+it adds flights, never removes them; with a ``journal`` the claim is checked against the
+planner's own approvals and refused when it contradicts them. The end of the run is taken only
+from the bound simulator.
 The planning itself is uam_planner.planning.Planner, shared with the in-process experiment runner.
 """
 
@@ -31,6 +39,7 @@ from __future__ import annotations
 import collections
 import dataclasses
 import math
+import secrets
 import sys
 import threading
 import time
@@ -45,6 +54,7 @@ from uam_msgs.srv import PlanEpoch, SolveMwis
 from uam_bringup import contract as c
 from uam_bringup import conversions as m
 from uam_bringup import qos, wire
+from uam_bringup.journal import Journal
 from uam_bringup.params import PLANNER, declare_table
 from uam_bringup.runtime import run_node
 from uam_planner.network import load_network
@@ -95,6 +105,12 @@ class PlannerNode(Node):
         self._last: tuple[int, PlanEpoch.Response] | None = None
         self._refusal_logged_at = float("-inf")
         self._refused_unlogged = 0
+        # the run tokens (docs/security.md): this planner's own, and the simulator's it serves
+        self.session = secrets.token_hex(8)
+        self.bound_simulator: str | None = None
+        self._epoch_s: float | None = None       # fixed by the first served call
+        self.resumed = False
+        self.journal = Journal(self.p["journal"]) if self.p["journal"] else None
         self.requests_received = 0
         self.plans_published = 0
         self.epochs_planned = 0
@@ -135,9 +151,11 @@ class PlannerNode(Node):
         reason = wire.bounded(reason)
         origin = msg.origin_id if len(msg.origin_id) <= wire.MAX_NODE_ID_LENGTH else ""
         dest = msg.destination_id if len(msg.destination_id) <= wire.MAX_NODE_ID_LENGTH else ""
-        plan = m.unapproved_plan(msg.request_id if ids_ok else "", origin, dest, outcome, reason,
+        # a bad id is kept, escaped and cut (wire.escaped_id), so two refusals never look like
+        # two decisions on one id
+        plan = m.unapproved_plan(wire.escaped_id(msg.request_id), origin, dest, outcome, reason,
                                  self._last_epoch_s, max(self._next_epoch - 1, 0), self.policy)
-        plan.operator_id = msg.operator_id if ids_ok else ""
+        plan.operator_id = wire.escaped_id(msg.operator_id)
         self._publish_plan(plan)
         self.planner.record_rejection()
         # at most one log line a second: rclpy's logger costs milliseconds a call, which a flood
@@ -207,38 +225,89 @@ class PlannerNode(Node):
                 fut.set_result(True)
 
     def _on_sync(self, msg: EpochSync) -> None:
-        if msg.sender == "simulator" and msg.finished:
+        # only the simulator this planner serves ends its run (a forged announcement does not)
+        if msg.sender == "simulator" and msg.finished and self.bound_simulator is not None \
+                and msg.session == self.bound_simulator:
             self.finished = True
 
     # ---- the epoch protocol ------------------------------------------------------------------
+    def _refuse_call(self, request: PlanEpoch.Request, response: PlanEpoch.Response, status: int,
+                     message: str) -> PlanEpoch.Response:
+        response.status = status
+        response.message = wire.bounded(message)
+        response.session = self.session
+        if status == PlanEpoch.Response.STATUS_REFUSED:
+            self._log_refused_call(message)
+        return response
+
+    def _log_refused_call(self, message: str) -> None:
+        now = time.monotonic()
+        if now - getattr(self, "_call_refusal_logged_at", float("-inf")) >= 1.0:
+            self._call_refusal_logged_at = now
+            self.get_logger().warning(f"refused an epoch call: {wire.bounded(message)}")
+
+    def _check_call(self, request: PlanEpoch.Request) -> str:
+        """Why this epoch call is not one of the bound simulator's (or malformed), or ''."""
+        session = request.session
+        if not session or len(session) > wire.MAX_ID_LENGTH:
+            return f"session: {wire.echo(session)} must be the simulator's run token (1 to {wire.MAX_ID_LENGTH} characters)"
+        if self.bound_simulator is not None and session != self.bound_simulator:
+            return (f"session: {wire.echo(session)} is not the simulator this planner serves "
+                    f"({self.bound_simulator!r}); a second simulator is refused")
+        if not (math.isfinite(request.epoch_s) and request.epoch_s > 0):
+            return f"epoch_s: {request.epoch_s!r} must be a positive number of seconds"
+        if self._epoch_s is not None and request.epoch_s != self._epoch_s:
+            return f"epoch_s: {request.epoch_s!r} differs from the run's epoch length {self._epoch_s!r} s (fixed at start)"
+        t_s = m.from_time(request.epoch_time)
+        if not math.isclose(t_s, request.epoch_index * request.epoch_s, rel_tol=1e-9, abs_tol=1e-6):
+            return (f"epoch_time: {t_s!r} s is not epoch_index {request.epoch_index} x epoch_s "
+                    f"{request.epoch_s!r} s")
+        if len(request.expected_request_ids) > self.p["max_pending"]:
+            return (f"expected_request_ids: {len(request.expected_request_ids)} ids, more than the planner "
+                    f"can hold waiting (max_pending {self.p['max_pending']})")
+        if request.resume and len(request.airborne) > self.p["max_pending"] * 10:
+            return f"airborne: {len(request.airborne)} flights is not a plausible airborne fleet"
+        return ""
+
     async def _on_plan_epoch(self, request: PlanEpoch.Request, response: PlanEpoch.Response):
         k = int(request.epoch_index)
         with self._lock:
+            problem = self._check_call(request)
+            if problem:
+                return self._refuse_call(request, response, PlanEpoch.Response.STATUS_REFUSED, problem)
             if self._last is not None and self._last[0] == k:
                 return self._last[1]
             if self._inflight is not None:
                 # answered at once: a waiting repeat would be one more suspended task that the
                 # executor resumes at every wake-up
                 same = self._inflight == k
-                response.status = PlanEpoch.Response.STATUS_IN_PROGRESS if same else PlanEpoch.Response.STATUS_REFUSED
-                response.message = f"epoch {self._inflight} is being planned" + ("" if same else f"; epoch {k} asked")
-                return response
+                return self._refuse_call(
+                    request, response,
+                    PlanEpoch.Response.STATUS_IN_PROGRESS if same else PlanEpoch.Response.STATUS_REFUSED,
+                    f"epoch {self._inflight} is being planned" + ("" if same else f"; epoch {k} asked"))
+            fresh = self._fresh()
+            if request.resume and not fresh:
+                # the resume path is for a planner that restarted and holds nothing: one that
+                # holds flights never lets a caller replace (or wipe) them
+                return self._refuse_call(request, response, PlanEpoch.Response.STATUS_REFUSED, (
+                    f"resume: refused, this planner holds {len(self.planner.active)} flights and "
+                    f"{len(self.planner.pending)} waiting requests of its own (next epoch {self._next_epoch}); "
+                    "a resume may not replace them"))
             if k != self._next_epoch:
-                if self._next_epoch == 0 and not request.resume:
-                    response.status = PlanEpoch.Response.STATUS_NEED_STATE
-                    response.message = f"planner started mid-run (epoch {k}): send the flights and decisions"
-                    return response
-                if not (self._next_epoch == 0 and request.resume):
-                    response.status = PlanEpoch.Response.STATUS_REFUSED
-                    response.message = f"epoch {k} asked, the next epoch is {self._next_epoch}"
-                    return response
+                if fresh and not request.resume:
+                    return self._refuse_call(request, response, PlanEpoch.Response.STATUS_NEED_STATE,
+                                             f"planner started mid-run (epoch {k}): send the flights and decisions")
+                if not (fresh and request.resume):
+                    return self._refuse_call(request, response, PlanEpoch.Response.STATUS_REFUSED,
+                                             f"epoch_index: {k} asked, the next epoch is {self._next_epoch}")
             t_s = m.from_time(request.epoch_time)
-            if not (math.isfinite(request.epoch_s) and request.epoch_s > 0):
-                response.status = PlanEpoch.Response.STATUS_REFUSED
-                response.message = f"epoch_s: {request.epoch_s!r} must be a positive number of seconds"
-                return response
             if request.resume:
-                self._resume(request, t_s)
+                problem = self._resume(request, t_s)
+                if problem:
+                    return self._refuse_call(request, response, PlanEpoch.Response.STATUS_REFUSED, problem)
+            if self.bound_simulator is None:
+                self._bind(request.session, resumed=bool(request.resume))
+            self._epoch_s = float(request.epoch_s)
             if self._held is not None:
                 self._decide_held(t_s, bool(request.resume))
             if self.config.epoch_s != request.epoch_s:
@@ -250,17 +319,56 @@ class PlannerNode(Node):
             with self._lock:
                 self._inflight = None
 
-    def _resume(self, request: PlanEpoch.Request, t_s: float) -> None:
-        """A planner started mid-run takes the simulator's state: what flies, what was decided."""
-        flights = [m.flight_from_plan(p, request_id=wire.scoped_id(p.operator_id, p.request_id))
-                   for p in request.airborne]
+    def _fresh(self) -> bool:
+        """True while this planner holds nothing of a run: no epoch planned, no resume taken."""
+        return self._next_epoch == 0 and self.epochs_planned == 0 and not self.resumed and \
+            self.bound_simulator is None and not self.planner.active
+
+    def _bind(self, session: str, resumed: bool) -> None:
+        self.bound_simulator = session
+        if self.journal is not None:
+            self.journal.start(session, keep=resumed)
+        self.get_logger().info(f"serving the simulator of session {session!r} (this planner: {self.session!r})")
+
+    def _resume(self, request: PlanEpoch.Request, t_s: float) -> str:
+        """A planner started mid-run takes the simulator's state: what flies, what was decided.
+        With a journal of the same run, the claim must agree with the planner's own approvals
+        (none left out while still flying, none added, none changed); returns why not, or ''."""
+        claimed = {}
+        for p in request.airborne:
+            if p.outcome != FlightPlan.OUTCOME_APPROVED or wire.check_id("operator_id", p.operator_id) \
+                    or wire.check_id("request_id", p.request_id):
+                return f"airborne: {wire.echo(p.operator_id)}/{wire.echo(p.request_id)} is not an approved plan with valid ids"
+            claimed[wire.scoped_id(p.operator_id, p.request_id)] = p
+        if self.journal is not None:
+            try:
+                own = {wire.scoped_id(p.operator_id, p.request_id): p for p in self.journal.read(request.session)}
+            except ValueError as exc:
+                return f"resume: {exc}"
+            flying = {key for key, p in own.items() if m.from_time(p.arrival_time) >= t_s}
+            left_out = sorted(flying - set(claimed))
+            unknown = sorted(set(claimed) - set(own))
+            changed = sorted(key for key in set(claimed) & set(own) if claimed[key].waypoints != own[key].waypoints)
+            if left_out or unknown or changed:
+                why = "; ".join(part for part in (
+                    f"{len(left_out)} flight(s) it approved and still flying are left out ({left_out[:3]})" if left_out else "",
+                    f"{len(unknown)} it never approved are claimed ({unknown[:3]})" if unknown else "",
+                    f"{len(changed)} are changed ({changed[:3]})" if changed else "") if part)
+                self.get_logger().error(f"resume refused: the claim contradicts the planner's journal: {why}")
+                return f"resume: the claim contradicts the planner's journal {self.journal.path}: {why}"
+        elif claimed or request.decided_request_ids:
+            self.get_logger().warning("resume without a journal: the claimed airborne set cannot be checked "
+                                      "against this planner's own approvals (parameter journal)")
+        flights = [m.flight_from_plan(p, request_id=key) for key, p in claimed.items()]
         decided = set(request.decided_request_ids)
         self.planner.restore(flights, decided)
-        self._taken |= decided | {f.request_id for f in flights}
+        self._taken |= decided | set(claimed)
         self._count_waiting()
+        self.resumed = True
         self.get_logger().warning(
             f"resumed at epoch {request.epoch_index} (t={t_s:g} s): {len(flights)} flights in the air, "
             f"{len(decided)} requests decided before, {len(self.planner.pending)} waiting")
+        return ""
 
     def _count_waiting(self) -> None:
         self._waiting_per_operator = collections.Counter(
@@ -301,6 +409,8 @@ class PlannerNode(Node):
                      for f in result.approved]
             for plan, f in zip(plans, result.approved):
                 plan.operator_id = wire.split_scoped(f.request_id)[0]
+            if self.journal is not None:
+                self.journal.append(plans)  # before anyone can hold them
             for req in result.expired:
                 op, rid = wire.split_scoped(req.request_id)
                 plan = m.unapproved_plan(
@@ -323,8 +433,9 @@ class PlannerNode(Node):
             self.epochs_planned += 1
             self._sync_pub.publish(EpochSync(
                 epoch_index=k, epoch_time=m.to_time(t_s), sender="planner", plans_published=self.plans_published,
-                requests_received=self.requests_received))
+                requests_received=self.requests_received, session=self.session))
             response.status = PlanEpoch.Response.STATUS_PLANNED
+            response.session = self.session
             response.message = f"epoch {k}: {len(result.approved)} approved, {len(result.expired)} expired"
             response.plans = plans
             response.report = report

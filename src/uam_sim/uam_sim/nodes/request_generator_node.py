@@ -15,6 +15,8 @@ uam_bringup.params.REQUEST_GENERATOR (docs/parameters.md).
 
 from __future__ import annotations
 
+import math
+import secrets
 import sys
 
 from rclpy.node import Node
@@ -51,6 +53,10 @@ class RequestGeneratorNode(Node):
         self.create_service(ReleaseDemand, c.SERVICE_RELEASE_DEMAND, self._on_release)
         self._next_instant = 0
         self._released: dict[int, list[str]] = {}  # epoch -> ids released for it (a repeated call gets them again)
+        # one partner (docs/security.md): the simulator of the first call; only its next epoch
+        self.session = secrets.token_hex(8)
+        self.bound_simulator: str | None = None
+        self._epoch_s: float | None = None
         self.published = 0
         self.finished = False
         self.get_logger().info(
@@ -58,8 +64,39 @@ class RequestGeneratorNode(Node):
             f"random demand: {p['rate']:g} requests per {p['interval_s']:g} s, seed {p['seed']}, "
             f"{len(network.aerodrome_ids)} aerodromes, operator {self.operator_id!r}")
 
+    def _check_release(self, request: ReleaseDemand.Request) -> str:
+        """Why this call is not the bound simulator's next epoch (or a repeat of its last), or ''."""
+        session, k = request.session, int(request.epoch_index)
+        if not session or len(session) > wire.MAX_ID_LENGTH:
+            return f"session: {wire.echo(session)} must be the simulator's run token"
+        if self.bound_simulator is not None and session != self.bound_simulator:
+            return f"session: {wire.echo(session)} is not the simulator this generator serves ({self.bound_simulator!r})"
+        if not (math.isfinite(request.epoch_s) and request.epoch_s > 0):
+            return f"epoch_s: {request.epoch_s!r} must be a positive number of seconds"
+        if self._epoch_s is not None and request.epoch_s != self._epoch_s:
+            return f"epoch_s: {request.epoch_s!r} differs from the run's {self._epoch_s!r} s (fixed at the first call)"
+        t_s = m.from_time(request.epoch_time)
+        if not math.isclose(t_s, k * request.epoch_s, rel_tol=1e-9, abs_tol=1e-6):
+            return f"epoch_time: {t_s!r} s is not epoch_index {k} x epoch_s {request.epoch_s!r} s"
+        last = max(self._released) if self._released else None
+        if k in self._released:
+            return "" if k == last else f"epoch_index: {k} was released before the last epoch {last}"
+        if last is not None and k != last + 1:
+            return f"epoch_index: {k} asked, the next epoch is {last + 1}"
+        return ""
+
     def _on_release(self, request: ReleaseDemand.Request, response: ReleaseDemand.Response):
         k = int(request.epoch_index)
+        response.session = self.session
+        problem = self._check_release(request)
+        if problem:
+            response.status = ReleaseDemand.Response.STATUS_REFUSED
+            response.message = wire.bounded(problem)
+            self.get_logger().warning(f"refused a release call: {response.message}")
+            return response
+        if self.bound_simulator is None:
+            self.bound_simulator, self._epoch_s = request.session, float(request.epoch_s)
+            self.get_logger().info(f"serving the simulator of session {request.session!r}")
         if k not in self._released:
             t_s = m.from_time(request.epoch_time)
             ids = []
@@ -73,12 +110,14 @@ class RequestGeneratorNode(Node):
                 self._next_instant += 1
             self._released[k] = ids
             self._sync_pub.publish(EpochSync(epoch_index=k, epoch_time=request.epoch_time, sender="request_generator",
-                                             requests_published=self.published))
+                                             requests_published=self.published, session=self.session))
         response.request_ids = self._released[k]
         return response
 
     def _on_sync(self, msg: EpochSync) -> None:
-        if msg.sender == "simulator" and msg.finished:
+        # only the simulator this generator serves ends its run (a forged announcement does not)
+        if msg.sender == "simulator" and msg.finished and self.bound_simulator is not None \
+                and msg.session == self.bound_simulator:
             self.finished = True
 
 

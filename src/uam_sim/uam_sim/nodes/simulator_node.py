@@ -21,11 +21,21 @@ planner that restarted lost the first call, answers the repeat with STATUS_NEED_
 the state (flights in the air, requests decided). Plans on uam/flight_plans are not flown: only the planner's answers are.
 
 The run ends at ``duration_s``: the simulator announces ``finished``, and the other nodes exit.
+
+One partner each (docs/security.md): every call carries this simulator's run token
+(``session``); it binds to the first planner and the first demand source that answer (their
+tokens, announced on uam/epoch_sync as ``partners``) and ends the run, with the reason, when an
+answer comes from another, or when more than one node serves either service. A planner that
+restarted (a new token answering STATUS_NEED_STATE while it is the only server) is taken on.
+Every wait is bounded (``startup_timeout_s``, ``ack_timeout_s``); a run that ends early
+announces why (``error`` of the ``finished`` announcement), so no recording of it reads as
+complete.
 """
 
 from __future__ import annotations
 
 import math
+import secrets
 import sys
 import time
 
@@ -56,6 +66,7 @@ class SimulatorNode(Node):
         self.step_s, self.duration_s, self.epoch_s = self.p["step_s"], self.p["duration_s"], self.p["epoch_s"]
         self.mode, self.rtf = self.p["mode"], self.p["real_time_factor"]
         self.ack_timeout_s = self.p["ack_timeout_s"]
+        self.startup_timeout_s = self.p["startup_timeout_s"]
         self.wait_for = [n for n in self.p["wait_for_subscribers"] if n]
         ratio = self.epoch_s / self.step_s
         if not math.isclose(ratio, round(ratio), rel_tol=0, abs_tol=1e-9):
@@ -90,12 +101,16 @@ class SimulatorNode(Node):
         self.started = False
         self.finished = False
         self.error = ""
+        self.session = secrets.token_hex(8)      # this run's token (docs/security.md)
+        self.partners: dict[str, str] = {}       # "planner" / "request_generator" -> its session
+        self._foreign_answers = 0                # NEED_STATE answers of a new planner while two serve
         self.active_samples: list[int] = []  # airborne vehicles at each step, for the summary
         self._wall_start = 0.0
         self._cpu_start = 0.0
         self._blocked_since: float | None = None  # lockstep: wall time since the fleet waits at an epoch
         self.blocked_wall_s = 0.0           # wall time the fleet waited for epoch outcomes, for the summary
         self._last_wait_log = time.monotonic()
+        self._created = time.monotonic()
         period = self.step_s / self.rtf if self.mode == "realtime" else 0.02
         self._timer = self.create_timer(period, self._on_timer)  # wall clock: this node owns sim time
         self.get_logger().info(
@@ -120,12 +135,24 @@ class SimulatorNode(Node):
         return self.step_index * self.step_s
 
     # ---- readiness -----------------------------------------------------------------------------
+    def _servers(self) -> list[str]:
+        """Why the services are not served by exactly one node each ('' entries dropped)."""
+        out = []
+        for client in (self._plan_client, self._demand_client):
+            if client is None:
+                continue
+            n = self.count_services(client.srv_name)
+            if n > 1:
+                out.append(f"{n} nodes serve {client.srv_name} (one expected)")
+        return out
+
     def _missing(self) -> list[str]:
         missing = []
         if not self._plan_client.service_is_ready():
             missing.append(self._plan_client.srv_name)
         if self._demand_client is not None and not self._demand_client.service_is_ready():
             missing.append(self._demand_client.srv_name)
+        missing += self._servers()
         if self.wait_for:
             subscribers = {info.node_name for info in
                            self.get_subscriptions_info_by_topic(self.resolve_topic_name(c.TOPIC_FLEET))}
@@ -147,10 +174,15 @@ class SimulatorNode(Node):
         self._wait_started = time.monotonic()
         self._expected = []
         self._resume = False
-        self._sync_pub.publish(EpochSync(epoch_index=k, epoch_time=m.to_time(t_s), sender="simulator"))
+        self._sync_pub.publish(self._sync(k, t_s))
+        servers = self._servers()
+        if servers:
+            self._end_with_error(f"epoch {k}: {'; '.join(servers)}: another node took a partner's name")
+            return
         if self._demand_client is not None:
-            self._send(self._demand_client, ReleaseDemand.Request(epoch_index=k, epoch_time=m.to_time(t_s)),
-                       self._on_demand)
+            self._send(self._demand_client, ReleaseDemand.Request(
+                epoch_index=k, epoch_time=m.to_time(t_s), epoch_s=float(self.epoch_s), session=self.session),
+                self._on_demand)
         else:
             self._ask_planner()
 
@@ -182,29 +214,83 @@ class SimulatorNode(Node):
         self._calls = []
         on_done(res)
 
+    def _sync(self, k: int, t_s: float, finished: bool = False) -> EpochSync:
+        return EpochSync(epoch_index=k, epoch_time=m.to_time(t_s), sender="simulator", finished=finished,
+                         session=self.session, partners=[f"{r}={s}" for r, s in sorted(self.partners.items())],
+                         duration_s=float(self.duration_s), epoch_s=float(self.epoch_s),
+                         error=wire.bounded(self.error) if finished else "")
+
+    def _end_with_error(self, error: str) -> None:
+        self.error = error
+        self.get_logger().error(self.error + "; ending the run")
+        self._finish()
+
+    def _partner(self, role: str, session: str, restarted: bool = False) -> bool:
+        """Bind ``role`` to the first ``session`` that answers; False (the run ends) for another
+        one, unless a planner ``restarted`` (then taken on, logged)."""
+        bound = self.partners.get(role)
+        if bound is None or bound == session:
+            if bound is None:
+                self.partners[role] = session
+                self.get_logger().info(f"bound to the {role} of session {session!r}")
+            return True
+        if restarted:
+            self.get_logger().warning(f"the {role} restarted: session {bound!r} -> {session!r}")
+            self.partners[role] = session
+            return True
+        self._end_with_error(f"an answer from a second {role} (session {wire.echo(session)}; bound to {bound!r})")
+        return False
+
     def _on_demand(self, res: ReleaseDemand.Response) -> None:
+        if not res.session or len(res.session) > wire.MAX_ID_LENGTH:
+            self._end_with_error(f"the request generator's answer has no valid session ({wire.echo(res.session)})")
+            return
+        if not self._partner("request_generator", res.session):
+            return
+        if res.status != ReleaseDemand.Response.STATUS_RELEASED:
+            self._end_with_error(f"the request generator refused epoch {self._waiting_epoch}: "
+                                 f"{wire.bounded(res.message)}")
+            return
         self._expected = list(res.request_ids)
         self._ask_planner()
 
     def _ask_planner(self) -> None:
         t = self._epoch_t
         req = PlanEpoch.Request(epoch_index=self._waiting_epoch, epoch_time=m.to_time(t), epoch_s=float(self.epoch_s),
-                                expected_request_ids=self._expected, resume=self._resume)
+                                expected_request_ids=self._expected, resume=self._resume, session=self.session)
         if self._resume:
             req.airborne = [p for p in self._flying.values() if m.from_time(p.arrival_time) >= t]
             req.decided_request_ids = list(self._decided)
         self._send(self._plan_client, req, self._on_outcome)
 
     def _on_outcome(self, res: PlanEpoch.Response) -> None:
+        if not res.session or len(res.session) > wire.MAX_ID_LENGTH:
+            self._end_with_error(f"the planner's answer for epoch {self._waiting_epoch} has no valid session "
+                                 f"({wire.echo(res.session)})")
+            return
+        bound = self.partners.get("planner")
+        if bound is not None and res.session != bound and res.status == PlanEpoch.Response.STATUS_NEED_STATE:
+            # a restarted planner, or a second one: taken on only while it is the only server
+            # (the old one may take a moment to leave the graph: asked again a few times)
+            if self.count_services(self._plan_client.srv_name) != 1:
+                self._foreign_answers += 1
+                if self._foreign_answers >= 3:
+                    self._end_with_error(f"a second planner (session {wire.echo(res.session)}) answered while "
+                                         f"{self.count_services(self._plan_client.srv_name)} nodes serve "
+                                         f"{self._plan_client.srv_name}")
+                else:
+                    self._ask_planner()
+                return
+        if not self._partner("planner", res.session, restarted=res.status == PlanEpoch.Response.STATUS_NEED_STATE):
+            return
+        self._foreign_answers = 0
         if res.status == PlanEpoch.Response.STATUS_NEED_STATE:
             self.get_logger().warning(f"the planner restarted: sending it the state at epoch {self._waiting_epoch}")
             self._resume = True
             self._ask_planner()
             return
         if res.status != PlanEpoch.Response.STATUS_PLANNED:
-            self.error = f"the planner refused epoch {self._waiting_epoch}: {wire.bounded(res.message)}"
-            self.get_logger().error(self.error + "; ending the run")
-            self._finish()
+            self._end_with_error(f"the planner refused epoch {self._waiting_epoch}: {wire.bounded(res.message)}")
             return
         self._call = None
         if self.step_index < self._waiting_epoch * self.steps_per_epoch:
@@ -258,6 +344,10 @@ class SimulatorNode(Node):
         now = time.monotonic()
         if not self.started:
             missing = self._missing()
+            if missing and now - self._created > self.startup_timeout_s:
+                self._end_with_error(f"not started within startup_timeout_s {self.startup_timeout_s:g} s: "
+                                     f"waiting for {', '.join(missing)}")
+                return
             if missing:
                 if now - self._last_wait_log > 10.0:
                     self._last_wait_log = now
@@ -274,9 +364,7 @@ class SimulatorNode(Node):
             return
         if self._waiting_epoch is not None and self._call is not None:
             if now - self._wait_started > self.ack_timeout_s:
-                self.error = f"no answer for epoch {self._waiting_epoch} within {self.ack_timeout_s:g} s"
-                self.get_logger().error(self.error + "; ending the run")
-                self._finish()
+                self._end_with_error(f"no answer for epoch {self._waiting_epoch} within {self.ack_timeout_s:g} s")
             elif self._call is not None and now - self._call_sent > RESEND_S:
                 client, _fut, request, on_done = self._call
                 self._send(client, request, on_done, again=True)  # a restarted server lost the first
@@ -343,9 +431,8 @@ class SimulatorNode(Node):
         for fut in self._calls:
             if not fut.done():
                 self._call[0].remove_pending_request(fut)
-        self._sync_pub.publish(EpochSync(epoch_index=self.step_index // self.steps_per_epoch,
-                                         epoch_time=m.to_time(min(self.t_s, self.duration_s)),
-                                         sender="simulator", finished=True))
+        self._sync_pub.publish(self._sync(self.step_index // self.steps_per_epoch, min(self.t_s, self.duration_s),
+                                          finished=True))
         wall = time.monotonic() - self._wall_start if self.started else 0.0
         cpu = time.process_time() - self._cpu_start if self.started else 0.0
         sim = min(self.t_s, self.duration_s)

@@ -1,0 +1,81 @@
+"""The planner's journal: its own approvals, on disk, so a restarted planner knows the traffic.
+
+What the planner believes about the airspace must come from its own approvals, never from one
+caller's word (docs/security.md). A planner that restarts mid-run loses its memory; the
+simulator then sends the flights in the air (``PlanEpoch`` with ``resume``). With a journal the
+restarted planner checks that claim against what it approved itself: a claim that leaves out a
+flight it approved and that is still flying, adds one it never approved, or changes one, is
+refused (the run then ends with the reason), so a faulty or forged resume can never make it
+forget an aircraft.
+
+Format: one JSON object per line, ``{"session": <simulator session>, "plan": <base64 of the
+FlightPlan's CDR>}``, appended and flushed before the plan is published or answered (so every
+plan anyone can hold is in the journal first). Only the entries of the simulator session the
+planner resumes for count: a journal left over from another run is ignored and started afresh.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import os
+from pathlib import Path
+
+
+class Journal:
+    """Append-only record of approved FlightPlan messages, keyed by the simulator's session."""
+
+    def __init__(self, path: str | os.PathLike):
+        self.path = Path(path)
+        self._file = None
+        self._session = ""
+
+    def read(self, session: str) -> list:
+        """The approved plans journaled for ``session`` (empty when none or another run's)."""
+        from rclpy.serialization import deserialize_message
+        from uam_msgs.msg import FlightPlan
+
+        if not self.path.is_file():
+            return []
+        lines = self.path.read_text(encoding="utf-8").splitlines()
+        plans = []
+        for n, line in enumerate(lines, 1):
+            if not line.strip():
+                continue
+            try:
+                entry = json.loads(line)
+                if entry.get("session") != session:
+                    continue
+                plans.append(deserialize_message(base64.b64decode(entry["plan"]), FlightPlan))
+            except (ValueError, KeyError, TypeError, AttributeError) as exc:
+                # a last line cut by a crash mid-write is the only expected damage: it was never
+                # published (the write comes first), so it is skipped; anything else is a broken
+                # journal, which must not be half-trusted
+                if n == len(lines):
+                    break
+                raise ValueError(f"journal {self.path}: line {n} is not a journal entry ({exc})") from exc
+        return plans
+
+    def start(self, session: str, keep: bool) -> None:
+        """Write for ``session`` from now on: appended to the existing entries when ``keep`` (a
+        resume of the same run), else the file is started afresh."""
+        self.close()
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._file = self.path.open("a" if keep else "w", encoding="utf-8")
+        self._session = session
+
+    def append(self, plans) -> None:
+        """Journal approved ``plans`` (FlightPlan messages); flushed to the OS before returning."""
+        from rclpy.serialization import serialize_message
+
+        if self._file is None:
+            return
+        for plan in plans:
+            self._file.write(json.dumps({"session": self._session,
+                                         "plan": base64.b64encode(serialize_message(plan)).decode("ascii")}) + "\n")
+        self._file.flush()
+
+    def close(self) -> None:
+        if self._file is not None:
+            self._file.close()
+            self._file = None
