@@ -13,6 +13,7 @@ from uam_msgs.msg import FleetState, FlightPlan, FlightRequest, PlanningReport, 
 
 from uam_sim.analysis import format_summary, main, summarize  # noqa: E402
 from uam_sim.audit import AIRSPACE_METADATA, airspace_metadata  # noqa: E402
+from run_frame import complete_run  # noqa: E402
 from uam_sim.mcap_writer import McapRecorder  # noqa: E402
 
 NS = 1_000_000_000
@@ -42,6 +43,7 @@ def _recording(path, z_b: float, metadata: dict | None):
             fs = FleetState(step_index=k, vehicles=[VehicleState(vehicle_id=v) for v in ("a", "b")])
             fs.header.stamp = Time(sec=k)
             rec.write("/uam/fleet_state", fs, k * NS)
+        complete_run(rec, airspace_record=False)  # the airspace record is the test's own
     return path
 
 

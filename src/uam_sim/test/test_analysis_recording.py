@@ -17,6 +17,7 @@ from uam_msgs.msg import (FleetState, FlightPlan, FlightRequest, MwisInstance,  
 
 from uam_sim.analysis import main, summarize  # noqa: E402
 from uam_sim.mcap_writer import McapRecorder  # noqa: E402
+from run_frame import complete_run  # noqa: E402
 from uam_sim.recorded_instances import instances_from_mcap, recorded_instances  # noqa: E402
 
 NS = 1_000_000_000
@@ -78,6 +79,7 @@ def recording(tmp_path_factory):
             fs = FleetState(step_index=k, vehicles=[VehicleState(vehicle_id=f"r{j + 1}") for j in range(n)])
             fs.header.stamp = t(k)
             rec.write("/uam/fleet_state", fs, k * NS)
+        complete_run(rec, epochs=2)
     return path
 
 

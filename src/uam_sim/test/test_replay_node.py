@@ -80,7 +80,9 @@ def test_node_republishes_everything_in_order(ros_context, spin_until, recording
 def test_a_replayed_run_recorded_again_gives_the_same_summary(ros_context, spin_until, tmp_path):
     """replay -> recorder round trip: what a viewer of the replay sees is the run itself."""
     from geometry_msgs.msg import Point
-    from uam_msgs.msg import EpochSync, FlightRequest, PlanningReport, Waypoint
+    from uam_msgs.msg import EpochSync, FlightRequest, PlanningReport, VehicleState, Waypoint
+
+    from uam_sim.audit import AIRSPACE_METADATA, airspace_metadata
 
     from uam_sim.analysis import summarize
     from uam_bringup.contract import resolved
@@ -100,10 +102,11 @@ def test_a_replayed_run_recorded_again_gives_the_same_summary(ros_context, spin_
         rec.write("/uam/planning_reports", PlanningReport(approved=2), 0)
         for k in range(5):
             rec.write("/clock", Clock(clock=Time(sec=k)), k * NS)
-            fs = FleetState(step_index=k)
+            fs = FleetState(step_index=k, vehicles=[VehicleState(vehicle_id=v) for v in ("r0", "r1")])
             fs.header.stamp = Time(sec=k)
             rec.write("/uam/fleet_state", fs, k * NS)
         rec.write("/uam/epoch_sync", EpochSync(sender="simulator", finished=True, epoch_time=Time(sec=5)), 5 * NS)
+        rec.add_metadata(AIRSPACE_METADATA, airspace_metadata())
 
     again = tmp_path / "again.mcap"
     recorder = RecorderNode(context=ros_context, parameter_overrides=[
@@ -122,7 +125,10 @@ def test_a_replayed_run_recorded_again_gives_the_same_summary(ros_context, spin_
         recorder.destroy_node()
     a, b = summarize(original).to_dict(), summarize(again).to_dict()
     a.pop("path"), b.pop("path")
-    # the recorder node adds its check of what it received; the hand-written original has none
+    # the recorder node adds its check of what it received; the hand-written original has none,
+    # so only the original is not verified, and for that reason alone
     assert a.pop("recorder_check") == {} and b.pop("recorder_check")["ok"] == "true"
+    assert [p.split(" (")[0] for p in a.pop("problems")] == ["the recorder's check"] and b.pop("problems") == []
+    assert a.pop("verified") is False and b.pop("verified") is True
     assert a == b
     assert b["approved"] == 2 and b["audit"]["min_separation_m"] == pytest.approx(150.0)

@@ -28,7 +28,12 @@ the caller names a model (``--separation``, ``--separation-m``, ``--vertical-sep
 It refuses to call a recording "OK" that lacks plans it should hold (:func:`integrity_problems`:
 reports announcing approvals whose plans are missing, vehicles flown without a plan, aircraft
 airborne together with no pair checked, conflicting decisions, or the recorder's own check
-failing): the verdict is then NOT VERIFIED and the command exits 3.
+failing), or whose run did not end as planned (:func:`run_problems`: no end announced by the
+simulator, an end with an error or before the duration, epochs without a planning report, two
+simulators or an unbound planner announcing, plans of epochs no report of the run holds, which
+are listed as forged and not audited, approvals never flown, the recorder's check or the run's
+airspace record missing, a file recovered after a crash): the verdict is then NOT VERIFIED and
+the command exits 3.
 
 Two decoders: ``reader="rclpy"`` (mcap's reader + ``rclpy.serialization``; tolerates a file cut
 short by a crash) and ``reader="rosbags"`` (the independent ``rosbags`` library, types built from
@@ -54,6 +59,7 @@ import numpy as np
 
 from .audit import AIRSPACE_METADATA, SafetyAudit, audit_plans, separation_from_metadata
 from .mcap_reader import is_complete, iter_decoded, read_metadata
+from .mcap_recover import RECOVERED_METADATA
 from .stamps import stamp_s
 
 #: the MCAP metadata record the recorder node writes with its check of what it received
@@ -68,7 +74,9 @@ TOPIC_REQUESTS = "/uam/requests"
 TOPIC_PLANS = "/uam/flight_plans"
 TOPIC_REPORTS = "/uam/planning_reports"
 TOPIC_FLEET = "/uam/fleet_state"
-ANALYSED_TOPICS = (TOPIC_REQUESTS, TOPIC_PLANS, TOPIC_REPORTS, TOPIC_FLEET)
+TOPIC_SYNC = "/uam/epoch_sync"
+ANALYSED_TOPICS = (TOPIC_REQUESTS, TOPIC_PLANS, TOPIC_REPORTS, TOPIC_FLEET, TOPIC_SYNC)
+
 
 
 @dataclass
@@ -127,6 +135,10 @@ class RunSummary:
     #: requests refused as reusing a taken (operator_id, request_id): OUTCOME_DUPLICATE answers,
     #: which are not decisions (the earlier request's decision stands)
     duplicate_requests_refused: int = 0
+    #: approved plans of epochs that no planning report of the run holds: not audited as flown
+    forged_plans: list = field(default_factory=list)
+    #: how the run ended, as the simulator announced it ("" when no end is recorded)
+    run_end: str = ""
 
     @property
     def verified(self) -> bool:
@@ -259,6 +271,73 @@ def integrity_problems(epochs: list, approved: list, flown_ids: set, max_active:
     return problems
 
 
+def run_problems(syncs: list, reports: dict, approved: list, flown_ids: set, fleet_end_s: float) -> tuple[list, list, str]:
+    """Whether the recorded run ended as planned: (problems, forged plan keys, how it ended).
+
+    ``syncs``: the EpochSync announcements; ``reports``: epoch index -> the distinct planning
+    reports of that epoch (their approved counts); ``approved``: (key, epoch index, departure s)
+    of every approved plan; ``flown_ids``: vehicles in the fleet states. The run's duration and
+    epoch length come from the simulator's announcements; every epoch k with k x epoch_s below
+    the duration must have exactly one report; plans of other epochs are forged (not audited);
+    approvals that should have departed before the last fleet state must have flown.
+    """
+    problems: list[str] = []
+    sim = [m for m in syncs if str(m.sender) == "simulator"]
+    if not sim:
+        return (["the simulator's epoch announcements (/uam/epoch_sync) are missing: the run's "
+                 "duration and end are unknown"], [], "")
+    sessions = sorted({str(getattr(m, "session", "")) for m in sim})
+    if len(sessions) > 1:
+        problems.append(f"{len(sessions)} simulators announced epochs (sessions {_few(sessions)}): "
+                        "a second simulator was on the run's domain")
+    duration = max(float(getattr(m, "duration_s", 0.0)) for m in sim)
+    epoch_s = max(float(getattr(m, "epoch_s", 0.0)) for m in sim)
+    ends = [m for m in sim if m.finished]
+    run_end = ""
+    if not ends:
+        problems.append("the simulator never announced the end of the run: the recording was cut short")
+    else:
+        end = ends[0]
+        t_end = stamp_s(end.epoch_time)
+        error = str(getattr(end, "error", ""))
+        run_end = f"ended at t = {t_end:g} s" + (f" on an error: {error}" if error else "")
+        if error:
+            problems.append(f"the run ended early on an error: {error}")
+        elif duration > 0 and t_end < duration - 1e-6:
+            problems.append(f"the run ended at t = {t_end:g} s, before its duration {duration:g} s")
+    planners = {str(getattr(m, "session", "")) for m in syncs if str(m.sender) == "planner"}
+    bound = {str(p).partition("=")[2] for m in sim for p in getattr(m, "partners", ())
+             if str(p).startswith("planner=")}
+    if bound and planners - bound:
+        problems.append(f"a planner the simulator was not bound to announced epochs (sessions "
+                        f"{_few(planners - bound)}): a second planner was on the run's domain")
+    twice = sorted(k for k, rs in reports.items() if len(rs) > 1)
+    if twice:
+        problems.append(f"{len(twice)} epoch(s) have two different planning reports (epochs {_few(twice)})")
+    announced = {int(m.epoch_index) for m in sim if not m.finished}
+    forged = []
+    if duration > 0 and epoch_s > 0:
+        n_epochs = int(math.ceil(duration / epoch_s - 1e-9))
+        if ends and not problems:  # ended as planned: every epoch of the run has its report
+            unreported = [k for k in range(n_epochs) if k not in reports]
+            if unreported:
+                problems.append(f"{len(unreported)} epoch(s) of the run have no planning report "
+                                f"(epochs {format_steps(len(unreported), unreported[:10])})")
+        beyond = sorted(k for k in reports if k >= n_epochs or k not in announced)
+        if beyond:
+            problems.append(f"planning reports for epochs the simulator never asked for ({_few(beyond)}): forged")
+        forged = sorted(key for key, k, _dep in approved if k >= n_epochs or k not in reports or k not in announced)
+        if forged:
+            problems.append(f"{len(forged)} approved plan(s) belong to no planning report of the run "
+                            f"({_few(forged)}): listed as forged, not audited as flown")
+    never = sorted(key for key, k, dep in approved if key not in flown_ids and dep < fleet_end_s - 1e-6
+                   and key not in set(forged))
+    if never:
+        problems.append(f"{len(never)} approved plan(s) never flew although they depart before the last "
+                        f"fleet state ({_few(never)})")
+    return problems, forged, run_end
+
+
 def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=100.0,
                        path: str = "", reader: str = "", complete_file: bool = True) -> RunSummary:
     """The summary of a stream of (topic, log_time_ns, message), e.g. from :func:`iter_decoded`.
@@ -278,8 +357,13 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=10
     fleet_steps: list[int] = []
     flown: set[str] = set()
     epochs: list[EpochStats] = []
+    syncs: list = []
+    reports: dict[int, set] = {}
     t_min, t_max = math.inf, -math.inf
     for topic, log_ns, msg in messages:
+        if topic == TOPIC_SYNC:  # announcements: not part of the run's time span
+            syncs.append(msg)
+            continue
         t_min, t_max = min(t_min, log_ns * 1e-9), max(t_max, log_ns * 1e-9)
         if topic == TOPIC_REQUESTS:
             request_ids.add(request_key(msg))
@@ -301,6 +385,10 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=10
             fleet_steps.append(int(msg.step_index))
             flown.update(ids)
         elif topic == TOPIC_REPORTS:
+            reports.setdefault(int(msg.epoch_index), set()).add(
+                (int(msg.approved), int(msg.expired), int(msg.eligible_requests), int(msg.vertices)))
+            if len(reports[int(msg.epoch_index)]) > 1 or any(e.epoch_index == int(msg.epoch_index) for e in epochs):
+                continue  # a repeat (or a second report) of an epoch counts once in the table
             epochs.append(EpochStats(
                 epoch_index=int(msg.epoch_index), t_s=stamp_s(msg.header.stamp),
                 eligible_requests=int(msg.eligible_requests), vertices=int(msg.vertices),
@@ -313,9 +401,15 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=10
     outcomes = [int(p.outcome) for p in plans]
     conflicting = {rid: [_OUTCOME_NAMES.get(int(p.outcome), str(int(p.outcome))) for p in ps]
                    for rid, ps in decisions.items() if len(ps) > 1}
+    all_approved = [(rid, p) for rid, ps in decisions.items() for p in ps if int(p.outcome) == OUTCOME_APPROVED]
+    fleet_end = max(fleet_t) if fleet_t else -math.inf
+    run, forged, run_end = run_problems(
+        syncs, reports, [(rid, int(p.epoch_index), stamp_s(p.waypoints[0].time) if p.waypoints else 0.0)
+                         for rid, p in all_approved], flown, fleet_end)
+    forged_set = set(forged)
     approved_plans, labels = [], []
     for rid, ps in decisions.items():
-        mine = [p for p in ps if int(p.outcome) == OUTCOME_APPROVED]
+        mine = [p for p in ps if int(p.outcome) == OUTCOME_APPROVED and rid not in forged_set]
         for k, p in enumerate(mine):
             approved_plans.append(p)
             labels.append(rid if k == 0 else f"{rid}#{k + 1}")
@@ -362,7 +456,9 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=10
         conflicting_decisions=conflicting,
         duplicate_requests_refused=refused_duplicates,
         problems=integrity_problems(epochs, [(request_key(p), int(p.epoch_index)) for p in approved_plans], flown,
-                                    max_active, audit, conflicting, fleet_steps),
+                                    max_active, audit, conflicting, fleet_steps) + run,
+        forged_plans=forged,
+        run_end=run_end,
     )
 
 
@@ -376,14 +472,28 @@ def summarize(path: str | Path, separation_m=None, reader: str = "rclpy",
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"recording: no file at {path}")
+    airspace = read_metadata(path, AIRSPACE_METADATA)
+    given = separation_m is not None
     if separation_m is None:
-        separation_m = separation_from_metadata(read_metadata(path, AIRSPACE_METADATA),
-                                                default_separation)
+        separation_m = separation_from_metadata(airspace, default_separation)
+    recovered = read_metadata(path, RECOVERED_METADATA)
+    complete = is_complete(path) and not recovered
     summary = summarize_messages(iter_decoded(path, reader, ANALYSED_TOPICS, fleet_digest_only=True),
-                                 separation_m, str(path), reader, is_complete(path))
+                                 separation_m, str(path), reader, complete)
     summary.recorder_check = read_metadata(path, RECORDER_CHECK)
     if summary.recorder_check.get("ok") == "false":
         summary.problems.append(f"the recorder found: {summary.recorder_check.get('verdict', '?')}")
+    if recovered:
+        summary.problems.append(f"the file was rebuilt from a recording cut short ({recovered.get('source', '?')}): "
+                                "the end of the run is not in it")
+    elif not summary.recorder_check:
+        summary.problems.append("the recorder's check (metadata uam_recorder_check) is missing: the recorder "
+                                "did not close this file")
+    if not airspace:
+        summary.problems.append("the run's airspace record (metadata uam_airspace) is missing: the separation "
+                                "model the run planned with is unknown"
+                                + (" (audited with the model given)" if given else
+                                   f" (audited with {default_separation!r})"))
     return summary
 
 
@@ -433,7 +543,7 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
         dist = "no two flights airborne together" if not math.isfinite(a.min_separation_m) \
             else f"{a.min_separation_m:.1f} m{pair}"
         verdict = (f"LOSS OF SEPARATION in {len(a.losses)} pair(s)" if not a.ok
-                   else "OK" if s.verified else "NOT VERIFIED (the recording lacks plans it should hold)")
+                   else "OK" if s.verified else "NOT VERIFIED (see the recording checks below)")
         lines.append(f"Safety audit     {verdict}: minimum separation {dist}, required "
                      f"{a.describe_minimum()}, {a.pairs_checked} overlapping pairs checked")
         for rid_a, rid_b, d, t in a.losses[:20]:
@@ -442,6 +552,8 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
         lines.append(f"Recording check  {problem}")
     if s.recorder_check:
         lines.append(f"Recorder check   {s.recorder_check.get('verdict', '')}")
+    if s.run_end:
+        lines.append(f"Run              {s.run_end}")
     if epochs and s.epochs:
         lines.append("")
         lines.append(f"{'epoch':>5} {'t [s]':>8} {'elig':>5} {'vert':>5} {'edges':>6} {'sel':>4} "

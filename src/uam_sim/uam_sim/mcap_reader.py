@@ -88,8 +88,12 @@ def read_metadata(path: str | os.PathLike, name: str) -> dict[str, str]:
             for record in make_reader(f).iter_metadata():
                 if record.name == name:
                     return dict(record.metadata)
-    except Exception:  # noqa: BLE001 - a torn file has no summary to find metadata by
-        return {}
+    except Exception:  # noqa: BLE001 - a torn file has no summary: read its records up to the tear
+        from .mcap_recover import _metadata_before_cut
+        try:
+            return next((data for n, data in _metadata_before_cut(path) if n == name), {})
+        except Exception:  # noqa: BLE001 - not an MCAP file at all
+            return {}
     return {}
 
 

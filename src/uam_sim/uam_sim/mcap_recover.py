@@ -10,6 +10,31 @@ from .mcap_schema import ROS2_PROFILE, RecordingError, library_string
 from .mcap_writer import _COMPRESSION, bag_metadata_yaml
 
 
+#: written into every rebuilt file: uam_sim.analysis then never takes it for a complete run
+RECOVERED_METADATA = "uam_recovered"
+
+
+def _metadata_before_cut(src) -> list[tuple[str, dict]]:
+    """(name, data) of the Metadata records of ``src`` up to its tear, in file order."""
+    from mcap.exceptions import McapError
+    from mcap.records import Metadata
+    from mcap.stream_reader import StreamReader
+
+    out = []
+    with open(src, "rb") as f:
+        records = StreamReader(f, skip_magic=False).records
+        while True:
+            try:
+                record = next(records)
+            except StopIteration:
+                break
+            except (McapError, EOFError, ValueError, OSError, KeyError, struct.error):
+                break
+            if isinstance(record, Metadata):
+                out.append((record.name, dict(record.metadata)))
+    return out
+
+
 def recover(src: str | os.PathLike, dst: str | os.PathLike, compression: str = "zstd") -> int:
     """Rewrite a recording cut short by a crash into a complete file; returns the messages kept.
 
@@ -59,6 +84,12 @@ def recover(src: str | os.PathLike, dst: str | os.PathLike, compression: str = "
                 counts[channel.topic] = counts.get(channel.topic, 0) + 1
                 start = message.log_time if start is None else min(start, message.log_time)
                 end = message.log_time if end is None else max(end, message.log_time)
+        # the metadata written before the cut (the recorder writes the run's airspace first),
+        # and the mark that keeps the rebuilt file from passing for a complete recording
+        for name, data in _metadata_before_cut(src):
+            if name not in ("rosbag2", RECOVERED_METADATA):
+                writer.add_metadata(name, data)
+        writer.add_metadata(RECOVERED_METADATA, {"source": str(src), "messages": str(count)})
         writer.add_metadata("rosbag2", {"serialized_metadata": bag_metadata_yaml(
             Path(dst).name, topics, counts, start, end)})
         writer.finish()

@@ -32,6 +32,13 @@ announce, epoch by epoch, against the approved plans received. At the close it l
 ``uam_recorder_check`` (``ok``, ``announced_approvals``, ``approved_plans``, ``verdict``), which
 ``uam_sim.analysis`` reads.
 
+It watches who publishes (docs/security.md): the topics with one authority (the simulator's
+/clock, fleet state and poses; the planner's plans and reports; one announcer each of the
+simulator, the planner and the generator on uam/epoch_sync) are checked every
+``PUBLISHER_CHECK_S``; more publishers at once (a second simulator or planner, a forger) make
+the check fail, naming them, so the analysis never calls such a run OK. A publisher that comes
+and goes between two looks is not seen: only SROS2 stops forged messages.
+
 It stops and closes the file (summary, footer) when the simulator has announced the end of the run
 (EpochSync with ``finished`` from sender "simulator") and no message has arrived for
 ``finish_quiet_s`` (messages of other topics can still be on their way when the announcement
@@ -81,6 +88,13 @@ def _starts_with_stamp(cls: type) -> bool:
     return bool(fields) and fields[0] in ("builtin_interfaces/Time", "std_msgs/Header")
 
 
+#: wall time between two looks at who publishes the topics with one authority [s]
+PUBLISHER_CHECK_S = 0.5
+#: how many publishers each topic with one authority may have at once
+SOLE_PUBLISHERS = {c.TOPIC_CLOCK: 1, c.TOPIC_FLEET: 1, c.TOPIC_POSES: 1, c.TOPIC_PLANS: 1, c.TOPIC_REPORTS: 1,
+                   c.TOPIC_SYNC: 3}
+
+
 class RecordingCheck:
     """Approvals announced by the planning reports vs approved plans received, per epoch; and
     fleet states missing between the first and the last received (one is published per step)."""
@@ -89,6 +103,7 @@ class RecordingCheck:
         self.announced: dict[int, int] = {}      # epoch index -> approvals its report announced
         self.received: dict[int, set] = {}       # epoch index -> request ids of approved plans
         self.steps: list[int] = []               # step index of every fleet state received
+        self.foreign: dict[str, str] = {}        # topic -> the first time it had too many publishers
 
     def on_fleet_state(self, data: bytes) -> None:
         step = fleet_state_step_index(data)
@@ -121,7 +136,10 @@ class RecordingCheck:
                         f"(steps {format_steps(lost, listed)})")
         else:
             verdict += f"; {len(self.steps)} fleet states, none missing"
-        return {"ok": "false" if bad or lost else "true", "announced_approvals": str(announced),
+        if self.foreign:
+            verdict += "; more publishers than the run has: " + "; ".join(
+                f"{topic}: {who}" for topic, who in sorted(self.foreign.items()))
+        return {"ok": "false" if bad or lost or self.foreign else "true", "announced_approvals": str(announced),
                 "approved_plans": str(received), "fleet_states": str(len(self.steps)),
                 "fleet_states_missing": str(lost), "verdict": verdict}
 
@@ -200,6 +218,7 @@ class RecorderNode(Node):
         self._flush_timer = self.create_timer(p["flush_period_s"], self._on_flush_timer,
                                               clock=steady)
         self._finish_timer = self.create_timer(0.05, self._maybe_close, clock=steady, autostart=False)
+        self._publisher_timer = self.create_timer(PUBLISHER_CHECK_S, self._check_publishers, clock=steady)
         self.get_logger().info(f"recording {len(RECORDED_TOPICS)} topics to {self.output}"
                                + (f", Rerun {rerun_mode}" + (f" to {rrd}" if rerun_mode == "save" else "")
                                   if rerun_mode != "off" else ""))
@@ -228,6 +247,23 @@ class RecorderNode(Node):
             self._subscribe(topic)
         self.get_logger().info(f"publishers of {', '.join(self._wait_for_publishers)} matched: "
                                "subscribed to the fleet state")
+
+    def _check_publishers(self) -> None:
+        """Note the topics that have more publishers at once than the run has (RecordingCheck.foreign)."""
+        if self.finished:
+            return
+        for topic, most in SOLE_PUBLISHERS.items():
+            if topic in self.check.foreign:
+                continue
+            try:
+                infos = self.get_publishers_info_by_topic(self._names[topic])
+            except Exception:  # noqa: BLE001 - graph queries can fail during shutdown
+                continue
+            names = [f"{i.node_namespace.rstrip('/')}/{i.node_name}" for i in infos]
+            if len(infos) > most or len(set(names)) < len(names):
+                self.check.foreign[topic] = f"{len(infos)} publishers at once ({', '.join(sorted(names))})"
+                self.get_logger().error(f"{topic} has {len(infos)} publishers at once ({', '.join(sorted(names))}): "
+                                        "the recording will not verify")
 
     def _make_callback(self, topic: str, cls: type):
         def callback(data: bytes) -> None:
