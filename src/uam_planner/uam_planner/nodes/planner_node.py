@@ -345,6 +345,10 @@ class PlannerNode(Node):
                 own = {wire.scoped_id(p.operator_id, p.request_id): p for p in self.journal.read(request.session)}
             except ValueError as exc:
                 return f"resume: {exc}"
+            # approvals of this epoch or later never reached the simulator (it asks for this
+            # epoch again): they never flew, and none can be claimed
+            k = int(request.epoch_index)
+            own = {key: p for key, p in own.items() if p.epoch_index < k}
             flying = {key for key, p in own.items() if m.from_time(p.arrival_time) >= t_s}
             left_out = sorted(flying - set(claimed))
             unknown = sorted(set(claimed) - set(own))

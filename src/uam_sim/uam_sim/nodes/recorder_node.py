@@ -199,6 +199,7 @@ class RecorderNode(Node):
         self._clock_ns = 0
         self._dirty = False
         self.check = RecordingCheck()
+        self._sim_session: str | None = None
         self._stamp_first = {topic: _starts_with_stamp(cls) for topic, (cls, _qos) in RECORDED_TOPICS.items()}
         # recorded under the names they resolve to (namespace and remapping applied)
         self._names = {topic: self.resolve_topic_name(topic) for topic in RECORDED_TOPICS}
@@ -292,8 +293,10 @@ class RecorderNode(Node):
             return
         self._last_rx = time.monotonic()
         msg = self._write(topic, cls, data)
+        if topic == c.TOPIC_SYNC and msg.sender == "simulator" and msg.session and self._sim_session is None:
+            self._sim_session = msg.session  # the run's simulator: only its end closes the file
         if topic == c.TOPIC_SYNC and msg.finished and msg.sender == "simulator" \
-                and not self.finish_requested:
+                and msg.session == (self._sim_session or msg.session) and not self.finish_requested:
             self.get_logger().info("the simulator ended the run: closing the recording once the "
                                    "last messages are in")
             self.finish_requested = True

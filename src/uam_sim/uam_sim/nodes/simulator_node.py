@@ -84,6 +84,7 @@ class SimulatorNode(Node):
         self.fleet = Fleet()
         self.step_index = 0                 # t = step_index * step_s
         self.plans_received = 0
+        self.flown_plans: list[FlightPlan] = []   # every approved plan flown, in order (for audits)
         self.fly_errors = 0                 # approved plans that could not be flown (should stay 0)
         self._flying: dict[str, FlightPlan] = {}   # scoped id -> approved plan, while it may be airborne
         self._decided: list[str] = []       # scoped ids of every request decided in an epoch answer
@@ -320,6 +321,7 @@ class SimulatorNode(Node):
                 try:
                     self.fleet.add(key, m.trajectory_from_plan(plan))
                     self._flying[key] = plan
+                    self.flown_plans.append(plan)
                 except ValueError as exc:
                     self.fly_errors += 1
                     self.get_logger().error(f"cannot fly plan {key!r}: {exc}")

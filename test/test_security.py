@@ -1,0 +1,281 @@
+"""Safety that no caller can talk the planner out of (issue 18, docs/security.md).
+
+Each test is an attack made by an ordinary node on the run's domain (a rogue in the in-process
+graph) while the graph runs. Each must end in one of two ways: the legitimate approvals of the
+clean run (the in-process runner's, same seed), or a run that ends with a reason and a recording
+the analysis does not call OK; never a flown pair under the minimum.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+rclpy = pytest.importorskip("rclpy", reason="needs the built workspace (scripts/test.sh sources it)")
+
+from graph_harness import (build_graph, decisions, in_process, make_planner, params,  # noqa: E402
+                           run_to_end, shutdown)
+from uam_msgs.msg import EpochSync, FlightPlan, FlightRequest  # noqa: E402
+from uam_msgs.srv import PlanEpoch, ReleaseDemand  # noqa: E402
+
+from uam_bringup import contract as c  # noqa: E402
+from uam_bringup import conversions as m  # noqa: E402
+from uam_bringup import qos, wire  # noqa: E402
+from uam_planner.audit import audit_flights  # noqa: E402
+
+pytestmark = pytest.mark.ros
+
+RATE, SEED, DURATION = 3.0, 13, 240.0
+
+
+def _flown_audit(obs):
+    approved = [p for p in obs.plans if p.outcome == FlightPlan.OUTCOME_APPROVED]
+    return audit_flights([m.trajectory_from_plan(p) for p in approved], separation_m=100.0)
+
+
+def _flown_by_simulator_audit(sim):
+    """The audit of what the simulator flew (its own record of the plans it flew)."""
+    return audit_flights([m.trajectory_from_plan(p) for p in sim.flown_plans], separation_m=100.0)
+
+
+class Rogue:
+    """An ordinary node on the run's domain: calls the epoch services and publishes what it likes."""
+
+    def __init__(self, context, name="rogue"):
+        self.node = rclpy.create_node(name, context=context)
+        self.plan = self.node.create_client(PlanEpoch, c.SERVICE_PLAN_EPOCH)
+        self.release = self.node.create_client(ReleaseDemand, c.SERVICE_RELEASE_DEMAND)
+        self.sync = self.node.create_publisher(EpochSync, c.TOPIC_SYNC, qos.QOS_LATCHED)
+        self.requests = self.node.create_publisher(FlightRequest, c.TOPIC_REQUESTS, qos.QOS_REQUESTS)
+
+    def call(self, executor, spin_until, client, request):
+        assert spin_until(executor, client.service_is_ready, 10)
+        fut = client.call_async(request)
+        assert spin_until(executor, fut.done, 30), "the server did not answer the rogue"
+        return fut.result()
+
+
+def _mid_run(executor, nodes, spin_until, t_s=100.0):
+    sim = nodes["simulator"]
+    assert spin_until(executor, lambda: sim.t_s >= t_s and nodes["planner"]._inflight is None, timeout_s=60)
+    return sim
+
+
+def _run_with_rogue(ros_context, spin_until, attack, tmp_path=None, **kw):
+    """Run the clean scenario with ``attack(executor, nodes, rogue)`` made mid-run; returns
+    (obs, nodes, what attack returned)."""
+    executor, nodes, obs = build_graph(ros_context, rate=RATE, seed=SEED, duration_s=DURATION,
+                                       record_to=None if tmp_path is None else tmp_path / "run.mcap", **kw)
+    rogue = Rogue(ros_context)
+    executor.add_node(rogue.node)
+    try:
+        out = attack(executor, nodes, rogue)
+        sim = nodes["simulator"]
+        assert spin_until(executor, lambda: sim.finished, timeout_s=120), f"the run did not end; t={sim.t_s}"
+        if "recorder" in nodes:
+            assert spin_until(executor, lambda: nodes["recorder"].finished, timeout_s=30)
+        if not sim.error:
+            run_to_end(executor, nodes, obs, spin_until)
+        return obs, nodes, out
+    finally:
+        executor.remove_node(rogue.node)
+        rogue.node.destroy_node()
+        shutdown(executor, nodes)
+
+
+def _clean():
+    return in_process(RATE, SEED, DURATION, "exact").decisions()
+
+
+def test_a_resume_with_an_empty_airborne_list_never_makes_the_planner_forget_the_fleet(ros_context, spin_until):
+    """Finding: one PlanEpoch(resume=true, airborne=[]) made the planner forget every aircraft in
+    the air; it then approved flights through them (55 flown pairs under 100 m)."""
+    def attack(executor, nodes, rogue):
+        sim = _mid_run(executor, nodes, spin_until)
+        planner = nodes["planner"]
+        held = len(planner.planner.active)
+        assert held > 0, "the attack needs aircraft in the air"
+        k = planner._next_epoch
+        # with the simulator's own token (no DDS security: anyone on the domain can read it)
+        res = rogue.call(executor, spin_until, rogue.plan, PlanEpoch.Request(
+            epoch_index=k, epoch_time=m.to_time(k * 30.0), epoch_s=30.0, resume=True, airborne=[],
+            session=sim.session))
+        assert res.status == PlanEpoch.Response.STATUS_REFUSED and "resume" in res.message, res.message
+        assert len(planner.planner.active) >= held
+        return res
+    obs, nodes, _ = _run_with_rogue(ros_context, spin_until, attack)
+    assert not nodes["simulator"].error
+    assert decisions(obs.plans) == _clean()
+    assert _flown_audit(obs).ok
+
+
+def test_epoch_calls_of_another_caller_or_another_epoch_length_are_refused(ros_context, spin_until):
+    """Findings: an early PlanEpoch made the simulator fly rogue-triggered epochs; one PlanEpoch
+    with epoch_s = 1e6 refused 20 legitimate requests; a million expected ids stalled an epoch."""
+    def attack(executor, nodes, rogue):
+        sim = _mid_run(executor, nodes, spin_until)
+        k = nodes["planner"]._next_epoch
+        answers = [
+            rogue.call(executor, spin_until, rogue.plan, PlanEpoch.Request(  # another simulator
+                epoch_index=k, epoch_time=m.to_time(k * 30.0), epoch_s=30.0, session="rogue")),
+            rogue.call(executor, spin_until, rogue.plan, PlanEpoch.Request(  # the run's token, a huge epoch
+                epoch_index=k, epoch_time=m.to_time(k * 1e6), epoch_s=1e6, session=sim.session)),
+            rogue.call(executor, spin_until, rogue.plan, PlanEpoch.Request(  # an epoch ahead
+                epoch_index=k + 5, epoch_time=m.to_time((k + 5) * 30.0), epoch_s=30.0, session=sim.session)),
+            rogue.call(executor, spin_until, rogue.plan, PlanEpoch.Request(  # at the wrong time
+                epoch_index=k, epoch_time=m.to_time(k * 30.0 + 7), epoch_s=30.0, session=sim.session)),
+            rogue.call(executor, spin_until, rogue.plan, PlanEpoch.Request(  # a flood of expected ids
+                epoch_index=k, epoch_time=m.to_time(k * 30.0), epoch_s=30.0, session=sim.session,
+                expected_request_ids=[f"x/{i}" for i in range(20_000)])),
+        ]
+        return answers
+    obs, nodes, answers = _run_with_rogue(ros_context, spin_until, attack)
+    fields = ["session", "epoch_s", "epoch_index", "epoch_time", "expected_request_ids"]
+    for res, field in zip(answers, fields):
+        assert res.status == PlanEpoch.Response.STATUS_REFUSED and res.message.startswith(field), (field, res.message)
+    assert not nodes["simulator"].error
+    assert decisions(obs.plans) == _clean()
+
+
+def test_release_demand_serves_only_the_bound_simulator_and_its_next_epoch(ros_context, spin_until):
+    """Finding: one ReleaseDemand(10^6, t = 600) released all demand at t = 60 (51 of 116 served)."""
+    def attack(executor, nodes, rogue):
+        sim = _mid_run(executor, nodes, spin_until, t_s=60.0)
+        return [
+            rogue.call(executor, spin_until, rogue.release, ReleaseDemand.Request(
+                epoch_index=10 ** 6, epoch_time=m.to_time(600.0), epoch_s=30.0, session=sim.session)),
+            rogue.call(executor, spin_until, rogue.release, ReleaseDemand.Request(
+                epoch_index=20, epoch_time=m.to_time(600.0), epoch_s=30.0, session="rogue")),
+        ]
+    obs, nodes, answers = _run_with_rogue(ros_context, spin_until, attack)
+    assert [r.status for r in answers] == [ReleaseDemand.Response.STATUS_REFUSED] * 2
+    assert answers[0].message.startswith("epoch_time") or answers[0].message.startswith("epoch_index")
+    assert answers[1].message.startswith("session")
+    assert not nodes["simulator"].error
+    assert decisions(obs.plans) == _clean()
+
+
+def test_a_second_planner_ends_the_run_with_a_reason_and_the_recording_does_not_verify(
+        ros_context, spin_until, tmp_path):
+    """Finding: a second planner on the domain took over; the simulator flew its answers."""
+    from uam_sim.analysis import summarize
+
+    def attack(executor, nodes, rogue):
+        _mid_run(executor, nodes, spin_until)
+        nodes["planner2"] = make_planner(ros_context, seed=SEED)
+        executor.add_node(nodes["planner2"])
+    obs, nodes, _ = _run_with_rogue(ros_context, spin_until, attack, tmp_path=tmp_path)
+    sim = nodes["simulator"]
+    assert sim.error and ("serve" in sim.error or "second planner" in sim.error), sim.error
+    assert _flown_by_simulator_audit(sim).ok
+    s = summarize(tmp_path / "run.mcap")
+    assert not s.verified and any("ended early" in p for p in s.problems), s.problems
+
+
+def test_a_forged_end_of_run_changes_nothing_and_the_recording_does_not_verify(ros_context, spin_until, tmp_path):
+    """Finding: a forged EpochSync(finished) cut the run short and the recording analysed as OK."""
+    from uam_sim.analysis import summarize
+
+    def attack(executor, nodes, rogue):
+        _mid_run(executor, nodes, spin_until)
+        rogue.sync.publish(EpochSync(epoch_index=4, epoch_time=m.to_time(120.0), sender="simulator",
+                                     finished=True, session="rogue"))
+        # the recorder sees a fourth announcer on the topic (it looks every PUBLISHER_CHECK_S)
+        assert spin_until(executor, lambda: c.TOPIC_SYNC in nodes["recorder"].check.foreign, timeout_s=10)
+    obs, nodes, _ = _run_with_rogue(ros_context, spin_until, attack, tmp_path=tmp_path)
+    assert not nodes["simulator"].error
+    assert decisions(obs.plans) == _clean()  # planner, generator and recorder ran on to the true end
+    s = summarize(tmp_path / "run.mcap")
+    assert not s.verified, s.problems
+    assert any("simulators announced" in p or "publishers" in p for p in s.problems), s.problems
+
+
+def test_use_sim_time_is_refused_at_run_time(ros_context, spin_until):
+    """Finding: /simulator use_sim_time:=true was accepted at run time and froze it for good."""
+    def attack(executor, nodes, rogue):
+        _mid_run(executor, nodes, spin_until, t_s=60.0)
+        results = {name: nodes[name].set_parameters([rclpy.parameter.Parameter("use_sim_time", value=True)])[0]
+                   for name in ("simulator", "planner", "generator", "solver")}
+        return results
+    import rclpy.parameter
+    obs, nodes, results = _run_with_rogue(ros_context, spin_until, attack)
+    for name, res in results.items():
+        assert not res.successful and "use_sim_time" in res.reason, (name, res.reason)
+    assert decisions(obs.plans) == _clean()
+
+
+def test_use_sim_time_at_start_up_is_refused_naming_it(ros_context):
+    from uam_sim.nodes.simulator_node import SimulatorNode
+
+    with pytest.raises(ValueError, match="use_sim_time"):
+        SimulatorNode(context=ros_context, parameter_overrides=params(use_sim_time=True))
+
+
+def test_a_planner_that_lost_its_memory_checks_the_claim_against_its_journal(ros_context, spin_until, tmp_path):
+    """A restarted planner with a journal refuses a resume that leaves out aircraft it approved
+    (a rogue's, which reaches it before the simulator's), then takes the simulator's true one."""
+    from rclpy.executors import SingleThreadedExecutor
+
+    journal = tmp_path / "journal.jsonl"
+    executor, nodes, obs = build_graph(ros_context, rate=RATE, seed=SEED, duration_s=DURATION,
+                                       planner_extra={"journal": str(journal)})
+    rogue = Rogue(ros_context)
+    sim = nodes["simulator"]
+    try:
+        old = nodes["planner"]
+        assert spin_until(executor, lambda: sim.t_s >= 90.0 and old._inflight is None and any(
+            f.arrival_s >= old._next_epoch * 30.0 for f in old.planner.active), timeout_s=60)
+        k = old._next_epoch
+        nodes.pop("planner")
+        executor.remove_node(old)
+        old.destroy_node()
+        # the new planner and the rogue alone: the simulator does not spin, so the rogue is first
+        new = make_planner(ros_context, seed=SEED, journal=str(journal))
+        alone = SingleThreadedExecutor(context=ros_context)
+        alone.add_node(new)
+        alone.add_node(rogue.node)
+        res = rogue.call(alone, spin_until, rogue.plan, PlanEpoch.Request(
+            epoch_index=k, epoch_time=m.to_time(k * 30.0), epoch_s=30.0, resume=True, airborne=[],
+            session=sim.session))
+        alone.remove_node(new)
+        alone.remove_node(rogue.node)
+        alone.shutdown()
+        assert res.status == PlanEpoch.Response.STATUS_REFUSED and "journal" in res.message \
+            and "left out" in res.message, res.message
+        assert not new.resumed and new.bound_simulator is None
+        nodes["planner"] = new
+        executor.add_node(new)
+        assert spin_until(executor, lambda: sim.finished, timeout_s=120)
+        assert not sim.error, sim.error
+        run_to_end(executor, nodes, obs, spin_until)
+        assert new.resumed and new.bound_simulator == sim.session
+        assert decisions(obs.plans) == _clean()
+        assert _flown_by_simulator_audit(sim).ok
+    finally:
+        rogue.node.destroy_node()
+        shutdown(executor, nodes)
+
+
+def test_refusals_keep_the_offending_id_escaped_so_two_are_never_one_decision(ros_context, spin_until):
+    """Finding: refusals of requests with bad ids carried an empty id; two of them made the
+    analysis report CONFLICTING decisions for ''."""
+    def attack(executor, nodes, rogue):
+        _mid_run(executor, nodes, spin_until, t_s=30.0)
+        for rid in ("bad id", "x" * 100_000):
+            rogue.requests.publish(FlightRequest(operator_id="console", request_id=rid, origin_id="A",
+                                                 destination_id="B", earliest_departure=m.to_time(60),
+                                                 latest_departure=m.to_time(120), request_time=m.to_time(30)))
+    obs, nodes, _ = _run_with_rogue(ros_context, spin_until, attack)
+    refused = [p for p in obs.plans if p.operator_id == "console"]
+    assert sorted(p.request_id for p in refused)[0] == "!bad%20id"
+    assert len({p.request_id for p in refused}) == 2 and all(len(p.request_id) < 80 for p in refused)
+    assert all(p.outcome == FlightPlan.OUTCOME_REJECTED and "request_id" in p.reason for p in refused)
+
+
+def test_escaped_ids_name_the_value_and_never_collide():
+    assert wire.escaped_id("ok-1.2_3") == "ok-1.2_3"
+    assert wire.escaped_id("") == "!"
+    assert wire.escaped_id("a b") == "!a%20b" and wire.escaped_id("a/b") == "!a%2Fb"
+    long_a, long_b = "y" * 200 + "a", "y" * 200 + "b"
+    assert wire.escaped_id(long_a) != wire.escaped_id(long_b)
+    assert wire.escaped_id(long_a) == wire.escaped_id(long_a) and len(wire.escaped_id(long_a)) <= 74
+    assert wire.check_id("request_id", wire.escaped_id("a b"))  # never a valid id itself
