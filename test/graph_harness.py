@@ -89,6 +89,15 @@ def make_planner(context, *, network=TINY, policy="mwis", backend="exact", seed=
         network=network, policy=policy, backend=backend, seed=int(seed), **extra))
 
 
+def between_epochs(sim, planner) -> bool:
+    """The planner has answered the epoch the simulator waits for and plans nothing: no call of
+    the simulator can reach it before the executor spins a few more times (the multi-threaded
+    executor runs a callback in a worker after spin_once returns, so `_inflight is None` alone
+    can be read just before a call that is already under way sets it)."""
+    k = sim._waiting_epoch
+    return k is not None and planner._inflight is None and planner._last is not None and planner._last[0] == k
+
+
 def run_to_end(executor, nodes, obs, spin_until, timeout_s=120.0):
     """Spin until the simulator ended the run and the observer holds every plan and report."""
     sim = nodes["simulator"]

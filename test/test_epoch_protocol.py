@@ -12,7 +12,7 @@ import pytest
 
 rclpy = pytest.importorskip("rclpy", reason="needs the built workspace (scripts/test.sh sources it)")
 
-from graph_harness import (build_graph, decisions, in_process, make_planner,  # noqa: E402
+from graph_harness import (between_epochs, build_graph, decisions, in_process, make_planner,  # noqa: E402
                            run_to_end, shutdown)
 from uam_msgs.msg import FlightPlan, FlightRequest  # noqa: E402
 
@@ -138,7 +138,7 @@ def test_a_restarted_planner_resumes_without_replaying_what_flies(ros_context, s
         # handles on the shared executor, which a killed planner process never does; the
         # simulator's call in flight (it asks for the next epoch while stepping) is then
         # answered by the new planner (STATUS_NEED_STATE, then the state)
-        assert spin_until(executor, lambda: sim.t_s >= 100.0 and nodes["planner"]._inflight is None,
+        assert spin_until(executor, lambda: sim.t_s >= 100.0 and between_epochs(sim, nodes["planner"]),
                           timeout_s=60)
         old = nodes.pop("planner")
         executor.remove_node(old)

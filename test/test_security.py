@@ -12,7 +12,7 @@ import pytest
 
 rclpy = pytest.importorskip("rclpy", reason="needs the built workspace (scripts/test.sh sources it)")
 
-from graph_harness import (build_graph, decisions, in_process, make_planner, params,  # noqa: E402
+from graph_harness import (between_epochs, build_graph, decisions, in_process, make_planner, params,  # noqa: E402
                            run_to_end, shutdown)
 from uam_msgs.msg import EpochSync, FlightPlan, FlightRequest  # noqa: E402
 from uam_msgs.srv import PlanEpoch, ReleaseDemand  # noqa: E402
@@ -222,7 +222,7 @@ def test_a_planner_that_lost_its_memory_checks_the_claim_against_its_journal(ros
     sim = nodes["simulator"]
     try:
         old = nodes["planner"]
-        assert spin_until(executor, lambda: sim.t_s >= 90.0 and old._inflight is None and any(
+        assert spin_until(executor, lambda: sim.t_s >= 90.0 and between_epochs(sim, old) and any(
             f.arrival_s >= old._next_epoch * 30.0 for f in old.planner.active), timeout_s=60)
         k = old._next_epoch
         nodes.pop("planner")
@@ -267,7 +267,7 @@ def test_refusals_keep_the_offending_id_escaped_so_two_are_never_one_decision(ro
     obs, nodes, _ = _run_with_rogue(ros_context, spin_until, attack)
     refused = [p for p in obs.plans if p.operator_id == "console"]
     assert sorted(p.request_id for p in refused)[0] == "!bad%20id"
-    assert len({p.request_id for p in refused}) == 2 and all(len(p.request_id) < 80 for p in refused)
+    assert len({p.request_id for p in refused}) == 2 and all(len(p.request_id) <= 64 for p in refused)
     assert all(p.outcome == FlightPlan.OUTCOME_REJECTED and "request_id" in p.reason for p in refused)
 
 
@@ -277,5 +277,40 @@ def test_escaped_ids_name_the_value_and_never_collide():
     assert wire.escaped_id("a b") == "!a%20b" and wire.escaped_id("a/b") == "!a%2Fb"
     long_a, long_b = "y" * 200 + "a", "y" * 200 + "b"
     assert wire.escaped_id(long_a) != wire.escaped_id(long_b)
-    assert wire.escaped_id(long_a) == wire.escaped_id(long_a) and len(wire.escaped_id(long_a)) <= 74
+    assert wire.escaped_id(long_a) == wire.escaped_id(long_a) and len(wire.escaped_id(long_a)) == 64
     assert wire.check_id("request_id", wire.escaped_id("a b"))  # never a valid id itself
+
+
+def test_a_flood_of_new_operator_ids_cannot_push_out_the_operators_already_served(ros_context, spin_until):
+    """Finding: 10,000 requests over 10,000 operator ids filled max_pending and 10 legitimate
+    requests were refused "queue is full" (100 of 116 served)."""
+    flood = 3000
+
+    def attack(executor, nodes, rogue):
+        _mid_run(executor, nodes, spin_until, t_s=40.0)
+        # valid requests that wait in the queue (their window opens after the run)
+        for i in range(flood):
+            rogue.requests.publish(FlightRequest(
+                operator_id=f"op{i}", request_id="r", origin_id="A", destination_id="B",
+                request_time=m.to_time(40.0), earliest_departure=m.to_time(1000.0),
+                latest_departure=m.to_time(1060.0)))
+        planner = nodes["planner"]
+        assert spin_until(executor, lambda: planner.requests_received >= flood, timeout_s=60)
+    obs, nodes, _ = _run_with_rogue(ros_context, spin_until, attack, planner_extra={
+        "max_pending": 200, "max_pending_new_operators": 100, "max_window_s": 2000.0})
+    refused = [p for p in obs.plans if p.operator_id.startswith("op") and p.outcome == FlightPlan.OUTCOME_REJECTED]
+    # at most max_pending of the flood waits (new operators of one epoch hold at most 100 of it;
+    # those accepted are established at the next epoch, and the next new ones get 100 more)
+    assert len(refused) >= flood - 200 and all("operator_id" in p.reason or "queue" in p.reason for p in refused)
+    assert decisions(obs.plans) == _clean()  # every legitimate request was served as in the clean run
+
+
+def test_ids_in_a_demand_file_are_bounded_at_load_as_on_the_wire(tmp_path):
+    from uam_sim.demand import DemandError, parse_demand
+
+    with pytest.raises(DemandError, match=r"\[0\]\.id: 'xxxx.*\(100000 characters\) must be 1 to 64"):
+        parse_demand([{"t_s": 0, "origin": "A", "destination": "B", "id": "x" * 100_000}])
+    with pytest.raises(DemandError, match=r"\[0\]\.origin: .*\(5000 characters\)"):
+        parse_demand([{"t_s": 0, "origin": "A" * 5000, "destination": "B"}])
+    with pytest.raises(DemandError, match=r"\[0\]\.id: 'a b'"):
+        parse_demand([{"t_s": 0, "origin": "A", "destination": "B", "id": "a b"}])

@@ -14,7 +14,7 @@ from uam_msgs.msg import FlightPlan, FlightRequest  # noqa: E402
 
 from uam_bringup import contract as c  # noqa: E402
 from uam_bringup import conversions as m  # noqa: E402
-from uam_bringup import qos  # noqa: E402
+from uam_bringup import qos, wire  # noqa: E402
 from uam_bringup.wire import MAX_REASON_CHARS, check_id, echo  # noqa: E402
 
 pytestmark = pytest.mark.ros
@@ -85,9 +85,11 @@ def test_malformed_and_implausible_requests_are_refused_naming_the_field(ros_con
     refusals = [p for p in obs.plans if p.outcome == FlightPlan.OUTCOME_REJECTED and p.operator_id != "generator"]
     for name, (msg, field) in probes.items():
         if check_id("operator_id", msg.operator_id) or check_id("request_id", msg.request_id):
-            # a refusal cannot carry the id it refuses: it carries none and shows the id cut short
+            # a refusal cannot carry the id it refuses: it carries a stand-in that names it, escaped
+            # and cut (wire.escaped_id: never a valid id), and shows the id cut short in the reason
             bad = msg.operator_id if check_id("operator_id", msg.operator_id) else msg.request_id
-            match = [p for p in refusals if p.request_id == "" and p.operator_id == "" and echo(bad) in p.reason]
+            match = [p for p in refusals if p.request_id == wire.escaped_id(msg.request_id)
+                     and p.operator_id == wire.escaped_id(msg.operator_id) and echo(bad) in p.reason]
         else:
             match = [p for p in refusals if p.operator_id == "probe" and p.request_id == msg.request_id]
         assert len(match) == 1, (name, [p.reason for p in refusals])

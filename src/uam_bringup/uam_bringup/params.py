@@ -247,6 +247,9 @@ PLANNER = (
           read_only=False),
     Param("max_pending", 5000, "requests waiting for a decision, all operators together; more are refused "
           "with the reason", 1, 10_000_000),
+    Param("max_pending_new_operators", 2500, "requests waiting for a decision of operators first accepted since "
+          "the last epoch, together: the operators that came before keep the rest of max_pending (a flood of new "
+          "operator ids cannot push them out)", 1, 10_000_000),
     Param("max_pending_per_operator", 500, "requests waiting for a decision per operator_id; more are "
           "refused with the reason", 1, 10_000_000),
     Param("max_window_s", 3600.0, "latest_departure may be at most this far after the current simulation "

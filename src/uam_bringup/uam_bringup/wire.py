@@ -13,25 +13,13 @@ operator is (see README, "What an open ROS graph cannot protect against").
 from __future__ import annotations
 
 import hashlib
-import re
 from typing import Any
 
-MAX_ID_LENGTH = 64
-ID_PATTERN = re.compile(r"[A-Za-z0-9_.\-]{1,%d}" % MAX_ID_LENGTH)
-MAX_NODE_ID_LENGTH = 128
-MAX_ECHO_CHARS = 40
+from uam_planner.ids import ID_PATTERN, MAX_ECHO_CHARS, MAX_ID_LENGTH, MAX_NODE_ID_LENGTH, check_id, echo  # noqa: F401 (the wire's rule)
+
 MAX_REASON_CHARS = 300
 NS_PER_S = 1_000_000_000
 SCOPE_SEPARATOR = "/"
-
-
-def echo(value: Any) -> str:
-    """``repr`` of a value cut to MAX_ECHO_CHARS characters, with the full length said."""
-    text = repr(value)
-    if len(text) <= MAX_ECHO_CHARS:
-        return text
-    size = len(value) if isinstance(value, (str, bytes, list, tuple)) else len(text)
-    return f"{text[:MAX_ECHO_CHARS]}... ({size} characters)"
 
 
 def bounded(reason: str) -> str:
@@ -39,26 +27,19 @@ def bounded(reason: str) -> str:
     return reason if len(reason) <= MAX_REASON_CHARS else reason[: MAX_REASON_CHARS - 3] + "..."
 
 
-def check_id(field: str, value: Any) -> str:
-    """'' if ``value`` is a valid id, else the reason naming ``field``."""
-    if not isinstance(value, str) or not ID_PATTERN.fullmatch(value):
-        return (f"{field}: {echo(value)} must be 1 to {MAX_ID_LENGTH} characters of letters, digits, "
-                "'_', '-' and '.'")
-    return ""
-
-
 def escaped_id(value: Any) -> str:
     """``value`` itself when it is a valid id; else a stand-in that names it and is never a valid
     id: ``!`` then the value with every character outside the id alphabet as ``%XX`` (its code
-    point), cut to MAX_ID_LENGTH characters, and ``~`` with 8 hex digits of its hash when cut (so
-    two different bad ids never share a stand-in, and one bad id always gets the same)."""
+    point), cut so that the stand-in is at most MAX_ID_LENGTH characters, ending in ``~`` and 8 hex
+    digits of its hash when cut (so two different bad ids never share a stand-in, and one bad id
+    always gets the same)."""
     if isinstance(value, str) and ID_PATTERN.fullmatch(value):
         return value
     text = value if isinstance(value, str) else repr(value)
     escaped = "".join(ch if ID_PATTERN.fullmatch(ch) else f"%{ord(ch):02X}" for ch in text[: MAX_ID_LENGTH * 2])
-    if len(escaped) > MAX_ID_LENGTH or len(text) > MAX_ID_LENGTH * 2:
+    if 1 + len(escaped) > MAX_ID_LENGTH or len(text) > MAX_ID_LENGTH * 2:
         digest = hashlib.sha256(text.encode("utf-8", "surrogatepass")).hexdigest()[:8]
-        escaped = escaped[:MAX_ID_LENGTH] + "~" + digest
+        escaped = escaped[: MAX_ID_LENGTH - 10] + "~" + digest  # at most MAX_ID_LENGTH in all
     return "!" + escaped
 
 

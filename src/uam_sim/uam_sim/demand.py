@@ -26,6 +26,7 @@ from typing import Any, Iterable, Sequence
 import numpy as np
 import yaml
 
+from uam_planner.ids import MAX_NODE_ID_LENGTH, check_id, echo
 from uam_planner.planning import FlightRequest
 
 DEFAULT_INTERVAL_S = 30.0
@@ -170,10 +171,11 @@ def parse_demand(data: Any, aerodrome_ids: Iterable[str] | None = None,
             raise DemandError(f"{at}.t_s: {t!r} must be a finite time >= 0")
         for key in ("origin", "destination"):
             v = item[key]
-            if not isinstance(v, (str, int)) or isinstance(v, bool) or str(v) == "":
-                raise DemandError(f"{at}.{key}: {v!r} must be a node id")
+            if not isinstance(v, (str, int)) or isinstance(v, bool) or str(v) == "" \
+                    or len(str(v)) > MAX_NODE_ID_LENGTH:
+                raise DemandError(f"{at}.{key}: {echo(v)} must be a node id of 1 to {MAX_NODE_ID_LENGTH} characters")
             if known is not None and str(v) not in known:
-                raise DemandError(f"{at}.{key}: {v!r} is not an aerodrome of the network")
+                raise DemandError(f"{at}.{key}: {echo(v)} is not an aerodrome of the network")
         if str(item["origin"]) == str(item["destination"]):
             raise DemandError(f"{at}.destination: {item['destination']!r} equals the origin")
         if "window_s" in item and "latest_s" in item:
@@ -190,9 +192,12 @@ def parse_demand(data: Any, aerodrome_ids: Iterable[str] | None = None,
                 raise DemandError(f"{at}.window_s: {w!r} must be a finite number >= 0")
             latest = float(t) + float(w)
         rid = item.get("id", f"d{i:05d}")
-        if not isinstance(rid, (str, int)) or isinstance(rid, bool) or str(rid) == "":
-            raise DemandError(f"{at}.id: {rid!r} must be a non-empty string")
+        if not isinstance(rid, (str, int)) or isinstance(rid, bool):
+            raise DemandError(f"{at}.id: {echo(rid)} must be a non-empty string")
         rid = str(rid)
+        problem = check_id(f"{at}.id", rid)  # bounded at load as on the wire
+        if problem:
+            raise DemandError(problem)
         if rid in seen:
             raise DemandError(f"{at}.id: {rid!r} is used by an earlier request")
         seen.add(rid)

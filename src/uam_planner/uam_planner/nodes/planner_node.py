@@ -97,6 +97,8 @@ class PlannerNode(Node):
         self._taken: set[str] = set()            # scoped ids decided or waiting: a reuse is a duplicate
         self._held: list | None = []             # requests that came before the first epoch call
         self._waiting_per_operator: collections.Counter = collections.Counter()
+        self._established: set[str] = set()      # operators with a request accepted before this epoch
+        self._new_operators: set[str] = set()    # operators first accepted since the last epoch
         self._waiters: list[tuple[set, Future]] = []
         self._next_epoch = 0
         self._next_epoch_s = 0.0                 # time of the next epoch: what arrivals are checked against
@@ -207,11 +209,19 @@ class PlannerNode(Node):
                           "requests waiting, its quota (max_pending_per_operator); send more once they are decided")
             elif len(self.planner.pending) >= self.p["max_pending"]:
                 reason = f"request: the planner's queue is full ({len(self.planner.pending)} waiting, max_pending)"
+            elif msg.operator_id not in self._established and \
+                    self._waiting_new() >= self.p["max_pending_new_operators"]:
+                # operators that came before this epoch keep their share of the queue: a flood of
+                # new operator ids cannot push them out (docs/security.md)
+                reason = (f"operator_id: {msg.operator_id!r} is new and operators new in this epoch hold "
+                          f"{self._waiting_new()} waiting requests (max_pending_new_operators); send again later")
         if not reason:
             reason = self.planner.submit(m.request_from_msg(msg, request_id=key)) or ""
             if not reason:
                 self._taken.add(key)
                 self._waiting_per_operator[msg.operator_id] += 1
+                if msg.operator_id not in self._established:
+                    self._new_operators.add(msg.operator_id)
                 return key
         if key is not None:
             self._taken.add(key)
@@ -378,6 +388,14 @@ class PlannerNode(Node):
         self._waiting_per_operator = collections.Counter(
             wire.split_scoped(r.request_id)[0] for r in self.planner.pending)
 
+    def _waiting_new(self) -> int:
+        return sum(self._waiting_per_operator[op] for op in self._new_operators)
+
+    def _new_epoch_for_operators(self) -> None:
+        """At an epoch: the operators first accepted since the last one are established now."""
+        self._established |= self._new_operators
+        self._new_operators = set()
+
     async def _wait_for(self, expected: list[str]) -> list[str]:
         """Wait until every expected request arrived or request_wait_timeout_s; return the missing."""
         with self._lock:
@@ -431,6 +449,7 @@ class PlannerNode(Node):
                 self.get_logger().warning(
                     f"epoch {k}: MWIS fallback to {result.report.backend_used}: {result.report.fallback_reason}")
             self._count_waiting()
+            self._new_epoch_for_operators()
             self._next_epoch = k + 1
             self._next_epoch_s = t_s + self.config.epoch_s
             self._last_epoch_s = t_s

@@ -261,7 +261,8 @@ class RecorderNode(Node):
             except Exception:  # noqa: BLE001 - graph queries can fail during shutdown
                 continue
             names = [f"{i.node_namespace.rstrip('/')}/{i.node_name}" for i in infos]
-            if len(infos) > most or len(set(names)) < len(names):
+            known = [n for n in names if "_NODE_NAME_UNKNOWN_" not in n]  # not discovered in full yet
+            if len(infos) > most or len(set(known)) < len(known):
                 self.check.foreign[topic] = f"{len(infos)} publishers at once ({', '.join(sorted(names))})"
                 self.get_logger().error(f"{topic} has {len(infos)} publishers at once ({', '.join(sorted(names))}): "
                                         "the recording will not verify")
