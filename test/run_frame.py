@@ -8,7 +8,7 @@ NS = 1_000_000_000
 
 
 def complete_run(rec, epochs: int = 1, epoch_s: float = 30.0, duration_s: float | None = None,
-                 airspace: dict | None = None, airspace_record: bool = True, session: str = "sim0", planner: str = "") -> None:
+                 airspace: dict | None = None, airspace_record: bool = True, end_s: float | None = None, session: str = "sim0", planner: str = "") -> None:
     """Write into McapRecorder ``rec`` the frame of a run of ``epochs`` epochs that ended as planned."""
     from builtin_interfaces.msg import Time
     from uam_msgs.msg import EpochSync
@@ -27,7 +27,8 @@ def complete_run(rec, epochs: int = 1, epoch_s: float = 30.0, duration_s: float 
 
     for k in range(epochs):
         rec.write("/uam/epoch_sync", sync(k, k * epoch_s), int(k * epoch_s * NS))
-    rec.write("/uam/epoch_sync", sync(epochs, duration, finished=True), int(duration * NS))
+    end = duration if end_s is None else float(end_s)
+    rec.write("/uam/epoch_sync", sync(epochs, end, finished=True), int(end * NS))
     if airspace_record:
         rec.add_metadata(AIRSPACE_METADATA, airspace or airspace_metadata("sphere", 100.0, 30.0, 0.0))
     rec.add_metadata("uam_recorder_check", {"ok": "true", "verdict": "a recording written by a test"})
