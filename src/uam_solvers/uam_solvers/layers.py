@@ -22,8 +22,8 @@ from typing import Any, Mapping
 import numpy as np
 from scipy.sparse.csgraph import connected_components
 
-from .base import (Backend, MwisProblem, MwisResult, check_selection, induced_subproblem,
-                   make_result)
+from .base import (Backend, MwisInputError, MwisProblem, MwisResult, check_selection,
+                   induced_subproblem, make_result)
 from .reductions import complete_maximal, reduce_problem
 
 __all__ = ["ComponentSplit", "Reduce", "ValidateFallback", "induced_subproblem", "Layer"]
@@ -300,6 +300,10 @@ class ValidateFallback(Layer):
                       f"{elapsed:.3f} s (limit {time_limit_s:.3f} s + margin)")
         elif "error" in box:
             exc = box["error"]
+            if isinstance(exc, MwisInputError):
+                # input the backend cannot represent (e.g. weights too small to scale to
+                # integers): the caller's error, as through the solve service, not a fallback
+                raise exc
             reason = f"backend {self.child.name!r} raised {type(exc).__name__}: {exc}"
         else:
             res = box.get("result")
