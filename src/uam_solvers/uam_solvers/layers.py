@@ -327,9 +327,9 @@ class ValidateFallback(Layer):
                               fallback=bool(res.fallback), message=res.message)
         log.warning("MWIS fallback to %s: %s", self.fallback.name, reason)
         try:
-            from .greedy import FAST_FALLBACK_ABOVE, GreedyBackend, fallback_selection
+            from .greedy import GreedyBackend, fallback_selection, needs_fast_fallback
 
-            if isinstance(self.fallback, GreedyBackend) and problem.n > FAST_FALLBACK_ABOVE:
+            if isinstance(self.fallback, GreedyBackend) and needs_fast_fallback(problem):
                 sel, rule = fallback_selection(problem)  # bounded time on large graphs
                 stats, proven = {"rule": rule}, False
             else:
