@@ -17,7 +17,8 @@ import solver_test_backends as tb  # noqa: E402
 
 import uam_solvers  # noqa: E402
 import uam_solvers.registry as registry  # noqa: E402
-from uam_solvers.executor import shared_service  # noqa: E402
+from uam_solvers import executor  # noqa: E402
+from uam_solvers.executor import close_shared_service, shared_service  # noqa: E402
 from uam_solvers.instances import paper_instance  # noqa: E402
 
 #: generous: the stand-in alone would run for hours; the kill comes at the limit + 0.4 s
@@ -42,8 +43,12 @@ def test_solve_bounded_kills_a_gil_holding_backend_and_answers_with_the_fallback
     assert r.fallback and r.stats["executor"] == "killed"
     assert r.backend == "greedy" and "worker killed" in r.message
     assert p.is_independent(r.selected) and r.objective > 0
+    # SIGKILL was sent before the answer; wait (a condition, not a sleep) until it is reaped
+    deadline = time.monotonic() + 10.0
+    while not (before - set(svc.worker_pids())) and time.monotonic() < deadline:
+        time.sleep(0.01)
     killed = before - set(svc.worker_pids())
-    assert killed and all(_gone(pid) for pid in killed)
+    assert len(killed) == 1 and _gone(killed.pop())
     assert wall < WALL_BOUND_S
 
 
@@ -52,9 +57,10 @@ def test_planner_default_solve_is_bounded_and_warm_before_the_first_epoch(monkey
 
     monkeypatch.setattr(registry, "_entry_points",
                         lambda: {"test-gil-hog": "solver_test_backends:GilHoldingBackend"})
+    close_shared_service()
     solve = default_solve_mwis(PlanningConfig(backend="test-gil-hog", time_limit_s=0.3))
-    svc = shared_service()
-    assert len(svc.worker_pids()) == 2  # started and warmed when the solve function was made
+    assert executor._SHARED is not None  # started and warmed when the solve function was made
+    assert len(executor._SHARED.worker_pids()) == 2
     p = paper_instance(6, seed=2)
     r = solve(p.weights, p.edges, list(p.groups))
     assert r.fallback and r.stats["executor"] == "killed"
