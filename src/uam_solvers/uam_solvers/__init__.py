@@ -16,7 +16,9 @@ optimality only when proven. Options are declared per backend (``backend.options
 dimod-style ``backend.parameters``); an unknown or malformed option is an MwisInputError.
 
 Deadlines that hold even for solvers holding the GIL: :class:`uam_solvers.executor.SolveService`
-(worker processes killed at the limit + margin, lanes by size); ``solve`` here runs in-process.
+(worker processes killed at the limit + margin, lanes by size); ``solve`` here runs in-process,
+``solve_bounded`` through the process's shared SolveService (what the in-process runner and the
+planner's default solve call, so every path keeps limit + ~0.5 s).
 """
 from __future__ import annotations
 

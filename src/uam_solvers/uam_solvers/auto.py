@@ -8,14 +8,16 @@ The outer layers of the default pipeline (Reduce, ComponentSplit) pass every gra
   straight from clean arrays). Measured: 0.6 ms median end to end on the 5-50 vertex corpus
   against 1.6 ms for KaMIS called directly (BENCHMARKS.md). Past its node limit (~0.1 s),
   KaMIS with the whole limit (it returned within ~50 ms on every such graph measured).
-* up to ``kamis_max_vertices`` (2,000) when requests interact little (mean interacting requests
-  per request <= ``kamis_max_partners`` = 8; the planner's graphs have 1.5-1.6 median, 6.7 max):
-  KaMIS branch-and-reduce on the whole graph (it reduces and splits faster than the Python
-  layers) with ``kamis_fraction`` (0.25) of the limit, at most ``kamis_max_share_s`` (1 s);
-  a return before 0.9 of that share is its completed search, a proof. Denser graphs are kept
-  from it because KaMIS overran its limit on them (1.5 s with 1 s on a 150-vertex dense
-  ``paper_instance``, 33 s on 250 vertices) and it holds the GIL, so nothing in-process could
-  stop it.
+* up to ``kamis_max_vertices`` (2,000) unless the conflict graph is dense (mean degree, group
+  cliques included, above ``kamis_max_degree`` = 32; :func:`conflict_degree`): KaMIS
+  branch-and-reduce on the whole graph first (it reduces and splits faster than the Python
+  layers) with ``kamis_fraction`` (0.2) of the limit, at most ``kamis_max_share_s`` (1 s); a
+  return before 0.9 of that share is its completed search, a proof, returned at once. The
+  groups do not enter the choice (issue 20: the earlier "interacting partners" score rose with
+  the groups and kept KaMIS from graphs it proves in 1-2 ms). Denser graphs are kept from it
+  because KaMIS overran even a 0.05 s limit on them (1-2 s at mean degree 40-44, past 8 s at
+  100-150) and it holds the GIL; :func:`uam_solvers.solve_bounded` and the solve service bound
+  any such overrun by a kill.
 * otherwise, up to 2,000 vertices: auto's own ``Reduce(ComponentSplit(...))`` (exact
   reductions up to 256 vertices, connected components) and per component: branch and bound,
   KaMIS up to 64 vertices, CP-SAT up to ``exact_max_vertices`` (200; it honours its limit and
@@ -173,7 +175,7 @@ class AutoBackend(Backend):
                                 "clique branch and bound gives up (then KaMIS)", lo=1, hi=10**8),
         "kamis_max_vertices": Option("kamis_max_vertices", "int", 2000, "graphs up to this size "
                                      "go to KaMIS branch-and-reduce whole first (when their "
-                                     "requests interact little, see kamis_max_partners)",
+                                     "graph is not dense, see kamis_max_degree)",
                                      lo=0, hi=100_000),
         "kamis_fraction": Option("kamis_fraction", "float", 0.2, "share of the limit KaMIS gets "
                                  "on a whole graph above 64 vertices (0: never)", lo=0.0, hi=1.0),
