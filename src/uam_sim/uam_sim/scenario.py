@@ -56,9 +56,15 @@ def _solver(method: str, cfg: ExperimentConfig, seed: int):
     import uam_solvers
     options = dict(cfg.solver_options.get(method) or {})
 
+    from uam_solvers.executor import shared_service
+
+    shared_service()  # workers started and warmed now, not in the first epoch
+
     def solve(weights, edges, groups):
-        return uam_solvers.solve(weights, edges, groups=groups, backend=method,
-                                 time_limit_s=cfg.time_limit_s, seed=int(seed), options=options)
+        # the solver node's deadline mechanism (uam_solvers.executor): limit + ~0.5 s at most
+        return uam_solvers.solve_bounded(weights, edges, groups=groups, backend=method,
+                                         time_limit_s=cfg.time_limit_s, seed=int(seed),
+                                         options=options)
     return solve
 
 

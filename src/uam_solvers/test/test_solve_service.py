@@ -57,6 +57,11 @@ def test_gil_holding_backend_is_killed_at_the_deadline(service):
     assert wall < 0.5 + 1.0
     assert r.fallback and r.backend == "greedy" and r.stats["executor"] == "killed"
     assert "exceeded its time limit" in r.message and problem.is_independent(r.selected)
+    # SIGKILL is sent before the answer, the reaping is off the answer's path (issue 20):
+    # wait (a condition) until the killed worker is gone
+    deadline = time.monotonic() + 10.0
+    while not (before - set(service.worker_pids())) and time.monotonic() < deadline:
+        time.sleep(0.01)
     killed = before - set(service.worker_pids())
     assert len(killed) == 1 and all(_gone(pid) for pid in killed)  # nothing left running
     _wait_for_workers(service, 2)  # replaced by a fresh worker (started in the background)

@@ -16,7 +16,9 @@ optimality only when proven. Options are declared per backend (``backend.options
 dimod-style ``backend.parameters``); an unknown or malformed option is an MwisInputError.
 
 Deadlines that hold even for solvers holding the GIL: :class:`uam_solvers.executor.SolveService`
-(worker processes killed at the limit + margin, lanes by size); ``solve`` here runs in-process.
+(worker processes killed at the limit + margin, lanes by size); ``solve`` here runs in-process,
+``solve_bounded`` through the process's shared SolveService (what the in-process runner and the
+planner's default solve call, so every path keeps limit + ~0.5 s).
 """
 from __future__ import annotations
 
@@ -74,6 +76,7 @@ __all__ = [
     "build_pipeline",
     "solve",
     "solve_problem",
+    "solve_bounded",
 ]
 
 
@@ -151,3 +154,46 @@ def solve(
             return res
     problem = MwisProblem.from_arrays(weights, edges, groups, max_vertices=max_vertices)
     return solve_problem(problem, backend, time_limit_s, seed, options, layers)
+
+
+def solve_bounded(
+    weights: Any,
+    edges: Any,
+    groups: Sequence[Any] | None = None,
+    backend: str | Backend = "greedy",
+    time_limit_s: float = 10.0,
+    seed: int = 0,
+    options: Mapping[str, Any] | None = None,
+    layers: bool = True,
+    max_vertices: int | None = None,
+) -> MwisResult:
+    """:func:`solve` with a deadline that holds: at most ``time_limit_s`` + ~0.5 s of wall
+    time whatever the backend does (one that holds the GIL or ignores its limit is killed,
+    and the answer is the fallback, flagged), through this process's shared
+    :class:`uam_solvers.executor.SolveService` (the same mechanism as the solver node's).
+    The in-process runner and the planner's local solve call this. Small graphs the backend
+    is known to finish at once run in this process (same answers as :func:`solve`); the rest
+    in a warm worker process. Same inputs, outputs and errors as :func:`solve`.
+    """
+    from .executor import shared_service
+    from .options import check_seed, check_time_limit
+
+    check_time_limit(time_limit_s)
+    check_seed(seed)
+    if backend == "auto" and layers and (options is None or (isinstance(options, Mapping)
+                                                             and not options)):
+        # the exact clique branch and bound of solve()'s fast path is bounded by its node
+        # limit (pure Python, about 5 us a node), so it runs here as there
+        from .auto import bb_node_limit
+        from .cliquebb import SMALL_MAX_VERTICES, solve_small_arrays
+
+        t0 = time.perf_counter()
+        cap = SMALL_MAX_VERTICES if max_vertices is None else min(SMALL_MAX_VERTICES, max_vertices)
+        res = solve_small_arrays(weights, edges, groups, bb_node_limit(time_limit_s), cap)
+        if res is not None:
+            res.solve_time_s = time.perf_counter() - t0
+            res.stats["executor"] = "inline"
+            return res
+    problem = MwisProblem.from_arrays(weights, edges, groups, max_vertices=max_vertices)
+    return shared_service().solve(problem, backend=backend, time_limit_s=time_limit_s,
+                                  seed=seed, options=options, layers=layers)

@@ -8,14 +8,16 @@ The outer layers of the default pipeline (Reduce, ComponentSplit) pass every gra
   straight from clean arrays). Measured: 0.6 ms median end to end on the 5-50 vertex corpus
   against 1.6 ms for KaMIS called directly (BENCHMARKS.md). Past its node limit (~0.1 s),
   KaMIS with the whole limit (it returned within ~50 ms on every such graph measured).
-* up to ``kamis_max_vertices`` (2,000) when requests interact little (mean interacting requests
-  per request <= ``kamis_max_partners`` = 8; the planner's graphs have 1.5-1.6 median, 6.7 max):
-  KaMIS branch-and-reduce on the whole graph (it reduces and splits faster than the Python
-  layers) with ``kamis_fraction`` (0.25) of the limit, at most ``kamis_max_share_s`` (1 s);
-  a return before 0.9 of that share is its completed search, a proof. Denser graphs are kept
-  from it because KaMIS overran its limit on them (1.5 s with 1 s on a 150-vertex dense
-  ``paper_instance``, 33 s on 250 vertices) and it holds the GIL, so nothing in-process could
-  stop it.
+* up to ``kamis_max_vertices`` (2,000) unless the conflict graph is dense (mean degree, group
+  cliques included, above ``kamis_max_degree`` = 32; :func:`conflict_degree`): KaMIS
+  branch-and-reduce on the whole graph first (it reduces and splits faster than the Python
+  layers) with ``kamis_fraction`` (0.2) of the limit, at most ``kamis_max_share_s`` (1 s); a
+  return before 0.9 of that share is its completed search, a proof, returned at once. The
+  groups do not enter the choice (issue 20: the earlier "interacting partners" score rose with
+  the groups and kept KaMIS from graphs it proves in 1-2 ms). Denser graphs are kept from it
+  because KaMIS overran even a 0.05 s limit on them (1-2 s at mean degree 40-44, past 8 s at
+  100-150) and it holds the GIL; :func:`uam_solvers.solve_bounded` and the solve service bound
+  any such overrun by a kill.
 * otherwise, up to 2,000 vertices: auto's own ``Reduce(ComponentSplit(...))`` (exact
   reductions up to 256 vertices, connected components) and per component: branch and bound,
   KaMIS up to 64 vertices, CP-SAT up to ``exact_max_vertices`` (200; it honours its limit and
@@ -54,6 +56,9 @@ BB_NODES_PER_S = 2e5
 BB_NODE_LIMIT = 20_000
 
 
+#: KaMIS gets the whole graph first up to this mean degree (see :func:`conflict_degree`)
+KAMIS_MAX_DEGREE = 32.0
+
 #: up to this size KaMIS gets the whole graph or component with the whole limit (it returned
 #: within ~50 ms on every such graph measured), after the clique branch and bound
 SMALL_KAMIS_VERTICES = 64
@@ -61,10 +66,10 @@ SMALL_KAMIS_VERTICES = 64
 
 def interacting_partners(problem: MwisProblem) -> float:
     """Mean number of other requests a request conflicts with (a vertex outside every group
-    counts as a request of its own). Measured on the planner's instances: median 1.5, max 6.7
-    (Singapore layered, rate 20) and median 1.6, max 3.6 (2,000-node city); the dense
-    ``paper_instance`` graphs on which KaMIS overran its limit (1.5 s with 1 s at 150 vertices,
-    33 s at 250) have 18-30. O(n + m)."""
+    counts as a request of its own). A description of the instance only: ``auto`` no longer
+    routes by it, because with the groups given the same graph scores higher (10.7-11.7 against
+    6.5-7.0 without them on paper-shaped graphs of 500 vertices), which kept KaMIS from graphs
+    it proves in milliseconds (issue 20). O(n + m)."""
     n = problem.n
     gid = np.arange(n, dtype=np.int64) + len(problem.groups)
     for i, g in enumerate(problem.groups):
@@ -77,15 +82,19 @@ def interacting_partners(problem: MwisProblem) -> float:
         return 0.0
     a, b = a[cross], b[cross]
     nid = n + len(problem.groups)
-    if nreq == len(problem.groups) and nreq <= 512:
-        # every vertex in a group (the planner's graphs): a dense request-pair table, no sort
-        table = np.zeros((nreq, nreq), dtype=bool)
-        table[a, b] = True
-        table[b, a] = True
-        pairs = int(table.sum()) // 2
-    else:
-        pairs = int(sorted_unique(np.minimum(a, b) * nid + np.maximum(a, b)).size)
+    pairs = int(sorted_unique(np.minimum(a, b) * nid + np.maximum(a, b)).size)
     return 2.0 * pairs / max(nreq, 1)
+
+
+def conflict_degree(problem: MwisProblem) -> float:
+    """Mean degree of the full conflict graph (listed edges plus every pair inside a group):
+    what decides whether KaMIS gets the whole graph first. The groups are a hint about the
+    same graph, so they cannot change it: the planner lists its group cliques among the edges,
+    and a group whose pairs are not listed adds exactly those pairs to the graph. Measured with
+    a 0.05 s limit, KaMIS returned within 0.14 s on G(n, p) of mean degree <= 30 (n = 100-2,000)
+    and overran to 1-2 s at 40-44 (paper_instance(30), G(150, 0.3)) and past 8 s at 100-150.
+    O(1) once ``all_edges`` is built (the CSR every backend needs)."""
+    return 2.0 * problem.all_edges().shape[0] / max(problem.n, 1)
 
 
 def learn_and_reduce_kernel(problem: MwisProblem, time_limit_s: float, seed: int):
@@ -166,17 +175,18 @@ class AutoBackend(Backend):
                                 "clique branch and bound gives up (then KaMIS)", lo=1, hi=10**8),
         "kamis_max_vertices": Option("kamis_max_vertices", "int", 2000, "graphs up to this size "
                                      "go to KaMIS branch-and-reduce whole first (when their "
-                                     "requests interact little, see kamis_max_partners)",
+                                     "graph is not dense, see kamis_max_degree)",
                                      lo=0, hi=100_000),
-        "kamis_fraction": Option("kamis_fraction", "float", 0.25, "share of the limit KaMIS gets "
+        "kamis_fraction": Option("kamis_fraction", "float", 0.2, "share of the limit KaMIS gets "
                                  "on a whole graph above 64 vertices (0: never)", lo=0.0, hi=1.0),
         "kamis_max_share_s": Option("kamis_max_share_s", "float", 1.0, "most time KaMIS gets on "
                                     "a whole graph above 64 vertices [s] (the planner's graphs "
                                     "took at most 0.7 s)", lo=0.0, hi=86_400.0),
-        "kamis_max_partners": Option("kamis_max_partners", "float", 8.0, "largest mean number of "
-                                     "interacting requests per request for which KaMIS gets the "
-                                     "whole graph (denser graphs made it overrun its limit)",
-                                     lo=0.0, hi=1e9),
+        "kamis_max_degree": Option("kamis_max_degree", "float", KAMIS_MAX_DEGREE, "largest mean "
+                                   "degree of the conflict graph (group cliques included, so "
+                                   "the groups change nothing) for which KaMIS gets the whole "
+                                   "graph first (denser graphs made it overrun its limit)",
+                                   lo=0.0, hi=1e9),
         "exact_max_vertices": Option("exact_max_vertices", "int", 200, "largest component solved "
                                      "by CP-SAT (larger: CHILS)", lo=0, hi=100_000),
         "exact_fraction": Option("exact_fraction", "float", 0.5, "share of a kernel's time "
@@ -233,14 +243,14 @@ class AutoBackend(Backend):
         if self._parts is None:  # a component handed over by the split below
             return self._solve_part(problem, time_limit_s, seed, opts, t0)
         if n <= opts["kamis_max_vertices"] and opts["kamis_fraction"] > 0:
-            partners = interacting_partners(problem)
-            if partners <= opts["kamis_max_partners"]:
-                # KaMIS on the whole graph (it reduces and splits itself, faster than the
-                # Python layers) with a share of the limit, at most kamis_max_share_s (on the
-                # hard large_instance family it never finishes 200 vertices, and the split's
-                # CP-SAT proves them in ~0.3 s): a return before 0.9 of the share is its
-                # completed search, a proof (a search stopped by the limit runs to it, as
-                # for the kamis backend); otherwise the split below goes on
+            degree = conflict_degree(problem)
+            if degree <= opts["kamis_max_degree"]:
+                # what proves first: KaMIS branch-and-reduce on the whole graph (its exact
+                # reductions are faster than the Python layers, and it splits itself) with a
+                # small share of the limit, at most kamis_max_share_s; a return before 0.9 of
+                # the share is its completed search, a proof (a search stopped by the limit runs
+                # to it, as for the kamis backend), returned at once; otherwise the split below
+                # (CP-SAT, CHILS) gets the rest of the limit
                 share = max(min(time_limit_s * opts["kamis_fraction"],
                                 opts["kamis_max_share_s"]), 1e-3)
                 res = self._kamis.solve(problem, time_limit_s=share, seed=seed,
@@ -249,7 +259,7 @@ class AutoBackend(Backend):
                     return make_result(problem, res.selected, proven_optimal=True,
                                        solve_time_s=time.perf_counter() - t0, backend=self.name,
                                        stats={**res.stats, "auto_method": "kamis",
-                                              "interacting_partners": partners})
+                                              "conflict_degree": degree})
         rest_s = max(time_limit_s - (time.perf_counter() - t0), 1e-3)
         if n <= self.split_max_vertices_parts:
             # exact reductions and component split, each component by _solve_part

@@ -30,6 +30,7 @@ __all__ = [
     "BackendUnavailable",
     "check_selection",
     "integer_weights",
+    "integer_proof_holds",
     "make_result",
     "brute_force_mwis",
     "induced_subproblem",
@@ -41,25 +42,82 @@ MAX_TOTAL_WEIGHT = 1e300
 
 
 
+def _show(value: Any) -> str:
+    """A caller's index value as they gave it (a Python int or float, never a wrapped int64)."""
+    return repr(value.item() if isinstance(value, np.generic) else value)
+
+
+def _asarray_exact(values: Any) -> np.ndarray:
+    """``np.asarray(values)``, except that a list holding Python ints beyond int64 (which numpy
+    turns into float64, losing digits) becomes an object array of the caller's exact values."""
+    arr = np.asarray(values)
+    if arr.dtype.kind == "f" and not isinstance(values, np.ndarray) and arr.size:
+        with np.errstate(invalid="ignore"):
+            big = np.abs(arr) >= 2.0**63
+        if big.any():
+            exact = np.asarray(values, dtype=object)
+            if exact.shape == arr.shape:
+                return exact
+    return arr
+
+
+def _index_values(arr: np.ndarray, field_name: str, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(idx, bad)`` for an array of vertex indices of any shape: ``idx`` the int64 values
+    (0 where bad), ``bad`` True where a value is not an integer in [0, n). The range is checked
+    in the array's own dtype (uint64 and floats beyond int64 never wrap, no numpy
+    RuntimeWarning); Python ints of any size in an object array are checked exactly.
+    Raises MwisInputError for a dtype that holds no integers."""
+    kind = arr.dtype.kind
+    if kind == "O":
+        flat = arr.reshape(-1).tolist()
+        ok = np.fromiter((isinstance(v, (int, np.integer)) and not isinstance(v, bool)
+                          and 0 <= int(v) < n for v in flat), dtype=bool, count=len(flat))
+        notint = [i for i, v in enumerate(flat)
+                  if not isinstance(v, (int, np.integer, float, np.floating))]
+        if notint:
+            v = flat[notint[0]]
+            raise MwisInputError(f"{field_name}: {v!r} is not a vertex index")
+        fl = [float(v) for v in flat]  # floats among ints: integral ones in range are fine
+        for i, v in enumerate(flat):
+            if not ok[i] and isinstance(v, (float, np.floating)) and math.isfinite(v) \
+                    and v == round(v) and 0 <= v < n:
+                ok[i] = True
+        idx = np.array([int(x) if ok[i] else 0 for i, x in enumerate(fl)], dtype=np.int64)
+        return idx.reshape(arr.shape), ~ok.reshape(arr.shape)
+    if kind == "f":
+        with np.errstate(invalid="ignore"):
+            bad = ~np.isfinite(arr) | (arr != np.round(arr)) | (arr < 0) | (arr >= n)
+        idx = np.where(bad, 0, arr).astype(np.int64)
+        return idx, bad
+    if kind == "u":
+        bad = arr >= n
+        return np.where(bad, 0, arr).astype(np.int64), bad
+    if kind in "ib":
+        idx = arr.astype(np.int64)
+        return idx, (idx < 0) | (idx >= n)
+    raise MwisInputError(f"{field_name}: expected integer vertex indices, got dtype {arr.dtype}")
+
+
+def _index_reason(value: Any, n: int) -> str:
+    """Why one vertex index value is bad, in the caller's own terms."""
+    if isinstance(value, (float, np.floating)) and (not math.isfinite(value)
+                                                    or value != round(value)):
+        return f"{value!r} is not an integer vertex index"
+    return f"vertex {_show(value)} is out of range [0, {n})"
+
+
 def _as_index_array(values: Any, field_name: str, n: int) -> np.ndarray:
-    """Return ``values`` as a 1-D int64 array of vertex indices in [0, n), or raise MwisInputError."""
+    """Return ``values`` as a 1-D int64 array of vertex indices in [0, n), or raise MwisInputError
+    naming the first bad element with the caller's value."""
     arr = np.asarray(values)
     if arr.size == 0:
         return np.zeros(0, dtype=np.int64)
     if arr.ndim != 1:
         raise MwisInputError(f"{field_name}: expected a 1-D index array, got shape {arr.shape}")
-    if arr.dtype.kind == "f":
-        bad = ~np.isfinite(arr) | (arr != np.round(arr))
-        if bad.any():
-            i = int(np.flatnonzero(bad)[0])
-            raise MwisInputError(f"{field_name}[{i}]: {arr[i]!r} is not an integer vertex index")
-    elif arr.dtype.kind not in "iub":
-        raise MwisInputError(f"{field_name}: expected integer vertex indices, got dtype {arr.dtype}")
-    idx = arr.astype(np.int64)
-    bad = (idx < 0) | (idx >= n)
+    idx, bad = _index_values(arr, field_name, n)
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
-        raise MwisInputError(f"{field_name}[{i}]: vertex {int(idx[i])} is out of range [0, {n})")
+        raise MwisInputError(f"{field_name}[{i}]: {_index_reason(arr[i], n)}")
     return idx
 
 
@@ -130,20 +188,16 @@ class MwisProblem:
             e = np.zeros((0, 2), dtype=np.int64)
         if e.ndim != 2 or e.shape[1] != 2:
             raise MwisInputError(f"edges: expected shape (m, 2), got {e.shape}")
-        if e.dtype.kind == "f":
-            bad = ~np.isfinite(e) | (e != np.round(e))
-            if bad.any():
-                i = int(np.flatnonzero(bad.any(axis=1))[0])
-                raise MwisInputError(f"edges[{i}]: {tuple(e[i].tolist())} is not a pair of integer vertex indices")
-        elif e.dtype.kind not in "iub":
-            raise MwisInputError(f"edges: expected integer vertex indices, got dtype {e.dtype}")
-        e64 = e.astype(np.int64)
-        bad = ((e64 < 0) | (e64 >= n)).any(axis=1)
+        e64, bad2 = _index_values(e, "edges", n)
+        bad = bad2.any(axis=1)
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
-            raise MwisInputError(
-                f"edges[{i}]: ({int(e64[i, 0])}, {int(e64[i, 1])}) has a vertex out of range [0, {n})"
-            )
+            pair = repr(tuple(e[i].tolist()))
+            if e.dtype.kind in "fO" and any(
+                    isinstance(v, (float, np.floating)) and (not math.isfinite(v) or v != round(v))
+                    for v in e[i].tolist()):
+                raise MwisInputError(f"edges[{i}]: {pair} is not a pair of integer vertex indices")
+            raise MwisInputError(f"edges[{i}]: {pair} has a vertex out of range [0, {n})")
         loops = e64[:, 0] == e64[:, 1]
         if loops.any():
             i = int(np.flatnonzero(loops)[0])
@@ -237,7 +291,7 @@ def _edge_array(edges: Any) -> np.ndarray:
     if edges is None:
         return np.zeros((0, 2), dtype=np.int64)
     try:
-        return np.asarray(edges)
+        return _asarray_exact(edges)
     except (TypeError, ValueError):
         pass
     try:
@@ -281,7 +335,7 @@ def _normalise_groups(groups: Sequence[Any] | None, n: int) -> list[np.ndarray]:
     arrays = []
     for gi, g in enumerate(groups):
         try:
-            a = np.asarray(g)
+            a = _asarray_exact(g)
         except (TypeError, ValueError):
             raise MwisInputError(f"groups[{gi}]: {g!r} is not a flat sequence of vertex indices") from None
         if a.ndim == 0:
@@ -396,23 +450,56 @@ def check_selection(problem: MwisProblem, selected: Any) -> tuple[bool, str]:
 def integer_weights(weights: np.ndarray, resolution: int = 10**6) -> tuple[np.ndarray, float]:
     """Scale float weights to non-negative int64 for integer solvers (CP-SAT, KaMIS, CHILS).
 
-    ``w_int = round(w * scale)`` with ``scale = resolution / max(w)``: the heaviest vertex becomes
-    ``resolution`` and every weight is rounded to a multiple of ``max(w) / resolution`` (absolute
-    error <= max(w) / (2 * resolution) per vertex). Positive weights that would round to 0 are
-    kept at 1 so the solver still prefers taking them. Returns ``(w_int, scale)``; scale is 1.0
-    when all weights are 0. Callers recompute the objective from the float weights.
-    Raises MwisInputError when ``n * resolution`` would overflow int64 sums.
+    ``w_int = round((w / max(w)) * resolution)``: the heaviest vertex becomes ``resolution`` and
+    every weight is rounded to a multiple of ``max(w) / resolution`` (absolute error
+    <= max(w) / (2 * resolution) per vertex). The ratio is taken first, so no finite input
+    overflows (w / max(w) <= 1) and none turns into garbage. Positive weights that would round
+    to 0 are kept at 1 so the solver still prefers taking them. Returns ``(w_int, scale)``,
+    ``scale = resolution / max(w)`` (finite; 1.0 when all weights are 0). Callers recompute
+    the objective from the float weights and check a claimed optimum with
+    :func:`integer_proof_holds`.
+    Raises MwisInputError naming the field and value when ``n * resolution`` would overflow
+    int64 sums, or when the largest weight is so small that ``scale`` is not representable
+    (below ``resolution / 1.8e308``, about 5.6e-303 at 10^6: rescale the weights).
     """
     w = np.asarray(weights, dtype=np.float64)
     if w.size and w.size * float(resolution) > 2.0**62:
         raise MwisInputError(f"weights: {w.size} vertices x resolution {resolution} overflows int64")
-    wmax = float(w.max()) if w.size else 0.0
+    if not w.size:
+        return np.zeros(0, dtype=np.int64), 1.0
+    i = int(np.argmax(w))
+    wmax = float(w[i])
     if wmax <= 0.0:
         return np.zeros(w.shape, dtype=np.int64), 1.0
-    scale = float(resolution) / wmax
-    wi = np.rint(w * scale).astype(np.int64)
+    with np.errstate(over="ignore"):
+        scale = float(resolution) / wmax
+    if not math.isfinite(scale):
+        raise MwisInputError(
+            f"weights[{i}]: {wmax!r} is the largest weight and too small for integer weights "
+            f"(resolution {resolution} / {wmax!r} overflows float64; multiply the weights by "
+            "a constant, which changes no optimum)")
+    wi = np.rint((w / wmax) * float(resolution)).astype(np.int64)
     wi[(wi == 0) & (w > 0)] = 1
     return wi, scale
+
+
+def integer_proof_holds(problem: "MwisProblem", selected: Any, wi: np.ndarray, scale: float,
+                        integer_bound: float) -> bool:
+    """True when a proof found on the integer weights ``wi`` (``integer_weights``) holds for the
+    returned set: its integer objective equals the solver's ``integer_bound`` (the optimum it
+    proved) and its objective recomputed in the input's own weights equals that bound divided
+    by ``scale`` up to the rounding of the selected weights (<= 1/2 step each; 1 step for a
+    positive weight kept at 1). Anything else (a solver whose set is not the one it proved, a
+    scale that turned the weights into garbage) is no proof. O(|selected|)."""
+    sel = np.asarray(selected, dtype=np.int64).reshape(-1)
+    if not math.isfinite(float(integer_bound)) or not math.isfinite(scale) or scale <= 0:
+        return False
+    int_obj = int(np.asarray(wi, dtype=np.int64)[sel].sum()) if sel.size else 0
+    if int_obj != round(float(integer_bound)):
+        return False
+    obj = problem.objective(sel)
+    tol = 0.5 * sel.size + float(np.sum(wi[sel] == 1)) * 0.5 + 1e-9 * max(int_obj, 1)
+    return abs(obj * scale - int_obj) <= tol
 
 
 @dataclass

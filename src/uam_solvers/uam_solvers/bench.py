@@ -430,6 +430,84 @@ def scale_benchmark(seed: int, corpora=(), out=print) -> None:
         + (f" ({r.message[:90]})" if r.fallback else ""))
 
 
+def adversarial_graphs(seed: int) -> list:
+    """(name, problem) of the deadline table: dense G(n, p) and a clique of 1,000 with a
+    pendant on each clique vertex, with and without the clique given as a group."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for n, pr in ((300, 0.5), (1000, 0.1), (2000, 0.1), (2000, 0.5)):
+        a, b = np.triu_indices(n, 1)
+        keep = rng.random(a.size) < pr
+        out.append((f"G({n}, {pr})", MwisProblem.from_arrays(rng.random(n) + 0.5,
+                                                             np.stack([a[keep], b[keep]], 1))))
+    a, b = np.triu_indices(1000, 1)
+    w = rng.random(2000) + 0.5
+    clique = np.stack([a, b], 1)
+    pend = np.stack([np.arange(1000), 1000 + np.arange(1000)], 1)
+    out.append(("K1000 + pendants", MwisProblem.from_arrays(w, np.concatenate([clique, pend]))))
+    out.append(("K1000 + pendants, clique as group",
+                MwisProblem.from_arrays(w, pend, groups=[np.arange(1000)])))
+    return out
+
+
+def deadline_benchmark(seed: int, backends, limit_s: float = 1.0, out=print) -> None:
+    """Wall time against the limit of every backend through ``uam_solvers.solve_bounded`` (the
+    in-process path of the runner and the planner: the process's shared SolveService) on the
+    adversarial graphs, one run each (issue 20: at most limit + 0.5 s)."""
+    from . import solve_bounded
+    from .executor import shared_service
+
+    t0 = time.perf_counter()
+    shared_service()
+    out(f"\n## Deadlines in process (issue 20): `uam_solvers.solve_bounded`, limit {limit_s:g} s\n")
+    out(f"(shared service started and warmed in {time.perf_counter() - t0:.2f} s, before the "
+        "first solve; wall = the call, from the validated problem's arrays)\n")
+    out("| graph | vertices | conflict pairs | " + " | ".join(backends) + " |")
+    out("|---|---:|---:|" + "---:|" * len(backends))
+    worst = 0.0
+    for name, p in adversarial_graphs(seed):
+        cells = []
+        for b in backends:
+            ok, _ = _usable(b)
+            if not ok:
+                cells.append("n/a")
+                continue
+            t = time.perf_counter()
+            r = solve_bounded(p.weights, p.edges, list(p.groups), backend=b, time_limit_s=limit_s)
+            dt = time.perf_counter() - t
+            worst = max(worst, dt)
+            tag = {"killed": " K", "no-free-worker": " Q"}.get(r.stats.get("executor"), "")
+            cells.append(f"{dt:.2f}{tag}{' P' if r.proven_optimal else ''}")
+        out(f"| {name} | {p.n} | {p.all_edges().shape[0]} | " + " | ".join(cells) + " |")
+    out(f"\nwall s per solve; K = killed at the limit + margin (the greedy fallback answered), "
+        f"P = proven optimal. Worst wall {worst:.2f} s with a {limit_s:g} s limit "
+        f"(target <= {limit_s + 0.5:g} s).")
+
+
+def grouped_benchmark(seed: int, sizes, seeds: int, limit_s: float = 1.0, out=print) -> None:
+    """Issue 20's target: ``auto`` end to end on paper-shaped graphs with the groups given
+    (``instances.grouped_random_instance``) against KaMIS branch-and-reduce called directly,
+    interleaved, best of TARGET_REPEATS; and the same graphs without their groups."""
+    from .instances import grouped_random_instance
+
+    warm = grouped_random_instance(300, seed + 1000)
+    _solve_arrays(warm, "auto", limit_s, 0)
+    kamis_direct(warm, limit_s)
+    out(f"\n## `auto` on paper-shaped graphs with groups (issue 20), limit {limit_s:g} s\n")
+    out("(`grouped_random_instance`: requests of 5 candidates as cliques, listed among the edges "
+        "and given as groups, plus random conflicts of 2.5 per vertex; `auto` by "
+        "`uam_solvers.solve` from the arrays, end to end; KaMIS on the CSR)\n")
+    out("| graphs, vertices | instances | auto median ms | auto proven | KaMIS direct median ms "
+        "| KaMIS finished | CP-SAT direct median ms | CP-SAT proven | median ratio auto/KaMIS "
+        "(both proven) | auto = best objective |")
+    out("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for n in sizes:
+        ps = [grouped_random_instance(n, seed + s) for s in range(seeds)]
+        out(_mid_row(f"with groups {n}", ps, limit_s, cpsat=False))
+        bare = [MwisProblem.from_arrays(p.weights, p.edges) for p in ps]
+        out(_mid_row(f"same, no groups {n}", bare, limit_s, cpsat=False))
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m uam_solvers.bench", description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true",
@@ -454,7 +532,18 @@ def main(argv=None) -> int:
     ap.add_argument("--corpus", action="append", default=[],
                     help="uam-mwis-corpus/1 file of real planner instances (repeatable), e.g. "
                          "from scripts/measure_system_airspace.py --instances")
+    ap.add_argument("--issue20", action="store_true",
+                    help="only issue 20's tables: auto vs KaMIS on paper-shaped graphs with "
+                         "groups (15-500 vertices) and the in-process deadline table")
+    ap.add_argument("--deadline-limit", type=float, default=1.0)
     args = ap.parse_args(argv)
+    if args.issue20:
+        print("# MWIS solver benchmark (python -m uam_solvers.bench " + " ".join(argv or sys.argv[1:]) + ")")
+        print(_machine())
+        grouped_benchmark(args.seed, [15, 50, 100, 250, 500], args.mid_seeds)
+        deadline_benchmark(args.seed, [b for b in args.large_backends.split(",") if b],
+                           args.deadline_limit)
+        return 0
     if args.quick:
         args.instances, args.qpu_subset = 60, 10
         args.large_sizes, args.large_limits = "1000", "1"

@@ -24,7 +24,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from .base import (Backend, MwisInputError, MwisProblem, MwisResult, check_selection,
-                   integer_weights, make_result)
+                   integer_proof_holds, integer_weights, make_result)
 from .options import Option
 
 __all__ = ["KamisBackend", "ChilsBackend"]
@@ -95,7 +95,10 @@ class KamisBackend(Backend):
         dt = time.perf_counter() - t0
         sel = _checked(problem, verts, self.name)
         finished = dt < finish_fraction * time_limit_s
-        return make_result(problem, sel, proven_optimal=finished, solve_time_s=dt, backend=self.name,
+        # a finished search proves the integer optimum int_obj; it is claimed only when the
+        # returned set has exactly that integer objective and its own weights agree with it
+        proven = finished and integer_proof_holds(problem, sel, wi, scale, int(int_obj))
+        return make_result(problem, sel, proven_optimal=proven, solve_time_s=dt, backend=self.name,
                            stats={"weight_scale": scale, "integer_objective": int(int_obj),
                                   "finished_before_limit": int(finished)})
 

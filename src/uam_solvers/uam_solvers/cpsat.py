@@ -21,7 +21,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from .base import Backend, MwisProblem, MwisResult, integer_weights, make_result
+from .base import Backend, MwisProblem, MwisResult, integer_proof_holds, integer_weights, make_result
 from .greedy import greedy_mwis
 from .options import Option
 
@@ -148,5 +148,9 @@ class CpSatBackend(Backend):
             "at_most_one_edges": int(rest.shape[0]),
             "cpsat_wall_time_s": float(solver.wall_time),
         }
-        return make_result(problem, sel, proven_optimal=status == cp_model.OPTIMAL, solve_time_s=dt,
+        # OPTIMAL proves the integer optimum (the bound); claimed only when the returned set
+        # has that integer objective and its own weights agree (integer_proof_holds)
+        proven = status == cp_model.OPTIMAL and integer_proof_holds(
+            problem, sel, wi, scale, float(solver.best_objective_bound))
+        return make_result(problem, sel, proven_optimal=proven, solve_time_s=dt,
                            backend=self.name, stats=stats)

@@ -22,8 +22,8 @@ from typing import Any, Mapping
 import numpy as np
 from scipy.sparse.csgraph import connected_components
 
-from .base import (Backend, MwisProblem, MwisResult, check_selection, induced_subproblem,
-                   make_result)
+from .base import (Backend, MwisInputError, MwisProblem, MwisResult, check_selection,
+                   induced_subproblem, make_result)
 from .reductions import complete_maximal, reduce_problem
 
 __all__ = ["ComponentSplit", "Reduce", "ValidateFallback", "induced_subproblem", "Layer"]
@@ -300,6 +300,10 @@ class ValidateFallback(Layer):
                       f"{elapsed:.3f} s (limit {time_limit_s:.3f} s + margin)")
         elif "error" in box:
             exc = box["error"]
+            if isinstance(exc, MwisInputError):
+                # input the backend cannot represent (e.g. weights too small to scale to
+                # integers): the caller's error, as through the solve service, not a fallback
+                raise exc
             reason = f"backend {self.child.name!r} raised {type(exc).__name__}: {exc}"
         else:
             res = box.get("result")
@@ -323,9 +327,9 @@ class ValidateFallback(Layer):
                               fallback=bool(res.fallback), message=res.message)
         log.warning("MWIS fallback to %s: %s", self.fallback.name, reason)
         try:
-            from .greedy import FAST_FALLBACK_ABOVE, GreedyBackend, fallback_selection
+            from .greedy import GreedyBackend, fallback_selection, needs_fast_fallback
 
-            if isinstance(self.fallback, GreedyBackend) and problem.n > FAST_FALLBACK_ABOVE:
+            if isinstance(self.fallback, GreedyBackend) and needs_fast_fallback(problem):
                 sel, rule = fallback_selection(problem)  # bounded time on large graphs
                 stats, proven = {"rule": rule}, False
             else:

@@ -524,7 +524,9 @@ def embedded_solve(problem: MwisProblem, child, *, backend: str, seed: int, time
         chain_strength_rule = "fixed"
     embedding_parameters = {
         "random_seed": _int_option(options, "embedding_seed", 0, 0),
-        "timeout": _float_option(options, "embedding_timeout_s", max(1.0, float(time_limit_s))),
+        # half the limit by default (it was max(1, limit): minorminer uses its whole timeout,
+        # so a 1 s limit ran to 1.4 s and was killed; issue 20 contract test)
+        "timeout": _float_option(options, "embedding_timeout_s", max(0.5 * float(time_limit_s), 0.05)),
         "tries": _int_option(options, "embedding_tries", 10, 1),
     }
 
@@ -649,7 +651,7 @@ class QpuBackend(Backend):
     DWaveSampler (tests pass AdvantageStandInSampler); the option of the same name overrides it
     per call. Options: num_reads (100), annealing_time_us (1.0), chain_strength (a number, or the
     default "uniform_torque_compensation"), chain_strength_prefactor (1.414), lambda (2.0),
-    optimum, embedding_seed (0), embedding_timeout_s (max(1, time_limit_s)), embedding_tries
+    optimum, embedding_seed (0), embedding_timeout_s (max(0.5 time_limit_s, 0.05)), embedding_tries
     (10), solver (DWaveSampler solver selection, e.g. a name).
     """
 

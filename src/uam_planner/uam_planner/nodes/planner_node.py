@@ -140,6 +140,12 @@ class PlannerNode(Node):
             return
         self._ready_timer.cancel()
         self.destroy_timer(self._ready_timer)
+        if not self.p["use_solver_service"]:
+            # local solves go through this process's solve service (uam_solvers.solve_bounded):
+            # its workers start and warm up now, before the first epoch is asked for
+            from uam_solvers.executor import shared_service
+
+            shared_service()
         self._service = self.create_service(PlanEpoch, c.SERVICE_PLAN_EPOCH, self._on_plan_epoch,
                                             callback_group=self._group)
         self.get_logger().info(f"serving {self.resolve_service_name(c.SERVICE_PLAN_EPOCH)}")
