@@ -314,3 +314,45 @@ def test_ids_in_a_demand_file_are_bounded_at_load_as_on_the_wire(tmp_path):
         parse_demand([{"t_s": 0, "origin": "A" * 5000, "destination": "B"}])
     with pytest.raises(DemandError, match=r"\[0\]\.id: 'a b'"):
         parse_demand([{"t_s": 0, "origin": "A", "destination": "B", "id": "a b"}])
+
+
+@pytest.mark.parametrize("seed,knows_token", [(0, False), (1, False), (0, True), (1, True)])
+def test_whatever_a_rogue_caller_sends_the_flown_fleet_keeps_its_separation(ros_context, spin_until, seed,
+                                                                            knows_token):
+    """Property: a rogue that sends random epoch and release calls (resumes with empty or partial
+    airborne lists, other epochs, other epoch lengths, ids that never arrive) never makes the
+    simulator fly two flights closer than the minimum. Without the run's token it changes
+    nothing: the run is the clean run, or ends with a reason. With the token (read off the open
+    wire) it impersonates the simulator and can change who is served (e.g. plan the next epoch
+    before the simulator asks, before its requests arrived): only DDS Security stops that
+    (docs/security.md), but separation still holds."""
+    import numpy as np
+
+    rng = np.random.default_rng(seed)
+
+    def attack(executor, nodes, rogue):
+        sim = nodes["simulator"]
+        assert spin_until(executor, lambda: sim.t_s >= 30.0, timeout_s=60)
+        for _ in range(25):
+            k = int(rng.integers(0, 12))
+            epoch_s = float(rng.choice([30.0, 30.0, 1.0, 1e6]))
+            session = sim.session if knows_token and rng.random() < 0.8 else f"rogue{int(rng.integers(3))}"
+            if rng.random() < 0.7:
+                seen = [p for p in sim.flown_plans]
+                airborne = [] if rng.random() < 0.5 or not seen else \
+                    [seen[i] for i in rng.choice(len(seen), size=min(len(seen), 2), replace=False)]
+                req = PlanEpoch.Request(epoch_index=k, epoch_time=m.to_time(k * epoch_s), epoch_s=epoch_s,
+                                        resume=bool(rng.random() < 0.6), airborne=airborne, session=session,
+                                        expected_request_ids=[f"x/{i}" for i in range(int(rng.integers(0, 3)))])
+                fut = rogue.plan.call_async(req)
+            else:
+                fut = rogue.release.call_async(ReleaseDemand.Request(
+                    epoch_index=k, epoch_time=m.to_time(k * epoch_s), epoch_s=epoch_s, session=session))
+            spin_until(executor, fut.done, timeout_s=5)
+            if sim.finished:
+                break
+    obs, nodes, _ = _run_with_rogue(ros_context, spin_until, attack)
+    sim = nodes["simulator"]
+    assert _flown_by_simulator_audit(sim).ok
+    if not knows_token:
+        assert not sim.error and decisions(obs.plans) == _clean(), sim.error
