@@ -300,7 +300,8 @@ class PlannerNode(Node):
                 return self._refuse_call(
                     request, response,
                     PlanEpoch.Response.STATUS_IN_PROGRESS if same else PlanEpoch.Response.STATUS_REFUSED,
-                    f"epoch {self._inflight} is being planned" + ("" if same else f"; epoch {k} asked"))
+                    f"epoch {self._inflight} is being planned" if same else
+                    f"epoch_index: {k} asked while epoch {self._inflight} is being planned")
             fresh = self._fresh()
             if request.resume and not fresh:
                 # the resume path is for a planner that restarted and holds nothing: one that
