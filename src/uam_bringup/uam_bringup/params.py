@@ -65,7 +65,10 @@ def check(name: str, value, default, lo=None, hi=None, choices=None, rule=None):
         if isinstance(value, bool) or not isinstance(value, int):
             raise ValueError(f"parameter {name}: {value!r} is not an integer")
     elif isinstance(default, str):
-        if not isinstance(value, str):
+        if isinstance(value, bool) and choices is not None and {"off", "on"} & set(choices):
+            # `-p rerun:=off`: ROS reads the argument as YAML, where off is the boolean false
+            value = _yaml_word(value)
+        elif not isinstance(value, str):
             raise ValueError(f"parameter {name}: {value!r} is not a string")
     if lo is not None and value < lo:
         raise ValueError(f"parameter {name}: {value!r} is below the minimum {lo}")
@@ -78,6 +81,16 @@ def check(name: str, value, default, lo=None, hi=None, choices=None, rule=None):
         if why:
             raise ValueError(f"parameter {name}: {why}")
     return value
+
+
+def _yaml_word(value: bool) -> str:
+    """The word a choice parameter means by a YAML 1.1 boolean (off/on)."""
+    return "on" if value else "off"
+
+
+def _bool_alias(p: "Param") -> bool:
+    """A string parameter with the choice 'off' or 'on', which YAML turns into a boolean."""
+    return isinstance(p.default, str) and bool(p.choices) and bool({"off", "on"} & set(p.choices))
 
 
 def _declared(node, p: "Param"):
@@ -105,7 +118,7 @@ def _descriptor(p: Param):
     from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 
     desc = ParameterDescriptor(description=p.text(), read_only=p.read_only,
-                               dynamic_typing=isinstance(p.default, float))
+                               dynamic_typing=isinstance(p.default, float) or _bool_alias(p))
     if isinstance(p.default, int) and not isinstance(p.default, bool) and p.lo is not None and p.hi is not None:
         desc.integer_range = [IntegerRange(from_value=int(p.lo), to_value=int(p.hi), step=0)]
     if p.choices:

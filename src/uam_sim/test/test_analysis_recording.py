@@ -139,6 +139,33 @@ def test_command_line_prints_summary_and_exit_code_flags_a_loss(recording, capsy
     assert main([str(recording) + ".missing"]) == 1
 
 
+def test_files_that_are_not_mcap_are_refused_naming_them(tmp_path, capsys):
+    # the README was read as an INCOMPLETE recording of 0 requests whose audit was "OK", exit 0
+    text = tmp_path / "README.md"
+    text.write_text("# not a recording\n")
+    empty = tmp_path / "empty.mcap"
+    empty.write_bytes(b"")
+    for path in (text, empty):
+        assert main([str(path)]) == 2
+        captured = capsys.readouterr()
+        assert f"{str(path)!r} is not an MCAP file" in captured.err
+        assert "Safety audit" not in captured.out and "OK" not in captured.out
+    with pytest.raises(ValueError, match="not an MCAP file"):
+        summarize(text)
+
+
+def test_misspelled_options_are_errors_not_file_names(recording, capsys):
+    # `--seperation cylinder x.mcap` said "no file at cylinder"
+    with pytest.raises(SystemExit) as stop:
+        main(["--seperation", "cylinder", str(recording)])
+    assert stop.value.code == 2 and "--seperation" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as stop:  # an abbreviation is not taken for the option
+        main(["--separation-", "40", str(recording)])
+    assert stop.value.code == 2
+    # what ros2 run appends is still ignored
+    assert main([str(recording), "--separation-m", "40", "--ros-args", "-r", "__node:=x"]) == 0
+
+
 def test_fleet_state_digest_reads_stamp_and_count_from_the_cdr():
     from uam_sim.cdr import fleet_state_digest as _fleet_state_digest
     from uam_sim.cdr import serialize_exact

@@ -53,7 +53,7 @@ from typing import Any, Iterable
 import numpy as np
 
 from .audit import AIRSPACE_METADATA, SafetyAudit, audit_plans, separation_from_metadata
-from .mcap_reader import is_complete, iter_decoded, read_metadata
+from .mcap_reader import is_complete, iter_decoded, read_metadata, require_mcap
 from .stamps import stamp_s
 
 #: the MCAP metadata record the recorder node writes with its check of what it received
@@ -376,6 +376,7 @@ def summarize(path: str | Path, separation_m=None, reader: str = "rclpy",
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"recording: no file at {path}")
+    require_mcap(path)
     if separation_m is None:
         separation_m = separation_from_metadata(read_metadata(path, AIRSPACE_METADATA),
                                                 default_separation)
@@ -472,7 +473,7 @@ def _separation_from_flags(args):
 def main(argv: list[str] | None = None) -> int:
     """Command line: print the summary of a recording (exit 2 if the audit finds a loss, 3 if the
     recording lacks plans it should hold, so its audit cannot be trusted)."""
-    ap = argparse.ArgumentParser(prog="analyze", description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, prog="analyze", description=__doc__.split("\n\n")[0])
     ap.add_argument("recording", help="the .mcap file of a run")
     ap.add_argument("--separation", choices=("sphere", "cylinder"), default=None,
                     help="separation model of the audit (default: the run's, from the recording's "
@@ -485,8 +486,17 @@ def main(argv: list[str] | None = None) -> int:
                     help="decoder: rclpy (default, tolerates torn files) or rosbags (independent)")
     ap.add_argument("--json", action="store_true", help="print the summary as JSON")
     ap.add_argument("--no-epochs", action="store_true", help="leave out the per-epoch table")
-    # ros2 run appends --ros-args ...; ignore it
-    args, _unknown = ap.parse_known_args(argv)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if "--ros-args" in argv:  # ros2 run appends --ros-args ...: that part is not ours
+        argv = argv[:argv.index("--ros-args")]
+    args = ap.parse_args(argv)  # a misspelled option is an error (exit 2), not a file name
+    try:
+        require_mcap(args.recording)
+    except ValueError as exc:  # not a recording at all: nothing was read, so no verdict
+        print(f"analyze: {exc}", file=sys.stderr)
+        return 2
+    except FileNotFoundError:
+        pass  # summarize says so
     try:
         separation = _separation_from_flags(args)
         summary = summarize(args.recording, separation, args.reader)

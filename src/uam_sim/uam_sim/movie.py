@@ -226,7 +226,7 @@ def make_movie(paths: Sequence[str | Path], out: str | Path, network: Any = None
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m uam_sim.movie",
+    ap = argparse.ArgumentParser(allow_abbrev=False, prog="python -m uam_sim.movie",
                                  description="side-by-side movie of runs of one demand (e.g. FIFO and MWIS)")
     ap.add_argument("recordings", nargs="+", help="the runs' .mcap files (two for the paper's movie)")
     ap.add_argument("--out", default="movie.mp4", help=".mp4 (ffmpeg) or .gif")

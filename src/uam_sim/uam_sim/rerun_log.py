@@ -487,7 +487,7 @@ def main(argv: list[str] | None = None) -> int:
     import argparse
     import sys
 
-    ap = argparse.ArgumentParser(prog="python -m uam_sim.rerun_log",
+    ap = argparse.ArgumentParser(allow_abbrev=False, prog="python -m uam_sim.rerun_log",
                                  description="turn a run's MCAP recording into a Rerun .rrd with the view")
     ap.add_argument("mcap")
     ap.add_argument("--network", default="", help="network file the run used (draws the network and "

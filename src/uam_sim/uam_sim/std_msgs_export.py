@@ -547,7 +547,7 @@ def main(argv: list[str] | None = None) -> int:
     import argparse
     import sys
 
-    ap = argparse.ArgumentParser(prog="python -m uam_sim.std_msgs_export",
+    ap = argparse.ArgumentParser(allow_abbrev=False, prog="python -m uam_sim.std_msgs_export",
                                  description="copy a recording and add the standard-message view topics")
     ap.add_argument("src", nargs="?")
     ap.add_argument("dst", nargs="?")
