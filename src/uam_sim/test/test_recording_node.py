@@ -250,3 +250,39 @@ def test_recorder_refuses_waiting_for_a_topic_it_does_not_record(ros_context, tm
         RecorderNode(context=ros_context, parameter_overrides=[
             Parameter("output", value=str(tmp_path / "r.mcap")),
             Parameter("wait_for_publishers", value=["uam/nope"])])
+
+
+def test_each_channel_s_log_times_are_in_order_when_its_publishers_stamps_are_not(ros_context, spin_until, tmp_path):
+    """`rerun mcap check` reported "PROBLEM /uam/epoch_sync 2 unordered chunks on
+    message_log_time": the simulator announces epoch k+1 before the planner and the generator
+    report epoch k, and the log time was each message's own stamp."""
+    out = tmp_path / "sync.mcap"
+    recorder = RecorderNode(context=ros_context, parameter_overrides=[
+        Parameter("output", value=str(out)), Parameter("views", value=False)])
+    talker = Node("talker", context=ros_context)
+    topic, (cls, qos) = next((k, v) for k, v in RECORDED_TOPICS.items() if k.endswith("epoch_sync"))
+    pub = talker.create_publisher(cls, topic, qos)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(recorder)
+    executor.add_node(talker)
+    sent = [("simulator", 1, 30), ("planner", 0, 0), ("request_generator", 1, 30), ("simulator", 2, 60),
+            ("planner", 1, 30)]
+    try:
+        assert spin_until(executor, lambda: pub.get_subscription_count() >= 1, 20)
+        for sender, k, sec in sent:
+            pub.publish(EpochSync(sender=sender, epoch_index=k, epoch_time=t(sec)))
+        assert spin_until(executor, lambda: recorder.messages_written == len(sent), 20)
+        pub.publish(EpochSync(sender="simulator", finished=True, epoch_time=t(60)))
+        assert spin_until(executor, lambda: recorder.finished, 20)
+    finally:
+        executor.shutdown()
+        recorder.destroy_node()
+        talker.destroy_node()
+    from rclpy.serialization import deserialize_message
+    msgs = [m for m in read_messages(out) if m.topic == "/uam/epoch_sync"]
+    assert len(msgs) == len(sent) + 1
+    times = [m.log_time_ns for m in msgs]
+    assert times == sorted(times) == [30 * NS, 30 * NS, 30 * NS, 60 * NS, 60 * NS, 60 * NS]
+    # each message keeps its own stamp in its bytes (the order they arrived in)
+    stamps = [deserialize_message(m.data, EpochSync).epoch_time.sec for m in msgs]
+    assert stamps == [30, 0, 30, 60, 30, 60]

@@ -6,7 +6,9 @@
 It subscribes raw (CDR bytes as DDS delivers them, like rosbag2), so the bytes in the file are
 exactly the bytes on the wire. Log time and publish time of each message are its simulation
 time: the message's own stamp (``header.stamp``, ``clock``, ``epoch_time``, ``request_time``)
-when it has one, else the latest ``/clock`` received. (rosbag2 with ``--use-sim-time`` stamps
+when it has one, else the latest ``/clock`` received; never earlier than the previous message of
+the same topic (a topic with several publishers delivers stamps out of order), so every channel's
+times are in order. (rosbag2 with ``--use-sim-time`` stamps
 the receive time on the /clock timeline; taking the message's own stamp gives the same time
 without the race between a message and the clock tick that announced it.)
 
@@ -133,6 +135,7 @@ class RecorderNode(Node):
         super().__init__("recorder", **kwargs)
         # one table (uam_bringup.params.RECORDER): declared read-only, checked at start-up
         p = declare_table(self, RECORDER)
+        self._channel_last_ns: dict[str, int] = {}  # topic -> log time of its last message [ns]
         airspace = airspace_metadata(p["separation_model"], p["separation_m"], p["vertical_separation_m"],
                                      p["departure_slot_s"])
         output = p["output"]
@@ -289,7 +292,7 @@ class RecorderNode(Node):
         log_ns = stamp if stamp is not None else self._clock_ns
         if not self.recorder.has_topic(self._names[topic]):
             self._register(topic, cls)
-        self.recorder.write(self._names[topic], data, log_time_ns=max(0, log_ns))
+        self.recorder.write(self._names[topic], data, log_time_ns=self._channel_time_ns(self._names[topic], log_ns))
         self.messages_written += 1
         self._dirty = True
         if topic in (c.TOPIC_PLANS, c.TOPIC_REPORTS, c.TOPIC_SYNC) and msg is None:
@@ -333,8 +336,18 @@ class RecorderNode(Node):
         """One view message (uam_sim.std_msgs_export.ViewMessage) at its simulation time."""
         if not self.recorder.has_topic(vm.topic):
             self.recorder.add_topic(vm.topic, vm.type_name)
-        self.recorder.write(vm.topic, vm.data, log_time_ns=max(0, vm.sim_time_ns))
+        self.recorder.write(vm.topic, vm.data, log_time_ns=self._channel_time_ns(vm.topic, vm.sim_time_ns))
         self.view_messages_written += 1
+
+    def _channel_time_ns(self, topic: str, stamp_ns: int) -> int:
+        """The log time of a message of ``topic``: its stamp, but never before the topic's previous
+        message. Several publishers share a topic (EpochSync of simulator, generator and planner,
+        the simulator announcing epoch k+1 before the others report epoch k), so stamps arrive out
+        of order; MCAP tools expect each channel's log times in order (`rerun mcap check`
+        reported unordered chunks). The message's own stamp is in its bytes."""
+        t = max(0, int(stamp_ns), self._channel_last_ns.get(topic, 0))
+        self._channel_last_ns[topic] = t
+        return t
 
     def _drain(self) -> int:
         """Write every message already delivered to our subscriptions but not yet taken.
