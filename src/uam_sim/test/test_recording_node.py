@@ -286,3 +286,23 @@ def test_each_channel_s_log_times_are_in_order_when_its_publishers_stamps_are_no
     # each message keeps its own stamp in its bytes (the order they arrived in)
     stamps = [deserialize_message(m.data, EpochSync).epoch_time.sec for m in msgs]
     assert stamps == [30, 0, 30, 60, 30, 60]
+
+
+def test_the_check_says_how_many_fleet_states_it_holds_and_which_steps_it_never_received():
+    """A replayed and re-recorded file held 594 of 601 fleet states and its check said "none
+    missing": the first seven were published before the recorder subscribed."""
+    from rclpy.serialization import serialize_message
+    from uam_sim.nodes.recorder_node import RecordingCheck
+
+    check = RecordingCheck()
+    for k in range(7, 601):
+        check.on_fleet_state(serialize_message(FleetState(step_index=k)))
+    r = check.result()
+    assert r["fleet_states"] == "594" and r["fleet_states_before_first"] == "7"
+    assert "594 fleet states (steps 7..600)" in r["verdict"]
+    assert "7 before the first not received (steps 0..6)" in r["verdict"]
+    assert "none missing;" not in r["verdict"] and not r["verdict"].endswith("none missing")
+    whole = RecordingCheck()
+    for k in range(0, 601):
+        whole.on_fleet_state(serialize_message(FleetState(step_index=k)))
+    assert whole.result()["verdict"].endswith("601 fleet states (steps 0..600), none missing between the first and the last")

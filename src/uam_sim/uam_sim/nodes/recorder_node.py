@@ -118,14 +118,22 @@ class RecordingCheck:
                        + ", ".join(f"{k} ({self.announced.get(k, 0)} announced, "
                                    f"{len(self.received.get(k, ()))} received)" for k in bad[:10]))
         lost, listed = missing_steps(self.steps)
+        held = len(set(self.steps))
+        # a run's fleet states start at step 0: those before the first received were not recorded
+        # (a replay that began before the recorder subscribed), which "none missing" hid
+        before = int(min(self.steps)) if self.steps else 0
+        span = f"steps {min(self.steps)}..{max(self.steps)}" if self.steps else "no steps"
         if lost:
-            verdict += (f"; {lost} fleet state(s) missing between the first and the last received "
-                        f"(steps {format_steps(lost, listed)})")
+            verdict += (f"; {held} fleet states ({span}), {lost} fleet state(s) missing between the "
+                        f"first and the last received (steps {format_steps(lost, listed)})")
         else:
-            verdict += f"; {len(self.steps)} fleet states, none missing"
+            verdict += f"; {held} fleet states ({span}), none missing between the first and the last"
+        if before:
+            verdict += f", {before} before the first not received (steps 0..{before - 1})"
         return {"ok": "false" if bad or lost else "true", "announced_approvals": str(announced),
                 "approved_plans": str(received), "fleet_states": str(len(self.steps)),
-                "fleet_states_missing": str(lost), "verdict": verdict}
+                "fleet_states_missing": str(lost), "fleet_states_before_first": str(before),
+                "verdict": verdict}
 
 
 class RecorderNode(Node):
