@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from typing import Any, Callable
 
 from uam_sim.rerun_log import MODES as RERUN_MODES
-from uam_sim.std_msgs_export import DEFAULT_SCENARIO_START_UTC
+from uam_sim.std_msgs_export import DEFAULT_SCENARIO_START_UTC, SIM_CLOCK
 
 INT32_MAX = 2**31 - 1
 
@@ -338,9 +338,10 @@ RECORDER = (
           "[s wall]", 0.0, 3600.0),
     Param("views", True, "also write the run in standard types for generic viewers (/uam/view/*: PointCloud2, "
           "NavSatFix, MarkerArray; docs/views.md)"),
-    Param("scenario_start_utc", DEFAULT_SCENARIO_START_UTC, "ISO 8601 instant of simulation time 0; the view "
-          "topics' header stamps are this plus the simulation time (log times stay simulation time)",
-          check=_utc_rule),
+    Param("scenario_start_utc", SIM_CLOCK, "'sim': the view topics' header stamps in simulation time, the "
+          "clock of every other topic; or an ISO 8601 instant of simulation time 0 (e.g. "
+          f"{DEFAULT_SCENARIO_START_UTC}): their stamps are then that plus the simulation time, real UTC "
+          "(log times stay simulation time)", check=_utc_rule),
     Param("view_fix_period_s", 5.0, "NavSatFix per vehicle every this many simulated seconds; 0 = every "
           "step [s]", 0.0, 3600.0),
     Param("foxglove_port", 0, "serve a live Foxglove WebSocket view on this port (0 = off; 8765 is "

@@ -92,7 +92,9 @@ def test_records_every_topic_and_closes_on_the_simulators_finish(ros_context, sp
     ts = get_typestore(Stores.ROS2_JAZZY)
     clouds = [m for m in msgs if m.topic == "/uam/view/fleet"]
     last = ts.deserialize_cdr(clouds[-1].data, "sensor_msgs/msg/PointCloud2")
-    assert last.header.stamp.sec == 1736121600 + 4 and last.width == 1   # 2025-01-06T00:00:04Z
+    # one clock for every topic: the view stamps are simulation time, as the fleet state's (they
+    # were UTC from 2025-01-06 while /uam/* carried simulation time)
+    assert (last.header.stamp.sec, last.header.stamp.nanosec) == (4, 0) and last.width == 1
     assert [m.log_time_ns for m in clouds] == [k * NS for k in range(5)]
     # log time = the message's simulation stamp
     fleet_times = [m.log_time_ns for m in msgs if m.topic == "/uam/fleet_state"]
@@ -306,3 +308,32 @@ def test_the_check_says_how_many_fleet_states_it_holds_and_which_steps_it_never_
     for k in range(0, 601):
         whole.on_fleet_state(serialize_message(FleetState(step_index=k)))
     assert whole.result()["verdict"].endswith("601 fleet states (steps 0..600), none missing between the first and the last")
+
+
+def test_view_stamps_are_real_utc_when_a_scenario_start_is_given(ros_context, spin_until, tmp_path):
+    out = tmp_path / "utc.mcap"
+    recorder = RecorderNode(context=ros_context, parameter_overrides=[
+        Parameter("output", value=str(out)), Parameter("scenario_start_utc", value="2025-01-06T00:00:00Z")])
+    talker = Node("talker", context=ros_context)
+    topic, (cls, qos) = next((k, v) for k, v in RECORDED_TOPICS.items() if k.endswith("fleet_state"))
+    sync, (sync_cls, sync_qos) = next((k, v) for k, v in RECORDED_TOPICS.items() if k.endswith("epoch_sync"))
+    pub, end = talker.create_publisher(cls, topic, qos), talker.create_publisher(sync_cls, sync, sync_qos)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(recorder)
+    executor.add_node(talker)
+    try:
+        assert spin_until(executor, lambda: pub.get_subscription_count() >= 1 and end.get_subscription_count() >= 1, 20)
+        fs = FleetState(step_index=3, vehicles=[VehicleState(vehicle_id="r1")])
+        fs.header.stamp = t(3)
+        pub.publish(fs)
+        assert spin_until(executor, lambda: recorder.messages_written == 1, 20)
+        end.publish(EpochSync(sender="simulator", finished=True, epoch_time=t(3)))
+        assert spin_until(executor, lambda: recorder.finished, 20)
+    finally:
+        executor.shutdown()
+        recorder.destroy_node()
+        talker.destroy_node()
+    from rosbags.typesys import Stores, get_typestore
+    cloud = next(m for m in read_messages(out) if m.topic == "/uam/view/fleet")
+    stamp = get_typestore(Stores.ROS2_JAZZY).deserialize_cdr(cloud.data, "sensor_msgs/msg/PointCloud2").header.stamp
+    assert stamp.sec == 1736121600 + 3 and cloud.log_time_ns == 3 * NS  # 2025-01-06T00:00:03Z; log time sim

@@ -24,7 +24,8 @@ for the check below.
 
 Views for generic viewers (issue 12, :mod:`uam_sim.std_msgs_export`): with ``views`` on (the
 default) the fleet, routes and network are also written in standard types (``/uam/view/*``:
-PointCloud2, NavSatFix, MarkerArray), stamped in real UTC from ``scenario_start_utc``, for
+PointCloud2, NavSatFix, MarkerArray), stamped in simulation time as every other topic (or in
+real UTC from ``scenario_start_utc`` when it names an instant), for
 Foxglove and Rerun's MCAP import; ``foxglove_port`` > 0 serves a live Foxglove WebSocket view
 (:mod:`uam_sim.foxglove_live`).
 
@@ -126,6 +127,8 @@ class RecordingCheck:
         if lost:
             verdict += (f"; {held} fleet states ({span}), {lost} fleet state(s) missing between the "
                         f"first and the last received (steps {format_steps(lost, listed)})")
+        elif not self.steps:
+            verdict += "; no fleet states"
         else:
             verdict += f"; {held} fleet states ({span}), none missing between the first and the last"
         if before:
