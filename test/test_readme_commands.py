@@ -159,6 +159,10 @@ def test_every_readme_command_runs_as_written(tmp_path, ros_domain_id):
             failures.append(f"README: {cmd}\n  ran: {argv}\n  exit {proc.returncode}, "
                             f"expected a line with {line!r}; output ends:\n{proc.stdout[-1500:]}")
     assert not failures, "\n\n".join(failures)
+    # the demo's recording passes Rerun's own check of its structure and timelines
+    checked = run(in_env + f"rerun mcap check {shlex.quote(str(mcap))}", env)
+    assert checked.returncode == 0 and "/uam/epoch_sync" in checked.stdout, checked.stdout[-2000:]
+    assert "PROBLEM" not in checked.stdout, checked.stdout[-2000:]
 
 
 def test_run_fleet_help_and_backend_list_say_what_the_script_does(tmp_path, ros_domain_id):

@@ -152,6 +152,14 @@ def test_files_that_are_not_mcap_are_refused_naming_them(tmp_path, capsys):
         assert "Safety audit" not in captured.out and "OK" not in captured.out
     with pytest.raises(ValueError, match="not an MCAP file"):
         summarize(text)
+    # an MCAP file of something else: none of a run's topics, so nothing to judge
+    other = tmp_path / "other.mcap"
+    with McapRecorder(other) as rec:
+        rec.add_topic("/camera/info", Time)
+        rec.write("/camera/info", t(1), NS)
+    assert main([str(other)]) == 2
+    captured = capsys.readouterr()
+    assert "holds none of the topics /uam/requests" in captured.err and "Safety audit" not in captured.out
 
 
 def test_misspelled_options_are_errors_not_file_names(recording, capsys):

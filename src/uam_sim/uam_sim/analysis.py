@@ -54,7 +54,7 @@ import numpy as np
 
 from .flights import flight_metrics
 from .audit import AIRSPACE_METADATA, SafetyAudit, audit_plans, separation_from_metadata
-from .mcap_reader import is_complete, iter_decoded, read_metadata, require_mcap
+from .mcap_reader import is_complete, iter_decoded, read_metadata, recorded_topics, require_mcap
 from .stamps import stamp_s
 
 #: the MCAP metadata record the recorder node writes with its check of what it received
@@ -561,7 +561,11 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)  # a misspelled option is an error (exit 2), not a file name
     try:
         require_mcap(args.recording)
-    except ValueError as exc:  # not a recording at all: nothing was read, so no verdict
+        topics = recorded_topics(args.recording)
+        if topics is not None and not topics & set(ANALYSED_TOPICS):
+            raise ValueError(f"recording: {args.recording!r} holds none of the topics "
+                             f"{', '.join(ANALYSED_TOPICS)} (not a recording of a run)")
+    except ValueError as exc:  # not a recording of a run at all: nothing to judge, so no verdict
         print(f"analyze: {exc}", file=sys.stderr)
         return 2
     except FileNotFoundError:

@@ -81,6 +81,19 @@ def require_mcap(path: str | os.PathLike) -> None:
                          f"not the MCAP magic {MCAP_MAGIC!r})")
 
 
+def recorded_topics(path: str | os.PathLike) -> set[str] | None:
+    """The topics (channels) of a complete recording, whether or not they carried a message;
+    None when the file has no summary to list them (cut short)."""
+    from mcap.reader import make_reader
+
+    try:
+        with open(path, "rb") as f:
+            summary = make_reader(f).get_summary()
+    except Exception:  # noqa: BLE001 - a torn file has no summary
+        return None
+    return None if summary is None else {c.topic for c in summary.channels.values()}
+
+
 def is_complete(path: str | os.PathLike) -> bool:
     """True if the file ends with a valid footer and summary (it was closed properly)."""
     from mcap.reader import make_reader
