@@ -219,6 +219,8 @@ def test_wrong_methods_network_and_misspelled_options_are_refused_naming_the_val
     # a missing network file ended in a traceback
     assert main(["--methods", "greedy", "--network", str(tmp_path / "nope.yaml")] + common) == 2
     assert "nope.yaml" in capsys.readouterr().err
+    assert main(["--methods", "greedy", "--demand", str(tmp_path / "no-demand.yaml")] + common) == 2
+    assert "demand_file: file" in capsys.readouterr().err
     # an abbreviation is not taken for the option it abbreviates
     with pytest.raises(SystemExit) as stop:
         main(["--methods", "greedy", "--dur", "60"] + common[:-6])
