@@ -52,8 +52,8 @@ from typing import Any, Iterable
 
 import numpy as np
 
-from .flights import flight_metrics
 from .audit import AIRSPACE_METADATA, SafetyAudit, audit_plans, separation_from_metadata
+from .flights import flight_metrics
 from .mcap_reader import is_complete, iter_decoded, read_metadata, recorded_topics, require_mcap
 from .stamps import stamp_s
 
@@ -451,15 +451,19 @@ def _flight_lines(whose: str, stats: dict) -> list[str]:
     """Departure delay and route detour of the approved flights (uam_sim.flights.flight_metrics)."""
     if not stats:
         return []
-    delay = stats["delay_mean_s"]
-    return [f"Departure delay{whose}  mean {delay:.1f} s after the earliest departure, "
-            f"{100 * stats['delayed_share']:.0f} % of {stats['flights']} flights delayed"
-            if delay == delay else f"Departure delay{whose}  - (no request with its earliest departure recorded)",
-            (f"Route detour{whose}     mean {stats['detour_mean_pct']:.1f} % over the shortest route "
-            f"(from the plans' weights), {100 * stats['shortest_share']:.0f} % on the best candidate, "
-            f"mean length {stats['route_length_mean_m'] / 1000:.2f} km"
-             if stats["detour_mean_pct"] == stats["detour_mean_pct"]
-             else f"Route detour{whose}     - (no plan with a weight in (0, 1])")]
+    delay, detour = stats["delay_mean_s"], stats["detour_mean_pct"]
+    if math.isnan(delay):
+        delay_line = f"Departure delay{whose}  - (no request with its earliest departure recorded)"
+    else:
+        delay_line = (f"Departure delay{whose}  mean {delay:.1f} s after the earliest departure, "
+                      f"{100 * stats['delayed_share']:.0f} % of {stats['flights']} flights delayed")
+    if math.isnan(detour):
+        detour_line = f"Route detour{whose}     - (no plan with a weight in (0, 1])"
+    else:
+        detour_line = (f"Route detour{whose}     mean {detour:.1f} % over the shortest route (from "
+                       f"the plans' weights), {100 * stats['shortest_share']:.0f} % on the best "
+                       f"candidate, mean length {stats['route_length_mean_m'] / 1000:.2f} km")
+    return [delay_line, detour_line]
 
 
 def format_summary(s: RunSummary, epochs: bool = True) -> str:
