@@ -10,8 +10,10 @@ test:
 
 # The main job: a short default scenario through the whole ROS node graph (Singapore, paper rate
 # 10 requests per 30 s, 600 s simulated, exact MWIS), recorded to MCAP + Rerun, then analysed.
+# DEMO_ARGS: more options for run_fleet.sh (a later option wins), e.g. DEMO_ARGS="--duration 60".
+DEMO_ARGS ?=
 demo:
-	bash scripts/run_fleet.sh --duration 600 --rate 10 --backend exact
+	bash scripts/run_fleet.sh --duration 600 --rate 10 --backend exact $(DEMO_ARGS)
 
 # Both studies from scratch (hours on 2 cores; BENCHMARKS.md has the wall times): the paper's
 # study and the capacity study, each resumable.

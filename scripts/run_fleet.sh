@@ -62,7 +62,7 @@ while [[ $# -gt 0 ]]; do
     --slot-s) SLOT_S="${2:?--slot-s needs a value}"; shift 2;;
     --climb-rate) CLIMB="${2:?--climb-rate needs a value}"; shift 2;;
     --descent-rate) DESCENT="${2:?--descent-rate needs a value}"; shift 2;;
-    -h|--help) sed -n '2,33p' "$0"; exit 0;;
+    -h|--help) awk 'NR > 1 && /^#/ { sub(/^# ?/, ""); print; next } NR > 1 { exit }' "$0"; exit 0;;
     *) die "unknown option '$1' (see --help)";;
   esac
 done
@@ -88,7 +88,12 @@ bash scripts/setup.sh >/tmp/uam-setup-$$.log 2>&1 || { cat /tmp/uam-setup-$$.log
 rm -f /tmp/uam-setup-$$.log
 # shellcheck disable=SC1091
 source scripts/env.sh
-if [[ "$BACKEND" == list ]]; then python -m uam_solvers.registry; exit 0; fi
+if [[ "$BACKEND" == list ]]; then
+  echo "MWIS backends (this script runs --backend exact unless told otherwise; the solver node"
+  echo "started on its own uses default_backend from config/solver.yaml, 'auto'):"
+  python -m uam_solvers.registry
+  exit 0
+fi
 python - "$BACKEND" <<'EOF' || exit 2
 import sys
 from uam_solvers.registry import UnknownBackendError, get_backend

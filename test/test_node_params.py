@@ -180,3 +180,22 @@ def test_an_integer_out_of_range_or_of_the_wrong_type_at_start_up_is_refused_nam
         with pytest.raises(ValueError) as err:
             make(context=ros_context, parameter_overrides=params(**overrides))
         assert words in str(err.value), str(err.value)
+
+
+@pytest.mark.ros
+def test_rerun_off_as_the_command_line_writes_it_is_accepted(ros_context, tmp_path):
+    """`-p rerun:=off` (as the docs write it) failed with "False is not a string": ROS reads the
+    value as YAML, where off is the boolean false. It means the choice 'off'."""
+    from uam_sim.nodes.recorder_node import RecorderNode
+
+    out = tmp_path / "r.mcap"
+    rec = RecorderNode(context=ros_context,
+                       cli_args=["--ros-args", "-p", "rerun:=off", "-p", f"output:={out}"])
+    try:
+        assert rec.rerun is None or not rec.rerun.enabled
+        assert "Rerun" not in (rec.get_parameter("rerun").value or "")
+    finally:
+        rec.close()
+        rec.destroy_node()
+    with pytest.raises(ValueError, match="parameter rerun: 'on' is not one of"):
+        RecorderNode(context=ros_context, cli_args=["--ros-args", "-p", "rerun:=on", "-p", f"output:={out}"])

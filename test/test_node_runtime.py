@@ -98,3 +98,31 @@ def test_a_node_that_ends_waits_until_a_stopped_subscriber_has_acknowledged_its_
             if p is not None and p.poll() is None:
                 os.kill(p.pid, signal.SIGCONT)
                 p.kill()
+
+
+ENDS_AT_ONCE = """
+import os, signal, sys, time
+from rclpy.node import Node
+from uam_bringup.runtime import run_node
+class Done(Node):
+    def __init__(self):
+        super().__init__("ends_at_once")
+        self.finished = True
+class SigintWhileFinalizing:
+    # run_fleet.sh's SIGINT at the end of a run reaching a node that is still exiting: module
+    # objects are destroyed after Python reset its signal handlers to the default action
+    def __del__(self):
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(0.2)
+sys.modules["sigint_while_finalizing"] = SigintWhileFinalizing()
+sys.exit(run_node(Done, "ends_at_once", None))
+"""
+
+
+def test_a_sigint_while_a_finished_node_exits_does_not_kill_it(ros_domain_id):
+    """A normal run logged "node 'planner' exited with code 130": the SIGINT run_fleet.sh sends
+    at the end reached the planner while the interpreter was finalizing."""
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain_id))
+    proc = subprocess.run([sys.executable, "-c", ENDS_AT_ONCE], env=env, capture_output=True,
+                          text=True, timeout=60)
+    assert proc.returncode == 0, (proc.returncode, proc.stderr)

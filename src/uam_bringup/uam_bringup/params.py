@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from typing import Any, Callable
 
 from uam_sim.rerun_log import MODES as RERUN_MODES
-from uam_sim.std_msgs_export import DEFAULT_SCENARIO_START_UTC
+from uam_sim.std_msgs_export import DEFAULT_SCENARIO_START_UTC, SIM_CLOCK
 
 INT32_MAX = 2**31 - 1
 
@@ -65,7 +65,10 @@ def check(name: str, value, default, lo=None, hi=None, choices=None, rule=None):
         if isinstance(value, bool) or not isinstance(value, int):
             raise ValueError(f"parameter {name}: {value!r} is not an integer")
     elif isinstance(default, str):
-        if not isinstance(value, str):
+        if isinstance(value, bool) and choices is not None and {"off", "on"} & set(choices):
+            # `-p rerun:=off`: ROS reads the argument as YAML, where off is the boolean false
+            value = _yaml_word(value)
+        elif not isinstance(value, str):
             raise ValueError(f"parameter {name}: {value!r} is not a string")
     if lo is not None and value < lo:
         raise ValueError(f"parameter {name}: {value!r} is below the minimum {lo}")
@@ -78,6 +81,16 @@ def check(name: str, value, default, lo=None, hi=None, choices=None, rule=None):
         if why:
             raise ValueError(f"parameter {name}: {why}")
     return value
+
+
+def _yaml_word(value: bool) -> str:
+    """The word a choice parameter means by a YAML 1.1 boolean (off/on)."""
+    return "on" if value else "off"
+
+
+def _bool_alias(p: "Param") -> bool:
+    """A string parameter with the choice 'off' or 'on', which YAML turns into a boolean."""
+    return isinstance(p.default, str) and bool(p.choices) and bool({"off", "on"} & set(p.choices))
 
 
 def _declared(node, p: "Param"):
@@ -105,7 +118,7 @@ def _descriptor(p: Param):
     from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 
     desc = ParameterDescriptor(description=p.text(), read_only=p.read_only,
-                               dynamic_typing=isinstance(p.default, float))
+                               dynamic_typing=isinstance(p.default, float) or _bool_alias(p))
     if isinstance(p.default, int) and not isinstance(p.default, bool) and p.lo is not None and p.hi is not None:
         desc.integer_range = [IntegerRange(from_value=int(p.lo), to_value=int(p.hi), step=0)]
     if p.choices:
@@ -354,9 +367,10 @@ RECORDER = (
           "[s wall]", 0.0, 3600.0),
     Param("views", True, "also write the run in standard types for generic viewers (/uam/view/*: PointCloud2, "
           "NavSatFix, MarkerArray; docs/views.md)"),
-    Param("scenario_start_utc", DEFAULT_SCENARIO_START_UTC, "ISO 8601 instant of simulation time 0; the view "
-          "topics' header stamps are this plus the simulation time (log times stay simulation time)",
-          check=_utc_rule),
+    Param("scenario_start_utc", SIM_CLOCK, "'sim': the view topics' header stamps in simulation time, the "
+          "clock of every other topic; or an ISO 8601 instant of simulation time 0 (e.g. "
+          f"{DEFAULT_SCENARIO_START_UTC}): their stamps are then that plus the simulation time, real UTC "
+          "(log times stay simulation time)", check=_utc_rule),
     Param("view_fix_period_s", 5.0, "NavSatFix per vehicle every this many simulated seconds; 0 = every "
           "step [s]", 0.0, 3600.0),
     Param("foxglove_port", 0, "serve a live Foxglove WebSocket view on this port (0 = off; 8765 is "

@@ -140,10 +140,26 @@ def _run_node(make_node, name: str, args=None, *, threads: int = 1, linger_s: fl
         print(f"{name}: {exc}", file=sys.stderr)
         return 2
     finally:
-        if node is not None:
-            try:
-                if hasattr(node, "close"):
-                    node.close()
-            finally:
-                node.destroy_node()
-        rclpy.try_shutdown()
+        try:
+            if node is not None:
+                try:
+                    if hasattr(node, "close"):
+                        node.close()
+                finally:
+                    node.destroy_node()
+            rclpy.try_shutdown()
+        finally:
+            _ignore_stop_signals()
+
+
+def _ignore_stop_signals() -> None:
+    """Ignore SIGINT and SIGTERM from here on: the node is done and cleaned up. While the
+    interpreter finalizes, Python resets a signal with a Python handler to the default action, so
+    the SIGINT that run_fleet.sh sends every node at the end of a run killed a node that was still
+    exiting ("node 'planner' exited with code 130" after a normal run). Ignored signals stay ignored."""
+    import signal
+    import threading
+
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, signal.SIG_IGN)

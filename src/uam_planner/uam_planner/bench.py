@@ -246,7 +246,7 @@ def _commit() -> str:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.split("\n\n")[0])
     ap.add_argument("--network", help="paper-scale network file (default config/networks/singapore.yaml)")
     ap.add_argument("--paper-epochs", type=int, default=120)
     ap.add_argument("--paper-repeats", type=int, default=3,

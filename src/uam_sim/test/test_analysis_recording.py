@@ -15,7 +15,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile  # noqa: E402
 from uam_msgs.msg import (FleetState, FlightPlan, FlightRequest, MwisInstance,  # noqa: E402
                           PlanningReport, VehicleState, Waypoint)
 
-from uam_sim.analysis import main, summarize  # noqa: E402
+from uam_sim.analysis import format_summary, main, summarize  # noqa: E402
 from uam_sim.mcap_writer import McapRecorder  # noqa: E402
 from run_frame import complete_run  # noqa: E402
 from uam_sim.recorded_instances import instances_from_mcap, recorded_instances  # noqa: E402
@@ -141,6 +141,41 @@ def test_command_line_prints_summary_and_exit_code_flags_a_loss(recording, capsy
     assert main([str(recording) + ".missing"]) == 1
 
 
+def test_files_that_are_not_mcap_are_refused_naming_them(tmp_path, capsys):
+    # the README was read as an INCOMPLETE recording of 0 requests whose audit was "OK", exit 0
+    text = tmp_path / "README.md"
+    text.write_text("# not a recording\n")
+    empty = tmp_path / "empty.mcap"
+    empty.write_bytes(b"")
+    for path in (text, empty):
+        assert main([str(path)]) == 2
+        captured = capsys.readouterr()
+        assert f"{str(path)!r} is not an MCAP file" in captured.err
+        assert "Safety audit" not in captured.out and "OK" not in captured.out
+    with pytest.raises(ValueError, match="not an MCAP file"):
+        summarize(text)
+    # an MCAP file of something else: none of a run's topics, so nothing to judge
+    other = tmp_path / "other.mcap"
+    with McapRecorder(other) as rec:
+        rec.add_topic("/camera/info", Time)
+        rec.write("/camera/info", t(1), NS)
+    assert main([str(other)]) == 2
+    captured = capsys.readouterr()
+    assert "holds none of the topics /uam/requests" in captured.err and "Safety audit" not in captured.out
+
+
+def test_misspelled_options_are_errors_not_file_names(recording, capsys):
+    # `--seperation cylinder x.mcap` said "no file at cylinder"
+    with pytest.raises(SystemExit) as stop:
+        main(["--seperation", "cylinder", str(recording)])
+    assert stop.value.code == 2 and "--seperation" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as stop:  # an abbreviation is not taken for the option
+        main(["--separation-", "40", str(recording)])
+    assert stop.value.code == 2
+    # what ros2 run appends is still ignored
+    assert main([str(recording), "--separation-m", "40", "--ros-args", "-r", "__node:=x"]) == 0
+
+
 def test_fleet_state_digest_reads_stamp_and_count_from_the_cdr():
     from uam_sim.cdr import fleet_state_digest as _fleet_state_digest
     from uam_sim.cdr import serialize_exact
@@ -187,3 +222,59 @@ def test_the_solver_librarys_corpus_reader_reads_recordings_through_the_entry_po
     entries = read_instances(recording)
     assert [e.name for e in entries] == ["synthetic-epoch0"]
     assert list(entries[0].problem.weights) == list(instances_from_mcap(recording)[0].weights)
+
+
+@pytest.fixture(scope="module")
+def fifo_two_operators(tmp_path_factory):
+    """A FIFO run of two operators: A's flight departs 30 s after its earliest departure on a
+    route 25 % longer than the shortest (weight d*/d = 0.8), B's at once on the shortest; two
+    requests expire by different latest departures."""
+    path = tmp_path_factory.mktemp("fifo") / "fifo.mcap"
+    with McapRecorder(path) as rec:
+        rec.add_topic("/uam/requests", FlightRequest)
+        rec.add_topic("/uam/flight_plans", FlightPlan)
+        rec.add_topic("/uam/planning_reports", PlanningReport)
+        for op, rid in [("opA", "a1"), ("opB", "b1"), ("opA", "a2"), ("opB", "b2")]:
+            rec.write("/uam/requests", FlightRequest(operator_id=op, request_id=rid, request_time=t(0),
+                                                     earliest_departure=t(0)), 0)
+        for op, rid, dep, w, k in [("opA", "a1", 30.0, 0.8, 1), ("opB", "b1", 0.0, 1.0, 0)]:
+            p = plan(rid, FlightPlan.OUTCOME_APPROVED, [(dep, 0, 0, 100), (dep + 100, 1000, 0, 100)])
+            p.operator_id, p.weight, p.length_m, p.candidate_index = op, w, 1000.0 / w, k
+            p.departure_time, p.arrival_time = t(dep), t(dep + 100)
+            rec.write("/uam/flight_plans", p, 0)
+        for op, rid, latest in [("opA", "a2", 60), ("opB", "b2", 90)]:
+            p = plan(rid, FlightPlan.OUTCOME_EXPIRED,
+                     reason=f"no conflict-free departure found by latest_departure {latest} s")
+            p.operator_id = op
+            rec.write("/uam/flight_plans", p, 0)
+        for k in range(2):  # FIFO reports its graph's size but solves no MWIS
+            r = PlanningReport(epoch_index=k, policy="fifo", vertices=2, edges=1, approved=1 - k)
+            r.header.stamp = t(30 * k)
+            rec.write("/uam/planning_reports", r, 30 * k * NS)
+    return path
+
+
+def test_delay_and_detour_per_run_and_per_operator(fifo_two_operators):
+    s = summarize(fifo_two_operators)
+    assert s.flight_stats["flights"] == 2
+    assert s.flight_stats["delay_mean_s"] == pytest.approx(15.0)  # (30 + 0) / 2
+    assert s.flight_stats["delayed_share"] == pytest.approx(0.5)
+    assert s.flight_stats["detour_mean_pct"] == pytest.approx(12.5)  # (25 + 0) / 2
+    assert s.flight_stats["shortest_share"] == pytest.approx(0.5)
+    assert s.flight_stats_by_operator["opA"]["delay_mean_s"] == pytest.approx(30.0)
+    assert s.flight_stats_by_operator["opA"]["detour_mean_pct"] == pytest.approx(25.0)
+    assert s.flight_stats_by_operator["opB"]["detour_mean_pct"] == pytest.approx(0.0)
+    text = format_summary(s)
+    assert "Departure delay  mean 15.0 s after the earliest departure, 50 % of 2 flights delayed" in text
+    assert "Route detour     mean 12.5 % over the shortest route" in text
+    assert "Departure delay of opA  mean 30.0 s" in text
+
+
+def test_fifo_prints_no_mwis_rows_and_reasons_show_their_numbers(fifo_two_operators):
+    s = summarize(fifo_two_operators)
+    assert s.mwis_vertices["count"] == 0 and s.mwis_selected["count"] == 0
+    text = format_summary(s)
+    # FIFO printed "MWIS selected min 0, median 0, max 0" and "... by latest_departure N s"
+    assert "MWIS             none solved (policy fifo)" in text and "MWIS selected" not in text
+    assert "2 x no conflict-free departure found by latest_departure 60..90 s" in text
+    assert "latest_departure N" not in text

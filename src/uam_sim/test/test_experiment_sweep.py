@@ -207,3 +207,36 @@ def test_sweep_audit_agrees_with_the_brute_force_audit():
         sb = {frozenset(x[:2]) for x in b.losses if not near(x[2])}
         assert sa == sb
     assert sep == 400.0 and sa  # the comparison saw losses
+
+
+def test_wrong_methods_network_and_misspelled_options_are_refused_naming_the_value(tmp_path, capsys):
+    common = ["--rates", "2", "--seeds", "1", "--duration", "60", "--workers", "1",
+              "--out", str(tmp_path / "res"), "--no-tts", "--no-progress"]
+    # a misspelled backend was answered by greedy fallbacks and exited 0
+    assert main(["--methods", "exat"] + common) == 2
+    err = capsys.readouterr().err
+    assert "methods: 'exat' is not a method" in err and "exact" in err
+    # a missing network file ended in a traceback
+    assert main(["--methods", "greedy", "--network", str(tmp_path / "nope.yaml")] + common) == 2
+    assert "nope.yaml" in capsys.readouterr().err
+    assert main(["--methods", "greedy", "--demand", str(tmp_path / "no-demand.yaml")] + common) == 2
+    assert "demand_file: file" in capsys.readouterr().err
+    # an abbreviation is not taken for the option it abbreviates
+    with pytest.raises(SystemExit) as stop:
+        main(["--methods", "greedy", "--dur", "60"] + common[:-6])
+    assert stop.value.code == 2 and "--dur" in capsys.readouterr().err
+    assert not (tmp_path / "res").exists()
+
+
+def test_a_tts_study_with_nothing_to_measure_says_so_in_the_report(tmp_path, monkeypatch):
+    monkeypatch.delenv("DWAVE_API_TOKEN", raising=False)
+    from uam_solvers.registry import get_backend
+    ok, _why = get_backend("qpu").available()
+    if ok:
+        pytest.skip("a D-Wave token is configured here: qpu would be measured")
+    cfg = small(tmp_path, methods=["greedy"], rates=[6],
+                tts={"enabled": True, "instances": 4, "reads": 10, "repetitions": 1, "backends": ["qpu"]})
+    out = run_experiment(cfg, progress=False)
+    assert out["tts"]["status"] == "skipped"
+    assert out["tts"]["reason"].startswith("nothing to measure (unavailable backends: qpu")
+    assert "Not run: nothing to measure (unavailable backends: qpu" in (tmp_path / "REPORT.md").read_text()

@@ -82,3 +82,28 @@ def test_cli_names_bad_input(two_runs, tmp_path, capsys):
     assert "no approved flight plans" in capsys.readouterr().err
     with pytest.raises(ValueError, match="step_s: must be > 0"):
         make_movie(two_runs, tmp_path / "z.gif", step_s=0.0)
+
+
+def test_the_movie_stops_at_the_run_s_end_unless_told_otherwise(tmp_path):
+    """The movie played on to the last arrival: 88 % of a 600 s run's movie came after the run."""
+    pytest.importorskip("uam_msgs.msg", reason="needs the built workspace (source scripts/env.sh)")
+    from PIL import Image
+    from view_runs import record_run
+    from uam_sim.movie import movie_end_s, read_plans
+
+    path = tmp_path / "cut.mcap"
+    record_run(path, "greedy", rate=4.0, duration_s=120.0, views=False, stop_s=90.0)
+    run = read_plans(path)
+    assert run.end_s == pytest.approx(90.0) and run.last_arrival_s() > 120.0
+    assert movie_end_s([run]) == pytest.approx(90.0)
+    assert movie_end_s([run], "arrivals") == pytest.approx(run.last_arrival_s())
+    assert movie_end_s([run], "45") == 45.0
+    with pytest.raises(ValueError, match="until: 'later'"):
+        movie_end_s([run], "later")
+    assert main([str(path), "--out", str(tmp_path / "end.gif"), "--step-s", "30", "--dpi", "40"]) == 0
+    with Image.open(tmp_path / "end.gif") as im:
+        assert im.n_frames == 4  # t = 0, 30, 60, 90 s
+    assert main([str(path), "--out", str(tmp_path / "all.gif"), "--step-s", "30", "--dpi", "40",
+                 "--until", "arrivals"]) == 0
+    with Image.open(tmp_path / "all.gif") as im:
+        assert im.n_frames == len(np.arange(0.0, run.last_arrival_s() + 1e-9, 30.0))

@@ -92,7 +92,9 @@ def test_records_every_topic_and_closes_on_the_simulators_finish(ros_context, sp
     ts = get_typestore(Stores.ROS2_JAZZY)
     clouds = [m for m in msgs if m.topic == "/uam/view/fleet"]
     last = ts.deserialize_cdr(clouds[-1].data, "sensor_msgs/msg/PointCloud2")
-    assert last.header.stamp.sec == 1736121600 + 4 and last.width == 1   # 2025-01-06T00:00:04Z
+    # one clock for every topic: the view stamps are simulation time, as the fleet state's (they
+    # were UTC from 2025-01-06 while /uam/* carried simulation time)
+    assert (last.header.stamp.sec, last.header.stamp.nanosec) == (4, 0) and last.width == 1
     assert [m.log_time_ns for m in clouds] == [k * NS for k in range(5)]
     # log time = the message's simulation stamp
     fleet_times = [m.log_time_ns for m in msgs if m.topic == "/uam/fleet_state"]
@@ -250,3 +252,88 @@ def test_recorder_refuses_waiting_for_a_topic_it_does_not_record(ros_context, tm
         RecorderNode(context=ros_context, parameter_overrides=[
             Parameter("output", value=str(tmp_path / "r.mcap")),
             Parameter("wait_for_publishers", value=["uam/nope"])])
+
+
+def test_each_channel_s_log_times_are_in_order_when_its_publishers_stamps_are_not(ros_context, spin_until, tmp_path):
+    """`rerun mcap check` reported "PROBLEM /uam/epoch_sync 2 unordered chunks on
+    message_log_time": the simulator announces epoch k+1 before the planner and the generator
+    report epoch k, and the log time was each message's own stamp."""
+    out = tmp_path / "sync.mcap"
+    recorder = RecorderNode(context=ros_context, parameter_overrides=[
+        Parameter("output", value=str(out)), Parameter("views", value=False)])
+    talker = Node("talker", context=ros_context)
+    topic, (cls, qos) = next((k, v) for k, v in RECORDED_TOPICS.items() if k.endswith("epoch_sync"))
+    pub = talker.create_publisher(cls, topic, qos)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(recorder)
+    executor.add_node(talker)
+    sent = [("simulator", 1, 30), ("planner", 0, 0), ("request_generator", 1, 30), ("simulator", 2, 60),
+            ("planner", 1, 30)]
+    try:
+        assert spin_until(executor, lambda: pub.get_subscription_count() >= 1, 20)
+        for sender, k, sec in sent:
+            pub.publish(EpochSync(sender=sender, epoch_index=k, epoch_time=t(sec)))
+        assert spin_until(executor, lambda: recorder.messages_written == len(sent), 20)
+        pub.publish(EpochSync(sender="simulator", finished=True, epoch_time=t(60)))
+        assert spin_until(executor, lambda: recorder.finished, 20)
+    finally:
+        executor.shutdown()
+        recorder.destroy_node()
+        talker.destroy_node()
+    from rclpy.serialization import deserialize_message
+    msgs = [m for m in read_messages(out) if m.topic == "/uam/epoch_sync"]
+    assert len(msgs) == len(sent) + 1
+    times = [m.log_time_ns for m in msgs]
+    assert times == sorted(times) == [30 * NS, 30 * NS, 30 * NS, 60 * NS, 60 * NS, 60 * NS]
+    # each message keeps its own stamp in its bytes (the order they arrived in)
+    stamps = [deserialize_message(m.data, EpochSync).epoch_time.sec for m in msgs]
+    assert stamps == [30, 0, 30, 60, 30, 60]
+
+
+def test_the_check_says_how_many_fleet_states_it_holds_and_which_steps_it_never_received():
+    """A replayed and re-recorded file held 594 of 601 fleet states and its check said "none
+    missing": the first seven were published before the recorder subscribed."""
+    from rclpy.serialization import serialize_message
+    from uam_sim.nodes.recorder_node import RecordingCheck
+
+    check = RecordingCheck()
+    for k in range(7, 601):
+        check.on_fleet_state(serialize_message(FleetState(step_index=k)))
+    r = check.result()
+    assert r["fleet_states"] == "594" and r["fleet_states_before_first"] == "7"
+    assert "594 fleet states (steps 7..600)" in r["verdict"]
+    assert "7 before the first not received (steps 0..6)" in r["verdict"]
+    assert "none missing;" not in r["verdict"] and not r["verdict"].endswith("none missing")
+    whole = RecordingCheck()
+    for k in range(0, 601):
+        whole.on_fleet_state(serialize_message(FleetState(step_index=k)))
+    assert whole.result()["verdict"].endswith("601 fleet states (steps 0..600), none missing between the first and the last")
+
+
+def test_view_stamps_are_real_utc_when_a_scenario_start_is_given(ros_context, spin_until, tmp_path):
+    out = tmp_path / "utc.mcap"
+    recorder = RecorderNode(context=ros_context, parameter_overrides=[
+        Parameter("output", value=str(out)), Parameter("scenario_start_utc", value="2025-01-06T00:00:00Z")])
+    talker = Node("talker", context=ros_context)
+    topic, (cls, qos) = next((k, v) for k, v in RECORDED_TOPICS.items() if k.endswith("fleet_state"))
+    sync, (sync_cls, sync_qos) = next((k, v) for k, v in RECORDED_TOPICS.items() if k.endswith("epoch_sync"))
+    pub, end = talker.create_publisher(cls, topic, qos), talker.create_publisher(sync_cls, sync, sync_qos)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(recorder)
+    executor.add_node(talker)
+    try:
+        assert spin_until(executor, lambda: pub.get_subscription_count() >= 1 and end.get_subscription_count() >= 1, 20)
+        fs = FleetState(step_index=3, vehicles=[VehicleState(vehicle_id="r1")])
+        fs.header.stamp = t(3)
+        pub.publish(fs)
+        assert spin_until(executor, lambda: recorder.messages_written == 1, 20)
+        end.publish(EpochSync(sender="simulator", finished=True, epoch_time=t(3)))
+        assert spin_until(executor, lambda: recorder.finished, 20)
+    finally:
+        executor.shutdown()
+        recorder.destroy_node()
+        talker.destroy_node()
+    from rosbags.typesys import Stores, get_typestore
+    cloud = next(m for m in read_messages(out) if m.topic == "/uam/view/fleet")
+    stamp = get_typestore(Stores.ROS2_JAZZY).deserialize_cdr(cloud.data, "sensor_msgs/msg/PointCloud2").header.stamp
+    assert stamp.sec == 1736121600 + 3 and cloud.log_time_ns == 3 * NS  # 2025-01-06T00:00:03Z; log time sim

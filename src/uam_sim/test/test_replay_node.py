@@ -132,3 +132,33 @@ def test_a_replayed_run_recorded_again_gives_the_same_summary(ros_context, spin_
     assert a.pop("verified") is False and b.pop("verified") is True
     assert a == b
     assert b["approved"] == 2 and b["audit"]["min_separation_m"] == pytest.approx(150.0)
+
+
+@pytest.mark.ros
+def test_the_replay_sleeps_until_the_next_message_is_due(ros_context, spin_until, tmp_path):
+    """A 1 ms timer polled for due messages: a 33 s replay took 32.9 CPU-s. Now the timer fires
+    when the next message is due: a handful of wakeups per message, not one per millisecond."""
+    path = tmp_path / "sparse.mcap"
+    with McapRecorder(path) as rec:
+        rec.add_topic("/clock", Clock)
+        for k in range(3):  # three messages 0.5 s apart: 1 s of replay at rate 1
+            rec.write("/clock", Clock(clock=Time(sec=k)), k * NS // 2)
+    listener = Node("listener", context=ros_context)
+    got = []
+    listener.create_subscription(Clock, "/clock", got.append, 10)
+    replay = ReplayNode(str(path), context=ros_context, parameter_overrides=[
+        Parameter("rate", value=1.0), Parameter("start_delay_s", value=0.0),
+        Parameter("wait_for_subscribers", value=1)])
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(listener)
+    executor.add_node(replay)
+    try:
+        assert spin_until(executor, lambda: replay.done and len(got) == 3, 30)
+    finally:
+        executor.shutdown()
+        replay.destroy_node()
+        listener.destroy_node()
+    assert [m.clock.sec for m in got] == [0, 1, 2]
+    # polling every 1 ms over the 1 s replay woke it about 1,000 times; now about once per
+    # message (a late wakeup only means fewer)
+    assert replay.wakeups <= 10, replay.wakeups

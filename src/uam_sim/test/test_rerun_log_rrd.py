@@ -111,7 +111,9 @@ def test_blueprint_lays_out_the_views():
         for child in getattr(part, "contents", None) or []:
             walk(child)
     walk(bp.root_container)
-    assert {"Network (top-down)", "Geographic", "Flights", "MWIS size", "Solve time [s]"} <= set(names)
+    assert {"Network (top-down)", "Geographic", "Flights", "MWIS size (conflict-graph vertices)",
+            "MWIS selected vertices", "Solve time [s]"} <= set(names)
+    assert not any(n.startswith("Side") for n in names)  # one level: nothing to see from the side
 
 
 def test_corridor_levels_colour_corridors_and_default_to_one_level():
@@ -184,6 +186,21 @@ def test_levels_of_a_layered_network_are_drawn_in_their_colours():
     assert sorted({float(s[0, 2]) for s in strips}) == [60.0, 90.0, 120.0]
     assert all(s[0, 2] == s[1, 2] for s in strips)
     assert tuple(kw["colors"][0]) == LEVEL_COLORS[0] and tuple(kw["colors"][-1]) == LEVEL_COLORS[2]
+    # the side view's copy: the same corridors, heights exaggerated so the levels lie apart
+    from uam_sim.rerun_log import height_exaggeration, make_blueprint
+    k = height_exaggeration(net)
+    assert k == pytest.approx(0.25 * 2000.0 / 120.0)  # a quarter of the 2 km extent over 120 m
+    _, side, side_kw = logged["side/network/corridors"]
+    assert sorted({float(s[0, 2]) for s in side}) == pytest.approx([60.0 * k, 90.0 * k, 120.0 * k])
+    assert [tuple(c) for c in side_kw["colors"]] == [tuple(c) for c in kw["colors"]]
+    names = []
+
+    def walk(part):
+        names.append(str(getattr(part, "name", "")))
+        for child in getattr(part, "contents", None) or []:
+            walk(child)
+    walk(make_blueprint(net).root_container)
+    assert f"Side (from the south, heights x{k:.0f})" in names
 
 
 def _latest_at(path, entity: str) -> dict[float, dict]:

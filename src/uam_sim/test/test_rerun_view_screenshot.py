@@ -20,10 +20,12 @@ import pytest
 
 pytest.importorskip("uam_msgs.msg", reason="needs the built workspace (source scripts/env.sh)")
 
-from uam_sim.rerun_log import AERODROME_COLOR, CORRIDOR_COLOR, VEHICLE_COLOR  # noqa: E402
+from uam_sim.rerun_log import (AERODROME_COLOR, CORRIDOR_COLOR, LEVEL_COLORS, ROUTE_COLOR,  # noqa: E402
+                               VEHICLE_COLOR)
 from view_runs import ROOT, record_run  # noqa: E402
 
 SINGAPORE = ROOT / "config" / "networks" / "singapore.yaml"
+SINGAPORE_LAYERED = ROOT / "config" / "networks" / "singapore-layered.yaml"
 
 pytestmark = pytest.mark.slow
 
@@ -117,3 +119,35 @@ def test_viewer_shows_aircraft_and_corridors_in_the_top_down_view(shot):
     assert ys.min() - 20 <= ay.min() and ay.max() <= ys.max() + 20
     # The geographic view beside it draws the fleet too.
     assert near(right, VEHICLE_COLOR).sum() >= 3 * 20 * scale ** 2
+    # The airborne flights' routes show over the corridors (none did: thin, translucent, below
+    # the corridors' width).
+    routes = near(left, ROUTE_COLOR)
+    assert routes.sum() >= 2000 * scale ** 2, f"route pixels: {routes.sum()}"
+
+
+@pytest.fixture(scope="module")
+def layered_shot(tmp_path_factory, xvfb_display):
+    tmp = tmp_path_factory.mktemp("viewer_layered")
+    rrd = tmp / "run.rrd"
+    from uam_planner.network import load_network
+    net = load_network(SINGAPORE_LAYERED)
+    record_run(tmp / "run.mcap", "greedy", network=net, rate=4.0, duration_s=240.0, views=False,
+               rerun_rrd=rrd, stop_s=200)
+    return screenshot(rrd, tmp / "shot.png", xvfb_display, tmp)
+
+
+def test_a_layered_network_shows_its_flight_levels_apart_and_the_routes(layered_shot):
+    """Top-down, the four levels overlap and only the top one's colour shows: the side view
+    below it shows each level in its colour."""
+    img = layered_shot
+    h, w, _ = img.shape
+    scale = w / WINDOW[0]
+    side = img[int(0.76 * h):int(0.95 * h), :int(0.58 * w)]      # the side view, under the top-down one
+    top = img[int(0.06 * h):int(0.72 * h), :int(0.58 * w)]
+    per_level = [int(near(side, c).sum()) for c in LEVEL_COLORS[:4]]
+    assert sum(n >= 300 * scale ** 2 for n in per_level) >= 2, f"level colour pixels: {per_level}"
+    assert all(n >= 100 * scale ** 2 for n in per_level), f"level colour pixels: {per_level}"
+    # each level lies at its own height: the colours' rows do not coincide
+    rows = [np.median(np.nonzero(near(side, c))[0]) for c in LEVEL_COLORS[:4]]
+    assert len({round(r / (4 * scale)) for r in rows}) == 4, rows
+    assert near(top, ROUTE_COLOR).sum() >= 1000 * scale ** 2, "no route lines in the top-down view"

@@ -86,6 +86,7 @@ def test_nav_sat_fix_and_marker_array_bytes_equal_rclpy():
 
 def test_scenario_start_parses_iso_times_and_names_bad_values():
     assert scenario_start_ns(DEFAULT_SCENARIO_START_UTC) == START_NS
+    assert scenario_start_ns("sim") == 0  # stamps in simulation time, the other topics' clock
     assert scenario_start_ns("2025-01-06T08:00:00+08:00") == START_NS
     assert scenario_start_ns("2025-01-06T00:00:00.25Z") == START_NS + SEC // 4
     for bad, why in (("yesterday", "ISO 8601"), ("2025-01-06T00:00:00", "no time zone"),

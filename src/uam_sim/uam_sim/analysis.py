@@ -58,7 +58,8 @@ from typing import Any, Iterable
 import numpy as np
 
 from .audit import AIRSPACE_METADATA, SafetyAudit, audit_plans, separation_from_metadata
-from .mcap_reader import is_complete, iter_decoded, read_metadata
+from .flights import flight_metrics
+from .mcap_reader import is_complete, iter_decoded, read_metadata, recorded_topics, require_mcap
 from .mcap_recover import RECOVERED_METADATA
 from .stamps import stamp_s
 
@@ -97,6 +98,7 @@ class EpochStats:
     solve_time_s: float
     backend_used: str
     fallback: bool
+    policy: str = ""  # "mwis", "fifo" or "firstfit": only mwis epochs solve an MWIS
 
 
 @dataclass
@@ -139,6 +141,15 @@ class RunSummary:
     forged_plans: list = field(default_factory=list)
     #: how the run ended, as the simulator announced it ("" when no end is recorded)
     run_end: str = ""
+    #: rejection reason as in ``rejection_reasons`` -> [min, max] of the number each N stands for
+    rejection_values: dict = field(default_factory=dict)
+    #: the approved flights as the experiment's flights table has them (uam_sim.flights): request,
+    #: operator, route, length_m, weight, candidate_index, earliest_departure_s, departure_s, ...
+    flights: list = field(default_factory=list)
+    #: uam_sim.flights.flight_metrics of the flights: delay_mean_s, detour_mean_pct, ... ({} if none)
+    flight_stats: dict = field(default_factory=dict)
+    #: the same per operator_id, when more than one operator had a flight approved
+    flight_stats_by_operator: dict = field(default_factory=dict)
 
     @property
     def verified(self) -> bool:
@@ -349,6 +360,7 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=10
     Complexity: linear in the messages, plus the audit (quadratic in overlapping flights).
     """
     request_ids: set[str] = set()
+    earliest_s: dict[str, float] = {}  # request key -> earliest departure [s]
     decisions: dict[str, list] = {}  # request id -> distinct plans, in arrival order
     seen: set[tuple] = set()
     duplicates = refused_duplicates = 0
@@ -367,6 +379,7 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=10
         t_min, t_max = min(t_min, log_ns * 1e-9), max(t_max, log_ns * 1e-9)
         if topic == TOPIC_REQUESTS:
             request_ids.add(request_key(msg))
+            earliest_s.setdefault(request_key(msg), stamp_s(msg.earliest_departure))
         elif topic == TOPIC_PLANS:
             if int(msg.outcome) == OUTCOME_DUPLICATE:
                 refused_duplicates += 1
@@ -396,7 +409,7 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=10
                 approved=int(msg.approved), expired=int(msg.expired), rejected=int(msg.rejected),
                 active_flights=int(msg.active_flights), objective=float(msg.objective),
                 solve_time_s=float(msg.solve_time_s), backend_used=str(msg.backend_used),
-                fallback=bool(msg.fallback)))
+                fallback=bool(msg.fallback), policy=str(getattr(msg, "policy", ""))))
     plans = [p for ps in decisions.values() for p in ps]
     outcomes = [int(p.outcome) for p in plans]
     conflicting = {rid: [_OUTCOME_NAMES.get(int(p.outcome), str(int(p.outcome))) for p in ps]
@@ -414,10 +427,20 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=10
             approved_plans.append(p)
             labels.append(rid if k == 0 else f"{rid}#{k + 1}")
     reasons: dict[str, int] = {}
+    values: dict[str, list] = {}
     for p in plans:
         if int(p.outcome) != OUTCOME_APPROVED:
             key = _REASON_NUMBER.sub("N", str(p.reason))  # "... by 270 s" and "... by 300 s" together
             reasons[key] = reasons.get(key, 0) + 1
+            numbers = [float(x) for x in _REASON_NUMBER.findall(str(p.reason))]
+            ranges = values.setdefault(key, [[x, x] for x in numbers])
+            for r, x in zip(ranges, numbers):
+                r[0], r[1] = min(r[0], x), max(r[1], x)
+    flights = [_flight_row(p, label, earliest_s) for p, label in zip(approved_plans, labels)]
+    by_operator = {}
+    if len({f["operator_id"] for f in flights}) > 1:
+        for op in sorted({f["operator_id"] for f in flights}):
+            by_operator[op] = flight_metrics({"flights": [f for f in flights if f["operator_id"] == op]})
 
     avg_active = 0.0
     if fleet_t:
@@ -429,7 +452,8 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=10
             avg_active = float(np.sum(n[:-1] * np.diff(t)) / (t[-1] - t[0]))
         else:
             avg_active = float(n.mean())
-    with_instance = [e for e in epochs if e.vertices > 0]
+    # a FIFO or first-fit epoch reports its graph but solves no MWIS: its selection is not one
+    with_instance = [e for e in epochs if e.vertices > 0 and e.policy in ("", "mwis")]
     max_active = int(max(fleet_n)) if fleet_n else 0
     audit = audit_plans(approved_plans, separation_m, labels=labels)
     return RunSummary(
@@ -452,6 +476,10 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=10
         solve_time_s=_stats([e.solve_time_s for e in with_instance]),
         fallbacks=sum(e.fallback for e in epochs),
         rejection_reasons=reasons,
+        rejection_values=values,
+        flights=flights,
+        flight_stats=flight_metrics({"flights": flights}),
+        flight_stats_by_operator=by_operator,
         audit=audit,
         conflicting_decisions=conflicting,
         duplicate_requests_refused=refused_duplicates,
@@ -460,6 +488,17 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=10
         forged_plans=forged,
         run_end=run_end,
     )
+
+
+def _flight_row(plan: Any, label: str, earliest_s: dict) -> dict:
+    """An approved plan as a row of the experiment's flights table (what uam_sim.flights reads)."""
+    key = request_key(plan)
+    return {"request_id": label, "operator_id": str(plan.operator_id), "origin": str(plan.origin_id),
+            "destination": str(plan.destination_id), "epoch": int(plan.epoch_index),
+            "earliest_departure_s": earliest_s.get(key),
+            "departure_s": stamp_s(plan.departure_time), "arrival_s": stamp_s(plan.arrival_time),
+            "length_m": float(plan.length_m), "weight": float(plan.weight),
+            "candidate_index": int(plan.candidate_index), "route": " ".join(plan.route_node_ids)}
 
 
 def summarize(path: str | Path, separation_m=None, reader: str = "rclpy",
@@ -472,6 +511,7 @@ def summarize(path: str | Path, separation_m=None, reader: str = "rclpy",
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"recording: no file at {path}")
+    require_mcap(path)
     airspace = read_metadata(path, AIRSPACE_METADATA)
     given = separation_m is not None
     if separation_m is None:
@@ -509,6 +549,33 @@ def _fmt_stats(s: dict, unit: str = "", scale: float = 1.0, digits: int = 1) -> 
             f"max {f.format(s['max'] * scale)}{unit} over {s['count']} epochs")
 
 
+def _reason_with_values(reason: str, ranges) -> str:
+    """A grouped reason with each N replaced by its value, or by the range of its values."""
+    if not ranges:
+        return reason
+    parts = iter(f"{lo:g}" if lo == hi else f"{lo:g}..{hi:g}" for lo, hi in ranges)
+    return re.sub(r"(?<![\w'.])N(?![\w'])", lambda m: next(parts, "N"), reason)
+
+
+def _flight_lines(whose: str, stats: dict) -> list[str]:
+    """Departure delay and route detour of the approved flights (uam_sim.flights.flight_metrics)."""
+    if not stats:
+        return []
+    delay, detour = stats["delay_mean_s"], stats["detour_mean_pct"]
+    if math.isnan(delay):
+        delay_line = f"Departure delay{whose}  - (no request with its earliest departure recorded)"
+    else:
+        delay_line = (f"Departure delay{whose}  mean {delay:.1f} s after the earliest departure, "
+                      f"{100 * stats['delayed_share']:.0f} % of {stats['flights']} flights delayed")
+    if math.isnan(detour):
+        detour_line = f"Route detour{whose}     - (no plan with a weight in (0, 1])"
+    else:
+        detour_line = (f"Route detour{whose}     mean {detour:.1f} % over the shortest route (from "
+                       f"the plans' weights), {100 * stats['shortest_share']:.0f} % on the best "
+                       f"candidate, mean length {stats['route_length_mean_m'] / 1000:.2f} km")
+    return [delay_line, detour_line]
+
+
 def format_summary(s: RunSummary, epochs: bool = True) -> str:
     """A human-readable report of a RunSummary."""
     lines = [
@@ -528,15 +595,22 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
     for rid, outs in sorted(s.conflicting_decisions.items())[:20]:
         lines.append(f"    CONFLICTING decisions for {rid!r}: {', '.join(outs)}")
     for reason, n in sorted(s.rejection_reasons.items(), key=lambda kv: -kv[1]):
-        lines.append(f"    {n:5d} x {reason or '(no reason given)'}")
+        lines.append(f"    {n:5d} x {_reason_with_values(reason, s.rejection_values.get(reason)) or '(no reason given)'}")
     lines += [
         f"Active aircraft  average {s.average_active_aircraft:.2f} (time-average over "
         f"{s.fleet_steps} fleet states), max {s.max_active_aircraft}",
-        f"MWIS vertices    {_fmt_stats(s.mwis_vertices, digits=0)}",
-        f"MWIS selected    {_fmt_stats(s.mwis_selected, digits=0)}",
-        f"Solve time       {_fmt_stats(s.solve_time_s, ' ms', 1e3, 2)}",
-        f"Fallbacks        {s.fallbacks}",
     ]
+    policies = {e.policy for e in s.epochs}
+    if s.epochs and not policies & {"", "mwis"}:
+        lines.append(f"MWIS             none solved (policy {', '.join(sorted(policies))})")
+    else:
+        lines += [f"MWIS vertices    {_fmt_stats(s.mwis_vertices, digits=0)}",
+                  f"MWIS selected    {_fmt_stats(s.mwis_selected, digits=0)}",
+                  f"Solve time       {_fmt_stats(s.solve_time_s, ' ms', 1e3, 2)}",
+                  f"Fallbacks        {s.fallbacks}"]
+    lines += _flight_lines("", s.flight_stats)
+    for op, stats in s.flight_stats_by_operator.items():
+        lines += _flight_lines(f" of {op}", stats)
     a = s.audit
     if a is not None:
         pair = f" ({a.closest_pair[0]} / {a.closest_pair[1]})" if a.closest_pair else ""
@@ -584,7 +658,7 @@ def _separation_from_flags(args):
 def main(argv: list[str] | None = None) -> int:
     """Command line: print the summary of a recording (exit 2 if the audit finds a loss, 3 if the
     recording lacks plans it should hold, so its audit cannot be trusted)."""
-    ap = argparse.ArgumentParser(prog="analyze", description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, prog="analyze", description=__doc__.split("\n\n")[0])
     ap.add_argument("recording", help="the .mcap file of a run")
     ap.add_argument("--separation", choices=("sphere", "cylinder"), default=None,
                     help="separation model of the audit (default: the run's, from the recording's "
@@ -597,8 +671,21 @@ def main(argv: list[str] | None = None) -> int:
                     help="decoder: rclpy (default, tolerates torn files) or rosbags (independent)")
     ap.add_argument("--json", action="store_true", help="print the summary as JSON")
     ap.add_argument("--no-epochs", action="store_true", help="leave out the per-epoch table")
-    # ros2 run appends --ros-args ...; ignore it
-    args, _unknown = ap.parse_known_args(argv)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if "--ros-args" in argv:  # ros2 run appends --ros-args ...: that part is not ours
+        argv = argv[:argv.index("--ros-args")]
+    args = ap.parse_args(argv)  # a misspelled option is an error (exit 2), not a file name
+    try:
+        require_mcap(args.recording)
+        topics = recorded_topics(args.recording)
+        if topics is not None and not topics & set(ANALYSED_TOPICS):
+            raise ValueError(f"recording: {args.recording!r} holds none of the topics "
+                             f"{', '.join(ANALYSED_TOPICS)} (not a recording of a run)")
+    except ValueError as exc:  # not a recording of a run at all: nothing to judge, so no verdict
+        print(f"analyze: {exc}", file=sys.stderr)
+        return 2
+    except FileNotFoundError:
+        pass  # summarize says so
     try:
         separation = _separation_from_flags(args)
         summary = summarize(args.recording, separation, args.reader)

@@ -527,7 +527,7 @@ def _instance_section(inst: pd.DataFrame, figs: dict, d: Path) -> list:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="capacity_report", description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, prog="capacity_report", description=__doc__.split("\n\n")[0])
     ap.add_argument("dir", help="a capacity study's output (docs/capacity-study)")
     args = ap.parse_args(argv)
     paths = write_capacity_report(Path(args.dir))

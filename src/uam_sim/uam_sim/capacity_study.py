@@ -348,7 +348,7 @@ def run_capacity_study(cfg: CapacityConfig, compute: bool = True, progress: bool
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="capacity_study", description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, prog="capacity_study", description=__doc__.split("\n\n")[0])
     ap.add_argument("--config", default="config/capacity-study.yaml")
     ap.add_argument("--out", default=None)
     ap.add_argument("--workers", type=int, default=None)

@@ -77,7 +77,8 @@ def run_experiment(cfg: ExperimentConfig, progress: bool = True, figures: bool =
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="experiment", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(prog="experiment", description=__doc__.split("\n\n")[0],
+                                allow_abbrev=False)
     p.add_argument("--config", help="YAML experiment file (config/experiment.yaml)")
     p.add_argument("--network", help="network file (overrides the config)")
     p.add_argument("--rates", help="comma list of requests per interval, e.g. 1,2,4")
@@ -137,11 +138,15 @@ def main(argv: list | None = None) -> int:
     except (ExperimentError, OSError, yaml.YAMLError) as exc:
         print(f"experiment: {exc}", file=sys.stderr)
         return 2
-    if args.from_mcap:
-        outputs = study_from_mcaps(args.from_mcap, cfg, figures=not args.no_figures)
-    else:
-        outputs = run_experiment(cfg, progress=not args.no_progress, figures=not args.no_figures,
-                                 report=not args.no_figures, compute=not args.no_compute)
+    try:
+        if args.from_mcap:
+            outputs = study_from_mcaps(args.from_mcap, cfg, figures=not args.no_figures)
+        else:
+            outputs = run_experiment(cfg, progress=not args.no_progress, figures=not args.no_figures,
+                                     report=not args.no_figures, compute=not args.no_compute)
+    except ExperimentError as exc:  # a bad value found only when it is used (e.g. a demand file)
+        print(f"experiment: {exc}", file=sys.stderr)
+        return 2
     sweep = outputs["sweep"]
     print(format_timing_table(sweep.cells))
     print(f"{len(sweep.cells)} cells ({len(sweep.computed)} computed, {len(sweep.reused)} reused) "

@@ -194,6 +194,15 @@ def make_config(data: dict | None = None, **overrides) -> ExperimentConfig:
     if not methods or not all(isinstance(m, str) and m for m in methods):
         raise ExperimentError(f"methods: {cfg.methods!r} must be a non-empty list of names")
     cfg.methods = [m.strip() for m in methods]
+    from uam_solvers.registry import backend_names
+    known = list(BASELINES) + backend_names()
+    for m in cfg.methods:
+        if m not in known:
+            raise ExperimentError(f"methods: {m!r} is not a method (known: {', '.join(known)})")
+    if isinstance(cfg.network, (str, Path)) and not resolve_path(str(cfg.network)).is_file():
+        raise ExperimentError(f"network: file {str(cfg.network)!r} does not exist")
+    if cfg.demand_file and not resolve_path(str(cfg.demand_file)).is_file():
+        raise ExperimentError(f"demand_file: file {str(cfg.demand_file)!r} does not exist")
     cfg.rates = [rate_label(r) for r in _num_list("rates", cfg.rates)]
     cfg.seeds = _seeds(cfg.seeds)
     for name in ("duration_s", "epoch_s", "interval_s", "window_s", "separation_m", "speed_mps",

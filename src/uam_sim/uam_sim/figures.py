@@ -27,6 +27,7 @@ import numpy as np  # noqa: E402
 METHOD_ORDER = ("fifo", "firstfit", "greedy", "exact", "sa", "tabu", "qpu-emulator", "qpu", "kamis",
                 "chils")
 from .experiment_config import BASELINES  # noqa: E402  (planner policies, not MWIS solvers)
+from .flights import corridor_use_m, flight_metrics  # noqa: E402,F401  (re-exported)
 # marker, line style and colour per method, so methods that overlap (exact, sa, tabu and the
 # emulator often approve the same flights) stay distinguishable in print and in greyscale
 STYLE = {"fifo": ("o", "-", "tab:blue"), "firstfit": ("s", "--", "tab:orange"),
@@ -482,44 +483,6 @@ def central_corridors(network, share: float = 0.10) -> tuple[np.ndarray, np.ndar
     n_top = max(int(math.ceil(share * network.n_edges)), 1)
     top[np.lexsort((np.arange(c.size), -c))[:n_top]] = True
     return c, top
-
-
-def corridor_use_m(network, flights) -> np.ndarray:
-    """Flown distance per corridor [m] of a run's flights (each flight's route node ids)."""
-    use = np.zeros(network.n_edges, dtype=float)
-    L = np.asarray(network.edge_length_m)
-    for f in flights:
-        ids = f["route"].split()
-        idx = [network.node_index(x) for x in ids]
-        for a, b in zip(idx[:-1], idx[1:]):
-            e = network.edge_index(a, b)
-            use[e] += L[e]
-    return use
-
-
-def flight_metrics(cell, network=None, top=None) -> dict:
-    """Per-run flight statistics: mean route length [m], mean detour [%] (route length over the
-    shortest route of the same origin-destination pair, from the weight d*/d: d/d* = 1/w), mean
-    delay [s] (departure - earliest departure), shares of flights on candidate 0 and with a
-    delay, and the share of flown distance on the central corridors (``top`` mask) when a
-    network is given."""
-    fl = cell.get("flights") or []
-    if not fl:
-        return {}
-    length = np.array([f["length_m"] for f in fl], dtype=float)
-    detour = 100.0 * (1.0 / np.array([f["weight"] for f in fl], dtype=float) - 1.0)
-    delay = np.array([f["departure_s"] - f["earliest_departure_s"] for f in fl
-                      if f.get("earliest_departure_s") not in (None, "")], dtype=float)
-    out = {"flights": len(fl), "route_length_mean_m": float(length.mean()),
-           "flown_km": float(length.sum() / 1000.0),
-           "detour_mean_pct": float(detour.mean()),
-           "shortest_share": float(np.mean([int(f["candidate_index"]) == 0 for f in fl])),
-           "delay_mean_s": float(delay.mean()) if delay.size else float("nan"),
-           "delayed_share": float((delay > 1e-6).mean()) if delay.size else float("nan")}
-    if network is not None and top is not None:
-        use = corridor_use_m(network, fl)
-        out["central_share"] = float(use[top].sum() / use.sum()) if use.sum() > 0 else float("nan")
-    return out
 
 
 def _network(cfg):

@@ -67,6 +67,33 @@ def read_messages_tolerant(path: str | os.PathLike) -> Iterator[RecordedMessage]
                                   channel.metadata.get("offered_qos_profiles", ""))
 
 
+#: The first bytes of every MCAP file (the specification's magic: 0x89 "MCAP0" CR LF).
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+
+
+def require_mcap(path: str | os.PathLike) -> None:
+    """Raise ValueError naming the file unless it starts with the MCAP magic (a README, a .rrd
+    or an empty file is not a recording); FileNotFoundError if there is no such file."""
+    with open(path, "rb") as f:
+        head = f.read(len(MCAP_MAGIC))
+    if head != MCAP_MAGIC:
+        raise ValueError(f"recording: {str(path)!r} is not an MCAP file (it starts with {head[:8]!r}, "
+                         f"not the MCAP magic {MCAP_MAGIC!r})")
+
+
+def recorded_topics(path: str | os.PathLike) -> set[str] | None:
+    """The topics (channels) of a complete recording, whether or not they carried a message;
+    None when the file has no summary to list them (cut short)."""
+    from mcap.reader import make_reader
+
+    try:
+        with open(path, "rb") as f:
+            summary = make_reader(f).get_summary()
+    except Exception:  # noqa: BLE001 - a torn file has no summary
+        return None
+    return None if summary is None else {c.topic for c in summary.channels.values()}
+
+
 def is_complete(path: str | os.PathLike) -> bool:
     """True if the file ends with a valid footer and summary (it was closed properly)."""
     from mcap.reader import make_reader

@@ -40,6 +40,12 @@ class RunPlans:
     times_s: list = field(default_factory=list)      # (p,) per flight
     points_m: list = field(default_factory=list)     # (p, 3) per flight
     requests: int = 0
+    #: the run's end [s]: the recording's last message (a node-graph run: the simulator's last
+    #: step); None when the file has no summary to say it (cut short)
+    end_s: float | None = None
+
+    def last_arrival_s(self) -> float:
+        return max(float(t[-1]) for t in self.times_s)
 
 
 
@@ -63,7 +69,41 @@ def read_plans(path: str | Path, label: str | None = None) -> RunPlans:
     run.requests = len(seen)
     if not run.ids:
         raise ValueError(f"recording {path}: no approved flight plans on {TOPIC_PLANS}")
+    run.end_s = _recording_end_s(path)
     return run
+
+
+def _recording_end_s(path: str | Path) -> float | None:
+    """Log time of the recording's last message [s] (log time is simulation time), from the
+    MCAP summary; None if the file has none."""
+    from .mcap_reader import is_complete
+
+    if not is_complete(path):
+        return None
+    from mcap.reader import make_reader
+    with open(path, "rb") as f:
+        stats = make_reader(f).get_summary().statistics
+    return stats.message_end_time / _NS if stats is not None and stats.message_count else None
+
+
+#: what ``until`` may name besides a number of seconds
+UNTIL_CHOICES = ("end", "arrivals")
+
+
+def movie_end_s(runs: Sequence[RunPlans], until: str | float = "end") -> float:
+    """The movie's last frame time [s]: ``"end"`` the latest run's end (its last arrival when
+    the recording does not say), ``"arrivals"`` the last arrival, or a number of seconds."""
+    if until == "end":
+        return max(r.end_s if r.end_s is not None else r.last_arrival_s() for r in runs)
+    if until == "arrivals":
+        return max(r.last_arrival_s() for r in runs)
+    try:
+        t = float(until)
+    except (TypeError, ValueError):
+        raise ValueError(f"until: {until!r} is not 'end', 'arrivals' or a number of seconds") from None
+    if not t > 0:
+        raise ValueError(f"until: must be > 0 s, got {until!r}")
+    return t
 
 
 def _seg_key(a: np.ndarray, b: np.ndarray) -> tuple:
@@ -130,10 +170,11 @@ def ffmpeg_path() -> str | None:
 
 def make_movie(paths: Sequence[str | Path], out: str | Path, network: Any = None,
                labels: Sequence[str] | None = None, step_s: float = 10.0, fps: int = 12,
-               dpi: int = 100, t_end_s: float | None = None) -> Path:
+               dpi: int = 100, t_end_s: float | None = None, until: str | float = "end") -> Path:
     """Render the runs side by side into ``out`` (.mp4 or .gif); returns the written path.
 
-    One frame per ``step_s`` of simulated time from 0 to the last arrival (or ``t_end_s``).
+    One frame per ``step_s`` of simulated time from 0 to ``t_end_s`` if given, else to
+    :func:`movie_end_s` of ``until`` (default: the run's end, not the last arrival after it).
     """
     import matplotlib
     matplotlib.use("Agg")
@@ -147,7 +188,7 @@ def make_movie(paths: Sequence[str | Path], out: str | Path, network: Any = None
         raise ValueError(f"fps: must be > 0, got {fps}")
     runs = [read_plans(p, labels[i] if labels else None) for i, p in enumerate(paths)]
     counter = UseCounter.from_runs(runs, network)
-    t_end = t_end_s if t_end_s is not None else max(float(t[-1]) for r in runs for t in r.times_s)
+    t_end = t_end_s if t_end_s is not None else movie_end_s(runs, until)
     frames = np.arange(0.0, t_end + 1e-9, step_s)
     final = [counter.uses_until(r, t_end) for r in runs]
     vmax = max(1.0, max(float(f.max()) for f in final))
@@ -226,7 +267,7 @@ def make_movie(paths: Sequence[str | Path], out: str | Path, network: Any = None
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m uam_sim.movie",
+    ap = argparse.ArgumentParser(allow_abbrev=False, prog="python -m uam_sim.movie",
                                  description="side-by-side movie of runs of one demand (e.g. FIFO and MWIS)")
     ap.add_argument("recordings", nargs="+", help="the runs' .mcap files (two for the paper's movie)")
     ap.add_argument("--out", default="movie.mp4", help=".mp4 (ffmpeg) or .gif")
@@ -235,6 +276,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--step-s", type=float, default=10.0, help="simulated seconds per frame")
     ap.add_argument("--fps", type=int, default=12)
     ap.add_argument("--dpi", type=int, default=100)
+    ap.add_argument("--until", default="end",
+                    help="last frame: 'end' (default: the run's end, its recording's last message), "
+                         "'arrivals' (until the last flight landed) or a number of seconds")
     args = ap.parse_args(argv)
     labels = [s.strip() for s in args.labels.split(",")] if args.labels else None
     if labels is not None and len(labels) != len(args.recordings):
@@ -245,7 +289,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.network:
             from uam_planner.network import load_network
             network = load_network(args.network)
-        out = make_movie(args.recordings, args.out, network, labels, args.step_s, args.fps, args.dpi)
+        out = make_movie(args.recordings, args.out, network, labels, args.step_s, args.fps, args.dpi,
+                         until=args.until)
     except (OSError, ValueError) as exc:
         print(f"movie: {exc}", file=sys.stderr)
         return 1

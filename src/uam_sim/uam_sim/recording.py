@@ -67,7 +67,7 @@ def main(argv: list[str] | None = None) -> int:
     """``python -m uam_sim.recording recover TORN.mcap FIXED.mcap`` | ``info FILE.mcap`` | ``bench``."""
     import argparse
 
-    ap = argparse.ArgumentParser(prog="python -m uam_sim.recording")
+    ap = argparse.ArgumentParser(allow_abbrev=False, prog="python -m uam_sim.recording")
     sub = ap.add_subparsers(dest="command", required=True)
     rec = sub.add_parser("recover", help="rewrite a crash-cut recording into a complete file")
     rec.add_argument("src")

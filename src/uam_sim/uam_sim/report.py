@@ -560,6 +560,11 @@ def write_report(sweep, outputs: dict, machine: dict, out: Path) -> Path:
                   f"the optimum (left out of the box). Study wall time {_f(tts.get('wall_s'), 1)} s"
                   + (f"; sub-samples for slow backends: {tts.get('backend_instances')}"
                      if tts.get('backend_instances') else "") + "."))
+        no_read = [r for r in figs["tts"]["table"] if r["per_read_median_s"] != r["per_read_median_s"]
+                   and r.get("per_read_not_reached")]
+        for r in no_read:  # an annealer whose reads never reached an optimum: no per-read TTS
+            L += [f"Per read, {r['backend']}: nothing to measure (no read reached the optimum on "
+                  f"any of its {r['per_read_not_reached']} instances).", ""]
         if pr:
             L += ["Per read:", "",
                   _table(pr, ["backend", "reads_per_call", "per_read_median_s", "per_read_median_lo",
@@ -710,7 +715,7 @@ def report_from_tables(d, figures: bool = True) -> Path:
 def main(argv=None) -> int:
     """``python -m uam_sim.report DIR``: the report of a finished study again from its tables."""
     import argparse
-    p = argparse.ArgumentParser(prog="uam_sim.report", description=report_from_tables.__doc__)
+    p = argparse.ArgumentParser(allow_abbrev=False, prog="uam_sim.report", description=report_from_tables.__doc__)
     p.add_argument("dir", help="study directory with runs.csv, epochs.csv[.gz], flights.csv[.gz], "
                                f"tts.csv and {INPUTS}")
     args = p.parse_args(argv)

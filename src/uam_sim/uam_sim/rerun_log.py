@@ -8,10 +8,14 @@ The blueprint (:func:`make_blueprint`) shows, side by side:
   labelled, aircraft as points whose size is in UI points (visible at any zoom), and the routes of
   the airborne flights as thin lines. Clicking an aircraft selects it *and* its route (they are
   instance ``k`` of the same entity, see ``world/fleet`` below), which Rerun highlights;
+- **Side (from the south)**, for a layered network: its corridors again (``side/network``),
+  heights exaggerated (:func:`height_exaggeration`) so that the flight levels lie apart, each in
+  its colour; top-down the highest level covers the others;
 - **Geographic**: the same network and fleet as GeoPoints / GeoLineStrings on a map
   (OpenStreetMap tiles when the viewer is online; the points are drawn without tiles too);
 - **Metrics** on the ``sim_time`` timeline: approved (cumulative), airborne and pending flights;
-  MWIS size (conflict-graph vertices) and selected vertices; MWIS solve time [s].
+  MWIS size (conflict-graph vertices) and selected vertices in panels of their own (at city scale
+  ~20 selected beside ~1,300 vertices sat flat at 0 on one axis); MWIS solve time [s].
 
 Entity layout (ENU metres, z up; geographic entities in WGS84 degrees):
 
@@ -56,7 +60,8 @@ AERODROME_COLOR = (255, 170, 0)
 CORRIDOR_COLOR = (90, 140, 200)
 WAYPOINT_COLOR = (150, 150, 150)
 VEHICLE_COLOR = (255, 40, 200)
-ROUTE_COLOR = (60, 200, 90, 150)
+#: Routes of the airborne flights: opaque and wider than the corridors, so they show on top of them.
+ROUTE_COLOR = (60, 220, 90, 255)
 #: Corridor colours by flight level (level 0, 1, ...), cycled when there are more levels.
 LEVEL_COLORS = ((90, 140, 200), (0, 200, 200), (160, 110, 230), (230, 200, 60), (120, 200, 90))
 
@@ -65,7 +70,10 @@ VEHICLE_RADIUS_UI = 5.0
 AERODROME_RADIUS_UI = 5.0
 WAYPOINT_RADIUS_UI = 1.5
 CORRIDOR_RADIUS_UI = 1.5
-ROUTE_RADIUS_UI = 1.0
+ROUTE_RADIUS_UI = 2.5
+#: Share of the network's horizontal extent that its height range spans in the views (heights
+#: are exaggerated: 30 m between flight levels is invisible beside 40 km of city).
+HEIGHT_SHARE = 0.25
 
 #: Attribute names under which a network may carry one flight level per corridor.
 LEVEL_ATTRIBUTES = ("edge_levels", "corridor_levels", "edge_level")
@@ -131,6 +139,29 @@ def _node_labels(network: Any) -> list[str]:
     return [str(n) if n else str(i) for n, i in zip(names, ids)]
 
 
+def height_exaggeration(network: Any) -> float:
+    """Factor on heights (z) in the 3D views: the network's height range (its flight levels, else
+    its nodes' heights, at least 100 m) spans :data:`HEIGHT_SHARE` of its horizontal extent."""
+    enu = np.asarray(network.enu_m, dtype=np.float64).reshape(-1, 3)
+    extent = float(max(np.ptp(enu[:, 0]), np.ptp(enu[:, 1]), 100.0)) if len(enu) else 1000.0
+    heights = list(getattr(network, "levels_m", None) or ()) + list(enu[:, 2]) + [0.0]
+    top = max(float(max(heights)), 100.0)
+    return max(1.0, HEIGHT_SHARE * extent / top)
+
+
+def side_eye(network: Any) -> tuple[tuple, tuple]:
+    """Camera position and look target (ENU m, heights exaggerated) of the side view: from the
+    south, level with the middle of the flight levels, far enough to see the whole width."""
+    enu = np.asarray(network.enu_m, dtype=np.float64).reshape(-1, 3)
+    lo, hi = enu[:, :2].min(axis=0), enu[:, :2].max(axis=0)
+    centre = (lo + hi) / 2
+    extent = float(max(hi - lo)) if len(enu) > 1 else 1000.0
+    levels = list(getattr(network, "levels_m", None) or ()) or [float(enu[:, 2].max()) if len(enu) else 100.0]
+    z = 0.5 * (min(levels) + max(levels)) * height_exaggeration(network)
+    target = (float(centre[0]), float(centre[1]), z)
+    return (target[0], float(lo[1]) - 0.2 * extent, z), target
+
+
 def top_down_eye(network: Any, fov_y_deg: float = 55.0) -> tuple[tuple, tuple]:
     """Camera position and look target (ENU m) that frame the whole network from straight above."""
     enu = np.asarray(network.enu_m, dtype=np.float64).reshape(-1, 3)
@@ -155,14 +186,25 @@ def make_blueprint(network: Any = None) -> Any:
     """The viewer layout sent with every recording (see the module docstring)."""
     import rerun.blueprint as rrb
 
-    eye = None
+    eye = side = None
+    side_name = "Side (from the south)"
     if network is not None:
         position, target = top_down_eye(network)
         eye = rrb.EyeControls3D(kind=rrb.Eye3DKind.Orbital, position=position, look_target=target,
                                 eye_up=(0.0, 1.0, 0.0))
+        s_pos, s_target = side_eye(network)
+        side = rrb.EyeControls3D(kind=rrb.Eye3DKind.Orbital, position=s_pos, look_target=s_target,
+                                 eye_up=(0.0, 0.0, 1.0))
+        side_name = f"Side (from the south, heights x{height_exaggeration(network):.0f})"
     top_down = rrb.Spatial3DView(name="Network (top-down)", origin="world", contents="$origin/**",
                                  eye_controls=eye, line_grid=rrb.LineGrid3D(visible=False),
                                  background=(18, 18, 24))
+    # the flight levels apart (top-down, the highest level covers the others): the corridors
+    # logged again under side/ with their heights exaggerated, seen from the south
+    layered = network is not None and bool(getattr(network, "levels_m", None))
+    side_view = rrb.Spatial3DView(name=side_name, origin="side", contents="$origin/**",
+                                  eye_controls=side, line_grid=rrb.LineGrid3D(visible=False),
+                                  background=(18, 18, 24))
     geo = rrb.MapView(name="Geographic", origin="geo", contents="$origin/**",
                       zoom=map_zoom(network) if network is not None else None,
                       background=rrb.MapProvider.OpenStreetMap)
@@ -170,13 +212,20 @@ def make_blueprint(network: Any = None) -> Any:
     axis = rrb.TimeAxis(view_range=rrb.TimeRange(start=rrb.TimeRangeBoundary.infinite(),
                                                  end=rrb.TimeRangeBoundary.cursor_relative(seconds=0.0)))
     flights = rrb.TimeSeriesView(name="Flights", origin="metrics", axis_x=axis, contents=[
-        "$origin/approved_cumulative", "$origin/active_aircraft", "$origin/pending_requests"])
-    mwis = rrb.TimeSeriesView(name="MWIS size", origin="metrics", axis_x=axis, contents=[
-        "$origin/mwis_vertices", "$origin/mwis_selected"])
+        "$origin/approved_cumulative", "$origin/active_aircraft", "$origin/pending_requests"],
+        plot_legend=rrb.PlotLegend(rrb.Corner2D.LeftTop))
+    # one panel each: at city scale the selection (~20) sat flat at 0 beside ~1,300 vertices;
+    # a single series needs no legend (the title names it), so none covers the curve's start
+    no_legend = rrb.PlotLegend(visible=False)
+    mwis = rrb.TimeSeriesView(name="MWIS size (conflict-graph vertices)", origin="metrics",
+                              axis_x=axis, contents=["$origin/mwis_vertices"], plot_legend=no_legend)
+    selected = rrb.TimeSeriesView(name="MWIS selected vertices", origin="metrics", axis_x=axis,
+                                  contents=["$origin/mwis_selected"], plot_legend=no_legend)
     solve = rrb.TimeSeriesView(name="Solve time [s]", origin="metrics", axis_x=axis,
-                               contents=["$origin/solve_time_s"])
+                               contents=["$origin/solve_time_s"], plot_legend=no_legend)
     return rrb.Blueprint(
-        rrb.Horizontal(top_down, rrb.Vertical(geo, flights, mwis, solve, row_shares=[3, 2, 2, 2]),
+        rrb.Horizontal(rrb.Vertical(top_down, side_view, row_shares=[3, 1]) if layered else top_down,
+                       rrb.Vertical(geo, flights, mwis, selected, solve, row_shares=[3, 2, 2, 2, 2]),
                        column_shares=[3, 2]),
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),
@@ -246,6 +295,8 @@ class RerunLogger:
         else:
             self._rec.connect_grpc(connect_url, default_blueprint=blueprint)
         self._rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        self._rec.log("side", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+
         self._log_series_styles()
         if network is not None:
             self.log_network(network)
@@ -298,6 +349,11 @@ class RerunLogger:
         self._rec.log("world/network/corridors",
                       rr.LineStrips3D(list(world_strips), colors=world_colors, radii=_ui(CORRIDOR_RADIUS_UI)),
                       static=True)
+        if levels_m and len(strips):  # the side view's copy, heights exaggerated
+            k = height_exaggeration(network)
+            self._rec.log("side/network/corridors",
+                          rr.LineStrips3D(list(world_strips * np.array([1.0, 1.0, k])), colors=world_colors,
+                                          radii=_ui(CORRIDOR_RADIUS_UI)), static=True)
         is_aero = np.asarray(network.is_aerodrome, dtype=bool)
         all_labels = _node_labels(network)
         labels = [all_labels[i] for i in np.flatnonzero(is_aero)]
@@ -487,7 +543,7 @@ def main(argv: list[str] | None = None) -> int:
     import argparse
     import sys
 
-    ap = argparse.ArgumentParser(prog="python -m uam_sim.rerun_log",
+    ap = argparse.ArgumentParser(allow_abbrev=False, prog="python -m uam_sim.rerun_log",
                                  description="turn a run's MCAP recording into a Rerun .rrd with the view")
     ap.add_argument("mcap")
     ap.add_argument("--network", default="", help="network file the run used (draws the network and "

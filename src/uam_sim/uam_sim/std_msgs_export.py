@@ -28,9 +28,11 @@ the frame of the project's own messages); it is the only frame, so no transform 
 the vehicle; a frame per vehicle that no transform reaches makes Rerun's MCAP import show an
 error on its 3D view, tried).
 
-Stamps: header stamps are real UTC, ``scenario_start_utc`` + simulation time (default
-:data:`DEFAULT_SCENARIO_START_UTC`, a fixed instant so that recordings are deterministic). Rerun
-puts Unix-range header stamps on its ``ros2_timestamp`` timeline.
+Stamps: header stamps are ``scenario_start_utc`` + simulation time. The recorder's default,
+``"sim"`` (:data:`SIM_CLOCK`), stamps them in simulation time, the clock of every other topic of
+the recording; an ISO 8601 instant (e.g. :data:`DEFAULT_SCENARIO_START_UTC`, 08:00 on a Monday in
+Singapore) stamps them in real UTC for tools that want dates. Rerun puts Unix-range header stamps
+on its ``ros2_timestamp`` timeline.
 
 The CDR bytes are written directly (as :mod:`uam_sim.cdr` does for the simulator's messages);
 a test holds them equal to rclpy's serialization of the same messages. No rclpy import here.
@@ -53,6 +55,8 @@ from .stamps import stamp_ns
 
 #: The default scenario start: Monday 6 January 2025, 08:00 in Singapore (00:00 UTC).
 DEFAULT_SCENARIO_START_UTC = "2025-01-06T00:00:00Z"
+#: ``scenario_start_utc`` value for header stamps in simulation time, the clock of every other topic
+SIM_CLOCK = "sim"
 FRAME_ID = "enu"
 
 TOPIC_NETWORK = "/uam/view/network"
@@ -81,12 +85,15 @@ _TOKEN_RE = re.compile(r"[^A-Za-z0-9_]")
 
 
 def scenario_start_ns(text: str) -> int:
-    """Nanoseconds since the Unix epoch of an ISO 8601 instant with a time zone.
+    """Nanoseconds since the Unix epoch of an ISO 8601 instant with a time zone, or 0 for
+    :data:`SIM_CLOCK` (``"sim"``: stamps in simulation time).
 
     ``"2025-01-06T00:00:00Z"`` or ``"2025-01-06T08:00:00+08:00"``. Raises ValueError naming
     ``scenario_start_utc`` and the value if it does not parse, has no zone, or is before 1990
     (viewers take earlier stamps for relative times).
     """
+    if text == SIM_CLOCK:
+        return 0
     try:
         when = datetime.fromisoformat(str(text).replace("Z", "+00:00"))
     except ValueError:
@@ -470,6 +477,8 @@ def write_views(src: str, dst: str, network: Any = None,
 
     if log_time not in ("sim", "utc"):
         raise ValueError(f"log_time: {log_time!r} is not 'sim' or 'utc'")
+    if log_time == "utc" and scenario_start_utc == SIM_CLOCK:
+        raise ValueError(f"log_time 'utc' needs scenario_start_utc as an instant, not {SIM_CLOCK!r}")
     views = ViewExporter(network, scenario_start_utc, geo_fixes)
     shift = views.start_ns if log_time == "utc" else 0
     n = 0
@@ -547,14 +556,17 @@ def main(argv: list[str] | None = None) -> int:
     import argparse
     import sys
 
-    ap = argparse.ArgumentParser(prog="python -m uam_sim.std_msgs_export",
+    ap = argparse.ArgumentParser(allow_abbrev=False, prog="python -m uam_sim.std_msgs_export",
                                  description="copy a recording and add the standard-message view topics")
     ap.add_argument("src", nargs="?")
     ap.add_argument("dst", nargs="?")
     ap.add_argument("--bench", action="store_true", help="print the cost per step of the views "
                     "(with --network, default the Singapore network) and exit")
     ap.add_argument("--network", default="", help="the run's network file (needed for markers and fixes)")
-    ap.add_argument("--scenario-start-utc", default=DEFAULT_SCENARIO_START_UTC)
+    ap.add_argument("--scenario-start-utc", default=None,
+                    help="'sim' (default: header stamps in simulation time, as every other topic's) "
+                         f"or an ISO 8601 instant of simulation time 0 (default with --log-time utc: "
+                         f"{DEFAULT_SCENARIO_START_UTC})")
     ap.add_argument("--no-fixes", action="store_true", help="leave out the per-vehicle NavSatFix topics")
     ap.add_argument("--log-time", choices=("sim", "utc"), default="sim")
     args = ap.parse_args(argv)
@@ -572,8 +584,8 @@ def main(argv: list[str] | None = None) -> int:
             for row in benchmark(network):
                 print(f"{row['what']:34s} {row['msgs_per_step']:6.1f} msgs/step {row['ms_per_step']:7.2f} ms/step")
             return 0
-        n = write_views(args.src, args.dst, network, args.scenario_start_utc, not args.no_fixes,
-                        args.log_time)
+        start = args.scenario_start_utc or (DEFAULT_SCENARIO_START_UTC if args.log_time == "utc" else SIM_CLOCK)
+        n = write_views(args.src, args.dst, network, start, not args.no_fixes, args.log_time)
     except (OSError, ValueError) as exc:
         print(f"std_msgs_export: {exc}", file=sys.stderr)
         return 1

@@ -89,6 +89,16 @@ def run_tts(cfg: ExperimentConfig, entries: list) -> dict:
         rows.extend(r)
         skipped.extend(x for x in sk if x not in skipped)
     wall = time.perf_counter() - t0
+    if not rows:  # nothing was measured: say why instead of reporting an empty study
+        why = []
+        if unavailable:
+            why.append("unavailable backends: " + "; ".join(f"{b} ({r})" for b, r in unavailable.items()))
+        if not backends:
+            why.append("no configured backend is available")
+        if skipped:
+            why.append(f"{len(skipped)} of {len(sample)} instances skipped (no proven optimum)")
+        return {"status": "skipped", "corpus": str(corpus), "instances": len(sample),
+                "reason": "nothing to measure (" + ", ".join(why or ["no row was produced"]) + ")"}
     tts_mod.write_csv(out / "tts.csv", rows)
     rows = [asdict(r) if hasattr(r, "__dataclass_fields__") else dict(r) for r in rows]
     result = {"status": "ok", "rows": rows, "csv": str(out / "tts.csv"), "corpus": str(corpus),

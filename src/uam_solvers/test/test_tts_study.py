@@ -166,3 +166,34 @@ def test_per_read_p_opt_is_the_share_of_reads_not_of_calls(monkeypatch):
     # TTS per read: t_read log(0.01) / log(0.99) = 458.2 t_read; interval ordered
     assert row.tts99_read_s == pytest.approx(row.t_read_s * 458.21, rel=1e-3)
     assert row.tts99_read_lo_s < row.tts99_read_s < row.tts99_read_hi_s
+
+
+class _NoOptimalRead(Backend):
+    """An annealer whose reads never reach the optimum (three reads per call in the test)."""
+
+    name = "no-optimal-read"
+    description = "test double"
+
+    def solve(self, problem, *, time_limit_s, seed, options):
+        return make_result(problem, [0], proven_optimal=False, solve_time_s=0.0,
+                           backend=self.name,
+                           stats={"reads": options["num_reads"], "optimal_fraction": 0.0})
+
+
+def test_no_optimal_read_in_a_few_reads_is_not_reached_instead_of_dividing_by_zero(monkeypatch):
+    # 0 hits in 3 reads: the Wilson formula's lower bound came out as 5.6e-17, log(1 - 5.6e-17)
+    # is 0.0 and the study stopped with ZeroDivisionError (the experiment's default run did).
+    lo, hi = wilson_interval(0, 3)
+    assert lo == 0.0 and 0.0 < hi < 1.0
+    assert wilson_interval(3, 3)[1] == 1.0
+    real = registry.get_backend
+    monkeypatch.setattr(registry, "get_backend",
+                        lambda name: _NoOptimalRead() if name == "no-optimal-read" else real(name))
+    monkeypatch.setattr("uam_solvers.tts.ANNEALING_BACKENDS", frozenset({"no-optimal-read"}))
+    problem = MwisProblem.from_arrays([0.6, 1.0, 0.7, 0.5], [[0, 1], [1, 2], [2, 3]])
+    rows, _ = run_study([CorpusEntry("path", problem, optimum=1.5)], ["no-optimal-read"],
+                        repetitions=1, num_reads=3, log=lambda msg: None)
+    row = rows[0]
+    assert row.read_hits == 0 and row.p_read == 0.0
+    assert row.tts99_read_s is None and row.tts99_read_hi_s is None  # no hit: unbounded above
+    assert row.tts99_read_lo_s > 0  # the interval's best case is still a number

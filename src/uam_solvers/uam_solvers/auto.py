@@ -151,7 +151,7 @@ class AutoBackend(Backend):
 
     name = "auto"
     description = ("exact reductions + component split, CP-SAT on kernels up to 200 vertices "
-                   "(proves optimality), CHILS above; the default")
+                   "(proves optimality), CHILS above")
     reduces_itself = True
     #: the outer Reduce and ComponentSplit layers pass every graph through: auto tries KaMIS
     #: on the whole graph first (it reduces and splits faster than the Python layers) and

@@ -509,7 +509,7 @@ def grouped_benchmark(seed: int, sizes, seeds: int, limit_s: float = 1.0, out=pr
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m uam_solvers.bench", description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, prog="python -m uam_solvers.bench", description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true",
                     help="60 small instances, qpu subset 10, large 1,000 vertices at 1 s only")
     ap.add_argument("--instances", type=int, default=600, help="small corpus size (default 600)")

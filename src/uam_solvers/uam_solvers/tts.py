@@ -102,7 +102,9 @@ def wilson_interval(hits: int, trials: int, z: float = _Z) -> tuple[float, float
     """Wilson score interval (default 95 %) for a binomial proportion hits / trials.
 
     Unlike the normal approximation it stays inside [0, 1] and is usable for p near 0 or 1
-    (Brown, Cai and DasGupta 2001). trials = 0 gives (0, 1).
+    (Brown, Cai and DasGupta 2001). trials = 0 gives (0, 1). No hits gives a lower bound of
+    exactly 0 and all hits an upper bound of exactly 1 (the formula leaves a rounding residue
+    such as 5.6e-17 there, a "probability" too small for log(1 - p) to tell from 0).
     """
     if trials <= 0:
         return 0.0, 1.0
@@ -111,7 +113,9 @@ def wilson_interval(hits: int, trials: int, z: float = _Z) -> tuple[float, float
     denom = 1.0 + z2 / trials
     centre = (p + z2 / (2 * trials)) / denom
     half = z * math.sqrt(p * (1 - p) / trials + z2 / (4 * trials * trials)) / denom
-    return max(0.0, centre - half), min(1.0, centre + half)
+    lo = 0.0 if hits <= 0 else max(0.0, centre - half)
+    hi = 1.0 if hits >= trials else min(1.0, centre + half)
+    return lo, hi
 
 
 def reads_needed(p: float = CI_REFERENCE_P, factor: float = CI_FACTOR, z: float = _Z) -> int:
@@ -320,7 +324,8 @@ def _per_read(reads_total: int, read_hits: int, call_times_s: Sequence[float],
             return None
         if q >= TARGET_PROBABILITY:
             return t_read
-        return t_read * math.log(1.0 - TARGET_PROBABILITY) / math.log(1.0 - q)
+        # log1p: exact for small q, where log(1.0 - q) rounds to 0
+        return t_read * math.log1p(-TARGET_PROBABILITY) / math.log1p(-q)
 
     within = None
     if read_hits > 0:
@@ -422,7 +427,7 @@ def summary_table(rows: Sequence[TtsRow], backends: Sequence[str]) -> str:
 
 
 def _parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(
+    parser = argparse.ArgumentParser(allow_abbrev=False,
         prog="python -m uam_solvers.tts",
         description="Time-to-solution study of MWIS backends (paper's TTS(0.99)).")
     parser.add_argument("--corpus", type=Path,

@@ -6,7 +6,9 @@
 It subscribes raw (CDR bytes as DDS delivers them, like rosbag2), so the bytes in the file are
 exactly the bytes on the wire. Log time and publish time of each message are its simulation
 time: the message's own stamp (``header.stamp``, ``clock``, ``epoch_time``, ``request_time``)
-when it has one, else the latest ``/clock`` received. (rosbag2 with ``--use-sim-time`` stamps
+when it has one, else the latest ``/clock`` received; never earlier than the previous message of
+the same topic (a topic with several publishers delivers stamps out of order), so every channel's
+times are in order. (rosbag2 with ``--use-sim-time`` stamps
 the receive time on the /clock timeline; taking the message's own stamp gives the same time
 without the race between a message and the clock tick that announced it.)
 
@@ -22,7 +24,8 @@ for the check below.
 
 Views for generic viewers (issue 12, :mod:`uam_sim.std_msgs_export`): with ``views`` on (the
 default) the fleet, routes and network are also written in standard types (``/uam/view/*``:
-PointCloud2, NavSatFix, MarkerArray), stamped in real UTC from ``scenario_start_utc``, for
+PointCloud2, NavSatFix, MarkerArray), stamped in simulation time as every other topic (or in
+real UTC from ``scenario_start_utc`` when it names an instant), for
 Foxglove and Rerun's MCAP import; ``foxglove_port`` > 0 serves a live Foxglove WebSocket view
 (:mod:`uam_sim.foxglove_live`).
 
@@ -131,17 +134,27 @@ class RecordingCheck:
                        + ", ".join(f"{k} ({self.announced.get(k, 0)} announced, "
                                    f"{len(self.received.get(k, ()))} received)" for k in bad[:10]))
         lost, listed = missing_steps(self.steps)
+        held = len(set(self.steps))
+        # a run's fleet states start at step 0: those before the first received were not recorded
+        # (a replay that began before the recorder subscribed), which "none missing" hid
+        before = int(min(self.steps)) if self.steps else 0
+        span = f"steps {min(self.steps)}..{max(self.steps)}" if self.steps else "no steps"
         if lost:
-            verdict += (f"; {lost} fleet state(s) missing between the first and the last received "
-                        f"(steps {format_steps(lost, listed)})")
+            verdict += (f"; {held} fleet states ({span}), {lost} fleet state(s) missing between the "
+                        f"first and the last received (steps {format_steps(lost, listed)})")
+        elif not self.steps:
+            verdict += "; no fleet states"
         else:
-            verdict += f"; {len(self.steps)} fleet states, none missing"
+            verdict += f"; {held} fleet states ({span}), none missing between the first and the last"
+        if before:
+            verdict += f", {before} before the first not received (steps 0..{before - 1})"
         if self.foreign:
             verdict += "; more publishers than the run has: " + "; ".join(
                 f"{topic}: {who}" for topic, who in sorted(self.foreign.items()))
         return {"ok": "false" if bad or lost or self.foreign else "true", "announced_approvals": str(announced),
                 "approved_plans": str(received), "fleet_states": str(len(self.steps)),
-                "fleet_states_missing": str(lost), "verdict": verdict}
+                "fleet_states_missing": str(lost), "fleet_states_before_first": str(before),
+                "verdict": verdict}
 
 
 class RecorderNode(Node):
@@ -151,6 +164,7 @@ class RecorderNode(Node):
         super().__init__("recorder", **kwargs)
         # one table (uam_bringup.params.RECORDER): declared read-only, checked at start-up
         p = declare_table(self, RECORDER)
+        self._channel_last_ns: dict[str, int] = {}  # topic -> log time of its last message [ns]
         airspace = airspace_metadata(p["separation_model"], p["separation_m"], p["vertical_separation_m"],
                                      p["departure_slot_s"])
         output = p["output"]
@@ -329,7 +343,7 @@ class RecorderNode(Node):
         log_ns = stamp if stamp is not None else self._clock_ns
         if not self.recorder.has_topic(self._names[topic]):
             self._register(topic, cls)
-        self.recorder.write(self._names[topic], data, log_time_ns=max(0, log_ns))
+        self.recorder.write(self._names[topic], data, log_time_ns=self._channel_time_ns(self._names[topic], log_ns))
         self.messages_written += 1
         self._dirty = True
         if topic in (c.TOPIC_PLANS, c.TOPIC_REPORTS, c.TOPIC_SYNC) and msg is None:
@@ -373,8 +387,18 @@ class RecorderNode(Node):
         """One view message (uam_sim.std_msgs_export.ViewMessage) at its simulation time."""
         if not self.recorder.has_topic(vm.topic):
             self.recorder.add_topic(vm.topic, vm.type_name)
-        self.recorder.write(vm.topic, vm.data, log_time_ns=max(0, vm.sim_time_ns))
+        self.recorder.write(vm.topic, vm.data, log_time_ns=self._channel_time_ns(vm.topic, vm.sim_time_ns))
         self.view_messages_written += 1
+
+    def _channel_time_ns(self, topic: str, stamp_ns: int) -> int:
+        """The log time of a message of ``topic``: its stamp, but never before the topic's previous
+        message. Several publishers share a topic (EpochSync of simulator, generator and planner,
+        the simulator announcing epoch k+1 before the others report epoch k), so stamps arrive out
+        of order; MCAP tools expect each channel's log times in order (`rerun mcap check`
+        reported unordered chunks). The message's own stamp is in its bytes."""
+        t = max(0, int(stamp_ns), self._channel_last_ns.get(topic, 0))
+        self._channel_last_ns[topic] = t
+        return t
 
     def _drain(self) -> int:
         """Write every message already delivered to our subscriptions but not yet taken.

@@ -83,7 +83,8 @@ class SimulatorNode(Node):
 
         self.fleet = Fleet()
         self.step_index = 0                 # t = step_index * step_s
-        self.plans_received = 0
+        self.plans_received = 0             # decisions in the epoch answers: approved, expired, rejected
+        self.approvals_received = 0         # of which approved
         self.flown_plans: list[FlightPlan] = []   # every approved plan flown, in order (for audits)
         self.fly_errors = 0                 # approved plans that could not be flown (should stay 0)
         self._flying: dict[str, FlightPlan] = {}   # scoped id -> approved plan, while it may be airborne
@@ -318,6 +319,7 @@ class SimulatorNode(Node):
             key = wire.scoped_id(plan.operator_id, plan.request_id)
             self._decided.append(key)
             if plan.outcome == FlightPlan.OUTCOME_APPROVED:
+                self.approvals_received += 1
                 try:
                     self.fleet.add(key, m.trajectory_from_plan(plan))
                     self._flying[key] = plan
@@ -441,7 +443,8 @@ class SimulatorNode(Node):
         avg = sum(self.active_samples) / len(self.active_samples) if self.active_samples else 0.0
         self.get_logger().info(
             f"run finished at t={sim:g} s: {self.fleet.total_added} approved flights flown, "
-            f"{self.plans_received} plans received, average airborne {avg:.2f}; wall {wall:.2f} s "
+            f"{self.approvals_received} approvals received ({self.plans_received} decisions in all, "
+            f"expired and rejected included), average airborne {avg:.2f}; wall {wall:.2f} s "
             f"(simulator cpu {cpu:.2f} s), real-time factor {sim / wall if wall > 0 else float('inf'):.1f}"
             + (f"; waited {self.blocked_wall_s:.2f} s at epochs for the planner" if self.mode == "lockstep" else ""))
 
