@@ -185,7 +185,7 @@ start uam_sim request_generator request_generator --params-file config/request_g
 # the recorder writes the run's airspace into the MCAP (uam_airspace metadata): the analysis audits in it.
 # It subscribes to the fleet state (which starts the simulator) only once it hears these topics'
 # publishers, so even a run stopped at once records the planner's and the generator's messages.
-RECORDER_WAITS="uam/flight_plans,uam/planning_reports,uam/requests,uam/epoch_sync"
+RECORDER_WAITS="$(python -c 'from uam_contract.names import RECORDER_WAITS_FOR as w; print(",".join(w))')"
 NODE_NICE=$RECORDER_NICE
 start uam_sim recorder recorder -p "output:=$MCAP" -p "network:=$NETWORK" -p "rerun:='$RERUN'" -p "rerun_rrd:=$RRD" \
   -p "foxglove_port:=$FOXGLOVE_PORT" "${AIRSPACE[@]}" -p "wait_for_publishers:=[$RECORDER_WAITS]"

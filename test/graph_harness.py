@@ -31,7 +31,7 @@ def make_observer(context):
     import rclpy
     from uam_msgs.msg import FleetState, FlightPlan, FlightRequest, PlanningReport
 
-    from uam_bringup import contract as c
+    from uam_contract import names as c
     from uam_bringup import qos
 
     obs = Observer()

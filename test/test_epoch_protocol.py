@@ -16,8 +16,8 @@ from graph_harness import (between_epochs, build_graph, decisions, in_process, m
                            run_to_end, shutdown)
 from uam_msgs.msg import FlightPlan, FlightRequest  # noqa: E402
 
-from uam_bringup import contract as c  # noqa: E402
-from uam_bringup import conversions as m  # noqa: E402
+from uam_contract import names as c  # noqa: E402
+from uam_planner.nodes import conversions as m  # noqa: E402
 from uam_bringup import qos  # noqa: E402
 from uam_planner.audit import audit_flights  # noqa: E402
 

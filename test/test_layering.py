@@ -1,22 +1,26 @@
-"""The import layering of the packages: no module imports a layer above its own, and no cycles.
+"""The import layering of the packages: no module imports a layer above its own, no cycles, and
+every package declares (package.xml) what it imports.
 
-Layers, lowest first (design.md): the libraries uam_solvers < uam_planner < uam_sim, then
-uam_bringup (the ROS contract), then every package's ``nodes`` subpackage (glue). Every import
-counts, at module level or inside a function (a lazy import is still a dependency). Read from
-the source with ``ast``, nothing is imported.
+Layers, lowest first (docs/architecture.md): uam_contract (names, QoS specs, wire limits, stamps,
+parameter tables; plain Python), the libraries uam_solvers < uam_planner < uam_sim, then
+uam_bringup (the rclpy glue: no library), then every library's ``nodes`` subpackage. Every
+import counts, at module level or inside a function (a lazy import is still a dependency). Read
+from the source with ``ast``, nothing is imported.
 """
 
 from __future__ import annotations
 
 import ast
 import pathlib
+import re
+import xml.etree.ElementTree as ET
 
 import networkx as nx
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
-PACKAGES = ("uam_solvers", "uam_planner", "uam_sim", "uam_bringup")
-LIBRARY_RANK = {"uam_solvers": 0, "uam_planner": 1, "uam_sim": 2, "uam_bringup": 3}
-NODES_RANK = 4
+PACKAGES = ("uam_contract", "uam_solvers", "uam_planner", "uam_sim", "uam_bringup")
+LIBRARY_RANK = {"uam_contract": 0, "uam_solvers": 1, "uam_planner": 2, "uam_sim": 3, "uam_bringup": 4}
+NODES_RANK = 5
 
 # Exceptions allowed (none): anything listed here that no longer holds fails the test too, so the
 # lists can only shrink. Issue 9 removed uam_solvers.instances -> uam_sim.analysis and
@@ -83,9 +87,9 @@ def _graph() -> nx.DiGraph:
 
 def test_the_layering_sees_the_packages():
     g = _graph()
-    assert {"uam_bringup.contract", "uam_planner.planning", "uam_planner.nodes.planner_node"} <= set(g)
+    assert {"uam_contract.names", "uam_planner.planning", "uam_planner.nodes.planner_node"} <= set(g)
     assert g.has_edge("uam_planner.nodes.planner_node", "uam_bringup.runtime")
-    assert g.has_edge("uam_bringup.conversions", "uam_planner.planning")
+    assert g.has_edge("uam_planner.nodes.conversions", "uam_planner.planning")
 
 
 def test_no_module_imports_a_layer_above_its_own():
@@ -100,8 +104,7 @@ def test_library_and_contract_modules_never_import_rclpy_at_import_time():
     import rclpy.serialization lazily to turn message objects into CDR."""
     offenders = []
     for mod, path in _modules().items():
-        if _rank(mod) == NODES_RANK or mod == "uam_bringup.qos" or mod == "uam_bringup.runtime" \
-                or mod == "uam_bringup.params":
+        if _rank(mod) == NODES_RANK or mod.startswith("uam_bringup."):
             continue  # glue: allowed
         tree = ast.parse(path.read_text())
         for node in tree.body:
@@ -126,7 +129,7 @@ def _unit(module: str) -> str:
 
 
 def test_no_import_cycles_between_packages():
-    """uam_solvers, uam_planner, uam_sim, uam_bringup and the nodes subpackages form a DAG."""
+    """uam_contract, the libraries, uam_bringup and the nodes subpackages form a DAG."""
     g = _graph()
     units = nx.DiGraph((_unit(a), _unit(b)) for a, b in g.edges if _unit(a) != _unit(b))
     assert "uam_sim" in units and "uam_sim.nodes" in units
@@ -137,5 +140,49 @@ def test_no_import_cycles_between_packages():
 def test_a_cycle_or_an_upward_import_is_seen():
     g = _graph()
     assert _rank("uam_sim.analysis") > _rank("uam_solvers.base")  # such an edge would be upward
+    assert _rank("uam_bringup.params") > _rank("uam_sim.analysis") > _rank("uam_contract.names")
     g.add_edge("uam_solvers.base", "uam_planner.planning")
     assert any(len(c) > 1 and "uam_solvers.base" in c for c in nx.strongly_connected_components(g))
+
+
+def _package_graph() -> nx.DiGraph:
+    """Package -> package it imports (a library's nodes subpackage counts as its package: they
+    ship together, so the package.xml of the library must declare what its nodes import)."""
+    g = _graph()
+    return nx.DiGraph((a.split(".")[0], b.split(".")[0]) for a, b in g.edges if a.split(".")[0] != b.split(".")[0])
+
+
+def _declared(pkg: str) -> set[str]:
+    root = ET.parse(ROOT / "src" / pkg / "package.xml").getroot()
+    return {e.text.strip() for e in root if e.tag.endswith("depend") and e.text}
+
+
+def test_packages_form_one_order_and_declare_what_they_import():
+    """Issue 19: the package level, not only the modules. uam_bringup imported the libraries and
+    their nodes imported uam_bringup (a cycle colcon could not be told about)."""
+    pg = _package_graph()
+    assert nx.is_directed_acyclic_graph(pg), [sorted(c) for c in nx.simple_cycles(pg)]
+    assert "uam_contract" not in pg or not set(pg.successors("uam_contract"))
+    assert not set(pg.successors("uam_bringup")) - {"uam_contract"}, sorted(pg.successors("uam_bringup"))
+    for pkg in PACKAGES:
+        if pkg not in pg:
+            continue
+        undeclared = set(pg.successors(pkg)) - _declared(pkg)
+        assert not undeclared, f"src/{pkg}/package.xml does not declare {sorted(undeclared)}"
+
+
+def test_libraries_take_topic_names_from_the_contract():
+    """No "/uam/..." or "uam/..." string literal outside uam_contract (tests aside)."""
+    literal = re.compile(r"""["']/?uam/""")
+    offenders = []
+    for pkg in PACKAGES:
+        for path in (ROOT / "src" / pkg / pkg).rglob("*.py"):
+            if pkg == "uam_contract":
+                continue
+            for n, line in enumerate(path.read_text().splitlines(), 1):
+                if literal.search(line):
+                    offenders.append(f"{path.relative_to(ROOT)}:{n}")
+    for path in (ROOT / "src" / "uam_bringup" / "launch").glob("*.py"):
+        offenders += [f"{path.relative_to(ROOT)}:{n}" for n, line in enumerate(path.read_text().splitlines(), 1)
+                      if literal.search(line)]
+    assert offenders == []

@@ -15,7 +15,7 @@ from graph_harness import build_graph, in_process, run_to_end, shutdown  # noqa:
 from uam_msgs.msg import FlightPlan  # noqa: E402
 
 from uam_planner.audit import audit_flights  # noqa: E402
-from uam_bringup.conversions import trajectory_from_plan  # noqa: E402
+from uam_planner.nodes.conversions import trajectory_from_plan  # noqa: E402
 
 pytestmark = pytest.mark.ros
 
@@ -131,8 +131,8 @@ def test_planner_falls_back_to_greedy_when_solver_absent(ros_context, spin_until
 def test_bad_requests_are_rejected_with_reason_and_graph_keeps_running(ros_context, spin_until):
     from uam_msgs.msg import FlightRequest
 
-    from uam_bringup import contract as c
-    from uam_bringup import conversions as m
+    from uam_contract import names as c
+    from uam_planner.nodes import conversions as m
     from uam_bringup import qos
 
     executor, nodes, obs = build_graph(ros_context, rate=2.0, seed=1, duration_s=150.0)

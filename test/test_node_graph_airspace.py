@@ -12,7 +12,7 @@ rclpy = pytest.importorskip("rclpy", reason="needs the built workspace (scripts/
 from graph_harness import ROOT, build_graph, in_process, run_to_end, shutdown  # noqa: E402
 from uam_msgs.msg import FlightPlan  # noqa: E402
 
-from uam_bringup.conversions import plan_level_m  # noqa: E402
+from uam_planner.nodes.conversions import plan_level_m  # noqa: E402
 
 pytestmark = pytest.mark.ros
 

@@ -11,9 +11,9 @@ ROOT = pathlib.Path(__file__).resolve().parents[1]
 
 
 def test_docs_parameters_md_is_the_tables():
-    from uam_bringup.params import markdown
+    from uam_contract.params import markdown
     assert (ROOT / "docs" / "parameters.md").read_text() == markdown(), \
-        "docs/parameters.md is stale: python -m uam_bringup.params > docs/parameters.md"
+        "docs/parameters.md is stale: python -m uam_contract.params > docs/parameters.md"
 
 
 rclpy = pytest.importorskip("rclpy", reason="needs the built workspace (scripts/test.sh sources it)")
@@ -79,7 +79,7 @@ def test_run_time_parameters_are_validated_and_take_effect(ros_context):
 
 @pytest.mark.ros
 def test_each_node_declares_exactly_its_table(ros_context, tmp_path):
-    from uam_bringup.params import TABLES
+    from uam_contract.params import TABLES
     from uam_sim.nodes.request_generator_node import RequestGeneratorNode
     from uam_sim.nodes.simulator_node import SimulatorNode
 

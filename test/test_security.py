@@ -17,9 +17,10 @@ from graph_harness import (between_epochs, build_graph, decisions, in_process, m
 from uam_msgs.msg import EpochSync, FlightPlan, FlightRequest  # noqa: E402
 from uam_msgs.srv import PlanEpoch, ReleaseDemand  # noqa: E402
 
-from uam_bringup import contract as c  # noqa: E402
-from uam_bringup import conversions as m  # noqa: E402
-from uam_bringup import qos, wire  # noqa: E402
+from uam_contract import names as c  # noqa: E402
+from uam_planner.nodes import conversions as m  # noqa: E402
+from uam_bringup import qos
+from uam_contract import wire  # noqa: E402
 from uam_planner.audit import audit_flights  # noqa: E402
 
 pytestmark = pytest.mark.ros

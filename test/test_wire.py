@@ -12,10 +12,11 @@ from builtin_interfaces.msg import Time  # noqa: E402
 from graph_harness import build_graph, decisions, in_process, run_to_end, shutdown  # noqa: E402
 from uam_msgs.msg import FlightPlan, FlightRequest  # noqa: E402
 
-from uam_bringup import contract as c  # noqa: E402
-from uam_bringup import conversions as m  # noqa: E402
-from uam_bringup import qos, wire  # noqa: E402
-from uam_bringup.wire import MAX_REASON_CHARS, check_id, echo  # noqa: E402
+from uam_contract import names as c  # noqa: E402
+from uam_planner.nodes import conversions as m  # noqa: E402
+from uam_bringup import qos
+from uam_contract import wire  # noqa: E402
+from uam_contract.wire import MAX_REASON_CHARS, check_id, echo  # noqa: E402
 
 pytestmark = pytest.mark.ros
 

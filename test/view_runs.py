@@ -29,7 +29,7 @@ def record_run(path, method: str = "greedy", network=None, rate: float = 4.0, se
     from rclpy.serialization import serialize_message
     from uam_planner.network import load_network
     try:   # the ROS contract's conversions (uam_bringup), or where they lived before it
-        from uam_bringup import conversions as m
+        from uam_planner.nodes import conversions as m
     except ImportError:
         from uam_planner.nodes import messages as m
 

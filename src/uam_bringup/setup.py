@@ -17,7 +17,6 @@ setup(
     zip_safe=True,
     maintainer="UAM traffic management team",
     maintainer_email="uam@example.org",
-    description="The ROS contract of the UAM node graph (names, QoS, conversions, parameters, runtime) and its launch file.",
+    description="The rclpy glue of the UAM node graph (QoS profiles, parameter declaration, runtime, journal) and its launch file.",
     license="Apache-2.0",
-    entry_points={"console_scripts": ["params_doc = uam_bringup.params:main"]},
 )

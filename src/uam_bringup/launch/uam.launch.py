@@ -4,7 +4,7 @@ scripts/run_fleet.sh.
     ros2 launch uam_bringup uam.launch.py config_dir:=$PWD/config backend:=exact rate:=10 \
         duration:=600 seed:=0 out:=runs/launch-demo
 
-Every name of the graph is relative (uam_bringup.contract), so ``namespace:=/fleet2`` moves the
+Every name of the graph is relative (uam_contract.names), so ``namespace:=/fleet2`` moves the
 whole graph. The launch ends when the simulator ends the run (the recorder closes its file by
 itself and exits; the launch then stops the solver, a server). Needs ``launch`` and
 ``launch_ros``, which the PyPI wheels do not ship (use scripts/run_fleet.sh there).
@@ -20,6 +20,7 @@ from launch.event_handlers import OnProcessExit
 from launch.events import Shutdown
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution, PythonExpression
 from launch_ros.actions import Node, PushRosNamespace
+from uam_contract.names import RECORDER_WAITS_FOR
 
 ARGS = {
     "config_dir": (os.path.join(os.getcwd(), "config"), "folder of the parameter files and networks"),
@@ -60,8 +61,7 @@ def generate_launch_description() -> LaunchDescription:
                     prefix="nice -n 19",
                     parameters=[{"output": mcap, "network": network, "rerun": a["rerun"], "rerun_rrd": rrd,
                                  # as run_fleet.sh: the run starts once the recorder hears these
-                                 "wait_for_publishers": ["uam/flight_plans", "uam/planning_reports",
-                                                         "uam/requests", "uam/epoch_sync"],
+                                 "wait_for_publishers": list(RECORDER_WAITS_FOR),
                                  **airspace}])
     nodes = [
         Node(package="uam_solvers", executable="solver", name="solver", output="screen",

@@ -1,12 +1,13 @@
-"""The ROS contract of the UAM node graph, one home for what every node must agree on.
+"""The rclpy glue every node shares, above the contract and free of the libraries.
 
-- :mod:`uam_bringup.contract`: topic and service names (relative), QoS (as plain data), frame id;
-- :mod:`uam_bringup.qos`: the same QoS as rclpy profiles (imports rclpy);
-- :mod:`uam_bringup.conversions`: messages <-> library types, rclpy-free and duck-typed (works on
-  generated messages and on messages decoded by ``rosbags`` or ``mcap_ros2``);
-- :mod:`uam_bringup.params`: every node's parameter table (declaration, run-time changes, docs);
-- :mod:`uam_bringup.runtime`: a node's ``main()`` (signals, executor, clean-up, CPU report).
+- :mod:`uam_bringup.qos`: the contract's QoS (:mod:`uam_contract.names`) as rclpy profiles;
+- :mod:`uam_bringup.params`: a node's parameter table (:mod:`uam_contract.params`) declared on
+  the node, with validation of run-time changes;
+- :mod:`uam_bringup.runtime`: a node's ``main()`` (signals, executor, clean-up, CPU report);
+- :mod:`uam_bringup.journal`: the planner's journal of its own approvals;
+- the launch file (``launch/uam.launch.py``).
 
-Layering: the libraries (uam_solvers < uam_planner < uam_sim) never import this package; the
-``nodes`` subpackages import it (test/test_layering.py checks it).
+Layering (docs/architecture.md, test/test_layering.py): uam_contract < uam_solvers < uam_planner
+< uam_sim are the libraries; this package imports only the contract (and rclpy); the ``nodes``
+subpackages of the libraries import it and their own library.
 """

@@ -1,11 +1,10 @@
-"""rclpy QoS profiles of the contract (:mod:`uam_bringup.contract` holds them as plain data)."""
+"""rclpy QoS profiles of the contract (:mod:`uam_contract.names` holds them as plain data)."""
 
 from __future__ import annotations
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-
-from uam_bringup import contract
-from uam_sim.recording import QosSpec
+from uam_contract import names as contract
+from uam_contract.qos_spec import QosSpec
 
 
 def profile(spec: QosSpec) -> QoSProfile:

@@ -184,6 +184,6 @@ def test_requests_are_keyed_by_operator_and_a_refused_duplicate_is_not_a_decisio
 
 
 def test_the_key_separator_is_the_contracts():
-    wire = pytest.importorskip("uam_bringup.wire")
+    wire = pytest.importorskip("uam_contract.wire")
     from uam_sim.analysis import SCOPE_SEPARATOR
     assert wire.scoped_id("op", "r1") == f"op{SCOPE_SEPARATOR}r1"

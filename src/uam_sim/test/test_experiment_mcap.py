@@ -7,7 +7,7 @@ import pytest
 pytest.importorskip("uam_msgs.msg", reason="needs the built workspace (source scripts/env.sh)")
 
 from uam_msgs.msg import FlightPlan, FlightRequest, PlanningReport  # noqa: E402
-from uam_bringup import conversions as m  # noqa: E402
+from uam_planner.nodes import conversions as m  # noqa: E402
 
 from uam_sim.experiment import main, make_config, run_scenario, study_from_mcaps  # noqa: E402
 from uam_sim.mcap_writer import McapRecorder  # noqa: E402

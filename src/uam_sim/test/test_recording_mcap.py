@@ -30,8 +30,8 @@ from uam_sim.mcap_reader import (deserialize, is_complete, read_messages,  # noq
                                  read_messages_tolerant)
 from uam_sim.mcap_schema import DEFINITION_SEPARATOR, RecordingError, message_definition  # noqa: E402
 from uam_sim.mcap_writer import McapRecorder  # noqa: E402
-from uam_sim.qos_yaml import offered_qos_yaml, parse_offered_qos  # noqa: E402
-from uam_sim.stamps import sim_stamp_ns  # noqa: E402
+from uam_contract.qos_spec import offered_qos_yaml, parse_offered_qos  # noqa: E402
+from uam_contract.stamps import sim_stamp_ns  # noqa: E402
 
 RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
 LATCHED = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,

@@ -22,7 +22,7 @@ from rosgraph_msgs.msg import Clock  # noqa: E402
 from uam_msgs.msg import (EpochSync, FleetState, FlightPlan, FlightRequest,  # noqa: E402
                           PlanningReport, VehicleState, Waypoint)
 
-from uam_bringup.contract import resolved  # noqa: E402
+from uam_contract.names import resolved  # noqa: E402
 from uam_sim.nodes.recorder_node import RECORDED_TOPICS, RecorderNode  # noqa: E402
 from uam_sim.mcap_reader import is_complete, read_messages  # noqa: E402
 
@@ -144,7 +144,7 @@ def test_recorder_checks_announced_approvals_and_never_deserializes_fleet_states
     and the analysis will not call it OK. Stamps of /clock, fleet states and poses are read from
     the CDR bytes: those messages are never deserialized (they were most of the recorder's CPU)."""
     import uam_sim.nodes.recorder_node as recorder_module
-    from uam_bringup import contract as c
+    from uam_contract import names as c
     from uam_sim.analysis import summarize
     from uam_sim.mcap_reader import read_metadata
 

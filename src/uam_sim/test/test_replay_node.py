@@ -85,7 +85,7 @@ def test_a_replayed_run_recorded_again_gives_the_same_summary(ros_context, spin_
     from uam_sim.audit import AIRSPACE_METADATA, airspace_metadata
 
     from uam_sim.analysis import summarize
-    from uam_bringup.contract import resolved
+    from uam_contract.names import resolved
     from uam_sim.nodes.recorder_node import RECORDED_TOPICS, RecorderNode
 
     original = tmp_path / "original.mcap"

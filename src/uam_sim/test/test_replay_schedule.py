@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from uam_sim.qos_yaml import QosSpec
+from uam_contract.qos_spec import QosSpec
 from uam_sim.replay import ReplayPlan, replay_qos, schedule_offsets_s
 
 

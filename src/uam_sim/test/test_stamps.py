@@ -1,4 +1,4 @@
-"""Stamp conversion has one home (uam_sim.stamps): it was written out five times (analysis/audit
+"""Stamp conversion has one home (uam_contract.stamps): it was written out five times (analysis/audit
 ``_t``, ``rerun_log._stamp_s``, ``movie._t``, ``conversions.from_time``) and the nanosecond form
 four times, free to drift apart."""
 
@@ -8,7 +8,7 @@ import re
 from pathlib import Path
 from types import SimpleNamespace as NS
 
-from uam_sim.stamps import sim_stamp_ns, stamp_ns, stamp_s
+from uam_contract.stamps import sim_stamp_ns, stamp_ns, stamp_s
 
 ROOT = Path(__file__).resolve().parents[3]
 
@@ -31,7 +31,7 @@ def test_every_package_converts_stamps_with_the_one_helper():
         for i, line in enumerate(path.read_text().splitlines(), 1):
             if pattern.search(line):
                 copies.append(f"{path.relative_to(ROOT)}:{i}: {line.strip()}")
-    assert copies == [], "stamp conversions outside uam_sim.stamps:\n" + "\n".join(copies)
+    assert copies == [], "stamp conversions outside uam_contract.stamps:\n" + "\n".join(copies)
 
-    from uam_bringup import conversions
+    from uam_planner.nodes import conversions
     assert conversions.from_time is stamp_s and conversions.stamp_ns is stamp_ns

@@ -61,7 +61,9 @@ from .audit import AIRSPACE_METADATA, SafetyAudit, audit_plans, separation_from_
 from .flights import flight_metrics
 from .mcap_reader import is_complete, iter_decoded, read_metadata, recorded_topics, require_mcap
 from .mcap_recover import RECOVERED_METADATA
-from .stamps import stamp_s
+from uam_contract.stamps import stamp_s
+from uam_contract import names
+from uam_contract.names import resolved
 
 #: the MCAP metadata record the recorder node writes with its check of what it received
 RECORDER_CHECK = "uam_recorder_check"
@@ -69,13 +71,14 @@ RECORDER_CHECK = "uam_recorder_check"
 OUTCOME_APPROVED, OUTCOME_REJECTED, OUTCOME_EXPIRED = 0, 1, 2
 OUTCOME_DUPLICATE = 3  # not a decision: a reused (operator_id, request_id) was refused
 #: Between operator_id and request_id in a request's key, as the node graph scopes ids (and names
-#: vehicles); uam_bringup.wire.scoped_id uses the same (a test holds them equal).
+#: vehicles); uam_contract.wire.scoped_id uses the same (a test holds them equal).
 SCOPE_SEPARATOR = "/"
-TOPIC_REQUESTS = "/uam/requests"
-TOPIC_PLANS = "/uam/flight_plans"
-TOPIC_REPORTS = "/uam/planning_reports"
-TOPIC_FLEET = "/uam/fleet_state"
-TOPIC_SYNC = "/uam/epoch_sync"
+# the topics as recordings of the default namespace carry them (uam_contract.names)
+TOPIC_REQUESTS = resolved(names.TOPIC_REQUESTS)
+TOPIC_PLANS = resolved(names.TOPIC_PLANS)
+TOPIC_REPORTS = resolved(names.TOPIC_REPORTS)
+TOPIC_FLEET = resolved(names.TOPIC_FLEET)
+TOPIC_SYNC = resolved(names.TOPIC_SYNC)
 ANALYSED_TOPICS = (TOPIC_REQUESTS, TOPIC_PLANS, TOPIC_REPORTS, TOPIC_FLEET, TOPIC_SYNC)
 
 

@@ -26,7 +26,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .stamps import stamp_s
+from uam_contract.stamps import stamp_s
 
 # as uam_planner.audit: a distance this close (relative) below the minimum is a rounded exact tie
 TIE_RELATIVE = 1e-9

@@ -26,7 +26,7 @@ from typing import Any, Iterable, Sequence
 import numpy as np
 import yaml
 
-from uam_planner.ids import MAX_NODE_ID_LENGTH, check_id, echo
+from uam_contract.ids import MAX_NODE_ID_LENGTH, check_id, echo
 from uam_planner.planning import FlightRequest
 
 DEFAULT_INTERVAL_S = 30.0

@@ -31,14 +31,16 @@ from typing import Any
 
 import numpy as np
 
-from .stamps import stamp_ns
+from uam_contract.stamps import stamp_ns
+from uam_contract import names
+from uam_contract.names import resolved
 from .std_msgs_export import DEFAULT_SCENARIO_START_UTC, FRAME_ID, scenario_start_ns
 
-TOPIC_NETWORK = "/uam/live/network"
-TOPIC_ROUTES = "/uam/live/routes"
-TOPIC_FLEET = "/uam/live/fleet"
-TOPIC_FLEET_GEO = "/uam/live/fleet_geo"
-TOPIC_METRICS = "/uam/live/metrics"
+TOPIC_NETWORK = resolved(names.TOPIC_LIVE_NETWORK)
+TOPIC_ROUTES = resolved(names.TOPIC_LIVE_ROUTES)
+TOPIC_FLEET = resolved(names.TOPIC_LIVE_FLEET)
+TOPIC_FLEET_GEO = resolved(names.TOPIC_LIVE_FLEET_GEO)
+TOPIC_METRICS = resolved(names.TOPIC_LIVE_METRICS)
 
 _NS = 1_000_000_000
 

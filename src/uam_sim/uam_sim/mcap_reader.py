@@ -11,11 +11,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable, Iterator, Sequence
 
+from uam_contract import names
+from uam_contract.names import resolved
 from .cdr import fleet_state_digest
 from .mcap_schema import message_class
 
 #: The topic whose messages ``iter_decoded(fleet_digest_only=True)`` reads as digests.
-FLEET_STATE_TOPIC = "/uam/fleet_state"
+FLEET_STATE_TOPIC = resolved(names.TOPIC_FLEET)
 
 
 @dataclass

@@ -18,7 +18,7 @@ import yaml
 from .cdr import serialize_exact
 from .mcap_schema import (MESSAGE_ENCODING, ROS2_PROFILE, ROSBAG2_METADATA_VERSION, SCHEMA_ENCODING,
                           RecordingError, library_string, message_definition, type_hash, type_name_of)
-from .qos_yaml import offered_qos_yaml
+from uam_contract.qos_spec import offered_qos_yaml
 
 
 def bag_metadata_yaml(file_name: str, topics: dict, counts: dict, start_ns: int | None,
@@ -79,8 +79,8 @@ class McapRecorder:
     Usage::
 
         with McapRecorder("run.mcap") as rec:
-            rec.add_topic("/uam/fleet_state", "uam_msgs/msg/FleetState", qos_profile)
-            rec.write("/uam/fleet_state", msg_or_cdr_bytes, log_time_ns)
+            rec.add_topic(topic, "uam_msgs/msg/FleetState", qos_profile)
+            rec.write(topic, msg_or_cdr_bytes, log_time_ns)
 
     Args:
         path: output file (parent directories are created); an existing file is replaced.
@@ -145,7 +145,7 @@ class McapRecorder:
         """
         self._check_open()
         if not isinstance(topic, str) or not topic.startswith("/"):
-            raise RecordingError(f"topic: {topic!r} must be an absolute topic name like '/uam/x'")
+            raise RecordingError(f"topic: {topic!r} must be an absolute topic name (starting with '/')")
         type_name = type_name_of(msg_type)
         if topic in self._topics:
             if self._topics[topic]["type"] != type_name:

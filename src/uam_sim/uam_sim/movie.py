@@ -24,9 +24,11 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .stamps import stamp_s
+from uam_contract.stamps import stamp_s
+from uam_contract import names
+from uam_contract.names import resolved
 
-TOPIC_PLANS = "/uam/flight_plans"
+TOPIC_PLANS = resolved(names.TOPIC_PLANS)
 _NS = 1_000_000_000
 
 

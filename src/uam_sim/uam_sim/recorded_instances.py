@@ -13,10 +13,12 @@ from typing import Any
 
 import numpy as np
 
-from .stamps import stamp_s
+from uam_contract.stamps import stamp_s
+from uam_contract import names
+from uam_contract.names import resolved
 from .mcap_reader import iter_decoded
 
-TOPIC_REPORTS = "/uam/planning_reports"
+TOPIC_REPORTS = resolved(names.TOPIC_REPORTS)
 
 
 @dataclass

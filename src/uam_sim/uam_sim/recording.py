@@ -27,8 +27,8 @@ back by :func:`read_messages_tolerant` (mcap's non-seeking reader, stopping at t
 At most the last ``flush_period_s`` of messages is lost.
 
 Where the parts live (this module is the command line and re-exports them for callers):
-:mod:`uam_sim.mcap_schema` (type names, definitions, hashes), :mod:`uam_sim.qos_yaml` (offered
-QoS YAML), :mod:`uam_sim.stamps` (a message's simulation time), :mod:`uam_sim.cdr` (CDR bytes:
+:mod:`uam_sim.mcap_schema` (type names, definitions, hashes), :mod:`uam_contract.qos_spec` (offered
+QoS YAML), :mod:`uam_contract.stamps` (a message's simulation time), :mod:`uam_sim.cdr` (CDR bytes:
 exact size, fields read without deserializing), :mod:`uam_sim.mcap_writer` (the writer),
 :mod:`uam_sim.mcap_reader` (reading, decoding), :mod:`uam_sim.mcap_recover` (repairing a torn
 file), :mod:`uam_sim.recording_bench` (the write/read benchmark).
@@ -50,9 +50,9 @@ from .mcap_schema import (DEFINITION_SEPARATOR, MESSAGE_ENCODING, ROS2_PROFILE, 
                           SCHEMA_ENCODING, RecordingError, library_string, message_class,
                           message_definition, split_type_name, type_hash, type_name_of)
 from .mcap_writer import McapRecorder, bag_metadata_yaml
-from .qos_yaml import INFINITE_DURATION, QosSpec, offered_qos_yaml, parse_offered_qos
+from uam_contract.qos_spec import INFINITE_DURATION, QosSpec, offered_qos_yaml, parse_offered_qos
 from .recording_bench import benchmark
-from .stamps import sim_stamp_ns
+from uam_contract.stamps import sim_stamp_ns
 
 __all__ = ["DEFINITION_SEPARATOR", "INFINITE_DURATION", "MESSAGE_ENCODING", "ROS2_PROFILE",
            "ROSBAG2_METADATA_VERSION", "SCHEMA_ENCODING", "McapRecorder", "QosSpec",

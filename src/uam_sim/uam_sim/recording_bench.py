@@ -6,8 +6,13 @@ import os
 import time
 from pathlib import Path
 
+from uam_contract import names
+from uam_contract.names import resolved
+
 from .mcap_reader import read_messages
 from .mcap_writer import McapRecorder
+
+FLEET, POSES, REPORTS = (resolved(t) for t in (names.TOPIC_FLEET, names.TOPIC_POSES, names.TOPIC_REPORTS))
 
 
 def benchmark(path: str | os.PathLike, steps: int = 3500, vehicles: int = 70, seed: int = 0) -> dict:
@@ -43,18 +48,18 @@ def benchmark(path: str | os.PathLike, steps: int = 3500, vehicles: int = 70, se
     t0 = time.perf_counter()
     with McapRecorder(path) as rec:
         rec.add_topic("/clock", Clock)
-        rec.add_topic("/uam/fleet_state", FleetState)
-        rec.add_topic("/uam/fleet_poses", PoseArray)
-        rec.add_topic("/uam/planning_reports", PlanningReport)
+        rec.add_topic(FLEET, FleetState)
+        rec.add_topic(POSES, PoseArray)
+        rec.add_topic(REPORTS, PlanningReport)
         for k, c, f, p in cdr:
             ns = k * 1_000_000_000
             rec.write("/clock", c, ns)
-            rec.write("/uam/fleet_state", f, ns)
-            rec.write("/uam/fleet_poses", p, ns)
+            rec.write(FLEET, f, ns)
+            rec.write(POSES, p, ns)
             if k % 30 == 0:
                 rep = PlanningReport(epoch_index=k // 30)
                 rep.header.stamp = Time(sec=k)
-                rec.write("/uam/planning_reports", rep, ns)
+                rec.write(REPORTS, rep, ns)
     write_s = time.perf_counter() - t0
     t0 = time.perf_counter()
     n_read = sum(1 for _ in read_messages(path))

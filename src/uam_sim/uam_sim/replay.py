@@ -16,7 +16,7 @@ from typing import Sequence
 import numpy as np
 
 from .mcap_reader import is_complete, read_messages, read_messages_tolerant
-from .qos_yaml import QosSpec, parse_offered_qos
+from uam_contract.qos_spec import QosSpec, parse_offered_qos
 
 
 def schedule_offsets_s(log_times_ns: Sequence[int], rate: float) -> np.ndarray:

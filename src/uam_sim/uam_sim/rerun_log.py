@@ -48,11 +48,13 @@ import time
 from pathlib import Path
 from typing import Any, Sequence
 
+from uam_contract import names
+from uam_contract.names import RERUN_MODES, resolved
 import numpy as np
 
-from .stamps import stamp_s
+from uam_contract.stamps import stamp_s
 
-MODES = ("off", "save", "spawn", "connect")
+MODES = RERUN_MODES
 TIMELINE = "sim_time"
 
 #: Colours (RGB) of the view; tests look for these colours in screenshots.
@@ -512,9 +514,9 @@ class RerunLogger:
         self.close()
 
 
-TOPIC_FLEET = "/uam/fleet_state"
-TOPIC_PLANS = "/uam/flight_plans"
-TOPIC_REPORTS = "/uam/planning_reports"
+TOPIC_FLEET = resolved(names.TOPIC_FLEET)
+TOPIC_PLANS = resolved(names.TOPIC_PLANS)
+TOPIC_REPORTS = resolved(names.TOPIC_REPORTS)
 
 
 def log_recording(mcap_path: str | os.PathLike, rrd_path: str | os.PathLike, network: Any = None) -> int:

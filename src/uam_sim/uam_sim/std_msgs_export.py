@@ -50,19 +50,18 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 
+from uam_contract import names
+from uam_contract.names import FRAME_ID, resolved
+from uam_contract.stamps import DEFAULT_SCENARIO_START_UTC, SIM_CLOCK, scenario_start_ns  # noqa: F401 (used by the views)
+
 from .cdr import _ENCAPSULATION, _Writer
-from .stamps import stamp_ns
+from uam_contract.stamps import stamp_ns
 
 #: The default scenario start: Monday 6 January 2025, 08:00 in Singapore (00:00 UTC).
-DEFAULT_SCENARIO_START_UTC = "2025-01-06T00:00:00Z"
-#: ``scenario_start_utc`` value for header stamps in simulation time, the clock of every other topic
-SIM_CLOCK = "sim"
-FRAME_ID = "enu"
-
-TOPIC_NETWORK = "/uam/view/network"
-TOPIC_ROUTES = "/uam/view/routes"
-TOPIC_FLEET_CLOUD = "/uam/view/fleet"
-TOPIC_FIX_PREFIX = "/uam/view/fix/"
+TOPIC_NETWORK = resolved(names.TOPIC_VIEW_NETWORK)
+TOPIC_ROUTES = resolved(names.TOPIC_VIEW_ROUTES)
+TOPIC_FLEET_CLOUD = resolved(names.TOPIC_VIEW_FLEET)
+TOPIC_FIX_PREFIX = resolved(names.TOPIC_VIEW_FIX_PREFIX)
 
 TYPE_MARKER_ARRAY = "visualization_msgs/msg/MarkerArray"
 TYPE_POINT_CLOUD2 = "sensor_msgs/msg/PointCloud2"
@@ -82,29 +81,6 @@ NAVSAT_SERVICE_GPS = 1
 
 _NS = 1_000_000_000
 _TOKEN_RE = re.compile(r"[^A-Za-z0-9_]")
-
-
-def scenario_start_ns(text: str) -> int:
-    """Nanoseconds since the Unix epoch of an ISO 8601 instant with a time zone, or 0 for
-    :data:`SIM_CLOCK` (``"sim"``: stamps in simulation time).
-
-    ``"2025-01-06T00:00:00Z"`` or ``"2025-01-06T08:00:00+08:00"``. Raises ValueError naming
-    ``scenario_start_utc`` and the value if it does not parse, has no zone, or is before 1990
-    (viewers take earlier stamps for relative times).
-    """
-    if text == SIM_CLOCK:
-        return 0
-    try:
-        when = datetime.fromisoformat(str(text).replace("Z", "+00:00"))
-    except ValueError:
-        raise ValueError(f"scenario_start_utc: {text!r} is not an ISO 8601 time like "
-                         f"{DEFAULT_SCENARIO_START_UTC!r}") from None
-    if when.tzinfo is None:
-        raise ValueError(f"scenario_start_utc: {text!r} has no time zone (end it with 'Z' for UTC)")
-    if when.year < 1990 or when.year >= 2100:
-        raise ValueError(f"scenario_start_utc: {text!r} must lie in 1990..2099")
-    delta = when.astimezone(timezone.utc) - datetime(1970, 1, 1, tzinfo=timezone.utc)
-    return (delta.days * 86400 + delta.seconds) * _NS + delta.microseconds * 1000
 
 
 def vehicle_topic(vehicle_id: str) -> str:
@@ -495,9 +471,9 @@ def write_views(src: str, dst: str, network: Any = None,
             if not rec.has_topic(r.topic):
                 rec.add_topic(r.topic, r.type_name, offered_qos_profiles=parse_offered_qos(r.qos_yaml) or None)
             rec.write(r.topic, r.data, r.log_time_ns + shift, r.publish_time_ns + shift)
-            if r.topic == "/uam/fleet_state":
+            if r.topic == resolved(names.TOPIC_FLEET):
                 extra = views.fleet_state_messages(deserialize(r))
-            elif r.topic == "/uam/flight_plans":
+            elif r.topic == resolved(names.TOPIC_PLANS):
                 extra = views.plan_messages(deserialize(r))
             else:
                 continue

@@ -20,7 +20,7 @@ from rclpy.executors import MultiThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from uam_msgs.srv import SolveMwis  # noqa: E402
 
-from uam_bringup.contract import SERVICE_SOLVE as SERVICE_NAME  # noqa: E402
+from uam_contract.names import SERVICE_SOLVE as SERVICE_NAME  # noqa: E402
 from uam_solvers.nodes.solver_node import SolverNode  # noqa: E402
 
 pytestmark = pytest.mark.ros

@@ -4,12 +4,12 @@
 
 Subscribes uam/requests (FlightRequest); serves uam/plan_epoch (PlanEpoch); calls
 uam/solve_mwis (SolveMwis); publishes uam/flight_plans (every decision), uam/planning_reports
-and its progress on uam/epoch_sync (for the recorder). Names and QoS: uam_bringup.contract;
+and its progress on uam/epoch_sync (for the recorder). Names and QoS: uam_contract.names;
 parameters: uam_bringup.params.PLANNER (docs/parameters.md).
 
 On arrival every request is accepted (queued) or refused at once with a reason that names the
 field (those that come before the first epoch call, when the simulation time is not known yet,
-are decided at that call, in arrival order) (uam_bringup.wire, then the planning library's checks): ids bounded in length and
+are decided at that call, in arrival order) (uam_contract.wire, then the planning library's checks): ids bounded in length and
 characters and unique per operator, times well-formed and plausible, per-operator quota and a
 queue limit. A second request with a taken (operator_id, request_id) gets an
 OUTCOME_DUPLICATE answer, which is not a decision: the first decision stands. Nothing is counted
@@ -51,11 +51,14 @@ from rclpy.task import Future
 from uam_msgs.msg import EpochSync, FlightPlan, FlightRequest, PlanningReport
 from uam_msgs.srv import PlanEpoch, SolveMwis
 
-from uam_bringup import contract as c
-from uam_bringup import conversions as m
-from uam_bringup import qos, wire
+from uam_contract import names as c
+from uam_planner.nodes import conversions as m
+from uam_bringup import qos
+from uam_contract import wire
 from uam_bringup.journal import Journal
-from uam_bringup.params import PLANNER, declare_table
+from uam_bringup.params import declare_table
+from uam_contract.params import PLANNER
+from uam_solvers.nodes import param_rules
 from uam_bringup.runtime import run_node
 from uam_planner.network import load_network
 from uam_planner.planning import AirspaceConfig, Planner, PlanningConfig, call_solver, default_solve_mwis
@@ -70,7 +73,7 @@ class PlannerNode(Node):
         # 3 CPU s of a paper run; BENCHMARKS.md).
         super().__init__("planner", **kwargs)
         self._lock = threading.RLock()
-        self.p = declare_table(self, PLANNER, on_change=self._on_change)
+        self.p = declare_table(self, PLANNER, on_change=self._on_change, rules=param_rules.RULES)
         self.network = load_network(self.p["network"])
         config = PlanningConfig(
             separation_m=self.p["separation_m"], k=self.p["k"], penalty_factor=self.p["penalty_factor"],

@@ -49,7 +49,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     import rclpy
 
-    from uam_bringup.contract import resolved
+    from uam_contract.names import resolved
     from uam_sim.mcap_reader import read_messages
     from uam_sim.nodes.recorder_node import RECORDED_TOPICS
 

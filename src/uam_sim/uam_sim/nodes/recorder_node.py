@@ -67,16 +67,17 @@ from uam_sim.audit import AIRSPACE_METADATA, airspace_metadata
 from uam_sim.cdr import fleet_state_digest, fleet_state_step_index, leading_stamp_ns
 from uam_sim.mcap_schema import message_class
 from uam_sim.mcap_writer import McapRecorder
-from uam_sim.stamps import sim_stamp_ns
+from uam_contract.stamps import sim_stamp_ns
 from uam_sim.rerun_log import RerunLogger
 from uam_sim.std_msgs_export import ViewExporter
 
-from uam_bringup import contract as c
-from uam_bringup.params import RECORDER, declare_table
+from uam_contract import names as c
+from uam_bringup.params import declare_table
+from uam_contract.params import RECORDER
 from uam_bringup.qos import profile
 from uam_bringup.runtime import run_node
 
-#: topic (relative, see uam_bringup.contract) -> (message class, subscription QoS)
+#: topic (relative, see uam_contract.names) -> (message class, subscription QoS)
 RECORDED_TOPICS = {topic: (message_class(type_name), profile(spec))
                    for topic, (type_name, spec) in c.RECORDED_TOPICS.items()}
 

@@ -23,9 +23,10 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.utilities import remove_ros_args
 
 from uam_sim.mcap_schema import message_class
-from uam_sim.qos_yaml import QosSpec
+from uam_contract.qos_spec import QosSpec
 from uam_sim.replay import load_plan
-from uam_bringup.params import REPLAY, declare_table
+from uam_bringup.params import declare_table
+from uam_contract.params import REPLAY
 from uam_bringup.runtime import run_node
 
 _BATCH = 500  # messages per timer tick at most, so the executor stays responsive at rate 0
@@ -52,7 +53,7 @@ class ReplayNode(Node):
 
     def __init__(self, path: str | None = None, **kwargs) -> None:
         super().__init__("replay", **kwargs)
-        p = declare_table(self, REPLAY)   # uam_bringup.params.REPLAY, read-only
+        p = declare_table(self, REPLAY)   # uam_contract.params.REPLAY, read-only
         path = path or p["recording"]
         if not path:
             raise ValueError("recording: give the .mcap file as the first argument or -p recording:=FILE")

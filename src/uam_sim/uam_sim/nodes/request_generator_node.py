@@ -23,10 +23,12 @@ from rclpy.node import Node
 from uam_msgs.msg import EpochSync, FlightRequest
 from uam_msgs.srv import ReleaseDemand
 
-from uam_bringup import contract as c
-from uam_bringup import conversions as m
-from uam_bringup import qos, wire
-from uam_bringup.params import REQUEST_GENERATOR, declare_table
+from uam_contract import names as c
+from uam_planner.nodes import conversions as m
+from uam_bringup import qos
+from uam_contract import wire
+from uam_bringup.params import declare_table
+from uam_contract.params import REQUEST_GENERATOR
 from uam_bringup.runtime import run_node
 from uam_planner.network import load_network
 from uam_sim.demand import DemandSchedule, RequestGenerator, load_demand

@@ -45,10 +45,12 @@ from rosgraph_msgs.msg import Clock
 from uam_msgs.msg import EpochSync, FleetState, FlightPlan
 from uam_msgs.srv import PlanEpoch, ReleaseDemand
 
-from uam_bringup import contract as c
-from uam_bringup import conversions as m
-from uam_bringup import qos, wire
-from uam_bringup.params import SIMULATOR, declare_table
+from uam_contract import names as c
+from uam_planner.nodes import conversions as m
+from uam_bringup import qos
+from uam_contract import wire
+from uam_bringup.params import declare_table
+from uam_contract.params import SIMULATOR
 from uam_bringup.runtime import run_node
 from uam_sim.cdr import encode_clock, encode_fleet_state, encode_pose_array, yaw_quaternions
 from uam_sim.fleet import Fleet

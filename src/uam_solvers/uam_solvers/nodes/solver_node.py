@@ -33,9 +33,11 @@ from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from uam_msgs.srv import SolveMwis
 
-from uam_bringup import contract as c
-from uam_bringup.conversions import problem_from_solve_request
-from uam_bringup.params import SOLVER, declare_table
+from uam_contract import names as c
+from uam_solvers.nodes.conversions import problem_from_solve_request
+from uam_bringup.params import declare_table
+from uam_contract.params import SOLVER
+from uam_solvers.nodes import param_rules
 from uam_bringup.runtime import run_node
 from uam_solvers import BackendUnavailable, MwisInputError, UnknownBackendError
 
@@ -67,7 +69,7 @@ class SolverNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__("solver", **kwargs)
-        self._p = declare_table(self, SOLVER, on_change=self._on_param)  # every change validated
+        self._p = declare_table(self, SOLVER, on_change=self._on_param, rules=param_rules.RULES)  # every change validated
         if self._p["default_time_limit_s"] > self._p["max_time_limit_s"]:
             raise ValueError(f"parameter default_time_limit_s: {self._p['default_time_limit_s']!r} s exceeds "
                              f"max_time_limit_s={self._p['max_time_limit_s']!r} s")

@@ -15,7 +15,7 @@ from __future__ import annotations
 import hashlib
 from typing import Any
 
-from uam_planner.ids import ID_PATTERN, MAX_ECHO_CHARS, MAX_ID_LENGTH, MAX_NODE_ID_LENGTH, check_id, echo  # noqa: F401 (the wire's rule)
+from uam_contract.ids import ID_PATTERN, MAX_ECHO_CHARS, MAX_ID_LENGTH, MAX_NODE_ID_LENGTH, check_id, echo  # noqa: F401 (the wire's rule)
 
 MAX_REASON_CHARS = 300
 NS_PER_S = 1_000_000_000

@@ -1,6 +1,6 @@
 """The ROS contract of the UAM node graph: topic and service names, QoS, frame and wire limits.
 
-rclpy-free (QoS as :class:`uam_sim.recording.QosSpec`, turned into rclpy profiles by
+rclpy-free (QoS as :class:`uam_contract.qos_spec.QosSpec`, turned into rclpy profiles by
 :mod:`uam_bringup.qos`), so the analysis of a recording and the tests can read it without ROS.
 
 Names are *relative*: a node started in a namespace (``--ros-args -r __ns:=/fleet2``) or a
@@ -11,7 +11,7 @@ the names recordings carry. ``/clock`` stays absolute: rclpy's time source liste
 
 from __future__ import annotations
 
-from uam_sim.recording import QosSpec
+from uam_contract.qos_spec import QosSpec
 
 FRAME_ID = "enu"
 
@@ -26,6 +26,25 @@ TOPIC_CLOCK = "/clock"
 SERVICE_SOLVE = "uam/solve_mwis"
 SERVICE_PLAN_EPOCH = "uam/plan_epoch"
 SERVICE_RELEASE_DEMAND = "uam/release_demand"
+
+# the standard-type views the recorder writes for generic viewers (uam_sim.std_msgs_export)
+TOPIC_VIEW_NETWORK = "uam/view/network"
+TOPIC_VIEW_ROUTES = "uam/view/routes"
+TOPIC_VIEW_FLEET = "uam/view/fleet"
+TOPIC_VIEW_FIX_PREFIX = "uam/view/fix/"
+# the live Foxglove WebSocket's channels (uam_sim.foxglove_live)
+TOPIC_LIVE_NETWORK = "uam/live/network"
+TOPIC_LIVE_ROUTES = "uam/live/routes"
+TOPIC_LIVE_FLEET = "uam/live/fleet"
+TOPIC_LIVE_FLEET_GEO = "uam/live/fleet_geo"
+TOPIC_LIVE_METRICS = "uam/live/metrics"
+
+#: the recorder's ``wait_for_publishers`` as run_fleet.sh and the launch file give it: the run
+#: starts once the recorder hears the planner and the demand source
+RECORDER_WAITS_FOR = (TOPIC_PLANS, TOPIC_REPORTS, TOPIC_REQUESTS, TOPIC_SYNC)
+
+#: Rerun sinks of the recorder (uam_sim.rerun_log.RerunLogger)
+RERUN_MODES = ("off", "save", "spawn", "connect")
 
 
 def resolved(name: str, namespace: str = "/") -> str:

@@ -1,0 +1,327 @@
+"""Every node's parameters, one table per node: the contract for declaration, run-time changes and docs.
+
+A :class:`Param` says a parameter's name, default (whose type is the parameter's type), meaning,
+range or choices, and whether it may change while the node runs. The tables are plain data:
+:func:`uam_bringup.params.declare_table` declares a node's table on the node (rclpy), and
+``python -m uam_contract.params`` prints them as Markdown (docs/parameters.md). A rule that needs
+a library (the known MWIS backends) is named by ``Param.rule`` and supplied by the node.
+
+Numbers given as integers where a float is expected (``-p duration_s:=600``) are accepted: float
+parameters are declared with dynamic typing and converted here.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass
+from typing import Any, Callable
+
+from uam_contract.names import RERUN_MODES
+from uam_contract.stamps import DEFAULT_SCENARIO_START_UTC, SIM_CLOCK
+
+INT32_MAX = 2**31 - 1
+
+
+@dataclass(frozen=True)
+class Param:
+    """One parameter: its default fixes its type; ``lo``/``hi`` bound numbers, ``choices`` strings;
+    ``read_only``: set at start-up only; ``check``: an extra rule, value -> '' or why not."""
+
+    name: str
+    default: Any
+    description: str
+    lo: float | None = None
+    hi: float | None = None
+    choices: tuple | None = None
+    read_only: bool = True
+    check: Callable[[Any], str] | None = None
+    #: a rule that needs a library (e.g. the known MWIS backends): named here, supplied by the
+    #: node that declares the table (uam_bringup.params.declare_table's ``rules``)
+    rule: str = ""
+
+    def validate(self, value):
+        """The value converted to the parameter's type; ValueError naming parameter and value."""
+        return check(self.name, value, self.default, self.lo, self.hi, self.choices, self.check)
+
+    def text(self) -> str:
+        t = self.description
+        if self.lo is not None or self.hi is not None:
+            t += f" (range [{self.lo if self.lo is not None else '-inf'}, {self.hi if self.hi is not None else 'inf'}])"
+        if self.choices:
+            t += f" (one of: {', '.join(map(str, self.choices))})"
+        return t
+
+
+def check(name: str, value, default, lo=None, hi=None, choices=None, rule=None):
+    """Validate ``value`` of parameter ``name`` against the default's type, a range and choices."""
+    if isinstance(default, bool):
+        if not isinstance(value, bool):
+            raise ValueError(f"parameter {name}: {value!r} is not true or false")
+    elif isinstance(default, float):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise ValueError(f"parameter {name}: {value!r} is not a finite number")
+        value = float(value)
+    elif isinstance(default, int):
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ValueError(f"parameter {name}: {value!r} is not an integer")
+    elif isinstance(default, str):
+        if isinstance(value, bool) and choices is not None and {"off", "on"} & set(choices):
+            # `-p rerun:=off`: ROS reads the argument as YAML, where off is the boolean false
+            value = _yaml_word(value)
+        elif not isinstance(value, str):
+            raise ValueError(f"parameter {name}: {value!r} is not a string")
+    if lo is not None and value < lo:
+        raise ValueError(f"parameter {name}: {value!r} is below the minimum {lo}")
+    if hi is not None and value > hi:
+        raise ValueError(f"parameter {name}: {value!r} is above the maximum {hi}")
+    if choices is not None and value not in choices:
+        raise ValueError(f"parameter {name}: {value!r} is not one of {', '.join(map(str, choices))}")
+    if rule is not None:
+        why = rule(value)
+        if why:
+            raise ValueError(f"parameter {name}: {why}")
+    return value
+
+
+def _yaml_word(value: bool) -> str:
+    """The word a choice parameter means by a YAML 1.1 boolean (off/on)."""
+    return "on" if value else "off"
+
+
+def _bool_alias(p: "Param") -> bool:
+    """A string parameter with the choice 'off' or 'on', which YAML turns into a boolean."""
+    return isinstance(p.default, str) and bool(p.choices) and bool({"off", "on"} & set(p.choices))
+
+
+#: rclpy's own parameters that would break a running node of this graph: refused at run time
+#: (and at start-up: :func:`check_builtins`). With use_sim_time the simulator's timers would wait
+#: for the /clock it publishes itself (frozen for good); the other nodes take simulation time from
+#: the epoch protocol and never need it.
+FROZEN_BUILTINS = {
+    "use_sim_time": "parameter use_sim_time: the nodes of this graph take simulation time from the epoch "
+                    "protocol; switching to /clock time would freeze the simulator's own timers",
+}
+
+
+# ---- the tables ------------------------------------------------------------------------------------
+
+def _id_rule(value: str) -> str:
+    from uam_contract.wire import ID_PATTERN, MAX_ID_LENGTH
+
+    if not ID_PATTERN.fullmatch(value):
+        return (f"{value[:MAX_ID_LENGTH]!r} must be 1 to {MAX_ID_LENGTH} characters of "
+                "letters, digits, '_', '-' and '.'")
+    return ""
+
+
+def _nonempty(what: str) -> Callable[[str], str]:
+    return lambda v: "" if v else f"empty; give {what}"
+
+
+PLANNER = (
+    Param("network", "", "routing network file (.yaml, .geojson, .graphml), e.g. config/networks/singapore.yaml",
+          check=_nonempty("a network file, e.g. config/networks/singapore.yaml")),
+    Param("policy", "mwis", "planning policy: conflict graph + MWIS, the shortest-FIFO baseline, or "
+          "first-fit (arrival order, the first conflict-free of the same k candidates)",
+          choices=("mwis", "fifo", "firstfit")),
+    Param("backend", "exact", "MWIS backend asked of the solver service (`ros2 run uam_solvers backends` lists "
+          "them); takes effect at the next epoch", read_only=False, rule="backend_name"),
+    Param("time_limit_s", 5.0, "MWIS solve time limit [s]; takes effect at the next epoch", 0.001, 3600.0,
+          read_only=False),
+    Param("seed", 0, "seed of stochastic MWIS backends (run_fleet.sh passes the run's --seed)", 0, INT32_MAX,
+          read_only=False),
+    Param("separation_m", 100.0, "separation minimum [m]: the sphere's radius, or the cylinder's horizontal minimum H",
+          0.001, 100000.0),
+    Param("separation_model", "sphere", "loss of separation: 'sphere' (the paper's: 3D distance < separation_m) or "
+          "'cylinder' (horizontal distance < separation_m while vertical distance < vertical_separation_m)",
+          choices=("sphere", "cylinder")),
+    Param("vertical_separation_m", 30.0, "the cylinder's vertical minimum V [m] (unused by the sphere)", 0.001, 10000.0),
+    Param("departure_slot_s", 0.0, "departure slots [s]: a request may depart at max(t, earliest) + i * slot up to "
+          "min(t + epoch, latest); 0 = the paper's rule (depart at the epoch time t)", 0.0, 86400.0),
+    Param("climb_rate_mps", 5.0, "vertical climb rate at the vertiports of a layered network [m/s]", 0.001, 100.0),
+    Param("descent_rate_mps", 3.0, "vertical descent rate at the vertiports of a layered network [m/s]", 0.001, 100.0),
+    Param("k", 5, "candidate routes per request", 1, 100),
+    Param("penalty_factor", 5.0, "penalised Dijkstra factor for diverse candidates", 0.0, 1000.0),
+    Param("speed_mps", 10.0, "cruise speed [m/s]", 0.001, 1000.0),
+    Param("precompute_routes", True, "compute every aerodrome pair's candidate routes at start-up (1-2 s for "
+          "Singapore) instead of on first use; same routes"),
+    Param("solver_timeout_margin_s", 5.0, "extra wall time [s] to wait for the solver service before the local "
+          "greedy fallback", 0.0, 3600.0, read_only=False),
+    Param("solver_startup_timeout_s", 30.0, "wall time [s] to wait at start-up for the solver service before "
+          "offering uam/plan_epoch (nodes start in any order); later a missing service means the local greedy "
+          "fallback at once", 0.0, 3600.0),
+    Param("use_solver_service", True, "call uam/solve_mwis; false solves in-process with the same backend"),
+    Param("request_wait_timeout_s", 60.0, "wall time [s] an epoch waits for the requests the demand source "
+          "released for it (named in the epoch call) before planning without the missing ones", 0.0, 3600.0,
+          read_only=False),
+    Param("max_pending", 5000, "requests waiting for a decision, all operators together; more are refused "
+          "with the reason", 1, 10_000_000),
+    Param("max_pending_new_operators", 2500, "requests waiting for a decision of operators first accepted since "
+          "the last epoch, together: the operators that came before keep the rest of max_pending (a flood of new "
+          "operator ids cannot push them out)", 1, 10_000_000),
+    Param("max_pending_per_operator", 500, "requests waiting for a decision per operator_id; more are "
+          "refused with the reason", 1, 10_000_000),
+    Param("max_window_s", 3600.0, "latest_departure may be at most this far after the current simulation "
+          "time [s]; later windows are refused", 0.0, 1e7),
+    Param("max_request_lead_s", 60.0, "request_time may be at most this far after the current simulation "
+          "time [s] (a request from the future)", 0.0, 1e7),
+    Param("journal", "", "file where the planner journals its approvals (uam_bringup.journal), so a restarted "
+          "planner checks the simulator's claim of the flights in the air against its own record; '' for none "
+          "(run_fleet.sh writes <out>/planner-journal.jsonl)"),
+)
+
+SOLVER = (
+    Param("default_backend", "auto", "MWIS backend used when a request names none", read_only=False,
+          rule="backend_available"),
+    Param("default_time_limit_s", 10.0, "solve time limit [s] used when a request gives 0; at most "
+          "max_time_limit_s", 0.001, 3600.0, read_only=False),
+    # Every solve holds a worker process for up to its limit: an unbounded limit (1e9 s was
+    # accepted) would let one request hold its lane for good.
+    Param("max_time_limit_s", 60.0, "requests asking a longer time limit [s] are refused", 0.01, 3600.0,
+          read_only=False),
+    # A lower bound that serves every planner graph of the paper's scenarios (hundreds of vertices):
+    # a tiny value would refuse every epoch and push the planner to its greedy fallback.
+    Param("max_vertices", 20000, "graphs with more vertices are refused", 1000, 10_000_000, read_only=False),
+    Param("layers", True, "split into components and apply exact reductions around the backend",
+          read_only=False),
+)
+
+SIMULATOR = (
+    Param("step_s", 1.0, "simulation step [s]", 0.001, 3600.0),
+    Param("duration_s", 3500.0, "simulated time after which the run ends [s]; epochs at t < duration_s",
+          0.0, 1e7),
+    Param("epoch_s", 30.0, "time between planning epochs [s], a multiple of step_s; the one place the epoch "
+          "length is configured (the planner gets it in each epoch call)", 0.001, 86400.0),
+    Param("mode", "lockstep", "'lockstep': as fast as the planner allows, result independent of CPU speed; "
+          "'realtime': paced at real_time_factor", choices=("lockstep", "realtime")),
+    Param("real_time_factor", 1.0, "in realtime mode: simulated seconds per wall second", 0.001, 1e5,
+          read_only=False),
+    Param("use_demand_service", True, "at each epoch, ask the request generator (uam/release_demand) to "
+          "publish the epoch's requests and pass their ids to the planner; false: requests come only "
+          "from outside, as they arrive"),
+    Param("wait_for_subscribers", [""], "start only once these nodes (by name) subscribe to "
+          "uam/fleet_state, so a recording starts at t = 0 (config/simulator.yaml: [recorder]); [''] for none"),
+    Param("startup_timeout_s", 300.0, "wall time [s] to wait at start for the planner's and the demand source's "
+          "services (exactly one of each) and the subscribers named in wait_for_subscribers before ending the run "
+          "with an error", 0.1, 86400.0),
+    Param("ack_timeout_s", 120.0, "wall time [s] to wait for an epoch's outcome before ending the run with "
+          "an error",
+          0.1, 86400.0),
+)
+
+REQUEST_GENERATOR = (
+    Param("network", "", "routing network file; its aerodromes are the origins and destinations",
+          check=_nonempty("a network file, e.g. config/networks/singapore.yaml")),
+    Param("rate", 10.0, "requests per interval (paper: 1 to 20 per 30 s); fractional rates allowed", 0.0, 10000.0),
+    Param("interval_s", 30.0, "time between request batches [s] (demand instants; each is released at the "
+          "first epoch at or after it)", 0.001, 86400.0),
+    Param("window_s", 60.0, "latest departure - earliest departure of each request [s]", 0.0, 86400.0),
+    Param("seed", 0, "random seed of the request stream", 0, INT32_MAX),
+    Param("demand_file", "", "optional YAML demand file to replay instead of random requests "
+          "(docs/demand-format.md)"),
+    Param("operator_id", "generator", "operator id the requests are published under (ids are unique per "
+          "operator)", check=_id_rule),
+)
+
+def _mcap_path_rule(value: str) -> str:
+    return "" if value.endswith(".mcap") else f"{value!r} must end with .mcap"
+
+
+def _utc_rule(value: str) -> str:
+    from uam_contract.stamps import scenario_start_ns
+
+    try:
+        scenario_start_ns(value)
+    except ValueError as exc:
+        return str(exc).split(": ", 1)[-1]
+    return ""
+
+
+def _recorded_topics_rule(value) -> str:
+    from uam_contract.names import RECORDED_TOPICS
+
+    unknown = [t for t in value if t and t not in RECORDED_TOPICS]
+    return f"{unknown!r} are not recorded topics; known: {', '.join(RECORDED_TOPICS)}" if unknown else ""
+
+
+RECORDER = (
+    Param("output", "run.mcap", "the .mcap file to write (parent directories are created; replaced if it exists)",
+          check=_mcap_path_rule),
+    Param("rerun", "off", "Rerun logging: 'off', 'save' (an .rrd file), 'spawn' (start a viewer) or 'connect' "
+          "(stream to a running viewer at rerun_url)", choices=RERUN_MODES),
+    Param("rerun_rrd", "", "the .rrd file for rerun:=save; empty = the output path with .rrd"),
+    Param("rerun_url", "", "viewer gRPC url for rerun:=connect; empty = Rerun's default"),
+    Param("network", "", "network file (config/networks/*.yaml) drawn in Rerun and the views; empty = none"),
+    Param("compression", "zstd", "MCAP chunk compression", choices=("zstd", "lz4", "none")),
+    Param("chunk_size_bytes", 256 * 1024, "uncompressed size after which an MCAP chunk is finished [bytes]",
+          1024, 1 << 30),
+    Param("flush_period_s", 1.0, "wall time after which the open chunk is written out, the most a crash "
+          "loses [s]", 0.01, 3600.0),
+    Param("finish_quiet_s", 0.5, "after the simulator's end of run, close once no message has arrived for this "
+          "long (messages of other topics may still be on their way) [s wall]", 0.0, 60.0),
+    Param("finish_timeout_s", 10.0, "after the simulator's end of run, close at the latest after this long "
+          "[s wall]", 0.0, 3600.0),
+    Param("views", True, "also write the run in standard types for generic viewers (/uam/view/*: PointCloud2, "
+          "NavSatFix, MarkerArray; docs/views.md)"),
+    Param("scenario_start_utc", SIM_CLOCK, "'sim': the view topics' header stamps in simulation time, the "
+          "clock of every other topic; or an ISO 8601 instant of simulation time 0 (e.g. "
+          f"{DEFAULT_SCENARIO_START_UTC}): their stamps are then that plus the simulation time, real UTC "
+          "(log times stay simulation time)", check=_utc_rule),
+    Param("view_fix_period_s", 5.0, "NavSatFix per vehicle every this many simulated seconds; 0 = every "
+          "step [s]", 0.0, 3600.0),
+    Param("foxglove_port", 0, "serve a live Foxglove WebSocket view on this port (0 = off; 8765 is "
+          "Foxglove's default)", 0, 65535),
+    # the airspace the run is planned in (run_fleet.sh passes the planner's values), written to the
+    # MCAP's uam_airspace metadata so that the analysis audits in the run's model
+    Param("separation_model", "sphere", "the run's separation model (as the planner's)",
+          choices=("sphere", "cylinder")),
+    Param("separation_m", 100.0, "the run's separation minimum (cylinder: H) [m]", 0.001, 100000.0),
+    Param("vertical_separation_m", 30.0, "the run's vertical minimum V of the cylinder [m]", 0.001, 10000.0),
+    Param("departure_slot_s", 0.0, "the run's departure slot [s] (0 = the paper's rule)", 0.0, 86400.0),
+    Param("wait_for_publishers", [""], "subscribe to the simulator's topics (/clock, uam/fleet_state, "
+          "uam/fleet_poses) only once each of these recorded topics has a matched publisher: the simulator "
+          "starts when the recorder subscribes to the fleet state, so the run then starts only when the "
+          "recorder hears the planner and the demand source (run_fleet.sh: uam/flight_plans, "
+          "uam/planning_reports, uam/requests, uam/epoch_sync); [''] = subscribe to everything at once",
+          check=_recorded_topics_rule),
+)
+
+REPLAY = (
+    Param("recording", "", "the .mcap file to replay (the command line's first argument sets it too)"),
+    Param("rate", 1.0, "playback speed: 1 = original timing, 10 = ten times faster, 0 = as fast as possible",
+          0.0, 1e9),
+    Param("start_delay_s", 1.0, "wall time to wait after creating the publishers before the first message "
+          "(lets subscribers discover them) [s]", 0.0, 3600.0),
+    Param("wait_for_subscribers", 0, "start only once every replayed topic has at least this many subscribers "
+          "(and start_delay_s has passed); 0 = do not wait", 0, 1000),
+    Param("topics", [""], "topics to replay; [''] = every recorded topic"),
+    Param("exit_when_done", True, "stop the node once everything is published"),
+)
+
+TABLES = {"planner": PLANNER, "solver": SOLVER, "simulator": SIMULATOR, "request_generator": REQUEST_GENERATOR,
+          "recorder": RECORDER, "replay": REPLAY}
+
+
+def markdown() -> str:
+    """The tables as Markdown (docs/parameters.md is this text)."""
+    out = ["# Node parameters", "",
+           "Generated by `python -m uam_bringup.params` from `src/uam_bringup/uam_bringup/params.py`, the "
+           "tables the nodes declare. *read-only*: read at start-up only; a change at run time is refused.",
+           ""]
+    for node, table in TABLES.items():
+        out += [f"## {node}", "", "| parameter | default | changes at run time | meaning |", "|---|---|---|---|"]
+        for p in table:
+            out.append(f"| `{p.name}` | `{p.default!r}` | {'yes' if not p.read_only else 'read-only'} | "
+                       f"{p.text().replace('|', '/')} |")
+        out.append("")
+    return "\n".join(out)
+
+
+def main(argv=None) -> int:
+    sys.stdout.write(markdown())
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
