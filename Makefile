@@ -1,5 +1,5 @@
 # Thin wrappers around scripts/: each target sets up whatever is missing first.
-.PHONY: setup test demo bench clean study
+.PHONY: setup test test-fast demo bench clean study
 
 setup:
 	bash scripts/setup.sh
@@ -7,6 +7,11 @@ setup:
 # The test command: every library and node test in one pytest run.
 test:
 	bash scripts/test.sh
+
+# The development loop: the library tests only (no ROS graph, no node, no subprocess run of the
+# graph, nothing marked slow); `make test-fast ARGS=--lf` reruns what failed last.
+test-fast:
+	bash scripts/test.sh -m "not ros and not slow" src/uam_planner/test src/uam_solvers/test src/uam_sim/test test/test_layering.py $(ARGS)
 
 # The main job: a short default scenario through the whole ROS node graph (Singapore, paper rate
 # 10 requests per 30 s, 600 s simulated, exact MWIS), recorded to MCAP + Rerun, then analysed.

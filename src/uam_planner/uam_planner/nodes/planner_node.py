@@ -5,7 +5,7 @@
 Subscribes uam/requests (FlightRequest); serves uam/plan_epoch (PlanEpoch); calls
 uam/solve_mwis (SolveMwis); publishes uam/flight_plans (every decision), uam/planning_reports
 and its progress on uam/epoch_sync (for the recorder). Names and QoS: uam_contract.names;
-parameters: uam_bringup.params.PLANNER (docs/parameters.md).
+parameters: uam_contract.params.PLANNER (docs/parameters.md).
 
 On arrival every request is accepted (queued) or refused at once with a reason that names the
 field (those that come before the first epoch call, when the simulation time is not known yet,

@@ -163,7 +163,7 @@ class RecorderNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__("recorder", **kwargs)
-        # one table (uam_bringup.params.RECORDER): declared read-only, checked at start-up
+        # one table (uam_contract.params.RECORDER): declared read-only, checked at start-up
         p = declare_table(self, RECORDER)
         self._channel_last_ns: dict[str, int] = {}  # topic -> log time of its last message [ns]
         airspace = airspace_metadata(p["separation_model"], p["separation_m"], p["vertical_separation_m"],

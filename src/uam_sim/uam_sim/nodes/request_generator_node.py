@@ -10,7 +10,7 @@ or before the epoch time not yet released) and answers with their ids, which the
 to the planner: the planner waits for those requests, not for a count. The requests carry
 ``operator_id`` (parameter, default "generator"). The stream is uam_sim.demand's, identical to
 the in-process experiment runner's for the same seed. Parameters:
-uam_bringup.params.REQUEST_GENERATOR (docs/parameters.md).
+uam_contract.params.REQUEST_GENERATOR (docs/parameters.md).
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ Publishes /clock (rosgraph_msgs/Clock, for recordings and viewers with use_sim_t
 of the graph take time from the epoch protocol instead), uam/fleet_state
 (uam_msgs/FleetState) and uam/fleet_poses (geometry_msgs/PoseArray, for generic viewers) at
 every step, and announces each epoch and the end of the run on uam/epoch_sync (for the recorder
-and observers). Parameters: uam_bringup.params.SIMULATOR (docs/parameters.md).
+and observers). Parameters: uam_contract.params.SIMULATOR (docs/parameters.md).
 
 The epoch protocol, at each epoch time t = k * epoch_s < duration_s: ask the demand source to
 release the epoch's requests (uam/release_demand; it answers with their ids), then ask the

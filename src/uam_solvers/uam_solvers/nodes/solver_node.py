@@ -2,7 +2,7 @@
 
     ros2 run uam_solvers solver --ros-args --params-file config/solver.yaml
 
-Parameters: uam_bringup.params.SOLVER (docs/parameters.md); every change at run time is
+Parameters: uam_contract.params.SOLVER (docs/parameters.md); every change at run time is
 validated (a backend must be known and available, max_vertices at least 1000, max_time_limit_s
 at most 3600 s).
 
