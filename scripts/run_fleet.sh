@@ -12,8 +12,9 @@
 #   --seed N           seed of the demand and of stochastic solvers (default 0)
 #   --network FILE     routing network (default config/networks/singapore.yaml; e.g.
 #                      config/networks/singapore-layered.yaml: vertiports with pads, 4 flight levels)
-#   --separation M     sphere | cylinder: loss of separation as the paper's 3D minimum (default)
-#                      or horizontal < H while vertical < V
+#   --separation M     sphere | cylinder: loss of separation as the paper's 3D minimum or horizontal
+#                      < H while vertical < V (default: the network's own, cylinder for a layered
+#                      network, else sphere; a contradicting choice is warned of)
 #   --separation-m H   separation minimum, the cylinder's horizontal H [m] (default 100)
 #   --vertical-separation-m V   the cylinder's vertical minimum [m] (default 30)
 #   --slot-s S         departure slots of S seconds inside the epoch (default 0: the paper's rule,
@@ -39,7 +40,7 @@ cd "$ROOT"
 
 BACKEND=exact POLICY=mwis RATE=10 DURATION=3500 SEED=0 NETWORK=config/networks/singapore.yaml
 DEMAND="" MODE=lockstep RTF=1 RERUN=save OUT="" FOXGLOVE_PORT=0 RECORDER_NICE=19
-SEPARATION=sphere SEPARATION_M=100 VERTICAL_M=30 SLOT_S=0 CLIMB=5 DESCENT=3
+SEPARATION="" SEPARATION_M=100 VERTICAL_M=30 SLOT_S=0 CLIMB=5 DESCENT=3
 die() { echo "run_fleet: $*" >&2; exit 2; }
 while [[ $# -gt 0 ]]; do
   case "$1" in
@@ -74,7 +75,7 @@ done
 [[ "$SEED" =~ ^[0-9]+$ ]] || die "--seed: '$SEED' is not an integer >= 0"
 [[ "$FOXGLOVE_PORT" =~ ^[0-9]+$ ]] && (( FOXGLOVE_PORT <= 65535 )) || die "--foxglove-port: '$FOXGLOVE_PORT' is not a port 0..65535"
 [[ "$RTF" =~ ^[0-9]+(\.[0-9]+)?$ ]] || die "--rtf: '$RTF' is not a positive number"
-[[ "$SEPARATION" == sphere || "$SEPARATION" == cylinder ]] || die "--separation: '$SEPARATION' is not sphere or cylinder"
+[[ -z "$SEPARATION" || "$SEPARATION" == sphere || "$SEPARATION" == cylinder ]] || die "--separation: '$SEPARATION' is not sphere or cylinder"
 for _flag in "separation-m:$SEPARATION_M" "vertical-separation-m:$VERTICAL_M" "slot-s:$SLOT_S" \
              "climb-rate:$CLIMB" "descent-rate:$DESCENT"; do
   [[ "${_flag#*:}" =~ ^[0-9]+(\.[0-9]+)?$ ]] || die "--${_flag%%:*}: '${_flag#*:}' is not a number >= 0"
@@ -104,6 +105,15 @@ except UnknownBackendError as exc:
 if not ok:
     sys.exit(f"run_fleet: --backend: {sys.argv[1]!r} is unavailable here: {why}")
 EOF
+
+# the separation model the network was built for (uam_planner.network.Network.separation_model)
+NET_MODEL="$(python -c 'import sys; from uam_planner.network import load_network; print(load_network(sys.argv[1]).separation_model)' "$NETWORK")" \
+  || die "--network: '$NETWORK' does not load (see above)"
+if [[ -z "$SEPARATION" ]]; then
+  SEPARATION=$NET_MODEL
+elif [[ "$SEPARATION" != "$NET_MODEL" ]]; then
+  echo "run_fleet: WARNING: --separation $SEPARATION contradicts $NETWORK, built for $NET_MODEL$([[ $NET_MODEL == cylinder ]] && echo ' (its flight levels are closer than the sphere: they separate nothing)'); running with $SEPARATION as asked" >&2
+fi
 
 if [[ -z "$OUT" ]]; then
   # mktemp creates the folder atomically with a random suffix: two runs started in the same second

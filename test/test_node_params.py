@@ -199,3 +199,25 @@ def test_rerun_off_as_the_command_line_writes_it_is_accepted(ros_context, tmp_pa
         rec.destroy_node()
     with pytest.raises(ValueError, match="parameter rerun: 'on' is not one of"):
         RecorderNode(context=ros_context, cli_args=["--ros-args", "-p", "rerun:=on", "-p", f"output:={out}"])
+
+
+def test_the_planner_takes_the_networks_own_separation_model_and_warns_of_a_contradiction(ros_context):
+    """Issue 19: a layered network flown with the sphere gave nothing for its four levels."""
+    from uam_planner.nodes.planner_node import PlannerNode
+
+    layered = str(ROOT / "config" / "networks" / "singapore-layered.yaml")
+    own = PlannerNode(context=ros_context, parameter_overrides=[
+        Parameter("network", value=layered), Parameter("precompute_routes", value=False)])
+    paper = PlannerNode(context=ros_context, parameter_overrides=[
+        Parameter("network", value=str(ROOT / "config" / "networks" / "tiny.yaml")),
+        Parameter("precompute_routes", value=False)])
+    forced = PlannerNode(context=ros_context, parameter_overrides=[
+        Parameter("network", value=layered), Parameter("precompute_routes", value=False),
+        Parameter("separation_model", value="sphere")])
+    try:
+        assert own.config.airspace.separation_model == "cylinder"
+        assert paper.config.airspace.separation_model == "sphere"
+        assert forced.config.airspace.separation_model == "sphere"  # as asked, with a warning
+    finally:
+        for n in (own, paper, forced):
+            n.destroy_node()

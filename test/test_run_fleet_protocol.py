@@ -37,8 +37,10 @@ def test_run_fleet_passes_the_seed_to_the_planner_and_matches_the_runner(tmp_pat
 
 def test_run_fleet_layered_with_slots_and_cylinder_matches_the_runner_and_audits_in_the_cylinder(
         tmp_path, ros_domain_id):
-    """Issue 10: run_fleet.sh --network singapore-layered --slot-s 5 --separation cylinder reaches
-    the planner and the recorder; the analysis audits in the recorded cylinder."""
+    """Issue 10: run_fleet.sh --network singapore-layered --slot-s 5 reaches the planner and the
+    recorder; the analysis audits in the recorded cylinder. Issue 19: the cylinder is the layered
+    network's own model, taken without --separation (with the sphere, its levels 30 m apart
+    separated nothing)."""
     from graph_harness import in_process
 
     from uam_sim.analysis import iter_decoded, summarize
@@ -47,10 +49,12 @@ def test_run_fleet_layered_with_slots_and_cylinder_matches_the_runner_and_audits
     env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain_id))
     proc = subprocess.run(
         ["bash", str(ROOT / "scripts" / "run_fleet.sh"), "--network", "config/networks/singapore-layered.yaml",
-         "--slot-s", "5", "--separation", "cylinder", "--vertical-separation-m", "30", "--rate", "3",
+         "--slot-s", "5", "--vertical-separation-m", "30", "--rate", "3",
          "--duration", "120", "--seed", "2", "--backend", "greedy", "--rerun", "off", "--out", str(out)],
         cwd=ROOT, env=env, capture_output=True, text=True, timeout=400)
     assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "run_fleet: airspace: separation cylinder H 100 m, V 30 m" in proc.stdout
+    assert "WARNING" not in proc.stderr
     assert "separation cylinder, departure slot 5 s" in (out / "planner.log").read_text()
     assert "100 m horizontal within 30 m vertical (cylinder)" in proc.stdout
     summary = summarize(out / "run.mcap")

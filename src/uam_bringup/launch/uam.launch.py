@@ -20,27 +20,12 @@ from launch.event_handlers import OnProcessExit
 from launch.events import Shutdown
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution, PythonExpression
 from launch_ros.actions import Node, PushRosNamespace
+from uam_contract.launch_options import LAUNCH_OPTIONS
 from uam_contract.names import RECORDER_WAITS_FOR
 
-ARGS = {
-    "config_dir": (os.path.join(os.getcwd(), "config"), "folder of the parameter files and networks"),
-    "network": ("", "network file (default: <config_dir>/networks/singapore.yaml)"),
-    "backend": ("exact", "MWIS backend of the solver and the planner"),
-    "policy": ("mwis", "mwis or fifo"),
-    "rate": ("10.0", "requests per 30 s"),
-    "duration": ("3500.0", "simulated seconds"),
-    "seed": ("0", "seed of the demand and of stochastic solvers"),
-    "demand_file": ("", "replay a demand file instead of random requests"),
-    "mode": ("lockstep", "lockstep or realtime"),
-    "rtf": ("1.0", "real-time factor in realtime mode"),
-    "rerun": ("save", "off, save, spawn or connect"),
-    "out": ("runs/launch", "output folder (run.mcap, run.rrd)"),
-    "namespace": ("", "namespace of the whole graph"),
-    "separation": ("sphere", "separation model: sphere (the paper's) or cylinder"),
-    "separation_m": ("100.0", "separation minimum, the cylinder's horizontal H [m]"),
-    "vertical_separation_m": ("30.0", "the cylinder's vertical minimum V [m]"),
-    "slot_s": ("0.0", "departure slot [s]; 0 = depart at the epoch time (the paper's rule)"),
-}
+# one table for both launchers (uam_contract.launch_options; test/test_launchers.py holds
+# run_fleet.sh to it)
+ARGS = {o.arg: (o.default, o.help) for o in LAUNCH_OPTIONS if o.only != "run_fleet"}
 
 
 def generate_launch_description() -> LaunchDescription:
@@ -50,16 +35,19 @@ def generate_launch_description() -> LaunchDescription:
     def params_file(node: str):
         return PathJoinSubstitution([cfg, f"{node}.yaml"])
 
-    network = PythonExpression(["'", a["network"], "' or '", cfg, "/networks/singapore.yaml'"])
-    mcap = PathJoinSubstitution([a["out"], "run.mcap"])
-    rrd = PathJoinSubstitution([a["out"], "run.rrd"])
-    # the planner's airspace; the recorder writes it into the MCAP for the analysis' audit
+    network = a["network"]
+    out = PythonExpression(["'", a["out"], "' or 'runs/launch'"])
+    mcap = PathJoinSubstitution([out, "run.mcap"])
+    rrd = PathJoinSubstitution([out, "run.rrd"])
+    # the planner's airspace ('' separation: the network's own, as both nodes resolve it); the
+    # recorder writes it into the MCAP for the analysis' audit
     airspace = {"separation_model": a["separation"], "separation_m": a["separation_m"],
                 "vertical_separation_m": a["vertical_separation_m"], "departure_slot_s": a["slot_s"]}
     # as run_fleet.sh: the recorder is not in the lockstep loop, so it runs at a lower priority
     recorder = Node(package="uam_sim", executable="recorder", name="recorder", output="screen",
                     prefix="nice -n 19",
                     parameters=[{"output": mcap, "network": network, "rerun": a["rerun"], "rerun_rrd": rrd,
+                                 "foxglove_port": a["foxglove_port"],
                                  # as run_fleet.sh: the run starts once the recorder hears these
                                  "wait_for_publishers": list(RECORDER_WAITS_FOR),
                                  **airspace}])
@@ -69,8 +57,9 @@ def generate_launch_description() -> LaunchDescription:
         Node(package="uam_planner", executable="planner", name="planner", output="screen",
              parameters=[params_file("planner"), {"network": network, "policy": a["policy"],
                                                    "backend": a["backend"], "seed": a["seed"],
-                                                   "journal": PathJoinSubstitution([a["out"], "planner-journal.jsonl"]),
-                                                   **airspace}]),
+                                                   "journal": PathJoinSubstitution([out, "planner-journal.jsonl"]),
+                                                   "climb_rate_mps": a["climb_rate"],
+                                                   "descent_rate_mps": a["descent_rate"], **airspace}]),
         Node(package="uam_sim", executable="request_generator", name="request_generator", output="screen",
              parameters=[params_file("request_generator"), {"network": network, "rate": a["rate"],
                                                              "seed": a["seed"], "demand_file": a["demand_file"]}]),

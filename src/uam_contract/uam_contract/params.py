@@ -133,9 +133,11 @@ PLANNER = (
           read_only=False),
     Param("separation_m", 100.0, "separation minimum [m]: the sphere's radius, or the cylinder's horizontal minimum H",
           0.001, 100000.0),
-    Param("separation_model", "sphere", "loss of separation: 'sphere' (the paper's: 3D distance < separation_m) or "
-          "'cylinder' (horizontal distance < separation_m while vertical distance < vertical_separation_m)",
-          choices=("sphere", "cylinder")),
+    Param("separation_model", "", "loss of separation: 'sphere' (the paper's: 3D distance < separation_m) or "
+          "'cylinder' (horizontal distance < separation_m while vertical distance < vertical_separation_m); "
+          "'' = the network's own: the cylinder for a layered network (its levels are closer than the sphere), "
+          "else the sphere; a choice that contradicts the network's is warned of at start",
+          choices=("", "sphere", "cylinder")),
     Param("vertical_separation_m", 30.0, "the cylinder's vertical minimum V [m] (unused by the sphere)", 0.001, 10000.0),
     Param("departure_slot_s", 0.0, "departure slots [s]: a request may depart at max(t, earliest) + i * slot up to "
           "min(t + epoch, latest); 0 = the paper's rule (depart at the epoch time t)", 0.0, 86400.0),
@@ -274,8 +276,8 @@ RECORDER = (
           "Foxglove's default)", 0, 65535),
     # the airspace the run is planned in (run_fleet.sh passes the planner's values), written to the
     # MCAP's uam_airspace metadata so that the analysis audits in the run's model
-    Param("separation_model", "sphere", "the run's separation model (as the planner's)",
-          choices=("sphere", "cylinder")),
+    Param("separation_model", "", "the run's separation model (as the planner's; '' = the network's own, "
+          "as the planner resolves it)", choices=("", "sphere", "cylinder")),
     Param("separation_m", 100.0, "the run's separation minimum (cylinder: H) [m]", 0.001, 100000.0),
     Param("vertical_separation_m", 30.0, "the run's vertical minimum V of the cylinder [m]", 0.001, 10000.0),
     Param("departure_slot_s", 0.0, "the run's departure slot [s] (0 = the paper's rule)", 0.0, 86400.0),

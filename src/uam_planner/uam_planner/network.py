@@ -274,6 +274,13 @@ class Network:
         """True if the network declares flight levels (vertiports, levels, pads)."""
         return bool(self.levels_m)
 
+    @property
+    def separation_model(self) -> str:
+        """The separation model the network was built for: 'cylinder' for a layered network (its
+        levels are tens of metres apart, so under the paper's 100 m sphere they would separate
+        nothing), else the paper's 'sphere'. What '' means for the planner's separation_model."""
+        return "cylinder" if self.layered else "sphere"
+
     def pads_of(self, node_index: int) -> np.ndarray:
         """(p, 2) pad offsets [m] (east, north) of an aerodrome; one pad at (0, 0) by default."""
         return np.asarray(self.pads_m.get(self.node_ids[int(node_index)], ((0.0, 0.0),)),

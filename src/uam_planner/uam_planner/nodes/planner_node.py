@@ -75,6 +75,13 @@ class PlannerNode(Node):
         self._lock = threading.RLock()
         self.p = declare_table(self, PLANNER, on_change=self._on_change, rules=param_rules.RULES)
         self.network = load_network(self.p["network"])
+        given = self.p["separation_model"]
+        self.p["separation_model"] = given or self.network.separation_model
+        if given and given != self.network.separation_model:
+            self.get_logger().warning(
+                f"separation_model {given!r} contradicts network {self.network.name!r}, built for "
+                f"{self.network.separation_model!r}" + (" (its flight levels are closer than the sphere: they "
+                "separate nothing)" if self.network.layered else "") + "; planning with " + repr(given))
         config = PlanningConfig(
             separation_m=self.p["separation_m"], k=self.p["k"], penalty_factor=self.p["penalty_factor"],
             speed_mps=self.p["speed_mps"], backend=self.p["backend"], time_limit_s=self.p["time_limit_s"],

@@ -166,8 +166,6 @@ class RecorderNode(Node):
         # one table (uam_contract.params.RECORDER): declared read-only, checked at start-up
         p = declare_table(self, RECORDER)
         self._channel_last_ns: dict[str, int] = {}  # topic -> log time of its last message [ns]
-        airspace = airspace_metadata(p["separation_model"], p["separation_m"], p["vertical_separation_m"],
-                                     p["departure_slot_s"])
         output = p["output"]
         rerun_mode = p["rerun"]
         rrd = p["rerun_rrd"] or str(Path(output).with_suffix(".rrd"))
@@ -175,6 +173,9 @@ class RecorderNode(Node):
         if p["network"]:
             from uam_planner.network import load_network
             network = load_network(p["network"])
+        # '' = the network's own model, as the planner resolves it
+        model = p["separation_model"] or (network.separation_model if network is not None else "sphere")
+        airspace = airspace_metadata(model, p["separation_m"], p["vertical_separation_m"], p["departure_slot_s"])
 
         self.output = Path(output)
         self.rrd_path = Path(rrd) if rerun_mode == "save" else None

@@ -1,0 +1,55 @@
+"""The options of the two launchers, one table: ``scripts/run_fleet.sh`` (flags) and
+``launch/uam.launch.py`` (launch arguments, for /opt/ros/jazzy users).
+
+Each row names the run_fleet.sh flag and its shell variable, the launch argument, the default
+(as text, as both launchers take it) and what it means. ``only`` marks the few options that one
+launcher has for a reason of its own: the launch file has a ``namespace`` and a ``config_dir``
+(run_fleet.sh runs from the checkout and claims a ROS domain instead), run_fleet.sh a
+``--recorder-nice`` (the launch file runs the recorder at nice 19 by a prefix). The launch file
+builds its arguments from this table; ``test/test_launchers.py`` holds run_fleet.sh's usage text,
+flags and defaults to it, so an option cannot exist in one launcher and not the other.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class LaunchOption:
+    flag: str          # run_fleet.sh flag ("" = launch file only)
+    var: str           # run_fleet.sh shell variable
+    arg: str           # launch argument ("" = run_fleet.sh only)
+    default: str
+    help: str
+    only: str = ""     # "", "run_fleet" or "launch"
+
+
+LAUNCH_OPTIONS: tuple[LaunchOption, ...] = (
+    LaunchOption("--backend", "BACKEND", "backend", "exact", "MWIS backend of the solver and the planner"),
+    LaunchOption("--policy", "POLICY", "policy", "mwis", "mwis, fifo or firstfit"),
+    LaunchOption("--rate", "RATE", "rate", "10", "requests per 30 s"),
+    LaunchOption("--duration", "DURATION", "duration", "3500", "simulated seconds"),
+    LaunchOption("--seed", "SEED", "seed", "0", "seed of the demand and of stochastic solvers"),
+    LaunchOption("--network", "NETWORK", "network", "config/networks/singapore.yaml", "routing network file"),
+    LaunchOption("--separation", "SEPARATION", "separation", "",
+                 "separation model: sphere (the paper's) or cylinder; default: the network's own "
+                 "(a layered network declares cylinder), else sphere"),
+    LaunchOption("--separation-m", "SEPARATION_M", "separation_m", "100",
+                 "separation minimum, the cylinder's horizontal H [m]"),
+    LaunchOption("--vertical-separation-m", "VERTICAL_M", "vertical_separation_m", "30",
+                 "the cylinder's vertical minimum V [m]"),
+    LaunchOption("--slot-s", "SLOT_S", "slot_s", "0", "departure slot [s]; 0 = depart at the epoch time"),
+    LaunchOption("--climb-rate", "CLIMB", "climb_rate", "5", "vertical climb rate at vertiports [m/s]"),
+    LaunchOption("--descent-rate", "DESCENT", "descent_rate", "3", "vertical descent rate at vertiports [m/s]"),
+    LaunchOption("--demand", "DEMAND", "demand_file", "", "replay a demand file instead of random requests"),
+    LaunchOption("--mode", "MODE", "mode", "lockstep", "lockstep or realtime"),
+    LaunchOption("--rtf", "RTF", "rtf", "1", "real-time factor in realtime mode"),
+    LaunchOption("--rerun", "RERUN", "rerun", "save", "off, save, spawn or connect"),
+    LaunchOption("--foxglove-port", "FOXGLOVE_PORT", "foxglove_port", "0",
+                 "serve a live Foxglove WebSocket view on this port (0 = off)"),
+    LaunchOption("--out", "OUT", "out", "", "output folder (run.mcap, run.rrd, logs); default a new folder under runs/"),
+    LaunchOption("--recorder-nice", "RECORDER_NICE", "", "19", "the recorder's nice value", only="run_fleet"),
+    LaunchOption("", "", "namespace", "", "namespace of the whole graph", only="launch"),
+    LaunchOption("", "", "config_dir", "config", "folder of the parameter files", only="launch"),
+)
