@@ -560,13 +560,24 @@ def embedded_solve(problem: MwisProblem, child, *, backend: str, seed: int, time
                                      chain_break_fraction=True, return_embedding=True, **passed)
         sampleset.resolve()
     except ValueError as exc:
-        if "no embedding found" in str(exc):
+        if "no embedding found" not in str(exc):
+            raise
+        # minorminer is a randomised heuristic on a time budget (half the limit), which a loaded
+        # machine can exhaust even for small graphs: the graph is a subgraph of K_n, so the
+        # busclique embedding of K_n (deterministic, cached per child) serves it instead
+        clique = clique_embedding(child, problem.n)
+        if clique is None:
             raise RuntimeError(
                 f"{backend}: minorminer found no embedding of the {problem.n}-vertex conflict "
                 f"graph ({len(problem.all_edges())} edges) within "
-                f"{embedding_parameters['timeout']} s; raise options['embedding_timeout_s'] "
-                f"or use a classical backend") from None
-        raise
+                f"{embedding_parameters['timeout']} s and the topology has no clique embedding of "
+                f"that size; raise options['embedding_timeout_s'] or use a classical backend") from None
+        from dwave.system import FixedEmbeddingComposite
+
+        sampleset = FixedEmbeddingComposite(child, embedding={v: clique[int(v)] for v in bqm.variables}).sample(
+            bqm, chain_strength=chain_strength, chain_break_method=majority_vote,
+            chain_break_fraction=True, return_embedding=True, **passed)
+        sampleset.resolve()
     sample_time = time.perf_counter() - sample_start
 
     raw = sampleset_to_array(sampleset, problem.n)
