@@ -114,6 +114,29 @@ def solve_problem(
     return pipeline.solve(problem, time_limit_s=time_limit_s, seed=seed, options=options)
 
 
+def _checked_fast_path(weights, edges, groups, backend, time_limit_s, seed, options, layers,
+                       max_vertices) -> MwisResult | None:
+    """Check the arguments (errors first, before the arrays are converted); then, for ``auto``
+    without options, the fast path for the small graphs of one planning epoch: the auto
+    backend's exact branch and bound straight from clean arrays (the same answer as through
+    the pipeline, in about a third of the time). None: take the full path."""
+    from .options import check_seed, check_time_limit
+
+    check_time_limit(time_limit_s)
+    check_seed(seed)
+    if not (backend == "auto" and layers and (options is None or (isinstance(options, Mapping) and not options))):
+        return None
+    from .auto import bb_node_limit
+    from .cliquebb import SMALL_MAX_VERTICES, solve_small_arrays
+
+    t0 = time.perf_counter()
+    cap = SMALL_MAX_VERTICES if max_vertices is None else min(SMALL_MAX_VERTICES, max_vertices)
+    res = solve_small_arrays(weights, edges, groups, bb_node_limit(time_limit_s), cap)
+    if res is not None:
+        res.solve_time_s = time.perf_counter() - t0
+    return res
+
+
 def solve(
     weights: Any,
     edges: Any,
@@ -134,24 +157,9 @@ def solve(
     Output: an MwisResult whose ``selected`` is always an independent set of the input graph.
     Raises MwisInputError (bad arrays), UnknownBackendError, BackendUnavailable.
     """
-    from .options import check_seed, check_time_limit
-
-    check_time_limit(time_limit_s)  # argument errors first, before the arrays are converted
-    check_seed(seed)
-    if backend == "auto" and layers and (options is None or (isinstance(options, Mapping)
-                                                             and not options)):
-        # Fast path for the small graphs of one planning epoch: the auto backend's exact branch
-        # and bound straight from clean arrays (the same answer as through the pipeline, in
-        # about a third of the time); None for anything else, which takes the full path below.
-        from .auto import bb_node_limit
-        from .cliquebb import SMALL_MAX_VERTICES, solve_small_arrays
-
-        t0 = time.perf_counter()
-        cap = SMALL_MAX_VERTICES if max_vertices is None else min(SMALL_MAX_VERTICES, max_vertices)
-        res = solve_small_arrays(weights, edges, groups, bb_node_limit(time_limit_s), cap)
-        if res is not None:
-            res.solve_time_s = time.perf_counter() - t0
-            return res
+    res = _checked_fast_path(weights, edges, groups, backend, time_limit_s, seed, options, layers, max_vertices)
+    if res is not None:
+        return res
     problem = MwisProblem.from_arrays(weights, edges, groups, max_vertices=max_vertices)
     return solve_problem(problem, backend, time_limit_s, seed, options, layers)
 
@@ -176,24 +184,13 @@ def solve_bounded(
     in a warm worker process. Same inputs, outputs and errors as :func:`solve`.
     """
     from .executor import shared_service
-    from .options import check_seed, check_time_limit
 
-    check_time_limit(time_limit_s)
-    check_seed(seed)
-    if backend == "auto" and layers and (options is None or (isinstance(options, Mapping)
-                                                             and not options)):
-        # the exact clique branch and bound of solve()'s fast path is bounded by its node
-        # limit (pure Python, about 5 us a node), so it runs here as there
-        from .auto import bb_node_limit
-        from .cliquebb import SMALL_MAX_VERTICES, solve_small_arrays
-
-        t0 = time.perf_counter()
-        cap = SMALL_MAX_VERTICES if max_vertices is None else min(SMALL_MAX_VERTICES, max_vertices)
-        res = solve_small_arrays(weights, edges, groups, bb_node_limit(time_limit_s), cap)
-        if res is not None:
-            res.solve_time_s = time.perf_counter() - t0
-            res.stats["executor"] = "inline"
-            return res
+    # the exact clique branch and bound of the fast path is bounded by its node limit (pure
+    # Python, about 5 us a node), so it runs in this process here as in solve()
+    res = _checked_fast_path(weights, edges, groups, backend, time_limit_s, seed, options, layers, max_vertices)
+    if res is not None:
+        res.stats["executor"] = "inline"
+        return res
     problem = MwisProblem.from_arrays(weights, edges, groups, max_vertices=max_vertices)
     return shared_service().solve(problem, backend=backend, time_limit_s=time_limit_s,
                                   seed=seed, options=options, layers=layers)
