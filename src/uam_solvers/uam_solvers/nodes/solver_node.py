@@ -49,6 +49,8 @@ LARGE_WORKERS = 1
 SMALL_LANE_MAX_VERTICES = 2000
 #: time a worker may run past the request's limit before it is killed [s] (covers the reply)
 MARGIN_S = 0.4
+#: how long close() waits for a start-up in progress [s]
+STARTER_JOIN_S = 2.0
 
 
 def parse_option(value: str):
@@ -122,11 +124,15 @@ class SolverNode(Node):
                                f"{self.solve_service.worker_pids()}")
 
     def close(self) -> None:
-        """Stop every worker process (waits for a start-up in progress, so none survives)."""
+        """Stop every worker process. A start-up still in progress (the workers' warm-up takes
+        seconds, more under load) is waited for at most STARTER_JOIN_S: it closes what it made
+        itself once it sees the node closed, and its worker processes are daemonic (and get
+        SIGTERM when the node's process dies), so none survives, and a SIGINT is never answered
+        later than run_fleet.sh's 10 s (a run stopped during the start-up failed that)."""
         with self._lock:
             self._closed = True
         if self._starter.is_alive() and threading.current_thread() is not self._starter:
-            self._starter.join()
+            self._starter.join(STARTER_JOIN_S)
         with self._lock:
             svc, self.solve_service = self.solve_service, None
         if svc is not None:
