@@ -148,7 +148,8 @@ def test_a_restarted_planner_resumes_without_replaying_what_flies(ros_context, s
         assert spin_until(executor, lambda: sim.finished, timeout_s=120)
         assert not sim.error, sim.error
         assert sim.fly_errors == 0
-        spin_until(executor, lambda: False, timeout_s=1.0)  # the last plans reach the observer
+        planner = nodes["planner"]  # the last plans reach the observer (a condition, not a sleep)
+        assert spin_until(executor, lambda: len(obs.plans) >= old.plans_published + planner.plans_published, 10)
         approved = [p for p in obs.plans if p.outcome == FlightPlan.OUTCOME_APPROVED]
         ids = [p.request_id for p in approved]
         assert len(ids) == len(set(ids)), "an approval was replayed"
