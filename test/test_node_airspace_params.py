@@ -35,7 +35,7 @@ def test_defaults_are_the_paper_model_and_the_parameters_reach_the_planner(ros_c
 
 
 @pytest.mark.parametrize("name, value, words", [
-    ("separation_model", "cube", "'cube' is not one of sphere, cylinder"),
+    ("separation_model", "cube", "'cube' is not one of '', sphere, cylinder"),
     ("departure_slot_s", -5.0, "below the minimum"),
     ("vertical_separation_m", 0.0, "below the minimum"),
 ])

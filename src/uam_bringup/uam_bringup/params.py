@@ -14,7 +14,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, Callable
 
-from uam_contract.params import FROZEN_BUILTINS, Param, _bool_alias
+from uam_contract.params import FROZEN_BUILTINS, Param, _bool_alias, _choices_text
 
 
 def _with_rule(p: Param, rule: Callable[[Any], str]) -> Param:
@@ -53,7 +53,7 @@ def _descriptor(p: Param):
     if isinstance(p.default, int) and not isinstance(p.default, bool) and p.lo is not None and p.hi is not None:
         desc.integer_range = [IntegerRange(from_value=int(p.lo), to_value=int(p.hi), step=0)]
     if p.choices:
-        desc.additional_constraints = "one of: " + ", ".join(map(str, p.choices))
+        desc.additional_constraints = "one of: " + _choices_text(p.choices)
     return desc
 
 

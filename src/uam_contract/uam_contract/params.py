@@ -49,7 +49,7 @@ class Param:
         if self.lo is not None or self.hi is not None:
             t += f" (range [{self.lo if self.lo is not None else '-inf'}, {self.hi if self.hi is not None else 'inf'}])"
         if self.choices:
-            t += f" (one of: {', '.join(map(str, self.choices))})"
+            t += f" (one of: {_choices_text(self.choices)})"
         return t
 
 
@@ -76,12 +76,17 @@ def check(name: str, value, default, lo=None, hi=None, choices=None, rule=None):
     if hi is not None and value > hi:
         raise ValueError(f"parameter {name}: {value!r} is above the maximum {hi}")
     if choices is not None and value not in choices:
-        raise ValueError(f"parameter {name}: {value!r} is not one of {', '.join(map(str, choices))}")
+        raise ValueError(f"parameter {name}: {value!r} is not one of {_choices_text(choices)}")
     if rule is not None:
         why = rule(value)
         if why:
             raise ValueError(f"parameter {name}: {why}")
     return value
+
+
+def _choices_text(choices) -> str:
+    """The choices as a reader sees them: the empty choice as ''."""
+    return ", ".join("''" if c == "" else str(c) for c in choices)
 
 
 def _yaml_word(value: bool) -> str:
