@@ -328,3 +328,52 @@ def test_empty_constraint_set_changes_nothing():
             p.submit(req(f"r{j}", ids[j % len(ids)], ids[(j + 1 + j // len(ids)) % len(ids)], 0.0))
         out.append([(f.request_id, f.route_node_ids) for f in p.plan(0.0, 0).approved])
     assert out[0] == out[1] and len(out[0]) > 0
+
+
+def ed269_zone(identifier="TFR01", restriction="PROHIBITED", **changes):
+    d = 0.001
+    ring = [[103.85 - d, 1.29 - d], [103.85 + d, 1.29 - d], [103.85 + d, 1.29 + d],
+            [103.85 - d, 1.29 + d], [103.85 - d, 1.29 - d]]
+    zone = {"identifier": identifier, "country": "SGP", "name": "test", "type": "COMMON",
+            "restriction": restriction, "reason": ["EMERGENCY"], "message": "fire",
+            "zoneAuthority": [{"name": "CAAS", "purpose": "AUTHORIZATION"}],
+            "applicability": [{"permanent": "NO", "startDateTime": "2025-01-06T00:10:00Z",
+                               "endDateTime": "2025-01-06T01:00:00.000Z"}],
+            "geometry": [{"uomDimensions": "FT", "lowerLimit": 0, "lowerVerticalReference": "AGL",
+                          "upperLimit": 400, "upperVerticalReference": "AGL",
+                          "horizontalProjection": {"type": "Polygon", "coordinates": [ring]}}]}
+    zone.update(changes)
+    return zone
+
+
+def test_ed269_zones_through_uas_standards(tmp_path):
+    net = tiny()
+    circle = ed269_zone("CIR01", geometry=[{
+        "uomDimensions": "M", "lowerLimit": 50, "lowerVerticalReference": "AMSL",
+        "upperVerticalReference": "AMSL",
+        "horizontalProjection": {"type": "Circle", "center": [103.85, 1.29], "radius": 300}}],
+        applicability=[{"permanent": "YES"}])
+    doc = {"title": "t", "description": "", "features": [
+        ed269_zone(), circle, ed269_zone("FREE01", restriction="NO_RESTRICTION")]}
+    path = tmp_path / "zones.json"
+    path.write_text(json.dumps(doc))
+    s = load_constraints(path, net, scenario_start_utc="2025-01-06T00:00:00Z")
+    poly, circ = s.constraints  # the NO_RESTRICTION zone constrains nothing
+    assert (poly.constraint_id, poly.version, poly.reason) == ("TFR01", 0, "PROHIBITED: EMERGENCY / fire")
+    assert (poly.start_s, poly.end_s) == (600.0, 3600.0)
+    assert (poly.lower_m, poly.upper_m) == (0.0, pytest.approx(121.92))   # 400 ft
+    assert (circ.kind, circ.radius_m, circ.start_s, circ.end_s) == ("circle", 300.0, -math.inf, math.inf)
+    assert circ.lower_m == 50.0 and circ.upper_m == math.inf  # origin at 0 m: AMSL = up
+    sched = ed269_zone(applicability=[{"permanent": "NO", "schedule": [
+        {"day": ["MON"], "startTime": "08:00Z", "endTime": "09:00Z"}]}])
+    with pytest.raises(ConstraintError, match=r"features\[0\] \(identifier 'TFR01'\).applicability\[0\]"
+                                              r".schedule: daily schedules are not supported"):
+        load_constraints_doc(tmp_path, {"features": [sched]}, net)
+    with pytest.raises(ConstraintError, match="ED-269"):
+        load_constraints_doc(tmp_path, {"features": [{"identifier": "X"}]}, net)
+
+
+def load_constraints_doc(tmp_path, doc, net):
+    path = tmp_path / "doc.json"
+    path.write_text(json.dumps(doc))
+    return load_constraints(path, net)

@@ -62,11 +62,12 @@ class ConstraintError(ValueError):
     """A constraint (or a file of them) that cannot be accepted; the message names field and value."""
 
 
-def _finite(owner: str, name: str, v, allow_inf: bool = False) -> float:
+def _finite(owner: str, name: str, v, allow_inf: bool = False, sign: int = 0) -> float:
+    """A float, finite or (``allow_inf``) infinite of sign ``sign`` (0: either)."""
     if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
         raise ConstraintError(f"{owner}{name}: {v!r} is not a number")
     x = float(v)
-    if math.isnan(x) or (math.isinf(x) and not allow_inf):
+    if math.isnan(x) or (math.isinf(x) and not (allow_inf and (sign == 0 or x * sign > 0))):
         raise ConstraintError(f"{owner}{name}: {v!r} is not a finite number")
     return x
 
@@ -79,7 +80,8 @@ class Constraint:
         constraint_id: non-empty id, unique in a ConstraintSet.
         version: integer >= 0 (a change of the same id has a higher version).
         reason: why it exists (free text, may be empty).
-        start_s, end_s: time window [start_s, end_s) in simulation seconds; end_s may be inf.
+        start_s, end_s: time window [start_s, end_s) in simulation seconds; start_s may be
+            -inf and end_s inf (a permanent zone).
         rings_m: polygon only: tuple of (n, 2) float arrays, exterior ring first then holes, in
             ENU metres (east, north) from the network's origin, without the closing vertex.
         center_m, radius_m: circle only: centre (east, north) [m] and radius [m] > 0.
@@ -112,8 +114,8 @@ class Constraint:
             raise ConstraintError(f"{own}version: {v!r} is not an integer >= 0")
         if not isinstance(self.reason, str):
             raise ConstraintError(f"{own}reason: {self.reason!r} is not a string")
-        start = _finite(own, "start_s", self.start_s)
-        end = _finite(own, "end_s", self.end_s, allow_inf=True)
+        start = _finite(own, "start_s", self.start_s, allow_inf=True, sign=-1)
+        end = _finite(own, "end_s", self.end_s, allow_inf=True, sign=1)
         if not end > start:
             raise ConstraintError(f"{own}end_s: {self.end_s!r} is not after start_s {self.start_s!r}")
         object.__setattr__(self, "version", int(v))
@@ -557,16 +559,127 @@ def constraints_from_geojson(doc: Mapping, network=None) -> list[Constraint]:
     return out
 
 
-def load_constraints(path, network, now_s: float | None = None) -> ConstraintSet:
-    """Read a constraints file (GeoJSON FeatureCollection, ``.geojson`` / ``.json``) and check
-    it against ``network`` (and ``now_s``, if given). Raises ConstraintError (a ValueError)
-    naming the file, the feature and the field."""
+_FT_M = 0.3048
+
+
+def _utc_s(text, start_ns: int, where: str) -> float:
+    from datetime import datetime, timezone
+    try:
+        when = datetime.fromisoformat(str(text).replace("Z", "+00:00"))
+    except ValueError:
+        raise ConstraintError(f"{where}: {text!r} is not an ISO 8601 time") from None
+    if when.tzinfo is None:
+        raise ConstraintError(f"{where}: {text!r} has no time zone")
+    epoch = datetime(1970, 1, 1, tzinfo=timezone.utc)
+    return (when.astimezone(timezone.utc) - epoch).total_seconds() - start_ns * 1e-9
+
+
+def constraints_from_ed269(doc: Mapping, network, scenario_start_utc: str | None = None) -> list[Constraint]:
+    """Constraints from an EUROCAE ED-269 UAS zone file, parsed with ``uas_standards``' types
+    (``uas_standards.eurocae_ed269.ED269Schema``), where it fits this planner:
+
+    - one Constraint per (geometry volume, applicability period) of a zone; its id is the zone's
+      ``identifier`` (``identifier.g.a`` when a zone has several), version 0 (ED-269 has no
+      version), reason ``restriction: reasons / message``;
+    - ``NO_RESTRICTION`` zones constrain nothing and are skipped; ``PROHIBITED``,
+      ``REQ_AUTHORISATION`` and ``CONDITIONAL`` are all no-fly here (the fleet holds no
+      authorisations);
+    - positions [lon, lat] (as GeoJSON and as published zone files have them); a ``Circle`` has
+      ``center`` [lon, lat] and ``radius`` in metres;
+    - limits in M or FT; ``AMSL`` becomes ENU up by subtracting the network origin's altitude,
+      ``AGL`` is taken over flat ground at the origin (no terrain model); a missing limit is
+      unbounded;
+    - ``permanent: YES`` is always active; otherwise ``startDateTime`` / ``endDateTime`` become
+      simulation seconds after ``scenario_start_utc`` (default
+      ``uam_contract.stamps.DEFAULT_SCENARIO_START_UTC``); daily ``schedule`` periods are refused
+      (not supported).
+    Raises ConstraintError naming ``features[i]`` and the field.
+    """
+    from uam_contract.stamps import DEFAULT_SCENARIO_START_UTC, scenario_start_ns
+    from uas_standards.eurocae_ed269 import ED269Schema
+
+    start_ns = scenario_start_ns(scenario_start_utc or DEFAULT_SCENARIO_START_UTC)
+    try:
+        schema = ED269Schema.from_dict(dict(doc))
+    except (ValueError, TypeError, KeyError) as exc:
+        raise ConstraintError(f"ED-269: {exc}") from None
+    origin_alt = float(network.origin_lat_lon_alt[2])
+    out = []
+    for i, z in enumerate(schema.features):
+        where = f"features[{i}] (identifier {z.identifier!r})"
+        restriction = str(getattr(z.restriction, "value", z.restriction))
+        if restriction == "NO_RESTRICTION":
+            continue
+        reasons = ",".join(str(getattr(r, "value", r)) for r in (z.get("reason") or []))
+        text = restriction + (f": {reasons}" if reasons else "") + \
+            (f" / {z.message}" if z.get("message") else "")
+        periods = []
+        for k, a in enumerate(z.applicability):
+            w = f"{where}.applicability[{k}]"
+            if a.get("schedule"):
+                raise ConstraintError(f"{w}.schedule: daily schedules are not supported")
+            if str(getattr(a.permanent, "value", a.permanent)) == "YES":
+                periods.append((-math.inf, math.inf))
+                continue
+            t0 = _utc_s(a.startDateTime, start_ns, f"{w}.startDateTime") \
+                if a.get("startDateTime") else -math.inf
+            t1 = _utc_s(a.endDateTime, start_ns, f"{w}.endDateTime") \
+                if a.get("endDateTime") else math.inf
+            periods.append((t0, t1))
+        n = len(z.geometry) * len(periods)
+        for g, vol in enumerate(z.geometry):
+            w = f"{where}.geometry[{g}]"
+            unit = _FT_M if str(getattr(vol.uomDimensions, "value", vol.uomDimensions)) == "FT" else 1.0
+            band = []
+            for name, ref, default in (("lowerLimit", "lowerVerticalReference", -math.inf),
+                                       ("upperLimit", "upperVerticalReference", math.inf)):
+                v = vol.get(name)
+                if v is None:
+                    band.append(default)
+                    continue
+                z_m = float(v) * unit
+                if str(getattr(vol.get(ref), "value", vol.get(ref))) == "AMSL":
+                    z_m -= origin_alt
+                band.append(z_m)
+            hp = vol.horizontalProjection
+            kind = str(getattr(hp.type, "value", hp.type))
+            try:
+                if kind == "Circle":
+                    c = _to_enu([hp.center], "wgs84", network, f"{w}.horizontalProjection.center")[0]
+                    geom = dict(center_m=(c[0], c[1]), radius_m=hp.radius)
+                else:
+                    rings = hp.coordinates or []
+                    if sum(len(r) for r in rings) > MAX_VERTICES + len(rings):
+                        raise ConstraintError(f"{w}.horizontalProjection.coordinates: more than the "
+                                              f"{MAX_VERTICES} vertices of ASTM F3548-21 (CstrMaxVertices)")
+                    geom = dict(rings_m=tuple(_to_enu(r, "wgs84", network,
+                                                      f"{w}.horizontalProjection.coordinates[{j}]")
+                                              for j, r in enumerate(rings)))
+                for k, (t0, t1) in enumerate(periods):
+                    cid = z.identifier if n == 1 else f"{z.identifier}.{g}.{k}"
+                    out.append(Constraint(cid, 0, text, t0, t1, lower_m=band[0], upper_m=band[1], **geom))
+            except ConstraintError as exc:
+                msg = str(exc)
+                raise ConstraintError(msg if msg.startswith("features[") else f"{w}: {msg}") from None
+    return out
+
+
+def load_constraints(path, network, now_s: float | None = None,
+                     scenario_start_utc: str | None = None) -> ConstraintSet:
+    """Read a constraints file and check it against ``network`` (and ``now_s``, if given): a
+    GeoJSON FeatureCollection (``"type": "FeatureCollection"``), or else an ED-269 UAS zone
+    file (``{"features": [UASZoneVersion, ...]}``, see :func:`constraints_from_ed269`). Raises
+    ConstraintError (a ValueError) naming the file, the feature and the field."""
     p = Path(path)
     try:
         doc = json.loads(p.read_text())
     except (OSError, json.JSONDecodeError) as exc:
         raise ConstraintError(f"constraints file {str(p)!r}: {exc}") from None
     try:
-        return ConstraintSet(constraints_from_geojson(doc, network), network, now_s)
+        if isinstance(doc, Mapping) and doc.get("type") != "FeatureCollection" and "features" in doc:
+            found = constraints_from_ed269(doc, network, scenario_start_utc)
+        else:
+            found = constraints_from_geojson(doc, network)
+        return ConstraintSet(found, network, now_s)
     except ConstraintError as exc:
         raise ConstraintError(f"constraints file {str(p)!r}: {exc}") from None
