@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from uam_planner import constraints as constraints_module
 from uam_planner.constraints import (MAX_VERTICES, Constraint, ConstraintError, ConstraintSet,
                                      constraints_from_geojson, load_constraints,
                                      prism_entry_times)
@@ -32,26 +33,34 @@ def entry(c, p_start, p_end, t0, t1):
 
 # ---- the segment-prism test, by hand ----------------------------------------------------------
 
-def test_segment_cutting_a_corner_enters_where_it_meets_the_first_edge():
+@pytest.fixture(params=["dense", "indexed"])
+def polygon_path(request, monkeypatch):
+    """Run a polygon test through both implementations: every segment x every edge, and the
+    STR-tree of edges used for outlines of many vertices."""
+    monkeypatch.setattr(constraints_module, "INDEXED_MIN_VERTICES", 10**9 if request.param == "dense" else 3)
+    return request.param
+
+
+def test_segment_cutting_a_corner_enters_where_it_meets_the_first_edge(polygon_path):
     # line x + y = 10 from (-50, 60) to (60, -50) over t in [0, 110]: x = -50 + t meets the
     # edge x = 0 at (0, 10), t = 50, and leaves through y = 0 at (10, 0), t = 60
     assert entry(box(), (-50, 60, 100), (60, -50, 100), 0.0, 110.0) == pytest.approx(50.0, abs=1e-9)
 
 
-def test_segment_through_the_corner_point_only_counts_as_entering():
+def test_segment_through_the_corner_point_only_counts_as_entering(polygon_path):
     # x + y = 0 touches the square at its corner (0, 0) alone, at t = 50: touching is entering
     assert entry(box(), (-50, 50, 100), (50, -50, 100), 0.0, 100.0) == 50.0
     # the parallel line x + y = -10 misses it
     assert entry(box(), (-50, 40, 100), (40, -50, 100), 0.0, 90.0) == math.inf
 
 
-def test_segment_over_the_prism_above_its_band_is_clear():
+def test_segment_over_the_prism_above_its_band_is_clear(polygon_path):
     assert entry(box(upper=200.0), (-100, 50, 250), (200, 50, 250), 0.0, 300.0) == math.inf
     # level exactly at upper_m: the band is closed, so it enters at x = 0, t = 100
     assert entry(box(upper=200.0), (-100, 50, 200), (200, 50, 200), 0.0, 300.0) == 100.0
 
 
-def test_climbing_segment_is_clipped_by_the_band():
+def test_climbing_segment_is_clipped_by_the_band(polygon_path):
     # x = -100 + t, z = 100 + t: over the square (t in [100, 200]) z runs 200 -> 300, so it is in
     # the band [0, 200] only at t = 100, on the square's edge: a touch, refused at t = 100
     assert entry(box(upper=200.0), (-100, 50, 100), (200, 50, 400), 0.0, 300.0) == 100.0
@@ -62,7 +71,7 @@ def test_climbing_segment_is_clipped_by_the_band():
     assert entry(box(upper=200.0), (-100, 50, 400), (200, 50, 100), 0.0, 300.0) == 200.0
 
 
-def test_time_window_is_half_open():
+def test_time_window_is_half_open(polygon_path):
     # x = -100 + t: in the square for t in [100, 200]
     path = ((-100, 50, 100), (200, 50, 100), 0.0, 300.0)
     assert entry(box(end=100.0), *path) == 100.0       # entry time, not yet compared to end_s
@@ -90,14 +99,14 @@ def test_circle_tangent_secant_and_miss():
     assert entry(c, (10, 10, 50), (300, 10, 50), 5.0, 300.0) == 5.0
 
 
-def test_vertical_segment_inside_on_edge_and_outside():
+def test_vertical_segment_inside_on_edge_and_outside(polygon_path):
     # a pad climb (no horizontal motion): inside, on the boundary (touch), outside
     assert entry(box(lower=50.0), (50, 50, 0), (50, 50, 100), 0.0, 10.0) == 5.0   # z = 50 at t = 5
     assert entry(box(lower=50.0), (100, 50, 0), (100, 50, 100), 0.0, 10.0) == 5.0
     assert entry(box(lower=50.0), (101, 50, 0), (101, 50, 100), 0.0, 10.0) == math.inf
 
 
-def test_polygon_with_a_hole_and_concave_notch():
+def test_polygon_with_a_hole_and_concave_notch(polygon_path):
     hole = ((40.0, 40.0), (60.0, 40.0), (60.0, 60.0), (40.0, 60.0))
     c = Constraint("ring", 1, "", 0.0, 1e3, rings_m=(SQUARE, hole), lower_m=0.0, upper_m=1e3)
     assert entry(c, (45, 45, 10), (55, 55, 10), 0.0, 10.0) == math.inf   # inside the hole
@@ -109,7 +118,7 @@ def test_polygon_with_a_hole_and_concave_notch():
     assert entry(cu, (50, 200, 10), (50, 0, 10), 0.0, 200.0) == 170.0   # y = 30 at t = 170
 
 
-def test_random_segments_agree_with_shapely():
+def test_random_segments_agree_with_shapely(polygon_path):
     """The closed-form test against an independent one (GEOS) on random segments of a concave
     polygon, band and window unbounded: entering <=> the closed segment meets the polygon."""
     import shapely
@@ -119,6 +128,8 @@ def test_random_segments_agree_with_shapely():
     c = Constraint("star", 1, "", 0.0, math.inf, rings_m=(star,))
     a = rng.uniform(-500, 500, (4000, 2))
     b = a + rng.uniform(-300, 300, (4000, 2))
+    b[:300] = a[:300]          # point segments (a vertical climb seen from above)
+    b[300:400, 1] = a[300:400, 1]  # horizontal ones, parallel to some edges
     p0 = np.column_stack([a, np.zeros(4000)])
     v = np.column_stack([b - a, np.zeros(4000)])
     ours = np.isfinite(prism_entry_times(np.zeros(4000), np.ones(4000), p0, v, c))
@@ -126,6 +137,28 @@ def test_random_segments_agree_with_shapely():
     ref = shapely.intersects(poly, shapely.linestrings(np.stack([a, b], axis=1)))
     assert ours.sum() > 500 and (~ours).sum() > 500
     assert (ours == ref).all()
+
+
+def test_many_vertex_outline_dense_and_indexed_agree(monkeypatch):
+    """A 600-vertex wavy outline: the STR-tree path and the all-pairs path give the same entry
+    times (not just the same yes/no) on random segments, and GEOS agrees on yes/no."""
+    import shapely
+    rng = np.random.default_rng(11)
+    ang = np.linspace(0, 2 * np.pi, 600, endpoint=False)
+    rad = 400 + 80 * np.sin(9 * ang)
+    c = Constraint("wavy", 1, "", 0.0, math.inf, rings_m=(np.column_stack([rad * np.cos(ang), rad * np.sin(ang)]),))
+    a = rng.uniform(-600, 600, (3000, 2))
+    b = a + rng.uniform(-200, 200, (3000, 2))
+    b[:200] = a[:200]
+    p0 = np.column_stack([a, np.zeros(3000)])
+    v = np.column_stack([(b - a) / 10.0, np.zeros(3000)])  # from a at t = 0 to b at t = 10
+    res = {}
+    for name, limit in (("dense", 10**9), ("indexed", 3)):
+        monkeypatch.setattr(constraints_module, "INDEXED_MIN_VERTICES", limit)
+        res[name] = prism_entry_times(np.zeros(3000), np.full(3000, 10.0), p0, v, c)
+    assert np.array_equal(res["dense"], res["indexed"])
+    ref = shapely.intersects(shapely.Polygon(c.rings_m[0]), shapely.linestrings(np.stack([a, b], axis=1)))
+    assert (np.isfinite(res["dense"]) == ref).all() and 300 < ref.sum() < 2700
 
 
 # ---- bad input ----------------------------------------------------------------------------------

@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Sequence
 
@@ -56,6 +56,8 @@ except ImportError:  # pragma: no cover - the pinned environment has it
 KINDS = ("polygon", "circle", "closure")
 #: segments x edges per block of the vectorised polygon test (bounds memory to ~100 MB)
 _BLOCK = 1 << 20
+#: outlines of at least this many vertices are tested through an STR-tree of their edges
+INDEXED_MIN_VERTICES = 32
 
 
 class ConstraintError(ValueError):
@@ -103,6 +105,7 @@ class Constraint:
     upper_m: float = math.inf
     vertiport_id: str | None = None
     pad_index: int | None = None
+    _index: dict = field(default_factory=dict, init=False, repr=False)  # GEOS tree, built once
 
     def __post_init__(self):
         cid = self.constraint_id
@@ -151,6 +154,11 @@ class Constraint:
             object.__setattr__(self, "radius_m", r)
             return
         object.__setattr__(self, "rings_m", _checked_rings(own, self.rings_m))
+
+    @property
+    def n_vertices(self) -> int:
+        """Vertices of the outline (every ring), 0 for a circle or a closure."""
+        return sum(r.shape[0] for r in self.rings_m) if self.rings_m is not None else 0
 
     @property
     def kind(self) -> str:
@@ -208,50 +216,87 @@ def _cross(ax, ay, bx, by):
     return ax * by - ay * bx
 
 
-def _polygon_entry(ax, ay, dx, dy, rings) -> np.ndarray:
-    """Least s in [0, 1] with (ax + s dx, ay + s dy) in the closed polygon (inf if none), (m,)."""
+def _edges(rings):
+    """(px, py, ex, ey) of every ring's edges: start point and edge vector, (e,) each."""
     px = np.concatenate([r[:, 0] for r in rings])
     py = np.concatenate([r[:, 1] for r in rings])
-    qx = np.concatenate([np.roll(r[:, 0], -1) for r in rings])
-    qy = np.concatenate([np.roll(r[:, 1], -1) for r in rings])
-    ex, ey = qx - px, qy - py
+    ex = np.concatenate([np.roll(r[:, 0], -1) for r in rings]) - px
+    ey = np.concatenate([np.roll(r[:, 1], -1) for r in rings]) - py
+    return px, py, ex, ey
+
+
+def _pair_entry(Ax, Ay, Dx, Dy, px, py, ex, ey):
+    """Least s in [0, 1] at which segment A + s D meets edge P + u E, u in [0, 1] (inf if
+    never); arrays broadcast. Crossing, touching at an end, collinear overlap (its first
+    point) and a point segment lying on the edge all count."""
+    wx, wy = px - Ax, py - Ay                    # edge start relative to segment start
+    denom = _cross(Dx, Dy, ex, ey)
+    ns = _cross(wx, wy, ex, ey)
+    nu = _cross(wx, wy, Dx, Dy)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = ns / denom
+        u = nu / denom
+    hit = (denom != 0.0) & (s >= 0.0) & (s <= 1.0) & (u >= 0.0) & (u <= 1.0)
+    cand = np.where(hit, s, np.inf)
+    # parallel and collinear: the overlap's first point
+    dd = Dx * Dx + Dy * Dy
+    coll = (denom == 0.0) & (nu == 0.0) & (dd > 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s_p = (wx * Dx + wy * Dy) / dd
+        s_q = ((wx + ex) * Dx + (wy + ey) * Dy) / dd
+    s_lo, s_hi = np.minimum(s_p, s_q), np.maximum(s_p, s_q)
+    cand = np.where(coll & (s_hi >= 0.0) & (s_lo <= 1.0), np.maximum(s_lo, 0.0), cand)
+    # a point segment (no horizontal motion) on the edge
+    t_on = -(wx * ex + wy * ey)
+    on = (dd == 0.0) & (ns == 0.0) & (t_on >= 0.0) & (t_on <= ex * ex + ey * ey)
+    return np.where(on, 0.0, cand)
+
+
+def _polygon_entry(ax, ay, dx, dy, rings) -> np.ndarray:
+    """Least s in [0, 1] with (ax + s dx, ay + s dy) in the closed polygon (inf if none), (m,).
+
+    Every segment against every edge, in blocks; the start point's crossing number (even-odd
+    over every ring: holes count) says whether it starts inside."""
+    px, py, ex, ey = _edges(rings)
     m, e = ax.shape[0], px.shape[0]
     out = np.full(m, np.inf)
-    step = max(1, _BLOCK // max(e, 1))
+    step = max(1, _BLOCK // e)
     for lo in range(0, m, step):
         sl = slice(lo, min(m, lo + step))
         Ax, Ay, Dx, Dy = (a[sl, None] for a in (ax, ay, dx, dy))
-        # crossing number of the start point (even-odd over every ring: holes count)
-        straddle = (py > Ay) != (qy > Ay)
+        straddle = (py > Ay) != (py + ey > Ay)
         with np.errstate(divide="ignore", invalid="ignore"):
             xcross = px + (Ay - py) * ex / ey
         inside = (np.count_nonzero(straddle & (Ax < xcross), axis=1) % 2) == 1
-        wx, wy = px - Ax, py - Ay                    # edge start relative to segment start
-        denom = _cross(Dx, Dy, ex, ey)
-        ns = _cross(wx, wy, ex, ey)
-        nu = _cross(wx, wy, Dx, Dy)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s = ns / denom
-            u = nu / denom
-        hit = (denom != 0.0) & (s >= 0.0) & (s <= 1.0) & (u >= 0.0) & (u <= 1.0)
-        cand = np.where(hit, s, np.inf)
-        # parallel and collinear: the overlap's first point
-        dd = Dx * Dx + Dy * Dy
-        coll = (denom == 0.0) & (nu == 0.0) & (dd > 0.0)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s_p = (wx * Dx + wy * Dy) / dd
-            s_q = ((wx + ex) * Dx + (wy + ey) * Dy) / dd
-        s_lo, s_hi = np.minimum(s_p, s_q), np.maximum(s_p, s_q)
-        ov = coll & (s_hi >= 0.0) & (s_lo <= 1.0)
-        cand = np.where(ov, np.maximum(s_lo, 0.0), cand)
-        # a degenerate (point) segment on an edge
-        ee = ex * ex + ey * ey
-        t_on = -(wx * ex + wy * ey)
-        on = (dd == 0.0) & (ns == 0.0) & (t_on >= 0.0) & (t_on <= ee)
-        cand = np.where(on, 0.0, cand)
-        first = cand.min(axis=1) if e else np.full(sl.stop - sl.start, np.inf)
+        first = _pair_entry(Ax, Ay, Dx, Dy, px, py, ex, ey).min(axis=1)
         out[sl] = np.where(inside, 0.0, first)
     return out
+
+
+def _polygon_entry_indexed(ax, ay, dx, dy, c: "Constraint") -> np.ndarray:
+    """As :func:`_polygon_entry` for outlines of many vertices: a GEOS STR-tree (shapely) of
+    the edges gives the segment-edge pairs whose bounding boxes meet (a necessary condition
+    for meeting, so nothing is lost), on which the same closed-form test runs; whether a
+    segment starts inside is GEOS's ``intersects_xy`` on the (prepared) polygon, boundary
+    included. Same answers, O((m + pairs) log e) instead of O(m e)."""
+    import shapely
+    cache = c._index
+    if "tree" not in cache:
+        px, py, ex, ey = _edges(c.rings_m)
+        lines = shapely.linestrings(np.stack([np.column_stack([px, py]),
+                                              np.column_stack([px + ex, py + ey])], axis=1))
+        poly = shapely.Polygon(c.rings_m[0], c.rings_m[1:])
+        shapely.prepare(poly)
+        cache.update(tree=shapely.STRtree(lines), edges=(px, py, ex, ey), poly=poly)
+    px, py, ex, ey = cache["edges"]
+    segs = shapely.linestrings(np.stack([np.column_stack([ax, ay]),
+                                         np.column_stack([ax + dx, ay + dy])], axis=1))
+    si, ei = cache["tree"].query(segs)
+    s = _pair_entry(ax[si], ay[si], dx[si], dy[si], px[ei], py[ei], ex[ei], ey[ei])
+    out = np.full(ax.shape[0], np.inf)
+    np.minimum.at(out, si, s)
+    inside = shapely.intersects_xy(cache["poly"], ax, ay)
+    return np.where(inside, 0.0, out)
 
 
 def _circle_entry(ax, ay, dx, dy, cx, cy, r) -> np.ndarray:
@@ -317,7 +362,10 @@ def prism_entry_times(t0_s, t1_s, p0_m, v_mps, c: Constraint) -> np.ndarray:
         s = np.full(live.size, np.inf)
         k = np.flatnonzero(near)
         if k.size:
-            s[k] = _polygon_entry(ax[k], ay[k], dx[k], dy[k], c.rings_m)
+            if c.n_vertices >= INDEXED_MIN_VERTICES:
+                s[k] = _polygon_entry_indexed(ax[k], ay[k], dx[k], dy[k], c)
+            else:
+                s[k] = _polygon_entry(ax[k], ay[k], dx[k], dy[k], c.rings_m)
     out[live] = np.where(np.isfinite(s), lo + s * (hi - lo), np.inf)
     return out
 
