@@ -410,3 +410,38 @@ def load_constraints_doc(tmp_path, doc, net):
     path = tmp_path / "doc.json"
     path.write_text(json.dumps(doc))
     return load_constraints(path, net)
+
+
+def test_pad_closure_in_the_planner_sends_arrivals_to_the_other_pad():
+    """A layered network with 2 pads per vertiport and 2 levels: a candidate at level index i
+    uses pad i mod 2 at each end. With pad 0 of every vertiport but one closed, the approved
+    flights touching those vertiports fly level index 1 only (pad 1); without it both levels fly."""
+    from uam_planner.planning import AirspaceConfig
+    from uam_planner.synthetic import generate_network
+    net = generate_network(30, 4, seed=2, levels_m=[60.0, 90.0], pads_per_vertiport=2)
+    ids = list(net.aerodrome_ids)
+    closed = [Constraint(f"pad0-{v}", 1, "", 0.0, 1e6, vertiport_id=v, pad_index=0) for v in ids]
+    levels = {}
+    for name, cs in (("free", None), ("pad 0 closed", closed)):
+        p = Planner(net, PlanningConfig(k=3, airspace=AirspaceConfig("cylinder", 30.0, 0.0)), "mwis")
+        if cs is not None:
+            p.set_constraints(cs)
+        for t in range(0, 300, 30):
+            for j, o in enumerate(ids):
+                p.submit(req(f"r{t}-{j}", o, ids[(j + 1 + t // 30) % len(ids)], float(t)))
+            p.plan(float(t), t // 30)
+        levels[name] = sorted({net.levels_m.index(f.level_m) for f in p.active})
+    assert levels["free"] == [0, 1]
+    assert levels["pad 0 closed"] == [1]
+
+
+def test_bad_constraints_leave_the_planner_as_it_was():
+    net = two_route_network()
+    p = Planner(net, PlanningConfig(k=2), "mwis")
+    p.set_constraints([box("tfr", lower=-10.0, upper=500.0, ring=OVER_M)])
+    before = p.config.constraints
+    with pytest.raises(ConstraintError, match="vertiport_id: 'Z'"):
+        p.set_constraints([box("ok", ring=OVER_M), Constraint("bad", 1, "", 0.0, 9.0, vertiport_id="Z")])
+    assert p.config.constraints is before
+    p.set_constraints(None)
+    assert p.config.constraints is None
