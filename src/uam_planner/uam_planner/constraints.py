@@ -54,8 +54,9 @@ except ImportError:  # pragma: no cover - the pinned environment has it
     MAX_VERTICES = 1000
 
 KINDS = ("polygon", "circle", "closure")
-#: segments x edges per block of the vectorised polygon test (bounds memory to ~100 MB)
-_BLOCK = 1 << 20
+#: segments x edges per block of the all-pairs polygon test (about 25 float64 temporaries of
+#: this many elements: ~50 MB at most)
+_BLOCK = 1 << 18
 #: outlines of at least this many vertices are tested through an STR-tree of their edges
 INDEXED_MIN_VERTICES = 32
 
@@ -322,7 +323,8 @@ def prism_entry_times(t0_s, t1_s, p0_m, v_mps, c: Constraint) -> np.ndarray:
         c: a polygon or circle Constraint.
     Returns: (m,) float64: the first time [s] in [t0, t1] at which the segment is in the
         region x band x [start_s, end_s] (closed; see the module's ties), inf where never; the
-        segment violates ``c`` where that time is < ``c.end_s``. O(m x vertices), vectorised.
+        segment violates ``c`` where that time is < ``c.end_s``. O(m x vertices) at most
+        (outlines of many vertices: O((m + pairs) log vertices)), vectorised.
     """
     t0 = np.asarray(t0_s, dtype=np.float64)
     t1 = np.asarray(t1_s, dtype=np.float64)
