@@ -21,6 +21,8 @@
 #                      depart at the epoch time)
 #   --climb-rate R, --descent-rate R   vertical rates at vertiports of a layered network [m/s] (5, 3)
 #   --demand FILE      replay a demand file instead of random requests
+#   --constraints FILE airspace constraints the planner plans around (GeoJSON or ED-269 zones,
+#                      docs/constraints.md; e.g. config/constraints_example.geojson)
 #   --mode M           lockstep | realtime (default lockstep)
 #   --rtf X            real-time factor in realtime mode (default 1)
 #   --rerun M          off | save | spawn | connect (default save: a .rrd next to the MCAP)
@@ -39,7 +41,7 @@ ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
 
 BACKEND=exact POLICY=mwis RATE=10 DURATION=3500 SEED=0 NETWORK=config/networks/singapore.yaml
-DEMAND="" MODE=lockstep RTF=1 RERUN=save OUT="" FOXGLOVE_PORT=0 RECORDER_NICE=19
+DEMAND="" CONSTRAINTS="" MODE=lockstep RTF=1 RERUN=save OUT="" FOXGLOVE_PORT=0 RECORDER_NICE=19
 SEPARATION="" SEPARATION_M=100 VERTICAL_M=30 SLOT_S=0 CLIMB=5 DESCENT=3
 die() { echo "run_fleet: $*" >&2; exit 2; }
 while [[ $# -gt 0 ]]; do
@@ -51,6 +53,7 @@ while [[ $# -gt 0 ]]; do
     --seed) SEED="${2:?--seed needs a value}"; shift 2;;
     --network) NETWORK="${2:?--network needs a value}"; shift 2;;
     --demand) DEMAND="${2:?--demand needs a value}"; shift 2;;
+    --constraints) CONSTRAINTS="${2:?--constraints needs a value}"; shift 2;;
     --mode) MODE="${2:?--mode needs a value}"; shift 2;;
     --rtf) RTF="${2:?--rtf needs a value}"; shift 2;;
     --rerun) RERUN="${2:?--rerun needs a value}"; shift 2;;
@@ -84,6 +87,7 @@ done
 f() { [[ "$1" == *.* ]] && echo "$1" || echo "$1.0"; }
 [[ -f "$NETWORK" ]] || die "--network: no file '$NETWORK'"
 [[ -z "$DEMAND" || -f "$DEMAND" ]] || die "--demand: no file '$DEMAND'"
+[[ -z "$CONSTRAINTS" || -f "$CONSTRAINTS" ]] || die "--constraints: no file '$CONSTRAINTS'"
 
 bash scripts/setup.sh >/tmp/uam-setup-$$.log 2>&1 || { cat /tmp/uam-setup-$$.log; die "setup failed"; }
 rm -f /tmp/uam-setup-$$.log
@@ -189,7 +193,8 @@ AIRSPACE=(-p "separation_model:=$SEPARATION" -p "separation_m:=$(f "$SEPARATION_
           -p "vertical_separation_m:=$(f "$VERTICAL_M")" -p "departure_slot_s:=$(f "$SLOT_S")")
 start uam_planner planner planner --params-file config/planner.yaml -p "network:=$NETWORK" \
   -p "policy:=$POLICY" -p "backend:=$BACKEND" -p "seed:=$SEED" "${AIRSPACE[@]}" \
-  -p "climb_rate_mps:=$(f "$CLIMB")" -p "descent_rate_mps:=$(f "$DESCENT")" -p "journal:=$OUT/planner-journal.jsonl"
+  -p "climb_rate_mps:=$(f "$CLIMB")" -p "descent_rate_mps:=$(f "$DESCENT")" -p "journal:=$OUT/planner-journal.jsonl" \
+  ${CONSTRAINTS:+-p "constraints_file:=$CONSTRAINTS"}
 start uam_sim request_generator request_generator --params-file config/request_generator.yaml \
   -p "network:=$NETWORK" -p "rate:=$RATE" -p "seed:=$SEED" ${DEMAND:+-p "demand_file:=$DEMAND"}
 # the recorder writes the run's airspace into the MCAP (uam_airspace metadata): the analysis audits in it.

@@ -43,6 +43,8 @@ LAUNCH_OPTIONS: tuple[LaunchOption, ...] = (
     LaunchOption("--climb-rate", "CLIMB", "climb_rate", "5", "vertical climb rate at vertiports [m/s]"),
     LaunchOption("--descent-rate", "DESCENT", "descent_rate", "3", "vertical descent rate at vertiports [m/s]"),
     LaunchOption("--demand", "DEMAND", "demand_file", "", "replay a demand file instead of random requests"),
+    LaunchOption("--constraints", "CONSTRAINTS", "constraints_file", "",
+                 "airspace constraints the planner plans around (docs/constraints.md)"),
     LaunchOption("--mode", "MODE", "mode", "lockstep", "lockstep or realtime"),
     LaunchOption("--rtf", "RTF", "rtf", "1", "real-time factor in realtime mode"),
     LaunchOption("--rerun", "RERUN", "rerun", "save", "off, save, spawn or connect"),

@@ -15,6 +15,11 @@ exact segment-pair separation checks per second:
   slots): the conflict graph of 10,000 candidates (about 143 requests x 5 routes x 2 levels x 7
   slots) against 2,000 airborne flights, built from the candidates' trajectories and the
   persistent active-flight index; target median < 1 s.
+- constraints (issue 22): ``prism_entry_times`` on random segments against a circle and polygons
+  of 4, 100 and 1,000 vertices (F3548's most), every segment inside the polygon's bounding box
+  (no cull: the worst case), in segment-prism checks per second; and the planner's constraint
+  filter (``refuse_candidates``) on about 10,000 candidates of the layered city against a 2 km
+  square restriction over its centre and one vertiport closure.
 
 Wall time is measured here only; the library never reads the clock to decide anything.
 """
@@ -225,6 +230,77 @@ def kernel_throughput(n_pairs: int, repeats: int, seed: int) -> float:
     return n_pairs / best, n_pairs / best_cpu
 
 
+def constraint_throughput(n_segments: int, repeats: int, seed: int) -> list:
+    """(label, checks/s by wall time, checks/s by CPU time) of ``prism_entry_times`` for
+    ``n_segments`` random segments, all inside the region's bounding box, per region kind."""
+    from .constraints import Constraint, prism_entry_times
+    rng = np.random.default_rng(seed)
+    t0 = np.zeros(n_segments)
+    t1 = rng.uniform(1.0, 60.0, n_segments)
+    p0 = np.column_stack([rng.uniform(-1000, 1000, (n_segments, 2)), rng.uniform(0, 300, n_segments)])
+    end = np.column_stack([rng.uniform(-1000, 1000, (n_segments, 2)), rng.uniform(0, 300, n_segments)])
+    v = (end - p0) / t1[:, None]
+    out = []
+    shapes = [("circle r 1 km", dict(center_m=(0.0, 0.0), radius_m=1000.0))]
+    for n in (4, 100, 1000):
+        a = np.linspace(0.0, 2 * np.pi, n, endpoint=False) + np.pi / 4
+        r = 1000.0 * np.where(np.arange(n) % 2 == 0, 1.0, 0.8) if n > 4 else np.full(n, 1000.0 * 2 ** 0.5)
+        shapes.append((f"polygon {n} vertices", dict(rings_m=(np.column_stack([r * np.cos(a), r * np.sin(a)]),))))
+    for label, geom in shapes:
+        c = Constraint("bench", 1, "", 0.0, 1e9, lower_m=50.0, upper_m=200.0, **geom)
+        best = best_cpu = float("inf")
+        for _ in range(repeats):
+            t = time.perf_counter()
+            cpu = time.process_time()
+            prism_entry_times(t0, t1, p0, v, c)
+            best_cpu = min(best_cpu, time.process_time() - cpu)
+            best = min(best, time.perf_counter() - t)
+        out.append((label, n_segments / best, n_segments / best_cpu))
+    return out
+
+
+def constraint_filter(n_nodes: int, n_vertiports: int, n_candidates: int, repeats: int, seed: int):
+    """Median wall time [s] of the planner's constraint filter on about ``n_candidates``
+    candidates of a layered city (5 s slots) against a 2 km square over the city's centre
+    (0-200 m, one hour) and the closure of one vertiport; returns (median_s, candidates,
+    segments, refused, requests losing every candidate)."""
+    from .constraints import Constraint, ConstraintSet, refuse_candidates
+    from .planning import AirspaceConfig, _epoch_candidates
+    from .synthetic import generate_network
+    net = generate_network(n_nodes, n_vertiports, seed=seed, levels_m=[60.0, 90.0, 120.0, 150.0],
+                           pads_per_vertiport=4)
+    cfg = PlanningConfig(airspace=AirspaceConfig("cylinder", 30.0, 5.0))
+    cache = CandidateCache(net, cfg.k, cfg.penalty_factor, cfg.speed_mps)
+    rng = np.random.default_rng(seed)
+    t0 = 10_000.0
+    requests, n = [], 0
+    while n < n_candidates:
+        o, d = rng.choice(len(net.aerodrome_ids), 2, replace=False)
+        r = FlightRequest(f"r{len(requests):05d}", net.aerodrome_ids[o], net.aerodrome_ids[d],
+                          t0, t0, t0 + 60.0)
+        requests.append(r)
+        n += len(_epoch_candidates(t0, [r], net, cfg, cache).tmpls)
+    cands = _epoch_candidates(t0, requests, net, cfg, cache)
+    cx, cy = np.median(net.enu_m[:, :2], axis=0)
+    square = ((cx - 1000, cy - 1000), (cx + 1000, cy - 1000), (cx + 1000, cy + 1000), (cx - 1000, cy + 1000))
+    cset = ConstraintSet([Constraint("square", 1, "bench", t0, t0 + 3600.0, rings_m=(square,),
+                                     lower_m=0.0, upper_m=200.0),
+                          Constraint("closed", 1, "bench", t0, t0 + 3600.0,
+                                     vertiport_id=net.aerodrome_ids[0])], net)
+    reqs = [requests[i] for i in cands.req_of]
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        trajs = cands.trajectories()
+        refused, lost = refuse_candidates(cset, net, trajs, [r.origin_id for r in reqs],
+                                          [r.destination_id for r in reqs],
+                                          [tp.level_index for tp in cands.tmpls], cands.req_of,
+                                          [r.request_id for r in requests])
+        times.append(time.perf_counter() - t)
+    segs = sum(tr.n_segments for tr in trajs)
+    return statistics.median(times), len(trajs), segs, int(refused.sum()), len(lost)
+
+
 def _machine() -> str:
     model = platform.processor() or "unknown"
     try:
@@ -261,8 +337,9 @@ def main(argv=None) -> int:
     ap.add_argument("--graph-candidates", type=int, default=10_000)
     ap.add_argument("--graph-active", type=int, default=2000)
     ap.add_argument("--graph-repeats", type=int, default=7)
+    ap.add_argument("--constraint-segments", type=int, default=200_000)
     ap.add_argument("--skip", action="append", default=[],
-                    choices=["paper", "city", "kernel", "graph"])
+                    choices=["paper", "city", "kernel", "graph", "constraints"])
     args = ap.parse_args(argv)
 
     print(f"machine: {_machine()}; commit {_commit()}; load average at start "
@@ -327,6 +404,16 @@ def main(argv=None) -> int:
               f"trajectories {med('trajectories_s'):.0f} ms, active index {med('index_s'):.1f} ms; "
               f"{r['discarded']} discarded, {r['vertices']} vertices, {r['edges']} edges "
               f"({r['conflict_edges']} conflict edges); target median < 1 s")
+    if "constraints" not in args.skip:
+        for label, rate, rate_cpu in constraint_throughput(args.constraint_segments, 5, args.seed):
+            print(f"  constraints: prism_entry_times, {label}: {rate / 1e6:.2f} million segment-prism "
+                  f"checks/s by wall time, {rate_cpu / 1e6:.2f} million/s by CPU time "
+                  f"({args.constraint_segments} segments in the bounding box, best of 5)")
+        med_s, n_c, n_s, n_ref, n_lost = constraint_filter(args.city_nodes, args.city_aerodromes,
+                                                           args.graph_candidates, 5, args.seed)
+        print(f"  constraints: planner filter on {n_c} candidates ({n_s} segments) against a 2 km "
+              f"square and a vertiport closure: median {1e3 * med_s:.0f} ms of 5 (trajectories "
+              f"included); {n_ref} candidates refused, {n_lost} requests lost every candidate")
     return 0
 
 

@@ -51,6 +51,7 @@ import numpy as np
 
 from .candidates import (DEFAULT_CLIMB_RATE_MPS, DEFAULT_DESCENT_RATE_MPS, CandidateCache,
                          RouteTemplate)
+from .constraints import ConstraintSet, refuse_candidates
 from .conflict_graph import (ActiveFlightIndex, ConflictGraph, ShiftedCandidates,
                              build_conflict_graph)
 from .separation import (DEFAULT_VERTICAL_SEPARATION_M, SEPARATION_MODELS, SegmentSet,
@@ -151,6 +152,9 @@ class PlanningConfig:
             network), so that no epoch pays for a route search.
         airspace: AirspaceConfig (separation model, departure slots, vertical rates); default
             the paper's model.
+        constraints: a ``uam_planner.constraints.ConstraintSet`` (volumes and vertiport
+            closures; a candidate that enters one during its window is discarded before the
+            conflict graph), or None (default: the paper's airspace, nothing is checked).
     """
 
     epoch_s: float = 30.0
@@ -163,6 +167,7 @@ class PlanningConfig:
     seed: int = 0
     precompute_routes: bool = False
     airspace: AirspaceConfig = AirspaceConfig()
+    constraints: ConstraintSet | None = None
 
     @property
     def separation(self) -> SeparationModel:
@@ -175,6 +180,9 @@ class PlanningConfig:
         if not isinstance(self.airspace, AirspaceConfig):
             raise ValueError(f"PlanningConfig.airspace must be an AirspaceConfig, got "
                              f"{type(self.airspace).__name__}")
+        if self.constraints is not None and not isinstance(self.constraints, ConstraintSet):
+            raise ValueError(f"PlanningConfig.constraints must be a ConstraintSet or None, got "
+                             f"{type(self.constraints).__name__}")
         for name in ("epoch_s", "separation_m", "speed_mps", "time_limit_s"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
@@ -220,6 +228,9 @@ class EpochReport:
     vertex_candidate_index: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     selected: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
     phase_times_s: dict = field(default_factory=dict)
+    #: request id -> reason naming the constraint(s), for each eligible request all of whose
+    #: candidates entered a constraint this epoch (uam_planner.constraints)
+    constraint_refusals: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -358,6 +369,7 @@ class _Candidates:
     weights: list
     req_of: list
     index_in_request: list
+    refusals: dict = field(default_factory=dict)  # request id -> reason (constraints)
 
     def trajectories(self) -> list:
         return [tp.trajectory(dep) for tp, dep in zip(self.tmpls, self.departures_s)]
@@ -404,7 +416,24 @@ def _epoch_candidates(t_s: float, eligible: Sequence[FlightRequest], network, co
                 out.req_of.append(i)
                 out.index_in_request.append(c)
                 c += 1
+    if config.constraints is not None and len(config.constraints):
+        out = _without_constrained(out, eligible, network, config.constraints)
     return out
+
+
+def _without_constrained(cands: _Candidates, eligible, network, cset) -> _Candidates:
+    """The one constraint hook (issue 22): drop the candidates that enter a constraint during
+    its window (``uam_planner.constraints``), before any separation check or graph; weights are
+    kept as computed against the unconstrained best, so a detour still costs its detour."""
+    reqs = [eligible[i] for i in cands.req_of]
+    refused, reasons = refuse_candidates(
+        cset, network, cands.trajectories(), [r.origin_id for r in reqs],
+        [r.destination_id for r in reqs], [tp.level_index for tp in cands.tmpls], cands.req_of,
+        [r.request_id for r in eligible])
+    keep = np.flatnonzero(~refused).tolist()
+    return _Candidates(*([lst[k] for k in keep] for lst in
+                         (cands.tmpls, cands.departures_s, cands.weights, cands.req_of,
+                          cands.index_in_request)), refusals=reasons)
 
 
 def _finish(t_s, config, pending, approved, active_count, report) -> EpochResult:
@@ -485,6 +514,7 @@ def prepare_epoch_mwis(t_s: float, epoch_index: int, pending: Sequence[FlightReq
 
     cands = _epoch_candidates(t_s, eligible, network, config, cache)
     tmpls, req_of = cands.tmpls, cands.req_of
+    report.constraint_refusals = cands.refusals
     t2 = time.perf_counter()
     phases["candidates_s"] = t2 - t1
     # With slots, the candidates of one template differ only by a time shift: deconflict them
@@ -604,6 +634,7 @@ def plan_epoch_fifo(t_s: float, epoch_index: int, pending: Sequence[FlightReques
     phases["eligible_s"] = t1 - t_start
     cands = _epoch_candidates(t_s, eligible, network, config, cache, best_only=True)
     tmpls = cands.tmpls
+    report.constraint_refusals = cands.refusals
     t2 = time.perf_counter()
     phases["candidates_s"] = t2 - t1
     trajs = cands.trajectories()
@@ -633,7 +664,7 @@ def plan_epoch_fifo(t_s: float, epoch_index: int, pending: Sequence[FlightReques
         if any(taken[j] for j in partners.get(i, ())):
             continue
         taken[i] = True
-        approved.append(_flight(eligible[i], tmpls[i], trajs[i], "fifo", "", epoch_index,
+        approved.append(_flight(eligible[cands.req_of[i]], tmpls[i], trajs[i], "fifo", "", epoch_index,
                                 cands.weights[i], cands.index_in_request[i]))
     t6 = time.perf_counter()
     phases["graph_s"] = t6 - t5
@@ -708,6 +739,15 @@ class Planner:
                                         cfg.airspace.descent_rate_mps)
             if cfg.precompute_routes:
                 self.cache.precompute()
+
+    def set_constraints(self, constraints) -> None:
+        """Plan from the next epoch on against ``constraints`` (a ConstraintSet, an iterable of
+        Constraint checked against this planner's network, or None for none). Flights already
+        approved are not revisited (batch re-planning is issue 22 item 3)."""
+        from dataclasses import replace
+        if constraints is not None and not isinstance(constraints, ConstraintSet):
+            constraints = ConstraintSet(constraints, self.network)
+        self.config = replace(self.config, constraints=constraints)
 
     def _default_solve(self, weights, edges, groups):
         return default_solve_mwis(self._config)(weights, edges, groups)

@@ -91,6 +91,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "processes) or an address tcp://HOST:8786 (see README, 'Beyond one machine')")
     p.add_argument("--out", help="output directory")
     p.add_argument("--demand", dest="demand_file", help="replay a demand file instead")
+    p.add_argument("--constraints", dest="constraints_file", metavar="FILE",
+                   help="airspace constraints to plan around (GeoJSON or ED-269, docs/constraints.md)")
     p.add_argument("--airspace-mode", dest="airspace_mode", choices=AIRSPACE_MODES,
                    help="paper (default), slots, levels or both (uam_sim.experiment_config.AIRSPACE_PRESETS)")
     p.add_argument("--separation", dest="separation_model", choices=("sphere", "cylinder"),
@@ -119,6 +121,7 @@ def main(argv: list | None = None) -> int:
     args = build_parser().parse_args(argv)
     over = {k: getattr(args, k) for k in ("network", "rates", "methods", "seeds", "duration_s",
                                           "time_limit_s", "workers", "out", "demand_file",
+                                          "constraints_file",
                                           "scheduler", "airspace_mode",
                                           "separation_model", "vertical_separation_m",
                                           "departure_slot_s", "climb_rate_mps", "descent_rate_mps")}

@@ -63,6 +63,8 @@ class ExperimentConfig:
         solver_options: backend name -> options mapping passed to uam_solvers.solve.
         demand_file: optional demand file replayed instead of random demand (rates then only label
             the cells).
+        constraints_file: optional airspace constraints (GeoJSON or ED-269, docs/constraints.md)
+            every planner plans around from t = 0.
         corpus_max_vertices: MWIS instances up to this size are kept for the corpus.
         audit: run the independent exact separation audit on every cell.
         out: output directory.
@@ -106,6 +108,7 @@ class ExperimentConfig:
     time_limit_s: float = 10.0
     solver_options: dict = field(default_factory=dict)
     demand_file: str | None = None
+    constraints_file: str | None = None
     corpus_max_vertices: int = 60
     audit: bool = True
     out: str = "results"
@@ -203,6 +206,8 @@ def make_config(data: dict | None = None, **overrides) -> ExperimentConfig:
         raise ExperimentError(f"network: file {str(cfg.network)!r} does not exist")
     if cfg.demand_file and not resolve_path(str(cfg.demand_file)).is_file():
         raise ExperimentError(f"demand_file: file {str(cfg.demand_file)!r} does not exist")
+    if cfg.constraints_file and not resolve_path(str(cfg.constraints_file)).is_file():
+        raise ExperimentError(f"constraints_file: file {str(cfg.constraints_file)!r} does not exist")
     cfg.rates = [rate_label(r) for r in _num_list("rates", cfg.rates)]
     cfg.seeds = _seeds(cfg.seeds)
     for name in ("duration_s", "epoch_s", "interval_s", "window_s", "separation_m", "speed_mps",

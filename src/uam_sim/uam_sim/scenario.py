@@ -14,7 +14,7 @@ from uam_planner.planning import Planner
 
 from .audit import sweep_audit
 from .demand import RequestGenerator
-from .experiment_config import BASELINES, ExperimentConfig, rate_label
+from .experiment_config import BASELINES, ExperimentConfig, ExperimentError, rate_label
 
 
 @dataclass
@@ -128,6 +128,14 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
     pcfg = cfg.planning_config("greedy" if method in BASELINES else method, seed)
     planner = Planner(network, pcfg, policy=policy,
                       solve_mwis=None if policy in BASELINES else _solver(method, cfg, seed))
+    if cfg.constraints_file:
+        from uam_planner.constraints import load_constraints
+        from .experiment_config import resolve_path
+        try:  # the run starts at t = 0: a window over by then is refused as in the past
+            planner.set_constraints(load_constraints(resolve_path(str(cfg.constraints_file)), network,
+                                                     now_s=0.0))
+        except ValueError as exc:
+            raise ExperimentError(f"constraints_file: {exc}") from None
     if demand is None:
         demand = RequestGenerator(network.aerodrome_ids, rate, cfg.interval_s, cfg.window_s, seed)
     n_epochs = int(math.ceil(duration_s / cfg.epoch_s - 1e-9))

@@ -37,6 +37,8 @@ def cell_params(cfg: ExperimentConfig, method: str, rate, seed: int) -> dict:
         params["airspace_mode"] = cfg.airspace_mode
     if cfg.demand_file:
         params["demand"] = hashlib.sha256(resolve_path(cfg.demand_file).read_bytes()).hexdigest()
+    if cfg.constraints_file:
+        params["constraints"] = hashlib.sha256(resolve_path(cfg.constraints_file).read_bytes()).hexdigest()
     return params
 
 

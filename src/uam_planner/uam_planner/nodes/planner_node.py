@@ -60,6 +60,7 @@ from uam_bringup.params import declare_table
 from uam_contract.params import PLANNER
 from uam_solvers.nodes import param_rules
 from uam_bringup.runtime import run_node
+from uam_planner.constraints import load_constraints
 from uam_planner.network import load_network
 from uam_planner.planning import AirspaceConfig, Planner, PlanningConfig, call_solver, default_solve_mwis
 
@@ -91,6 +92,13 @@ class PlannerNode(Node):
                 "descent_rate_mps")}))
         self.policy = self.p["policy"]
         self.planner = Planner(self.network, config, self.policy)
+        if self.p["constraints_file"]:
+            # the node starts at simulation time 0: a window over by then is refused as in the past
+            try:
+                cset = load_constraints(self.p["constraints_file"], self.network, now_s=0.0)
+            except ValueError as exc:
+                raise ValueError(f"constraints_file: {exc}") from None
+            self.planner.set_constraints(cset)
 
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._group = ReentrantCallbackGroup()  # the epoch service awaits; arrivals must go on meanwhile
@@ -131,7 +139,8 @@ class PlannerNode(Node):
             f"planner: network {self.network.name!r} ({len(self.network.node_ids)} nodes, "
             f"{len(self.network.aerodrome_ids)} aerodromes{', layered' if self.network.layered else ''}), "
             f"policy {self.policy}, backend {self.config.backend}, seed {self.config.seed}, separation "
-            f"{self.config.separation.kind}, departure slot {self.config.airspace.departure_slot_s:g} s")
+            f"{self.config.separation.kind}, departure slot {self.config.airspace.departure_slot_s:g} s, "
+            f"{len(self.config.constraints or ())} constraint(s)")
 
     @property
     def config(self) -> PlanningConfig:
@@ -450,12 +459,14 @@ class PlannerNode(Node):
                 plan.operator_id = wire.split_scoped(f.request_id)[0]
             if self.journal is not None:
                 self.journal.append(plans)  # before anyone can hold them
+            refusals = result.report.constraint_refusals
             for req in result.expired:
                 op, rid = wire.split_scoped(req.request_id)
+                why = refusals.get(req.request_id) or \
+                    f"no conflict-free departure found by latest_departure {req.latest_departure_s:g} s"
                 plan = m.unapproved_plan(
                     rid, req.origin_id, req.destination_id, FlightPlan.OUTCOME_EXPIRED,
-                    f"no conflict-free departure found by latest_departure {req.latest_departure_s:g} s",
-                    t_s, k, self.policy)
+                    wire.bounded(why), t_s, k, self.policy)
                 plan.operator_id = op
                 plans.append(plan)
             for plan in plans:
