@@ -56,6 +56,8 @@ from .conflict_graph import (ActiveFlightIndex, ConflictGraph, ShiftedCandidates
 from .separation import (DEFAULT_VERTICAL_SEPARATION_M, SEPARATION_MODELS, SegmentSet,
                          SeparationModel, conflicting_pairs)
 from .first_fit import as_firstfit, first_fit_select
+from .objectives import (BASELINE_ORDERS, OperatorShares, check_objective, check_priority,
+                         epoch_weights, operator_of, order_requests)
 from .trajectory import Trajectory
 
 POLICIES = ("mwis", "fifo", "firstfit")  # firstfit: uam_planner.first_fit
@@ -71,6 +73,8 @@ class FlightRequest:
     request_time_s: float
     earliest_departure_s: float
     latest_departure_s: float
+    priority: int = 0  # integer class (ASTM F3548 style), 0..255; higher is more important
+    operator_id: str = ""  # who asks ('' = operator-scoped request_id "operator/request", or none)
 
 
 @dataclass(frozen=True, eq=False)
@@ -92,6 +96,8 @@ class Flight:
     epoch_index: int
     route_index: int = 0
     level_m: float = float("nan")
+    priority: int = 0
+    operator_id: str = ""
 
 
 def _positive(owner: str, name: str, v, allow_zero: bool = False) -> None:
@@ -151,6 +157,10 @@ class PlanningConfig:
             network), so that no epoch pays for a route search.
         airspace: AirspaceConfig (separation model, departure slots, vertical rates); default
             the paper's model.
+        objective: what the MWIS maximises (``uam_planner.objectives``, docs/objectives.md):
+            "paper" (the paper's weights, the default), "count", "delay", "priority", "fair".
+        baseline_order: the order in which FIFO and first-fit serve requests: "arrival" (the
+            paper's) or "priority" (priority class, then earliest latest departure, then arrival).
     """
 
     epoch_s: float = 30.0
@@ -163,6 +173,8 @@ class PlanningConfig:
     seed: int = 0
     precompute_routes: bool = False
     airspace: AirspaceConfig = AirspaceConfig()
+    objective: str = "paper"
+    baseline_order: str = "arrival"
 
     @property
     def separation(self) -> SeparationModel:
@@ -186,6 +198,13 @@ class PlanningConfig:
             raise ValueError(f"PlanningConfig.penalty_factor must be finite and >= 0, got {pf!r}")
         if not isinstance(self.backend, str) or not self.backend:
             raise ValueError(f"PlanningConfig.backend must be a non-empty string, got {self.backend!r}")
+        try:
+            check_objective(self.objective)
+        except ValueError as exc:
+            raise ValueError(f"PlanningConfig.{exc}") from None
+        if self.baseline_order not in BASELINE_ORDERS:
+            raise ValueError(f"PlanningConfig.baseline_order must be one of {BASELINE_ORDERS}, "
+                             f"got {self.baseline_order!r}")
 
 
 @dataclass
@@ -322,13 +341,18 @@ def default_solve_mwis(config: PlanningConfig) -> Callable:
 
 # ---- the two policies ---------------------------------------------------------------------------
 
-def _eligible(t_s: float, pending: Sequence[FlightRequest], config: PlanningConfig) -> list:
+def _eligible(t_s: float, pending: Sequence[FlightRequest], config: PlanningConfig,
+              order: str = "arrival") -> list:
+    """The requests that may depart in this epoch, in arrival order or (``order``, for the
+    baselines) in ``uam_planner.objectives.order_requests`` order."""
     if config.airspace.departure_slot_s > 0.0:
         # any departure in [max(t, earliest), min(t + epoch_s, latest)]
         hi = t_s + config.epoch_s
-        return [r for r in pending if r.earliest_departure_s <= hi and r.latest_departure_s >= t_s
-                and max(t_s, r.earliest_departure_s) <= min(hi, r.latest_departure_s)]
-    return [r for r in pending if r.earliest_departure_s <= t_s <= r.latest_departure_s]
+        out = [r for r in pending if r.earliest_departure_s <= hi and r.latest_departure_s >= t_s
+               and max(t_s, r.earliest_departure_s) <= min(hi, r.latest_departure_s)]
+    else:
+        out = [r for r in pending if r.earliest_departure_s <= t_s <= r.latest_departure_s]
+    return order_requests(out, order)
 
 
 def departure_slots_s(t_s: float, request: FlightRequest, config: PlanningConfig) -> np.ndarray:
@@ -379,10 +403,13 @@ def _paper_weights(config: PlanningConfig, network) -> bool:
 
 
 def _epoch_candidates(t_s: float, eligible: Sequence[FlightRequest], network, config,
-                      cache: CandidateCache, best_only: bool = False) -> _Candidates:
+                      cache: CandidateCache, best_only: bool = False,
+                      shares: OperatorShares | None = None) -> _Candidates:
     """Every (template, departure) candidate of the eligible requests, in request order; with
     ``best_only`` only each request's best one (shortest route, lowest allowed level, first
-    slot: weight 1)."""
+    slot: weight 1). Weights: ``config.objective`` (``uam_planner.objectives``) from the paper's
+    weights, the departures and flight times; ``shares`` are the running operator counts for
+    the "fair" objective."""
     paper = _paper_weights(config, network)
     out = _Candidates([], [], [], [], [])
     for i, r in enumerate(eligible):
@@ -404,6 +431,11 @@ def _epoch_candidates(t_s: float, eligible: Sequence[FlightRequest], network, co
                 out.req_of.append(i)
                 out.index_in_request.append(c)
                 c += 1
+    if config.objective != "paper" and out.tmpls:
+        w = epoch_weights(config.objective, t_s, config.epoch_s, eligible, out.req_of,
+                          out.departures_s, [tp.duration_s for tp in out.tmpls], out.weights,
+                          shares)
+        out.weights = w.weights.tolist()
     return out
 
 
@@ -430,7 +462,8 @@ def _flight(req: FlightRequest, tmpl: RouteTemplate, traj: Trajectory, method: s
                   trajectory=traj, departure_s=traj.departure_s, arrival_s=traj.arrival_s,
                   length_m=r.length_m, weight=float(weight), candidate_index=int(candidate_index),
                   method=method, backend=backend, epoch_index=int(epoch_index),
-                  route_index=int(r.candidate_index), level_m=float(tmpl.level_m))
+                  route_index=int(r.candidate_index), level_m=float(tmpl.level_m),
+                  priority=int(getattr(req, "priority", 0)), operator_id=req.operator_id)
 
 
 def _airborne(active: Sequence[Flight], t_s: float) -> list:
@@ -466,24 +499,27 @@ class PreparedEpoch:
 
 def prepare_epoch_mwis(t_s: float, epoch_index: int, pending: Sequence[FlightRequest],
                        active: Sequence[Flight], network, config: PlanningConfig,
-                       cache: CandidateCache, active_index=None) -> PreparedEpoch:
+                       cache: CandidateCache, active_index=None,
+                       shares: OperatorShares | None = None,
+                       order: str = "arrival") -> PreparedEpoch:
     """Steps 1-6 of an MWIS epoch at ``t_s`` [s]: eligible requests, candidates, trajectories,
     deconfliction and the conflict graph (``PreparedEpoch.graph``), still to be solved.
 
     Arguments as :func:`plan_epoch_mwis`; ``active_index``: optional ActiveFlightIndex holding
     ``active`` (kept across epochs by the Planner, so the active flights' segments are not
-    rebuilt every epoch).
+    rebuilt every epoch); ``shares``: running operator counts (objective "fair"); ``order``:
+    the vertex order by request ("arrival", or "priority" for first-fit's walk).
     """
     t_start = time.perf_counter()
     phases = {}
     report = EpochReport(epoch_index=int(epoch_index), t_s=float(t_s), policy="mwis",
                          pending=len(pending), backend_requested=config.backend)
-    eligible = _eligible(t_s, pending, config)
+    eligible = _eligible(t_s, pending, config, order)
     airborne = _airborne(active, t_s)
     t1 = time.perf_counter()
     phases["eligible_s"] = t1 - t_start
 
-    cands = _epoch_candidates(t_s, eligible, network, config, cache)
+    cands = _epoch_candidates(t_s, eligible, network, config, cache, shares=shares)
     tmpls, req_of = cands.tmpls, cands.req_of
     t2 = time.perf_counter()
     phases["candidates_s"] = t2 - t1
@@ -553,7 +589,8 @@ def commit_epoch(prep: PreparedEpoch, answer, config: PlanningConfig, solve_s: f
 def plan_epoch_mwis(t_s: float, epoch_index: int, pending: Sequence[FlightRequest],
                     active: Sequence[Flight], network, config: PlanningConfig,
                     solve_mwis: Callable, cache: CandidateCache,
-                    active_index=None) -> EpochResult:
+                    active_index=None, shares: OperatorShares | None = None,
+                    order: str = "arrival") -> EpochResult:
     """One MWIS planning epoch at time ``t_s`` [s]: prepare, solve, commit.
 
     Args:
@@ -570,12 +607,15 @@ def plan_epoch_mwis(t_s: float, epoch_index: int, pending: Sequence[FlightReques
         cache: CandidateCache built for this network and config.
         active_index: optional ActiveFlightIndex holding ``active`` (kept across epochs by the
             Planner, so the active flights' segments are not rebuilt every epoch).
+        shares: running operator counts for the "fair" objective (OperatorShares).
+        order: the request (and so vertex) order: "arrival", or "priority" (first-fit's walk
+            with ``baseline_order`` "priority").
     Returns: EpochResult. Approved flights never lose separation (in ``config.separation``)
     with each other or with ``active``: every conflict is an edge and the answer is checked to
     be independent.
     """
     prep = prepare_epoch_mwis(t_s, epoch_index, pending, active, network, config, cache,
-                              active_index)
+                              active_index, shares, order)
     t = time.perf_counter()
     answer = call_solver(solve_mwis, prep.graph) if prep.needs_solver else None
     return commit_epoch(prep, answer, config, time.perf_counter() - t)
@@ -584,10 +624,11 @@ def plan_epoch_mwis(t_s: float, epoch_index: int, pending: Sequence[FlightReques
 def plan_epoch_fifo(t_s: float, epoch_index: int, pending: Sequence[FlightRequest],
                     active: Sequence[Flight], network, config: PlanningConfig,
                     solve_mwis: Callable | None, cache: CandidateCache,
-                    active_index=None) -> EpochResult:
+                    active_index=None, shares: OperatorShares | None = None) -> EpochResult:
     """One shortest-FIFO epoch; same inputs and outputs as :func:`plan_epoch_mwis`.
 
-    In the order of ``pending`` (arrival order), each eligible request gets its shortest route if
+    In the order of ``pending`` (arrival order; with ``config.baseline_order`` "priority": by
+    priority class, then earliest latest departure, then arrival), each eligible request gets its shortest route if
     it keeps separation with every active flight and every flight approved before it in this
     epoch; otherwise it waits. ``solve_mwis`` is ignored. The report's instance is empty;
     ``vertices`` counts the shortest routes that survive the active flights and ``edges`` /
@@ -598,11 +639,11 @@ def plan_epoch_fifo(t_s: float, epoch_index: int, pending: Sequence[FlightReques
     phases = {}
     report = EpochReport(epoch_index=int(epoch_index), t_s=float(t_s), policy="fifo",
                          pending=len(pending))
-    eligible = _eligible(t_s, pending, config)
+    eligible = _eligible(t_s, pending, config, config.baseline_order)
     airborne = _airborne(active, t_s)
     t1 = time.perf_counter()
     phases["eligible_s"] = t1 - t_start
-    cands = _epoch_candidates(t_s, eligible, network, config, cache, best_only=True)
+    cands = _epoch_candidates(t_s, eligible, network, config, cache, best_only=True, shares=shares)
     tmpls = cands.tmpls
     t2 = time.perf_counter()
     phases["candidates_s"] = t2 - t1
@@ -686,6 +727,8 @@ class Planner:
         self._known_ids: set[str] = set()
         self._rejected_since_plan = 0
         self._prepared: PreparedEpoch | None = None
+        # requests accepted and approved per operator (the "fair" objective's running shares)
+        self.shares = OperatorShares()
 
     @property
     def config(self) -> PlanningConfig:
@@ -740,6 +783,12 @@ class Planner:
             if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) \
                     or not math.isfinite(v):
                 return f"{name}: {v!r} is not a finite time"
+        problem = check_priority(getattr(request, "priority", 0))
+        if problem:
+            return problem
+        op = getattr(request, "operator_id", "")
+        if not isinstance(op, str):
+            return f"operator_id: {op!r} is not a string"
         if request.latest_departure_s < request.earliest_departure_s:
             return (f"latest_departure_s: {request.latest_departure_s!r} is before "
                     f"earliest_departure_s {request.earliest_departure_s!r}")
@@ -760,6 +809,7 @@ class Planner:
             return reason
         self._known_ids.add(request.request_id)
         self.pending.append(request)
+        self.shares.requested[operator_of(request)] += 1
         return None
 
     def prepare(self, t_s: float, epoch_index: int) -> PreparedEpoch:
@@ -775,11 +825,13 @@ class Planner:
         self.active = [f for f in self.active if f.arrival_s >= t_s]
         if self.policy == "mwis":
             prep = prepare_epoch_mwis(t_s, epoch_index, self.pending, self.active, self.network, self.config,
-                                      self.cache, self.active_index)
+                                      self.cache, self.active_index, self.shares)
         else:
             args = (t_s, epoch_index, self.pending, self.active, self.network, self.config)
-            res = plan_epoch_fifo(*args, None, self.cache, self.active_index) if self.policy == "fifo" else \
-                as_firstfit(plan_epoch_mwis(*args, first_fit_select, self.cache, self.active_index))  # uam_planner.first_fit
+            res = plan_epoch_fifo(*args, None, self.cache, self.active_index, self.shares) \
+                if self.policy == "fifo" else \
+                as_firstfit(plan_epoch_mwis(*args, first_fit_select, self.cache, self.active_index,
+                                            self.shares, self.config.baseline_order))  # uam_planner.first_fit
             prep = PreparedEpoch(t_s=float(t_s), epoch_index=int(epoch_index), pending=list(self.pending),
                                  report=res.report, result=res)
         self._prepared = prep
@@ -795,6 +847,7 @@ class Planner:
         arrived_since = self.pending[len(prep.pending):]
         self.pending = list(result.waiting) + arrived_since
         self.active = self.active + list(result.approved)
+        self.shares.approved.update(operator_of(f) for f in result.approved)
         result.report.rejected = self._rejected_since_plan
         self._rejected_since_plan = 0
         return result
@@ -811,7 +864,9 @@ class Planner:
         ``decided_ids`` were decided before (their ids are taken, nothing is planned for them).
         Adds only: a flight already active stays as it is, whatever ``flights`` says."""
         held = {f.request_id for f in self.active}
-        self.active = self.active + [f for f in flights if f.request_id not in held]
+        new = [f for f in flights if f.request_id not in held]
+        self.active = self.active + new
+        self.shares.approved.update(operator_of(f) for f in new)
         self._known_ids.update(f.request_id for f in flights)
         self._known_ids.update(decided_ids)
         self.pending = [r for r in self.pending if r.request_id not in self._known_ids]
