@@ -58,6 +58,7 @@ from typing import Any, Iterable
 import numpy as np
 
 from .audit import AIRSPACE_METADATA, SafetyAudit, audit_plans, separation_from_metadata
+from .decision_metrics import decision_metrics
 from .mcap_reader import is_complete, iter_decoded, read_metadata
 from .mcap_recover import RECOVERED_METADATA
 from .stamps import stamp_s
@@ -139,6 +140,10 @@ class RunSummary:
     forged_plans: list = field(default_factory=list)
     #: how the run ended, as the simulator announced it ("" when no end is recorded)
     run_end: str = ""
+    #: delay (from the earliest departure) mean/p95, per-priority p95 delay, per-operator
+    #: approval share and Jain index (``uam_sim.decision_metrics``, as the in-process runner's
+    #: summary); detour_mean_m is NaN: a recording holds no candidate route lengths
+    decision_metrics: dict = field(default_factory=dict)
 
     @property
     def verified(self) -> bool:
@@ -349,6 +354,7 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=10
     Complexity: linear in the messages, plus the audit (quadratic in overlapping flights).
     """
     request_ids: set[str] = set()
+    request_rows: dict[str, dict] = {}  # request key -> the first request's times, class, operator
     decisions: dict[str, list] = {}  # request id -> distinct plans, in arrival order
     seen: set[tuple] = set()
     duplicates = refused_duplicates = 0
@@ -366,7 +372,12 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=10
             continue
         t_min, t_max = min(t_min, log_ns * 1e-9), max(t_max, log_ns * 1e-9)
         if topic == TOPIC_REQUESTS:
-            request_ids.add(request_key(msg))
+            key = request_key(msg)
+            request_ids.add(key)
+            request_rows.setdefault(key, {
+                "earliest_departure_s": stamp_s(msg.earliest_departure),
+                "priority": int(getattr(msg, "priority", 0)),  # recordings before issue 21: 0
+                "operator": str(getattr(msg, "operator_id", "") or "")})
         elif topic == TOPIC_PLANS:
             if int(msg.outcome) == OUTCOME_DUPLICATE:
                 refused_duplicates += 1
@@ -432,6 +443,12 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=10
     with_instance = [e for e in epochs if e.vertices > 0]
     max_active = int(max(fleet_n)) if fleet_n else 0
     audit = audit_plans(approved_plans, separation_m, labels=labels)
+    flight_rows = []
+    for p in approved_plans:
+        r = request_rows.get(request_key(p))
+        if r is not None:  # a plan without its request has no earliest departure
+            flight_rows.append({**r, "departure_s": stamp_s(p.departure_time),
+                                "length_m": float(p.length_m), "shortest_length_m": None})
     return RunSummary(
         path=str(path), reader=reader, complete_file=complete_file,
         sim_start_s=t_min if math.isfinite(t_min) else 0.0,
@@ -459,6 +476,7 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=10
                                     max_active, audit, conflicting, fleet_steps) + run,
         forged_plans=forged,
         run_end=run_end,
+        decision_metrics=decision_metrics(flight_rows, list(request_rows.values())),
     )
 
 
@@ -537,6 +555,15 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
         f"Solve time       {_fmt_stats(s.solve_time_s, ' ms', 1e3, 2)}",
         f"Fallbacks        {s.fallbacks}",
     ]
+    dm = s.decision_metrics
+    if dm:
+        extra = "".join(f", {k.replace('delay_p95_s_prio', 'p95 class ')} {v:.1f} s" for k, v in dm.items()
+                        if k.startswith("delay_p95_s_prio"))
+        lines.append(f"Delay            mean {dm['delay_mean_s']:.1f} s, p95 {dm['delay_p95_s']:.1f} s "
+                     f"(from the earliest departure){extra}")
+        shares = ", ".join(f"{k[6:]} {v:.3f}" for k, v in dm.items() if k.startswith("share_"))
+        if shares:
+            lines.append(f"Operators        approval share {shares}; Jain index {dm['jain_index']:.3f}")
     a = s.audit
     if a is not None:
         pair = f" ({a.closest_pair[0]} / {a.closest_pair[1]})" if a.closest_pair else ""
