@@ -12,7 +12,7 @@ from uam_planner.network import network_from_enu
 from uam_planner.objectives import (FLOAT_EXACT, ObjectiveRangeError, OperatorShares,
                                     epoch_weights, lexicographic_weights, order_requests,
                                     priority_values)
-from uam_planner.planning import FlightRequest, Planner, PlanningConfig
+from uam_planner.planning import AirspaceConfig, FlightRequest, Planner, PlanningConfig
 
 
 def req(rid, t=0.0, earliest=None, latest=None, priority=0, operator=""):
@@ -282,3 +282,57 @@ def test_count_selects_a_maximum_cardinality_set_in_every_epoch_of_a_busy_run():
             checked += 1
         p.commit(prep, ans)
     assert checked >= 6
+
+
+# ---- the planning horizon --------------------------------------------------------------------------
+
+def run_horizon(h, slot_s=0.0):
+    """One route C-m-D (100 s): r1 (class 1) may depart at 0 or 30 s, r2 (class 0) only at 0;
+    two departures at the same time conflict, 30 s apart (300 m in trail) they do not."""
+    p = Planner(one_route_network(), PlanningConfig(objective="priority", backend="exact", horizon_epochs=h,
+                                                    airspace=AirspaceConfig(departure_slot_s=slot_s)))
+    assert p.submit(FlightRequest("r1", "C", "D", 0, 0, 30, priority=1)) is None
+    assert p.submit(FlightRequest("r2", "C", "D", 0, 0, 0)) is None
+    out = []
+    for e in range(2):
+        res = p.plan(30.0 * e, e)
+        out.append(([(f.request_id, f.departure_s) for f in res.approved],
+                    sorted(r.request_id for r in res.expired), sorted(r.request_id for r in res.waiting)))
+    return out
+
+
+def test_planning_two_epochs_jointly_approves_more_than_two_myopic_epochs():
+    # H = 1 at t = 0: r1 and r2 both depart at 0 and conflict; priority takes r1 (class 1),
+    # r2's window closes: it expires. Epoch 1: nothing left. 1 flight.
+    assert run_horizon(1) == [([("r1", 0.0)], ["r2"], []), ([], [], [])]
+    # H = 2 at t = 0: r1 may take 30 s; one graph over both epochs (P = 1, 2 for r2, r1) takes
+    # r2 at 0 and r1 at 30. Only r2 departs in this epoch: committed; r1 waits, and at t = 30
+    # is planned again and flies. 2 flights.
+    assert run_horizon(2) == [([("r2", 0.0)], [], ["r1"]), ([("r1", 30.0)], [], [])]
+    # with 10 s slots the epoch's window is [t, t + 30] (H = 1): r1 simply takes a later slot
+    assert sorted(run_horizon(1, slot_s=10.0)[0][0]) == [("r1", 10.0), ("r2", 0.0)]
+
+
+def test_horizon_commits_only_what_departs_in_this_epoch_and_replans_the_rest():
+    # r1 may depart at 0, 30 or 60 (class 1), r2 only at 0, r3 only at 30; H = 3 at t = 0:
+    # r2 at 0, r3 at 30, r1 at 60 (no two at one time). Only r2 is committed; r1 and r3 wait and
+    # are planned again at t = 30 (r3 at 30 committed, r1 at 60 waits) and at t = 60 (r1).
+    p = Planner(one_route_network(), PlanningConfig(objective="priority", backend="exact", horizon_epochs=3))
+    for r in (FlightRequest("r1", "C", "D", 0, 0, 60, priority=1), FlightRequest("r2", "C", "D", 0, 0, 0),
+              FlightRequest("r3", "C", "D", 0, 30, 30)):
+        assert p.submit(r) is None
+    res = p.plan(0.0, 0)
+    assert [(f.request_id, f.departure_s) for f in res.approved] == [("r2", 0.0)]
+    assert [r.request_id for r in res.waiting] == ["r1", "r3"]
+    assert res.report.approved == 1 and len(res.report.selected) == 1  # committed vertices only
+    res = p.plan(30.0, 1)
+    assert [(f.request_id, f.departure_s) for f in res.approved] == [("r3", 30.0)]
+    res = p.plan(60.0, 2)
+    assert [(f.request_id, f.departure_s) for f in res.approved] == [("r1", 60.0)]
+
+
+def test_horizon_epochs_is_validated():
+    with pytest.raises(ValueError, match=r"PlanningConfig.horizon_epochs must be an integer in \[1, 100\], got 0"):
+        PlanningConfig(horizon_epochs=0)
+    with pytest.raises(ValueError, match=r"horizon_epochs .* got 2.0"):
+        PlanningConfig(horizon_epochs=2.0)

@@ -12,6 +12,12 @@ One epoch at time t:
 7. the selected candidates become flights departing at t; an unapproved request whose latest
    departure comes before the next epoch (t + epoch_s) expires now; the others wait.
 
+A rolling horizon (``PlanningConfig.horizon_epochs`` H > 1, MWIS policy only): steps 1-6 take
+the departures of the next H epochs (a request is eligible when one lies in its window), and
+step 7 commits only the selected candidates that depart in this epoch; the other requests wait
+and are planned again at the next epoch with what is known then. H = 1 is the rule above.
+What the MWIS maximises is ``PlanningConfig.objective`` (``uam_planner.objectives``).
+
 ``plan_epoch_fifo`` is the paper's baseline with the same inputs and outputs: in arrival order,
 each eligible request gets its shortest route if that route keeps separation with every active
 flight and every flight approved before it in this epoch; otherwise it waits (until it expires).
@@ -61,6 +67,7 @@ from .objectives import (BASELINE_ORDERS, OperatorShares, check_objective, check
 from .trajectory import Trajectory
 
 POLICIES = ("mwis", "fifo", "firstfit")  # firstfit: uam_planner.first_fit
+MAX_HORIZON_EPOCHS = 100  # PlanningConfig.horizon_epochs
 
 
 @dataclass(frozen=True)
@@ -161,6 +168,11 @@ class PlanningConfig:
             "paper" (the paper's weights, the default), "count", "delay", "priority", "fair".
         baseline_order: the order in which FIFO and first-fit serve requests: "arrival" (the
             paper's) or "priority" (priority class, then earliest latest departure, then arrival).
+        horizon_epochs: H, the epochs the MWIS policy plans jointly (rolling horizon): the
+            candidates of a request at the departures of the next H epochs are vertices of one
+            graph (one clique per request), and only the selected ones departing in this epoch
+            (before t + epoch_s in the paper's rule; at most t + epoch_s with slots) are
+            committed; the others wait and are planned again at the next epoch. 1 = today's (the paper's) one-epoch planning. The baselines ignore it.
     """
 
     epoch_s: float = 30.0
@@ -175,6 +187,7 @@ class PlanningConfig:
     airspace: AirspaceConfig = AirspaceConfig()
     objective: str = "paper"
     baseline_order: str = "arrival"
+    horizon_epochs: int = 1
 
     @property
     def separation(self) -> SeparationModel:
@@ -202,6 +215,10 @@ class PlanningConfig:
             check_objective(self.objective)
         except ValueError as exc:
             raise ValueError(f"PlanningConfig.{exc}") from None
+        h = self.horizon_epochs
+        if isinstance(h, bool) or not isinstance(h, (int, np.integer)) or not 1 <= h <= MAX_HORIZON_EPOCHS:
+            raise ValueError(f"PlanningConfig.horizon_epochs must be an integer in [1, {MAX_HORIZON_EPOCHS}], "
+                             f"got {h!r}")
         if self.baseline_order not in BASELINE_ORDERS:
             raise ValueError(f"PlanningConfig.baseline_order must be one of {BASELINE_ORDERS}, "
                              f"got {self.baseline_order!r}")
@@ -342,31 +359,45 @@ def default_solve_mwis(config: PlanningConfig) -> Callable:
 # ---- the two policies ---------------------------------------------------------------------------
 
 def _eligible(t_s: float, pending: Sequence[FlightRequest], config: PlanningConfig,
-              order: str = "arrival") -> list:
-    """The requests that may depart in this epoch, in arrival order or (``order``, for the
-    baselines) in ``uam_planner.objectives.order_requests`` order."""
+              order: str = "arrival", horizon: int = 1) -> list:
+    """The requests that may depart in this epoch (or, with a ``horizon`` of H epochs, in one of
+    the next H), in arrival order or (``order``, for the baselines) in
+    ``uam_planner.objectives.order_requests`` order."""
     if config.airspace.departure_slot_s > 0.0:
-        # any departure in [max(t, earliest), min(t + epoch_s, latest)]
-        hi = t_s + config.epoch_s
+        # any departure in [max(t, earliest), min(t + H epoch_s, latest)]
+        hi = t_s + horizon * config.epoch_s
         out = [r for r in pending if r.earliest_departure_s <= hi and r.latest_departure_s >= t_s
                and max(t_s, r.earliest_departure_s) <= min(hi, r.latest_departure_s)]
-    else:
+    elif horizon == 1:
         out = [r for r in pending if r.earliest_departure_s <= t_s <= r.latest_departure_s]
+    else:
+        out = [r for r in pending if _horizon_epoch_times(t_s, r, config, horizon).size]
     return order_requests(out, order)
 
 
-def departure_slots_s(t_s: float, request: FlightRequest, config: PlanningConfig) -> np.ndarray:
+def _horizon_epoch_times(t_s: float, request: FlightRequest, config: PlanningConfig,
+                         horizon: int) -> np.ndarray:
+    """Paper rule with a horizon: the epoch times t + j epoch_s (j < H) inside the window."""
+    ts = float(t_s) + config.epoch_s * np.arange(horizon, dtype=np.float64)
+    return ts[(ts >= request.earliest_departure_s) & (ts <= request.latest_departure_s)]
+
+
+def departure_slots_s(t_s: float, request: FlightRequest, config: PlanningConfig,
+                      horizon: int = 1) -> np.ndarray:
     """Departure times [s] a request may take at the epoch at ``t_s``.
 
     Paper rule (``departure_slot_s == 0``): [t_s]. Otherwise lo, lo + slot, ... <= hi with
     lo = max(t_s, earliest_departure_s), hi = min(t_s + epoch_s, latest_departure_s); empty when
     lo > hi. E.g. t = 0, epoch 30 s, slot 5 s, window [0, 60]: 0, 5, ..., 30 (7 slots).
+    With a ``horizon`` of H epochs: hi = min(t_s + H epoch_s, latest_departure_s), and the paper
+    rule's departures are the epoch times t_s + j epoch_s (j < H) inside the window.
     """
     slot = float(config.airspace.departure_slot_s)
     if slot <= 0.0:
-        return np.array([float(t_s)])
+        return np.array([float(t_s)]) if horizon == 1 else \
+            _horizon_epoch_times(t_s, request, config, horizon)
     lo = max(float(t_s), float(request.earliest_departure_s))
-    hi = min(float(t_s) + config.epoch_s, float(request.latest_departure_s))
+    hi = min(float(t_s) + horizon * config.epoch_s, float(request.latest_departure_s))
     if lo > hi:
         return np.zeros(0)
     n = int(math.floor((hi - lo) / slot + 1e-9)) + 1
@@ -404,17 +435,18 @@ def _paper_weights(config: PlanningConfig, network) -> bool:
 
 def _epoch_candidates(t_s: float, eligible: Sequence[FlightRequest], network, config,
                       cache: CandidateCache, best_only: bool = False,
-                      shares: OperatorShares | None = None) -> _Candidates:
+                      shares: OperatorShares | None = None, horizon: int = 1) -> _Candidates:
     """Every (template, departure) candidate of the eligible requests, in request order; with
     ``best_only`` only each request's best one (shortest route, lowest allowed level, first
     slot: weight 1). Weights: ``config.objective`` (``uam_planner.objectives``) from the paper's
     weights, the departures and flight times; ``shares`` are the running operator counts for
-    the "fair" objective."""
-    paper = _paper_weights(config, network)
+    the "fair" objective. ``horizon``: the departures of the next H epochs (the paper's
+    weights then count the delay, T*/(T + delay), as with slots)."""
+    paper = _paper_weights(config, network) and horizon == 1
     out = _Candidates([], [], [], [], [])
     for i, r in enumerate(eligible):
         ts = cache.templates(network.node_index(r.origin_id), network.node_index(r.destination_id))
-        slots = departure_slots_s(t_s, r, config)
+        slots = departure_slots_s(t_s, r, config, horizon)
         if best_only:
             ts = ts[:1]
             slots = slots[:1]
@@ -432,7 +464,8 @@ def _epoch_candidates(t_s: float, eligible: Sequence[FlightRequest], network, co
                 out.index_in_request.append(c)
                 c += 1
     if config.objective != "paper" and out.tmpls:
-        w = epoch_weights(config.objective, t_s, config.epoch_s, eligible, out.req_of,
+        # with a horizon, "not approved now" means not within the H epochs
+        w = epoch_weights(config.objective, t_s, horizon * config.epoch_s, eligible, out.req_of,
                           out.departures_s, [tp.duration_s for tp in out.tmpls], out.weights,
                           shares)
         out.weights = w.weights.tolist()
@@ -490,6 +523,9 @@ class PreparedEpoch:
     prepare_s: float = 0.0
     phases: dict = field(default_factory=dict)
     result: EpochResult | None = None
+    horizon: int = 1
+    epoch_s: float = 0.0
+    slots: bool = False
 
     @property
     def needs_solver(self) -> bool:
@@ -501,31 +537,34 @@ def prepare_epoch_mwis(t_s: float, epoch_index: int, pending: Sequence[FlightReq
                        active: Sequence[Flight], network, config: PlanningConfig,
                        cache: CandidateCache, active_index=None,
                        shares: OperatorShares | None = None,
-                       order: str = "arrival") -> PreparedEpoch:
+                       order: str = "arrival", horizon: int | None = None) -> PreparedEpoch:
     """Steps 1-6 of an MWIS epoch at ``t_s`` [s]: eligible requests, candidates, trajectories,
     deconfliction and the conflict graph (``PreparedEpoch.graph``), still to be solved.
 
     Arguments as :func:`plan_epoch_mwis`; ``active_index``: optional ActiveFlightIndex holding
     ``active`` (kept across epochs by the Planner, so the active flights' segments are not
     rebuilt every epoch); ``shares``: running operator counts (objective "fair"); ``order``:
-    the vertex order by request ("arrival", or "priority" for first-fit's walk).
+    the vertex order by request ("arrival", or "priority" for first-fit's walk); ``horizon``:
+    the epochs planned jointly (default ``config.horizon_epochs``).
     """
+    horizon = int(config.horizon_epochs if horizon is None else horizon)
     t_start = time.perf_counter()
     phases = {}
     report = EpochReport(epoch_index=int(epoch_index), t_s=float(t_s), policy="mwis",
                          pending=len(pending), backend_requested=config.backend)
-    eligible = _eligible(t_s, pending, config, order)
+    eligible = _eligible(t_s, pending, config, order, horizon)
     airborne = _airborne(active, t_s)
     t1 = time.perf_counter()
     phases["eligible_s"] = t1 - t_start
 
-    cands = _epoch_candidates(t_s, eligible, network, config, cache, shares=shares)
+    cands = _epoch_candidates(t_s, eligible, network, config, cache, shares=shares, horizon=horizon)
     tmpls, req_of = cands.tmpls, cands.req_of
     t2 = time.perf_counter()
     phases["candidates_s"] = t2 - t1
     # With slots, the candidates of one template differ only by a time shift: deconflict them
     # per template (ShiftedCandidates) and build trajectories only for the survivors.
-    trajs = cands.shifted() if config.airspace.departure_slot_s > 0.0 else cands.trajectories()
+    trajs = cands.shifted() if config.airspace.departure_slot_s > 0.0 or horizon > 1 \
+        else cands.trajectories()
     t3 = time.perf_counter()
     phases["trajectories_s"] = t3 - t2
 
@@ -540,7 +579,8 @@ def prepare_epoch_mwis(t_s: float, epoch_index: int, pending: Sequence[FlightReq
                          graph=graph, eligible=eligible, tmpls=tmpls, trajs=trajs, req_of=req_of,
                          weights=cands.weights, index_in_request=cands.index_in_request,
                          airborne_count=len(airborne), prepare_s=time.perf_counter() - t_start,
-                         phases=phases)
+                         phases=phases, horizon=horizon, epoch_s=float(config.epoch_s),
+                         slots=config.airspace.departure_slot_s > 0.0)
 
 
 def commit_epoch(prep: PreparedEpoch, answer, config: PlanningConfig, solve_s: float = 0.0) -> EpochResult:
@@ -554,6 +594,13 @@ def commit_epoch(prep: PreparedEpoch, answer, config: PlanningConfig, solve_s: f
     graph, report, phases, eligible = prep.graph, prep.report, prep.phases, prep.eligible
     t4 = time.perf_counter()
     selected = checked_selection(graph, answer, report)
+    if prep.horizon > 1 and selected.size:
+        # rolling horizon: commit what departs in this epoch (before the next epoch time in the
+        # paper's rule; up to and including it with slots, whose window is [t, t + epoch_s]);
+        # the rest waits and is planned again
+        deps = np.array([prep.trajs[int(graph.vertex_source[v])].departure_s for v in selected.tolist()])
+        end = prep.t_s + prep.epoch_s
+        selected = selected[deps <= end + 1e-9 if prep.slots else deps < end - 1e-9]
     t5 = time.perf_counter()
     phases["solve_s"] = float(solve_s) + (t5 - t4)
     report.solve_time_s = phases["solve_s"]
@@ -590,7 +637,7 @@ def plan_epoch_mwis(t_s: float, epoch_index: int, pending: Sequence[FlightReques
                     active: Sequence[Flight], network, config: PlanningConfig,
                     solve_mwis: Callable, cache: CandidateCache,
                     active_index=None, shares: OperatorShares | None = None,
-                    order: str = "arrival") -> EpochResult:
+                    order: str = "arrival", horizon: int | None = None) -> EpochResult:
     """One MWIS planning epoch at time ``t_s`` [s]: prepare, solve, commit.
 
     Args:
@@ -610,12 +657,14 @@ def plan_epoch_mwis(t_s: float, epoch_index: int, pending: Sequence[FlightReques
         shares: running operator counts for the "fair" objective (OperatorShares).
         order: the request (and so vertex) order: "arrival", or "priority" (first-fit's walk
             with ``baseline_order`` "priority").
+        horizon: the epochs planned jointly (default ``config.horizon_epochs``; only the
+            selected flights departing by t_s + epoch_s are committed).
     Returns: EpochResult. Approved flights never lose separation (in ``config.separation``)
     with each other or with ``active``: every conflict is an edge and the answer is checked to
     be independent.
     """
     prep = prepare_epoch_mwis(t_s, epoch_index, pending, active, network, config, cache,
-                              active_index, shares, order)
+                              active_index, shares, order, horizon)
     t = time.perf_counter()
     answer = call_solver(solve_mwis, prep.graph) if prep.needs_solver else None
     return commit_epoch(prep, answer, config, time.perf_counter() - t)
@@ -831,7 +880,8 @@ class Planner:
             res = plan_epoch_fifo(*args, None, self.cache, self.active_index, self.shares) \
                 if self.policy == "fifo" else \
                 as_firstfit(plan_epoch_mwis(*args, first_fit_select, self.cache, self.active_index,
-                                            self.shares, self.config.baseline_order))  # uam_planner.first_fit
+                                            self.shares, self.config.baseline_order,
+                                            horizon=1))  # uam_planner.first_fit; myopic
             prep = PreparedEpoch(t_s=float(t_s), epoch_index=int(epoch_index), pending=list(self.pending),
                                  report=res.report, result=res)
         self._prepared = prep
