@@ -11,6 +11,8 @@
 #                      paper; docs/objectives.md)
 #   --baseline-order B arrival | priority: the order of fifo and firstfit (default arrival)
 #   --priority-share P share of random requests of priority class 1, e.g. 0.05 (default 0)
+#   --horizon H        epochs the MWIS plans jointly (rolling horizon, default 1: the paper's)
+#   --lead-time S      requests are filed S seconds before their earliest departure (default 0)
 #   --rate R           requests per 30 s (default 10, the paper's middle rate)
 #   --duration S       simulated seconds (default 3500)
 #   --seed N           seed of the demand and of stochastic solvers (default 0)
@@ -44,7 +46,7 @@ cd "$ROOT"
 BACKEND=exact POLICY=mwis RATE=10 DURATION=3500 SEED=0 NETWORK=config/networks/singapore.yaml
 DEMAND="" MODE=lockstep RTF=1 RERUN=save OUT="" FOXGLOVE_PORT=0 RECORDER_NICE=19
 SEPARATION=sphere SEPARATION_M=100 VERTICAL_M=30 SLOT_S=0 CLIMB=5 DESCENT=3
-OBJECTIVE=paper BASELINE_ORDER=arrival PRIORITY_SHARE=0
+OBJECTIVE=paper BASELINE_ORDER=arrival PRIORITY_SHARE=0 HORIZON=1 LEAD_TIME=0
 die() { echo "run_fleet: $*" >&2; exit 2; }
 while [[ $# -gt 0 ]]; do
   case "$1" in
@@ -53,6 +55,8 @@ while [[ $# -gt 0 ]]; do
     --objective) OBJECTIVE="${2:?--objective needs a value}"; shift 2;;
     --baseline-order) BASELINE_ORDER="${2:?--baseline-order needs a value}"; shift 2;;
     --priority-share) PRIORITY_SHARE="${2:?--priority-share needs a value}"; shift 2;;
+    --horizon) HORIZON="${2:?--horizon needs a value}"; shift 2;;
+    --lead-time) LEAD_TIME="${2:?--lead-time needs a value}"; shift 2;;
     --rate) RATE="${2:?--rate needs a value}"; shift 2;;
     --duration) DURATION="${2:?--duration needs a value}"; shift 2;;
     --seed) SEED="${2:?--seed needs a value}"; shift 2;;
@@ -70,7 +74,7 @@ while [[ $# -gt 0 ]]; do
     --slot-s) SLOT_S="${2:?--slot-s needs a value}"; shift 2;;
     --climb-rate) CLIMB="${2:?--climb-rate needs a value}"; shift 2;;
     --descent-rate) DESCENT="${2:?--descent-rate needs a value}"; shift 2;;
-    -h|--help) sed -n '2,37p' "$0"; exit 0;;
+    -h|--help) sed -n '2,39p' "$0"; exit 0;;
     *) die "unknown option '$1' (see --help)";;
   esac
 done
@@ -78,6 +82,8 @@ done
 [[ "$OBJECTIVE" =~ ^(paper|count|delay|priority|fair)$ ]] || die "--objective: '$OBJECTIVE' is not paper, count, delay, priority or fair"
 [[ "$BASELINE_ORDER" == arrival || "$BASELINE_ORDER" == priority ]] || die "--baseline-order: '$BASELINE_ORDER' is not arrival or priority"
 [[ "$PRIORITY_SHARE" =~ ^(0(\.[0-9]+)?|1(\.0+)?)$ ]] || die "--priority-share: '$PRIORITY_SHARE' is not a number in [0, 1]"
+[[ "$HORIZON" =~ ^[0-9]+$ ]] && (( HORIZON >= 1 && HORIZON <= 100 )) || die "--horizon: '$HORIZON' is not an integer in [1, 100]"
+[[ "$LEAD_TIME" =~ ^[0-9]+(\.[0-9]+)?$ ]] || die "--lead-time: '$LEAD_TIME' is not a number of seconds >= 0"
 [[ "$MODE" == lockstep || "$MODE" == realtime ]] || die "--mode: '$MODE' is not lockstep or realtime"
 [[ "$RERUN" =~ ^(off|save|spawn|connect)$ ]] || die "--rerun: '$RERUN' is not off, save, spawn or connect"
 [[ "$RATE" =~ ^[0-9]+(\.[0-9]+)?$ ]] || die "--rate: '$RATE' is not a number >= 0"
@@ -185,10 +191,11 @@ AIRSPACE=(-p "separation_model:=$SEPARATION" -p "separation_m:=$(f "$SEPARATION_
           -p "vertical_separation_m:=$(f "$VERTICAL_M")" -p "departure_slot_s:=$(f "$SLOT_S")")
 start uam_planner planner planner --params-file config/planner.yaml -p "network:=$NETWORK" \
   -p "policy:=$POLICY" -p "backend:=$BACKEND" -p "seed:=$SEED" "${AIRSPACE[@]}" \
-  -p "objective:=$OBJECTIVE" -p "baseline_order:=$BASELINE_ORDER" \
+  -p "objective:=$OBJECTIVE" -p "baseline_order:=$BASELINE_ORDER" -p "horizon_epochs:=$HORIZON" \
   -p "climb_rate_mps:=$(f "$CLIMB")" -p "descent_rate_mps:=$(f "$DESCENT")" -p "journal:=$OUT/planner-journal.jsonl"
 start uam_sim request_generator request_generator --params-file config/request_generator.yaml \
   -p "network:=$NETWORK" -p "rate:=$RATE" -p "seed:=$SEED" -p "priority_share:=$(f "$PRIORITY_SHARE")" \
+  -p "lead_time_s:=$(f "$LEAD_TIME")" \
   ${DEMAND:+-p "demand_file:=$DEMAND"}
 # the recorder writes the run's airspace into the MCAP (uam_airspace metadata): the analysis audits in it.
 # It subscribes to the fleet state (which starts the simulator) only once it hears these topics'

@@ -56,7 +56,7 @@ def test_read_only_parameters_refuse_changes(ros_context, tmp_path):
                                   (rec, "output", str(tmp_path / "other.mcap")), (planner, "network", TINY),
                                   (planner, "policy", "fifo"), (planner, "k", 3),
                                   (planner, "objective", "count"), (planner, "baseline_order", "priority"),
-                                  (gen, "priority_share", 0.5)]:
+                                  (planner, "horizon_epochs", 2), (gen, "priority_share", 0.5)]:
             before = node.get_parameter(name).value
             res = _set(node, **{name: value})
             assert not res.successful and name in res.reason, (name, res.reason)
@@ -189,10 +189,10 @@ def test_planner_objective_and_baseline_order_reach_the_library_and_bad_ones_are
     """Issue 21: the read-only objective and baseline_order become the Planner's PlanningConfig."""
     from uam_planner.nodes.planner_node import PlannerNode
 
-    planner = make_planner(ros_context, objective="priority", baseline_order="priority")
+    planner = make_planner(ros_context, objective="priority", baseline_order="priority", horizon_epochs=3)
     try:
         cfg = planner.planner.config
-        assert (cfg.objective, cfg.baseline_order) == ("priority", "priority")
+        assert (cfg.objective, cfg.baseline_order, cfg.horizon_epochs) == ("priority", "priority", 3)
     finally:
         planner.destroy_node()
     tiny = str(ROOT / "config" / "networks" / "tiny.yaml")

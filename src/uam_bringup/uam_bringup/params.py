@@ -240,6 +240,9 @@ PLANNER = (
     Param("baseline_order", "arrival", "order in which the fifo and firstfit policies serve requests: 'arrival' "
           "(the paper's) or 'priority' (priority class, then earliest latest departure, then arrival)",
           choices=("arrival", "priority")),
+    Param("horizon_epochs", 1, "rolling planning horizon H of the mwis policy: the departures of the next H "
+          "epochs are planned in one MWIS and only what departs in this epoch is committed, the rest planned "
+          "again; 1 = the paper's one-epoch planning", 1, 100),
     Param("k", 5, "candidate routes per request", 1, 100),
     Param("penalty_factor", 5.0, "penalised Dijkstra factor for diverse candidates", 0.0, 1000.0),
     Param("speed_mps", 10.0, "cruise speed [m/s]", 0.001, 1000.0),
@@ -324,6 +327,8 @@ REQUEST_GENERATOR = (
     Param("priority_share", 0.0, "share of random requests of class priority_class (e.g. 0.05 medical flights), "
           "drawn from the seeded stream after the paper's numbers; 0 = none (the paper's)", 0.0, 1.0),
     Param("priority_class", 1, "priority class of those requests (FlightRequest.priority)", 1, 255),
+    Param("lead_time_s", 0.0, "random requests are filed this long before their earliest departure [s] "
+          "(for a planning horizon; the planner's max_window_s bounds it)", 0.0, 86400.0),
 )
 
 def _mcap_path_rule(value: str) -> str:

@@ -174,3 +174,13 @@ def test_demand_file_priority_and_operator():
         parse_demand([{"t_s": 0, "origin": "A", "destination": "B", "priority": True}], AERO)
     with pytest.raises(DemandError, match=r"demand\[0\]\.operator: 'x/y' must be 1 to 64"):
         parse_demand([{"t_s": 0, "origin": "A", "destination": "B", "operator": "x/y"}], AERO)
+
+
+def test_lead_time_files_requests_ahead_with_the_same_stream():
+    plain = RequestGenerator(AERO, 3, seed=2).requests_for_epoch(4)
+    ahead = RequestGenerator(AERO, 3, seed=2, lead_time_s=600.0).requests_for_epoch(4)
+    assert [(r.origin_id, r.destination_id, r.request_time_s) for r in plain] == \
+        [(r.origin_id, r.destination_id, r.request_time_s) for r in ahead]
+    assert [(r.earliest_departure_s, r.latest_departure_s) for r in ahead] == [(720.0, 780.0)] * 3
+    with pytest.raises(DemandError, match=r"lead_time_s: -1 must be a finite number >= 0"):
+        RequestGenerator(AERO, 3, lead_time_s=-1)

@@ -68,6 +68,8 @@ class RequestGenerator:
             (e.g. 0.05 medical flights); the others are class 0.
         priority_class: the class of those requests, an integer in [1, 255].
         operators: operator ids a request is drawn from uniformly (empty: no operator_id).
+        lead_time_s: requests are filed this long ahead [s] (>= 0): earliest departure
+            ``t + lead_time_s``, latest ``t + lead_time_s + window_s`` (for a planning horizon).
 
     ``requests_at(t_s, interval_index)`` returns that interval's requests, requested at ``t_s``,
     earliest departure ``t_s``, latest ``t_s + window_s``. O(rate) per call.
@@ -76,7 +78,7 @@ class RequestGenerator:
     def __init__(self, aerodrome_ids: Sequence[str], rate_per_interval: float,
                  interval_s: float = DEFAULT_INTERVAL_S, window_s: float = DEFAULT_WINDOW_S,
                  seed: int = 0, priority_share: float = 0.0, priority_class: int = 1,
-                 operators: Sequence[str] = ()):
+                 operators: Sequence[str] = (), lead_time_s: float = 0.0):
         ids = [str(a) for a in aerodrome_ids]
         if len(set(ids)) < 2:
             raise DemandError(f"aerodrome_ids: need at least 2 distinct aerodromes, got {ids!r}")
@@ -108,6 +110,11 @@ class RequestGenerator:
                 raise DemandError(problem)
         if len(set(ops)) != len(ops):
             raise DemandError(f"operators: duplicates in {ops!r}")
+        lt = lead_time_s
+        if isinstance(lt, bool) or not isinstance(lt, (int, float, np.integer, np.floating)) \
+                or not math.isfinite(lt) or lt < 0:
+            raise DemandError(f"lead_time_s: {lt!r} must be a finite number >= 0")
+        self.lead_time_s = float(lt)
         self.priority_share = float(ps)
         self.priority_class = int(priority_class)
         self.operators = tuple(ops)
@@ -138,10 +145,11 @@ class RequestGenerator:
         ops = [self.operators[j] for j in rng.integers(0, len(self.operators), size=n).tolist()] \
             if self.operators else [""] * n
         t = float(t_s)
+        e = t + self.lead_time_s
         return [FlightRequest(request_id=request_id(interval_index, i),
                               origin_id=self.aerodrome_ids[o], destination_id=self.aerodrome_ids[d],
-                              request_time_s=t, earliest_departure_s=t,
-                              latest_departure_s=t + self.window_s, priority=int(prio[i]),
+                              request_time_s=t, earliest_departure_s=e,
+                              latest_departure_s=e + self.window_s, priority=int(prio[i]),
                               operator_id=ops[i])
                 for i, (o, d) in enumerate(zip(origin.tolist(), dest.tolist()))]
 

@@ -85,6 +85,8 @@ class ExperimentConfig:
         priority_share, priority_class: the generator's priority mix (share of requests of that
             class, e.g. 0.05 and 1; 0 = none, the paper's).
         operators: operator ids the generator draws each request's operator from (none: "").
+        horizon_epochs: epochs the MWIS plans jointly (rolling horizon; 1 = the paper's).
+        lead_time_s: requests are filed this long before their earliest departure [s].
         cumulative_rates: rates shown in the cumulative-approvals figure (default: up to 4 spread).
         tts: TTS study settings: enabled, instances (sampled from the runs' MWIS instances),
             min_vertices, max_vertices, reads (per annealing run), repetitions (runs per instance
@@ -125,6 +127,8 @@ class ExperimentConfig:
     priority_share: float = 0.0
     priority_class: int = 1
     operators: list = field(default_factory=list)
+    horizon_epochs: int = 1
+    lead_time_s: float = 0.0
     tts: dict = field(default_factory=lambda: {
         "enabled": True, "instances": 629, "min_vertices": 5, "max_vertices": 50, "reads": 100,
         "repetitions": 5, "backend_instances": {"qpu-emulator": 60},
@@ -153,7 +157,8 @@ class ExperimentConfig:
                               penalty_factor=self.penalty_factor, speed_mps=self.speed_mps,
                               backend=backend, time_limit_s=self.time_limit_s, seed=int(seed),
                               airspace=self.airspace(), objective=self.objective,
-                              baseline_order=self.baseline_order)
+                              baseline_order=self.baseline_order,
+                              horizon_epochs=self.horizon_epochs)
 
 
 def _num_list(name: str, value, cast=float) -> list:
@@ -234,7 +239,8 @@ def make_config(data: dict | None = None, **overrides) -> ExperimentConfig:
     try:
         from .demand import DemandError, RequestGenerator
         RequestGenerator(["a", "b"], 0, priority_share=cfg.priority_share,
-                         priority_class=cfg.priority_class, operators=cfg.operators)
+                         priority_class=cfg.priority_class, operators=cfg.operators,
+                         lead_time_s=cfg.lead_time_s)
     except DemandError as exc:
         raise ExperimentError(str(exc)) from None
     try:

@@ -45,7 +45,8 @@ class RequestGeneratorNode(Node):
                                          p["interval_s"])
         else:
             self.source = RequestGenerator(network.aerodrome_ids, p["rate"], p["interval_s"], p["window_s"], p["seed"],
-                                           priority_share=p["priority_share"], priority_class=p["priority_class"])
+                                           priority_share=p["priority_share"], priority_class=p["priority_class"],
+                                           lead_time_s=p["lead_time_s"])
         self.interval_s = p["interval_s"]
         self.operator_id = p["operator_id"]
         self._pub = self.create_publisher(FlightRequest, c.TOPIC_REQUESTS, qos.QOS_REQUESTS)
