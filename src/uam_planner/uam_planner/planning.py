@@ -172,7 +172,8 @@ class PlanningConfig:
             candidates of a request at the departures of the next H epochs are vertices of one
             graph (one clique per request), and only the selected ones departing in this epoch
             (before t + epoch_s in the paper's rule; at most t + epoch_s with slots) are
-            committed; the others wait and are planned again at the next epoch. 1 = today's (the paper's) one-epoch planning. The baselines ignore it.
+            committed; the others wait and are planned again at the next epoch. 1 = today's
+            (the paper's) one-epoch planning. The baselines ignore it.
     """
 
     epoch_s: float = 30.0
