@@ -336,3 +336,17 @@ def test_horizon_epochs_is_validated():
         PlanningConfig(horizon_epochs=0)
     with pytest.raises(ValueError, match=r"horizon_epochs .* got 2.0"):
         PlanningConfig(horizon_epochs=2.0)
+
+
+def test_horizon_departures_every_slot_now_and_the_first_of_each_later_epoch():
+    from uam_planner.planning import departure_slots_s
+
+    cfg = PlanningConfig(horizon_epochs=3, airspace=AirspaceConfig(departure_slot_s=10.0))
+    r = FlightRequest("r", "C", "D", 0, 0, 200)
+    assert departure_slots_s(0.0, r, cfg, 3).tolist() == [0, 10, 20, 30, 40, 70]
+    assert departure_slots_s(0.0, r, cfg, 1).tolist() == [0, 10, 20, 30]
+    late = FlightRequest("l", "C", "D", 0, 45, 200)  # grid 45, 55, 65, 75, 85: epochs 2, 2, 3, 3, 3
+    assert departure_slots_s(0.0, late, cfg, 3).tolist() == [45, 65]
+    # the paper's rule: the epoch times inside the window
+    paper = PlanningConfig(horizon_epochs=3)
+    assert departure_slots_s(0.0, FlightRequest("p", "C", "D", 0, 20, 70), paper, 3).tolist() == [30, 60]

@@ -390,8 +390,10 @@ def departure_slots_s(t_s: float, request: FlightRequest, config: PlanningConfig
     Paper rule (``departure_slot_s == 0``): [t_s]. Otherwise lo, lo + slot, ... <= hi with
     lo = max(t_s, earliest_departure_s), hi = min(t_s + epoch_s, latest_departure_s); empty when
     lo > hi. E.g. t = 0, epoch 30 s, slot 5 s, window [0, 60]: 0, 5, ..., 30 (7 slots).
-    With a ``horizon`` of H epochs: hi = min(t_s + H epoch_s, latest_departure_s), and the paper
-    rule's departures are the epoch times t_s + j epoch_s (j < H) inside the window.
+    With a ``horizon`` of H epochs: hi = min(t_s + H epoch_s, latest_departure_s), every slot of
+    this epoch (up to t_s + epoch_s) and, of each later epoch, its first slot only; the paper
+    rule's departures are the epoch times t_s + j epoch_s (j < H) inside the window. E.g.
+    t = 0, epoch 30 s, slot 10 s, H = 3, window [0, 200]: 0, 10, 20, 30, 40, 70.
     """
     slot = float(config.airspace.departure_slot_s)
     if slot <= 0.0:
@@ -402,7 +404,17 @@ def departure_slots_s(t_s: float, request: FlightRequest, config: PlanningConfig
     if lo > hi:
         return np.zeros(0)
     n = int(math.floor((hi - lo) / slot + 1e-9)) + 1
-    return lo + slot * np.arange(n, dtype=np.float64)
+    grid = lo + slot * np.arange(n, dtype=np.float64)
+    if horizon == 1:
+        return grid
+    # Later epochs of the horizon are planned again before they are committed: one departure
+    # each (the first slot after the epoch's start) bounds the graph (every slot of a 300 s
+    # window at 5 s gave 17,500 vertices and 4.7 million edges at H = 10, rate 20).
+    end = float(t_s) + config.epoch_s
+    later = grid > end + 1e-9
+    epoch_of = np.ceil((grid[later] - float(t_s)) / config.epoch_s - 1e-9)
+    _, first = np.unique(epoch_of, return_index=True)
+    return np.concatenate((grid[~later], grid[later][first]))
 
 
 @dataclass
