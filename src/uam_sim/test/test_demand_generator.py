@@ -184,3 +184,18 @@ def test_lead_time_files_requests_ahead_with_the_same_stream():
     assert [(r.earliest_departure_s, r.latest_departure_s) for r in ahead] == [(720.0, 780.0)] * 3
     with pytest.raises(DemandError, match=r"lead_time_s: -1 must be a finite number >= 0"):
         RequestGenerator(AERO, 3, lead_time_s=-1)
+
+
+def test_operators_with_their_own_filing_habits():
+    gen = RequestGenerator(AERO, 10, seed=5, operators=["early", "late"], lead_time_s=30.0,
+                           operator_lead_times_s=[600.0, 0.0])
+    reqs = [r for e in range(5) for r in gen.requests_for_epoch(e)]
+    for r in reqs:
+        lead = r.earliest_departure_s - r.request_time_s
+        assert lead == (630.0 if r.operator_id == "early" else 30.0)
+        assert r.latest_departure_s - r.earliest_departure_s == 60.0
+    assert {r.operator_id for r in reqs} == {"early", "late"}
+    with pytest.raises(DemandError, match=r"operator_lead_times_s: 1 values for 2 operators"):
+        RequestGenerator(AERO, 1, operators=["a", "b"], operator_lead_times_s=[5.0])
+    with pytest.raises(DemandError, match=r"operator_lead_times_s: -5.0 must be a finite number >= 0"):
+        RequestGenerator(AERO, 1, operators=["a"], operator_lead_times_s=[-5.0])

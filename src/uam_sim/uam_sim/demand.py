@@ -70,6 +70,9 @@ class RequestGenerator:
         operators: operator ids a request is drawn from uniformly (empty: no operator_id).
         lead_time_s: requests are filed this long ahead [s] (>= 0): earliest departure
             ``t + lead_time_s``, latest ``t + lead_time_s + window_s`` (for a planning horizon).
+        operator_lead_times_s: optional extra lead time [s] per operator (same length as
+            ``operators``): filing habits, e.g. (600, 0) for one operator that files 10 min
+            ahead and one that files at the last moment.
 
     ``requests_at(t_s, interval_index)`` returns that interval's requests, requested at ``t_s``,
     earliest departure ``t_s``, latest ``t_s + window_s``. O(rate) per call.
@@ -78,7 +81,8 @@ class RequestGenerator:
     def __init__(self, aerodrome_ids: Sequence[str], rate_per_interval: float,
                  interval_s: float = DEFAULT_INTERVAL_S, window_s: float = DEFAULT_WINDOW_S,
                  seed: int = 0, priority_share: float = 0.0, priority_class: int = 1,
-                 operators: Sequence[str] = (), lead_time_s: float = 0.0):
+                 operators: Sequence[str] = (), lead_time_s: float = 0.0,
+                 operator_lead_times_s: Sequence[float] = ()):
         ids = [str(a) for a in aerodrome_ids]
         if len(set(ids)) < 2:
             raise DemandError(f"aerodrome_ids: need at least 2 distinct aerodromes, got {ids!r}")
@@ -115,6 +119,14 @@ class RequestGenerator:
                 or not math.isfinite(lt) or lt < 0:
             raise DemandError(f"lead_time_s: {lt!r} must be a finite number >= 0")
         self.lead_time_s = float(lt)
+        olt = list(operator_lead_times_s)
+        if olt and len(olt) != len(ops):
+            raise DemandError(f"operator_lead_times_s: {len(olt)} values for {len(ops)} operators")
+        for v in olt:
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
+                    or not math.isfinite(v) or v < 0:
+                raise DemandError(f"operator_lead_times_s: {v!r} must be a finite number >= 0")
+        self.operator_lead_times_s = tuple(float(v) for v in olt) or (0.0,) * len(ops)
         self.priority_share = float(ps)
         self.priority_class = int(priority_class)
         self.operators = tuple(ops)
@@ -142,14 +154,15 @@ class RequestGenerator:
         # drawn after the paper's numbers, only when asked for: the paper's stream is unchanged
         prio = np.where(rng.random(n) < self.priority_share, self.priority_class, 0) \
             if self.priority_share > 0 else np.zeros(n, dtype=np.int64)
-        ops = [self.operators[j] for j in rng.integers(0, len(self.operators), size=n).tolist()] \
-            if self.operators else [""] * n
+        which = rng.integers(0, len(self.operators), size=n).tolist() if self.operators else []
+        ops = [self.operators[j] for j in which] if which else [""] * n
+        extra = [self.operator_lead_times_s[j] for j in which] if which else [0.0] * n
         t = float(t_s)
-        e = t + self.lead_time_s
         return [FlightRequest(request_id=request_id(interval_index, i),
                               origin_id=self.aerodrome_ids[o], destination_id=self.aerodrome_ids[d],
-                              request_time_s=t, earliest_departure_s=e,
-                              latest_departure_s=e + self.window_s, priority=int(prio[i]),
+                              request_time_s=t, earliest_departure_s=t + self.lead_time_s + extra[i],
+                              latest_departure_s=t + self.lead_time_s + extra[i] + self.window_s,
+                              priority=int(prio[i]),
                               operator_id=ops[i])
                 for i, (o, d) in enumerate(zip(origin.tolist(), dest.tolist()))]
 

@@ -87,6 +87,7 @@ class ExperimentConfig:
         operators: operator ids the generator draws each request's operator from (none: "").
         horizon_epochs: epochs the MWIS plans jointly (rolling horizon; 1 = the paper's).
         lead_time_s: requests are filed this long before their earliest departure [s].
+        operator_lead_times_s: extra lead time [s] per operator (filing habits), as ``operators``.
         cumulative_rates: rates shown in the cumulative-approvals figure (default: up to 4 spread).
         tts: TTS study settings: enabled, instances (sampled from the runs' MWIS instances),
             min_vertices, max_vertices, reads (per annealing run), repetitions (runs per instance
@@ -129,6 +130,7 @@ class ExperimentConfig:
     operators: list = field(default_factory=list)
     horizon_epochs: int = 1
     lead_time_s: float = 0.0
+    operator_lead_times_s: list = field(default_factory=list)
     tts: dict = field(default_factory=lambda: {
         "enabled": True, "instances": 629, "min_vertices": 5, "max_vertices": 50, "reads": 100,
         "repetitions": 5, "backend_instances": {"qpu-emulator": 60},
@@ -240,7 +242,8 @@ def make_config(data: dict | None = None, **overrides) -> ExperimentConfig:
         from .demand import DemandError, RequestGenerator
         RequestGenerator(["a", "b"], 0, priority_share=cfg.priority_share,
                          priority_class=cfg.priority_class, operators=cfg.operators,
-                         lead_time_s=cfg.lead_time_s)
+                         lead_time_s=cfg.lead_time_s,
+                         operator_lead_times_s=cfg.operator_lead_times_s)
     except DemandError as exc:
         raise ExperimentError(str(exc)) from None
     try:

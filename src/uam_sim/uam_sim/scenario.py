@@ -136,7 +136,8 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
         demand = RequestGenerator(network.aerodrome_ids, rate, cfg.interval_s, cfg.window_s, seed,
                                   priority_share=cfg.priority_share,
                                   priority_class=cfg.priority_class, operators=cfg.operators,
-                                  lead_time_s=cfg.lead_time_s)
+                                  lead_time_s=cfg.lead_time_s,
+                                  operator_lead_times_s=cfg.operator_lead_times_s)
     n_epochs = int(math.ceil(duration_s / cfg.epoch_s - 1e-9))
     next_interval = 0
     epochs, flights, instances, rejections = [], [], [], []
