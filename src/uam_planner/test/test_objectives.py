@@ -138,7 +138,7 @@ def test_delay_counts_from_the_earliest_departure_and_gives_a_last_chance_urgenc
 # ---- fair ------------------------------------------------------------------------------------------
 
 def test_fair_serves_the_operator_behind_where_count_sees_a_tie():
-    # a: 10 requests so far, 10 approved; b: 10 requests, 2 approved.
+    # a: 10 requests decided so far, 10 approved; b: 10 decided, 2 approved.
     # phi_a = round(10 * 11 / 11) = 10; phi_b = round(10 * 11 / 3) = round(36.67) = 37
     shares = OperatorShares(Counter(a=10, b=10), Counter(a=10, b=2))
     # an operator not seen yet: round(10 * 1 / 1) = 10
@@ -181,8 +181,9 @@ def test_fair_balances_two_operators_over_epochs_where_count_serves_one():
     won, p = run_two_operators("count")
     assert len(won) == 4 and len(set(won)) == 1  # a tie every epoch, broken the same way
     won, p = run_two_operators("fair")
-    # epoch 0: phi = round(10 * 2 / 1) = 20 each (tie); epoch 1: the winner's phi is
-    # round(10 * 3 / 2) = 15, the other's 30: the other flies; and so on: 2 each
+    # counts of decided requests: epoch 0: nothing decided, phi = 10 each (tie); epoch 1: the
+    # winner's phi is round(10 * 2 / 2) = 10, the other's round(10 * 2 / 1) = 20: the other
+    # flies; epoch 2: a tie again; epoch 3: 13 against 20. 2 each
     assert sorted(Counter(won).values()) == [2, 2]
     assert p.shares.approved == Counter(a=2, b=2) and p.shares.requested == Counter(a=4, b=4)
 

@@ -16,7 +16,7 @@ candidate (docs/objectives.md has the formula, the reason and a hand-computed ex
   outweighs every flight of all lower classes together; inside a class, as ``count``.
 - ``fair``: proportional fairness between operators (Kelly 1998; alpha-fair with alpha = 1, Mo and
   Walrand 2000), re-weighted between epochs from the running shares: w = phi_o B + q with
-  phi_o = round(F (n_o + 1) / (a_o + 1)) (n_o requests accepted so far, a_o approved), the
+  phi_o = round(F (n_o + 1) / (a_o + 1)) (n_o requests decided so far, a_o approved), the
   gradient of sum_o n_o log(a_o / n_o); clipped to [F, F * FAIR_MAX_RATIO].
 
 Every objective but ``paper`` gives whole-number weights no larger than ``w_max`` (default
@@ -90,10 +90,12 @@ def operator_of(request) -> str:
 
 @dataclass
 class OperatorShares:
-    """Running counts per operator for ``fair``: requests accepted and approved so far.
+    """Running counts per operator for ``fair``: requests decided (approved or expired) and
+    approved so far.
 
-    The Planner counts a request when it is accepted (``submit``) and an approval when it is
-    committed; the weights of an epoch read the counts as they were when it was prepared.
+    The Planner counts both when an epoch is committed (a request filed far ahead counts only
+    once it had its chance); the weights of an epoch read the counts as they were when it was
+    prepared.
     """
 
     requested: Counter = field(default_factory=Counter)

@@ -789,7 +789,8 @@ class Planner:
         self._known_ids: set[str] = set()
         self._rejected_since_plan = 0
         self._prepared: PreparedEpoch | None = None
-        # requests accepted and approved per operator (the "fair" objective's running shares)
+        # requests decided (approved or expired) and approved per operator (the "fair"
+        # objective's running shares)
         self.shares = OperatorShares()
 
     @property
@@ -871,7 +872,6 @@ class Planner:
             return reason
         self._known_ids.add(request.request_id)
         self.pending.append(request)
-        self.shares.requested[operator_of(request)] += 1
         return None
 
     def prepare(self, t_s: float, epoch_index: int) -> PreparedEpoch:
@@ -911,6 +911,8 @@ class Planner:
         self.pending = list(result.waiting) + arrived_since
         self.active = self.active + list(result.approved)
         self.shares.approved.update(operator_of(f) for f in result.approved)
+        self.shares.requested.update(operator_of(f) for f in result.approved)
+        self.shares.requested.update(operator_of(r) for r in result.expired)
         result.report.rejected = self._rejected_since_plan
         self._rejected_since_plan = 0
         return result
@@ -930,6 +932,7 @@ class Planner:
         new = [f for f in flights if f.request_id not in held]
         self.active = self.active + new
         self.shares.approved.update(operator_of(f) for f in new)
+        self.shares.requested.update(operator_of(f) for f in new)
         self._known_ids.update(f.request_id for f in flights)
         self._known_ids.update(decided_ids)
         self.pending = [r for r in self.pending if r.request_id not in self._known_ids]

@@ -43,6 +43,16 @@ def test_decision_metrics_hand_computed():
     assert m["jain_index"] == pytest.approx(0.8)
     m = decision_metrics(flights, requests)
     assert m["share_b"] == pytest.approx(2 / 4) and m["delay_mean_s"] == pytest.approx(30.0)
+    # end_s: a request whose window is still open at the end is left out (b: 1 of 2 left)
+    rows = [{"earliest_departure_s": 0.0, "latest_departure_s": 60.0, "operator": "b"},
+            {"earliest_departure_s": 600.0, "latest_departure_s": 660.0, "operator": "b"}]
+    assert decision_metrics([], rows)["share_b"] == 0.0
+    m = decision_metrics([{**rows[1], "departure_s": 600.0, "length_m": 1.0,
+                           "shortest_length_m": 1.0}], rows, end_s=300.0)
+    assert m["share_b"] == 0.0 and math.isnan(m["delay_mean_s"])
+    m = decision_metrics([{**rows[1], "departure_s": 600.0, "length_m": 1.0,
+                           "shortest_length_m": 1.0}], rows)
+    assert m["share_b"] == 0.5
     # no operator named, one class: no share or class keys
     m = decision_metrics([{"earliest_departure_s": 0.0, "departure_s": 5.0, "length_m": 1.0,
                            "shortest_length_m": None}],
@@ -66,7 +76,10 @@ def test_runner_summary_carries_the_objective_and_metrics():
         assert {"share_a", "share_b", "jain_index", "delay_p95_s_prio0", "delay_p95_s_prio2",
                 "delay_mean_s", "delay_p95_s", "detour_mean_m"} <= set(s)
         assert 0.0 <= s["share_a"] <= 1.0 and 0.5 <= s["jain_index"] <= 1.0
-        delays = [f["departure_s"] - f["earliest_departure_s"] for f in r.flights]
+        # flights of requests still within their window at the end (300 s) are left out
+        delays = [f["departure_s"] - f["earliest_departure_s"] for f in r.flights
+                  if f["latest_departure_s"] <= 300.0]
+        assert len(delays) < len(r.flights)
         assert s["delay_mean_s"] == pytest.approx(sum(delays) / len(delays))
         assert all(f["length_m"] >= f["shortest_length_m"] - 1e-6 for f in r.flights)
     # the mix leaves the paper objective's decisions as they are without it

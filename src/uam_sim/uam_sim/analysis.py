@@ -376,6 +376,7 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=10
             request_ids.add(key)
             request_rows.setdefault(key, {
                 "earliest_departure_s": stamp_s(msg.earliest_departure),
+                "latest_departure_s": stamp_s(msg.latest_departure),
                 "priority": int(getattr(msg, "priority", 0)),  # recordings before issue 21: 0
                 "operator": str(getattr(msg, "operator_id", "") or "")})
         elif topic == TOPIC_PLANS:
@@ -443,6 +444,10 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=10
     with_instance = [e for e in epochs if e.vertices > 0]
     max_active = int(max(fleet_n)) if fleet_n else 0
     audit = audit_plans(approved_plans, separation_m, labels=labels)
+    # the run's end as the epochs show it: the last epoch's time + the epoch length (the median
+    # step between epochs); requests still within their window then are left out, as in the runner
+    ts = sorted({e.t_s for e in epochs})
+    end_s = ts[-1] + float(np.median(np.diff(ts))) if len(ts) > 1 else None
     flight_rows = []
     for p in approved_plans:
         r = request_rows.get(request_key(p))
@@ -476,7 +481,7 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=10
                                     max_active, audit, conflicting, fleet_steps) + run,
         forged_plans=forged,
         run_end=run_end,
-        decision_metrics=decision_metrics(flight_rows, list(request_rows.values())),
+        decision_metrics=decision_metrics(flight_rows, list(request_rows.values()), end_s=end_s),
     )
 
 

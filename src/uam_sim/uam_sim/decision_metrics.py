@@ -12,7 +12,8 @@ recordings (``uam_sim.analysis``): plain functions over plain rows, no ROS.
   operator gets the same share, 1/n when one gets everything; NaN with no operator or all shares 0.
 
 Warm-up: with ``warmup_s``, requests whose earliest departure is before it are left out of every
-metric.
+metric. End: with ``end_s``, requests whose latest departure is after it (not through their
+window when the run ended: filed ahead, still waiting) are left out too.
 """
 
 from __future__ import annotations
@@ -38,7 +39,7 @@ def _p95(x: np.ndarray) -> float:
 
 
 def decision_metrics(flights: Iterable[Mapping], requests: Iterable[Mapping],
-                     warmup_s: float | None = None) -> dict:
+                     warmup_s: float | None = None, end_s: float | None = None) -> dict:
     """Delay, detour, per-priority p95 delay, per-operator approval share and Jain index.
 
     Args:
@@ -49,13 +50,20 @@ def decision_metrics(flights: Iterable[Mapping], requests: Iterable[Mapping],
             ``earliest_departure_s``, ``operator`` and ``priority``.
         warmup_s: requests (and their flights) with an earliest departure before it are left out
             (None: none is).
+        end_s: requests (and their flights) with a latest departure after it are left out
+            (None: none is); rows without ``latest_departure_s`` are kept.
     Returns: a flat dict (a tidy summary row): ``delay_mean_s``, ``delay_p95_s``,
     ``detour_mean_m``, ``jain_index``, ``delay_p95_s_prio<c>`` per class present and
     ``share_<op>`` per named operator (when any request names one). O(n log n).
     """
     lo = -math.inf if warmup_s is None else float(warmup_s)
-    fl = [f for f in flights if float(f["earliest_departure_s"]) >= lo]
-    rq = [r for r in requests if float(r["earliest_departure_s"]) >= lo]
+    hi = math.inf if end_s is None else float(end_s)
+
+    def inside(row) -> bool:
+        return float(row["earliest_departure_s"]) >= lo and \
+            float(row.get("latest_departure_s", -math.inf)) <= hi
+    fl = [f for f in flights if inside(f)]
+    rq = [r for r in requests if inside(r)]
     delay = np.array([float(f["departure_s"]) - float(f["earliest_departure_s"]) for f in fl])
     det = np.array([float(f["length_m"]) - float(f["shortest_length_m"]) for f in fl
                     if f.get("shortest_length_m") is not None])
