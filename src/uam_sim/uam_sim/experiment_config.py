@@ -88,6 +88,8 @@ class ExperimentConfig:
         horizon_epochs: epochs the MWIS plans jointly (rolling horizon; 1 = the paper's).
         lead_time_s: requests are filed this long before their earliest departure [s].
         operator_lead_times_s: extra lead time [s] per operator (filing habits), as ``operators``.
+        metrics_warmup_s: the decision metrics (delay, shares, ...) leave out requests whose
+            earliest departure is before it (the warm-up); 0 = none.
         cumulative_rates: rates shown in the cumulative-approvals figure (default: up to 4 spread).
         tts: TTS study settings: enabled, instances (sampled from the runs' MWIS instances),
             min_vertices, max_vertices, reads (per annealing run), repetitions (runs per instance
@@ -131,6 +133,7 @@ class ExperimentConfig:
     horizon_epochs: int = 1
     lead_time_s: float = 0.0
     operator_lead_times_s: list = field(default_factory=list)
+    metrics_warmup_s: float = 0.0
     tts: dict = field(default_factory=lambda: {
         "enabled": True, "instances": 629, "min_vertices": 5, "max_vertices": 50, "reads": 100,
         "repetitions": 5, "backend_instances": {"qpu-emulator": 60},

@@ -223,7 +223,7 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
         "losses": audit.get("losses"),
         "objective": cfg.objective,
         # requests still within their window at the end (filed ahead) are left out
-        **decision_metrics(flights, asked, end_s=duration_s),
+        **decision_metrics(flights, asked, warmup_s=cfg.metrics_warmup_s or None, end_s=duration_s),
     }
     wall = time.perf_counter() - t_wall
     summary["wall_s"] = wall
