@@ -7,6 +7,12 @@
 # usage: scripts/run_fleet.sh [options]
 #   --backend NAME     MWIS backend of the solver (default exact; `--backend list` lists them)
 #   --policy P         mwis | fifo | firstfit (default mwis)
+#   --objective O      what the MWIS maximises: paper | count | delay | priority | fair (default
+#                      paper; docs/objectives.md)
+#   --baseline-order B arrival | priority: the order of fifo and firstfit (default arrival)
+#   --priority-share P share of random requests of priority class 1, e.g. 0.05 (default 0)
+#   --horizon H        epochs the MWIS plans jointly (rolling horizon, default 1: the paper's)
+#   --lead-time S      requests are filed S seconds before their earliest departure (default 0)
 #   --rate R           requests per 30 s (default 10, the paper's middle rate)
 #   --duration S       simulated seconds (default 3500)
 #   --seed N           seed of the demand and of stochastic solvers (default 0)
@@ -43,11 +49,17 @@ cd "$ROOT"
 BACKEND=exact POLICY=mwis RATE=10 DURATION=3500 SEED=0 NETWORK=config/networks/singapore.yaml
 DEMAND="" CONSTRAINTS="" MODE=lockstep RTF=1 RERUN=save OUT="" FOXGLOVE_PORT=0 RECORDER_NICE=19
 SEPARATION="" SEPARATION_M=100 VERTICAL_M=30 SLOT_S=0 CLIMB=5 DESCENT=3
+OBJECTIVE=paper BASELINE_ORDER=arrival PRIORITY_SHARE=0 HORIZON=1 LEAD_TIME=0
 die() { echo "run_fleet: $*" >&2; exit 2; }
 while [[ $# -gt 0 ]]; do
   case "$1" in
     --backend) BACKEND="${2:?--backend needs a value}"; shift 2;;
     --policy) POLICY="${2:?--policy needs a value}"; shift 2;;
+    --objective) OBJECTIVE="${2:?--objective needs a value}"; shift 2;;
+    --baseline-order) BASELINE_ORDER="${2:?--baseline-order needs a value}"; shift 2;;
+    --priority-share) PRIORITY_SHARE="${2:?--priority-share needs a value}"; shift 2;;
+    --horizon) HORIZON="${2:?--horizon needs a value}"; shift 2;;
+    --lead-time) LEAD_TIME="${2:?--lead-time needs a value}"; shift 2;;
     --rate) RATE="${2:?--rate needs a value}"; shift 2;;
     --duration) DURATION="${2:?--duration needs a value}"; shift 2;;
     --seed) SEED="${2:?--seed needs a value}"; shift 2;;
@@ -71,6 +83,11 @@ while [[ $# -gt 0 ]]; do
   esac
 done
 [[ "$POLICY" == mwis || "$POLICY" == fifo || "$POLICY" == firstfit ]] || die "--policy: '$POLICY' is not mwis, fifo or firstfit"
+[[ "$OBJECTIVE" =~ ^(paper|count|delay|priority|fair)$ ]] || die "--objective: '$OBJECTIVE' is not paper, count, delay, priority or fair"
+[[ "$BASELINE_ORDER" == arrival || "$BASELINE_ORDER" == priority ]] || die "--baseline-order: '$BASELINE_ORDER' is not arrival or priority"
+[[ "$PRIORITY_SHARE" =~ ^(0(\.[0-9]+)?|1(\.0+)?)$ ]] || die "--priority-share: '$PRIORITY_SHARE' is not a number in [0, 1]"
+[[ "$HORIZON" =~ ^[0-9]+$ ]] && (( HORIZON >= 1 && HORIZON <= 100 )) || die "--horizon: '$HORIZON' is not an integer in [1, 100]"
+[[ "$LEAD_TIME" =~ ^[0-9]+(\.[0-9]+)?$ ]] || die "--lead-time: '$LEAD_TIME' is not a number of seconds >= 0"
 [[ "$MODE" == lockstep || "$MODE" == realtime ]] || die "--mode: '$MODE' is not lockstep or realtime"
 [[ "$RERUN" =~ ^(off|save|spawn|connect)$ ]] || die "--rerun: '$RERUN' is not off, save, spawn or connect"
 [[ "$RATE" =~ ^[0-9]+(\.[0-9]+)?$ ]] || die "--rate: '$RATE' is not a number >= 0"
@@ -193,10 +210,13 @@ AIRSPACE=(-p "separation_model:=$SEPARATION" -p "separation_m:=$(f "$SEPARATION_
           -p "vertical_separation_m:=$(f "$VERTICAL_M")" -p "departure_slot_s:=$(f "$SLOT_S")")
 start uam_planner planner planner --params-file config/planner.yaml -p "network:=$NETWORK" \
   -p "policy:=$POLICY" -p "backend:=$BACKEND" -p "seed:=$SEED" "${AIRSPACE[@]}" \
+  -p "objective:=$OBJECTIVE" -p "baseline_order:=$BASELINE_ORDER" -p "horizon_epochs:=$HORIZON" \
   -p "climb_rate_mps:=$(f "$CLIMB")" -p "descent_rate_mps:=$(f "$DESCENT")" -p "journal:=$OUT/planner-journal.jsonl" \
   ${CONSTRAINTS:+-p "constraints_file:=$CONSTRAINTS"}
 start uam_sim request_generator request_generator --params-file config/request_generator.yaml \
-  -p "network:=$NETWORK" -p "rate:=$RATE" -p "seed:=$SEED" ${DEMAND:+-p "demand_file:=$DEMAND"}
+  -p "network:=$NETWORK" -p "rate:=$RATE" -p "seed:=$SEED" -p "priority_share:=$(f "$PRIORITY_SHARE")" \
+  -p "lead_time_s:=$(f "$LEAD_TIME")" \
+  ${DEMAND:+-p "demand_file:=$DEMAND"}
 # the recorder writes the run's airspace into the MCAP (uam_airspace metadata): the analysis audits in it.
 # It subscribes to the fleet state (which starts the simulator) only once it hears these topics'
 # publishers, so even a run stopped at once records the planner's and the generator's messages.

@@ -54,7 +54,9 @@ def test_read_only_parameters_refuse_changes(ros_context, tmp_path):
     try:
         for node, name, value in [(gen, "demand_file", "config/demand_example.yaml"), (gen, "seed", 3),
                                   (rec, "output", str(tmp_path / "other.mcap")), (planner, "network", TINY),
-                                  (planner, "policy", "fifo"), (planner, "k", 3)]:
+                                  (planner, "policy", "fifo"), (planner, "k", 3),
+                                  (planner, "objective", "count"), (planner, "baseline_order", "priority"),
+                                  (planner, "horizon_epochs", 2), (gen, "priority_share", 0.5)]:
             before = node.get_parameter(name).value
             res = _set(node, **{name: value})
             assert not res.successful and name in res.reason, (name, res.reason)
@@ -221,3 +223,30 @@ def test_the_planner_takes_the_networks_own_separation_model_and_warns_of_a_cont
     finally:
         for n in (own, paper, forced):
             n.destroy_node()
+
+
+def test_planner_objective_and_baseline_order_reach_the_library_and_bad_ones_are_named(ros_context):
+    """Issue 21: the read-only objective and baseline_order become the Planner's PlanningConfig."""
+    from uam_planner.nodes.planner_node import PlannerNode
+
+    planner = make_planner(ros_context, objective="priority", baseline_order="priority", horizon_epochs=3)
+    try:
+        cfg = planner.planner.config
+        assert (cfg.objective, cfg.baseline_order, cfg.horizon_epochs) == ("priority", "priority", 3)
+    finally:
+        planner.destroy_node()
+    tiny = str(ROOT / "config" / "networks" / "tiny.yaml")
+    with pytest.raises(ValueError) as err:
+        PlannerNode(context=ros_context, parameter_overrides=params(network=tiny, objective="speed"))
+    assert "parameter objective: 'speed' is not one of paper, count, delay, priority, fair" in str(err.value)
+
+
+def test_request_priority_survives_the_message_conversions():
+    from uam_planner.nodes import conversions as m
+    from uam_planner.planning import FlightRequest
+
+    req = FlightRequest("r1", "A", "B", 0.0, 0.0, 60.0, priority=7)
+    msg = m.request_to_msg(req, operator_id="medic")
+    assert (msg.priority, msg.operator_id) == (7, "medic")
+    back = m.request_from_msg(msg, request_id="medic/r1")
+    assert (back.priority, back.request_id) == (7, "medic/r1")

@@ -180,3 +180,13 @@ def test_a_killed_run_fleet_stops_every_node_and_no_node_holds_the_domain_lock(t
         [nodes[pid] for pid in nodes if _alive(pid)]
     with open(tmp_path / "run" / "run.mcap", "rb") as f:
         assert make_reader(f).get_summary() is not None  # the recorder closed the file on SIGTERM
+
+
+def test_bad_objective_order_and_priority_share_are_refused_naming_the_flag():
+    """Issue 21: the flags are checked before any node starts."""
+    for args, words in [(["--objective", "best"], "--objective: 'best' is not paper, count, delay, priority or fair"),
+                        (["--baseline-order", "random"], "--baseline-order: 'random' is not arrival or priority"),
+                        (["--priority-share", "1.5"], "--priority-share: '1.5' is not a number in [0, 1]")]:
+        res = subprocess.run(["bash", str(ROOT / "scripts" / "run_fleet.sh"), *args], capture_output=True,
+                             text=True, timeout=60)
+        assert res.returncode == 2 and words in res.stderr, (args, res.stderr)

@@ -148,6 +148,18 @@ PLANNER = (
           "min(t + epoch, latest); 0 = the paper's rule (depart at the epoch time t)", 0.0, 86400.0),
     Param("climb_rate_mps", 5.0, "vertical climb rate at the vertiports of a layered network [m/s]", 0.001, 100.0),
     Param("descent_rate_mps", 3.0, "vertical descent rate at the vertiports of a layered network [m/s]", 0.001, 100.0),
+    Param("objective", "paper", "what the MWIS maximises (docs/objectives.md): 'paper' (the paper's weights), "
+          "'count' (approvals first, then least added delay and detour, lexicographic), 'delay' (the delay from "
+          "the earliest departure an approval saves; urgency for a window closing before the next epoch), "
+          "'priority' (a flight of a higher priority class is never refused for any number of lower ones), "
+          "'fair' (proportional fairness between operators from the running approval shares)",
+          choices=("paper", "count", "delay", "priority", "fair")),
+    Param("baseline_order", "arrival", "order in which the fifo and firstfit policies serve requests: 'arrival' "
+          "(the paper's) or 'priority' (priority class, then earliest latest departure, then arrival)",
+          choices=("arrival", "priority")),
+    Param("horizon_epochs", 1, "rolling planning horizon H of the mwis policy: the departures of the next H "
+          "epochs are planned in one MWIS and only what departs in this epoch is committed, the rest planned "
+          "again; 1 = the paper's one-epoch planning", 1, 100),
     Param("k", 5, "candidate routes per request", 1, 100),
     Param("penalty_factor", 5.0, "penalised Dijkstra factor for diverse candidates", 0.0, 1000.0),
     Param("speed_mps", 10.0, "cruise speed [m/s]", 0.001, 1000.0),
@@ -231,7 +243,12 @@ REQUEST_GENERATOR = (
     Param("demand_file", "", "optional YAML demand file to replay instead of random requests "
           "(docs/demand-format.md)"),
     Param("operator_id", "generator", "operator id the requests are published under (ids are unique per "
-          "operator)", check=_id_rule),
+          "operator); a demand file's per-request operator replaces it", check=_id_rule),
+    Param("priority_share", 0.0, "share of random requests of class priority_class (e.g. 0.05 medical flights), "
+          "drawn from the seeded stream after the paper's numbers; 0 = none (the paper's)", 0.0, 1.0),
+    Param("priority_class", 1, "priority class of those requests (FlightRequest.priority)", 1, 255),
+    Param("lead_time_s", 0.0, "random requests are filed this long before their earliest departure [s] "
+          "(for a planning horizon; the planner's max_window_s bounds it)", 0.0, 86400.0),
 )
 
 def _mcap_path_rule(value: str) -> str:

@@ -12,6 +12,12 @@ One epoch at time t:
 7. the selected candidates become flights departing at t; an unapproved request whose latest
    departure comes before the next epoch (t + epoch_s) expires now; the others wait.
 
+A rolling horizon (``PlanningConfig.horizon_epochs`` H > 1, MWIS policy only): steps 1-6 take
+the departures of the next H epochs (a request is eligible when one lies in its window), and
+step 7 commits only the selected candidates that depart in this epoch; the other requests wait
+and are planned again at the next epoch with what is known then. H = 1 is the rule above.
+What the MWIS maximises is ``PlanningConfig.objective`` (``uam_planner.objectives``).
+
 ``plan_epoch_fifo`` is the paper's baseline with the same inputs and outputs: in arrival order,
 each eligible request gets its shortest route if that route keeps separation with every active
 flight and every flight approved before it in this epoch; otherwise it waits (until it expires).
@@ -57,9 +63,12 @@ from .conflict_graph import (ActiveFlightIndex, ConflictGraph, ShiftedCandidates
 from .separation import (DEFAULT_VERTICAL_SEPARATION_M, SEPARATION_MODELS, SegmentSet,
                          SeparationModel, conflicting_pairs)
 from .first_fit import as_firstfit, first_fit_select
+from .objectives import (BASELINE_ORDERS, OperatorShares, check_objective, check_priority,
+                         epoch_weights, operator_of, order_requests)
 from .trajectory import Trajectory
 
 POLICIES = ("mwis", "fifo", "firstfit")  # firstfit: uam_planner.first_fit
+MAX_HORIZON_EPOCHS = 100  # PlanningConfig.horizon_epochs
 
 
 @dataclass(frozen=True)
@@ -72,6 +81,8 @@ class FlightRequest:
     request_time_s: float
     earliest_departure_s: float
     latest_departure_s: float
+    priority: int = 0  # integer class (ASTM F3548 style), 0..255; higher is more important
+    operator_id: str = ""  # who asks ('' = operator-scoped request_id "operator/request", or none)
 
 
 @dataclass(frozen=True, eq=False)
@@ -93,6 +104,8 @@ class Flight:
     epoch_index: int
     route_index: int = 0
     level_m: float = float("nan")
+    priority: int = 0
+    operator_id: str = ""
 
 
 def _positive(owner: str, name: str, v, allow_zero: bool = False) -> None:
@@ -155,6 +168,16 @@ class PlanningConfig:
         constraints: a ``uam_planner.constraints.ConstraintSet`` (volumes and vertiport
             closures; a candidate that enters one during its window is discarded before the
             conflict graph), or None (default: the paper's airspace, nothing is checked).
+        objective: what the MWIS maximises (``uam_planner.objectives``, docs/objectives.md):
+            "paper" (the paper's weights, the default), "count", "delay", "priority", "fair".
+        baseline_order: the order in which FIFO and first-fit serve requests: "arrival" (the
+            paper's) or "priority" (priority class, then earliest latest departure, then arrival).
+        horizon_epochs: H, the epochs the MWIS policy plans jointly (rolling horizon): the
+            candidates of a request at the departures of the next H epochs are vertices of one
+            graph (one clique per request), and only the selected ones departing in this epoch
+            (before t + epoch_s in the paper's rule; at most t + epoch_s with slots) are
+            committed; the others wait and are planned again at the next epoch. 1 = today's
+            (the paper's) one-epoch planning. The baselines ignore it.
     """
 
     epoch_s: float = 30.0
@@ -168,6 +191,9 @@ class PlanningConfig:
     precompute_routes: bool = False
     airspace: AirspaceConfig = AirspaceConfig()
     constraints: ConstraintSet | None = None
+    objective: str = "paper"
+    baseline_order: str = "arrival"
+    horizon_epochs: int = 1
 
     @property
     def separation(self) -> SeparationModel:
@@ -194,6 +220,17 @@ class PlanningConfig:
             raise ValueError(f"PlanningConfig.penalty_factor must be finite and >= 0, got {pf!r}")
         if not isinstance(self.backend, str) or not self.backend:
             raise ValueError(f"PlanningConfig.backend must be a non-empty string, got {self.backend!r}")
+        try:
+            check_objective(self.objective)
+        except ValueError as exc:
+            raise ValueError(f"PlanningConfig.{exc}") from None
+        h = self.horizon_epochs
+        if isinstance(h, bool) or not isinstance(h, (int, np.integer)) or not 1 <= h <= MAX_HORIZON_EPOCHS:
+            raise ValueError(f"PlanningConfig.horizon_epochs must be an integer in [1, {MAX_HORIZON_EPOCHS}], "
+                             f"got {h!r}")
+        if self.baseline_order not in BASELINE_ORDERS:
+            raise ValueError(f"PlanningConfig.baseline_order must be one of {BASELINE_ORDERS}, "
+                             f"got {self.baseline_order!r}")
 
 
 @dataclass
@@ -333,31 +370,62 @@ def default_solve_mwis(config: PlanningConfig) -> Callable:
 
 # ---- the two policies ---------------------------------------------------------------------------
 
-def _eligible(t_s: float, pending: Sequence[FlightRequest], config: PlanningConfig) -> list:
+def _eligible(t_s: float, pending: Sequence[FlightRequest], config: PlanningConfig,
+              order: str = "arrival", horizon: int = 1) -> list:
+    """The requests that may depart in this epoch (or, with a ``horizon`` of H epochs, in one of
+    the next H), in arrival order or (``order``, for the baselines) in
+    ``uam_planner.objectives.order_requests`` order."""
     if config.airspace.departure_slot_s > 0.0:
-        # any departure in [max(t, earliest), min(t + epoch_s, latest)]
-        hi = t_s + config.epoch_s
-        return [r for r in pending if r.earliest_departure_s <= hi and r.latest_departure_s >= t_s
-                and max(t_s, r.earliest_departure_s) <= min(hi, r.latest_departure_s)]
-    return [r for r in pending if r.earliest_departure_s <= t_s <= r.latest_departure_s]
+        # any departure in [max(t, earliest), min(t + H epoch_s, latest)]
+        hi = t_s + horizon * config.epoch_s
+        out = [r for r in pending if r.earliest_departure_s <= hi and r.latest_departure_s >= t_s
+               and max(t_s, r.earliest_departure_s) <= min(hi, r.latest_departure_s)]
+    elif horizon == 1:
+        out = [r for r in pending if r.earliest_departure_s <= t_s <= r.latest_departure_s]
+    else:
+        out = [r for r in pending if _horizon_epoch_times(t_s, r, config, horizon).size]
+    return order_requests(out, order)
 
 
-def departure_slots_s(t_s: float, request: FlightRequest, config: PlanningConfig) -> np.ndarray:
+def _horizon_epoch_times(t_s: float, request: FlightRequest, config: PlanningConfig,
+                         horizon: int) -> np.ndarray:
+    """Paper rule with a horizon: the epoch times t + j epoch_s (j < H) inside the window."""
+    ts = float(t_s) + config.epoch_s * np.arange(horizon, dtype=np.float64)
+    return ts[(ts >= request.earliest_departure_s) & (ts <= request.latest_departure_s)]
+
+
+def departure_slots_s(t_s: float, request: FlightRequest, config: PlanningConfig,
+                      horizon: int = 1) -> np.ndarray:
     """Departure times [s] a request may take at the epoch at ``t_s``.
 
     Paper rule (``departure_slot_s == 0``): [t_s]. Otherwise lo, lo + slot, ... <= hi with
     lo = max(t_s, earliest_departure_s), hi = min(t_s + epoch_s, latest_departure_s); empty when
     lo > hi. E.g. t = 0, epoch 30 s, slot 5 s, window [0, 60]: 0, 5, ..., 30 (7 slots).
+    With a ``horizon`` of H epochs: hi = min(t_s + H epoch_s, latest_departure_s), every slot of
+    this epoch (up to t_s + epoch_s) and, of each later epoch, its first slot only; the paper
+    rule's departures are the epoch times t_s + j epoch_s (j < H) inside the window. E.g.
+    t = 0, epoch 30 s, slot 10 s, H = 3, window [0, 200]: 0, 10, 20, 30, 40, 70.
     """
     slot = float(config.airspace.departure_slot_s)
     if slot <= 0.0:
-        return np.array([float(t_s)])
+        return np.array([float(t_s)]) if horizon == 1 else \
+            _horizon_epoch_times(t_s, request, config, horizon)
     lo = max(float(t_s), float(request.earliest_departure_s))
-    hi = min(float(t_s) + config.epoch_s, float(request.latest_departure_s))
+    hi = min(float(t_s) + horizon * config.epoch_s, float(request.latest_departure_s))
     if lo > hi:
         return np.zeros(0)
     n = int(math.floor((hi - lo) / slot + 1e-9)) + 1
-    return lo + slot * np.arange(n, dtype=np.float64)
+    grid = lo + slot * np.arange(n, dtype=np.float64)
+    if horizon == 1:
+        return grid
+    # Later epochs of the horizon are planned again before they are committed: one departure
+    # each (the first slot after the epoch's start) bounds the graph (every slot of a 300 s
+    # window at 5 s gave 17,500 vertices and 4.7 million edges at H = 10, rate 20).
+    end = float(t_s) + config.epoch_s
+    later = grid > end + 1e-9
+    epoch_of = np.ceil((grid[later] - float(t_s)) / config.epoch_s - 1e-9)
+    _, first = np.unique(epoch_of, return_index=True)
+    return np.concatenate((grid[~later], grid[later][first]))
 
 
 @dataclass
@@ -391,15 +459,19 @@ def _paper_weights(config: PlanningConfig, network) -> bool:
 
 
 def _epoch_candidates(t_s: float, eligible: Sequence[FlightRequest], network, config,
-                      cache: CandidateCache, best_only: bool = False) -> _Candidates:
+                      cache: CandidateCache, best_only: bool = False,
+                      shares: OperatorShares | None = None, horizon: int = 1) -> _Candidates:
     """Every (template, departure) candidate of the eligible requests, in request order; with
     ``best_only`` only each request's best one (shortest route, lowest allowed level, first
-    slot: weight 1)."""
-    paper = _paper_weights(config, network)
+    slot: weight 1). Weights: ``config.objective`` (``uam_planner.objectives``) from the paper's
+    weights, the departures and flight times; ``shares`` are the running operator counts for
+    the "fair" objective. ``horizon``: the departures of the next H epochs (the paper's
+    weights then count the delay, T*/(T + delay), as with slots)."""
+    paper = _paper_weights(config, network) and horizon == 1
     out = _Candidates([], [], [], [], [])
     for i, r in enumerate(eligible):
         ts = cache.templates(network.node_index(r.origin_id), network.node_index(r.destination_id))
-        slots = departure_slots_s(t_s, r, config)
+        slots = departure_slots_s(t_s, r, config, horizon)
         if best_only:
             ts = ts[:1]
             slots = slots[:1]
@@ -416,6 +488,12 @@ def _epoch_candidates(t_s: float, eligible: Sequence[FlightRequest], network, co
                 out.req_of.append(i)
                 out.index_in_request.append(c)
                 c += 1
+    if config.objective != "paper" and out.tmpls:
+        # with a horizon, "not approved now" means not within the H epochs
+        w = epoch_weights(config.objective, t_s, horizon * config.epoch_s, eligible, out.req_of,
+                          out.departures_s, [tp.duration_s for tp in out.tmpls], out.weights,
+                          shares)
+        out.weights = w.weights.tolist()
     if config.constraints is not None and len(config.constraints):
         out = _without_constrained(out, eligible, network, config.constraints)
     return out
@@ -459,7 +537,8 @@ def _flight(req: FlightRequest, tmpl: RouteTemplate, traj: Trajectory, method: s
                   trajectory=traj, departure_s=traj.departure_s, arrival_s=traj.arrival_s,
                   length_m=r.length_m, weight=float(weight), candidate_index=int(candidate_index),
                   method=method, backend=backend, epoch_index=int(epoch_index),
-                  route_index=int(r.candidate_index), level_m=float(tmpl.level_m))
+                  route_index=int(r.candidate_index), level_m=float(tmpl.level_m),
+                  priority=int(getattr(req, "priority", 0)), operator_id=req.operator_id)
 
 
 def _airborne(active: Sequence[Flight], t_s: float) -> list:
@@ -486,6 +565,9 @@ class PreparedEpoch:
     prepare_s: float = 0.0
     phases: dict = field(default_factory=dict)
     result: EpochResult | None = None
+    horizon: int = 1
+    epoch_s: float = 0.0
+    slots: bool = False
 
     @property
     def needs_solver(self) -> bool:
@@ -495,31 +577,37 @@ class PreparedEpoch:
 
 def prepare_epoch_mwis(t_s: float, epoch_index: int, pending: Sequence[FlightRequest],
                        active: Sequence[Flight], network, config: PlanningConfig,
-                       cache: CandidateCache, active_index=None) -> PreparedEpoch:
+                       cache: CandidateCache, active_index=None,
+                       shares: OperatorShares | None = None,
+                       order: str = "arrival", horizon: int | None = None) -> PreparedEpoch:
     """Steps 1-6 of an MWIS epoch at ``t_s`` [s]: eligible requests, candidates, trajectories,
     deconfliction and the conflict graph (``PreparedEpoch.graph``), still to be solved.
 
     Arguments as :func:`plan_epoch_mwis`; ``active_index``: optional ActiveFlightIndex holding
     ``active`` (kept across epochs by the Planner, so the active flights' segments are not
-    rebuilt every epoch).
+    rebuilt every epoch); ``shares``: running operator counts (objective "fair"); ``order``:
+    the vertex order by request ("arrival", or "priority" for first-fit's walk); ``horizon``:
+    the epochs planned jointly (default ``config.horizon_epochs``).
     """
+    horizon = int(config.horizon_epochs if horizon is None else horizon)
     t_start = time.perf_counter()
     phases = {}
     report = EpochReport(epoch_index=int(epoch_index), t_s=float(t_s), policy="mwis",
                          pending=len(pending), backend_requested=config.backend)
-    eligible = _eligible(t_s, pending, config)
+    eligible = _eligible(t_s, pending, config, order, horizon)
     airborne = _airborne(active, t_s)
     t1 = time.perf_counter()
     phases["eligible_s"] = t1 - t_start
 
-    cands = _epoch_candidates(t_s, eligible, network, config, cache)
+    cands = _epoch_candidates(t_s, eligible, network, config, cache, shares=shares, horizon=horizon)
     tmpls, req_of = cands.tmpls, cands.req_of
     report.constraint_refusals = cands.refusals
     t2 = time.perf_counter()
     phases["candidates_s"] = t2 - t1
     # With slots, the candidates of one template differ only by a time shift: deconflict them
     # per template (ShiftedCandidates) and build trajectories only for the survivors.
-    trajs = cands.shifted() if config.airspace.departure_slot_s > 0.0 else cands.trajectories()
+    trajs = cands.shifted() if config.airspace.departure_slot_s > 0.0 or horizon > 1 \
+        else cands.trajectories()
     t3 = time.perf_counter()
     phases["trajectories_s"] = t3 - t2
 
@@ -534,7 +622,8 @@ def prepare_epoch_mwis(t_s: float, epoch_index: int, pending: Sequence[FlightReq
                          graph=graph, eligible=eligible, tmpls=tmpls, trajs=trajs, req_of=req_of,
                          weights=cands.weights, index_in_request=cands.index_in_request,
                          airborne_count=len(airborne), prepare_s=time.perf_counter() - t_start,
-                         phases=phases)
+                         phases=phases, horizon=horizon, epoch_s=float(config.epoch_s),
+                         slots=config.airspace.departure_slot_s > 0.0)
 
 
 def commit_epoch(prep: PreparedEpoch, answer, config: PlanningConfig, solve_s: float = 0.0) -> EpochResult:
@@ -548,6 +637,13 @@ def commit_epoch(prep: PreparedEpoch, answer, config: PlanningConfig, solve_s: f
     graph, report, phases, eligible = prep.graph, prep.report, prep.phases, prep.eligible
     t4 = time.perf_counter()
     selected = checked_selection(graph, answer, report)
+    if prep.horizon > 1 and selected.size:
+        # rolling horizon: commit what departs in this epoch (before the next epoch time in the
+        # paper's rule; up to and including it with slots, whose window is [t, t + epoch_s]);
+        # the rest waits and is planned again
+        deps = np.array([prep.trajs[int(graph.vertex_source[v])].departure_s for v in selected.tolist()])
+        end = prep.t_s + prep.epoch_s
+        selected = selected[deps <= end + 1e-9 if prep.slots else deps < end - 1e-9]
     t5 = time.perf_counter()
     phases["solve_s"] = float(solve_s) + (t5 - t4)
     report.solve_time_s = phases["solve_s"]
@@ -583,7 +679,8 @@ def commit_epoch(prep: PreparedEpoch, answer, config: PlanningConfig, solve_s: f
 def plan_epoch_mwis(t_s: float, epoch_index: int, pending: Sequence[FlightRequest],
                     active: Sequence[Flight], network, config: PlanningConfig,
                     solve_mwis: Callable, cache: CandidateCache,
-                    active_index=None) -> EpochResult:
+                    active_index=None, shares: OperatorShares | None = None,
+                    order: str = "arrival", horizon: int | None = None) -> EpochResult:
     """One MWIS planning epoch at time ``t_s`` [s]: prepare, solve, commit.
 
     Args:
@@ -600,12 +697,17 @@ def plan_epoch_mwis(t_s: float, epoch_index: int, pending: Sequence[FlightReques
         cache: CandidateCache built for this network and config.
         active_index: optional ActiveFlightIndex holding ``active`` (kept across epochs by the
             Planner, so the active flights' segments are not rebuilt every epoch).
+        shares: running operator counts for the "fair" objective (OperatorShares).
+        order: the request (and so vertex) order: "arrival", or "priority" (first-fit's walk
+            with ``baseline_order`` "priority").
+        horizon: the epochs planned jointly (default ``config.horizon_epochs``; only the
+            selected flights departing by t_s + epoch_s are committed).
     Returns: EpochResult. Approved flights never lose separation (in ``config.separation``)
     with each other or with ``active``: every conflict is an edge and the answer is checked to
     be independent.
     """
     prep = prepare_epoch_mwis(t_s, epoch_index, pending, active, network, config, cache,
-                              active_index)
+                              active_index, shares, order, horizon)
     t = time.perf_counter()
     answer = call_solver(solve_mwis, prep.graph) if prep.needs_solver else None
     return commit_epoch(prep, answer, config, time.perf_counter() - t)
@@ -614,10 +716,11 @@ def plan_epoch_mwis(t_s: float, epoch_index: int, pending: Sequence[FlightReques
 def plan_epoch_fifo(t_s: float, epoch_index: int, pending: Sequence[FlightRequest],
                     active: Sequence[Flight], network, config: PlanningConfig,
                     solve_mwis: Callable | None, cache: CandidateCache,
-                    active_index=None) -> EpochResult:
+                    active_index=None, shares: OperatorShares | None = None) -> EpochResult:
     """One shortest-FIFO epoch; same inputs and outputs as :func:`plan_epoch_mwis`.
 
-    In the order of ``pending`` (arrival order), each eligible request gets its shortest route if
+    In the order of ``pending`` (arrival order; with ``config.baseline_order`` "priority": by
+    priority class, then earliest latest departure, then arrival), each eligible request gets its shortest route if
     it keeps separation with every active flight and every flight approved before it in this
     epoch; otherwise it waits. ``solve_mwis`` is ignored. The report's instance is empty;
     ``vertices`` counts the shortest routes that survive the active flights and ``edges`` /
@@ -628,11 +731,11 @@ def plan_epoch_fifo(t_s: float, epoch_index: int, pending: Sequence[FlightReques
     phases = {}
     report = EpochReport(epoch_index=int(epoch_index), t_s=float(t_s), policy="fifo",
                          pending=len(pending))
-    eligible = _eligible(t_s, pending, config)
+    eligible = _eligible(t_s, pending, config, config.baseline_order)
     airborne = _airborne(active, t_s)
     t1 = time.perf_counter()
     phases["eligible_s"] = t1 - t_start
-    cands = _epoch_candidates(t_s, eligible, network, config, cache, best_only=True)
+    cands = _epoch_candidates(t_s, eligible, network, config, cache, best_only=True, shares=shares)
     tmpls = cands.tmpls
     report.constraint_refusals = cands.refusals
     t2 = time.perf_counter()
@@ -717,6 +820,9 @@ class Planner:
         self._known_ids: set[str] = set()
         self._rejected_since_plan = 0
         self._prepared: PreparedEpoch | None = None
+        # requests decided (approved or expired) and approved per operator (the "fair"
+        # objective's running shares)
+        self.shares = OperatorShares()
 
     @property
     def config(self) -> PlanningConfig:
@@ -780,6 +886,12 @@ class Planner:
             if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) \
                     or not math.isfinite(v):
                 return f"{name}: {v!r} is not a finite time"
+        problem = check_priority(getattr(request, "priority", 0))
+        if problem:
+            return problem
+        op = getattr(request, "operator_id", "")
+        if not isinstance(op, str):
+            return f"operator_id: {op!r} is not a string"
         if request.latest_departure_s < request.earliest_departure_s:
             return (f"latest_departure_s: {request.latest_departure_s!r} is before "
                     f"earliest_departure_s {request.earliest_departure_s!r}")
@@ -815,11 +927,14 @@ class Planner:
         self.active = [f for f in self.active if f.arrival_s >= t_s]
         if self.policy == "mwis":
             prep = prepare_epoch_mwis(t_s, epoch_index, self.pending, self.active, self.network, self.config,
-                                      self.cache, self.active_index)
+                                      self.cache, self.active_index, self.shares)
         else:
             args = (t_s, epoch_index, self.pending, self.active, self.network, self.config)
-            res = plan_epoch_fifo(*args, None, self.cache, self.active_index) if self.policy == "fifo" else \
-                as_firstfit(plan_epoch_mwis(*args, first_fit_select, self.cache, self.active_index))  # uam_planner.first_fit
+            res = plan_epoch_fifo(*args, None, self.cache, self.active_index, self.shares) \
+                if self.policy == "fifo" else \
+                as_firstfit(plan_epoch_mwis(*args, first_fit_select, self.cache, self.active_index,
+                                            self.shares, self.config.baseline_order,
+                                            horizon=1))  # uam_planner.first_fit; myopic
             prep = PreparedEpoch(t_s=float(t_s), epoch_index=int(epoch_index), pending=list(self.pending),
                                  report=res.report, result=res)
         self._prepared = prep
@@ -835,6 +950,9 @@ class Planner:
         arrived_since = self.pending[len(prep.pending):]
         self.pending = list(result.waiting) + arrived_since
         self.active = self.active + list(result.approved)
+        self.shares.approved.update(operator_of(f) for f in result.approved)
+        self.shares.requested.update(operator_of(f) for f in result.approved)
+        self.shares.requested.update(operator_of(r) for r in result.expired)
         result.report.rejected = self._rejected_since_plan
         self._rejected_since_plan = 0
         return result
@@ -851,7 +969,10 @@ class Planner:
         ``decided_ids`` were decided before (their ids are taken, nothing is planned for them).
         Adds only: a flight already active stays as it is, whatever ``flights`` says."""
         held = {f.request_id for f in self.active}
-        self.active = self.active + [f for f in flights if f.request_id not in held]
+        new = [f for f in flights if f.request_id not in held]
+        self.active = self.active + new
+        self.shares.approved.update(operator_of(f) for f in new)
+        self.shares.requested.update(operator_of(f) for f in new)
         self._known_ids.update(f.request_id for f in flights)
         self._known_ids.update(decided_ids)
         self.pending = [r for r in self.pending if r.request_id not in self._known_ids]

@@ -60,3 +60,36 @@ def test_recordings_give_the_runs_metrics(tmp_path):
     rc = main(["--from-mcap", str(tmp_path / "greedy.mcap"), "--out", str(tmp_path / "cli"),
                "--no-tts"])
     assert rc == 0 and (tmp_path / "cli" / "runs.csv").exists()
+
+
+def test_a_recording_gives_the_runs_decision_metrics(tmp_path):
+    """Issue 21: uam_sim.analysis computes the runner's delay, per-class p95 and operator shares
+    from a recording with the same implementation (uam_sim.decision_metrics)."""
+    from uam_sim.analysis import format_summary, summarize
+
+    cfg = make_config({"network": NET, "objective": "priority", "priority_share": 0.3,
+                       "priority_class": 4, "operators": ["a", "b"], "audit": False})
+    net = load_network_spec(NET)
+    path = tmp_path / "run.mcap"
+    with McapRecorder(path) as rec:
+        rec.add_topic("/uam/requests", FlightRequest)
+        rec.add_topic("/uam/flight_plans", FlightPlan)
+        rec.add_topic("/uam/planning_reports", PlanningReport)
+
+        def observer(t_s, epoch, submitted, refused, res):
+            ns = int(t_s * NS)
+            for r in submitted:
+                rec.write("/uam/requests", m.request_to_msg(r, operator_id=r.operator_id), ns)
+            for f in res.approved:
+                plan = m.approved_plan(f, t_s, "mwis")
+                plan.operator_id = f.operator_id
+                rec.write("/uam/flight_plans", plan, ns)
+            rec.write("/uam/planning_reports", m.report_to_msg(res.report), ns)
+        run = run_scenario(net, "greedy", 6, 0, 300.0, cfg, observer=observer)
+    dm = summarize(path).decision_metrics
+    want = run.summary
+    for k in ("delay_mean_s", "delay_p95_s", "delay_p95_s_prio0", "delay_p95_s_prio4",
+              "share_a", "share_b", "jain_index"):
+        assert dm[k] == pytest.approx(want[k], abs=1e-6), k
+    text = format_summary(summarize(path), epochs=False)
+    assert "p95 class 4" in text and "Jain index" in text

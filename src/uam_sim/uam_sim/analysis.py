@@ -58,6 +58,7 @@ from typing import Any, Iterable
 import numpy as np
 
 from .audit import AIRSPACE_METADATA, SafetyAudit, audit_plans, separation_from_metadata
+from .decision_metrics import decision_metrics
 from .flights import flight_metrics
 from .mcap_reader import is_complete, iter_decoded, read_metadata, recorded_topics, require_mcap
 from .mcap_recover import RECOVERED_METADATA
@@ -153,6 +154,10 @@ class RunSummary:
     flight_stats: dict = field(default_factory=dict)
     #: the same per operator_id, when more than one operator had a flight approved
     flight_stats_by_operator: dict = field(default_factory=dict)
+    #: delay (from the earliest departure) mean/p95, per-priority p95 delay, per-operator
+    #: approval share and Jain index (``uam_sim.decision_metrics``, as the in-process runner's
+    #: summary); detour_mean_m is NaN: a recording holds no candidate route lengths
+    decision_metrics: dict = field(default_factory=dict)
 
     @property
     def verified(self) -> bool:
@@ -364,6 +369,7 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=10
     """
     request_ids: set[str] = set()
     earliest_s: dict[str, float] = {}  # request key -> earliest departure [s]
+    request_rows: dict[str, dict] = {}  # request key -> the first request's times, class, operator
     decisions: dict[str, list] = {}  # request id -> distinct plans, in arrival order
     seen: set[tuple] = set()
     duplicates = refused_duplicates = 0
@@ -381,8 +387,14 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=10
             continue
         t_min, t_max = min(t_min, log_ns * 1e-9), max(t_max, log_ns * 1e-9)
         if topic == TOPIC_REQUESTS:
-            request_ids.add(request_key(msg))
-            earliest_s.setdefault(request_key(msg), stamp_s(msg.earliest_departure))
+            key = request_key(msg)
+            request_ids.add(key)
+            earliest_s.setdefault(key, stamp_s(msg.earliest_departure))
+            request_rows.setdefault(key, {
+                "earliest_departure_s": stamp_s(msg.earliest_departure),
+                "latest_departure_s": stamp_s(msg.latest_departure),
+                "priority": int(getattr(msg, "priority", 0)),  # recordings before issue 21: 0
+                "operator": str(getattr(msg, "operator_id", "") or "")})
         elif topic == TOPIC_PLANS:
             if int(msg.outcome) == OUTCOME_DUPLICATE:
                 refused_duplicates += 1
@@ -459,6 +471,16 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=10
     with_instance = [e for e in epochs if e.vertices > 0 and e.policy in ("", "mwis")]
     max_active = int(max(fleet_n)) if fleet_n else 0
     audit = audit_plans(approved_plans, separation_m, labels=labels)
+    # the run's end as the epochs show it: the last epoch's time + the epoch length (the median
+    # step between epochs); requests still within their window then are left out, as in the runner
+    ts = sorted({e.t_s for e in epochs})
+    end_s = ts[-1] + float(np.median(np.diff(ts))) if len(ts) > 1 else None
+    flight_rows = []
+    for p in approved_plans:
+        r = request_rows.get(request_key(p))
+        if r is not None:  # a plan without its request has no earliest departure
+            flight_rows.append({**r, "departure_s": stamp_s(p.departure_time),
+                                "length_m": float(p.length_m), "shortest_length_m": None})
     return RunSummary(
         path=str(path), reader=reader, complete_file=complete_file,
         sim_start_s=t_min if math.isfinite(t_min) else 0.0,
@@ -490,6 +512,7 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=10
                                     max_active, audit, conflicting, fleet_steps) + run,
         forged_plans=forged,
         run_end=run_end,
+        decision_metrics=decision_metrics(flight_rows, list(request_rows.values()), end_s=end_s),
     )
 
 
@@ -614,6 +637,14 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
     lines += _flight_lines("", s.flight_stats)
     for op, stats in s.flight_stats_by_operator.items():
         lines += _flight_lines(f" of {op}", stats)
+    dm = s.decision_metrics
+    if dm:
+        extra = "".join(f", {k.replace('delay_p95_s_prio', 'class ')} {v:.1f} s" for k, v in dm.items()
+                        if k.startswith("delay_p95_s_prio"))
+        lines.append(f"Delay p95        {dm['delay_p95_s']:.1f} s from the earliest departure{extra}")
+        shares = ", ".join(f"{k[6:]} {v:.3f}" for k, v in dm.items() if k.startswith("share_"))
+        if shares:
+            lines.append(f"Operators        approval share {shares}; Jain index {dm['jain_index']:.3f}")
     a = s.audit
     if a is not None:
         pair = f" ({a.closest_pair[0]} / {a.closest_pair[1]})" if a.closest_pair else ""

@@ -11,8 +11,13 @@ Fractional rates: an interval issues ``floor(rate)`` requests plus one more with
 ``rate - floor(rate)`` (drawn from that interval's RNG). Rate 0.5 gives on average one request
 every other interval; the expected count per interval is exactly ``rate``.
 
+Priority and operator mixes (issue 21): with ``priority_share`` p > 0 each request is of class
+``priority_class`` with probability p (else class 0), and with ``operators`` each request gets one
+of the named operators uniformly; both are drawn from the interval's RNG after the paper's
+draws, so without them the stream is exactly the paper's.
+
 Demand files (docs/demand-format.md): a YAML list of requests, each {t_s, origin, destination,
-optionally id, window_s or latest_s}, replayed by :class:`DemandSchedule` at the epoch whose
+optionally id, window_s or latest_s, priority, operator}, replayed by :class:`DemandSchedule` at the epoch whose
 interval contains ``t_s``.
 """
 
@@ -27,6 +32,7 @@ import numpy as np
 import yaml
 
 from uam_contract.ids import MAX_NODE_ID_LENGTH, check_id, echo
+from uam_planner.objectives import check_priority
 from uam_planner.planning import FlightRequest
 
 DEFAULT_INTERVAL_S = 30.0
@@ -58,6 +64,15 @@ class RequestGenerator:
         interval_s: time between generation instants [s] (30 s in the paper).
         window_s: latest departure - earliest departure [s] (60 s in the paper).
         seed: integer >= 0; the stream is a function of (seed, interval index) only.
+        priority_share: probability in [0, 1] that a request is of class ``priority_class``
+            (e.g. 0.05 medical flights); the others are class 0.
+        priority_class: the class of those requests, an integer in [1, 255].
+        operators: operator ids a request is drawn from uniformly (empty: no operator_id).
+        lead_time_s: requests are filed this long ahead [s] (>= 0): earliest departure
+            ``t + lead_time_s``, latest ``t + lead_time_s + window_s`` (for a planning horizon).
+        operator_lead_times_s: optional extra lead time [s] per operator (same length as
+            ``operators``): filing habits, e.g. (600, 0) for one operator that files 10 min
+            ahead and one that files at the last moment.
 
     ``requests_at(t_s, interval_index)`` returns that interval's requests, requested at ``t_s``,
     earliest departure ``t_s``, latest ``t_s + window_s``. O(rate) per call.
@@ -65,7 +80,9 @@ class RequestGenerator:
 
     def __init__(self, aerodrome_ids: Sequence[str], rate_per_interval: float,
                  interval_s: float = DEFAULT_INTERVAL_S, window_s: float = DEFAULT_WINDOW_S,
-                 seed: int = 0):
+                 seed: int = 0, priority_share: float = 0.0, priority_class: int = 1,
+                 operators: Sequence[str] = (), lead_time_s: float = 0.0,
+                 operator_lead_times_s: Sequence[float] = ()):
         ids = [str(a) for a in aerodrome_ids]
         if len(set(ids)) < 2:
             raise DemandError(f"aerodrome_ids: need at least 2 distinct aerodromes, got {ids!r}")
@@ -82,6 +99,37 @@ class RequestGenerator:
         self.interval_s = _positive("interval_s", interval_s)
         self.window_s = _positive("window_s", window_s)
         self.seed = int(seed)
+        ps = priority_share
+        if isinstance(ps, bool) or not isinstance(ps, (int, float, np.integer, np.floating)) \
+                or not math.isfinite(ps) or not 0.0 <= ps <= 1.0:
+            raise DemandError(f"priority_share: {ps!r} must be a number in [0, 1]")
+        if check_priority(priority_class) or priority_class == 0:
+            raise DemandError(f"priority_class: {priority_class!r} must be an integer in [1, 255]")
+        if isinstance(operators, str):
+            raise DemandError(f"operators: {operators!r} must be a list of operator ids, not a string")
+        ops = [str(o) for o in operators]
+        for o in ops:
+            problem = check_id("operators", o)
+            if problem:
+                raise DemandError(problem)
+        if len(set(ops)) != len(ops):
+            raise DemandError(f"operators: duplicates in {ops!r}")
+        lt = lead_time_s
+        if isinstance(lt, bool) or not isinstance(lt, (int, float, np.integer, np.floating)) \
+                or not math.isfinite(lt) or lt < 0:
+            raise DemandError(f"lead_time_s: {lt!r} must be a finite number >= 0")
+        self.lead_time_s = float(lt)
+        olt = list(operator_lead_times_s)
+        if olt and len(olt) != len(ops):
+            raise DemandError(f"operator_lead_times_s: {len(olt)} values for {len(ops)} operators")
+        for v in olt:
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
+                    or not math.isfinite(v) or v < 0:
+                raise DemandError(f"operator_lead_times_s: {v!r} must be a finite number >= 0")
+        self.operator_lead_times_s = tuple(float(v) for v in olt) or (0.0,) * len(ops)
+        self.priority_share = float(ps)
+        self.priority_class = int(priority_class)
+        self.operators = tuple(ops)
 
     def rng(self, interval_index: int) -> np.random.Generator:
         """The RNG of one interval, derived from (seed, interval_index) only."""
@@ -103,11 +151,19 @@ class RequestGenerator:
         origin = rng.integers(0, m, size=n)
         dest = rng.integers(0, m - 1, size=n)
         dest = dest + (dest >= origin)  # uniform over the aerodromes other than the origin
+        # drawn after the paper's numbers, only when asked for: the paper's stream is unchanged
+        prio = np.where(rng.random(n) < self.priority_share, self.priority_class, 0) \
+            if self.priority_share > 0 else np.zeros(n, dtype=np.int64)
+        which = rng.integers(0, len(self.operators), size=n).tolist() if self.operators else []
+        ops = [self.operators[j] for j in which] if which else [""] * n
+        extra = [self.operator_lead_times_s[j] for j in which] if which else [0.0] * n
         t = float(t_s)
         return [FlightRequest(request_id=request_id(interval_index, i),
                               origin_id=self.aerodrome_ids[o], destination_id=self.aerodrome_ids[d],
-                              request_time_s=t, earliest_departure_s=t,
-                              latest_departure_s=t + self.window_s)
+                              request_time_s=t, earliest_departure_s=t + self.lead_time_s + extra[i],
+                              latest_departure_s=t + self.lead_time_s + extra[i] + self.window_s,
+                              priority=int(prio[i]),
+                              operator_id=ops[i])
                 for i, (o, d) in enumerate(zip(origin.tolist(), dest.tolist()))]
 
     def requests_for_epoch(self, epoch_index: int) -> list[FlightRequest]:
@@ -126,14 +182,17 @@ class DemandEntry:
     origin: str
     destination: str
     latest_s: float
+    priority: int = 0
+    operator: str = ""
 
     def to_request(self) -> FlightRequest:
         return FlightRequest(request_id=self.request_id, origin_id=self.origin,
                              destination_id=self.destination, request_time_s=self.t_s,
-                             earliest_departure_s=self.t_s, latest_departure_s=self.latest_s)
+                             earliest_departure_s=self.t_s, latest_departure_s=self.latest_s,
+                             priority=self.priority, operator_id=self.operator)
 
 
-_KEYS = {"t_s", "origin", "destination", "window_s", "latest_s", "id"}
+_KEYS = {"t_s", "origin", "destination", "window_s", "latest_s", "id", "priority", "operator"}
 
 
 def parse_demand(data: Any, aerodrome_ids: Iterable[str] | None = None,
@@ -201,8 +260,18 @@ def parse_demand(data: Any, aerodrome_ids: Iterable[str] | None = None,
         if rid in seen:
             raise DemandError(f"{at}.id: {rid!r} is used by an earlier request")
         seen.add(rid)
+        prio = item.get("priority", 0)
+        problem = check_priority(prio)
+        if problem:
+            raise DemandError(f"{at}.{problem}")
+        op = item.get("operator", "")
+        if op != "":
+            problem = check_id(f"{at}.operator", op) if isinstance(op, str) else \
+                f"{at}.operator: {echo(op)} must be an operator id"
+            if problem:
+                raise DemandError(problem)
         entries.append(DemandEntry(rid, float(t), str(item["origin"]), str(item["destination"]),
-                                   latest))
+                                   latest, int(prio), op))
     order = sorted(range(len(entries)), key=lambda j: (entries[j].t_s, j))
     return [entries[j] for j in order]
 

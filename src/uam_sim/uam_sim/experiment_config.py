@@ -80,6 +80,18 @@ class ExperimentConfig:
             separation_model and departure_slot_s where they are not given (given values must
             agree with the mode), and the network becomes its layered form in "levels"/"both"
             (see :func:`mode_network`). A mode other than "paper" becomes part of each cell's key.
+        objective: what the MWIS maximises ("paper", "count", "delay", "priority", "fair";
+            ``uam_planner.objectives``, docs/objectives.md).
+        baseline_order: the order of FIFO and first-fit: "arrival" (the paper's) or "priority"
+            (class, then earliest latest departure, then arrival).
+        priority_share, priority_class: the generator's priority mix (share of requests of that
+            class, e.g. 0.05 and 1; 0 = none, the paper's).
+        operators: operator ids the generator draws each request's operator from (none: "").
+        horizon_epochs: epochs the MWIS plans jointly (rolling horizon; 1 = the paper's).
+        lead_time_s: requests are filed this long before their earliest departure [s].
+        operator_lead_times_s: extra lead time [s] per operator (filing habits), as ``operators``.
+        metrics_warmup_s: the decision metrics (delay, shares, ...) leave out requests whose
+            earliest departure is before it (the warm-up); 0 = none.
         cumulative_rates: rates shown in the cumulative-approvals figure (default: up to 4 spread).
         tts: TTS study settings: enabled, instances (sampled from the runs' MWIS instances),
             min_vertices, max_vertices, reads (per annealing run), repetitions (runs per instance
@@ -116,6 +128,15 @@ class ExperimentConfig:
     scheduler: str | None = None
     airspace_mode: str = "paper"
     cumulative_rates: list | None = None
+    objective: str = "paper"
+    baseline_order: str = "arrival"
+    priority_share: float = 0.0
+    priority_class: int = 1
+    operators: list = field(default_factory=list)
+    horizon_epochs: int = 1
+    lead_time_s: float = 0.0
+    operator_lead_times_s: list = field(default_factory=list)
+    metrics_warmup_s: float = 0.0
     tts: dict = field(default_factory=lambda: {
         "enabled": True, "instances": 629, "min_vertices": 5, "max_vertices": 50, "reads": 100,
         "repetitions": 5, "backend_instances": {"qpu-emulator": 60},
@@ -143,7 +164,9 @@ class ExperimentConfig:
         return PlanningConfig(epoch_s=self.epoch_s, separation_m=self.separation_m, k=self.k,
                               penalty_factor=self.penalty_factor, speed_mps=self.speed_mps,
                               backend=backend, time_limit_s=self.time_limit_s, seed=int(seed),
-                              airspace=self.airspace())
+                              airspace=self.airspace(), objective=self.objective,
+                              baseline_order=self.baseline_order,
+                              horizon_epochs=self.horizon_epochs)
 
 
 def _num_list(name: str, value, cast=float) -> list:
@@ -230,6 +253,16 @@ def make_config(data: dict | None = None, **overrides) -> ExperimentConfig:
         cfg.cumulative_rates = [rate_label(r) for r in _num_list("cumulative_rates", cfg.cumulative_rates)]
     if not isinstance(cfg.solver_options, dict):
         raise ExperimentError(f"solver_options: {cfg.solver_options!r} must be a mapping")
+    if isinstance(cfg.operators, str):
+        cfg.operators = [o.strip() for o in cfg.operators.split(",") if o.strip()]
+    try:
+        from .demand import DemandError, RequestGenerator
+        RequestGenerator(["a", "b"], 0, priority_share=cfg.priority_share,
+                         priority_class=cfg.priority_class, operators=cfg.operators,
+                         lead_time_s=cfg.lead_time_s,
+                         operator_lead_times_s=cfg.operator_lead_times_s)
+    except DemandError as exc:
+        raise ExperimentError(str(exc)) from None
     try:
         cfg.planning_config("greedy", 0)  # validates k, penalty_factor and the airspace
     except ValueError as exc:

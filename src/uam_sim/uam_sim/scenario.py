@@ -13,6 +13,7 @@ import numpy as np
 from uam_planner.planning import Planner
 
 from .audit import sweep_audit
+from .decision_metrics import decision_metrics
 from .demand import RequestGenerator
 from .experiment_config import BASELINES, ExperimentConfig, ExperimentError, rate_label
 
@@ -23,10 +24,13 @@ class ScenarioResult:
 
     Attributes:
         method, rate, seed, duration_s: the cell.
-        summary: one tidy row (counts, average aircraft in the air, solve-time stats, audit).
+        summary: one tidy row (counts, average aircraft in the air, solve-time stats, audit, the
+            objective and the decision metrics of ``uam_sim.decision_metrics``: delay mean and
+            p95 from the earliest departure, detour, per-priority p95 delay, per-operator
+            approval shares and Jain index).
         epochs: one row per epoch (t_s, counts so far, MWIS size, solve time, fallback, ...).
         flights: one row per approved flight (ids, epoch, earliest departure, departure/arrival,
-            route, weight).
+            route, weight, priority, operator, shortest candidate route length).
         audit: the exact separation audit over all flown flights (min_separation_m, losses,
             pairs_checked) or {} when disabled.
         instances: MWIS instances (weights, edges incl. clique edges, groups) of this run with
@@ -137,12 +141,18 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
         except ValueError as exc:
             raise ExperimentError(f"constraints_file: {exc}") from None
     if demand is None:
-        demand = RequestGenerator(network.aerodrome_ids, rate, cfg.interval_s, cfg.window_s, seed)
+        demand = RequestGenerator(network.aerodrome_ids, rate, cfg.interval_s, cfg.window_s, seed,
+                                  priority_share=cfg.priority_share,
+                                  priority_class=cfg.priority_class, operators=cfg.operators,
+                                  lead_time_s=cfg.lead_time_s,
+                                  operator_lead_times_s=cfg.operator_lead_times_s)
     n_epochs = int(math.ceil(duration_s / cfg.epoch_s - 1e-9))
     next_interval = 0
     epochs, flights, instances, rejections = [], [], [], []
     n_requests = approved_cum = expired_cum = 0
     earliest_s: dict = {}
+    latest_s: dict = {}
+    asked = []  # every request submitted, for the decision metrics
     for e in range(n_epochs):
         t = e * cfg.epoch_s
         # every demand instant up to t, in time order (equal spacing when interval_s == epoch_s)
@@ -152,6 +162,10 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
                 n_requests += 1
                 submitted.append(req)
                 earliest_s[req.request_id] = req.earliest_departure_s  # for the delay analysis
+                latest_s[req.request_id] = req.latest_departure_s
+                asked.append({"earliest_departure_s": req.earliest_departure_s,
+                              "latest_departure_s": req.latest_departure_s,
+                              "operator": req.operator_id, "priority": int(req.priority)})
                 reason = planner.submit(req)
                 if reason is not None:
                     rejections.append((req.request_id, reason))
@@ -167,11 +181,17 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
             flights.append({"request_id": f.request_id, "origin": f.origin_id,
                             "destination": f.destination_id, "epoch": e,
                             "earliest_departure_s": earliest_s.get(f.request_id),
+                            "latest_departure_s": latest_s.get(f.request_id),
                             "departure_s": f.departure_s, "arrival_s": f.arrival_s,
                             "length_m": f.length_m, "weight": f.weight,
                             "candidate_index": int(f.candidate_index),
                             "route_index": int(f.route_index), "level_m": float(f.level_m),
-                            "route": " ".join(f.route_node_ids), "_traj": f.trajectory})
+                            "route": " ".join(f.route_node_ids), "_traj": f.trajectory,
+                            "priority": int(f.priority), "operator": f.operator_id,
+                            "shortest_length_m": min(
+                                tp.route.length_m for tp in planner.cache.templates(
+                                    network.node_index(f.origin_id),
+                                    network.node_index(f.destination_id)))})
         epochs.append({"epoch": e, "t_s": t, "requests_cum": n_requests, "pending": rep.pending,
                        "eligible": rep.eligible, "candidates": rep.candidates,
                        "discarded": rep.discarded, "vertices": rep.vertices, "edges": rep.edges,
@@ -209,6 +229,9 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
         "fallbacks": int(sum(r["fallback"] for r in epochs)),
         "min_separation_m": audit.get("min_separation_m"),
         "losses": audit.get("losses"),
+        "objective": cfg.objective,
+        # requests still within their window at the end (filed ahead) are left out
+        **decision_metrics(flights, asked, warmup_s=cfg.metrics_warmup_s or None, end_s=duration_s),
     }
     wall = time.perf_counter() - t_wall
     summary["wall_s"] = wall

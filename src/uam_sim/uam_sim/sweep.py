@@ -35,6 +35,13 @@ def cell_params(cfg: ExperimentConfig, method: str, rate, seed: int) -> dict:
         params["solver_options"] = cfg.solver_options.get(method) or {}
     if cfg.airspace_mode != "paper":  # paper-mode keys stay as they were, so old cells resume
         params["airspace_mode"] = cfg.airspace_mode
+    # issue 21: only cells that leave the paper's objective, order or demand mix get the keys
+    for name, default in (("objective", "paper"), ("baseline_order", "arrival"),
+                          ("priority_share", 0.0), ("priority_class", 1), ("operators", []),
+                          ("horizon_epochs", 1), ("lead_time_s", 0.0),
+                          ("operator_lead_times_s", []), ("metrics_warmup_s", 0.0)):
+        if getattr(cfg, name) != default:
+            params[name] = getattr(cfg, name)
     if cfg.demand_file:
         params["demand"] = hashlib.sha256(resolve_path(cfg.demand_file).read_bytes()).hexdigest()
     if cfg.constraints_file:

@@ -81,3 +81,19 @@ def test_brute_force_on_hand_checked_graphs():
     # 5-cycle with unit weights: optimum 2.
     c5 = MwisProblem.from_arrays(np.ones(5), [[i, (i + 1) % 5] for i in range(5)])
     assert brute_force_mwis(c5)[1] == 2.0
+
+
+def test_whole_weights_within_resolution_are_scaled_by_a_whole_factor_without_rounding():
+    # max 7, 1000 // 7 = 142: every sum is multiplied by 142 exactly, so the tie 2 + 2 + 3 = 7
+    # stays a tie; the general rule (round(w / 7 * 1000)) gives 286 + 286 + 429 = 1001 != 1000
+    wi, scale = integer_weights(np.array([2.0, 3.0, 4.0, 5.0, 7.0]), resolution=1000)
+    assert scale == 142.0
+    assert wi.tolist() == [284, 426, 568, 710, 994]
+    assert wi[0] * 2 + wi[1] == wi[4]
+    general = np.rint(np.array([2.0, 3.0, 7.0]) / 7.0 * 1000).astype(int)
+    assert 2 * general[0] + general[1] != general[2]  # what the factor avoids
+    # all ones: as before (the heaviest becomes the resolution)
+    assert integer_weights(np.ones(3), resolution=1000)[0].tolist() == [1000] * 3
+    # whole weights above the resolution: the general (rounding) rule
+    wi, scale = integer_weights(np.array([3000.0, 1500.0]), resolution=1000)
+    assert wi.tolist() == [1000, 500]

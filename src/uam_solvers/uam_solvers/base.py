@@ -455,7 +455,10 @@ def integer_weights(weights: np.ndarray, resolution: int = 10**6) -> tuple[np.nd
     <= max(w) / (2 * resolution) per vertex). The ratio is taken first, so no finite input
     overflows (w / max(w) <= 1) and none turns into garbage. Positive weights that would round
     to 0 are kept at 1 so the solver still prefers taking them. Returns ``(w_int, scale)``,
-    ``scale = resolution / max(w)`` (finite; 1.0 when all weights are 0). Callers recompute
+    ``scale = resolution / max(w)`` (finite; 1.0 when all weights are 0). Exception: weights
+    that are all whole numbers with ``max(w) <= resolution`` are multiplied by the whole factor
+    ``resolution // max(w)`` instead (no rounding at all: an integer objective such as
+    ``uam_planner.objectives``' lexicographic weights keeps its exact optimum). Callers recompute
     the objective from the float weights and check a claimed optimum with
     :func:`integer_proof_holds`.
     Raises MwisInputError naming the field and value when ``n * resolution`` would overflow
@@ -471,6 +474,12 @@ def integer_weights(weights: np.ndarray, resolution: int = 10**6) -> tuple[np.nd
     wmax = float(w[i])
     if wmax <= 0.0:
         return np.zeros(w.shape, dtype=np.int64), 1.0
+    if wmax <= resolution and np.all(w == np.floor(w)):
+        # Integer weights (uam_planner.objectives: lexicographic and priority objectives) are
+        # multiplied by a whole factor, so every sum keeps its exact order and a proof on the
+        # integer weights is a proof on the input (all weights 1.0 still become ``resolution``).
+        factor = int(resolution // wmax)
+        return w.astype(np.int64) * factor, float(factor)
     with np.errstate(over="ignore"):
         scale = float(resolution) / wmax
     if not math.isfinite(scale):

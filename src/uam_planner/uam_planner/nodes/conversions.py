@@ -63,7 +63,7 @@ def request_to_msg(req: LibRequest, operator_id: str = ""):
     msg = FlightRequest(
         request_id=req.request_id, origin_id=req.origin_id, destination_id=req.destination_id,
         request_time=to_time(req.request_time_s), earliest_departure=to_time(req.earliest_departure_s),
-        latest_departure=to_time(req.latest_departure_s))
+        latest_departure=to_time(req.latest_departure_s), priority=int(req.priority))
     if operator_id and hasattr(msg, "operator_id"):
         msg.operator_id = operator_id
     return msg
@@ -76,7 +76,7 @@ def request_from_msg(msg: Any, request_id: str | None = None) -> LibRequest:
         request_id=msg.request_id if request_id is None else request_id,
         origin_id=msg.origin_id, destination_id=msg.destination_id,
         request_time_s=from_time(msg.request_time), earliest_departure_s=from_time(msg.earliest_departure),
-        latest_departure_s=from_time(msg.latest_departure))
+        latest_departure_s=from_time(msg.latest_departure), priority=int(msg.priority))
 
 
 # ---- plans ---------------------------------------------------------------------------------------

@@ -46,7 +46,9 @@ class RequestGeneratorNode(Node):
             self.source = DemandSchedule(load_demand(p["demand_file"], network.aerodrome_ids, p["window_s"]),
                                          p["interval_s"])
         else:
-            self.source = RequestGenerator(network.aerodrome_ids, p["rate"], p["interval_s"], p["window_s"], p["seed"])
+            self.source = RequestGenerator(network.aerodrome_ids, p["rate"], p["interval_s"], p["window_s"], p["seed"],
+                                           priority_share=p["priority_share"], priority_class=p["priority_class"],
+                                           lead_time_s=p["lead_time_s"])
         self.interval_s = p["interval_s"]
         self.operator_id = p["operator_id"]
         self._pub = self.create_publisher(FlightRequest, c.TOPIC_REQUESTS, qos.QOS_REQUESTS)
@@ -106,8 +108,9 @@ class RequestGeneratorNode(Node):
             while self._next_instant * self.interval_s <= t_s + 1e-9:
                 i = self._next_instant
                 for req in self.source.requests_at(i * self.interval_s, i):
-                    self._pub.publish(m.request_to_msg(req, operator_id=self.operator_id))
-                    ids.append(wire.scoped_id(self.operator_id, req.request_id))
+                    op = req.operator_id or self.operator_id  # a demand file may name the operator
+                    self._pub.publish(m.request_to_msg(req, operator_id=op))
+                    ids.append(wire.scoped_id(op, req.request_id))
                     self.published += 1
                 self._next_instant += 1
             self._released[k] = ids
