@@ -639,7 +639,7 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
         lines += _flight_lines(f" of {op}", stats)
     dm = s.decision_metrics
     if dm:
-        extra = "".join(f", {k.replace('delay_p95_s_prio', 'class ')} {v:.1f} s" for k, v in dm.items()
+        extra = "".join(f", {k.replace('delay_p95_s_prio', 'p95 class ')} {v:.1f} s" for k, v in dm.items()
                         if k.startswith("delay_p95_s_prio"))
         lines.append(f"Delay p95        {dm['delay_p95_s']:.1f} s from the earliest departure{extra}")
         shares = ", ".join(f"{k[6:]} {v:.3f}" for k, v in dm.items() if k.startswith("share_"))
