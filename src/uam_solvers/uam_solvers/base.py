@@ -333,8 +333,12 @@ def _group_pairs(groups: Sequence[np.ndarray]) -> np.ndarray:
     return np.stack([flat[first], flat[first + 1 + step]], axis=1)
 
 
-def _group_arrays(groups: list, n: int) -> list[np.ndarray]:
-    """Each group as a flat numpy array, or MwisInputError naming groups[i]."""
+def _normalise_groups(groups: Sequence[Any] | None, n: int) -> list[np.ndarray]:
+    """Validate clique groups (indices in [0, n)), drop duplicates inside each, keep those of
+    size >= 2 as sorted int32 arrays. Vectorised over all groups. Raises MwisInputError."""
+    groups = _group_list(groups)
+    if not groups:
+        return []
     arrays = []
     for gi, g in enumerate(groups):
         try:
@@ -346,21 +350,6 @@ def _group_arrays(groups: list, n: int) -> list[np.ndarray]:
         if a.size and (a.ndim != 1 or a.dtype.kind not in "iuf"):
             _as_index_array(a, f"groups[{gi}]", n)  # raises with the group's name
         arrays.append(a.reshape(-1))
-    return arrays
-
-
-def _normalise_groups(groups: Sequence[Any] | None, n: int) -> list[np.ndarray]:
-    """Validate clique groups (indices in [0, n)), drop duplicates inside each, keep those of
-    size >= 2 as sorted int32 arrays. Vectorised over all groups. Raises MwisInputError."""
-    groups = _group_list(groups)
-    if not groups:
-        return []
-    if all(type(g) is np.ndarray and g.ndim == 1 and g.dtype.kind in "iu" for g in groups):
-        # integer arrays already (the planner's, a validated problem's): nothing to convert;
-        # the range and duplicate checks below still run on every index
-        arrays = groups
-    else:
-        arrays = _group_arrays(groups, n)
     lengths = np.array([a.size for a in arrays], dtype=np.int64)
     if lengths.sum() == 0:
         return []
