@@ -99,3 +99,15 @@ def test_size_buckets_partition_the_sizes():
     assert size_bucket(1) == -1
     for i, (lo, hi) in enumerate(SIZE_BUCKETS):
         assert size_bucket(lo) == size_bucket(hi) == i
+
+
+def test_dense_clustered_planner_graphs_go_to_kamis_whole_with_or_without_groups(corpus):
+    # issue 20, second pass: planner graphs of mean degree 35-90 used to go to CHILS (to the
+    # limit, unproven) because of the degree gate alone; KaMIS proves them in milliseconds
+    p = min((e.problem for e in corpus if conflict_degree(e.problem) > 32
+             and e.problem.n > 250), key=lambda q: q.n)
+    bare = MwisProblem.from_arrays(p.weights, p.all_edges())
+    for q in (p, bare):
+        r = solve(q.weights, q.edges, list(q.groups), backend="auto", time_limit_s=10.0)
+        assert r.stats["auto_method"] == "kamis" and r.proven_optimal, r.stats
+        assert "triangle_ratio" in r.stats

@@ -108,6 +108,10 @@ def conflict_degree(problem: MwisProblem) -> float:
 #: overran its limit on (0.5-160 s with a 0.05 s limit)
 KAMIS_MIN_TRIANGLE_RATIO = 0.5
 KAMIS_MIN_TRIANGLE_EXCESS = 2.0
+#: ... and when it has at most this many conflict pairs: the planner graphs above have at most
+#: 67,000 (1,673 vertices); on K1000 with pendants (500,500 pairs, ratio 0.998) KaMIS needed
+#: 0.24-0.9 s and under load the rest of a 1 s limit no longer sufficed (killed at 1.37 s)
+KAMIS_CLUSTERED_MAX_PAIRS = 150_000
 #: two-paths :func:`triangle_ratio` samples (standard error at most 0.008)
 TRIANGLE_SAMPLES = 4096
 
@@ -306,7 +310,8 @@ class AutoBackend(Backend):
             degree = conflict_degree(problem)
             tri = None
             clustered = False
-            if degree > opts["kamis_max_degree"] and opts["kamis_min_triangle_ratio"] <= 1.0:
+            if degree > opts["kamis_max_degree"] and opts["kamis_min_triangle_ratio"] <= 1.0 \
+                    and problem.all_edges().shape[0] <= KAMIS_CLUSTERED_MAX_PAIRS:
                 tri = triangle_ratio(problem)
                 density = degree / max(n - 1, 1)
                 clustered = (tri >= opts["kamis_min_triangle_ratio"]

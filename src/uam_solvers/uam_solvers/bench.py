@@ -658,7 +658,8 @@ def main(argv=None) -> int:
                          "from scripts/measure_system_airspace.py --instances")
     ap.add_argument("--issue20", action="store_true",
                     help="only issue 20's tables: auto vs KaMIS on paper-shaped graphs with "
-                         "groups (15-500 vertices) and the in-process deadline table")
+                         "groups (15-500 vertices), on the committed real corpus, and the "
+                         "in-process deadline table (--node-path: the solver node's)")
     ap.add_argument("--deadline-limit", type=float, default=1.0)
     ap.add_argument("--real-corpus", nargs="?", const="", default=None, metavar="FILE",
                     help="only issue 20's table on real planner instances: auto vs KaMIS direct "
@@ -684,6 +685,7 @@ def main(argv=None) -> int:
         print("# MWIS solver benchmark (python -m uam_solvers.bench " + " ".join(argv or sys.argv[1:]) + ")")
         print(_machine())
         grouped_benchmark(args.seed, [15, 50, 100, 250, 500], args.mid_seeds)
+        corpus_benchmark(None, args.corpus_limit)
         deadline_benchmark(args.seed, [b for b in args.large_backends.split(",") if b],
                            args.deadline_limit)
         return 0
