@@ -12,9 +12,11 @@ The outer layers of the default pipeline (Reduce, ComponentSplit) pass every gra
   cliques included, above ``kamis_max_degree`` = 32; :func:`conflict_degree`): KaMIS
   branch-and-reduce on the whole graph first (it reduces and splits faster than the Python
   layers; a denser graph too when it is clustered like the planner's, :func:`triangle_ratio`
-  >= ``kamis_min_triangle_ratio`` = 0.5 and >= twice the edge density: the layered runs' graphs of 250-1,300 vertices have
-  mean degree 35-90 and KaMIS proves them in 1-80 ms, issue 20) with ``kamis_fraction`` (0.2) of the limit, at most ``kamis_max_share_s`` (1 s); a
-  return before 0.9 of that share is its completed search, a proof, returned at once. The
+  >= ``kamis_min_triangle_ratio`` = 0.5 and >= twice the edge density, up to 150,000 conflict
+  pairs: the layered runs' graphs of 250-1,750 vertices have mean degree 35-90 and KaMIS proves
+  every one, in 1-700 ms; such a graph gets ``kamis_clustered_fraction`` = 0.85 of the limit,
+  and KaMIS's best set is kept when the split below finds no better, issue 20); the others
+  get ``kamis_fraction`` (0.2) of the limit, at most ``kamis_max_share_s`` (1 s); a return before 0.9 of that share is its completed search, a proof, returned at once. The
   groups do not enter the choice (issue 20: the earlier "interacting partners" score rose with
   the groups and kept KaMIS from graphs it proves in 1-2 ms). Denser graphs are kept from it
   because KaMIS overran even a 0.05 s limit on them (1-2 s at mean degree 40-44, past 8 s at
@@ -228,11 +230,13 @@ class AutoBackend(Backend):
                                      lo=0, hi=100_000),
         "kamis_fraction": Option("kamis_fraction", "float", 0.2, "share of the limit KaMIS gets "
                                  "on a whole graph above 64 vertices (0: never)", lo=0.0, hi=1.0),
-        "kamis_clustered_fraction": Option("kamis_clustered_fraction", "float", 0.6, "share of "
-                                           "the limit KaMIS gets on a graph denser than "
+        "kamis_clustered_fraction": Option("kamis_clustered_fraction", "float", 0.85, "share "
+                                           "of the limit KaMIS gets on a graph denser than "
                                            "kamis_max_degree that passed the triangle test "
-                                           "(planner graphs KaMIS proves: one of 966 vertices "
-                                           "needed 0.5 s)", lo=0.0, hi=1.0),
+                                           "(planner graphs: KaMIS proved every one measured, "
+                                           "one of 966 vertices needed 0.5-0.7 s under load; "
+                                           "its best set is kept when the rest finds worse)",
+                                           lo=0.0, hi=1.0),
         "kamis_max_share_s": Option("kamis_max_share_s", "float", 1.0, "most time KaMIS gets on "
                                     "a whole graph above 64 vertices [s] (the planner's graphs "
                                     "took at most 0.7 s)", lo=0.0, hi=86_400.0),
@@ -310,6 +314,7 @@ class AutoBackend(Backend):
             degree = conflict_degree(problem)
             tri = None
             clustered = False
+            incumbent = None
             if degree > opts["kamis_max_degree"] and opts["kamis_min_triangle_ratio"] <= 1.0 \
                     and problem.all_edges().shape[0] <= KAMIS_CLUSTERED_MAX_PAIRS:
                 tri = triangle_ratio(problem)
@@ -334,10 +339,18 @@ class AutoBackend(Backend):
                                               "conflict_degree": degree,
                                               **({} if tri is None else
                                                  {"triangle_ratio": round(tri, 4)})})
+                incumbent = res  # KaMIS's best set when its share ran out: kept if better
+        else:
+            incumbent = None
         rest_s = max(time_limit_s - (time.perf_counter() - t0), 1e-3)
         if n <= self.split_max_vertices_parts:
             # exact reductions and component split, each component by _solve_part
             res = self._parts.solve(problem, time_limit_s=rest_s, seed=seed, options=opts)
+            if incumbent is not None and incumbent.objective > res.objective:
+                res = make_result(problem, incumbent.selected, proven_optimal=False,
+                                  solve_time_s=0.0, backend=self.name,
+                                  stats={**incumbent.stats, "auto_method": "kamis (limit)",
+                                         "after_kamis": res.stats.get("auto_method", "")})
             res.solve_time_s = time.perf_counter() - t0
             return res
         return self._solve_large(problem, time_limit_s, seed, opts, t0)
