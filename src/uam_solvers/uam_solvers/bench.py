@@ -25,6 +25,14 @@ Part 2 (scale): paper-shaped instances of 1,000 and 10,000 vertices
 10 s limit (end-to-end wall time shown), the gap to the best value any backend found, and
 whether the large-graph default (``chils``) is within 0.5 % of that best in 1 s.
 
+Issue 20 (each prints only its tables): ``--issue20`` (auto vs KaMIS on paper-shaped graphs
+with groups, on the committed real corpus, and every backend's wall through
+``solve_bounded``), ``--real-corpus [FILE]`` (auto vs KaMIS branch-and-reduce called directly per
+size bucket on real planner instances; default the committed
+``data/mwis/layered-mwis.jsonl.gz`` of scripts/make_mwis_corpus.py), ``--node-path`` (every
+backend through the solver node's SolveService, ``executor.node_service``, on the adversarial
+graphs and 10,000 vertices, and auto's gap at 1 s there).
+
 Speed is machine- and load-dependent: the header prints the machine, load average and commit.
 "median CPU ms" is the process CPU time (all threads) per solve: on a shared, loaded machine wall
 time includes waiting for a core, CPU time does not.
