@@ -11,8 +11,12 @@ The outer layers of the default pipeline (Reduce, ComponentSplit) pass every gra
 * up to ``kamis_max_vertices`` (2,000) unless the conflict graph is dense (mean degree, group
   cliques included, above ``kamis_max_degree`` = 32; :func:`conflict_degree`): KaMIS
   branch-and-reduce on the whole graph first (it reduces and splits faster than the Python
-  layers) with ``kamis_fraction`` (0.2) of the limit, at most ``kamis_max_share_s`` (1 s); a
-  return before 0.9 of that share is its completed search, a proof, returned at once. The
+  layers; a denser graph too when it is clustered like the planner's, :func:`triangle_ratio`
+  >= ``kamis_min_triangle_ratio`` = 0.5 and >= twice the edge density, up to 150,000 conflict
+  pairs: the layered runs' graphs of 250-1,750 vertices have mean degree 35-90 and KaMIS proves
+  every one, in 1-700 ms; such a graph gets ``kamis_clustered_fraction`` = 0.85 of the limit,
+  and KaMIS's best set is kept when the split below finds no better, issue 20); the others
+  get ``kamis_fraction`` (0.2) of the limit, at most ``kamis_max_share_s`` (1 s); a return before 0.9 of that share is its completed search, a proof, returned at once. The
   groups do not enter the choice (issue 20: the earlier "interacting partners" score rose with
   the groups and kept KaMIS from graphs it proves in 1-2 ms). Denser graphs are kept from it
   because KaMIS overran even a 0.05 s limit on them (1-2 s at mean degree 40-44, past 8 s at
@@ -97,6 +101,53 @@ def conflict_degree(problem: MwisProblem) -> float:
     return 2.0 * problem.all_edges().shape[0] / max(problem.n, 1)
 
 
+#: a conflict graph denser than kamis_max_degree still goes to KaMIS first when at least this
+#: share of its two-paths close into triangles (:func:`triangle_ratio`) and that share is at
+#: least KAMIS_MIN_TRIANGLE_EXCESS times its edge density (in G(n, p) both are p): measured
+#: 0.59-0.99 (7-20x the density) on the planner graphs of the layered Singapore and city runs
+#: above mean degree 32 (KaMIS direct proved every one, in 0.5-80 ms on Singapore's), against
+#: 0.10-0.50 (1.0-1.6x) on the G(n, p), paper_instance and large_instance graphs KaMIS
+#: overran its limit on (0.5-160 s with a 0.05 s limit)
+KAMIS_MIN_TRIANGLE_RATIO = 0.5
+KAMIS_MIN_TRIANGLE_EXCESS = 2.0
+#: ... and when it has at most this many conflict pairs: the planner graphs above have at most
+#: 67,000 (1,673 vertices); on K1000 with pendants (500,500 pairs, ratio 0.998) KaMIS needed
+#: 0.24-0.9 s and under load the rest of a 1 s limit no longer sufficed (killed at 1.37 s)
+KAMIS_CLUSTERED_MAX_PAIRS = 150_000
+#: two-paths :func:`triangle_ratio` samples (standard error at most 0.008)
+TRIANGLE_SAMPLES = 4096
+
+
+def triangle_ratio(problem: MwisProblem, samples: int = TRIANGLE_SAMPLES) -> float:
+    """Share of the two-paths a-v-b of the full conflict graph (groups included, so the groups
+    change nothing) whose ends a, b conflict too (the transitivity; G(n, p): about p). The
+    planner's graphs are unions of cliques (a request's candidates, and the candidates of
+    several requests that use one corridor segment at one time) and score 0.59-0.99; random
+    graphs of the same density, on which KaMIS overruns its limit, 0.1-0.5 (K1000 with
+    pendants, which KaMIS proves, 0.998). Estimated on ``samples`` two-paths drawn uniformly
+    with a fixed seed (deterministic). O(n + m + samples log m)."""
+    n = problem.n
+    indptr, indices = problem.csr()
+    deg = np.diff(indptr)
+    wv = deg.astype(np.float64) * (deg - 1)
+    total = float(wv.sum())
+    if n < 3 or total <= 0:
+        return 0.0
+    rng = np.random.default_rng(0)
+    v = np.searchsorted(np.cumsum(wv), rng.random(samples) * total, side="right")
+    v = np.minimum(v, n - 1)
+    d = deg[v]
+    i = (rng.random(samples) * d).astype(np.int64)
+    j = (rng.random(samples) * (d - 1)).astype(np.int64)
+    j += j >= i
+    a = indices[indptr[v] + i].astype(np.int64)
+    b = indices[indptr[v] + j].astype(np.int64)
+    keys = np.repeat(np.arange(n, dtype=np.int64) * n, deg) + indices  # sorted: rows, then cols
+    q = a * n + b
+    pos = np.minimum(np.searchsorted(keys, q), keys.size - 1)
+    return float(np.count_nonzero(keys[pos] == q)) / samples
+
+
 def learn_and_reduce_kernel(problem: MwisProblem, time_limit_s: float, seed: int):
     """chszlablib's LearnAndReduce exact kernelisation (config ``cyclic_fast``, GNN filter
     ``initial_tight``) within ``time_limit_s`` [s].
@@ -179,14 +230,31 @@ class AutoBackend(Backend):
                                      lo=0, hi=100_000),
         "kamis_fraction": Option("kamis_fraction", "float", 0.2, "share of the limit KaMIS gets "
                                  "on a whole graph above 64 vertices (0: never)", lo=0.0, hi=1.0),
+        "kamis_clustered_fraction": Option("kamis_clustered_fraction", "float", 0.85, "share "
+                                           "of the limit KaMIS gets on a graph denser than "
+                                           "kamis_max_degree that passed the triangle test "
+                                           "(planner graphs: KaMIS proved every one measured, "
+                                           "one of 966 vertices needed 0.5-0.7 s under load; "
+                                           "its best set is kept when the rest finds worse)",
+                                           lo=0.0, hi=1.0),
         "kamis_max_share_s": Option("kamis_max_share_s", "float", 1.0, "most time KaMIS gets on "
                                     "a whole graph above 64 vertices [s] (the planner's graphs "
                                     "took at most 0.7 s)", lo=0.0, hi=86_400.0),
         "kamis_max_degree": Option("kamis_max_degree", "float", KAMIS_MAX_DEGREE, "largest mean "
                                    "degree of the conflict graph (group cliques included, so "
                                    "the groups change nothing) for which KaMIS gets the whole "
-                                   "graph first (denser graphs made it overrun its limit)",
+                                   "graph first (denser random graphs made it overrun its "
+                                   "limit); denser graphs get it too when their triangle ratio "
+                                   "is at least kamis_min_triangle_ratio",
                                    lo=0.0, hi=1e9),
+        "kamis_min_triangle_ratio": Option("kamis_min_triangle_ratio", "float",
+                                           KAMIS_MIN_TRIANGLE_RATIO, "graphs denser than "
+                                           "kamis_max_degree go to KaMIS whole first when this "
+                                           "share of their two-paths closes into triangles, and "
+                                           "twice their edge density (planner graphs: "
+                                           "0.59-0.99; random graphs KaMIS overran on: 0.1-0.5; "
+                                           "above 1: never)",
+                                           lo=0.0, hi=2.0),
         "exact_max_vertices": Option("exact_max_vertices", "int", 200, "largest component solved "
                                      "by CP-SAT (larger: CHILS)", lo=0, hi=100_000),
         "exact_fraction": Option("exact_fraction", "float", 0.5, "share of a kernel's time "
@@ -244,26 +312,45 @@ class AutoBackend(Backend):
             return self._solve_part(problem, time_limit_s, seed, opts, t0)
         if n <= opts["kamis_max_vertices"] and opts["kamis_fraction"] > 0:
             degree = conflict_degree(problem)
-            if degree <= opts["kamis_max_degree"]:
+            tri = None
+            clustered = False
+            incumbent = None
+            if degree > opts["kamis_max_degree"] and opts["kamis_min_triangle_ratio"] <= 1.0 \
+                    and problem.all_edges().shape[0] <= KAMIS_CLUSTERED_MAX_PAIRS:
+                tri = triangle_ratio(problem)
+                density = degree / max(n - 1, 1)
+                clustered = (tri >= opts["kamis_min_triangle_ratio"]
+                             and tri >= KAMIS_MIN_TRIANGLE_EXCESS * density)
+            if degree <= opts["kamis_max_degree"] or clustered:
                 # what proves first: KaMIS branch-and-reduce on the whole graph (its exact
                 # reductions are faster than the Python layers, and it splits itself) with a
                 # small share of the limit, at most kamis_max_share_s; a return before 0.9 of
                 # the share is its completed search, a proof (a search stopped by the limit runs
                 # to it, as for the kamis backend), returned at once; otherwise the split below
                 # (CP-SAT, CHILS) gets the rest of the limit
-                share = max(min(time_limit_s * opts["kamis_fraction"],
-                                opts["kamis_max_share_s"]), 1e-3)
+                fraction = opts["kamis_clustered_fraction" if clustered else "kamis_fraction"]
+                share = max(min(time_limit_s * fraction, opts["kamis_max_share_s"]), 1e-3)
                 res = self._kamis.solve(problem, time_limit_s=share, seed=seed,
                                         options={"finish_fraction": 0.9})
                 if res.proven_optimal:
                     return make_result(problem, res.selected, proven_optimal=True,
                                        solve_time_s=time.perf_counter() - t0, backend=self.name,
                                        stats={**res.stats, "auto_method": "kamis",
-                                              "conflict_degree": degree})
+                                              "conflict_degree": degree,
+                                              **({} if tri is None else
+                                                 {"triangle_ratio": round(tri, 4)})})
+                incumbent = res  # KaMIS's best set when its share ran out: kept if better
+        else:
+            incumbent = None
         rest_s = max(time_limit_s - (time.perf_counter() - t0), 1e-3)
         if n <= self.split_max_vertices_parts:
             # exact reductions and component split, each component by _solve_part
             res = self._parts.solve(problem, time_limit_s=rest_s, seed=seed, options=opts)
+            if incumbent is not None and incumbent.objective > res.objective:
+                res = make_result(problem, incumbent.selected, proven_optimal=False,
+                                  solve_time_s=0.0, backend=self.name,
+                                  stats={**incumbent.stats, "auto_method": "kamis (limit)",
+                                         "after_kamis": res.stats.get("auto_method", "")})
             res.solve_time_s = time.perf_counter() - t0
             return res
         return self._solve_large(problem, time_limit_s, seed, opts, t0)

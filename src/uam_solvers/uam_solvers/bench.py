@@ -25,6 +25,14 @@ Part 2 (scale): paper-shaped instances of 1,000 and 10,000 vertices
 10 s limit (end-to-end wall time shown), the gap to the best value any backend found, and
 whether the large-graph default (``chils``) is within 0.5 % of that best in 1 s.
 
+Issue 20 (each prints only its tables): ``--issue20`` (auto vs KaMIS on paper-shaped graphs
+with groups, on the committed real corpus, and every backend's wall through
+``solve_bounded``), ``--real-corpus [FILE]`` (auto vs KaMIS branch-and-reduce called directly per
+size bucket on real planner instances; default the committed
+``data/mwis/layered-mwis.jsonl.gz`` of scripts/make_mwis_corpus.py), ``--node-path`` (every
+backend through the solver node's SolveService, ``executor.node_service``, on the adversarial
+graphs and 10,000 vertices, and auto's gap at 1 s there).
+
 Speed is machine- and load-dependent: the header prints the machine, load average and commit.
 "median CPU ms" is the process CPU time (all threads) per solve: on a shared, loaded machine wall
 time includes waiting for a core, CPU time does not.
@@ -484,6 +492,130 @@ def deadline_benchmark(seed: int, backends, limit_s: float = 1.0, out=print) -> 
         f"(target <= {limit_s + 0.5:g} s).")
 
 
+def corpus_benchmark(path=None, limit_s: float = 1.0, repeats: int = TARGET_REPEATS,
+                     out=print) -> list[dict]:
+    """Issue 20's target on the committed corpus of real planner instances (layered mode,
+    ``instances.REAL_CORPUS``, written by scripts/make_mwis_corpus.py): per size bucket,
+    ``auto`` end to end (``uam_solvers.solve`` from the arrays, as the planner calls it) against
+    KaMIS branch-and-reduce called directly on the CSR, interleaved instance by instance, each
+    the best of ``repeats`` runs. Returns one dict per instance."""
+    from .instances import SIZE_BUCKETS, load_corpus, real_corpus_path, size_bucket
+
+    path = real_corpus_path() if path is None else path
+    entries = load_corpus(path)
+    warm = max(entries, key=lambda e: e.problem.n).problem
+    _solve_arrays(warm, "auto", limit_s, 0)
+    kamis_direct(warm, limit_s)
+    rows = []
+    for e in entries:
+        p = e.problem
+        (ok, dk, fk), (r, da) = _kamis_and_auto(p, limit_s, repeats)
+        rows.append({"name": e.name, "n": p.n, "m": int(p.all_edges().shape[0]),
+                     "bucket": size_bucket(p.n), "auto_s": da, "auto_proven": r.proven_optimal,
+                     "auto_obj": r.objective, "auto_valid": p.is_independent(r.selected),
+                     "auto_method": r.stats.get("auto_method", ""), "kamis_s": dk,
+                     "kamis_finished": fk, "kamis_obj": ok})
+    out(f"\n## `auto` on the real corpus (issue 20): {os.path.basename(str(path))}, "
+        f"{len(entries)} instances, limit {limit_s:g} s\n")
+    out(f"(`auto` by `uam_solvers.solve` from the arrays, end to end, as the planner calls it; "
+        f"KaMIS branch-and-reduce on the prebuilt CSR, 'finished' = returned before 0.9 of the "
+        f"limit, a completed search; interleaved, best of {repeats})\n")
+    out("| bucket, vertices | instances | vertices (range) | edges median | auto median ms | "
+        "auto proven | KaMIS direct median ms | KaMIS finished | auto proven where KaMIS "
+        "finished | median ratio auto/KaMIS (both) | max ratio | auto valid | auto >= KaMIS "
+        "objective |")
+    out("|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for b, (lo, hi) in enumerate(SIZE_BUCKETS):
+        rs = [x for x in rows if x["bucket"] == b]
+        if not rs:
+            continue
+        a = np.array([x["auto_s"] for x in rs]) * 1e3
+        k = np.array([x["kamis_s"] for x in rs]) * 1e3
+        both = np.array([x["auto_proven"] and x["kamis_finished"] for x in rs])
+        ratio = a[both] / k[both]
+        kf = sum(x["kamis_finished"] for x in rs)
+        ap_k = sum(x["auto_proven"] and x["kamis_finished"] for x in rs)
+        geq = sum(x["auto_obj"] >= x["kamis_obj"] - 1e-9 * max(1.0, x["kamis_obj"]) for x in rs)
+        hi_s = f"{hi}" if hi < 10**8 else "+"
+        out(f"| {lo}-{hi_s} | {len(rs)} | {min(x['n'] for x in rs)}-{max(x['n'] for x in rs)} | "
+            f"{int(np.median([x['m'] for x in rs]))} | {np.median(a):.2f} | "
+            f"{sum(x['auto_proven'] for x in rs)} | {np.median(k):.2f} | {kf} | {ap_k}/{kf} | "
+            f"{np.median(ratio):.2f} | {ratio.max():.2f} | {sum(x['auto_valid'] for x in rs)}/"
+            f"{len(rs)} | {geq}/{len(rs)} |" if both.any() else
+            f"| {lo}-{hi_s} | {len(rs)} | {min(x['n'] for x in rs)}-{max(x['n'] for x in rs)} | "
+            f"{int(np.median([x['m'] for x in rs]))} | {np.median(a):.2f} | "
+            f"{sum(x['auto_proven'] for x in rs)} | {np.median(k):.2f} | {kf} | {ap_k}/{kf} | - "
+            f"| - | {sum(x['auto_valid'] for x in rs)}/{len(rs)} | {geq}/{len(rs)} |")
+    kf = [x for x in rows if x["kamis_finished"]]
+    missed = [x["name"] for x in kf if not x["auto_proven"]]
+    ratios = np.array([x["auto_s"] / x["kamis_s"] for x in kf if x["auto_proven"]])
+    out(f"\nauto proved {len(kf) - len(missed)} of the {len(kf)} instances KaMIS finished"
+        + (f" (not: {', '.join(missed)})" if missed else "")
+        + (f"; ratio auto/KaMIS median {np.median(ratios):.2f}, instances above 2x: "
+           f"{int((ratios > 2).sum())}" if ratios.size else "")
+        + f"; every answer valid: {all(x['auto_valid'] for x in rows)}")
+    return rows
+
+
+def node_path_benchmark(seed: int, backends, limit_s: float = 1.0, out=print) -> None:
+    """Issue 20: every backend through ``SolveService`` exactly as the solver node builds it
+    (``executor.node_service``: one worker per lane, small lane up to 2,000 vertices, margin
+    0.4 s) on the adversarial graphs and the 10,000-vertex instance: wall against limit +
+    0.5 s; then auto's gap at 1 s on the 10,000-vertex instance against the best known."""
+    from .executor import NODE_LAYOUT, node_service
+    from .instances import large_instance
+
+    t0 = time.perf_counter()
+    svc = node_service(max_time_limit_s=60.0, max_vertices=200_000)
+    started = time.perf_counter() - t0
+    graphs = adversarial_graphs(seed) + [(f"large_instance(10000, {seed})",
+                                          large_instance(10_000, seed))]
+    out(f"\n## Deadlines through the solver node's SolveService (issue 20), limit {limit_s:g} s\n")
+    out(f"(`executor.node_service()`, the service `uam_solvers/nodes/solver_node.py` builds: "
+        f"{NODE_LAYOUT}; started and warmed in {started:.2f} s; wall = `svc.solve(problem, ...)` "
+        f"on the validated problem, what the node calls after converting the request)\n")
+    out("| graph | vertices | conflict pairs | " + " | ".join(backends) + " |")
+    out("|---|---:|---:|" + "---:|" * len(backends))
+    worst, worst_at = 0.0, ""
+    try:
+        for name, p in graphs:
+            cells = []
+            for b in backends:
+                ok, _ = _usable(b)
+                if not ok:
+                    cells.append("n/a")
+                    continue
+                t = time.perf_counter()
+                r = svc.solve(p, backend=b, time_limit_s=limit_s, seed=0)
+                dt = time.perf_counter() - t
+                if dt > worst:
+                    worst, worst_at = dt, f"{b} on {name}"
+                tag = {"killed": " K", "no-free-worker": " Q",
+                       "worker-crashed": " C"}.get(r.stats.get("executor"), "")
+                valid = "" if p.is_independent(r.selected) else " INVALID"
+                cells.append(f"{dt:.2f}{tag}{' P' if r.proven_optimal else ''}{valid}")
+            out(f"| {name} | {p.n} | {p.all_edges().shape[0]} | " + " | ".join(cells) + " |")
+        out(f"\nwall s per solve; K = killed at the limit + margin (the greedy fallback "
+            f"answered), P = proven optimal. Worst wall {worst:.2f} s ({worst_at}) with a "
+            f"{limit_s:g} s limit (target <= {limit_s + 0.5:g} s).")
+        big = graphs[-1][1]
+        runs = {}
+        for lim in (1.0, 10.0):
+            r = svc.solve(big, backend="auto", time_limit_s=lim, seed=0)
+            runs[f"auto {lim:g} s (node service)"] = (r.objective, r.stats.get("auto_method", ""))
+        runs["CHILS direct 10 s"] = (chils_direct(big, 10.0)[0], "")
+        runs["CHILS direct 30 s"] = (chils_direct(big, 30.0)[0], "")
+        runs["KaMIS direct 10 s"] = (kamis_direct(big, 10.0)[0], "")
+        best = max(v[0] for v in runs.values())
+        out(f"\n### {graphs[-1][0]}: `auto` at 1 s through the node's service against the best "
+            f"known\n\nbest known {best:.6f} (best of the runs below)\n")
+        out("| run | objective | gap to best known | auto's method |\n|---|---:|---:|---|")
+        for k, (obj, method) in runs.items():
+            out(f"| {k} | {obj:.4f} | {100 * (best - obj) / best:.4f} % | {method} |")
+    finally:
+        svc.close()
+
+
 def grouped_benchmark(seed: int, sizes, seeds: int, limit_s: float = 1.0, out=print) -> None:
     """Issue 20's target: ``auto`` end to end on paper-shaped graphs with the groups given
     (``instances.grouped_random_instance``) against KaMIS branch-and-reduce called directly,
@@ -534,13 +666,34 @@ def main(argv=None) -> int:
                          "from scripts/measure_system_airspace.py --instances")
     ap.add_argument("--issue20", action="store_true",
                     help="only issue 20's tables: auto vs KaMIS on paper-shaped graphs with "
-                         "groups (15-500 vertices) and the in-process deadline table")
+                         "groups (15-500 vertices), on the committed real corpus, and the "
+                         "in-process deadline table (--node-path: the solver node's)")
     ap.add_argument("--deadline-limit", type=float, default=1.0)
+    ap.add_argument("--real-corpus", nargs="?", const="", default=None, metavar="FILE",
+                    help="only issue 20's table on real planner instances: auto vs KaMIS direct "
+                         "per size bucket (default file: the committed "
+                         "data/mwis/layered-mwis.jsonl.gz)")
+    ap.add_argument("--corpus-limit", type=float, default=1.0,
+                    help="time limit of --real-corpus solves [s]")
+    ap.add_argument("--node-path", action="store_true",
+                    help="only issue 20's table through the solver node's SolveService: every "
+                         "backend on the adversarial graphs and 10,000 vertices, and auto's gap "
+                         "at 1 s on 10,000 vertices")
     args = ap.parse_args(argv)
+    if args.real_corpus is not None or args.node_path:
+        print("# MWIS solver benchmark (python -m uam_solvers.bench " + " ".join(argv or sys.argv[1:]) + ")")
+        print(_machine())
+        if args.real_corpus is not None:
+            corpus_benchmark(args.real_corpus or None, args.corpus_limit)
+        if args.node_path:
+            node_path_benchmark(args.seed, [b for b in args.large_backends.split(",") if b],
+                                args.deadline_limit)
+        return 0
     if args.issue20:
         print("# MWIS solver benchmark (python -m uam_solvers.bench " + " ".join(argv or sys.argv[1:]) + ")")
         print(_machine())
         grouped_benchmark(args.seed, [15, 50, 100, 250, 500], args.mid_seeds)
+        corpus_benchmark(None, args.corpus_limit)
         deadline_benchmark(args.seed, [b for b in args.large_backends.split(",") if b],
                            args.deadline_limit)
         return 0

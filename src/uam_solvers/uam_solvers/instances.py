@@ -29,6 +29,8 @@ planner recordings (the MWIS instance of every PlanningReport, read through uam_
 
 from __future__ import annotations
 
+import gzip
+import io
 import json
 import math
 from dataclasses import dataclass
@@ -41,9 +43,42 @@ from uam_solvers.base import MwisInputError, MwisProblem
 
 CORPUS_FORMAT = "uam-mwis-corpus/1"
 
+#: size buckets [lo, hi] (vertices) of the committed real corpus: how
+#: scripts/make_mwis_corpus.py samples it and ``python -m uam_solvers.bench --real-corpus``
+#: reports it
+SIZE_BUCKETS = ((2, 14), (15, 64), (65, 250), (251, 500), (501, 1000), (1001, 2000),
+                (2001, 10**9))
+
+#: the committed corpus of real planner instances (layered mode), relative to the repository
+REAL_CORPUS = "data/mwis/layered-mwis.jsonl.gz"
+
+
+def size_bucket(n: int) -> int:
+    """Index into SIZE_BUCKETS of a graph of ``n`` vertices (-1 below 2)."""
+    for i, (lo, hi) in enumerate(SIZE_BUCKETS):
+        if lo <= n <= hi:
+            return i
+    return -1
+
+
+def real_corpus_path() -> Path:
+    """Where the committed real corpus is: under the current directory or the repository that
+    holds this source file (the bench runs from a checkout)."""
+    here = Path(__file__).resolve()
+    for base in (Path.cwd(), *here.parents):
+        cand = base / REAL_CORPUS
+        if cand.is_file():
+            return cand
+    raise MwisInputError(f"the real corpus {REAL_CORPUS} was not found under {Path.cwd()} or "
+                         f"above {here.parent} (write it with scripts/make_mwis_corpus.py)")
+
 __all__ = [
     "CORPUS_FORMAT",
     "CORPUS_READERS",
+    "REAL_CORPUS",
+    "SIZE_BUCKETS",
+    "real_corpus_path",
+    "size_bucket",
     "CorpusEntry",
     "generate_corpus",
     "generate_corpus_entries",
@@ -372,7 +407,8 @@ def _entry_to_json(entry: CorpusEntry) -> str:
 def save_corpus(path: str | Path, problems: Sequence[MwisProblem | CorpusEntry],
                 names: Sequence[str] | None = None, sources: Sequence[str] | None = None,
                 optima: Sequence[float | None] | None = None) -> Path:
-    """Write instances as JSON Lines (one instance per line, format in docs/mwis-corpus-format.md).
+    """Write instances as JSON Lines (one instance per line, format in docs/mwis-corpus-format.md);
+    a path ending in ``.gz`` is written gzip-compressed (reproducible bytes).
 
     problems: MwisProblem or CorpusEntry items; names/sources/optima (same length) override the
     entries' fields; default names are "instance-<i>". Returns the path written. Names must be
@@ -398,11 +434,29 @@ def save_corpus(path: str | Path, problems: Sequence[MwisProblem | CorpusEntry],
             raise MwisInputError(f"names must be unique, {entry.name!r} appears twice")
         seen.add(entry.name)
     path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("w", encoding="utf-8") as handle:
+    with _open_text(path, "w") as handle:
         for entry in entries:
             handle.write(_entry_to_json(entry))
             handle.write("\n")
     return path
+
+
+def _open_text(path: Path, mode: str):
+    """A text handle on ``path``; a name ending in ``.gz`` is gzip-compressed (written with no
+    time stamp or file name in the header, so the same corpus gives the same bytes)."""
+    if path.suffix.lower() != ".gz":
+        return path.open(mode, encoding="utf-8")
+    if mode == "w":
+        raw = path.open("wb")
+        gz = gzip.GzipFile(filename="", mode="wb", fileobj=raw, mtime=0, compresslevel=9)
+
+        class _Closing(io.TextIOWrapper):
+            def close(self) -> None:  # closes the gzip stream, then the file under it
+                super().close()
+                raw.close()
+
+        return _Closing(gz, encoding="utf-8")
+    return io.TextIOWrapper(gzip.open(path, "rb"), encoding="utf-8")
 
 
 def _entry_from_json(line: str, where: str) -> CorpusEntry:
@@ -449,7 +503,8 @@ def _entry_from_json(line: str, where: str) -> CorpusEntry:
 
 
 def load_corpus(path: str | Path) -> list[CorpusEntry]:
-    """Read a JSON Lines corpus written by `save_corpus` (or by hand, same format).
+    """Read a JSON Lines corpus written by `save_corpus` (or by hand, same format); a path
+    ending in ``.gz`` is read as gzip-compressed JSON Lines.
 
     Blank lines are skipped. Every instance is validated by MwisProblem.from_arrays; an error
     names the file, the line number, the instance and the field. Complexity: O(file size).
@@ -457,7 +512,7 @@ def load_corpus(path: str | Path) -> list[CorpusEntry]:
     path = Path(path)
     entries = []
     seen = set()
-    with path.open("r", encoding="utf-8") as handle:
+    with _open_text(path, "r") as handle:
         for line_no, line in enumerate(handle, start=1):
             if not line.strip():
                 continue
@@ -489,6 +544,7 @@ def _read_mcap(path: Path) -> list[CorpusEntry]:
 CORPUS_READERS: dict[str, Callable[[Path], list[CorpusEntry]]] = {
     ".jsonl": load_corpus,
     ".json": load_corpus,
+    ".gz": load_corpus,  # .jsonl.gz: gzip-compressed JSON Lines
     ".mcap": _read_mcap,
 }
 

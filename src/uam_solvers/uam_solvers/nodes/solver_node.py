@@ -41,14 +41,8 @@ from uam_solvers.nodes import param_rules
 from uam_bringup.runtime import run_node
 from uam_solvers import BackendUnavailable, MwisInputError, UnknownBackendError
 
-# Worker layout of the SolveService (issue 11): one worker per lane keeps the node within the two
-# cores of the target machine; problems up to 2,000 vertices (every planner epoch of the paper's
-# scenarios) use the small lane, so a city-scale graph never delays them.
-SMALL_WORKERS = 1
-LARGE_WORKERS = 1
-SMALL_LANE_MAX_VERTICES = 2000
-#: time a worker may run past the request's limit before it is killed [s] (covers the reply)
-MARGIN_S = 0.4
+# Worker layout of the SolveService: uam_solvers.executor.NODE_LAYOUT (node_service builds it,
+# so benchmarks of this node's path use the same service without ROS).
 #: how long close() waits for a start-up in progress [s]
 STARTER_JOIN_S = 2.0
 
@@ -93,12 +87,10 @@ class SolverNode(Node):
     # -- start-up and shut-down ----------------------------------------------------------------
 
     def _start_workers(self) -> None:
-        from uam_solvers.executor import SolveService
+        from uam_solvers.executor import node_service
 
         try:
-            svc = SolveService(small_workers=SMALL_WORKERS, large_workers=LARGE_WORKERS,
-                               small_lane_max_vertices=SMALL_LANE_MAX_VERTICES, margin_s=MARGIN_S,
-                               max_time_limit_s=float(self._p["max_time_limit_s"]),
+            svc = node_service(max_time_limit_s=float(self._p["max_time_limit_s"]),
                                max_vertices=int(self._p["max_vertices"]))
         except Exception as exc:  # noqa: BLE001 - reported; the node stays up without the service
             self.start_error = f"{type(exc).__name__}: {exc}"

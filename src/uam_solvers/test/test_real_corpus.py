@@ -1,0 +1,113 @@
+"""The committed corpus of real planner instances (issue 20): it loads, covers the layered
+runs' sizes and steady state, and `auto`'s answers on it are valid and proven where KaMIS
+branch-and-reduce proves (a few instances, no timing assertions)."""
+
+import gzip
+
+import numpy as np
+import pytest
+
+from uam_solvers import solve
+from uam_solvers.auto import conflict_degree, triangle_ratio
+from uam_solvers.base import MwisProblem
+from uam_solvers.instances import (SIZE_BUCKETS, load_corpus, read_instances, real_corpus_path,
+                                   save_corpus, size_bucket)
+
+
+@pytest.fixture(scope="module")
+def corpus():
+    return load_corpus(real_corpus_path())
+
+
+def test_the_corpus_loads_small_and_covers_sizes_and_the_steady_state(corpus):
+    path = real_corpus_path()
+    assert path.stat().st_size < 2_000_000
+    assert [e.name for e in read_instances(path)] == [e.name for e in corpus]
+    names = [e.name for e in corpus]
+    assert len(set(names)) == len(names) >= 40
+    assert {n.split("-r")[0] for n in names} == {"singapore-layered", "city2000"}
+    buckets = {size_bucket(e.problem.n) for e in corpus}
+    assert {1, 2, 3, 4, 5} <= buckets  # 15-64 ... 1001-2000 vertices
+    epochs = [int(n.split("-e")[1].split("-")[0]) for n in names]
+    assert sum(ep > 25 for ep in epochs) >= 20, "the steady state after the warm-up is in"
+    for e in corpus:
+        p = e.problem
+        assert p.groups, "the planner always gives the requests as groups"
+        assert "epoch" in e.source and "make_mwis_corpus" in e.source
+
+
+def test_a_gzip_corpus_round_trips_with_reproducible_bytes(tmp_path):
+    p = MwisProblem.from_arrays([1.0, 0.5, 0.25], [[0, 1]], groups=[[1, 2]])
+    a, b = tmp_path / "a.jsonl.gz", tmp_path / "b.jsonl.gz"
+    save_corpus(a, [p])
+    save_corpus(b, [p])
+    assert a.read_bytes() == b.read_bytes()
+    assert gzip.decompress(a.read_bytes()).decode().count("\n") == 1
+    (e,) = load_corpus(a)
+    np.testing.assert_array_equal(e.problem.weights, p.weights)
+
+
+def _kamis_proves(p: MwisProblem) -> tuple[bool, float]:
+    from uam_solvers.bench import kamis_direct
+
+    obj, _, finished = kamis_direct(p, 10.0)
+    return finished, obj
+
+
+def _pick(corpus):
+    """One instance per size bucket and case: the smallest of each (fast), plus the dense
+    clustered ones auto used to leave to CHILS (mean degree above 32)."""
+    seen, out = set(), []
+    for e in sorted(corpus, key=lambda e: e.problem.n):
+        key = (e.name.split("-r")[0], size_bucket(e.problem.n))
+        if key not in seen:
+            seen.add(key)
+            out.append(e)
+    dense = [e for e in corpus if conflict_degree(e.problem) > 32 and e not in out]
+    return out + dense[:2]
+
+
+def test_auto_is_valid_and_proves_where_kamis_proves(corpus):
+    for e in _pick(corpus):
+        p = e.problem
+        r = solve(p.weights, p.edges, list(p.groups), backend="auto", time_limit_s=10.0)
+        assert p.is_independent(r.selected), e.name
+        assert not r.fallback, (e.name, r.message)
+        finished, kobj = _kamis_proves(p)
+        if finished:
+            assert r.proven_optimal, (e.name, r.stats)
+            assert r.objective >= kobj - 1e-9 * max(1.0, kobj), e.name
+
+
+def test_triangle_ratio_separates_planner_graphs_from_random_ones(corpus):
+    rng = np.random.default_rng(0)
+    a, b = np.triu_indices(300, 1)
+    keep = rng.random(a.size) < 0.5
+    g = MwisProblem.from_arrays(rng.random(300) + 0.5, np.stack([a[keep], b[keep]], 1))
+    assert abs(triangle_ratio(g) - 0.5) < 0.05
+    dense = [e.problem for e in corpus if conflict_degree(e.problem) > 32]
+    assert dense
+    assert min(triangle_ratio(p) for p in dense) > 0.55
+    # the groups are a hint about the same graph: the ratio ignores whether they are given
+    p = dense[0]
+    bare = MwisProblem.from_arrays(p.weights, p.all_edges())
+    assert triangle_ratio(bare) == triangle_ratio(p)
+    assert triangle_ratio(p) == triangle_ratio(p)  # deterministic
+
+
+def test_size_buckets_partition_the_sizes():
+    assert size_bucket(1) == -1
+    for i, (lo, hi) in enumerate(SIZE_BUCKETS):
+        assert size_bucket(lo) == size_bucket(hi) == i
+
+
+def test_dense_clustered_planner_graphs_go_to_kamis_whole_with_or_without_groups(corpus):
+    # issue 20, second pass: planner graphs of mean degree 35-90 used to go to CHILS (to the
+    # limit, unproven) because of the degree gate alone; KaMIS proves them in milliseconds
+    p = min((e.problem for e in corpus if conflict_degree(e.problem) > 32
+             and e.problem.n > 250), key=lambda q: q.n)
+    bare = MwisProblem.from_arrays(p.weights, p.all_edges())
+    for q in (p, bare):
+        r = solve(q.weights, q.edges, list(q.groups), backend="auto", time_limit_s=10.0)
+        assert r.stats["auto_method"] == "kamis" and r.proven_optimal, r.stats
+        assert "triangle_ratio" in r.stats
