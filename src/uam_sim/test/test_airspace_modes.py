@@ -60,6 +60,7 @@ def test_settings_that_contradict_the_mode_are_refused_naming_the_field(tmp_path
         make_config({"network": SG_LAYERED, "airspace_mode": "slots"})
 
 
+@pytest.mark.slow  # not in `make test-fast`: four airspace modes, 5 s
 def test_the_expanded_modes_approve_more_than_the_paper_on_the_same_demand_without_losses():
     """Singapore at rate 20 for 300 s, greedy: every mode flies safely under its own model, and
     each expansion approves at least as many of the same requests as the paper's airspace."""

@@ -40,6 +40,7 @@ def record(path, method, cfg):
         return run_scenario(net, method, 6, 0, 300.0, cfg, observer=observer)
 
 
+@pytest.mark.slow  # not in `make test-fast`: two runs, recordings and a report, 3 s
 def test_recordings_give_the_runs_metrics(tmp_path):
     cfg = make_config({"network": NET, "out": str(tmp_path / "res"), "include_qpu": False,
                        "tts": {"enabled": False}})

@@ -70,6 +70,7 @@ def test_audit_runs_and_finds_no_loss(serial):
     assert sum(c["audit"]["pairs_checked"] for c in sweep.cells) > 0
 
 
+@pytest.mark.slow  # not in `make test-fast`: a process pool
 def test_parallel_equals_serial(serial, tmp_path):
     cfg, sweep = serial
     par = run_sweep(small(tmp_path, workers=2), progress=False)
@@ -96,6 +97,7 @@ def test_resumed_run_recomputes_nothing(serial):
     assert sorted(partial.missing) == [("fifo", 8, 0), ("greedy", 8, 0)]
 
 
+@pytest.mark.slow  # not in `make test-fast`: matplotlib figures, 4 s
 def test_figures_report_and_tables_are_written(tmp_path):
     cfg = small(tmp_path, tts={"enabled": True, "instances": 6, "reads": 10, "repetitions": 2,
                                "backends": ["greedy", "exact", "sa"], "backend_instances": {"sa": 2}})

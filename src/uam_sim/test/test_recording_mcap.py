@@ -269,6 +269,7 @@ def _rerun_cli() -> str | None:
 
 
 @pytest.mark.skipif(_rerun_cli() is None, reason="rerun CLI (rerun-sdk) not installed")
+@pytest.mark.slow  # not in `make test-fast`: a subprocess of the rerun CLI
 def test_rerun_cli_reads_the_recording(recording, tmp_path):
     cli = _rerun_cli()
     info = subprocess.run([cli, "mcap", "info", str(recording)], capture_output=True, text=True, timeout=120)

@@ -12,6 +12,9 @@ from uam_solvers.executor import SolveService
 from uam_solvers.instances import large_instance, paper_instance
 from uam_solvers.qpu import AdvantageStandInSampler, QpuBackend
 
+# not in `make test-fast`: every backend through a SolveService's worker processes
+pytestmark = pytest.mark.slow
+
 LIMIT_S = 1.0
 
 

@@ -21,6 +21,9 @@ from uam_solvers import executor  # noqa: E402
 from uam_solvers.executor import close_shared_service, shared_service  # noqa: E402
 from uam_solvers.instances import paper_instance  # noqa: E402
 
+# not in `make test-fast`: the shared solve service's worker processes
+pytestmark = pytest.mark.slow
+
 #: generous: the stand-in alone would run for hours; the kill comes at the limit + 0.4 s
 WALL_BOUND_S = 15.0
 

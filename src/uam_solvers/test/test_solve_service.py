@@ -17,6 +17,9 @@ from uam_solvers import MwisInputError, MwisProblem  # noqa: E402
 from uam_solvers.executor import SolveService  # noqa: E402
 from uam_solvers.instances import large_instance, paper_instance  # noqa: E402
 
+# not in `make test-fast`: worker processes
+pytestmark = pytest.mark.slow
+
 
 @pytest.fixture(scope="module")
 def service():
