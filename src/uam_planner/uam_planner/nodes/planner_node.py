@@ -126,6 +126,7 @@ class PlannerNode(Node):
         self._inflight: int | None = None       # the epoch being planned
         self._last: tuple[int, PlanEpoch.Response] | None = None
         self._refusal_logged_at = float("-inf")
+        self._call_refusal_logged_at = float("-inf")
         self._refused_unlogged = 0
         # the run tokens (docs/security.md): this planner's own, and the simulator's it serves
         self.session = secrets.token_hex(8)
@@ -279,7 +280,7 @@ class PlannerNode(Node):
 
     def _log_refused_call(self, message: str) -> None:
         now = time.monotonic()
-        if now - getattr(self, "_call_refusal_logged_at", float("-inf")) >= 1.0:
+        if now - self._call_refusal_logged_at >= 1.0:
             self._call_refusal_logged_at = now
             self.get_logger().warning(f"refused an epoch call: {wire.bounded(message)}")
 
