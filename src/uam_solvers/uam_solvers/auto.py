@@ -27,13 +27,20 @@ The outer layers of the default pipeline (Reduce, ComponentSplit) pass every gra
   KaMIS up to 64 vertices, CP-SAT up to ``exact_max_vertices`` (200; it honours its limit and
   proves optimality for the integer-scaled weights, CHILS gets the rest of the share when it
   has not proven within ``exact_fraction``), CHILS above.
-* above 2,000 vertices: chszlablib's LearnAndReduce exact kernelisation with ``lr_fraction``
-  (0.2) of the limit, then CHILS with the rest on the kernel when it holds at most
-  ``lr_max_kernel_fraction`` (25 %) of the vertices, else on the whole graph (proven when the
-  kernel is empty: measured on the 10,000-vertex planner-shaped graph in 0.13 s).
+* above 2,000 vertices: chszlablib's LearnAndReduce exact kernelisation, first a probe with
+  ``lr_probe_fraction`` (0.01) of the limit: when it removed less than ``lr_min_probe_removed``
+  (10 %) of the vertices, CHILS gets the whole graph and the rest of the limit at once (issue 20:
+  the 10,000-vertex stress graph loses 0.6-2.4 % in the probe and 4 % in a full 0.2 s
+  kernelisation, which took 0.3-0.43 s under load); otherwise LearnAndReduce goes on with the
+  probe's kernel up to ``lr_fraction`` (0.2) of the limit, then KaMIS branch-and-reduce on a
+  kernel of at most ``kamis_max_vertices`` and mean degree ``kamis_max_degree`` with its share
+  (a completed search proves the optimum), CHILS with the rest on the kernel when it holds at
+  most ``lr_max_kernel_fraction`` (25 %) of the vertices, else on the whole graph (proven when
+  the kernel is empty: planner-shaped 10,000 vertices in 0.13-0.2 s).
 
 ``proven_optimal`` is True only when the branch and bound completed, KaMIS finished, CP-SAT
-reported OPTIMAL for every component, or LearnAndReduce left nothing.
+reported OPTIMAL for every component, or LearnAndReduce left nothing or a kernel KaMIS finished
+(checked: the lifted set's integer weight is the reductions' offset plus the kernel optimum).
 """
 from __future__ import annotations
 
@@ -116,6 +123,8 @@ KAMIS_MIN_TRIANGLE_EXCESS = 2.0
 KAMIS_CLUSTERED_MAX_PAIRS = 150_000
 #: two-paths :func:`triangle_ratio` samples (standard error at most 0.008)
 TRIANGLE_SAMPLES = 4096
+#: integer weight of the heaviest vertex for LearnAndReduce (see learn_and_reduce_kernel)
+LR_RESOLUTION = 10**6
 
 
 def triangle_ratio(problem: MwisProblem, samples: int = TRIANGLE_SAMPLES) -> float:
@@ -148,48 +157,94 @@ def triangle_ratio(problem: MwisProblem, samples: int = TRIANGLE_SAMPLES) -> flo
     return float(np.count_nonzero(keys[pos] == q)) / samples
 
 
-def learn_and_reduce_kernel(problem: MwisProblem, time_limit_s: float, seed: int):
-    """chszlablib's LearnAndReduce exact kernelisation (config ``cyclic_fast``, GNN filter
-    ``initial_tight``) within ``time_limit_s`` [s].
+class LrKernel:
+    """A LearnAndReduce kernel in exact integer weights (see :func:`learn_and_reduce`).
 
-    Returns ``(kernel, lift, removed)``: the kernel as an MwisProblem (weights in the units of
-    ``problem.weights``, rounded to max(w) / 10^6), ``lift(kernel_selection) -> selection`` of
-    ``problem`` and the number of vertices the reductions removed; None when LearnAndReduce is
-    not installed. The reductions are exact: an optimum of the kernel lifts to an optimum.
-    """
+    ``indptr``, ``indices``: the kernel's CSR; ``int_weights``: its integer weights (in the
+    units of the input's ``int_weights``; folded vertices can exceed the input's largest);
+    ``offset``: the integer weight the reductions fixed, so that for any kernel set K the lifted
+    set L has ``input_int_weights[L].sum() == offset + int_weights[K].sum()`` (an optimum of the
+    kernel lifts to an optimum); ``lift(kernel_selection) -> selection`` of the input."""
+
+    __slots__ = ("indptr", "indices", "int_weights", "offset", "lift", "n")
+
+    def __init__(self, indptr, indices, int_weights, offset, lift):
+        self.indptr, self.indices, self.int_weights = indptr, indices, int_weights
+        self.offset, self.lift = int(offset), lift
+        self.n = int(int_weights.size)
+
+    def problem(self, scale: float) -> MwisProblem:
+        """The kernel as an MwisProblem in the input's float units (``int_weights / scale``)."""
+        rows = np.repeat(np.arange(self.n, dtype=np.int64), np.diff(self.indptr))
+        keep = rows < self.indices
+        edges = np.stack([rows[keep], self.indices[keep]], axis=1)
+        return MwisProblem.from_arrays(self.int_weights.astype(np.float64) / scale, edges)
+
+
+def learn_and_reduce(indptr: np.ndarray, indices: np.ndarray, int_weights: np.ndarray,
+                     time_limit_s: float, seed: int) -> LrKernel | None:
+    """chszlablib's LearnAndReduce exact kernelisation (config ``cyclic_fast``, GNN filter
+    ``initial_tight``) of the graph ``(indptr, indices)`` with the integer weights
+    ``int_weights`` within ``time_limit_s`` [s] (it overran that by 0.05-0.2 s on 10,000
+    vertices under load). The integers are taken as they are, so a kernel can be reduced again
+    (``learn_and_reduce(k.indptr, k.indices, k.int_weights, ...)``) with no rounding. Returns
+    an :class:`LrKernel`, or None when LearnAndReduce is not installed."""
     try:
         import importlib.resources
 
         from chszlablib._learnandreduce import LearnAndReduceKernel
     except ImportError:
         return None
-    from .base import integer_weights
-
-    # 10^6 as for CHILS: with 10^9 LearnAndReduce returned an empty kernel whose lifted set
-    # was 6.7 % below CHILS's on a 10,500-vertex city instance (an overflow inside, measured)
-    wi, scale = integer_weights(problem.weights, 10**6)
-    ip, ix = problem.csr()
     models = str(importlib.resources.files("chszlablib").joinpath("models")) + "/"
-    lr = LearnAndReduceKernel(ip.astype(np.uint32), ix.astype(np.uint32), wi.astype(np.uint64),
+    lr = LearnAndReduceKernel(np.asarray(indptr).astype(np.uint32),
+                              np.asarray(indices).astype(np.uint32),
+                              np.asarray(int_weights).astype(np.uint64),
                               "cyclic_fast", "initial_tight", max(float(time_limit_s), 1e-3),
                               int(seed) % (2**31), models)
-    kxadj, kadj, kw, _offset, kn = lr.kernelize()
+    kxadj, kadj, kw, offset, kn = lr.kernelize()
     kn = int(kn)
     if kn:
         kxadj = np.asarray(kxadj, dtype=np.int64)
         kadj = np.asarray(kadj, dtype=np.int64)
-        rows = np.repeat(np.arange(kn, dtype=np.int64), np.diff(kxadj))
-        keep = rows < kadj
-        edges = np.stack([rows[keep], kadj[keep]], axis=1)
-        kernel = MwisProblem.from_arrays(np.asarray(kw, dtype=np.float64) / scale, edges)
+        kw = np.asarray(kw, dtype=np.int64)
     else:
-        kernel = MwisProblem.from_arrays(np.zeros(0), np.zeros((0, 2), dtype=np.int64))
+        kxadj, kadj, kw = np.zeros(1, dtype=np.int64), np.zeros(0, dtype=np.int64), \
+            np.zeros(0, dtype=np.int64)
 
     def lift(kernel_selection: np.ndarray) -> np.ndarray:
         _, verts = lr.lift_solution(np.asarray(kernel_selection, dtype=np.int32))
         return np.asarray(verts, dtype=np.int64)
 
-    return kernel, lift, problem.n - kn
+    return LrKernel(kxadj, kadj, kw, int(offset), lift)
+
+
+def reduce_again(first: LrKernel, time_limit_s: float, seed: int) -> LrKernel:
+    """``first`` reduced further by LearnAndReduce within ``time_limit_s`` [s], composed so that
+    the result lifts to the original graph and its offset counts both steps' fixed weight."""
+    second = learn_and_reduce(first.indptr, first.indices, first.int_weights, time_limit_s, seed)
+    lift1, lift2 = first.lift, second.lift
+    return LrKernel(second.indptr, second.indices, second.int_weights,
+                    first.offset + second.offset, lambda sel: lift1(lift2(sel)))
+
+
+def learn_and_reduce_kernel(problem: MwisProblem, time_limit_s: float, seed: int):
+    """:func:`learn_and_reduce` of ``problem`` with its weights rounded to max(w) / 10^6.
+
+    Returns ``(kernel, lift, removed)``: the kernel as an MwisProblem (weights in the units of
+    ``problem.weights``), ``lift(kernel_selection) -> selection`` of ``problem`` and the number
+    of vertices the reductions removed; None when LearnAndReduce is not installed. The
+    reductions are exact: an optimum of the kernel lifts to an optimum.
+    """
+    from .base import integer_weights
+
+    # 10^6 as for CHILS: with 10^9 LearnAndReduce returned an empty kernel whose lifted set
+    # was 6.7 % below CHILS's on a 10,500-vertex city instance (an overflow inside, measured)
+    wi, scale = integer_weights(problem.weights, LR_RESOLUTION)
+    ip, ix = problem.csr()
+    k = learn_and_reduce(ip, ix, wi, time_limit_s, seed)
+    if k is None:
+        return None
+    return k.problem(scale), k.lift, problem.n - k.n
 
 
 def bb_node_limit(time_limit_s: float, cap: int = BB_NODE_LIMIT) -> int:
@@ -262,6 +317,16 @@ class AutoBackend(Backend):
         "lr_fraction": Option("lr_fraction", "float", 0.2, "share of the limit LearnAndReduce's "
                               "kernelisation gets above 2,000 vertices (0: CHILS on the whole "
                               "graph)", lo=0.0, hi=0.9),
+        "lr_probe_fraction": Option("lr_probe_fraction", "float", 0.01, "share of the limit "
+                                    "of LearnAndReduce's first, short kernelisation above 2,000 "
+                                    "vertices: when it removes less than lr_min_probe_removed "
+                                    "of the graph, CHILS gets the whole graph and the rest of "
+                                    "the limit at once (10,000-vertex stress graph: 0.6-2.4 % "
+                                    "removed, planner-shaped: 62-66 %)", lo=0.0, hi=0.9),
+        "lr_min_probe_removed": Option("lr_min_probe_removed", "float", 0.1, "share of the "
+                                       "vertices the probe must remove for LearnAndReduce to "
+                                       "go on (up to lr_fraction of the limit)",
+                                       lo=0.0, hi=1.0),
         "lr_max_kernel_fraction": Option("lr_max_kernel_fraction", "float", 0.25, "largest "
                                          "kernel (share of the vertices) CHILS gets instead of "
                                          "the whole graph", lo=0.0, hi=1.0),
@@ -413,29 +478,81 @@ class AutoBackend(Backend):
 
     def _solve_large(self, problem: MwisProblem, time_limit_s: float, seed: int, opts: dict,
                      t0: float) -> MwisResult:
-        """Above split_max_vertices: LearnAndReduce's exact kernelisation with a share of the
-        limit, then CHILS on the kernel with the rest (proven when the kernel is empty)."""
+        """Above split_max_vertices: a short LearnAndReduce probe (``lr_probe_fraction`` of the
+        limit); when it removed less than ``lr_min_probe_removed`` of the graph, CHILS on the
+        whole graph with the rest of the limit (issue 20: on the 10,000-vertex stress graph the
+        full kernelisation took 0.3-0.43 s of a 1 s limit to remove 4 %); otherwise
+        LearnAndReduce again on the probe's kernel up to ``lr_fraction`` of the limit, then
+        KaMIS branch-and-reduce on a small sparse kernel (a completed search is a proof), CHILS
+        on the kernel (or on the whole graph when the kernel keeps more than
+        ``lr_max_kernel_fraction`` of it) with what is left. A proof (empty kernel, or KaMIS
+        finished on the kernel) is claimed only when the lifted set's integer weight equals the
+        reductions' offset plus the kernel's optimum and its own weights agree
+        (:func:`uam_solvers.base.integer_proof_holds`)."""
+        from .base import integer_proof_holds, integer_weights
+
         if opts["lr_fraction"] <= 0:
             return self._solve_chils(problem, time_limit_s, seed, opts, t0)
-        lr = learn_and_reduce_kernel(problem, time_limit_s * opts["lr_fraction"], seed)
-        if lr is None:
+        wi, scale = integer_weights(problem.weights, LR_RESOLUTION)
+        ip, ix = problem.csr()
+        lr_share = time_limit_s * opts["lr_fraction"]
+        probe_s = min(time_limit_s * opts["lr_probe_fraction"], lr_share)
+        k = learn_and_reduce(ip, ix, wi, probe_s if probe_s > 0 else lr_share, seed)
+        if k is None:
             return self._solve_chils(problem, time_limit_s, seed, opts, t0)
-        kernel, lift, removed = lr
-        stats = {"lr_kernel_vertices": kernel.n, "lr_removed_vertices": removed}
-        if kernel.n > opts["lr_max_kernel_fraction"] * problem.n:
+        stats = {"lr_probe_kernel_vertices": k.n}
+        if probe_s > 0 and k.n > (1.0 - opts["lr_min_probe_removed"]) * problem.n:
+            res = self._solve_chils(problem, time_limit_s, seed, opts, t0)
+            res.stats = {**res.stats, **stats, "lr_kernel_vertices": k.n,
+                         "lr_removed_vertices": problem.n - k.n}
+            return res
+        rest = lr_share - (time.perf_counter() - t0)
+        if probe_s > 0 and k.n and rest > 1e-3:
+            k = reduce_again(k, rest, seed)
+        stats.update(lr_kernel_vertices=k.n, lr_removed_vertices=problem.n - k.n)
+        if k.n == 0:
+            sel = k.lift(np.zeros(0, dtype=np.int64))
+            proven = integer_proof_holds(problem, sel, wi, scale, k.offset)
+            return make_result(problem, sel, proven_optimal=proven,
+                               solve_time_s=time.perf_counter() - t0, backend=self.name,
+                               stats={**stats, "auto_method": "learn-and-reduce"})
+        if k.n > opts["lr_max_kernel_fraction"] * problem.n:
             # little removed: CHILS on the whole graph did better than on such kernels (7,026-
             # vertex city graph, kernel 34 %: 0.096 % below the best known against 0.007 %)
             res = self._solve_chils(problem, time_limit_s, seed, opts, t0)
             res.stats = {**res.stats, **stats}
             return res
-        if kernel.n == 0:
-            sel = lift(np.zeros(0, dtype=np.int64))
-            return make_result(problem, sel, proven_optimal=True,
-                               solve_time_s=time.perf_counter() - t0, backend=self.name,
-                               stats={**stats, "auto_method": "learn-and-reduce"})
+        kernel = k.problem(scale)
+        incumbent = None
+        if (k.n <= opts["kamis_max_vertices"] and opts["kamis_fraction"] > 0
+                and conflict_degree(kernel) <= opts["kamis_max_degree"]
+                and int(k.int_weights.sum()) < 2**31):
+            # the kernel's own integer weights (no second rounding), which KaMIS sums in 32 bits
+            from chszlablib._kamis_wmis import branch_reduce
+
+            share = max(min(time_limit_s * opts["kamis_fraction"], opts["kamis_max_share_s"]),
+                        1e-3)
+            tk = time.perf_counter()
+            int_obj, verts = branch_reduce(k.indptr.astype(np.int32), k.indices.astype(np.int32),
+                                           k.int_weights.astype(np.int32), share,
+                                           int(seed) % (2**31))
+            finished = time.perf_counter() - tk < 0.9 * share
+            ksel = np.asarray(verts, dtype=np.int64)
+            if kernel.is_independent(ksel):
+                sel = k.lift(ksel)
+                if finished and integer_proof_holds(problem, sel, wi, scale,
+                                                    k.offset + int(int_obj)):
+                    return make_result(problem, sel, proven_optimal=True,
+                                       solve_time_s=time.perf_counter() - t0,
+                                       backend=self.name,
+                                       stats={**stats, "auto_method": "learn-and-reduce+kamis"})
+                incumbent = sel
         kres = self._solve_chils(kernel, time_limit_s, seed, opts, t0,
                                  method="learn-and-reduce+chils")
-        sel = lift(np.asarray(kres.selected, dtype=np.int64))
+        sel = k.lift(np.asarray(kres.selected, dtype=np.int64))
+        if incumbent is not None and problem.objective(incumbent) > problem.objective(sel):
+            sel, kres.stats = incumbent, {**kres.stats,
+                                          "auto_method": "learn-and-reduce+kamis (limit)"}
         return make_result(problem, sel, proven_optimal=False,
                            solve_time_s=time.perf_counter() - t0, backend=self.name,
                            stats={**kres.stats, **stats})
