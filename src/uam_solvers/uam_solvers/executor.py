@@ -123,6 +123,11 @@ def _warm_up() -> None:
         backend = get_backend(name)
         if backend.available()[0]:
             backend.solve(tiny, time_limit_s=0.01, seed=0, options={})
+    # auto's path above 2,000 vertices starts with LearnAndReduce: loading its library and
+    # models took 0.4-0.75 s of the first such solve under load (issue 20)
+    from .auto import learn_and_reduce
+
+    learn_and_reduce(*tiny.csr(), np.array([2, 4, 3, 2]), 0.01, 0)
 
 
 def _worker_main(conn) -> None:
