@@ -111,6 +111,10 @@ def test_learn_and_reduce_offset_on_hand_solved_graphs():
     k = learn_and_reduce(*p.csr(), np.array([3, 4, 3, 4, 3]), 1.0, 0)
     assert k.n == 0 and k.offset == 9
     assert sorted(k.lift(np.zeros(0, dtype=np.int64)).tolist()) == [0, 2, 4]
+    # lifting undoes the reductions inside the kernelizer: a second lift is refused (it
+    # crashed the process)
+    with pytest.raises(RuntimeError, match="lifted only once"):
+        k.lift(np.zeros(0, dtype=np.int64))
 
 
 def test_reduce_again_composes_lift_and_offset():
@@ -137,8 +141,9 @@ def test_probe_sends_an_irreducible_large_graph_to_chils_at_once():
     p = large_instance(3000, seed=1)
     res = uam_solvers.solve_problem(p, backend="auto", time_limit_s=1.0)
     assert res.stats["auto_method"] == "chils" and not res.proven_optimal
-    assert res.stats["lr_probe_kernel_vertices"] == res.stats["lr_kernel_vertices"]
     assert res.stats["lr_kernel_vertices"] > 0.9 * p.n
+    if res.stats["lr_probe_kernel_vertices"] < p.n:  # (a probe that removed none goes on)
+        assert res.stats["lr_probe_kernel_vertices"] == res.stats["lr_kernel_vertices"]
     assert p.is_independent(res.selected)
     # with no probe (lr_probe_fraction 0) the full kernelisation runs and keeps >= 25 %: CHILS
     # on the whole graph as well, the same route
@@ -157,8 +162,12 @@ def test_probe_threshold_option_decides_whether_reduction_goes_on():
     assert on.stats["auto_method"].startswith("learn-and-reduce")
     off = uam_solvers.solve_problem(p, backend="auto", time_limit_s=1.0,
                                     options={"lr_min_probe_removed": 1.0})
-    assert off.stats["auto_method"] == "chils" and not off.proven_optimal
     assert p.is_independent(off.selected)
+    if off.stats["lr_probe_kernel_vertices"] < p.n:
+        assert off.stats["auto_method"] == "chils" and not off.proven_optimal
+        assert off.stats["lr_kernel_vertices"] == off.stats["lr_probe_kernel_vertices"]
+    else:  # the probe removed nothing (it did not start, load): the kernelisation went on
+        assert off.stats["lr_kernel_vertices"] < p.n
 
 
 def test_no_proof_claimed_when_the_lifted_weight_disagrees_with_the_offset(monkeypatch):
@@ -179,3 +188,31 @@ def test_no_proof_claimed_when_the_lifted_weight_disagrees_with_the_offset(monke
     assert res.stats["lr_kernel_vertices"] == 0 and not res.proven_optimal
     assert p.is_independent(res.selected)
     assert res.objective == pytest.approx(honest.objective, abs=1e-9)
+
+
+def test_kernel_kamis_that_does_not_finish_claims_nothing_and_lifts_once(monkeypatch):
+    # KaMIS on the kernel stopped by its share (a stand-in that runs the real search and then
+    # takes its whole share): its set is kept as an incumbent in kernel space, CHILS runs, the
+    # better kernel set is lifted once (lifting twice crashed the process), nothing is proven
+    import chszlablib._kamis_wmis as kw
+    import time as _time
+
+    real = kw.branch_reduce
+    calls = []
+
+    def slow(xadj, adj, w, limit, seed):
+        out = real(xadj, adj, w, limit, seed)
+        calls.append(len(w))
+        _time.sleep(limit)
+        return out
+
+    p = planner_instance(2500, seed=3)
+    best = _kamis_optimum(p)
+    monkeypatch.setattr(kw, "branch_reduce", slow)
+    res = uam_solvers.solve_problem(p, backend="auto", time_limit_s=2.0)
+    assert p.is_independent(res.selected) and not res.fallback
+    if calls:  # the kernel path ran (a kernel of <= 25 %, not empty)
+        assert not res.proven_optimal
+        assert res.stats["auto_method"] in ("learn-and-reduce+chils",
+                                            "learn-and-reduce+kamis (limit)")
+        assert res.objective == pytest.approx(best, abs=1e-4)

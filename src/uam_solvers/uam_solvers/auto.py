@@ -211,7 +211,15 @@ def learn_and_reduce(indptr: np.ndarray, indices: np.ndarray, int_weights: np.nd
         kxadj, kadj, kw = np.zeros(1, dtype=np.int64), np.zeros(0, dtype=np.int64), \
             np.zeros(0, dtype=np.int64)
 
+    lifted = []
+
     def lift(kernel_selection: np.ndarray) -> np.ndarray:
+        # lift_solution undoes the reductions inside the kernelizer: a second call on the same
+        # object worked on an undone graph and crashed the process (SIGSEGV, measured), so it
+        # is refused
+        if lifted:
+            raise RuntimeError("learn_and_reduce: a kernel can be lifted only once")
+        lifted.append(True)
         _, verts = lr.lift_solution(np.asarray(kernel_selection, dtype=np.int32))
         return np.asarray(verts, dtype=np.int64)
 
@@ -325,7 +333,8 @@ class AutoBackend(Backend):
                                     "removed, planner-shaped: 62-66 %)", lo=0.0, hi=0.9),
         "lr_min_probe_removed": Option("lr_min_probe_removed", "float", 0.1, "share of the "
                                        "vertices the probe must remove for LearnAndReduce to "
-                                       "go on (up to lr_fraction of the limit)",
+                                       "go on (up to lr_fraction of the limit); a probe that "
+                                       "removed none did not start and LearnAndReduce goes on",
                                        lo=0.0, hi=1.0),
         "lr_max_kernel_fraction": Option("lr_max_kernel_fraction", "float", 0.25, "largest "
                                          "kernel (share of the vertices) CHILS gets instead of "
@@ -479,8 +488,8 @@ class AutoBackend(Backend):
     def _solve_large(self, problem: MwisProblem, time_limit_s: float, seed: int, opts: dict,
                      t0: float) -> MwisResult:
         """Above split_max_vertices: a short LearnAndReduce probe (``lr_probe_fraction`` of the
-        limit); when it removed less than ``lr_min_probe_removed`` of the graph, CHILS on the
-        whole graph with the rest of the limit (issue 20: on the 10,000-vertex stress graph the
+        limit); when it removed some but less than ``lr_min_probe_removed`` of the graph, CHILS
+        on the whole graph with the rest of the limit (issue 20: on the 10,000-vertex stress graph the
         full kernelisation took 0.3-0.43 s of a 1 s limit to remove 4 %); otherwise
         LearnAndReduce again on the probe's kernel up to ``lr_fraction`` of the limit, then
         KaMIS branch-and-reduce on a small sparse kernel (a completed search is a proof), CHILS
@@ -501,7 +510,10 @@ class AutoBackend(Backend):
         if k is None:
             return self._solve_chils(problem, time_limit_s, seed, opts, t0)
         stats = {"lr_probe_kernel_vertices": k.n}
-        if probe_s > 0 and k.n > (1.0 - opts["lr_min_probe_removed"]) * problem.n:
+        # a probe that removed nothing at all did not get past LearnAndReduce's set-up (a cold
+        # process under load: 4 of 8 fresh runs on the planner-shaped 10,000-vertex graph,
+        # which the full kernelisation empties): the kernelisation then goes on as without one
+        if probe_s > 0 and problem.n > k.n > (1.0 - opts["lr_min_probe_removed"]) * problem.n:
             res = self._solve_chils(problem, time_limit_s, seed, opts, t0)
             res.stats = {**res.stats, **stats, "lr_kernel_vertices": k.n,
                          "lr_removed_vertices": problem.n - k.n}
@@ -523,7 +535,7 @@ class AutoBackend(Backend):
             res.stats = {**res.stats, **stats}
             return res
         kernel = k.problem(scale)
-        incumbent = None
+        incumbent = None  # KaMIS's kernel set when it did not finish (lifted once, at the end)
         if (k.n <= opts["kamis_max_vertices"] and opts["kamis_fraction"] > 0
                 and conflict_degree(kernel) <= opts["kamis_max_degree"]
                 and int(k.int_weights.sum()) < 2**31):
@@ -539,20 +551,23 @@ class AutoBackend(Backend):
             finished = time.perf_counter() - tk < 0.9 * share
             ksel = np.asarray(verts, dtype=np.int64)
             if kernel.is_independent(ksel):
-                sel = k.lift(ksel)
-                if finished and integer_proof_holds(problem, sel, wi, scale,
-                                                    k.offset + int(int_obj)):
-                    return make_result(problem, sel, proven_optimal=True,
+                if finished:
+                    sel = k.lift(ksel)
+                    proven = integer_proof_holds(problem, sel, wi, scale, k.offset + int(int_obj))
+                    return make_result(problem, sel, proven_optimal=proven,
                                        solve_time_s=time.perf_counter() - t0,
                                        backend=self.name,
                                        stats={**stats, "auto_method": "learn-and-reduce+kamis"})
-                incumbent = sel
+                incumbent = ksel
         kres = self._solve_chils(kernel, time_limit_s, seed, opts, t0,
                                  method="learn-and-reduce+chils")
-        sel = k.lift(np.asarray(kres.selected, dtype=np.int64))
-        if incumbent is not None and problem.objective(incumbent) > problem.objective(sel):
-            sel, kres.stats = incumbent, {**kres.stats,
-                                          "auto_method": "learn-and-reduce+kamis (limit)"}
+        ksel = np.asarray(kres.selected, dtype=np.int64)
+        if incumbent is not None and int(k.int_weights[incumbent].sum()) > \
+                int(k.int_weights[ksel].sum()):
+            # the kernel's integer weights order the lifted sets exactly (same offset)
+            ksel, kres.stats = incumbent, {**kres.stats,
+                                           "auto_method": "learn-and-reduce+kamis (limit)"}
+        sel = k.lift(ksel)
         return make_result(problem, sel, proven_optimal=False,
                            solve_time_s=time.perf_counter() - t0, backend=self.name,
                            stats={**kres.stats, **stats})
