@@ -73,3 +73,21 @@ def test_the_study_runs_in_one_pool_resumes_and_reports_from_its_tables(tmp_path
     for fig in ("approvals_by_mode", "approval_rate_vs_load", "mwis_variables", "active_over_time",
                 "delay", "solve_time_gap_vs_size"):
         assert (d / "figures" / f"{fig}.png").stat().st_size > 5000
+
+
+def test_the_auto_both_file_is_the_main_study_restricted_to_auto_in_both():
+    # config/capacity-study-auto-both.yaml (issue 20's re-run): the same base and, for each of
+    # its arms, the main study's network and rates with only method auto in mode "both"
+    main = load_capacity_config("config/capacity-study.yaml")
+    sub = load_capacity_config("config/capacity-study-auto-both.yaml")
+    assert sub.base == main.base
+    arms = {a.name: a for a in main.arms}
+    assert [a.name for a in sub.arms] == ["singapore", "singapore-below-knee", "city"]
+    for a in sub.arms:
+        assert a.modes == ["both"] and a.methods == ["auto"]
+        assert "both" in arms[a.name].modes and "auto" in arms[a.name].methods
+        assert a.network == arms[a.name].network and a.rates == arms[a.name].rates
+    combos = sub.combos()
+    assert [(a.name, m) for a, m, _cfg in combos] == [("singapore", "both"),
+                                                      ("singapore-below-knee", "both"),
+                                                      ("city", "both")]
