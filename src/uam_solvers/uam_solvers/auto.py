@@ -489,8 +489,8 @@ class AutoBackend(Backend):
                      t0: float) -> MwisResult:
         """Above split_max_vertices: a short LearnAndReduce probe (``lr_probe_fraction`` of the
         limit); when it removed some but less than ``lr_min_probe_removed`` of the graph, CHILS
-        on the whole graph with the rest of the limit (issue 20: on the 10,000-vertex stress graph the
-        full kernelisation took 0.3-0.43 s of a 1 s limit to remove 4 %); otherwise
+        on the whole graph with the rest of the limit (issue 20: on the 10,000-vertex stress
+        graph the full kernelisation took 0.3-0.43 s of a 1 s limit to remove 4 %); otherwise
         LearnAndReduce again on the probe's kernel up to ``lr_fraction`` of the limit, then
         KaMIS branch-and-reduce on a small sparse kernel (a completed search is a proof), CHILS
         on the kernel (or on the whole graph when the kernel keeps more than
