@@ -37,9 +37,11 @@ from typing import Sequence
 
 import numpy as np
 
+from uam_contract import defaults
+
 from .trajectory import Trajectory
 
-DEFAULT_SEPARATION_M = 100.0
+DEFAULT_SEPARATION_M = defaults.SEPARATION_M   # the one source: uam_contract.defaults
 _MAX_PAIRS_PER_CHUNK = 1 << 20
 # Broad-phase defaults, tuned on the paper- and city-scale instances of python -m uam_planner.bench
 # (corridors of 0.7-1 km): cells of 12 separations and time buckets of one cell's flight time
@@ -147,7 +149,7 @@ def segment_pair_min_distance(t0a, t1a, p0a, va, t0b, t1b, p0b, vb) -> np.ndarra
 
 
 SEPARATION_MODELS = ("sphere", "cylinder")
-DEFAULT_VERTICAL_SEPARATION_M = 30.0
+DEFAULT_VERTICAL_SEPARATION_M = defaults.VERTICAL_SEPARATION_M
 
 
 @dataclass(frozen=True)
