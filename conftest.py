@@ -3,7 +3,8 @@
 Node tests use the fixtures here: each test gets its own rclpy Context, initialised on this test
 run's own ROS domain id, and waits on conditions with timeouts (`spin_until`), never on sleeps.
 
-The domain id is chosen once per pytest run by taking an exclusive lock file per id
+The domain id is chosen once per pytest process (each pytest-xdist worker of scripts/test.sh
+claims its own) by taking an exclusive lock file per id
 (/tmp/uam-ros-domain-<id>.lock), so two test runs on one machine never share a domain and never
 hear each other; discovery is also limited to this machine.
 """

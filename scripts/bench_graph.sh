@@ -5,6 +5,9 @@
 set -Eeuo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
+if [[ "${1:-}" == "-h" || "${1:-}" == "--help" ]]; then
+  sed -n '2,4p' "$0" | sed 's/^# \{0,1\}//'; echo "usage: scripts/bench_graph.sh [run_fleet.sh options, e.g. --rerun off]"; exit 0
+fi
 OUT="${BENCH_OUT:-/tmp/uam-bench-graph}"
 rm -rf "$OUT"
 bash scripts/run_fleet.sh --duration 3500 --rate 10 --backend exact --out "$OUT" "$@" > "$OUT.log" 2>&1 || {

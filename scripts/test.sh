@@ -1,14 +1,20 @@
 #!/usr/bin/env bash
 # The project's test command: set up whatever is missing, then run every test (library and node
 # tests) in one pytest run. Extra arguments go to pytest, e.g. scripts/test.sh -k separation.
+# The tests run in UAM_TEST_WORKERS pytest-xdist worker processes (default 2, one per core of the
+# reference machine; 0 = in this process), each test file on one worker (--dist loadfile: a file's
+# module fixtures, e.g. a solve service's worker pool, are built once). Each worker claims its own
+# ROS domain id (conftest.py's lock files), so the node tests of two workers never hear each other.
 set -Eeuo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
 bash scripts/setup.sh
 # shellcheck disable=SC1091
 source scripts/env.sh
+WORKERS=(); n="${UAM_TEST_WORKERS:-2}"
+if [[ "$n" != 0 ]] && python -c "import xdist" 2>/dev/null; then WORKERS=(-n "$n" --dist loadfile); fi
 set +e
-python -m pytest "$@"
+python -m pytest "${WORKERS[@]}" "$@"
 rc=$?
 set -e
 exit $rc

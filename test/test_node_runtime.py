@@ -23,7 +23,7 @@ pytest.importorskip("rclpy", reason="needs the built workspace (source scripts/e
 N = 300
 
 SUBSCRIBER = """
-import sys, time, rclpy
+import os, sys, time, rclpy
 from rclpy.qos import QoSProfile, ReliabilityPolicy, HistoryPolicy
 from std_msgs.msg import UInt32
 rclpy.init()
@@ -35,6 +35,8 @@ open(sys.argv[1] + ".ready", "w").close()
 end = time.monotonic() + float(sys.argv[2])
 while time.monotonic() < end and len(got) < {n}:
     rclpy.spin_once(node, timeout_sec=0.05)
+    if node.count_publishers("flush_probe") and not os.path.exists(sys.argv[1] + ".heard"):
+        open(sys.argv[1] + ".heard", "w").close()
 open(sys.argv[1], "w").write(str(len(got)))
 """.replace("{n}", str(N))
 
@@ -61,6 +63,7 @@ class Pub(Node):
                 self.pub.publish(UInt32(data=i))
             self.finished = True
             self.timer.cancel()
+            open(go + ".published", "w").close()
 sys.exit(run_node(Pub, "flush_publisher", None))
 """.replace("{n}", str(N))
 
@@ -84,10 +87,13 @@ def test_a_node_that_ends_waits_until_a_stopped_subscriber_has_acknowledged_its_
         pub = subprocess.Popen([sys.executable, "-c", PUBLISHER, str(go)], env=env,
                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         assert _wait_file(pathlib.Path(str(go) + ".matched"), 30), "the publisher never matched the subscriber"
-        time.sleep(0.5)
+        # both ends have discovered each other (conditions, not sleeps)
+        assert _wait_file(pathlib.Path(str(count) + ".heard"), 30), "the subscriber never saw the publisher"
         os.kill(sub.pid, signal.SIGSTOP)  # the subscriber gets no CPU, as a starved recorder
         go.touch()
-        time.sleep(3.0)                   # the publisher has published and ended its loop
+        assert _wait_file(pathlib.Path(str(go) + ".published"), 60), "the publisher never ended its loop"
+        # its loop has ended, but nothing is acknowledged yet: the node is still waiting
+        assert pub.poll() is None, "the publisher exited before its stopped subscriber acknowledged"
         os.kill(sub.pid, signal.SIGCONT)
         out, _ = pub.communicate(timeout=60)
         assert pub.returncode == 0, out

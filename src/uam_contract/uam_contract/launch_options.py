@@ -14,6 +14,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from uam_contract import defaults as D
+
 
 @dataclass(frozen=True)
 class LaunchOption:
@@ -45,13 +47,13 @@ LAUNCH_OPTIONS: tuple[LaunchOption, ...] = (
     LaunchOption("--separation", "SEPARATION", "separation", "",
                  "separation model: sphere (the paper's) or cylinder; default: the network's own "
                  "(a layered network declares cylinder), else sphere"),
-    LaunchOption("--separation-m", "SEPARATION_M", "separation_m", "100",
+    LaunchOption("--separation-m", "SEPARATION_M", "separation_m", D.as_text(D.SEPARATION_M),
                  "separation minimum, the cylinder's horizontal H [m]"),
-    LaunchOption("--vertical-separation-m", "VERTICAL_M", "vertical_separation_m", "30",
+    LaunchOption("--vertical-separation-m", "VERTICAL_M", "vertical_separation_m", D.as_text(D.VERTICAL_SEPARATION_M),
                  "the cylinder's vertical minimum V [m]"),
-    LaunchOption("--slot-s", "SLOT_S", "slot_s", "0", "departure slot [s]; 0 = depart at the epoch time"),
-    LaunchOption("--climb-rate", "CLIMB", "climb_rate", "5", "vertical climb rate at vertiports [m/s]"),
-    LaunchOption("--descent-rate", "DESCENT", "descent_rate", "3", "vertical descent rate at vertiports [m/s]"),
+    LaunchOption("--slot-s", "SLOT_S", "slot_s", D.as_text(D.DEPARTURE_SLOT_S), "departure slot [s]; 0 = depart at the epoch time"),
+    LaunchOption("--climb-rate", "CLIMB", "climb_rate", D.as_text(D.CLIMB_RATE_MPS), "vertical climb rate at vertiports [m/s]"),
+    LaunchOption("--descent-rate", "DESCENT", "descent_rate", D.as_text(D.DESCENT_RATE_MPS), "vertical descent rate at vertiports [m/s]"),
     LaunchOption("--demand", "DEMAND", "demand_file", "", "replay a demand file instead of random requests"),
     LaunchOption("--constraints", "CONSTRAINTS", "constraints_file", "",
                  "airspace constraints the planner plans around (docs/constraints.md)"),

@@ -17,6 +17,7 @@ import sys
 from dataclasses import dataclass
 from typing import Any, Callable
 
+from uam_contract import defaults as D
 from uam_contract.names import RERUN_MODES
 from uam_contract.stamps import DEFAULT_SCENARIO_START_UTC, SIM_CLOCK
 
@@ -136,18 +137,18 @@ PLANNER = (
           read_only=False),
     Param("seed", 0, "seed of stochastic MWIS backends (run_fleet.sh passes the run's --seed)", 0, INT32_MAX,
           read_only=False),
-    Param("separation_m", 100.0, "separation minimum [m]: the sphere's radius, or the cylinder's horizontal minimum H",
+    Param("separation_m", D.SEPARATION_M, "separation minimum [m]: the sphere's radius, or the cylinder's horizontal minimum H",
           0.001, 100000.0),
     Param("separation_model", "", "loss of separation: 'sphere' (the paper's: 3D distance < separation_m) or "
           "'cylinder' (horizontal distance < separation_m while vertical distance < vertical_separation_m); "
           "'' = the network's own: the cylinder for a layered network (its levels are closer than the sphere), "
           "else the sphere; a choice that contradicts the network's is warned of at start",
           choices=("", "sphere", "cylinder")),
-    Param("vertical_separation_m", 30.0, "the cylinder's vertical minimum V [m] (unused by the sphere)", 0.001, 10000.0),
-    Param("departure_slot_s", 0.0, "departure slots [s]: a request may depart at max(t, earliest) + i * slot up to "
+    Param("vertical_separation_m", D.VERTICAL_SEPARATION_M, "the cylinder's vertical minimum V [m] (unused by the sphere)", 0.001, 10000.0),
+    Param("departure_slot_s", D.DEPARTURE_SLOT_S, "departure slots [s]: a request may depart at max(t, earliest) + i * slot up to "
           "min(t + epoch, latest); 0 = the paper's rule (depart at the epoch time t)", 0.0, 86400.0),
-    Param("climb_rate_mps", 5.0, "vertical climb rate at the vertiports of a layered network [m/s]", 0.001, 100.0),
-    Param("descent_rate_mps", 3.0, "vertical descent rate at the vertiports of a layered network [m/s]", 0.001, 100.0),
+    Param("climb_rate_mps", D.CLIMB_RATE_MPS, "vertical climb rate at the vertiports of a layered network [m/s]", 0.001, 100.0),
+    Param("descent_rate_mps", D.DESCENT_RATE_MPS, "vertical descent rate at the vertiports of a layered network [m/s]", 0.001, 100.0),
     Param("objective", "paper", "what the MWIS maximises (docs/objectives.md): 'paper' (the paper's weights), "
           "'count' (approvals first, then least added delay and detour, lexicographic), 'delay' (the delay from "
           "the earliest departure an approval saves; urgency for a window closing before the next epoch), "
@@ -160,9 +161,9 @@ PLANNER = (
     Param("horizon_epochs", 1, "rolling planning horizon H of the mwis policy: the departures of the next H "
           "epochs are planned in one MWIS and only what departs in this epoch is committed, the rest planned "
           "again; 1 = the paper's one-epoch planning", 1, 100),
-    Param("k", 5, "candidate routes per request", 1, 100),
-    Param("penalty_factor", 5.0, "penalised Dijkstra factor for diverse candidates", 0.0, 1000.0),
-    Param("speed_mps", 10.0, "cruise speed [m/s]", 0.001, 1000.0),
+    Param("k", D.K, "candidate routes per request", 1, 100),
+    Param("penalty_factor", D.PENALTY_FACTOR, "penalised Dijkstra factor for diverse candidates", 0.0, 1000.0),
+    Param("speed_mps", D.SPEED_MPS, "cruise speed [m/s]", 0.001, 1000.0),
     Param("precompute_routes", True, "compute every aerodrome pair's candidate routes at start-up (1-2 s for "
           "Singapore) instead of on first use; same routes"),
     Param("solver_timeout_margin_s", 5.0, "extra wall time [s] to wait for the solver service before the local "
@@ -213,7 +214,7 @@ SIMULATOR = (
     Param("step_s", 1.0, "simulation step [s]", 0.001, 3600.0),
     Param("duration_s", 3500.0, "simulated time after which the run ends [s]; epochs at t < duration_s",
           0.0, 1e7),
-    Param("epoch_s", 30.0, "time between planning epochs [s], a multiple of step_s; the one place the epoch "
+    Param("epoch_s", D.EPOCH_S, "time between planning epochs [s], a multiple of step_s; the one place the epoch "
           "length is configured (the planner gets it in each epoch call)", 0.001, 86400.0),
     Param("mode", "lockstep", "'lockstep': as fast as the planner allows, result independent of CPU speed; "
           "'realtime': paced at real_time_factor", choices=("lockstep", "realtime")),
@@ -238,7 +239,7 @@ REQUEST_GENERATOR = (
     Param("rate", 10.0, "requests per interval (paper: 1 to 20 per 30 s); fractional rates allowed", 0.0, 10000.0),
     Param("interval_s", 30.0, "time between request batches [s] (demand instants; each is released at the "
           "first epoch at or after it)", 0.001, 86400.0),
-    Param("window_s", 60.0, "latest departure - earliest departure of each request [s]", 0.0, 86400.0),
+    Param("window_s", D.WINDOW_S, "latest departure - earliest departure of each request [s]", 0.0, 86400.0),
     Param("seed", 0, "random seed of the request stream", 0, INT32_MAX),
     Param("demand_file", "", "optional YAML demand file to replay instead of random requests "
           "(docs/demand-format.md)"),
@@ -303,9 +304,9 @@ RECORDER = (
     # MCAP's uam_airspace metadata so that the analysis audits in the run's model
     Param("separation_model", "", "the run's separation model (as the planner's; '' = the network's own, "
           "as the planner resolves it)", choices=("", "sphere", "cylinder")),
-    Param("separation_m", 100.0, "the run's separation minimum (cylinder: H) [m]", 0.001, 100000.0),
-    Param("vertical_separation_m", 30.0, "the run's vertical minimum V of the cylinder [m]", 0.001, 10000.0),
-    Param("departure_slot_s", 0.0, "the run's departure slot [s] (0 = the paper's rule)", 0.0, 86400.0),
+    Param("separation_m", D.SEPARATION_M, "the run's separation minimum (cylinder: H) [m]", 0.001, 100000.0),
+    Param("vertical_separation_m", D.VERTICAL_SEPARATION_M, "the run's vertical minimum V of the cylinder [m]", 0.001, 10000.0),
+    Param("departure_slot_s", D.DEPARTURE_SLOT_S, "the run's departure slot [s] (0 = the paper's rule)", 0.0, 86400.0),
     Param("wait_for_publishers", [""], "subscribe to the simulator's topics (/clock, uam/fleet_state, "
           "uam/fleet_poses) only once each of these recorded topics has a matched publisher: the simulator "
           "starts when the recorder subscribes to the fleet state, so the run then starts only when the "

@@ -7,7 +7,7 @@ string never comes back in a reason, a log line or a recording; reasons are at m
 
 Ids are scoped by operator: the decision key is ``operator_id/request_id`` (neither may contain
 ``/``), so one operator cannot take another's id. Nothing on an open ROS graph proves who an
-operator is (see README, "What an open ROS graph cannot protect against").
+operator is (see docs/security.md, "What an open ROS graph cannot protect against").
 """
 
 from __future__ import annotations

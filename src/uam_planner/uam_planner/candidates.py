@@ -34,6 +34,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+from uam_contract import defaults
 import scipy.sparse
 from scipy.sparse.csgraph import dijkstra
 
@@ -57,8 +59,8 @@ class CandidateRoute:
     candidate_index: int
 
 
-DEFAULT_CLIMB_RATE_MPS = 5.0
-DEFAULT_DESCENT_RATE_MPS = 3.0
+DEFAULT_CLIMB_RATE_MPS = defaults.CLIMB_RATE_MPS        # the one source: uam_contract.defaults
+DEFAULT_DESCENT_RATE_MPS = defaults.DESCENT_RATE_MPS
 
 
 class _PenalisedGraph:

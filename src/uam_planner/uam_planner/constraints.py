@@ -1,5 +1,6 @@
 """Airspace constraints: prisms and vertiport / pad closures, and the exact test of a flight
-against them (issue 22, design.md "Decisions over a horizon, and an airspace that changes").
+against them (issue 22, "Decisions over a horizon, and an airspace that changes"; format and
+semantics: docs/constraints.md).
 
 A **volume constraint** is a prism: a horizontal region (a polygon, holes allowed, or a circle) in
 the network's local ENU metres, times an altitude band ``[lower_m, upper_m]`` (ENU up, metres),

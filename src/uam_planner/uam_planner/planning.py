@@ -55,6 +55,8 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from uam_contract import defaults
+
 from .candidates import (DEFAULT_CLIMB_RATE_MPS, DEFAULT_DESCENT_RATE_MPS, CandidateCache,
                          RouteTemplate)
 from .constraints import ConstraintSet, refuse_candidates
@@ -134,7 +136,7 @@ class AirspaceConfig:
 
     separation_model: str = "sphere"
     vertical_separation_m: float = DEFAULT_VERTICAL_SEPARATION_M
-    departure_slot_s: float = 0.0
+    departure_slot_s: float = defaults.DEPARTURE_SLOT_S
     climb_rate_mps: float = DEFAULT_CLIMB_RATE_MPS
     descent_rate_mps: float = DEFAULT_DESCENT_RATE_MPS
 
@@ -180,11 +182,11 @@ class PlanningConfig:
             (the paper's) one-epoch planning. The baselines ignore it.
     """
 
-    epoch_s: float = 30.0
-    separation_m: float = 100.0
-    k: int = 5
-    penalty_factor: float = 5.0
-    speed_mps: float = 10.0
+    epoch_s: float = defaults.EPOCH_S          # the paper's values, from uam_contract.defaults
+    separation_m: float = defaults.SEPARATION_M
+    k: int = defaults.K
+    penalty_factor: float = defaults.PENALTY_FACTOR
+    speed_mps: float = defaults.SPEED_MPS
     backend: str = "greedy"
     time_limit_s: float = 10.0
     seed: int = 0

@@ -37,9 +37,11 @@ from typing import Sequence
 
 import numpy as np
 
+from uam_contract import defaults
+
 from .trajectory import Trajectory
 
-DEFAULT_SEPARATION_M = 100.0
+DEFAULT_SEPARATION_M = defaults.SEPARATION_M   # the one source: uam_contract.defaults
 _MAX_PAIRS_PER_CHUNK = 1 << 20
 # Broad-phase defaults, tuned on the paper- and city-scale instances of python -m uam_planner.bench
 # (corridors of 0.7-1 km): cells of 12 separations and time buckets of one cell's flight time
@@ -147,7 +149,7 @@ def segment_pair_min_distance(t0a, t1a, p0a, va, t0b, t1b, p0b, vb) -> np.ndarra
 
 
 SEPARATION_MODELS = ("sphere", "cylinder")
-DEFAULT_VERTICAL_SEPARATION_M = 30.0
+DEFAULT_VERTICAL_SEPARATION_M = defaults.VERTICAL_SEPARATION_M
 
 
 @dataclass(frozen=True)
@@ -418,6 +420,340 @@ def _cut_pieces(s: SegmentSet, cell_m: float, bucket_s: float, half_m: float,
                    np.minimum(p0[:, 2], z1) - half_z_m, np.maximum(p0[:, 2], z1) + half_z_m)
 
 
+def _check_groups(groups_a, single: bool, n_a: int):
+    """groups_a as an int64 array (or None), refused unless it labels every trajectory of a."""
+    if groups_a is None:
+        return None
+    if not single:
+        raise ValueError("groups_a is only supported when trajs_b is None")
+    groups = np.asarray(groups_a, dtype=np.int64)
+    if groups.shape != (n_a,):
+        raise ValueError(f"groups_a must have shape ({n_a},), got {groups.shape}")
+    return groups
+
+
+def _check_shifts(shifts_a, single: bool, n_a: int):
+    """(first, shift_s, slack per trajectory of a) from ``shifts_a``, or (None, None, None)."""
+    if shifts_a is None:
+        return None, None, None
+    if single:
+        raise ValueError("shifts_a is only supported with trajs_b")
+    first = np.asarray(shifts_a[0], dtype=np.int64)
+    shift = np.asarray(shifts_a[1], dtype=np.float64)
+    if first.shape != (n_a + 1,) or first[0] != 0 or \
+            np.any(np.diff(first) < 0) or first[-1] != shift.shape[0]:
+        raise ValueError(f"shifts_a: first must be ({n_a + 1},) non-decreasing "
+                         f"offsets from 0 to len(shift_s)={shift.shape[0]}")
+    if shift.size and not (np.all(np.isfinite(shift)) and shift.min() >= 0.0):
+        raise ValueError("shifts_a: shift_s must be finite and >= 0")
+    slack_traj = np.zeros(n_a)
+    nonempty = np.flatnonzero(np.diff(first) > 0)
+    if nonempty.size:
+        slack_traj[nonempty] = np.maximum.reduceat(shift, first[nonempty])
+    return first, shift, slack_traj
+
+
+def _common_window(sa: SegmentSet, sb: SegmentSet, slack_traj):
+    """The segments of a and b inside their common time window (a's stretched by its slack)."""
+    if slack_traj is None:
+        sa = sa.window(sb.t0_s.min(), sb.t1_s.max())
+    else:
+        keep = (sa.t1_s + slack_traj[sa.traj] >= sb.t0_s.min()) & (sa.t0_s <= sb.t1_s.max())
+        sa = sa if bool(keep.all()) else sa.take(keep)
+    if len(sa) == 0:
+        return sa, sb
+    hi_a = sa.t1_s.max() if slack_traj is None else (sa.t1_s + slack_traj[sa.traj]).max()
+    return sa, sb.window(sa.t0_s.min(), hi_a)
+
+
+def _grid_size(sa: SegmentSet, separation_m: float, cell_m, bucket_s) -> tuple[float, float]:
+    """The broad phase's cell size [m] and time bucket [s] (defaults in the module's header)."""
+    cell = float(cell_m) if cell_m is not None else DEFAULT_CELL_SEPARATIONS * float(separation_m)
+    if cell < separation_m:
+        raise ValueError(f"cell_m must be >= separation_m={separation_m}, got {cell}")
+    if bucket_s is None:
+        speeds = np.linalg.norm(sa.v_mps, axis=1)
+        med = float(np.median(speeds))
+        bucket = DEFAULT_BUCKET_CELLS * cell / med if med > 0.0 else 60.0
+    else:
+        bucket = float(bucket_s)
+    if not (np.isfinite(bucket) and bucket > 0.0):
+        raise ValueError(f"bucket_s must be positive and finite, got {bucket_s!r}")
+    return cell, bucket
+
+
+@dataclass
+class _Grid:
+    """The space-time grid both sets are keyed on: origin, cell and bucket, extent in cells."""
+    x0: float
+    y0: float
+    tt0: float
+    cell: float
+    bucket: float
+    nx: int = 0
+    ny: int = 0
+    nt: int = 0
+
+    def ranges(self, p: _Pieces, t1):
+        """Per piece, the first and last cell index along x, y and t its box touches."""
+        return (np.floor((p.xlo - self.x0) / self.cell).astype(np.int64),
+                np.floor((p.xhi - self.x0) / self.cell).astype(np.int64),
+                np.floor((p.ylo - self.y0) / self.cell).astype(np.int64),
+                np.floor((p.yhi - self.y0) / self.cell).astype(np.int64),
+                np.floor((p.t0 - self.tt0) / self.bucket).astype(np.int64),
+                np.floor((t1 - self.tt0) / self.bucket).astype(np.int64))
+
+
+def _make_grid(pa: _Pieces, pb: _Pieces, pa_t1_sweep, cell: float, bucket: float) -> _Grid:
+    """A grid origin shared by both sets so their keys agree; refuses extents whose cell
+    indices would not fit int64 (the float -> int conversion would wrap)."""
+    grid = _Grid(min(pa.xlo.min(), pb.xlo.min()), min(pa.ylo.min(), pb.ylo.min()),
+                 min(pa.t0.min(), pb.t0.min()), cell, bucket)
+    # up to int64 indices, a too-large combined cell code is widened in _sorted_keys
+    for axis, span_cells in (
+            ("x", (max(pa.xhi.max(), pb.xhi.max()) - grid.x0) / cell),
+            ("y", (max(pa.yhi.max(), pb.yhi.max()) - grid.y0) / cell),
+            ("t", (max(pa_t1_sweep.max(), pb.t1.max()) - grid.tt0) / bucket)):
+        if not span_cells < float(1 << 62):
+            raise ValueError(f"conflicting_pairs: the extent along {axis} spans {span_cells:.3g} "
+                             f"broad-phase cells (cell_m={cell} m, bucket_s={bucket} s), more than "
+                             f"int64 cell indices hold; use a larger cell_m or bucket_s")
+    return grid
+
+
+def _expand_keys(r, side: int, offset: int, grid: _Grid, widened: bool, packed: bool,
+                 item_bits: int):
+    """Every (cell, side, item) key of the pieces with index ranges ``r``: the (t, y, x)
+    coordinates when widened, else one int64 code (with the item packed in when it fits)."""
+    ix0, ix1, iy0, iy1, it0, it1 = r
+    cx = ix1 - ix0 + 1
+    cy = iy1 - iy0 + 1
+    cnt = cx * cy * (it1 - it0 + 1)
+    item = np.repeat(np.arange(cnt.shape[0], dtype=np.int64), cnt)
+    local = np.arange(item.shape[0], dtype=np.int64) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+    cxi = cx[item]
+    rest, ix = np.divmod(local, cxi)
+    ix += ix0[item]
+    cyi = cy[item]
+    it, iy = np.divmod(rest, cyi)
+    iy += iy0[item]
+    it += it0[item]
+    item += offset
+    if widened:
+        return (it, iy, ix), item
+    code = ((it * grid.ny + iy) * grid.nx + ix) * 2 + side
+    if packed:
+        # one int64 holds (cell, side, item): a plain sort beats an argsort several-fold
+        code <<= item_bits
+        code |= item
+        return code, None
+    return code, item
+
+
+@dataclass
+class _SortedKeys:
+    """The broad phase's sorted keys: per entry its item (piece id, b's offset by len(a)), key
+    (cell * 2 + side), dense cell key and cell coordinates (kt, ky, kx)."""
+    items: np.ndarray
+    keys: np.ndarray
+    cell_key: np.ndarray
+    kt: np.ndarray
+    ky: np.ndarray
+    kx: np.ndarray
+
+
+def _sorted_keys(ra, rb, single: bool, na: int, n_items: int, grid: _Grid,
+                 clock: list) -> _SortedKeys:
+    """Sort every piece's cell keys so that the pieces sharing a cell lie together (a's before
+    b's within a cell). Appends the time when the keys are made to ``clock`` (for ``stats``)."""
+    item_bits = max(int(n_items).bit_length(), 1)
+    # Python ints: the code of the last cell must fit int64 before any int64 arithmetic.
+    max_code = (grid.nt * grid.ny * grid.nx) * 2
+    packed = max_code.bit_length() + item_bits <= 63
+    # Beyond int64 (e.g. 1e9 m and 1e12 s of extent) the single cell code would wrap around and
+    # pieces of different cells would share a key or pieces of one cell be split, silently
+    # missing conflicts; then cells are sorted by their (t, y, x) coordinates instead.
+    widened = max_code.bit_length() > 63
+    ka, ia = _expand_keys(ra, 0, 0, grid, widened, packed, item_bits)
+    if single:
+        codes, items = ka, ia
+    else:
+        kb, ib = _expand_keys(rb, 1, na, grid, widened, packed, item_bits)
+        if widened:
+            codes = tuple(np.concatenate((u, w)) for u, w in zip(ka, kb))
+            items = np.concatenate((ia, ib))
+        else:
+            codes = np.concatenate((ka, kb))
+            items = None if packed else np.concatenate((ia, ib))
+    clock.append(time.perf_counter())
+    if widened:
+        it_, iy_, ix_ = codes
+        side_ = (items >= na).astype(np.int64) if not single else np.zeros_like(items)
+        order = np.lexsort((items, side_, ix_, iy_, it_))
+        kt, ky, kx = it_[order], iy_[order], ix_[order]
+        items = items[order]
+        new_cell = np.ones(kt.shape[0], dtype=bool)
+        new_cell[1:] = (kt[1:] != kt[:-1]) | (ky[1:] != ky[:-1]) | (kx[1:] != kx[:-1])
+        cell_key = np.cumsum(new_cell) - 1          # dense cell ranks fit int64 always
+        keys = cell_key * 2 + side_[order]
+    else:
+        if packed:
+            codes.sort()
+            items = codes & ((1 << item_bits) - 1)
+            keys = codes >> item_bits
+        else:
+            order = np.argsort(codes)
+            keys = codes[order]
+            items = items[order]
+        cell_key = keys >> 1
+        # cell coordinates of each sorted entry (for the canonical-cell test)
+        rest, kx = np.divmod(cell_key, grid.nx)
+        kt, ky = np.divmod(rest, grid.ny)
+    return _SortedKeys(items, keys, cell_key, kt, ky, kx)
+
+
+def _cell_mates(sk: _SortedKeys, single: bool):
+    """Per sorted entry that has partners in its cell: (its position, the first partner's
+    position, the number of partners): within one set the entries after it in its cell, across
+    two sets (only for a's entries) the b entries of its cell."""
+    m = sk.keys.shape[0]
+    bounds = np.flatnonzero(np.diff(sk.cell_key)) + 1
+    g_start = np.concatenate(([0], bounds))
+    g_end = np.concatenate((bounds, [m]))
+    g_of = np.repeat(np.arange(g_start.shape[0]), g_end - g_start)
+    if single:
+        # Item at sorted position p pairs with positions p+1 .. end of its cell.
+        left_pos = np.arange(m, dtype=np.int64)
+        right_first = left_pos + 1
+        n_right = g_end[g_of] - right_first
+    else:
+        # Within a cell the A items (side 0) sort before the B items (side 1).
+        is_b = (sk.keys & 1).astype(bool)
+        nb_in_g = np.add.reduceat(is_b.astype(np.int64), g_start)
+        first_b = g_end - nb_in_g
+        left_pos = np.flatnonzero(~is_b)
+        right_first = first_b[g_of[left_pos]]
+        n_right = nb_in_g[g_of[left_pos]]
+    keep = n_right > 0
+    return left_pos[keep], right_first[keep], n_right[keep]
+
+
+@dataclass
+class _PieceTable:
+    """Per-piece arrays of both sets by global item id (P_*: b's offset by len(a)) and the
+    box arrays in sorted-key order (S_*), which the narrow phase's filters gather from."""
+    P_t0: np.ndarray
+    P_t1: np.ndarray
+    P_p0: np.ndarray
+    P_v: np.ndarray
+    P_traj: np.ndarray
+    S_t0: np.ndarray
+    S_t1: np.ndarray
+    S_xlo: np.ndarray
+    S_xhi: np.ndarray
+    S_ylo: np.ndarray
+    S_yhi: np.ndarray
+    S_zlo: np.ndarray
+    S_zhi: np.ndarray
+    S_traj: np.ndarray | None
+
+
+def _piece_table(pa: _Pieces, pb: _Pieces, sa: SegmentSet, sb: SegmentSet, single: bool,
+                 pa_t1_sweep, slack: bool, items: np.ndarray) -> _PieceTable:
+    if single:
+        P_t0, P_t1, P_xlo, P_xhi, P_ylo, P_yhi = pa.t0, pa.t1, pa.xlo, pa.xhi, pa.ylo, pa.yhi
+        P_zlo, P_zhi = pa.zlo, pa.zhi
+    else:
+        P_t0 = np.concatenate((pa.t0, pb.t0))
+        P_t1 = np.concatenate((pa.t1, pb.t1))
+        P_xlo = np.concatenate((pa.xlo, pb.xlo))
+        P_xhi = np.concatenate((pa.xhi, pb.xhi))
+        P_ylo = np.concatenate((pa.ylo, pb.ylo))
+        P_yhi = np.concatenate((pa.yhi, pb.yhi))
+        P_zlo = np.concatenate((pa.zlo, pb.zlo))
+        P_zhi = np.concatenate((pa.zhi, pb.zhi))
+    P_p0 = pa.p0 if single else np.concatenate((pa.p0, pb.p0))
+    P_traj = np.concatenate((sa.traj[pa.seg], sb.traj[pb.seg])) if not single else sa.traj[pa.seg]
+    P_v = sa.v_mps[pa.seg] if single else np.concatenate((sa.v_mps[pa.seg], sb.v_mps[pb.seg]))
+    # The same per-piece values in sorted-key order.
+    S_t1 = P_t1[items] if not slack else np.concatenate((pa_t1_sweep, pb.t1))[items]
+    return _PieceTable(P_t0, P_t1, P_p0, P_v, P_traj,
+                       P_t0[items], S_t1, P_xlo[items], P_xhi[items], P_ylo[items], P_yhi[items],
+                       P_zlo[items], P_zhi[items], P_traj[items] if single else None)
+
+
+def _box_filter(l, r, pt: _PieceTable, sk: _SortedKeys, grid: _Grid, single: bool, groups):
+    """The sorted-entry pairs (l, r) that may come near: different trajectories (and groups),
+    overlapping inflated boxes in z, t, x and y, kept only in their canonical cell (the one
+    holding the low corner of the boxes' intersection), so a pair sharing several cells is
+    checked once. Returns the pairs' item ids (i, j)."""
+    if single:
+        ti = pt.S_traj[l]
+        tj = pt.S_traj[r]
+        ok = ti != tj
+        if groups is not None:
+            ok &= groups[ti] != groups[tj]
+        l, r = l[ok], r[ok]
+    # Filters in order of selectivity, compressing after each so later gathers are cheap
+    # (on arrays in sorted-key order, so the gathers walk memory nearly sequentially).
+    # z is not in the keys: first drop pieces whose z ranges, inflated by half the vertical
+    # reach, do not overlap with positive length (a loss needs |dz| strictly below the
+    # reach); at flight levels this removes most pairs sharing a cell
+    ok = np.maximum(pt.S_zlo[l], pt.S_zlo[r]) < np.minimum(pt.S_zhi[l], pt.S_zhi[r])
+    l, r = l[ok], r[ok]
+    lo = np.maximum(pt.S_t0[l], pt.S_t0[r])
+    ok = lo <= np.minimum(pt.S_t1[l], pt.S_t1[r])
+    ok &= np.floor((lo - grid.tt0) / grid.bucket).astype(np.int64) == sk.kt[l]
+    l, r = l[ok], r[ok]
+    lo = np.maximum(pt.S_xlo[l], pt.S_xlo[r])
+    ok = lo <= np.minimum(pt.S_xhi[l], pt.S_xhi[r])
+    ok &= np.floor((lo - grid.x0) / grid.cell).astype(np.int64) == sk.kx[l]
+    l, r = l[ok], r[ok]
+    lo = np.maximum(pt.S_ylo[l], pt.S_ylo[r])
+    ok = lo <= np.minimum(pt.S_yhi[l], pt.S_yhi[r])
+    ok &= np.floor((lo - grid.y0) / grid.cell).astype(np.int64) == sk.ky[l]
+    return sk.items[l[ok]], sk.items[r[ok]]
+
+
+def _narrow_phase(i, j, pt: _PieceTable, model: SeparationModel, first, shift):
+    """The exact check of the piece pairs (i, j): (a index, b index, distance) of the pairs
+    that lose separation (a index a candidate when shifted), or None; and the exact checks done."""
+    separation_m = model.separation_m
+    if shift is None:
+        d = model.segment_measure(pt.P_t0[i], pt.P_t1[i], pt.P_p0[i], pt.P_v[i],
+                                  pt.P_t0[j], pt.P_t1[j], pt.P_p0[j], pt.P_v[j])
+        lose = d < separation_m
+        if not lose.any():
+            return None, 0
+        return (pt.P_traj[i[lose]], pt.P_traj[j[lose]], d[lose]), 0
+    # one exact check per candidate (shift) of a's trajectory
+    ta = pt.P_traj[i]
+    cnt = first[ta + 1] - first[ta]
+    cand = np.repeat(first[ta], cnt) + (np.arange(int(cnt.sum()), dtype=np.int64)
+                                        - np.repeat(np.cumsum(cnt) - cnt, cnt))
+    i = np.repeat(i, cnt)
+    j = np.repeat(j, cnt)
+    dt = shift[cand]
+    extra = int(i.size) - int(cnt.size)
+    d = model.segment_measure(pt.P_t0[i] + dt, pt.P_t1[i] + dt, pt.P_p0[i], pt.P_v[i],
+                              pt.P_t0[j], pt.P_t1[j], pt.P_p0[j], pt.P_v[j])
+    lose = d < separation_m
+    if not lose.any():
+        return None, extra
+    return (cand[lose], pt.P_traj[j[lose]], d[lose]), extra
+
+
+def _unique_min_pairs(out_pairs, out_dist, nbt: int):
+    """Unique pairs, sorted lexicographically, each with its minimum distance."""
+    pairs = np.concatenate(out_pairs)
+    dist = np.concatenate(out_dist)
+    code = pairs[:, 0] * nbt + pairs[:, 1]
+    order = np.lexsort((dist, code))
+    code = code[order]
+    first = np.concatenate(([True], code[1:] != code[:-1]))
+    return pairs[order][first], dist[order][first]
+
+
 def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPARATION_M,
                       groups_a=None, cell_m: float | None = None, bucket_s: float | None = None,
                       return_distances: bool = False, stats: dict | None = None,
@@ -457,219 +793,41 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
     single = trajs_b is None
     sa = _as_segment_set(trajs_a)
     sb = sa if single else _as_segment_set(trajs_b)
-    groups = None
-    if groups_a is not None:
-        if not single:
-            raise ValueError("groups_a is only supported when trajs_b is None")
-        groups = np.asarray(groups_a, dtype=np.int64)
-        if groups.shape != (sa.n_trajectories,):
-            raise ValueError(f"groups_a must have shape ({sa.n_trajectories},), got {groups.shape}")
-
+    groups = _check_groups(groups_a, single, sa.n_trajectories)
+    first, shift, slack_traj = _check_shifts(shifts_a, single, sa.n_trajectories)
     empty = np.zeros((0, 2), dtype=np.int64)
-    slack_traj = None
-    if shifts_a is not None:
-        if single:
-            raise ValueError("shifts_a is only supported with trajs_b")
-        first = np.asarray(shifts_a[0], dtype=np.int64)
-        shift = np.asarray(shifts_a[1], dtype=np.float64)
-        if first.shape != (sa.n_trajectories + 1,) or first[0] != 0 or \
-                np.any(np.diff(first) < 0) or first[-1] != shift.shape[0]:
-            raise ValueError(f"shifts_a: first must be ({sa.n_trajectories + 1},) non-decreasing "
-                             f"offsets from 0 to len(shift_s)={shift.shape[0]}")
-        if shift.size and not (np.all(np.isfinite(shift)) and shift.min() >= 0.0):
-            raise ValueError("shifts_a: shift_s must be finite and >= 0")
-        slack_traj = np.zeros(sa.n_trajectories)
-        nonempty = np.flatnonzero(np.diff(first) > 0)
-        if nonempty.size:
-            slack_traj[nonempty] = np.maximum.reduceat(shift, first[nonempty])
+    nothing = (empty, np.zeros(0)) if return_distances else empty
     if len(sa) == 0 or len(sb) == 0:
-        return (empty, np.zeros(0)) if return_distances else empty
+        return nothing
     if not single:
         # Only the common time window can hold a conflict.
-        if slack_traj is None:
-            sa = sa.window(sb.t0_s.min(), sb.t1_s.max())
-        else:
-            keep = (sa.t1_s + slack_traj[sa.traj] >= sb.t0_s.min()) & (sa.t0_s <= sb.t1_s.max())
-            sa = sa if bool(keep.all()) else sa.take(keep)
-        if len(sa) == 0:
-            return (empty, np.zeros(0)) if return_distances else empty
-        hi_a = sa.t1_s.max() if slack_traj is None else (sa.t1_s + slack_traj[sa.traj]).max()
-        sb = sb.window(sa.t0_s.min(), hi_a)
-        if len(sb) == 0:
-            return (empty, np.zeros(0)) if return_distances else empty
+        sa, sb = _common_window(sa, sb, slack_traj)
+        if len(sa) == 0 or len(sb) == 0:
+            return nothing
 
+    # Broad phase: pieces, their cell keys, sorted; the pairs of pieces sharing a cell.
     clock = [time.perf_counter()]
-    cell = float(cell_m) if cell_m is not None else DEFAULT_CELL_SEPARATIONS * float(separation_m)
-    if cell < separation_m:
-        raise ValueError(f"cell_m must be >= separation_m={separation_m}, got {cell}")
-    if bucket_s is None:
-        speeds = np.linalg.norm(sa.v_mps, axis=1)
-        med = float(np.median(speeds))
-        bucket = DEFAULT_BUCKET_CELLS * cell / med if med > 0.0 else 60.0
-    else:
-        bucket = float(bucket_s)
-    if not (np.isfinite(bucket) and bucket > 0.0):
-        raise ValueError(f"bucket_s must be positive and finite, got {bucket_s!r}")
+    cell, bucket = _grid_size(sa, separation_m, cell_m, bucket_s)
     half = 0.5 * float(separation_m)
     half_z = 0.5 * model.vertical_reach_m
-
     pa = _cut_pieces(sa, cell, bucket, half, half_z)
     pb = pa if single else _cut_pieces(sb, cell, bucket, half, half_z)
     na = pa.t0.shape[0]
     # a's pieces occupy their boxes until t1 plus their trajectory's largest shift
     pa_t1_sweep = pa.t1 if slack_traj is None else pa.t1 + slack_traj[sa.traj[pa.seg]]
     clock.append(time.perf_counter())
-
-    # Global grid origin shared by both sets so keys agree.
-    x0 = min(pa.xlo.min(), pb.xlo.min())
-    y0 = min(pa.ylo.min(), pb.ylo.min())
-    tt0 = min(pa.t0.min(), pb.t0.min())
-    # Refuse extents whose cell indices would not even fit int64 (the float -> int conversion
-    # below would wrap); up to that, a too-large combined cell code is widened further down.
-    for axis, span_cells in (
-            ("x", (max(pa.xhi.max(), pb.xhi.max()) - x0) / cell),
-            ("y", (max(pa.yhi.max(), pb.yhi.max()) - y0) / cell),
-            ("t", (max(pa_t1_sweep.max(), pb.t1.max()) - tt0) / bucket)):
-        if not span_cells < float(1 << 62):
-            raise ValueError(f"conflicting_pairs: the extent along {axis} spans {span_cells:.3g} "
-                             f"broad-phase cells (cell_m={cell} m, bucket_s={bucket} s), more than "
-                             f"int64 cell indices hold; use a larger cell_m or bucket_s")
-
-    def ranges(p: _Pieces, t1=None):
-        t1 = p.t1 if t1 is None else t1
-        ix0 = np.floor((p.xlo - x0) / cell).astype(np.int64)
-        ix1 = np.floor((p.xhi - x0) / cell).astype(np.int64)
-        iy0 = np.floor((p.ylo - y0) / cell).astype(np.int64)
-        iy1 = np.floor((p.yhi - y0) / cell).astype(np.int64)
-        it0 = np.floor((p.t0 - tt0) / bucket).astype(np.int64)
-        it1 = np.floor((t1 - tt0) / bucket).astype(np.int64)
-        return ix0, ix1, iy0, iy1, it0, it1
-
-    ra = ranges(pa, pa_t1_sweep)
-    rb = ra if single else ranges(pb)
-    nx = int(max(ra[1].max(), rb[1].max())) + 1
-    ny = int(max(ra[3].max(), rb[3].max())) + 1
-
-    nt = int(max(ra[5].max(), rb[5].max())) + 1
+    grid = _make_grid(pa, pb, pa_t1_sweep, cell, bucket)
+    ra = grid.ranges(pa, pa_t1_sweep)
+    rb = ra if single else grid.ranges(pb, pb.t1)
+    grid.nx = int(max(ra[1].max(), rb[1].max())) + 1
+    grid.ny = int(max(ra[3].max(), rb[3].max())) + 1
+    grid.nt = int(max(ra[5].max(), rb[5].max())) + 1
     n_items = na + (0 if single else pb.t0.shape[0])
-    item_bits = max(int(n_items).bit_length(), 1)
-    # Python ints: the code of the last cell must fit int64 before any int64 arithmetic.
-    max_code = (nt * ny * nx) * 2
-    packed = max_code.bit_length() + item_bits <= 63
-    # Beyond int64 (e.g. 1e9 m and 1e12 s of extent) the single cell code would wrap around and
-    # pieces of different cells would share a key or pieces of one cell be split, silently
-    # missing conflicts; then cells are sorted by their (t, y, x) coordinates instead.
-    widened = max_code.bit_length() > 63
+    sk = _sorted_keys(ra, rb, single, na, n_items, grid, clock)
+    left_pos, right_first, n_right = _cell_mates(sk, single)
+    pt = _piece_table(pa, pb, sa, sb, single, pa_t1_sweep, slack_traj is not None, sk.items)
 
-    def expand(r, side: int, offset: int):
-        ix0, ix1, iy0, iy1, it0, it1 = r
-        cx = ix1 - ix0 + 1
-        cy = iy1 - iy0 + 1
-        cnt = cx * cy * (it1 - it0 + 1)
-        item = np.repeat(np.arange(cnt.shape[0], dtype=np.int64), cnt)
-        local = np.arange(item.shape[0], dtype=np.int64) - np.repeat(np.cumsum(cnt) - cnt, cnt)
-        cxi = cx[item]
-        rest, ix = np.divmod(local, cxi)
-        ix += ix0[item]
-        cyi = cy[item]
-        it, iy = np.divmod(rest, cyi)
-        iy += iy0[item]
-        it += it0[item]
-        item += offset
-        if widened:
-            return (it, iy, ix), item
-        code = ((it * ny + iy) * nx + ix) * 2 + side
-        if packed:
-            # one int64 holds (cell, side, item): a plain sort beats an argsort several-fold
-            code <<= item_bits
-            code |= item
-            return code, None
-        return code, item
-
-    ka, ia = expand(ra, 0, 0)
-    if single:
-        codes, items = ka, ia
-    else:
-        kb, ib = expand(rb, 1, na)
-        if widened:
-            codes = tuple(np.concatenate((u, w)) for u, w in zip(ka, kb))
-            items = np.concatenate((ia, ib))
-        else:
-            codes = np.concatenate((ka, kb))
-            items = None if packed else np.concatenate((ia, ib))
-    clock.append(time.perf_counter())
-    if widened:
-        it_, iy_, ix_ = codes
-        side_ = (items >= na).astype(np.int64) if not single else np.zeros_like(items)
-        order = np.lexsort((items, side_, ix_, iy_, it_))
-        kt, ky, kx = it_[order], iy_[order], ix_[order]
-        items = items[order]
-        new_cell = np.ones(kt.shape[0], dtype=bool)
-        new_cell[1:] = (kt[1:] != kt[:-1]) | (ky[1:] != ky[:-1]) | (kx[1:] != kx[:-1])
-        cell_key = np.cumsum(new_cell) - 1          # dense cell ranks fit int64 always
-        keys = cell_key * 2 + side_[order]
-    else:
-        if packed:
-            codes.sort()
-            items = codes & ((1 << item_bits) - 1)
-            keys = codes >> item_bits
-        else:
-            order = np.argsort(codes)
-            keys = codes[order]
-            items = items[order]
-        cell_key = keys >> 1
-        # cell coordinates of each sorted entry (for the canonical-cell test)
-        rest, kx = np.divmod(cell_key, nx)
-        kt, ky = np.divmod(rest, ny)
-    m = keys.shape[0]
-    bounds = np.flatnonzero(np.diff(cell_key)) + 1
-    g_start = np.concatenate(([0], bounds))
-    g_end = np.concatenate((bounds, [m]))
-    g_of = np.repeat(np.arange(g_start.shape[0]), g_end - g_start)
-
-    if single:
-        # Item at sorted position p pairs with positions p+1 .. end of its cell.
-        left_pos = np.arange(m, dtype=np.int64)
-        right_first = left_pos + 1
-        n_right = g_end[g_of] - right_first
-    else:
-        # Within a cell the A items (side 0) sort before the B items (side 1).
-        is_b = (keys & 1).astype(bool)
-        nb_in_g = np.add.reduceat(is_b.astype(np.int64), g_start)
-        first_b = g_end - nb_in_g
-        left_pos = np.flatnonzero(~is_b)
-        right_first = first_b[g_of[left_pos]]
-        n_right = nb_in_g[g_of[left_pos]]
-    keep = n_right > 0
-    left_pos = left_pos[keep]
-    right_first = right_first[keep]
-    n_right = n_right[keep]
-
-    # Per-piece arrays of b indexed by global item id (b items are offset by na).
-    if single:
-        P_t0, P_t1, P_xlo, P_xhi, P_ylo, P_yhi = pa.t0, pa.t1, pa.xlo, pa.xhi, pa.ylo, pa.yhi
-        P_zlo, P_zhi = pa.zlo, pa.zhi
-    else:
-        P_t0 = np.concatenate((pa.t0, pb.t0))
-        P_t1 = np.concatenate((pa.t1, pb.t1))
-        P_xlo = np.concatenate((pa.xlo, pb.xlo))
-        P_xhi = np.concatenate((pa.xhi, pb.xhi))
-        P_ylo = np.concatenate((pa.ylo, pb.ylo))
-        P_yhi = np.concatenate((pa.yhi, pb.yhi))
-        P_zlo = np.concatenate((pa.zlo, pb.zlo))
-        P_zhi = np.concatenate((pa.zhi, pb.zhi))
-    P_p0 = pa.p0 if single else np.concatenate((pa.p0, pb.p0))
-    P_traj = np.concatenate((sa.traj[pa.seg], sb.traj[pb.seg])) if not single else sa.traj[pa.seg]
-    P_v = sa.v_mps[pa.seg] if single else np.concatenate((sa.v_mps[pa.seg], sb.v_mps[pb.seg]))
-
-    # The same per-piece values in sorted-key order.
-    S_t0 = P_t0[items]
-    S_t1 = P_t1[items] if slack_traj is None else \
-        np.concatenate((pa_t1_sweep, pb.t1))[items]
-    S_xlo, S_xhi, S_ylo, S_yhi = P_xlo[items], P_xhi[items], P_ylo[items], P_yhi[items]
-    S_zlo, S_zhi = P_zlo[items], P_zhi[items]
-    S_traj = P_traj[items] if single else None
-
+    # Narrow phase, in bounded chunks of cell-mate pairs: box filters, then the exact check.
     clock.append(time.perf_counter())
     out_pairs = []
     out_dist = []
@@ -688,86 +846,29 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
         lrep = np.repeat(lp, nr)
         rpos = np.repeat(rf, nr) + (np.arange(cnt, dtype=np.int64) - np.repeat(np.cumsum(nr) - nr, nr))
         start = stop
-        l, r = lrep, rpos
-        if single:
-            ti = S_traj[l]
-            tj = S_traj[r]
-            ok = ti != tj
-            if groups is not None:
-                ok &= groups[ti] != groups[tj]
-            l, r = l[ok], r[ok]
-        # Filters in order of selectivity, compressing after each so later gathers are cheap
-        # (on arrays in sorted-key order, so the gathers walk memory nearly sequentially).
-        # Each keeps a pair only in its canonical cell (the one holding the low corner of the
-        # intersection of the two boxes), so a pair sharing several cells is checked once.
-        # z is not in the keys: first drop pieces whose z ranges, inflated by half the vertical
-        # reach, do not overlap with positive length (a loss needs |dz| strictly below the
-        # reach); at flight levels this removes most pairs sharing a cell
-        ok = np.maximum(S_zlo[l], S_zlo[r]) < np.minimum(S_zhi[l], S_zhi[r])
-        l, r = l[ok], r[ok]
-        lo = np.maximum(S_t0[l], S_t0[r])
-        ok = lo <= np.minimum(S_t1[l], S_t1[r])
-        ok &= np.floor((lo - tt0) / bucket).astype(np.int64) == kt[l]
-        l, r = l[ok], r[ok]
-        lo = np.maximum(S_xlo[l], S_xlo[r])
-        ok = lo <= np.minimum(S_xhi[l], S_xhi[r])
-        ok &= np.floor((lo - x0) / cell).astype(np.int64) == kx[l]
-        l, r = l[ok], r[ok]
-        lo = np.maximum(S_ylo[l], S_ylo[r])
-        ok = lo <= np.minimum(S_yhi[l], S_yhi[r])
-        ok &= np.floor((lo - y0) / cell).astype(np.int64) == ky[l]
-        i = items[l[ok]]
-        j = items[r[ok]]
+        i, j = _box_filter(lrep, rpos, pt, sk, grid, single, groups)
         n_exact += int(i.size)
         if i.size == 0:
             continue
-        if slack_traj is None:
-            d = model.segment_measure(P_t0[i], P_t1[i], P_p0[i], P_v[i],
-                                      P_t0[j], P_t1[j], P_p0[j], P_v[j])
-            lose = d < separation_m
-            if not lose.any():
-                continue
-            a_idx = P_traj[i[lose]]
-            b_idx = P_traj[j[lose]]
-        else:
-            # one exact check per candidate (shift) of a's trajectory
-            ta = P_traj[i]
-            cnt = first[ta + 1] - first[ta]
-            cand = np.repeat(first[ta], cnt) + (np.arange(int(cnt.sum()), dtype=np.int64)
-                                                - np.repeat(np.cumsum(cnt) - cnt, cnt))
-            i = np.repeat(i, cnt)
-            j = np.repeat(j, cnt)
-            dt = shift[cand]
-            n_exact += int(i.size) - int(cnt.size)
-            d = model.segment_measure(P_t0[i] + dt, P_t1[i] + dt, P_p0[i], P_v[i],
-                                      P_t0[j], P_t1[j], P_p0[j], P_v[j])
-            lose = d < separation_m
-            if not lose.any():
-                continue
-            a_idx = cand[lose]
-            b_idx = P_traj[j[lose]]
+        lost, extra = _narrow_phase(i, j, pt, model, first, shift)
+        n_exact += extra
+        if lost is None:
+            continue
+        a_idx, b_idx, d = lost
         if single:
             a_idx, b_idx = np.minimum(a_idx, b_idx), np.maximum(a_idx, b_idx)
         out_pairs.append(np.stack((a_idx, b_idx), axis=1))
-        out_dist.append(d[lose])
+        out_dist.append(d)
     clock.append(time.perf_counter())
     if stats is not None:
-        stats.update(segments_a=len(sa), segments_b=len(sb), pieces=int(na + (0 if single else pb.t0.shape[0])),
-                     keys=int(m), pairs_sharing_cell=n_shared, exact_checks=n_exact,
+        stats.update(segments_a=len(sa), segments_b=len(sb), pieces=int(n_items),
+                     keys=int(sk.keys.shape[0]), pairs_sharing_cell=n_shared, exact_checks=n_exact,
                      pieces_s=clock[1] - clock[0], keys_s=clock[2] - clock[1],
                      sort_s=clock[3] - clock[2], pairs_and_exact_s=clock[4] - clock[3])
     if not out_pairs:
-        return (empty, np.zeros(0)) if return_distances else empty
-    pairs = np.concatenate(out_pairs)
-    dist = np.concatenate(out_dist)
-    # Unique pairs with their minimum distance.
+        return nothing
     nbt = int(max(sa.n_trajectories, sb.n_trajectories,
-                  0 if slack_traj is None else shift.shape[0])) + 1
-    code = pairs[:, 0] * nbt + pairs[:, 1]
-    order = np.lexsort((dist, code))
-    code = code[order]
-    first = np.concatenate(([True], code[1:] != code[:-1]))
-    pairs = pairs[order][first]
-    dist = dist[order][first]
+                  0 if shift is None else shift.shape[0])) + 1
+    pairs, dist = _unique_min_pairs(out_pairs, out_dist, nbt)
     return (pairs, dist) if return_distances else pairs
 

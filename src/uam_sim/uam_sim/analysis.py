@@ -57,6 +57,8 @@ from typing import Any, Iterable
 
 import numpy as np
 
+from uam_contract.defaults import SEPARATION_M
+
 from .audit import AIRSPACE_METADATA, SafetyAudit, audit_plans, separation_from_metadata
 from .decision_metrics import decision_metrics
 from .flights import flight_metrics
@@ -357,7 +359,7 @@ def run_problems(syncs: list, reports: dict, approved: list, flown_ids: set, fle
     return problems, forged, run_end
 
 
-def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=100.0,
+def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SEPARATION_M,
                        path: str = "", reader: str = "", complete_file: bool = True) -> RunSummary:
     """The summary of a stream of (topic, log_time_ns, message), e.g. from :func:`iter_decoded`.
 
@@ -528,7 +530,7 @@ def _flight_row(plan: Any, label: str, earliest_s: dict) -> dict:
 
 
 def summarize(path: str | Path, separation_m=None, reader: str = "rclpy",
-              default_separation=100.0) -> RunSummary:
+              default_separation=SEPARATION_M) -> RunSummary:
     """Read a recording and return its :class:`RunSummary` (see the module docstring).
 
     ``separation_m``: the audit's model (number = sphere, or a SeparationModel); None = the
@@ -698,7 +700,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="separation model of the audit (default: the run's, from the recording's "
                          "uam_airspace metadata; recordings without it: sphere)")
     ap.add_argument("--separation-m", type=float, default=None,
-                    help="separation minimum (the cylinder's horizontal H) [m] (default: the run's, else 100)")
+                    help="separation minimum (the cylinder's horizontal H) [m] (default: the run's, else %g)" % SEPARATION_M)
     ap.add_argument("--vertical-separation-m", type=float, default=None,
                     help="the cylinder's vertical minimum V [m] (default: the run's, else 30)")
     ap.add_argument("--reader", choices=("rclpy", "rosbags"), default="rclpy",

@@ -26,6 +26,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from uam_contract.defaults import SEPARATION_M
 from uam_contract.stamps import stamp_s
 
 # as uam_planner.audit: a distance this close (relative) below the minimum is a rounded exact tie
@@ -42,7 +43,7 @@ def _model(separation):
 AIRSPACE_METADATA = "uam_airspace"
 
 
-def airspace_metadata(separation_model: str = "sphere", separation_m: float = 100.0,
+def airspace_metadata(separation_model: str = "sphere", separation_m: float = SEPARATION_M,
                       vertical_separation_m: float = 30.0, departure_slot_s: float = 0.0) -> dict:
     """The ``uam_airspace`` metadata of a run (strings, as MCAP metadata holds them); the
     values are checked as the planner checks them (ValueError naming the field)."""
@@ -56,7 +57,7 @@ def airspace_metadata(separation_model: str = "sphere", separation_m: float = 10
             "departure_slot_s": repr(float(departure_slot_s))}
 
 
-def separation_from_metadata(meta: dict, default=100.0):
+def separation_from_metadata(meta: dict, default=SEPARATION_M):
     """The SeparationModel recorded in a ``uam_airspace`` metadata record, or ``default`` (a
     number = the sphere, or a model) when the record is absent (recordings made before it).
     A malformed record raises ValueError naming the field."""
@@ -107,7 +108,7 @@ def trajectory_of(plan: Any) -> tuple[np.ndarray, np.ndarray]:
 
 
 def audit_trajectories(flights: list[tuple[np.ndarray, np.ndarray]], labels: list[str],
-                       separation_m=100.0) -> SafetyAudit:
+                       separation_m=SEPARATION_M) -> SafetyAudit:
     """Exact minimum separation and every loss of separation among piecewise-linear 4D flights.
 
     ``flights``: (times_s (p,), points_m (p, 3)) per flight, times increasing. The exact closest
@@ -170,7 +171,7 @@ def audit_trajectories(flights: list[tuple[np.ndarray, np.ndarray]], labels: lis
                        closest_pair=best_pair, losses=losses, pairs_checked=checked, **kind)
 
 
-def audit_plans(plans: list[Any], separation_m=100.0,
+def audit_plans(plans: list[Any], separation_m=SEPARATION_M,
                 labels: Sequence[str] | None = None) -> SafetyAudit:
     """Exact minimum separation between every pair of approved plans (see :func:`audit_trajectories`).
 

@@ -302,7 +302,20 @@ def _rel(p: Path, d: Path) -> str:
 
 
 def _report_text(runs, epochs, flights, inst, inputs, figs, d) -> str:
+    """REPORT.md's text from the tables; one helper per section, in the report's order."""
     L = []
+    _setup_section(L, runs, inputs)
+    _departures_section(L, inputs.get("config", {}).get("base", {}))
+    _safety_section(L, runs)
+    _runs_section(L, runs, figs, d)
+    _airspace_section(L, runs)
+    _solver_section(L, runs)
+    _variables_section(L, epochs, inst, figs, d)
+    _delay_section(L, flights, figs, d)
+    return "\n".join(L) + "\n"
+
+
+def _setup_section(L: list, runs, inputs) -> None:
     cfg = inputs.get("config", {})
     base = cfg.get("base", {})
     mach = inputs.get("machine", {})
@@ -339,6 +352,9 @@ def _report_text(runs, epochs, flights, inst, inputs, figs, d) -> str:
         "in up to 13 departure times. `auto` is the solver node's default backend (exact "
         "reductions, then KaMIS or CP-SAT on small kernels and CHILS on large ones; it claims "
         "optimality only when proven).\n")
+
+
+def _departures_section(L: list, base: dict) -> None:
     L.append("## Departures from the paper\n")
     L.append("- The paper's airspace is one cruise level with departures at the epoch time; the "
              "expanded modes are ours (the paper predicts, without testing, that more airspace "
@@ -357,6 +373,9 @@ def _report_text(runs, epochs, flights, inst, inputs, figs, d) -> str:
              "the next epoch; it does not search the slots, so its slots - paper difference is 0 "
              "by construction. First-fit is the baseline that uses the slots and the "
              "alternatives without optimising.\n")
+
+
+def _safety_section(L: list, runs) -> None:
     L.append("## Safety audit\n")
     losses = int(runs.losses.fillna(0).sum())
     pairs = int(runs.pairs_checked.fillna(0).sum())
@@ -364,6 +383,9 @@ def _report_text(runs, epochs, flights, inst, inputs, figs, d) -> str:
              f"approach of every overlapping pair of flown trajectories, `uam_sim.audit`): "
              f"**{losses} losses of separation** over {pairs:,} pairs in {len(runs)} runs; smallest "
              f"separation {runs.min_separation_m.min():.1f} m (the minimum is 100 m).\n")
+
+
+def _runs_section(L: list, runs, figs, d) -> None:
     L.append("## Runs (mean over seeds)\n")
     rows = []
     g = runs.groupby(["arm", "mode", "rate", "method"], sort=False)
@@ -381,7 +403,10 @@ def _report_text(runs, epochs, flights, inst, inputs, figs, d) -> str:
                            "solve mean ms", "proven %", "fallbacks", "delay mean s"]))
     L.append(f"\n![approvals]({_rel(figs['approvals'], d)})\n")
     L.append(f"![approval rate]({_rel(figs['share'], d)})\n")
-    # what the airspace changes
+
+
+def _airspace_section(L: list, runs) -> None:
+    """What the expanded airspace changes, paired per seed against paper mode."""
     L.append("## What the expanded airspace changes (same demand, paired per seed)\n")
     rows = []
     for arm in runs.arm.unique():
@@ -404,7 +429,10 @@ def _report_text(runs, epochs, flights, inst, inputs, figs, d) -> str:
     L.append(_table(rows, ["arm", "rate", "method", "comparison", "approvals, paired diff [95 % CI]",
                            "relative", "ratio"]))
     L.append("")
-    # the question
+
+
+def _solver_section(L: list, runs) -> None:
+    """The question: does the solver decide the throughput (and the annealers' rows)?"""
     L.append("## Does the solver decide the throughput?\n")
     sr = solver_rows(runs)
     rows = [[arm, mode, rate, f"{a} - {b}", _ci(p), "yes" if p.supported else "no"]
@@ -433,7 +461,10 @@ def _report_text(runs, epochs, flights, inst, inputs, figs, d) -> str:
         L.append(_table(rows, ["network", "mode", "rate", "comparison", "approvals, paired diff [95 % CI]",
                                "interval excludes 0", "fallbacks (its runs)"]))
         L.append("")
-    # instance sizes
+
+
+def _variables_section(L: list, epochs, inst, figs, d) -> None:
+    """MWIS instance sizes per epoch, and the instance study when it ran."""
     L.append("## MWIS variables per epoch\n")
     e = epochs[(epochs.vertices > 0) & (epochs.method == "auto")]
     rows = []
@@ -448,6 +479,9 @@ def _report_text(runs, epochs, flights, inst, inputs, figs, d) -> str:
     L.append(f"\n![variables]({_rel(figs['variables'], d)})\n")
     if len(inst):
         L.extend(_instance_section(inst, figs, d))
+
+
+def _delay_section(L: list, flights, figs, d) -> None:
     L.append("## Aircraft in the air and departure delay\n")
     L.append(f"![active]({_rel(figs['active'], d)})\n")
     L.append(f"![delay]({_rel(figs['delay'], d)})\n")
@@ -460,7 +494,6 @@ def _report_text(runs, epochs, flights, inst, inputs, figs, d) -> str:
     rows.sort(key=lambda r: (r[0], MODES.index(r[1])))
     L.append(_table(rows, ["arm", "mode", "delay mean s (auto)", "median", "p95", "flown route mean km"]))
     L.append("")
-    return "\n".join(L) + "\n"
 
 
 def _verdict(runs, sr) -> list:

@@ -18,10 +18,14 @@ from typing import Any
 
 import numpy as np
 
-_ENCAPSULATION = b"\x00\x01\x00\x00"  # CDR_LE
+ENCAPSULATION = b"\x00\x01\x00\x00"  # CDR_LE
 
 
-class _Writer:
+class CdrWriter:
+    """The one CDR (XCDR1, little endian) writer of the package: primitives aligned to their size
+    from the start of the payload, as rmw_fastrtps writes them. Used here for the simulator's
+    per-step messages and by ``uam_sim.std_msgs_export`` for the standard view messages."""
+
     __slots__ = ("buf",)
 
     def __init__(self):
@@ -53,6 +57,31 @@ class _Writer:
         self.i32(sec)
         self.u32(nanosec)
         self.string(frame_id)
+
+    def f64s(self, values) -> None:
+        vals = [float(v) for v in values]
+        self.align(8)
+        self.buf += struct.pack(f"<{len(vals)}d", *vals)
+
+    def f32s(self, values) -> None:
+        vals = [float(v) for v in values]
+        self.align(4)
+        self.buf += struct.pack(f"<{len(vals)}f", *vals)
+
+    def u8(self, v: int) -> None:
+        self.buf += struct.pack("<B", int(v))
+
+    def i8(self, v: int) -> None:
+        self.buf += struct.pack("<b", int(v))
+
+    def u16(self, v: int) -> None:
+        self.align(2)
+        self.buf += struct.pack("<H", int(v))
+
+    def octets(self, data: bytes) -> None:
+        self.u32(len(data))
+        self.buf += data
+
 
 
 # The fixed part of a VehicleState after its id: position and velocity (6 float64), phase (uint8,
@@ -103,13 +132,13 @@ def encode_fleet_state(sec: int, nanosec: int, frame_id: str, step_index: int, v
 
     The fixed part of all vehicles is one numpy structured array, scattered into the layout of
     the ids (:class:`_Layout`, kept while the ids stay the same)."""
-    w = _Writer()
+    w = CdrWriter()
     w.header(sec, nanosec, frame_id)
     w.u64(step_index)
     n = len(vehicle_ids)
     w.u32(n)
     if n == 0:
-        return _ENCAPSULATION + bytes(w.buf)
+        return ENCAPSULATION + bytes(w.buf)
     fixed = np.zeros(n, dtype=_VEHICLE_FIXED)
     fixed["pv"][:, :3] = np.asarray(positions_m, dtype=np.float64).reshape(n, 3)
     fixed["pv"][:, 3:] = np.asarray(velocities_mps, dtype=np.float64).reshape(n, 3)
@@ -123,7 +152,7 @@ def encode_fleet_state(sec: int, nanosec: int, frame_id: str, step_index: int, v
         layout = _LAYOUT[0] = _Layout(key, len(w.buf), vehicle_ids)
     body = layout.template.copy()
     body[layout.positions] = fixed.view(np.uint8)
-    return b"".join((_ENCAPSULATION, bytes(w.buf), body.tobytes()))
+    return b"".join((ENCAPSULATION, bytes(w.buf), body.tobytes()))
 
 
 _CLOCK = struct.Struct("<4siI")
@@ -132,12 +161,12 @@ _CLOCK = struct.Struct("<4siI")
 def encode_clock(sec: int, nanosec: int) -> bytes:
     """Serialized rosgraph_msgs/Clock (one builtin_interfaces/Time): published every step, and
     converting a Clock object costs rclpy ~0.1-0.3 ms against ~0.05 ms for bytes (measured)."""
-    return _CLOCK.pack(_ENCAPSULATION, int(sec), int(nanosec))
+    return _CLOCK.pack(ENCAPSULATION, int(sec), int(nanosec))
 
 
 def encode_pose_array(sec: int, nanosec: int, frame_id: str, positions_m, orientations_xyzw) -> bytes:
     """Serialized geometry_msgs/PoseArray (positions (n, 3), quaternions (n, 4) as x, y, z, w)."""
-    w = _Writer()
+    w = CdrWriter()
     w.header(sec, nanosec, frame_id)
     pos = np.asarray(positions_m, dtype="<f8").reshape(-1, 3)
     quat = np.asarray(orientations_xyzw, dtype="<f8").reshape(-1, 4)
@@ -145,7 +174,7 @@ def encode_pose_array(sec: int, nanosec: int, frame_id: str, positions_m, orient
     if pos.shape[0]:
         w.align(8)
         w.buf += np.concatenate([pos, quat], axis=1).tobytes()
-    return _ENCAPSULATION + bytes(w.buf)
+    return ENCAPSULATION + bytes(w.buf)
 
 
 def yaw_quaternions(velocities_mps) -> np.ndarray:

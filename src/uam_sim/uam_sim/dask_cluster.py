@@ -18,7 +18,7 @@ with an error naming the cell and both keys instead of mixing results.
 one thread each (the cells are CPU-bound Python; threads would share one GIL), no dashboard (so
 no port is taken), closed at the end; any other string is a scheduler address to connect to
 (``tcp://HOST:8786``), whose workers are started separately (``dask worker tcp://HOST:8786
---nworkers N --nthreads 1``, see the README).
+--nworkers N --nthreads 1``, see docs/dask.md).
 """
 
 from __future__ import annotations

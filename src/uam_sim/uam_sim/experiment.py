@@ -88,7 +88,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--time-limit", type=float, dest="time_limit_s", help="MWIS time limit [s]")
     p.add_argument("--workers", type=int, help="processes (1 = serial; more: a local Dask cluster)")
     p.add_argument("--scheduler", help="Dask scheduler: 'local' (a LocalCluster of --workers "
-                   "processes) or an address tcp://HOST:8786 (see README, 'Beyond one machine')")
+                   "processes) or an address tcp://HOST:8786 (see docs/dask.md)")
     p.add_argument("--out", help="output directory")
     p.add_argument("--demand", dest="demand_file", help="replay a demand file instead")
     p.add_argument("--constraints", dest="constraints_file", metavar="FILE",

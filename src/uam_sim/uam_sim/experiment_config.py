@@ -10,6 +10,7 @@ from typing import Any
 
 import yaml
 
+from uam_contract import defaults
 from uam_planner.planning import AirspaceConfig, PlanningConfig
 
 DEFAULT_METHODS = ("fifo", "firstfit", "greedy", "exact", "sa", "tabu", "qpu-emulator")
@@ -105,16 +106,16 @@ class ExperimentConfig:
     rates: list = field(default_factory=lambda: list(DEFAULT_RATES))
     seeds: list = field(default_factory=lambda: list(range(5)))
     duration_s: float = 3500.0
-    epoch_s: float = 30.0
-    interval_s: float = 30.0
-    window_s: float = 60.0
-    separation_m: float = 100.0
-    k: int = 5
-    penalty_factor: float = 5.0
-    speed_mps: float = 10.0
+    epoch_s: float = defaults.EPOCH_S          # the paper's values, from uam_contract.defaults
+    interval_s: float = defaults.INTERVAL_S
+    window_s: float = defaults.WINDOW_S
+    separation_m: float = defaults.SEPARATION_M
+    k: int = defaults.K
+    penalty_factor: float = defaults.PENALTY_FACTOR
+    speed_mps: float = defaults.SPEED_MPS
     separation_model: str = "sphere"
     vertical_separation_m: float = AirspaceConfig.vertical_separation_m
-    departure_slot_s: float = 0.0
+    departure_slot_s: float = defaults.DEPARTURE_SLOT_S
     climb_rate_mps: float = AirspaceConfig.climb_rate_mps
     descent_rate_mps: float = AirspaceConfig.descent_rate_mps
     time_limit_s: float = 10.0

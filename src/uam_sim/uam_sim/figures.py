@@ -58,17 +58,17 @@ def style(m: str, i: int = 0) -> dict:
 
 
 def mean_ci(values, level: float = 0.95) -> tuple[float, float, float]:
-    """(mean, low, high) of a sample with a Student-t confidence interval; n = 1 gives a point."""
-    x = np.asarray([v for v in values if v is not None and not (isinstance(v, float) and math.isnan(v))],
-                   dtype=np.float64)
-    if x.size == 0:
-        return float("nan"), float("nan"), float("nan")
-    m = float(x.mean())
-    if x.size < 2:
+    """(mean, low, high) of a sample with a Student-t confidence interval; n = 1 gives a point.
+
+    The interval is ``uam_sim.stats.mean_interval``'s (the one CI helper); the figures only draw
+    a single seed as a point (a zero-width band) where the statistics say "no interval"."""
+    from .stats import mean_interval
+
+    x = [v for v in values if v is not None and not (isinstance(v, float) and math.isnan(v))]
+    m, lo, hi = mean_interval(x, level)
+    if len(x) == 1:
         return m, m, m
-    from scipy.stats import t as student_t
-    half = float(student_t.ppf(0.5 + level / 2, x.size - 1) * x.std(ddof=1) / math.sqrt(x.size))
-    return m, m - half, m + half
+    return m, lo, hi
 
 
 def _methods(cells) -> list:

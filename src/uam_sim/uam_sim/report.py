@@ -320,14 +320,37 @@ def _metric_rows(cells, metric_fn, a: str, b: str) -> list:
 
 
 def write_report(sweep, outputs: dict, machine: dict, out: Path) -> Path:
-    """Write ``out/REPORT.md`` from a SweepResult and run_experiment's outputs; returns its path."""
+    """Write ``out/REPORT.md`` from a SweepResult and run_experiment's outputs; returns its path.
+    One helper per part of the report, in the report's order."""
     cfg = sweep.config
     cells = sweep.cells
     figs = outputs.get("figures", {})
     tts = outputs.get("tts", {})
     methods = _methods(cells)
     mm = mwis_methods(cells)
-    L = ["# UAM fleet planning study: results", "",
+    L = _intro_lines()
+    _setup_section(L, sweep, outputs, machine, methods)
+    L += ["## Departures from the paper", ""] + [f"- {d}" for d in departures(cfg, figs, tts)] + [""]
+    _safety_section(L, cfg, cells)
+    _runs_section(L, cells, methods)
+
+    def fig(name, title, cols, heads=None, note="", nd=2):
+        _fig_section(L, figs, out, name, title, cols, heads, note, nd)
+
+    _approvals_section(L, fig, cells, methods, mm)
+    _load_section(L, fig, figs, cfg)
+    _routes_section(L, fig, figs, cells, methods, cfg)
+    _mwis_section(fig, figs, cfg)
+    _tts_section(L, fig, figs, tts, cfg)
+    _closing_section(L, cells, figs, tts)
+    path = Path(out) / "REPORT.md"
+    path.write_text("\n".join(L), encoding="utf-8")
+    _write_inputs(Path(out), sweep, outputs, machine)
+    return path
+
+
+def _intro_lines() -> list:
+    return ["# UAM fleet planning study: results", "",
          "Written by `uam_sim.experiment` (the in-process runner). Every number below is computed "
          "from the tables in this directory (`runs.csv`, `epochs.csv`, `flights.csv`, `tts.csv`, "
          f"gzipped where large, and `{INPUTS}`): `python -m uam_sim.report DIR` writes this report "
@@ -337,7 +360,11 @@ def write_report(sweep, outputs: dict, machine: dict, out: Path) -> Path:
          "at one rate and seed) and given as mean difference [95 % CI] over seeds (Student t, "
          "`uam_sim.stats`); 'k+ / j-' counts the seeds with a positive / negative difference. A "
          "difference is called a finding only when its interval excludes 0.", ""]
-    # ---- setup
+
+
+def _setup_section(L: list, sweep, outputs: dict, machine: dict, methods: list) -> None:
+    cfg = sweep.config
+    cells = sweep.cells
     wall_total = sum(c["summary"]["wall_s"] for c in cells)
     L += ["## Setup", "",
           f"- network: `{cfg.network}`; methods: {', '.join(methods)} (fifo = shortest route in "
@@ -363,9 +390,9 @@ def write_report(sweep, outputs: dict, machine: dict, out: Path) -> Path:
     full = {"workers": cfg.workers, **{k: v for k, v in asdict(cfg).items() if k != "tts"}}
     L += ["<details><summary>All parameters</summary>", "", "```", *(f"{k}: {v}" for k, v in full.items()),
           f"tts: {cfg.tts}", "```", "</details>", ""]
-    # ---- departures
-    L += ["## Departures from the paper", ""] + [f"- {d}" for d in departures(cfg, figs, tts)] + [""]
-    # ---- safety
+
+
+def _safety_section(L: list, cfg, cells) -> None:
     seps = [c["audit"].get("min_separation_m") for c in cells if c.get("audit")]
     seps = [s for s in seps if s is not None]
     losses = sum(c["audit"].get("losses", 0) for c in cells if c.get("audit"))
@@ -380,7 +407,9 @@ def write_report(sweep, outputs: dict, machine: dict, out: Path) -> Path:
           f"separation seen: **{_f(min(seps) if seps else None, 2)} m** (minimum required "
           f"{cfg.separation_m:g} m). Losses of separation: **{losses}**"
           + (" (as required)." if losses == 0 else " - THIS IS A SAFETY FAILURE."), ""]
-    # ---- runs table
+
+
+def _runs_section(L: list, cells, methods: list) -> None:
     runs = []
     for m in methods:
         for rate in _rates(cells):
@@ -401,16 +430,21 @@ def write_report(sweep, outputs: dict, machine: dict, out: Path) -> Path:
                  ["method", "rate", "requests", "approved", "expired", "approval rate",
                   "avg airborne", "wall [s]", "fallbacks"])]
 
-    def fig(name, title, cols, heads=None, note="", nd=2):
-        f = figs.get(name)
-        if not f:
-            return
-        L.extend([f"## {title}", "", f"![{title}]({_rel(f['path'], out)})", ""])
-        if note:
-            L.extend([note, ""])
-        if cols:
-            L.append(_table(f["table"], cols, heads, nd))
 
+def _fig_section(L: list, figs: dict, out, name, title, cols, heads=None, note="", nd=2) -> None:
+    """A figure's section: heading, image, note and its table (nothing when it was not drawn)."""
+    f = figs.get(name)
+    if not f:
+        return
+    L.extend([f"## {title}", "", f"![{title}]({_rel(f['path'], out)})", ""])
+    if note:
+        L.extend([note, ""])
+    if cols:
+        L.append(_table(f["table"], cols, heads, nd))
+
+
+
+def _approvals_section(L: list, fig, cells, methods: list, mm: list) -> None:
     fig("cumulative", "Cumulative approved flights over time",
         ["rate", "method", "final_mean", "final_lo", "final_hi", "seeds"],
         ["rate", "method", "approved at end (mean)", "95 % CI low", "95 % CI high", "seeds"],
@@ -419,7 +453,6 @@ def write_report(sweep, outputs: dict, machine: dict, out: Path) -> Path:
         "exactly; the markers show each of them.")
     fig("approved", "Approved flights per rate", [], note="Means and unpaired 95 % CIs; the "
         "paired comparisons below are the ones that decide.")
-    # ---- paired comparisons
     L += ["## Paired comparisons of approvals", ""]
     if "fifo" in methods:
         rows = gains_vs_fifo(cells)
@@ -447,6 +480,9 @@ def write_report(sweep, outputs: dict, machine: dict, out: Path) -> Path:
               _table(rows, ["rate", "mean_a", "mean_b", "diff_ci", "rel_ci", "signs", "verdict"],
                      ["rate", "greedy", "exact", "difference [flights]", "relative", "seeds",
                       "finding"], 1)]
+
+
+def _load_section(L: list, fig, figs: dict, cfg) -> None:
     fig("approval_rate", "Approval rate against offered load", [],
         note="Offered load = requests per hour (rate x 3600 s / interval); approval rate = "
              "approved / requested per run (mean, 95 % CI over seeds). Table: `runs.csv` "
@@ -467,7 +503,9 @@ def write_report(sweep, outputs: dict, machine: dict, out: Path) -> Path:
         if w:
             L += [f"Warm-up over all shown (rate, method): median {_f(float(np.median(w)), 0)} s, "
                   f"range {_f(min(w), 0)} to {_f(max(w), 0)} s of the {cfg.duration_s:g} s run.", ""]
-    # ---- delay and detour
+
+
+def _routes_section(L: list, fig, figs: dict, cells, methods: list, cfg) -> None:
     fl = figs.get("flights")
     if fl:
         fig("flights", "Route detour and departure delay",
@@ -511,6 +549,9 @@ def write_report(sweep, outputs: dict, machine: dict, out: Path) -> Path:
                   _table(rows, ["a", "rate", "mean_a", "mean_b", "diff_ci", "signs", "verdict"],
                          ["method", "rate", "share [%]", "FIFO [%]", "difference [points]",
                           "seeds", "finding"], 1)]
+
+
+def _mwis_section(fig, figs: dict, cfg) -> None:
     ms = figs.get("mwis_size")
     fig("mwis_size", "MWIS variables and MWIS size per rate",
         ["rate", "instances", "vertices_mean", "vertices_median", "vertices_p99", "vertices_max",
@@ -536,6 +577,9 @@ def write_report(sweep, outputs: dict, machine: dict, out: Path) -> Path:
              "proven optimal is the share the pipeline solved without calling them. A fallback is "
              "an epoch where the backend failed or ran past its time limit and greedy answered "
              "(`epochs.csv`); those depend on machine load.")
+
+
+def _tts_section(L: list, fig, figs: dict, tts: dict, cfg) -> None:
     if figs.get("tts"):
         reads = tts.get("reads")
         pr = [r for r in figs["tts"]["table"] if r["per_read_median_s"] == r["per_read_median_s"]]
@@ -586,7 +630,9 @@ def write_report(sweep, outputs: dict, machine: dict, out: Path) -> Path:
                   f"10,000-read calls would cost, and the per-read figure is the one to compare.", ""]
     else:
         L += ["## TTS study", "", f"Not run: {tts.get('reason', 'no result')}.", ""]
-    # ---- paper checks
+
+
+def _closing_section(L: list, cells, figs: dict, tts: dict) -> None:
     L += ["## Compared with the paper's statements", ""]
     for title, text, verdict in paper_checks(cells, figs, tts):
         L += [f"- **{title}: {verdict}.** {text}"]
@@ -602,10 +648,6 @@ def write_report(sweep, outputs: dict, machine: dict, out: Path) -> Path:
           "which runs the same cells as this study in the airspace modes paper, + slots, "
           "+ levels and + both (`airspace_mode`, `uam_sim.experiment_config.AIRSPACE_PRESETS`) "
           "on Singapore and a synthetic city, with the same paired per-seed statistics.", ""]
-    path = Path(out) / "REPORT.md"
-    path.write_text("\n".join(L), encoding="utf-8")
-    _write_inputs(Path(out), sweep, outputs, machine)
-    return path
 
 
 # ---- the report again from the tidy tables ----------------------------------------------------

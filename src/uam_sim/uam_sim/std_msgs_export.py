@@ -46,7 +46,7 @@ import re
 import struct
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
-from typing import Any, Iterable, Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -54,7 +54,7 @@ from uam_contract import names
 from uam_contract.names import FRAME_ID, resolved
 from uam_contract.stamps import DEFAULT_SCENARIO_START_UTC, SIM_CLOCK, scenario_start_ns  # noqa: F401 (used by the views)
 
-from .cdr import _ENCAPSULATION, _Writer
+from .cdr import ENCAPSULATION, CdrWriter
 from uam_contract.stamps import stamp_ns
 
 #: The default scenario start: Monday 6 January 2025, 08:00 in Singapore (00:00 UTC).
@@ -95,32 +95,7 @@ def vehicle_topic(vehicle_id: str) -> str:
 # CDR encoders
 # --------------------------------------------------------------------------------------------
 
-class _W(_Writer):
-    __slots__ = ()
-
-    def f64s(self, values: Iterable[float]) -> None:
-        vals = [float(v) for v in values]
-        self.align(8)
-        self.buf += struct.pack(f"<{len(vals)}d", *vals)
-
-    def f32s(self, values: Iterable[float]) -> None:
-        vals = [float(v) for v in values]
-        self.align(4)
-        self.buf += struct.pack(f"<{len(vals)}f", *vals)
-
-    def u8(self, v: int) -> None:
-        self.buf += struct.pack("<B", int(v))
-
-    def i8(self, v: int) -> None:
-        self.buf += struct.pack("<b", int(v))
-
-    def u16(self, v: int) -> None:
-        self.align(2)
-        self.buf += struct.pack("<H", int(v))
-
-    def octets(self, data: bytes) -> None:
-        self.u32(len(data))
-        self.buf += data
+# (one writer for every CDR message of the package: uam_sim.cdr.CdrWriter)
 
 
 def _split_ns(t_ns: int) -> tuple[int, int]:
@@ -131,7 +106,7 @@ def encode_point_cloud(stamp_ns: int, frame_id: str, positions_m: Any) -> bytes:
     """Serialized sensor_msgs/PointCloud2 of (n, 3) points: fields x, y, z float32, one row."""
     pts = np.ascontiguousarray(np.asarray(positions_m, dtype="<f4").reshape(-1, 3))
     n = pts.shape[0]
-    w = _W()
+    w = CdrWriter()
     w.header(*_split_ns(stamp_ns), frame_id)
     w.u32(1)            # height
     w.u32(n)            # width
@@ -146,14 +121,14 @@ def encode_point_cloud(stamp_ns: int, frame_id: str, positions_m: Any) -> bytes:
     w.u32(12 * n)       # row_step
     w.octets(pts.tobytes())
     w.u8(1)             # is_dense
-    return _ENCAPSULATION + bytes(w.buf)
+    return ENCAPSULATION + bytes(w.buf)
 
 
 @functools.lru_cache(maxsize=16)
 def _point_cloud_template(frame_id: str) -> tuple[bytes, int, int, int]:
     """The bytes of an empty cloud of ``frame_id`` up to its data, and the offsets (in them) of
     width, row_step and the data length: all that changes between steps besides the stamp."""
-    w = _W()
+    w = CdrWriter()
     w.header(0, 0, frame_id)
     w.u32(1)
     w.align(4)
@@ -173,7 +148,7 @@ def _point_cloud_template(frame_id: str) -> tuple[bytes, int, int, int]:
     w.align(4)
     length_at = len(w.buf)
     w.u32(0)
-    return _ENCAPSULATION + bytes(w.buf), 4 + width_at, 4 + row_step_at, 4 + length_at
+    return ENCAPSULATION + bytes(w.buf), 4 + width_at, 4 + row_step_at, 4 + length_at
 
 
 def encode_point_cloud_fast(stamp_ns: int, frame_id: str, positions_m: Any) -> bytes:
@@ -208,7 +183,7 @@ def encode_nav_sat_fix(stamp_ns: int, frame_id: str, lat_deg: float, lon_deg: fl
     pad2 = (p + 1) % 2                   # service (uint16) aligned to 2
     p += 1 + pad2 + 2
     pad8 = (-p) % 8                      # latitude (float64) aligned to 8
-    return b"".join((_ENCAPSULATION, head, struct.pack("<b", NAVSAT_STATUS_FIX), b"\x00" * pad2,
+    return b"".join((ENCAPSULATION, head, struct.pack("<b", NAVSAT_STATUS_FIX), b"\x00" * pad2,
                      struct.pack("<H", NAVSAT_SERVICE_GPS), b"\x00" * pad8,
                      _FIX_BODY.pack(float(lat_deg), float(lon_deg), float(alt_m), *([0.0] * 9), 0)))
 
@@ -258,7 +233,7 @@ class Marker:
 
 def encode_marker_array(markers: Sequence[Marker]) -> bytes:
     """Serialized visualization_msgs/MarkerArray."""
-    w = _W()
+    w = CdrWriter()
     w.u32(len(markers))
     for m in markers:
         w.header(*_split_ns(m.stamp_ns), m.frame_id)
@@ -290,7 +265,7 @@ def encode_marker_array(markers: Sequence[Marker]) -> bytes:
         w.string("")                        # mesh_file.filename
         w.u32(0)                            # mesh_file.data
         w.u8(0)                             # mesh_use_embedded_materials
-    return _ENCAPSULATION + bytes(w.buf)
+    return ENCAPSULATION + bytes(w.buf)
 
 
 # --------------------------------------------------------------------------------------------

@@ -2,8 +2,8 @@
 runner's and the planner library's solve) goes through the process's shared SolveService, so a
 backend that holds the GIL and never returns is killed and answered by the fallback, as in the
 solver node. The assertions are on what happened (fallback taken, the stand-in's process
-gone), with a generous wall bound: the measured wall against the limit is in the benchmark
-(``python -m uam_solvers.bench --deadlines``), not here."""
+gone), with no wall bound: the measured wall against the limit is in the benchmark
+(``python -m uam_solvers.bench --issue20``, its deadline table), not here."""
 import os
 import sys
 import time
@@ -24,8 +24,7 @@ from uam_solvers.instances import paper_instance  # noqa: E402
 # not in `make test-fast`: the shared solve service's worker processes
 pytestmark = pytest.mark.slow
 
-#: generous: the stand-in alone would run for hours; the kill comes at the limit + 0.4 s
-WALL_BOUND_S = 15.0
+# the stand-in alone would run for hours: an answer at all means its worker was killed
 
 
 def _gone(pid: int) -> bool:
@@ -39,10 +38,8 @@ def test_solve_bounded_kills_a_gil_holding_backend_and_answers_with_the_fallback
     p = paper_instance(8, seed=1)
     svc = shared_service()
     before = set(svc.worker_pids())
-    t0 = time.perf_counter()
     r = uam_solvers.solve_bounded(p.weights, p.edges, list(p.groups),
                                   backend=tb.GilHoldingBackend(), time_limit_s=0.3)
-    wall = time.perf_counter() - t0
     assert r.fallback and r.stats["executor"] == "killed"
     assert r.backend == "greedy" and "worker killed" in r.message
     assert p.is_independent(r.selected) and r.objective > 0
@@ -52,7 +49,6 @@ def test_solve_bounded_kills_a_gil_holding_backend_and_answers_with_the_fallback
         time.sleep(0.01)
     killed = before - set(svc.worker_pids())
     assert len(killed) == 1 and _gone(killed.pop())
-    assert wall < WALL_BOUND_S
 
 
 def test_planner_default_solve_is_bounded_and_warm_before_the_first_epoch(monkeypatch):
