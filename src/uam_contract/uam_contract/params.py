@@ -160,6 +160,9 @@ PLANNER = (
     Param("horizon_epochs", 1, "rolling planning horizon H of the mwis policy: the departures of the next H "
           "epochs are planned in one MWIS and only what departs in this epoch is committed, the rest planned "
           "again; 1 = the paper's one-epoch planning", 1, 100),
+    Param("commit_ahead", False, "with horizon_epochs > 1, commit every selected departure of the horizon at "
+          "once as a reservation (an approved flight never re-optimised; only a constraint's re-planning may "
+          "revoke it) instead of planning the later epochs again"),
     Param("k", 5, "candidate routes per request", 1, 100),
     Param("penalty_factor", 5.0, "penalised Dijkstra factor for diverse candidates", 0.0, 1000.0),
     Param("speed_mps", 10.0, "cruise speed [m/s]", 0.001, 1000.0),

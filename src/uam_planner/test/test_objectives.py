@@ -332,6 +332,36 @@ def test_horizon_commits_only_what_departs_in_this_epoch_and_replans_the_rest():
     assert [(f.request_id, f.departure_s) for f in res.approved] == [("r1", 60.0)]
 
 
+def run_reservations(commit_ahead):
+    """H = 2 on route C-m-D (priority): at t = 0, r1 (class 1) may depart at 0 or 30, r2 (class 0)
+    only at 0; at t = 30 arrives r3 (class 2) that may depart only at 30. Two departures at one
+    time conflict."""
+    p = Planner(one_route_network(), PlanningConfig(objective="priority", backend="exact", horizon_epochs=2,
+                                                    commit_ahead=commit_ahead))
+    assert p.submit(FlightRequest("r1", "C", "D", 0, 0, 30, priority=1)) is None
+    assert p.submit(FlightRequest("r2", "C", "D", 0, 0, 0)) is None
+    out = [p.plan(0.0, 0)]
+    assert p.submit(FlightRequest("r3", "C", "D", 30, 30, 30, priority=2)) is None
+    out.append(p.plan(30.0, 1))
+    return [([(f.request_id, f.departure_s) for f in r.approved], [x.request_id for x in r.expired],
+             [x.request_id for x in r.waiting], r.report.discarded) for r in out], p
+
+
+def test_commit_ahead_turns_the_horizons_later_departures_into_reservations_that_are_not_replanned():
+    # rolling horizon (default): t = 0 commits r2 at 0, r1 waits; at t = 30 r1 (class 1) and r3
+    # (class 2) both want 30: priority takes r3, r1 expires.
+    plain, _ = run_reservations(False)
+    assert plain == [([("r2", 0.0)], [], ["r1"], 0), ([("r3", 30.0)], ["r1"], [], 0)]
+    # commit_ahead: t = 0 commits r2 at 0 and r1 at 30 (a reservation: an approved flight now);
+    # at t = 30 r3's only candidate conflicts with the reserved r1, so it is discarded against
+    # it (discarded = 1) and r3 expires: the reservation is not revoked for a higher class.
+    ahead, p = run_reservations(True)
+    assert ahead == [([("r1", 30.0), ("r2", 0.0)], [], [], 0), ([], ["r3"], [], 1)]  # arrival order
+    assert sorted(f.request_id for f in p.active) == ["r1", "r2"]
+    with pytest.raises(ValueError, match=r"PlanningConfig.commit_ahead must be a bool, got 'yes'"):
+        PlanningConfig(commit_ahead="yes")
+
+
 def test_horizon_epochs_is_validated():
     with pytest.raises(ValueError, match=r"PlanningConfig.horizon_epochs must be an integer in \[1, 100\], got 0"):
         PlanningConfig(horizon_epochs=0)
