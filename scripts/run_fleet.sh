@@ -267,7 +267,7 @@ echo "run_fleet: node logs: $OUT/*.log"
 ANALYSIS_RC=0
 if [[ -f "$MCAP" ]]; then
   # exit code 2: a loss of separation; 3: the recording lacks plans it should hold (not verified)
-  python -m uam_sim.analysis "$MCAP" | tee "$OUT/summary.txt" || ANALYSIS_RC=$?
+  python -m uam_sim.analysis "$MCAP" --network "$NETWORK" | tee "$OUT/summary.txt" || ANALYSIS_RC=$?
 else
   echo "run_fleet: no recording was written; see $OUT/recorder.log" >&2
   exit 1
