@@ -178,6 +178,8 @@ class PlanningConfig:
             (before t + epoch_s in the paper's rule; at most t + epoch_s with slots) are
             committed; the others wait and are planned again at the next epoch. 1 = today's
             (the paper's) one-epoch planning. The baselines ignore it.
+        fair_window_s: the "fair" objective's operator shares count only the decisions of
+            the epochs in the last fair_window_s seconds (a sliding window); 0 = the whole run.
         commit_ahead: with H > 1, commit every selected candidate at once, also those departing
             in a later epoch of the horizon: reservations, ordinary approved flights (active, so
             every later epoch is deconflicted against them) that are never re-optimised (only
@@ -200,6 +202,7 @@ class PlanningConfig:
     baseline_order: str = "arrival"
     horizon_epochs: int = 1
     commit_ahead: bool = False
+    fair_window_s: float = 0.0
 
     @property
     def separation(self) -> SeparationModel:
@@ -234,6 +237,7 @@ class PlanningConfig:
         if isinstance(h, bool) or not isinstance(h, (int, np.integer)) or not 1 <= h <= MAX_HORIZON_EPOCHS:
             raise ValueError(f"PlanningConfig.horizon_epochs must be an integer in [1, {MAX_HORIZON_EPOCHS}], "
                              f"got {h!r}")
+        _positive("PlanningConfig", "fair_window_s", self.fair_window_s, allow_zero=True)
         if not isinstance(self.commit_ahead, (bool, np.bool_)):
             raise ValueError(f"PlanningConfig.commit_ahead must be a bool, got {self.commit_ahead!r}")
         if self.baseline_order not in BASELINE_ORDERS:
@@ -855,8 +859,8 @@ class Planner:
         self._rejected_since_plan = 0
         self._prepared: PreparedEpoch | None = None
         # requests decided (approved or expired) and approved per operator (the "fair"
-        # objective's running shares)
-        self.shares = OperatorShares()
+        # objective's running shares, over the whole run or a sliding window)
+        self.shares = OperatorShares(window_s=float(self.config.fair_window_s))
 
     @property
     def config(self) -> PlanningConfig:
@@ -962,6 +966,7 @@ class Planner:
         if self._prepared is not None:
             raise RuntimeError(f"epoch {self._prepared.epoch_index} is prepared but not committed")
         self.active = [f for f in self.active if f.arrival_s >= t_s]
+        self.shares.advance(t_s)
         if self.policy == "mwis":
             prep = prepare_epoch_mwis(t_s, epoch_index, self.pending, self.active, self.network, self.config,
                                       self.cache, self.active_index, self.shares,
@@ -988,9 +993,8 @@ class Planner:
         arrived_since = self.pending[len(prep.pending):]
         self.pending = list(result.waiting) + arrived_since
         self.active = self.active + list(result.approved)
-        self.shares.approved.update(operator_of(f) for f in result.approved)
-        self.shares.requested.update(operator_of(f) for f in result.approved)
-        self.shares.requested.update(operator_of(r) for r in result.expired)
+        self.shares.record(prep.t_s, [operator_of(f) for f in result.approved],
+                           [operator_of(r) for r in result.expired])
         result.report.rejected = self._rejected_since_plan
         self._rejected_since_plan = 0
         return result
@@ -1009,8 +1013,8 @@ class Planner:
         held = {f.request_id for f in self.active}
         new = [f for f in flights if f.request_id not in held]
         self.active = self.active + new
-        self.shares.approved.update(operator_of(f) for f in new)
-        self.shares.requested.update(operator_of(f) for f in new)
+        for f in new:  # counted when they departed (the fair window's time)
+            self.shares.record(f.departure_s, [operator_of(f)], [])
         self._known_ids.update(f.request_id for f in flights)
         self._known_ids.update(decided_ids)
         self.pending = [r for r in self.pending if r.request_id not in self._known_ids]
