@@ -12,6 +12,8 @@
 #   --baseline-order B arrival | priority: the order of fifo and firstfit (default arrival)
 #   --priority-share P share of random requests of priority class 1, e.g. 0.05 (default 0)
 #   --horizon H        epochs the MWIS plans jointly (rolling horizon, default 1: the paper's)
+#   --commit-ahead B   true | false: with --horizon > 1, commit the horizon's later departures now
+#                      as reservations, never re-optimised (default false)
 #   --lead-time S      requests are filed S seconds before their earliest departure (default 0)
 #   --rate R           requests per 30 s (default 10, the paper's middle rate)
 #   --duration S       simulated seconds (default 3500)
@@ -49,7 +51,7 @@ cd "$ROOT"
 BACKEND=exact POLICY=mwis RATE=10 DURATION=3500 SEED=0 NETWORK=config/networks/singapore.yaml
 DEMAND="" CONSTRAINTS="" MODE=lockstep RTF=1 RERUN=save OUT="" FOXGLOVE_PORT=0 RECORDER_NICE=19
 SEPARATION="" SEPARATION_M=100 VERTICAL_M=30 SLOT_S=0 CLIMB=5 DESCENT=3
-OBJECTIVE=paper BASELINE_ORDER=arrival PRIORITY_SHARE=0 HORIZON=1 LEAD_TIME=0
+OBJECTIVE=paper BASELINE_ORDER=arrival PRIORITY_SHARE=0 HORIZON=1 LEAD_TIME=0 COMMIT_AHEAD=false
 die() { echo "run_fleet: $*" >&2; exit 2; }
 while [[ $# -gt 0 ]]; do
   case "$1" in
@@ -59,6 +61,7 @@ while [[ $# -gt 0 ]]; do
     --baseline-order) BASELINE_ORDER="${2:?--baseline-order needs a value}"; shift 2;;
     --priority-share) PRIORITY_SHARE="${2:?--priority-share needs a value}"; shift 2;;
     --horizon) HORIZON="${2:?--horizon needs a value}"; shift 2;;
+    --commit-ahead) COMMIT_AHEAD="${2:?--commit-ahead needs a value}"; shift 2;;
     --lead-time) LEAD_TIME="${2:?--lead-time needs a value}"; shift 2;;
     --rate) RATE="${2:?--rate needs a value}"; shift 2;;
     --duration) DURATION="${2:?--duration needs a value}"; shift 2;;
@@ -87,6 +90,7 @@ done
 [[ "$BASELINE_ORDER" == arrival || "$BASELINE_ORDER" == priority ]] || die "--baseline-order: '$BASELINE_ORDER' is not arrival or priority"
 [[ "$PRIORITY_SHARE" =~ ^(0(\.[0-9]+)?|1(\.0+)?)$ ]] || die "--priority-share: '$PRIORITY_SHARE' is not a number in [0, 1]"
 [[ "$HORIZON" =~ ^[0-9]+$ ]] && (( HORIZON >= 1 && HORIZON <= 100 )) || die "--horizon: '$HORIZON' is not an integer in [1, 100]"
+[[ "$COMMIT_AHEAD" == true || "$COMMIT_AHEAD" == false ]] || die "--commit-ahead: '$COMMIT_AHEAD' is not true or false"
 [[ "$LEAD_TIME" =~ ^[0-9]+(\.[0-9]+)?$ ]] || die "--lead-time: '$LEAD_TIME' is not a number of seconds >= 0"
 [[ "$MODE" == lockstep || "$MODE" == realtime ]] || die "--mode: '$MODE' is not lockstep or realtime"
 [[ "$RERUN" =~ ^(off|save|spawn|connect)$ ]] || die "--rerun: '$RERUN' is not off, save, spawn or connect"
@@ -211,6 +215,7 @@ AIRSPACE=(-p "separation_model:=$SEPARATION" -p "separation_m:=$(f "$SEPARATION_
 start uam_planner planner planner --params-file config/planner.yaml -p "network:=$NETWORK" \
   -p "policy:=$POLICY" -p "backend:=$BACKEND" -p "seed:=$SEED" "${AIRSPACE[@]}" \
   -p "objective:=$OBJECTIVE" -p "baseline_order:=$BASELINE_ORDER" -p "horizon_epochs:=$HORIZON" \
+  -p "commit_ahead:=$COMMIT_AHEAD" \
   -p "climb_rate_mps:=$(f "$CLIMB")" -p "descent_rate_mps:=$(f "$DESCENT")" -p "journal:=$OUT/planner-journal.jsonl" \
   ${CONSTRAINTS:+-p "constraints_file:=$CONSTRAINTS"}
 start uam_sim request_generator request_generator --params-file config/request_generator.yaml \
@@ -262,7 +267,7 @@ echo "run_fleet: node logs: $OUT/*.log"
 ANALYSIS_RC=0
 if [[ -f "$MCAP" ]]; then
   # exit code 2: a loss of separation; 3: the recording lacks plans it should hold (not verified)
-  python -m uam_sim.analysis "$MCAP" | tee "$OUT/summary.txt" || ANALYSIS_RC=$?
+  python -m uam_sim.analysis "$MCAP" --network "$NETWORK" | tee "$OUT/summary.txt" || ANALYSIS_RC=$?
 else
   echo "run_fleet: no recording was written; see $OUT/recorder.log" >&2
   exit 1

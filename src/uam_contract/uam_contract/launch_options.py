@@ -36,6 +36,8 @@ LAUNCH_OPTIONS: tuple[LaunchOption, ...] = (
                  "order of fifo and firstfit: arrival or priority"),
     LaunchOption("--horizon", "HORIZON", "horizon_epochs", "1",
                  "epochs the MWIS plans jointly (rolling horizon; 1 = the paper's)"),
+    LaunchOption("--commit-ahead", "COMMIT_AHEAD", "commit_ahead", "false",
+                 "with --horizon > 1, commit the horizon's later departures now as reservations"),
     LaunchOption("--priority-share", "PRIORITY_SHARE", "priority_share", "0",
                  "share of random requests of priority class 1 (e.g. 0.05)"),
     LaunchOption("--lead-time", "LEAD_TIME", "lead_time_s", "0",

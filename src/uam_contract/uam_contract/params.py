@@ -161,6 +161,12 @@ PLANNER = (
     Param("horizon_epochs", 1, "rolling planning horizon H of the mwis policy: the departures of the next H "
           "epochs are planned in one MWIS and only what departs in this epoch is committed, the rest planned "
           "again; 1 = the paper's one-epoch planning", 1, 100),
+    Param("fair_window_s", 0.0, "objective 'fair': the operators' approval shares count only the decisions "
+          "of the epochs in the last fair_window_s seconds (a sliding window of the run); 0 = the whole run",
+          0.0, 1.0e7),
+    Param("commit_ahead", False, "with horizon_epochs > 1, commit every selected departure of the horizon at "
+          "once as a reservation (an approved flight never re-optimised; only a constraint's re-planning may "
+          "revoke it) instead of planning the later epochs again"),
     Param("k", D.K, "candidate routes per request", 1, 100),
     Param("penalty_factor", D.PENALTY_FACTOR, "penalised Dijkstra factor for diverse candidates", 0.0, 1000.0),
     Param("speed_mps", D.SPEED_MPS, "cruise speed [m/s]", 0.001, 1000.0),

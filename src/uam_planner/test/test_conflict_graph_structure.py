@@ -76,3 +76,80 @@ def test_scenarios_exercise_discards_and_conflicts():
 def test_empty_inputs():
     g = build_conflict_graph([], np.zeros(0), np.zeros(0), np.zeros(0), 0, [], 100.0)
     assert g.n_vertices == 0 and g.n_edges == 0 and g.edges.shape == (0, 2)
+
+
+# ---- the rolling horizon's pair cache ----------------------------------------------------------------
+
+def test_candidate_pair_cache_gives_the_pairs_of_a_full_check():
+    """Two calls whose candidates overlap (the second drops some and adds new ones, in another
+    order): each answer is the brute-force set of conflicting pairs of different requests, and the
+    second reuses the pairs among the candidates both calls share."""
+    from uam_planner.conflict_graph import CandidatePairCache
+
+    trajs, req, _, _, _, _ = scenario(3, n_requests=10, n_active=0)
+    n = len(trajs)
+    cache = CandidatePairCache()
+
+    def brute(ix):
+        return sorted((u, v) for u, v in itertools.combinations(range(len(ix)), 2)
+                      if req[ix[u]] != req[ix[v]] and min_separation_m(trajs[ix[u]], trajs[ix[v]]) < 100.0)
+
+    first = list(range(0, 2 * n // 3))
+    second = list(range(n // 3, n))  # shares n/3 .. 2n/3 with the first, in the same order
+    for ix in (first, second):
+        got = cache.conflicts([("r", i) for i in ix], [trajs[i] for i in ix], req[ix], 100.0, 120.0)
+        assert [tuple(p) for p in got.tolist()] == brute(ix)
+    shared = set(first) & set(second)
+    expect_reused = sum(1 for u, v in brute(first) if first[u] in shared and first[v] in shared)
+    assert expect_reused > 0 and cache.reused_pairs == expect_reused
+    assert cache.checked_new == len(first) + len(set(second) - shared)
+
+
+def test_candidate_pair_cache_refuses_keys_that_do_not_name_the_candidates():
+    from uam_planner.conflict_graph import CandidatePairCache
+
+    trajs, req, _, _, _, _ = scenario(0, n_requests=2, n_active=0)
+    with pytest.raises(ValueError, match=r"keys: 1 keys for 2 candidates"):
+        CandidatePairCache().conflicts([0], trajs[:2], req[:2], 100.0, 120.0)
+    with pytest.raises(ValueError, match=r"keys: 1 of 2 keys repeat an earlier one"):
+        CandidatePairCache().conflicts([0, 0], trajs[:2], req[:2], 100.0, 120.0)
+
+
+def test_planner_horizon_builds_the_same_graphs_with_and_without_the_pair_cache():
+    """A rolling horizon (H = 3, 5 s slots) over 6 epochs of a synthetic network, once with the
+    planner's pair cache and once without: every epoch's graph (weights, edges) and approvals are
+    the same, and the cache did reuse pairs."""
+    from uam_planner.planning import AirspaceConfig, FlightRequest, Planner, PlanningConfig
+
+    net = generate_network(50, 6, seed=1)
+    ids = [net.node_ids[i] for i in net.aerodrome_indices]
+    cfg = PlanningConfig(horizon_epochs=3, objective="count", airspace=AirspaceConfig(departure_slot_s=5.0))
+
+    def greedy(weights, edges, groups):
+        from uam_solvers.greedy import greedy_mwis
+
+        class Answer:
+            selected = greedy_mwis(weights, edges)
+        return Answer()
+
+    def run(cached):
+        p = Planner(net, cfg, solve_mwis=greedy)
+        if not cached:
+            p.pair_cache = None
+        rng = np.random.default_rng(4)
+        out = []
+        for e in range(6):
+            t = 30.0 * e
+            for j in range(6):
+                o, d = rng.choice(len(ids), 2, replace=False)
+                assert p.submit(FlightRequest(f"r{e}_{j}", ids[o], ids[d], t, t + 30.0, t + 120.0)) is None
+            res = p.plan(t, e)
+            out.append((res.report.weights.tolist(), res.report.edges_array.tolist(),
+                        [(f.request_id, f.departure_s) for f in res.approved]))
+        return out, p
+
+    with_cache, planner = run(True)
+    without, _ = run(False)
+    assert with_cache == without
+    assert planner.pair_cache.reused_pairs > 0
+    assert sum(len(a) for _, _, a in without) > 0 and max(len(e) for _, e, _ in without) > 0

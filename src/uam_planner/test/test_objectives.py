@@ -332,6 +332,36 @@ def test_horizon_commits_only_what_departs_in_this_epoch_and_replans_the_rest():
     assert [(f.request_id, f.departure_s) for f in res.approved] == [("r1", 60.0)]
 
 
+def run_reservations(commit_ahead):
+    """H = 2 on route C-m-D (priority): at t = 0, r1 (class 1) may depart at 0 or 30, r2 (class 0)
+    only at 0; at t = 30 arrives r3 (class 2) that may depart only at 30. Two departures at one
+    time conflict."""
+    p = Planner(one_route_network(), PlanningConfig(objective="priority", backend="exact", horizon_epochs=2,
+                                                    commit_ahead=commit_ahead))
+    assert p.submit(FlightRequest("r1", "C", "D", 0, 0, 30, priority=1)) is None
+    assert p.submit(FlightRequest("r2", "C", "D", 0, 0, 0)) is None
+    out = [p.plan(0.0, 0)]
+    assert p.submit(FlightRequest("r3", "C", "D", 30, 30, 30, priority=2)) is None
+    out.append(p.plan(30.0, 1))
+    return [([(f.request_id, f.departure_s) for f in r.approved], [x.request_id for x in r.expired],
+             [x.request_id for x in r.waiting], r.report.discarded) for r in out], p
+
+
+def test_commit_ahead_turns_the_horizons_later_departures_into_reservations_that_are_not_replanned():
+    # rolling horizon (default): t = 0 commits r2 at 0, r1 waits; at t = 30 r1 (class 1) and r3
+    # (class 2) both want 30: priority takes r3, r1 expires.
+    plain, _ = run_reservations(False)
+    assert plain == [([("r2", 0.0)], [], ["r1"], 0), ([("r3", 30.0)], ["r1"], [], 0)]
+    # commit_ahead: t = 0 commits r2 at 0 and r1 at 30 (a reservation: an approved flight now);
+    # at t = 30 r3's only candidate conflicts with the reserved r1, so it is discarded against
+    # it (discarded = 1) and r3 expires: the reservation is not revoked for a higher class.
+    ahead, p = run_reservations(True)
+    assert ahead == [([("r1", 30.0), ("r2", 0.0)], [], [], 0), ([], ["r3"], [], 1)]  # arrival order
+    assert sorted(f.request_id for f in p.active) == ["r1", "r2"]
+    with pytest.raises(ValueError, match=r"PlanningConfig.commit_ahead must be a bool, got 'yes'"):
+        PlanningConfig(commit_ahead="yes")
+
+
 def test_horizon_epochs_is_validated():
     with pytest.raises(ValueError, match=r"PlanningConfig.horizon_epochs must be an integer in \[1, 100\], got 0"):
         PlanningConfig(horizon_epochs=0)
@@ -351,3 +381,51 @@ def test_horizon_departures_every_slot_now_and_the_first_of_each_later_epoch():
     # the paper's rule: the epoch times inside the window
     paper = PlanningConfig(horizon_epochs=3)
     assert departure_slots_s(0.0, FlightRequest("p", "C", "D", 0, 20, 70), paper, 3).tolist() == [30, 60]
+
+
+def test_fair_shares_over_a_sliding_window_forget_the_older_epochs():
+    from uam_planner.objectives import OperatorShares
+
+    whole, window = OperatorShares(), OperatorShares(window_s=60.0)
+    for s in (whole, window):
+        s.record(0.0, ["a"], ["b"])     # epoch at 0: a approved, b expired
+        s.record(30.0, ["b"], ["a"])    # epoch at 30: b approved, a expired
+        s.advance(90.0)                 # the window keeps tau >= 90 - 60 = 30
+    # whole run: a 1 of 2, b 1 of 2: phi = round(10 x 3 / 2) = 15 each
+    assert (whole.factor("a"), whole.factor("b")) == (15, 15)
+    # window: only the epoch at 30: a 0 of 1 -> round(10 x 2 / 1) = 20; b 1 of 1 -> 10
+    assert (window.requested["a"], window.approved["a"]) == (1, 0)
+    assert (window.factor("a"), window.factor("b")) == (20, 10)
+    window.advance(120.0)  # nothing left: back to the neutral F = 10
+    assert (window.factor("a"), window.factor("b")) == (10, 10)
+
+
+def run_fair_window(window_s):
+    """Route C-m-D, objective fair: b's two requests expire at t = 0 (windows [5, 10] s fall
+    between epochs), a's one at t = 30 ([35, 40]); at t = 90 a and b ask for the same departure."""
+    p = Planner(one_route_network(), PlanningConfig(objective="fair", backend="exact", fair_window_s=window_s))
+    for e, rids in enumerate((("b0", "b1"), ("a1",))):
+        t = 30.0 * e
+        for rid in rids:
+            assert p.submit(FlightRequest(rid, "C", "D", t, t + 5, t + 10, operator_id=rid[0])) is None
+        res = p.plan(t, e)
+        assert res.approved == [] and sorted(r.request_id for r in res.expired) == list(rids)
+    p.plan(60.0, 2)
+    for op in ("a", "b"):
+        assert p.submit(FlightRequest(f"{op}3", "C", "D", 90, 90, 90, operator_id=op)) is None
+    return [f.request_id for f in p.plan(90.0, 3).approved], p
+
+
+def test_fair_window_forgets_the_early_losses_in_the_planner():
+    # whole run at t = 90: a 0 of 1 -> phi 20, b 0 of 2 -> round(10 x 3 / 1) = 30: b flies
+    won, p = run_fair_window(0.0)
+    assert won == ["b3"]
+    # after it: a 0 of 2 -> round(10 x 3 / 1) = 30, b 1 of 3 -> round(10 x 4 / 2) = 20
+    assert (p.shares.factor("a"), p.shares.factor("b")) == (30, 20)
+    # window 60 s at t = 90: only decisions at tau >= 30 count: a 0 of 1 -> 20, b none -> 10: a
+    won, p = run_fair_window(60.0)
+    assert won == ["a3"] and p.shares.window_s == 60.0
+    # after it (window still at t = 90): a 1 of 2 -> 15, b 0 of 1 (b3) -> 20
+    assert (p.shares.factor("a"), p.shares.factor("b")) == (15, 20)
+    with pytest.raises(ValueError, match=r"PlanningConfig.fair_window_s must be finite and >= 0, got -1"):
+        PlanningConfig(fair_window_s=-1)

@@ -92,17 +92,22 @@ class ShiftedCandidates:
     epoch are discarded against the active flights and never need one).
     """
 
-    def __init__(self, base, first, shift_s):
+    def __init__(self, base, first, shift_s, exact=None):
         self.base = list(base)
         self.first = np.asarray(first, dtype=np.int64)
         self.shift_s = np.asarray(shift_s, dtype=np.float64)
         self.template_of = np.repeat(np.arange(len(self.base)), np.diff(self.first))
+        # optional callable(c) -> the candidate's trajectory built from its template and
+        # departure (not shifted from the base: the same floats whatever the base)
+        self.exact = exact
 
     def __len__(self) -> int:
         return int(self.shift_s.shape[0])
 
     def __getitem__(self, c):
         c = int(c)
+        if self.exact is not None:
+            return self.exact(c)
         tr = self.base[int(self.template_of[c])]
         dt = float(self.shift_s[c])
         if dt == 0.0:
@@ -113,9 +118,96 @@ class ShiftedCandidates:
         return Trajectory._trusted(times, tr.points_m, (times[:-1], times[1:], p0, v))
 
 
+def _unique_pairs(pairs: np.ndarray, n: int) -> np.ndarray:
+    """Rows (min, max) of ``pairs`` over 0..n-1, unique and sorted lexicographically (as
+    ``np.unique(np.sort(pairs, axis=1), axis=0)``, on one int64 code per row)."""
+    if pairs.shape[0] == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    a = np.minimum(pairs[:, 0], pairs[:, 1]).astype(np.int64)
+    b = np.maximum(pairs[:, 0], pairs[:, 1]).astype(np.int64)
+    code = a * max(int(n), 1) + b
+    code.sort()  # a sort and a mask: np.unique's hash path is several times slower here
+    code = code[np.concatenate(([True], code[1:] != code[:-1]))]
+    return np.stack(np.divmod(code, max(int(n), 1)), axis=1)
+
+
+class CandidatePairCache:
+    """The conflicts among one epoch's surviving candidates, reused at the next (rolling horizon).
+
+    Whether two candidates lose separation is a function of their two trajectories alone, and a
+    candidate is its request, template and departure time: ``keys`` name them (``(request_id,
+    id(template), departure_s)`` in the planner, whose CandidateCache keeps the templates alive;
+    keys must be unique within a call, and two candidates of both calls must keep their relative
+    order, as the planner's arrival-ordered vertices do). With a
+    horizon of H epochs most candidates of an epoch were candidates of the previous one (the
+    later epochs' departures stay on the same slot grid), so only the pairs with a new candidate
+    are checked: new x new and new x old (``conflicting_pairs`` calls with a fixed time bucket);
+    the old x old pairs come from the previous epoch's answer. The result is the same set of
+    pairs, to the last bit, as one call over all candidates with that bucket
+    (``test_planner_horizon_builds_the_same_graphs_with_and_without_the_pair_cache``).
+
+    Holds one epoch: ``conflicts`` replaces what it holds by the pairs it returns.
+    """
+
+    def __init__(self):
+        self._index: dict = {}
+        self._pairs = np.zeros((0, 2), dtype=np.int64)
+        self.reused_pairs = 0  # old x old pairs taken from the cache, over the run
+        self.checked_new = 0   # candidates that were new, over the run
+
+    def conflicts(self, keys, candidates, request, separation_m, bucket_s: float) -> np.ndarray:
+        """Conflicting pairs (i < j, sorted) among ``candidates`` (sequence of Trajectory) of
+        different ``request`` labels; ``keys[i]`` identifies candidate i's trajectory (the same
+        key must mean the same floats). ``bucket_s``: the broad phase's time bucket, fixed so
+        that every call cuts a segment into the same pieces: the verdict on a pair is then a
+        function of its two trajectories alone, to the last bit, whatever else is in the call."""
+        n = len(candidates)
+        request = np.asarray(request, dtype=np.int64)
+        if len(keys) != n:
+            raise ValueError(f"keys: {len(keys)} keys for {n} candidates")
+        old_pos = np.fromiter((self._index.get(k, -1) for k in keys), dtype=np.int64, count=n)
+        old = np.flatnonzero(old_pos >= 0)
+        new = np.flatnonzero(old_pos < 0)
+        parts = []
+        if old.size and self._pairs.shape[0]:
+            renumber = np.full(len(self._index), -1, dtype=np.int64)
+            renumber[old_pos[old]] = old
+            p = renumber[self._pairs]
+            p = p[(p >= 0).all(axis=1)]
+            self.reused_pairs += int(p.shape[0])
+            parts.append(p)
+        if new.size > 1:
+            nn = conflicting_pairs([candidates[i] for i in new], None, separation_m,
+                                   groups_a=request[new], bucket_s=bucket_s)
+            parts.append(new[nn])
+        if new.size and old.size:
+            # The exact kernel is evaluated with the lower-index candidate first, as one call
+            # over all candidates does (its rounding is not symmetric to the last bit): new
+            # candidates after every old one (new requests) in one call, old first; the others
+            # in both orders, each keeping the pairs it orients as a full call would.
+            late = new > old[-1]
+            for a, b in ((old, new[late]), (new[~late], old), (old, new[~late])):
+                if not (a.size and b.size):
+                    continue
+                ab = conflicting_pairs([candidates[i] for i in a], [candidates[i] for i in b],
+                                       separation_m, bucket_s=bucket_s)
+                ab = np.stack((a[ab[:, 0]], b[ab[:, 1]]), axis=1)
+                parts.append(ab[(request[ab[:, 0]] != request[ab[:, 1]]) & (ab[:, 0] < ab[:, 1])])
+        self.checked_new += int(new.size)
+        pairs = _unique_pairs(np.concatenate(parts) if parts else np.zeros((0, 2), np.int64), n)
+        index = {k: i for i, k in enumerate(keys)}
+        if len(index) != n:
+            raise ValueError(f"keys: {n - len(index)} of {n} keys repeat an earlier one")
+        self._index = index
+        self._pairs = pairs
+        return pairs
+
+
 def build_conflict_graph(candidates, candidate_request, candidate_index, candidate_weight,
                          n_requests: int, active=(), separation_m: float = DEFAULT_SEPARATION_M,
-                         timings: dict | None = None) -> ConflictGraph:
+                         timings: dict | None = None, keys=None,
+                         pair_cache: CandidatePairCache | None = None,
+                         bucket_s: float | None = None) -> ConflictGraph:
     """Deconflict candidates against active flights and build the conflict graph.
 
     Args:
@@ -129,6 +221,11 @@ def build_conflict_graph(candidates, candidate_request, candidate_index, candida
         separation_m: separation minimum [m] (the paper's sphere) or a SeparationModel.
         timings: optional dict; gets 'deconfliction_s', 'conflicts_s', 'graph_s' (wall time,
             for reports and benchmarks only).
+        keys, pair_cache: optional (n,) hashable names of the candidates' trajectories and a
+            CandidatePairCache: the conflicts among survivors then reuse the previous call's
+            (same graph, fewer checks; the planner's rolling horizon).
+        bucket_s: the time bucket of the conflicts among survivors (default: the separation
+            module's, from the median speed; required with ``pair_cache``).
     Returns: a ConflictGraph. Complexity: that of two ``conflicting_pairs`` calls plus
     O(v + e log e).
     """
@@ -164,18 +261,22 @@ def build_conflict_graph(candidates, candidate_request, candidate_index, candida
     vreq = cand_req[keep]
     # Conflicts among survivors of different requests.
     surv = [candidates[i] for i in keep]
-    conflict = conflicting_pairs(surv, None, separation_m, groups_a=vreq) if len(surv) > 1 \
-        else np.zeros((0, 2), dtype=np.int64)
+    if pair_cache is not None:
+        if keys is None or bucket_s is None:
+            raise ValueError("build_conflict_graph: pair_cache needs keys and bucket_s")
+        conflict = pair_cache.conflicts([keys[i] for i in keep.tolist()], surv, vreq, separation_m,
+                                        bucket_s)
+    else:
+        conflict = conflicting_pairs(surv, None, separation_m, groups_a=vreq,
+                                     bucket_s=bucket_s) if len(surv) > 1 \
+            else np.zeros((0, 2), dtype=np.int64)
     t2 = time.perf_counter()
 
     order = np.argsort(vreq, kind="stable")
     bounds = np.searchsorted(vreq[order], np.arange(n_requests + 1))
     groups = [order[bounds[r]:bounds[r + 1]].astype(np.int64) for r in range(n_requests)]
     clique = _clique_edges(groups)
-    edges = np.concatenate((clique, conflict)).astype(np.int64)
-    if edges.shape[0]:
-        edges = np.sort(edges, axis=1)
-        edges = np.unique(edges, axis=0)
+    edges = _unique_pairs(np.concatenate((clique, conflict)), keep.shape[0])
     edges = edges.astype(np.int32).reshape(-1, 2)
     t3 = time.perf_counter()
     if timings is not None:

@@ -37,7 +37,7 @@ no wall time, no randomness. No rclpy.
 from __future__ import annotations
 
 import math
-from collections import Counter
+from collections import Counter, deque
 from dataclasses import dataclass, field
 from typing import Sequence
 
@@ -96,10 +96,35 @@ class OperatorShares:
     The Planner counts both when an epoch is committed (a request filed far ahead counts only
     once it had its chance); the weights of an epoch read the counts as they were when it was
     prepared.
+
+    ``window_s`` > 0 (``PlanningConfig.fair_window_s``): a sliding window of the run; only the
+    decisions of epochs at times tau >= t - window_s count at the epoch at t (``record`` keeps
+    each epoch's decisions with its time, ``advance(t)`` drops the older ones). 0: the whole run.
     """
 
     requested: Counter = field(default_factory=Counter)
     approved: Counter = field(default_factory=Counter)
+    window_s: float = 0.0
+    _events: deque = field(default_factory=deque, repr=False)
+
+    def record(self, t_s: float, approved: Sequence[str], expired: Sequence[str]) -> None:
+        """Count the operators of one epoch's approvals and expiries, decided at ``t_s``."""
+        approved, expired = list(approved), list(expired)
+        self.approved.update(approved)
+        self.requested.update(approved)
+        self.requested.update(expired)
+        if self.window_s > 0.0:
+            self._events.append((float(t_s), approved, expired))
+
+    def advance(self, t_s: float) -> None:
+        """With a window, forget the decisions of epochs before ``t_s - window_s``."""
+        if self.window_s <= 0.0:
+            return
+        while self._events and self._events[0][0] < float(t_s) - self.window_s - 1e-9:
+            _, approved, expired = self._events.popleft()
+            self.approved.subtract(approved)
+            self.requested.subtract(approved)
+            self.requested.subtract(expired)
 
     def factor(self, operator: str) -> int:
         """phi_o = round(F (n_o + 1) / (a_o + 1)), clipped to [F, F * FAIR_MAX_RATIO]."""

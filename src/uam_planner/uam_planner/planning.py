@@ -60,8 +60,8 @@ from uam_contract import defaults
 from .candidates import (DEFAULT_CLIMB_RATE_MPS, DEFAULT_DESCENT_RATE_MPS, CandidateCache,
                          RouteTemplate)
 from .constraints import ConstraintSet, refuse_candidates
-from .conflict_graph import (ActiveFlightIndex, ConflictGraph, ShiftedCandidates,
-                             build_conflict_graph)
+from .conflict_graph import (ActiveFlightIndex, CandidatePairCache, ConflictGraph,
+                             ShiftedCandidates, build_conflict_graph)
 from .separation import (DEFAULT_VERTICAL_SEPARATION_M, SEPARATION_MODELS, SegmentSet,
                          SeparationModel, conflicting_pairs)
 from .first_fit import as_firstfit, first_fit_select
@@ -180,6 +180,13 @@ class PlanningConfig:
             (before t + epoch_s in the paper's rule; at most t + epoch_s with slots) are
             committed; the others wait and are planned again at the next epoch. 1 = today's
             (the paper's) one-epoch planning. The baselines ignore it.
+        fair_window_s: the "fair" objective's operator shares count only the decisions of
+            the epochs in the last fair_window_s seconds (a sliding window); 0 = the whole run.
+        commit_ahead: with H > 1, commit every selected candidate at once, also those departing
+            in a later epoch of the horizon: reservations, ordinary approved flights (active, so
+            every later epoch is deconflicted against them) that are never re-optimised (only
+            a constraint's re-planning may revoke one). False (default): the rolling horizon
+            commits only this epoch's departures and plans the rest again.
     """
 
     epoch_s: float = defaults.EPOCH_S          # the paper's values, from uam_contract.defaults
@@ -196,6 +203,8 @@ class PlanningConfig:
     objective: str = "paper"
     baseline_order: str = "arrival"
     horizon_epochs: int = 1
+    commit_ahead: bool = False
+    fair_window_s: float = 0.0
 
     @property
     def separation(self) -> SeparationModel:
@@ -230,6 +239,9 @@ class PlanningConfig:
         if isinstance(h, bool) or not isinstance(h, (int, np.integer)) or not 1 <= h <= MAX_HORIZON_EPOCHS:
             raise ValueError(f"PlanningConfig.horizon_epochs must be an integer in [1, {MAX_HORIZON_EPOCHS}], "
                              f"got {h!r}")
+        _positive("PlanningConfig", "fair_window_s", self.fair_window_s, allow_zero=True)
+        if not isinstance(self.commit_ahead, (bool, np.bool_)):
+            raise ValueError(f"PlanningConfig.commit_ahead must be a bool, got {self.commit_ahead!r}")
         if self.baseline_order not in BASELINE_ORDERS:
             raise ValueError(f"PlanningConfig.baseline_order must be one of {BASELINE_ORDERS}, "
                              f"got {self.baseline_order!r}")
@@ -444,16 +456,19 @@ class _Candidates:
     def trajectories(self) -> list:
         return [tp.trajectory(dep) for tp, dep in zip(self.tmpls, self.departures_s)]
 
-    def shifted(self) -> ShiftedCandidates:
+    def shifted(self, exact: bool = False) -> ShiftedCandidates:
         """The same candidates as one base trajectory per template (at its first slot) and
-        departure shifts: the slots of one template are consecutive."""
+        departure shifts: the slots of one template are consecutive. ``exact``: a candidate's
+        trajectory is built from its template and departure (the same floats in every epoch,
+        as the horizon's pair cache needs), not shifted from the base."""
         n = len(self.tmpls)
         starts = [c for c in range(n) if c == 0 or self.tmpls[c] is not self.tmpls[c - 1]]
         first = np.asarray(starts + [n], dtype=np.int64)
         deps = np.asarray(self.departures_s, dtype=np.float64)
         base = [self.tmpls[c].trajectory(self.departures_s[c]) for c in starts]
         shift = deps - np.repeat(deps[first[:-1]], np.diff(first)) if n else deps
-        return ShiftedCandidates(base, first, shift)
+        build = (lambda c: self.tmpls[c].trajectory(self.departures_s[c])) if exact else None
+        return ShiftedCandidates(base, first, shift, exact=build)
 
 
 def _paper_weights(config: PlanningConfig, network) -> bool:
@@ -570,6 +585,7 @@ class PreparedEpoch:
     horizon: int = 1
     epoch_s: float = 0.0
     slots: bool = False
+    commit_ahead: bool = False
 
     @property
     def needs_solver(self) -> bool:
@@ -581,7 +597,8 @@ def prepare_epoch_mwis(t_s: float, epoch_index: int, pending: Sequence[FlightReq
                        active: Sequence[Flight], network, config: PlanningConfig,
                        cache: CandidateCache, active_index=None,
                        shares: OperatorShares | None = None,
-                       order: str = "arrival", horizon: int | None = None) -> PreparedEpoch:
+                       order: str = "arrival", horizon: int | None = None,
+                       pair_cache: CandidatePairCache | None = None) -> PreparedEpoch:
     """Steps 1-6 of an MWIS epoch at ``t_s`` [s]: eligible requests, candidates, trajectories,
     deconfliction and the conflict graph (``PreparedEpoch.graph``), still to be solved.
 
@@ -589,7 +606,10 @@ def prepare_epoch_mwis(t_s: float, epoch_index: int, pending: Sequence[FlightReq
     ``active`` (kept across epochs by the Planner, so the active flights' segments are not
     rebuilt every epoch); ``shares``: running operator counts (objective "fair"); ``order``:
     the vertex order by request ("arrival", or "priority" for first-fit's walk); ``horizon``:
-    the epochs planned jointly (default ``config.horizon_epochs``).
+    the epochs planned jointly (default ``config.horizon_epochs``); ``pair_cache``: with a
+    horizon H > 1, the previous epoch's conflicts among candidates (kept by the Planner, valid
+    while ``cache`` is: candidates are keyed by request, template identity and departure), so
+    only pairs with a new candidate are checked (the same graph).
     """
     horizon = int(config.horizon_epochs if horizon is None else horizon)
     t_start = time.perf_counter()
@@ -608,24 +628,41 @@ def prepare_epoch_mwis(t_s: float, epoch_index: int, pending: Sequence[FlightReq
     phases["candidates_s"] = t2 - t1
     # With slots, the candidates of one template differ only by a time shift: deconflict them
     # per template (ShiftedCandidates) and build trajectories only for the survivors.
-    trajs = cands.shifted() if config.airspace.departure_slot_s > 0.0 or horizon > 1 \
+    trajs = cands.shifted(exact=horizon > 1) if config.airspace.departure_slot_s > 0.0 or horizon > 1 \
         else cands.trajectories()
     t3 = time.perf_counter()
     phases["trajectories_s"] = t3 - t2
 
     active_set = active_index.segments(airborne, t_s) if active_index is not None \
         else [f.trajectory for f in airborne]
+    use_cache = pair_cache is not None and horizon > 1
+    # a candidate: its request (requests of one origin and destination share templates), its
+    # template and its departure
+    keys = [(eligible[r].request_id, id(tp), dep) for r, tp, dep in
+            zip(req_of, tmpls, cands.departures_s)] if use_cache else None
     graph = build_conflict_graph(
         trajs, np.asarray(req_of, dtype=np.int64),
         np.asarray(cands.index_in_request, dtype=np.int64),
         np.asarray(cands.weights, dtype=np.float64),
-        len(eligible), active_set, config.separation, timings=phases)
+        len(eligible), active_set, config.separation, timings=phases, keys=keys,
+        pair_cache=pair_cache if use_cache else None,
+        bucket_s=_horizon_bucket_s(config) if horizon > 1 else None)
     return PreparedEpoch(t_s=float(t_s), epoch_index=int(epoch_index), pending=list(pending), report=report,
                          graph=graph, eligible=eligible, tmpls=tmpls, trajs=trajs, req_of=req_of,
                          weights=cands.weights, index_in_request=cands.index_in_request,
                          airborne_count=len(airborne), prepare_s=time.perf_counter() - t_start,
                          phases=phases, horizon=horizon, epoch_s=float(config.epoch_s),
-                         slots=config.airspace.departure_slot_s > 0.0)
+                         slots=config.airspace.departure_slot_s > 0.0,
+                         commit_ahead=bool(config.commit_ahead))
+
+
+def _horizon_bucket_s(config: PlanningConfig) -> float:
+    """The broad phase's time bucket among a horizon's candidates: the separation module's
+    default (one cell's flight time) at the cruise speed, fixed rather than from each call's
+    median speed, so that a pair's verdict does not depend on the other candidates."""
+    from .separation import DEFAULT_BUCKET_CELLS, DEFAULT_CELL_SEPARATIONS
+    return DEFAULT_BUCKET_CELLS * DEFAULT_CELL_SEPARATIONS * float(config.separation_m) / \
+        float(config.speed_mps)
 
 
 def commit_epoch(prep: PreparedEpoch, answer, config: PlanningConfig, solve_s: float = 0.0) -> EpochResult:
@@ -639,10 +676,11 @@ def commit_epoch(prep: PreparedEpoch, answer, config: PlanningConfig, solve_s: f
     graph, report, phases, eligible = prep.graph, prep.report, prep.phases, prep.eligible
     t4 = time.perf_counter()
     selected = checked_selection(graph, answer, report)
-    if prep.horizon > 1 and selected.size:
+    if prep.horizon > 1 and selected.size and not prep.commit_ahead:
         # rolling horizon: commit what departs in this epoch (before the next epoch time in the
         # paper's rule; up to and including it with slots, whose window is [t, t + epoch_s]);
-        # the rest waits and is planned again
+        # the rest waits and is planned again (with commit_ahead everything selected is
+        # committed now: the later departures are reservations)
         deps = np.array([prep.trajs[int(graph.vertex_source[v])].departure_s for v in selected.tolist()])
         end = prep.t_s + prep.epoch_s
         selected = selected[deps <= end + 1e-9 if prep.slots else deps < end - 1e-9]
@@ -823,8 +861,8 @@ class Planner:
         self._rejected_since_plan = 0
         self._prepared: PreparedEpoch | None = None
         # requests decided (approved or expired) and approved per operator (the "fair"
-        # objective's running shares)
-        self.shares = OperatorShares()
+        # objective's running shares, over the whole run or a sliding window)
+        self.shares = OperatorShares(window_s=float(self.config.fair_window_s))
 
     @property
     def config(self) -> PlanningConfig:
@@ -838,6 +876,9 @@ class Planner:
             raise TypeError(f"config must be a PlanningConfig, got {type(cfg).__name__}")
         old = self._config
         self._config = cfg
+        # the horizon's conflicts between epochs (keyed by the route cache's templates, in this
+        # config's separation): begun afresh with every config
+        self.pair_cache = CandidatePairCache()
         route_fields = ("k", "penalty_factor", "speed_mps")
         vertical = ("climb_rate_mps", "descent_rate_mps")
         if old is None or any(getattr(old, f) != getattr(cfg, f) for f in route_fields) or \
@@ -927,9 +968,11 @@ class Planner:
         if self._prepared is not None:
             raise RuntimeError(f"epoch {self._prepared.epoch_index} is prepared but not committed")
         self.active = [f for f in self.active if f.arrival_s >= t_s]
+        self.shares.advance(t_s)
         if self.policy == "mwis":
             prep = prepare_epoch_mwis(t_s, epoch_index, self.pending, self.active, self.network, self.config,
-                                      self.cache, self.active_index, self.shares)
+                                      self.cache, self.active_index, self.shares,
+                                      pair_cache=self.pair_cache)
         else:
             args = (t_s, epoch_index, self.pending, self.active, self.network, self.config)
             res = plan_epoch_fifo(*args, None, self.cache, self.active_index, self.shares) \
@@ -952,9 +995,8 @@ class Planner:
         arrived_since = self.pending[len(prep.pending):]
         self.pending = list(result.waiting) + arrived_since
         self.active = self.active + list(result.approved)
-        self.shares.approved.update(operator_of(f) for f in result.approved)
-        self.shares.requested.update(operator_of(f) for f in result.approved)
-        self.shares.requested.update(operator_of(r) for r in result.expired)
+        self.shares.record(prep.t_s, [operator_of(f) for f in result.approved],
+                           [operator_of(r) for r in result.expired])
         result.report.rejected = self._rejected_since_plan
         self._rejected_since_plan = 0
         return result
@@ -973,8 +1015,8 @@ class Planner:
         held = {f.request_id for f in self.active}
         new = [f for f in flights if f.request_id not in held]
         self.active = self.active + new
-        self.shares.approved.update(operator_of(f) for f in new)
-        self.shares.requested.update(operator_of(f) for f in new)
+        for f in new:  # counted when they departed (the fair window's time)
+            self.shares.record(f.departure_s, [operator_of(f)], [])
         self._known_ids.update(f.request_id for f in flights)
         self._known_ids.update(decided_ids)
         self.pending = [r for r in self.pending if r.request_id not in self._known_ids]

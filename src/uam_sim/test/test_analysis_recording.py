@@ -265,7 +265,9 @@ def test_delay_and_detour_per_run_and_per_operator(fifo_two_operators):
     assert s.flight_stats_by_operator["opA"]["detour_mean_pct"] == pytest.approx(25.0)
     assert s.flight_stats_by_operator["opB"]["detour_mean_pct"] == pytest.approx(0.0)
     text = format_summary(s)
-    assert "Departure delay  mean 15.0 s after the earliest departure, 50 % of 2 flights delayed" in text
+    # one delay row: mean, p95 (linear: 0 + 0.95 x 30 = 28.5) and the delayed share of one set
+    assert "Departure delay  mean 15.0 s after the earliest departure, p95 28.5 s, 50 % of 2 flights delayed" in text
+    assert text.count("p95") == 3  # the run's row and one per operator; no second delay row
     assert "Route detour     mean 12.5 % over the shortest route" in text
     assert "Departure delay of opA  mean 30.0 s" in text
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 
 pytest.importorskip("uam_msgs.msg", reason="needs the built workspace (source scripts/env.sh)")
@@ -64,8 +66,9 @@ def test_recordings_give_the_runs_metrics(tmp_path):
 
 
 def test_a_recording_gives_the_runs_decision_metrics(tmp_path):
-    """Issue 21: uam_sim.analysis computes the runner's delay, per-class p95 and operator shares
-    from a recording with the same implementation (uam_sim.decision_metrics)."""
+    """Issue 21: uam_sim.analysis computes the runner's delay, per-class p95, operator shares and,
+    given the network, the detour in metres from a recording with the same implementation
+    (uam_sim.flights.run_metrics)."""
     from uam_sim.analysis import format_summary, summarize
 
     cfg = make_config({"network": NET, "objective": "priority", "priority_share": 0.3,
@@ -87,10 +90,12 @@ def test_a_recording_gives_the_runs_decision_metrics(tmp_path):
                 rec.write("/uam/flight_plans", plan, ns)
             rec.write("/uam/planning_reports", m.report_to_msg(res.report), ns)
         run = run_scenario(net, "greedy", 6, 0, 300.0, cfg, observer=observer)
-    dm = summarize(path).decision_metrics
+    dm = summarize(path, network=net).decision_metrics
     want = run.summary
     for k in ("delay_mean_s", "delay_p95_s", "delay_p95_s_prio0", "delay_p95_s_prio4",
-              "share_a", "share_b", "jain_index"):
+              "share_a", "share_b", "jain_index", "detour_mean_m", "delayed_share"):
         assert dm[k] == pytest.approx(want[k], abs=1e-6), k
+    assert want["detour_mean_m"] > 0  # some flight took a longer candidate: the check can fail
+    assert math.isnan(summarize(path).flight_stats["detour_mean_m"])  # no network, no metres
     text = format_summary(summarize(path), epochs=False)
     assert "p95 class 4" in text and "Jain index" in text

@@ -47,6 +47,20 @@ def rrd(tmp_path_factory) -> tuple[Path, RerunLogger]:
     rejected = NS(outcome=1, request_id="r2", header=NS(stamp=stamp(30.0)), waypoints=[])
     logger.log_flight_plan_msg(plan)
     logger.log_flight_plan_msg(rejected)
+    # the decision panels (issue 21): operator a's requests a1 (earliest 0 s) approved at 30 s
+    # and a2 (earliest 10 s) at 50 s, b's b1 expired; r1 had no request logged (no delay)
+    for rid, op, earliest in (("a1", "a", 0.0), ("a2", "a", 10.0), ("b1", "b", 0.0)):
+        logger.log_request_msg(NS(request_id=rid, operator_id=op, earliest_departure=stamp(earliest)))
+    for rid, dep in (("a1", 30.0), ("a2", 50.0)):
+        logger.log_flight_plan_msg(NS(outcome=0, request_id=rid, operator_id="a", header=NS(stamp=stamp(30.0)),
+                                      departure_time=stamp(dep), waypoints=[]))
+    logger.log_flight_plan_msg(NS(outcome=2, request_id="b1", operator_id="b", header=NS(stamp=stamp(30.0)),
+                                  waypoints=[]))
+    # approved 3 (r1, a1, a2), expired 1; delays 30, 40: mean 35, p95 = 30 + 0.95 x 10 = 39.5;
+    # shares a 2 of 2, b 0 of 1
+    assert logger.decision_values() == {"decisions/approved": 3.0, "decisions/expired": 1.0,
+                                        "delay/p95_s": pytest.approx(39.5), "delay/mean_s": 35.0,
+                                        "share/a": 1.0, "share/b": 0.0}
     report = NS(header=NS(stamp=stamp(30.0)), approved=1, active_flights=1, vertices=3,
                 instance=NS(selected=[0]), solve_time_s=0.01, pending_requests=2)
     logger.log_planning_report_msg(report)
@@ -55,7 +69,7 @@ def rrd(tmp_path_factory) -> tuple[Path, RerunLogger]:
                    vehicles=[NS(vehicle_id="r1", position=point(20.0 * k, 0, 6))])
         logger.log_fleet_state_msg(state)
     logger.log_fleet_state_msg(NS(header=NS(stamp=stamp(34.0)), vehicles=[]))  # landed
-    assert logger.approved_total == 1
+    assert logger.approved_total == 3
     logger.close()
     return path, logger
 
@@ -77,7 +91,8 @@ def test_rrd_verifies_and_contains_the_entities(rrd):
     text = printed.stdout + printed.stderr
     for entity in ("world/network/corridors", "world/network/aerodromes", "world/fleet",
                    "geo/network/corridors", "geo/fleet", "metrics/approved_cumulative",
-                   "metrics/solve_time_s", "metrics/pending_requests"):
+                   "metrics/solve_time_s", "metrics/pending_requests", "metrics/decisions/expired",
+                   "metrics/delay/p95_s", "metrics/share/a", "metrics/share/b"):
         assert entity in text, entity
     assert "sim_time" in text
     chunks = text.split("entity_path: ")
@@ -90,7 +105,8 @@ def test_rrd_verifies_and_contains_the_entities(rrd):
     assert "Blueprint" in text
     data = subprocess.run([_cli(), "rrd", "print", "-vvv", str(path)], capture_output=True, text=True,
                           timeout=120).stdout
-    for view in ("Network (top-down)", "Geographic", "Flights", "MWIS size", "Solve time [s]"):
+    for view in ("Network (top-down)", "Geographic", "Flights", "MWIS size", "Solve time [s]",
+                 "Approvals and expiries", "Delay from the earliest departure [s]", "Operator approval share"):
         assert view in data, view
 
 
@@ -112,7 +128,8 @@ def test_blueprint_lays_out_the_views():
             walk(child)
     walk(bp.root_container)
     assert {"Network (top-down)", "Geographic", "Flights", "MWIS size (conflict-graph vertices)",
-            "MWIS selected vertices", "Solve time [s]"} <= set(names)
+            "MWIS selected vertices", "Solve time [s]", "Approvals and expiries",
+            "Delay from the earliest departure [s]", "Operator approval share"} <= set(names)
     assert not any(n.startswith("Side") for n in names)  # one level: nothing to see from the side
 
 

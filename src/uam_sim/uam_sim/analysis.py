@@ -60,8 +60,7 @@ import numpy as np
 from uam_contract.defaults import SEPARATION_M
 
 from .audit import AIRSPACE_METADATA, SafetyAudit, audit_plans, separation_from_metadata
-from .decision_metrics import decision_metrics
-from .flights import flight_metrics
+from .flights import run_metrics, shortest_route_lengths_m
 from .mcap_reader import is_complete, iter_decoded, read_metadata, recorded_topics, require_mcap
 from .mcap_recover import RECOVERED_METADATA
 from uam_contract.stamps import stamp_s
@@ -151,15 +150,20 @@ class RunSummary:
     rejection_values: dict = field(default_factory=dict)
     #: the approved flights as the experiment's flights table has them (uam_sim.flights): request,
     #: operator, route, length_m, weight, candidate_index, earliest_departure_s, departure_s, ...
+    #: (shortest_length_m when the network is known)
     flights: list = field(default_factory=list)
-    #: uam_sim.flights.flight_metrics of the flights: delay_mean_s, detour_mean_pct, ... ({} if none)
+    #: uam_sim.flights.run_metrics of the flights and requests, as the in-process runner's
+    #: summary has them: delay mean/p95/delayed share from the earliest departure, per-priority
+    #: p95 delay, detour (in m when the network is given), per-operator approval share and Jain
+    #: index; requests still within their window at the end are left out ({} if none)
     flight_stats: dict = field(default_factory=dict)
     #: the same per operator_id, when more than one operator had a flight approved
     flight_stats_by_operator: dict = field(default_factory=dict)
-    #: delay (from the earliest departure) mean/p95, per-priority p95 delay, per-operator
-    #: approval share and Jain index (``uam_sim.decision_metrics``, as the in-process runner's
-    #: summary); detour_mean_m is NaN: a recording holds no candidate route lengths
-    decision_metrics: dict = field(default_factory=dict)
+
+    @property
+    def decision_metrics(self) -> dict:
+        """The runner's decision metrics: ``flight_stats`` (one implementation, one set)."""
+        return self.flight_stats
 
     @property
     def verified(self) -> bool:
@@ -360,7 +364,8 @@ def run_problems(syncs: list, reports: dict, approved: list, flown_ids: set, fle
 
 
 def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SEPARATION_M,
-                       path: str = "", reader: str = "", complete_file: bool = True) -> RunSummary:
+                       path: str = "", reader: str = "", complete_file: bool = True,
+                       network=None) -> RunSummary:
     """The summary of a stream of (topic, log_time_ns, message), e.g. from :func:`iter_decoded`.
 
     Every distinct plan counts, whatever its id: identical repeats (a latched plan delivered
@@ -370,7 +375,6 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
     Complexity: linear in the messages, plus the audit (quadratic in overlapping flights).
     """
     request_ids: set[str] = set()
-    earliest_s: dict[str, float] = {}  # request key -> earliest departure [s]
     request_rows: dict[str, dict] = {}  # request key -> the first request's times, class, operator
     decisions: dict[str, list] = {}  # request id -> distinct plans, in arrival order
     seen: set[tuple] = set()
@@ -391,7 +395,6 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
         if topic == TOPIC_REQUESTS:
             key = request_key(msg)
             request_ids.add(key)
-            earliest_s.setdefault(key, stamp_s(msg.earliest_departure))
             request_rows.setdefault(key, {
                 "earliest_departure_s": stamp_s(msg.earliest_departure),
                 "latest_departure_s": stamp_s(msg.latest_departure),
@@ -453,11 +456,12 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
             ranges = values.setdefault(key, [[x, x] for x in numbers])
             for r, x in zip(ranges, numbers):
                 r[0], r[1] = min(r[0], x), max(r[1], x)
-    flights = [_flight_row(p, label, earliest_s) for p, label in zip(approved_plans, labels)]
-    by_operator = {}
-    if len({f["operator_id"] for f in flights}) > 1:
-        for op in sorted({f["operator_id"] for f in flights}):
-            by_operator[op] = flight_metrics({"flights": [f for f in flights if f["operator_id"] == op]})
+    flights = [_flight_row(p, label, request_rows.get(request_key(p)))
+               for p, label in zip(approved_plans, labels)]
+    if network is not None:  # the detour in metres, as the runner measures it
+        shortest = shortest_route_lengths_m(network, [(f["origin"], f["destination"]) for f in flights])
+        for f in flights:
+            f["shortest_length_m"] = shortest.get((f["origin"], f["destination"]))
 
     avg_active = 0.0
     if fleet_t:
@@ -477,12 +481,12 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
     # step between epochs); requests still within their window then are left out, as in the runner
     ts = sorted({e.t_s for e in epochs})
     end_s = ts[-1] + float(np.median(np.diff(ts))) if len(ts) > 1 else None
-    flight_rows = []
-    for p in approved_plans:
-        r = request_rows.get(request_key(p))
-        if r is not None:  # a plan without its request has no earliest departure
-            flight_rows.append({**r, "departure_s": stamp_s(p.departure_time),
-                                "length_m": float(p.length_m), "shortest_length_m": None})
+    requests = list(request_rows.values())
+    by_operator = {}
+    if len({f["operator_id"] for f in flights}) > 1:
+        for op in sorted({f["operator_id"] for f in flights}):
+            by_operator[op] = run_metrics([f for f in flights if f["operator_id"] == op],
+                                          [r for r in requests if r["operator"] == op], end_s=end_s)
     return RunSummary(
         path=str(path), reader=reader, complete_file=complete_file,
         sim_start_s=t_min if math.isfinite(t_min) else 0.0,
@@ -505,7 +509,7 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
         rejection_reasons=reasons,
         rejection_values=values,
         flights=flights,
-        flight_stats=flight_metrics({"flights": flights}),
+        flight_stats=run_metrics(flights, requests, end_s=end_s),
         flight_stats_by_operator=by_operator,
         audit=audit,
         conflicting_decisions=conflicting,
@@ -514,27 +518,31 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
                                     max_active, audit, conflicting, fleet_steps) + run,
         forged_plans=forged,
         run_end=run_end,
-        decision_metrics=decision_metrics(flight_rows, list(request_rows.values()), end_s=end_s),
     )
 
 
-def _flight_row(plan: Any, label: str, earliest_s: dict) -> dict:
-    """An approved plan as a row of the experiment's flights table (what uam_sim.flights reads)."""
-    key = request_key(plan)
-    return {"request_id": label, "operator_id": str(plan.operator_id), "origin": str(plan.origin_id),
+def _flight_row(plan: Any, label: str, request: dict | None) -> dict:
+    """An approved plan as a row of the experiment's flights table (what uam_sim.flights reads),
+    with its request's window, class and operator (None: a plan without its request)."""
+    r = request or {}
+    return {"request_id": label, "operator_id": str(plan.operator_id), "operator": str(plan.operator_id),
+            "origin": str(plan.origin_id),
             "destination": str(plan.destination_id), "epoch": int(plan.epoch_index),
-            "earliest_departure_s": earliest_s.get(key),
+            "earliest_departure_s": r.get("earliest_departure_s"),
+            "latest_departure_s": r.get("latest_departure_s"), "priority": int(r.get("priority", 0)),
             "departure_s": stamp_s(plan.departure_time), "arrival_s": stamp_s(plan.arrival_time),
             "length_m": float(plan.length_m), "weight": float(plan.weight),
             "candidate_index": int(plan.candidate_index), "route": " ".join(plan.route_node_ids)}
 
 
 def summarize(path: str | Path, separation_m=None, reader: str = "rclpy",
-              default_separation=SEPARATION_M) -> RunSummary:
+              default_separation=SEPARATION_M, network=None) -> RunSummary:
     """Read a recording and return its :class:`RunSummary` (see the module docstring).
 
     ``separation_m``: the audit's model (number = sphere, or a SeparationModel); None = the
     run's own, from the recording's ``uam_airspace`` metadata, else ``default_separation``.
+    ``network``: the run's network (a Network or a network file), for the flights' detour in
+    metres over the shortest route, as the runner measures it (None: no detour in metres).
     """
     path = Path(path)
     if not path.is_file():
@@ -546,8 +554,11 @@ def summarize(path: str | Path, separation_m=None, reader: str = "rclpy",
         separation_m = separation_from_metadata(airspace, default_separation)
     recovered = read_metadata(path, RECOVERED_METADATA)
     complete = is_complete(path) and not recovered
+    if isinstance(network, (str, Path)):
+        from .network_spec import load_network_spec
+        network = load_network_spec(str(network))
     summary = summarize_messages(iter_decoded(path, reader, ANALYSED_TOPICS, fleet_digest_only=True),
-                                 separation_m, str(path), reader, complete)
+                                 separation_m, str(path), reader, complete, network=network)
     summary.recorder_check = read_metadata(path, RECORDER_CHECK)
     if summary.recorder_check.get("ok") == "false":
         summary.problems.append(f"the recorder found: {summary.recorder_check.get('verdict', '?')}")
@@ -586,21 +597,31 @@ def _reason_with_values(reason: str, ranges) -> str:
 
 
 def _flight_lines(whose: str, stats: dict) -> list[str]:
-    """Departure delay and route detour of the approved flights (uam_sim.flights.flight_metrics)."""
-    if not stats:
+    """Departure delay and route detour of the approved flights (uam_sim.flights.run_metrics):
+    one delay row (mean, p95, per priority class, delayed share: one set of flights)."""
+    if not stats or not stats.get("flights"):
         return []
-    delay, detour = stats["delay_mean_s"], stats["detour_mean_pct"]
+    delay, detour, detour_m = stats["delay_mean_s"], stats["detour_mean_pct"], stats["detour_mean_m"]
     if math.isnan(delay):
         delay_line = f"Departure delay{whose}  - (no request with its earliest departure recorded)"
     else:
-        delay_line = (f"Departure delay{whose}  mean {delay:.1f} s after the earliest departure, "
-                      f"{100 * stats['delayed_share']:.0f} % of {stats['flights']} flights delayed")
-    if math.isnan(detour):
-        detour_line = f"Route detour{whose}     - (no plan with a weight in (0, 1])"
+        classes = "".join(f", p95 class {k[len('delay_p95_s_prio'):]} {v:.1f} s" for k, v in stats.items()
+                          if k.startswith("delay_p95_s_prio"))
+        delay_line = (f"Departure delay{whose}  mean {delay:.1f} s after the earliest departure, p95 "
+                      f"{stats['delay_p95_s']:.1f} s{classes}, {100 * stats['delayed_share']:.0f} % of "
+                      f"{stats['flights']} flights delayed")
+    parts = []
+    if not math.isnan(detour_m):
+        parts.append(f"mean {detour_m:.0f} m over the shortest route")
+    if not math.isnan(detour):
+        parts.append(f"mean {detour:.1f} % over the shortest route (from the plans' weights)")
+    if parts:
+        detour_line = (f"Route detour{whose}     {', '.join(parts)}, "
+                       f"{100 * stats['shortest_share']:.0f} % on the best candidate, mean length "
+                       f"{stats['route_length_mean_m'] / 1000:.2f} km")
     else:
-        detour_line = (f"Route detour{whose}     mean {detour:.1f} % over the shortest route (from "
-                       f"the plans' weights), {100 * stats['shortest_share']:.0f} % on the best "
-                       f"candidate, mean length {stats['route_length_mean_m'] / 1000:.2f} km")
+        detour_line = (f"Route detour{whose}     - (no plan with a weight in (0, 1]; "
+                       f"give --network for the detour in metres)")
     return [delay_line, detour_line]
 
 
@@ -639,14 +660,9 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
     lines += _flight_lines("", s.flight_stats)
     for op, stats in s.flight_stats_by_operator.items():
         lines += _flight_lines(f" of {op}", stats)
-    dm = s.decision_metrics
-    if dm:
-        extra = "".join(f", {k.replace('delay_p95_s_prio', 'p95 class ')} {v:.1f} s" for k, v in dm.items()
-                        if k.startswith("delay_p95_s_prio"))
-        lines.append(f"Delay p95        {dm['delay_p95_s']:.1f} s from the earliest departure{extra}")
-        shares = ", ".join(f"{k[6:]} {v:.3f}" for k, v in dm.items() if k.startswith("share_"))
-        if shares:
-            lines.append(f"Operators        approval share {shares}; Jain index {dm['jain_index']:.3f}")
+    shares = ", ".join(f"{k[6:]} {v:.3f}" for k, v in s.flight_stats.items() if k.startswith("share_"))
+    if shares:
+        lines.append(f"Operators        approval share {shares}; Jain index {s.flight_stats['jain_index']:.3f}")
     a = s.audit
     if a is not None:
         pair = f" ({a.closest_pair[0]} / {a.closest_pair[1]})" if a.closest_pair else ""
@@ -705,6 +721,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="the cylinder's vertical minimum V [m] (default: the run's, else 30)")
     ap.add_argument("--reader", choices=("rclpy", "rosbags"), default="rclpy",
                     help="decoder: rclpy (default, tolerates torn files) or rosbags (independent)")
+    ap.add_argument("--network", default=None,
+                    help="the run's network file: the flights' detour in metres over the shortest route")
     ap.add_argument("--json", action="store_true", help="print the summary as JSON")
     ap.add_argument("--no-epochs", action="store_true", help="leave out the per-epoch table")
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -724,7 +742,7 @@ def main(argv: list[str] | None = None) -> int:
         pass  # summarize says so
     try:
         separation = _separation_from_flags(args)
-        summary = summarize(args.recording, separation, args.reader)
+        summary = summarize(args.recording, separation, args.reader, network=args.network)
     except (FileNotFoundError, ValueError) as exc:
         print(f"analyze: {exc}", file=sys.stderr)
         return 1

@@ -89,6 +89,10 @@ class ExperimentConfig:
             class, e.g. 0.05 and 1; 0 = none, the paper's).
         operators: operator ids the generator draws each request's operator from (none: "").
         horizon_epochs: epochs the MWIS plans jointly (rolling horizon; 1 = the paper's).
+        fair_window_s: the "fair" objective's shares over a sliding window of the run [s]
+            (0 = the whole run).
+        commit_ahead: with horizon_epochs > 1, commit the later epochs' selected departures at
+            once as reservations (never re-optimised) instead of planning them again.
         lead_time_s: requests are filed this long before their earliest departure [s].
         operator_lead_times_s: extra lead time [s] per operator (filing habits), as ``operators``.
         metrics_warmup_s: the decision metrics (delay, shares, ...) leave out requests whose
@@ -135,6 +139,8 @@ class ExperimentConfig:
     priority_class: int = 1
     operators: list = field(default_factory=list)
     horizon_epochs: int = 1
+    commit_ahead: bool = False
+    fair_window_s: float = 0.0
     lead_time_s: float = 0.0
     operator_lead_times_s: list = field(default_factory=list)
     metrics_warmup_s: float = 0.0
@@ -167,7 +173,8 @@ class ExperimentConfig:
                               backend=backend, time_limit_s=self.time_limit_s, seed=int(seed),
                               airspace=self.airspace(), objective=self.objective,
                               baseline_order=self.baseline_order,
-                              horizon_epochs=self.horizon_epochs)
+                              horizon_epochs=self.horizon_epochs,
+                              commit_ahead=self.commit_ahead, fair_window_s=self.fair_window_s)
 
 
 def _num_list(name: str, value, cast=float) -> list:

@@ -29,7 +29,14 @@ Entity layout (ENU metres, z up; geographic entities in WGS84 degrees):
   latitude/longitude (only with a network, whose origin places ENU on the Earth);
 - ``metrics/approved_cumulative``, ``metrics/active_aircraft``, ``metrics/pending_requests``,
   ``metrics/mwis_vertices``, ``metrics/mwis_selected``, ``metrics/solve_time_s``: Scalars once
-  per planning epoch.
+  per planning epoch;
+- the decisions operators value (issue 21), once per planning epoch from the plans and requests
+  logged so far: ``metrics/decisions/approved`` and ``metrics/decisions/expired`` (cumulative),
+  ``metrics/delay/p95_s`` and ``metrics/delay/mean_s`` (the approved flights' departure - their
+  request's earliest departure, over the run so far; numpy's linear percentile, as
+  ``uam_sim.flights``), ``metrics/share/<operator>`` (approved / decided so far, per named
+  operator): the panels "Approvals and expiries", "Delay from the earliest departure [s]" and
+  "Operator approval share".
 
 Every time-varying entity is logged on the ``sim_time`` timeline (a duration, seconds of
 simulation time). Modes: ``"off"`` (nothing, rerun is not even imported), ``"save"`` (an .rrd
@@ -225,9 +232,19 @@ def make_blueprint(network: Any = None) -> Any:
                                   contents=["$origin/mwis_selected"], plot_legend=no_legend)
     solve = rrb.TimeSeriesView(name="Solve time [s]", origin="metrics", axis_x=axis,
                                contents=["$origin/solve_time_s"], plot_legend=no_legend)
+    legend = rrb.PlotLegend(rrb.Corner2D.LeftTop)
+    decisions = rrb.TimeSeriesView(name="Approvals and expiries", origin="metrics/decisions",
+                                   axis_x=axis, contents="$origin/**", plot_legend=legend)
+    delay = rrb.TimeSeriesView(name="Delay from the earliest departure [s]", origin="metrics/delay",
+                               axis_x=axis, contents="$origin/**", plot_legend=legend)
+    shares = rrb.TimeSeriesView(name="Operator approval share", origin="metrics/share",
+                                axis_x=axis, contents="$origin/**", plot_legend=legend)
     return rrb.Blueprint(
         rrb.Horizontal(rrb.Vertical(top_down, side_view, row_shares=[3, 1]) if layered else top_down,
-                       rrb.Vertical(geo, flights, mwis, selected, solve, row_shares=[3, 2, 2, 2, 2]),
+                       # the decision panels (issue 21) under the run's: the top-down view keeps
+                       # its 3/5 of the width
+                       rrb.Vertical(geo, flights, mwis, selected, solve, decisions, delay, shares,
+                                    row_shares=[3, 2, 2, 2, 2, 2, 2, 2]),
                        column_shares=[3, 2]),
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),
@@ -282,6 +299,13 @@ class RerunLogger:
         self._pending_since = 0.0
         self._approved_total = 0
         self._report_approved = 0
+        # the decisions operators value (issue 21), from the requests and plans logged so far
+        self._earliest: dict[str, float] = {}
+        self._delays: list[float] = []
+        self._expired_total = 0
+        self._decided: dict[str, int] = {}
+        self._approved_by: dict[str, int] = {}
+        self._styled_ops: set[str] = set()
         if mode == "off":
             return
         import rerun as rr
@@ -328,7 +352,11 @@ class RerunLogger:
                                    ("pending_requests", "pending requests", (230, 200, 60)),
                                    ("mwis_vertices", "MWIS size (vertices)", (90, 140, 200)),
                                    ("mwis_selected", "selected vertices", (60, 200, 90)),
-                                   ("solve_time_s", "solve time [s]", (230, 120, 60))):
+                                   ("solve_time_s", "solve time [s]", (230, 120, 60)),
+                                   ("decisions/approved", "approved (cumulative)", (60, 200, 90)),
+                                   ("decisions/expired", "expired (cumulative)", (230, 80, 60)),
+                                   ("delay/p95_s", "p95", (230, 120, 60)),
+                                   ("delay/mean_s", "mean", (90, 140, 200))):
             self._rec.log(f"metrics/{name}", rr.SeriesLines(names=label, colors=color, widths=2.0),
                           static=True)
 
@@ -476,14 +504,60 @@ class RerunLogger:
         pos = [(v.position.x, v.position.y, v.position.z) for v in msg.vehicles]
         self.log_fleet(stamp_s(msg.header.stamp), ids, pos)
 
+    def log_request_msg(self, msg: Any) -> None:
+        """A uam_msgs/FlightRequest: its earliest departure, for the delay of its approval."""
+        if not self.enabled:
+            return
+        self._earliest.setdefault(_request_key(msg), stamp_s(msg.earliest_departure))
+
     def log_flight_plan_msg(self, msg: Any) -> None:
-        """A uam_msgs/FlightPlan: approved plans add a route and count towards the total."""
-        if not self.enabled or int(msg.outcome) != 0:  # OUTCOME_APPROVED
+        """A uam_msgs/FlightPlan: approved plans add a route and count towards the total;
+        approvals and expiries count towards the decision panels (delay, operator shares)."""
+        if not self.enabled:
+            return
+        outcome = int(msg.outcome)
+        op = str(getattr(msg, "operator_id", "") or "")
+        if outcome == 2:  # OUTCOME_EXPIRED
+            self._expired_total += 1
+            if op:
+                self._decided[op] = self._decided.get(op, 0) + 1
+        if outcome != 0:  # not OUTCOME_APPROVED
             return
         self._approved_total += 1
+        if op:
+            self._decided[op] = self._decided.get(op, 0) + 1
+            self._approved_by[op] = self._approved_by.get(op, 0) + 1
+        earliest = self._earliest.get(_request_key(msg))
+        if earliest is not None:
+            self._delays.append(stamp_s(msg.departure_time) - earliest)
         pts = [(w.position.x, w.position.y, w.position.z) for w in msg.waypoints]
         if pts:
             self.log_route(stamp_s(msg.header.stamp), msg.request_id, pts)
+
+    def decision_values(self) -> dict:
+        """What the decision panels show now: entity path under ``metrics/`` -> value."""
+        out = {"decisions/approved": float(self._approved_total),
+               "decisions/expired": float(self._expired_total)}
+        if self._delays:
+            d = np.asarray(self._delays, dtype=np.float64)
+            out["delay/p95_s"] = float(np.percentile(d, 95))
+            out["delay/mean_s"] = float(d.mean())
+        for op in sorted(self._decided):
+            out[f"share/{op}"] = self._approved_by.get(op, 0) / self._decided[op]
+        return out
+
+    def log_decisions(self, t_s: float) -> None:
+        """The decision panels at simulation time ``t_s`` [s] (called once per epoch)."""
+        if not self.enabled:
+            return
+        rr = self._rr
+        self._at(t_s)
+        for name, value in self.decision_values().items():
+            op = name[len("share/"):] if name.startswith("share/") else None
+            if op is not None and op not in self._styled_ops:
+                self._styled_ops.add(op)
+                self._rec.log(f"metrics/{name}", rr.SeriesLines(names=op, widths=2.0), static=True)
+            self._rec.log(f"metrics/{name}", rr.Scalars(value))
 
     def log_planning_report_msg(self, msg: Any) -> None:
         """A uam_msgs/PlanningReport: the epoch's metrics (approvals counted from the reports)."""
@@ -497,6 +571,7 @@ class RerunLogger:
                        mwis_selected=len(msg.instance.selected),
                        solve_time_s=float(msg.solve_time_s),
                        pending_requests=int(msg.pending_requests))
+        self.log_decisions(stamp_s(msg.header.stamp))
 
     def close(self) -> None:
         """Flush everything and close the sink (the .rrd file is complete afterwards)."""
@@ -517,6 +592,14 @@ class RerunLogger:
 TOPIC_FLEET = resolved(names.TOPIC_FLEET)
 TOPIC_PLANS = resolved(names.TOPIC_PLANS)
 TOPIC_REPORTS = resolved(names.TOPIC_REPORTS)
+TOPIC_REQUESTS = resolved(names.TOPIC_REQUESTS)
+
+
+def _request_key(msg: Any) -> str:
+    """``operator_id/request_id`` (bare request_id without an operator), as the analysis keys
+    requests and plans (``uam_sim.analysis.request_key``)."""
+    operator = str(getattr(msg, "operator_id", "") or "")
+    return f"{operator}/{msg.request_id}" if operator else str(msg.request_id)
 
 
 def log_recording(mcap_path: str | os.PathLike, rrd_path: str | os.PathLike, network: Any = None) -> int:
@@ -529,9 +612,12 @@ def log_recording(mcap_path: str | os.PathLike, rrd_path: str | os.PathLike, net
 
     n = 0
     with RerunLogger("save", rrd_path, network=network) as logger:
-        for topic, _t_ns, msg in iter_decoded(mcap_path, topics=(TOPIC_FLEET, TOPIC_PLANS, TOPIC_REPORTS)):
+        for topic, _t_ns, msg in iter_decoded(mcap_path, topics=(TOPIC_FLEET, TOPIC_PLANS, TOPIC_REPORTS,
+                                                                 TOPIC_REQUESTS)):
             if topic == TOPIC_FLEET:
                 logger.log_fleet_state_msg(msg)
+            elif topic == TOPIC_REQUESTS:
+                logger.log_request_msg(msg)
             elif topic == TOPIC_PLANS:
                 logger.log_flight_plan_msg(msg)
             else:

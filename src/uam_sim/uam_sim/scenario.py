@@ -13,7 +13,7 @@ import numpy as np
 from uam_planner.planning import Planner
 
 from .audit import sweep_audit
-from .decision_metrics import decision_metrics
+from .flights import run_metrics
 from .demand import RequestGenerator
 from .experiment_config import BASELINES, ExperimentConfig, ExperimentError, rate_label
 
@@ -25,9 +25,9 @@ class ScenarioResult:
     Attributes:
         method, rate, seed, duration_s: the cell.
         summary: one tidy row (counts, average aircraft in the air, solve-time stats, audit, the
-            objective and the decision metrics of ``uam_sim.decision_metrics``: delay mean and
-            p95 from the earliest departure, detour, per-priority p95 delay, per-operator
-            approval shares and Jain index).
+            objective and the flight metrics of ``uam_sim.flights.run_metrics``: delay mean,
+            p95 and delayed share from the earliest departure, detour, per-priority p95 delay,
+            per-operator approval shares and Jain index, route lengths).
         epochs: one row per epoch (t_s, counts so far, MWIS size, solve time, fallback, ...).
         flights: one row per approved flight (ids, epoch, earliest departure, departure/arrival,
             route, weight, priority, operator, shortest candidate route length).
@@ -231,7 +231,8 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
         "losses": audit.get("losses"),
         "objective": cfg.objective,
         # requests still within their window at the end (filed ahead) are left out
-        **decision_metrics(flights, asked, warmup_s=cfg.metrics_warmup_s or None, end_s=duration_s),
+        **{k: v for k, v in run_metrics(flights, asked, warmup_s=cfg.metrics_warmup_s or None,
+                                        end_s=duration_s).items() if k != "flights"},
     }
     wall = time.perf_counter() - t_wall
     summary["wall_s"] = wall

@@ -38,7 +38,7 @@ def cell_params(cfg: ExperimentConfig, method: str, rate, seed: int) -> dict:
     # issue 21: only cells that leave the paper's objective, order or demand mix get the keys
     for name, default in (("objective", "paper"), ("baseline_order", "arrival"),
                           ("priority_share", 0.0), ("priority_class", 1), ("operators", []),
-                          ("horizon_epochs", 1), ("lead_time_s", 0.0),
+                          ("horizon_epochs", 1), ("commit_ahead", False), ("fair_window_s", 0.0), ("lead_time_s", 0.0),
                           ("operator_lead_times_s", []), ("metrics_warmup_s", 0.0)):
         if getattr(cfg, name) != default:
             params[name] = getattr(cfg, name)

@@ -88,7 +88,8 @@ class PlannerNode(Node):
             speed_mps=self.p["speed_mps"], backend=self.p["backend"], time_limit_s=self.p["time_limit_s"],
             seed=self.p["seed"], precompute_routes=self.p["precompute_routes"],
             objective=self.p["objective"], baseline_order=self.p["baseline_order"],
-            horizon_epochs=self.p["horizon_epochs"],
+            horizon_epochs=self.p["horizon_epochs"], commit_ahead=self.p["commit_ahead"],
+            fair_window_s=self.p["fair_window_s"],
             airspace=AirspaceConfig(**{f: self.p[f] for f in (
                 "separation_model", "vertical_separation_m", "departure_slot_s", "climb_rate_mps",
                 "descent_rate_mps")}))

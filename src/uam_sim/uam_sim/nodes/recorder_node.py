@@ -383,6 +383,11 @@ class RecorderNode(Node):
             self.rerun.log_planning_report_msg(msg)
             if self.foxglove is not None:
                 self.foxglove.on_planning_report(msg)
+        elif topic == c.TOPIC_REQUESTS and self.rerun.enabled:
+            # the earliest departures, for the Rerun view's delay panel (issue 21)
+            if msg is None:
+                msg = deserialize_message(data, cls)
+            self.rerun.log_request_msg(msg)
         return msg
 
     def _write_view(self, vm) -> None:
