@@ -147,7 +147,9 @@ def test_probe_sends_an_irreducible_large_graph_to_chils_at_once():
     assert p.is_independent(res.selected)
     # with no probe (lr_probe_fraction 0) the full kernelisation runs and keeps >= 25 %: CHILS
     # on the whole graph as well, the same route
-    full = uam_solvers.solve_problem(p, backend="auto", time_limit_s=1.0,
+    # (3 s: LearnAndReduce overruns its share by 0.05-0.2 s under load, which at 1 s can leave
+    # CHILS no time; the route, not the timing, is what this asserts)
+    full = uam_solvers.solve_problem(p, backend="auto", time_limit_s=3.0,
                                      options={"lr_probe_fraction": 0.0})
     assert full.stats["auto_method"] == "chils" and "lr_probe_kernel_vertices" in full.stats
 
