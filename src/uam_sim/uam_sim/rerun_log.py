@@ -32,7 +32,9 @@ Entity layout (ENU metres, z up; geographic entities in WGS84 degrees):
   per planning epoch.
 
 Every time-varying entity is logged on the ``sim_time`` timeline (a duration, seconds of
-simulation time). Modes: ``"off"`` (nothing, rerun is not even imported), ``"save"`` (an .rrd
+simulation time) and, given the scenario's UTC start (``utc_zero_ns``, as the recorder and
+:func:`log_recording` pass it), on the ``utc`` timeline too (a timestamp: real dates).
+Modes: ``"off"`` (nothing, rerun is not even imported), ``"save"`` (an .rrd
 file), ``"spawn"`` (start a local viewer and stream to it), ``"connect"`` (stream to a running
 viewer at ``connect_url``, default ``rerun+http://127.0.0.1:9876/proxy``).
 
@@ -56,6 +58,9 @@ from uam_contract.stamps import stamp_s
 
 MODES = RERUN_MODES
 TIMELINE = "sim_time"
+#: the second timeline (issue 22): the same instants on the scenario's UTC clock (a timestamp),
+#: when the logger is given the scenario's start (``utc_zero_ns``), as the MCAP's log times are
+UTC_TIMELINE = "utc"
 
 #: Colours (RGB) of the view; tests look for these colours in screenshots.
 AERODROME_COLOR = (255, 170, 0)
@@ -184,6 +189,52 @@ def map_zoom(network: Any, pane_px: float = 200.0) -> float:
     return float(np.clip(np.log2(156543.03 * np.cos(np.radians(lat)) * pane_px / extent), 1.0, 18.0))
 
 
+#: colour of airspace constraints (issue 22) in Rerun and the standard-message views
+CONSTRAINT_COLOR = (235, 60, 60)
+CONSTRAINT_RADIUS_UI = 1.5
+#: drawn height of a band open upwards [m], and of a vertiport closure's ring [m]
+CONSTRAINT_OPEN_TOP_M = 600.0
+CLOSURE_RADIUS_M = 150.0
+
+
+def constraint_outline(c: Any, network: Any = None, segments: int = 48) -> list[np.ndarray]:
+    """Line strips (each (n, 3), ENU metres) that outline a constraint's prism: the outline at the
+    bottom and at the top of its band (an unbounded band drawn from 0 m or to
+    :data:`CONSTRAINT_OPEN_TOP_M`) and a vertical edge at each vertex (a circle: at 8 of its
+    ``segments``); a vertiport closure is a ring of :data:`CLOSURE_RADIUS_M` around it at 0 m."""
+    if c.kind == "closure":
+        if network is None or c.vertiport_id not in network.index:
+            return []
+        x, y, z = (float(v) for v in np.asarray(network.enu_m)[network.node_index(c.vertiport_id)])
+        a = np.linspace(0.0, 2 * np.pi, segments + 1)
+        return [np.column_stack([x + CLOSURE_RADIUS_M * np.cos(a), y + CLOSURE_RADIUS_M * np.sin(a),
+                                 np.full(a.shape, z)])]
+    lo = 0.0 if not np.isfinite(c.lower_m) else float(c.lower_m)
+    hi = CONSTRAINT_OPEN_TOP_M if not np.isfinite(c.upper_m) else float(c.upper_m)
+    if c.kind == "circle":
+        a = np.linspace(0.0, 2 * np.pi, segments + 1)
+        rings = [np.column_stack([c.center_m[0] + c.radius_m * np.cos(a), c.center_m[1] + c.radius_m * np.sin(a)])]
+        verticals = rings[0][:-1:max(1, segments // 8)]
+    else:
+        rings = [np.vstack([r, r[:1]]) for r in c.rings_m]
+        verticals = np.vstack([r for r in c.rings_m])
+    out = []
+    for r in rings:
+        for z in (lo, hi):
+            out.append(np.column_stack([r, np.full(len(r), z)]))
+    for x, y in np.asarray(verticals, dtype=np.float64).reshape(-1, 2):
+        out.append(np.array([[x, y, lo], [x, y, hi]]))
+    return out
+
+
+def constraint_label(c: Any) -> str:
+    """``id vN (reason) [start, end) s``: what a view writes beside a constraint."""
+    def t(x: float) -> str:
+        return "-inf" if x == -np.inf else "inf" if x == np.inf else f"{x:g}"
+    band = "" if c.kind == "closure" else f" {t(c.lower_m)}..{t(c.upper_m)} m"
+    return f"{c.label()}{band} [{t(c.start_s)}, {t(c.end_s)}) s"
+
+
 def make_blueprint(network: Any = None) -> Any:
     """The viewer layout sent with every recording (see the module docstring)."""
     import rerun.blueprint as rrb
@@ -257,7 +308,7 @@ class RerunLogger:
     def __init__(self, mode: str, rrd_path: str | os.PathLike | None = None, network: Any = None,
                  app_id: str = "uam_fleet", connect_url: str | None = None,
                  recording_id: str | None = None, batch_steps: int = 50,
-                 batch_wall_s: float = 0.25) -> None:
+                 batch_wall_s: float = 0.25, utc_zero_ns: int | None = None) -> None:
         if mode not in MODES:
             raise ValueError(f"mode: {mode!r} is not one of {MODES}")
         if mode == "save" and not rrd_path:
@@ -268,6 +319,9 @@ class RerunLogger:
         self._rr = None
         self._network = network
         self._origin = None if network is None else tuple(network.origin_lat_lon_alt)
+        if utc_zero_ns is not None and int(utc_zero_ns) < 0:
+            raise ValueError(f"utc_zero_ns: {utc_zero_ns!r} must be >= 0 (ns since the Unix epoch)")
+        self._utc_zero_s = None if not utc_zero_ns else int(utc_zero_ns) * 1e-9
         self._routes: dict[str, np.ndarray] = {}
         self._fleet_ids: tuple[str, ...] | None = None
         self._fleet_styled = False
@@ -314,6 +368,8 @@ class RerunLogger:
 
     def _at(self, t_s: float) -> None:
         self._rec.set_time(TIMELINE, duration=float(t_s))
+        if self._utc_zero_s is not None:
+            self._rec.set_time(UTC_TIMELINE, timestamp=self._utc_zero_s + float(t_s))
 
     def _lat_lon(self, enu_m: np.ndarray) -> np.ndarray:
         from uam_planner.geo import enu_to_geodetic
@@ -438,6 +494,8 @@ class RerunLogger:
         lengths = [len(p) for p in parts]
         flat = np.concatenate(parts) if parts else np.zeros((0, 3))
         index = [rr.TimeColumn(TIMELINE, duration=times)]
+        if self._utc_zero_s is not None:
+            index.append(rr.TimeColumn(UTC_TIMELINE, timestamp=[self._utc_zero_s + t for t in times]))
         self._rec.send_columns("world/fleet", indexes=index,
                                columns=rr.Points3D.columns(positions=flat).partition(lengths))
         if self._origin is not None:
@@ -465,6 +523,50 @@ class RerunLogger:
                             ("solve_time_s", solve_time_s),
                             ("pending_requests", pending_requests)):
             self._rec.log(f"metrics/{name}", rr.Scalars(float(value)))
+
+    def log_constraints(self, t_s: float, constraints: Sequence[Any]) -> None:
+        """The constraint set the planner plans with from ``t_s`` on (issue 22): each constraint an
+        entity ``world/constraints/<id>`` (its prism's outline, :func:`constraint_outline`, labelled
+        with id, version, band and window) and ``geo/constraints/<id>`` on the map, shown from
+        ``max(t_s, start_s)`` and cleared at ``end_s``; those no longer in the set are cleared at
+        ``t_s``. Logged on the timelines at those instants (Rerun takes data out of time order)."""
+        if not self.enabled:
+            return
+        rr = self._rr
+        shown = getattr(self, "_constraints_shown", set())
+        now = {str(c.constraint_id): c for c in constraints}
+        self._at(t_s)
+        for cid in shown - set(now):
+            self._rec.log(f"world/constraints/{cid}", rr.Clear(recursive=True))
+            if self._origin is not None:
+                self._rec.log(f"geo/constraints/{cid}", rr.Clear(recursive=True))
+        for cid, c in now.items():
+            strips = constraint_outline(c, self._network)
+            if not strips:
+                continue
+            self._at(max(float(t_s), float(c.start_s)))
+            label = constraint_label(c)
+            self._rec.log(f"world/constraints/{cid}", rr.LineStrips3D(
+                strips, colors=CONSTRAINT_COLOR, radii=_ui(CONSTRAINT_RADIUS_UI), labels=[label] + [""] * (len(strips) - 1)))
+            if self._origin is not None:
+                outlines = [s for s in strips if len(s) > 2][::2]   # each ring once (its bottom)
+                self._rec.log(f"geo/constraints/{cid}", rr.GeoLineStrings(
+                    lat_lon=[self._lat_lon(s) for s in outlines], colors=CONSTRAINT_COLOR,
+                    radii=_ui(CONSTRAINT_RADIUS_UI)))
+            if np.isfinite(c.end_s):
+                self._at(float(c.end_s))
+                self._rec.log(f"world/constraints/{cid}", rr.Clear(recursive=True))
+                if self._origin is not None:
+                    self._rec.log(f"geo/constraints/{cid}", rr.Clear(recursive=True))
+        self._constraints_shown = set(now)
+
+    def log_constraints_msg(self, msg: Any) -> None:
+        """A std_msgs/String of ``uam/constraints`` (uam_planner.live_constraints.set_geojson)."""
+        if not self.enabled:
+            return
+        from uam_planner.live_constraints import constraints_from_text
+        t_s, found = constraints_from_text(msg.data, self._network)
+        self.log_constraints(t_s, [c for c, _eff in found])
 
     # -- ROS messages (duck-typed) ----------------------------------------------------------
 
@@ -526,9 +628,10 @@ def log_recording(mcap_path: str | os.PathLike, rrd_path: str | os.PathLike, net
     Decodes with rclpy (the workspace must be sourced).
     """
     from .analysis import iter_decoded
+    from .mcap_reader import log_time_zero_ns
 
     n = 0
-    with RerunLogger("save", rrd_path, network=network) as logger:
+    with RerunLogger("save", rrd_path, network=network, utc_zero_ns=log_time_zero_ns(mcap_path) or None) as logger:
         for topic, _t_ns, msg in iter_decoded(mcap_path, topics=(TOPIC_FLEET, TOPIC_PLANS, TOPIC_REPORTS)):
             if topic == TOPIC_FLEET:
                 logger.log_fleet_state_msg(msg)

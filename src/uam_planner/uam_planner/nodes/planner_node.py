@@ -48,8 +48,9 @@ from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.task import Future
+from std_msgs.msg import String
 from uam_msgs.msg import EpochSync, FlightPlan, FlightRequest, PlanningReport
-from uam_msgs.srv import PlanEpoch, SolveMwis
+from uam_msgs.srv import PlanEpoch, SolveMwis, UpdateConstraint
 
 from uam_contract import names as c
 from uam_planner.nodes import conversions as m
@@ -61,6 +62,7 @@ from uam_contract.params import PLANNER
 from uam_solvers.nodes import param_rules
 from uam_bringup.runtime import run_node
 from uam_planner.constraints import load_constraints
+from uam_planner.live_constraints import LiveAirspace, set_geojson
 from uam_planner.network import load_network
 from uam_planner.planning import AirspaceConfig, Planner, PlanningConfig, call_solver, default_solve_mwis
 
@@ -101,12 +103,19 @@ class PlannerNode(Node):
             except ValueError as exc:
                 raise ValueError(f"constraints_file: {exc}") from None
             self.planner.set_constraints(cset)
+        # live constraints (issue 22): uam/update_constraint, applied at the next epoch's start
+        self.airspace = LiveAirspace(self.network, self.config.constraints or ())
+        self._constraint_effective: dict[str, float] = {c.constraint_id: 0.0 for c in self.airspace.accepted.values()}
 
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._group = ReentrantCallbackGroup()  # the epoch service awaits; arrivals must go on meanwhile
         self._plan_pub = self.create_publisher(FlightPlan, c.TOPIC_PLANS, qos.QOS_LATCHED)
         self._report_pub = self.create_publisher(PlanningReport, c.TOPIC_REPORTS, qos.QOS_LATCHED)
         self._sync_pub = self.create_publisher(EpochSync, c.TOPIC_SYNC, qos.QOS_LATCHED)
+        self._constraints_pub = self.create_publisher(String, c.TOPIC_CONSTRAINTS, qos.QOS_CONSTRAINTS)
+        self._publish_constraints(0.0)
+        self._constraint_service = self.create_service(UpdateConstraint, c.SERVICE_UPDATE_CONSTRAINT,
+                                                       self._on_update_constraint)
         self.create_subscription(FlightRequest, c.TOPIC_REQUESTS, self._on_request, qos.QOS_REQUESTS)
         self.create_subscription(EpochSync, c.TOPIC_SYNC, self._on_sync, qos.QOS_LATCHED)
         self._client = self.create_client(SolveMwis, c.SERVICE_SOLVE, callback_group=self._group)
@@ -171,6 +180,44 @@ class PlannerNode(Node):
         self._service = self.create_service(PlanEpoch, c.SERVICE_PLAN_EPOCH, self._on_plan_epoch,
                                             callback_group=self._group)
         self.get_logger().info(f"serving {self.resolve_service_name(c.SERVICE_PLAN_EPOCH)}")
+
+    # ---- live constraints (issue 22, uam_planner.live_constraints) -----------------------
+    def _on_update_constraint(self, request, response):
+        """Accept (queued for the next epoch) or refuse one constraint update, naming the field."""
+        with self._lock:
+            now = self._next_epoch_s
+            error = self.airspace.request(request, now)
+            response.accepted = not error
+            response.error = wire.bounded(error)
+            response.constraints = len(self.airspace.accepted)
+            response.effective_time = m.to_time(now)
+        action = {0: "add", 1: "change", 2: "withdraw"}.get(request.action, str(request.action))
+        if error:
+            self.get_logger().warning(f"refused a constraint update ({action} {wire.echo(request.constraint_id)}): "
+                                      f"{response.error}")
+        else:
+            self.get_logger().info(f"constraint update accepted: {action} {request.constraint_id!r} "
+                                   f"v{request.version}, from the epoch at t = {now:g} s")
+        return response
+
+    def _apply_constraint_updates(self, t_s: float) -> None:
+        """At an epoch's start (under the lock): the updates accepted since the last, in one step."""
+        updates = self.airspace.take()
+        if not updates:
+            return
+        for u in updates:
+            if u.action == "withdraw":
+                self._constraint_effective.pop(u.constraint.constraint_id, None)
+            else:
+                self._constraint_effective[u.constraint.constraint_id] = t_s
+        self.planner.set_constraints(self.airspace.constraint_set())
+        self._publish_constraints(t_s)
+        self.get_logger().info(f"epoch at t = {t_s:g} s: {len(updates)} constraint update(s) applied, "
+                               f"{len(self.airspace.accepted)} constraint(s) in force")
+
+    def _publish_constraints(self, t_s: float) -> None:
+        self._constraints_pub.publish(String(data=set_geojson(self.airspace.accepted.values(), t_s,
+                                                              self._constraint_effective)))
 
     # ---- requests ----------------------------------------------------------------------------
     def _publish_plan(self, plan: FlightPlan) -> None:
@@ -450,6 +497,7 @@ class PlannerNode(Node):
             self.get_logger().warning(f"epoch {k}: planning without {len(missing)} expected request(s) that did "
                                       f"not arrive within {self.p['request_wait_timeout_s']:g} s: {missing[:5]}")
         with self._lock:
+            self._apply_constraint_updates(t_s)
             prep = self.planner.prepare(t_s, k)
         t0 = time.perf_counter()
         answer = await self._solve(prep.graph) if prep.needs_solver else None
