@@ -20,7 +20,7 @@ from uam_msgs.srv import UpdateConstraint  # noqa: E402
 from graph_harness import TINY, build_graph, make_planner, run_to_end, shutdown  # noqa: E402
 from uam_bringup import qos  # noqa: E402
 from uam_contract import names as c  # noqa: E402
-from uam_planner.constraints import ConstraintSet  # noqa: E402
+from uam_planner.constraints import MAX_VERTICES, ConstraintSet  # noqa: E402
 from uam_planner.network import load_network  # noqa: E402
 from uam_planner.nodes import conversions as m  # noqa: E402
 from uam_planner.live_constraints import constraints_from_text  # noqa: E402
@@ -69,15 +69,15 @@ def test_bad_updates_are_refused_naming_the_field_and_nothing_accepted_is_lost(r
         assert ok.accepted and ok.error == "" and ok.constraints == 1
         assert (ok.effective_time.sec, ok.effective_time.nanosec) == (0, 0)   # the first epoch
         bow_tie = [[0, 0], [100, 100], [100, 0], [0, 100], [0, 0]]
-        big = [[1000 * math.cos(2 * math.pi * k / 10001), 1000 * math.sin(2 * math.pi * k / 10001)]
-               for k in range(10001)]
+        n = MAX_VERTICES + 1   # ASTM F3548-21 CstrMaxVertices, as uas_standards gives it (1000)
+        big = [[1000 * math.cos(2 * math.pi * k / n), 1000 * math.sin(2 * math.pi * k / n)] for k in range(n)]
         cases = [
             (request(ADD, "bow", 1, square("bow", ring=bow_tie)), "invalid polygon: Self-intersection"),
             (request(ADD, "inv", 1, square("inv", lower=300.0, upper=100.0)),
              "upper_m: 100.0 is not above lower_m 300.0"),
             (request(ADD, "old", 1, square("old", start=-100.0, end=0.0)), "end_s: 0.0 is in the past"),
             (request(ADD, "huge", 1, square("huge", ring=big + [big[0]])),
-             "10001 positions, more than the 10000 vertices of ASTM F3548-21"),
+             f"{n + 1} positions, more than the {MAX_VERTICES} vertices of ASTM F3548-21"),
             (request(ADD, "nowhere", 1, closure("nowhere", vertiport="ZZ")),
              "vertiport_id: 'ZZ' is not a vertiport of network"),
             (request(ADD, "hub", 2, square("hub", version=2)), "constraint_id: 'hub' is in use (version 1)"),

@@ -209,10 +209,10 @@ def constraints_from_text(text: str, network=None) -> tuple[float, list[tuple[Co
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as exc:
-        raise ConstraintError(f"uam/constraints: not JSON ({exc})") from None
+        raise ConstraintError(f"constraint set: not JSON ({exc})") from None
     feats = doc.get("features") if isinstance(doc, dict) else None
     if not isinstance(feats, list):
-        raise ConstraintError("uam/constraints: no features list")
+        raise ConstraintError("constraint set: no features list")
     for f in feats:  # null = unbounded
         p = f.get("properties", {}) if isinstance(f, dict) else {}
         for key, inf in (("start_s", -math.inf), ("end_s", math.inf), ("lower_m", -math.inf), ("upper_m", math.inf)):

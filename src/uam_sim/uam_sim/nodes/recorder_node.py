@@ -401,7 +401,7 @@ class RecorderNode(Node):
         try:
             t_s, found = constraints_from_text(msg.data)
         except ValueError as exc:  # recorded as it came; only the drawing is skipped
-            self.get_logger().warning(f"uam/constraints: not drawn: {exc}")
+            self.get_logger().warning(f"{c.TOPIC_CONSTRAINTS}: not drawn: {exc}")
             return
         constraints = [k for k, _eff in found]
         self.rerun.log_constraints(t_s, constraints)
