@@ -106,8 +106,13 @@ def _validate_k_penalty(k, penalty_factor):
 
 
 def _routes(graph: _PenalisedGraph, network, o: int, d: int, k: int,
-            penalty_factor: float, terminals: bool = False) -> list[CandidateRoute]:
+            penalty_factor: float, terminals: bool = False,
+            blocked: np.ndarray | None = None) -> list[CandidateRoute]:
+    """``blocked``: optional (m,) bool, corridors closed to this search (re-planning around a
+    constraint, ``uam_planner.replanning``)."""
     cost = graph.length.copy()
+    if blocked is not None:
+        cost[blocked] = np.inf
     if terminals:
         # Vertiports are terminals: corridors touching any other aerodrome are closed.
         other = network.is_aerodrome.copy()
