@@ -14,11 +14,13 @@ plan, from ``t_eff`` on, enters a constraint of the updated set during its windo
   after t_eff (a corridor node, or its origin pad at the top of the climb), and from there gets
   up to ``k`` routes to its destination (**rerouted**) and the shortest route to each of the
   ``DIVERT_VERTIPORTS`` nearest other vertiports, every pad (**diverted**), all at its level,
-  searched on the corridors that do not cross an updated volume (penalised Dijkstra, vertiports
-  as terminals on a layered network) and then checked exactly; none chosen -> **contingency**:
-  it flies the constraint-free alternative that lands soonest (a contingency landing, flown but
-  *not deconflicted*, ``Flight.contingent``, F3548 Contingent), or its current plan if none stays
-  out (an incursion that cannot be avoided: reported, never hidden);
+  searched with the corridors that cross an updated volume avoided (penalised Dijkstra, each such
+  corridor 10,000 km dearer, so taken only where there is no other way, e.g. to leave the zone
+  before it opens; vertiports as terminals on a layered network) and then checked exactly; none chosen -> **contingency**:
+  it flies the constraint-free alternative that loses separation with the fewest flights, then
+  lands soonest (a contingency landing, flown but *not deconflicted*, ``Flight.contingent``,
+  F3548 Contingent), or its current plan if none stays out (an incursion that cannot be
+  avoided: reported, never hidden);
 - a flight whose plan still stays out keeps it (**kept**; a flight is affected only if it does
   not, so kept appears when the caller names flights explicitly).
 
@@ -507,6 +509,27 @@ def _constraint_free(alts: list, cset: ConstraintSet, t_eff: float, network, ori
     return [a for a, w in zip(alts, which.tolist()) if w < 0]
 
 
+def _least_conflicting(alts: list, unaffected: list, chosen: dict, contingencies: list, config,
+                       t_eff: float):
+    """A contingency's plan: of its constraint-free alternatives, the one that loses separation
+    with the fewest flights (unaffected, chosen, and the contingencies decided before it), then
+    the one landing soonest."""
+    from .separation import SegmentSet, conflicting_pairs
+    others = [f.trajectory for f in unaffected] + [x.trajectory for x in chosen.values()] + \
+        [f.trajectory for f in contingencies if f.contingent]
+    n_conf = np.zeros(len(alts), dtype=np.int64)
+    if others:
+        oset = SegmentSet.from_trajectories(others)
+        oset = oset.take(oset.t1_s >= t_eff) if len(oset) else oset
+        if len(oset):
+            pairs = conflicting_pairs(SegmentSet.from_trajectories([x.trajectory for x in alts]), oset,
+                                      config.separation)
+            for i in np.unique(pairs[:, 0]).tolist():
+                n_conf[i] = np.unique(pairs[pairs[:, 0] == i, 1]).size
+    k = min(range(len(alts)), key=lambda i: (int(n_conf[i]), alts[i].trajectory.arrival_s, -alts[i].weight))
+    return alts[k]
+
+
 def replan(t_eff: float, epoch_index: int, active: Sequence, requests: dict, network, config,
            cache, cset: ConstraintSet, solve_mwis: Callable | None, policy: str = "mwis",
            affected: dict | None = None, labels: Sequence[str] = ()) -> tuple[list, list, ReplanReport]:
@@ -606,7 +629,7 @@ def replan(t_eff: float, epoch_index: int, active: Sequence, requests: dict, net
         if a is None:
             clean = per_flight[r]
             if clean:
-                a = min(clean, key=lambda x: (x.trajectory.arrival_s, -x.weight))
+                a = _least_conflicting(clean, unaffected, chosen, new_versions, config, t_eff)
                 what = f"contingency landing at {network.node_ids[a.destination]!r}, flown but not deconflicted"
             else:
                 a = _Alt(f.trajectory, "kept", W_KEEP, network.node_index(f.destination_id),
