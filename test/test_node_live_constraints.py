@@ -80,9 +80,11 @@ def test_bad_updates_are_refused_naming_the_field_and_nothing_accepted_is_lost(r
              f"{n + 1} positions, more than the {MAX_VERTICES} vertices of ASTM F3548-21"),
             (request(ADD, "nowhere", 1, closure("nowhere", vertiport="ZZ")),
              "vertiport_id: 'ZZ' is not a vertiport of network"),
-            (request(ADD, "hub", 2, square("hub", version=2)), "constraint_id: 'hub' is in use (version 1)"),
-            (request(CHANGE, "hub", 1, square("hub", version=1)), "version: 1 is not above 'hub''s version 1"),
-            (request(CHANGE, "ghost", 2, square("ghost", version=2)), "constraint_id: 'ghost' is not a constraint in use"),
+            (request(ADD, "hub", 2, square("hub", version=2)), "constraint_id: 'hub' is already a constraint (v1)"),
+            (request(CHANGE, "hub", 1, square("hub", version=1)), "version: 1 of 'hub' is not above the current version 1"),
+            (request(CHANGE, "ghost", 2, square("ghost", version=2)), "constraint_id: 'ghost' is not a known constraint"),
+            (request(WITHDRAW, "ghost", 2), "constraint_id: 'ghost' is not a known constraint (nothing to withdraw)"),
+            (request(WITHDRAW, "hub", 1), "version: 1 is not above 'hub''s version 1"),
             (request(ADD, "x", 1, square("y")), "properties.id: 'y' differs from constraint_id 'x'"),
             (request(ADD, "x", 1, "{not json"), "geojson: not JSON"),
             (request(7, "x", 1, square("x")), "action: 7 is not 0 (add), 1 (change) or 2 (withdraw)"),
@@ -93,26 +95,29 @@ def test_bad_updates_are_refused_naming_the_field_and_nothing_accepted_is_lost(r
             assert not res.accepted and expected in res.error, (expected, res.error)
             assert res.constraints == 1
         # nothing accepted before is lost, and the node still serves
-        assert list(planner.airspace.accepted) == ["hub"] and planner.airspace.accepted["hub"].version == 1
-        assert planner.airspace.refused == len(cases)
+        held = planner._projected_constraints()
+        assert list(held) == ["hub"] and held["hub"].version == 1
+        assert planner.constraint_updates_refused == len(cases)
         changed = call(executor, spin_until, client, request(CHANGE, "hub", 2, square("hub", version=2, half=100.0)))
-        assert changed.accepted and planner.airspace.accepted["hub"].version == 2
+        assert changed.accepted and planner._projected_constraints()["hub"].version == 2
         gone = call(executor, spin_until, client, request(WITHDRAW, "hub", 3, reason="event over"))
         assert gone.accepted and gone.constraints == 0
-        # a withdrawn id keeps its versions: adding it again must go higher
-        again = call(executor, spin_until, client, request(ADD, "hub", 3, square("hub", version=3)))
-        assert not again.accepted and "version: 3 is not above 'hub''s version 3" in again.error
-        assert [u.action for u in planner.airspace.queue] == ["add", "change", "withdraw"]
+        # queued in the planning library, in order, for its next epoch (t = 0: none planned yet)
+        assert [(u.action, u.t_s) for u in planner.planner.queued_updates] == [("add", 0.0), ("change", 0.0),
+                                                                             ("withdraw", 0.0)]
     finally:
         executor.shutdown()
         planner.destroy_node()
         caller.destroy_node()
 
 
-def test_an_update_takes_effect_at_the_next_epoch_and_is_published_latched(ros_context, spin_until):
+def test_an_update_takes_effect_at_the_next_epoch_and_is_published_latched(ros_context, spin_until, tmp_path):
     """A 500 m square over hub W7 (0-300 m, from t = 0 on) added while the graph runs: from the
-    epoch it takes effect at, no approved plan enters it; the set is on uam/constraints, latched."""
-    executor, nodes, obs = build_graph(ros_context, rate=3.0, seed=5, duration_s=240.0)
+    epoch it takes effect at, no approved plan enters it, the flights it affects get new versions
+    naming it, the set is on uam/constraints (latched), and the recording's audit of what flew
+    finds no incursion and no loss."""
+    out = tmp_path / "live.mcap"
+    executor, nodes, obs = build_graph(ros_context, rate=3.0, seed=5, duration_s=240.0, record_to=out)
     sets: list[str] = []
     listener = rclpy.create_node("constraint_listener", context=ros_context)
     listener.create_subscription(String, c.TOPIC_CONSTRAINTS, lambda msg: sets.append(msg.data), qos.QOS_CONSTRAINTS)
@@ -144,4 +149,16 @@ def test_an_update_takes_effect_at_the_next_epoch_and_is_published_latched(ros_c
     trajs = [m.trajectory_from_plan(p) for p in approved]
     which, _ = cset.violations(trajs)
     assert (which == -1).all(), "a plan approved after the update enters the constraint"
-    assert sim.finished and not sim.error
+    assert sim.finished and not sim.error and sim.fly_errors == 0
+    # the flights it affected: new versions from the epoch it took effect at, naming it
+    updates = [p for p in obs.plans if p.version > 1]
+    assert updates, "the square over the hub affected no flight: the test shows nothing"
+    assert all(list(p.constraint_ids) == ["hub"] and m.from_time(p.effective_time) == effective_s
+               and p.update_kind in ("rerouted", "retimed", "diverted", "cancelled", "contingency")
+               and "'hub' v1" in p.reason for p in updates), [(p.update_kind, p.reason) for p in updates]
+    assert sim.versions_received == len(updates)
+    from uam_sim.analysis import summarize
+    s = summarize(out)
+    assert s.verified, s.problems
+    assert s.audit.ok and s.incursions == [] and s.constraints_in_force == 1
+    assert sum(s.plan_updates.values()) == len(updates)

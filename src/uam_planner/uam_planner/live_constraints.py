@@ -1,8 +1,8 @@
 """Live airspace constraints (issue 22 item 1): the rules behind the planner node's ``uam/update_constraint``.
 
 rclpy-free and duck-typed (anything with the fields of ``UpdateConstraint.Request``), so the
-rules are tested without a ROS graph; the planner node holds one :class:`LiveAirspace` and calls
-it from its service callback and at the start of each epoch.
+rules are tested without a ROS graph; the planner node calls :func:`parse_update` and the
+planning library's ``Planner.update_constraint`` from its service callback.
 
 Why the planner serves it (and not an authority node of its own): the planner owns the airspace
 it plans in. An update must reach the planning exactly between two epochs, all at once, or an
@@ -14,29 +14,28 @@ authority (a USS, a test harness) is a *client* of this service.
 
 What happens to an update:
 
-1. :meth:`LiveAirspace.request` checks it at once against the set as accepted so far (the
-   constraint itself with the planning library's own rules, :mod:`uam_planner.constraints`:
-   geometry, band, vertex limit, vertiport, window not over by the time it takes effect) and
-   either refuses it, naming the field and the value, changing nothing, or accepts it into the
-   accepted set and the queue of updates;
-2. at the start of the next epoch the node takes the queue (:meth:`LiveAirspace.take`) and
-   applies it to the planner in one step, under the lock that also guards the epoch's prepare
-   and commit; from then on the set is published on ``uam/constraints`` (:func:`set_geojson`).
+1. :func:`parse_update` reads it (the action, the GeoJSON Feature into a
+   :class:`~uam_planner.constraints.Constraint`: geometry, band, vertex limit, window, all with the
+   library's own rules) and ``Planner.update_constraint`` checks it against the set as it will be
+   once the updates queued before are applied (id in use or not, version higher, vertiport
+   known, window not over by the time it takes effect); either refuses it, naming the field and
+   the value, changing nothing, or queues it;
+2. the planner applies the queue at its next epoch, in one step, before that epoch's requests
+   (``Planner.prepare``, under the node's lock that also guards the commit), and re-plans the
+   flights the update affects (docs/replanning.md); the node then publishes the set on
+   ``uam/constraints`` (:func:`set_geojson`).
 
-Nothing accepted before is lost: a refused update changes nothing, and the set and the queue
-change only together, under the node's lock.
+Nothing accepted before is lost: a refused update changes nothing.
 """
 
 from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
 from typing import Any, Iterable
 
 from uam_contract.ids import echo
-from uam_planner.constraints import (MAX_VERTICES, Constraint, ConstraintError, ConstraintSet, check_against,
-                                     constraints_from_geojson)
+from uam_planner.constraints import MAX_VERTICES, Constraint, ConstraintError, constraints_from_geojson
 
 ACTION_ADD, ACTION_CHANGE, ACTION_WITHDRAW = 0, 1, 2
 ACTIONS = {ACTION_ADD: "add", ACTION_CHANGE: "change", ACTION_WITHDRAW: "withdraw"}
@@ -44,18 +43,6 @@ ACTIONS = {ACTION_ADD: "add", ACTION_CHANGE: "change", ACTION_WITHDRAW: "withdra
 MAX_GEOJSON_CHARS = 2_000_000
 #: the most constraints the planner holds at once
 MAX_CONSTRAINTS = 10_000
-
-
-@dataclass(frozen=True)
-class Update:
-    """One accepted update: the action, the constraint (its new version; for a withdrawal the
-    version withdrawn, as it was), the new version number, the reason and when it was accepted."""
-
-    action: str
-    constraint: Constraint
-    version: int
-    reason: str
-    accepted_s: float
 
 
 def _feature_constraint(text: str, network) -> Constraint:
@@ -83,86 +70,38 @@ def _feature_constraint(text: str, network) -> Constraint:
     return found[0]
 
 
-class LiveAirspace:
-    """The accepted set of constraints and the updates not yet applied to the planner.
-
-    Args:
-        network: the planner's Network (closures must name one of its vertiports).
-        initial: constraints the planner starts with (its ``constraints_file``), already checked.
-    """
-
-    def __init__(self, network, initial: Iterable[Constraint] = ()) -> None:
-        self.network = network
-        self.accepted: dict[str, Constraint] = {c.constraint_id: c for c in initial}
-        #: id -> the highest version ever used (a withdrawn id keeps it: a re-add must go higher)
-        self.versions: dict[str, int] = {cid: c.version for cid, c in self.accepted.items()}
-        self.queue: list[Update] = []
-        self.refused = 0
-
-    def request(self, req: Any, now_s: float) -> str:
-        """Check and accept one UpdateConstraint request at simulation time ``now_s`` (the next
-        epoch, when it takes effect). Returns '' when accepted, else why not (field and value)."""
-        try:
-            update = self._checked(req, float(now_s))
-        except ConstraintError as exc:
-            self.refused += 1
-            return str(exc)
-        c = update.constraint
-        if update.action == "withdraw":
-            del self.accepted[c.constraint_id]
-        else:
-            self.accepted[c.constraint_id] = c
-        self.versions[c.constraint_id] = update.version
-        self.queue.append(update)
-        return ""
-
-    def _checked(self, req: Any, now_s: float) -> Update:
-        action = getattr(req, "action", None)
-        if action not in ACTIONS:
-            raise ConstraintError(f"action: {echo(action)} is not 0 (add), 1 (change) or 2 (withdraw)")
-        name = ACTIONS[action]
-        cid = getattr(req, "constraint_id", "")
-        version = getattr(req, "version", 0)
-        reason = getattr(req, "reason", "") or ""
-        if not isinstance(cid, str) or not cid.strip():
-            raise ConstraintError(f"constraint_id: {echo(cid)} is not a non-empty id")
-        if len(cid) > 200:
-            raise ConstraintError(f"constraint_id: {echo(cid)} is longer than 200 characters")
-        if isinstance(version, bool) or not isinstance(version, int) or version < 0:
-            raise ConstraintError(f"version: {echo(version)} is not an integer >= 0")
-        held = self.accepted.get(cid)
-        if name == "add" and held is not None:
-            raise ConstraintError(f"constraint_id: {cid!r} is in use (version {held.version}); "
-                                  "a new version is a change (action 1)")
-        if name in ("change", "withdraw") and held is None:
-            raise ConstraintError(f"constraint_id: {cid!r} is not a constraint in use; known: "
-                                  f"{sorted(self.accepted)[:10]}")
-        last = self.versions.get(cid)
-        if last is not None and version <= last:
-            raise ConstraintError(f"version: {version} is not above {cid!r}'s version {last}")
-        if name == "withdraw":
-            if getattr(req, "geojson", ""):
-                raise ConstraintError("geojson: a withdrawal carries no geometry (leave it empty)")
-            return Update(name, held, version, str(reason), now_s)
-        if name == "add" and len(self.accepted) >= MAX_CONSTRAINTS:
-            raise ConstraintError(f"constraint_id: the planner holds {len(self.accepted)} constraints, "
-                                  f"its most ({MAX_CONSTRAINTS}); withdraw one first")
-        c = _feature_constraint(getattr(req, "geojson", ""), self.network)
-        if c.constraint_id != cid:
-            raise ConstraintError(f"geojson properties.id: {c.constraint_id!r} differs from constraint_id {cid!r}")
-        if c.version != version:
-            raise ConstraintError(f"geojson properties.version: {c.version} differs from version {version}")
-        check_against(c, self.network, now_s)  # vertiport and pad; a window over by then is in the past
-        return Update(name, c, version, c.reason, now_s)
-
-    def take(self) -> list[Update]:
-        """The updates accepted since the last call (the node applies them at an epoch's start)."""
-        out, self.queue = self.queue, []
-        return out
-
-    def constraint_set(self) -> ConstraintSet:
-        """The accepted set as the planning library takes it."""
-        return ConstraintSet(self.accepted.values(), self.network)
+def parse_update(req: Any, current: dict, network) -> tuple[str, Any]:
+    """One UpdateConstraint request as the planning library takes it: (action name, Constraint,
+    or the id for a withdrawal), for ``Planner.update_constraint``. Raises ConstraintError naming
+    the field and the value for what the library does not check itself: the action, the
+    request's id and version against its Feature, a withdrawal's version (above the current),
+    the text. ``current``: id -> Constraint once the queued updates are applied."""
+    action = getattr(req, "action", None)
+    if action not in ACTIONS:
+        raise ConstraintError(f"action: {echo(action)} is not 0 (add), 1 (change) or 2 (withdraw)")
+    name = ACTIONS[action]
+    cid = getattr(req, "constraint_id", "")
+    version = getattr(req, "version", 0)
+    if not isinstance(cid, str) or not cid.strip() or len(cid) > 200:
+        raise ConstraintError(f"constraint_id: {echo(cid)} is not an id of 1 to 200 characters")
+    if isinstance(version, bool) or not isinstance(version, int) or version < 0:
+        raise ConstraintError(f"version: {echo(version)} is not an integer >= 0")
+    if name == "withdraw":
+        if getattr(req, "geojson", ""):
+            raise ConstraintError("geojson: a withdrawal carries no geometry (leave it empty)")
+        held = current.get(cid)
+        if held is not None and version <= held.version:
+            raise ConstraintError(f"version: {version} is not above {cid!r}'s version {held.version}")
+        return name, cid
+    if name == "add" and cid not in current and len(current) >= MAX_CONSTRAINTS:
+        raise ConstraintError(f"constraint_id: the planner holds {len(current)} constraints, its most "
+                              f"({MAX_CONSTRAINTS}); withdraw one first")
+    c = _feature_constraint(getattr(req, "geojson", ""), network)
+    if c.constraint_id != cid:
+        raise ConstraintError(f"geojson properties.id: {c.constraint_id!r} differs from constraint_id {cid!r}")
+    if c.version != version:
+        raise ConstraintError(f"geojson properties.version: {c.version} differs from version {version}")
+    return name, c
 
 
 def _num(x: float):
@@ -223,6 +162,6 @@ def constraints_from_text(text: str, network=None) -> tuple[float, list[tuple[Co
     return float(doc.get("t_s", 0.0)), list(zip(found, eff))
 
 
-__all__ = ["ACTIONS", "ACTION_ADD", "ACTION_CHANGE", "ACTION_WITHDRAW", "LiveAirspace", "MAX_CONSTRAINTS",
-           "MAX_GEOJSON_CHARS", "MAX_VERTICES", "Update", "constraint_feature", "constraints_from_text",
+__all__ = ["ACTIONS", "ACTION_ADD", "ACTION_CHANGE", "ACTION_WITHDRAW", "MAX_CONSTRAINTS",
+           "MAX_GEOJSON_CHARS", "MAX_VERTICES", "constraint_feature", "constraints_from_text", "parse_update",
            "set_geojson"]

@@ -18,7 +18,7 @@ def t(sec: float) -> NS:
     return NS(sec=int(math.floor(sec)), nanosec=int(round((sec - math.floor(sec)) * 1e9)))
 
 
-def plan(wps, version=0, effective=0.0, ids=(), kind="", origin="A", destination="B"):
+def plan(wps, version=1, effective=0.0, ids=(), kind="", origin="A", destination="B"):
     """A FlightPlan-like object; ``wps``: (t, x, y, z)."""
     return NS(request_id="r1", operator_id="op", version=version, effective_time=t(effective),
               constraint_ids=list(ids), update_kind=kind, origin_id=origin, destination_id=destination,
@@ -37,21 +37,21 @@ EAST = [(0, -500, 0, 100), (100, 500, 0, 100)]
 def test_a_reroute_in_the_air_is_flown_from_its_effective_instant():
     # at t = 50 the flight is at x = 0; version 1 turns north from there: (0, 10 (t - 50), 100)
     v0 = plan(EAST)
-    v1 = plan([(50, 0, 0, 100), (80, 0, 300, 100)], version=1, effective=50.0, ids=["sq"], kind="rerouted")
+    v1 = plan([(50, 0, 0, 100), (80, 0, 300, 100)], version=2, effective=50.0, ids=["sq"], kind="rerouted")
     f, problems = flown_trajectory("op/r1", [v0, v1])
     assert problems == []
     np.testing.assert_allclose(f.times_s, [0, 50, 80])
     np.testing.assert_allclose(f.points_m, [[-500, 0, 100], [0, 0, 100], [0, 300, 100]])
-    assert f.pieces == [(0, 0.0, 50.0), (1, 50.0, 80.0)]
+    assert f.pieces == [(1, 0.0, 50.0), (2, 50.0, 80.0)]
     # a takeover that does not start where the flight was: 3 m off at t = 50
-    jump = plan([(50, 0, 3, 100), (80, 0, 300, 100)], version=1, effective=50.0, ids=["sq"])
+    jump = plan([(50, 0, 3, 100), (80, 0, 300, 100)], version=2, effective=50.0, ids=["sq"])
     _, problems = flown_trajectory("op/r1", [v0, jump])
-    assert problems == ["op/r1: version 1 starts 3.000 m from where version 0 had the flight at 50 s"]
+    assert problems == ["op/r1: version 2 starts 3.000 m from where version 1 had the flight at 50 s"]
     # a cancellation before departure: nothing flown; a retime: only the new version
-    cancel = plan([], version=1, effective=-10.0, ids=["sq"], kind="cancelled")
+    cancel = plan([], version=2, effective=-10.0, ids=["sq"], kind="cancelled")
     f, _ = flown_trajectory("op/r1", [plan([(10, -500, 0, 100), (110, 500, 0, 100)]), cancel])
     assert len(f.times_s) == 0
-    retimed = plan([(40, -500, 0, 100), (140, 500, 0, 100)], version=1, effective=5.0, ids=["sq"], kind="retimed")
+    retimed = plan([(40, -500, 0, 100), (140, 500, 0, 100)], version=2, effective=5.0, ids=["sq"], kind="retimed")
     f, problems = flown_trajectory("op/r1", [plan([(10, -500, 0, 100), (110, 500, 0, 100)]), retimed])
     assert problems == [] and f.times_s.tolist() == [40.0, 140.0]
 
@@ -59,26 +59,26 @@ def test_a_reroute_in_the_air_is_flown_from_its_effective_instant():
 def test_versions_that_do_not_chain_are_named():
     announced = {"sq": 30.0}
     v0 = plan(EAST)
-    v1 = plan(EAST, version=1, effective=50.0, ids=["sq"])
-    v2 = plan(EAST, version=2, effective=40.0, ids=["sq"])
-    v3 = plan(EAST, version=3, effective=60.0, ids=["other"])
+    v1 = plan(EAST, version=2, effective=50.0, ids=["sq"])
+    v2 = plan(EAST, version=3, effective=40.0, ids=["sq"])
+    v3 = plan(EAST, version=4, effective=60.0, ids=["other"])
     assert chain_problems("k", [v0, v1], announced) == []
-    assert chain_problems("k", [v0, v2], announced) == ["k: version 2 follows version 0 (version 1 missing)"]
-    assert chain_problems("k", [v1], announced) == ["k: version 1 without version 0 (the approval)"]
+    assert chain_problems("k", [v0, v2], announced) == ["k: version 3 follows version 1 (version 2 missing)"]
+    assert chain_problems("k", [v1], announced) == ["k: version 2 without version 1 (the approval)"]
     assert chain_problems("k", [v0, v1, v2], announced) == [
-        "k: version 2 takes effect at 40 s, before version 1 (at 50 s)"]
-    assert chain_problems("k", [v0, v1, v2.__class__(**{**v2.__dict__, "version": 2, "effective_time": t(55)}), v3],
-                          announced) == ["k: version 3 names constraint 'other', never announced on the constraint topic"]
-    early = plan(EAST, version=1, effective=20.0, ids=["sq"])
+        "k: version 3 takes effect at 40 s, before version 2 (at 50 s)"]
+    assert chain_problems("k", [v0, v1, v2.__class__(**{**v2.__dict__, "version": 3, "effective_time": t(55)}), v3],
+                          announced) == ["k: version 4 names constraint 'other', never announced on the constraint topic"]
+    early = plan(EAST, version=2, effective=20.0, ids=["sq"])
     assert chain_problems("k", [v0, early], announced) == [
-        "k: version 1 takes effect at 20 s, before constraint 'sq' was announced (30 s)"]
-    nameless = plan(EAST, version=1, effective=50.0, kind="retimed")
-    assert chain_problems("k", [v0, nameless], announced) == ["k: version 1 (retimed) names no constraint"]
+        "k: version 2 takes effect at 20 s, before constraint 'sq' was announced (30 s)"]
+    nameless = plan(EAST, version=2, effective=50.0, kind="retimed")
+    assert chain_problems("k", [v0, nameless], announced) == ["k: version 2 (retimed) names no constraint"]
 
 
 def test_flown_versions_flags_updates_without_an_approval():
     sets = [(30.0, [(square(), 30.0)])]
-    flown, problems = flown_versions([], {"op/r1": {1: plan(EAST, version=1, effective=50.0, ids=["sq"])}}, sets)
+    flown, problems = flown_versions([], {"op/r1": {2: plan(EAST, version=2, effective=50.0, ids=["sq"])}}, sets)
     assert flown == {} and problems == ["op/r1: 1 plan update(s) for a request with no approval in the recording"]
 
 
@@ -114,10 +114,10 @@ def test_incursions_hand_computed():
 
 
 def test_a_reroute_that_leaves_the_constraint_in_time_has_no_incursion():
-    """Version 0 would enter the square at t = 40; version 1, effective at 30 (x = -200), turns
-    north before it: the flown trajectory never enters. Audited on version 0 alone it would."""
+    """Version 1 would enter the square at t = 40; version 2, effective at 30 (x = -200), turns
+    north before it: the flown trajectory never enters. Audited on version 1 alone it would."""
     v0 = plan(EAST)
-    v1 = plan([(30, -200, 0, 100), (60, -200, 300, 100)], version=1, effective=30.0, ids=["sq"], kind="rerouted")
+    v1 = plan([(30, -200, 0, 100), (60, -200, 300, 100)], version=2, effective=30.0, ids=["sq"], kind="rerouted")
     sets = [(30.0, [(square(), 30.0)])]
     flown, problems = flown_versions([("op/r1", v0)], {"op/r1": {1: v1}}, sets)
     assert problems == []

@@ -159,7 +159,7 @@ class RunSummary:
     #: approval share and Jain index (``uam_sim.decision_metrics``, as the in-process runner's
     #: summary); detour_mean_m is NaN: a recording holds no candidate route lengths
     decision_metrics: dict = field(default_factory=dict)
-    #: plan versions after the approval (issue 22): update kind -> count ("rerouted", "cancelled", ...)
+    #: plan versions after the approval (version >= 2, issue 22): update kind -> count ("rerouted", ...)
     plan_updates: dict = field(default_factory=dict)
     #: entries of flown trajectories into constraints in force (uam_sim.flown_audit.Incursion.describe)
     incursions: list = field(default_factory=list)
@@ -387,7 +387,7 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=10
     epochs: list[EpochStats] = []
     syncs: list = []
     reports: dict[int, set] = {}
-    updates: dict[str, dict] = {}  # request key -> {plan key: plan} of its versions >= 1 (issue 22)
+    updates: dict[str, dict] = {}  # request key -> {plan key: plan} of its versions >= 2 (issue 22)
     constraint_sets: list = []     # (t_s, [(constraint, effective_s)]) as the planner published them
     constraint_problems: list = []
     t_min, t_max = math.inf, -math.inf
@@ -417,7 +417,7 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=10
                 refused_duplicates += 1
                 continue
             rid = request_key(msg)
-            if int(getattr(msg, "version", 0) or 0) > 0:  # a new version of an approved plan
+            if int(getattr(msg, "version", 0) or 0) > 1:  # a new version of an approved plan (issue 22)
                 updates.setdefault(rid, {})[(int(msg.version),) + _plan_key(msg)] = msg
                 continue
             if rid in decisions:

@@ -3,15 +3,15 @@ trajectories actually flown, and every flown trajectory checked against the airs
 constraints in force.
 
 Plan versions (``FlightPlan.version``, ``effective_time``, ``state``, ``constraint_ids``,
-``update_kind``; docs/replanning.md): version 0 is the approval; version n + 1 replaces version n
-from its ``effective_time`` on. The simulator flies each version from the instant it takes
-effect, so what flew is, per request, version 0 up to the effective instant of version 1, then
-version 1 up to that of version 2, and so on (:func:`flown_trajectory`). A version without
-waypoints (a cancellation) ends the flight there.
+``update_kind``; docs/replanning.md): version 1 is the approval (0 in recordings made before
+versions); version n + 1 replaces version n from its ``effective_time`` on. The simulator flies
+each version from the instant it takes effect, so what flew is, per request, version 1 up to the
+effective instant of version 2, then version 2 up to that of version 3, and so on
+(:func:`flown_trajectory`). A version without waypoints (a cancellation) ends the flight there.
 
-**Chaining** (:func:`chain_problems`): the versions of a request must be 0, 1, ..., n with no gap
+**Chaining** (:func:`chain_problems`): the versions of a request must be 1, 2, ..., n with no gap
 (a version n + 1 without n is a plan the recording lost, or one nobody issued), each effective
-no earlier than its predecessor, each update (n >= 1) naming at least one constraint that the
+no earlier than its predecessor, each update (n >= 2) naming at least one constraint that the
 planner announced on ``uam/constraints`` at or before it took effect, and a version that takes
 over a flight in the air must start where the flight was at that instant (to 1 mm). A
 recording that breaks any of these is NOT VERIFIED.
@@ -47,13 +47,15 @@ CONTINUITY_M = 1e-3
 
 
 def plan_version(p: Any) -> int:
-    """A plan's version (0 for recordings made before versions)."""
-    return int(getattr(p, "version", 0) or 0)
+    """A plan's version: 1 is the approval (``uam_planner.planning.Flight.version``); recordings
+    made before versions carry 0, read as 1."""
+    return max(1, int(getattr(p, "version", 0) or 0))
 
 
 def effective_s(p: Any) -> float:
-    """When a plan version takes effect [s]; version 0: -inf (from its approval on)."""
-    if plan_version(p) == 0:
+    """When a plan version takes effect [s]; the approval (version 1): -inf (it is flown whole
+    until a later version takes over)."""
+    if plan_version(p) == 1:
         return -math.inf
     return stamp_s(p.effective_time)
 
@@ -102,8 +104,8 @@ def chain_problems(key: str, versions: Sequence[Any], announced: dict[str, float
     the first instant [s] the planner had it in force (from ``uam/constraints``)."""
     out = []
     numbers = [plan_version(p) for p in versions]
-    if numbers and numbers[0] != 0:
-        out.append(f"{key}: version {numbers[0]} without version 0 (the approval)")
+    if numbers and numbers[0] != 1:
+        out.append(f"{key}: version {numbers[0]} without version 1 (the approval)")
     for a, b in zip(numbers, numbers[1:]):
         if b == a:
             out.append(f"{key}: version {b} twice, with different contents")
@@ -290,8 +292,8 @@ def flown_versions(approved: Sequence[tuple[str, Any]], updates: dict, sets: Seq
     """The flown trajectories of the requests that have versions after their approval, and the
     problems of their chains (see the module docstring).
 
-    ``approved``: (request key, approved plan = version 0); ``updates``: key -> {any: plan of
-    version >= 1}; ``sets``: the recorded constraint sets (t_s, [(constraint, effective_s)]).
+    ``approved``: (request key, approved plan = version 1); ``updates``: key -> {any: plan of
+    version >= 2}; ``sets``: the recorded constraint sets (t_s, [(constraint, effective_s)]).
     Returns ({key: Flown}, problems)."""
     if not updates:
         return {}, []

@@ -62,7 +62,8 @@ from uam_contract.params import PLANNER
 from uam_solvers.nodes import param_rules
 from uam_bringup.runtime import run_node
 from uam_planner.constraints import load_constraints
-from uam_planner.live_constraints import LiveAirspace, set_geojson
+from uam_planner.constraints import ConstraintError
+from uam_planner.live_constraints import parse_update, set_geojson
 from uam_planner.network import load_network
 from uam_planner.planning import AirspaceConfig, Planner, PlanningConfig, call_solver, default_solve_mwis
 
@@ -103,9 +104,11 @@ class PlannerNode(Node):
             except ValueError as exc:
                 raise ValueError(f"constraints_file: {exc}") from None
             self.planner.set_constraints(cset)
-        # live constraints (issue 22): uam/update_constraint, applied at the next epoch's start
-        self.airspace = LiveAirspace(self.network, self.config.constraints or ())
-        self._constraint_effective: dict[str, float] = {c.constraint_id: 0.0 for c in self.airspace.accepted.values()}
+        # live constraints (issue 22): uam/update_constraint, queued in the planner and applied at
+        # its next epoch (Planner.update_constraint); the set in force is published on uam/constraints
+        self._constraint_effective: dict[str, float] = {c.constraint_id: 0.0 for c in self.config.constraints or ()}
+        self._constraints_logged = 0        # entries of planner.constraint_log published
+        self.constraint_updates_refused = 0
 
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._group = ReentrantCallbackGroup()  # the epoch service awaits; arrivals must go on meanwhile
@@ -181,17 +184,32 @@ class PlannerNode(Node):
                                             callback_group=self._group)
         self.get_logger().info(f"serving {self.resolve_service_name(c.SERVICE_PLAN_EPOCH)}")
 
-    # ---- live constraints (issue 22, uam_planner.live_constraints) -----------------------
+    # ---- live constraints (issue 22, uam_planner.live_constraints) ---------------------------
+    def _projected_constraints(self) -> dict:
+        """constraint id -> Constraint once every queued update is applied."""
+        cur = {k.constraint_id: k for k in self.config.constraints or ()}
+        for u in self.planner.queued_updates:
+            if u.action == "withdraw":
+                cur.pop(u.constraint.constraint_id, None)
+            else:
+                cur[u.constraint.constraint_id] = u.constraint
+        return cur
+
     def _on_update_constraint(self, request, response):
-        """Accept (queued for the next epoch) or refuse one constraint update, naming the field."""
+        """Queue (for the next epoch) or refuse one constraint update, naming the field and value."""
         with self._lock:
             now = self._next_epoch_s
-            error = self.airspace.request(request, now)
+            try:
+                action, what = parse_update(request, self._projected_constraints(), self.network)
+                error = self.planner.update_constraint(action, what, now) or ""
+            except ConstraintError as exc:
+                action, error = str(request.action), str(exc)
+            if error:
+                self.constraint_updates_refused += 1
             response.accepted = not error
             response.error = wire.bounded(error)
-            response.constraints = len(self.airspace.accepted)
+            response.constraints = len(self._projected_constraints())
             response.effective_time = m.to_time(now)
-        action = {0: "add", 1: "change", 2: "withdraw"}.get(request.action, str(request.action))
         if error:
             self.get_logger().warning(f"refused a constraint update ({action} {wire.echo(request.constraint_id)}): "
                                       f"{response.error}")
@@ -200,23 +218,23 @@ class PlannerNode(Node):
                                    f"v{request.version}, from the epoch at t = {now:g} s")
         return response
 
-    def _apply_constraint_updates(self, t_s: float) -> None:
-        """At an epoch's start (under the lock): the updates accepted since the last, in one step."""
-        updates = self.airspace.take()
-        if not updates:
+    def _publish_constraint_changes(self, t_s: float) -> None:
+        """After an epoch's prepare (under the lock): the set in force, if updates were applied."""
+        log = self.planner.constraint_log
+        if len(log) == self._constraints_logged:
             return
-        for u in updates:
+        for u in log[self._constraints_logged:]:
             if u.action == "withdraw":
                 self._constraint_effective.pop(u.constraint.constraint_id, None)
             else:
-                self._constraint_effective[u.constraint.constraint_id] = t_s
-        self.planner.set_constraints(self.airspace.constraint_set())
+                self._constraint_effective[u.constraint.constraint_id] = float(u.applied_s)
+        self._constraints_logged = len(log)
         self._publish_constraints(t_s)
-        self.get_logger().info(f"epoch at t = {t_s:g} s: {len(updates)} constraint update(s) applied, "
-                               f"{len(self.airspace.accepted)} constraint(s) in force")
+        self.get_logger().info(f"epoch at t = {t_s:g} s: constraint update(s) applied, "
+                               f"{len(self.config.constraints or ())} constraint(s) in force")
 
     def _publish_constraints(self, t_s: float) -> None:
-        self._constraints_pub.publish(String(data=set_geojson(self.airspace.accepted.values(), t_s,
+        self._constraints_pub.publish(String(data=set_geojson(self.config.constraints or (), t_s,
                                                               self._constraint_effective)))
 
     # ---- requests ----------------------------------------------------------------------------
@@ -497,8 +515,8 @@ class PlannerNode(Node):
             self.get_logger().warning(f"epoch {k}: planning without {len(missing)} expected request(s) that did "
                                       f"not arrive within {self.p['request_wait_timeout_s']:g} s: {missing[:5]}")
         with self._lock:
-            self._apply_constraint_updates(t_s)
-            prep = self.planner.prepare(t_s, k)
+            prep = self.planner.prepare(t_s, k)   # applies the constraint updates due (docs/replanning.md)
+            self._publish_constraint_changes(t_s)
         t0 = time.perf_counter()
         answer = await self._solve(prep.graph) if prep.needs_solver else None
         solve_s = time.perf_counter() - t0
@@ -508,6 +526,13 @@ class PlannerNode(Node):
                      for f in result.approved]
             for plan, f in zip(plans, result.approved):
                 plan.operator_id = wire.split_scoped(f.request_id)[0]
+            for u in result.plan_updates:   # new versions and cancellations (issue 22 item 4)
+                if u.kind == "kept":
+                    continue
+                op, rid = wire.split_scoped(u.request_id)
+                plan = m.plan_update_msg(u, t_s, self.policy, request_id=rid)
+                plan.operator_id = op
+                plans.append(plan)
             if self.journal is not None:
                 self.journal.append(plans)  # before anyone can hold them
             refusals = result.report.constraint_refusals

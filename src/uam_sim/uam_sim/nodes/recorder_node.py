@@ -121,6 +121,8 @@ class RecordingCheck:
         self.announced[int(msg.epoch_index)] = int(msg.approved)  # a repeated report counts once
 
     def on_plan(self, msg) -> None:
+        if int(getattr(msg, "version", 0)) > 1:
+            return  # a re-planned version of an approval (issue 22): no report announces it as one
         if int(msg.outcome) == FlightPlan.OUTCOME_APPROVED:
             self.received.setdefault(int(msg.epoch_index), set()).add(request_key(msg))
 
