@@ -88,10 +88,12 @@ class ReplanClock:
 
     def __init__(self):
         self.reports = []
+        self.updates = []
 
     def __call__(self, t_s, epoch_index, submitted, refused, result):
         if result.report.replan is not None:
             self.reports.append(result.report.replan)
+        self.updates.extend(result.plan_updates)
 
 
 def one_run(net, cfg, seed: int, policy: str, args) -> dict:
@@ -101,6 +103,9 @@ def one_run(net, cfg, seed: int, policy: str, args) -> dict:
     res = run_scenario(net, args.method, rate, seed, args.duration, cfg, observer=clock, before_epoch=ann)
     wall = time.perf_counter() - t0
     rows = res.replans
+    for r in clock.updates:
+        if r.kind == "contingency":
+            print(f"  contingency {r.request_id}: {r.reason}", flush=True)
     rep = clock.reports[0] if clock.reports else None
     kinds = {k: sum(r["kind"] == k for r in rows) for k in
              ("kept", "rerouted", "retimed", "diverted", "cancelled", "contingency")}
@@ -113,6 +118,8 @@ def one_run(net, cfg, seed: int, policy: str, args) -> dict:
            "by_class": by_class, "reach": len(reach), "saved": sum(r["kind"] in SAVED for r in rows),
            "reach_delay_mean_s": float(np.mean([r["added_delay_s"] for r in reach])) if reach else float("nan"),
            "decision_s": rep.decision_time_s if rep else float("nan"),
+           "decision_cpu_s": rep.decision_cpu_s if rep else float("nan"),
+           "stage2": rep.stage2 if rep else 0,
            "solve_s": rep.solve_time_s if rep else float("nan"),
            "vertices": rep.vertices if rep else 0, "edges": rep.edges if rep else 0,
            "alternatives": rep.alternatives if rep else 0, "fallback": rep.fallback if rep else False,
@@ -121,15 +128,25 @@ def one_run(net, cfg, seed: int, policy: str, args) -> dict:
            "loss_pairs": res.audit.get("loss_pairs", [])[:3], "approved": res.summary["approved"],
            "requests": res.summary["requests"], "wall_s": wall}
     handled = out["affected"] == (rep.affected if rep else 0)
+    contingent = {r["request_id"] for r in rows if r["kind"] == "contingency"}
+    out["losses_without_contingency"] = sum(1 for a, b, *_ in res.audit.get("loss_pairs", [])
+                                            if a not in contingent and b not in contingent) \
+        if (res.audit.get("losses") or 0) <= 20 else None
+    if args.out:
+        import json
+        with open(args.out, "a") as fh:
+            fh.write(json.dumps(out, default=str) + "\n")
     print(f"seed {seed} {policy}: t = {out.get('t_s')} s, {out.get('intents')} intents "
           f"({out.get('airborne')} airborne, {out.get('accepted')} accepted), centre {out.get('node')} "
           f"{out.get('centre')} with {out.get('airborne_inside')} airborne within {args.radius:g} m; "
           f"affected {out['affected']} {out['by_class']} (all decided in the epoch: {handled}); "
           f"graph {out['alternatives']} alternatives, {out['vertices']} vertices, {out['edges']} edges; "
-          f"decision {1e3 * out['decision_s']:.0f} ms wall (solve {1e3 * out['solve_s']:.0f} ms, "
+          f"decision {1e3 * out['decision_s']:.0f} ms wall, {1e3 * out['decision_cpu_s']:.0f} ms CPU "
+          f"(solve {1e3 * out['solve_s']:.0f} ms, {out['stage2']} flights with stage-2 alternatives, "
           f"fallback {out['fallback']}); reach destination {out['reach']}, saved {out['saved']}, "
           f"mean added delay {out['reach_delay_mean_s']:.1f} s; audit of what flew: {out['losses']} "
-          f"losses in {out['pairs']} pairs (min {out['min_sep']}), {out['incursions']} incursions "
+          f"losses in {out['pairs']} pairs (min {out['min_sep']}; without a contingency flight: "
+          f"{out['losses_without_contingency']}), {out['incursions']} incursions "
           f"{out['loss_pairs']}; {out['approved']}/{out['requests']} approved; wall {wall:.0f} s; "
           f"uptime: {uptime()}", flush=True)
     return out
@@ -158,6 +175,7 @@ def main(argv=None) -> int:
     ap.add_argument("--vertiports", type=int, default=100)
     ap.add_argument("--slot-s", type=float, default=5.0)
     ap.add_argument("--policies", nargs="+", default=["mwis", "firstfit"])
+    ap.add_argument("--out", default=None, help="append one JSON line per run to this file")
     args = ap.parse_args(argv)
     spec = {"synthetic": {"n_nodes": args.nodes, "n_aerodromes": args.vertiports, "seed": 0,
                           "levels_m": LEVELS_M, "pads_per_vertiport": 4}}
@@ -174,8 +192,10 @@ def main(argv=None) -> int:
             runs[p][seed] = one_run(net, cfg, seed, p, args)
     for p in args.policies:
         d = [r["decision_s"] for r in runs[p].values()]
+        dc = [r["decision_cpu_s"] for r in runs[p].values()]
         m, lo, hi = mean_interval([r["affected"] for r in runs[p].values()])
-        print(f"{p}: decision wall median {1e3 * statistics.median(d):.0f} ms (max {1e3 * max(d):.0f}); "
+        print(f"{p}: decision wall median {1e3 * statistics.median(d):.0f} ms (max {1e3 * max(d):.0f}), "
+              f"CPU median {1e3 * statistics.median(dc):.0f} ms (max {1e3 * max(dc):.0f}); "
               f"affected mean {m:.1f} [{lo:.1f}, {hi:.1f}]; losses {[r['losses'] for r in runs[p].values()]}, "
               f"incursions {[r['incursions'] for r in runs[p].values()]}")
     if "mwis" in runs and "firstfit" in runs and len(runs["mwis"]) >= 1:

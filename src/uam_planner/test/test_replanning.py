@@ -304,3 +304,35 @@ def test_paper_mode_flights_default_to_version_one():
     assert p.replan_policy() == "mwis" and Planner(lanes(), policy="fifo").replan_policy() == "firstfit"
     with pytest.raises(ValueError, match="replan_policy"):
         PlanningConfig(replan_policy="best")
+
+
+def layered_lanes():
+    """The lanes at one level (60 m, no direction rule); C has two pads, (0, 480) and (150, 480)."""
+    base = lanes()
+    return network_from_enu("lanes-layered", list(base.node_ids), base.enu_m, base.is_aerodrome,
+                            [(base.node_ids[a], base.node_ids[b]) for a, b in base.edges],
+                            airspace={"levels_m": [60.0], "direction_rule": "none"},
+                            pads_m={"C": [[0.0, 0.0], [150.0, 0.0]]})
+
+
+def test_airborne_flight_diverted_to_the_free_pad_of_the_alternate():
+    """Climb 5 m/s, descent 3 m/s. P: Wp -> mp -> Ep at 60 m: top of climb at 12 s, mp at 112,
+    Ep at 212. R: Wq -> mq -> C pad 0 (the only level's pad), over pad 0 at 164, down at 184."""
+    net = layered_lanes()
+    p = Planner(net, PlanningConfig(k=2), "mwis", solve_mwis=exact_mwis)
+    fly(p, req("P", "Wp", "Ep"), req("R", "Wq", "C"))
+    np.testing.assert_allclose(p.active[1].trajectory.times_s, [0.0, 12.0, 112.0, 164.0, 184.0], atol=0.05)
+    p.update_constraint("add", EAST, 60.0)
+    (u,) = p.plan(60.0, 2).plan_updates
+    # Branch at mp (112 s). C pad 0: over it at 160, descending until 180 while R descends there
+    # from 164: 12 m apart at 164, a loss. C pad 1 (150, 480): 502.9 m -> over it at 162.3, down at
+    # 182.3, never within 100 m of R: chosen (lands 122.3 s after t_eff: w = 1 + 300/422.3, above
+    # Wp's 1 + 300/472).
+    assert (u.kind, u.flight.destination_id) == ("diverted", "C")
+    tr = u.flight.trajectory
+    np.testing.assert_allclose(tr.points_m[-2:], [(150, 480, 60), (150, 480, tr.points_m[-1, 2])])
+    assert tr.points_m[-1, 2] < 0.1                      # the pad (ground, about 0 m)
+    np.testing.assert_allclose(tr.times_s[-2:], [112.0 + math.hypot(150, 480) / 10.0,
+                                                 112.0 + math.hypot(150, 480) / 10.0 + 20.0], atol=0.05)
+    np.testing.assert_allclose(tr.times_s[:3], [0.0, 12.0, 112.0], atol=0.05)   # the old plan up to mp
+    assert u.flight.weight == pytest.approx(divert_weight(tr.arrival_s - 60.0))

@@ -55,6 +55,8 @@ STATES = ("Accepted", "Activated", "Contingent", "Ended")  # ASTM F3548-21 (Nonc
 W_KEEP = 4.0
 DELAY_SCALE_S = 300.0
 DIVERT_VERTIPORTS = 3
+BRANCH_WAYPOINTS = 2
+STAGE2_BELOW = 4
 _EPS_T = 1e-9
 
 
@@ -115,11 +117,13 @@ class ReplanReport:
     affected: int = 0
     affected_airborne: int = 0
     affected_not_departed: int = 0
-    alternatives: int = 0
+    alternatives: int = 0       # constraint-free alternatives generated
+    stage2: int = 0             # flights that got stage-2 alternatives
     vertices: int = 0
     edges: int = 0
     kinds: dict = field(default_factory=dict)        # kind -> count
     decision_time_s: float = 0.0                     # wall, for reports only
+    decision_cpu_s: float = 0.0                      # process CPU time, for reports only
     solve_time_s: float = 0.0
     backend_used: str = ""
     fallback: bool = False
@@ -184,10 +188,13 @@ def clipped_from(tr: Trajectory, t_s: float) -> Trajectory | None:
         return None
     if t <= tr.departure_s:
         return tr
-    after = tr.times_s > t + _EPS_T
-    times = np.concatenate(([t], tr.times_s[after]))
-    points = np.concatenate(([tr.position_at(t)], tr.points_m[after]))
-    return Trajectory(times, points)
+    ts, ps = tr.times_s, tr.points_m
+    j = int(np.searchsorted(ts, t + _EPS_T, side="right"))  # first waypoint after t
+    w = (t - ts[j - 1]) / (ts[j] - ts[j - 1])
+    here = ps[j - 1] + w * (ps[j] - ps[j - 1])
+    times = np.concatenate(([t], ts[j:]))
+    points = np.concatenate(([here], ps[j:]))
+    return Trajectory._trusted(times, points, None)  # a cut of a valid trajectory
 
 
 # ---- the constraint state ----------------------------------------------------------------------
@@ -354,6 +361,7 @@ class _Router:
         self.vols = [c for c in cset if c.kind != "closure" and c.end_s > t_eff]
         self._blocked: dict = {}
         self._lines = None
+        self._memo: dict = {}
 
     def blocked(self, level_z: float | None) -> np.ndarray:
         key = None if level_z is None else round(float(level_z), 6)
@@ -390,84 +398,98 @@ class _Router:
         from .candidates import _routes
         if u == target:
             return []
-        try:
-            return _routes(self.cache._graph, self.net, u, target, k, self.cache.penalty_factor,
-                           terminals=self.net.layered, blocked=self.blocked(level_z))
-        except ValueError:
-            return []
+        key = (u, target, k, None if level_z is None else round(float(level_z), 6))
+        got = self._memo.get(key)
+        if got is None:
+            try:
+                got = _routes(self.cache._graph, self.net, u, target, k, self.cache.penalty_factor,
+                              terminals=self.net.layered, blocked=self.blocked(level_z))
+            except ValueError:
+                got = []
+            self._memo[key] = got
+        return got
 
 
-def _airborne_alternatives(f, t_eff: float, network, config, router: _Router) -> list:
-    """Re-routes to the destination and diversions of airborne flight ``f`` from its branch
-    point (see the module docstring); may be empty."""
+def _airborne_alternatives(f, t_eff: float, network, config, router: _Router, stage: int = 1) -> list:
+    """Re-routes to the destination and diversions of airborne flight ``f`` (see the module
+    docstring); may be empty. Stage 1: from its branch point, re-routes to its own pad and
+    diversions to every pad; stage 2 (the rest, for a flight with too few stage-1 survivors):
+    re-routes to its destination's other pads, then everything from the next
+    ``BRANCH_WAYPOINTS - 1`` waypoints."""
     tr = f.trajectory
     times, pts = tr.times_s, tr.points_m
-    k = int(np.searchsorted(times, t_eff - _EPS_T, side="left"))  # first waypoint >= t_eff
+    k0 = int(np.searchsorted(times, t_eff - _EPS_T, side="left"))  # first waypoint >= t_eff
     route = [network.node_index(x) for x in f.route_node_ids]
     layered = network.layered
-    node_at = k - 1 if layered else k  # route node of waypoint k
-    if not 0 <= node_at < len(route) or (layered and k == 0):
-        return []  # descending to its pad (or not yet airborne): nothing to branch from
-    u = route[node_at]
     dest = network.node_index(f.destination_id)
     speed = float(config.speed_mps)
     descent = float(config.airspace.descent_rate_mps)
-    level = float(pts[k, 2]) if layered else None
-    targets = [(dest, "rerouted", int(config.k))]
     xy = network.enu_m[:, :2]
-    others = [int(a) for a in network.aerodrome_indices if int(a) != dest]
-    others.sort(key=lambda a: (float(np.hypot(*(xy[a] - pts[k, :2]))), a))
-    targets += [(a, "diverted", 1) for a in others[:DIVERT_VERTIPORTS]]
-    old_remaining = tr.arrival_s
-    out = []
-    for target, kind, n_routes in targets:
-        for r in router.routes(u, target, n_routes, level):
-            mid = np.asarray(r.node_indices[1:-1], dtype=np.int64)
-            if layered:
-                alt_z = float(network.lat_lon_alt[target, 2])
-                pads = network.pads_of(target)
-                pad_choices = range(len(pads)) if kind == "diverted" else \
-                    [_pad_of_point(network, dest, pts[-1])]
-                for pi in pad_choices:
-                    pad = xy[target] + pads[pi]
-                    horiz = np.concatenate((xy[mid].reshape(-1, 2), [pad]))
-                    new = np.column_stack((horiz, np.full(horiz.shape[0], level)))
-                    new = np.concatenate((new, [(pad[0], pad[1], alt_z)]))
-                    alt = _extend(times[:k + 1], pts[:k + 1], new, speed, descent, vertical_last=True)
-                    if alt is not None:
-                        out.append((alt, kind, target, r, old_remaining))
-            else:
-                new = network.enu_m[np.asarray(r.node_indices[1:], dtype=np.int64)]
-                alt = _extend(times[:k + 1], pts[:k + 1], new, speed, descent, vertical_last=False)
-                if alt is not None:
-                    out.append((alt, kind, target, r, old_remaining))
+    dest_pad = _pad_of_point(network, dest, pts[-1])
     alts = []
-    for traj, kind, target, r, old_arr in out:
-        node_ids = tuple(f.route_node_ids[:node_at + 1]) + tuple(network.node_ids[i] for i in r.node_indices[1:])
-        length = float(np.linalg.norm(np.diff(traj.points_m, axis=0), axis=1).sum())
-        # a re-route costs its added delay; a diversion its time to land (the nearest pad first)
-        cost = traj.arrival_s - (old_arr if kind == "rerouted" else t_eff)
-        alts.append(_Alt(traj, kind, _tier(kind, cost), target, node_ids, length,
-                         int(r.candidate_index)))
+    for k in range(k0, k0 + (1 if stage == 1 else BRANCH_WAYPOINTS)):
+        node_at = k - 1 if layered else k  # route node of waypoint k
+        if not 0 <= node_at < len(route) or (layered and k == 0):
+            break  # descending to its pad: nothing to branch from
+        u = route[node_at]
+        level = float(pts[k, 2]) if layered else None
+        targets = [(dest, "rerouted", int(config.k))]
+        others = [int(a) for a in network.aerodrome_indices if int(a) != dest]
+        others.sort(key=lambda a: (float(np.hypot(*(xy[a] - pts[k, :2]))), a))
+        targets += [(a, "diverted", 1) for a in others[:DIVERT_VERTIPORTS]]
+        for target, kind, n_routes in targets:
+            for r in router.routes(u, target, n_routes, level):
+                mid = np.asarray(r.node_indices[1:-1], dtype=np.int64)
+                news = []
+                if layered:
+                    alt_z = float(network.lat_lon_alt[target, 2])
+                    pads = network.pads_of(target)
+                    order = list(range(len(pads)))
+                    if kind == "rerouted":  # its own pad first
+                        order.remove(dest_pad)
+                        order.insert(0, dest_pad)
+                    for pi in order:
+                        first = k == k0 and (kind == "diverted" or pi == dest_pad)
+                        if first != (stage == 1):
+                            continue
+                        pad = xy[target] + pads[pi]
+                        horiz = np.concatenate((xy[mid].reshape(-1, 2), [pad]))
+                        new = np.column_stack((horiz, np.full(horiz.shape[0], level)))
+                        news.append(np.concatenate((new, [(pad[0], pad[1], alt_z)])))
+                elif (k == k0) == (stage == 1):
+                    news.append(network.enu_m[np.asarray(r.node_indices[1:], dtype=np.int64)])
+                for new in news:
+                    traj = _extend(times[:k + 1], pts[:k + 1], new, speed, descent, vertical_last=layered)
+                    if traj is None:
+                        continue
+                    node_ids = tuple(f.route_node_ids[:node_at + 1]) + \
+                        tuple(network.node_ids[i] for i in r.node_indices[1:])
+                    length = float(np.sqrt(np.square(np.diff(traj.points_m, axis=0)).sum(axis=1)).sum())
+                    # a re-route costs its added delay; a diversion its time to land
+                    cost = traj.arrival_s - (tr.arrival_s if kind == "rerouted" else t_eff)
+                    alts.append(_Alt(traj, kind, _tier(kind, cost), target, node_ids, length,
+                                     int(r.candidate_index)))
     return alts
 
 
 def _extend(times, pts, new_pts, speed, descent, vertical_last: bool) -> Trajectory | None:
     """Prefix (times, pts) continued through ``new_pts`` at ``speed`` (the last leg vertical at
     ``descent`` when ``vertical_last``); zero-length legs dropped; None if nothing is left."""
-    seq = [pts[-1]]
-    for p in new_pts:
-        if float(np.linalg.norm(np.asarray(p) - seq[-1])) > 1e-9:
-            seq.append(np.asarray(p, dtype=np.float64))
-    if len(seq) < 2:
+    seq = np.concatenate((pts[-1:], np.asarray(new_pts, dtype=np.float64).reshape(-1, 3)))
+    legs = np.sqrt(np.square(np.diff(seq, axis=0)).sum(axis=1))
+    keep = np.concatenate(([True], legs > 1e-9))   # drop zero-length legs
+    if not keep.all():
+        seq = seq[keep]
+        legs = legs[legs > 1e-9]
+    if seq.shape[0] < 2:
         return None
-    seq = np.asarray(seq)
-    legs = np.linalg.norm(np.diff(seq, axis=0), axis=1)
     dt = legs / speed
-    if vertical_last and np.allclose(seq[-1, :2], seq[-2, :2]):
+    if vertical_last and seq[-1, 0] == seq[-2, 0] and seq[-1, 1] == seq[-2, 1]:
         dt[-1] = legs[-1] / descent
-    t = np.concatenate(([times[-1]], times[-1] + np.cumsum(dt)))
-    return Trajectory(np.concatenate((times[:-1], t)), np.concatenate((pts[:-1], seq)))
+    t = times[-1] + np.concatenate(([0.0], np.cumsum(dt)))
+    out_t = np.concatenate((times[:-1], t))
+    out_p = np.concatenate((pts[:-1], seq))
+    return Trajectory._trusted(out_t, out_p, None)  # increasing: positive legs at positive speeds
 
 
 def _ground_alternatives(f, req, t_eff: float, network, config, cache) -> list:
@@ -557,7 +579,7 @@ def replan(t_eff: float, epoch_index: int, active: Sequence, requests: dict, net
     from .planning import EpochReport, call_solver, checked_selection
     from .separation import SegmentSet
 
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     rep = ReplanReport(t_s=float(t_eff), policy=policy, updates=list(labels))
     if affected is None:
         affected = affected_flights(active, cset, t_eff, network)
@@ -565,9 +587,14 @@ def replan(t_eff: float, epoch_index: int, active: Sequence, requests: dict, net
     rep.affected = len(idx)
     if not idx:
         rep.decision_time_s = time.perf_counter() - t0
+        rep.decision_cpu_s = time.process_time() - c0
         return list(active), [], rep
+    from .conflict_graph import discard_against_active
     router = _Router(network, cache, cset, t_eff)
-    per_flight = []
+    unaffected = [f for j, f in enumerate(active) if j not in affected]
+    act = SegmentSet.from_trajectories([f.trajectory for f in unaffected])
+    act = act.take(act.t1_s >= t_eff) if len(act) else act
+    per_flight, clean = [], []
     for i in idx:
         f = active[i]
         airborne = f.departure_s < t_eff
@@ -580,17 +607,33 @@ def replan(t_eff: float, epoch_index: int, active: Sequence, requests: dict, net
         keep = _constraint_free([_Alt(f.trajectory, "kept", W_KEEP, network.node_index(f.destination_id),
                                       tuple(f.route_node_ids), f.length_m, f.route_index,
                                       f.candidate_index)], cset, t_eff, network, origin)
-        alts = keep + alts
+        per_flight.append(keep + alts)
+    # stage 2: a flight left with fewer than STAGE2_BELOW alternatives that keep separation
+    # with the unaffected flights gets the rest (other pads, the next branch point)
+    flat1 = [a.trajectory for alts in per_flight for a in alts]
+    gone = discard_against_active(flat1, act, config.separation) if flat1 and len(act) \
+        else np.zeros(len(flat1), dtype=bool)
+    pos = 0
+    for r, i in enumerate(idx):
+        n = len(per_flight[r])
+        mine = gone[pos:pos + n]
+        pos += n
+        clean.append(list(per_flight[r]))
+        per_flight[r] = [a for a, g in zip(per_flight[r], mine.tolist()) if not g]
+        f = active[i]
+        if len(per_flight[r]) < STAGE2_BELOW and f.departure_s < t_eff:
+            more = _constraint_free(_airborne_alternatives(f, t_eff, network, config, router, stage=2),
+                                    cset, t_eff, network, None)
+            per_flight[r] += more
+            clean[r] += more
+            rep.stage2 += 1
+    for alts in per_flight:
         alts.sort(key=lambda a: -a.weight)  # stable: preference order within the flight
-        per_flight.append(alts)
     flat = [a for alts in per_flight for a in alts]
     req_of = np.repeat(np.arange(len(idx)), [len(a) for a in per_flight]).astype(np.int64)
     cand_idx = np.concatenate([np.arange(len(a)) for a in per_flight]).astype(np.int64) \
         if flat else np.zeros(0, np.int64)
-    rep.alternatives = len(flat)
-    unaffected = [f for j, f in enumerate(active) if j not in affected]
-    act = SegmentSet.from_trajectories([f.trajectory for f in unaffected])
-    act = act.take(act.t1_s >= t_eff) if len(act) else act
+    rep.alternatives = len(flat1) + sum(len(c) for c in clean) - len(flat1)
     graph = build_conflict_graph([a.trajectory for a in flat], req_of, cand_idx,
                                  np.array([a.weight for a in flat], dtype=np.float64), len(idx),
                                  act, config.separation)
@@ -627,10 +670,11 @@ def replan(t_eff: float, epoch_index: int, active: Sequence, requests: dict, net
                                       reason, float(t_eff), None, f))
             continue
         if a is None:
-            clean = per_flight[r]
-            if clean:
-                a = _least_conflicting(clean, unaffected, chosen, new_versions, config, t_eff)
-                what = f"contingency landing at {network.node_ids[a.destination]!r}, flown but not deconflicted"
+            if clean[r]:
+                a = _least_conflicting(clean[r], unaffected, chosen, new_versions, config, t_eff)
+                what = (f"each of its {len(clean[r])} alternatives that stay out loses separation with "
+                        f"another flight; contingency landing at {network.node_ids[a.destination]!r}, "
+                        f"flown but not deconflicted")
             else:
                 a = _Alt(f.trajectory, "kept", W_KEEP, network.node_index(f.destination_id),
                          tuple(f.route_node_ids), f.length_m, f.route_index, f.candidate_index)
@@ -656,4 +700,5 @@ def replan(t_eff: float, epoch_index: int, active: Sequence, requests: dict, net
     for u in updates:
         rep.kinds[u.kind] = rep.kinds.get(u.kind, 0) + 1
     rep.decision_time_s = time.perf_counter() - t0
+    rep.decision_cpu_s = time.process_time() - c0
     return unaffected + new_versions, updates, rep
