@@ -73,3 +73,30 @@ def test_graph_replans_as_the_runner_does_and_the_recording_audits_what_flew(ros
     assert sum(s.plan_updates.values()) == len(graph_updates)
     assert s.approved == len(ref.decisions())
     assert ref.summary["replans"] == len(graph_updates)
+
+
+def test_a_restarted_planner_takes_each_flights_newest_journaled_version(tmp_path):
+    """The journal holds every version (issue 22 item 4); a resume at epoch 5 (t = 150 s) takes,
+    per flight, the newest version decided before it: r1's re-route of t = 120 s (not its
+    approval), r2's cancellation, but not r3's re-route decided at 150 s (never answered)."""
+    from builtin_interfaces.msg import Time
+    from uam_bringup.journal import Journal, newest_versions
+
+    def plan(rid, version, epoch, stamp_s, outcome=FlightPlan.OUTCOME_APPROVED):
+        p = FlightPlan(operator_id="op", request_id=rid, outcome=outcome, epoch_index=epoch, version=version,
+                       effective_time=Time(sec=int(stamp_s)), update_kind="rerouted" if version > 1 else "")
+        p.header.stamp = Time(sec=int(stamp_s))
+        return p
+
+    written = [plan("r1", 1, 2, 60), plan("r2", 1, 3, 90), plan("r3", 1, 4, 120),
+               plan("r1", 2, 2, 120), plan("r2", 2, 3, 120, FlightPlan.OUTCOME_REJECTED), plan("r3", 2, 4, 150),
+               plan("r4", 1, 5, 150)]
+    journal = Journal(tmp_path / "j.jsonl")
+    journal.start("s1", keep=False)
+    journal.append(written)
+    journal.close()
+    got = newest_versions(Journal(tmp_path / "j.jsonl").read("s1"), 5, 150.0)
+    assert {k: (p.version, p.outcome) for k, p in got.items()} == {
+        "op/r1": (2, FlightPlan.OUTCOME_APPROVED), "op/r2": (2, FlightPlan.OUTCOME_REJECTED),
+        "op/r3": (1, FlightPlan.OUTCOME_APPROVED)}
+    assert got["op/r1"].update_kind == "rerouted"

@@ -56,7 +56,7 @@ from uam_contract import names as c
 from uam_planner.nodes import conversions as m
 from uam_bringup import qos
 from uam_contract import wire
-from uam_bringup.journal import Journal
+from uam_bringup.journal import Journal, newest_versions
 from uam_bringup.params import declare_table
 from uam_contract.params import PLANNER
 from uam_solvers.nodes import param_rules
@@ -446,14 +446,16 @@ class PlannerNode(Node):
             claimed[wire.scoped_id(p.operator_id, p.request_id)] = p
         if self.journal is not None:
             try:
-                own = {wire.scoped_id(p.operator_id, p.request_id): p for p in self.journal.read(request.session)}
+                journaled = self.journal.read(request.session)
             except ValueError as exc:
                 return f"resume: {exc}"
             # approvals of this epoch or later never reached the simulator (it asks for this
-            # epoch again): they never flew, and none can be claimed
+            # epoch again): they never flew, and none can be claimed; of the rest, each flight's
+            # newest version (re-plans, issue 22) is what flies
             k = int(request.epoch_index)
-            own = {key: p for key, p in own.items() if p.epoch_index < k}
-            flying = {key for key, p in own.items() if m.from_time(p.arrival_time) >= t_s}
+            own = newest_versions(journaled, k, t_s)
+            flying = {key for key, p in own.items() if p.outcome == FlightPlan.OUTCOME_APPROVED
+                      and m.from_time(p.arrival_time) >= t_s}
             left_out = sorted(flying - set(claimed))
             unknown = sorted(set(claimed) - set(own))
             changed = sorted(key for key in set(claimed) & set(own) if claimed[key].waypoints != own[key].waypoints)
