@@ -162,3 +162,19 @@ def test_an_update_takes_effect_at_the_next_epoch_and_is_published_latched(ros_c
     assert s.verified, s.problems
     assert s.audit.ok and s.incursions == [] and s.constraints_in_force == 1
     assert sum(s.plan_updates.values()) == len(updates)
+
+
+def test_the_command_line_client_builds_the_request_from_a_feature_file(tmp_path):
+    from uam_planner.nodes.constraint_client import build_request
+
+    path = tmp_path / "one.geojson"
+    path.write_text(json.dumps({"type": "FeatureCollection", "frame": "enu", "features": [json.loads(square())]}))
+    req = build_request("add", str(path))
+    assert (req.action, req.constraint_id, req.version, req.reason) == (ADD, "hub", 1, "event")
+    assert json.loads(req.geojson)["properties"]["frame"] == "enu"
+    gone = build_request("withdraw", constraint_id="hub", version=2, reason="over")
+    assert (gone.action, gone.constraint_id, gone.version, gone.geojson) == (WITHDRAW, "hub", 2, "")
+    two = tmp_path / "two.geojson"
+    two.write_text(json.dumps({"type": "FeatureCollection", "features": [json.loads(square()), json.loads(square("b"))]}))
+    with pytest.raises(ValueError, match="2 features; one update carries exactly one"):
+        build_request("add", str(two))
