@@ -203,9 +203,10 @@ def constraint_outline(c: Any, network: Any = None, segments: int = 48) -> list[
     :data:`CONSTRAINT_OPEN_TOP_M`) and a vertical edge at each vertex (a circle: at 8 of its
     ``segments``); a vertiport closure is a ring of :data:`CLOSURE_RADIUS_M` around it at 0 m."""
     if c.kind == "closure":
-        if network is None or c.vertiport_id not in network.index:
+        ids = list(getattr(network, "node_ids", ()) if network is not None else ())
+        if c.vertiport_id not in ids:
             return []
-        x, y, z = (float(v) for v in np.asarray(network.enu_m)[network.node_index(c.vertiport_id)])
+        x, y, z = (float(v) for v in np.asarray(network.enu_m)[ids.index(c.vertiport_id)])
         a = np.linspace(0.0, 2 * np.pi, segments + 1)
         return [np.column_stack([x + CLOSURE_RADIUS_M * np.cos(a), y + CLOSURE_RADIUS_M * np.sin(a),
                                  np.full(a.shape, z)])]
