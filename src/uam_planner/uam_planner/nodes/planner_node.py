@@ -2,9 +2,12 @@
 
     ros2 run uam_planner planner --ros-args --params-file config/planner.yaml
 
-Subscribes uam/requests (FlightRequest); serves uam/plan_epoch (PlanEpoch); calls
-uam/solve_mwis (SolveMwis); publishes uam/flight_plans (every decision), uam/planning_reports
-and its progress on uam/epoch_sync (for the recorder). Names and QoS: uam_contract.names;
+Subscribes uam/requests (FlightRequest); serves uam/plan_epoch (PlanEpoch) and
+uam/update_constraint (UpdateConstraint: live airspace constraints, queued to the next epoch,
+docs/constraints.md); calls uam/solve_mwis (SolveMwis); publishes uam/flight_plans (every
+decision, and every new version of a plan re-planned around a constraint, docs/replanning.md),
+uam/planning_reports, uam/constraints (the set in force, latched) and its progress on
+uam/epoch_sync (for the recorder). Names and QoS: uam_contract.names;
 parameters: uam_contract.params.PLANNER (docs/parameters.md).
 
 On arrival every request is accepted (queued) or refused at once with a reason that names the
