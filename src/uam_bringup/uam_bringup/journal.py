@@ -23,6 +23,7 @@ import json
 import os
 from pathlib import Path
 
+from uam_contract.stamps import stamp_s
 from uam_contract.wire import scoped_id
 
 
@@ -35,8 +36,7 @@ def newest_versions(plans, epoch_index: int, t_s: float) -> dict:
     for p in plans:
         version = int(getattr(p, "version", 0) or 0)
         if version > 1:
-            stamp = p.header.stamp
-            if int(stamp.sec) + int(stamp.nanosec) * 1e-9 >= t_s:
+            if stamp_s(p.header.stamp) >= t_s:
                 continue
         elif int(p.epoch_index) >= epoch_index:
             continue
