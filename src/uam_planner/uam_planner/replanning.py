@@ -191,7 +191,7 @@ def clipped_from(tr: Trajectory, t_s: float) -> Trajectory | None:
     if t <= tr.departure_s:
         return tr
     ts, ps = tr.times_s, tr.points_m
-    j = int(np.searchsorted(ts, t + _EPS_T, side="right"))  # first waypoint after t
+    j = min(int(np.searchsorted(ts, t + _EPS_T, side="right")), ts.shape[0] - 1)  # next waypoint
     w = (t - ts[j - 1]) / (ts[j] - ts[j - 1])
     here = ps[j - 1] + w * (ps[j] - ps[j - 1])
     times = np.concatenate(([t], ts[j:]))
