@@ -159,6 +159,31 @@ def uptime() -> str:
         return "load " + " ".join(f"{x:.2f}" for x in os.getloadavg())
 
 
+def summarize(runs: dict) -> None:
+    """Per policy: decision times, affected, losses, incursions; then MWIS - first-fit paired
+    over the seeds both have."""
+    for p in runs:
+        if not runs[p]:
+            continue
+        d = [r["decision_s"] for r in runs[p].values()]
+        dc = [r["decision_cpu_s"] for r in runs[p].values()]
+        m, lo, hi = mean_interval([r["affected"] for r in runs[p].values()])
+        kinds = {k: sum(r["kinds"][k] for r in runs[p].values()) for k in next(iter(runs[p].values()))["kinds"]}
+        print(f"{p} ({len(d)} seeds): decision wall median {1e3 * statistics.median(d):.0f} ms (max {1e3 * max(d):.0f}), "
+              f"CPU median {1e3 * statistics.median(dc):.0f} ms (max {1e3 * max(dc):.0f}); "
+              f"affected mean {m:.1f} [{lo:.1f}, {hi:.1f}], in all {kinds}; intents "
+              f"{[r['intents'] for r in runs[p].values()]}; losses {[r['losses'] for r in runs[p].values()]} "
+              f"(without a contingency flight {[r['losses_without_contingency'] for r in runs[p].values()]}), "
+              f"incursions {[r['incursions'] for r in runs[p].values()]}")
+    if runs.get("mwis") and runs.get("firstfit"):
+        a, b = runs["mwis"], runs["firstfit"]
+        for metric in ("reach", "saved", "reach_delay_mean_s"):
+            pr = paired({s: a[s][metric] for s in a}, {s: b[s][metric] for s in b})
+            print(f"mwis - firstfit {metric}: {pr.text(1)} over {pr.n} seeds (t, 95 %) "
+                  f"(mwis {[round(a[s][metric], 1) for s in sorted(a)]}, "
+                  f"firstfit {[round(b[s][metric], 1) for s in sorted(b)]})")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, default=3)
@@ -176,7 +201,16 @@ def main(argv=None) -> int:
     ap.add_argument("--slot-s", type=float, default=5.0)
     ap.add_argument("--policies", nargs="+", default=["mwis", "firstfit"])
     ap.add_argument("--out", default=None, help="append one JSON line per run to this file")
+    ap.add_argument("--summarize", default=None, help="only summarise the JSON lines of this file")
     args = ap.parse_args(argv)
+    if args.summarize:
+        import json
+        runs: dict = {}
+        for line in open(args.summarize):
+            r = json.loads(line)
+            runs.setdefault(r["policy"], {})[r["seed"]] = r
+        summarize(runs)
+        return 0
     spec = {"synthetic": {"n_nodes": args.nodes, "n_aerodromes": args.vertiports, "seed": 0,
                           "levels_m": LEVELS_M, "pads_per_vertiport": 4}}
     cfg = make_config({"network": spec, "duration_s": args.duration, "audit": True,
@@ -190,20 +224,7 @@ def main(argv=None) -> int:
     for seed in range(args.first_seed, args.first_seed + args.seeds):
         for p in args.policies:
             runs[p][seed] = one_run(net, cfg, seed, p, args)
-    for p in args.policies:
-        d = [r["decision_s"] for r in runs[p].values()]
-        dc = [r["decision_cpu_s"] for r in runs[p].values()]
-        m, lo, hi = mean_interval([r["affected"] for r in runs[p].values()])
-        print(f"{p}: decision wall median {1e3 * statistics.median(d):.0f} ms (max {1e3 * max(d):.0f}), "
-              f"CPU median {1e3 * statistics.median(dc):.0f} ms (max {1e3 * max(dc):.0f}); "
-              f"affected mean {m:.1f} [{lo:.1f}, {hi:.1f}]; losses {[r['losses'] for r in runs[p].values()]}, "
-              f"incursions {[r['incursions'] for r in runs[p].values()]}")
-    if "mwis" in runs and "firstfit" in runs and len(runs["mwis"]) >= 1:
-        a, b = runs["mwis"], runs["firstfit"]
-        for metric in ("reach", "saved", "reach_delay_mean_s"):
-            pr = paired({s: a[s][metric] for s in a}, {s: b[s][metric] for s in b})
-            print(f"mwis - firstfit {metric}: {pr.text(1)} over {pr.n} seeds "
-                  f"(mwis {[a[s][metric] for s in sorted(a)]}, firstfit {[b[s][metric] for s in sorted(b)]})")
+    summarize(runs)
     print(f"uptime: {uptime()}")
     return 0
 

@@ -336,3 +336,15 @@ def test_airborne_flight_diverted_to_the_free_pad_of_the_alternate():
                                                  112.0 + math.hypot(150, 480) / 10.0 + 20.0], atol=0.05)
     np.testing.assert_allclose(tr.times_s[:3], [0.0, 12.0, 112.0], atol=0.05)   # the old plan up to mp
     assert u.flight.weight == pytest.approx(divert_weight(tr.arrival_s - 60.0))
+
+
+def test_clipped_from_cuts_at_any_instant():
+    from uam_planner.replanning import clipped_from
+    tr = Trajectory(np.array([0.0, 100.0, 200.0]), np.array([(0, 0, 0), (1000, 0, 0), (1000, 1000, 0)], float))
+    c = clipped_from(tr, 150.0)
+    np.testing.assert_allclose(c.times_s, [150.0, 200.0])
+    np.testing.assert_allclose(c.points_m, [(1000, 500, 0), (1000, 1000, 0)])
+    assert clipped_from(tr, -5.0) is tr and clipped_from(tr, 200.0) is None
+    c = clipped_from(tr, 200.0 - 1e-12)         # within rounding of the arrival
+    assert c.times_s[-1] == 200.0 and c.times_s[0] < 200.0
+    np.testing.assert_allclose(clipped_from(tr, 100.0).points_m[0], (1000, 0, 0))

@@ -403,6 +403,21 @@ def default_solve_mwis(config: PlanningConfig) -> Callable:
     return solve
 
 
+def replan_selector(solve_mwis: Callable, config: PlanningConfig, epoch_index: int = 0,
+                    t_s: float = 0.0) -> Callable:
+    """The ``select(graph, policy)`` of ``uam_planner.replanning.replan``: policy "mwis" calls
+    ``solve_mwis`` (the answer checked, greedy if invalid or failed), "firstfit" walks the
+    vertices (``uam_planner.first_fit``); returns (selected, an EpochReport with backend_used,
+    fallback and fallback_reason)."""
+    def select(graph, policy):
+        rep = EpochReport(epoch_index=int(epoch_index), t_s=float(t_s), policy=policy,
+                          backend_requested=config.backend if policy == "mwis" else "firstfit")
+        answer = first_fit_select(graph.weights, graph.edges) if policy == "firstfit" \
+            else call_solver(solve_mwis, graph)
+        return checked_selection(graph, answer, rep), rep
+    return select
+
+
 # ---- the two policies ---------------------------------------------------------------------------
 
 def _eligible(t_s: float, pending: Sequence[FlightRequest], config: PlanningConfig,
@@ -983,8 +998,11 @@ class Planner:
             from .replanning import ReplanReport
             self._replan_report = ReplanReport(t_s=float(t_s), policy=self.replan_policy(), updates=labels)
             return
+        cfg = self.config
         active, updates, report = replan(t_s, epoch_index, self.active, self._requests, self.network,
-                                         self.config, self.cache, cset, self.solve_mwis,
+                                         cfg, self.cache, cset,
+                                         replan_selector(self.solve_mwis, cfg, epoch_index, t_s),
+                                         lambda t, r: departure_slots_s(t, r, cfg),
                                          self.replan_policy(), labels=labels)
         self.active = active
         self._plan_updates, self._replan_report = updates, report

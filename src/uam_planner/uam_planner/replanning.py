@@ -11,16 +11,18 @@ plan, from ``t_eff`` on, enters a constraint of the updated set during its windo
   as the planner builds them) that stay out of every constraint; none chosen -> **cancelled**,
   with a reason naming the constraint;
 - **airborne** (departure < t_eff): it flies on to its *branch point*, the first waypoint at or
-  after t_eff (a corridor node, or its origin pad at the top of the climb), and from there gets
-  up to ``k`` routes to its destination (**rerouted**) and the shortest route to each of the
-  ``DIVERT_VERTIPORTS`` nearest other vertiports, every pad (**diverted**), all at its level,
-  searched with the corridors that cross an updated volume avoided (penalised Dijkstra, each such
-  corridor 10,000 km dearer, so taken only where there is no other way, e.g. to leave the zone
-  before it opens; vertiports as terminals on a layered network) and then checked exactly; none chosen -> **contingency**:
-  it flies the constraint-free alternative that loses separation with the fewest flights, then
-  lands soonest (a contingency landing, flown but *not deconflicted*, ``Flight.contingent``,
-  F3548 Contingent), or its current plan if none stays out (an incursion that cannot be
-  avoided: reported, never hidden);
+  after t_eff (a corridor node, or its origin pad at the top of the climb), and from there gets,
+  at its level, up to ``k`` routes to its destination's pad (**rerouted**) and the shortest
+  route to each of the ``DIVERT_VERTIPORTS`` nearest other vertiports, every pad (**diverted**);
+  a flight left with fewer than ``STAGE2_BELOW`` of them that keep separation with the
+  unaffected flights also gets the re-routes to its destination's other pads and all of these
+  from its next waypoint (``BRANCH_WAYPOINTS``). Routes: penalised Dijkstra with the corridors
+  that cross an updated volume avoided (each 10,000 km dearer, so taken only where there is no
+  other way, e.g. to leave the zone before it opens; vertiports terminals on a layered
+  network), then checked exactly. None chosen -> **contingency**: it flies the constraint-free
+  alternative that loses separation with the fewest flights, then lands soonest (a contingency
+  landing, flown but *not deconflicted*, ``Flight.contingent``, F3548 Contingent), or its
+  current plan if none stays out (an incursion that cannot be avoided: reported, never hidden);
 - a flight whose plan still stays out keeps it (**kept**; a flight is affected only if it does
   not, so kept appears when the caller names flights explicitly).
 
@@ -189,7 +191,7 @@ def clipped_from(tr: Trajectory, t_s: float) -> Trajectory | None:
     if t <= tr.departure_s:
         return tr
     ts, ps = tr.times_s, tr.points_m
-    j = int(np.searchsorted(ts, t + _EPS_T, side="right"))  # first waypoint after t
+    j = min(int(np.searchsorted(ts, t + _EPS_T, side="right")), ts.shape[0] - 1)  # next waypoint
     w = (t - ts[j - 1]) / (ts[j] - ts[j - 1])
     here = ps[j - 1] + w * (ps[j] - ps[j - 1])
     times = np.concatenate(([t], ts[j:]))
@@ -492,13 +494,12 @@ def _extend(times, pts, new_pts, speed, descent, vertical_last: bool) -> Traject
     return Trajectory._trusted(out_t, out_p, None)  # increasing: positive legs at positive speeds
 
 
-def _ground_alternatives(f, req, t_eff: float, network, config, cache) -> list:
+def _ground_alternatives(f, req, t_eff: float, network, cache, departures: Callable) -> list:
     """Candidates of a flight that has not departed: every template and departure slot in its
     request's window from t_eff (see the module docstring)."""
-    from .planning import departure_slots_s
     o, d = network.node_index(f.origin_id), network.node_index(f.destination_id)
     if req is not None:
-        slots = departure_slots_s(t_eff, req, config)
+        slots = np.asarray(departures(t_eff, req), dtype=np.float64)
         slots = slots[(slots >= req.earliest_departure_s - _EPS_T) & (slots <= req.latest_departure_s + _EPS_T)]
     else:  # restored without its request: only its own departure time
         slots = np.array([f.departure_s]) if f.departure_s >= t_eff else np.zeros(0)
@@ -553,7 +554,7 @@ def _least_conflicting(alts: list, unaffected: list, chosen: dict, contingencies
 
 
 def replan(t_eff: float, epoch_index: int, active: Sequence, requests: dict, network, config,
-           cache, cset: ConstraintSet, solve_mwis: Callable | None, policy: str = "mwis",
+           cache, cset: ConstraintSet, select: Callable, departures: Callable, policy: str = "mwis",
            affected: dict | None = None, labels: Sequence[str] = ()) -> tuple[list, list, ReplanReport]:
     """Re-plan the flights of ``active`` that the constraints ``cset`` affect, at ``t_eff``.
 
@@ -565,8 +566,11 @@ def replan(t_eff: float, epoch_index: int, active: Sequence, requests: dict, net
             missing here keeps only its own departure time as a re-time option).
         network, config, cache: the planner's Network, PlanningConfig and CandidateCache.
         cset: the ConstraintSet after the update.
-        solve_mwis: callable(weights, edges, groups) for policy "mwis" (answer checked, greedy
-            fallback); ignored by "firstfit".
+        select: callable(graph, policy) -> (selected vertex indices, an object with
+            ``backend_used``, ``fallback``, ``fallback_reason``): the checked MWIS or first-fit
+            answer (the Planner's: ``uam_planner.planning.replan_selector``).
+        departures: callable(t_s, request) -> departure times a request may take at an epoch at
+            t_s (the Planner's ``departure_slots_s`` with its config).
         policy: "mwis" or "firstfit".
         affected: optional {index in active: (constraint index, entry time)} (default:
             :func:`affected_flights`).
@@ -575,8 +579,6 @@ def replan(t_eff: float, epoch_index: int, active: Sequence, requests: dict, net
         PlanUpdate per affected flight in ``active`` order; ReplanReport).
     """
     from .conflict_graph import build_conflict_graph
-    from .first_fit import first_fit_select
-    from .planning import EpochReport, call_solver, checked_selection
     from .separation import SegmentSet
 
     t0, c0 = time.perf_counter(), time.process_time()
@@ -602,7 +604,7 @@ def replan(t_eff: float, epoch_index: int, active: Sequence, requests: dict, net
         rep.affected_not_departed += int(not airborne)
         origin = None if airborne else network.node_index(f.origin_id)
         alts = _airborne_alternatives(f, t_eff, network, config, router) if airborne else \
-            _ground_alternatives(f, requests.get(f.request_id), t_eff, network, config, cache)
+            _ground_alternatives(f, requests.get(f.request_id), t_eff, network, cache, departures)
         alts = _constraint_free(alts, cset, t_eff, network, origin)
         keep = _constraint_free([_Alt(f.trajectory, "kept", W_KEEP, network.node_index(f.destination_id),
                                       tuple(f.route_node_ids), f.length_m, f.route_index,
@@ -638,17 +640,13 @@ def replan(t_eff: float, epoch_index: int, active: Sequence, requests: dict, net
                                  np.array([a.weight for a in flat], dtype=np.float64), len(idx),
                                  act, config.separation)
     rep.vertices, rep.edges = graph.n_vertices, graph.n_edges
-    er = EpochReport(epoch_index=int(epoch_index), t_s=float(t_eff), policy=policy,
-                     backend_requested=config.backend if policy == "mwis" else "firstfit")
     ts = time.perf_counter()
     if graph.n_vertices == 0:
         selected = np.zeros(0, dtype=np.int64)
-    elif policy == "firstfit":
-        selected = checked_selection(graph, first_fit_select(graph.weights, graph.edges), er)
     else:
-        selected = checked_selection(graph, call_solver(solve_mwis, graph), er)
+        selected, er = select(graph, policy)
+        rep.backend_used, rep.fallback, rep.fallback_reason = er.backend_used, er.fallback, er.fallback_reason
     rep.solve_time_s = time.perf_counter() - ts
-    rep.backend_used, rep.fallback, rep.fallback_reason = er.backend_used, er.fallback, er.fallback_reason
     chosen = {}
     for v in selected.tolist():
         src = int(graph.vertex_source[v])
