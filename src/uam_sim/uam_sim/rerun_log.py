@@ -620,6 +620,7 @@ class RerunLogger:
 TOPIC_FLEET = resolved(names.TOPIC_FLEET)
 TOPIC_PLANS = resolved(names.TOPIC_PLANS)
 TOPIC_REPORTS = resolved(names.TOPIC_REPORTS)
+TOPIC_CONSTRAINTS = resolved(names.TOPIC_CONSTRAINTS)
 
 
 def log_recording(mcap_path: str | os.PathLike, rrd_path: str | os.PathLike, network: Any = None) -> int:
@@ -633,11 +634,14 @@ def log_recording(mcap_path: str | os.PathLike, rrd_path: str | os.PathLike, net
 
     n = 0
     with RerunLogger("save", rrd_path, network=network, utc_zero_ns=log_time_zero_ns(mcap_path) or None) as logger:
-        for topic, _t_ns, msg in iter_decoded(mcap_path, topics=(TOPIC_FLEET, TOPIC_PLANS, TOPIC_REPORTS)):
+        for topic, _t_ns, msg in iter_decoded(mcap_path, topics=(TOPIC_FLEET, TOPIC_PLANS, TOPIC_REPORTS,
+                                                                 TOPIC_CONSTRAINTS)):
             if topic == TOPIC_FLEET:
                 logger.log_fleet_state_msg(msg)
             elif topic == TOPIC_PLANS:
                 logger.log_flight_plan_msg(msg)
+            elif topic == TOPIC_CONSTRAINTS:
+                logger.log_constraints_msg(msg)
             else:
                 logger.log_planning_report_msg(msg)
             n += 1

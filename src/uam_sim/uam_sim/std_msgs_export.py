@@ -547,6 +547,11 @@ def write_views(src: str, dst: str, network: Any = None,
                 extra = views.fleet_state_messages(deserialize(r))
             elif r.topic == resolved(names.TOPIC_PLANS):
                 extra = views.plan_messages(deserialize(r))
+            elif r.topic == resolved(names.TOPIC_CONSTRAINTS):  # issue 22: the set in force
+                from uam_planner.live_constraints import constraints_from_text
+                t_set, found = constraints_from_text(deserialize(r).data)
+                extra = views.constraint_messages(max(r.log_time_ns - zero_src, int(round(t_set * 1e9))),
+                                                  [k for k, _eff in found])
             else:
                 continue
             for vm in extra:

@@ -407,8 +407,8 @@ class RecorderNode(Node):
             return
         constraints = [k for k, _eff in found]
         self.rerun.log_constraints(t_s, constraints)
-        if self.views is not None:
-            for vm in self.views.constraint_messages(log_ns, constraints):
+        if self.views is not None:   # at the instant the set took effect (a String has no stamp)
+            for vm in self.views.constraint_messages(max(int(log_ns), int(round(t_s * 1e9))), constraints):
                 self._write_view(vm)
 
     def _write_view(self, vm) -> None:
