@@ -301,3 +301,27 @@ def test_the_scenario_clock_and_the_constraints_are_in_the_rrd(tmp_path):
                for k, t in enumerate(d["sim_time"]) for name in d if ":" in name and d[name][k] is not None]
     assert (30.0, "LineStrips3D:strips") in closure and any(t == 60.0 and "Clear" in n for t, n in closure), closure
     assert "/geo/constraints/sq" in by_entity
+
+
+def test_graph_routes_match_their_aircraft_and_replanned_ones_show_as_such(tmp_path):
+    """In the node graph the simulator names a vehicle operator/request: its route must carry that
+    key (it carried the bare request id, so every airborne route was drawn as a point). A plan
+    version > 1 (issue 22) replaces the route, in the re-planned colour, and is not an approval."""
+    from uam_sim.rerun_log import REPLANNED_ROUTE_COLOR, ROUTE_COLOR
+
+    def plan(version, xs, stamp_s):
+        return NS(outcome=0, operator_id="generator", request_id="r1", version=version, header=NS(stamp=stamp(stamp_s)),
+                  waypoints=[NS(position=point(x, 0, 100)) for x in xs])
+
+    path = tmp_path / "g.rrd"
+    with RerunLogger("save", path, network=tiny_network(), batch_steps=1) as lg:
+        lg.log_flight_plan_msg(plan(1, (0, 1000, 2000), 0.0))
+        lg.log_fleet(1.0, ["generator/r1"], [[10.0, 0.0, 100.0]])
+        lg.log_flight_plan_msg(plan(2, (10, 500), 30.0))
+        lg.log_fleet(31.0, ["generator/r1"], [[20.0, 0.0, 100.0]])
+        assert lg.approved_total == 1
+    shown = _latest_at(path, "/world/fleet")
+    assert np.asarray(shown[1.0]["LineStrips3D:strips"][0]).shape == (3, 3)
+    assert shown[1.0]["LineStrips3D:colors"] == [int.from_bytes(bytes(ROUTE_COLOR), "big")]
+    assert np.asarray(shown[31.0]["LineStrips3D:strips"][0]).shape == (2, 3)
+    assert shown[31.0]["LineStrips3D:colors"] == [int.from_bytes(bytes(REPLANNED_ROUTE_COLOR) + b"\xff", "big")]

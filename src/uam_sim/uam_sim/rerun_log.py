@@ -189,6 +189,8 @@ def map_zoom(network: Any, pane_px: float = 200.0) -> float:
     return float(np.clip(np.log2(156543.03 * np.cos(np.radians(lat)) * pane_px / extent), 1.0, 18.0))
 
 
+#: colour of the route of a flight re-planned around a constraint (a plan version > 1, issue 22)
+REPLANNED_ROUTE_COLOR = (255, 150, 40)
 #: colour of airspace constraints (issue 22) in Rerun and the standard-message views
 CONSTRAINT_COLOR = (235, 60, 60)
 CONSTRAINT_RADIUS_UI = 1.5
@@ -466,14 +468,18 @@ class RerunLogger:
                 self._rec.log("geo/fleet", rr.GeoPoints.from_fields(
                     colors=VEHICLE_COLOR, radii=_ui(VEHICLE_RADIUS_UI)), static=True)
             self._fleet_styled = True
-        if ids != self._fleet_ids:
+        if ids != self._fleet_ids or getattr(self, "_routes_changed", False):
+            self._routes_changed = False
             self._at(t_s)
             self._rec.log("world/fleet", rr.Points3D.from_fields(labels=list(ids)))
             strips = []
             for vid, p in zip(ids, pos):
                 route = self._routes.get(vid)
                 strips.append(route if route is not None and len(route) >= 2 else np.stack([p, p]))
-            self._rec.log("world/fleet", rr.LineStrips3D(_strips_arrow(strips), colors=ROUTE_COLOR,
+            replanned = getattr(self, "_replanned", set())
+            colors = ROUTE_COLOR if not replanned & set(ids) else \
+                [REPLANNED_ROUTE_COLOR if vid in replanned else ROUTE_COLOR for vid in ids]
+            self._rec.log("world/fleet", rr.LineStrips3D(_strips_arrow(strips), colors=colors,
                                                          radii=_ui(ROUTE_RADIUS_UI)))
             for landed in set(self._fleet_ids or ()) - set(ids):
                 self._routes.pop(landed, None)
@@ -581,12 +587,27 @@ class RerunLogger:
 
     def log_flight_plan_msg(self, msg: Any) -> None:
         """A uam_msgs/FlightPlan: approved plans add a route and count towards the total."""
-        if not self.enabled or int(msg.outcome) != 0:  # OUTCOME_APPROVED
+        if not self.enabled:
+            return
+        # the simulator names each vehicle operator/request (uam_contract.wire.scoped_id): the
+        # route must carry the same key to be drawn with its aircraft (plans without an operator,
+        # as from the in-process runner, keep the bare id the fleet uses there)
+        op = str(getattr(msg, "operator_id", "") or "")
+        key = f"{op}/{msg.request_id}" if op else str(msg.request_id)
+        pts = [(w.position.x, w.position.y, w.position.z) for w in msg.waypoints]
+        if int(getattr(msg, "version", 0) or 0) > 1:  # a re-planned version (issue 22): not an approval
+            if not hasattr(self, "_replanned"):
+                self._replanned = set()
+            self._replanned.add(key)
+            if int(msg.outcome) == 0 and pts:
+                self.log_route(stamp_s(msg.header.stamp), key, pts)
+            self._routes_changed = True   # re-log the routes at the next step, in their new colour
+            return
+        if int(msg.outcome) != 0:  # OUTCOME_APPROVED
             return
         self._approved_total += 1
-        pts = [(w.position.x, w.position.y, w.position.z) for w in msg.waypoints]
         if pts:
-            self.log_route(stamp_s(msg.header.stamp), msg.request_id, pts)
+            self.log_route(stamp_s(msg.header.stamp), key, pts)
 
     def log_planning_report_msg(self, msg: Any) -> None:
         """A uam_msgs/PlanningReport: the epoch's metrics (approvals counted from the reports)."""
