@@ -116,10 +116,12 @@ def run_to_end(executor, nodes, obs, spin_until, timeout_s=120.0):
 
 
 def decisions(plans, operator_id="generator") -> dict:
-    """request id -> (epoch, candidate) of the approvals of one operator (what must match a run)."""
+    """request id -> (epoch, candidate) of the approvals of one operator (what must match a run);
+    later versions of a plan (re-plans, issue 22) are not approvals and are left out."""
     from uam_msgs.msg import FlightPlan
     return {p.request_id: (int(p.epoch_index), int(p.candidate_index)) for p in plans
-            if p.outcome == FlightPlan.OUTCOME_APPROVED and p.operator_id == operator_id}
+            if p.outcome == FlightPlan.OUTCOME_APPROVED and p.operator_id == operator_id
+            and int(getattr(p, "version", 1)) <= 1}
 
 
 def in_process(rate, seed, duration_s, backend, policy="mwis", epoch_s=30.0, network=TINY, time_limit_s=5.0,

@@ -10,7 +10,9 @@ forget an aircraft.
 
 Format: one JSON object per line, ``{"session": <simulator session>, "plan": <base64 of the
 FlightPlan's CDR>}``, appended and flushed before the plan is published or answered (so every
-plan anyone can hold is in the journal first). Only the entries of the simulator session the
+plan anyone can hold is in the journal first). Re-planned versions and cancellations (issue 22:
+``FlightPlan.version`` > 1) are journaled the same way, so a restarted planner takes each
+flight's newest version (:func:`newest_versions`), not its first. Only the entries of the simulator session the
 planner resumes for count: a journal left over from another run is ignored and started afresh.
 """
 
@@ -20,6 +22,29 @@ import base64
 import json
 import os
 from pathlib import Path
+
+from uam_contract.stamps import stamp_s
+from uam_contract.wire import scoped_id
+
+
+def newest_versions(plans, epoch_index: int, t_s: float) -> dict:
+    """scoped request id -> the newest version of its plan that reached the simulator before the
+    epoch ``epoch_index`` at ``t_s`` [s]: approvals of earlier epochs, and re-planned versions
+    (issue 22: ``version`` > 1; a cancellation too) decided before ``t_s``. Later ones were
+    never answered (the simulator asks for that epoch again), so they never flew."""
+    own: dict = {}
+    for p in plans:
+        version = int(getattr(p, "version", 0) or 0)
+        if version > 1:
+            if stamp_s(p.header.stamp) >= t_s:
+                continue
+        elif int(p.epoch_index) >= epoch_index:
+            continue
+        key = scoped_id(p.operator_id, p.request_id)
+        held = own.get(key)
+        if held is None or version >= int(getattr(held, "version", 0) or 0):
+            own[key] = p
+    return own
 
 
 class Journal:

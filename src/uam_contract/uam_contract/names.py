@@ -26,12 +26,18 @@ TOPIC_CLOCK = "/clock"
 SERVICE_SOLVE = "uam/solve_mwis"
 SERVICE_PLAN_EPOCH = "uam/plan_epoch"
 SERVICE_RELEASE_DEMAND = "uam/release_demand"
+# live airspace constraints (issue 22): the planner serves updates and publishes the set it plans with
+SERVICE_UPDATE_CONSTRAINT = "uam/update_constraint"
+TOPIC_CONSTRAINTS = "uam/constraints"
 
 # the standard-type views the recorder writes for generic viewers (uam_sim.std_msgs_export)
 TOPIC_VIEW_NETWORK = "uam/view/network"
 TOPIC_VIEW_ROUTES = "uam/view/routes"
 TOPIC_VIEW_FLEET = "uam/view/fleet"
 TOPIC_VIEW_FIX_PREFIX = "uam/view/fix/"
+TOPIC_VIEW_NETWORK_POINTS = "uam/view/network_points"
+TOPIC_VIEW_CONSTRAINTS = "uam/view/constraints"
+TOPIC_VIEW_CONSTRAINT_POINTS = "uam/view/constraint_points"
 # the live Foxglove WebSocket's channels (uam_sim.foxglove_live)
 TOPIC_LIVE_NETWORK = "uam/live/network"
 TOPIC_LIVE_ROUTES = "uam/live/routes"
@@ -69,6 +75,10 @@ QOS_RECORD_VOLATILE = QosSpec(history="keep_last", depth=10000, reliability="rel
 # Requests from operators: transient local so a planner that starts (or restarts) late still gets
 # every request; the planner's reader history bounds what a flood can queue.
 QOS_REQUESTS = QOS_LATCHED
+# The constraint set (a std_msgs/String of GeoJSON, the whole set each time it changes): latched, so a
+# late subscriber gets the current set, and deep enough that a recorder that starts late still gets
+# every set the run planned with (the audit of incursions needs each one).
+QOS_CONSTRAINTS = QosSpec(history="keep_last", depth=1000, reliability="reliable", durability="transient_local")
 
 #: topic -> (message type ``pkg/msg/Type``, QoS of the recorder's subscription). A transient-local
 #: reader does not match a volatile writer, so each topic is read with its writers' durability.
@@ -80,4 +90,5 @@ RECORDED_TOPICS: dict[str, tuple[str, QosSpec]] = {
     TOPIC_FLEET: ("uam_msgs/msg/FleetState", QOS_RECORD_VOLATILE),
     TOPIC_POSES: ("geometry_msgs/msg/PoseArray", QOS_RECORD_VOLATILE),
     TOPIC_SYNC: ("uam_msgs/msg/EpochSync", QOS_LATCHED),
+    TOPIC_CONSTRAINTS: ("std_msgs/msg/String", QOS_CONSTRAINTS),
 }

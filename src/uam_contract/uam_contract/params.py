@@ -301,7 +301,11 @@ RECORDER = (
     Param("scenario_start_utc", SIM_CLOCK, "'sim': the view topics' header stamps in simulation time, the "
           "clock of every other topic; or an ISO 8601 instant of simulation time 0 (e.g. "
           f"{DEFAULT_SCENARIO_START_UTC}): their stamps are then that plus the simulation time, real UTC "
-          "(log times stay simulation time)", check=_utc_rule),
+          "(log times: log_time_start_utc)", check=_utc_rule),
+    Param("log_time_start_utc", DEFAULT_SCENARIO_START_UTC, "the scenario's UTC instant of simulation time 0: "
+          "every message's MCAP log and publish time is that plus its simulation time, so Rerun and Foxglove "
+          "show real dates (the analysis subtracts it again: MCAP record uam_clock); 'sim' = log times in "
+          "simulation time (from 1970-01-01, as before)", check=_utc_rule),
     Param("view_fix_period_s", 5.0, "NavSatFix per vehicle every this many simulated seconds; 0 = every "
           "step [s]", 0.0, 3600.0),
     Param("foxglove_port", 0, "serve a live Foxglove WebSocket view on this port (0 = off; 8765 is "

@@ -61,6 +61,7 @@ class CandidateRoute:
 
 DEFAULT_CLIMB_RATE_MPS = defaults.CLIMB_RATE_MPS        # the one source: uam_contract.defaults
 DEFAULT_DESCENT_RATE_MPS = defaults.DESCENT_RATE_MPS
+AVOID_COST_M = 1e7  # extra cost of an avoided corridor in a re-planning search
 
 
 class _PenalisedGraph:
@@ -108,8 +109,14 @@ def _validate_k_penalty(k, penalty_factor):
 
 
 def _routes(graph: _PenalisedGraph, network, o: int, d: int, k: int,
-            penalty_factor: float, terminals: bool = False) -> list[CandidateRoute]:
+            penalty_factor: float, terminals: bool = False,
+            blocked: np.ndarray | None = None) -> list[CandidateRoute]:
+    """``blocked``: optional (m,) bool, corridors to avoid (re-planning around a constraint,
+    ``uam_planner.replanning``): each costs ``AVOID_COST_M`` more, so a route takes one only
+    where there is no other way (e.g. to leave a zone before it opens; the exact test decides)."""
     cost = graph.length.copy()
+    if blocked is not None:
+        cost[blocked] += AVOID_COST_M
     if terminals:
         # Vertiports are terminals: corridors touching any other aerodrome are closed.
         other = network.is_aerodrome.copy()

@@ -93,6 +93,9 @@ class Constraint:
             be infinite: -inf = from the ground, inf = unlimited).
         vertiport_id, pad_index: closure only: the vertiport (an aerodrome id of the network) and
             optionally one pad index (None = the whole vertiport).
+        announce_s: when the authority announces it [s] (-inf, the default: known from the
+            start). A ``Planner`` holds a constraint back until its first epoch at a time >=
+            announce_s, and then re-plans the flights it affects (docs/replanning.md).
     """
 
     constraint_id: str
@@ -107,6 +110,7 @@ class Constraint:
     upper_m: float = math.inf
     vertiport_id: str | None = None
     pad_index: int | None = None
+    announce_s: float = -math.inf
     _index: dict = field(default_factory=dict, init=False, repr=False)  # GEOS tree, built once
 
     def __post_init__(self):
@@ -123,7 +127,12 @@ class Constraint:
         end = _finite(own, "end_s", self.end_s, allow_inf=True, sign=1)
         if not end > start:
             raise ConstraintError(f"{own}end_s: {self.end_s!r} is not after start_s {self.start_s!r}")
+        announce = _finite(own, "announce_s", self.announce_s, allow_inf=True, sign=-1)
+        if not announce < end:
+            raise ConstraintError(f"{own}announce_s: {self.announce_s!r} is not before end_s "
+                                  f"{self.end_s!r} (announced after it ended)")
         object.__setattr__(self, "version", int(v))
+        object.__setattr__(self, "announce_s", announce)
         object.__setattr__(self, "start_s", start)
         object.__setattr__(self, "end_s", end)
         given = [n for n, x in (("polygon", self.rings_m), ("circle", self.center_m),
@@ -369,7 +378,8 @@ def prism_entry_times(t0_s, t1_s, p0_m, v_mps, c: Constraint) -> np.ndarray:
                 s[k] = _polygon_entry_indexed(ax[k], ay[k], dx[k], dy[k], c)
             else:
                 s[k] = _polygon_entry(ax[k], ay[k], dx[k], dy[k], c.rings_m)
-    out[live] = np.where(np.isfinite(s), lo + s * (hi - lo), np.inf)
+    with np.errstate(invalid="ignore"):  # s = inf where never: inf x 0 is masked out
+        out[live] = np.where(np.isfinite(s), lo + s * (hi - lo), np.inf)
     return out
 
 
@@ -577,7 +587,8 @@ def constraints_from_geojson(doc: Mapping, network=None) -> list[Constraint]:
         where = f"features[{i}] (id {cid!r})"
         common = dict(constraint_id=cid, version=_prop(props, "version", where),
                       reason=_prop(props, "reason", where, False, ""),
-                      start_s=_prop(props, "start_s", where), end_s=_prop(props, "end_s", where))
+                      start_s=_prop(props, "start_s", where), end_s=_prop(props, "end_s", where),
+                      announce_s=_prop(props, "announce_s", where, False, -math.inf))
         geom = f.get("geometry")
         try:
             if geom is None:

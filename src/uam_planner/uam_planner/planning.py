@@ -70,6 +70,7 @@ from .objectives import (BASELINE_ORDERS, OperatorShares, check_objective, check
 from .trajectory import Trajectory
 
 POLICIES = ("mwis", "fifo", "firstfit")  # firstfit: uam_planner.first_fit
+REPLAN_POLICIES = ("mwis", "firstfit")  # uam_planner.replanning
 MAX_HORIZON_EPOCHS = 100  # PlanningConfig.horizon_epochs
 
 
@@ -89,7 +90,17 @@ class FlightRequest:
 
 @dataclass(frozen=True, eq=False)
 class Flight:
-    """An approved flight: a request with its chosen route and 4D trajectory."""
+    """An approved flight: a request with its chosen route and 4D trajectory.
+
+    Plan versions (issue 22, docs/replanning.md): ``version`` counts the plans of one request
+    (1 = the approval; a re-plan on a constraint update makes version + 1) and ``effective_s``
+    is when this version took effect (the first version: its departure, the default when nan
+    is given; a re-plan: the epoch time at which the update was applied). A new version flies
+    the old trajectory before ``effective_s`` and its own after (an airborne re-plan keeps the
+    old waypoints up to its branch point, so the two chain). ``contingent``: the plan is a
+    contingency (flown, not deconflicted; F3548 state Contingent). The F3548 state at a time is
+    :func:`uam_planner.replanning.flight_state`.
+    """
 
     request_id: str
     origin_id: str
@@ -108,6 +119,13 @@ class Flight:
     level_m: float = float("nan")
     priority: int = 0
     operator_id: str = ""
+    version: int = 1
+    effective_s: float = float("nan")
+    contingent: bool = False
+
+    def __post_init__(self):
+        if math.isnan(self.effective_s):
+            object.__setattr__(self, "effective_s", float(self.departure_s))
 
 
 def _positive(owner: str, name: str, v, allow_zero: bool = False) -> None:
@@ -187,6 +205,11 @@ class PlanningConfig:
             every later epoch is deconflicted against them) that are never re-optimised (only
             a constraint's re-planning may revoke one). False (default): the rolling horizon
             commits only this epoch's departures and plans the rest again.
+        replan_policy: how the Planner re-plans the flights a constraint update affects
+            (``uam_planner.replanning``, docs/replanning.md): "mwis" (one MWIS over every
+            affected flight's alternatives), "firstfit" (the baseline: in approval order, each
+            flight's first alternative in preference order that keeps separation), or ""
+            (default: "mwis" for the MWIS policy, "firstfit" for FIFO and first-fit).
     """
 
     epoch_s: float = defaults.EPOCH_S          # the paper's values, from uam_contract.defaults
@@ -205,6 +228,7 @@ class PlanningConfig:
     horizon_epochs: int = 1
     commit_ahead: bool = False
     fair_window_s: float = 0.0
+    replan_policy: str = ""
 
     @property
     def separation(self) -> SeparationModel:
@@ -242,6 +266,9 @@ class PlanningConfig:
         _positive("PlanningConfig", "fair_window_s", self.fair_window_s, allow_zero=True)
         if not isinstance(self.commit_ahead, (bool, np.bool_)):
             raise ValueError(f"PlanningConfig.commit_ahead must be a bool, got {self.commit_ahead!r}")
+        if self.replan_policy not in ("",) + REPLAN_POLICIES:
+            raise ValueError(f"PlanningConfig.replan_policy must be one of {('',) + REPLAN_POLICIES}, "
+                             f"got {self.replan_policy!r}")
         if self.baseline_order not in BASELINE_ORDERS:
             raise ValueError(f"PlanningConfig.baseline_order must be one of {BASELINE_ORDERS}, "
                              f"got {self.baseline_order!r}")
@@ -282,16 +309,24 @@ class EpochReport:
     #: request id -> reason naming the constraint(s), for each eligible request all of whose
     #: candidates entered a constraint this epoch (uam_planner.constraints)
     constraint_refusals: dict = field(default_factory=dict)
+    #: the batch re-plan of this epoch (``uam_planner.replanning.ReplanReport``), or None when
+    #: no constraint update was applied at this epoch
+    replan: object = None
 
 
 @dataclass
 class EpochResult:
-    """Approvals, expiries and the requests left waiting after one epoch, with the report."""
+    """Approvals, expiries and the requests left waiting after one epoch, with the report.
+
+    ``plan_updates``: the new versions and cancellations of flights approved before, decided at
+    this epoch because constraints changed (``uam_planner.replanning.PlanUpdate``, one per
+    affected flight; empty when nothing changed)."""
 
     approved: list
     expired: list
     waiting: list
     report: EpochReport
+    plan_updates: list = field(default_factory=list)
 
 
 # ---- MWIS answer checking ---------------------------------------------------------------------
@@ -380,6 +415,21 @@ def default_solve_mwis(config: PlanningConfig) -> Callable:
         return uam_solvers.solve_bounded(weights, edges, groups=groups, backend=config.backend,
                                          time_limit_s=config.time_limit_s, seed=config.seed)
     return solve
+
+
+def replan_selector(solve_mwis: Callable, config: PlanningConfig, epoch_index: int = 0,
+                    t_s: float = 0.0) -> Callable:
+    """The ``select(graph, policy)`` of ``uam_planner.replanning.replan``: policy "mwis" calls
+    ``solve_mwis`` (the answer checked, greedy if invalid or failed), "firstfit" walks the
+    vertices (``uam_planner.first_fit``); returns (selected, an EpochReport with backend_used,
+    fallback and fallback_reason)."""
+    def select(graph, policy):
+        rep = EpochReport(epoch_index=int(epoch_index), t_s=float(t_s), policy=policy,
+                          backend_requested=config.backend if policy == "mwis" else "firstfit")
+        answer = first_fit_select(graph.weights, graph.edges) if policy == "firstfit" \
+            else call_solver(solve_mwis, graph)
+        return checked_selection(graph, answer, rep), rep
+    return select
 
 
 # ---- the two policies ---------------------------------------------------------------------------
@@ -863,6 +913,15 @@ class Planner:
         # requests decided (approved or expired) and approved per operator (the "fair"
         # objective's running shares, over the whole run or a sliding window)
         self.shares = OperatorShares(window_s=float(self.config.fair_window_s))
+        # constraint updates (issue 22, uam_planner.replanning): queued ones are applied at the
+        # first epoch at a time >= their t_s; applied ones are logged in order
+        self._queued_updates: list = []
+        self._update_seq = 0
+        self.constraint_log: list = []          # ConstraintUpdate, with applied_s
+        self.initial_constraints: tuple = ()    # the constraints in force from the start
+        self._requests: dict = {}               # request_id -> FlightRequest of active flights
+        self._plan_updates: list = []           # decided in prepare, returned by commit
+        self._replan_report = None
 
     @property
     def config(self) -> PlanningConfig:
@@ -891,12 +950,105 @@ class Planner:
 
     def set_constraints(self, constraints) -> None:
         """Plan from the next epoch on against ``constraints`` (a ConstraintSet, an iterable of
-        Constraint checked against this planner's network, or None for none). Flights already
-        approved are not revisited (batch re-planning is issue 22 item 3)."""
+        Constraint checked against this planner's network, or None for none).
+
+        A constraint with a finite ``announce_s`` is held back and added (an 'add' update, see
+        :meth:`update_constraint`) at the first epoch at a time >= announce_s, when the flights
+        it affects are re-planned; the others apply from the next epoch, and flights already
+        approved are not revisited by this call. Replaces every constraint and every queued
+        update given before."""
         from dataclasses import replace
+        from .replanning import ConstraintUpdate
         if constraints is not None and not isinstance(constraints, ConstraintSet):
             constraints = ConstraintSet(constraints, self.network)
+        now = [c for c in (constraints or ()) if not math.isfinite(c.announce_s)]
+        later = sorted((c for c in (constraints or ()) if math.isfinite(c.announce_s)),
+                       key=lambda c: c.announce_s)
+        self._queued_updates = []
+        for c in later:
+            self._update_seq += 1
+            self._queued_updates.append(ConstraintUpdate("add", c, float(c.announce_s), self._update_seq))
+        if constraints is not None and later:
+            constraints = ConstraintSet(now, self.network)
+        self.initial_constraints = tuple(now)
         self.config = replace(self.config, constraints=constraints)
+
+    def _projected_constraints(self) -> dict:
+        """constraint id -> Constraint once every queued update is applied."""
+        cur = {c.constraint_id: c for c in (self.config.constraints or ())}
+        for u in sorted(self._queued_updates, key=lambda u: (u.t_s, u.seq)):
+            if u.action == "withdraw":
+                cur.pop(u.constraint.constraint_id, None)
+            else:
+                cur[u.constraint.constraint_id] = u.constraint
+        return cur
+
+    def update_constraint(self, action: str, constraint, t_s: float) -> str | None:
+        """Queue a live constraint update; return None if accepted, else the reason (naming the
+        field and value; nothing changes then).
+
+        Args:
+            action: 'add' (a new id), 'change' (a known id with a higher version) or
+                'withdraw' (a known id; ``constraint`` may be the Constraint or its id).
+            constraint: a ``uam_planner.constraints.Constraint`` (or an id for 'withdraw').
+            t_s: when it is announced [s]; it is applied at the first epoch at a time >= t_s
+                (or the next epoch, if that time has passed), before that epoch's requests are
+                planned: the flights it affects are re-planned then (:mod:`uam_planner.replanning`)
+                and the results are that epoch's ``EpochResult.plan_updates``. A constraint
+                whose window has ended by t_s is refused.
+        """
+        from .replanning import ConstraintUpdate, check_update
+        current = self._projected_constraints()
+        reason = check_update(action, constraint, t_s, current, self.network)
+        if reason is not None:
+            return reason
+        c = current[constraint if isinstance(constraint, str) else constraint.constraint_id] \
+            if action == "withdraw" else constraint
+        self._update_seq += 1
+        self._queued_updates.append(ConstraintUpdate(action, c, float(t_s), self._update_seq))
+        return None
+
+    @property
+    def queued_updates(self) -> list:
+        """The constraint updates not applied yet, in the order they will be applied."""
+        return sorted(self._queued_updates, key=lambda u: (u.t_s, u.seq))
+
+    def replan_policy(self) -> str:
+        """The re-plan policy in use: ``config.replan_policy``, or by default "mwis" for the MWIS
+        policy and "firstfit" for the baselines."""
+        return self.config.replan_policy or ("mwis" if self.policy == "mwis" else "firstfit")
+
+    def _apply_constraint_updates(self, t_s: float, epoch_index: int) -> None:
+        """The one place constraint updates take effect (issue 22): at the epoch at ``t_s``,
+        after landed flights are dropped and before the epoch's requests are planned. Applies
+        every queued update due by ``t_s`` and, if one added or changed a constraint,
+        re-plans the affected flights (``uam_planner.replanning.replan``) and replaces them in
+        ``active`` by their new versions (cancelled ones removed)."""
+        from dataclasses import replace
+        from .replanning import apply_updates, replan
+        self._plan_updates, self._replan_report = [], None
+        due = [u for u in self._queued_updates if u.t_s <= t_s]
+        if not due:
+            return
+        due.sort(key=lambda u: (u.t_s, u.seq))
+        self._queued_updates = [u for u in self._queued_updates if u.t_s > t_s]
+        cset = apply_updates(self.config.constraints, due, self.network)
+        applied = [replace(u, applied_s=float(t_s)) for u in due]
+        self.constraint_log.extend(applied)
+        self.config = replace(self.config, constraints=cset)
+        labels = [f"{u.action} {u.constraint.label()}" for u in applied]
+        if not any(u.action != "withdraw" for u in applied):
+            from .replanning import ReplanReport
+            self._replan_report = ReplanReport(t_s=float(t_s), policy=self.replan_policy(), updates=labels)
+            return
+        cfg = self.config
+        active, updates, report = replan(t_s, epoch_index, self.active, self._requests, self.network,
+                                         cfg, self.cache, cset,
+                                         replan_selector(self.solve_mwis, cfg, epoch_index, t_s),
+                                         lambda t, r: departure_slots_s(t, r, cfg),
+                                         self.replan_policy(), labels=labels)
+        self.active = active
+        self._plan_updates, self._replan_report = updates, report
 
     def _default_solve(self, weights, edges, groups):
         return default_solve_mwis(self._config)(weights, edges, groups)
@@ -969,6 +1121,10 @@ class Planner:
             raise RuntimeError(f"epoch {self._prepared.epoch_index} is prepared but not committed")
         self.active = [f for f in self.active if f.arrival_s >= t_s]
         self.shares.advance(t_s)
+        if self._requests:
+            alive = {f.request_id for f in self.active}
+            self._requests = {k: r for k, r in self._requests.items() if k in alive}
+        self._apply_constraint_updates(t_s, epoch_index)
         if self.policy == "mwis":
             prep = prepare_epoch_mwis(t_s, epoch_index, self.pending, self.active, self.network, self.config,
                                       self.cache, self.active_index, self.shares,
@@ -992,6 +1148,13 @@ class Planner:
             raise RuntimeError("commit: this epoch was not prepared by this planner (or is committed)")
         self._prepared = None
         result = commit_epoch(prep, answer, self.config, solve_s)
+        result.plan_updates = list(self._plan_updates)
+        result.report.replan = self._replan_report
+        self._plan_updates, self._replan_report = [], None
+        if result.approved:
+            by_id = {r.request_id: r for r in prep.pending}
+            self._requests.update((f.request_id, by_id[f.request_id]) for f in result.approved
+                                  if f.request_id in by_id)
         arrived_since = self.pending[len(prep.pending):]
         self.pending = list(result.waiting) + arrived_since
         self.active = self.active + list(result.approved)

@@ -280,3 +280,40 @@ def test_fifo_prints_no_mwis_rows_and_reasons_show_their_numbers(fifo_two_operat
     assert "MWIS             none solved (policy fifo)" in text and "MWIS selected" not in text
     assert "2 x no conflict-free departure found by latest_departure 60..90 s" in text
     assert "latest_departure N" not in text
+
+
+def test_log_times_on_the_scenario_clock_give_the_same_analysis(recording, tmp_path):
+    """Issue 22: the recorder puts log times on the scenario's UTC clock (2025-01-06T00:00:00Z =
+    1,736,121,600 s after the Unix epoch, + simulation time) and says so in the ``uam_clock``
+    record; the readers subtract it, so the analysis, its times and its verdict are unchanged."""
+    from uam_sim.mcap_reader import CLOCK_METADATA, iter_decoded, log_time_zero_ns, read_messages, read_metadata
+    from uam_sim.recording import parse_offered_qos
+
+    zero = 1_736_121_600 * NS
+    utc = tmp_path / "utc.mcap"
+    with McapRecorder(utc) as rec:
+        rec.add_metadata(CLOCK_METADATA, {"log_time_zero_ns": zero, "log_time_start_utc": "2025-01-06T00:00:00Z"})
+        for m in read_messages(recording):
+            if not rec.has_topic(m.topic):
+                rec.add_topic(m.topic, m.type_name, offered_qos_profiles=parse_offered_qos(m.qos_yaml) or None)
+            rec.write(m.topic, m.data, m.log_time_ns + zero)
+        for name in ("uam_airspace", "uam_recorder_check"):
+            if read_metadata(recording, name):
+                rec.add_metadata(name, read_metadata(recording, name))
+    assert log_time_zero_ns(recording) == 0 and log_time_zero_ns(utc) == zero
+    assert min(m.log_time_ns for m in read_messages(utc)) == zero          # the file: 2025-01-06
+    assert [t for _, t, _ in iter_decoded(utc)] == [t for _, t, _ in iter_decoded(recording)]
+    a, b = summarize(recording).to_dict(), summarize(utc).to_dict()
+    a.pop("path", None), b.pop("path", None)
+    assert a == b and a["fleet_steps"] == 5
+    assert main([str(utc)]) == main([str(recording)]) == 2                # the same loss, found the same way
+
+
+def test_a_bad_clock_record_is_refused_naming_it(tmp_path):
+    from uam_sim.mcap_reader import CLOCK_METADATA, log_time_zero_ns
+
+    bad = tmp_path / "bad.mcap"
+    with McapRecorder(bad) as rec:
+        rec.add_metadata(CLOCK_METADATA, {"log_time_zero_ns": "soon"})
+    with pytest.raises(ValueError, match=r"uam_clock.log_time_zero_ns: 'soon' is not an integer"):
+        log_time_zero_ns(bad)

@@ -164,3 +164,24 @@ def test_clock_cdr_equals_rclpy_serialization():
         msg = Clock(clock=Time(sec=sec, nanosec=nanosec))
         assert encode_clock(sec, nanosec) == serialize_message(msg)
         assert deserialize_message(encode_clock(sec, nanosec), Clock) == msg
+
+
+def test_a_new_version_flies_from_its_effective_instant_and_must_chain():
+    fleet = _fleet()
+    # b re-planned at t = 15 (half-way along its second segment, at (100, 50, 0)): from the
+    # waypoint (100, 100, 0) at t = 20 it turns west instead of descending, 100 m in 10 s
+    new = Trajectory([0.0, 10.0, 20.0, 30.0], [[0, 0, 0], [100, 0, 0], [100, 100, 0], [0, 100, 0]])
+    fleet.update("b", new, 15.0)
+    s = fleet.sample(25.0)
+    np.testing.assert_allclose(s.positions_m[s.vehicle_ids.index("b")], [50, 100, 0])
+    s = fleet.sample(12.5)   # before the switch the old and new versions are the same path
+    np.testing.assert_allclose(s.positions_m[s.vehicle_ids.index("b")], [100, 25, 0])
+    # a version that is not where b is at the switch is refused, and b keeps flying its plan
+    jump = Trajectory([15.0, 25.0], [[0, 0, 0], [0, 100, 0]])
+    with pytest.raises(ValueError, match="versions do not chain"):
+        fleet.update("b", jump, 15.0)
+    np.testing.assert_allclose(fleet.sample(25.0).positions_m[fleet.sample(25.0).vehicle_ids.index("b")],
+                               [50, 100, 0])
+    assert fleet.total_added == 2       # a new version is not a new flight
+    assert fleet.remove("b") and fleet.sample(25.0).vehicle_ids == []   # cancelled; a landed at 15
+    assert not fleet.remove("b")

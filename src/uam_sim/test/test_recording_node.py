@@ -86,8 +86,8 @@ def test_records_every_topic_and_closes_on_the_simulators_finish(ros_context, sp
         "/uam/flight_plans": 1, "/uam/planning_reports": 1, "/uam/epoch_sync": 2}
     # the run in standard types (views on by default): the network once, a cloud per fleet
     # state, the approved route, and vehicle r1's fix at t = 0 (one every 5 s)
-    assert views == {"/uam/view/network": 1, "/uam/view/fleet": 5, "/uam/view/routes": 1,
-                     "/uam/view/fix/r1": 1}
+    assert views == {"/uam/view/network": 1, "/uam/view/network_points": 1, "/uam/view/fleet": 5,
+                     "/uam/view/routes": 1, "/uam/view/fix/r1": 1}
     from rosbags.typesys import Stores, get_typestore
     ts = get_typestore(Stores.ROS2_JAZZY)
     clouds = [m for m in msgs if m.topic == "/uam/view/fleet"]
@@ -95,10 +95,19 @@ def test_records_every_topic_and_closes_on_the_simulators_finish(ros_context, sp
     # one clock for every topic: the view stamps are simulation time, as the fleet state's (they
     # were UTC from 2025-01-06 while /uam/* carried simulation time)
     assert (last.header.stamp.sec, last.header.stamp.nanosec) == (4, 0) and last.width == 1
-    assert [m.log_time_ns for m in clouds] == [k * NS for k in range(5)]
-    # log time = the message's simulation stamp
+    # log time = the message's simulation stamp on the scenario's UTC clock (issue 22): by default
+    # 2025-01-06T00:00:00Z = 1736121600 s after the Unix epoch, so viewers show that date
+    zero = 1736121600 * NS
+    assert [m.log_time_ns for m in clouds] == [zero + k * NS for k in range(5)]
     fleet_times = [m.log_time_ns for m in msgs if m.topic == "/uam/fleet_state"]
-    assert fleet_times == [k * NS for k in range(5)]
+    assert fleet_times == [zero + k * NS for k in range(5)]
+    from uam_sim.mcap_reader import iter_decoded, read_metadata
+    assert read_metadata(out, "uam_clock") == {"log_time_zero_ns": str(zero),
+                                               "log_time_start_utc": "2025-01-06T00:00:00Z"}
+    # the readers give simulation time back (the analysis works in seconds from the start)
+    assert [t_ns for _topic, t_ns, _m in iter_decoded(out, topics=["/uam/fleet_state"])] == [k * NS for k in range(5)]
+    assert [t_ns for _topic, t_ns, _m in iter_decoded(out, "rosbags", topics=["/uam/fleet_state"])] == \
+        [k * NS for k in range(5)]
     # offered QoS as the publisher offered it (asked from the graph)
     plans_qos = yaml.safe_load(next(m.qos_yaml for m in msgs if m.topic == "/uam/flight_plans"))
     assert plans_qos[0]["durability"] == "transient_local" and plans_qos[0]["reliability"] == "reliable"
@@ -121,7 +130,7 @@ def test_sigterm_and_ctrl_c_close_the_file_properly(tmp_path, sig):
         lines = []
         for line in proc.stdout:
             lines.append(line)
-            if "recording 7 topics" in line:
+            if "recording 8 topics" in line:
                 break
         assert out.exists(), "".join(lines)
         proc.send_signal(sig)
@@ -260,7 +269,8 @@ def test_each_channel_s_log_times_are_in_order_when_its_publishers_stamps_are_no
     report epoch k, and the log time was each message's own stamp."""
     out = tmp_path / "sync.mcap"
     recorder = RecorderNode(context=ros_context, parameter_overrides=[
-        Parameter("output", value=str(out)), Parameter("views", value=False)])
+        Parameter("output", value=str(out)), Parameter("views", value=False),
+        Parameter("log_time_start_utc", value="sim")])  # log times in simulation time, as before issue 22
     talker = Node("talker", context=ros_context)
     topic, (cls, qos) = next((k, v) for k, v in RECORDED_TOPICS.items() if k.endswith("epoch_sync"))
     pub = talker.create_publisher(cls, topic, qos)
@@ -336,4 +346,5 @@ def test_view_stamps_are_real_utc_when_a_scenario_start_is_given(ros_context, sp
     from rosbags.typesys import Stores, get_typestore
     cloud = next(m for m in read_messages(out) if m.topic == "/uam/view/fleet")
     stamp = get_typestore(Stores.ROS2_JAZZY).deserialize_cdr(cloud.data, "sensor_msgs/msg/PointCloud2").header.stamp
-    assert stamp.sec == 1736121600 + 3 and cloud.log_time_ns == 3 * NS  # 2025-01-06T00:00:03Z; log time sim
+    assert stamp.sec == 1736121600 + 3  # 2025-01-06T00:00:03Z
+    assert cloud.log_time_ns == (1736121600 + 3) * NS  # log time on the scenario's clock too (issue 22)

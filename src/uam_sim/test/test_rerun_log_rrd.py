@@ -285,3 +285,60 @@ def test_batched_fleet_logging_shows_every_step_as_logged(tmp_path, batch_steps)
         assert len(geo[t]["GeoPoints:positions"]) == len(ids)
         if ids:
             assert -90 < geo[t]["GeoPoints:positions"][0][0] < 90
+
+
+def test_the_scenario_clock_and_the_constraints_are_in_the_rrd(tmp_path):
+    """Issue 22: with the scenario's UTC start the fleet is on a ``utc`` timeline too (t = 3 s is
+    2025-01-06T00:00:03Z), and a constraint set logged at t = 30 s draws each constraint from then
+    (a square: 2 rings of 4 sides + 4 vertical edges = 6 strips) until its window ends (a clear at
+    end_s = 100 s); a constraint missing from the next set is cleared then (t = 60 s)."""
+    import rerun as rr
+    from uam_planner.constraints import Constraint
+
+    path = tmp_path / "c.rrd"
+    square = Constraint("sq", 1, "event", 0.0, 100.0, lower_m=0.0, upper_m=300.0,
+                        rings_m=(np.array([[-100.0, -100.0], [100.0, -100.0], [100.0, 100.0], [-100.0, 100.0]]),))
+    closed = Constraint("B-closed", 1, "", 0.0, 1e9, vertiport_id="B")
+    with RerunLogger("save", path, network=tiny_network(), utc_zero_ns=1_736_121_600 * 10**9) as lg:
+        lg.log_fleet(3.0, ["a"], [[0.0, 0.0, 5.0]])
+        lg.log_constraints(30.0, [square, closed])
+        lg.log_constraints(60.0, [square])
+    by_entity: dict[str, list] = {}
+    for chunk in rr.chunk.RrdReader(path).stream():
+        if not chunk.is_static:
+            by_entity.setdefault(chunk.entity_path, []).append(chunk.to_record_batch().to_pydict())
+    fleet = [d for d in by_entity["/world/fleet"] if "Points3D:positions" in d]
+    assert [str(t) for d in fleet for t in d["utc"]] == ["2025-01-06 00:00:03"]
+    rows = [(t.total_seconds(), name) for d in by_entity["/world/constraints/sq"] for k, t in enumerate(d["sim_time"])
+            for name in d if ":" in name and d[name][k] is not None]
+    assert (30.0, "LineStrips3D:strips") in rows and any(t == 100.0 and "Clear" in n for t, n in rows), rows
+    strips = next(d["LineStrips3D:strips"][0] for d in by_entity["/world/constraints/sq"] if "LineStrips3D:strips" in d)
+    assert len(strips) == 6
+    closure = [(t.total_seconds(), name) for d in by_entity["/world/constraints/B-closed"]
+               for k, t in enumerate(d["sim_time"]) for name in d if ":" in name and d[name][k] is not None]
+    assert (30.0, "LineStrips3D:strips") in closure and any(t == 60.0 and "Clear" in n for t, n in closure), closure
+    assert "/geo/constraints/sq" in by_entity
+
+
+def test_graph_routes_match_their_aircraft_and_replanned_ones_show_as_such(tmp_path):
+    """In the node graph the simulator names a vehicle operator/request: its route must carry that
+    key (it carried the bare request id, so every airborne route was drawn as a point). A plan
+    version > 1 (issue 22) replaces the route, in the re-planned colour, and is not an approval."""
+    from uam_sim.rerun_log import REPLANNED_ROUTE_COLOR, ROUTE_COLOR
+
+    def plan(version, xs, stamp_s):
+        return NS(outcome=0, operator_id="generator", request_id="r1", version=version, header=NS(stamp=stamp(stamp_s)),
+                  waypoints=[NS(position=point(x, 0, 100)) for x in xs])
+
+    path = tmp_path / "g.rrd"
+    with RerunLogger("save", path, network=tiny_network(), batch_steps=1) as lg:
+        lg.log_flight_plan_msg(plan(1, (0, 1000, 2000), 0.0))
+        lg.log_fleet(1.0, ["generator/r1"], [[10.0, 0.0, 100.0]])
+        lg.log_flight_plan_msg(plan(2, (10, 500), 30.0))
+        lg.log_fleet(31.0, ["generator/r1"], [[20.0, 0.0, 100.0]])
+        assert lg.approved_total == 1
+    shown = _latest_at(path, "/world/fleet")
+    assert np.asarray(shown[1.0]["LineStrips3D:strips"][0]).shape == (3, 3)
+    assert shown[1.0]["LineStrips3D:colors"] == [int.from_bytes(bytes(ROUTE_COLOR), "big")]
+    assert np.asarray(shown[31.0]["LineStrips3D:strips"][0]).shape == (2, 3)
+    assert shown[31.0]["LineStrips3D:colors"] == [int.from_bytes(bytes(REPLANNED_ROUTE_COLOR) + b"\xff", "big")]

@@ -124,8 +124,9 @@ def test_corridors_get_one_line_list_per_level():
     from rosbags.typesys import Stores, get_typestore
     ts = get_typestore(Stores.ROS2_JAZZY)
     for network, n_lists in ((net, 1), (leveled, 2)):
-        (vm,) = ViewExporter(network).network_messages()
-        arr = ts.deserialize_cdr(vm.data, "visualization_msgs/msg/MarkerArray")
+        markers, points = ViewExporter(network).network_messages()
+        assert (markers.topic, points.topic) == (TOPIC_NETWORK, "/uam/view/network_points")
+        arr = ts.deserialize_cdr(markers.data, "visualization_msgs/msg/MarkerArray")
         lists = [m for m in arr.markers if m.type == MARKER_LINE_LIST and m.action == 0]
         assert len(lists) == n_lists
         assert sum(len(m.points) for m in lists) == 2 * net.n_edges
@@ -177,7 +178,8 @@ def test_rosbags_reads_every_view_message_with_utc_stamps(run_mcap):
                 assert m.type == MARKER_LINE_STRIP and len(m.points) >= 2 and m.lifetime.sec > 0
     ids = {t: v for t, v in fleet_sizes.items() if isinstance(t, tuple)}
     fleet = {t: v for t, v in fleet_sizes.items() if not isinstance(t, tuple)}
-    assert counts["sensor_msgs/msg/PointCloud2"] == len(fleet) == 161
+    # a cloud per fleet state, and the network's points (for Rerun's MCAP import) once
+    assert counts["sensor_msgs/msg/PointCloud2"] - 1 == len(fleet) == 161
     assert counts["visualization_msgs/msg/MarkerArray"] == 1 + result.summary["approved"]
     # fixes every 5 s of simulation time (the default fix period), one per airborne vehicle
     due = {t for t in fleet if t % (5 * SEC) == 0}
@@ -211,6 +213,9 @@ def test_rerun_mcap_convert_yields_points_and_geo_points(run_mcap, tmp_path):
     assert fixes and all("GeoPoints:positions" in by_entity[e] for e in fixes)
     assert "ros2_timestamp" in by_entity[TOPIC_FLEET_CLOUD]   # the UTC header stamps, as a timeline
     assert TOPIC_NETWORK in by_entity
+    # Rerun 0.41 imports no MarkerArray as geometry: the network is drawn from its point cloud
+    assert "Points3D:positions" not in by_entity[TOPIC_NETWORK]
+    assert "Points3D:positions" in by_entity["/uam/view/network_points"]
 
 
 def test_views_are_added_to_an_older_recording(tmp_path):
@@ -273,3 +278,45 @@ def test_bulk_fleet_encoding_decodes_to_the_same_messages_as_the_per_vehicle_pat
             [encode_nav_sat_fix(START_NS + 3, frame, *row) for row in lla]
         for pts in (np.zeros((0, 3)), lla, rng.uniform(-1, 1, (50, 3))):
             assert encode_point_cloud_fast(START_NS + 3, frame, pts) == encode_point_cloud(START_NS + 3, frame, pts)
+
+
+def test_lines_are_sampled_into_points_at_most_25_m_apart():
+    from uam_sim.std_msgs_export import sample_lines
+
+    # 100 m east: 0, 25, 50, 75, 100; 30 m north: two steps of 15 m; a point-long segment: twice
+    got = sample_lines([[[0, 0, 0], [100, 0, 0]], [[0, 0, 10], [0, 30, 10]], [[5, 5, 5], [5, 5, 5]]])
+    np.testing.assert_allclose(got, [[0, 0, 0], [25, 0, 0], [50, 0, 0], [75, 0, 0], [100, 0, 0],
+                                     [0, 0, 10], [0, 15, 10], [0, 30, 10], [5, 5, 5], [5, 5, 5]])
+    assert sample_lines(np.zeros((0, 2, 3))).shape == (0, 3)
+
+
+def test_constraints_are_drawn_with_their_window_as_markers_and_points():
+    """A 500 m square over the origin, 0-300 m, [0, 10000) s: its outline is 2 rings of 4 sides
+    and 4 vertical edges (12 segments = 24 LINE_LIST points); as points every 25 m, 21 per side of a
+    ring (8 sides) and 13 per vertical edge (4): 220. A vertiport closure is a 150 m ring at 0 m."""
+    from rosbags.typesys import Stores, get_typestore
+    from uam_planner.constraints import Constraint
+    from uam_planner.network import load_network
+
+    net = load_network(TINY)
+    square = Constraint("hub", 1, "event", 0.0, 10000.0, rings_m=(np.array([[-250, -250], [250, -250], [250, 250],
+                                                                          [-250, 250]], dtype=float),),
+                        lower_m=0.0, upper_m=300.0)
+    closed = Constraint("C-closed", 2, "", 0.0, 150.0, vertiport_id="C")
+    markers, cloud = ViewExporter(net).constraint_messages(30 * SEC, [square, closed])
+    assert (markers.topic, cloud.topic) == ("/uam/view/constraints", "/uam/view/constraint_points")
+    assert markers.sim_time_ns == cloud.sim_time_ns == 30 * SEC
+    ts = get_typestore(Stores.ROS2_JAZZY)
+    arr = ts.deserialize_cdr(markers.data, "visualization_msgs/msg/MarkerArray")
+    assert arr.markers[0].action == 3   # DELETEALL: the set replaces the one before
+    lines = [m for m in arr.markers if m.type == MARKER_LINE_LIST and m.action == 0]
+    texts = sorted(m.text for m in arr.markers if m.type == 9)
+    assert texts == ["'C-closed' v2 [0, 150) s", "'hub' v1 (event) 0..300 m [0, 10000) s"]
+    by_len = sorted(len(m.points) for m in lines)
+    assert by_len == [24, 2 * 48]   # the closure's ring: 48 segments
+    pc = ts.deserialize_cdr(cloud.data, "sensor_msgs/msg/PointCloud2")
+    # the closure's ring: 48 segments of 2 pi 150 / 48 = 19.6 m < 25 m, each drawn by its 2 ends
+    assert pc.width == 220 + 48 * 2
+    empty_markers, empty_cloud = ViewExporter(net).constraint_messages(60 * SEC, [])
+    assert len(ts.deserialize_cdr(empty_markers.data, "visualization_msgs/msg/MarkerArray").markers) == 1
+    assert ts.deserialize_cdr(empty_cloud.data, "sensor_msgs/msg/PointCloud2").width == 0

@@ -10,6 +10,7 @@ One job per module (imports only point down this list's layers; ``test/test_laye
   ``recording`` (the ``python -m uam_sim.recording`` command; re-exports the names above),
   ``replay`` (timing of a replay), ``rerun_log``;
 - analysis: ``audit`` (exact separation audits: pairwise on plans, time sweep on trajectories),
+  ``flown_audit`` (plan versions chained into what flew; incursions into recorded constraints),
   ``analysis`` (summary of a recording and its integrity checks; ``python -m uam_sim.analysis``),
   ``recorded_instances`` (the MWIS instances of a recording; the ``.mcap`` corpus reader that
   ``uam_solvers.instances`` finds through an entry point);

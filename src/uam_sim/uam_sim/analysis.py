@@ -59,7 +59,7 @@ import numpy as np
 
 from uam_contract.defaults import SEPARATION_M
 
-from .audit import AIRSPACE_METADATA, SafetyAudit, audit_plans, separation_from_metadata
+from .audit import AIRSPACE_METADATA, SafetyAudit, audit_plans, separation_from_metadata, trajectory_of
 from .flights import run_metrics, shortest_route_lengths_m
 from .mcap_reader import is_complete, iter_decoded, read_metadata, recorded_topics, require_mcap
 from .mcap_recover import RECOVERED_METADATA
@@ -81,7 +81,8 @@ TOPIC_PLANS = resolved(names.TOPIC_PLANS)
 TOPIC_REPORTS = resolved(names.TOPIC_REPORTS)
 TOPIC_FLEET = resolved(names.TOPIC_FLEET)
 TOPIC_SYNC = resolved(names.TOPIC_SYNC)
-ANALYSED_TOPICS = (TOPIC_REQUESTS, TOPIC_PLANS, TOPIC_REPORTS, TOPIC_FLEET, TOPIC_SYNC)
+TOPIC_CONSTRAINTS = resolved(names.TOPIC_CONSTRAINTS)
+ANALYSED_TOPICS = (TOPIC_REQUESTS, TOPIC_PLANS, TOPIC_REPORTS, TOPIC_FLEET, TOPIC_SYNC, TOPIC_CONSTRAINTS)
 
 
 
@@ -164,6 +165,13 @@ class RunSummary:
     def decision_metrics(self) -> dict:
         """The runner's decision metrics: ``flight_stats`` (one implementation, one set)."""
         return self.flight_stats
+
+    #: plan versions after the approval (version >= 2, issue 22): update kind -> count ("rerouted", ...)
+    plan_updates: dict = field(default_factory=dict)
+    #: entries of flown trajectories into constraints in force (uam_sim.flown_audit.Incursion.describe)
+    incursions: list = field(default_factory=list)
+    #: constraint versions the planner had in force during the run (from uam/constraints)
+    constraints_in_force: int = 0
 
     @property
     def verified(self) -> bool:
@@ -386,10 +394,20 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
     epochs: list[EpochStats] = []
     syncs: list = []
     reports: dict[int, set] = {}
+    updates: dict[str, dict] = {}  # request key -> {plan key: plan} of its versions >= 2 (issue 22)
+    constraint_sets: list = []     # (t_s, [(constraint, effective_s)]) as the planner published them
+    constraint_problems: list = []
     t_min, t_max = math.inf, -math.inf
     for topic, log_ns, msg in messages:
         if topic == TOPIC_SYNC:  # announcements: not part of the run's time span
             syncs.append(msg)
+            continue
+        if topic == TOPIC_CONSTRAINTS:
+            from uam_planner.live_constraints import constraints_from_text
+            try:
+                constraint_sets.append(constraints_from_text(msg.data))
+            except ValueError as exc:
+                constraint_problems.append(f"a constraint set on {TOPIC_CONSTRAINTS} cannot be read: {exc}")
             continue
         t_min, t_max = min(t_min, log_ns * 1e-9), max(t_max, log_ns * 1e-9)
         if topic == TOPIC_REQUESTS:
@@ -405,6 +423,9 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
                 refused_duplicates += 1
                 continue
             rid = request_key(msg)
+            if int(getattr(msg, "version", 0) or 0) > 1:  # a new version of an approved plan (issue 22)
+                updates.setdefault(rid, {})[(int(msg.version),) + _plan_key(msg)] = msg
+                continue
             if rid in decisions:
                 duplicates += 1
             key = _plan_key(msg)
@@ -436,8 +457,10 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
                    for rid, ps in decisions.items() if len(ps) > 1}
     all_approved = [(rid, p) for rid, ps in decisions.items() for p in ps if int(p.outcome) == OUTCOME_APPROVED]
     fleet_end = max(fleet_t) if fleet_t else -math.inf
+    from .flown_audit import flown_versions
+    flown_by_key, version_problems = flown_versions(all_approved, updates, constraint_sets)
     run, forged, run_end = run_problems(
-        syncs, reports, [(rid, int(p.epoch_index), stamp_s(p.waypoints[0].time) if p.waypoints else 0.0)
+        syncs, reports, [(rid, int(p.epoch_index), _departure_flown(rid, p, flown_by_key))
                          for rid, p in all_approved], flown, fleet_end)
     forged_set = set(forged)
     approved_plans, labels = [], []
@@ -476,7 +499,16 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
     # a FIFO or first-fit epoch reports its graph but solves no MWIS: its selection is not one
     with_instance = [e for e in epochs if e.vertices > 0 and e.policy in ("", "mwis")]
     max_active = int(max(fleet_n)) if fleet_n else 0
-    audit = audit_plans(approved_plans, separation_m, labels=labels)
+    if updates:  # what flew: every version from the instant it took effect (uam_sim.flown_audit)
+        from .audit import audit_trajectories
+        flown_list = [(flown_by_key[lab].times_s, flown_by_key[lab].points_m) if lab in flown_by_key
+                      else trajectory_of(p) for p, lab in zip(approved_plans, labels)]
+        keep = [k for k, (t, _x) in enumerate(flown_list) if len(t) >= 2]
+        audit = audit_trajectories([flown_list[k] for k in keep], [labels[k] for k in keep], separation_m)
+    else:
+        audit = audit_plans(approved_plans, separation_m, labels=labels)
+    from .flown_audit import audit_incursions
+    found_incursions, n_in_force = audit_incursions(approved_plans, labels, flown_by_key, constraint_sets)
     # the run's end as the epochs show it: the last epoch's time + the epoch length (the median
     # step between epochs); requests still within their window then are left out, as in the runner
     ts = sorted({e.t_s for e in epochs})
@@ -515,10 +547,34 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
         conflicting_decisions=conflicting,
         duplicate_requests_refused=refused_duplicates,
         problems=integrity_problems(epochs, [(request_key(p), int(p.epoch_index)) for p in approved_plans], flown,
-                                    max_active, audit, conflicting, fleet_steps) + run,
+                                    max_active, audit, conflicting, fleet_steps) + run
+        + constraint_problems + version_problems,
         forged_plans=forged,
         run_end=run_end,
+        plan_updates=_update_counts(updates),
+        incursions=[i.describe() for i in found_incursions],
+        constraints_in_force=n_in_force,
     )
+
+
+def _departure_flown(key: str, plan: Any, flown_by_key: dict) -> float:
+    """When a flight departs as flown: its plan's first waypoint, or the flown trajectory's when it
+    has later versions (inf when a cancellation left nothing flown)."""
+    f = flown_by_key.get(key)
+    if f is not None:
+        return float(f.times_s[0]) if len(f.times_s) else math.inf
+    return stamp_s(plan.waypoints[0].time) if plan.waypoints else 0.0
+
+
+def _update_counts(updates: dict) -> dict:
+    counts: dict[str, int] = {}
+    for versions in updates.values():
+        seen = {}
+        for p in versions.values():
+            seen[int(p.version)] = str(getattr(p, "update_kind", "") or "update")
+        for kind in seen.values():
+            counts[kind] = counts.get(kind, 0) + 1
+    return dict(sorted(counts.items()))
 
 
 def _flight_row(plan: Any, label: str, request: dict | None) -> dict:
@@ -674,6 +730,13 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
                      f"{a.describe_minimum()}, {a.pairs_checked} overlapping pairs checked")
         for rid_a, rid_b, d, t in a.losses[:20]:
             lines.append(f"    {rid_a} / {rid_b}: {d:.1f} m at t = {t:.1f} s")
+    if s.plan_updates or s.constraints_in_force:
+        kinds = ", ".join(f"{n} {k}" for k, n in s.plan_updates.items()) or "none"
+        lines.append(f"Plan updates     {kinds}; {s.constraints_in_force} constraint version(s) in force")
+        verdict = "OK: none" if not s.incursions else f"{len(s.incursions)} INCURSION(S)"
+        lines.append(f"Constraint audit {verdict} (every flown version from the instant it took effect)")
+        for text in s.incursions[:20]:
+            lines.append(f"    {text}")
     for problem in s.problems:
         lines.append(f"Recording check  {problem}")
     if s.recorder_check:
@@ -708,8 +771,9 @@ def _separation_from_flags(args):
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Command line: print the summary of a recording (exit 2 if the audit finds a loss, 3 if the
-    recording lacks plans it should hold, so its audit cannot be trusted)."""
+    """Command line: print the summary of a recording (exit 2 if the audit finds a loss of
+    separation or a flown trajectory entering a constraint in force, 3 if the recording lacks plans
+    it should hold or its plan versions do not chain, so its audit cannot be trusted)."""
     ap = argparse.ArgumentParser(allow_abbrev=False, prog="analyze", description=__doc__.split("\n\n")[0])
     ap.add_argument("recording", help="the .mcap file of a run")
     ap.add_argument("--separation", choices=("sphere", "cylinder"), default=None,
@@ -753,7 +817,7 @@ def main(argv: list[str] | None = None) -> int:
             print(format_summary(summary, epochs=not args.no_epochs))
     except BrokenPipeError:  # e.g. piped into `head`
         sys.stderr.close()
-    if summary.audit is not None and not summary.audit.ok:
+    if (summary.audit is not None and not summary.audit.ok) or summary.incursions:
         return 2
     return 0 if summary.verified else 3
 

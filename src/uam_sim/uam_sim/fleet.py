@@ -71,6 +71,30 @@ class Fleet:
         self._arrays = None
         self.total_added += 1
 
+    def update(self, vehicle_id: str, trajectory: Trajectory, effective_s: float) -> None:
+        """Fly a new plan version of ``vehicle_id`` from ``effective_s`` on: the old trajectory
+        before, the new one after (``uam_planner.replanning.spliced``: ValueError if the two do
+        not chain, i.e. the new one is not where the old one is at ``effective_s``). A flight
+        not (or no longer) in the fleet is added with the new trajectory."""
+        from uam_planner.replanning import spliced
+        got = self._flights.pop(vehicle_id, None)
+        if got is not None:
+            old = Trajectory(got[0], got[1])
+            try:
+                trajectory = spliced(old, trajectory, effective_s)
+            except ValueError:
+                self._flights[vehicle_id] = got
+                raise
+            self.total_added -= 1  # a new version, not a new flight
+        self.add(vehicle_id, trajectory)
+
+    def remove(self, vehicle_id: str) -> bool:
+        """Drop ``vehicle_id`` (a cancelled plan); True if it was in the fleet."""
+        found = self._flights.pop(vehicle_id, None) is not None
+        if found:
+            self._arrays = None
+        return found
+
     def _build(self):
         ids = sorted(self._flights)
         v = len(ids)

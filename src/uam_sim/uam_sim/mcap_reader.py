@@ -19,6 +19,11 @@ from .mcap_schema import message_class
 #: The topic whose messages ``iter_decoded(fleet_digest_only=True)`` reads as digests.
 FLEET_STATE_TOPIC = resolved(names.TOPIC_FLEET)
 
+#: MCAP metadata record of the recording's clock (issue 22): ``log_time_zero_ns``, the log time
+#: [ns since the Unix epoch] of simulation time 0 (the scenario's UTC start), and
+#: ``log_time_start_utc``, that instant as ISO 8601 (or "sim": log times are simulation time).
+CLOCK_METADATA = "uam_clock"
+
 
 @dataclass
 class RecordedMessage:
@@ -126,6 +131,21 @@ def read_metadata(path: str | os.PathLike, name: str) -> dict[str, str]:
     return {}
 
 
+def log_time_zero_ns(path: str | os.PathLike) -> int:
+    """The log time of simulation time 0 in a recording [ns since the Unix epoch]: the
+    ``uam_clock`` record's ``log_time_zero_ns`` (the scenario's UTC start), 0 for a recording
+    without one (made before log times were put on the scenario's clock: log time = sim time).
+    Raises ValueError naming the record if its value is not a non-negative integer."""
+    value = read_metadata(path, CLOCK_METADATA).get("log_time_zero_ns", "0")
+    try:
+        zero = int(value)
+    except ValueError:
+        raise ValueError(f"{CLOCK_METADATA}.log_time_zero_ns: {value!r} is not an integer") from None
+    if zero < 0:
+        raise ValueError(f"{CLOCK_METADATA}.log_time_zero_ns: {value!r} must be >= 0")
+    return zero
+
+
 def deserialize(record: RecordedMessage) -> Any:
     """The rclpy message object of a recorded message (imports rclpy)."""
     from rclpy.serialization import deserialize_message
@@ -135,7 +155,11 @@ def deserialize(record: RecordedMessage) -> Any:
 def iter_decoded(path: str | Path, reader: str = "rclpy",
                  topics: Iterable[str] | None = None,
                  fleet_digest_only: bool = False) -> Iterator[tuple[str, int, Any]]:
-    """(topic, log_time_ns, message) of the given topics (None: every topic), in log-time order.
+    """(topic, sim_time_ns, message) of the given topics (None: every topic), in log-time order.
+
+    The time is the message's log time in simulation time: the file's log times are on the
+    scenario's UTC clock (:data:`CLOCK_METADATA`), and the ``log_time_zero_ns`` recorded there is
+    subtracted, so the analysis works in seconds from the start as before.
 
     ``reader``: "rclpy" (mcap + rclpy deserialization; a torn file yields what was written) or
     "rosbags" (the independent rosbags library, every message decoded in full; needs a complete
@@ -143,6 +167,7 @@ def iter_decoded(path: str | Path, reader: str = "rclpy",
     step_index and a ``vehicles`` range of the right length only, read from the CDR directly.
     """
     wanted = None if topics is None else set(topics)
+    zero = log_time_zero_ns(path) if reader in ("rclpy", "rosbags") else 0
     if reader == "rclpy":
         if is_complete(path):
             records = read_messages(path, topics=sorted(wanted) if wanted is not None else None)
@@ -153,9 +178,9 @@ def iter_decoded(path: str | Path, reader: str = "rclpy",
             if rec.topic == FLEET_STATE_TOPIC and fleet_digest_only:
                 digest = fleet_state_digest(rec.data)
                 if digest is not None:
-                    yield rec.topic, rec.log_time_ns, digest
+                    yield rec.topic, rec.log_time_ns - zero, digest
                     continue
-            yield rec.topic, rec.log_time_ns, deserialize(rec)
+            yield rec.topic, rec.log_time_ns - zero, deserialize(rec)
     elif reader == "rosbags":
         from rosbags.highlevel import AnyReader
         from rosbags.typesys import Stores, get_typestore
@@ -163,6 +188,6 @@ def iter_decoded(path: str | Path, reader: str = "rclpy",
         with AnyReader([Path(path)], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as r:
             conns = [c for c in r.connections if wanted is None or c.topic in wanted]
             for conn, timestamp, raw in r.messages(connections=conns):
-                yield conn.topic, timestamp, r.deserialize(raw, conn.msgtype)
+                yield conn.topic, timestamp - zero, r.deserialize(raw, conn.msgtype)
     else:
         raise ValueError(f"reader: {reader!r} is not 'rclpy' or 'rosbags'")

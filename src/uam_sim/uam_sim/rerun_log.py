@@ -39,7 +39,9 @@ Entity layout (ENU metres, z up; geographic entities in WGS84 degrees):
   "Operator approval share".
 
 Every time-varying entity is logged on the ``sim_time`` timeline (a duration, seconds of
-simulation time). Modes: ``"off"`` (nothing, rerun is not even imported), ``"save"`` (an .rrd
+simulation time) and, given the scenario's UTC start (``utc_zero_ns``, as the recorder and
+:func:`log_recording` pass it), on the ``utc`` timeline too (a timestamp: real dates).
+Modes: ``"off"`` (nothing, rerun is not even imported), ``"save"`` (an .rrd
 file), ``"spawn"`` (start a local viewer and stream to it), ``"connect"`` (stream to a running
 viewer at ``connect_url``, default ``rerun+http://127.0.0.1:9876/proxy``).
 
@@ -63,6 +65,9 @@ from uam_contract.stamps import stamp_s
 
 MODES = RERUN_MODES
 TIMELINE = "sim_time"
+#: the second timeline (issue 22): the same instants on the scenario's UTC clock (a timestamp),
+#: when the logger is given the scenario's start (``utc_zero_ns``), as the MCAP's log times are
+UTC_TIMELINE = "utc"
 
 #: Colours (RGB) of the view; tests look for these colours in screenshots.
 AERODROME_COLOR = (255, 170, 0)
@@ -191,6 +196,55 @@ def map_zoom(network: Any, pane_px: float = 200.0) -> float:
     return float(np.clip(np.log2(156543.03 * np.cos(np.radians(lat)) * pane_px / extent), 1.0, 18.0))
 
 
+#: colour of the route of a flight re-planned around a constraint (a plan version > 1, issue 22)
+REPLANNED_ROUTE_COLOR = (255, 150, 40)
+#: colour of airspace constraints (issue 22) in Rerun and the standard-message views
+CONSTRAINT_COLOR = (235, 60, 60)
+CONSTRAINT_RADIUS_UI = 1.5
+#: drawn height of a band open upwards [m], and of a vertiport closure's ring [m]
+CONSTRAINT_OPEN_TOP_M = 600.0
+CLOSURE_RADIUS_M = 150.0
+
+
+def constraint_outline(c: Any, network: Any = None, segments: int = 48) -> list[np.ndarray]:
+    """Line strips (each (n, 3), ENU metres) that outline a constraint's prism: the outline at the
+    bottom and at the top of its band (an unbounded band drawn from 0 m or to
+    :data:`CONSTRAINT_OPEN_TOP_M`) and a vertical edge at each vertex (a circle: at 8 of its
+    ``segments``); a vertiport closure is a ring of :data:`CLOSURE_RADIUS_M` around it at 0 m."""
+    if c.kind == "closure":
+        ids = list(getattr(network, "node_ids", ()) if network is not None else ())
+        if c.vertiport_id not in ids:
+            return []
+        x, y, z = (float(v) for v in np.asarray(network.enu_m)[ids.index(c.vertiport_id)])
+        a = np.linspace(0.0, 2 * np.pi, segments + 1)
+        return [np.column_stack([x + CLOSURE_RADIUS_M * np.cos(a), y + CLOSURE_RADIUS_M * np.sin(a),
+                                 np.full(a.shape, z)])]
+    lo = 0.0 if not np.isfinite(c.lower_m) else float(c.lower_m)
+    hi = CONSTRAINT_OPEN_TOP_M if not np.isfinite(c.upper_m) else float(c.upper_m)
+    if c.kind == "circle":
+        a = np.linspace(0.0, 2 * np.pi, segments + 1)
+        rings = [np.column_stack([c.center_m[0] + c.radius_m * np.cos(a), c.center_m[1] + c.radius_m * np.sin(a)])]
+        verticals = rings[0][:-1:max(1, segments // 8)]
+    else:
+        rings = [np.vstack([r, r[:1]]) for r in c.rings_m]
+        verticals = np.vstack([r for r in c.rings_m])
+    out = []
+    for r in rings:
+        for z in (lo, hi):
+            out.append(np.column_stack([r, np.full(len(r), z)]))
+    for x, y in np.asarray(verticals, dtype=np.float64).reshape(-1, 2):
+        out.append(np.array([[x, y, lo], [x, y, hi]]))
+    return out
+
+
+def constraint_label(c: Any) -> str:
+    """``id vN (reason) [start, end) s``: what a view writes beside a constraint."""
+    def t(x: float) -> str:
+        return "-inf" if x == -np.inf else "inf" if x == np.inf else f"{x:g}"
+    band = "" if c.kind == "closure" else f" {t(c.lower_m)}..{t(c.upper_m)} m"
+    return f"{c.label()}{band} [{t(c.start_s)}, {t(c.end_s)}) s"
+
+
 def make_blueprint(network: Any = None) -> Any:
     """The viewer layout sent with every recording (see the module docstring)."""
     import rerun.blueprint as rrb
@@ -274,7 +328,7 @@ class RerunLogger:
     def __init__(self, mode: str, rrd_path: str | os.PathLike | None = None, network: Any = None,
                  app_id: str = "uam_fleet", connect_url: str | None = None,
                  recording_id: str | None = None, batch_steps: int = 50,
-                 batch_wall_s: float = 0.25) -> None:
+                 batch_wall_s: float = 0.25, utc_zero_ns: int | None = None) -> None:
         if mode not in MODES:
             raise ValueError(f"mode: {mode!r} is not one of {MODES}")
         if mode == "save" and not rrd_path:
@@ -285,6 +339,9 @@ class RerunLogger:
         self._rr = None
         self._network = network
         self._origin = None if network is None else tuple(network.origin_lat_lon_alt)
+        if utc_zero_ns is not None and int(utc_zero_ns) < 0:
+            raise ValueError(f"utc_zero_ns: {utc_zero_ns!r} must be >= 0 (ns since the Unix epoch)")
+        self._utc_zero_s = None if not utc_zero_ns else int(utc_zero_ns) * 1e-9
         self._routes: dict[str, np.ndarray] = {}
         self._fleet_ids: tuple[str, ...] | None = None
         self._fleet_styled = False
@@ -338,6 +395,8 @@ class RerunLogger:
 
     def _at(self, t_s: float) -> None:
         self._rec.set_time(TIMELINE, duration=float(t_s))
+        if self._utc_zero_s is not None:
+            self._rec.set_time(UTC_TIMELINE, timestamp=self._utc_zero_s + float(t_s))
 
     def _lat_lon(self, enu_m: np.ndarray) -> np.ndarray:
         from uam_planner.geo import enu_to_geodetic
@@ -437,14 +496,18 @@ class RerunLogger:
                 self._rec.log("geo/fleet", rr.GeoPoints.from_fields(
                     colors=VEHICLE_COLOR, radii=_ui(VEHICLE_RADIUS_UI)), static=True)
             self._fleet_styled = True
-        if ids != self._fleet_ids:
+        if ids != self._fleet_ids or getattr(self, "_routes_changed", False):
+            self._routes_changed = False
             self._at(t_s)
             self._rec.log("world/fleet", rr.Points3D.from_fields(labels=list(ids)))
             strips = []
             for vid, p in zip(ids, pos):
                 route = self._routes.get(vid)
                 strips.append(route if route is not None and len(route) >= 2 else np.stack([p, p]))
-            self._rec.log("world/fleet", rr.LineStrips3D(_strips_arrow(strips), colors=ROUTE_COLOR,
+            replanned = getattr(self, "_replanned", set())
+            colors = ROUTE_COLOR if not replanned & set(ids) else \
+                [REPLANNED_ROUTE_COLOR if vid in replanned else ROUTE_COLOR for vid in ids]
+            self._rec.log("world/fleet", rr.LineStrips3D(_strips_arrow(strips), colors=colors,
                                                          radii=_ui(ROUTE_RADIUS_UI)))
             for landed in set(self._fleet_ids or ()) - set(ids):
                 self._routes.pop(landed, None)
@@ -466,6 +529,8 @@ class RerunLogger:
         lengths = [len(p) for p in parts]
         flat = np.concatenate(parts) if parts else np.zeros((0, 3))
         index = [rr.TimeColumn(TIMELINE, duration=times)]
+        if self._utc_zero_s is not None:
+            index.append(rr.TimeColumn(UTC_TIMELINE, timestamp=[self._utc_zero_s + t for t in times]))
         self._rec.send_columns("world/fleet", indexes=index,
                                columns=rr.Points3D.columns(positions=flat).partition(lengths))
         if self._origin is not None:
@@ -494,6 +559,50 @@ class RerunLogger:
                             ("pending_requests", pending_requests)):
             self._rec.log(f"metrics/{name}", rr.Scalars(float(value)))
 
+    def log_constraints(self, t_s: float, constraints: Sequence[Any]) -> None:
+        """The constraint set the planner plans with from ``t_s`` on (issue 22): each constraint an
+        entity ``world/constraints/<id>`` (its prism's outline, :func:`constraint_outline`, labelled
+        with id, version, band and window) and ``geo/constraints/<id>`` on the map, shown from
+        ``max(t_s, start_s)`` and cleared at ``end_s``; those no longer in the set are cleared at
+        ``t_s``. Logged on the timelines at those instants (Rerun takes data out of time order)."""
+        if not self.enabled:
+            return
+        rr = self._rr
+        shown = getattr(self, "_constraints_shown", set())
+        now = {str(c.constraint_id): c for c in constraints}
+        self._at(t_s)
+        for cid in shown - set(now):
+            self._rec.log(f"world/constraints/{cid}", rr.Clear(recursive=True))
+            if self._origin is not None:
+                self._rec.log(f"geo/constraints/{cid}", rr.Clear(recursive=True))
+        for cid, c in now.items():
+            strips = constraint_outline(c, self._network)
+            if not strips:
+                continue
+            self._at(max(float(t_s), float(c.start_s)))
+            label = constraint_label(c)
+            self._rec.log(f"world/constraints/{cid}", rr.LineStrips3D(
+                strips, colors=CONSTRAINT_COLOR, radii=_ui(CONSTRAINT_RADIUS_UI), labels=[label] + [""] * (len(strips) - 1)))
+            if self._origin is not None:
+                outlines = [s for s in strips if len(s) > 2][::2]   # each ring once (its bottom)
+                self._rec.log(f"geo/constraints/{cid}", rr.GeoLineStrings(
+                    lat_lon=[self._lat_lon(s) for s in outlines], colors=CONSTRAINT_COLOR,
+                    radii=_ui(CONSTRAINT_RADIUS_UI)))
+            if np.isfinite(c.end_s):
+                self._at(float(c.end_s))
+                self._rec.log(f"world/constraints/{cid}", rr.Clear(recursive=True))
+                if self._origin is not None:
+                    self._rec.log(f"geo/constraints/{cid}", rr.Clear(recursive=True))
+        self._constraints_shown = set(now)
+
+    def log_constraints_msg(self, msg: Any) -> None:
+        """A std_msgs/String of ``uam/constraints`` (uam_planner.live_constraints.set_geojson)."""
+        if not self.enabled:
+            return
+        from uam_planner.live_constraints import constraints_from_text
+        t_s, found = constraints_from_text(msg.data, self._network)
+        self.log_constraints(t_s, [c for c, _eff in found])
+
     # -- ROS messages (duck-typed) ----------------------------------------------------------
 
     def log_fleet_state_msg(self, msg: Any) -> None:
@@ -512,11 +621,25 @@ class RerunLogger:
 
     def log_flight_plan_msg(self, msg: Any) -> None:
         """A uam_msgs/FlightPlan: approved plans add a route and count towards the total;
-        approvals and expiries count towards the decision panels (delay, operator shares)."""
+        approvals and expiries count towards the decision panels (delay, operator shares); a
+        re-planned version (issue 22) redraws the route and counts as no new decision."""
         if not self.enabled:
             return
-        outcome = int(msg.outcome)
+        # the simulator names each vehicle operator/request (uam_contract.wire.scoped_id): the
+        # route must carry the same key to be drawn with its aircraft (plans without an operator,
+        # as from the in-process runner, keep the bare id the fleet uses there)
         op = str(getattr(msg, "operator_id", "") or "")
+        key = f"{op}/{msg.request_id}" if op else str(msg.request_id)
+        pts = [(w.position.x, w.position.y, w.position.z) for w in msg.waypoints]
+        if int(getattr(msg, "version", 0) or 0) > 1:  # a re-planned version (issue 22): not an approval
+            if not hasattr(self, "_replanned"):
+                self._replanned = set()
+            self._replanned.add(key)
+            if int(msg.outcome) == 0 and pts:
+                self.log_route(stamp_s(msg.header.stamp), key, pts)
+            self._routes_changed = True   # re-log the routes at the next step, in their new colour
+            return
+        outcome = int(msg.outcome)
         if outcome == 2:  # OUTCOME_EXPIRED
             self._expired_total += 1
             if op:
@@ -530,9 +653,8 @@ class RerunLogger:
         earliest = self._earliest.get(_request_key(msg))
         if earliest is not None:
             self._delays.append(stamp_s(msg.departure_time) - earliest)
-        pts = [(w.position.x, w.position.y, w.position.z) for w in msg.waypoints]
         if pts:
-            self.log_route(stamp_s(msg.header.stamp), msg.request_id, pts)
+            self.log_route(stamp_s(msg.header.stamp), key, pts)
 
     def decision_values(self) -> dict:
         """What the decision panels show now: entity path under ``metrics/`` -> value."""
@@ -600,6 +722,7 @@ def _request_key(msg: Any) -> str:
     requests and plans (``uam_sim.analysis.request_key``)."""
     operator = str(getattr(msg, "operator_id", "") or "")
     return f"{operator}/{msg.request_id}" if operator else str(msg.request_id)
+TOPIC_CONSTRAINTS = resolved(names.TOPIC_CONSTRAINTS)
 
 
 def log_recording(mcap_path: str | os.PathLike, rrd_path: str | os.PathLike, network: Any = None) -> int:
@@ -609,17 +732,20 @@ def log_recording(mcap_path: str | os.PathLike, rrd_path: str | os.PathLike, net
     Decodes with rclpy (the workspace must be sourced).
     """
     from .analysis import iter_decoded
+    from .mcap_reader import log_time_zero_ns
 
     n = 0
-    with RerunLogger("save", rrd_path, network=network) as logger:
+    with RerunLogger("save", rrd_path, network=network, utc_zero_ns=log_time_zero_ns(mcap_path) or None) as logger:
         for topic, _t_ns, msg in iter_decoded(mcap_path, topics=(TOPIC_FLEET, TOPIC_PLANS, TOPIC_REPORTS,
-                                                                 TOPIC_REQUESTS)):
+                                                                 TOPIC_REQUESTS, TOPIC_CONSTRAINTS)):
             if topic == TOPIC_FLEET:
                 logger.log_fleet_state_msg(msg)
             elif topic == TOPIC_REQUESTS:
                 logger.log_request_msg(msg)
             elif topic == TOPIC_PLANS:
                 logger.log_flight_plan_msg(msg)
+            elif topic == TOPIC_CONSTRAINTS:
+                logger.log_constraints_msg(msg)
             else:
                 logger.log_planning_report_msg(msg)
             n += 1

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
@@ -37,6 +37,9 @@ class ScenarioResult:
             1..corpus_max_vertices vertices, with their epoch index.
         rejections: (request_id, reason) of requests the planner refused at submission.
         wall_s: wall time of the run.
+        replans: one row per plan update (issue 22, ``uam_planner.replanning``): t_s,
+            request_id, kind, version, constraint ids, added delay, airborne (bool); empty
+            when no constraint changed during the run.
     """
 
     method: str
@@ -50,6 +53,7 @@ class ScenarioResult:
     instances: list
     rejections: list
     wall_s: float
+    replans: list = field(default_factory=list)
 
     def decisions(self) -> dict:
         """request id -> (epoch, candidate) of each approval: what must match across runs."""
@@ -106,9 +110,33 @@ def epoch_statistics(epochs: Sequence[dict]) -> dict:
     }
 
 
+def _apply_plan_updates(updates, by_id: dict, replans: list, t: float) -> None:
+    """Fold one epoch's plan updates (uam_planner.replanning.PlanUpdate) into the flight rows:
+    a new version replaces the row's route, destination and times and splices what flies (old
+    trajectory before its effective instant, new after); a cancellation marks the row."""
+    from uam_planner.replanning import spliced
+    for u in updates:
+        row = by_id.get(u.request_id)
+        replans.append({"t_s": t, "request_id": u.request_id, "kind": u.kind, "version": u.version,
+                        "constraints": " ".join(u.constraint_ids),
+                        "added_delay_s": u.added_delay_s,
+                        "airborne": bool(u.previous.departure_s < u.effective_s)})
+        if row is None:
+            continue
+        row["version"] = u.version
+        row["replan"] = u.kind
+        if u.flight is None:
+            row["cancelled"] = True
+            continue
+        f = u.flight
+        row["_traj"] = spliced(row["_traj"], f.trajectory, u.effective_s)
+        row.update(destination=f.destination_id, departure_s=f.departure_s, arrival_s=f.arrival_s,
+                   length_m=f.length_m, route=" ".join(f.route_node_ids), level_m=float(f.level_m))
+
+
 def run_scenario(network, method: str, rate: float, seed: int, duration_s: float,
                  config: ExperimentConfig | None = None, demand=None,
-                 observer=None) -> ScenarioResult:
+                 observer=None, before_epoch=None) -> ScenarioResult:
     """Run one scenario in process: requests from the seeded generator, one planner, one method.
 
     Args:
@@ -124,7 +152,16 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
         observer: optional callable(t_s, epoch_index, submitted, rejected, EpochResult) called
             after each epoch with the requests submitted before it and the (request, reason)
             pairs refused (e.g. to record the run as the node graph would).
+        before_epoch: optional callable(planner, t_s, epoch_index) called before each epoch is
+            planned (after its requests are submitted), e.g. to announce a constraint with
+            ``planner.update_constraint`` where the traffic is (scripts/measure_replanning.py).
     Returns: ScenarioResult. Cost: one planning cycle per epoch plus an O(F^2) audit.
+
+    Constraint updates (a file's ``announce_s``, or ``before_epoch``): each epoch's
+    ``plan_updates`` replace the flight rows' plans (``ScenarioResult.replans`` lists them), the
+    audit checks what flew (every version from the instant it took effect; cancelled flights
+    flew nothing) and, when any constraint was in force, the summary adds ``replans``,
+    ``replan_<kind>`` counts and ``incursions`` (``uam_planner.replanning.audit_incursions``).
     """
     cfg = config if config is not None else ExperimentConfig()
     t_wall = time.perf_counter()
@@ -148,7 +185,8 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
                                   operator_lead_times_s=cfg.operator_lead_times_s)
     n_epochs = int(math.ceil(duration_s / cfg.epoch_s - 1e-9))
     next_interval = 0
-    epochs, flights, instances, rejections = [], [], [], []
+    epochs, flights, instances, rejections, replans = [], [], [], [], []
+    by_id: dict = {}
     n_requests = approved_cum = expired_cum = 0
     earliest_s: dict = {}
     latest_s: dict = {}
@@ -171,7 +209,11 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
                     rejections.append((req.request_id, reason))
                     refused.append((req, reason))
             next_interval += 1
+        if before_epoch is not None:
+            before_epoch(planner, t, e)
         res = planner.plan(t, e)
+        if res.plan_updates:
+            _apply_plan_updates(res.plan_updates, by_id, replans, t)
         if observer is not None:
             observer(t, e, submitted, refused, res)
         rep = res.report
@@ -192,6 +234,7 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
                                 tp.route.length_m for tp in planner.cache.templates(
                                     network.node_index(f.origin_id),
                                     network.node_index(f.destination_id)))})
+            by_id[f.request_id] = flights[-1]
         epochs.append({"epoch": e, "t_s": t, "requests_cum": n_requests, "pending": rep.pending,
                        "eligible": rep.eligible, "candidates": rep.candidates,
                        "discarded": rep.discarded, "vertices": rep.vertices, "edges": rep.edges,
@@ -208,10 +251,22 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
                               "groups": groups_from_ids(rep.vertex_request_ids)})
 
     audit = {}
+    flown = [f for f in flights if not f.get("cancelled")]
     if cfg.audit:
-        # in the run's separation model (the paper's sphere, or the cylinder)
-        audit = sweep_audit([f["_traj"] for f in flights], cfg.separation(),
-                            labels=[f["request_id"] for f in flights])
+        # in the run's separation model (the paper's sphere, or the cylinder); what flew
+        audit = sweep_audit([f["_traj"] for f in flown], cfg.separation(),
+                            labels=[f["request_id"] for f in flown])
+    extra = {}
+    if planner.constraint_log or planner.initial_constraints:
+        from uam_planner.replanning import KINDS, audit_incursions, constraint_timeline
+        timeline = constraint_timeline(planner.initial_constraints, planner.constraint_log)
+        inc = audit_incursions({f["request_id"]: f["_traj"] for f in flown}, timeline, network,
+                               {f["request_id"]: (f["origin"], f["destination"]) for f in flown}) \
+            if cfg.audit else []
+        extra = {"replans": len(replans), **{f"replan_{k}": sum(r["kind"] == k for r in replans)
+                                             for k in KINDS},
+                 "incursions": len(inc) if cfg.audit else None}
+        audit = dict(audit, incursions=[list(x) for x in inc[:20]])
     for f in flights:
         del f["_traj"]
     mwis_epochs = [r for r in epochs if r["vertices"] > 0]
@@ -221,8 +276,8 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
         "approved": approved_cum, "expired": expired_cum,
         "pending_end": n_requests - len(rejections) - approved_cum - expired_cum,
         "approval_rate": approved_cum / n_requests if n_requests else float("nan"),
-        "avg_airborne": average_airborne([f["departure_s"] for f in flights],
-                                         [f["arrival_s"] for f in flights], duration_s),
+        "avg_airborne": average_airborne([f["departure_s"] for f in flown],
+                                         [f["arrival_s"] for f in flown], duration_s),
         **epoch_statistics(epochs),
         "proven_optimal_share": (float(np.mean([r["proven_optimal"] for r in mwis_epochs]))
                                  if mwis_epochs and policy == "mwis" else float("nan")),
@@ -233,9 +288,10 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
         # requests still within their window at the end (filed ahead) are left out
         **{k: v for k, v in run_metrics(flights, asked, warmup_s=cfg.metrics_warmup_s or None,
                                         end_s=duration_s).items() if k != "flights"},
+        **extra,
     }
     wall = time.perf_counter() - t_wall
     summary["wall_s"] = wall
     summary["real_time_factor"] = duration_s / wall if wall > 0 else float("inf")
     return ScenarioResult(method, rate_label(rate), int(seed), float(duration_s), summary, epochs,
-                          flights, audit, instances, rejections, wall)
+                          flights, audit, instances, rejections, wall, replans)

@@ -62,6 +62,11 @@ TOPIC_NETWORK = resolved(names.TOPIC_VIEW_NETWORK)
 TOPIC_ROUTES = resolved(names.TOPIC_VIEW_ROUTES)
 TOPIC_FLEET_CLOUD = resolved(names.TOPIC_VIEW_FLEET)
 TOPIC_FIX_PREFIX = resolved(names.TOPIC_VIEW_FIX_PREFIX)
+TOPIC_NETWORK_POINTS = resolved(names.TOPIC_VIEW_NETWORK_POINTS)
+TOPIC_CONSTRAINTS = resolved(names.TOPIC_VIEW_CONSTRAINTS)
+TOPIC_CONSTRAINT_POINTS = resolved(names.TOPIC_VIEW_CONSTRAINT_POINTS)
+#: spacing of the points that draw lines in a PointCloud2 (Rerun 0.41 imports no MarkerArray) [m]
+LINE_POINT_SPACING_M = 25.0
 
 TYPE_MARKER_ARRAY = "visualization_msgs/msg/MarkerArray"
 TYPE_POINT_CLOUD2 = "sensor_msgs/msg/PointCloud2"
@@ -268,6 +273,20 @@ def encode_marker_array(markers: Sequence[Marker]) -> bytes:
     return ENCAPSULATION + bytes(w.buf)
 
 
+def sample_lines(segments_m: Any, spacing_m: float = LINE_POINT_SPACING_M) -> np.ndarray:
+    """Points along each segment of an (n, 2, 3) array, both ends included, at most ``spacing_m``
+    apart: lines drawn as a point cloud."""
+    seg = np.asarray(segments_m, dtype=np.float64).reshape(-1, 2, 3)
+    if not len(seg):
+        return np.zeros((0, 3))
+    length = np.linalg.norm(seg[:, 1] - seg[:, 0], axis=1)
+    counts = np.maximum(1, np.ceil(length / float(spacing_m)).astype(np.int64))
+    owner = np.repeat(np.arange(len(seg)), counts + 1)
+    start = np.concatenate([[0], np.cumsum(counts + 1)[:-1]])
+    frac = (np.arange(len(owner)) - np.repeat(start, counts + 1)) / np.repeat(counts, counts + 1)
+    return seg[owner, 0] + frac[:, None] * (seg[owner, 1] - seg[owner, 0])
+
+
 # --------------------------------------------------------------------------------------------
 # The exporter
 # --------------------------------------------------------------------------------------------
@@ -343,7 +362,39 @@ class ViewExporter:
             markers.append(Marker("vertiport_names", int(k), MARKER_TEXT_VIEW_FACING, stamp,
                                   position=tuple(enu[i] + (0.0, 0.0, 150.0)), scale=(0.0, 0.0, 150.0),
                                   color=_rgba((255, 255, 255)), text=labels[i]))
-        return [ViewMessage(TOPIC_NETWORK, TYPE_MARKER_ARRAY, encode_marker_array(markers), sim_time_ns)]
+        # Rerun 0.41's MCAP import draws no MarkerArray but does draw PointCloud2 (as Points3D):
+        # the corridors as points every LINE_POINT_SPACING_M, and the vertiports, in one cloud
+        pts = np.vstack([sample_lines(enu[edges]), enu[aero]]) if len(edges) else enu[aero]
+        return [ViewMessage(TOPIC_NETWORK, TYPE_MARKER_ARRAY, encode_marker_array(markers), sim_time_ns),
+                ViewMessage(TOPIC_NETWORK_POINTS, TYPE_POINT_CLOUD2, encode_point_cloud(stamp, FRAME_ID, pts),
+                            sim_time_ns)]
+
+    def constraint_messages(self, sim_time_ns: int, constraints: Sequence[Any]) -> list[ViewMessage]:
+        """The constraint set in force from ``sim_time_ns`` (issue 22): a MarkerArray (DELETEALL,
+        then one LINE_LIST outline of each prism or closure and a text with its id, version, band
+        and window) and the same outlines as a PointCloud2 (points every LINE_POINT_SPACING_M), for
+        Rerun's MCAP import. An empty set clears both."""
+        from .rerun_log import CONSTRAINT_COLOR, constraint_label, constraint_outline
+
+        stamp = self.stamp_ns(sim_time_ns)
+        markers = [Marker("constraints", -1, MARKER_LINE_LIST, stamp, action=MARKER_DELETEALL)]
+        clouds = []
+        for k, c in enumerate(sorted(constraints, key=lambda c: c.constraint_id)):
+            strips = constraint_outline(c, self.network)
+            if not strips:
+                continue
+            pairs = np.vstack([np.column_stack([s[:-1], s[1:]]).reshape(-1, 3) for s in strips])
+            markers.append(Marker("constraints", 2 * k, MARKER_LINE_LIST, stamp, scale=(10.0, 0.0, 0.0),
+                                  color=_rgba(CONSTRAINT_COLOR, 0.9), points=pairs))
+            top = max(strips, key=lambda s: float(s[:, 2].max()))
+            markers.append(Marker("constraint_labels", 2 * k + 1, MARKER_TEXT_VIEW_FACING, stamp,
+                                  position=tuple(top[0] + (0.0, 0.0, 60.0)), scale=(0.0, 0.0, 120.0),
+                                  color=_rgba(CONSTRAINT_COLOR), text=constraint_label(c)))
+            clouds.append(np.vstack([sample_lines(np.stack([s[:-1], s[1:]], axis=1)) for s in strips]))
+        pts = np.vstack(clouds) if clouds else np.zeros((0, 3))
+        return [ViewMessage(TOPIC_CONSTRAINTS, TYPE_MARKER_ARRAY, encode_marker_array(markers), sim_time_ns),
+                ViewMessage(TOPIC_CONSTRAINT_POINTS, TYPE_POINT_CLOUD2, encode_point_cloud(stamp, FRAME_ID, pts),
+                            sim_time_ns)]
 
     def plan_messages(self, plan: Any) -> list[ViewMessage]:
         """The route marker of an approved uam_msgs/FlightPlan (duck-typed); [] for others."""
@@ -415,14 +466,24 @@ class ViewExporter:
         return self.fleet_messages(t_ns, ids, pos)
 
 
+def _metadata_records(path: str) -> list[tuple[str, dict]]:
+    """(name, data) of every MCAP metadata record of a complete recording."""
+    from mcap.reader import make_reader
+
+    with open(path, "rb") as f:
+        return [(m.name, dict(m.metadata)) for m in make_reader(f).iter_metadata()]
+
+
 def write_views(src: str, dst: str, network: Any = None,
                 scenario_start_utc: str = DEFAULT_SCENARIO_START_UTC, geo_fixes: bool = True,
                 log_time: str = "sim") -> int:
     """Copy a recording and add the view topics; returns the view messages added.
 
-    ``log_time``: "sim" keeps the recording's log times (simulation time) and gives the view
-    messages theirs; "utc" shifts every message's log and publish time by the scenario start, so
-    a player's timeline shows real dates. Decodes with rclpy.
+    ``log_time``: "sim" writes every log time in simulation time (a source on the scenario's UTC
+    clock, MCAP record ``uam_clock``, is taken back to it); "utc" puts every message's log and
+    publish time on the scenario's clock (``scenario_start_utc`` + simulation time), so a player's
+    timeline shows real dates. The source's other metadata records (the run's airspace, the
+    recorder's check) are copied. Decodes with rclpy.
     """
     from .recording import McapRecorder, deserialize, parse_offered_qos, read_messages
 
@@ -430,14 +491,25 @@ def write_views(src: str, dst: str, network: Any = None,
         raise ValueError(f"log_time: {log_time!r} is not 'sim' or 'utc'")
     if log_time == "utc" and scenario_start_utc == SIM_CLOCK:
         raise ValueError(f"log_time 'utc' needs scenario_start_utc as an instant, not {SIM_CLOCK!r}")
+    from .mcap_reader import CLOCK_METADATA, log_time_zero_ns
+
     views = ViewExporter(network, scenario_start_utc, geo_fixes)
-    shift = views.start_ns if log_time == "utc" else 0
+    # the source's log times may already be on the scenario's UTC clock (its uam_clock record):
+    # taken back to simulation time, then put on the clock asked for
+    zero_src = log_time_zero_ns(src)
+    zero_dst = views.start_ns if log_time == "utc" else 0
     n = 0
     with McapRecorder(dst) as rec:
+        rec.add_metadata(CLOCK_METADATA, {"log_time_zero_ns": zero_dst,
+                                          "log_time_start_utc": scenario_start_utc if zero_dst else SIM_CLOCK})
+        for name, data in _metadata_records(src):
+            if name not in ("rosbag2", CLOCK_METADATA):
+                rec.add_metadata(name, data)
+
         def put(vm: ViewMessage) -> None:
             if not rec.has_topic(vm.topic):
                 rec.add_topic(vm.topic, vm.type_name)
-            rec.write(vm.topic, vm.data, vm.sim_time_ns + shift)
+            rec.write(vm.topic, vm.data, vm.sim_time_ns + zero_dst)
 
         for vm in views.network_messages(0):
             put(vm)
@@ -445,11 +517,16 @@ def write_views(src: str, dst: str, network: Any = None,
         for r in read_messages(src):
             if not rec.has_topic(r.topic):
                 rec.add_topic(r.topic, r.type_name, offered_qos_profiles=parse_offered_qos(r.qos_yaml) or None)
-            rec.write(r.topic, r.data, r.log_time_ns + shift, r.publish_time_ns + shift)
+            rec.write(r.topic, r.data, r.log_time_ns - zero_src + zero_dst, r.publish_time_ns - zero_src + zero_dst)
             if r.topic == resolved(names.TOPIC_FLEET):
                 extra = views.fleet_state_messages(deserialize(r))
             elif r.topic == resolved(names.TOPIC_PLANS):
                 extra = views.plan_messages(deserialize(r))
+            elif r.topic == resolved(names.TOPIC_CONSTRAINTS):  # issue 22: the set in force
+                from uam_planner.live_constraints import constraints_from_text
+                t_set, found = constraints_from_text(deserialize(r).data)
+                extra = views.constraint_messages(max(r.log_time_ns - zero_src, int(round(t_set * 1e9))),
+                                                  [k for k, _eff in found])
             else:
                 continue
             for vm in extra:

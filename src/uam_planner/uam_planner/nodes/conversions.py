@@ -102,7 +102,48 @@ def approved_plan(flight: Flight, t_s: float, policy: str, request_id: str | Non
                    for t, p in zip(traj.times_s, traj.points_m)],
         length_m=float(flight.length_m), weight=float(flight.weight), candidate_index=int(flight.candidate_index),
         method=policy, backend=flight.backend or "")
+    if hasattr(plan, "version"):  # plan versions (issue 22; FlightPlan.msg, docs/replanning.md)
+        plan.version = int(getattr(flight, "version", 1))
+        plan.effective_time = to_time(float(getattr(flight, "effective_s", flight.departure_s)))
+        plan.state = plan_state(flight, t_s)
     _plan_header(plan, t_s)
+    return plan
+
+
+#: F3548 state names (uam_planner.replanning.flight_state) -> FlightPlan.STATE_* values
+STATES = {"Accepted": 1, "Activated": 2, "Nonconforming": 3, "Contingent": 4, "Ended": 5}
+
+
+def plan_state(flight: Flight, t_s: float) -> int:
+    """FlightPlan.STATE_* of ``flight`` (its newest version) at ``t_s`` [s]."""
+    from uam_planner.replanning import flight_state
+    return STATES[flight_state(flight, t_s)]
+
+
+def plan_update_msg(update: Any, t_s: float, policy: str, request_id: str | None = None):
+    """FlightPlan message of a re-plan (a ``uam_planner.replanning.PlanUpdate``) decided at the
+    epoch at ``t_s``: the new version of the flight, from ``effective_time`` on, naming the
+    constraint(s) and the kind in ``update_kind`` and the sentence in ``reason``. A cancellation
+    is OUTCOME_REJECTED with no waypoints and state Ended; every other kind is OUTCOME_APPROVED
+    with the new trajectory (a contingency: state Contingent)."""
+    from uam_msgs.msg import FlightPlan
+
+    rid = update.request_id if request_id is None else request_id
+    if update.flight is None:
+        prev = update.previous
+        plan = unapproved_plan(rid, prev.origin_id if prev is not None else "",
+                               prev.destination_id if prev is not None else "", FlightPlan.OUTCOME_REJECTED,
+                               str(update.reason), t_s, int(prev.epoch_index) if prev is not None else 0, policy)
+        plan.state = FlightPlan.STATE_ENDED
+    else:
+        plan = approved_plan(update.flight, t_s, policy, request_id=rid)
+        plan.reason = str(update.reason)
+        if update.kind == "contingency":
+            plan.state = FlightPlan.STATE_CONTINGENT
+    plan.version = int(update.version)
+    plan.effective_time = to_time(float(update.effective_s))
+    plan.constraint_ids = [str(c) for c in update.constraint_ids]
+    plan.update_kind = str(update.kind)
     return plan
 
 
@@ -139,7 +180,11 @@ def flight_from_plan(plan: Any, request_id: str | None = None) -> Flight:
                   departure_s=from_time(plan.departure_time), arrival_s=from_time(plan.arrival_time),
                   length_m=float(plan.length_m), weight=float(plan.weight),
                   candidate_index=int(plan.candidate_index), method=str(plan.method),
-                  backend=str(plan.backend), epoch_index=int(plan.epoch_index))
+                  backend=str(plan.backend), epoch_index=int(plan.epoch_index),
+                  version=max(1, int(getattr(plan, "version", 1) or 1)),
+                  effective_s=from_time(plan.effective_time) if int(getattr(plan, "version", 0) or 0) > 1
+                  else float("nan"),
+                  contingent=int(getattr(plan, "state", 0) or 0) == 4)
 
 
 # ---- reports -------------------------------------------------------------------------------------

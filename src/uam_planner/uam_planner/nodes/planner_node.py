@@ -2,9 +2,12 @@
 
     ros2 run uam_planner planner --ros-args --params-file config/planner.yaml
 
-Subscribes uam/requests (FlightRequest); serves uam/plan_epoch (PlanEpoch); calls
-uam/solve_mwis (SolveMwis); publishes uam/flight_plans (every decision), uam/planning_reports
-and its progress on uam/epoch_sync (for the recorder). Names and QoS: uam_contract.names;
+Subscribes uam/requests (FlightRequest); serves uam/plan_epoch (PlanEpoch) and
+uam/update_constraint (UpdateConstraint: live airspace constraints, queued to the next epoch,
+docs/constraints.md); calls uam/solve_mwis (SolveMwis); publishes uam/flight_plans (every
+decision, and every new version of a plan re-planned around a constraint, docs/replanning.md),
+uam/planning_reports, uam/constraints (the set in force, latched) and its progress on
+uam/epoch_sync (for the recorder). Names and QoS: uam_contract.names;
 parameters: uam_contract.params.PLANNER (docs/parameters.md).
 
 On arrival every request is accepted (queued) or refused at once with a reason that names the
@@ -48,19 +51,22 @@ from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.task import Future
+from std_msgs.msg import String
 from uam_msgs.msg import EpochSync, FlightPlan, FlightRequest, PlanningReport
-from uam_msgs.srv import PlanEpoch, SolveMwis
+from uam_msgs.srv import PlanEpoch, SolveMwis, UpdateConstraint
 
 from uam_contract import names as c
 from uam_planner.nodes import conversions as m
 from uam_bringup import qos
 from uam_contract import wire
-from uam_bringup.journal import Journal
+from uam_bringup.journal import Journal, newest_versions
 from uam_bringup.params import declare_table
 from uam_contract.params import PLANNER
 from uam_solvers.nodes import param_rules
 from uam_bringup.runtime import run_node
 from uam_planner.constraints import load_constraints
+from uam_planner.constraints import ConstraintError
+from uam_planner.live_constraints import parse_update, set_geojson
 from uam_planner.network import load_network
 from uam_planner.planning import AirspaceConfig, Planner, PlanningConfig, call_solver, default_solve_mwis
 
@@ -102,12 +108,21 @@ class PlannerNode(Node):
             except ValueError as exc:
                 raise ValueError(f"constraints_file: {exc}") from None
             self.planner.set_constraints(cset)
+        # live constraints (issue 22): uam/update_constraint, queued in the planner and applied at
+        # its next epoch (Planner.update_constraint); the set in force is published on uam/constraints
+        self._constraint_effective: dict[str, float] = {c.constraint_id: 0.0 for c in self.config.constraints or ()}
+        self._constraints_logged = 0        # entries of planner.constraint_log published
+        self.constraint_updates_refused = 0
 
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._group = ReentrantCallbackGroup()  # the epoch service awaits; arrivals must go on meanwhile
         self._plan_pub = self.create_publisher(FlightPlan, c.TOPIC_PLANS, qos.QOS_LATCHED)
         self._report_pub = self.create_publisher(PlanningReport, c.TOPIC_REPORTS, qos.QOS_LATCHED)
         self._sync_pub = self.create_publisher(EpochSync, c.TOPIC_SYNC, qos.QOS_LATCHED)
+        self._constraints_pub = self.create_publisher(String, c.TOPIC_CONSTRAINTS, qos.QOS_CONSTRAINTS)
+        self._publish_constraints(0.0)
+        self._constraint_service = self.create_service(UpdateConstraint, c.SERVICE_UPDATE_CONSTRAINT,
+                                                       self._on_update_constraint)
         self.create_subscription(FlightRequest, c.TOPIC_REQUESTS, self._on_request, qos.QOS_REQUESTS)
         self.create_subscription(EpochSync, c.TOPIC_SYNC, self._on_sync, qos.QOS_LATCHED)
         self._client = self.create_client(SolveMwis, c.SERVICE_SOLVE, callback_group=self._group)
@@ -172,6 +187,59 @@ class PlannerNode(Node):
         self._service = self.create_service(PlanEpoch, c.SERVICE_PLAN_EPOCH, self._on_plan_epoch,
                                             callback_group=self._group)
         self.get_logger().info(f"serving {self.resolve_service_name(c.SERVICE_PLAN_EPOCH)}")
+
+    # ---- live constraints (issue 22, uam_planner.live_constraints) ---------------------------
+    def _projected_constraints(self) -> dict:
+        """constraint id -> Constraint once every queued update is applied."""
+        cur = {k.constraint_id: k for k in self.config.constraints or ()}
+        for u in self.planner.queued_updates:
+            if u.action == "withdraw":
+                cur.pop(u.constraint.constraint_id, None)
+            else:
+                cur[u.constraint.constraint_id] = u.constraint
+        return cur
+
+    def _on_update_constraint(self, request, response):
+        """Queue (for the next epoch) or refuse one constraint update, naming the field and value."""
+        with self._lock:
+            now = self._next_epoch_s
+            try:
+                action, what = parse_update(request, self._projected_constraints(), self.network)
+                error = self.planner.update_constraint(action, what, now) or ""
+            except ConstraintError as exc:
+                action, error = str(request.action), str(exc)
+            if error:
+                self.constraint_updates_refused += 1
+            response.accepted = not error
+            response.error = wire.bounded(error)
+            response.constraints = len(self._projected_constraints())
+            response.effective_time = m.to_time(now)
+        if error:
+            self.get_logger().warning(f"refused a constraint update ({action} {wire.echo(request.constraint_id)}): "
+                                      f"{response.error}")
+        else:
+            self.get_logger().info(f"constraint update accepted: {action} {request.constraint_id!r} "
+                                   f"v{request.version}, from the epoch at t = {now:g} s")
+        return response
+
+    def _publish_constraint_changes(self, t_s: float) -> None:
+        """After an epoch's prepare (under the lock): the set in force, if updates were applied."""
+        log = self.planner.constraint_log
+        if len(log) == self._constraints_logged:
+            return
+        for u in log[self._constraints_logged:]:
+            if u.action == "withdraw":
+                self._constraint_effective.pop(u.constraint.constraint_id, None)
+            else:
+                self._constraint_effective[u.constraint.constraint_id] = float(u.applied_s)
+        self._constraints_logged = len(log)
+        self._publish_constraints(t_s)
+        self.get_logger().info(f"epoch at t = {t_s:g} s: constraint update(s) applied, "
+                               f"{len(self.config.constraints or ())} constraint(s) in force")
+
+    def _publish_constraints(self, t_s: float) -> None:
+        self._constraints_pub.publish(String(data=set_geojson(self.config.constraints or (), t_s,
+                                                              self._constraint_effective)))
 
     # ---- requests ----------------------------------------------------------------------------
     def _publish_plan(self, plan: FlightPlan) -> None:
@@ -382,14 +450,16 @@ class PlannerNode(Node):
             claimed[wire.scoped_id(p.operator_id, p.request_id)] = p
         if self.journal is not None:
             try:
-                own = {wire.scoped_id(p.operator_id, p.request_id): p for p in self.journal.read(request.session)}
+                journaled = self.journal.read(request.session)
             except ValueError as exc:
                 return f"resume: {exc}"
             # approvals of this epoch or later never reached the simulator (it asks for this
-            # epoch again): they never flew, and none can be claimed
+            # epoch again): they never flew, and none can be claimed; of the rest, each flight's
+            # newest version (re-plans, issue 22) is what flies
             k = int(request.epoch_index)
-            own = {key: p for key, p in own.items() if p.epoch_index < k}
-            flying = {key for key, p in own.items() if m.from_time(p.arrival_time) >= t_s}
+            own = newest_versions(journaled, k, t_s)
+            flying = {key for key, p in own.items() if p.outcome == FlightPlan.OUTCOME_APPROVED
+                      and m.from_time(p.arrival_time) >= t_s}
             left_out = sorted(flying - set(claimed))
             unknown = sorted(set(claimed) - set(own))
             changed = sorted(key for key in set(claimed) & set(own) if claimed[key].waypoints != own[key].waypoints)
@@ -451,7 +521,8 @@ class PlannerNode(Node):
             self.get_logger().warning(f"epoch {k}: planning without {len(missing)} expected request(s) that did "
                                       f"not arrive within {self.p['request_wait_timeout_s']:g} s: {missing[:5]}")
         with self._lock:
-            prep = self.planner.prepare(t_s, k)
+            prep = self.planner.prepare(t_s, k)   # applies the constraint updates due (docs/replanning.md)
+            self._publish_constraint_changes(t_s)
         t0 = time.perf_counter()
         answer = await self._solve(prep.graph) if prep.needs_solver else None
         solve_s = time.perf_counter() - t0
@@ -461,6 +532,13 @@ class PlannerNode(Node):
                      for f in result.approved]
             for plan, f in zip(plans, result.approved):
                 plan.operator_id = wire.split_scoped(f.request_id)[0]
+            for u in result.plan_updates:   # new versions and cancellations (issue 22 item 4)
+                if u.kind == "kept":
+                    continue
+                op, rid = wire.split_scoped(u.request_id)
+                plan = m.plan_update_msg(u, t_s, self.policy, request_id=rid)
+                plan.operator_id = op
+                plans.append(plan)
             if self.journal is not None:
                 self.journal.append(plans)  # before anyone can hold them
             refusals = result.report.constraint_refusals

@@ -5,7 +5,8 @@
 
 It subscribes raw (CDR bytes as DDS delivers them, like rosbag2), so the bytes in the file are
 exactly the bytes on the wire. Log time and publish time of each message are its simulation
-time: the message's own stamp (``header.stamp``, ``clock``, ``epoch_time``, ``request_time``)
+time on the scenario's UTC clock (``log_time_start_utc`` + simulation time, recorded in the MCAP
+record ``uam_clock``, which the readers subtract): the message's own stamp (``header.stamp``, ``clock``, ``epoch_time``, ``request_time``)
 when it has one, else the latest ``/clock`` received; never earlier than the previous message of
 the same topic (a topic with several publishers delivers stamps out of order), so every channel's
 times are in order. (rosbag2 with ``--use-sim-time`` stamps
@@ -65,9 +66,10 @@ from uam_msgs.msg import FlightPlan
 from uam_sim.analysis import format_steps, missing_steps, request_key
 from uam_sim.audit import AIRSPACE_METADATA, airspace_metadata
 from uam_sim.cdr import fleet_state_digest, fleet_state_step_index, leading_stamp_ns
+from uam_sim.mcap_reader import CLOCK_METADATA
 from uam_sim.mcap_schema import message_class
 from uam_sim.mcap_writer import McapRecorder
-from uam_contract.stamps import sim_stamp_ns
+from uam_contract.stamps import scenario_start_ns, sim_stamp_ns
 from uam_sim.rerun_log import RerunLogger
 from uam_sim.std_msgs_export import ViewExporter
 
@@ -96,6 +98,7 @@ def _starts_with_stamp(cls: type) -> bool:
 PUBLISHER_CHECK_S = 0.5
 #: how many publishers each topic with one authority may have at once
 SOLE_PUBLISHERS = {c.TOPIC_CLOCK: 1, c.TOPIC_FLEET: 1, c.TOPIC_POSES: 1, c.TOPIC_PLANS: 1, c.TOPIC_REPORTS: 1,
+                   c.TOPIC_CONSTRAINTS: 1,
                    c.TOPIC_SYNC: 3}
 
 
@@ -118,6 +121,8 @@ class RecordingCheck:
         self.announced[int(msg.epoch_index)] = int(msg.approved)  # a repeated report counts once
 
     def on_plan(self, msg) -> None:
+        if int(getattr(msg, "version", 0)) > 1:
+            return  # a re-planned version of an approval (issue 22): no report announces it as one
         if int(msg.outcome) == FlightPlan.OUTCOME_APPROVED:
             self.received.setdefault(int(msg.epoch_index), set()).add(request_key(msg))
 
@@ -190,9 +195,14 @@ class RecorderNode(Node):
         self.foxglove = None
         self.rerun = None
         self.recorder.add_metadata(AIRSPACE_METADATA, airspace)
+        # log times on the scenario's UTC clock (issue 22): sim time + this; readers subtract it
+        self._log_zero_ns = scenario_start_ns(p["log_time_start_utc"])
+        self.recorder.add_metadata(CLOCK_METADATA, {"log_time_zero_ns": self._log_zero_ns,
+                                                    "log_time_start_utc": p["log_time_start_utc"]})
         try:
             self.rerun = RerunLogger(rerun_mode, rrd, network=network,
-                                     connect_url=p["rerun_url"] or None)
+                                     connect_url=p["rerun_url"] or None,
+                                     utc_zero_ns=self._log_zero_ns or None)
             if p["views"]:
                 self.views = ViewExporter(network, p["scenario_start_utc"], fix_period_s=p["view_fix_period_s"])
             if p["foxglove_port"] > 0:
@@ -388,7 +398,23 @@ class RecorderNode(Node):
             if msg is None:
                 msg = deserialize_message(data, cls)
             self.rerun.log_request_msg(msg)
+        elif topic == c.TOPIC_CONSTRAINTS:
+            self._draw_constraints(msg, log_ns)
         return msg
+
+    def _draw_constraints(self, msg, log_ns: int) -> None:
+        """The constraint set (uam/constraints, issue 22) in Rerun and the view topics."""
+        from uam_planner.live_constraints import constraints_from_text
+        try:
+            t_s, found = constraints_from_text(msg.data)
+        except ValueError as exc:  # recorded as it came; only the drawing is skipped
+            self.get_logger().warning(f"{c.TOPIC_CONSTRAINTS}: not drawn: {exc}")
+            return
+        constraints = [k for k, _eff in found]
+        self.rerun.log_constraints(t_s, constraints)
+        if self.views is not None:   # at the instant the set took effect (a String has no stamp)
+            for vm in self.views.constraint_messages(max(int(log_ns), int(round(t_s * 1e9))), constraints):
+                self._write_view(vm)
 
     def _write_view(self, vm) -> None:
         """One view message (uam_sim.std_msgs_export.ViewMessage) at its simulation time."""
@@ -402,10 +428,11 @@ class RecorderNode(Node):
         message. Several publishers share a topic (EpochSync of simulator, generator and planner,
         the simulator announcing epoch k+1 before the others report epoch k), so stamps arrive out
         of order; MCAP tools expect each channel's log times in order (`rerun mcap check`
-        reported unordered chunks). The message's own stamp is in its bytes."""
+        reported unordered chunks). The message's own stamp is in its bytes. Returned on the
+        scenario's UTC clock (``log_time_start_utc`` + that simulation time, issue 22)."""
         t = max(0, int(stamp_ns), self._channel_last_ns.get(topic, 0))
         self._channel_last_ns[topic] = t
-        return t
+        return t + self._log_zero_ns
 
     def _drain(self) -> int:
         """Write every message already delivered to our subscriptions but not yet taken.

@@ -89,6 +89,7 @@ class SimulatorNode(Node):
         self.approvals_received = 0         # of which approved
         self.flown_plans: list[FlightPlan] = []   # every approved plan flown, in order (for audits)
         self.fly_errors = 0                 # approved plans that could not be flown (should stay 0)
+        self.versions_received = 0          # re-planned versions and cancellations flown (issue 22)
         self._flying: dict[str, FlightPlan] = {}   # scoped id -> approved plan, while it may be airborne
         self._decided: list[str] = []       # scoped ids of every request decided in an epoch answer
         self._waiting_epoch: int | None = None
@@ -319,6 +320,9 @@ class SimulatorNode(Node):
         for plan in res.plans:
             self.plans_received += 1
             key = wire.scoped_id(plan.operator_id, plan.request_id)
+            if int(getattr(plan, "version", 0)) > 1:   # a new version of a flight approved before (issue 22)
+                self._fly_version(key, plan)
+                continue
             self._decided.append(key)
             if plan.outcome == FlightPlan.OUTCOME_APPROVED:
                 self.approvals_received += 1
@@ -339,6 +343,23 @@ class SimulatorNode(Node):
             self._start_epoch(epoch + 1, t_next)
         self._publish_state()
         self.step_index += 1
+
+    def _fly_version(self, key: str, plan: FlightPlan) -> None:
+        """Fly a re-planned version from the instant it takes effect (``Fleet.update``: the old
+        trajectory before, the new one after; refused when they do not chain), or drop a
+        cancelled flight (docs/replanning.md)."""
+        self.versions_received += 1
+        try:
+            if plan.outcome == FlightPlan.OUTCOME_APPROVED and plan.waypoints:
+                self.fleet.update(key, m.trajectory_from_plan(plan), m.from_time(plan.effective_time))
+                self._flying[key] = plan
+                self.flown_plans.append(plan)
+            else:
+                self.fleet.remove(key)
+                self._flying.pop(key, None)
+        except ValueError as exc:
+            self.fly_errors += 1
+            self.get_logger().error(f"cannot fly version {plan.version} of {key!r}: {exc}")
 
     # ---- stepping ------------------------------------------------------------------------------
     def _epoch_at(self, step_index: int) -> int | None:

@@ -1,0 +1,350 @@
+"""Batch re-planning on constraint updates, plan versions and the audit of what flew (issue 22,
+uam_planner.replanning, docs/replanning.md). Every expected value is computed by hand in the
+comments: speed 10 m/s, the paper's sphere of 100 m, epochs of 30 s."""
+
+import itertools
+import json
+import math
+
+import numpy as np
+import pytest
+
+from uam_planner.constraints import Constraint, load_constraints
+from uam_planner.network import network_from_enu
+from uam_planner.planning import AirspaceConfig, FlightRequest, Planner, PlanningConfig
+from uam_planner.replanning import (DELAY_SCALE_S, audit_incursions, constraint_timeline,
+                                    flight_state, flown_trajectory, spliced)
+from uam_planner.trajectory import Trajectory
+
+
+def lanes():
+    """Two east-west lanes 1 km apart and a vertiport C between them.
+
+    P's lane: Wp (-1000, 0) - mp (0, 0) - Ep (1000, 0); Q's lane: Wq (-1000, 1000) - mq (0, 1000)
+    - Eq (1000, 1000); C (0, 480) joined to mp (480 m) and mq (520 m). Aerodromes: the W, E and C."""
+    ids = ["Wp", "mp", "Ep", "Wq", "mq", "Eq", "C"]
+    enu = [(-1000, 0, 0), (0, 0, 0), (1000, 0, 0), (-1000, 1000, 0), (0, 1000, 0), (1000, 1000, 0),
+           (0, 480, 0)]
+    aer = [True, False, True, True, False, True, True]
+    edges = [("Wp", "mp"), ("mp", "Ep"), ("Wq", "mq"), ("mq", "Eq"), ("mp", "C"), ("mq", "C")]
+    return network_from_enu("lanes", ids, enu, aer, edges)
+
+
+#: x in [400, 600] over both lanes, 0-500 m, from t = 60 s
+EAST = Constraint("east", 1, "storm cell", 60.0, 1000.0, lower_m=-10.0, upper_m=500.0,
+                  rings_m=(np.array([(400.0, -100.0), (600.0, -100.0), (600.0, 1100.0), (400.0, 1100.0)]),))
+
+
+def req(rid, o, d, t=0.0, latest=None, earliest=None):
+    e = t if earliest is None else earliest
+    return FlightRequest(rid, o, d, t, e, e + 20.0 if latest is None else latest)
+
+
+def exact_mwis(weights, edges, groups):
+    """Brute force over every independent set (a handful of vertices)."""
+    from types import SimpleNamespace
+    n = len(weights)
+    adj = {(int(a), int(b)) for a, b in np.asarray(edges).reshape(-1, 2)}
+    best, best_set = -1.0, ()
+    for r in range(n + 1):
+        for s in itertools.combinations(range(n), r):
+            if any((a, b) in adj for a, b in itertools.combinations(s, 2)):
+                continue
+            w = float(sum(weights[i] for i in s))
+            if w > best + 1e-12:
+                best, best_set = w, s
+    return SimpleNamespace(selected=np.array(best_set, dtype=np.int64), backend="brute-force")
+
+
+def planner(policy="mwis", **kw):
+    return Planner(lanes(), PlanningConfig(k=2, **kw), policy, solve_mwis=exact_mwis)
+
+
+def fly(p, *requests):
+    for r in requests:
+        assert p.submit(r) is None
+    res = p.plan(0.0, 0)
+    assert sorted(f.request_id for f in res.approved) == sorted(r.request_id for r in requests)
+    return res
+
+
+def divert_weight(t_land_s):
+    return 1.0 + 1.0 / (1.0 + t_land_s / DELAY_SCALE_S)
+
+
+def test_airborne_flight_is_diverted_to_the_nearest_free_vertiport():
+    p = planner()
+    fly(p, req("P", "Wp", "Ep"))
+    # P: Wp at 0, mp at 100, Ep at 200; it would enter x = 400 at t = 140
+    assert p.update_constraint("add", EAST, 50.0) is None
+    assert p.plan(30.0, 1).plan_updates == []            # announced at 50: not yet
+    res = p.plan(60.0, 2)
+    (u,) = res.plan_updates
+    # branch point mp (the first waypoint at or after t = 60); no route east avoids the cell;
+    # the nearest vertiports from mp: C (480 m, lands at 148: 88 s after t_eff), Wp (1000 m, 140 s
+    # after), Wq (1414 m; its route through C and mq lands at 300)
+    assert (u.kind, u.version, u.effective_s, u.constraint_ids) == ("diverted", 2, 60.0, ("east",))
+    assert "constraint 'east' v1 (storm cell)" in u.reason and "'C'" in u.reason
+    f = u.flight
+    assert (f.destination_id, f.route_node_ids, f.version, f.effective_s) == ("C", ("Wp", "mp", "C"), 2, 60.0)
+    np.testing.assert_allclose(f.trajectory.times_s, [0.0, 100.0, 148.0])
+    np.testing.assert_allclose(f.trajectory.points_m, [(-1000, 0, 0), (0, 0, 0), (0, 480, 0)])
+    assert f.weight == pytest.approx(divert_weight(88.0))   # lands 148 - 60 = 88 s after t_eff
+    assert u.added_delay_s == pytest.approx(148.0 - 200.0)
+    assert [g.request_id for g in p.active] == ["P"] and p.active[0] is f
+    assert res.report.replan.kinds == {"diverted": 1} and res.report.replan.affected_airborne == 1
+    # the chain: what flew is the old plan up to t_eff and the new one after
+    flown = flown_trajectory([u.previous, f])
+    np.testing.assert_allclose(flown.points_m[-1], (0, 480, 0))
+    assert flight_state(f, 120.0) == "Activated" and flight_state(f, 149.0) == "Ended"
+
+
+def test_an_occupied_alternate_sends_the_diversion_to_the_next_vertiport():
+    p = planner()
+    # R: Wq -> mq -> C, lands at C at t = 152 (1,520 m); it never meets the cell: unaffected
+    fly(p, req("P", "Wp", "Ep"), req("R", "Wq", "C"))
+    p.update_constraint("add", EAST, 60.0)
+    res = p.plan(60.0, 2)
+    (u,) = res.plan_updates
+    # P -> C would land at 148 while R is 40 m away (at (0, 520)): a loss, so P turns back to Wp
+    assert (u.request_id, u.kind, u.flight.destination_id) == ("P", "diverted", "Wp")
+    np.testing.assert_allclose(u.flight.trajectory.times_s, [0.0, 100.0, 200.0])
+    assert [f.request_id for f in p.active] == ["R", "P"]
+
+
+@pytest.mark.parametrize("policy", ["mwis", "firstfit"])
+def test_two_replanned_flights_that_would_conflict_get_compatible_alternatives(policy):
+    p = planner(replan_policy=policy)
+    fly(p, req("P", "Wp", "Ep"), req("Q", "Wq", "Eq"))
+    wq_closed = Constraint("Wq-closed", 1, "fire", 60.0, 1000.0, vertiport_id="Wq")
+    assert p.update_constraint("add", EAST, 60.0) is None
+    assert p.update_constraint("add", wq_closed, 60.0) is None
+    res = p.plan(60.0, 2)
+    got = {u.request_id: (u.kind, u.flight.destination_id if u.flight else None) for u in res.plan_updates}
+    # Alternatives (branch at mp / mq at t = 100; Wq closed; the east lanes blocked):
+    #   P -> C lands 148 (w = 1 + 300/388), P -> Wp lands 200 (w = 1 + 300/440)
+    #   Q -> C lands 152 (w = 1 + 300/392), Q -> Wp via C, mp lands 300 (w = 1 + 300/540)
+    # P -> C conflicts with both of Q's (Q is 40 m from C when P lands there at 148).
+    # MWIS: {P -> Wp, Q -> C} = 3.447 beats {P -> C} alone = 1.773 and {P -> Wp, Q -> Wp}.
+    # First-fit in approval order: P takes C, Q has nothing left: a contingency.
+    if policy == "mwis":
+        assert got == {"P": ("diverted", "Wp"), "Q": ("diverted", "C")}
+    else:
+        assert got == {"P": ("diverted", "C"), "Q": ("contingency", "C")}
+        q = next(u for u in res.plan_updates if u.request_id == "Q")
+        assert q.flight.contingent and "not deconflicted" in q.reason
+        assert flight_state(q.flight, 120.0) == "Contingent"
+    assert res.report.replan.affected == 2 and res.report.replan.policy == policy
+
+
+def test_a_flight_that_would_enter_only_after_the_window_closes_is_not_replanned():
+    # P reaches x = 400 at t = 140: a window closing at 140 is never entered ([start, end))
+    for end, n_updates in ((140.0, 0), (140.5, 1)):
+        p = planner()
+        fly(p, req("P", "Wp", "Ep"))
+        c = Constraint("east", 1, "", 60.0, end, lower_m=-10.0, upper_m=500.0, rings_m=EAST.rings_m)
+        p.update_constraint("add", c, 60.0)
+        res = p.plan(60.0, 2)
+        assert len(res.plan_updates) == n_updates
+        assert res.report.replan.affected == n_updates
+
+
+def two_route_network():
+    """A -> B directly through m (1 km) or around through n (2 x 707 m)."""
+    return network_from_enu("two", ["A", "m", "n", "B"],
+                            [(0, 0, 0), (500, 0, 0), (500, 500, 0), (1000, 0, 0)],
+                            [True, False, False, True],
+                            [("A", "m"), ("m", "B"), ("A", "n"), ("n", "B")])
+
+
+OVER_M = (np.array([(400.0, -100.0), (600.0, -100.0), (600.0, 100.0), (400.0, 100.0)]),)
+
+
+def slotted(k=2):
+    return Planner(two_route_network(), PlanningConfig(k=k, airspace=AirspaceConfig(departure_slot_s=10.0)),
+                   "mwis", solve_mwis=exact_mwis)
+
+
+def test_a_flight_not_departed_is_retimed_rerouted_or_cancelled():
+    # r1 asks to depart in [30, 50]: approved at epoch 0 for t = 30 (its only slot then), direct
+    # (arrives 130). The cell over m opens at 30 and closes at 75: departing at 30 it would be at
+    # x = 400 at 70 (inside), at 40 it gets there at 80 (after): re-timed to 40,
+    # w = 2 + 1/(1 + 10/300) = 2.968 beats the detour at 30 (arrives 171.4: 2 + 1/(1 + 41.4/300)).
+    c = Constraint("cell", 2, "", 30.0, 75.0, lower_m=-10.0, upper_m=500.0, rings_m=OVER_M)
+    p = slotted()
+    assert p.submit(req("r1", "A", "B", 0.0, earliest=30.0, latest=50.0)) is None
+    (f,) = p.plan(0.0, 0).approved
+    assert (f.departure_s, f.route_node_ids) == (30.0, ("A", "m", "B"))
+    p.update_constraint("add", c, 10.0)
+    res = p.plan(30.0, 1)
+    (u,) = res.plan_updates
+    assert (u.kind, u.flight.departure_s, u.flight.route_node_ids) == ("retimed", 40.0, ("A", "m", "B"))
+    assert u.flight.weight == pytest.approx(2.0 + 1.0 / (1.0 + 10.0 / 300.0))
+    assert flight_state(u.flight, 35.0) == "Accepted"
+    # closed until 1000 instead: no slot of the direct route gets out, the detour at 30 does
+    p = slotted()
+    p.submit(req("r1", "A", "B", 0.0, earliest=30.0, latest=50.0))
+    p.plan(0.0, 0)
+    p.update_constraint("add", Constraint("cell", 2, "", 30.0, 1000.0, lower_m=-10.0, upper_m=500.0,
+                                          rings_m=OVER_M), 10.0)
+    (u,) = p.plan(30.0, 1).plan_updates
+    assert (u.kind, u.flight.departure_s, u.flight.route_node_ids) == ("rerouted", 30.0, ("A", "n", "B"))
+    # and with k = 1 (no detour) it is cancelled, naming the constraint
+    p = slotted(k=1)
+    p.submit(req("r1", "A", "B", 0.0, earliest=30.0, latest=50.0))
+    p.plan(0.0, 0)
+    p.update_constraint("add", Constraint("cell", 2, "hail", 30.0, 1000.0, lower_m=-10.0, upper_m=500.0,
+                                          rings_m=OVER_M), 10.0)
+    res = p.plan(30.0, 1)
+    (u,) = res.plan_updates
+    assert (u.kind, u.flight, u.version) == ("cancelled", None, 2)
+    assert "constraint 'cell' v2 (hail)" in u.reason
+    assert p.active == [] and res.approved == []
+
+
+def test_bad_updates_are_refused_naming_the_field_and_nothing_is_lost():
+    p = planner()
+    assert p.update_constraint("add", EAST, 10.0) is None
+    before = list(p.queued_updates)
+    assert "action: 'move'" in p.update_constraint("move", EAST, 10.0)
+    assert "constraint_id: 'east' is already a constraint" in p.update_constraint("add", EAST, 10.0)
+    lower = Constraint("east", 0, "", 60.0, 1000.0, center_m=(0.0, 0.0), radius_m=50.0)
+    assert "version: 0 of 'east' is not above the current version 1" in p.update_constraint("change", lower, 10.0)
+    unknown = Constraint("nope", 5, "", 60.0, 1000.0, center_m=(0.0, 0.0), radius_m=50.0)
+    assert "constraint_id: 'nope' is not a known constraint" in p.update_constraint("change", unknown, 10.0)
+    assert "constraint_id: 'nope'" in p.update_constraint("withdraw", "nope", 10.0)
+    past = Constraint("old", 1, "", 0.0, 5.0, center_m=(0.0, 0.0), radius_m=50.0)
+    assert "end_s: 5.0 is in the past (now is 10.0 s)" in p.update_constraint("add", past, 10.0)
+    closed = Constraint("z", 1, "", 0.0, 50.0, vertiport_id="mp")
+    assert "vertiport_id: 'mp' is not a vertiport" in p.update_constraint("add", closed, 10.0)
+    assert "t_s: nan" in p.update_constraint("add", unknown, float("nan"))
+    assert p.queued_updates == before
+    # a change with a higher version and a withdrawal are accepted, applied in order
+    bigger = Constraint("east", 2, "", 60.0, 1000.0, center_m=(500.0, 0.0), radius_m=50.0)
+    assert p.update_constraint("change", bigger, 20.0) is None
+    assert p.update_constraint("withdraw", "east", 25.0) is None
+    p.plan(30.0, 1)
+    assert [(u.action, u.constraint.version, u.applied_s) for u in p.constraint_log] == \
+        [("add", 1, 30.0), ("change", 2, 30.0), ("withdraw", 2, 30.0)]
+    assert len(p.config.constraints) == 0
+
+
+def test_announced_constraint_from_geojson_applies_at_its_first_epoch(tmp_path):
+    net = lanes()
+    doc = {"type": "FeatureCollection", "frame": "enu", "features": [{
+        "type": "Feature", "geometry": {"type": "Point", "coordinates": [500.0, 0.0]},
+        "properties": {"id": "tfr", "version": 1, "reason": "VIP", "start_s": 60.0, "end_s": 900.0,
+                       "announce_s": 45.0, "radius_m": 50.0, "lower_m": -10.0, "upper_m": 300.0}}]}
+    path = tmp_path / "c.geojson"
+    path.write_text(json.dumps(doc))
+    cs = load_constraints(path, net)
+    assert cs.constraints[0].announce_s == 45.0
+    p = Planner(net, PlanningConfig(k=2), "mwis", solve_mwis=exact_mwis)
+    p.set_constraints(cs)
+    assert len(p.config.constraints) == 0 and len(p.queued_updates) == 1
+    fly(p, req("P", "Wp", "Ep"))
+    # at t = 30 it is not announced yet: a request planned then flies through (no detour asked)
+    assert p.submit(req("P2", "Wq", "Eq", 30.0)) is None
+    r30 = p.plan(30.0, 1)
+    assert [f.request_id for f in r30.approved] == ["P2"] and r30.plan_updates == []
+    r60 = p.plan(60.0, 2)   # announced at 45: applied at the first epoch >= 45
+    assert [u.request_id for u in r60.plan_updates] == ["P"]    # P2's lane is 1 km north
+    assert [c.constraint_id for c in p.config.constraints] == ["tfr"]
+
+
+def test_announce_after_the_end_is_refused():
+    from uam_planner.constraints import ConstraintError
+    with pytest.raises(ConstraintError, match=r"announce_s: 950.0 is not before end_s 900.0"):
+        Constraint("x", 1, "", 60.0, 900.0, center_m=(0.0, 0.0), radius_m=5.0, announce_s=950.0)
+
+
+def test_spliced_versions_chain_and_a_gap_is_refused():
+    old = Trajectory(np.array([0.0, 100.0, 200.0]), np.array([(0, 0, 0), (1000, 0, 0), (2000, 0, 0)], float))
+    new = Trajectory(np.array([0.0, 100.0, 150.0]), np.array([(0, 0, 0), (1000, 0, 0), (1000, 500, 0)], float))
+    s = spliced(old, new, 60.0)
+    np.testing.assert_allclose(s.times_s, [0.0, 60.0, 100.0, 150.0])
+    np.testing.assert_allclose(s.points_m[1], (600, 0, 0))
+    bad = Trajectory(np.array([0.0, 150.0]), np.array([(0, 10, 0), (1000, 500, 0)], float))
+    with pytest.raises(ValueError, match="versions do not chain"):
+        spliced(old, bad, 60.0)
+    # a version replacing one that had not departed is simply the new one
+    later = old.shifted(100.0)
+    assert spliced(later, new, 60.0) is new
+
+
+def test_audit_of_what_flew_finds_no_incursion_where_the_old_plans_had_one():
+    """C and Wq closed too: both turn back to Wp (P lands at 200, Q, through C and mp, at 300);
+    what flew stays out, the old plans would not have."""
+    p = planner(replan_policy="firstfit")
+    fly(p, req("P", "Wp", "Ep"), req("Q", "Wq", "Eq"))
+    for c in (EAST, Constraint("Wq-closed", 1, "", 60.0, 1000.0, vertiport_id="Wq"),
+              Constraint("C-closed", 1, "", 60.0, 1000.0, vertiport_id="C")):
+        assert p.update_constraint("add", c, 60.0) is None
+    res = p.plan(60.0, 2)
+    kinds = {u.request_id: u.kind for u in res.plan_updates}
+    # P: back to Wp (lands 200). Q: Wp through C and mp (the closure of C forbids only landing
+    # there), arriving 300 - P has landed at 200, so it is free: no contingency after all
+    assert kinds == {"P": "diverted", "Q": "diverted"}
+    flown = {u.request_id: flown_trajectory([u.previous, u.flight]) for u in res.plan_updates}
+    ends = {u.request_id: (u.flight.origin_id, u.flight.destination_id) for u in res.plan_updates}
+    tl = constraint_timeline(p.initial_constraints, p.constraint_log)
+    assert audit_incursions(flown, tl, p.network, ends) == []
+    # the old plans would have entered the cell (x = 400 at t = 140) had they been flown
+    old = {u.request_id: u.previous.trajectory for u in res.plan_updates}
+    old_ends = {u.request_id: (u.previous.origin_id, u.previous.destination_id) for u in res.plan_updates}
+    got = sorted(audit_incursions(old, tl, p.network, old_ends))
+    assert got == [("P", "'east' v1 (storm cell)", pytest.approx(140.0)),
+                   ("Q", "'east' v1 (storm cell)", pytest.approx(140.0))]
+
+
+def test_paper_mode_flights_default_to_version_one():
+    p = planner()
+    (f,) = fly(p, req("P", "Wp", "Ep")).approved
+    assert (f.version, f.effective_s, f.contingent) == (1, 0.0, False)
+    assert p.replan_policy() == "mwis" and Planner(lanes(), policy="fifo").replan_policy() == "firstfit"
+    with pytest.raises(ValueError, match="replan_policy"):
+        PlanningConfig(replan_policy="best")
+
+
+def layered_lanes():
+    """The lanes at one level (60 m, no direction rule); C has two pads, (0, 480) and (150, 480)."""
+    base = lanes()
+    return network_from_enu("lanes-layered", list(base.node_ids), base.enu_m, base.is_aerodrome,
+                            [(base.node_ids[a], base.node_ids[b]) for a, b in base.edges],
+                            airspace={"levels_m": [60.0], "direction_rule": "none"},
+                            pads_m={"C": [[0.0, 0.0], [150.0, 0.0]]})
+
+
+def test_airborne_flight_diverted_to_the_free_pad_of_the_alternate():
+    """Climb 5 m/s, descent 3 m/s. P: Wp -> mp -> Ep at 60 m: top of climb at 12 s, mp at 112,
+    Ep at 212. R: Wq -> mq -> C pad 0 (the only level's pad), over pad 0 at 164, down at 184."""
+    net = layered_lanes()
+    p = Planner(net, PlanningConfig(k=2), "mwis", solve_mwis=exact_mwis)
+    fly(p, req("P", "Wp", "Ep"), req("R", "Wq", "C"))
+    np.testing.assert_allclose(p.active[1].trajectory.times_s, [0.0, 12.0, 112.0, 164.0, 184.0], atol=0.05)
+    p.update_constraint("add", EAST, 60.0)
+    (u,) = p.plan(60.0, 2).plan_updates
+    # Branch at mp (112 s). C pad 0: over it at 160, descending until 180 while R descends there
+    # from 164: 12 m apart at 164, a loss. C pad 1 (150, 480): 502.9 m -> over it at 162.3, down at
+    # 182.3, never within 100 m of R: chosen (lands 122.3 s after t_eff: w = 1 + 300/422.3, above
+    # Wp's 1 + 300/472).
+    assert (u.kind, u.flight.destination_id) == ("diverted", "C")
+    tr = u.flight.trajectory
+    np.testing.assert_allclose(tr.points_m[-2:], [(150, 480, 60), (150, 480, tr.points_m[-1, 2])])
+    assert tr.points_m[-1, 2] < 0.1                      # the pad (ground, about 0 m)
+    np.testing.assert_allclose(tr.times_s[-2:], [112.0 + math.hypot(150, 480) / 10.0,
+                                                 112.0 + math.hypot(150, 480) / 10.0 + 20.0], atol=0.05)
+    np.testing.assert_allclose(tr.times_s[:3], [0.0, 12.0, 112.0], atol=0.05)   # the old plan up to mp
+    assert u.flight.weight == pytest.approx(divert_weight(tr.arrival_s - 60.0))
+
+
+def test_clipped_from_cuts_at_any_instant():
+    from uam_planner.replanning import clipped_from
+    tr = Trajectory(np.array([0.0, 100.0, 200.0]), np.array([(0, 0, 0), (1000, 0, 0), (1000, 1000, 0)], float))
+    c = clipped_from(tr, 150.0)
+    np.testing.assert_allclose(c.times_s, [150.0, 200.0])
+    np.testing.assert_allclose(c.points_m, [(1000, 500, 0), (1000, 1000, 0)])
+    assert clipped_from(tr, -5.0) is tr and clipped_from(tr, 200.0) is None
+    c = clipped_from(tr, 200.0 - 1e-12)         # within rounding of the arrival
+    assert c.times_s[-1] == 200.0 and c.times_s[0] < 200.0
+    np.testing.assert_allclose(clipped_from(tr, 100.0).points_m[0], (1000, 0, 0))

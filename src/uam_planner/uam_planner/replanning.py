@@ -1,0 +1,702 @@
+"""Batch re-planning when constraints change, plan versions and F3548 states (issue 22, items 3
+and 4; docs/replanning.md). Free of ROS; no wall clock inside a decision.
+
+When the ``Planner`` applies a constraint update at an epoch time ``t_eff`` (an announced
+constraint reaching its ``announce_s``, or a live ``Planner.update_constraint``), before the
+epoch's new requests are planned, :func:`replan` decides for every **affected** flight (one whose
+plan, from ``t_eff`` on, enters a constraint of the updated set during its window):
+
+- **not departed** (departure >= t_eff): its alternatives are its request's candidates (every
+  route and level, every departure slot in [max(t_eff, earliest), min(latest, t_eff + epoch)],
+  as the planner builds them) that stay out of every constraint; none chosen -> **cancelled**,
+  with a reason naming the constraint;
+- **airborne** (departure < t_eff): it flies on to its *branch point*, the first waypoint at or
+  after t_eff (a corridor node, or its origin pad at the top of the climb), and from there gets,
+  at its level, up to ``k`` routes to its destination's pad (**rerouted**) and the shortest
+  route to each of the ``DIVERT_VERTIPORTS`` nearest other vertiports, every pad (**diverted**);
+  a flight left with fewer than ``STAGE2_BELOW`` of them that keep separation with the
+  unaffected flights also gets the re-routes to its destination's other pads and all of these
+  from its next waypoint (``BRANCH_WAYPOINTS``). Routes: penalised Dijkstra with the corridors
+  that cross an updated volume avoided (each 10,000 km dearer, so taken only where there is no
+  other way, e.g. to leave the zone before it opens; vertiports terminals on a layered
+  network), then checked exactly. None chosen -> **contingency**: it flies the constraint-free
+  alternative that loses separation with the fewest flights, then lands soonest (a contingency
+  landing, flown but *not deconflicted*, ``Flight.contingent``, F3548 Contingent), or its
+  current plan if none stays out (an incursion that cannot be avoided: reported, never hidden);
+- a flight whose plan still stays out keeps it (**kept**; a flight is affected only if it does
+  not, so kept appears when the caller names flights explicitly).
+
+ONE conflict graph over every affected flight's alternatives (one vertex per alternative, one
+clique per flight), each alternative deconflicted exactly (``conflict_graph``, the run's
+separation model) against every unaffected active flight and joined by an edge to the
+alternatives of other affected flights it loses separation with. Weights (tiers, so the MWIS
+prefers keep > re-route or re-time with the least added delay > divert to the nearest pad >
+nothing): ``W_KEEP`` = 4; re-route / re-time 2 + 1 / (1 + delay / ``DELAY_SCALE_S``) in (2, 3],
+delay = new arrival - old arrival clamped at 0; divert 1 + 1 / (1 + T / ``DELAY_SCALE_S``) in
+(1, 2], T = landing time - t_eff.
+Policy "mwis" solves it with the planner's solve function (answer checked, greedy fallback);
+"firstfit" (the baseline) walks the flights in approval order and takes each one's first
+alternative in preference order (weight, descending) that keeps separation with what is taken.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field, replace
+from typing import Callable, Sequence
+
+import numpy as np
+
+from .constraints import Constraint, ConstraintError, ConstraintSet, check_against
+from .trajectory import Trajectory
+
+ACTIONS = ("add", "change", "withdraw")
+KINDS = ("kept", "rerouted", "retimed", "diverted", "cancelled", "contingency")
+STATES = ("Accepted", "Activated", "Contingent", "Ended")  # ASTM F3548-21 (Nonconforming: issue 23)
+W_KEEP = 4.0
+DELAY_SCALE_S = 300.0
+DIVERT_VERTIPORTS = 3
+BRANCH_WAYPOINTS = 2
+STAGE2_BELOW = 4
+_EPS_T = 1e-9
+
+
+@dataclass(frozen=True)
+class ConstraintUpdate:
+    """One queued or applied constraint update.
+
+    Attributes:
+        action: 'add', 'change' or 'withdraw'.
+        constraint: the new Constraint (add, change) or the one withdrawn (withdraw).
+        t_s: when it was announced [s]; it is applied at the first epoch at a time >= t_s.
+        seq: submission order (ties of t_s are applied in this order).
+        applied_s: the epoch time it was applied at (nan while queued).
+    """
+
+    action: str
+    constraint: Constraint
+    t_s: float
+    seq: int
+    applied_s: float = float("nan")
+
+
+@dataclass(frozen=True, eq=False)
+class PlanUpdate:
+    """What happened to one affected flight, for the operator and the recording.
+
+    Attributes:
+        request_id, operator_id: the flight.
+        version: the new version (old version + 1; a cancellation has one too).
+        kind: one of KINDS.
+        constraint_ids: the constraint(s) the old plan entered.
+        reason: a sentence naming the constraint(s) and what was done.
+        effective_s: when the new version takes effect (the epoch time t_eff).
+        flight: the new Flight (None when cancelled).
+        previous: the replaced Flight.
+        added_delay_s: new arrival - old arrival [s] (nan when cancelled).
+    """
+
+    request_id: str
+    operator_id: str
+    version: int
+    kind: str
+    constraint_ids: tuple
+    reason: str
+    effective_s: float
+    flight: object
+    previous: object
+    added_delay_s: float = float("nan")
+
+
+@dataclass
+class ReplanReport:
+    """Counts and times of one batch re-plan (``EpochReport.replan``)."""
+
+    t_s: float
+    policy: str
+    updates: list = field(default_factory=list)      # labels of the updates applied
+    affected: int = 0
+    affected_airborne: int = 0
+    affected_not_departed: int = 0
+    alternatives: int = 0       # constraint-free alternatives generated
+    stage2: int = 0             # flights that got stage-2 alternatives
+    vertices: int = 0
+    edges: int = 0
+    kinds: dict = field(default_factory=dict)        # kind -> count
+    decision_time_s: float = 0.0                     # wall, for reports only
+    decision_cpu_s: float = 0.0                      # process CPU time, for reports only
+    solve_time_s: float = 0.0
+    backend_used: str = ""
+    fallback: bool = False
+    fallback_reason: str = ""
+
+
+# ---- states and versions ----------------------------------------------------------------------
+
+def flight_state(flight, t_s: float) -> str:
+    """The ASTM F3548-21 state of ``flight`` (its newest version) at ``t_s`` [s]: 'Accepted'
+    before departure, 'Activated' airborne, 'Contingent' airborne on a contingency plan,
+    'Ended' after arrival. (A cancelled flight is Ended from its cancellation; a PlanUpdate of
+    kind 'cancelled' says so. Nonconforming needs a conformance monitor: issue 23.)"""
+    if t_s > flight.arrival_s:
+        return "Ended"
+    if t_s < flight.departure_s:
+        return "Accepted"
+    return "Contingent" if getattr(flight, "contingent", False) else "Activated"
+
+
+def spliced(old: Trajectory, new: Trajectory, effective_s: float, tol_m: float = 1e-6) -> Trajectory:
+    """What flies when ``new`` replaces ``old`` at ``effective_s``: old before, new after.
+
+    If ``old`` has not departed by ``effective_s`` the answer is ``new``. Otherwise the two
+    must chain: ``new`` airborne at ``effective_s`` at the position of ``old`` there (within
+    ``tol_m``); else ValueError naming the gap ("versions do not chain")."""
+    t = float(effective_s)
+    if old.departure_s >= t:
+        return new
+    if not new.departure_s <= t <= new.arrival_s:
+        raise ValueError(f"versions do not chain: the new version is not airborne at t = {t:g} s "
+                         f"(it flies [{new.departure_s:g}, {new.arrival_s:g}] s)")
+    a = old.position_at(min(t, old.arrival_s), clamp=True)
+    b = new.position_at(t)
+    gap = float(np.linalg.norm(a - b))
+    if gap > tol_m:
+        raise ValueError(f"versions do not chain: at t = {t:g} s the new version is {gap:.3f} m "
+                         f"from the old one")
+    keep = old.times_s < t - _EPS_T
+    after = new.times_s > t + _EPS_T
+    times = np.concatenate((old.times_s[keep], [t], new.times_s[after]))
+    points = np.concatenate((old.points_m[keep], [b], new.points_m[after]))
+    return Trajectory(times, points)
+
+
+def flown_trajectory(versions: Sequence) -> Trajectory | None:
+    """The trajectory flown by one flight given its versions in order (Flight objects with
+    ``trajectory`` and ``effective_s``, or None for a cancellation): each version from the
+    instant it took effect. None if nothing flew (cancelled before departure)."""
+    flown = None
+    for v in versions:
+        if v is None:  # cancelled: only a flight that had not departed is ever cancelled
+            return None
+        flown = v.trajectory if flown is None else spliced(flown, v.trajectory, v.effective_s)
+    return flown
+
+
+def clipped_from(tr: Trajectory, t_s: float) -> Trajectory | None:
+    """The part of ``tr`` at or after ``t_s`` (None if it has landed by then)."""
+    t = float(t_s)
+    if t >= tr.arrival_s:
+        return None
+    if t <= tr.departure_s:
+        return tr
+    ts, ps = tr.times_s, tr.points_m
+    j = min(int(np.searchsorted(ts, t + _EPS_T, side="right")), ts.shape[0] - 1)  # next waypoint
+    w = (t - ts[j - 1]) / (ts[j] - ts[j - 1])
+    here = ps[j - 1] + w * (ps[j] - ps[j - 1])
+    times = np.concatenate(([t], ts[j:]))
+    points = np.concatenate(([here], ps[j:]))
+    return Trajectory._trusted(times, points, None)  # a cut of a valid trajectory
+
+
+# ---- the constraint state ----------------------------------------------------------------------
+
+def check_update(action: str, constraint, t_s, current: dict, network) -> str | None:
+    """Why the update cannot be accepted (naming the field and value), or None.
+
+    ``current``: constraint id -> Constraint as it will be once every update queued before is
+    applied."""
+    if action not in ACTIONS:
+        return f"action: {action!r} is not one of {ACTIONS}"
+    if isinstance(t_s, bool) or not isinstance(t_s, (int, float, np.integer, np.floating)) \
+            or not math.isfinite(t_s):
+        return f"t_s: {t_s!r} is not a finite time"
+    if action == "withdraw":
+        cid = constraint if isinstance(constraint, str) else getattr(constraint, "constraint_id", None)
+        if cid not in current:
+            return f"constraint_id: {cid!r} is not a known constraint (nothing to withdraw)"
+        return None
+    if not isinstance(constraint, Constraint):
+        return f"constraint: {constraint!r} is not a Constraint"
+    cid = constraint.constraint_id
+    if action == "add" and cid in current:
+        return (f"constraint_id: {cid!r} is already a constraint (v{current[cid].version}); "
+                f"use 'change' with a higher version")
+    if action == "change":
+        if cid not in current:
+            return f"constraint_id: {cid!r} is not a known constraint (nothing to change)"
+        if constraint.version <= current[cid].version:
+            return (f"version: {constraint.version!r} of {cid!r} is not above the current "
+                    f"version {current[cid].version}")
+    try:
+        check_against(constraint, network, float(t_s))
+    except ConstraintError as exc:
+        return str(exc)
+    return None
+
+
+def apply_updates(cset: ConstraintSet | None, updates: Sequence[ConstraintUpdate], network) -> ConstraintSet:
+    """The ConstraintSet after ``updates`` (in order) on ``cset`` (None = empty)."""
+    cur = {c.constraint_id: c for c in (cset or ())}
+    for u in updates:
+        cid = u.constraint.constraint_id
+        if u.action == "withdraw":
+            cur.pop(cid, None)
+        else:
+            cur[cid] = u.constraint
+    return ConstraintSet(list(cur.values()), network)
+
+
+def constraint_timeline(initial: Sequence[Constraint], applied: Sequence[ConstraintUpdate]) -> list:
+    """(Constraint, from_s, until_s) of every constraint version while it was in force: from
+    the epoch it was applied at (-inf for the initial ones) until it was changed or withdrawn
+    (inf if never). What the audit of what flew checks incursions against."""
+    open_: dict = {c.constraint_id: (c, -math.inf) for c in initial}
+    out = []
+    for u in applied:
+        cid = u.constraint.constraint_id
+        if cid in open_:
+            c, since = open_.pop(cid)
+            out.append((c, since, u.applied_s))
+        if u.action != "withdraw":
+            open_[cid] = (u.constraint, u.applied_s)
+    out.extend((c, since, math.inf) for c, since in open_.values())
+    return out
+
+
+def _pad_of_point(network, node: int, xy) -> int:
+    pads = network.pads_of(node)
+    if len(pads) <= 1:
+        return 0
+    d = np.linalg.norm(network.enu_m[node, :2] + np.asarray(pads) - np.asarray(xy)[:2], axis=1)
+    return int(np.argmin(d))
+
+
+def audit_incursions(flown: dict, timeline: Sequence, network, ends: dict) -> list:
+    """Constraint incursions of what flew: (request_id, constraint label, t_s) for each flight
+    whose flown trajectory enters a constraint version while it was in force (its window cut
+    to [from_s, until_s)), by the same exact test the planner uses.
+
+    Args:
+        flown: request_id -> flown Trajectory.
+        timeline: from :func:`constraint_timeline`.
+        network: the Network.
+        ends: request_id -> (origin_id, destination_id) (the destination it landed at).
+    """
+    cs = []
+    for k, (c, since, until) in enumerate(timeline):
+        lo, hi = max(c.start_s, since), min(c.end_s, until)
+        if not hi > lo:
+            continue
+        cs.append(replace(c, constraint_id=f"{c.constraint_id}#{k}", start_s=lo, end_s=hi,
+                          announce_s=-math.inf))
+    if not cs or not flown:
+        return []
+    labels = {f"{c.constraint_id}#{k}": c.label() for k, (c, _a, _b) in enumerate(timeline)}
+    cset = ConstraintSet(cs, network)
+    ids = list(flown)
+    trs = [flown[i] for i in ids]
+    o = np.array([network.node_index(ends[i][0]) for i in ids], dtype=np.int64)
+    d = np.array([network.node_index(ends[i][1]) for i in ids], dtype=np.int64)
+    po = np.array([_pad_of_point(network, oi, tr.points_m[0]) for oi, tr in zip(o.tolist(), trs)])
+    pd = np.array([_pad_of_point(network, di, tr.points_m[-1]) for di, tr in zip(d.tolist(), trs)])
+    which, when = cset.violations(trs, o, d, po, pd)
+    return [(ids[i], labels[cset.constraints[int(which[i])].constraint_id], float(when[i]))
+            for i in np.flatnonzero(which >= 0).tolist()]
+
+
+# ---- affected flights and their alternatives ---------------------------------------------------
+
+def affected_flights(active: Sequence, cset: ConstraintSet, t_eff: float, network) -> dict:
+    """index in ``active`` -> (constraint index, entry time) of each flight whose plan from
+    ``t_eff`` on enters a constraint of ``cset`` during its window (an airborne flight's
+    departure is not re-checked against closures)."""
+    if cset is None or not len(cset) or not active:
+        return {}
+    rows, trs, o, d, po, pd = [], [], [], [], [], []
+    for i, f in enumerate(active):
+        tr = clipped_from(f.trajectory, t_eff)
+        if tr is None:
+            continue
+        rows.append(i)
+        trs.append(tr)
+        oi = network.node_index(f.origin_id)
+        di = network.node_index(f.destination_id)
+        o.append(oi if f.departure_s >= t_eff else -1)
+        d.append(di)
+        po.append(_pad_of_point(network, oi, f.trajectory.points_m[0]))
+        pd.append(_pad_of_point(network, di, f.trajectory.points_m[-1]))
+    if not rows:
+        return {}
+    which, when = cset.violations(trs, np.array(o), np.array(d), np.array(po), np.array(pd))
+    return {rows[k]: (int(which[k]), float(when[k])) for k in np.flatnonzero(which >= 0).tolist()}
+
+
+@dataclass
+class _Alt:
+    trajectory: Trajectory
+    kind: str
+    weight: float
+    destination: int
+    route_node_ids: tuple
+    length_m: float
+    route_index: int = 0
+    candidate_index: int = 0
+
+
+def _tier(kind: str, delay_s: float) -> float:
+    d = max(0.0, float(delay_s))
+    if kind == "kept":
+        return W_KEEP
+    base = 1.0 if kind == "diverted" else 2.0
+    return base + 1.0 / (1.0 + d / DELAY_SCALE_S)
+
+
+class _Router:
+    """Routes from any node at one level around the updated volumes (penalised Dijkstra on the
+    corridors that do not cross a volume whose band holds the level, vertiports terminals on a
+    layered network)."""
+
+    def __init__(self, network, cache, cset: ConstraintSet, t_eff: float):
+        self.net = network
+        self.cache = cache
+        self.vols = [c for c in cset if c.kind != "closure" and c.end_s > t_eff]
+        self._blocked: dict = {}
+        self._lines = None
+        self._memo: dict = {}
+
+    def blocked(self, level_z: float | None) -> np.ndarray:
+        key = None if level_z is None else round(float(level_z), 6)
+        got = self._blocked.get(key)
+        if got is not None:
+            return got
+        import shapely
+        net = self.net
+        e = np.asarray(net.edges, dtype=np.int64)
+        mask = np.zeros(e.shape[0], dtype=bool)
+        if self.vols and e.shape[0]:
+            if self._lines is None:
+                xy = net.enu_m[:, :2]
+                self._lines = shapely.STRtree(shapely.linestrings(np.stack((xy[e[:, 0]], xy[e[:, 1]]), axis=1)))
+            z = net.enu_m[:, 2]
+            zlo = np.minimum(z[e[:, 0]], z[e[:, 1]])
+            zhi = np.maximum(z[e[:, 0]], z[e[:, 1]])
+            for c in self.vols:
+                if c.center_m is not None:
+                    # the disk grown by 1 m: the search is a pre-filter, the exact test decides
+                    geom = shapely.Point(c.center_m).buffer(c.radius_m + 1.0, quad_segs=32)
+                else:
+                    geom = shapely.Polygon(c.rings_m[0], c.rings_m[1:]).buffer(1.0)
+                hit = self._lines.query(geom, predicate="intersects")
+                if level_z is None:
+                    band = (zhi[hit] >= c.lower_m) & (zlo[hit] <= c.upper_m)
+                else:
+                    band = np.full(hit.shape[0], c.lower_m <= level_z <= c.upper_m)
+                mask[hit[band]] = True
+        self._blocked[key] = mask
+        return mask
+
+    def routes(self, u: int, target: int, k: int, level_z: float | None):
+        from .candidates import _routes
+        if u == target:
+            return []
+        key = (u, target, k, None if level_z is None else round(float(level_z), 6))
+        got = self._memo.get(key)
+        if got is None:
+            try:
+                got = _routes(self.cache._graph, self.net, u, target, k, self.cache.penalty_factor,
+                              terminals=self.net.layered, blocked=self.blocked(level_z))
+            except ValueError:
+                got = []
+            self._memo[key] = got
+        return got
+
+
+def _airborne_alternatives(f, t_eff: float, network, config, router: _Router, stage: int = 1) -> list:
+    """Re-routes to the destination and diversions of airborne flight ``f`` (see the module
+    docstring); may be empty. Stage 1: from its branch point, re-routes to its own pad and
+    diversions to every pad; stage 2 (the rest, for a flight with too few stage-1 survivors):
+    re-routes to its destination's other pads, then everything from the next
+    ``BRANCH_WAYPOINTS - 1`` waypoints."""
+    tr = f.trajectory
+    times, pts = tr.times_s, tr.points_m
+    k0 = int(np.searchsorted(times, t_eff - _EPS_T, side="left"))  # first waypoint >= t_eff
+    route = [network.node_index(x) for x in f.route_node_ids]
+    layered = network.layered
+    dest = network.node_index(f.destination_id)
+    speed = float(config.speed_mps)
+    descent = float(config.airspace.descent_rate_mps)
+    xy = network.enu_m[:, :2]
+    dest_pad = _pad_of_point(network, dest, pts[-1])
+    alts = []
+    for k in range(k0, k0 + (1 if stage == 1 else BRANCH_WAYPOINTS)):
+        node_at = k - 1 if layered else k  # route node of waypoint k
+        if not 0 <= node_at < len(route) or (layered and k == 0):
+            break  # descending to its pad: nothing to branch from
+        u = route[node_at]
+        level = float(pts[k, 2]) if layered else None
+        targets = [(dest, "rerouted", int(config.k))]
+        others = [int(a) for a in network.aerodrome_indices if int(a) != dest]
+        others.sort(key=lambda a: (float(np.hypot(*(xy[a] - pts[k, :2]))), a))
+        targets += [(a, "diverted", 1) for a in others[:DIVERT_VERTIPORTS]]
+        for target, kind, n_routes in targets:
+            for r in router.routes(u, target, n_routes, level):
+                mid = np.asarray(r.node_indices[1:-1], dtype=np.int64)
+                news = []
+                if layered:
+                    alt_z = float(network.lat_lon_alt[target, 2])
+                    pads = network.pads_of(target)
+                    order = list(range(len(pads)))
+                    if kind == "rerouted":  # its own pad first
+                        order.remove(dest_pad)
+                        order.insert(0, dest_pad)
+                    for pi in order:
+                        first = k == k0 and (kind == "diverted" or pi == dest_pad)
+                        if first != (stage == 1):
+                            continue
+                        pad = xy[target] + pads[pi]
+                        horiz = np.concatenate((xy[mid].reshape(-1, 2), [pad]))
+                        new = np.column_stack((horiz, np.full(horiz.shape[0], level)))
+                        news.append(np.concatenate((new, [(pad[0], pad[1], alt_z)])))
+                elif (k == k0) == (stage == 1):
+                    news.append(network.enu_m[np.asarray(r.node_indices[1:], dtype=np.int64)])
+                for new in news:
+                    traj = _extend(times[:k + 1], pts[:k + 1], new, speed, descent, vertical_last=layered)
+                    if traj is None:
+                        continue
+                    node_ids = tuple(f.route_node_ids[:node_at + 1]) + \
+                        tuple(network.node_ids[i] for i in r.node_indices[1:])
+                    length = float(np.sqrt(np.square(np.diff(traj.points_m, axis=0)).sum(axis=1)).sum())
+                    # a re-route costs its added delay; a diversion its time to land
+                    cost = traj.arrival_s - (tr.arrival_s if kind == "rerouted" else t_eff)
+                    alts.append(_Alt(traj, kind, _tier(kind, cost), target, node_ids, length,
+                                     int(r.candidate_index)))
+    return alts
+
+
+def _extend(times, pts, new_pts, speed, descent, vertical_last: bool) -> Trajectory | None:
+    """Prefix (times, pts) continued through ``new_pts`` at ``speed`` (the last leg vertical at
+    ``descent`` when ``vertical_last``); zero-length legs dropped; None if nothing is left."""
+    seq = np.concatenate((pts[-1:], np.asarray(new_pts, dtype=np.float64).reshape(-1, 3)))
+    legs = np.sqrt(np.square(np.diff(seq, axis=0)).sum(axis=1))
+    keep = np.concatenate(([True], legs > 1e-9))   # drop zero-length legs
+    if not keep.all():
+        seq = seq[keep]
+        legs = legs[legs > 1e-9]
+    if seq.shape[0] < 2:
+        return None
+    dt = legs / speed
+    if vertical_last and seq[-1, 0] == seq[-2, 0] and seq[-1, 1] == seq[-2, 1]:
+        dt[-1] = legs[-1] / descent
+    t = times[-1] + np.concatenate(([0.0], np.cumsum(dt)))
+    out_t = np.concatenate((times[:-1], t))
+    out_p = np.concatenate((pts[:-1], seq))
+    return Trajectory._trusted(out_t, out_p, None)  # increasing: positive legs at positive speeds
+
+
+def _ground_alternatives(f, req, t_eff: float, network, cache, departures: Callable) -> list:
+    """Candidates of a flight that has not departed: every template and departure slot in its
+    request's window from t_eff (see the module docstring)."""
+    o, d = network.node_index(f.origin_id), network.node_index(f.destination_id)
+    if req is not None:
+        slots = np.asarray(departures(t_eff, req), dtype=np.float64)
+        slots = slots[(slots >= req.earliest_departure_s - _EPS_T) & (slots <= req.latest_departure_s + _EPS_T)]
+    else:  # restored without its request: only its own departure time
+        slots = np.array([f.departure_s]) if f.departure_s >= t_eff else np.zeros(0)
+    alts = []
+    c = 0
+    for tp in cache.templates(o, d):
+        for dep in slots.tolist():
+            traj = tp.trajectory(dep)
+            same = tp.node_ids == tuple(f.route_node_ids) and \
+                (math.isnan(tp.level_m) and math.isnan(f.level_m) or tp.level_m == f.level_m)
+            kind = "retimed" if same else "rerouted"
+            alts.append(_Alt(traj, kind, _tier(kind, traj.arrival_s - f.arrival_s), d, tp.node_ids,
+                             float(tp.route.length_m), int(tp.route.candidate_index), c))
+            c += 1
+    return alts
+
+
+def _constraint_free(alts: list, cset: ConstraintSet, t_eff: float, network, origin: int | None) -> list:
+    """The alternatives that, from t_eff on, stay out of every constraint (closures at the end
+    they land at; at the origin too for a flight that has not departed)."""
+    if not alts:
+        return alts
+    trs = [clipped_from(a.trajectory, t_eff) for a in alts]
+    o = np.array([origin if origin is not None else -1] * len(alts), dtype=np.int64)
+    d = np.array([a.destination for a in alts], dtype=np.int64)
+    po = np.array([_pad_of_point(network, max(origin, 0), a.trajectory.points_m[0]) if origin is not None
+                   else 0 for a in alts])
+    pd = np.array([_pad_of_point(network, a.destination, a.trajectory.points_m[-1]) for a in alts])
+    which, _ = cset.violations(trs, o, d, po, pd)
+    return [a for a, w in zip(alts, which.tolist()) if w < 0]
+
+
+def _least_conflicting(alts: list, unaffected: list, chosen: dict, contingencies: list, config,
+                       t_eff: float):
+    """A contingency's plan: of its constraint-free alternatives, the one that loses separation
+    with the fewest flights (unaffected, chosen, and the contingencies decided before it), then
+    the one landing soonest."""
+    from .separation import SegmentSet, conflicting_pairs
+    others = [f.trajectory for f in unaffected] + [x.trajectory for x in chosen.values()] + \
+        [f.trajectory for f in contingencies if f.contingent]
+    n_conf = np.zeros(len(alts), dtype=np.int64)
+    if others:
+        oset = SegmentSet.from_trajectories(others)
+        oset = oset.take(oset.t1_s >= t_eff) if len(oset) else oset
+        if len(oset):
+            pairs = conflicting_pairs(SegmentSet.from_trajectories([x.trajectory for x in alts]), oset,
+                                      config.separation)
+            for i in np.unique(pairs[:, 0]).tolist():
+                n_conf[i] = np.unique(pairs[pairs[:, 0] == i, 1]).size
+    k = min(range(len(alts)), key=lambda i: (int(n_conf[i]), alts[i].trajectory.arrival_s, -alts[i].weight))
+    return alts[k]
+
+
+def replan(t_eff: float, epoch_index: int, active: Sequence, requests: dict, network, config,
+           cache, cset: ConstraintSet, select: Callable, departures: Callable, policy: str = "mwis",
+           affected: dict | None = None, labels: Sequence[str] = ()) -> tuple[list, list, ReplanReport]:
+    """Re-plan the flights of ``active`` that the constraints ``cset`` affect, at ``t_eff``.
+
+    Args:
+        t_eff: the epoch time the update takes effect [s].
+        epoch_index: the epoch, copied to the new versions.
+        active: the planner's active flights (newest versions; landed ones already dropped).
+        requests: request_id -> FlightRequest of the active flights (their windows; a flight
+            missing here keeps only its own departure time as a re-time option).
+        network, config, cache: the planner's Network, PlanningConfig and CandidateCache.
+        cset: the ConstraintSet after the update.
+        select: callable(graph, policy) -> (selected vertex indices, an object with
+            ``backend_used``, ``fallback``, ``fallback_reason``): the checked MWIS or first-fit
+            answer (the Planner's: ``uam_planner.planning.replan_selector``).
+        departures: callable(t_s, request) -> departure times a request may take at an epoch at
+            t_s (the Planner's ``departure_slots_s`` with its config).
+        policy: "mwis" or "firstfit".
+        affected: optional {index in active: (constraint index, entry time)} (default:
+            :func:`affected_flights`).
+        labels: the updates' labels, for the report.
+    Returns: (new active list: unaffected flights in their order, then the new versions;
+        PlanUpdate per affected flight in ``active`` order; ReplanReport).
+    """
+    from .conflict_graph import build_conflict_graph
+    from .separation import SegmentSet
+
+    t0, c0 = time.perf_counter(), time.process_time()
+    rep = ReplanReport(t_s=float(t_eff), policy=policy, updates=list(labels))
+    if affected is None:
+        affected = affected_flights(active, cset, t_eff, network)
+    idx = sorted(affected)
+    rep.affected = len(idx)
+    if not idx:
+        rep.decision_time_s = time.perf_counter() - t0
+        rep.decision_cpu_s = time.process_time() - c0
+        return list(active), [], rep
+    from .conflict_graph import discard_against_active
+    router = _Router(network, cache, cset, t_eff)
+    unaffected = [f for j, f in enumerate(active) if j not in affected]
+    act = SegmentSet.from_trajectories([f.trajectory for f in unaffected])
+    act = act.take(act.t1_s >= t_eff) if len(act) else act
+    per_flight, clean = [], []
+    for i in idx:
+        f = active[i]
+        airborne = f.departure_s < t_eff
+        rep.affected_airborne += int(airborne)
+        rep.affected_not_departed += int(not airborne)
+        origin = None if airborne else network.node_index(f.origin_id)
+        alts = _airborne_alternatives(f, t_eff, network, config, router) if airborne else \
+            _ground_alternatives(f, requests.get(f.request_id), t_eff, network, cache, departures)
+        alts = _constraint_free(alts, cset, t_eff, network, origin)
+        keep = _constraint_free([_Alt(f.trajectory, "kept", W_KEEP, network.node_index(f.destination_id),
+                                      tuple(f.route_node_ids), f.length_m, f.route_index,
+                                      f.candidate_index)], cset, t_eff, network, origin)
+        per_flight.append(keep + alts)
+    # stage 2: a flight left with fewer than STAGE2_BELOW alternatives that keep separation
+    # with the unaffected flights gets the rest (other pads, the next branch point)
+    flat1 = [a.trajectory for alts in per_flight for a in alts]
+    gone = discard_against_active(flat1, act, config.separation) if flat1 and len(act) \
+        else np.zeros(len(flat1), dtype=bool)
+    pos = 0
+    for r, i in enumerate(idx):
+        n = len(per_flight[r])
+        mine = gone[pos:pos + n]
+        pos += n
+        clean.append(list(per_flight[r]))
+        per_flight[r] = [a for a, g in zip(per_flight[r], mine.tolist()) if not g]
+        f = active[i]
+        if len(per_flight[r]) < STAGE2_BELOW and f.departure_s < t_eff:
+            more = _constraint_free(_airborne_alternatives(f, t_eff, network, config, router, stage=2),
+                                    cset, t_eff, network, None)
+            per_flight[r] += more
+            clean[r] += more
+            rep.stage2 += 1
+    for alts in per_flight:
+        alts.sort(key=lambda a: -a.weight)  # stable: preference order within the flight
+    flat = [a for alts in per_flight for a in alts]
+    req_of = np.repeat(np.arange(len(idx)), [len(a) for a in per_flight]).astype(np.int64)
+    cand_idx = np.concatenate([np.arange(len(a)) for a in per_flight]).astype(np.int64) \
+        if flat else np.zeros(0, np.int64)
+    rep.alternatives = len(flat1) + sum(len(c) for c in clean) - len(flat1)
+    graph = build_conflict_graph([a.trajectory for a in flat], req_of, cand_idx,
+                                 np.array([a.weight for a in flat], dtype=np.float64), len(idx),
+                                 act, config.separation)
+    rep.vertices, rep.edges = graph.n_vertices, graph.n_edges
+    ts = time.perf_counter()
+    if graph.n_vertices == 0:
+        selected = np.zeros(0, dtype=np.int64)
+    else:
+        selected, er = select(graph, policy)
+        rep.backend_used, rep.fallback, rep.fallback_reason = er.backend_used, er.fallback, er.fallback_reason
+    rep.solve_time_s = time.perf_counter() - ts
+    chosen = {}
+    for v in selected.tolist():
+        src = int(graph.vertex_source[v])
+        chosen[int(req_of[src])] = flat[src]
+    updates, new_versions = [], []
+    method = f"replan-{policy}"
+    for r, i in enumerate(idx):
+        f = active[i]
+        k_c, when = affected[i]
+        c = cset.constraints[k_c]
+        cids = (c.constraint_id,)
+        airborne = f.departure_s < t_eff
+        a = chosen.get(r)
+        contingent = False
+        if a is None and not airborne:
+            reason = (f"cancelled: its plan enters constraint {c.label()} at t = {when:g} s and no "
+                      f"route, level or departure in its window avoids it and keeps separation")
+            updates.append(PlanUpdate(f.request_id, f.operator_id, f.version + 1, "cancelled", cids,
+                                      reason, float(t_eff), None, f))
+            continue
+        if a is None:
+            if clean[r]:
+                a = _least_conflicting(clean[r], unaffected, chosen, new_versions, config, t_eff)
+                what = (f"each of its {len(clean[r])} alternatives that stay out loses separation with "
+                        f"another flight; contingency landing at {network.node_ids[a.destination]!r}, "
+                        f"flown but not deconflicted")
+            else:
+                a = _Alt(f.trajectory, "kept", W_KEEP, network.node_index(f.destination_id),
+                         tuple(f.route_node_ids), f.length_m, f.route_index, f.candidate_index)
+                what = "no route avoids it: it flies its current plan (an incursion that cannot be avoided)"
+            kind = "contingency"
+            contingent = True
+            reason = f"contingency: its plan enters constraint {c.label()} at t = {when:g} s; {what}"
+        else:
+            kind = a.kind
+            reason = (f"{kind}: its plan entered constraint {c.label()} at t = {when:g} s"
+                      if kind != "kept" else f"kept: its plan stays out of constraint {c.label()}")
+            if kind == "diverted":
+                reason += f"; diverted to {network.node_ids[a.destination]!r}"
+        nf = replace(f, destination_id=network.node_ids[a.destination], route_node_ids=a.route_node_ids,
+                     trajectory=a.trajectory, departure_s=a.trajectory.departure_s,
+                     arrival_s=a.trajectory.arrival_s, length_m=a.length_m, weight=a.weight,
+                     candidate_index=a.candidate_index, method=method, backend=rep.backend_used or policy,
+                     epoch_index=int(epoch_index), route_index=a.route_index,
+                     version=f.version + 1, effective_s=float(t_eff), contingent=contingent)
+        updates.append(PlanUpdate(f.request_id, f.operator_id, nf.version, kind, cids, reason,
+                                  float(t_eff), nf, f, nf.arrival_s - f.arrival_s))
+        new_versions.append(nf)
+    for u in updates:
+        rep.kinds[u.kind] = rep.kinds.get(u.kind, 0) + 1
+    rep.decision_time_s = time.perf_counter() - t0
+    rep.decision_cpu_s = time.process_time() - c0
+    return unaffected + new_versions, updates, rep

@@ -1,0 +1,133 @@
+"""The audit of what flew when plans change (issue 22 item 5), on hand-built plan versions:
+chaining, the flown trajectory, and incursions into constraints in force, hand-computed."""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace as NS
+
+import numpy as np
+import pytest
+
+from uam_planner.constraints import Constraint
+from uam_sim.flown_audit import (audit_incursions, chain_problems, constraint_intervals, flown_trajectory,
+                                 flown_versions, incursions)
+
+
+def t(sec: float) -> NS:
+    return NS(sec=int(math.floor(sec)), nanosec=int(round((sec - math.floor(sec)) * 1e9)))
+
+
+def plan(wps, version=1, effective=0.0, ids=(), kind="", origin="A", destination="B"):
+    """A FlightPlan-like object; ``wps``: (t, x, y, z)."""
+    return NS(request_id="r1", operator_id="op", version=version, effective_time=t(effective),
+              constraint_ids=list(ids), update_kind=kind, origin_id=origin, destination_id=destination,
+              waypoints=[NS(time=t(ts), position=NS(x=float(x), y=float(y), z=float(z))) for ts, x, y, z in wps])
+
+
+def square(cid="sq", version=1, lo=(-100.0, -100.0), hi=(100.0, 100.0), band=(0.0, 300.0), window=(0.0, 1000.0)):
+    ring = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
+    return Constraint(cid, version, "test", window[0], window[1], rings_m=(ring,), lower_m=band[0], upper_m=band[1])
+
+
+# r1 flies east at 10 m/s, z = 100: x = -500 + 10 t for t in [0, 100]
+EAST = [(0, -500, 0, 100), (100, 500, 0, 100)]
+
+
+def test_a_reroute_in_the_air_is_flown_from_its_effective_instant():
+    # at t = 50 the flight is at x = 0; version 1 turns north from there: (0, 10 (t - 50), 100)
+    v0 = plan(EAST)
+    v1 = plan([(50, 0, 0, 100), (80, 0, 300, 100)], version=2, effective=50.0, ids=["sq"], kind="rerouted")
+    f, problems = flown_trajectory("op/r1", [v0, v1])
+    assert problems == []
+    np.testing.assert_allclose(f.times_s, [0, 50, 80])
+    np.testing.assert_allclose(f.points_m, [[-500, 0, 100], [0, 0, 100], [0, 300, 100]])
+    assert f.pieces == [(1, 0.0, 50.0), (2, 50.0, 80.0)]
+    # a takeover that does not start where the flight was: 3 m off at t = 50
+    jump = plan([(50, 0, 3, 100), (80, 0, 300, 100)], version=2, effective=50.0, ids=["sq"])
+    _, problems = flown_trajectory("op/r1", [v0, jump])
+    assert problems == ["op/r1: version 2 starts 3.000 m from where version 1 had the flight at 50 s"]
+    # a cancellation before departure: nothing flown; a retime: only the new version
+    cancel = plan([], version=2, effective=-10.0, ids=["sq"], kind="cancelled")
+    f, _ = flown_trajectory("op/r1", [plan([(10, -500, 0, 100), (110, 500, 0, 100)]), cancel])
+    assert len(f.times_s) == 0
+    retimed = plan([(40, -500, 0, 100), (140, 500, 0, 100)], version=2, effective=5.0, ids=["sq"], kind="retimed")
+    f, problems = flown_trajectory("op/r1", [plan([(10, -500, 0, 100), (110, 500, 0, 100)]), retimed])
+    assert problems == [] and f.times_s.tolist() == [40.0, 140.0]
+
+
+def test_versions_that_do_not_chain_are_named():
+    announced = {"sq": 30.0}
+    v0 = plan(EAST)
+    v1 = plan(EAST, version=2, effective=50.0, ids=["sq"])
+    v2 = plan(EAST, version=3, effective=40.0, ids=["sq"])
+    v3 = plan(EAST, version=4, effective=60.0, ids=["other"])
+    assert chain_problems("k", [v0, v1], announced) == []
+    assert chain_problems("k", [v0, v2], announced) == ["k: version 3 follows version 1 (version 2 missing)"]
+    assert chain_problems("k", [v1], announced) == ["k: version 2 without version 1 (the approval)"]
+    assert chain_problems("k", [v0, v1, v2], announced) == [
+        "k: version 3 takes effect at 40 s, before version 2 (at 50 s)"]
+    assert chain_problems("k", [v0, v1, v2.__class__(**{**v2.__dict__, "version": 3, "effective_time": t(55)}), v3],
+                          announced) == ["k: version 4 names constraint 'other', never announced on the constraint topic"]
+    early = plan(EAST, version=2, effective=20.0, ids=["sq"])
+    assert chain_problems("k", [v0, early], announced) == [
+        "k: version 2 takes effect at 20 s, before constraint 'sq' was announced (30 s)"]
+    nameless = plan(EAST, version=2, effective=50.0, kind="retimed")
+    assert chain_problems("k", [v0, nameless], announced) == ["k: version 2 (retimed) names no constraint"]
+
+
+def test_flown_versions_flags_updates_without_an_approval():
+    sets = [(30.0, [(square(), 30.0)])]
+    flown, problems = flown_versions([], {"op/r1": {2: plan(EAST, version=2, effective=50.0, ids=["sq"])}}, sets)
+    assert flown == {} and problems == ["op/r1: 1 plan update(s) for a request with no approval in the recording"]
+
+
+def test_incursions_hand_computed():
+    flight = flown_trajectory("op/r1", [plan(EAST)])[0]
+    # in force from 0, window [0, 1000): entered at x = -100, t = 40
+    (hit,) = incursions([flight], [(square(), 0.0, math.inf)])
+    assert (hit.constraint_id, hit.t_s, hit.what) == ("sq", pytest.approx(40.0), "volume")
+    # the window closes at 40: entering exactly then is allowed (half-open); at 40.5 it is not
+    assert incursions([flight], [(square(window=(0.0, 40.0)), 0.0, math.inf)]) == []
+    assert len(incursions([flight], [(square(window=(0.0, 40.5)), 0.0, math.inf)])) == 1
+    # the band: level at 100 m under a band from 120 m: nothing
+    assert incursions([flight], [(square(band=(120.0, 300.0)), 0.0, math.inf)]) == []
+    # in force only from t = 60 (the flight is then at x = 100, on the closed boundary): t = 60
+    (late,) = incursions([flight], [(square(), 60.0, math.inf)])
+    assert late.t_s == pytest.approx(60.0)
+    # withdrawn at t = 30, before the flight reaches it: nothing
+    assert incursions([flight], [(square(), 0.0, 30.0)]) == []
+    # climbing: z = 2 t, x = -500 + 10 t; band from 150 m is reached at t = 75 (x = 250), inside
+    # a square over x in [0, 400]: entry at t = 75
+    climb = flown_trajectory("op/r1", [plan([(0, -500, 0, 0), (100, 500, 0, 200)])])[0]
+    (up,) = incursions([climb], [(square(lo=(0.0, -100.0), hi=(400.0, 100.0), band=(150.0, 300.0)), 0.0, math.inf)])
+    assert up.t_s == pytest.approx(75.0)
+    # a circle of 100 m around (200, 0): the level flight enters at x = 100, t = 60
+    circle = Constraint("c", 1, "", 0.0, 1000.0, center_m=(200.0, 0.0), radius_m=100.0, lower_m=0.0, upper_m=300.0)
+    (round_,) = incursions([flight], [(circle, 0.0, math.inf)])
+    assert round_.t_s == pytest.approx(60.0)
+    # a closure of the origin A over [0, 100): the departure at t = 0 enters it
+    closed = Constraint("A-closed", 1, "", 0.0, 100.0, vertiport_id="A")
+    (dep,) = incursions([flight], [(closed, 0.0, math.inf)])
+    assert (dep.what, dep.t_s) == ("departure", 0.0)
+    assert incursions([flight], [(Constraint("B-closed", 1, "", 0.0, 100.0, vertiport_id="B"), 0.0, math.inf)]) == []
+
+
+def test_a_reroute_that_leaves_the_constraint_in_time_has_no_incursion():
+    """Version 1 would enter the square at t = 40; version 2, effective at 30 (x = -200), turns
+    north before it: the flown trajectory never enters. Audited on version 1 alone it would."""
+    v0 = plan(EAST)
+    v1 = plan([(30, -200, 0, 100), (60, -200, 300, 100)], version=2, effective=30.0, ids=["sq"], kind="rerouted")
+    sets = [(30.0, [(square(), 30.0)])]
+    flown, problems = flown_versions([("op/r1", v0)], {"op/r1": {1: v1}}, sets)
+    assert problems == []
+    assert audit_incursions([v0], ["op/r1"], flown, sets) == ([], 1)
+    found, _ = audit_incursions([v0], ["op/r1"], {}, sets)
+    assert [i.t_s for i in found] == [pytest.approx(40.0)]
+
+
+def test_constraint_intervals_follow_the_recorded_sets():
+    v1, v2 = square(version=1), square(version=2)
+    sets = [(0.0, [(v1, 0.0)]), (60.0, [(v2, 60.0)]), (120.0, [])]
+    got = [(c.version, a, b) for c, a, b in constraint_intervals(sets)]
+    assert got == [(1, 0.0, 60.0), (2, 60.0, 120.0)]

@@ -1,0 +1,337 @@
+"""Audit of what flew when plans change (issue 22 item 5): plan versions chained into the
+trajectories actually flown, and every flown trajectory checked against the airspace
+constraints in force.
+
+Plan versions (``FlightPlan.version``, ``effective_time``, ``state``, ``constraint_ids``,
+``update_kind``; docs/replanning.md): version 1 is the approval (0 in recordings made before
+versions); version n + 1 replaces version n from its ``effective_time`` on. The simulator flies
+each version from the instant it takes effect, so what flew is, per request, version 1 up to the
+effective instant of version 2, then version 2 up to that of version 3, and so on
+(:func:`flown_trajectory`). A version without waypoints (a cancellation) ends the flight there.
+
+**Chaining** (:func:`chain_problems`): the versions of a request must be 1, 2, ..., n with no gap
+(a version n + 1 without n is a plan the recording lost, or one nobody issued), each effective
+no earlier than its predecessor, each update (n >= 2) naming at least one constraint that the
+planner announced on ``uam/constraints`` at or before it took effect, and a version that takes
+over a flight in the air must start where the flight was at that instant (to 1 mm). A
+recording that breaks any of these is NOT VERIFIED.
+
+**Incursions** (:func:`incursions`): every flown trajectory, from the instant each version took
+effect, against every constraint version while the planner had it in force (from the epoch it
+took effect at, ``effective_s``, until it was replaced or withdrawn) and during its window
+``[start_s, end_s)``. The test is written here again, independently of the planner's closed-form
+prism test (``uam_planner.constraints``): each straight segment is clipped to the time interval
+and to the altitude band (z is linear in t), and the clipped part is intersected with the
+region by shapely (GEOS: exact segment-polygon intersection on the closed polygon; a circle by
+the exact distance of the segment to its centre). The entry instant is the earliest point of
+the intersection; it is an incursion when it lies before the end of the interval (the window is
+half-open: entering exactly at ``end_s`` is allowed, as the planner allows it). A vertiport
+closure is entered by a departure (the first flown waypoint) or an arrival (the last) at that
+vertiport inside the interval.
+
+rclpy-free and duck-typed: plans are anything with FlightPlan's fields.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Iterable, Sequence
+
+import numpy as np
+
+from uam_contract.stamps import stamp_s
+
+#: a version taking over a flight in the air must start within this of where the flight was [m]
+CONTINUITY_M = 1e-3
+
+
+def plan_version(p: Any) -> int:
+    """A plan's version: 1 is the approval (``uam_planner.planning.Flight.version``); recordings
+    made before versions carry 0, read as 1."""
+    return max(1, int(getattr(p, "version", 0) or 0))
+
+
+def effective_s(p: Any) -> float:
+    """When a plan version takes effect [s]; the approval (version 1): -inf (it is flown whole
+    until a later version takes over)."""
+    if plan_version(p) == 1:
+        return -math.inf
+    return stamp_s(p.effective_time)
+
+
+def _waypoints(p: Any) -> tuple[np.ndarray, np.ndarray]:
+    t = np.array([stamp_s(w.time) for w in p.waypoints], dtype=np.float64)
+    x = np.array([(w.position.x, w.position.y, w.position.z) for w in p.waypoints], dtype=np.float64).reshape(-1, 3)
+    return t, x
+
+
+def _at(t: np.ndarray, x: np.ndarray, when: float) -> np.ndarray:
+    return np.array([np.interp(when, t, x[:, k]) for k in range(3)])
+
+
+def _clip(t: np.ndarray, x: np.ndarray, lo: float, hi: float) -> tuple[np.ndarray, np.ndarray]:
+    """The part of a piecewise-linear trajectory in [lo, hi] (endpoints interpolated)."""
+    if not len(t) or hi < t[0] or lo > t[-1] or hi < lo:
+        return np.zeros(0), np.zeros((0, 3))
+    a, b = max(lo, t[0]), min(hi, t[-1])
+    inside = (t > a) & (t < b)
+    times = np.concatenate([[a], t[inside], [b]]) if b > a else np.array([a])
+    pts = np.vstack([_at(t, x, a), x[inside], _at(t, x, b)]) if b > a else _at(t, x, a)[None, :]
+    return times, pts
+
+
+@dataclass
+class Flown:
+    """What one request flew: its versions in order and the flown trajectory (times, points);
+    ``pieces``: (version, start_s, end_s) of each version's part."""
+
+    key: str
+    versions: list
+    times_s: np.ndarray
+    points_m: np.ndarray
+    pieces: list = field(default_factory=list)
+
+    @property
+    def latest(self) -> Any:
+        return self.versions[-1]
+
+
+def chain_problems(key: str, versions: Sequence[Any], announced: dict[str, float]) -> list[str]:
+    """Why the versions of one request do not chain (empty when they do); see the module docstring.
+
+    ``versions``: its distinct plan versions sorted by version; ``announced``: constraint id ->
+    the first instant [s] the planner had it in force (from ``uam/constraints``)."""
+    out = []
+    numbers = [plan_version(p) for p in versions]
+    if numbers and numbers[0] != 1:
+        out.append(f"{key}: version {numbers[0]} without version 1 (the approval)")
+    for a, b in zip(numbers, numbers[1:]):
+        if b == a:
+            out.append(f"{key}: version {b} twice, with different contents")
+        elif b != a + 1:
+            out.append(f"{key}: version {b} follows version {a} (version {a + 1} missing)")
+    for prev, p in zip(versions, versions[1:]):
+        e, e_prev = effective_s(p), effective_s(prev)
+        if e < e_prev:
+            out.append(f"{key}: version {plan_version(p)} takes effect at {e:g} s, before version "
+                       f"{plan_version(prev)} (at {e_prev:g} s)")
+    for p in versions[1:]:
+        ids = [str(i) for i in getattr(p, "constraint_ids", [])]
+        e = effective_s(p)
+        if not ids:
+            out.append(f"{key}: version {plan_version(p)} ({getattr(p, 'update_kind', '') or 'update'}) names no "
+                       "constraint")
+        for cid in ids:
+            first = announced.get(cid)
+            if first is None:
+                out.append(f"{key}: version {plan_version(p)} names constraint {cid!r}, never announced on the "
+                           "constraint topic")
+            elif first > e + 1e-9:
+                out.append(f"{key}: version {plan_version(p)} takes effect at {e:g} s, before constraint {cid!r} "
+                           f"was announced ({first:g} s)")
+    return out
+
+
+def flown_trajectory(key: str, versions: Sequence[Any]) -> tuple[Flown, list[str]]:
+    """The trajectory one request flew (see the module docstring) and any continuity problem."""
+    problems = []
+    times, points, pieces = [], [], []
+    for n, p in enumerate(versions):
+        start = effective_s(p)
+        end = effective_s(versions[n + 1]) if n + 1 < len(versions) else math.inf
+        if not p.waypoints:
+            continue  # a cancellation: nothing flown from here on (the previous part ends at `start`)
+        t, x = _waypoints(p)
+        ct, cx = _clip(t, x, start, end)
+        if not len(ct):
+            continue
+        piece = (plan_version(p), float(ct[0]), float(ct[-1]))
+        if times and len(ct) and ct[0] <= times[-1][-1] + 1e-9 and times[-1][-1] >= ct[0] - 1e-9:
+            # taking over a flight in the air: it must start where the flight was
+            gap = float(np.linalg.norm(points[-1][-1] - cx[0]))
+            if gap > CONTINUITY_M:
+                problems.append(f"{key}: version {plan_version(p)} starts {gap:.3f} m from where version "
+                                f"{plan_version(versions[n - 1])} had the flight at {ct[0]:g} s")
+            ct, cx = ct[1:], cx[1:]
+            if not len(ct):
+                continue
+        times.append(ct)
+        points.append(cx)
+        pieces.append(piece)
+    if times:
+        t_all, x_all = np.concatenate(times), np.vstack(points)
+    else:
+        t_all, x_all = np.zeros(0), np.zeros((0, 3))
+    return Flown(key, list(versions), t_all, x_all, pieces), problems
+
+
+def constraint_intervals(sets: Sequence[tuple[float, Sequence[tuple[Any, float]]]]) -> list[tuple[Any, float, float]]:
+    """(constraint version, from_s, until_s) for each constraint version the planner had in force:
+    from the effective instant recorded with it until the set that replaced or dropped it (inf)."""
+    out: dict[tuple[str, int], list] = {}
+    order = sorted(sets, key=lambda s: s[0])
+    for i, (t_s, found) in enumerate(order):
+        present = {(c.constraint_id, c.version) for c, _eff in found}
+        for c, eff in found:
+            out.setdefault((c.constraint_id, c.version), [c, float(eff), math.inf])
+        for k, entry in out.items():
+            if k not in present and entry[2] == math.inf and t_s >= entry[1]:
+                entry[2] = float(t_s)
+    return [tuple(v) for v in out.values()]
+
+
+def _segment_entry(p0, p1, t0, t1, c) -> float | None:
+    """The earliest instant in [t0, t1] at which the straight segment p0 -> p1 is in the closed
+    prism of ``c`` (region x band), or None."""
+    import shapely
+
+    z0, z1 = float(p0[2]), float(p1[2])
+    lo, hi = float(c.lower_m), float(c.upper_m)
+    if t1 > t0 and z1 != z0:  # the band as an interval of t
+        ta = t0 + (lo - z0) / (z1 - z0) * (t1 - t0) if math.isfinite(lo) else -math.inf
+        tb = t0 + (hi - z0) / (z1 - z0) * (t1 - t0) if math.isfinite(hi) else math.inf
+        ta, tb = min(ta, tb), max(ta, tb)
+        a, b = max(t0, ta), min(t1, tb)
+        if a > b:
+            return None
+    else:
+        if not (lo <= z0 <= hi):
+            return None
+        a, b = t0, t1
+
+    def at(t):
+        s = 0.0 if t1 == t0 else (t - t0) / (t1 - t0)
+        return (float(p0[0]) + s * (float(p1[0]) - float(p0[0])), float(p0[1]) + s * (float(p1[1]) - float(p0[1])))
+
+    qa, qb = at(a), at(b)
+    seg = shapely.LineString([qa, qb]) if qa != qb else shapely.Point(qa)
+    if c.kind == "circle":
+        center = shapely.Point(c.center_m)
+        if seg.distance(center) > c.radius_m:
+            return None
+        if center.distance(shapely.Point(qa)) <= c.radius_m:
+            return a
+        # first root of |qa + s d - C| = r along the segment
+        dx, dy = qb[0] - qa[0], qb[1] - qa[1]
+        fx, fy = qa[0] - c.center_m[0], qa[1] - c.center_m[1]
+        A, B, C = dx * dx + dy * dy, 2 * (fx * dx + fy * dy), fx * fx + fy * fy - c.radius_m ** 2
+        s = (-B - math.sqrt(max(B * B - 4 * A * C, 0.0))) / (2 * A)
+        return a + min(max(s, 0.0), 1.0) * (b - a)
+    poly = shapely.Polygon(c.rings_m[0], list(c.rings_m[1:]))
+    hit = seg.intersection(poly)
+    if hit.is_empty:
+        return None
+    if seg.geom_type == "Point":
+        return a
+    length = seg.length
+    coords = shapely.get_coordinates(hit)
+    s = min(seg.project(shapely.Point(q)) for q in coords) / length
+    return a + s * (b - a)
+
+
+@dataclass
+class Incursion:
+    """A flown trajectory inside a constraint while it was in force."""
+
+    key: str
+    constraint_id: str
+    constraint_version: int
+    t_s: float
+    what: str = "volume"   # "volume", "departure" or "arrival"
+
+    def describe(self) -> str:
+        return (f"{self.key} enters constraint {self.constraint_id!r} v{self.constraint_version} "
+                f"({self.what}) at t = {self.t_s:g} s")
+
+
+def incursions(flown: Iterable[Flown], intervals: Sequence[tuple[Any, float, float]]) -> list[Incursion]:
+    """Every entry of a flown trajectory into a constraint version while it was in force and in
+    its window (see the module docstring), earliest per (flight, constraint version)."""
+    out = []
+    for f in flown:
+        if len(f.times_s) < 1:
+            continue
+        t, x = f.times_s, f.points_m
+        for c, since, until in intervals:
+            lo_t, hi_t = max(since, float(c.start_s)), min(until, float(c.end_s))
+            if not hi_t > lo_t:
+                continue
+            if c.kind == "closure":
+                latest = f.latest
+                for what, when, node in (("departure", float(t[0]), getattr(f.versions[0], "origin_id", "")),
+                                         ("arrival", float(t[-1]), getattr(latest, "destination_id", ""))):
+                    if node == c.vertiport_id and lo_t <= when < hi_t:
+                        out.append(Incursion(f.key, c.constraint_id, c.version, when, what))
+                continue
+            first = None
+            for k in range(len(t) - 1):
+                a, b = max(t[k], lo_t), min(t[k + 1], hi_t)
+                if a > b or t[k + 1] < lo_t or t[k] >= hi_t:
+                    continue
+                p0, p1 = _at(t[k:k + 2], x[k:k + 2], a), _at(t[k:k + 2], x[k:k + 2], b)
+                when = _segment_entry(p0, p1, a, b, c)
+                if when is not None and when < hi_t:
+                    first = when
+                    break
+            if first is not None:
+                out.append(Incursion(f.key, c.constraint_id, c.version, float(first)))
+    return sorted(out, key=lambda i: (i.t_s, i.key, i.constraint_id))
+
+
+def announced_at(sets: Sequence[tuple[float, Sequence[tuple[Any, float]]]]) -> dict[str, float]:
+    """constraint id -> the first instant [s] the planner had any version of it in force."""
+    out: dict[str, float] = {}
+    for _t, found in sets:
+        for c, eff in found:
+            out[c.constraint_id] = min(out.get(c.constraint_id, math.inf), float(eff))
+    return out
+
+
+def flown_versions(approved: Sequence[tuple[str, Any]], updates: dict, sets: Sequence) -> tuple[dict, list]:
+    """The flown trajectories of the requests that have versions after their approval, and the
+    problems of their chains (see the module docstring).
+
+    ``approved``: (request key, approved plan = version 1); ``updates``: key -> {any: plan of
+    version >= 2}; ``sets``: the recorded constraint sets (t_s, [(constraint, effective_s)]).
+    Returns ({key: Flown}, problems)."""
+    if not updates:
+        return {}, []
+    announced = announced_at(sets)
+    by_key: dict[str, list] = {}
+    for key, p in approved:
+        by_key.setdefault(key, []).append(p)
+    flown, problems = {}, []
+    for key in sorted(updates):
+        v0 = by_key.get(key, [])
+        if len(v0) != 1:
+            problems.append(f"{key}: {len(updates[key])} plan update(s) for a request with "
+                            f"{'no approval' if not v0 else f'{len(v0)} different approvals'} in the recording")
+            continue
+        versions = sorted([v0[0], *updates[key].values()], key=plan_version)
+        chain = chain_problems(key, versions, announced)
+        f, gaps = flown_trajectory(key, versions)
+        problems += chain + gaps
+        flown[key] = f
+    return flown, problems
+
+
+def audit_incursions(plans: Sequence[Any], labels: Sequence[str], flown_by_key: dict,
+                     sets: Sequence) -> tuple[list[Incursion], int]:
+    """Incursions of every approved flight as flown (its versions where it has them, else its
+    plan) into the recorded constraints while in force; and how many constraint versions were."""
+    intervals = constraint_intervals(sets)
+    if not intervals:
+        return [], 0
+    flights = []
+    for p, label in zip(plans, labels):
+        f = flown_by_key.get(label)
+        if f is None:
+            t, x = _waypoints(p)
+            f = Flown(label, [p], t, x, [(plan_version(p), float(t[0]), float(t[-1]))] if len(t) else [])
+        flights.append(f)
+    return incursions(flights, intervals), len(intervals)
+
+
+__all__ = ["announced_at", "audit_incursions", "flown_versions", "CONTINUITY_M", "Flown", "Incursion", "chain_problems", "constraint_intervals", "effective_s",
+           "flown_trajectory", "incursions", "plan_version"]

@@ -1,0 +1,180 @@
+"""Live constraints (issue 22 item 1): the planner's ``uam/update_constraint`` service and its
+latched ``uam/constraints`` topic, in-process. Bad input is refused naming the field and the
+value, the node keeps serving, and nothing accepted before is lost; accepted updates take
+effect at the next epoch and the graph plans around them from then on."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+
+rclpy = pytest.importorskip("rclpy", reason="needs the built workspace (scripts/test.sh sources it)")
+
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from std_msgs.msg import String  # noqa: E402
+from uam_msgs.msg import FlightPlan  # noqa: E402
+from uam_msgs.srv import UpdateConstraint  # noqa: E402
+
+from graph_harness import TINY, build_graph, make_planner, run_to_end, shutdown  # noqa: E402
+from uam_bringup import qos  # noqa: E402
+from uam_contract import names as c  # noqa: E402
+from uam_planner.constraints import MAX_VERTICES, ConstraintSet  # noqa: E402
+from uam_planner.network import load_network  # noqa: E402
+from uam_planner.nodes import conversions as m  # noqa: E402
+from uam_planner.live_constraints import constraints_from_text  # noqa: E402
+
+pytestmark = pytest.mark.ros
+
+ADD, CHANGE, WITHDRAW = (UpdateConstraint.Request.ACTION_ADD, UpdateConstraint.Request.ACTION_CHANGE,
+                         UpdateConstraint.Request.ACTION_WITHDRAW)
+
+
+def square(cid="hub", version=1, half=250.0, lower=0.0, upper=300.0, start=0.0, end=10000.0, ring=None):
+    """A square of side 2 x ``half`` m over the tiny network's origin (its hub W7), in ENU metres."""
+    ring = ring or [[-half, -half], [half, -half], [half, half], [-half, half], [-half, -half]]
+    return json.dumps({"type": "Feature", "geometry": {"type": "Polygon", "coordinates": [ring]},
+                       "properties": {"id": cid, "version": version, "reason": "event", "frame": "enu",
+                                      "lower_m": lower, "upper_m": upper, "start_s": start, "end_s": end}})
+
+
+def closure(cid="C-closed", version=1, vertiport="C", start=0.0, end=150.0):
+    return json.dumps({"type": "Feature", "geometry": None,
+                       "properties": {"id": cid, "version": version, "reason": "maintenance",
+                                      "vertiport_id": vertiport, "start_s": start, "end_s": end}})
+
+
+def request(action, cid, version, geojson="", reason=""):
+    return UpdateConstraint.Request(action=action, constraint_id=cid, version=version, geojson=geojson,
+                                    reason=reason)
+
+
+def call(executor, spin_until, client, req):
+    fut = client.call_async(req)
+    assert spin_until(executor, fut.done, 20)
+    return fut.result()
+
+
+def test_bad_updates_are_refused_naming_the_field_and_nothing_accepted_is_lost(ros_context, spin_until):
+    planner = make_planner(ros_context)
+    caller = rclpy.create_node("authority", context=ros_context)
+    client = caller.create_client(UpdateConstraint, c.SERVICE_UPDATE_CONSTRAINT)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(planner)
+    executor.add_node(caller)
+    try:
+        assert spin_until(executor, client.service_is_ready, 20)
+        ok = call(executor, spin_until, client, request(ADD, "hub", 1, square()))
+        assert ok.accepted and ok.error == "" and ok.constraints == 1
+        assert (ok.effective_time.sec, ok.effective_time.nanosec) == (0, 0)   # the first epoch
+        bow_tie = [[0, 0], [100, 100], [100, 0], [0, 100], [0, 0]]
+        n = MAX_VERTICES + 1   # ASTM F3548-21 CstrMaxVertices, as uas_standards gives it (1000)
+        big = [[1000 * math.cos(2 * math.pi * k / n), 1000 * math.sin(2 * math.pi * k / n)] for k in range(n)]
+        cases = [
+            (request(ADD, "bow", 1, square("bow", ring=bow_tie)), "invalid polygon: Self-intersection"),
+            (request(ADD, "inv", 1, square("inv", lower=300.0, upper=100.0)),
+             "upper_m: 100.0 is not above lower_m 300.0"),
+            (request(ADD, "old", 1, square("old", start=-100.0, end=0.0)), "end_s: 0.0 is in the past"),
+            (request(ADD, "huge", 1, square("huge", ring=big + [big[0]])),
+             f"{n + 1} positions, more than the {MAX_VERTICES} vertices of ASTM F3548-21"),
+            (request(ADD, "nowhere", 1, closure("nowhere", vertiport="ZZ")),
+             "vertiport_id: 'ZZ' is not a vertiport of network"),
+            (request(ADD, "hub", 2, square("hub", version=2)), "constraint_id: 'hub' is already a constraint (v1)"),
+            (request(CHANGE, "hub", 1, square("hub", version=1)), "version: 1 of 'hub' is not above the current version 1"),
+            (request(CHANGE, "ghost", 2, square("ghost", version=2)), "constraint_id: 'ghost' is not a known constraint"),
+            (request(WITHDRAW, "ghost", 2), "constraint_id: 'ghost' is not a known constraint (nothing to withdraw)"),
+            (request(WITHDRAW, "hub", 1), "version: 1 is not above 'hub''s version 1"),
+            (request(ADD, "x", 1, square("y")), "properties.id: 'y' differs from constraint_id 'x'"),
+            (request(ADD, "x", 1, "{not json"), "geojson: not JSON"),
+            (request(7, "x", 1, square("x")), "action: 7 is not 0 (add), 1 (change) or 2 (withdraw)"),
+            (request(WITHDRAW, "hub", 2, square("hub", version=2)), "geojson: a withdrawal carries no geometry"),
+        ]
+        for req, expected in cases:
+            res = call(executor, spin_until, client, req)
+            assert not res.accepted and expected in res.error, (expected, res.error)
+            assert res.constraints == 1
+        # nothing accepted before is lost, and the node still serves
+        held = planner._projected_constraints()
+        assert list(held) == ["hub"] and held["hub"].version == 1
+        assert planner.constraint_updates_refused == len(cases)
+        changed = call(executor, spin_until, client, request(CHANGE, "hub", 2, square("hub", version=2, half=100.0)))
+        assert changed.accepted and planner._projected_constraints()["hub"].version == 2
+        gone = call(executor, spin_until, client, request(WITHDRAW, "hub", 3, reason="event over"))
+        assert gone.accepted and gone.constraints == 0
+        # queued in the planning library, in order, for its next epoch (t = 0: none planned yet)
+        assert [(u.action, u.t_s) for u in planner.planner.queued_updates] == [("add", 0.0), ("change", 0.0),
+                                                                             ("withdraw", 0.0)]
+    finally:
+        executor.shutdown()
+        planner.destroy_node()
+        caller.destroy_node()
+
+
+def test_an_update_takes_effect_at_the_next_epoch_and_is_published_latched(ros_context, spin_until, tmp_path):
+    """A 500 m square over hub W7 (0-300 m, from t = 0 on) added while the graph runs: from the
+    epoch it takes effect at, no approved plan enters it, the flights it affects get new versions
+    naming it, the set is on uam/constraints (latched), and the recording's audit of what flew
+    finds no incursion and no loss."""
+    out = tmp_path / "live.mcap"
+    executor, nodes, obs = build_graph(ros_context, rate=3.0, seed=5, duration_s=240.0, record_to=out)
+    sets: list[str] = []
+    listener = rclpy.create_node("constraint_listener", context=ros_context)
+    listener.create_subscription(String, c.TOPIC_CONSTRAINTS, lambda msg: sets.append(msg.data), qos.QOS_CONSTRAINTS)
+    client = listener.create_client(UpdateConstraint, c.SERVICE_UPDATE_CONSTRAINT)
+    executor.add_node(listener)
+    nodes["listener"] = listener
+    planner, sim = nodes["planner"], nodes["simulator"]
+    try:
+        # after the first epochs: the update is accepted for the planner's next epoch
+        assert spin_until(executor, lambda: planner.epochs_planned >= 2 and client.service_is_ready(), 60)
+        res = call(executor, spin_until, client, request(ADD, "hub", 1, square()))
+        assert res.accepted, res.error
+        effective_s = m.from_time(res.effective_time)
+        assert effective_s > 0 and effective_s % 30.0 == 0
+        run_to_end(executor, nodes, obs, spin_until)
+        assert spin_until(executor, lambda: len(sets) >= 2, 10)
+    finally:
+        shutdown(executor, nodes)
+    # the start-up set (empty), then the set from the epoch the update took effect at
+    t0, first = constraints_from_text(sets[0])
+    assert (t0, first) == (0.0, [])
+    net = load_network(TINY)
+    t1, later = constraints_from_text(sets[-1], net)
+    assert t1 == effective_s and [(k.constraint_id, eff) for k, eff in later] == [("hub", effective_s)]
+    cset = ConstraintSet([later[0][0]], net)
+    approved = [p for p in obs.plans if p.outcome == FlightPlan.OUTCOME_APPROVED
+                and p.epoch_index * 30.0 >= effective_s]
+    assert approved, "no flight approved after the update: the test shows nothing"
+    trajs = [m.trajectory_from_plan(p) for p in approved]
+    which, _ = cset.violations(trajs)
+    assert (which == -1).all(), "a plan approved after the update enters the constraint"
+    assert sim.finished and not sim.error and sim.fly_errors == 0
+    # the flights it affected: new versions from the epoch it took effect at, naming it
+    updates = [p for p in obs.plans if p.version > 1]
+    assert updates, "the square over the hub affected no flight: the test shows nothing"
+    assert all(list(p.constraint_ids) == ["hub"] and m.from_time(p.effective_time) == effective_s
+               and p.update_kind in ("rerouted", "retimed", "diverted", "cancelled", "contingency")
+               and "'hub' v1" in p.reason for p in updates), [(p.update_kind, p.reason) for p in updates]
+    assert sim.versions_received == len(updates)
+    from uam_sim.analysis import summarize
+    s = summarize(out)
+    assert s.verified, s.problems
+    assert s.audit.ok and s.incursions == [] and s.constraints_in_force == 1
+    assert sum(s.plan_updates.values()) == len(updates)
+
+
+def test_the_command_line_client_builds_the_request_from_a_feature_file(tmp_path):
+    from uam_planner.nodes.constraint_client import build_request
+
+    path = tmp_path / "one.geojson"
+    path.write_text(json.dumps({"type": "FeatureCollection", "frame": "enu", "features": [json.loads(square())]}))
+    req = build_request("add", str(path))
+    assert (req.action, req.constraint_id, req.version, req.reason) == (ADD, "hub", 1, "event")
+    assert json.loads(req.geojson)["properties"]["frame"] == "enu"
+    gone = build_request("withdraw", constraint_id="hub", version=2, reason="over")
+    assert (gone.action, gone.constraint_id, gone.version, gone.geojson) == (WITHDRAW, "hub", 2, "")
+    two = tmp_path / "two.geojson"
+    two.write_text(json.dumps({"type": "FeatureCollection", "features": [json.loads(square()), json.loads(square("b"))]}))
+    with pytest.raises(ValueError, match="2 features; one update carries exactly one"):
+        build_request("add", str(two))
