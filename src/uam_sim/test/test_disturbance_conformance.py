@@ -263,3 +263,18 @@ def test_disturbed_run_is_seeded_and_reports_what_flew():
     keys = [k for k in r1.summary if k.startswith(("conf_", "flown_"))]
     assert keys and {k: r1.summary[k] for k in keys} == {k: r2.summary[k] for k in keys}
     assert r1.summary["conf_conformance_percent"] < 100.0
+
+
+def test_time_control_holds_a_slow_aircraft_near_its_plan():
+    # -10 % airspeed, time gain 0.05/s, correction up to 20 %: the steady lag L solves
+    # 0.9 (10 + 0.05 L) = 10, L = 10 / 0.9 / 0.05 - 200 = 22.2 m (2.2 s): conforming throughout,
+    # whereas without time control it is at 9 t, which the plan reached at 0.9 t: 0.1 t late,
+    # 10 s at t = 100 s (still conforming, inclusive), first nonconforming sample t = 101 s
+    long = Trajectory(np.array([0.0, 1000.0]), np.array([[0.0, 0.0, 50.0], [10000.0, 0.0, 50.0]]))
+    cfg = DisturbanceConfig(speed_error=0.1, time_gain_per_s=0.05, max_speed_adjust=0.2)
+    flown = fly(long, FlightDraws(speed_error=-0.1), cfg)
+    tc = track_conformance("a", long, flown, ConformanceBounds())
+    assert tc.conforming.all()
+    assert tc.time_err_s[500] == pytest.approx((10.0 / 0.9 / 0.05 - 200.0) / 10.0, abs=0.01)
+    free = fly(long, FlightDraws(speed_error=-0.1), DisturbanceConfig(speed_error=0.1))
+    assert track_conformance("a", long, free, ConformanceBounds()).first_nonconforming_s == pytest.approx(101.0)

@@ -19,7 +19,9 @@ The world (seeded by ``DisturbanceConfig.seed``):
 The path-following model (one flight, every step ``dt``):
 
 - along track, the aircraft holds its airspeed ``va = (1 + e) v_plan(segment)`` (not the plan's
-  ground speed): its ground speed along the path is ``sqrt(va^2 - c^2) + w_along`` where
+  ground speed) or, with time control (``time_gain_per_s`` k_t > 0), ``va = (1 + e) (v_plan + c)``
+  with ``c = k_t (s_plan(t) - s)`` clipped to ``+-max_speed_adjust v_plan`` (s the along-track
+  distance flown, s_plan the plan's at t): its ground speed along the path is ``sqrt(va^2 - c^2) + w_along`` where
   ``w_along`` is the wind's component along the segment's horizontal direction and ``c`` the
   steady cross-track wind it crabs against (known, so compensated: with
   ``compensate_steady_wind`` false no crab, ``c = 0``, and the whole cross wind drifts it), at
@@ -72,6 +74,11 @@ class DisturbanceConfig:
         track_gain_per_s: cross-track guidance gain k [1/s].
         max_lateral_m: bound on the cross-track offset [m].
         compensate_steady_wind: crab against the (forecast) steady wind; false = it drifts too.
+        time_gain_per_s: along-track (4D) guidance gain k_t [1/s]: the commanded airspeed is the
+            plan's plus k_t x (the plan's along-track distance now - the aircraft's), within
+            +-max_speed_adjust of the plan's; 0 (default) = no time control, the airspeed is held
+            (NASA's uncompensated speed error).
+        max_speed_adjust: bound of that correction, as a share of the plan's speed.
         step_s: integration step; the flown track is sampled every step_s [s].
         seed: seed of the wind field and of every flight's draws.
     """
@@ -87,6 +94,8 @@ class DisturbanceConfig:
     track_gain_per_s: float = 0.1
     max_lateral_m: float = 50.0
     compensate_steady_wind: bool = True
+    time_gain_per_s: float = 0.0
+    max_speed_adjust: float = 0.1
     step_s: float = 1.0
     seed: int = 0
 
@@ -106,6 +115,8 @@ class DisturbanceConfig:
                 raise ValueError(f"DisturbanceConfig.{f.name}: {v!r} is not a finite number")
             positive = f.name in ("gust_length_m", "gust_period_s", "track_gain_per_s", "step_s",
                                   "max_lateral_m")
+            if f.name == "max_speed_adjust" and v >= 1.0:
+                raise ValueError(f"DisturbanceConfig.max_speed_adjust: {v!r} must be below 1")
             if v < 0 or (positive and v == 0):
                 raise ValueError(f"DisturbanceConfig.{f.name}: {v!r} must be "
                                  f"{'> 0' if positive else '>= 0'}")
@@ -205,6 +216,7 @@ def fly_batch(plans: Sequence[Trajectory], draws: Sequence[FlightDraws], config:
     U = np.zeros((n, p - 1, 3))          # unit direction per segment
     UH = np.zeros((n, p - 1, 2))         # unit horizontal direction (0 for vertical segments)
     V = np.ones((n, p - 1))              # planned speed per segment
+    TT = np.full((n, p), np.inf)         # planned waypoint times
     nseg = np.empty(n, dtype=np.int64)
     for i, pl in enumerate(plans):
         pts, ts = pl.points_m, pl.times_s
@@ -221,6 +233,7 @@ def fly_batch(plans: Sequence[Trajectory], draws: Sequence[FlightDraws], config:
         hz = hl > 1e-9 * np.maximum(ln, 1.0)
         UH[i, :k - 1][hz] = d[hz, :2] / hl[hz, None]
         V[i, :k - 1] = np.where(nz, ln / np.diff(ts), 1.0)
+        TT[i, :k] = ts
         nseg[i] = k - 1
     length = C[np.arange(n), nseg]
     e = np.array([d.speed_error for d in draws])
@@ -266,7 +279,16 @@ def fly_batch(plans: Sequence[Trajectory], draws: Sequence[FlightDraws], config:
         else:
             drift = cross
             crab2 = np.zeros(r.size)
-        va = (1.0 + e[r]) * V[r, seg]
+        vp = V[r, seg]
+        if config.time_gain_per_s > 0:
+            tt = np.clip(t[r], TT[r, 0], TT[r, nseg[r]])
+            ts_ = np.minimum((TT[r] <= tt[:, None]).sum(axis=1) - 1, nseg[r] - 1)
+            t0, t1 = TT[r, ts_], TT[r, ts_ + 1]
+            s_plan = C[r, ts_] + (tt - t0) / (t1 - t0) * (C[r, ts_ + 1] - C[r, ts_])
+            adj = np.clip(config.time_gain_per_s * (s_plan - s[r]), -config.max_speed_adjust * vp,
+                          config.max_speed_adjust * vp)
+            vp = vp + adj
+        va = (1.0 + e[r]) * vp
         gs = np.where(horizontal, np.sqrt(np.maximum(va * va - crab2, 0.0)) + w_along, va)
         gs = np.maximum(gs, min_share * va)
         o = off[r] * decay + drift * gain
@@ -289,3 +311,19 @@ def fly_plans(plans: Sequence[Trajectory], flight_ids: Sequence[str], config: Di
     if not config.enabled:
         return list(plans)
     return fly_batch(plans, [flight_draws(config, fid) for fid in flight_ids], config, wind)
+
+
+#: simulator parameter -> DisturbanceConfig field (uam_contract.params.SIMULATOR)
+SIMULATOR_PARAMS = {"wind_speed_mps": "wind_speed_mps", "wind_from_deg": "wind_from_deg",
+                    "gust_std_mps": "gust_std_mps", "gust_length_m": "gust_length_m",
+                    "gust_period_s": "gust_period_s", "speed_error": "speed_error",
+                    "delay_mean_s": "delay_mean_s", "delay_max_s": "delay_max_s",
+                    "track_gain_per_s": "track_gain_per_s", "max_lateral_m": "max_lateral_m",
+                    "compensate_steady_wind": "compensate_steady_wind", "disturbance_seed": "seed"}
+
+
+def from_simulator_params(params: dict, step_s: float) -> DisturbanceConfig:
+    """The DisturbanceConfig of the simulator node's parameters; the flown tracks are sampled at
+    the simulator's step."""
+    return DisturbanceConfig(step_s=float(step_s),
+                             **{field_: params[name] for name, field_ in SIMULATOR_PARAMS.items()})

@@ -89,6 +89,7 @@ class PlannerNode(Node):
             seed=self.p["seed"], precompute_routes=self.p["precompute_routes"],
             objective=self.p["objective"], baseline_order=self.p["baseline_order"],
             horizon_epochs=self.p["horizon_epochs"],
+            spatial_buffer_m=self.p["spatial_buffer_m"], temporal_buffer_s=self.p["temporal_buffer_s"],
             airspace=AirspaceConfig(**{f: self.p[f] for f in (
                 "separation_model", "vertical_separation_m", "departure_slot_s", "climb_rate_mps",
                 "descent_rate_mps")}))
