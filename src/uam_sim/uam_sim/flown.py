@@ -82,3 +82,59 @@ def flown_audit(tracks: Mapping[str, Trajectory], separation, sample_step_s: flo
     out.update({"what": "flown", "sampling_bound_m": bound, "possible_losses": possible,
                 "max_speed_mps": vmax})
     return out
+
+
+def recording_flown(path, separation, bounds=None, plans=None) -> dict:
+    """What flew in a recording: the flown tracks from every ``uam/fleet_state`` (positions read
+    straight from the CDR), their exact audit in the true minimum (:func:`flown_audit`, sampling
+    step = the largest gap between fleet states), and the F3548 conformance of each flown track
+    with its approved plan (``uam_sim.conformance``). ``plans``: the approved FlightPlan messages
+    (else read from ``uam/flight_plans``); a vehicle flies the plan of its ``operator/request`` id.
+    Returns {} when the recording holds no fleet positions."""
+    from uam_contract import names
+    from uam_contract.names import resolved
+    from uam_contract.stamps import stamp_s
+
+    from .audit import trajectory_of
+    from .cdr import fleet_state_digest
+    from .conformance import ConformanceBounds, f3548_statistics, track_conformance
+    from .mcap_reader import deserialize, is_complete, read_messages, read_messages_tolerant
+
+    fleet_topic, plan_topic = resolved(names.TOPIC_FLEET), resolved(names.TOPIC_PLANS)
+    records = (read_messages(path, topics=[fleet_topic, plan_topic]) if is_complete(path)
+               else sorted((r for r in read_messages_tolerant(path) if r.topic in (fleet_topic, plan_topic)),
+                           key=lambda r: r.log_time_ns))
+    samples, found_plans = [], []
+    for rec in records:
+        if rec.topic == fleet_topic:
+            d = fleet_state_digest(rec.data, positions=True)
+            if d is None:  # big-endian data: decode in full
+                msg = deserialize(rec)
+                ids = [v.vehicle_id for v in msg.vehicles]
+                pos = np.array([(v.position.x, v.position.y, v.position.z) for v in msg.vehicles]).reshape(-1, 3)
+                samples.append((stamp_s(msg.header.stamp), ids, pos))
+            else:
+                samples.append((stamp_s(d.header.stamp), d.vehicle_ids, d.positions_m))
+        elif plans is None:
+            found_plans.append(deserialize(rec))
+    if not samples:
+        return {}
+    samples.sort(key=lambda s: s[0])
+    ts = np.array([s[0] for s in samples])
+    step = float(np.max(np.diff(ts))) if ts.size > 1 else 0.0
+    tracks = tracks_from_samples(samples)
+    out = flown_audit(tracks, separation, sample_step_s=step)
+    out["sample_step_s"] = step
+    from .analysis import OUTCOME_APPROVED, request_key
+    approved = {}
+    for p in (plans if plans is not None else found_plans):
+        if int(p.outcome) == OUTCOME_APPROVED and request_key(p) not in approved:
+            t, pts = trajectory_of(p)
+            if t.size >= 2 and np.all(np.diff(t) > 0):
+                approved[request_key(p)] = Trajectory(t, pts)
+    bounds = bounds or ConformanceBounds()
+    conf = [track_conformance(vid, approved[vid], tr, bounds) for vid, tr in tracks.items() if vid in approved]
+    out["conformance"] = f3548_statistics(conf).as_dict()
+    out["conformance_bounds"] = {"lateral_m": bounds.lateral_m, "vertical_m": bounds.vertical_m,
+                                 "time_s": bounds.time_s}
+    return out
