@@ -244,8 +244,11 @@ start uam_sim recorder recorder -p "output:=$MCAP" -p "network:=$NETWORK" -p "re
   -p "foxglove_port:=$FOXGLOVE_PORT" "${AIRSPACE[@]}" -p "wait_for_publishers:=[$RECORDER_WAITS]"
 REC_PID=${PIDS[-1]}
 NODE_NICE=
+# issue 23: compares every fleet state with the approved plans, publishes uam/conformance (recorded)
+start uam_sim conformance_monitor conformance_monitor
 start uam_sim simulator simulator --params-file config/simulator.yaml -p "duration_s:=$DURATION" \
-  -p "mode:=$MODE" -p "real_time_factor:=$RTF" -p "disturbance_seed:=$SEED" -p "wind_speed_mps:=$(f "$WIND")" \
+  -p "mode:=$MODE" -p "real_time_factor:=$RTF" -p "wait_for_subscribers:=[recorder,conformance_monitor]" \
+  -p "disturbance_seed:=$SEED" -p "wind_speed_mps:=$(f "$WIND")" \
   -p "wind_from_deg:=$(f "$WIND_FROM")" -p "gust_std_mps:=$(f "$GUST")" -p "speed_error:=$(f "$SPEED_ERROR")" \
   -p "delay_mean_s:=$(f "$DELAY_MEAN")"
 SIM_PID=${PIDS[-1]}

@@ -72,9 +72,12 @@ def generate_launch_description() -> LaunchDescription:
                                                              "priority_share": a["priority_share"],
                                                              "lead_time_s": a["lead_time_s"]}]),
         recorder,
+        # issue 23: compares every fleet state with the approved plans, publishes uam/conformance
+        Node(package="uam_sim", executable="conformance_monitor", name="conformance_monitor", output="screen"),
         Node(package="uam_sim", executable="simulator", name="simulator", output="screen",
              parameters=[params_file("simulator"), {"duration_s": a["duration"], "mode": a["mode"],
                                                      "real_time_factor": a["rtf"],
+                                                     "wait_for_subscribers": ["recorder", "conformance_monitor"],
                                                      # disturbances (issue 23), seeded by the run's seed
                                                      "disturbance_seed": a["seed"],
                                                      "wind_speed_mps": a["wind_speed_mps"],

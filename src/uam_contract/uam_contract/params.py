@@ -347,8 +347,16 @@ REPLAY = (
     Param("exit_when_done", True, "stop the node once everything is published"),
 )
 
+CONFORMANCE_MONITOR = (
+    Param("lateral_m", 30.0, "lateral bound: horizontal distance from the nearest point of the planned path [m] "
+          "(uam_sim.conformance, docs/disturbances.md)", 0.001, 100000.0),
+    Param("vertical_m", 15.0, "vertical bound: height above or below that point [m]", 0.001, 10000.0),
+    Param("time_s", 10.0, "time bound: |now - the planned time of that point| [s]", 0.001, 86400.0),
+)
+
 TABLES = {"planner": PLANNER, "solver": SOLVER, "simulator": SIMULATOR, "request_generator": REQUEST_GENERATOR,
-          "recorder": RECORDER, "replay": REPLAY}
+          "recorder": RECORDER, "replay": REPLAY,
+          "conformance_monitor": CONFORMANCE_MONITOR}
 
 
 def markdown() -> str:

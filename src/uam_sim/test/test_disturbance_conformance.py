@@ -278,3 +278,22 @@ def test_time_control_holds_a_slow_aircraft_near_its_plan():
     assert tc.time_err_s[500] == pytest.approx((10.0 / 0.9 / 0.05 - 200.0) / 10.0, abs=0.01)
     free = fly(long, FlightDraws(speed_error=-0.1), DisturbanceConfig(speed_error=0.1))
     assert track_conformance("a", long, free, ConformanceBounds()).first_nonconforming_s == pytest.approx(101.0)
+
+
+def test_montecarlo_aggregates_a_point_by_hand():
+    from uam_sim.experiment import key_values
+    from uam_sim.montecarlo import aggregate
+    assert key_values("speed_error=0.1, compensate_steady_wind=false") == {
+        "speed_error": 0.1, "compensate_steady_wind": False}
+    # two runs: 10 + 30 flight hours at 90 % and 100 %: flight-time weighted 97.5 %;
+    # 2 + 6 excursions over 40 h: 0.2 per hour; approvals 30 of 40 + 50 of 60 = 80 %
+    a = {"requests": 40, "approved": 30, "conf_flight_hours": 10.0, "conf_conformance_percent": 90.0,
+         "conf_excursions": 2, "conf_longest_excursion_s": 12.0, "conf_nonconforming_flights": 2,
+         "replans": 0, "flown_losses": 1, "flown_min_separation_m": 80.0, "losses": 0}
+    b = {"requests": 60, "approved": 50, "conf_flight_hours": 30.0, "conf_conformance_percent": 100.0,
+         "conf_excursions": 6, "conf_longest_excursion_s": 4.0, "conf_nonconforming_flights": 3,
+         "replans": 0, "flown_losses": 0, "flown_min_separation_m": 120.0, "losses": 0}
+    row = aggregate((0.1, 25.0, 5.0), [{"summary": a}, {"summary": b}])
+    assert row["approval_rate"] == pytest.approx(0.8) and row["conformance_percent"] == pytest.approx(97.5)
+    assert row["excursions_per_flight_hour"] == pytest.approx(0.2) and row["longest_excursion_s"] == 12.0
+    assert row["flown_losses"] == 1 and row["flown_min_separation_m"] == 80.0 and row["flights"] == 80

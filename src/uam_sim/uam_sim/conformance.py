@@ -34,6 +34,7 @@ from typing import Iterable, Sequence
 import numpy as np
 from uas_standards.astm.f3548.v21 import constants as f3548
 
+from uam_contract.params import CONFORMANCE_MONITOR
 from uam_planner.trajectory import Trajectory
 
 MIN_CONFORMANCE_PERCENT = float(f3548.OiMinConformancePercent)          # 95
@@ -43,13 +44,17 @@ MAX_EXCURSION_S = float(f3548.OiMaxDurationPerExcursionSeconds)         # 10
 MAX_UPDATE_NONCONFORMING_S = float(f3548.OiMaxUpdateTimeNonconfSeconds)  # 5
 
 
+_DEFAULTS = {prm.name: prm.default for prm in CONFORMANCE_MONITOR}  # one source: the node's table
+
+
 @dataclass(frozen=True)
 class ConformanceBounds:
-    """The tube around a plan: lateral [m], vertical [m] and time [s] bounds (inclusive)."""
+    """The tube around a plan: lateral [m], vertical [m] and time [s] bounds (inclusive);
+    defaults: the conformance monitor node's (uam_contract.params.CONFORMANCE_MONITOR)."""
 
-    lateral_m: float = 30.0
-    vertical_m: float = 15.0
-    time_s: float = 10.0
+    lateral_m: float = _DEFAULTS["lateral_m"]
+    vertical_m: float = _DEFAULTS["vertical_m"]
+    time_s: float = _DEFAULTS["time_s"]
 
     def __post_init__(self):
         for name in ("lateral_m", "vertical_m", "time_s"):
@@ -257,6 +262,11 @@ class ConformanceMonitor:
 
     def has_plan(self, flight_id: str) -> bool:
         return flight_id in self._plans
+
+    @property
+    def open_excursions(self) -> int:
+        """Flights nonconforming at their last sample (excursions begun, not yet over)."""
+        return len(self._open)
 
     def update(self, t_s: float, flight_ids: Sequence[str], positions_m) -> list[ConformanceState]:
         """States of the sampled flights that have a plan (the others are skipped)."""

@@ -146,6 +146,45 @@ def format_table(rows: list[dict]) -> str:
     return "\n".join(out)
 
 
+def figure(rows: list[dict], path) -> Path:
+    """Approval rate, conformance and flown losses against the buffer, one line per speed error
+    (spatial buffers at temporal 0, then temporal buffers at spatial 0 on the same axis as
+    'b m' and 'tau s' ticks)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    def label(r):
+        return (f"{r['spatial_buffer_m']:g} m" if r["temporal_buffer_s"] == 0 else
+                f"{r['spatial_buffer_m']:g} m+{r['temporal_buffer_s']:g} s")
+    buffers = []
+    for r in sorted(rows, key=lambda r: (r["temporal_buffer_s"], r["spatial_buffer_m"])):
+        if label(r) not in buffers:
+            buffers.append(label(r))
+    fig, axes = plt.subplots(1, 3, figsize=(14, 4.2))
+    for e in sorted({r["speed_error"] for r in rows}):
+        pts = {label(r): r for r in rows if r["speed_error"] == e}
+        xs = [i for i, b in enumerate(buffers) if b in pts]
+        for ax, key, scale in ((axes[0], "approval_rate", 100.0), (axes[1], "conformance_percent", 1.0),
+                               (axes[2], "flown_losses", 1.0)):
+            ax.plot(xs, [pts[buffers[i]][key] * scale for i in xs], marker="o", label=f"speed error {100 * e:.0f} %")
+    for ax, title in zip(axes, ("approval rate [%]", "time in conformance [%] (F3548: >= 95)",
+                                "losses of separation in what flew [pairs]")):
+        ax.set_xticks(range(len(buffers)))
+        ax.set_xticklabels(buffers, rotation=30)
+        ax.set_xlabel("planning buffer (spatial m + temporal s)")
+        ax.set_title(title)
+        ax.grid(alpha=0.3)
+    axes[1].axhline(95.0, color="grey", ls="--", lw=1)
+    axes[0].legend()
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="montecarlo", description=__doc__.split("\n\n")[0], allow_abbrev=False)
     p.add_argument("--network", type=_network, default=DEFAULT_NETWORK,
@@ -168,6 +207,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--scheduler", default=None, help="'local' or tcp://HOST:8786")
     p.add_argument("--out", default="results/montecarlo")
+    p.add_argument("--figure", help="also write the figure (PNG) here")
     return p
 
 
@@ -185,6 +225,8 @@ def main(argv=None) -> int:
         w.writeheader()
         w.writerows(rows)
     print(format_table(rows))
+    if args.figure:
+        print(f"figure: {figure(rows, args.figure)}")
     print(f"{len(rows)} points in {time.perf_counter() - t0:.1f} s; table in {out}")
     return 0
 
