@@ -30,6 +30,8 @@ from uam_planner.trajectory import Trajectory
 
 from .audit import sweep_audit
 
+OUTCOME_APPROVED = 0  # uam_msgs/FlightPlan.OUTCOME_APPROVED
+
 
 def tracks_from_samples(samples: Iterable[tuple[float, list, np.ndarray]]) -> dict[str, Trajectory]:
     """Per vehicle, its track from fleet samples ``(t_s, vehicle_ids, positions (v, 3))`` in time
@@ -125,13 +127,15 @@ def recording_flown(path, separation, bounds=None, plans=None) -> dict:
     tracks = tracks_from_samples(samples)
     out = flown_audit(tracks, separation, sample_step_s=step)
     out["sample_step_s"] = step
-    from .analysis import OUTCOME_APPROVED, request_key
+    from uam_contract.wire import scoped_id
     approved = {}
     for p in (plans if plans is not None else found_plans):
-        if int(p.outcome) == OUTCOME_APPROVED and request_key(p) not in approved:
+        # the vehicle id of a plan: operator/request (uam_sim.analysis.request_key)
+        key = scoped_id(p.operator_id, p.request_id) if p.operator_id else str(p.request_id)
+        if int(p.outcome) == OUTCOME_APPROVED and key not in approved:
             t, pts = trajectory_of(p)
             if t.size >= 2 and np.all(np.diff(t) > 0):
-                approved[request_key(p)] = Trajectory(t, pts)
+                approved[key] = Trajectory(t, pts)
     bounds = bounds or ConformanceBounds()
     conf = [track_conformance(vid, approved[vid], tr, bounds) for vid, tr in tracks.items() if vid in approved]
     out["conformance"] = f3548_statistics(conf).as_dict()

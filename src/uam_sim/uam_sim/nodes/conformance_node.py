@@ -6,8 +6,8 @@ Subscribes to uam/flight_plans (the approved plans: the reference) and uam/fleet
 positions as flown), publishes uam/conformance (uam_msgs/Conformance) for every fleet state: per
 vehicle with a plan, conforming or not, the lateral, vertical and time errors and how long its
 excursion has lasted (uam_sim.conformance.ConformanceMonitor). The recorder records it. At the
-end of the run (the simulator's ``finished`` announcement) it logs the run's F3548 statistics
-and exits.
+end of the run (the simulator's ``finished`` announcement, once the fleet state of that time
+was compared) it logs the run's F3548 statistics and exits.
 
 Why a node of its own (docs/disturbances.md): conformance monitoring is a USS function that
 sees what any USS sees, the published intents and the reported positions, not the simulator's
@@ -43,6 +43,8 @@ class ConformanceNode(Node):
         self.monitor = ConformanceMonitor(self.bounds)
         self.finished = False
         self.samples = 0
+        self._end_t: float | None = None     # the run's end, once the simulator announced it
+        self._last_t = -float("inf")         # the time of the last fleet state compared
         self._pub = self.create_publisher(Conformance, c.TOPIC_CONFORMANCE, qos.QOS_STREAM)
         self.create_subscription(FlightPlan, c.TOPIC_PLANS, self._on_plan, qos.QOS_LATCHED)
         self.create_subscription(FleetState, c.TOPIC_FLEET, self._on_fleet, qos.QOS_STREAM)
@@ -79,9 +81,18 @@ class ConformanceNode(Node):
                           time_bound_s=self.bounds.time_s,
                           excursions=len(self.monitor.excursions) + self.monitor.open_excursions)
         self._pub.publish(out)
+        self._last_t = t
+        self._maybe_finish()
 
     def _on_sync(self, msg: EpochSync) -> None:
-        if msg.sender == "simulator" and msg.finished and not self.finished:
+        if msg.sender == "simulator" and msg.finished and self._end_t is None:
+            self._end_t = m.from_time(msg.epoch_time)   # the last fleet state's time
+            self._maybe_finish()
+
+    def _maybe_finish(self) -> None:
+        """Done once the run ended and its last fleet state was compared (states may still be
+        queued when the end is announced)."""
+        if self._end_t is not None and self._last_t >= self._end_t - 1e-9 and not self.finished:
             st = self.monitor.statistics()
             self.get_logger().info(
                 f"run finished: {self.samples} fleet states, {st.flights} flights, {st.flight_hours:.2f} flight "
