@@ -58,9 +58,14 @@ def _network(text: str):
 def point_configs(args) -> list[tuple[tuple, dict]]:
     """((speed error, spatial, temporal), config dict) of every grid point."""
     out = []
+    if getattr(args, "axes", False):   # each buffer alone: spatial at 0 s, then temporal at 0 m
+        combos = [(bs, 0.0) for bs in args.spatial_buffers] + \
+                 [(0.0, bt) for bt in args.temporal_buffers if bt > 0]
+    else:                              # the full product
+        combos = [(bs, bt) for bs in args.spatial_buffers for bt in args.temporal_buffers]
     for e in args.speed_errors:
-        for bs in args.spatial_buffers:
-            for bt in args.temporal_buffers:
+        for bs, bt in combos:
+            if True:
                 dist = {"speed_error": e, "gust_std_mps": args.gust, "delay_mean_s": args.delay_mean,
                         "wind_speed_mps": args.wind, "step_s": args.step,
                         "time_gain_per_s": args.time_gain}
@@ -192,6 +197,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--speed-errors", type=_num_list, default=[0.0, 0.05, 0.1])
     p.add_argument("--spatial-buffers", type=_num_list, default=[0.0, 10.0, 25.0, 50.0])
     p.add_argument("--temporal-buffers", type=_num_list, default=[0.0, 5.0, 10.0])
+    p.add_argument("--axes", action="store_true",
+                   help="each buffer alone (spatial buffers at 0 s, temporal at 0 m) instead of every pair")
     p.add_argument("--gust", type=float, default=1.0, help="gust std per component [m/s] (default 1)")
     p.add_argument("--wind", type=float, default=0.0, help="steady wind [m/s] (default 0)")
     p.add_argument("--delay-mean", type=float, default=0.0, help="mean departure delay [s] (default 0)")
