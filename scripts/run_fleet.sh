@@ -31,6 +31,13 @@
 #   --demand FILE      replay a demand file instead of random requests
 #   --constraints FILE airspace constraints the planner plans around (GeoJSON or ED-269 zones,
 #                      docs/constraints.md; e.g. config/constraints_example.geojson)
+#   --spatial-buffer-m B, --temporal-buffer-s T   planning buffers on the separation [m], [s]
+#                      (default 0, 0; docs/disturbances.md; the audits keep the true minimum)
+#   --wind W, --wind-from D   steady wind [m/s] blowing from D [deg from north] (default 0, 270)
+#   --gust G           gusts: standard deviation per horizontal component [m/s] (default 0)
+#   --speed-error E    per-flight airspeed error, uniform in [-E, E] (default 0; 0.1 = +-10 %)
+#   --delay-mean S     mean departure delay [s], exponential (default 0); all disturbances 0 =
+#                      plans flown exactly (docs/disturbances.md)
 #   --mode M           lockstep | realtime (default lockstep)
 #   --rtf X            real-time factor in realtime mode (default 1)
 #   --rerun M          off | save | spawn | connect (default save: a .rrd next to the MCAP)
@@ -49,6 +56,7 @@ ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
 
 BACKEND=exact POLICY=mwis RATE=10 DURATION=3500 SEED=0 NETWORK=config/networks/singapore.yaml
+SPATIAL_BUFFER=0 TEMPORAL_BUFFER=0 WIND=0 WIND_FROM=270 GUST=0 SPEED_ERROR=0 DELAY_MEAN=0
 DEMAND="" CONSTRAINTS="" MODE=lockstep RTF=1 RERUN=save OUT="" FOXGLOVE_PORT=0 RECORDER_NICE=19
 SEPARATION="" SEPARATION_M=100 VERTICAL_M=30 SLOT_S=0 CLIMB=5 DESCENT=3
 OBJECTIVE=paper BASELINE_ORDER=arrival PRIORITY_SHARE=0 HORIZON=1 LEAD_TIME=0 COMMIT_AHEAD=false
@@ -69,6 +77,13 @@ while [[ $# -gt 0 ]]; do
     --network) NETWORK="${2:?--network needs a value}"; shift 2;;
     --demand) DEMAND="${2:?--demand needs a value}"; shift 2;;
     --constraints) CONSTRAINTS="${2:?--constraints needs a value}"; shift 2;;
+    --spatial-buffer-m) SPATIAL_BUFFER="${2:?--spatial-buffer-m needs a value}"; shift 2;;
+    --temporal-buffer-s) TEMPORAL_BUFFER="${2:?--temporal-buffer-s needs a value}"; shift 2;;
+    --wind) WIND="${2:?--wind needs a value}"; shift 2;;
+    --wind-from) WIND_FROM="${2:?--wind-from needs a value}"; shift 2;;
+    --gust) GUST="${2:?--gust needs a value}"; shift 2;;
+    --speed-error) SPEED_ERROR="${2:?--speed-error needs a value}"; shift 2;;
+    --delay-mean) DELAY_MEAN="${2:?--delay-mean needs a value}"; shift 2;;
     --mode) MODE="${2:?--mode needs a value}"; shift 2;;
     --rtf) RTF="${2:?--rtf needs a value}"; shift 2;;
     --rerun) RERUN="${2:?--rerun needs a value}"; shift 2;;
@@ -101,7 +116,9 @@ done
 [[ "$RTF" =~ ^[0-9]+(\.[0-9]+)?$ ]] || die "--rtf: '$RTF' is not a positive number"
 [[ -z "$SEPARATION" || "$SEPARATION" == sphere || "$SEPARATION" == cylinder ]] || die "--separation: '$SEPARATION' is not sphere or cylinder"
 for _flag in "separation-m:$SEPARATION_M" "vertical-separation-m:$VERTICAL_M" "slot-s:$SLOT_S" \
-             "climb-rate:$CLIMB" "descent-rate:$DESCENT"; do
+             "climb-rate:$CLIMB" "descent-rate:$DESCENT" "spatial-buffer-m:$SPATIAL_BUFFER" \
+             "temporal-buffer-s:$TEMPORAL_BUFFER" "wind:$WIND" "wind-from:$WIND_FROM" "gust:$GUST" \
+             "speed-error:$SPEED_ERROR" "delay-mean:$DELAY_MEAN"; do
   [[ "${_flag#*:}" =~ ^[0-9]+(\.[0-9]+)?$ ]] || die "--${_flag%%:*}: '${_flag#*:}' is not a number >= 0"
 done
 # as floats: ROS parameters typed double refuse an integer given on the command line
@@ -217,6 +234,7 @@ start uam_planner planner planner --params-file config/planner.yaml -p "network:
   -p "objective:=$OBJECTIVE" -p "baseline_order:=$BASELINE_ORDER" -p "horizon_epochs:=$HORIZON" \
   -p "commit_ahead:=$COMMIT_AHEAD" \
   -p "climb_rate_mps:=$(f "$CLIMB")" -p "descent_rate_mps:=$(f "$DESCENT")" -p "journal:=$OUT/planner-journal.jsonl" \
+  -p "spatial_buffer_m:=$(f "$SPATIAL_BUFFER")" -p "temporal_buffer_s:=$(f "$TEMPORAL_BUFFER")" \
   ${CONSTRAINTS:+-p "constraints_file:=$CONSTRAINTS"}
 start uam_sim request_generator request_generator --params-file config/request_generator.yaml \
   -p "network:=$NETWORK" -p "rate:=$RATE" -p "seed:=$SEED" -p "priority_share:=$(f "$PRIORITY_SHARE")" \
@@ -231,8 +249,13 @@ start uam_sim recorder recorder -p "output:=$MCAP" -p "network:=$NETWORK" -p "re
   -p "foxglove_port:=$FOXGLOVE_PORT" "${AIRSPACE[@]}" -p "wait_for_publishers:=[$RECORDER_WAITS]"
 REC_PID=${PIDS[-1]}
 NODE_NICE=
+# issue 23: compares every fleet state with the approved plans, publishes uam/conformance (recorded)
+start uam_sim conformance_monitor conformance_monitor
 start uam_sim simulator simulator --params-file config/simulator.yaml -p "duration_s:=$DURATION" \
-  -p "mode:=$MODE" -p "real_time_factor:=$RTF"
+  -p "mode:=$MODE" -p "real_time_factor:=$RTF" -p "wait_for_subscribers:=[recorder,conformance_monitor]" \
+  -p "disturbance_seed:=$SEED" -p "wind_speed_mps:=$(f "$WIND")" \
+  -p "wind_from_deg:=$(f "$WIND_FROM")" -p "gust_std_mps:=$(f "$GUST")" -p "speed_error:=$(f "$SPEED_ERROR")" \
+  -p "delay_mean_s:=$(f "$DELAY_MEAN")"
 SIM_PID=${PIDS[-1]}
 T0=$SECONDS
 SIM_RC=0

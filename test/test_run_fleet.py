@@ -103,13 +103,14 @@ def _start(out: pathlib.Path | None, env: dict, log: pathlib.Path, duration: str
 
 
 def _running(proc: subprocess.Popen, log: pathlib.Path) -> dict[int, str]:
-    """Wait until the five nodes run and the simulator started; returns them."""
+    """Wait until the six nodes run (the conformance monitor of issue 23 included) and the
+    simulator started; returns them."""
     assert _wait_for(lambda: "outputs in" in log.read_text(), 120), log.read_text()
     out = pathlib.Path(log.read_text().split("outputs in ", 1)[1].split(" (")[0])
     assert _wait_for(lambda: "starting the run" in (out / "simulator.log").read_text()
                      if (out / "simulator.log").exists() else False, 90), log.read_text()
     nodes = _node_children(proc.pid)
-    assert len(nodes) == 5, nodes
+    assert len(nodes) == 6, nodes
     return nodes
 
 

@@ -22,6 +22,7 @@ setup(
             "simulator = uam_sim.nodes.simulator_node:main",
             "recorder = uam_sim.nodes.recorder_node:main",
             "replay = uam_sim.nodes.replay_node:main",
+            "conformance_monitor = uam_sim.nodes.conformance_node:main",
             "analyze = uam_sim.analysis:main",
             "experiment = uam_sim.experiment:main",
         ],

@@ -64,16 +64,28 @@ def generate_launch_description() -> LaunchDescription:
                                                    "journal": PathJoinSubstitution([out, "planner-journal.jsonl"]),
                                                    "climb_rate_mps": a["climb_rate"],
                                                    "descent_rate_mps": a["descent_rate"],
-                                                   "constraints_file": a["constraints_file"], **airspace}]),
+                                                   "constraints_file": a["constraints_file"],
+                                                   "spatial_buffer_m": a["spatial_buffer_m"],
+                                                   "temporal_buffer_s": a["temporal_buffer_s"], **airspace}]),
         Node(package="uam_sim", executable="request_generator", name="request_generator", output="screen",
              parameters=[params_file("request_generator"), {"network": network, "rate": a["rate"],
                                                              "seed": a["seed"], "demand_file": a["demand_file"],
                                                              "priority_share": a["priority_share"],
                                                              "lead_time_s": a["lead_time_s"]}]),
         recorder,
+        # issue 23: compares every fleet state with the approved plans, publishes uam/conformance
+        Node(package="uam_sim", executable="conformance_monitor", name="conformance_monitor", output="screen"),
         Node(package="uam_sim", executable="simulator", name="simulator", output="screen",
              parameters=[params_file("simulator"), {"duration_s": a["duration"], "mode": a["mode"],
-                                                     "real_time_factor": a["rtf"]}]),
+                                                     "real_time_factor": a["rtf"],
+                                                     "wait_for_subscribers": ["recorder", "conformance_monitor"],
+                                                     # disturbances (issue 23), seeded by the run's seed
+                                                     "disturbance_seed": a["seed"],
+                                                     "wind_speed_mps": a["wind_speed_mps"],
+                                                     "wind_from_deg": a["wind_from_deg"],
+                                                     "gust_std_mps": a["gust_std_mps"],
+                                                     "speed_error": a["speed_error"],
+                                                     "delay_mean_s": a["delay_mean_s"]}]),
     ]
     return LaunchDescription(
         [DeclareLaunchArgument(name, default_value=default, description=text)

@@ -22,6 +22,7 @@ TOPIC_REPORTS = "uam/planning_reports"
 TOPIC_FLEET = "uam/fleet_state"
 TOPIC_POSES = "uam/fleet_poses"
 TOPIC_SYNC = "uam/epoch_sync"
+TOPIC_CONFORMANCE = "uam/conformance"   # issue 23: the conformance monitor's output
 TOPIC_CLOCK = "/clock"
 SERVICE_SOLVE = "uam/solve_mwis"
 SERVICE_PLAN_EPOCH = "uam/plan_epoch"
@@ -91,4 +92,5 @@ RECORDED_TOPICS: dict[str, tuple[str, QosSpec]] = {
     TOPIC_POSES: ("geometry_msgs/msg/PoseArray", QOS_RECORD_VOLATILE),
     TOPIC_SYNC: ("uam_msgs/msg/EpochSync", QOS_LATCHED),
     TOPIC_CONSTRAINTS: ("std_msgs/msg/String", QOS_CONSTRAINTS),
+    TOPIC_CONFORMANCE: ("uam_msgs/msg/Conformance", QOS_RECORD_VOLATILE),
 }

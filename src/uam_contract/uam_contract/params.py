@@ -198,6 +198,11 @@ PLANNER = (
     Param("constraints_file", "", "airspace constraints to plan around from the first epoch: a GeoJSON "
           "FeatureCollection or an ED-269 UAS zone file (docs/constraints.md); no candidate entering one "
           "during its window is approved; '' for none (the paper's airspace)"),
+    Param("spatial_buffer_m", 0.0, "planning buffer added to the separation the planner keeps [m] (issue 23, "
+          "docs/disturbances.md; the audits keep the true minimum); 0 = none (the paper's)", 0.0, 100000.0),
+    Param("temporal_buffer_s", 0.0, "temporal planning buffer [s]: plans keep the minimum plus the spatial "
+          "buffer between any two times this far apart (the separation widened by v_max x it; "
+          "docs/disturbances.md); 0 = none (the paper's)", 0.0, 3600.0),
 )
 
 SOLVER = (
@@ -237,6 +242,22 @@ SIMULATOR = (
     Param("ack_timeout_s", 120.0, "wall time [s] to wait for an epoch's outcome before ending the run with "
           "an error",
           0.1, 86400.0),
+    # disturbances (issue 23, uam_sim.disturbance, docs/disturbances.md): all 0 = plans flown exactly
+    Param("wind_speed_mps", 0.0, "steady wind speed [m/s]; 0 with the other levels 0 = plans flown exactly "
+          "(the paper's)", 0.0, 100.0),
+    Param("wind_from_deg", 270.0, "direction the steady wind blows from [deg clockwise from north]", 0.0, 360.0),
+    Param("gust_std_mps", 0.0, "standard deviation of each horizontal gust component [m/s]", 0.0, 100.0),
+    Param("gust_length_m", 2000.0, "typical gust wavelength [m]", 1.0, 1e6),
+    Param("gust_period_s", 60.0, "typical gust period [s]", 0.1, 1e6),
+    Param("speed_error", 0.0, "per-flight airspeed error bound: (1 + e) x the plan's speed, e uniform in "
+          "[-speed_error, speed_error] (0.1 = 10 %)", 0.0, 0.79),
+    Param("delay_mean_s", 0.0, "mean departure delay [s] (exponential); 0 = on time", 0.0, 3600.0),
+    Param("delay_max_s", 120.0, "departure delays are truncated here [s]", 0.0, 86400.0),
+    Param("track_gain_per_s", 0.1, "cross-track guidance gain of the path-following model [1/s]", 0.001, 100.0),
+    Param("max_lateral_m", 50.0, "bound of the cross-track offset of the path-following model [m]", 0.001, 10000.0),
+    Param("compensate_steady_wind", True, "the aircraft crabs against the steady wind (false: it drifts)"),
+    Param("disturbance_seed", 0, "seed of the wind field and of every flight's draws (run_fleet.sh passes "
+          "the run's --seed)", 0, INT32_MAX),
 )
 
 REQUEST_GENERATOR = (
@@ -337,8 +358,16 @@ REPLAY = (
     Param("exit_when_done", True, "stop the node once everything is published"),
 )
 
+CONFORMANCE_MONITOR = (
+    Param("lateral_m", 30.0, "lateral bound: horizontal distance from the nearest point of the planned path [m] "
+          "(uam_sim.conformance, docs/disturbances.md)", 0.001, 100000.0),
+    Param("vertical_m", 15.0, "vertical bound: height above or below that point [m]", 0.001, 10000.0),
+    Param("time_s", 10.0, "time bound: |now - the planned time of that point| [s]", 0.001, 86400.0),
+)
+
 TABLES = {"planner": PLANNER, "solver": SOLVER, "simulator": SIMULATOR, "request_generator": REQUEST_GENERATOR,
-          "recorder": RECORDER, "replay": REPLAY}
+          "recorder": RECORDER, "replay": REPLAY,
+          "conformance_monitor": CONFORMANCE_MONITOR}
 
 
 def markdown() -> str:

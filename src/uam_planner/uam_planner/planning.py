@@ -210,6 +210,9 @@ class PlanningConfig:
             affected flight's alternatives), "firstfit" (the baseline: in approval order, each
             flight's first alternative in preference order that keeps separation), or ""
             (default: "mwis" for the MWIS policy, "firstfit" for FIFO and first-fit).
+        spatial_buffer_m, temporal_buffer_s: planning buffers on the separation (issue 23,
+            docs/disturbances.md); 0 = today's. The planner keeps ``separation`` (the minimum
+            widened by both), every audit keeps ``minimum_separation``.
     """
 
     epoch_s: float = defaults.EPOCH_S          # the paper's values, from uam_contract.defaults
@@ -229,13 +232,35 @@ class PlanningConfig:
     commit_ahead: bool = False
     fair_window_s: float = 0.0
     replan_policy: str = ""
+    spatial_buffer_m: float = 0.0
+    temporal_buffer_s: float = 0.0
 
     @property
-    def separation(self) -> SeparationModel:
-        """The SeparationModel of this config (sphere of ``separation_m`` by default)."""
+    def minimum_separation(self) -> SeparationModel:
+        """The true minimum (sphere of ``separation_m`` by default): what audits check."""
         a = self.airspace
         return SeparationModel(a.separation_model, float(self.separation_m),
                                float(a.vertical_separation_m))
+
+    @property
+    def separation(self) -> SeparationModel:
+        """The separation the planner keeps: the minimum itself without buffers (the paper's),
+        else widened by the spatial buffer b and v_max x the temporal buffer tau (sphere: radius
+        S + b + v tau, v the largest of the cruise, climb and descent speeds; cylinder: H + b +
+        v_h tau with v_h the cruise speed, V + v_z tau with v_z the largest vertical rate), so
+        plans keep the minimum plus b between any two times tau apart (docs/disturbances.md)."""
+        if not (self.spatial_buffer_m or self.temporal_buffer_s):
+            return self.minimum_separation
+        a = self.airspace
+        tau = float(self.temporal_buffer_s)
+        b = float(self.spatial_buffer_m)
+        v_z = max(a.climb_rate_mps, a.descent_rate_mps)
+        if a.separation_model == "sphere":
+            v = max(self.speed_mps, v_z)
+            return SeparationModel("sphere", float(self.separation_m) + b + v * tau,
+                                   float(a.vertical_separation_m))
+        return SeparationModel("cylinder", float(self.separation_m) + b + self.speed_mps * tau,
+                               float(a.vertical_separation_m) + v_z * tau)
 
     def __post_init__(self):
         if not isinstance(self.airspace, AirspaceConfig):
@@ -244,6 +269,8 @@ class PlanningConfig:
         if self.constraints is not None and not isinstance(self.constraints, ConstraintSet):
             raise ValueError(f"PlanningConfig.constraints must be a ConstraintSet or None, got "
                              f"{type(self.constraints).__name__}")
+        for name in ("spatial_buffer_m", "temporal_buffer_s"):
+            _positive("PlanningConfig", name, getattr(self, name), allow_zero=True)
         for name in ("epoch_s", "separation_m", "speed_mps", "time_limit_s"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:

@@ -130,7 +130,7 @@ def test_sigterm_and_ctrl_c_close_the_file_properly(tmp_path, sig):
         lines = []
         for line in proc.stdout:
             lines.append(line)
-            if "recording 8 topics" in line:
+            if f"recording {len(RECORDED_TOPICS)} topics" in line:  # 9: with uam/constraints (issue 22) and uam/conformance (issue 23)
                 break
         assert out.exists(), "".join(lines)
         proc.send_signal(sig)

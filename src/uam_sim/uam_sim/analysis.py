@@ -172,6 +172,10 @@ class RunSummary:
     incursions: list = field(default_factory=list)
     #: constraint versions the planner had in force during the run (from uam/constraints)
     constraints_in_force: int = 0
+    #: the audit of what flew (issue 23, uam_sim.flown.recording_flown): the fleet states' tracks,
+    #: their exact closest approach in the true minimum with the sampling bound, and their F3548
+    #: conformance with the approved plans ({} when no fleet positions were recorded)
+    flown: dict = field(default_factory=dict)
 
     @property
     def verified(self) -> bool:
@@ -616,6 +620,8 @@ def summarize(path: str | Path, separation_m=None, reader: str = "rclpy",
     summary = summarize_messages(iter_decoded(path, reader, ANALYSED_TOPICS, fleet_digest_only=True),
                                  separation_m, str(path), reader, complete, network=network)
     summary.recorder_check = read_metadata(path, RECORDER_CHECK)
+    from .flown import recording_flown
+    summary.flown = recording_flown(path, separation_m)
     if summary.recorder_check.get("ok") == "false":
         summary.problems.append(f"the recorder found: {summary.recorder_check.get('verdict', '?')}")
     if recovered:
@@ -737,6 +743,19 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
         lines.append(f"Constraint audit {verdict} (every flown version from the instant it took effect)")
         for text in s.incursions[:20]:
             lines.append(f"    {text}")
+    fl = s.flown
+    if fl:  # issue 23: the audit above is of what was planned; this one of what flew
+        ms = fl["min_separation_m"]
+        verdict = f"LOSS OF SEPARATION in {fl['losses']} pair(s)" if fl["losses"] else "OK"
+        lines.append(f"Flown audit      {verdict} (what flew: the fleet states, linear between samples "
+                     f"{fl['sample_step_s']:g} s apart; the audit above is of the plans): minimum separation "
+                     + ("-" if ms is None else f"{ms:.1f} m")
+                     + f"; sampling error at most {fl['sampling_bound_m']:.1f} m per pair, "
+                     f"{fl['possible_losses']} pair(s) within it of the minimum")
+        cf = fl["conformance"]
+        lines.append(f"Conformance      {cf['conformance_percent']:.2f} % of {cf['flight_hours']:.2f} flight hours, "
+                     f"{cf['excursions']} excursions ({cf['excursions_per_flight_hour']:.2f} per flight hour), "
+                     f"longest {cf['longest_excursion_s']:.0f} s (F3548: >= 95 %, <= 18 per hour, <= 10 s)")
     for problem in s.problems:
         lines.append(f"Recording check  {problem}")
     if s.recorder_check:

@@ -76,6 +76,19 @@ def run_experiment(cfg: ExperimentConfig, progress: bool = True, figures: bool =
     return outputs
 
 
+def key_values(text: str) -> dict:
+    """'a=1,b=true' -> {'a': 1, 'b': True} (YAML scalars); argparse reports a bad item."""
+    out = {}
+    for item in (x.strip() for x in text.split(",")):
+        if not item:
+            continue
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise argparse.ArgumentTypeError(f"{item!r} is not KEY=VALUE")
+        out[key.strip()] = yaml.safe_load(value)
+    return out
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="experiment", description=__doc__.split("\n\n")[0],
                                 allow_abbrev=False)
@@ -105,6 +118,15 @@ def build_parser() -> argparse.ArgumentParser:
                    help="climb rate at vertiports of a layered network [m/s] (default 5)")
     p.add_argument("--descent-rate", type=float, dest="descent_rate_mps",
                    help="descent rate at vertiports of a layered network [m/s] (default 3)")
+    p.add_argument("--spatial-buffer-m", type=float, dest="spatial_buffer_m",
+                   help="planning buffer on the separation [m] (docs/disturbances.md; default 0)")
+    p.add_argument("--temporal-buffer-s", type=float, dest="temporal_buffer_s",
+                   help="temporal planning buffer [s] (docs/disturbances.md; default 0)")
+    p.add_argument("--disturbance", type=key_values, metavar="K=V,...",
+                   help="disturbances flown (uam_sim.disturbance.DisturbanceConfig fields), e.g. "
+                        "speed_error=0.1,gust_std_mps=1.5,delay_mean_s=10 (default none)")
+    p.add_argument("--conformance", type=key_values, metavar="K=V,...",
+                   help="conformance bounds (uam_sim.conformance.ConformanceBounds), e.g. lateral_m=30,time_s=10")
     p.add_argument("--tts-reads", type=int, help="reads per annealing run in the TTS study")
     p.add_argument("--tts-instances", type=int, help="instances in the TTS study")
     p.add_argument("--no-tts", action="store_true", help="skip the TTS study")
@@ -124,7 +146,9 @@ def main(argv: list | None = None) -> int:
                                           "constraints_file",
                                           "scheduler", "airspace_mode",
                                           "separation_model", "vertical_separation_m",
-                                          "departure_slot_s", "climb_rate_mps", "descent_rate_mps")}
+                                          "departure_slot_s", "climb_rate_mps", "descent_rate_mps",
+                                          "spatial_buffer_m", "temporal_buffer_s", "disturbance",
+                                          "conformance")}
     try:
         base = yaml.safe_load(Path(args.config).read_text()) if args.config else {}
         base = base or {}

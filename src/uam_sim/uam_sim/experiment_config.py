@@ -95,6 +95,12 @@ class ExperimentConfig:
             once as reservations (never re-optimised) instead of planning them again.
         lead_time_s: requests are filed this long before their earliest departure [s].
         operator_lead_times_s: extra lead time [s] per operator (filing habits), as ``operators``.
+        spatial_buffer_m, temporal_buffer_s: planning buffers on the separation (issue 23;
+            0 = today's); audits keep the true minimum.
+        disturbance: fields of ``uam_sim.disturbance.DisturbanceConfig`` (wind, gusts, speed
+            error, departure delay, path following); {} = none, the plans flown exactly. The
+            flights' draws are seeded by the cell's seed (the ``seed`` field is ignored).
+        conformance: fields of ``uam_sim.conformance.ConformanceBounds`` ({} = the defaults).
         metrics_warmup_s: the decision metrics (delay, shares, ...) leave out requests whose
             earliest departure is before it (the warm-up); 0 = none.
         cumulative_rates: rates shown in the cumulative-approvals figure (default: up to 4 spread).
@@ -144,6 +150,10 @@ class ExperimentConfig:
     lead_time_s: float = 0.0
     operator_lead_times_s: list = field(default_factory=list)
     metrics_warmup_s: float = 0.0
+    spatial_buffer_m: float = 0.0
+    temporal_buffer_s: float = 0.0
+    disturbance: dict = field(default_factory=dict)
+    conformance: dict = field(default_factory=dict)
     tts: dict = field(default_factory=lambda: {
         "enabled": True, "instances": 629, "min_vertices": 5, "max_vertices": 50, "reads": 100,
         "repetitions": 5, "backend_instances": {"qpu-emulator": 60},
@@ -165,7 +175,7 @@ class ExperimentConfig:
 
     def separation(self):
         """The run's SeparationModel (what the planner keeps and the audit checks)."""
-        return self.planning_config("greedy", 0).separation
+        return self.planning_config("greedy", 0).minimum_separation  # never the buffered one
 
     def planning_config(self, backend: str, seed: int) -> PlanningConfig:
         return PlanningConfig(epoch_s=self.epoch_s, separation_m=self.separation_m, k=self.k,
@@ -174,7 +184,18 @@ class ExperimentConfig:
                               airspace=self.airspace(), objective=self.objective,
                               baseline_order=self.baseline_order,
                               horizon_epochs=self.horizon_epochs,
-                              commit_ahead=self.commit_ahead, fair_window_s=self.fair_window_s)
+                              commit_ahead=self.commit_ahead, fair_window_s=self.fair_window_s,
+                              spatial_buffer_m=self.spatial_buffer_m,
+                              temporal_buffer_s=self.temporal_buffer_s)
+
+    def disturbance_config(self):
+        """The DisturbanceConfig of ``disturbance`` (off when empty); its seed is the cell's."""
+        from .disturbance import DisturbanceConfig
+        return DisturbanceConfig.from_mapping(self.disturbance)
+
+    def conformance_bounds(self):
+        from .conformance import ConformanceBounds
+        return ConformanceBounds(**dict(self.conformance or {}))
 
 
 def _num_list(name: str, value, cast=float) -> list:
@@ -271,6 +292,15 @@ def make_config(data: dict | None = None, **overrides) -> ExperimentConfig:
                          operator_lead_times_s=cfg.operator_lead_times_s)
     except DemandError as exc:
         raise ExperimentError(str(exc)) from None
+    for name in ("disturbance", "conformance"):
+        if not isinstance(getattr(cfg, name), dict):
+            raise ExperimentError(f"{name}: {getattr(cfg, name)!r} must be a mapping")
+    try:
+        cfg.disturbance_config()
+        cfg.conformance_bounds()
+    except (TypeError, ValueError) as exc:
+        raise ExperimentError(str(exc).replace("DisturbanceConfig.", "disturbance.")
+                              .replace("ConformanceBounds.", "conformance.")) from None
     try:
         cfg.planning_config("greedy", 0)  # validates k, penalty_factor and the airspace
     except ValueError as exc:

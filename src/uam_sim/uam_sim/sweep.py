@@ -39,7 +39,10 @@ def cell_params(cfg: ExperimentConfig, method: str, rate, seed: int) -> dict:
     for name, default in (("objective", "paper"), ("baseline_order", "arrival"),
                           ("priority_share", 0.0), ("priority_class", 1), ("operators", []),
                           ("horizon_epochs", 1), ("commit_ahead", False), ("fair_window_s", 0.0), ("lead_time_s", 0.0),
-                          ("operator_lead_times_s", []), ("metrics_warmup_s", 0.0)):
+                          ("operator_lead_times_s", []), ("metrics_warmup_s", 0.0),
+                          # issue 23: buffers, disturbances and conformance bounds
+                          ("spatial_buffer_m", 0.0), ("temporal_buffer_s", 0.0),
+                          ("disturbance", {}), ("conformance", {})):
         if getattr(cfg, name) != default:
             params[name] = getattr(cfg, name)
     if cfg.demand_file:

@@ -96,6 +96,7 @@ class PlannerNode(Node):
             objective=self.p["objective"], baseline_order=self.p["baseline_order"],
             horizon_epochs=self.p["horizon_epochs"], commit_ahead=self.p["commit_ahead"],
             fair_window_s=self.p["fair_window_s"],
+            spatial_buffer_m=self.p["spatial_buffer_m"], temporal_buffer_s=self.p["temporal_buffer_s"],
             airspace=AirspaceConfig(**{f: self.p[f] for f in (
                 "separation_model", "vertical_separation_m", "departure_slot_s", "climb_rate_mps",
                 "descent_rate_mps")}))

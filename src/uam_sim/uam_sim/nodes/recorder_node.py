@@ -99,7 +99,7 @@ PUBLISHER_CHECK_S = 0.5
 #: how many publishers each topic with one authority may have at once
 SOLE_PUBLISHERS = {c.TOPIC_CLOCK: 1, c.TOPIC_FLEET: 1, c.TOPIC_POSES: 1, c.TOPIC_PLANS: 1, c.TOPIC_REPORTS: 1,
                    c.TOPIC_CONSTRAINTS: 1,
-                   c.TOPIC_SYNC: 3}
+                   c.TOPIC_SYNC: 3, c.TOPIC_CONFORMANCE: 1}
 
 
 class RecordingCheck:

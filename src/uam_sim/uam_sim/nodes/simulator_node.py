@@ -11,7 +11,8 @@ and observers). Parameters: uam_contract.params.SIMULATOR (docs/parameters.md).
 The epoch protocol, at each epoch time t = k * epoch_s < duration_s: ask the demand source to
 release the epoch's requests (uam/release_demand; it answers with their ids), then ask the
 planner to plan epoch k at t (uam/plan_epoch, naming those ids), and fly the approvals of the
-answer exactly as planned; only then step on. Between epochs it steps as fast as it can
+answer (exactly as planned, or, with disturbances on, as the path-following model of
+uam_sim.disturbance flies them: the fleet state is what flew); only then step on. Between epochs it steps as fast as it can
 (lockstep) or at ``real_time_factor`` x wall time (realtime): the result does not depend on CPU
 speed. It starts once the planner's and the demand source's services are up and the nodes named
 in ``wait_for_subscribers`` subscribe to the fleet state (explicit readiness, no counts). A call
@@ -53,6 +54,7 @@ from uam_bringup.params import declare_table
 from uam_contract.params import SIMULATOR
 from uam_bringup.runtime import run_node
 from uam_sim.cdr import encode_clock, encode_fleet_state, encode_pose_array, yaw_quaternions
+from uam_sim.disturbance import WindField, fly_plans, from_simulator_params
 from uam_sim.fleet import Fleet
 
 RESEND_S = 2.0  # wall time after which an unanswered call is sent again (a restarted server lost it)
@@ -84,6 +86,9 @@ class SimulatorNode(Node):
             if self.p["use_demand_service"] else None
 
         self.fleet = Fleet()
+        # issue 23: what flies (off by default: the plans themselves)
+        self.disturbance = from_simulator_params(self.p, self.step_s)
+        self.wind = WindField(self.disturbance) if self.disturbance.enabled else None
         self.step_index = 0                 # t = step_index * step_s
         self.plans_received = 0             # decisions in the epoch answers: approved, expired, rejected
         self.approvals_received = 0         # of which approved
@@ -327,7 +332,10 @@ class SimulatorNode(Node):
             if plan.outcome == FlightPlan.OUTCOME_APPROVED:
                 self.approvals_received += 1
                 try:
-                    self.fleet.add(key, m.trajectory_from_plan(plan))
+                    traj = m.trajectory_from_plan(plan)
+                    if self.wind is not None:
+                        traj = fly_plans([traj], [key], self.disturbance, self.wind)[0]
+                    self.fleet.add(key, traj)
                     self._flying[key] = plan
                     self.flown_plans.append(plan)
                 except ValueError as exc:

@@ -1,0 +1,242 @@
+"""Monte-Carlo of flights that do not fly to plan (issue 23): disturbance level x planning buffer.
+
+    python -m uam_sim.montecarlo --speed-errors 0,0.05,0.1 --spatial-buffers 0,10,25,50 \
+        --temporal-buffers 0,5,10 --seeds 4 --rate 10 --duration 1800 --workers 2 \
+        --out results/montecarlo [--network SPEC] [--gust 1.0 --delay-mean 10 --wind 3]
+
+Each *point* of the grid (speed error, spatial buffer, temporal buffer) is a set of seeded runs of
+the in-process runner (:func:`uam_sim.scenario.run_scenario`, one MWIS method) in which the
+planner plans with the buffers and the aircraft fly the disturbance model
+(:mod:`uam_sim.disturbance`). Every run of every point is one cell of the experiment runner, so
+the cells run on its Dask scheduler (a LocalCluster of ``--workers`` processes, or
+``--scheduler tcp://HOST:8786``), are written as they finish and are reused by a later call
+(resumable). Per point it reports, over the point's runs: flights flown, approval rate, time in
+conformance (F3548), excursions per flight hour, longest excursion, re-plans (0: the reaction of
+issue 23 item 3 is not wired yet) and the **losses of separation in what flew**: the exact
+closest approach between the flown tracks (:func:`uam_sim.flown.flown_audit`) in the true
+minimum, never the buffered one. Writes ``<out>/montecarlo.csv`` and prints the table.
+
+The default network is the synthetic city of the capacity study's paper mode scaled down
+(``--network`` takes a file or ``synthetic:n_nodes=...,n_aerodromes=...,seed=...``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import sys
+import time
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+from .experiment import key_values
+from .experiment_config import ExperimentError, make_config
+from .sweep import cell_key, cell_params, run_cell
+
+DEFAULT_NETWORK = {"synthetic": {"n_nodes": 400, "n_aerodromes": 30, "seed": 1}}
+COLUMNS = ("speed_error", "spatial_buffer_m", "temporal_buffer_s", "runs", "requests", "flights",
+           "approval_rate", "conformance_percent", "excursions_per_flight_hour", "longest_excursion_s",
+           "nonconforming_flights", "replans", "flown_losses", "flown_min_separation_m",
+           "planned_losses")
+
+
+def _num_list(text: str) -> list[float]:
+    try:
+        return [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a comma list of numbers") from None
+
+
+def _network(text: str):
+    if text.startswith("synthetic:"):
+        return {"synthetic": key_values(text.split(":", 1)[1])}
+    return text
+
+
+def point_configs(args) -> list[tuple[tuple, dict]]:
+    """((speed error, spatial, temporal), config dict) of every grid point."""
+    out = []
+    if getattr(args, "axes", False):   # each buffer alone: spatial at 0 s, then temporal at 0 m
+        combos = [(bs, 0.0) for bs in args.spatial_buffers] + \
+                 [(0.0, bt) for bt in args.temporal_buffers if bt > 0]
+    else:                              # the full product
+        combos = [(bs, bt) for bs in args.spatial_buffers for bt in args.temporal_buffers]
+    for e in args.speed_errors:
+        for bs, bt in combos:
+            if True:
+                dist = {"speed_error": e, "gust_std_mps": args.gust, "delay_mean_s": args.delay_mean,
+                        "wind_speed_mps": args.wind, "step_s": args.step,
+                        "time_gain_per_s": args.time_gain}
+                cfg = make_config({"network": args.network, "methods": [args.method], "rates": [args.rate],
+                                   "seeds": args.seeds, "duration_s": args.duration,
+                                   "time_limit_s": args.time_limit, "spatial_buffer_m": bs,
+                                   "temporal_buffer_s": bt, "disturbance": dist,
+                                   "conformance": args.conformance or {}, "out": args.out,
+                                   "workers": args.workers, "scheduler": args.scheduler,
+                                   "corpus_max_vertices": 0})
+                out.append(((e, bs, bt), asdict(cfg)))
+    return out
+
+
+def aggregate(point: tuple, cells: list[dict]) -> dict:
+    """One row of the table from a point's cells (flight-time weighted conformance)."""
+    s = [c["summary"] for c in cells]
+    hours = sum(x["conf_flight_hours"] for x in s)
+    req = sum(x["requests"] for x in s)
+    appr = sum(x["approved"] for x in s)
+    mins = [x["flown_min_separation_m"] for x in s if x["flown_min_separation_m"] is not None]
+    return {"speed_error": point[0], "spatial_buffer_m": point[1], "temporal_buffer_s": point[2],
+            "runs": len(cells), "requests": req, "flights": appr,
+            "approval_rate": appr / req if req else float("nan"),
+            "conformance_percent": (sum(x["conf_conformance_percent"] * x["conf_flight_hours"] for x in s)
+                                    / hours if hours else 100.0),
+            "excursions_per_flight_hour": sum(x["conf_excursions"] for x in s) / hours if hours else 0.0,
+            "longest_excursion_s": max(x["conf_longest_excursion_s"] for x in s),
+            "nonconforming_flights": sum(x["conf_nonconforming_flights"] for x in s),
+            "replans": sum(x["replans"] for x in s),
+            "flown_losses": sum(x["flown_losses"] for x in s),
+            "flown_min_separation_m": min(mins) if mins else None,
+            "planned_losses": sum(x["losses"] or 0 for x in s)}
+
+
+def run(args) -> list[dict]:
+    cells_dir = Path(args.out) / "cells"
+    cells_dir.mkdir(parents=True, exist_ok=True)
+    points = point_configs(args)
+    todo, keys, confs, found = [], {}, {}, {}
+    for i, (_pt, conf) in enumerate(points):
+        cfg = make_config(conf)
+        for s in cfg.seeds:
+            c = (i, args.method, cfg.rates[0], s)
+            key = cell_key(cell_params(cfg, args.method, cfg.rates[0], s))
+            path = cells_dir / f"{key}.json"
+            if path.exists():
+                import json
+                cell = json.loads(path.read_text())
+                if cell.get("key") == key:
+                    found[c] = cell
+                    continue
+            todo.append(c)
+            keys[c] = key
+            confs[c] = conf
+    todo.sort(key=lambda c: c[3])  # seeds outermost: an interrupted run has every point's first seeds
+    if todo and args.workers <= 1 and args.scheduler in (None, "local"):
+        for c in todo:
+            found[c] = run_cell(confs[c], c[1], c[2], c[3], str(cells_dir))
+    elif todo:
+        from .dask_cluster import run_cells
+        found.update(run_cells(points[0][1], todo, keys, cells_dir, run_cell,
+                               scheduler=args.scheduler or "local", n_workers=args.workers,
+                               cell_configs=confs))
+    rows = []
+    for i, (pt, conf) in enumerate(points):
+        cells = [v for c, v in found.items() if c[0] == i]
+        rows.append(aggregate(pt, cells))
+    return rows
+
+
+def format_table(rows: list[dict]) -> str:
+    head = ("| speed error | buffer m | buffer s | runs | flights | approval | conformance | exc/h | "
+            "longest exc s | flown losses | flown min sep m | planned losses |")
+    out = [head, "|" + "---|" * 12]
+    for r in rows:
+        ms = r["flown_min_separation_m"]
+        out.append(f"| {100 * r['speed_error']:.0f} % | {r['spatial_buffer_m']:g} | {r['temporal_buffer_s']:g} | "
+                   f"{r['runs']} | {r['flights']} | {100 * r['approval_rate']:.1f} % | "
+                   f"{r['conformance_percent']:.2f} % | {r['excursions_per_flight_hour']:.2f} | "
+                   f"{r['longest_excursion_s']:.0f} | {r['flown_losses']} | "
+                   f"{'-' if ms is None else f'{ms:.1f}'} | {r['planned_losses']} |")
+    return "\n".join(out)
+
+
+def figure(rows: list[dict], path) -> Path:
+    """Approval rate, conformance and flown losses against the buffer, one line per speed error
+    (spatial buffers at temporal 0, then temporal buffers at spatial 0 on the same axis as
+    'b m' and 'tau s' ticks)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    def label(r):
+        return (f"{r['spatial_buffer_m']:g} m" if r["temporal_buffer_s"] == 0 else
+                f"{r['spatial_buffer_m']:g} m+{r['temporal_buffer_s']:g} s")
+    buffers = []
+    for r in sorted(rows, key=lambda r: (r["temporal_buffer_s"], r["spatial_buffer_m"])):
+        if label(r) not in buffers:
+            buffers.append(label(r))
+    fig, axes = plt.subplots(1, 3, figsize=(14, 4.2))
+    for e in sorted({r["speed_error"] for r in rows}):
+        pts = {label(r): r for r in rows if r["speed_error"] == e}
+        xs = [i for i, b in enumerate(buffers) if b in pts]
+        for ax, key, scale in ((axes[0], "approval_rate", 100.0), (axes[1], "conformance_percent", 1.0),
+                               (axes[2], "flown_losses", 1.0)):
+            ax.plot(xs, [pts[buffers[i]][key] * scale for i in xs], marker="o", label=f"speed error {100 * e:.0f} %")
+    for ax, title in zip(axes, ("approval rate [%]", "time in conformance [%] (F3548: >= 95)",
+                                "losses of separation in what flew [pairs]")):
+        ax.set_xticks(range(len(buffers)))
+        ax.set_xticklabels(buffers, rotation=30)
+        ax.set_xlabel("planning buffer (spatial m + temporal s)")
+        ax.set_title(title)
+        ax.grid(alpha=0.3)
+    axes[1].axhline(95.0, color="grey", ls="--", lw=1)
+    axes[0].legend()
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="montecarlo", description=__doc__.split("\n\n")[0], allow_abbrev=False)
+    p.add_argument("--network", type=_network, default=DEFAULT_NETWORK,
+                   help="network file or synthetic:n_nodes=N,n_aerodromes=A,seed=S (default: 400 nodes, 30 vertiports)")
+    p.add_argument("--speed-errors", type=_num_list, default=[0.0, 0.05, 0.1])
+    p.add_argument("--spatial-buffers", type=_num_list, default=[0.0, 10.0, 25.0, 50.0])
+    p.add_argument("--temporal-buffers", type=_num_list, default=[0.0, 5.0, 10.0])
+    p.add_argument("--axes", action="store_true",
+                   help="each buffer alone (spatial buffers at 0 s, temporal at 0 m) instead of every pair")
+    p.add_argument("--gust", type=float, default=1.0, help="gust std per component [m/s] (default 1)")
+    p.add_argument("--wind", type=float, default=0.0, help="steady wind [m/s] (default 0)")
+    p.add_argument("--delay-mean", type=float, default=0.0, help="mean departure delay [s] (default 0)")
+    p.add_argument("--time-gain", type=float, default=0.0,
+                   help="along-track (4D) guidance gain [1/s]; 0 = airspeed held, no time control (default)")
+    p.add_argument("--step", type=float, default=1.0, help="disturbance model step [s] (default 1)")
+    p.add_argument("--conformance", type=key_values, help="conformance bounds, e.g. lateral_m=30,time_s=10")
+    p.add_argument("--seeds", default="4", help="a count n (seeds 0..n-1) or a comma list")
+    p.add_argument("--rate", type=float, default=10.0, help="requests per 30 s (default 10)")
+    p.add_argument("--duration", type=float, default=1800.0, help="simulated seconds per run (default 1800)")
+    p.add_argument("--method", default="greedy", help="MWIS backend or fifo/firstfit (default greedy)")
+    p.add_argument("--time-limit", type=float, default=5.0, help="MWIS time limit [s]")
+    p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--scheduler", default=None, help="'local' or tcp://HOST:8786")
+    p.add_argument("--out", default="results/montecarlo")
+    p.add_argument("--figure", help="also write the figure (PNG) here")
+    return p
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    t0 = time.perf_counter()
+    try:
+        rows = run(args)
+    except ExperimentError as exc:
+        print(f"montecarlo: {exc}", file=sys.stderr)
+        return 2
+    out = Path(args.out) / "montecarlo.csv"
+    with out.open("w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=COLUMNS)
+        w.writeheader()
+        w.writerows(rows)
+    print(format_table(rows))
+    if args.figure:
+        print(f"figure: {figure(rows, args.figure)}")
+    print(f"{len(rows)} points in {time.perf_counter() - t0:.1f} s; table in {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
