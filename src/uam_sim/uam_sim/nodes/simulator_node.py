@@ -89,6 +89,7 @@ class SimulatorNode(Node):
         # issue 23: what flies (off by default: the plans themselves)
         self.disturbance = from_simulator_params(self.p, self.step_s)
         self.wind = WindField(self.disturbance) if self.disturbance.enabled else None
+        self._plan_trajs: dict = {}  # with disturbances: each flight's plan (spliced over its versions)
         self.step_index = 0                 # t = step_index * step_s
         self.plans_received = 0             # decisions in the epoch answers: approved, expired, rejected
         self.approvals_received = 0         # of which approved
@@ -322,6 +323,8 @@ class SimulatorNode(Node):
         epoch = self._waiting_epoch
         t = self.t_s
         self._flying = {k: p for k, p in self._flying.items() if m.from_time(p.arrival_time) >= t}
+        if self._plan_trajs:
+            self._plan_trajs = {k: v for k, v in self._plan_trajs.items() if k in self._flying}
         for plan in res.plans:
             self.plans_received += 1
             key = wire.scoped_id(plan.operator_id, plan.request_id)
@@ -334,6 +337,7 @@ class SimulatorNode(Node):
                 try:
                     traj = m.trajectory_from_plan(plan)
                     if self.wind is not None:
+                        self._plan_trajs[key] = traj   # a later version is spliced onto the plan
                         traj = fly_plans([traj], [key], self.disturbance, self.wind)[0]
                     self.fleet.add(key, traj)
                     self._flying[key] = plan
@@ -358,13 +362,24 @@ class SimulatorNode(Node):
         cancelled flight (docs/replanning.md)."""
         self.versions_received += 1
         try:
-            if plan.outcome == FlightPlan.OUTCOME_APPROVED and plan.waypoints:
+            if plan.outcome == FlightPlan.OUTCOME_APPROVED and plan.waypoints and self.wind is not None \
+                    and key in self._plan_trajs:
+                # disturbed: the new version chains onto the old plan, not onto what flew; the
+                # spliced plan is flown by the model again (the same track up to the switch)
+                from uam_planner.replanning import spliced
+                new = spliced(self._plan_trajs[key], m.trajectory_from_plan(plan), m.from_time(plan.effective_time))
+                self._plan_trajs[key] = new
+                self.fleet.replace(key, fly_plans([new], [key], self.disturbance, self.wind)[0])
+                self._flying[key] = plan
+                self.flown_plans.append(plan)
+            elif plan.outcome == FlightPlan.OUTCOME_APPROVED and plan.waypoints:
                 self.fleet.update(key, m.trajectory_from_plan(plan), m.from_time(plan.effective_time))
                 self._flying[key] = plan
                 self.flown_plans.append(plan)
             else:
                 self.fleet.remove(key)
                 self._flying.pop(key, None)
+                self._plan_trajs.pop(key, None)
         except ValueError as exc:
             self.fly_errors += 1
             self.get_logger().error(f"cannot fly version {plan.version} of {key!r}: {exc}")
