@@ -245,9 +245,15 @@ class UssServer:
 
     def __init__(self, store: IntentStore, host: str = "127.0.0.1", port: int = 0,
                  auth: str = "off"):
-        from werkzeug.serving import make_server
+        from werkzeug.serving import WSGIRequestHandler, make_server
+
+        class _Quiet(WSGIRequestHandler):  # no log line per request (a load of them is the job)
+            def log_request(self, *args, **kwargs):
+                pass
+
         self.store = store
-        self._server = make_server(host, int(port), create_app(store, auth), threaded=True)
+        self._server = make_server(host, int(port), create_app(store, auth), threaded=True,
+                                   request_handler=_Quiet)
         self.host, self.port = host, int(self._server.server_port)
         self._thread = threading.Thread(target=self._server.serve_forever, name="uss-http",
                                         daemon=True)

@@ -31,8 +31,8 @@ from uam_msgs.msg import FlightPlan, FlightRequest
 
 
 class UssNode(Node):
-    def __init__(self):
-        super().__init__("uss")
+    def __init__(self, **kwargs):
+        super().__init__("uss", **kwargs)
         p = declare_table(self, USS)
         from uam_planner.f3548 import IntentContext, VolumeSpec
         from uam_planner.network import load_network
