@@ -155,6 +155,7 @@ def _run(tmp_path, separation_m, storm=True):
     return net, decided
 
 
+@pytest.mark.slow  # not in `make test-fast`: a short run in process, ~8 s
 @pytest.mark.parametrize("separation_m", [100.0])
 def test_every_intent_of_a_short_run_is_valid_and_holds_its_flight(tmp_path, separation_m):
     net, decided = _run(tmp_path, separation_m)
@@ -196,6 +197,7 @@ def _speeds(flights):
     return vh, vz
 
 
+@pytest.mark.slow  # not in `make test-fast`: two short runs in process, ~15 s
 def test_volumes_of_approved_plans_meet_only_within_the_bound_and_never_beyond_it(tmp_path):
     """At the paper's 100 m, approved (separated) flights may have intersecting volumes; every
     intersection lies within the bound (D_h, D_v) at its instant. Planned with a separation
