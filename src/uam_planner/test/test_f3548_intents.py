@@ -231,3 +231,49 @@ def test_volumes_of_approved_plans_meet_only_within_the_bound_and_never_beyond_i
             assert met == 0
         else:
             assert met > 0  # the paper's separation alone does not give disjoint volume sets
+
+
+def test_another_usss_intents_and_constraints_come_in_as_constraints(tmp_path):
+    """Intents in (item 4): a foreign intent's volume becomes a prism widened by half our
+    separation; an F3548 constraint a prism as it is; the planner then keeps out of both."""
+    import json
+
+    from uam_planner.constraints import load_constraints
+    from uam_planner.f3548 import constraints_from_f3548
+    from uam_planner.network import load_network
+
+    net = load_network("config/networks/tiny.yaml")
+    ctx = IntentContext(net.origin_lat_lon_alt, VolumeSpec(10.0, 5.0, 60.0), manager="uss2")
+    other = flight([100.0, 160.0], [[-300, 0, 120], [300, 0, 120]], "theirs", "uss2-op", priority=5)
+    doc = {"operational_intent": as_json(operational_intent(other, 0.0, ctx))}
+    cons = constraints_from_f3548(doc, net, spec=VolumeSpec.for_separation(100.0))
+    assert len(cons) == 1 and cons[0].constraint_id.startswith("oi:")
+    assert "priority 5" in cons[0].reason and "uss2" in cons[0].reason
+    # their rectangle [-310, 310] x [-10, 10], widened by 50 m (mitre: still a rectangle)
+    xy = cons[0].rings_m[0]
+    assert np.allclose(sorted({round(v, 1) for v in xy[:, 0]}), [-360.0, 360.0], atol=0.05)
+    assert np.allclose(sorted({round(v, 1) for v in xy[:, 1]}), [-60.0, 60.0], atol=0.05)
+    assert cons[0].lower_m == pytest.approx(120 - 5 - 50, abs=0.01)
+    assert cons[0].upper_m == pytest.approx(120 + 5 + 50, abs=0.01)
+    assert (cons[0].start_s, cons[0].end_s) == (100.0, 160.0)
+    storm = f3548_constraint(Constraint("s", 3, "", 0.0, 500.0, center_m=(800.0, 0.0), radius_m=100.0,
+                                        lower_m=0.0, upper_m=300.0), ctx)
+    both = {"operational_intents": [doc["operational_intent"]], "constraints": [as_json(storm)]}
+    path = tmp_path / "f3548.json"
+    path.write_text(json.dumps(both))
+    cset = load_constraints(path, net)  # --constraints FILE takes F3548 documents too
+    ids = sorted(c.constraint_id for c in cset)
+    assert ids[0].startswith("cst:") and ids[1].startswith("oi:")
+    circle = next(c for c in cset if c.constraint_id.startswith("cst:"))
+    assert circle.center_m == pytest.approx((800.0, 0.0), abs=0.01) and circle.radius_m == 100.0
+    # a flight through their volume while it holds is refused; after its window it is allowed
+    through = Trajectory(np.array([120.0, 150.0]), np.array([[0.0, -200, 120], [0.0, 200, 120]]))
+    later = through.shifted(100.0)
+    which, _ = cset.violations([through, later], [0, 0], [1, 1])
+    assert which[0] >= 0 and which[1] < 0
+    bad = dict(doc)
+    bad["operational_intent"] = {"reference": {"id": "x"}}
+    path.write_text(json.dumps(bad))
+    from uam_planner.constraints import ConstraintError
+    with pytest.raises(ConstraintError, match="not an F3548 OperationalIntent"):
+        load_constraints(path, net)

@@ -375,3 +375,150 @@ def as_json(obj) -> dict:
     """An ImplicitDict (or a list of them) as plain JSON data (enums as strings)."""
     import json
     return json.loads(json.dumps(obj, default=lambda o: o.value if hasattr(o, "value") else str(o)))
+
+
+# ---- in: another USS's operational intents and F3548 constraints ------------------------------
+
+F3548_KEYS = ("operational_intent", "operational_intents", "constraint", "constraints",
+              "reference")
+
+
+def is_f3548_document(doc) -> bool:
+    """True for what :func:`constraints_from_f3548` reads: a GetOperationalIntentDetailsResponse
+    or GetConstraintDetailsResponse, a bare OperationalIntent or Constraint, a list of those, or
+    ``{"operational_intents": [...], "constraints": [...]}``."""
+    if isinstance(doc, list):
+        return bool(doc) and all(is_f3548_document(d) for d in doc)
+    return isinstance(doc, dict) and doc.get("type") != "FeatureCollection" \
+        and any(k in doc for k in F3548_KEYS)
+
+
+def _sim_s(time_doc, start_ns: int, where: str) -> float:
+    from implicitdict import StringBasedDateTime
+    try:
+        when = StringBasedDateTime(time_doc["value"]).datetime
+    except (KeyError, TypeError, ValueError):
+        raise F3548Error(f"{where}: {time_doc!r} is not an F3548 Time") from None
+    delta = when.astimezone(timezone.utc) - datetime(1970, 1, 1, tzinfo=timezone.utc)
+    ns = (delta.days * 86400 + delta.seconds) * 1_000_000_000 + delta.microseconds * 1000
+    return (ns - start_ns) / 1e9
+
+
+def _volume_constraint(v4: dict, cid: str, version: int, reason: str, origin, start_ns: int,
+                       buffer_h: float, buffer_v: float, where: str):
+    """One F3548 Volume4D (JSON) as a prism Constraint in the network's frame, widened by
+    ``buffer_h`` horizontally (mitre joins: the polygon stays a polygon) and ``buffer_v``
+    below and above."""
+    from shapely.geometry import Polygon as P
+
+    from .constraints import Constraint
+    from .geo import geodetic_to_enu
+
+    vol = v4.get("volume") or {}
+    lower = vol.get("altitude_lower")
+    upper = vol.get("altitude_upper")
+    for name, alt in (("altitude_lower", lower), ("altitude_upper", upper)):
+        if alt is not None and (alt.get("reference") != "W84" or alt.get("units") != "M"):
+            raise F3548Error(f"{where}.volume.{name}: {alt!r} is not W84 metres")
+    if vol.get("outline_polygon"):
+        pts = vol["outline_polygon"].get("vertices") or []
+        if len(pts) < 3:
+            raise F3548Error(f"{where}.volume.outline_polygon: {len(pts)} vertices, fewer than 3")
+        lla = np.array([[p["lat"], p["lng"], 0.0] for p in pts], dtype=float)
+        h_ref = float(lower["value"]) if lower else 0.0
+        lla[:, 2] = h_ref
+        enu = geodetic_to_enu(lla, origin)
+        ring = P(enu[:, :2])
+        if buffer_h > 0:
+            ring = ring.buffer(buffer_h, join_style="mitre", mitre_limit=10.0)
+        xy = np.asarray(ring.exterior.coords)[:-1]
+        centre = enu[:, :2].mean(axis=0)
+        shape = {"rings_m": (xy,)}
+    elif vol.get("outline_circle"):
+        circ = vol["outline_circle"]
+        if circ.get("radius", {}).get("units") != "M":
+            raise F3548Error(f"{where}.volume.outline_circle.radius: {circ.get('radius')!r} is not metres")
+        h_ref = float(lower["value"]) if lower else 0.0
+        c = geodetic_to_enu([circ["center"]["lat"], circ["center"]["lng"], h_ref], origin)
+        centre = c[:2]
+        shape = {"center_m": (float(c[0]), float(c[1])),
+                 "radius_m": float(circ["radius"]["value"]) + buffer_h}
+    else:
+        raise F3548Error(f"{where}.volume: neither outline_polygon nor outline_circle")
+
+    def up(alt, sign):
+        if alt is None:
+            return -math.inf if sign < 0 else math.inf
+        h = float(alt["value"])
+        z = geodetic_to_enu([*_centre_lla(centre, origin), h], origin)[2]
+        return float(z + sign * buffer_v)
+
+    start = _sim_s(v4["time_start"], start_ns, f"{where}.time_start") if v4.get("time_start") else -math.inf
+    end = _sim_s(v4["time_end"], start_ns, f"{where}.time_end") if v4.get("time_end") else math.inf
+    return Constraint(cid, int(version), reason, start, end, lower_m=up(lower, -1),
+                      upper_m=up(upper, +1), **shape)
+
+
+def _centre_lla(centre_enu, origin):
+    lla = enu_to_geodetic([float(centre_enu[0]), float(centre_enu[1]), 0.0], origin)
+    return float(lla[0]), float(lla[1])
+
+
+def constraints_from_f3548(doc, network, scenario_start_utc: str = DEFAULT_SCENARIO_START_UTC,
+                           spec: VolumeSpec | None = None) -> list:
+    """Another USS's operational intents and F3548 constraints as this planner's prism
+    Constraints (``uam_planner.constraints``; docs/f3548.md, "In").
+
+    - every volume of an intent (``volumes`` and ``off_nominal_volumes``) becomes one prism, widened
+      by ``spec``'s r_h horizontally and r_v vertically (default: half the paper's 100 m), so our
+      aircraft's half-separation box stays out of the other USS's volume; id
+      ``oi:<intent id>:<k>``, version the intent's, reason naming the manager, state and priority.
+      Every foreign intent is avoided whatever its priority (F3548 lets a higher-priority flight
+      conflict with a lower one; this planner never plans into conflict);
+    - every volume of an F3548 constraint becomes one prism, not widened (as our own constraints:
+      the trajectory may not enter it); id ``cst:<constraint id>:<k>``.
+    Times are read on the scenario's UTC clock (simulation time 0 = ``scenario_start_utc``).
+    Raises F3548Error (a ValueError) naming the document, the volume and the field."""
+    from implicitdict import ImplicitDict
+
+    spec = spec or VolumeSpec.for_separation(100.0)
+    start_ns = scenario_start_ns(scenario_start_utc)
+    origin = network.origin_lat_lon_alt
+    items = doc if isinstance(doc, list) else [doc]
+    out = []
+    for n, item in enumerate(items):
+        where = f"document {n}"
+        if not isinstance(item, dict):
+            raise F3548Error(f"{where}: {type(item).__name__} is not an F3548 document")
+        if "operational_intents" in item or "constraints" in item:
+            out += constraints_from_f3548(
+                [{"operational_intent": d} for d in item.get("operational_intents", [])]
+                + [{"constraint": d} for d in item.get("constraints", [])],
+                network, scenario_start_utc, spec)
+            continue
+        kind = "constraint" if "constraint" in item else "operational_intent"
+        body = item.get(kind, item)
+        try:
+            ImplicitDict.parse(body, api.Constraint if kind == "constraint" else api.OperationalIntent)
+        except (ValueError, KeyError, TypeError) as exc:
+            raise F3548Error(f"{where}: not an F3548 {'Constraint' if kind == 'constraint' else 'OperationalIntent'}: "
+                             f"{exc}") from None
+        ref, det = body["reference"], body["details"]
+        where = f"{where} ({kind} {ref['id']})"
+        if kind == "constraint":
+            vols = det.get("volumes") or []
+            reason = f"F3548 constraint {ref['id']} of {ref.get('manager', '?')}"
+            if det.get("type"):
+                reason += f" ({det['type']})"
+            for k, v4 in enumerate(vols):
+                out.append(_volume_constraint(v4, f"cst:{ref['id']}:{k}", ref["version"], reason,
+                                              origin, start_ns, 0.0, 0.0, f"{where}.volumes[{k}]"))
+            continue
+        vols = list(det.get("volumes") or []) + list(det.get("off_nominal_volumes") or [])
+        reason = (f"operational intent {ref['id']} of {ref.get('manager', '?')} "
+                  f"({ref.get('state', '?')}, priority {det.get('priority', 0)})")
+        for k, v4 in enumerate(vols):
+            out.append(_volume_constraint(v4, f"oi:{ref['id']}:{k}", ref["version"], reason, origin,
+                                          start_ns, spec.horizontal_buffer_m, spec.vertical_buffer_m,
+                                          f"{where}.volumes[{k}]"))
+    return out
