@@ -41,17 +41,34 @@ def _utc_text(ns: int) -> str:
     return when.strftime("%Y-%m-%dT%H:%M:%S.%fZ")
 
 
+def _flight(msg, version: int, priority: int):
+    """The planner's Flight of a recorded FlightPlan (what uam_planner.nodes.conversions does,
+    which this library may not import: docs/architecture.md)."""
+    import numpy as np
+
+    from uam_planner.planning import Flight
+    from uam_planner.trajectory import Trajectory
+
+    t = np.array([stamp_s(w.time) for w in msg.waypoints], dtype=np.float64)
+    x = np.array([(w.position.x, w.position.y, w.position.z) for w in msg.waypoints],
+                 dtype=np.float64).reshape(-1, 3)
+    traj = Trajectory(t, x)
+    return Flight(msg.request_id, msg.origin_id, msg.destination_id, tuple(msg.route_node_ids), traj,
+                  stamp_s(msg.departure_time), stamp_s(msg.arrival_time), float(msg.length_m),
+                  float(msg.weight), int(msg.candidate_index), str(msg.method), str(msg.backend),
+                  int(msg.epoch_index), priority=int(priority), operator_id=msg.operator_id,
+                  version=version, contingent=int(getattr(msg, "state", 0) or 0) == 4,
+                  effective_s=stamp_s(msg.effective_time) if version > 1 else float("nan"))
+
+
 def export(recording, out_dir, network_file: str, piece_s: float = 5.0,
            scenario_start_utc: str | None = None) -> dict:
     """Write the F3548 documents of ``recording`` into ``out_dir``; returns the index."""
-    from dataclasses import replace
-
     from uam_planner.f3548 import (IntentContext, VolumeSpec, as_json, constraint_entity_id,
                                    f3548_constraint, intent_id, operational_intent)
     from uam_planner.f3548_schema import validate
     from uam_planner.live_constraints import constraints_from_text
     from uam_planner.network import load_network
-    from uam_planner.nodes.conversions import flight_from_plan
 
     from .analysis import TOPIC_CONSTRAINTS, TOPIC_PLANS, TOPIC_REQUESTS
     from .audit import AIRSPACE_METADATA, separation_from_metadata
@@ -104,8 +121,7 @@ def export(recording, out_dir, network_file: str, piece_s: float = 5.0,
                 row["state"] = "Ended"  # a cancelled version
                 intents.append(row)
             continue
-        f = replace(flight_from_plan(msg), operator_id=msg.operator_id,
-                    priority=priority.get((msg.operator_id, msg.request_id), 0))
+        f = _flight(msg, version, priority.get((msg.operator_id, msg.request_id), 0))
         state = STATES.get(int(getattr(msg, "state", 0) or 0))
         oi = operational_intent(f, decided, ctx, state=state if state != "Ended" else None)
         if oi is None:
