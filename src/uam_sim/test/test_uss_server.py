@@ -135,3 +135,20 @@ def test_auth_scope_checks_the_standards_scopes():
         srv.stop()
     with pytest.raises(ValueError, match="auth: 'basic' is not one of off, scope"):
         UssServer(store, port=0, auth="basic")
+
+
+def test_fetch_another_usss_intents_into_a_constraints_file(server, tmp_path):
+    """Intents in over HTTP: fetched from a USS, they load as constraints the planner avoids."""
+    from uam_planner.constraints import load_constraints
+    from uam_planner.network import load_network
+    from uam_sim.uss_server import main
+
+    a = server.store.put_flight(flight("r1", 30.0))
+    server.store.put_flight(flight("r2", 60.0))
+    out = tmp_path / "theirs.json"
+    assert main(["fetch", server.url, "--out", str(out)]) == 0
+    cset = load_constraints(out, load_network("config/networks/tiny.yaml"))
+    assert len(list(cset)) == 8  # 2 intents x 4 volumes, each a prism
+    assert main(["fetch", server.url, a, "--out", str(out)]) == 0
+    assert len(list(load_constraints(out, load_network("config/networks/tiny.yaml")))) == 4
+    assert main(["fetch", server.url, "0b6d5e4c-3a2b-4c1d-8e9f-0a1b2c3d4e5f", "--out", str(out)]) == 2

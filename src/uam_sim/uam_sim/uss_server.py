@@ -270,3 +270,65 @@ class UssServer:
         self._server.shutdown()
         self._server.server_close()
         self._thread.join(timeout=5)
+
+
+# ---- a client: another USS's intents into a file the planner reads --------------------------
+
+def fetch(base_url: str, ids=(), out=None, token: str = "", timeout_s: float = 10.0) -> dict:
+    """GET the details of operational intents ``ids`` (default: every id a uam_fleet server lists
+    at /uam_fleet/v1/operational_intents) from the USS at ``base_url``; each answer is checked
+    against the F3548 schema. Returns ``{"operational_intents": [...]}`` (written to ``out`` if
+    given), which ``--constraints FILE`` reads (docs/f3548.md, "In"). Raises ValueError naming the
+    id and the HTTP status of a failed request."""
+    import requests
+
+    from uam_planner.f3548_schema import errors
+
+    headers = {"Authorization": f"Bearer {token}"} if token else {}
+    base = base_url.rstrip("/")
+    if not ids:
+        r = requests.get(f"{base}/uam_fleet/v1/operational_intents", headers=headers, timeout=timeout_s)
+        if r.status_code != 200:
+            raise ValueError(f"{base}: listing the intents: HTTP {r.status_code} (give the ids)")
+        ids = r.json()["ids"]
+    docs = []
+    for oid in ids:
+        r = requests.get(f"{base}/uss/v1/operational_intents/{oid}", headers=headers, timeout=timeout_s)
+        if r.status_code != 200:
+            raise ValueError(f"operational intent {oid}: HTTP {r.status_code}: {r.text[:200]}")
+        errs = errors(r.json(), "GetOperationalIntentDetailsResponse")
+        if errs:
+            raise ValueError(f"operational intent {oid}: not a valid F3548 answer: {errs[:3]}")
+        docs.append(r.json()["operational_intent"])
+    result = {"operational_intents": docs}
+    if out is not None:
+        from pathlib import Path
+        Path(out).write_text(json.dumps(result))
+    return result
+
+
+def main(argv=None) -> int:
+    import argparse
+    import sys
+
+    ap = argparse.ArgumentParser(prog="python -m uam_sim.uss_server",
+                                 description="fetch: another USS's operational intents into a "
+                                             "JSON file for --constraints FILE")
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    f = sub.add_parser("fetch")
+    f.add_argument("base_url")
+    f.add_argument("ids", nargs="*", help="entity ids (default: all a uam_fleet server lists)")
+    f.add_argument("--out", required=True)
+    f.add_argument("--token", default="", help="bearer access token, if the USS asks for one")
+    args = ap.parse_args(argv)
+    try:
+        got = fetch(args.base_url, args.ids, args.out, args.token)
+    except (ValueError, OSError) as exc:
+        print(f"uss_server fetch: {exc}", file=sys.stderr)
+        return 2
+    print(f"uss_server fetch: {len(got['operational_intents'])} operational intents in {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
