@@ -78,8 +78,18 @@ def test_details_unknown_ids_and_the_clock(server):
     assert errors({"operational_intent": doc}, "GetOperationalIntentDetailsResponse") == []
     store.set_time(81.0)
     assert get(server, f"/uss/v1/operational_intents/{oid}").status_code == 404  # ended
-    assert get(server, "/uam_fleet/v1/operational_intents").json() == {"t_s": 81.0, "ids": [oid]}
-    assert store.end("op", "r1") and get(server, "/uam_fleet/v1/operational_intents").json()["ids"] == []
+    # ended intents are dropped every 30 s of simulation time: at 81 s (81 s after the last
+    # prune, at 0) r1, ended at 80 s, is gone; r2, ended at 100 s, goes at the first move 30 s
+    # after the prune at 81 s
+    assert get(server, "/uam_fleet/v1/operational_intents").json() == {"t_s": 81.0, "ids": []}
+    assert not store.end("op", "r1")
+    store.put_flight(flight("r3", 200.0))
+    assert store.end("op", "r3") and get(server, "/uam_fleet/v1/operational_intents").json()["ids"] == []
+    store.put_flight(flight("r2", 80.0))   # flies [80, 100] s
+    store.set_time(105.0)                 # 24 s after the prune at 81 s: kept
+    assert get(server, "/uam_fleet/v1/operational_intents").json()["ids"] == [intent_id("op", "r2")]
+    store.set_time(111.0)                 # 30 s after it: r2 ended at 100 s, dropped
+    assert get(server, "/uam_fleet/v1/operational_intents").json()["ids"] == []
 
 
 def test_a_malformed_id_or_a_huge_query_is_refused_and_the_server_keeps_serving(server):

@@ -42,6 +42,7 @@ ENTITY_ID = re.compile(r"^[0-9a-fA-F]{8}-[0-9a-fA-F]{4}-4[0-9a-fA-F]{3}-[89abAB]
 MAX_URL_CHARS = 2048
 MAX_BODY_BYTES = 65536
 AUTH_MODES = ("off", "scope")
+PRUNE_EVERY_S = 30.0
 SCOPE_INTENTS = "utm.strategic_coordination"
 SCOPE_CONSTRAINTS = "utm.constraint_processing"
 
@@ -68,6 +69,7 @@ class IntentStore:
         self._intents: dict[str, _Intent] = {}
         self._constraints: dict[str, str] = {}
         self._t_s = 0.0
+        self._pruned_s = 0.0
 
     # ---- updates ---------------------------------------------------------------------------
     def put_flight(self, flight) -> str:
@@ -99,8 +101,15 @@ class IntentStore:
             self._constraints = docs
 
     def set_time(self, t_s: float) -> None:
+        """Move the clock; every ``PRUNE_EVERY_S`` of simulation time the intents that ended
+        (arrival before the clock) are dropped, so a long run's store stays the size of what
+        is live (an intent's volumes are ~150 KiB of JSON on the Singapore network)."""
         with self._lock:
             self._t_s = max(self._t_s, float(t_s))
+            if self._t_s - self._pruned_s >= PRUNE_EVERY_S:
+                self._pruned_s = self._t_s
+                for oid in [k for k, e in self._intents.items() if e.flight.arrival_s < self._t_s]:
+                    del self._intents[oid]
 
     @property
     def time_s(self) -> float:

@@ -44,13 +44,18 @@ class UssNode(Node):
         self.network = load_network(p["network"])
         kind = p["separation_model"] or self.network.separation_model
         model = SeparationModel(kind, p["separation_m"], p["vertical_separation_m"])
-        base = p["uss_base_url"] or f"http://localhost:{p['port']}"
-        ctx = IntentContext(self.network.origin_lat_lon_alt,
-                            VolumeSpec.for_separation(model, p["volume_piece_s"]),
-                            scenario_start_utc=p["scenario_start_utc"], uss_base_url=base)
-        self.store = IntentStore(ctx)
+        spec = VolumeSpec.for_separation(model, p["volume_piece_s"])
+
+        def context(port):
+            return IntentContext(self.network.origin_lat_lon_alt, spec,
+                                 scenario_start_utc=p["scenario_start_utc"],
+                                 uss_base_url=p["uss_base_url"] or f"http://localhost:{port}")
+        self.store = IntentStore(context(p["port"]))
         self._priority: dict[tuple, int] = {}
-        self.server = UssServer(self.store, p["host"], p["port"], p["auth"]).start()
+        self.server = UssServer(self.store, p["host"], p["port"], p["auth"])
+        self.store.ctx = context(self.server.port)  # port 0: the port the server got (store empty)
+        base = self.store.ctx.uss_base_url
+        self.server.start()
         self.get_logger().info(f"serving F3548 USS-USS details on {self.server.url} "
                                f"(auth {p['auth']}; base url {base})")
         self.create_subscription(FlightPlan, c.TOPIC_PLANS, self._on_plan, qos.QOS_LATCHED)
