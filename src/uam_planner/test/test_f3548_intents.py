@@ -67,10 +67,11 @@ def test_the_intent_reference_details_and_times():
     assert ref.time_end.value == "2025-01-06T00:00:40.000000Z"
     assert det.priority == 3 and len(det.volumes) == 2 and det.off_nominal_volumes == []
     v = det.volumes[0].volume
-    # corners 50 m off the origin's meridian and parallel: 50 / 111,320 m per degree, about
-    lats = sorted({round(p.lat, 6) for p in v.outline_polygon.vertices})
-    assert lats == [round(1.29 - 50 / 110574.0, 6), round(1.29 + 50 / 110574.0, 6)] or \
-        abs(lats[0] - (1.29 - 0.000452)) < 2e-6
+    # corners 50 m south and north of the origin's parallel: a degree of latitude at 1.29 deg is
+    # M pi / 180 = 110,575 m (WGS84 meridian radius M = 6,335,471 m there), so 0.00045218 deg
+    lats = [p.lat for p in v.outline_polygon.vertices]
+    assert min(lats) == pytest.approx(1.29 - 50 / 110575.0, abs=2e-7)  # 2e-7 deg: 2 cm
+    assert max(lats) == pytest.approx(1.29 + 50 / 110575.0, abs=2e-7)
     assert abs(v.altitude_lower.value - 70.0) < 0.01 and abs(v.altitude_upper.value - 170.0) < 0.01
     # rounding to the microsecond: start down, end up
     start = ctx.start_ns
