@@ -23,6 +23,8 @@ setup(
             "recorder = uam_sim.nodes.recorder_node:main",
             "replay = uam_sim.nodes.replay_node:main",
             "conformance_monitor = uam_sim.nodes.conformance_node:main",
+            "uss = uam_sim.nodes.uss_node:main",
+            "export_f3548 = uam_sim.export_f3548:main",
             "analyze = uam_sim.analysis:main",
             "experiment = uam_sim.experiment:main",
         ],

@@ -16,6 +16,7 @@ import os
 
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, EmitEvent, GroupAction, RegisterEventHandler
+from launch.conditions import IfCondition
 from launch.event_handlers import OnProcessExit
 from launch.events import Shutdown
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution, PythonExpression
@@ -87,6 +88,13 @@ def generate_launch_description() -> LaunchDescription:
                                                      "speed_error": a["speed_error"],
                                                      "delay_mean_s": a["delay_mean_s"]}]),
     ]
+    # the F3548 USS-USS interface, only with uss_port > 0 (docs/f3548.md)
+    nodes.append(Node(package="uam_sim", executable="uss", name="uss", output="screen",
+                      condition=IfCondition(PythonExpression(["int('", a["uss_port"], "') > 0"])),
+                      parameters=[{"port": a["uss_port"], "network": network,
+                                   "separation_model": a["separation"],
+                                   "separation_m": a["separation_m"],
+                                   "vertical_separation_m": a["vertical_separation_m"]}]))
     return LaunchDescription(
         [DeclareLaunchArgument(name, default_value=default, description=text)
          for name, (default, text) in ARGS.items()]

@@ -75,6 +75,8 @@ LAUNCH_OPTIONS: tuple[LaunchOption, ...] = (
     LaunchOption("--rerun", "RERUN", "rerun", "save", "off, save, spawn or connect"),
     LaunchOption("--foxglove-port", "FOXGLOVE_PORT", "foxglove_port", "0",
                  "serve a live Foxglove WebSocket view on this port (0 = off)"),
+    LaunchOption("--uss-port", "USS_PORT", "uss_port", "0",
+                 "serve the plans as F3548 operational intents over HTTP on this port (0 = off; docs/f3548.md)"),
     LaunchOption("--out", "OUT", "out", "", "output folder (run.mcap, run.rrd, logs); default a new folder under runs/"),
     LaunchOption("--recorder-nice", "RECORDER_NICE", "", "19", "the recorder's nice value", only="run_fleet"),
     LaunchOption("", "", "namespace", "", "namespace of the whole graph", only="launch"),

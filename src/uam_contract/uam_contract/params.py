@@ -365,9 +365,30 @@ CONFORMANCE_MONITOR = (
     Param("time_s", 10.0, "time bound: |now - the planned time of that point| [s]", 0.001, 86400.0),
 )
 
+# the F3548 USS-USS interface (issue 25, docs/f3548.md; run_fleet.sh --uss-port)
+USS = (
+    Param("port", 8090, "TCP port of the HTTP server (0 = any free port, logged)", 0, 65535),
+    Param("host", "127.0.0.1", "address to bind ('0.0.0.0' for every interface; loopback by default)",
+          check=_nonempty("host")),
+    Param("auth", "off", "'off' (local runs: no token asked for) or 'scope': a bearer JWT whose scope "
+          "claim holds the endpoint's F3548 scope (signature NOT verified)", choices=("off", "scope")),
+    Param("uss_base_url", "", "the base URL the intents name (no trailing '/'); '' = http://localhost:<port>"),
+    Param("network", "", "network file (its origin places the volumes on WGS84)"),
+    Param("scenario_start_utc", DEFAULT_SCENARIO_START_UTC, "the UTC instant of simulation time 0 (F3548 "
+          "times are absolute)", check=_utc_rule),
+    Param("separation_model", "", "the run's separation model ('' = the network's own)",
+          choices=("", "sphere", "cylinder")),
+    Param("separation_m", D.SEPARATION_M, "separation minimum (cylinder: H); volumes are buffered by half [m]",
+          0.001, 100000.0),
+    Param("vertical_separation_m", D.VERTICAL_SEPARATION_M, "the cylinder's vertical minimum V; volumes are buffered by "
+          "half [m]", 0.001, 10000.0),
+    Param("volume_piece_s", 5.0, "longest time window of one Volume4D [s] (docs/f3548.md: the bound)",
+          0.01, 86400.0),
+)
+
 TABLES = {"planner": PLANNER, "solver": SOLVER, "simulator": SIMULATOR, "request_generator": REQUEST_GENERATOR,
           "recorder": RECORDER, "replay": REPLAY,
-          "conformance_monitor": CONFORMANCE_MONITOR}
+          "conformance_monitor": CONFORMANCE_MONITOR, "uss": USS}
 
 
 def markdown() -> str:

@@ -730,7 +730,9 @@ def load_constraints(path, network, now_s: float | None = None,
                      scenario_start_utc: str | None = None) -> ConstraintSet:
     """Read a constraints file and check it against ``network`` (and ``now_s``, if given): a
     GeoJSON FeatureCollection (``"type": "FeatureCollection"``), or else an ED-269 UAS zone
-    file (``{"features": [UASZoneVersion, ...]}``, see :func:`constraints_from_ed269`). Raises
+    file (``{"features": [UASZoneVersion, ...]}``, see :func:`constraints_from_ed269`), or F3548
+    documents (another USS's operational intents, F3548 constraints:
+    :func:`uam_planner.f3548.constraints_from_f3548`). Raises
     ConstraintError (a ValueError) naming the file, the feature and the field."""
     p = Path(path)
     try:
@@ -738,7 +740,15 @@ def load_constraints(path, network, now_s: float | None = None,
     except (OSError, json.JSONDecodeError) as exc:
         raise ConstraintError(f"constraints file {str(p)!r}: {exc}") from None
     try:
-        if isinstance(doc, Mapping) and doc.get("type") != "FeatureCollection" and "features" in doc:
+        from uam_contract.stamps import DEFAULT_SCENARIO_START_UTC
+
+        from .f3548 import F3548Error, constraints_from_f3548, is_f3548_document
+        if is_f3548_document(doc):  # another USS's operational intents, F3548 constraints (issue 25)
+            try:
+                found = constraints_from_f3548(doc, network, scenario_start_utc or DEFAULT_SCENARIO_START_UTC)
+            except F3548Error as exc:
+                raise ConstraintError(str(exc)) from None
+        elif isinstance(doc, Mapping) and doc.get("type") != "FeatureCollection" and "features" in doc:
             found = constraints_from_ed269(doc, network, scenario_start_utc)
         else:
             found = constraints_from_geojson(doc, network)

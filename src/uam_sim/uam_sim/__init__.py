@@ -23,5 +23,9 @@ One job per module (imports only point down this list's layers; ``test/test_laye
   (arms, one pool, tables, instance-size study; ``python -m uam_sim.capacity_study``) and
   ``capacity_report`` (report and figures from its tables).
 
-``nodes/`` holds the ROS glue (generator, simulator, recorder, replay).
+- ASTM F3548 (issue 25, docs/f3548.md): ``uss_server`` (the USS-USS interface over HTTP: an
+  intent store and a Flask app) and ``export_f3548`` (a recording's intents as JSON;
+  ``python -m uam_sim.export_f3548``).
+
+``nodes/`` holds the ROS glue (generator, simulator, recorder, replay, uss).
 """

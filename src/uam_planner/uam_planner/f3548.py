@@ -1,0 +1,524 @@
+"""Plans as ASTM F3548-21 operational intents, constraints as F3548 constraints (issue 25;
+docs/f3548.md). Built with ``uas_standards.astm.f3548.v21.api`` types; no ROS, no wall clock.
+
+**Volumes.** A trajectory (piecewise linear in time, ``uam_planner.trajectory``) becomes one
+Volume4D per *piece*: every segment is cut in time into ``ceil(duration / max_piece_s)`` equal
+pieces. A piece flown from A (time ta) to B (time tb) gives
+
+- horizontally the rectangle around the segment A-B widened by ``r_h`` on both sides and
+  lengthened by ``r_h`` beyond both ends (a square of side 2 r_h for a vertical climb); it
+  contains every disc of radius r_h centred on the piece;
+- vertically [min(zA, zB) - r_v, max(zA, zB) + r_v];
+- in time [ta, tb] (start rounded down, end up, to the microsecond).
+
+``VolumeSpec.for_separation`` takes r_h = H / 2 and r_v = V / 2 of the run's separation model
+(the sphere: V = H = the radius). So at every instant t the aircraft's half-separation box
+(disc r_h x band r_v) lies inside the volume of the piece flying at t, and:
+
+- **a loss of separation always shows as intersecting volumes** (two aircraft closer than H
+  horizontally and V vertically at t: their midpoint lies in both volumes at t);
+- **the converse does not hold**: a volume holds its whole piece for its whole time window, so
+  two flights that keep separation can have intersecting volume sets. :meth:`VolumeSpec.bounds_m`
+  gives the exact sufficient condition used in the tests: the volume sets of two flights are
+  disjoint (by more than F3548's 1 cm) if at every instant both are airborne their horizontal
+  distance exceeds ``D_h = 2 sqrt((v_h dt + r_h)^2 + r_h^2)`` or their vertical distance
+  exceeds ``D_v = 2 (r_v + v_z dt)`` (dt = max_piece_s, v_h, v_z the largest speeds), plus 1 cm.
+  A planner run with a separation >= sqrt(D_h^2 + D_v^2) + 1 cm (sphere) therefore publishes
+  volume sets that never intersect; with the paper's 100 m and 5 s pieces at 10 m/s,
+  D_h = 223.6 m.
+
+**Frames.** Corners are converted from the network's ENU frame to WGS84 exactly
+(``uam_planner.geo.enu_to_geodetic``, at the piece's lower and upper altitude; the band is the
+least and greatest ellipsoidal height over the corners). Polygon edges are geodesics in F3548 and
+straight lines in ENU; for pieces of ~50 m the two differ by far less than 1 cm.
+
+**References.** ``id``: a UUID in F3548's UUIDv4 format derived from (operator, request id) by
+SHA-1 (``uuid5`` with its version bits set to 4, as F3548's EntityID pattern demands), so the
+same flight has the same id in every run and every version. ``version``: the plan version.
+``ovn``: without a DSS no one issues OVNs, so it is the SHA-256 of (id, version), 32 hex digits
+(F3548: 16-128 characters). ``state``: :func:`uam_planner.replanning.flight_state`;
+a Contingent intent has no ``volumes`` and its plan in ``off_nominal_volumes`` (F3548);
+Ended is no F3548 state (the intent is deleted): :func:`operational_intent` returns None.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import uuid
+from dataclasses import dataclass
+from datetime import datetime, timedelta, timezone
+from typing import Sequence
+
+import numpy as np
+from shapely import STRtree
+from shapely.geometry import Polygon as ShapelyPolygon
+from uas_standards.astm.f3548.v21 import api
+from uas_standards.astm.f3548.v21.constants import IntersectionMinimumPrecisionCm, OiMaxVertices
+
+from uam_contract.stamps import DEFAULT_SCENARIO_START_UTC, scenario_start_ns
+
+from .geo import enu_to_geodetic
+from .separation import SeparationModel, as_separation_model
+
+#: F3548's intersection precision [m] (1 cm)
+PRECISION_M = IntersectionMinimumPrecisionCm / 100.0
+#: default duration of one volume [s]: 50 m of flight at the paper's 10 m/s
+DEFAULT_PIECE_S = 5.0
+#: UUID namespace of this project's intent and constraint ids (fixed: ids are stable across runs)
+ID_NAMESPACE = uuid.UUID("8f0c5b7e-3a61-4c39-9d0e-25f3548a0000")
+DEFAULT_MANAGER = "uam-fleet"
+DEFAULT_USS_BASE_URL = "http://localhost:8090"
+
+
+class F3548Error(ValueError):
+    """Bad input for a conversion, naming the field and the value."""
+
+
+@dataclass(frozen=True)
+class VolumeSpec:
+    """How a trajectory becomes volumes.
+
+    Attributes:
+        horizontal_buffer_m: r_h, the rectangle's half-width and end extension [m] > 0.
+        vertical_buffer_m: r_v, added below and above the piece's altitudes [m] > 0.
+        max_piece_s: the longest time window of one volume [s] > 0.
+    """
+
+    horizontal_buffer_m: float
+    vertical_buffer_m: float
+    max_piece_s: float = DEFAULT_PIECE_S
+
+    def __post_init__(self):
+        for name in ("horizontal_buffer_m", "vertical_buffer_m", "max_piece_s"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
+                    or not math.isfinite(v) or v <= 0:
+                raise F3548Error(f"VolumeSpec.{name}: {v!r} is not a positive finite number")
+
+    @classmethod
+    def for_separation(cls, separation, max_piece_s: float = DEFAULT_PIECE_S) -> "VolumeSpec":
+        """r_h = H / 2, r_v = V / 2 (the sphere: both the radius / 2) of a SeparationModel or a
+        number (the paper's sphere of that radius)."""
+        model: SeparationModel = as_separation_model(separation)
+        vertical = model.separation_m if model.kind == "sphere" else model.vertical_separation_m
+        return cls(model.separation_m / 2.0, vertical / 2.0, float(max_piece_s))
+
+    def bounds_m(self, horizontal_speed_mps: float, vertical_speed_mps: float = 0.0) -> tuple:
+        """(D_h, D_v): two flights whose pieces' windows overlap at t and whose volumes meet are
+        within D_h horizontally AND D_v vertically at t (module docstring)."""
+        r, dt = self.horizontal_buffer_m, self.max_piece_s
+        d_h = 2.0 * math.hypot(abs(horizontal_speed_mps) * dt + r, r)
+        d_v = 2.0 * (self.vertical_buffer_m + abs(vertical_speed_mps) * dt)
+        return d_h, d_v
+
+
+@dataclass(frozen=True)
+class EnuVolume:
+    """One volume in the network's frame: a convex polygon (corners (k, 2), ENU metres) times the
+    band [lower_m, upper_m] (ENU up) times the window [t0_s, t1_s]."""
+
+    corners_m: np.ndarray
+    lower_m: float
+    upper_m: float
+    t0_s: float
+    t1_s: float
+
+    def polygon(self) -> ShapelyPolygon:
+        return ShapelyPolygon(self.corners_m)
+
+
+def _rectangle(a: np.ndarray, b: np.ndarray, r: float) -> np.ndarray:
+    d = b - a
+    length = float(math.hypot(d[0], d[1]))
+    if length < 1e-9:  # vertical (or no) motion: a square centred on the point
+        u, n = np.array([1.0, 0.0]), np.array([0.0, 1.0])
+    else:
+        u = d / length
+        n = np.array([-u[1], u[0]])
+    lo, hi = a - u * r, b + u * r
+    return np.array([lo - n * r, hi - n * r, hi + n * r, lo + n * r])
+
+
+def trajectory_volumes(trajectory, spec: VolumeSpec, from_s: float = -math.inf) -> list:
+    """The EnuVolumes of ``trajectory`` (module docstring), in time order; with ``from_s`` only the
+    pieces that end after it (the piece flying at ``from_s`` is kept whole). O(pieces)."""
+    times, points = trajectory.times_s, trajectory.points_m
+    out = []
+    r_h, r_v = spec.horizontal_buffer_m, spec.vertical_buffer_m
+    for j in range(times.shape[0] - 1):
+        t0, t1 = float(times[j]), float(times[j + 1])
+        if t1 <= from_s:
+            continue
+        n = max(1, math.ceil((t1 - t0) / spec.max_piece_s - 1e-9))
+        p0, p1 = points[j], points[j + 1]
+        for k in range(n):
+            ta = t0 + (t1 - t0) * k / n
+            tb = t1 if k == n - 1 else t0 + (t1 - t0) * (k + 1) / n
+            if tb <= from_s:
+                continue
+            a = p0 + (p1 - p0) * (k / n)
+            b = p1 if k == n - 1 else p0 + (p1 - p0) * ((k + 1) / n)
+            out.append(EnuVolume(_rectangle(a[:2], b[:2], r_h), float(min(a[2], b[2]) - r_v),
+                                 float(max(a[2], b[2]) + r_v), ta, tb))
+    return out
+
+
+def volumes_for_limit(trajectory, spec: VolumeSpec, from_s: float = -math.inf,
+                      max_vertices: int = OiMaxVertices) -> tuple:
+    """(volumes, spec used): the spec's pieces, or, where they would exceed F3548's
+    ``OiMaxVertices`` (10,000; 4 per volume), pieces just long enough to fit (the bound of
+    :meth:`VolumeSpec.bounds_m` then holds with the longer ``max_piece_s`` returned)."""
+    vols = trajectory_volumes(trajectory, spec, from_s)
+    while 4 * len(vols) > max_vertices:
+        spec = VolumeSpec(spec.horizontal_buffer_m, spec.vertical_buffer_m,
+                          spec.max_piece_s * 4 * len(vols) / max_vertices * 1.05)
+        vols = trajectory_volumes(trajectory, spec, from_s)
+    return vols, spec
+
+
+def first_intersection(a: Sequence[EnuVolume], b: Sequence[EnuVolume],
+                       precision_m: float = PRECISION_M):
+    """The first pair (i, j) of volumes of ``a`` and ``b`` that intersect at F3548's precision
+    (windows overlap, bands overlap or lie closer than ``precision_m``, polygons closer than
+    ``precision_m``; closed sets, so touching counts), or None. GEOS STR-tree over ``b``."""
+    if not a or not b:
+        return None
+    polys_b = [v.polygon() for v in b]
+    tree = STRtree(polys_b)
+    for i, va in enumerate(a):
+        pa = va.polygon()
+        for j in sorted(int(k) for k in tree.query(pa, predicate="dwithin", distance=precision_m)):
+            vb = b[j]
+            if va.t0_s <= vb.t1_s and vb.t0_s <= va.t1_s \
+                    and va.lower_m <= vb.upper_m + precision_m and vb.lower_m <= va.upper_m + precision_m:
+                return i, j
+    return None
+
+
+# ---- identities and times ---------------------------------------------------------------------
+
+def entity_id(kind: str, *parts: str) -> str:
+    """A stable id in F3548's UUIDv4 format (version 4, RFC 4122 variant) from ``kind`` and
+    ``parts`` (SHA-1 name-based, uuid5, with the version bits set to 4)."""
+    name = "/".join([kind, *(str(p) for p in parts)])
+    return str(uuid.UUID(bytes=uuid.uuid5(ID_NAMESPACE, name).bytes, version=4))
+
+
+def intent_id(operator_id: str, request_id: str) -> str:
+    """The operational intent id of a request (every version shares it)."""
+    return entity_id("operational_intent", operator_id or "", request_id)
+
+
+def constraint_entity_id(constraint_id: str) -> str:
+    return entity_id("constraint", constraint_id)
+
+
+def ovn(entity: str, version: int) -> str:
+    """A local OVN (no DSS issues one here): 32 hex digits of SHA-256(id, version)."""
+    return hashlib.sha256(f"{entity}:{int(version)}".encode()).hexdigest()[:32]
+
+
+def rfc3339(t_s: float, start_ns: int, up: bool = False) -> str:
+    """Simulation time ``t_s`` as an RFC 3339 UTC instant ('Z') after the scenario start
+    ``start_ns`` [ns since 1970], to the microsecond, rounded down (or ``up``)."""
+    if not math.isfinite(t_s):
+        raise F3548Error(f"time: {t_s!r} is not finite")
+    us = (math.ceil if up else math.floor)(float(t_s) * 1e6)
+    base = datetime(1970, 1, 1, tzinfo=timezone.utc) + timedelta(microseconds=start_ns // 1000)
+    when = base + timedelta(microseconds=us)
+    return when.strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+
+
+@dataclass(frozen=True)
+class IntentContext:
+    """What a conversion needs beyond the plan.
+
+    Attributes:
+        origin_lat_lon_alt: the network's ENU origin (lat deg, lon deg, ellipsoidal height m).
+        spec: the VolumeSpec (from the run's separation model).
+        scenario_start_utc: the UTC instant of simulation time 0 (ISO 8601 with a zone; 'sim' is
+            refused: F3548 needs absolute times).
+        manager, uss_base_url: the USS the intents say they come from (no trailing '/').
+    """
+
+    origin_lat_lon_alt: tuple
+    spec: VolumeSpec
+    scenario_start_utc: str = DEFAULT_SCENARIO_START_UTC
+    manager: str = DEFAULT_MANAGER
+    uss_base_url: str = DEFAULT_USS_BASE_URL
+
+    def __post_init__(self):
+        start = scenario_start_ns(self.scenario_start_utc)
+        if start == 0:
+            raise F3548Error(f"scenario_start_utc: {self.scenario_start_utc!r}: F3548 times are "
+                             f"absolute UTC; give an instant such as {DEFAULT_SCENARIO_START_UTC!r}")
+        if not isinstance(self.uss_base_url, str) or not self.uss_base_url \
+                or self.uss_base_url.endswith("/"):
+            raise F3548Error(f"uss_base_url: {self.uss_base_url!r} must be a URL without a "
+                             f"trailing '/'")
+        object.__setattr__(self, "_start_ns", start)
+
+    @property
+    def start_ns(self) -> int:
+        return self._start_ns
+
+    @property
+    def subscription_id(self) -> str:
+        """The subscription an intent names (F3548 requires one; without a DSS it is this
+        USS's single, fixed id)."""
+        return entity_id("subscription", self.manager)
+
+    def time(self, t_s: float, up: bool = False) -> api.Time:
+        return api.Time(value=rfc3339(t_s, self.start_ns, up), format="RFC3339")
+
+    def altitude(self, h_m: float) -> api.Altitude:
+        return api.Altitude(value=float(h_m), reference="W84", units="M")
+
+
+def volume4d(v: EnuVolume, ctx: IntentContext) -> api.Volume4D:
+    """One EnuVolume as an F3548 Volume4D (WGS84 corners, W84 altitudes, UTC window)."""
+    k = v.corners_m.shape[0]
+    enu = np.zeros((2 * k, 3))
+    enu[:k, :2] = v.corners_m
+    enu[k:, :2] = v.corners_m
+    enu[:k, 2] = v.lower_m
+    enu[k:, 2] = v.upper_m
+    lla = enu_to_geodetic(enu, ctx.origin_lat_lon_alt)
+    mid = (lla[:k, :2] + lla[k:, :2]) / 2.0
+    vertices = [api.LatLngPoint(lat=float(lat), lng=float(lng)) for lat, lng in mid]
+    return api.Volume4D(
+        volume=api.Volume3D(outline_polygon=api.Polygon(vertices=vertices),
+                            altitude_lower=ctx.altitude(float(lla[:k, 2].min())),
+                            altitude_upper=ctx.altitude(float(lla[k:, 2].max()))),
+        time_start=ctx.time(v.t0_s), time_end=ctx.time(v.t1_s, up=True))
+
+
+def operational_intent(flight, t_s: float, ctx: IntentContext, state: str | None = None):
+    """The F3548 OperationalIntent of ``flight`` (a ``planning.Flight``, its version) as known
+    at simulation time ``t_s``: state at ``t_s`` (or ``state``), volumes of the pieces that end
+    after ``t_s``; None when Ended. Raises F3548Error naming the field for a bad state."""
+    from .replanning import flight_state
+    st = state if state is not None else flight_state(flight, t_s)
+    if st == "Ended":
+        return None
+    if st not in ("Accepted", "Activated", "Nonconforming", "Contingent"):
+        raise F3548Error(f"state: {st!r} is not an F3548 operational intent state")
+    vols, _ = volumes_for_limit(flight.trajectory, ctx.spec, from_s=t_s)
+    if not vols:
+        return None
+    v4 = [volume4d(v, ctx) for v in vols]
+    oid = intent_id(flight.operator_id, flight.request_id)
+    version = int(flight.version)
+    reference = api.OperationalIntentReference(
+        id=oid, manager=ctx.manager, uss_availability="Unknown", version=version, state=st,
+        ovn=ovn(oid, version), time_start=v4[0].time_start, time_end=v4[-1].time_end,
+        uss_base_url=ctx.uss_base_url, subscription_id=ctx.subscription_id)
+    off_nominal = st in ("Nonconforming", "Contingent")
+    details = api.OperationalIntentDetails(
+        volumes=[] if st == "Contingent" else v4, off_nominal_volumes=v4 if off_nominal else [],
+        priority=int(flight.priority))
+    return api.OperationalIntent(reference=reference, details=details)
+
+
+def constraint_volumes(c, ctx: IntentContext) -> list:
+    """The Volume4Ds of a prism Constraint (``uam_planner.constraints``): the polygon's exterior
+    ring (holes are not expressible in F3548 and are filled: the F3548 volume is larger) or the
+    circle, its band (an infinite limit is left out), its window (an infinite end is left out).
+    Raises F3548Error for a closure (F3548 constraints are volumes)."""
+    if c.vertiport_id is not None:
+        raise F3548Error(f"constraint {c.constraint_id!r}: a vertiport closure has no F3548 volume")
+    finite = [z for z in (c.lower_m, c.upper_m) if math.isfinite(z)]
+    z_ref = finite[0] if finite else 0.0
+    kw = {}
+    if c.rings_m is not None:
+        ring = np.asarray(c.rings_m[0], dtype=float)
+        enu = np.column_stack([ring, np.full(len(ring), z_ref)])
+        lla = enu_to_geodetic(enu, ctx.origin_lat_lon_alt)
+        kw["outline_polygon"] = api.Polygon(vertices=[api.LatLngPoint(lat=float(a), lng=float(b))
+                                                      for a, b, _ in lla])
+    else:
+        lla = enu_to_geodetic([c.center_m[0], c.center_m[1], z_ref], ctx.origin_lat_lon_alt)
+        kw["outline_circle"] = api.Circle(center=api.LatLngPoint(lat=float(lla[0]), lng=float(lla[1])),
+                                          radius=api.Radius(value=float(c.radius_m), units="M"))
+    centre = np.asarray(c.rings_m[0], float).mean(axis=0) if c.rings_m is not None \
+        else np.asarray(c.center_m, float)
+    for name, z in (("altitude_lower", c.lower_m), ("altitude_upper", c.upper_m)):
+        if math.isfinite(z):
+            h = enu_to_geodetic([centre[0], centre[1], z], ctx.origin_lat_lon_alt)[2]
+            kw[name] = ctx.altitude(float(h))
+    v4 = {"volume": api.Volume3D(**kw)}
+    if math.isfinite(c.start_s):
+        v4["time_start"] = ctx.time(c.start_s)
+    if math.isfinite(c.end_s):
+        v4["time_end"] = ctx.time(c.end_s, up=True)
+    return [api.Volume4D(**v4)]
+
+
+def f3548_constraint(c, ctx: IntentContext, t_s: float = 0.0):
+    """An F3548 Constraint (reference and details) of a prism Constraint; its id is derived from
+    the constraint's id, its version is the constraint's. None for a closure."""
+    if c.vertiport_id is not None:
+        return None
+    vols = constraint_volumes(c, ctx)
+    cid = constraint_entity_id(c.constraint_id)
+    start = vols[0].time_start if "time_start" in vols[0] else ctx.time(t_s)
+    end = vols[0].time_end if "time_end" in vols[0] else ctx.time(t_s + 86400.0, up=True)
+    reference = api.ConstraintReference(
+        id=cid, manager=ctx.manager, uss_availability="Unknown", version=int(c.version),
+        ovn=ovn(cid, c.version), time_start=start, time_end=end, uss_base_url=ctx.uss_base_url)
+    details = api.ConstraintDetails(volumes=vols, type="uam_fleet.restriction")
+    return api.Constraint(reference=reference, details=details)
+
+
+def as_json(obj) -> dict:
+    """An ImplicitDict (or a list of them) as plain JSON data (enums as strings)."""
+    import json
+    return json.loads(json.dumps(obj, default=lambda o: o.value if hasattr(o, "value") else str(o)))
+
+
+# ---- in: another USS's operational intents and F3548 constraints ------------------------------
+
+F3548_KEYS = ("operational_intent", "operational_intents", "constraint", "constraints",
+              "reference")
+
+
+def is_f3548_document(doc) -> bool:
+    """True for what :func:`constraints_from_f3548` reads: a GetOperationalIntentDetailsResponse
+    or GetConstraintDetailsResponse, a bare OperationalIntent or Constraint, a list of those, or
+    ``{"operational_intents": [...], "constraints": [...]}``."""
+    if isinstance(doc, list):
+        return bool(doc) and all(is_f3548_document(d) for d in doc)
+    return isinstance(doc, dict) and doc.get("type") != "FeatureCollection" \
+        and any(k in doc for k in F3548_KEYS)
+
+
+def _sim_s(time_doc, start_ns: int, where: str) -> float:
+    from implicitdict import StringBasedDateTime
+    try:
+        when = StringBasedDateTime(time_doc["value"]).datetime
+    except (KeyError, TypeError, ValueError):
+        raise F3548Error(f"{where}: {time_doc!r} is not an F3548 Time") from None
+    delta = when.astimezone(timezone.utc) - datetime(1970, 1, 1, tzinfo=timezone.utc)
+    ns = (delta.days * 86400 + delta.seconds) * 1_000_000_000 + delta.microseconds * 1000
+    return (ns - start_ns) / 1e9
+
+
+def _volume_constraint(v4: dict, cid: str, version: int, reason: str, origin, start_ns: int,
+                       buffer_h: float, buffer_v: float, where: str):
+    """One F3548 Volume4D (JSON) as a prism Constraint in the network's frame, widened by
+    ``buffer_h`` horizontally (mitre joins: the polygon stays a polygon) and ``buffer_v``
+    below and above."""
+    from shapely.geometry import Polygon as P
+
+    from .constraints import Constraint
+    from .geo import geodetic_to_enu
+
+    vol = v4.get("volume") or {}
+    lower = vol.get("altitude_lower")
+    upper = vol.get("altitude_upper")
+    for name, alt in (("altitude_lower", lower), ("altitude_upper", upper)):
+        if alt is not None and (alt.get("reference") != "W84" or alt.get("units") != "M"):
+            raise F3548Error(f"{where}.volume.{name}: {alt!r} is not W84 metres")
+    if vol.get("outline_polygon"):
+        pts = vol["outline_polygon"].get("vertices") or []
+        if len(pts) < 3:
+            raise F3548Error(f"{where}.volume.outline_polygon: {len(pts)} vertices, fewer than 3")
+        lla = np.array([[p["lat"], p["lng"], 0.0] for p in pts], dtype=float)
+        h_ref = float(lower["value"]) if lower else 0.0
+        lla[:, 2] = h_ref
+        enu = geodetic_to_enu(lla, origin)
+        ring = P(enu[:, :2])
+        if buffer_h > 0:
+            ring = ring.buffer(buffer_h, join_style="mitre", mitre_limit=10.0)
+        xy = np.asarray(ring.exterior.coords)[:-1]
+        centre = enu[:, :2].mean(axis=0)
+        shape = {"rings_m": (xy,)}
+    elif vol.get("outline_circle"):
+        circ = vol["outline_circle"]
+        if circ.get("radius", {}).get("units") != "M":
+            raise F3548Error(f"{where}.volume.outline_circle.radius: {circ.get('radius')!r} is not metres")
+        h_ref = float(lower["value"]) if lower else 0.0
+        c = geodetic_to_enu([circ["center"]["lat"], circ["center"]["lng"], h_ref], origin)
+        centre = c[:2]
+        shape = {"center_m": (float(c[0]), float(c[1])),
+                 "radius_m": float(circ["radius"]["value"]) + buffer_h}
+    else:
+        raise F3548Error(f"{where}.volume: neither outline_polygon nor outline_circle")
+
+    def up(alt, sign):
+        if alt is None:
+            return -math.inf if sign < 0 else math.inf
+        h = float(alt["value"])
+        z = geodetic_to_enu([*_centre_lla(centre, origin), h], origin)[2]
+        return float(z + sign * buffer_v)
+
+    start = _sim_s(v4["time_start"], start_ns, f"{where}.time_start") if v4.get("time_start") else -math.inf
+    end = _sim_s(v4["time_end"], start_ns, f"{where}.time_end") if v4.get("time_end") else math.inf
+    return Constraint(cid, int(version), reason, start, end, lower_m=up(lower, -1),
+                      upper_m=up(upper, +1), **shape)
+
+
+def _centre_lla(centre_enu, origin):
+    lla = enu_to_geodetic([float(centre_enu[0]), float(centre_enu[1]), 0.0], origin)
+    return float(lla[0]), float(lla[1])
+
+
+def constraints_from_f3548(doc, network, scenario_start_utc: str = DEFAULT_SCENARIO_START_UTC,
+                           spec: VolumeSpec | None = None) -> list:
+    """Another USS's operational intents and F3548 constraints as this planner's prism
+    Constraints (``uam_planner.constraints``; docs/f3548.md, "In").
+
+    - every volume of an intent (``volumes`` and ``off_nominal_volumes``) becomes one prism, widened
+      by ``spec``'s r_h horizontally and r_v vertically (default: half the paper's 100 m), so our
+      aircraft's half-separation box stays out of the other USS's volume; id
+      ``oi:<intent id>:<k>``, version the intent's, reason naming the manager, state and priority.
+      Every foreign intent is avoided whatever its priority (F3548 lets a higher-priority flight
+      conflict with a lower one; this planner never plans into conflict);
+    - every volume of an F3548 constraint becomes one prism, not widened (as our own constraints:
+      the trajectory may not enter it); id ``cst:<constraint id>:<k>``.
+    Times are read on the scenario's UTC clock (simulation time 0 = ``scenario_start_utc``).
+    Raises F3548Error (a ValueError) naming the document, the volume and the field."""
+    from implicitdict import ImplicitDict
+
+    spec = spec or VolumeSpec.for_separation(100.0)
+    start_ns = scenario_start_ns(scenario_start_utc)
+    origin = network.origin_lat_lon_alt
+    items = doc if isinstance(doc, list) else [doc]
+    out = []
+    for n, item in enumerate(items):
+        where = f"document {n}"
+        if not isinstance(item, dict):
+            raise F3548Error(f"{where}: {type(item).__name__} is not an F3548 document")
+        if "operational_intents" in item or "constraints" in item:
+            out += constraints_from_f3548(
+                [{"operational_intent": d} for d in item.get("operational_intents", [])]
+                + [{"constraint": d} for d in item.get("constraints", [])],
+                network, scenario_start_utc, spec)
+            continue
+        kind = "constraint" if "constraint" in item else "operational_intent"
+        body = item.get(kind, item)
+        try:
+            ImplicitDict.parse(body, api.Constraint if kind == "constraint" else api.OperationalIntent)
+        except (ValueError, KeyError, TypeError) as exc:
+            raise F3548Error(f"{where}: not an F3548 {'Constraint' if kind == 'constraint' else 'OperationalIntent'}: "
+                             f"{exc}") from None
+        ref, det = body["reference"], body["details"]
+        where = f"{where} ({kind} {ref['id']})"
+        if kind == "constraint":
+            vols = det.get("volumes") or []
+            reason = f"F3548 constraint {ref['id']} of {ref.get('manager', '?')}"
+            if det.get("type"):
+                reason += f" ({det['type']})"
+            for k, v4 in enumerate(vols):
+                out.append(_volume_constraint(v4, f"cst:{ref['id']}:{k}", ref["version"], reason,
+                                              origin, start_ns, 0.0, 0.0, f"{where}.volumes[{k}]"))
+            continue
+        vols = list(det.get("volumes") or []) + list(det.get("off_nominal_volumes") or [])
+        reason = (f"operational intent {ref['id']} of {ref.get('manager', '?')} "
+                  f"({ref.get('state', '?')}, priority {det.get('priority', 0)})")
+        for k, v4 in enumerate(vols):
+            out.append(_volume_constraint(v4, f"oi:{ref['id']}:{k}", ref["version"], reason, origin,
+                                          start_ns, spec.horizontal_buffer_m, spec.vertical_buffer_m,
+                                          f"{where}.volumes[{k}]"))
+    return out
