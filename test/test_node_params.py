@@ -129,9 +129,11 @@ def test_launch_file_starts_the_nodes_and_parameter_files_of_run_fleet():
     files = {m.group(1) for m in re.finditer(r'params_file\("(\w+)"\)', (ROOT / "src" / "uam_bringup" / "launch"
                                                                            / "uam.launch.py").read_text())}
     script = (ROOT / "scripts" / "run_fleet.sh").read_text()
-    started = set(re.findall(r"^start (\w+) (\w+) ", script, re.M))
+    started = set(re.findall(r"^\s*start (\w+) (\w+) ", script, re.M))
     script_files = set(re.findall(r"--params-file config/(\w+)\.yaml", script))
-    assert launched == started and len(started) == 6  # + the conformance monitor (issue 23)
+    # five always, + the conformance monitor (issue 23), + the F3548 server (issue 25) only with
+    # a port in both (`--uss-port`, `uss_port:=`)
+    assert launched == started and len(started) == 7
     assert files == script_files == {"solver", "planner", "request_generator", "simulator"}
     # the run's seed goes to both the demand and the planner, in both
     assert re.search(r'"seed": a\["seed"\]', (ROOT / "src" / "uam_bringup" / "launch" / "uam.launch.py").read_text())

@@ -239,7 +239,7 @@ def test_another_usss_intents_and_constraints_come_in_as_constraints(tmp_path):
     separation; an F3548 constraint a prism as it is; the planner then keeps out of both."""
     import json
 
-    from uam_planner.constraints import load_constraints
+    from uam_planner.airspace_files import load_airspace as load_constraints
     from uam_planner.f3548 import constraints_from_f3548
     from uam_planner.network import load_network
 

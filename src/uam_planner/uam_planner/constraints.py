@@ -730,28 +730,28 @@ def load_constraints(path, network, now_s: float | None = None,
                      scenario_start_utc: str | None = None) -> ConstraintSet:
     """Read a constraints file and check it against ``network`` (and ``now_s``, if given): a
     GeoJSON FeatureCollection (``"type": "FeatureCollection"``), or else an ED-269 UAS zone
-    file (``{"features": [UASZoneVersion, ...]}``, see :func:`constraints_from_ed269`), or F3548
-    documents (another USS's operational intents, F3548 constraints:
-    :func:`uam_planner.f3548.constraints_from_f3548`). Raises
-    ConstraintError (a ValueError) naming the file, the feature and the field."""
+    file (``{"features": [UASZoneVersion, ...]}``, see :func:`constraints_from_ed269`); F3548
+    documents too through :func:`uam_planner.airspace_files.load_airspace`, which the runner and
+    the planner node use. Raises ConstraintError (a ValueError) naming the file, the feature and
+    the field."""
     p = Path(path)
     try:
         doc = json.loads(p.read_text())
     except (OSError, json.JSONDecodeError) as exc:
         raise ConstraintError(f"constraints file {str(p)!r}: {exc}") from None
-    try:
-        from uam_contract.stamps import DEFAULT_SCENARIO_START_UTC
+    return constraint_set_from_document(doc, network, now_s, scenario_start_utc, str(p))
 
-        from .f3548 import F3548Error, constraints_from_f3548, is_f3548_document
-        if is_f3548_document(doc):  # another USS's operational intents, F3548 constraints (issue 25)
-            try:
-                found = constraints_from_f3548(doc, network, scenario_start_utc or DEFAULT_SCENARIO_START_UTC)
-            except F3548Error as exc:
-                raise ConstraintError(str(exc)) from None
-        elif isinstance(doc, Mapping) and doc.get("type") != "FeatureCollection" and "features" in doc:
+
+def constraint_set_from_document(doc, network, now_s: float | None = None,
+                                 scenario_start_utc: str | None = None, name: str = "") -> ConstraintSet:
+    """:func:`load_constraints` of a parsed GeoJSON or ED-269 document (``name``: the file, for
+    the errors). F3548 documents are read one layer up, by :func:`uam_planner.airspace_files.load_airspace`."""
+    p = name or "<document>"
+    try:
+        if isinstance(doc, Mapping) and doc.get("type") != "FeatureCollection" and "features" in doc:
             found = constraints_from_ed269(doc, network, scenario_start_utc)
         else:
             found = constraints_from_geojson(doc, network)
         return ConstraintSet(found, network, now_s)
     except ConstraintError as exc:
-        raise ConstraintError(f"constraints file {str(p)!r}: {exc}") from None
+        raise ConstraintError(f"constraints file {p!r}: {exc}") from None

@@ -149,7 +149,7 @@ def test_auth_scope_checks_the_standards_scopes():
 
 def test_fetch_another_usss_intents_into_a_constraints_file(server, tmp_path):
     """Intents in over HTTP: fetched from a USS, they load as constraints the planner avoids."""
-    from uam_planner.constraints import load_constraints
+    from uam_planner.airspace_files import load_airspace as load_constraints
     from uam_planner.network import load_network
     from uam_sim.uss_server import main
 

@@ -187,10 +187,10 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
     planner = Planner(network, pcfg, policy=policy,
                       solve_mwis=None if policy in BASELINES else _solver(method, cfg, seed))
     if cfg.constraints_file:
-        from uam_planner.constraints import load_constraints
+        from uam_planner.airspace_files import load_airspace
         from .experiment_config import resolve_path
         try:  # the run starts at t = 0: a window over by then is refused as in the past
-            planner.set_constraints(load_constraints(resolve_path(str(cfg.constraints_file)), network,
+            planner.set_constraints(load_airspace(resolve_path(str(cfg.constraints_file)), network,
                                                      now_s=0.0))
         except ValueError as exc:
             raise ExperimentError(f"constraints_file: {exc}") from None

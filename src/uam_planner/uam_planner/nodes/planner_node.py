@@ -64,7 +64,7 @@ from uam_bringup.params import declare_table
 from uam_contract.params import PLANNER
 from uam_solvers.nodes import param_rules
 from uam_bringup.runtime import run_node
-from uam_planner.constraints import load_constraints
+from uam_planner.airspace_files import load_airspace
 from uam_planner.constraints import ConstraintError
 from uam_planner.live_constraints import parse_update, set_geojson
 from uam_planner.network import load_network
@@ -105,7 +105,7 @@ class PlannerNode(Node):
         if self.p["constraints_file"]:
             # the node starts at simulation time 0: a window over by then is refused as in the past
             try:
-                cset = load_constraints(self.p["constraints_file"], self.network, now_s=0.0)
+                cset = load_airspace(self.p["constraints_file"], self.network, now_s=0.0)
             except ValueError as exc:
                 raise ValueError(f"constraints_file: {exc}") from None
             self.planner.set_constraints(cset)
