@@ -44,6 +44,8 @@
 #   --foxglove-port N  serve a live Foxglove WebSocket view on port N (default 0 = off; docs/views.md)
 #   --uss-port N       serve the plans and constraints as ASTM F3548 operational intents over HTTP on
 #                      127.0.0.1:N (the USS-USS interface; default 0 = off; docs/f3548.md)
+#   --conformance C    start the conformance monitor: true, false, or auto (default) = only when a
+#                      disturbance is set (it runs at the recorder's nice value)
 #   --recorder-nice N  the recorder's nice value (default 19): it is not in the lockstep loop, so the
 #                      loop's nodes get the CPU first and the recorder drains its queue after
 #                      (its reader history holds the whole backlog, the simulator waits for its
@@ -60,6 +62,7 @@ cd "$ROOT"
 BACKEND=exact POLICY=mwis RATE=10 DURATION=3500 SEED=0 NETWORK=config/networks/singapore.yaml
 SPATIAL_BUFFER=0 TEMPORAL_BUFFER=0 WIND=0 WIND_FROM=270 GUST=0 SPEED_ERROR=0 DELAY_MEAN=0
 DEMAND="" CONSTRAINTS="" MODE=lockstep RTF=1 RERUN=save OUT="" FOXGLOVE_PORT=0 USS_PORT=0 RECORDER_NICE=19
+CONFORMANCE=auto
 SEPARATION="" SEPARATION_M=100 VERTICAL_M=30 SLOT_S=0 CLIMB=5 DESCENT=3
 OBJECTIVE=paper BASELINE_ORDER=arrival PRIORITY_SHARE=0 HORIZON=1 LEAD_TIME=0 COMMIT_AHEAD=false
 die() { echo "run_fleet: $*" >&2; exit 2; }
@@ -91,6 +94,7 @@ while [[ $# -gt 0 ]]; do
     --rerun) RERUN="${2:?--rerun needs a value}"; shift 2;;
     --foxglove-port) FOXGLOVE_PORT="${2:?--foxglove-port needs a value}"; shift 2;;
     --uss-port) USS_PORT="${2:?--uss-port needs a value}"; shift 2;;
+    --conformance) CONFORMANCE="${2:?--conformance needs a value}"; shift 2;;
     --recorder-nice) RECORDER_NICE="${2:?--recorder-nice needs a value}"; shift 2;;
     --out) OUT="${2:?--out needs a value}"; shift 2;;
     --separation) SEPARATION="${2:?--separation needs a value}"; shift 2;;
@@ -116,6 +120,11 @@ done
 [[ "$DURATION" =~ ^[0-9]+(\.[0-9]+)?$ ]] || die "--duration: '$DURATION' is not a number of seconds"
 [[ "$SEED" =~ ^[0-9]+$ ]] || die "--seed: '$SEED' is not an integer >= 0"
 [[ "$FOXGLOVE_PORT" =~ ^[0-9]+$ ]] && (( FOXGLOVE_PORT <= 65535 )) || die "--foxglove-port: '$FOXGLOVE_PORT' is not a port 0..65535"
+[[ "$CONFORMANCE" =~ ^(auto|true|false)$ ]] || die "--conformance: '$CONFORMANCE' is not auto, true or false"
+if [[ "$CONFORMANCE" == auto ]]; then  # on only when the fleet can deviate from its plans
+  CONFORMANCE=$(awk -v w="$WIND" -v g="$GUST" -v s="$SPEED_ERROR" -v d="$DELAY_MEAN" \
+    'BEGIN { print ((w + 0 != 0 || g + 0 != 0 || s + 0 != 0 || d + 0 != 0) ? "true" : "false") }')
+fi
 [[ "$USS_PORT" =~ ^[0-9]+$ ]] && (( USS_PORT <= 65535 )) || die "--uss-port: '$USS_PORT' is not a port 0..65535"
 [[ "$RTF" =~ ^[0-9]+(\.[0-9]+)?$ ]] || die "--rtf: '$RTF' is not a positive number"
 [[ -z "$SEPARATION" || "$SEPARATION" == sphere || "$SEPARATION" == cylinder ]] || die "--separation: '$SEPARATION' is not sphere or cylinder"
@@ -253,15 +262,22 @@ start uam_sim recorder recorder -p "output:=$MCAP" -p "network:=$NETWORK" -p "re
   -p "foxglove_port:=$FOXGLOVE_PORT" "${AIRSPACE[@]}" -p "wait_for_publishers:=[$RECORDER_WAITS]"
 REC_PID=${PIDS[-1]}
 NODE_NICE=
-# issue 23: compares every fleet state with the approved plans, publishes uam/conformance (recorded)
-start uam_sim conformance_monitor conformance_monitor
+# issue 23: compares every fleet state with the approved plans, publishes uam/conformance (recorded);
+# an observer like the recorder, so it runs at the recorder's priority
+SIM_WAITS=recorder
+if [[ "$CONFORMANCE" == true ]]; then
+  NODE_NICE=$RECORDER_NICE
+  start uam_sim conformance_monitor conformance_monitor
+  NODE_NICE=
+  SIM_WAITS=recorder,conformance_monitor
+fi
 if (( USS_PORT > 0 )); then  # the F3548 USS-USS interface (docs/f3548.md)
   start uam_sim uss uss -p "port:=$USS_PORT" -p "network:=$NETWORK" -p "separation_model:=$SEPARATION" \
     -p "separation_m:=$(f "$SEPARATION_M")" -p "vertical_separation_m:=$(f "$VERTICAL_M")"
   echo "run_fleet: F3548 operational intents on http://127.0.0.1:$USS_PORT/uss/v1/operational_intents/{id} (ids: /uam_fleet/v1/operational_intents)"
 fi
 start uam_sim simulator simulator --params-file config/simulator.yaml -p "duration_s:=$DURATION" \
-  -p "mode:=$MODE" -p "real_time_factor:=$RTF" -p "wait_for_subscribers:=[recorder,conformance_monitor]" \
+  -p "mode:=$MODE" -p "real_time_factor:=$RTF" -p "wait_for_subscribers:=[$SIM_WAITS]" \
   -p "disturbance_seed:=$SEED" -p "wind_speed_mps:=$(f "$WIND")" \
   -p "wind_from_deg:=$(f "$WIND_FROM")" -p "gust_std_mps:=$(f "$GUST")" -p "speed_error:=$(f "$SPEED_ERROR")" \
   -p "delay_mean_s:=$(f "$DELAY_MEAN")"

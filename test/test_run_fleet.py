@@ -92,9 +92,10 @@ def _alive(pid: int) -> bool:
         return False
 
 
-def _start(out: pathlib.Path | None, env: dict, log: pathlib.Path, duration: str = "100000") -> subprocess.Popen:
+def _start(out: pathlib.Path | None, env: dict, log: pathlib.Path, duration: str = "100000",
+           extra: tuple = ()) -> subprocess.Popen:
     args = ["bash", str(ROOT / "scripts" / "run_fleet.sh"), "--network", "config/networks/tiny.yaml",
-            "--rate", "2", "--duration", duration, "--rerun", "off"]
+            "--rate", "2", "--duration", duration, "--rerun", "off", *extra]
     if duration == "100000":
         args += ["--mode", "realtime", "--rtf", "20"]
     if out is not None:
@@ -102,15 +103,15 @@ def _start(out: pathlib.Path | None, env: dict, log: pathlib.Path, duration: str
     return subprocess.Popen(args, cwd=ROOT, env=env, stdout=log.open("w"), stderr=subprocess.STDOUT)
 
 
-def _running(proc: subprocess.Popen, log: pathlib.Path) -> dict[int, str]:
-    """Wait until the six nodes run (the conformance monitor of issue 23 included) and the
+def _running(proc: subprocess.Popen, log: pathlib.Path, n: int = 5) -> dict[int, str]:
+    """Wait until the ``n`` nodes run (5; 6 with the conformance monitor of issue 23) and the
     simulator started; returns them."""
     assert _wait_for(lambda: "outputs in" in log.read_text(), 120), log.read_text()
     out = pathlib.Path(log.read_text().split("outputs in ", 1)[1].split(" (")[0])
     assert _wait_for(lambda: "starting the run" in (out / "simulator.log").read_text()
                      if (out / "simulator.log").exists() else False, 90), log.read_text()
     nodes = _node_children(proc.pid)
-    assert len(nodes) == 6, nodes
+    assert len(nodes) == n, nodes
     return nodes
 
 
@@ -129,9 +130,11 @@ def test_two_runs_started_in_the_same_second_without_out_get_their_own_folders(t
 
 def test_sighup_stops_every_node(tmp_path, ros_domain_id):
     log = tmp_path / "run.log"
-    proc = _start(tmp_path / "run", dict(os.environ, ROS_DOMAIN_ID=str(ros_domain_id)), log)
+    # with the conformance monitor asked for (by default it runs only with a disturbance set)
+    proc = _start(tmp_path / "run", dict(os.environ, ROS_DOMAIN_ID=str(ros_domain_id)), log,
+                  extra=("--conformance", "true"))
     try:
-        nodes = _running(proc, log)
+        nodes = _running(proc, log, n=6)
         mcap = tmp_path / "run" / "run.mcap"
         assert _wait_for(lambda: mcap.exists() and mcap.stat().st_size > 20_000, 60)
         proc.send_signal(signal.SIGHUP)

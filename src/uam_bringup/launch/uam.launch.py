@@ -16,7 +16,7 @@ import os
 
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, EmitEvent, GroupAction, RegisterEventHandler
-from launch.conditions import IfCondition
+from launch.conditions import IfCondition, UnlessCondition
 from launch.event_handlers import OnProcessExit
 from launch.events import Shutdown
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution, PythonExpression
@@ -44,9 +44,22 @@ def generate_launch_description() -> LaunchDescription:
     # recorder writes it into the MCAP for the analysis' audit
     airspace = {"separation_model": a["separation"], "separation_m": a["separation_m"],
                 "vertical_separation_m": a["vertical_separation_m"], "departure_slot_s": a["slot_s"]}
+    # as run_fleet.sh: the conformance monitor (issue 23) runs when asked, or with auto when a
+    # disturbance is set (an undisturbed fleet flies its plans exactly); the simulator then
+    # waits for it as for the recorder
+    conformance_on = PythonExpression([
+        "'", a["conformance"], "' == 'true' or ('", a["conformance"], "' == 'auto' and any(float(x) != 0 "
+        "for x in ('", a["wind_speed_mps"], "', '", a["gust_std_mps"], "', '", a["speed_error"], "', '",
+        a["delay_mean_s"], "')))"])
+    recorder_prefix = "nice -n 19"
+    sim_params = {"duration_s": a["duration"], "mode": a["mode"], "real_time_factor": a["rtf"],
+                  # disturbances (issue 23), seeded by the run's seed
+                  "disturbance_seed": a["seed"], "wind_speed_mps": a["wind_speed_mps"],
+                  "wind_from_deg": a["wind_from_deg"], "gust_std_mps": a["gust_std_mps"],
+                  "speed_error": a["speed_error"], "delay_mean_s": a["delay_mean_s"]}
     # as run_fleet.sh: the recorder is not in the lockstep loop, so it runs at a lower priority
     recorder = Node(package="uam_sim", executable="recorder", name="recorder", output="screen",
-                    prefix="nice -n 19",
+                    prefix=recorder_prefix,
                     parameters=[{"output": mcap, "network": network, "rerun": a["rerun"], "rerun_rrd": rrd,
                                  "foxglove_port": a["foxglove_port"],
                                  # as run_fleet.sh: the run starts once the recorder hears these
@@ -75,18 +88,17 @@ def generate_launch_description() -> LaunchDescription:
                                                              "lead_time_s": a["lead_time_s"]}]),
         recorder,
         # issue 23: compares every fleet state with the approved plans, publishes uam/conformance
-        Node(package="uam_sim", executable="conformance_monitor", name="conformance_monitor", output="screen"),
+        # (only when asked, or with a disturbance set: conformance:=auto; at the recorder's nice value)
+        Node(package="uam_sim", executable="conformance_monitor", name="conformance_monitor", output="screen",
+             condition=IfCondition(conformance_on), prefix=recorder_prefix),
+        # the simulator, waiting for the observers that run (one of the two starts)
         Node(package="uam_sim", executable="simulator", name="simulator", output="screen",
-             parameters=[params_file("simulator"), {"duration_s": a["duration"], "mode": a["mode"],
-                                                     "real_time_factor": a["rtf"],
-                                                     "wait_for_subscribers": ["recorder", "conformance_monitor"],
-                                                     # disturbances (issue 23), seeded by the run's seed
-                                                     "disturbance_seed": a["seed"],
-                                                     "wind_speed_mps": a["wind_speed_mps"],
-                                                     "wind_from_deg": a["wind_from_deg"],
-                                                     "gust_std_mps": a["gust_std_mps"],
-                                                     "speed_error": a["speed_error"],
-                                                     "delay_mean_s": a["delay_mean_s"]}]),
+             condition=IfCondition(conformance_on),
+             parameters=[params_file("simulator"),
+                         {**sim_params, "wait_for_subscribers": ["recorder", "conformance_monitor"]}]),
+        Node(package="uam_sim", executable="simulator", name="simulator", output="screen",
+             condition=UnlessCondition(conformance_on),
+             parameters=[params_file("simulator"), {**sim_params, "wait_for_subscribers": ["recorder"]}]),
     ]
     # the F3548 USS-USS interface, only with uss_port > 0 (docs/f3548.md)
     nodes.append(Node(package="uam_sim", executable="uss", name="uss", output="screen",

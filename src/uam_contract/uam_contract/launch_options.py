@@ -70,6 +70,9 @@ LAUNCH_OPTIONS: tuple[LaunchOption, ...] = (
     LaunchOption("--speed-error", "SPEED_ERROR", "speed_error", "0",
                  "per-flight airspeed error bound, uniform (0.1 = +-10 %)"),
     LaunchOption("--delay-mean", "DELAY_MEAN", "delay_mean_s", "0", "mean departure delay [s] (exponential)"),
+    LaunchOption("--conformance", "CONFORMANCE", "conformance", "auto",
+                 "start the conformance monitor: true, false, or auto = only when a disturbance is set "
+                 "(an undisturbed fleet flies its plans exactly; the monitor costs more CPU than any other node)"),
     LaunchOption("--mode", "MODE", "mode", "lockstep", "lockstep or realtime"),
     LaunchOption("--rtf", "RTF", "rtf", "1", "real-time factor in realtime mode"),
     LaunchOption("--rerun", "RERUN", "rerun", "save", "off, save, spawn or connect"),
