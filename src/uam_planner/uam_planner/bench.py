@@ -156,18 +156,38 @@ def city_scale(n_nodes: int, n_aerodromes: int, n_active: int, per_epoch: int, e
     return net, reports
 
 
+def _layered_city(n_nodes: int, n_vertiports: int, seed: int):
+    """A synthetic layered city (4 levels, 4 pads per vertiport), its cylinder-and-slots
+    PlanningConfig and candidate cache: the setting of the graph and constraint benchmarks."""
+    from .planning import AirspaceConfig
+    from .synthetic import generate_network
+    net = generate_network(n_nodes, n_vertiports, seed=seed, levels_m=[60.0, 90.0, 120.0, 150.0],
+                           pads_per_vertiport=4)
+    cfg = PlanningConfig(airspace=AirspaceConfig("cylinder", 30.0, 5.0))
+    return net, cfg, CandidateCache(net, cfg.k, cfg.penalty_factor, cfg.speed_mps)
+
+
+def _requests_with_candidates(n_candidates: int, net, cfg, cache, rng, t0: float) -> list:
+    """Random requests departing at ``t0`` until they have about ``n_candidates`` candidates."""
+    from .planning import _epoch_candidates
+    requests, n = [], 0
+    while n < n_candidates:
+        o, d = rng.choice(len(net.aerodrome_ids), 2, replace=False)
+        r = FlightRequest(f"r{len(requests):05d}", net.aerodrome_ids[o], net.aerodrome_ids[d],
+                          t0, t0, t0 + 60.0)
+        requests.append(r)
+        n += len(_epoch_candidates(t0, [r], net, cfg, cache).tmpls)
+    return requests
+
+
 def graph_scale(n_nodes: int, n_vertiports: int, n_active: int, n_candidates: int, repeats: int,
                 seed: int):
     """Median build time of the conflict graph (deconfliction against the active flights,
     conflicts among candidates, graph) for ``n_candidates`` candidates and ``n_active``
     airborne flights on a layered city; returns (reports of each repeat as dicts, network)."""
     from .conflict_graph import ActiveFlightIndex, build_conflict_graph
-    from .planning import AirspaceConfig, _epoch_candidates
-    from .synthetic import generate_network
-    net = generate_network(n_nodes, n_vertiports, seed=seed, levels_m=[60.0, 90.0, 120.0, 150.0],
-                           pads_per_vertiport=4)
-    cfg = PlanningConfig(airspace=AirspaceConfig("cylinder", 30.0, 5.0))
-    cache = CandidateCache(net, cfg.k, cfg.penalty_factor, cfg.speed_mps)
+    from .planning import _epoch_candidates
+    net, cfg, cache = _layered_city(n_nodes, n_vertiports, seed)
     rng = np.random.default_rng(seed)
     t0 = 10_000.0
     active = []
@@ -182,13 +202,7 @@ def graph_scale(n_nodes: int, n_vertiports: int, n_active: int, n_candidates: in
                              "greedy", -1, 0, tp.level_m))
     index = ActiveFlightIndex()
     index.segments(active, t0)
-    requests, n = [], 0
-    while n < n_candidates:
-        o, d = rng.choice(len(net.aerodrome_ids), 2, replace=False)
-        r = FlightRequest(f"r{len(requests):05d}", net.aerodrome_ids[o], net.aerodrome_ids[d],
-                          t0, t0, t0 + 60.0)
-        requests.append(r)
-        n += len(_epoch_candidates(t0, [r], net, cfg, cache).tmpls)
+    requests = _requests_with_candidates(n_candidates, net, cfg, cache, rng, t0)
     cands = _epoch_candidates(t0, requests, net, cfg, cache)
     keep = len(cands.tmpls)
     out = []
@@ -265,21 +279,11 @@ def constraint_filter(n_nodes: int, n_vertiports: int, n_candidates: int, repeat
     (0-200 m, one hour) and the closure of one vertiport; returns (median_s, candidates,
     segments, refused, requests losing every candidate)."""
     from .constraints import Constraint, ConstraintSet, refuse_candidates
-    from .planning import AirspaceConfig, _epoch_candidates
-    from .synthetic import generate_network
-    net = generate_network(n_nodes, n_vertiports, seed=seed, levels_m=[60.0, 90.0, 120.0, 150.0],
-                           pads_per_vertiport=4)
-    cfg = PlanningConfig(airspace=AirspaceConfig("cylinder", 30.0, 5.0))
-    cache = CandidateCache(net, cfg.k, cfg.penalty_factor, cfg.speed_mps)
+    from .planning import _epoch_candidates
+    net, cfg, cache = _layered_city(n_nodes, n_vertiports, seed)
     rng = np.random.default_rng(seed)
     t0 = 10_000.0
-    requests, n = [], 0
-    while n < n_candidates:
-        o, d = rng.choice(len(net.aerodrome_ids), 2, replace=False)
-        r = FlightRequest(f"r{len(requests):05d}", net.aerodrome_ids[o], net.aerodrome_ids[d],
-                          t0, t0, t0 + 60.0)
-        requests.append(r)
-        n += len(_epoch_candidates(t0, [r], net, cfg, cache).tmpls)
+    requests = _requests_with_candidates(n_candidates, net, cfg, cache, rng, t0)
     cands = _epoch_candidates(t0, requests, net, cfg, cache)
     cx, cy = np.median(net.enu_m[:, :2], axis=0)
     square = ((cx - 1000, cy - 1000), (cx + 1000, cy - 1000), (cx + 1000, cy + 1000), (cx - 1000, cy + 1000))

@@ -260,9 +260,9 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
             by_id[f.request_id] = flights[-1]
         if disturbed and res.approved:
             new = flights[len(flights) - len(res.approved):]
-            for f, flown in zip(new, fly_plans([f["_traj"] for f in new],
+            for f, track in zip(new, fly_plans([f["_traj"] for f in new],
                                                [f["request_id"] for f in new], dcfg, wind)):
-                f["_flown"] = flown
+                f["_flown"] = track
         epochs.append({"epoch": e, "t_s": t, "requests_cum": n_requests, "pending": rep.pending,
                        "eligible": rep.eligible, "candidates": rep.candidates,
                        "discarded": rep.discarded, "vertices": rep.vertices, "edges": rep.edges,

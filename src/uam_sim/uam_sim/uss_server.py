@@ -209,26 +209,25 @@ def create_app(store: IntentStore, auth: str = "off"):
             return _error(400, f"entityid: {shown!r} is not an F3548 EntityID (a UUIDv4)")
         return None
 
-    @app.get("/uss/v1/operational_intents/<path:entityid>")
-    def operational_intent(entityid):
-        bad = _check(entityid, SCOPE_INTENTS)
+    def _details(entityid, scope, lookup, missing: str):
+        """One details endpoint: the id and auth checks, then the stored document or a 404."""
+        bad = _check(entityid, scope)
         if bad is not None:
             return bad
-        body = store.details(entityid)
+        body = lookup(entityid)
         if body is None:
-            return _error(404, f"operational intent {entityid} is not managed here (unknown or "
-                               f"ended)")
+            return _error(404, missing.format(entityid))
         return Response(body, status=200, mimetype="application/json")
+
+    @app.get("/uss/v1/operational_intents/<path:entityid>")
+    def operational_intent(entityid):
+        return _details(entityid, SCOPE_INTENTS, store.details,
+                        "operational intent {} is not managed here (unknown or ended)")
 
     @app.get("/uss/v1/constraints/<path:entityid>")
     def constraint(entityid):
-        bad = _check(entityid, SCOPE_CONSTRAINTS)
-        if bad is not None:
-            return bad
-        body = store.constraint_details(entityid)
-        if body is None:
-            return _error(404, f"constraint {entityid} is not managed here")
-        return Response(body, status=200, mimetype="application/json")
+        return _details(entityid, SCOPE_CONSTRAINTS, store.constraint_details,
+                        "constraint {} is not managed here")
 
     @app.get("/uam_fleet/v1/operational_intents")
     def list_intents():
