@@ -154,13 +154,18 @@ class Param:
 
 # ---- pydantic: the file and config inputs -------------------------------------------------------
 
-def path_text(where: str, loc) -> str:
+def path_text(where: str, loc, tag: Callable[[tuple], str] | None = None) -> str:
     """A pydantic location as a reader writes it: ``('arms', 2, 'rates')`` -> ``arms[2].rates``,
-    after ``where`` (``demand`` + ``(0, 't_s')`` -> ``demand[0].t_s``)."""
+    after ``where`` (``demand`` + ``(0, 't_s')`` -> ``demand[0].t_s``). ``tag(loc up to an index)``
+    may name the item after its index (``nodes[3] (id 'W2').lat``), unless the refusal is of the
+    field the tag shows (``id``)."""
     out = where
-    for part in loc:
+    loc = tuple(loc)
+    for k, part in enumerate(loc):
         if isinstance(part, int):
             out += f"[{part}]"
+            if tag is not None and k + 1 < len(loc) and loc[k + 1] != "id":
+                out += tag(loc[: k + 1])
         elif "[" in str(part) or "(" in str(part) or "," in str(part):
             continue  # a union member's or function validator's tag, not a field
         else:
@@ -182,7 +187,7 @@ def _fields(cls) -> dict | None:
     import pydantic
 
     if isinstance(cls, type) and issubclass(cls, pydantic.BaseModel):
-        return {k: f.annotation for k, f in cls.model_fields.items()}
+        return {f.alias or k: f.annotation for k, f in cls.model_fields.items()}
     if isinstance(cls, type) and dataclasses.is_dataclass(cls):
         hints = typing.get_type_hints(cls, include_extras=True)
         return {f.name: hints.get(f.name) for f in dataclasses.fields(cls)}
@@ -224,11 +229,11 @@ _REASONS = {
 }
 
 
-def message(err: dict, where: str = "", model=None) -> str:
+def message(err: dict, where: str = "", model=None, tag=None) -> str:
     """One pydantic error (an item of ``ValidationError.errors()``) in the house style."""
     typ, ctx, value = err["type"], err.get("ctx") or {}, err.get("input")
     loc = tuple(err["loc"])
-    path = path_text(where, loc) or "value"
+    path = path_text(where, loc, tag) or "value"
     if typ == "missing":
         return f"{path}: missing"
     if typ in ("extra_forbidden", "unexpected_keyword_argument"):
@@ -258,17 +263,18 @@ def message(err: dict, where: str = "", model=None) -> str:
     return f"{path}: {_echo(value)} {why}"
 
 
-def parse(model, data, where: str = "", error: type[Exception] = ValueError):
+def parse(model, data, where: str = "", error: type[Exception] = ValueError,
+          tag: Callable[[tuple], str] | None = None):
     """``data`` validated by ``model`` (a pydantic model class or any type pydantic validates,
     e.g. ``list[Entry]``); the first error raised as ``error`` in the house style, naming the path
-    after ``where`` and the value."""
+    after ``where`` (with ``tag``: :func:`path_text`) and the value."""
     import pydantic
 
     adapter = _adapter(model)
     try:
         return adapter.validate_python(data)
     except pydantic.ValidationError as exc:
-        raise error(message(_first(exc.errors(include_url=False), model), where, model)) from None
+        raise error(message(_first(exc.errors(include_url=False), model), where, model, tag)) from None
 
 
 def _first(errors: list, model) -> dict:
