@@ -86,10 +86,9 @@ class Param:
                  error: type[Exception] = ValueError):
         """``value`` converted to the row's kind, or ``error`` naming ``label`` (by default
         ``parameter <name>``) and the value, then ``context`` (e.g. `` (backend 'sa')``)."""
-        label = f"parameter {self.name}" if label is None else label
-
         def bad(why: str) -> Exception:
-            return error(f"{label}: {value!r} {why}{context}")
+            where = f"parameter {self.name}" if label is None else label
+            return error(f"{where}: {value!r} {why}{context}")
 
         if value is None:
             if self.nullable or self.default is None:
@@ -125,7 +124,7 @@ class Param:
         if self.check is not None:
             why = self.check(value)
             if why:
-                raise error(f"{label}: {why}{context}")
+                raise error(f"{f'parameter {self.name}' if label is None else label}: {why}{context}")
         if self.convert is not None:
             try:
                 value = self.convert(value)
