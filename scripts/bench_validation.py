@@ -60,7 +60,7 @@ def main(argv=None) -> int:
     sa = get_backend("sa").options_spec
 
     cases = [
-        ("load_network singapore.yaml (45 nodes)", lambda: load_network("config/networks/singapore.yaml")),
+        ("load_network singapore.yaml (241 nodes)", lambda: load_network("config/networks/singapore.yaml")),
         ("load_network singapore-layered.yaml", lambda: load_network("config/networks/singapore-layered.yaml")),
         ("load_network singapore.graphml", lambda: load_network("config/networks/singapore.graphml")),
         ("network_from_dict synthetic city (400 nodes)", lambda: network_from_dict(copy.deepcopy(city))),
