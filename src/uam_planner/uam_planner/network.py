@@ -26,7 +26,6 @@ import pydantic
 import scipy.sparse
 import scipy.sparse.csgraph
 import yaml
-
 from pydantic import AfterValidator, PlainValidator
 
 from uam_contract.validation import parse
@@ -489,8 +488,6 @@ def _assemble(name: str, node_ids: Sequence[str], names: Sequence[str], is_aerod
                    levels_m=levels_m, direction_rule=direction_rule, pads_m=pads_m or {})
 
 
-
-
 def _number(value: Any, where: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise NetworkError(f"{where}: {value!r} is not a number")
@@ -544,6 +541,12 @@ def _id_text(value: Any) -> str:
     return value
 
 
+def _zone_name(value: Any) -> str:
+    if not isinstance(value, str) or not value:
+        raise ValueError("is not a non-empty string")
+    return value
+
+
 def _flag(value: Any) -> bool:
     if not isinstance(value, (bool, np.bool_)):
         raise ValueError("is not true/false")
@@ -585,7 +588,7 @@ class _CorridorFile(pydantic.BaseModel):
 
 class _ZoneFile(pydantic.BaseModel):
     model_config = _Schema
-    name: Annotated[Any, PlainValidator(_id_text)]
+    name: Annotated[Any, PlainValidator(_zone_name)]
     lat: _Lat
     lon: _Lon
     radius_m: Annotated[_Real, AfterValidator(_positive_number)]
@@ -799,7 +802,6 @@ def network_to_dict(net: Network) -> dict:
 def _zones_to_list(zones: Sequence[NoFlyZone]) -> list[dict]:
     return [{"name": z.name, "lat": float(z.lat), "lon": float(z.lon),
              "radius_m": float(z.radius_m)} for z in zones]
-
 
 
 def network_from_dict(data: Any, default_name: str = "network") -> Network:
