@@ -19,7 +19,9 @@ or in time, so all-pairs checking would waste nearly all its work. We
    separation/2 in x and y, touches (a handful per piece, since cell_m >= separation);
 4. sort the keys; pieces sharing a key are the candidate pairs. Two pieces closer than the
    separation at a common time t share the key of their midpoint at t, so no conflict is lost
-   (z is ignored in the keys, which is conservative: 3D distance >= horizontal distance);
+   (z is ignored in the keys by default, which is conservative: 3D distance >= horizontal
+   distance; with ``z_cell_m`` the keys also hold z cells, compared with the boundaries rather
+   than divided, so two z ranges that overlap strictly always share one);
 5. drop pairs whose inflated boxes or time intervals do not overlap and report each surviving
    pair only in one canonical cell (the one holding the low corner of the boxes' intersection),
    so the exact kernel runs once per pair of pieces that can actually come near.
