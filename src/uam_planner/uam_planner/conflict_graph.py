@@ -190,7 +190,8 @@ class CandidatePairCache:
             # rank_a, rank_b), and pairs of one request are skipped before any box test (a
             # request's old and new candidates share their pad and routes: groups). Was three
             # calls, (old, late new), (early new, old) and (old, early new), each filtering
-            # afterwards: 2.4x the piece pairs sharing a cell (bench_horizon, H = 10).
+            # afterwards: 92.1 M piece pairs sharing a cell against 71.9 M in one call, before
+            # the z cells (bench_horizon --in-process, H = 10, 120/120, 300 s).
             ab = conflicting_pairs([candidates[i] for i in old], [candidates[i] for i in new],
                                    separation_m, bucket_s=bucket_s, groups_a=request[old],
                                    groups_b=request[new], rank_a=old, rank_b=new,
