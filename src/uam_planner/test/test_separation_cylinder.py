@@ -187,6 +187,10 @@ def test_shifted_candidates_give_the_same_pairs_as_every_shifted_trajectory(mode
     want = conflicting_pairs(explicit, active, separation_m=model)
     got = conflicting_pairs(base, active, separation_m=model, shifts_a=(first, shift))
     assert got.tolist() == want.tolist() and len(want) > 20
+    # z cells in the keys (the horizon's deconfliction): the same pairs
+    keyed = conflicting_pairs(base, active, separation_m=model, shifts_a=(first, shift),
+                              z_cell_m=model.vertical_reach_m)
+    assert keyed.tolist() == want.tolist()
     with pytest.raises(ValueError, match="shifts_a"):
         conflicting_pairs(base, active, shifts_a=(first[:-1], shift))
 

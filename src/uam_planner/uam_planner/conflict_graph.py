@@ -252,9 +252,13 @@ def build_conflict_graph(candidates, candidate_request, candidate_index, candida
         act = active if isinstance(active, SegmentSet) else \
             SegmentSet.from_trajectories(list(active))
         if n and len(act):
+            # with the horizon's pair cache, z cells in the keys as in its calls (the same pairs)
+            z_cell = as_separation_model(separation_m).vertical_reach_m \
+                if pair_cache is not None else None
             pairs = conflicting_pairs(SegmentSet.from_trajectories(candidates.base), act,
                                       separation_m,
-                                      shifts_a=(candidates.first, candidates.shift_s))
+                                      shifts_a=(candidates.first, candidates.shift_s),
+                                      z_cell_m=z_cell)
             discarded[pairs[:, 0]] = True
     else:
         cand_set = SegmentSet.from_trajectories(list(candidates))
