@@ -115,15 +115,22 @@ def test_candidate_pair_cache_refuses_keys_that_do_not_name_the_candidates():
         CandidatePairCache().conflicts([0, 0], trajs[:2], req[:2], 100.0, 120.0)
 
 
-def test_planner_horizon_builds_the_same_graphs_with_and_without_the_pair_cache():
+@pytest.mark.parametrize("layered", [False, True], ids=["sphere", "levels-cylinder"])
+def test_planner_horizon_builds_the_same_graphs_with_and_without_the_pair_cache(layered):
     """A rolling horizon (H = 3, 5 s slots) over 6 epochs of a synthetic network, once with the
     planner's pair cache and once without: every epoch's graph (weights, edges) and approvals are
-    the same, and the cache did reuse pairs."""
+    the same, and the cache did reuse pairs. ``layered``: 4 levels 30 m apart, 4 pads, the
+    cylinder (V = 30 m): the cache's z cells in the keys, where levels touch exactly."""
     from uam_planner.planning import AirspaceConfig, FlightRequest, Planner, PlanningConfig
 
-    net = generate_network(50, 6, seed=1)
+    if layered:
+        net = generate_network(50, 6, seed=1, levels_m=[60.0, 90.0, 120.0, 150.0], pads_per_vertiport=4)
+        air = AirspaceConfig("cylinder", 30.0, 5.0)
+    else:
+        net = generate_network(50, 6, seed=1)
+        air = AirspaceConfig(departure_slot_s=5.0)
     ids = [net.node_ids[i] for i in net.aerodrome_indices]
-    cfg = PlanningConfig(horizon_epochs=3, objective="count", airspace=AirspaceConfig(departure_slot_s=5.0))
+    cfg = PlanningConfig(horizon_epochs=3, objective="count", airspace=air)
 
     def greedy(weights, edges, groups):
         from uam_solvers.greedy import greedy_mwis

@@ -19,7 +19,9 @@ or in time, so all-pairs checking would waste nearly all its work. We
    separation/2 in x and y, touches (a handful per piece, since cell_m >= separation);
 4. sort the keys; pieces sharing a key are the candidate pairs. Two pieces closer than the
    separation at a common time t share the key of their midpoint at t, so no conflict is lost
-   (z is ignored in the keys, which is conservative: 3D distance >= horizontal distance);
+   (z is ignored in the keys by default, which is conservative: 3D distance >= horizontal
+   distance; with ``z_cell_m`` the keys also hold z cells, compared with the boundaries rather
+   than divided, so two z ranges that overlap strictly always share one);
 5. drop pairs whose inflated boxes or time intervals do not overlap and report each surviving
    pair only in one canonical cell (the one holding the low corner of the boxes' intersection),
    so the exact kernel runs once per pair of pieces that can actually come near.
@@ -42,7 +44,10 @@ from uam_contract import defaults
 from .trajectory import Trajectory
 
 DEFAULT_SEPARATION_M = defaults.SEPARATION_M   # the one source: uam_contract.defaults
-_MAX_PAIRS_PER_CHUNK = 1 << 20
+# Pairs per chunk of the narrow phase: 2^17 (was 2^20) keeps each chunk's temporaries (~1 MB)
+# in memory malloc reuses; at 2^20 they were mapped and unmapped per chunk: 2.9 s of system
+# time against 0.8 s in bench_horizon --in-process --cpu (H = 10, 300 s), the same pairs.
+_MAX_PAIRS_PER_CHUNK = 1 << 17
 # Broad-phase defaults, tuned on the paper- and city-scale instances of python -m uam_planner.bench
 # (corridors of 0.7-1 km): cells of 12 separations and time buckets of one cell's flight time
 # balance the cell keys per piece (sorting cost) against the pairs that share a cell without
@@ -420,16 +425,34 @@ def _cut_pieces(s: SegmentSet, cell_m: float, bucket_s: float, half_m: float,
                    np.minimum(p0[:, 2], z1) - half_z_m, np.maximum(p0[:, 2], z1) + half_z_m)
 
 
-def _check_groups(groups_a, single: bool, n_a: int):
-    """groups_a as an int64 array (or None), refused unless it labels every trajectory of a."""
-    if groups_a is None:
+def _labels(name: str, values, n: int):
+    """``values`` as an (n,) int64 array (or None), refused unless it labels every trajectory."""
+    if values is None:
         return None
-    if not single:
-        raise ValueError("groups_a is only supported when trajs_b is None")
-    groups = np.asarray(groups_a, dtype=np.int64)
-    if groups.shape != (n_a,):
-        raise ValueError(f"groups_a must have shape ({n_a},), got {groups.shape}")
-    return groups
+    arr = np.asarray(values, dtype=np.int64)
+    if arr.shape != (n,):
+        raise ValueError(f"{name} must have shape ({n},), got {arr.shape}")
+    return arr
+
+
+def _check_groups(groups_a, single: bool, n_a: int, groups_b=None, n_b: int = 0):
+    """(groups_a, groups_b) as int64 arrays (or None). Within one set groups_a alone; across two
+    sets both or neither (a pair is skipped when its two labels are equal)."""
+    if single and groups_b is not None:
+        raise ValueError("groups_b is only supported with trajs_b")
+    if not single and (groups_a is None) != (groups_b is None):
+        raise ValueError("with trajs_b, give both groups_a and groups_b or neither")
+    return _labels("groups_a", groups_a, n_a), _labels("groups_b", groups_b, n_b)
+
+
+def _check_ranks(rank_a, rank_b, single: bool, n_a: int, n_b: int, shifts: bool):
+    """(rank_a, rank_b) as int64 arrays (or None): both or neither, only across two sets and
+    not with shifts_a."""
+    if rank_a is None and rank_b is None:
+        return None, None
+    if single or shifts or (rank_a is None) != (rank_b is None):
+        raise ValueError("rank_a and rank_b go together, only with trajs_b and without shifts_a")
+    return _labels("rank_a", rank_a, n_a), _labels("rank_b", rank_b, n_b)
 
 
 def _check_shifts(shifts_a, single: bool, n_a: int):
@@ -493,22 +516,47 @@ class _Grid:
     nx: int = 0
     ny: int = 0
     nt: int = 0
+    z_bounds: np.ndarray | None = None  # z cell boundaries [m] (z in the keys), or None
+    nz: int = 1
 
     def ranges(self, p: _Pieces, t1):
-        """Per piece, the first and last cell index along x, y and t its box touches."""
-        return (np.floor((p.xlo - self.x0) / self.cell).astype(np.int64),
-                np.floor((p.xhi - self.x0) / self.cell).astype(np.int64),
-                np.floor((p.ylo - self.y0) / self.cell).astype(np.int64),
-                np.floor((p.yhi - self.y0) / self.cell).astype(np.int64),
-                np.floor((p.t0 - self.tt0) / self.bucket).astype(np.int64),
-                np.floor((t1 - self.tt0) / self.bucket).astype(np.int64))
+        """Per piece, the first and last cell index along x, y and t its box touches (and,
+        with ``z_bounds``, along z: see :func:`_z_ranges`)."""
+        r = (np.floor((p.xlo - self.x0) / self.cell).astype(np.int64),
+             np.floor((p.xhi - self.x0) / self.cell).astype(np.int64),
+             np.floor((p.ylo - self.y0) / self.cell).astype(np.int64),
+             np.floor((p.yhi - self.y0) / self.cell).astype(np.int64),
+             np.floor((p.t0 - self.tt0) / self.bucket).astype(np.int64),
+             np.floor((t1 - self.tt0) / self.bucket).astype(np.int64))
+        return r if self.z_bounds is None else r + _z_ranges(self.z_bounds, p)
 
 
-def _make_grid(pa: _Pieces, pb: _Pieces, pa_t1_sweep, cell: float, bucket: float) -> _Grid:
+def _z_ranges(bounds: np.ndarray, p: _Pieces):
+    """The z cells of each piece's z box [zlo, zhi), by comparison with the boundaries (no
+    division, so no rounding): first = #{b <= zlo} - 1, last = #{b < zhi} - 1. Two boxes that
+    overlap strictly (zlo_j < zhi_i, the z filter's test) then share the cell max(first_i,
+    first_j): {b <= zlo_j} is a subset of {b < zhi_i}. Boxes that only touch (two flight levels
+    exactly V apart) share no cell when the touching point is a boundary."""
+    return (np.searchsorted(bounds, p.zlo, side="right").astype(np.int64) - 1,
+            np.searchsorted(bounds, p.zhi, side="left").astype(np.int64) - 1)
+
+
+def _make_grid(pa: _Pieces, pb: _Pieces, pa_t1_sweep, cell: float, bucket: float,
+               z_cell_m: float | None = None, z_offset_m: float = 0.0) -> _Grid:
     """A grid origin shared by both sets so their keys agree; refuses extents whose cell
-    indices would not fit int64 (the float -> int conversion would wrap)."""
+    indices would not fit int64 (the float -> int conversion would wrap). ``z_cell_m``: z cells
+    of that height with boundaries at z_offset_m + k z_cell_m (None: z is not in the keys)."""
     grid = _Grid(min(pa.xlo.min(), pb.xlo.min()), min(pa.ylo.min(), pb.ylo.min()),
                  min(pa.t0.min(), pb.t0.min()), cell, bucket)
+    if z_cell_m is not None:
+        zmin = float(min(pa.zlo.min(), pb.zlo.min()))
+        z0 = z_offset_m + z_cell_m * np.floor((zmin - z_offset_m) / z_cell_m)
+        if z0 > zmin:  # rounding: the first boundary must lie at or below every box
+            z0 -= z_cell_m
+        span = float(max(pa.zhi.max(), pb.zhi.max())) - z0
+        n = int(np.ceil(span / z_cell_m)) + 2 if np.isfinite(span) else 0
+        if 0 < n <= 1 << 16:  # else (an absurd extent) z stays out of the keys
+            grid.z_bounds = z0 + float(z_cell_m) * np.arange(n, dtype=np.float64)
     # up to int64 indices, a too-large combined cell code is widened in _sorted_keys
     for axis, span_cells in (
             ("x", (max(pa.xhi.max(), pb.xhi.max()) - grid.x0) / cell),
@@ -525,12 +573,19 @@ def _expand_keys(r, side: int, offset: int, grid: _Grid, widened: bool, packed: 
                  item_bits: int):
     """Every (cell, side, item) key of the pieces with index ranges ``r``: the (t, y, x)
     coordinates when widened, else one int64 code (with the item packed in when it fits)."""
-    ix0, ix1, iy0, iy1, it0, it1 = r
+    ix0, ix1, iy0, iy1, it0, it1 = r[:6]
     cx = ix1 - ix0 + 1
     cy = iy1 - iy0 + 1
     cnt = cx * cy * (it1 - it0 + 1)
+    z = len(r) > 6
+    if z:
+        cz = r[7] - r[6] + 1
+        cnt = cnt * cz
     item = np.repeat(np.arange(cnt.shape[0], dtype=np.int64), cnt)
     local = np.arange(item.shape[0], dtype=np.int64) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+    if z:
+        local, iz = np.divmod(local, cz[item])
+        iz += r[6][item]
     cxi = cx[item]
     rest, ix = np.divmod(local, cxi)
     ix += ix0[item]
@@ -541,7 +596,11 @@ def _expand_keys(r, side: int, offset: int, grid: _Grid, widened: bool, packed: 
     item += offset
     if widened:
         return (it, iy, ix), item
-    code = ((it * grid.ny + iy) * grid.nx + ix) * 2 + side
+    code = (it * grid.ny + iy) * grid.nx + ix
+    if z:
+        code *= grid.nz
+        code += iz
+    code = code * 2 + side
     if packed:
         # one int64 holds (cell, side, item): a plain sort beats an argsort several-fold
         code <<= item_bits
@@ -560,6 +619,7 @@ class _SortedKeys:
     kt: np.ndarray
     ky: np.ndarray
     kx: np.ndarray
+    kz: np.ndarray | None = None  # with z in the keys
 
 
 def _sorted_keys(ra, rb, single: bool, na: int, n_items: int, grid: _Grid,
@@ -568,7 +628,7 @@ def _sorted_keys(ra, rb, single: bool, na: int, n_items: int, grid: _Grid,
     b's within a cell). Appends the time when the keys are made to ``clock`` (for ``stats``)."""
     item_bits = max(int(n_items).bit_length(), 1)
     # Python ints: the code of the last cell must fit int64 before any int64 arithmetic.
-    max_code = (grid.nt * grid.ny * grid.nx) * 2
+    max_code = (grid.nt * grid.ny * grid.nx * grid.nz) * 2
     packed = max_code.bit_length() + item_bits <= 63
     # Beyond int64 (e.g. 1e9 m and 1e12 s of extent) the single cell code would wrap around and
     # pieces of different cells would share a key or pieces of one cell be split, silently
@@ -607,8 +667,14 @@ def _sorted_keys(ra, rb, single: bool, na: int, n_items: int, grid: _Grid,
             items = items[order]
         cell_key = keys >> 1
         # cell coordinates of each sorted entry (for the canonical-cell test)
-        rest, kx = np.divmod(cell_key, grid.nx)
+        kz = None
+        if grid.z_bounds is not None:
+            rest, kz = np.divmod(cell_key, grid.nz)
+            rest, kx = np.divmod(rest, grid.nx)
+        else:
+            rest, kx = np.divmod(cell_key, grid.nx)
         kt, ky = np.divmod(rest, grid.ny)
+        return _SortedKeys(items, keys, cell_key, kt, ky, kx, kz)
     return _SortedKeys(items, keys, cell_key, kt, ky, kx)
 
 
@@ -656,10 +722,13 @@ class _PieceTable:
     S_zlo: np.ndarray
     S_zhi: np.ndarray
     S_traj: np.ndarray | None
+    S_group: np.ndarray | None = None  # two sets with groups: each sorted entry's group label
+    S_iz0: np.ndarray | None = None    # z in the keys: each sorted entry's first z cell
 
 
 def _piece_table(pa: _Pieces, pb: _Pieces, sa: SegmentSet, sb: SegmentSet, single: bool,
-                 pa_t1_sweep, slack: bool, items: np.ndarray) -> _PieceTable:
+                 pa_t1_sweep, slack: bool, items: np.ndarray, groups_ab=None,
+                 iz0=None) -> _PieceTable:
     if single:
         P_t0, P_t1, P_xlo, P_xhi, P_ylo, P_yhi = pa.t0, pa.t1, pa.xlo, pa.xhi, pa.ylo, pa.yhi
         P_zlo, P_zhi = pa.zlo, pa.zhi
@@ -677,9 +746,14 @@ def _piece_table(pa: _Pieces, pb: _Pieces, sa: SegmentSet, sb: SegmentSet, singl
     P_v = sa.v_mps[pa.seg] if single else np.concatenate((sa.v_mps[pa.seg], sb.v_mps[pb.seg]))
     # The same per-piece values in sorted-key order.
     S_t1 = P_t1[items] if not slack else np.concatenate((pa_t1_sweep, pb.t1))[items]
+    S_group = None
+    if not single and groups_ab is not None:
+        ga, gb = groups_ab
+        S_group = np.concatenate((ga[sa.traj[pa.seg]], gb[sb.traj[pb.seg]]))[items]
     return _PieceTable(P_t0, P_t1, P_p0, P_v, P_traj,
                        P_t0[items], S_t1, P_xlo[items], P_xhi[items], P_ylo[items], P_yhi[items],
-                       P_zlo[items], P_zhi[items], P_traj[items] if single else None)
+                       P_zlo[items], P_zhi[items], P_traj[items] if single else None, S_group,
+                       None if iz0 is None else iz0[items])
 
 
 def _box_filter(l, r, pt: _PieceTable, sk: _SortedKeys, grid: _Grid, single: bool, groups):
@@ -694,12 +768,17 @@ def _box_filter(l, r, pt: _PieceTable, sk: _SortedKeys, grid: _Grid, single: boo
         if groups is not None:
             ok &= groups[ti] != groups[tj]
         l, r = l[ok], r[ok]
+    elif pt.S_group is not None:
+        ok = pt.S_group[l] != pt.S_group[r]
+        l, r = l[ok], r[ok]
     # Filters in order of selectivity, compressing after each so later gathers are cheap
     # (on arrays in sorted-key order, so the gathers walk memory nearly sequentially).
     # z is not in the keys: first drop pieces whose z ranges, inflated by half the vertical
     # reach, do not overlap with positive length (a loss needs |dz| strictly below the
     # reach); at flight levels this removes most pairs sharing a cell
     ok = np.maximum(pt.S_zlo[l], pt.S_zlo[r]) < np.minimum(pt.S_zhi[l], pt.S_zhi[r])
+    if sk.kz is not None:  # z in the keys: the canonical z cell is the pair's first common one
+        ok &= np.maximum(pt.S_iz0[l], pt.S_iz0[r]) == sk.kz[l]
     l, r = l[ok], r[ok]
     lo = np.maximum(pt.S_t0[l], pt.S_t0[r])
     ok = lo <= np.minimum(pt.S_t1[l], pt.S_t1[r])
@@ -715,13 +794,21 @@ def _box_filter(l, r, pt: _PieceTable, sk: _SortedKeys, grid: _Grid, single: boo
     return sk.items[l[ok]], sk.items[r[ok]]
 
 
-def _narrow_phase(i, j, pt: _PieceTable, model: SeparationModel, first, shift):
+def _narrow_phase(i, j, pt: _PieceTable, model: SeparationModel, first, shift, ranks=None):
     """The exact check of the piece pairs (i, j): (a index, b index, distance) of the pairs
-    that lose separation (a index a candidate when shifted), or None; and the exact checks done."""
+    that lose separation (a index a candidate when shifted), or None; and the exact checks done.
+    ``ranks`` (rank_a, rank_b): the kernel takes the piece of the lower-ranked trajectory first
+    (its rounding is not symmetric to the last bit), as one call over the union would."""
     separation_m = model.separation_m
     if shift is None:
-        d = model.segment_measure(pt.P_t0[i], pt.P_t1[i], pt.P_p0[i], pt.P_v[i],
-                                  pt.P_t0[j], pt.P_t1[j], pt.P_p0[j], pt.P_v[j])
+        u, w = i, j
+        if ranks is not None:
+            # P_traj holds each set's own trajectory index (i of a, j of b)
+            swap = ranks[1][pt.P_traj[j]] < ranks[0][pt.P_traj[i]]
+            if swap.any():
+                u, w = np.where(swap, j, i), np.where(swap, i, j)
+        d = model.segment_measure(pt.P_t0[u], pt.P_t1[u], pt.P_p0[u], pt.P_v[u],
+                                  pt.P_t0[w], pt.P_t1[w], pt.P_p0[w], pt.P_v[w])
         lose = d < separation_m
         if not lose.any():
             return None, 0
@@ -757,7 +844,8 @@ def _unique_min_pairs(out_pairs, out_dist, nbt: int):
 def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPARATION_M,
                       groups_a=None, cell_m: float | None = None, bucket_s: float | None = None,
                       return_distances: bool = False, stats: dict | None = None,
-                      shifts_a=None):
+                      shifts_a=None, groups_b=None, rank_a=None, rank_b=None,
+                      z_cell_m: float | None = None):
     """Pairs of trajectories that lose separation at some time (exact, continuous time).
 
     Args:
@@ -766,8 +854,10 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
         separation_m: separation minimum [m] (the paper's sphere: a pair conflicts when its exact
             minimum 3D distance is strictly below it), or a :class:`SeparationModel` (sphere or
             cylinder).
-        groups_a: optional (n_a,) labels, only with ``trajs_b=None``: pairs within one group are
-            skipped (the candidates of one request exclude each other anyway).
+        groups_a: optional (n_a,) labels: pairs within one group are skipped (the candidates
+            of one request exclude each other anyway). With ``trajs_b``, together with
+            ``groups_b`` (n_b,): a pair (i, j) is skipped when groups_a[i] == groups_b[j], before
+            any box test (the planner's rolling horizon: a request's old and new candidates).
         cell_m, bucket_s: broad-phase cell size [m] (>= separation) and
             time bucket [s] (defaults: 12 x separation, and the time to fly one cell at the
             median segment speed).
@@ -782,6 +872,16 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
             and the exact check once per candidate of each surviving pair; the pairs returned
             are (candidate, j into b). The same answer as listing every shifted trajectory,
             for a fraction of the broad-phase work.
+        rank_a, rank_b: optional (n_a,) and (n_b,) ranks, only with ``trajs_b`` and without
+            ``shifts_a``: the exact kernel takes each pair's trajectory of the lower rank as its
+            first argument, so a pair's distance is the one, to the last bit, that a call within
+            one set ordered by rank computes (the kernel's rounding is not symmetric); one call
+            then stands for the two orientations.
+        z_cell_m: optional height [m] of z cells in the broad phase's keys (None: z is only
+            filtered, not keyed). The same pairs and distances either way (the exact kernel sees
+            the same piece pairs); with flight levels V apart and ``z_cell_m`` = V, pieces
+            cruising on different levels no longer share a cell (the rolling horizon's dense
+            graphs: see ``uam_planner.conflict_graph.CandidatePairCache``).
     Returns:
         (k, 2) int64 array of trajectory index pairs (i into a, j into b; i < j within one set),
         sorted lexicographically; with ``return_distances`` also (k,) float64 distances.
@@ -793,8 +893,12 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
     single = trajs_b is None
     sa = _as_segment_set(trajs_a)
     sb = sa if single else _as_segment_set(trajs_b)
-    groups = _check_groups(groups_a, single, sa.n_trajectories)
+    groups, groups_b = _check_groups(groups_a, single, sa.n_trajectories, groups_b,
+                                     sb.n_trajectories)
     first, shift, slack_traj = _check_shifts(shifts_a, single, sa.n_trajectories)
+    ranks = _check_ranks(rank_a, rank_b, single, sa.n_trajectories, sb.n_trajectories,
+                         shifts_a is not None)
+    ranks = None if ranks[0] is None else ranks
     empty = np.zeros((0, 2), dtype=np.int64)
     nothing = (empty, np.zeros(0)) if return_distances else empty
     if len(sa) == 0 or len(sb) == 0:
@@ -816,16 +920,30 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
     # a's pieces occupy their boxes until t1 plus their trajectory's largest shift
     pa_t1_sweep = pa.t1 if slack_traj is None else pa.t1 + slack_traj[sa.traj[pa.seg]]
     clock.append(time.perf_counter())
-    grid = _make_grid(pa, pb, pa_t1_sweep, cell, bucket)
+    if z_cell_m is not None and not (np.isfinite(z_cell_m) and z_cell_m > 0.0):
+        raise ValueError(f"z_cell_m must be positive and finite, got {z_cell_m!r}")
+    # z boundaries at -V/2 + k z_cell_m: flight levels at multiples of V = z_cell_m touch (their
+    # boxes, inflated by V/2) exactly on a boundary and share no cell
+    grid = _make_grid(pa, pb, pa_t1_sweep, cell, bucket, z_cell_m, -half_z)
     ra = grid.ranges(pa, pa_t1_sweep)
     rb = ra if single else grid.ranges(pb, pb.t1)
     grid.nx = int(max(ra[1].max(), rb[1].max())) + 1
     grid.ny = int(max(ra[3].max(), rb[3].max())) + 1
     grid.nt = int(max(ra[5].max(), rb[5].max())) + 1
+    if grid.z_bounds is not None:
+        grid.nz = int(max(ra[7].max(), rb[7].max())) + 1
+        if ((grid.nt * grid.ny * grid.nx * grid.nz) * 2).bit_length() > 63:
+            # the widened (coordinate) sort has no z: leave z out of the keys
+            grid.z_bounds, grid.nz = None, 1
+            ra, rb = ra[:6], rb[:6]
     n_items = na + (0 if single else pb.t0.shape[0])
     sk = _sorted_keys(ra, rb, single, na, n_items, grid, clock)
     left_pos, right_first, n_right = _cell_mates(sk, single)
-    pt = _piece_table(pa, pb, sa, sb, single, pa_t1_sweep, slack_traj is not None, sk.items)
+    iz0 = None
+    if grid.z_bounds is not None:
+        iz0 = ra[6] if single else np.concatenate((ra[6], rb[6]))
+    pt = _piece_table(pa, pb, sa, sb, single, pa_t1_sweep, slack_traj is not None, sk.items,
+                      None if single or groups is None else (groups, groups_b), iz0)
 
     # Narrow phase, in bounded chunks of cell-mate pairs: box filters, then the exact check.
     clock.append(time.perf_counter())
@@ -850,7 +968,7 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
         n_exact += int(i.size)
         if i.size == 0:
             continue
-        lost, extra = _narrow_phase(i, j, pt, model, first, shift)
+        lost, extra = _narrow_phase(i, j, pt, model, first, shift, ranks)
         n_exact += extra
         if lost is None:
             continue
