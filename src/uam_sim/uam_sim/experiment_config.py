@@ -101,6 +101,10 @@ class ExperimentConfig:
             error, departure delay, path following); {} = none, the plans flown exactly. The
             flights' draws are seeded by the cell's seed (the ``seed`` field is ignored).
         conformance: fields of ``uam_sim.conformance.ConformanceBounds`` ({} = the defaults).
+        reaction: the planner reacts to nonconforming flights (issue 23 item 3,
+            ``uam_planner.nonconformance``): the runner's monitor reports them, the planner
+            checks each report against its own view and updates the intent; false (default) =
+            no reaction. Needs ``disturbance``.
         metrics_warmup_s: the decision metrics (delay, shares, ...) leave out requests whose
             earliest departure is before it (the warm-up); 0 = none.
         cumulative_rates: rates shown in the cumulative-approvals figure (default: up to 4 spread).
@@ -154,6 +158,7 @@ class ExperimentConfig:
     temporal_buffer_s: float = 0.0
     disturbance: dict = field(default_factory=dict)
     conformance: dict = field(default_factory=dict)
+    reaction: bool = False
     tts: dict = field(default_factory=lambda: {
         "enabled": True, "instances": 629, "min_vertices": 5, "max_vertices": 50, "reads": 100,
         "repetitions": 5, "backend_instances": {"qpu-emulator": 60},
@@ -186,7 +191,8 @@ class ExperimentConfig:
                               horizon_epochs=self.horizon_epochs,
                               commit_ahead=self.commit_ahead, fair_window_s=self.fair_window_s,
                               spatial_buffer_m=self.spatial_buffer_m,
-                              temporal_buffer_s=self.temporal_buffer_s)
+                              temporal_buffer_s=self.temporal_buffer_s,
+                              conformance=self.conformance_bounds() if self.reaction else None)
 
     def disturbance_config(self):
         """The DisturbanceConfig of ``disturbance`` (off when empty); its seed is the cell's."""
@@ -292,6 +298,8 @@ def make_config(data: dict | None = None, **overrides) -> ExperimentConfig:
                          operator_lead_times_s=cfg.operator_lead_times_s)
     except DemandError as exc:
         raise ExperimentError(str(exc)) from None
+    if not isinstance(cfg.reaction, bool):
+        raise ExperimentError(f"reaction: {cfg.reaction!r} is not true or false")
     for name in ("disturbance", "conformance"):
         if not isinstance(getattr(cfg, name), dict):
             raise ExperimentError(f"{name}: {getattr(cfg, name)!r} must be a mapping")
