@@ -31,15 +31,16 @@ at its *observed progress rate* f (planned seconds flown per second, so 0.9 = 10
 from the observed position q at the observation time t0, straight to the first waypoint of its
 plan beyond the point of the path nearest to q, then the plan's remaining waypoints, every leg
 timed at f times the plan's speed (:func:`rejoin_trajectory`). Alternatives: that rejoin at
-``f``, and at ``SLOWER`` x f (the aircraft asked to fly slower, which delays it but can clear a
-neighbour). One conflict graph over every nonconforming flight's alternatives (one clique per
+``f``, and at ``SHARES`` x f (the aircraft asked to fly slower, which delays it, or 10 % faster,
+either of which can clear a neighbour). One conflict graph over every nonconforming flight's alternatives (one clique per
 flight), each alternative deconflicted exactly against every other active flight (the run's
 separation model, from t_eff on), solved by the planner's selector (the same as issue 22's
 batch re-planning: MWIS with the answer checked and greedy as fallback, or first-fit). Weights
 2 + 1 / (1 + delay / 300 s), delay = arrival - the arrival of the rejoin at f (the tier of a
-re-route in ``uam_planner.replanning``). The chosen one becomes version + 1 (``PlanUpdate`` of
-kind ``nonconforming``, ``effective_s`` = t_eff); with none chosen the rejoin at f is taken as a
-``contingency`` (``Flight.contingent``, F3548 Contingent). The F3548 state at the decision is
+re-route in ``uam_planner.replanning``; a faster one weighs as the rejoin at f). The chosen one
+becomes version + 1 (``PlanUpdate`` of kind ``nonconforming``, ``effective_s`` = t_eff); with none
+chosen the alternative that loses separation with the fewest flights (then lands soonest) is
+taken as a ``contingency`` (``Flight.contingent``, F3548 Contingent). The F3548 state at the decision is
 Nonconforming (``FlightPlan.STATE_NONCONFORMING`` on the wire): the flight was outside its intent
 from the report until its new version took effect, and conforms to the new one.
 
@@ -76,8 +77,9 @@ MIN_SPEED_SPAN_S = 10.0
 #: the estimated progress rate is clipped to this range (performance: an eVTOL does not fly
 #: at half or twice its planned speed; a wild estimate would not be flown anyway)
 RATE_RANGE = (0.5, 1.5)
-#: the slower alternatives, as shares of the observed rate
-SLOWER = (0.9, 0.8)
+#: the other alternatives, as shares of the observed rate: slower (a delay), and 10 % faster (the
+#: speed margin an aircraft keeps; 4D guidance asks for as much)
+SHARES = (0.9, 1.1, 0.8, 0.7)
 DELAY_SCALE_S = 300.0
 _EPS_T = 1e-9
 
@@ -265,6 +267,23 @@ def _clipped(tr: Trajectory, t_s: float) -> Trajectory | None:
     return clipped_from(tr, t_s)
 
 
+def _least_conflicting(alts: list, others: list, config, t_eff: float):
+    """Of (trajectory, weight) alternatives, the one that loses separation (from t_eff on) with
+    the fewest of ``others``, then the one that lands soonest."""
+    from .separation import SegmentSet, conflicting_pairs
+    n_conf = np.zeros(len(alts), dtype=np.int64)
+    oset = SegmentSet.from_trajectories(others) if others else None
+    if oset is not None and len(oset):
+        oset = oset.take(oset.t1_s >= t_eff)
+    if oset is not None and len(oset):
+        aset = SegmentSet.from_trajectories([_clipped(a[0], t_eff) or a[0] for a in alts])
+        pairs = conflicting_pairs(aset, oset, config.separation)
+        for i in np.unique(pairs[:, 0]).tolist():
+            n_conf[i] = np.unique(pairs[pairs[:, 0] == i, 1]).size
+    k = min(range(len(alts)), key=lambda i: (int(n_conf[i]), alts[i][0].arrival_s))
+    return alts[k]
+
+
 def react(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: PositionBook,
           config, select: Callable, policy: str, network=None) -> tuple[list, list, dict]:
     """Update the intents of the nonconforming flights ``found`` at the epoch ``t_eff``.
@@ -304,7 +323,7 @@ def react(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: P
         report["rates"][f.request_id] = rate
         alts = []
         base = None
-        for share in (1.0,) + tuple(SLOWER):
+        for share in (1.0,) + tuple(SHARES):
             tr = rejoin_trajectory(f.trajectory, obs.t_s, obs.position_m, rate * share)
             if tr is None or tr.arrival_s <= t_eff:
                 continue
@@ -350,7 +369,8 @@ def react(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: P
         if a is None:
             if not per[r]:
                 continue  # nothing left to fly: it is at its plan's end (it keeps its plan)
-            a = per[r][0]
+            a = _least_conflicting(per[r], [f.trajectory for f in others] +
+                                   [x.trajectory for x in new_versions], config, t_eff)
             kind = KIND_CONTINGENCY
             reason = (f"contingency: {what}; each of its {len(per[r])} updated intents loses "
                       f"separation with another flight: flown but not deconflicted")
