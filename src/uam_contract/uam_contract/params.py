@@ -258,6 +258,11 @@ SIMULATOR = (
     Param("compensate_steady_wind", True, "the aircraft crabs against the steady wind (false: it drifts)"),
     Param("disturbance_seed", 0, "seed of the wind field and of every flight's draws (run_fleet.sh passes "
           "the run's --seed)", 0, INT32_MAX),
+    Param("vertical_gust_std_mps", 0.0, "standard deviation of the vertical gust [m/s]; 0 = none", 0.0, 100.0),
+    Param("altitude_error_m", 0.0, "per-flight altitude-hold error bound: the height held above the plan is "
+          "uniform in [-altitude_error_m, altitude_error_m] [m]; 0 = none", 0.0, 10000.0),
+    Param("altitude_gain_per_s", 0.1, "altitude-hold gain of the path-following model [1/s]", 0.001, 100.0),
+    Param("max_vertical_m", 30.0, "bound of the height offset of the path-following model [m]", 0.001, 10000.0),
 )
 
 REQUEST_GENERATOR = (

@@ -96,7 +96,7 @@ def aggregate(point: tuple, cells: list[dict]) -> dict:
     appr = sum(x["approved"] for x in s)
     mins = [x["flown_min_separation_m"] for x in s if x["flown_min_separation_m"] is not None]
     return {"speed_error": point[0], "spatial_buffer_m": point[1], "temporal_buffer_s": point[2],
-            "reaction": bool(point[3]), "runs": len(cells), "requests": req, "flights": appr,
+            "reaction": bool(point[3]) if len(point) > 3 else False, "runs": len(cells), "requests": req, "flights": appr,
             "approval_rate": appr / req if req else float("nan"),
             "conformance_percent": (sum(x["conf_conformance_percent"] * x["conf_flight_hours"] for x in s)
                                     / hours if hours else 100.0),
