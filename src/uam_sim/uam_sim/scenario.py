@@ -422,6 +422,29 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
                               "edges": np.asarray(rep.edges_array).reshape(-1, 2).tolist(),
                               "groups": groups_from_ids(rep.vertex_request_ids)})
 
+    if reaction is not None:
+        # the flights approved by the end fly on after it: the reaction goes on (no new requests,
+        # none planned: the requests still pending are dropped) until the last one has landed,
+        # so every flight is monitored and updated to its end
+        planner.pending = []
+        e = n_epochs
+        while any(f.get("_flown") is not None and f["_flown"].arrival_s >= e * cfg.epoch_s
+                  for f in flights if not f.get("cancelled")):
+            t = e * cfg.epoch_s
+            reaction.before_epoch(t, flights)
+            res = planner.plan(t, e)
+            rates = (res.report.nonconformance or {}).get("rates", {})
+            for u in res.plan_updates:
+                row = by_id.get(u.request_id)
+                if row is not None and _is_reaction(u):
+                    row["version"], row["replan"] = u.version, u.kind
+                    row["arrival_s"] = u.flight.arrival_s
+                    reaction.apply(u, row, rates[u.request_id])
+                    replans.append({"t_s": t, "request_id": u.request_id, "kind": u.kind,
+                                    "version": u.version, "constraints": "",
+                                    "added_delay_s": u.added_delay_s, "airborne": True})
+            _apply_plan_updates([u for u in res.plan_updates if not _is_reaction(u)], by_id, replans, t)
+            e += 1
     audit = {}
     flown = [f for f in flights if not f.get("cancelled")]
     if cfg.audit:
