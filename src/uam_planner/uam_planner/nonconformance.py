@@ -262,6 +262,24 @@ def rejoin_trajectory(plan: Trajectory, t0_s: float, q, rate: float) -> Trajecto
     return Trajectory(np.array(times), np.array(points))
 
 
+#: the reason of a nonconforming update names the observed progress rate after this word; the
+#: simulator reads it back (:func:`rate_of`) to fly the aircraft on at the airspeed it had
+RATE_WORD = "observed progress rate"
+
+
+def rate_of(reason: str) -> float | None:
+    """The observed progress rate a nonconforming update's reason names (None if none)."""
+    i = reason.find(RATE_WORD)
+    if i < 0:
+        return None
+    word = reason[i + len(RATE_WORD):].split()[0].rstrip(";,)")
+    try:
+        v = float(word)
+    except ValueError:
+        return None
+    return v if math.isfinite(v) and RATE_RANGE[0] <= v <= RATE_RANGE[1] else None
+
+
 def _clipped(tr: Trajectory, t_s: float) -> Trajectory | None:
     from .replanning import clipped_from
     return clipped_from(tr, t_s)
@@ -362,8 +380,7 @@ def react(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: P
         f = active[i]
         obs, (lat, ver, terr) = found[i]
         what = (f"nonconforming at t = {obs.t_s:g} s (lateral {lat:.1f} m, vertical {ver:.1f} m, "
-                f"time {terr:+.1f} s); intent updated from where it is at {100 * rates[r]:.0f} % "
-                f"of its planned speed")
+                f"time {terr:+.1f} s); intent updated from where it is, {RATE_WORD} {rates[r]:.12g}")
         a = chosen.get(r)
         contingent = a is None
         if a is None:

@@ -375,6 +375,22 @@ def fly_plans(plans: Sequence[Trajectory], flight_ids: Sequence[str], config: Di
     return fly_batch(plans, [flight_draws(config, fid) for fid in flight_ids], config, wind)
 
 
+def fly_on(flown: Trajectory, new_plan: Trajectory, speed_error: float, rate: float,
+           config: DisturbanceConfig, wind: WindField | None = None) -> tuple[Trajectory, float]:
+    """What flies after a nonconforming update (issue 23 item 3, ``uam_planner.nonconformance``):
+    ``flown`` up to the new plan's start, then the model flying ``new_plan`` from its first point
+    (where the aircraft was), on time, with the aircraft's airspeed as it flew: the update timed
+    the new plan at ``rate`` (the observed progress rate) times the old plan's speeds, so the
+    aircraft's speed error against the new plan is (1 + e) / rate - 1. Returns (the flown
+    track, that speed error, to be used for the next update of the same flight)."""
+    e_new = (1.0 + float(speed_error)) / float(rate) - 1.0
+    t0 = float(new_plan.departure_s)
+    cont = fly_batch([new_plan], [FlightDraws(e_new, 0.0)], config, wind)[0]
+    keep = flown.times_s < t0 - 1e-9
+    return (Trajectory(np.concatenate((flown.times_s[keep], cont.times_s)),
+                       np.concatenate((flown.points_m[keep], cont.points_m))), e_new)
+
+
 #: simulator parameter -> DisturbanceConfig field (uam_contract.params.SIMULATOR)
 SIMULATOR_PARAMS = {"wind_speed_mps": "wind_speed_mps", "wind_from_deg": "wind_from_deg",
                     "gust_std_mps": "gust_std_mps", "gust_length_m": "gust_length_m",

@@ -183,21 +183,13 @@ class _Reaction:
 
     def apply(self, u, row, rate: float) -> None:
         """Fly a nonconforming update of ``row`` from where the aircraft is."""
-        from .disturbance import FlightDraws, fly_batch
+        from .disturbance import flight_draws, fly_on
         new = u.flight.trajectory
         t0 = float(new.departure_s)
         e = row.get("_e")
         if e is None:
-            from .disturbance import flight_draws
             e = flight_draws(self.dcfg, row["request_id"]).speed_error
-        e_new = (1.0 + e) / float(rate) - 1.0
-        fl = row["_flown"]
-        cont = fly_batch([new], [FlightDraws(e_new, 0.0)], self.dcfg, self.wind)[0]
-        keep = fl.times_s < t0 - 1e-9
-        from uam_planner.trajectory import Trajectory
-        row["_flown"] = Trajectory(np.concatenate((fl.times_s[keep], cont.times_s)),
-                                   np.concatenate((fl.points_m[keep], cont.points_m)))
-        row["_e"] = e_new
+        row["_flown"], row["_e"] = fly_on(row["_flown"], new, e, rate, self.dcfg, self.wind)
         row["_t0"] = t0
         row.setdefault("_pieces", [(float(row["_traj"].departure_s), row["_traj"])])
         row["_pieces"].append((t0, new))
