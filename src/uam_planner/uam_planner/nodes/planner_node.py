@@ -134,9 +134,16 @@ class PlannerNode(Node):
         # checked against it and against the planner's plan at the next epoch
         self.conformance_reports = 0
         self.conformance_reports_refused = 0
+        # the messages go to an inbox (a deque: appends are atomic) from their own callback group,
+        # so a busy epoch never holds them up; the planner reads the inbox before each epoch
+        self._inbox: collections.deque = collections.deque()
         if self.p["reaction"]:
-            self.create_subscription(FleetState, c.TOPIC_FLEET, self._on_fleet, qos.QOS_STREAM)
-            self.create_subscription(Conformance, c.TOPIC_CONFORMANCE, self._on_conformance, qos.QOS_STREAM)
+            from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+            group = MutuallyExclusiveCallbackGroup()
+            self.create_subscription(FleetState, c.TOPIC_FLEET, lambda msg: self._inbox.append(msg), qos.QOS_STREAM,
+                                     callback_group=group)
+            self.create_subscription(Conformance, c.TOPIC_CONFORMANCE, lambda msg: self._inbox.append(msg), qos.QOS_STREAM,
+                                     callback_group=group)
         self._client = self.create_client(SolveMwis, c.SERVICE_SOLVE, callback_group=self._group)
         self._service = None  # offered once the solver is up (or its start-up wait is over)
         self._started_at = time.monotonic()
@@ -173,12 +180,21 @@ class PlannerNode(Node):
             f"{self.config.separation.kind}, departure slot {self.config.airspace.departure_slot_s:g} s, "
             f"{len(self.config.constraints or ())} constraint(s)")
 
+    def _read_inbox(self) -> None:
+        """Under the lock, before an epoch: every fleet state and conformance report received,
+        in the order received."""
+        while self._inbox:
+            msg = self._inbox.popleft()
+            if isinstance(msg, FleetState):
+                self._on_fleet(msg)
+            else:
+                self._on_conformance(msg)
+
     def _on_fleet(self, msg: FleetState) -> None:
         """The planner's own observation of every vehicle in the fleet state."""
         t = m.from_time(msg.header.stamp)
-        with self._lock:
-            for v in msg.vehicles:
-                self.planner.observe(v.vehicle_id, t, (v.position.x, v.position.y, v.position.z))
+        for v in msg.vehicles:
+            self.planner.observe(v.vehicle_id, t, (v.position.x, v.position.y, v.position.z))
 
     def _on_conformance(self, msg: Conformance) -> None:
         """Each vehicle the monitor calls nonconforming: a claim, queued for the next epoch, where
@@ -190,13 +206,12 @@ class PlannerNode(Node):
                                       f"flags: refused")
             return
         t = m.from_time(msg.header.stamp)
-        with self._lock:
-            for vid, good in zip(ids, ok):
-                if good:
-                    continue
-                self.conformance_reports += 1
-                if self.planner.report_nonconforming(vid, t, "conformance_monitor") is not None:
-                    self.conformance_reports_refused += 1
+        for vid, good in zip(ids, ok):
+            if good:
+                continue
+            self.conformance_reports += 1
+            if self.planner.report_nonconforming(vid, t, "conformance_monitor") is not None:
+                self.conformance_reports_refused += 1
 
     @property
     def config(self) -> PlanningConfig:
@@ -558,6 +573,7 @@ class PlannerNode(Node):
             self.get_logger().warning(f"epoch {k}: planning without {len(missing)} expected request(s) that did "
                                       f"not arrive within {self.p['request_wait_timeout_s']:g} s: {missing[:5]}")
         with self._lock:
+            self._read_inbox()   # issue 23: the fleet states and conformance reports received so far
             prep = self.planner.prepare(t_s, k)   # applies the constraint updates due (docs/replanning.md)
             self._publish_constraint_changes(t_s)
         t0 = time.perf_counter()
