@@ -145,3 +145,36 @@ def test_with_no_deconflicted_update_it_stays_in_the_picture_as_a_contingency():
     assert u.kind == "contingency" and u.flight.contingent
     assert u.flight.arrival_s == pytest.approx(120.0 + 4920.0 / 9.9)
     assert {f.request_id for f in p.active} == {"P", "Q2"}
+
+
+def test_the_runner_reacts_and_off_is_todays_run():
+    """The in-process runner with --reaction: its monitor reports, the planner confirms and
+    updates, the aircraft fly on; conformance improves and every update is recorded. Reaction
+    off is the run without the option, field for field (timings aside)."""
+    from uam_planner.network import load_network
+    from uam_sim.experiment_config import REPO_ROOT, make_config
+    from uam_sim.scenario import run_scenario
+    from uam_sim.sweep import TIMING_FIELDS
+    net = load_network(REPO_ROOT / "config" / "networks" / "tiny.yaml")
+    dist = {"speed_error": 0.3, "gust_std_mps": 0.5}
+    base = dict(epoch_s=30.0, time_limit_s=5.0, corpus_max_vertices=0, disturbance=dist)
+    off = run_scenario(net, "greedy", 3.0, 4, 300.0, make_config(base))
+    off2 = run_scenario(net, "greedy", 3.0, 4, 300.0, make_config(dict(base, reaction=False)))
+    on = run_scenario(net, "greedy", 3.0, 4, 300.0, make_config(dict(base, reaction=True)))
+    import json
+    strip = lambda s: json.dumps({k: v for k, v in s.items() if k not in TIMING_FIELDS},  # noqa: E731
+                                 sort_keys=True, default=str)
+    assert strip(off.summary) == strip(off2.summary) and off.flights == off2.flights
+    kinds = [r["kind"] for r in on.replans]
+    assert kinds and set(kinds) <= {KIND, "contingency"} and on.summary["nonconforming_updates"] > 0
+    assert on.summary["conf_conformance_percent"] > off.summary["conf_conformance_percent"]
+    assert on.summary["conf_longest_excursion_s"] < off.summary["conf_longest_excursion_s"]
+    # every update is a new version of a flight the run approved, decided at an epoch
+    ids = {f["request_id"] for f in on.flights}
+    assert all(r["request_id"] in ids and r["version"] >= 2 and r["t_s"] % 30.0 == 0 for r in on.replans)
+    # the plans (every version while in force) lose separation only where a contingency (flown,
+    # not deconflicted) is one of the pair
+    contingent = {r["request_id"] for r in on.replans if r["kind"] == "contingency"}
+    pairs = on.audit["loss_pairs"]
+    assert len(pairs) == min(on.summary["losses"], 20)
+    assert all(a in contingent or b in contingent for a, b, _d, _t in pairs)
