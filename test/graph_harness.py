@@ -45,7 +45,7 @@ def make_observer(context):
 
 def build_graph(context, *, network=TINY, rate=2.0, seed=3, duration_s=300.0, policy="mwis", backend="exact",
                 with_solver=True, with_planner=True, planner_extra=None, simulator_extra=None, generator_extra=None,
-                record_to=None, threads=4, recorder_extra=None):
+                record_to=None, threads=4, recorder_extra=None, conformance=False):
     """The graph's nodes on one multi-threaded executor; returns (executor, nodes dict, observer).
 
     Readiness is the epoch protocol: the simulator starts once the planner's and the generator's
@@ -66,11 +66,16 @@ def build_graph(context, *, network=TINY, rate=2.0, seed=3, duration_s=300.0, po
         from uam_sim.nodes.recorder_node import RecorderNode
         nodes["recorder"] = RecorderNode(context=context, parameter_overrides=params(
             output=str(record_to), network=network, rerun="off", **(recorder_extra or {})))
+    waits = ["recorder"] if record_to is not None else []
+    if conformance:  # issue 23: the conformance monitor, which the simulator waits for
+        from uam_sim.nodes.conformance_node import ConformanceNode
+        nodes["conformance_monitor"] = ConformanceNode(context=context)
+        waits.append("conformance_monitor")
     observer_node, obs = make_observer(context)
     nodes["observer"] = observer_node
     from uam_sim.nodes.simulator_node import SimulatorNode
     nodes["simulator"] = SimulatorNode(context=context, parameter_overrides=params(
-        duration_s=float(duration_s), wait_for_subscribers=["recorder"] if record_to is not None else [""],
+        duration_s=float(duration_s), wait_for_subscribers=waits or [""],
         **(simulator_extra or {})))
     executor = MultiThreadedExecutor(num_threads=threads, context=context)
     for n in nodes.values():

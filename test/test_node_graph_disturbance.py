@@ -48,3 +48,45 @@ def test_fleet_state_is_what_flew_and_the_analysis_audits_it(ros_context, spin_u
     assert 0.0 < summary.flown["conformance"]["conformance_percent"] <= 100.0
     text = format_summary(summary)
     assert "Flown audit" in text and "the audit above is of the plans" in text and "Conformance" in text
+
+
+def test_the_graph_reacts_to_a_nonconforming_flight_and_flies_its_update(ros_context, spin_until, tmp_path):
+    """Reaction on (issue 23 item 3): the conformance monitor reports, the planner checks the
+    report against the fleet state it saw and its plan, updates the intent from where the
+    aircraft is (a FlightPlan of version 2, update_kind nonconforming, state Nonconforming) and
+    the simulator flies it on from there; the plans keep separation, the analysis reads it."""
+    # +-30 %: late or early by 10 s within a minute; real time x 10 (lockstep outruns the one-process
+    # harness: the planner would read fleet states 80 s old and rightly refuse every report)
+    sim = {"speed_error": 0.3, "disturbance_seed": 2, "mode": "realtime", "real_time_factor": 10.0}
+    executor, nodes, obs = build_graph(ros_context, rate=3.0, seed=5, duration_s=300.0, backend="greedy",
+                                       simulator_extra=sim, planner_extra={"reaction": True},
+                                       conformance=True, record_to=tmp_path / "run.mcap")
+    try:
+        run_to_end(executor, nodes, obs, spin_until, timeout_s=300.0)
+    finally:
+        shutdown(executor, nodes)
+    updates = [p for p in obs.plans if int(p.version) > 1]
+    assert updates, "no nonconforming flight was updated"
+    assert {p.update_kind for p in updates} <= {"nonconforming", "contingency"}
+    nc = [p for p in updates if p.update_kind == "nonconforming"]
+    assert nc and all(p.state == FlightPlan.STATE_NONCONFORMING for p in nc)
+    assert all("observed progress rate" in p.reason for p in updates)
+    # every update was flown (realtime under a heavy load can make the simulator refuse a
+    # duplicated first approval, "already flying": counted in fly_errors, not a version)
+    flown = {(p.operator_id, p.request_id, int(p.version)) for p in nodes["simulator"].flown_plans}
+    assert all((p.operator_id, p.request_id, int(p.version)) in flown for p in updates)
+    assert nodes["simulator"].versions_received == len(updates)
+    # the newest versions keep separation with each other from their effective times on
+    from uam_planner.audit import audit_flights
+    from uam_planner.replanning import clipped_from
+    newest = {}
+    for p in obs.plans:
+        if p.outcome == FlightPlan.OUTCOME_APPROVED:
+            newest[(p.operator_id, p.request_id)] = p
+    t_last = max(m.from_time(p.effective_time) for p in updates)
+    trs = [clipped_from(m.trajectory_from_plan(p), t_last) for p in newest.values()
+           if p.update_kind != "contingency"]
+    assert audit_flights([t for t in trs if t is not None], separation_m=100.0).losses == []
+    from uam_sim.analysis import summarize
+    summary = summarize(tmp_path / "run.mcap")
+    assert summary.flown["what"] == "flown"

@@ -357,3 +357,41 @@ def test_whatever_a_rogue_caller_sends_the_flown_fleet_keeps_its_separation(ros_
     assert _flown_by_simulator_audit(sim).ok
     if not knows_token:
         assert not sim.error and decisions(obs.plans) == _clean(), sim.error
+
+
+def test_forged_conformance_reports_never_drop_a_flight_nor_change_a_conforming_one(ros_context, spin_until):
+    """A rogue publishes on uam/conformance that every vehicle it sees (and some that do not
+    exist) is nonconforming, at every fleet state. The planner (reaction on) takes a report as a
+    claim: it checks it against its own plan and the fleet state it saw (issue 23,
+    uam_planner.nonconformance). The fleet flies its plans exactly, so every claim is refused:
+    the run is the clean run, no flight gets a new version, none is dropped, and what flew keeps
+    its separation."""
+    from uam_msgs.msg import Conformance, FleetState
+
+    def attack(executor, nodes, rogue):
+        pub = rogue.node.create_publisher(Conformance, c.TOPIC_CONFORMANCE, qos.QOS_STREAM)
+        sent = []
+
+        def forge(fs):
+            ids = [v.vehicle_id for v in fs.vehicles] + ["nobody/x", "generator/never"]
+            pub.publish(Conformance(header=fs.header, step_index=fs.step_index, vehicle_ids=ids,
+                                    conforming=[False] * len(ids), lateral_m=[500.0] * len(ids),
+                                    vertical_m=[0.0] * len(ids), time_error_s=[60.0] * len(ids),
+                                    excursion_s=[30.0] * len(ids)))
+            sent.append(len(ids))
+        rogue.node.create_subscription(FleetState, c.TOPIC_FLEET, forge, qos.QOS_STREAM)
+        # and one malformed report (lengths that do not match)
+        pub.publish(Conformance(vehicle_ids=["generator/a", "generator/b"], conforming=[False]))
+        return sent
+
+    obs, nodes, sent = _run_with_rogue(ros_context, spin_until, attack, planner_extra={"reaction": True})
+    sim, planner = nodes["simulator"], nodes["planner"]
+    assert not sim.error, sim.error
+    assert sum(sent) > 50 and planner.conformance_reports > 50
+    assert decisions(obs.plans) == _clean()
+    assert [p for p in obs.plans if int(p.version) > 1] == []        # no flight was re-planned
+    assert sim.fly_errors == 0 and _flown_by_simulator_audit(sim).ok
+    # every approved flight flew: none was dropped from the fleet by a report
+    flown = {f"{p.operator_id}/{p.request_id}" for p in sim.flown_plans}
+    assert flown == {f"{p.operator_id}/{p.request_id}" for p in obs.plans
+                     if p.outcome == FlightPlan.OUTCOME_APPROVED}

@@ -45,12 +45,14 @@ def generate_launch_description() -> LaunchDescription:
     airspace = {"separation_model": a["separation"], "separation_m": a["separation_m"],
                 "vertical_separation_m": a["vertical_separation_m"], "departure_slot_s": a["slot_s"]}
     # as run_fleet.sh: the conformance monitor (issue 23) runs when asked, or with auto when a
-    # disturbance is set (an undisturbed fleet flies its plans exactly); the simulator then
+    # disturbance is set (an undisturbed fleet flies its plans exactly) or the planner reacts to
+    # its reports (reaction:=true); the simulator then
     # waits for it as for the recorder
     conformance_on = PythonExpression([
-        "'", a["conformance"], "' == 'true' or ('", a["conformance"], "' == 'auto' and any(float(x) != 0 "
+        "'", a["conformance"], "' == 'true' or ('", a["conformance"], "' == 'auto' and ('", a["reaction"],
+        "' == 'true' or any(float(x) != 0 "
         "for x in ('", a["wind_speed_mps"], "', '", a["gust_std_mps"], "', '", a["speed_error"], "', '",
-        a["delay_mean_s"], "')))"])
+        a["delay_mean_s"], "'))))"])
     recorder_prefix = "nice -n 19"
     sim_params = {"duration_s": a["duration"], "mode": a["mode"], "real_time_factor": a["rtf"],
                   # disturbances (issue 23), seeded by the run's seed
@@ -75,6 +77,7 @@ def generate_launch_description() -> LaunchDescription:
                                                    "baseline_order": a["baseline_order"],
                                                    "horizon_epochs": a["horizon_epochs"],
                                                    "commit_ahead": a["commit_ahead"],
+                                                   "reaction": a["reaction"],
                                                    "journal": PathJoinSubstitution([out, "planner-journal.jsonl"]),
                                                    "climb_rate_mps": a["climb_rate"],
                                                    "descent_rate_mps": a["descent_rate"],

@@ -38,6 +38,8 @@ LAUNCH_OPTIONS: tuple[LaunchOption, ...] = (
                  "epochs the MWIS plans jointly (rolling horizon; 1 = the paper's)"),
     LaunchOption("--commit-ahead", "COMMIT_AHEAD", "commit_ahead", "false",
                  "with --horizon > 1, commit the horizon's later departures now as reservations"),
+    LaunchOption("--reaction", "REACTION", "reaction", "false",
+                 "the planner updates a nonconforming flight's intent (reports checked against its own view)"),
     LaunchOption("--priority-share", "PRIORITY_SHARE", "priority_share", "0",
                  "share of random requests of priority class 1 (e.g. 0.05)"),
     LaunchOption("--lead-time", "LEAD_TIME", "lead_time_s", "0",

@@ -136,6 +136,16 @@ PLANNER = (
     Param("temporal_buffer_s", 0.0, "temporal planning buffer [s]: plans keep the minimum plus the spatial "
           "buffer between any two times this far apart (the separation widened by v_max x it; "
           "docs/disturbances.md); 0 = none (the paper's)", 0.0, 3600.0),
+    Param("reaction", False, "react to nonconforming flights (issue 23, uam_planner.nonconformance): each "
+          "report on uam/conformance is checked against the planner's own plan and the fleet state it saw, "
+          "and a confirmed one gets the flight's intent updated from where it is, deconflicted; false = "
+          "reports ignored (the paper's)"),
+    Param("reaction_lateral_m", 30.0, "the planner's lateral conformance bound when it checks a report [m] "
+          "(the conformance monitor's lateral_m)", 0.001, 100000.0),
+    Param("reaction_vertical_m", 15.0, "the planner's vertical conformance bound [m] (the monitor's vertical_m)",
+          0.001, 10000.0),
+    Param("reaction_time_s", 10.0, "the planner's time conformance bound [s] (the monitor's time_s)",
+          0.001, 86400.0),
 )
 
 SOLVER = (
@@ -191,6 +201,11 @@ SIMULATOR = (
     Param("compensate_steady_wind", True, "the aircraft crabs against the steady wind (false: it drifts)"),
     Param("disturbance_seed", 0, "seed of the wind field and of every flight's draws (run_fleet.sh passes "
           "the run's --seed)", 0, INT32_MAX),
+    Param("vertical_gust_std_mps", 0.0, "standard deviation of the vertical gust [m/s]; 0 = none", 0.0, 100.0),
+    Param("altitude_error_m", 0.0, "per-flight altitude-hold error bound: the height held above the plan is "
+          "uniform in [-altitude_error_m, altitude_error_m] [m]; 0 = none", 0.0, 10000.0),
+    Param("altitude_gain_per_s", 0.1, "altitude-hold gain of the path-following model [1/s]", 0.001, 100.0),
+    Param("max_vertical_m", 30.0, "bound of the height offset of the path-following model [m]", 0.001, 10000.0),
 )
 
 REQUEST_GENERATOR = (

@@ -68,6 +68,7 @@ from .first_fit import as_firstfit, first_fit_select
 from .objectives import (BASELINE_ORDERS, OperatorShares, check_objective, check_priority,
                          epoch_weights, operator_of, order_requests)
 from .trajectory import Trajectory
+from .nonconformance import Claim, ConformanceBounds, PositionBook, react, verify
 
 POLICIES = ("mwis", "fifo", "firstfit")  # firstfit: uam_planner.first_fit
 REPLAN_POLICIES = ("mwis", "firstfit")  # uam_planner.replanning
@@ -213,6 +214,10 @@ class PlanningConfig:
         spatial_buffer_m, temporal_buffer_s: planning buffers on the separation (issue 23,
             docs/disturbances.md); 0 = today's. The planner keeps ``separation`` (the minimum
             widened by both), every audit keeps ``minimum_separation``.
+        conformance: the reaction to nonconforming flights (issue 23 item 3,
+            ``uam_planner.nonconformance``): a ConformanceBounds the planner checks each
+            nonconformance report against (its own plan, its own observation) before it updates
+            the flight's intent; None (default) = no reaction, reports are ignored.
     """
 
     epoch_s: float = defaults.EPOCH_S          # the paper's values, from uam_contract.defaults
@@ -234,6 +239,7 @@ class PlanningConfig:
     replan_policy: str = ""
     spatial_buffer_m: float = 0.0
     temporal_buffer_s: float = 0.0
+    conformance: ConformanceBounds | None = None
 
     @property
     def minimum_separation(self) -> SeparationModel:
@@ -271,6 +277,9 @@ class PlanningConfig:
                              f"{type(self.constraints).__name__}")
         for name in ("spatial_buffer_m", "temporal_buffer_s"):
             _positive("PlanningConfig", name, getattr(self, name), allow_zero=True)
+        if self.conformance is not None and not isinstance(self.conformance, ConformanceBounds):
+            raise ValueError(f"PlanningConfig.conformance must be a ConformanceBounds or None, got "
+                             f"{self.conformance!r}")
         for name in ("epoch_s", "separation_m", "speed_mps", "time_limit_s"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
@@ -339,6 +348,9 @@ class EpochReport:
     #: the batch re-plan of this epoch (``uam_planner.replanning.ReplanReport``), or None when
     #: no constraint update was applied at this epoch
     replan: object = None
+    #: the reaction to nonconforming flights of this epoch (``uam_planner.nonconformance.react``'s
+    #: report dict, plus ``refused``: [(request_id, reason)] of the claims not acted on), or None
+    nonconformance: object = None
 
 
 @dataclass
@@ -949,6 +961,11 @@ class Planner:
         self._requests: dict = {}               # request_id -> FlightRequest of active flights
         self._plan_updates: list = []           # decided in prepare, returned by commit
         self._replan_report = None
+        # the reaction to nonconformance (issue 23, uam_planner.nonconformance): the planner's
+        # own observations of the vehicles and the reports (claims) not acted on yet
+        self.positions = PositionBook()
+        self._claims: list = []
+        self._nonconformance_report = None
 
     @property
     def config(self) -> PlanningConfig:
@@ -1077,6 +1094,63 @@ class Planner:
         self.active = active
         self._plan_updates, self._replan_report = updates, report
 
+    def observe(self, request_id: str, t_s: float, position_m) -> str | None:
+        """The planner's own observation of a vehicle (its position in the fleet state at
+        ``t_s``); what a nonconformance report is checked against. Returns None, or why the
+        observation was refused (naming the field and value)."""
+        return self.positions.observe(request_id, t_s, position_m)
+
+    def report_nonconforming(self, request_id: str, t_s: float, source: str = "") -> str | None:
+        """A claim that ``request_id`` is nonconforming at ``t_s`` (from the conformance
+        monitor). None if queued, else why it is refused (naming the field and value). Queued
+        claims are checked at the first epoch at a time >= t_s against the planner's own plan and
+        observation (:func:`uam_planner.nonconformance.verify`) and acted on only if they hold:
+        a report can at worst cause one deconflicted update of a flight the planner itself sees
+        outside its plan, never the removal of a flight."""
+        if self.config.conformance is None:
+            return "conformance: the reaction to nonconformance is off (PlanningConfig.conformance is None)"
+        if isinstance(t_s, bool) or not isinstance(t_s, (int, float, np.integer, np.floating)) \
+                or not math.isfinite(t_s):
+            return f"t_s: {t_s!r} is not a finite time"
+        if not isinstance(request_id, str) or not any(f.request_id == request_id for f in self.active):
+            return f"request_id: {request_id!r} is not an active flight of this planner"
+        if any(c.request_id == request_id for c in self._claims):
+            return None  # already queued: one update per flight and epoch
+        self._claims.append(Claim(request_id, float(t_s), str(source)))
+        return None
+
+    def _react_to_nonconformance(self, t_s: float, epoch_index: int) -> None:
+        """Step 2b of ``prepare`` (after the constraint re-plan, before new requests): the claims
+        due by ``t_s`` that the planner's own view confirms get their intents updated from where
+        the flights are (``uam_planner.nonconformance.react``), deconflicted in one batch."""
+        self._nonconformance_report = None
+        self.positions.forget(f.request_id for f in self.active)
+        due = [c for c in self._claims if c.t_s <= t_s]
+        if not due or self.config.conformance is None:
+            return
+        self._claims = [c for c in self._claims if c.t_s > t_s]
+        where = {f.request_id: i for i, f in enumerate(self.active)}
+        found, refused = {}, []
+        for c in due:
+            i = where.get(c.request_id)
+            if i is None:
+                refused.append((c.request_id, f"request_id: {c.request_id!r} is no longer active"))
+                continue
+            got, why = verify(self.active[i], self.positions.latest(c.request_id),
+                              self.config.conformance, t_s)
+            if got is None:
+                refused.append((c.request_id, why))
+                continue
+            found[i] = (self.positions.latest(c.request_id), got)
+        cfg = self.config
+        active, updates, rep_ = react(t_s, epoch_index, self.active, found, self.positions, cfg,
+                                      replan_selector(self.solve_mwis, cfg, epoch_index, t_s),
+                                      self.replan_policy(), self.network)
+        rep_["refused"] = refused
+        self.active = active
+        self._plan_updates = list(self._plan_updates) + list(updates)
+        self._nonconformance_report = rep_
+
     def _default_solve(self, weights, edges, groups):
         return default_solve_mwis(self._config)(weights, edges, groups)
 
@@ -1152,6 +1226,7 @@ class Planner:
             alive = {f.request_id for f in self.active}
             self._requests = {k: r for k, r in self._requests.items() if k in alive}
         self._apply_constraint_updates(t_s, epoch_index)
+        self._react_to_nonconformance(t_s, epoch_index)
         if self.policy == "mwis":
             prep = prepare_epoch_mwis(t_s, epoch_index, self.pending, self.active, self.network, self.config,
                                       self.cache, self.active_index, self.shares,
@@ -1177,7 +1252,8 @@ class Planner:
         result = commit_epoch(prep, answer, self.config, solve_s)
         result.plan_updates = list(self._plan_updates)
         result.report.replan = self._replan_report
-        self._plan_updates, self._replan_report = [], None
+        result.report.nonconformance = self._nonconformance_report
+        self._plan_updates, self._replan_report, self._nonconformance_report = [], None, None
         if result.approved:
             by_id = {r.request_id: r for r in prep.pending}
             self._requests.update((f.request_id, by_id[f.request_id]) for f in result.approved

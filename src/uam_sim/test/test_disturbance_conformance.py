@@ -319,3 +319,61 @@ def test_the_planner_keeps_the_buffered_separation_and_the_audit_the_minimum():
     # approvals need not fall: first-fit's later choices change too)
     assert got[60.0][1]["losses"] == 0 and got[0.0][1]["losses"] > 0
     assert got[60.0][0] > 0
+
+
+# ---- vertical disturbances --------------------------------------------------------------------
+
+def test_an_altitude_hold_error_is_flagged_by_the_vertical_bound_at_the_right_step():
+    # a flight that holds 20 m above its plan (altitude-hold gain 0.1 /s, from 0 at departure):
+    # h(t) = 20 (1 - exp(-0.1 t)) exactly at the samples (the exact integration); over the
+    # vertical bound of 15 m from t = 10 ln 4 = 13.86 s, so the first nonconforming sample is
+    # t = 14 s (h = 15.07 m; h(13) = 14.55 m); lateral and time errors stay 0
+    cfg = DisturbanceConfig(altitude_error_m=20.0, altitude_gain_per_s=0.1)
+    assert cfg.enabled and cfg.vertical
+    flown = fly(PLAN, FlightDraws(altitude_offset_m=20.0), cfg)
+    t = flown.times_s
+    assert flown.points_m[:, 2] - 50.0 == pytest.approx(20.0 * (1.0 - np.exp(-0.1 * t)), abs=1e-9)
+    tc = track_conformance("a", PLAN, flown, ConformanceBounds(lateral_m=30, vertical_m=15, time_s=10))
+    assert tc.first_nonconforming_s == pytest.approx(14.0)
+    assert np.abs(tc.lateral_m).max() < 1e-9 and np.abs(tc.time_err_s).max() < 1e-9
+    (ex,) = tc.excursions
+    assert ex.max_vertical_m == pytest.approx(20.0 * (1.0 - math.exp(-0.1 * 100.0)), abs=1e-6)
+    # below: the same, 20 m under the plan; clipped at max_vertical_m
+    low = fly(PLAN, FlightDraws(altitude_offset_m=-40.0), cfg)
+    assert low.points_m[:, 2].min() == pytest.approx(50.0 - 30.0)
+
+
+def test_vertical_disturbances_leave_the_horizontal_track_and_draws_unchanged():
+    # the vertical field and the altitude error have their own streams: with them on, the
+    # horizontal track and the speed error and delay of every flight are those without them,
+    # bit for bit, and without them the height is the plan's exactly
+    base = DisturbanceConfig(speed_error=0.1, gust_std_mps=1.5, delay_mean_s=10.0, seed=3)
+    vert = DisturbanceConfig(speed_error=0.1, gust_std_mps=1.5, delay_mean_s=10.0, seed=3,
+                             vertical_gust_std_mps=1.0, altitude_error_m=10.0)
+    ids = [f"r{i}" for i in range(20)]
+    for i in ids:
+        a, b = flight_draws(base, i), flight_draws(vert, i)
+        assert (a.speed_error, a.delay_s) == (b.speed_error, b.delay_s)
+        assert a.altitude_offset_m == 0.0 and -10.0 <= b.altitude_offset_m <= 10.0
+    plans = [PLAN] * len(ids)
+    fa, fb = fly_plans(plans, ids, base), fly_plans(plans, ids, vert)
+    for x, y in zip(fa, fb):
+        assert np.array_equal(x.times_s, y.times_s)
+        assert np.array_equal(x.points_m[:, :2], y.points_m[:, :2])
+        assert np.array_equal(x.points_m[:, 2], np.full(x.times_s.shape, 50.0))
+    assert max(np.abs(y.points_m[:, 2] - 50.0).max() for y in fb) > 1.0
+
+
+def test_vertical_gusts_are_seeded_and_have_the_stated_spread():
+    from uam_sim.disturbance import WindField
+    cfg = DisturbanceConfig(vertical_gust_std_mps=0.5, seed=2)
+    xy = np.random.default_rng(0).uniform(-20000, 20000, size=(20000, 2))
+    t = np.random.default_rng(1).uniform(0, 3600, 20000)
+    w = WindField(cfg).vertical(xy, t)
+    assert np.array_equal(w, WindField(cfg).vertical(xy, t))
+    # 8 cosines of amplitude 0.5 sqrt(2/8) = 0.25: std 0.5
+    assert w.std() == pytest.approx(0.5, rel=0.1)
+    # the horizontal gusts are the same with or without the vertical ones
+    h = DisturbanceConfig(gust_std_mps=1.0, seed=2)
+    hv = DisturbanceConfig(gust_std_mps=1.0, seed=2, vertical_gust_std_mps=0.5)
+    assert np.array_equal(WindField(h).gust(xy, t), WindField(hv).gust(xy, t))

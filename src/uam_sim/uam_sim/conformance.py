@@ -34,7 +34,6 @@ from typing import Iterable, Sequence
 import numpy as np
 from uas_standards.astm.f3548.v21 import constants as f3548
 
-from uam_contract.params import CONFORMANCE_MONITOR
 from uam_planner.trajectory import Trajectory
 
 MIN_CONFORMANCE_PERCENT = float(f3548.OiMinConformancePercent)          # 95
@@ -44,56 +43,10 @@ MAX_EXCURSION_S = float(f3548.OiMaxDurationPerExcursionSeconds)         # 10
 MAX_UPDATE_NONCONFORMING_S = float(f3548.OiMaxUpdateTimeNonconfSeconds)  # 5
 
 
-_DEFAULTS = {prm.name: prm.default for prm in CONFORMANCE_MONITOR}  # one source: the node's table
-
-
-@dataclass(frozen=True)
-class ConformanceBounds:
-    """The tube around a plan: lateral [m], vertical [m] and time [s] bounds (inclusive);
-    defaults: the conformance monitor node's (uam_contract.params.CONFORMANCE_MONITOR)."""
-
-    lateral_m: float = _DEFAULTS["lateral_m"]
-    vertical_m: float = _DEFAULTS["vertical_m"]
-    time_s: float = _DEFAULTS["time_s"]
-
-    def __post_init__(self):
-        for name in ("lateral_m", "vertical_m", "time_s"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
-                    or not math.isfinite(v) or v <= 0:
-                raise ValueError(f"ConformanceBounds.{name}: {v!r} must be a positive finite number")
-
-
-def deviations(plan: Trajectory, times_s, points_m) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Lateral [m], vertical [m] and time [s] errors of flown samples against ``plan``.
-
-    Args: ``times_s`` (n,), ``points_m`` (n, 3). Returns three (n,) arrays (see the module).
-    Exact nearest point over every segment: O(n p) for p waypoints.
-    """
-    t = np.asarray(times_s, dtype=np.float64).reshape(-1)
-    q = np.asarray(points_m, dtype=np.float64).reshape(-1, 3)
-    a = plan.points_m[:-1]                     # (s, 3)
-    d = plan.points_m[1:] - a
-    dd = np.square(d).sum(axis=1)
-    rel = q[:, None, :] - a[None, :, :]        # (n, s, 3)
-    lam = np.where(dd > 0, (rel * d[None]).sum(axis=2) / np.where(dd > 0, dd, 1.0), 0.0)
-    lam = np.clip(lam, 0.0, 1.0)
-    near = a[None] + lam[..., None] * d[None]
-    dist2 = np.square(q[:, None, :] - near).sum(axis=2)
-    j = np.argmin(dist2, axis=1)
-    rows = np.arange(q.shape[0])
-    pt = near[rows, j]
-    lj = lam[rows, j]
-    tau = plan.times_s[j] + lj * (plan.times_s[j + 1] - plan.times_s[j])
-    off = q - pt
-    lateral = np.sqrt(np.square(off[:, :2]).sum(axis=1))
-    return lateral, off[:, 2], t - tau
-
-
-def conforming(lateral, vertical, time_err, bounds: ConformanceBounds) -> np.ndarray:
-    """True where every error is within its bound (inclusive)."""
-    return ((np.asarray(lateral) <= bounds.lateral_m) & (np.abs(vertical) <= bounds.vertical_m)
-            & (np.abs(time_err) <= bounds.time_s))
+# the tube's bounds, the nearest-point errors and the inclusive test live below the simulator, in
+# the planner, which checks every conformance report against its own plan with the same code
+# (uam_planner.nonconformance; issue 23 item 3)
+from uam_planner.nonconformance import ConformanceBounds, conforming, deviations  # noqa: E402,F401
 
 
 @dataclass(frozen=True)
@@ -176,6 +129,27 @@ def track_conformance(flight_id: str, plan: Trajectory, flown: Trajectory,
             times = np.append(times, flown.arrival_s)
         pts = flown.position_at(times, clamp=True)
     lat, ver, terr = deviations(plan, times, pts)
+    ok = conforming(lat, ver, terr, bounds)
+    return TrackConformance(flight_id, np.asarray(times), ok, lat, ver, terr,
+                            excursions_of(flight_id, times, ok, lat, ver, terr))
+
+
+def versioned_conformance(flight_id: str, pieces, flown: Trajectory,
+                          bounds: ConformanceBounds) -> TrackConformance:
+    """Conformance of a flown track with the plan versions in force while it flew: ``pieces``
+    [(from_s, plan)] in time order, each sample compared with the last version that took
+    effect at or before it (a nonconforming update is a new intent from where the aircraft
+    is: the flight is compared with it from then on)."""
+    times, pts = flown.times_s, flown.points_m
+    starts = np.array([p[0] for p in pieces], dtype=np.float64)
+    which = np.clip(np.searchsorted(starts, times, side="right") - 1, 0, len(pieces) - 1)
+    lat = np.empty(times.shape[0])
+    ver = np.empty(times.shape[0])
+    terr = np.empty(times.shape[0])
+    for k, (_t0, plan) in enumerate(pieces):
+        sel = which == k
+        if sel.any():
+            lat[sel], ver[sel], terr[sel] = deviations(plan, times[sel], pts[sel])
     ok = conforming(lat, ver, terr, bounds)
     return TrackConformance(flight_id, np.asarray(times), ok, lat, ver, terr,
                             excursions_of(flight_id, times, ok, lat, ver, terr))

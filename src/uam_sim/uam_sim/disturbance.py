@@ -15,6 +15,10 @@ The world (seeded by ``DisturbanceConfig.seed``):
 - **speed error**: each flight's airspeed is ``(1 + e)`` times the plan's on every segment, e
   uniform in ``[-speed_error, +speed_error]`` (0.1 = the +-10 % of NASA's study).
 - **departure delay**: exponential with mean ``delay_mean_s``, truncated at ``delay_max_s``.
+- **vertical** (off unless set): vertical gusts, a field like the horizontal one (its own seeded
+  plane waves, standard deviation ``vertical_gust_std_mps``), and an altitude-hold error per
+  flight, uniform in ``[-altitude_error_m, +altitude_error_m]`` (a barometric bias: the height
+  the aircraft's altitude hold settles at above its plan).
 
 The path-following model (one flight, every step ``dt``):
 
@@ -36,7 +40,13 @@ The path-following model (one flight, every step ``dt``):
   (the bound of the guidance). A steady uncompensated cross wind ``w`` settles at ``w / k``.
 - the flown position is the path point at the along-track distance plus ``(d, 0)``; the flight
   ends (lands) when the along-track distance reaches the path's length, at the time found by
-  linear interpolation inside that step. Altitude follows the path exactly (vertical error 0).
+  linear interpolation inside that step.
+- vertically, on level (horizontal) segments, the height offset ``h`` from the path obeys
+  ``h' = w_z - k_z (h - b)`` with ``w_z`` the vertical gust, ``b`` the flight's altitude-hold error
+  and ``k_z = altitude_gain_per_s`` (the altitude hold), integrated exactly for ``w_z`` held over the
+  step and clipped at ``+-max_vertical_m``; on climbs and descents (vertical segments at pads)
+  the aircraft follows the path's height: ``h' = -k_z h`` (it decays). With both vertical levels 0
+  the height follows the path exactly (vertical error 0), bit for bit as before they existed.
 
 Cost: O(n_steps x flights) numpy steps per batch, vectorised over the batch (``fly_batch``).
 """
@@ -79,6 +89,11 @@ class DisturbanceConfig:
             +-max_speed_adjust of the plan's; 0 (default) = no time control, the airspeed is held
             (NASA's uncompensated speed error).
         max_speed_adjust: bound of that correction, as a share of the plan's speed.
+        vertical_gust_std_mps: standard deviation of the vertical gust [m/s] (0 = none).
+        altitude_error_m: per-flight altitude-hold error bound: b ~ U[-altitude_error_m,
+            +altitude_error_m] [m] (0 = none).
+        altitude_gain_per_s: the altitude hold's gain k_z [1/s].
+        max_vertical_m: bound of the height offset [m].
         step_s: integration step; the flown track is sampled every step_s [s].
         seed: seed of the wind field and of every flight's draws.
     """
@@ -98,6 +113,10 @@ class DisturbanceConfig:
     max_speed_adjust: float = 0.1
     step_s: float = 1.0
     seed: int = 0
+    vertical_gust_std_mps: float = 0.0
+    altitude_error_m: float = 0.0
+    altitude_gain_per_s: float = 0.1
+    max_vertical_m: float = 30.0
 
     def __post_init__(self):
         for f in fields(self):
@@ -114,7 +133,7 @@ class DisturbanceConfig:
                     or not math.isfinite(v):
                 raise ValueError(f"DisturbanceConfig.{f.name}: {v!r} is not a finite number")
             positive = f.name in ("gust_length_m", "gust_period_s", "track_gain_per_s", "step_s",
-                                  "max_lateral_m")
+                                  "max_lateral_m", "altitude_gain_per_s", "max_vertical_m")
             if f.name == "max_speed_adjust" and v >= 1.0:
                 raise ValueError(f"DisturbanceConfig.max_speed_adjust: {v!r} must be below 1")
             if v < 0 or (positive and v == 0):
@@ -127,7 +146,13 @@ class DisturbanceConfig:
     @property
     def enabled(self) -> bool:
         """True when any disturbance is on (else the plan is flown exactly)."""
-        return bool(self.wind_speed_mps or self.gust_std_mps or self.speed_error or self.delay_mean_s)
+        return bool(self.wind_speed_mps or self.gust_std_mps or self.speed_error or self.delay_mean_s
+                    or self.vertical)
+
+    @property
+    def vertical(self) -> bool:
+        """True when a vertical disturbance is on (vertical gusts or an altitude-hold error)."""
+        return bool(self.vertical_gust_std_mps or self.altitude_error_m)
 
     @classmethod
     def from_mapping(cls, data) -> "DisturbanceConfig":
@@ -142,21 +167,26 @@ class DisturbanceConfig:
 
 @dataclass(frozen=True)
 class FlightDraws:
-    """One flight's draws: airspeed factor error e and departure delay [s]."""
+    """One flight's draws: airspeed factor error e, departure delay [s] and altitude-hold
+    error [m]."""
 
     speed_error: float = 0.0
     delay_s: float = 0.0
+    altitude_offset_m: float = 0.0
 
 
 def flight_draws(config: DisturbanceConfig, flight_id: str) -> FlightDraws:
     """The draws of ``flight_id``: a pure function of the seed and the id (not of the order
-    flights are flown in). Both numbers are always drawn, so one level does not shift the other."""
+    flights are flown in). Every number is always drawn, in the same order (the altitude error
+    last, so it did not shift the two drawn before it existed), so one level does not shift
+    another."""
     rng = np.random.default_rng([int(config.seed), zlib.crc32(flight_id.encode("utf-8"))])
     u = rng.uniform(-1.0, 1.0)
     x = rng.exponential(1.0)
+    z = rng.uniform(-1.0, 1.0)
     e = float(u * config.speed_error)
     delay = float(min(x * config.delay_mean_s, config.delay_max_s)) if config.delay_mean_s > 0 else 0.0
-    return FlightDraws(e, delay)
+    return FlightDraws(e, delay, float(z * config.altitude_error_m))
 
 
 class WindField:
@@ -178,6 +208,16 @@ class WindField:
         # each component: sum of m cosines of amplitude a: variance m a^2 / 2 = std^2
         amp = config.gust_std_mps * math.sqrt(2.0 / m)
         self.amp = amp * rng.choice([-1.0, 1.0], size=(m, 2))
+        # the vertical gusts: their own plane waves (their own stream: the horizontal field is
+        # the same with or without them)
+        vr = np.random.default_rng([int(config.seed), 0x56455254])
+        vh = vr.uniform(0.0, 2.0 * math.pi, m)
+        vl = config.gust_length_m * vr.uniform(0.5, 2.0, m)
+        vp = config.gust_period_s * vr.uniform(0.5, 2.0, m)
+        self.kz = (2.0 * math.pi / vl)[:, None] * np.stack([np.cos(vh), np.sin(vh)], 1)
+        self.omega_z = 2.0 * math.pi / vp
+        self.phase_z = vr.uniform(0.0, 2.0 * math.pi, m)
+        self.amp_z = config.vertical_gust_std_mps * math.sqrt(2.0 / m) * vr.choice([-1.0, 1.0], size=m)
 
     def gust(self, xy: np.ndarray, t_s) -> np.ndarray:
         """Gusts at positions ``xy`` (n, 2) and time(s) ``t_s`` (scalar or (n,))."""
@@ -189,6 +229,15 @@ class WindField:
 
     def at(self, xy: np.ndarray, t_s) -> np.ndarray:
         return self.steady + self.gust(np.asarray(xy, dtype=np.float64), t_s)
+
+    def vertical(self, xy: np.ndarray, t_s) -> np.ndarray:
+        """Vertical gusts [m/s] at positions ``xy`` (n, 2) and time(s) ``t_s``."""
+        xy = np.asarray(xy, dtype=np.float64)
+        if self.config.vertical_gust_std_mps == 0.0:
+            return np.zeros(xy.shape[0])
+        t = np.broadcast_to(np.asarray(t_s, dtype=np.float64), (xy.shape[0],))
+        arg = xy @ self.kz.T - t[:, None] * self.omega_z[None, :] + self.phase_z
+        return np.cos(arg) @ self.amp_z
 
 
 def fly(plan: Trajectory, draws: FlightDraws, config: DisturbanceConfig,
@@ -240,6 +289,12 @@ def fly_batch(plans: Sequence[Trajectory], draws: Sequence[FlightDraws], config:
     t = np.array([pl.departure_s + d.delay_s for pl, d in zip(plans, draws)])
     s = np.zeros(n)
     off = np.zeros((n, 2))
+    vertical = config.vertical
+    hoff = np.zeros(n)
+    bias = np.array([d.altitude_offset_m for d in draws])
+    kz = float(config.altitude_gain_per_s)
+    decay_z = math.exp(-kz * config.step_s)
+    gain_z = (1.0 - decay_z) / kz
     dt = float(config.step_s)
     k = float(config.track_gain_per_s)
     decay = math.exp(-k * dt)
@@ -256,6 +311,8 @@ def fly_batch(plans: Sequence[Trajectory], draws: Sequence[FlightDraws], config:
         base = P[r, seg] + (s[r] - C[r, seg])[:, None] * U[r, seg]
         pos = base.copy()
         pos[:, :2] += off[r]
+        if vertical:
+            pos[:, 2] += hoff[r]
         for j, row in enumerate(r.tolist()):
             out_t[row].append(float(t[row]))
             out_p[row].append(pos[j])
@@ -296,6 +353,11 @@ def fly_batch(plans: Sequence[Trajectory], draws: Sequence[FlightDraws], config:
         over = norm > config.max_lateral_m
         o[over] *= (config.max_lateral_m / norm[over])[:, None]
         off[r] = o
+        if vertical:
+            # level segments: h' = w_z - k_z (h - b); climbs and descents follow the path's height
+            wz = np.where(horizontal, wind.vertical(pos[:, :2], t[r]) + kz * bias[r], 0.0)
+            h = np.clip(hoff[r] * decay_z + wz * gain_z, -config.max_vertical_m, config.max_vertical_m)
+            hoff[r] = h
         s_new = s[r] + gs * dt
         last = s_new >= length[r]
         step = np.where(last, (length[r] - s[r]) / gs, dt)
@@ -313,13 +375,32 @@ def fly_plans(plans: Sequence[Trajectory], flight_ids: Sequence[str], config: Di
     return fly_batch(plans, [flight_draws(config, fid) for fid in flight_ids], config, wind)
 
 
+def fly_on(flown: Trajectory, new_plan: Trajectory, speed_error: float, rate: float,
+           config: DisturbanceConfig, wind: WindField | None = None) -> tuple[Trajectory, float]:
+    """What flies after a nonconforming update (issue 23 item 3, ``uam_planner.nonconformance``):
+    ``flown`` up to the new plan's start, then the model flying ``new_plan`` from its first point
+    (where the aircraft was), on time, with the aircraft's airspeed as it flew: the update timed
+    the new plan at ``rate`` (the observed progress rate) times the old plan's speeds, so the
+    aircraft's speed error against the new plan is (1 + e) / rate - 1. Returns (the flown
+    track, that speed error, to be used for the next update of the same flight)."""
+    e_new = (1.0 + float(speed_error)) / float(rate) - 1.0
+    t0 = float(new_plan.departure_s)
+    cont = fly_batch([new_plan], [FlightDraws(e_new, 0.0)], config, wind)[0]
+    keep = flown.times_s < t0 - 1e-9
+    return (Trajectory(np.concatenate((flown.times_s[keep], cont.times_s)),
+                       np.concatenate((flown.points_m[keep], cont.points_m))), e_new)
+
+
 #: simulator parameter -> DisturbanceConfig field (uam_contract.params.SIMULATOR)
 SIMULATOR_PARAMS = {"wind_speed_mps": "wind_speed_mps", "wind_from_deg": "wind_from_deg",
                     "gust_std_mps": "gust_std_mps", "gust_length_m": "gust_length_m",
                     "gust_period_s": "gust_period_s", "speed_error": "speed_error",
                     "delay_mean_s": "delay_mean_s", "delay_max_s": "delay_max_s",
                     "track_gain_per_s": "track_gain_per_s", "max_lateral_m": "max_lateral_m",
-                    "compensate_steady_wind": "compensate_steady_wind", "disturbance_seed": "seed"}
+                    "compensate_steady_wind": "compensate_steady_wind", "disturbance_seed": "seed",
+                    "vertical_gust_std_mps": "vertical_gust_std_mps",
+                    "altitude_error_m": "altitude_error_m",
+                    "altitude_gain_per_s": "altitude_gain_per_s", "max_vertical_m": "max_vertical_m"}
 
 
 def from_simulator_params(params: dict, step_s: float) -> DisturbanceConfig:

@@ -125,6 +125,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--disturbance", type=key_values, metavar="K=V,...",
                    help="disturbances flown (uam_sim.disturbance.DisturbanceConfig fields), e.g. "
                         "speed_error=0.1,gust_std_mps=1.5,delay_mean_s=10 (default none)")
+    p.add_argument("--reaction", action="store_true", default=None,
+                   help="the planner reacts to nonconforming flights (issue 23 item 3; needs --disturbance)")
     p.add_argument("--conformance", type=key_values, metavar="K=V,...",
                    help="conformance bounds (uam_sim.conformance.ConformanceBounds), e.g. lateral_m=30,time_s=10")
     p.add_argument("--tts-reads", type=int, help="reads per annealing run in the TTS study")
@@ -148,7 +150,7 @@ def main(argv: list | None = None) -> int:
                                           "separation_model", "vertical_separation_m",
                                           "departure_slot_s", "climb_rate_mps", "descent_rate_mps",
                                           "spatial_buffer_m", "temporal_buffer_s", "disturbance",
-                                          "conformance")}
+                                          "conformance", "reaction")}
     try:
         base = yaml.safe_load(Path(args.config).read_text()) if args.config else {}
         base = base or {}

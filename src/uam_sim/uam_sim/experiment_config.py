@@ -118,6 +118,10 @@ class ExperimentConfig:
             error, departure delay, path following); {} = none, the plans flown exactly. The
             flights' draws are seeded by the cell's seed (the ``seed`` field is ignored).
         conformance: fields of ``uam_sim.conformance.ConformanceBounds`` ({} = the defaults).
+        reaction: the planner reacts to nonconforming flights (issue 23 item 3,
+            ``uam_planner.nonconformance``): the runner's monitor reports them, the planner
+            checks each report against its own view and updates the intent; false (default) =
+            no reaction. Needs ``disturbance``.
         metrics_warmup_s: the decision metrics (delay, shares, ...) leave out requests whose
             earliest departure is before it (the warm-up); 0 = none.
         cumulative_rates: rates shown in the cumulative-approvals figure (default: up to 4 spread).
@@ -171,6 +175,7 @@ class ExperimentConfig:
     temporal_buffer_s: Float = 0.0
     disturbance: Mapping = field(default_factory=dict)  # fields: DisturbanceConfig
     conformance: Mapping = field(default_factory=dict)  # fields: ConformanceBounds
+    reaction: Bool = False
     tts: Optional[Mapping] = field(default_factory=lambda: {
         "enabled": True, "instances": 629, "min_vertices": 5, "max_vertices": 50, "reads": 100,
         "repetitions": 5, "backend_instances": {"qpu-emulator": 60},
@@ -205,7 +210,8 @@ class ExperimentConfig:
                               horizon_epochs=self.horizon_epochs,
                               commit_ahead=self.commit_ahead, fair_window_s=self.fair_window_s,
                               spatial_buffer_m=self.spatial_buffer_m,
-                              temporal_buffer_s=self.temporal_buffer_s)
+                              temporal_buffer_s=self.temporal_buffer_s,
+                              conformance=self.conformance_bounds() if self.reaction else None)
 
     def disturbance_config(self):
         """The DisturbanceConfig of ``disturbance`` (off when empty); its seed is the cell's."""

@@ -88,6 +88,11 @@ class Fleet:
             self.total_added -= 1  # a new version, not a new flight
         self.add(vehicle_id, trajectory)
 
+    def flown(self, vehicle_id: str) -> Trajectory | None:
+        """The trajectory ``vehicle_id`` flies (None if it is not in the fleet)."""
+        got = self._flights.get(vehicle_id)
+        return None if got is None else Trajectory(got[0], got[1])
+
     def replace(self, vehicle_id: str, trajectory: Trajectory) -> None:
         """Fly ``trajectory`` for ``vehicle_id`` in place of what it flew (not a new flight): with
         disturbances, a new plan version is flown by the path-following model over the spliced

@@ -36,10 +36,10 @@ from .experiment_config import ExperimentError, make_config
 from .sweep import cell_key, cell_params, run_cell
 
 DEFAULT_NETWORK = {"synthetic": {"n_nodes": 400, "n_aerodromes": 30, "seed": 1}}
-COLUMNS = ("speed_error", "spatial_buffer_m", "temporal_buffer_s", "runs", "requests", "flights",
+COLUMNS = ("speed_error", "spatial_buffer_m", "temporal_buffer_s", "reaction", "runs", "requests", "flights",
            "approval_rate", "conformance_percent", "excursions_per_flight_hour", "longest_excursion_s",
            "nonconforming_flights", "replans", "flown_losses", "flown_min_separation_m",
-           "planned_losses")
+           "planned_losses", "nonconforming_updates", "reaction_contingencies")
 
 
 def _num_list(text: str) -> list[float]:
@@ -49,6 +49,13 @@ def _num_list(text: str) -> list[float]:
         raise argparse.ArgumentTypeError(f"{text!r} is not a comma list of numbers") from None
 
 
+def _reaction(text: str) -> list[bool]:
+    opts = {"off": [False], "on": [True], "both": [False, True]}
+    if text not in opts:
+        raise argparse.ArgumentTypeError(f"--reaction: {text!r} is not one of off, on, both")
+    return opts[text]
+
+
 def _network(text: str):
     if text.startswith("synthetic:"):
         return {"synthetic": key_values(text.split(":", 1)[1])}
@@ -56,7 +63,7 @@ def _network(text: str):
 
 
 def point_configs(args) -> list[tuple[tuple, dict]]:
-    """((speed error, spatial, temporal), config dict) of every grid point."""
+    """((speed error, spatial, temporal, reaction), config dict) of every grid point."""
     out = []
     if getattr(args, "axes", False):   # each buffer alone: spatial at 0 s, then temporal at 0 m
         combos = [(bs, 0.0) for bs in args.spatial_buffers] + \
@@ -64,7 +71,7 @@ def point_configs(args) -> list[tuple[tuple, dict]]:
     else:                              # the full product
         combos = [(bs, bt) for bs in args.spatial_buffers for bt in args.temporal_buffers]
     for e in args.speed_errors:
-        for bs, bt in combos:
+        for (bs, bt), react in ((c, r) for c in combos for r in args.reaction):
             if True:
                 dist = {"speed_error": e, "gust_std_mps": args.gust, "delay_mean_s": args.delay_mean,
                         "wind_speed_mps": args.wind, "step_s": args.step,
@@ -74,9 +81,10 @@ def point_configs(args) -> list[tuple[tuple, dict]]:
                                    "time_limit_s": args.time_limit, "spatial_buffer_m": bs,
                                    "temporal_buffer_s": bt, "disturbance": dist,
                                    "conformance": args.conformance or {}, "out": args.out,
+                                   "reaction": react,
                                    "workers": args.workers, "scheduler": args.scheduler,
                                    "corpus_max_vertices": 0})
-                out.append(((e, bs, bt), asdict(cfg)))
+                out.append(((e, bs, bt, react), asdict(cfg)))
     return out
 
 
@@ -88,7 +96,7 @@ def aggregate(point: tuple, cells: list[dict]) -> dict:
     appr = sum(x["approved"] for x in s)
     mins = [x["flown_min_separation_m"] for x in s if x["flown_min_separation_m"] is not None]
     return {"speed_error": point[0], "spatial_buffer_m": point[1], "temporal_buffer_s": point[2],
-            "runs": len(cells), "requests": req, "flights": appr,
+            "reaction": bool(point[3]) if len(point) > 3 else False, "runs": len(cells), "requests": req, "flights": appr,
             "approval_rate": appr / req if req else float("nan"),
             "conformance_percent": (sum(x["conf_conformance_percent"] * x["conf_flight_hours"] for x in s)
                                     / hours if hours else 100.0),
@@ -98,7 +106,9 @@ def aggregate(point: tuple, cells: list[dict]) -> dict:
             "replans": sum(x["replans"] for x in s),
             "flown_losses": sum(x["flown_losses"] for x in s),
             "flown_min_separation_m": min(mins) if mins else None,
-            "planned_losses": sum(x["losses"] or 0 for x in s)}
+            "planned_losses": sum(x["losses"] or 0 for x in s),
+            "nonconforming_updates": sum(x.get("nonconforming_updates", 0) for x in s),
+            "reaction_contingencies": sum(x.get("reaction_contingencies", 0) for x in s)}
 
 
 def run(args) -> list[dict]:
@@ -138,15 +148,16 @@ def run(args) -> list[dict]:
 
 
 def format_table(rows: list[dict]) -> str:
-    head = ("| speed error | buffer m | buffer s | runs | flights | approval | conformance | exc/h | "
-            "longest exc s | flown losses | flown min sep m | planned losses |")
-    out = [head, "|" + "---|" * 12]
+    head = ("| speed error | buffer m | buffer s | reaction | runs | flights | approval | conformance | "
+            "exc/h | longest exc s | updates | flown losses | flown min sep m | planned losses |")
+    out = [head, "|" + "---|" * 14]
     for r in rows:
         ms = r["flown_min_separation_m"]
         out.append(f"| {100 * r['speed_error']:.0f} % | {r['spatial_buffer_m']:g} | {r['temporal_buffer_s']:g} | "
+                   f"{'on' if r['reaction'] else 'off'} | "
                    f"{r['runs']} | {r['flights']} | {100 * r['approval_rate']:.1f} % | "
                    f"{r['conformance_percent']:.2f} % | {r['excursions_per_flight_hour']:.2f} | "
-                   f"{r['longest_excursion_s']:.0f} | {r['flown_losses']} | "
+                   f"{r['longest_excursion_s']:.0f} | {r['nonconforming_updates']} | {r['flown_losses']} | "
                    f"{'-' if ms is None else f'{ms:.1f}'} | {r['planned_losses']} |")
     return "\n".join(out)
 
@@ -167,12 +178,14 @@ def figure(rows: list[dict], path) -> Path:
         if label(r) not in buffers:
             buffers.append(label(r))
     fig, axes = plt.subplots(1, 3, figsize=(14, 4.2))
-    for e in sorted({r["speed_error"] for r in rows}):
-        pts = {label(r): r for r in rows if r["speed_error"] == e}
+    for e, react in sorted({(r["speed_error"], bool(r.get("reaction"))) for r in rows}):
+        pts = {label(r): r for r in rows if r["speed_error"] == e and bool(r.get("reaction")) == react}
         xs = [i for i, b in enumerate(buffers) if b in pts]
+        name = f"speed error {100 * e:.0f} %" + (", reaction" if react else "")
         for ax, key, scale in ((axes[0], "approval_rate", 100.0), (axes[1], "conformance_percent", 1.0),
                                (axes[2], "flown_losses", 1.0)):
-            ax.plot(xs, [pts[buffers[i]][key] * scale for i in xs], marker="o", label=f"speed error {100 * e:.0f} %")
+            ax.plot(xs, [pts[buffers[i]][key] * scale for i in xs], marker="o", ls="--" if react else "-",
+                    label=name)
     for ax, title in zip(axes, ("approval rate [%]", "time in conformance [%] (F3548: >= 95)",
                                 "losses of separation in what flew [pairs]")):
         ax.set_xticks(range(len(buffers)))
@@ -205,6 +218,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--time-gain", type=float, default=0.0,
                    help="along-track (4D) guidance gain [1/s]; 0 = airspeed held, no time control (default)")
     p.add_argument("--step", type=float, default=1.0, help="disturbance model step [s] (default 1)")
+    p.add_argument("--reaction", type=_reaction, default=[False],
+                   help="the planner's reaction to nonconforming flights: off (default), on or both")
     p.add_argument("--conformance", type=key_values, help="conformance bounds, e.g. lateral_m=30,time_s=10")
     p.add_argument("--seeds", default="4", help="a count n (seeds 0..n-1) or a comma list")
     p.add_argument("--rate", type=float, default=10.0, help="requests per 30 s (default 10)")

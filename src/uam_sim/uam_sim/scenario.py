@@ -133,21 +133,129 @@ def _apply_plan_updates(updates, by_id: dict, replans: list, t: float) -> None:
         row.update(destination=f.destination_id, departure_s=f.departure_s, arrival_s=f.arrival_s,
                    length_m=f.length_m, route=" ".join(f.route_node_ids), level_m=float(f.level_m))
 
+def _is_reaction(u) -> bool:
+    """A plan update of the reaction to nonconformance (``uam_planner.nonconformance``)."""
+    return u.flight is not None and str(u.flight.method).startswith("nonconforming")
+
+
+class _Reaction:
+    """The in-process runner's side of the reaction to nonconformance (issue 23 item 3), doing
+    what the node graph's conformance monitor and fleet state do for the planner node:
+
+    - before each epoch at t, every airborne flight's flown track is compared with its newest
+      plan version at every model sample in (t - epoch, t] (``uam_sim.conformance``, the
+      monitor's test); a flight nonconforming at a sample is *reported* to the planner
+      (``Planner.report_nonconforming``, a claim it checks itself);
+    - the planner *observes* every airborne flight (``Planner.observe``: the fleet state) at
+      t - 20, t - 10 and t: its own view, which the claims are checked against and its progress
+      rate estimated from;
+    - a nonconforming update (its trajectory starts where the aircraft is at t) is flown from
+      there by the path-following model with the aircraft's airspeed unchanged: the speed error
+      against the new plan becomes (1 + e) / f - 1 for the observed rate f (the aircraft flies
+      as it flew; the intent now predicts it); what flew before t is kept.
+    """
+
+    OBSERVE_BACK_S = (20.0, 10.0, 0.0)
+
+    def __init__(self, planner, dcfg, wind, bounds, epoch_s: float):
+        self.planner, self.dcfg, self.wind, self.bounds = planner, dcfg, wind, bounds
+        self.epoch_s = float(epoch_s)
+
+    def before_epoch(self, t: float, rows) -> None:
+        from .conformance import conforming, deviations
+        for row in rows:
+            fl = row.get("_flown")
+            if fl is None or row.get("cancelled") or not fl.departure_s < t < fl.arrival_s:
+                continue
+            rid = row["request_id"]
+            for back in self.OBSERVE_BACK_S:
+                tb = t - back
+                if fl.departure_s <= tb:
+                    self.planner.observe(rid, tb, fl.position_at(tb))
+            ts, ps = fl.times_s, fl.points_m
+            sel = (ts > t - self.epoch_s) & (ts <= t)
+            if not sel.any():
+                continue
+            lat, ver, terr = deviations(row["_traj"], ts[sel], ps[sel])
+            bad = np.flatnonzero(~conforming(lat, ver, terr, self.bounds))
+            if bad.size:
+                self.planner.report_nonconforming(rid, float(ts[sel][bad[0]]), "runner monitor")
+
+    def apply(self, u, row, rate: float) -> None:
+        """Fly a nonconforming update of ``row`` from where the aircraft is."""
+        from .disturbance import flight_draws, fly_on
+        new = u.flight.trajectory
+        t0 = float(new.departure_s)
+        e = row.get("_e")
+        if e is None:
+            e = flight_draws(self.dcfg, row["request_id"]).speed_error
+        row["_flown"], row["_e"] = fly_on(row["_flown"], new, e, rate, self.dcfg, self.wind)
+        row["_t0"] = t0
+        row.setdefault("_pieces", [(float(row["_traj"].departure_s), row["_traj"])])
+        row["_pieces"].append((t0, new))
+        row["_traj"] = new
+
+    def refly(self, row) -> None:
+        """After a constraint re-plan of a row the reaction changed before: fly its spliced plan
+        from the last nonconforming update on."""
+        from .disturbance import FlightDraws, fly_batch
+        from uam_planner.trajectory import Trajectory
+        t0 = row["_t0"]
+        fl = row["_flown"]
+        cont = fly_batch([row["_traj"]], [FlightDraws(row["_e"], 0.0)], self.dcfg, self.wind)[0]
+        keep = fl.times_s < t0 - 1e-9
+        row["_flown"] = Trajectory(np.concatenate((fl.times_s[keep], cont.times_s)),
+                                   np.concatenate((fl.points_m[keep], cont.points_m)))
+        row["_pieces"][-1] = (row["_pieces"][-1][0], row["_traj"])
+
+
+def _until(tr, u: float):
+    """The part of ``tr`` before ``u`` (None if it starts at or after u)."""
+    from uam_planner.trajectory import Trajectory
+    if tr.departure_s >= u:
+        return None
+    if tr.arrival_s <= u:
+        return tr
+    keep = tr.times_s < u
+    return Trajectory(np.append(tr.times_s[keep], u), np.vstack((tr.points_m[keep], tr.position_at(u))))
+
+
+def planned_pieces(row) -> list:
+    """The plans of a flight row as flown in time: each version until the next took effect
+    (a nonconforming update does not chain with the version before it; 1 ms apart, so the
+    plans' audit does not compare a flight with itself)."""
+    pieces = row.get("_pieces")
+    if not pieces:
+        return [row["_traj"]]
+    out = []
+    for k, (t0, tr) in enumerate(pieces):
+        nxt = pieces[k + 1][0] - 1e-3 if k + 1 < len(pieces) else math.inf
+        cut = _until(tr, nxt)
+        if cut is not None and cut.times_s.shape[0] >= 2:
+            out.append(cut)
+    return out
+
+
 def _flown_summary(flights: list, cfg: ExperimentConfig, dcfg) -> dict:
     """What flew (issue 23): the exact audit of the flown tracks in the true minimum
     (:func:`uam_sim.flown.flown_audit`) and the F3548 conformance statistics of the run."""
-    from .conformance import f3548_statistics, track_conformance
+    from .conformance import f3548_statistics, track_conformance, versioned_conformance
     from .flown import flown_audit
 
     bounds = cfg.conformance_bounds()
     tracks = {f["request_id"]: f["_flown"] for f in flights}
     # the simulated aircraft flies the interpolation of the model's samples: no sampling error
     audit = flown_audit(tracks, cfg.separation())
-    stats = f3548_statistics(track_conformance(f["request_id"], f["_traj"], f["_flown"], bounds)
-                             for f in flights)
+    stats = f3548_statistics(
+        versioned_conformance(f["request_id"], f["_pieces"], f["_flown"], bounds) if f.get("_pieces")
+        else track_conformance(f["request_id"], f["_traj"], f["_flown"], bounds) for f in flights)
     out = {f"conf_{k}": v for k, v in stats.as_dict().items()}
     out.update({"flown_min_separation_m": audit["min_separation_m"], "flown_losses": audit["losses"],
                 "replans": 0})
+    if cfg.reaction:
+        out["nonconforming_updates"] = sum(1 for f in flights if f.get("_pieces"))
+        out["reaction_contingencies"] = sum(1 for f in flights if f.get("replan") == "contingency"
+                                            and f.get("_pieces"))
     return out
 
 
@@ -206,6 +314,8 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
         from .disturbance import WindField, fly_plans
         dcfg = _replace(cfg.disturbance_config(), seed=int(seed))
         wind = WindField(dcfg)
+    reaction = _Reaction(planner, dcfg, wind, cfg.conformance_bounds(), cfg.epoch_s) \
+        if disturbed and cfg.reaction else None
     n_epochs = int(math.ceil(duration_s / cfg.epoch_s - 1e-9))
     next_interval = 0
     epochs, flights, instances, rejections, replans = [], [], [], [], []
@@ -234,9 +344,35 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
             next_interval += 1
         if before_epoch is not None:
             before_epoch(planner, t, e)
+        if reaction is not None:
+            reaction.before_epoch(t, flights)
         res = planner.plan(t, e)
         if res.plan_updates:
-            _apply_plan_updates(res.plan_updates, by_id, replans, t)
+            if reaction is not None:
+                rates = (res.report.nonconformance or {}).get("rates", {})
+                for u in res.plan_updates:
+                    row = by_id.get(u.request_id)
+                    if row is None:
+                        continue
+                    if _is_reaction(u):
+                        row["version"], row["replan"] = u.version, u.kind
+                        row["arrival_s"] = u.flight.arrival_s
+                        reaction.apply(u, row, rates[u.request_id])
+                        replans.append({"t_s": t, "request_id": u.request_id, "kind": u.kind,
+                                        "version": u.version, "constraints": "",
+                                        "added_delay_s": u.added_delay_s, "airborne": True})
+                _apply_plan_updates([u for u in res.plan_updates if not _is_reaction(u)], by_id,
+                                    replans, t)
+                for u in res.plan_updates:   # a constraint re-plan: what flies changes now
+                    row = by_id.get(u.request_id)
+                    if row is None or _is_reaction(u) or row.get("cancelled") or "_flown" not in row:
+                        continue
+                    if row.get("_t0") is not None:
+                        reaction.refly(row)
+                    else:
+                        row["_flown"] = fly_plans([row["_traj"]], [row["request_id"]], dcfg, wind)[0]
+            else:
+                _apply_plan_updates(res.plan_updates, by_id, replans, t)
         if observer is not None:
             observer(t, e, submitted, refused, res)
         rep = res.report
@@ -278,12 +414,35 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
                               "edges": np.asarray(rep.edges_array).reshape(-1, 2).tolist(),
                               "groups": groups_from_ids(rep.vertex_request_ids)})
 
+    if reaction is not None:
+        # the flights approved by the end fly on after it: the reaction goes on (no new requests,
+        # none planned: the requests still pending are dropped) until the last one has landed,
+        # so every flight is monitored and updated to its end
+        planner.pending = []
+        e = n_epochs
+        while any(f.get("_flown") is not None and f["_flown"].arrival_s >= e * cfg.epoch_s
+                  for f in flights if not f.get("cancelled")):
+            t = e * cfg.epoch_s
+            reaction.before_epoch(t, flights)
+            res = planner.plan(t, e)
+            rates = (res.report.nonconformance or {}).get("rates", {})
+            for u in res.plan_updates:
+                row = by_id.get(u.request_id)
+                if row is not None and _is_reaction(u):
+                    row["version"], row["replan"] = u.version, u.kind
+                    row["arrival_s"] = u.flight.arrival_s
+                    reaction.apply(u, row, rates[u.request_id])
+                    replans.append({"t_s": t, "request_id": u.request_id, "kind": u.kind,
+                                    "version": u.version, "constraints": "",
+                                    "added_delay_s": u.added_delay_s, "airborne": True})
+            _apply_plan_updates([u for u in res.plan_updates if not _is_reaction(u)], by_id, replans, t)
+            e += 1
     audit = {}
     flown = [f for f in flights if not f.get("cancelled")]
     if cfg.audit:
         # in the run's separation model (the paper's sphere, or the cylinder); what flew
-        audit = sweep_audit([f["_traj"] for f in flown], cfg.separation(),
-                            labels=[f["request_id"] for f in flown])
+        pieces = [(f["request_id"], p) for f in flown for p in planned_pieces(f)]
+        audit = sweep_audit([p for _r, p in pieces], cfg.separation(), labels=[r for r, _p in pieces])
     extra = {}
     if planner.constraint_log or planner.initial_constraints:
         from uam_planner.replanning import KINDS, audit_incursions, constraint_timeline
@@ -297,14 +456,17 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
         audit = dict(audit, incursions=[list(x) for x in inc[:20]])
     if disturbed:
         # a re-planned flight flies its spliced plan (old version before the switch, new after)
-        again = [f for f in flown if f.get("replan") and "_flown" in f]
+        again = [f for f in flown if f.get("replan") and "_flown" in f and f.get("_t0") is None]
         for f, track in zip(again, fly_plans([f["_traj"] for f in again],
                                              [f["request_id"] for f in again], dcfg, wind)):
             f["_flown"] = track
     flown_summary = _flown_summary(flown, cfg, dcfg) if disturbed else {}
+    if flown_summary:
+        flown_summary["replans"] = len(replans)
     for f in flights:
         del f["_traj"]
-        f.pop("_flown", None)
+        for k in ("_flown", "_pieces", "_e", "_t0"):
+            f.pop(k, None)
     mwis_epochs = [r for r in epochs if r["vertices"] > 0]
     summary = {
         "method": method, "rate": rate_label(rate), "seed": int(seed), "duration_s": float(duration_s),

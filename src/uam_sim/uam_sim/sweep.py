@@ -42,7 +42,7 @@ def cell_params(cfg: ExperimentConfig, method: str, rate, seed: int) -> dict:
                           ("operator_lead_times_s", []), ("metrics_warmup_s", 0.0),
                           # issue 23: buffers, disturbances and conformance bounds
                           ("spatial_buffer_m", 0.0), ("temporal_buffer_s", 0.0),
-                          ("disturbance", {}), ("conformance", {})):
+                          ("disturbance", {}), ("conformance", {}), ("reaction", False)):
         if getattr(cfg, name) != default:
             params[name] = getattr(cfg, name)
     if cfg.demand_file:

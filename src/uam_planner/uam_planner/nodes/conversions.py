@@ -125,7 +125,8 @@ def plan_update_msg(update: Any, t_s: float, policy: str, request_id: str | None
     epoch at ``t_s``: the new version of the flight, from ``effective_time`` on, naming the
     constraint(s) and the kind in ``update_kind`` and the sentence in ``reason``. A cancellation
     is OUTCOME_REJECTED with no waypoints and state Ended; every other kind is OUTCOME_APPROVED
-    with the new trajectory (a contingency: state Contingent)."""
+    with the new trajectory (a contingency: state Contingent; a nonconforming flight's update,
+    uam_planner.nonconformance: state Nonconforming, the state it was in until this version)."""
     from uam_msgs.msg import FlightPlan
 
     rid = update.request_id if request_id is None else request_id
@@ -140,6 +141,8 @@ def plan_update_msg(update: Any, t_s: float, policy: str, request_id: str | None
         plan.reason = str(update.reason)
         if update.kind == "contingency":
             plan.state = FlightPlan.STATE_CONTINGENT
+        elif update.kind == "nonconforming":   # issue 23: it was outside its intent until now
+            plan.state = FlightPlan.STATE_NONCONFORMING
     plan.version = int(update.version)
     plan.effective_time = to_time(float(update.effective_s))
     plan.constraint_ids = [str(c) for c in update.constraint_ids]

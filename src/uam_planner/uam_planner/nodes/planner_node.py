@@ -52,7 +52,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.task import Future
 from std_msgs.msg import String
-from uam_msgs.msg import EpochSync, FlightPlan, FlightRequest, PlanningReport
+from uam_msgs.msg import Conformance, EpochSync, FleetState, FlightPlan, FlightRequest, PlanningReport
 from uam_msgs.srv import PlanEpoch, SolveMwis, UpdateConstraint
 
 from uam_contract import names as c
@@ -68,6 +68,7 @@ from uam_planner.airspace_files import load_airspace
 from uam_planner.constraints import ConstraintError
 from uam_planner.live_constraints import parse_update, set_geojson
 from uam_planner.network import load_network
+from uam_planner.nonconformance import ConformanceBounds
 from uam_planner.planning import AirspaceConfig, Planner, PlanningConfig, call_solver, default_solve_mwis
 
 
@@ -97,6 +98,8 @@ class PlannerNode(Node):
             horizon_epochs=self.p["horizon_epochs"], commit_ahead=self.p["commit_ahead"],
             fair_window_s=self.p["fair_window_s"],
             spatial_buffer_m=self.p["spatial_buffer_m"], temporal_buffer_s=self.p["temporal_buffer_s"],
+            conformance=ConformanceBounds(self.p["reaction_lateral_m"], self.p["reaction_vertical_m"],
+                                          self.p["reaction_time_s"]) if self.p["reaction"] else None,
             airspace=AirspaceConfig(**{f: self.p[f] for f in (
                 "separation_model", "vertical_separation_m", "departure_slot_s", "climb_rate_mps",
                 "descent_rate_mps")}))
@@ -126,6 +129,21 @@ class PlannerNode(Node):
                                                        self._on_update_constraint)
         self.create_subscription(FlightRequest, c.TOPIC_REQUESTS, self._on_request, qos.QOS_REQUESTS)
         self.create_subscription(EpochSync, c.TOPIC_SYNC, self._on_sync, qos.QOS_LATCHED)
+        # the reaction to nonconformance (issue 23, uam_planner.nonconformance): the fleet state is
+        # the planner's own view of where the vehicles are; a report on uam/conformance is a claim
+        # checked against it and against the planner's plan at the next epoch
+        self.conformance_reports = 0
+        self.conformance_reports_refused = 0
+        # the messages go to an inbox (a deque: appends are atomic) from their own callback group,
+        # so a busy epoch never holds them up; the planner reads the inbox before each epoch
+        self._inbox: collections.deque = collections.deque()
+        if self.p["reaction"]:
+            from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+            group = MutuallyExclusiveCallbackGroup()
+            self.create_subscription(FleetState, c.TOPIC_FLEET, lambda msg: self._inbox.append(msg), qos.QOS_STREAM,
+                                     callback_group=group)
+            self.create_subscription(Conformance, c.TOPIC_CONFORMANCE, lambda msg: self._inbox.append(msg), qos.QOS_STREAM,
+                                     callback_group=group)
         self._client = self.create_client(SolveMwis, c.SERVICE_SOLVE, callback_group=self._group)
         self._service = None  # offered once the solver is up (or its start-up wait is over)
         self._started_at = time.monotonic()
@@ -161,6 +179,39 @@ class PlannerNode(Node):
             f"policy {self.policy}, backend {self.config.backend}, seed {self.config.seed}, separation "
             f"{self.config.separation.kind}, departure slot {self.config.airspace.departure_slot_s:g} s, "
             f"{len(self.config.constraints or ())} constraint(s)")
+
+    def _read_inbox(self) -> None:
+        """Under the lock, before an epoch: every fleet state and conformance report received,
+        in the order received."""
+        while self._inbox:
+            msg = self._inbox.popleft()
+            if isinstance(msg, FleetState):
+                self._on_fleet(msg)
+            else:
+                self._on_conformance(msg)
+
+    def _on_fleet(self, msg: FleetState) -> None:
+        """The planner's own observation of every vehicle in the fleet state."""
+        t = m.from_time(msg.header.stamp)
+        for v in msg.vehicles:
+            self.planner.observe(v.vehicle_id, t, (v.position.x, v.position.y, v.position.z))
+
+    def _on_conformance(self, msg: Conformance) -> None:
+        """Each vehicle the monitor calls nonconforming: a claim, queued for the next epoch, where
+        the planner checks it against its own view (``Planner.report_nonconforming``)."""
+        ids, ok = list(msg.vehicle_ids), list(msg.conforming)
+        if len(ids) != len(ok):
+            self.conformance_reports_refused += 1
+            self.get_logger().warning(f"conformance: {len(ids)} vehicle_ids but {len(ok)} conforming "
+                                      f"flags: refused")
+            return
+        t = m.from_time(msg.header.stamp)
+        for vid, good in zip(ids, ok):
+            if good:
+                continue
+            self.conformance_reports += 1
+            if self.planner.report_nonconforming(vid, t, "conformance_monitor") is not None:
+                self.conformance_reports_refused += 1
 
     @property
     def config(self) -> PlanningConfig:
@@ -522,6 +573,7 @@ class PlannerNode(Node):
             self.get_logger().warning(f"epoch {k}: planning without {len(missing)} expected request(s) that did "
                                       f"not arrive within {self.p['request_wait_timeout_s']:g} s: {missing[:5]}")
         with self._lock:
+            self._read_inbox()   # issue 23: the fleet states and conformance reports received so far
             prep = self.planner.prepare(t_s, k)   # applies the constraint updates due (docs/replanning.md)
             self._publish_constraint_changes(t_s)
         t0 = time.perf_counter()

@@ -41,6 +41,7 @@ class ConformanceNode(Node):
         p = declare_table(self, CONFORMANCE_MONITOR)
         self.bounds = ConformanceBounds(p["lateral_m"], p["vertical_m"], p["time_s"])
         self.monitor = ConformanceMonitor(self.bounds)
+        self._versions: dict[str, int] = {}
         self.finished = False
         self.samples = 0
         self._end_t: float | None = None     # the run's end, once the simulator announced it
@@ -56,8 +57,10 @@ class ConformanceNode(Node):
         if plan.outcome != FlightPlan.OUTCOME_APPROVED:
             return
         key = wire.scoped_id(plan.operator_id, plan.request_id)
-        if self.monitor.has_plan(key):
-            return
+        version = int(getattr(plan, "version", 0) or 0)
+        if self.monitor.has_plan(key) and version <= self._versions.get(key, 1):
+            return   # the first approved plan, then each newer version, is the reference
+        self._versions[key] = max(version, 1)
         try:
             self.monitor.set_plan(key, m.trajectory_from_plan(plan))
         except ValueError as exc:

@@ -55,6 +55,7 @@ from uam_contract.params import SIMULATOR
 from uam_bringup.runtime import run_node
 from uam_sim.cdr import encode_clock, encode_fleet_state, encode_pose_array, yaw_quaternions
 from uam_sim.disturbance import WindField, fly_plans, from_simulator_params
+from uam_planner.nonconformance import rate_of
 from uam_sim.fleet import Fleet
 
 RESEND_S = 2.0  # wall time after which an unanswered call is sent again (a restarted server lost it)
@@ -90,6 +91,7 @@ class SimulatorNode(Node):
         self.disturbance = from_simulator_params(self.p, self.step_s)
         self.wind = WindField(self.disturbance) if self.disturbance.enabled else None
         self._plan_trajs: dict = {}  # with disturbances: each flight's plan (spliced over its versions)
+        self._speed_errors: dict = {}  # after a nonconforming update: the speed error against its plan
         self.step_index = 0                 # t = step_index * step_s
         self.plans_received = 0             # decisions in the epoch answers: approved, expired, rejected
         self.approvals_received = 0         # of which approved
@@ -362,7 +364,20 @@ class SimulatorNode(Node):
         cancelled flight (docs/replanning.md)."""
         self.versions_received += 1
         try:
-            if plan.outcome == FlightPlan.OUTCOME_APPROVED and plan.waypoints and self.wind is not None \
+            rate = rate_of(plan.reason) if plan.outcome == FlightPlan.OUTCOME_APPROVED else None
+            if rate is not None and plan.waypoints and self.wind is not None and self.fleet.flown(key) is not None:
+                # issue 23: a nonconforming flight's intent, updated from where it is: flown on
+                # from there at the airspeed it had (uam_sim.disturbance.fly_on), as the runner does
+                from uam_sim.disturbance import flight_draws, fly_on
+                new = m.trajectory_from_plan(plan)
+                e = self._speed_errors.get(key, flight_draws(self.disturbance, key).speed_error)
+                flown, self._speed_errors[key] = fly_on(self.fleet.flown(key), new, e, rate,
+                                                        self.disturbance, self.wind)
+                self._plan_trajs[key] = new
+                self.fleet.replace(key, flown)
+                self._flying[key] = plan
+                self.flown_plans.append(plan)
+            elif plan.outcome == FlightPlan.OUTCOME_APPROVED and plan.waypoints and self.wind is not None \
                     and key in self._plan_trajs:
                 # disturbed: the new version chains onto the old plan, not onto what flew; the
                 # spliced plan is flown by the model again (the same track up to the switch)

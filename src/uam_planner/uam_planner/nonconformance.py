@@ -1,0 +1,407 @@
+"""The reaction to a nonconforming flight (issue 23 item 3; docs/disturbances.md), free of ROS.
+
+A flight is *conforming* at time t, at position q, when q lies within bounds of its plan (the
+intent's volumes of ASTM F3548-21, here a tube around the 4D trajectory): with p the point of the
+planned path nearest to q (3D, exact per segment) and tau* its planned time, the **lateral**
+error |q - p| horizontally <= ``lateral_m``, the **vertical** error |q_z - p_z| <= ``vertical_m``
+and the **time** error |t - tau*| <= ``time_s``. The same test serves the conformance monitor
+(``uam_sim.conformance``, which imports it from here) and the planner, which checks every
+report against its own plan.
+
+**A report is a claim, not a fact.** The planner learns of a nonconforming flight from outside
+(the ``conformance_monitor`` node's ``/uam/conformance``; in process the runner's monitor), but
+it acts only on what it knows itself:
+
+- the flight must be one of its active flights, airborne at the report's time;
+- the position used is the planner's own latest observation of the vehicle (the fleet state,
+  :class:`PositionBook`), never a number from the report; it must be at most ``MAX_AGE_S`` old;
+- the planner recomputes the errors of that position against its own newest plan version: if
+  they are within the bounds the report is refused (nothing changes);
+- the observed speed is the planner's own estimate (:meth:`PositionBook.progress_rate`).
+
+What a report can cause is therefore at worst one re-plan of a flight that the planner itself sees
+outside its plan, and that re-plan is deconflicted like any other: a flight is never removed from
+the planner's traffic picture by a report (there is no cancellation here; a flight for which no
+deconflicted alternative exists keeps flying its updated intent as a *contingency*, still
+active, so later requests are deconflicted against it).
+
+**The update** (at the epoch after the report, ``Planner.prepare`` step 2, right after issue 22's
+constraint re-plan; t_eff = the epoch time): the flight's intent is re-drawn *from where it is*
+at its *observed progress rate* f (planned seconds flown per second, so 0.9 = 10 % slow):
+from the observed position q at the observation time t0, straight to the first waypoint of its
+plan beyond the point of the path nearest to q, then the plan's remaining waypoints, every leg
+timed at f times the plan's speed (:func:`rejoin_trajectory`). Alternatives: that rejoin at
+``f``, and at ``SHARES`` x f (the aircraft asked to fly slower, which delays it, or 10 % faster,
+either of which can clear a neighbour). One conflict graph over every nonconforming flight's alternatives (one clique per
+flight), each alternative deconflicted exactly against every other active flight (the run's
+separation model, from t_eff on), solved by the planner's selector (the same as issue 22's
+batch re-planning: MWIS with the answer checked and greedy as fallback, or first-fit). Weights
+2 + 1 / (1 + delay / 300 s), delay = arrival - the arrival of the rejoin at f (the tier of a
+re-route in ``uam_planner.replanning``; a faster one weighs as the rejoin at f). The chosen one
+becomes version + 1 (``PlanUpdate`` of kind ``nonconforming``, ``effective_s`` = t_eff); with none
+chosen the alternative that loses separation with the fewest flights (then lands soonest) is
+taken as a ``contingency`` (``Flight.contingent``, F3548 Contingent). The F3548 state at the decision is
+Nonconforming (``FlightPlan.STATE_NONCONFORMING`` on the wire): the flight was outside its intent
+from the report until its new version took effect, and conforms to the new one.
+
+The new version's trajectory starts at the observation (t0, q): it does not chain with the old
+plan (the aircraft is not where the old plan is; that is why it is updated). What flew before
+t_eff is what flew; the simulator flies the new version from the aircraft's state.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, replace
+from typing import Callable, Sequence
+
+import numpy as np
+
+from uam_contract.params import CONFORMANCE_MONITOR
+
+from .trajectory import Trajectory
+
+_DEFAULTS = {prm.name: prm.default for prm in CONFORMANCE_MONITOR}  # one source: the node's table
+
+#: the update kinds of this module (``PlanUpdate.kind``; ``FlightPlan.update_kind``)
+KIND = "nonconforming"
+KIND_CONTINGENCY = "contingency"
+STATE = "Nonconforming"
+#: the planner acts on its own observation only if it is at most this old at the epoch [s]
+MAX_AGE_S = 10.0
+#: the progress rate is estimated over the observations of the last SPEED_WINDOW_S seconds [s]
+SPEED_WINDOW_S = 120.0
+#: ... from at least this much time (else from the plan's departure) [s]
+MIN_SPEED_SPAN_S = 10.0
+#: the estimated progress rate is clipped to this range (performance: an eVTOL does not fly
+#: at half or twice its planned speed; a wild estimate would not be flown anyway)
+RATE_RANGE = (0.5, 1.5)
+#: the other alternatives, as shares of the observed rate: slower (a delay), and 10 % faster (the
+#: speed margin an aircraft keeps; 4D guidance asks for as much)
+SHARES = (0.9, 1.1, 0.8, 0.7)
+DELAY_SCALE_S = 300.0
+_EPS_T = 1e-9
+
+
+@dataclass(frozen=True)
+class ConformanceBounds:
+    """The tube around a plan: lateral [m], vertical [m] and time [s] bounds (inclusive);
+    defaults: the conformance monitor node's (uam_contract.params.CONFORMANCE_MONITOR)."""
+
+    lateral_m: float = _DEFAULTS["lateral_m"]
+    vertical_m: float = _DEFAULTS["vertical_m"]
+    time_s: float = _DEFAULTS["time_s"]
+
+    def __post_init__(self):
+        for name in ("lateral_m", "vertical_m", "time_s"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
+                    or not math.isfinite(v) or v <= 0:
+                raise ValueError(f"ConformanceBounds.{name}: {v!r} must be a positive finite number")
+
+
+def nearest(plan: Trajectory, points_m) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """For each point (n, 3): the plan's segment index j, the share along it, the nearest point
+    of the planned path (3D, exact per segment) and its planned time tau*."""
+    q = np.asarray(points_m, dtype=np.float64).reshape(-1, 3)
+    a = plan.points_m[:-1]                     # (s, 3)
+    d = plan.points_m[1:] - a
+    dd = np.square(d).sum(axis=1)
+    rel = q[:, None, :] - a[None, :, :]        # (n, s, 3)
+    lam = np.where(dd > 0, (rel * d[None]).sum(axis=2) / np.where(dd > 0, dd, 1.0), 0.0)
+    lam = np.clip(lam, 0.0, 1.0)
+    near = a[None] + lam[..., None] * d[None]
+    dist2 = np.square(q[:, None, :] - near).sum(axis=2)
+    j = np.argmin(dist2, axis=1)
+    rows = np.arange(q.shape[0])
+    lj = lam[rows, j]
+    tau = plan.times_s[j] + lj * (plan.times_s[j + 1] - plan.times_s[j])
+    return j, lj, near[rows, j], tau
+
+
+def deviations(plan: Trajectory, times_s, points_m) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Lateral [m], vertical [m] (signed: above) and time [s] (positive = late) errors of
+    samples against ``plan``. Args: ``times_s`` (n,), ``points_m`` (n, 3). O(n p)."""
+    t = np.asarray(times_s, dtype=np.float64).reshape(-1)
+    q = np.asarray(points_m, dtype=np.float64).reshape(-1, 3)
+    _j, _l, pt, tau = nearest(plan, q)
+    off = q - pt
+    return np.sqrt(np.square(off[:, :2]).sum(axis=1)), off[:, 2], t - tau
+
+
+def conforming(lateral, vertical, time_err, bounds: ConformanceBounds) -> np.ndarray:
+    """True where every error is within its bound (inclusive)."""
+    return ((np.asarray(lateral) <= bounds.lateral_m) & (np.abs(vertical) <= bounds.vertical_m)
+            & (np.abs(time_err) <= bounds.time_s))
+
+
+# ---- what the planner itself knows ----------------------------------------------------------
+
+@dataclass(frozen=True)
+class Observation:
+    t_s: float
+    position_m: tuple
+
+
+class PositionBook:
+    """The planner's own observations of the airborne vehicles (from the fleet state), per
+    request id: the last ``SPEED_WINDOW_S`` seconds, in time order."""
+
+    def __init__(self):
+        self._obs: dict[str, deque] = {}
+
+    def observe(self, request_id: str, t_s: float, position_m) -> str | None:
+        """Record one observation; return None, or why it was refused (naming the field)."""
+        if not isinstance(request_id, str) or not request_id:
+            return f"request_id: {request_id!r} is not a non-empty string"
+        if isinstance(t_s, bool) or not isinstance(t_s, (int, float, np.integer, np.floating)) \
+                or not math.isfinite(t_s):
+            return f"t_s: {t_s!r} is not a finite time"
+        p = np.asarray(position_m, dtype=np.float64).reshape(-1)
+        if p.shape != (3,) or not np.isfinite(p).all():
+            return f"position_m: {position_m!r} is not three finite numbers"
+        q = self._obs.setdefault(request_id, deque())
+        if q and t_s <= q[-1].t_s:
+            return None  # a repeated or late sample: the newest is kept
+        q.append(Observation(float(t_s), tuple(float(x) for x in p)))
+        while q and q[0].t_s < t_s - SPEED_WINDOW_S:
+            q.popleft()
+        return None
+
+    def latest(self, request_id: str) -> Observation | None:
+        q = self._obs.get(request_id)
+        return q[-1] if q else None
+
+    def forget(self, keep_ids) -> None:
+        """Drop every vehicle not in ``keep_ids`` (landed flights)."""
+        keep = set(keep_ids)
+        for k in [k for k in self._obs if k not in keep]:
+            del self._obs[k]
+
+    def progress_rate(self, request_id: str, plan: Trajectory) -> float:
+        """The observed progress rate along ``plan``: planned seconds covered per second, from
+        the oldest observation of the window to the newest (the planned time of each one's
+        nearest path point), or, with less than ``MIN_SPEED_SPAN_S`` of observations, from the
+        plan's departure to the newest; 1 without observations; clipped to ``RATE_RANGE``."""
+        q = self._obs.get(request_id)
+        if not q:
+            return 1.0
+        last = q[-1]
+        first = q[0]
+        if last.t_s - first.t_s >= MIN_SPEED_SPAN_S:
+            _j, _l, _p, tau = nearest(plan, np.array([first.position_m, last.position_m]))
+            rate = (tau[1] - tau[0]) / (last.t_s - first.t_s)
+        elif last.t_s - plan.departure_s >= MIN_SPEED_SPAN_S:
+            _j, _l, _p, tau = nearest(plan, np.array([last.position_m]))
+            rate = (tau[0] - plan.departure_s) / (last.t_s - plan.departure_s)
+        else:
+            return 1.0
+        return float(np.clip(rate, *RATE_RANGE))
+
+
+@dataclass(frozen=True)
+class Claim:
+    """A nonconformance report, as received: who says which flight is nonconforming when."""
+
+    request_id: str
+    t_s: float
+    source: str = ""
+
+
+def verify(flight, obs: Observation | None, bounds: ConformanceBounds, t_eff: float):
+    """Check a claim about ``flight`` against the planner's own knowledge at the epoch ``t_eff``.
+
+    Returns (errors (lateral, vertical, time), None) when the planner's own newest observation,
+    at most ``MAX_AGE_S`` old, is outside ``bounds`` of the flight's current plan while it is
+    airborne; else (None, the reason naming what did not hold)."""
+    if obs is None:
+        return None, f"request_id: {flight.request_id!r} has no fleet state the planner saw"
+    if obs.t_s > t_eff + _EPS_T or obs.t_s < t_eff - MAX_AGE_S:
+        return None, (f"fleet state of {flight.request_id!r} at t = {obs.t_s:g} s is not within "
+                      f"{MAX_AGE_S:g} s before the epoch at {t_eff:g} s")
+    tr = flight.trajectory
+    if not tr.departure_s < obs.t_s < flight.arrival_s:
+        return None, (f"request_id: {flight.request_id!r} is not airborne on its plan at t = "
+                      f"{obs.t_s:g} s ([{tr.departure_s:g}, {flight.arrival_s:g}] s)")
+    lat, ver, terr = (float(x[0]) for x in deviations(tr, [obs.t_s], [obs.position_m]))
+    if bool(conforming(lat, ver, terr, bounds)):
+        return None, (f"request_id: {flight.request_id!r} conforms in the planner's own view at "
+                      f"t = {obs.t_s:g} s (lateral {lat:.1f} m, vertical {ver:.1f} m, time "
+                      f"{terr:.1f} s within {bounds.lateral_m:g} m, {bounds.vertical_m:g} m, "
+                      f"{bounds.time_s:g} s)")
+    return (lat, ver, terr), None
+
+
+# ---- the update -------------------------------------------------------------------------------
+
+def rejoin_trajectory(plan: Trajectory, t0_s: float, q, rate: float) -> Trajectory | None:
+    """From ``q`` at ``t0_s`` straight to the first waypoint of ``plan`` beyond the point of
+    its path nearest to ``q``, then the plan's remaining waypoints; every leg at ``rate`` times
+    the plan's speed (the first at the speed of the segment it rejoins). None if nothing is
+    left (it is at the plan's end)."""
+    q = np.asarray(q, dtype=np.float64).reshape(3)
+    j, lam, _p, _tau = nearest(plan, q[None])
+    j = int(j[0])
+    nxt = j + 1
+    pts = plan.points_m
+    ts = plan.times_s
+    seg_len = float(np.linalg.norm(pts[j + 1] - pts[j]))
+    v_seg = seg_len / float(ts[j + 1] - ts[j]) if seg_len > 0 else 1.0
+    first = float(np.linalg.norm(pts[nxt] - q))
+    times = [float(t0_s)]
+    points = [q]
+    if first > 1e-6:
+        times.append(times[-1] + first / (rate * v_seg))
+        points.append(pts[nxt])
+    for k in range(nxt + 1, pts.shape[0]):
+        times.append(times[-1] + float(ts[k] - ts[k - 1]) / rate)
+        points.append(pts[k])
+    if len(times) < 2:
+        return None
+    return Trajectory(np.array(times), np.array(points))
+
+
+#: the reason of a nonconforming update names the observed progress rate after this word; the
+#: simulator reads it back (:func:`rate_of`) to fly the aircraft on at the airspeed it had
+RATE_WORD = "observed progress rate"
+
+
+def rate_of(reason: str) -> float | None:
+    """The observed progress rate a nonconforming update's reason names (None if none)."""
+    i = reason.find(RATE_WORD)
+    if i < 0:
+        return None
+    word = reason[i + len(RATE_WORD):].split()[0].rstrip(";,)")
+    try:
+        v = float(word)
+    except ValueError:
+        return None
+    return v if math.isfinite(v) and RATE_RANGE[0] <= v <= RATE_RANGE[1] else None
+
+
+def _clipped(tr: Trajectory, t_s: float) -> Trajectory | None:
+    from .replanning import clipped_from
+    return clipped_from(tr, t_s)
+
+
+def _least_conflicting(alts: list, others: list, config, t_eff: float):
+    """Of (trajectory, weight) alternatives, the one that loses separation (from t_eff on) with
+    the fewest of ``others``, then the one that lands soonest."""
+    from .separation import SegmentSet, conflicting_pairs
+    n_conf = np.zeros(len(alts), dtype=np.int64)
+    oset = SegmentSet.from_trajectories(others) if others else None
+    if oset is not None and len(oset):
+        oset = oset.take(oset.t1_s >= t_eff)
+    if oset is not None and len(oset):
+        aset = SegmentSet.from_trajectories([_clipped(a[0], t_eff) or a[0] for a in alts])
+        pairs = conflicting_pairs(aset, oset, config.separation)
+        for i in np.unique(pairs[:, 0]).tolist():
+            n_conf[i] = np.unique(pairs[pairs[:, 0] == i, 1]).size
+    k = min(range(len(alts)), key=lambda i: (int(n_conf[i]), alts[i][0].arrival_s))
+    return alts[k]
+
+
+def react(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: PositionBook,
+          config, select: Callable, policy: str, network=None) -> tuple[list, list, dict]:
+    """Update the intents of the nonconforming flights ``found`` at the epoch ``t_eff``.
+
+    Args:
+        t_eff: the epoch time [s] (the update takes effect then).
+        epoch_index: copied to the new versions.
+        active: the planner's active flights (newest versions).
+        found: index in ``active`` -> (observation, (lateral, vertical, time) errors), the
+            verified claims (:func:`verify`).
+        book: the planner's PositionBook (the progress rates).
+        config: the PlanningConfig (its ``separation``: the buffered one the planner keeps;
+            ``constraints``: alternatives that enter one are dropped).
+        select: callable(graph, policy) -> (selected, report), ``planning.replan_selector``.
+        policy: "mwis" or "firstfit".
+    Returns: (new active list: the others in their order, then the new versions; PlanUpdate per
+    flight in ``active`` order; a report dict: flights, alternatives, vertices, edges, kinds).
+    """
+    from .conflict_graph import build_conflict_graph
+    from .replanning import PlanUpdate
+    from .separation import SegmentSet
+
+    idx = sorted(found)
+    report = {"t_s": float(t_eff), "flights": len(idx), "alternatives": 0, "vertices": 0,
+              "edges": 0, "kinds": {}, "rates": {}}
+    if not idx:
+        return list(active), [], report
+    others = [f for j, f in enumerate(active) if j not in found]
+    act = SegmentSet.from_trajectories([f.trajectory for f in others])
+    act = act.take(act.t1_s >= t_eff) if len(act) else act
+    per, rates = [], []
+    for i in idx:
+        f = active[i]
+        obs = found[i][0]
+        rate = book.progress_rate(f.request_id, f.trajectory)
+        rates.append(rate)
+        report["rates"][f.request_id] = rate
+        alts = []
+        base = None
+        for share in (1.0,) + tuple(SHARES):
+            tr = rejoin_trajectory(f.trajectory, obs.t_s, obs.position_m, rate * share)
+            if tr is None or tr.arrival_s <= t_eff:
+                continue
+            if base is None:
+                base = tr.arrival_s
+            alts.append((tr, 2.0 + 1.0 / (1.0 + max(0.0, tr.arrival_s - base) / DELAY_SCALE_S)))
+        cset = config.constraints
+        if alts and cset is not None and len(cset):
+            d = network.node_index(f.destination_id)
+            from .replanning import _pad_of_point
+            trs = [_clipped(a[0], t_eff) for a in alts]
+            which, _ = cset.violations(trs, np.full(len(alts), -1, dtype=np.int64),
+                                       np.full(len(alts), d, dtype=np.int64), np.zeros(len(alts), dtype=np.int64),
+                                       np.array([_pad_of_point(network, d, a[0].points_m[-1]) for a in alts]))
+            alts = [a for a, w in zip(alts, which.tolist()) if w < 0] or alts[:1]
+        per.append(alts)
+    flat = [a for alts in per for a in alts]
+    report["alternatives"] = len(flat)
+    req_of = np.repeat(np.arange(len(idx)), [len(a) for a in per]).astype(np.int64)
+    cand = np.concatenate([np.arange(len(a)) for a in per]).astype(np.int64) if flat else np.zeros(0, np.int64)
+    # deconflicted from t_eff on (what flew before is past)
+    trs = [_clipped(a[0], t_eff) or a[0] for a in flat]
+    graph = build_conflict_graph(trs, req_of, cand, np.array([a[1] for a in flat], dtype=np.float64),
+                                 len(idx), act, config.separation)
+    report["vertices"], report["edges"] = graph.n_vertices, graph.n_edges
+    chosen = {}
+    backend = policy
+    if graph.n_vertices:
+        selected, er = select(graph, policy)
+        backend = er.backend_used or policy
+        for v in np.asarray(selected).tolist():
+            src = int(graph.vertex_source[v])
+            chosen[int(req_of[src])] = flat[src]
+    updates, new_versions = [], []
+    for r, i in enumerate(idx):
+        f = active[i]
+        obs, (lat, ver, terr) = found[i]
+        what = (f"nonconforming at t = {obs.t_s:g} s (lateral {lat:.1f} m, vertical {ver:.1f} m, "
+                f"time {terr:+.1f} s); intent updated from where it is, {RATE_WORD} {rates[r]:.12g}")
+        a = chosen.get(r)
+        contingent = a is None
+        if a is None:
+            if not per[r]:
+                continue  # nothing left to fly: it is at its plan's end (it keeps its plan)
+            a = _least_conflicting(per[r], [f.trajectory for f in others] +
+                                   [x.trajectory for x in new_versions], config, t_eff)
+            kind = KIND_CONTINGENCY
+            reason = (f"contingency: {what}; each of its {len(per[r])} updated intents loses "
+                      f"separation with another flight: flown but not deconflicted")
+        else:
+            kind = KIND
+            reason = f"{KIND}: {what}"
+        tr = a[0]
+        nf = replace(f, trajectory=tr, arrival_s=float(tr.arrival_s), weight=float(a[1]),
+                     method=f"nonconforming-{policy}", backend=backend, epoch_index=int(epoch_index),
+                     version=f.version + 1, effective_s=float(t_eff), contingent=contingent)
+        updates.append(PlanUpdate(f.request_id, f.operator_id, nf.version, kind, (), reason,
+                                  float(t_eff), nf, f, nf.arrival_s - f.arrival_s))
+        new_versions.append(nf)
+        report["kinds"][kind] = report["kinds"].get(kind, 0) + 1
+    replaced = {u.request_id for u in updates}
+    keep = [f for j, f in enumerate(active) if j not in found or active[j].request_id not in replaced]
+    return keep + new_versions, updates, report

@@ -1,0 +1,180 @@
+"""The reaction to a nonconforming flight (issue 23 item 3; uam_planner.nonconformance,
+docs/disturbances.md). Every expected value is computed by hand in the comments: the paper's
+sphere of 100 m, speed 10 m/s, epochs of 30 s, the conformance bounds 30 m, 15 m, 10 s."""
+
+import math
+
+import numpy as np
+import pytest
+
+from uam_planner.audit import audit_flights
+from uam_planner.network import network_from_enu
+from uam_planner.nonconformance import KIND, ConformanceBounds, rejoin_trajectory
+from uam_planner.planning import Flight, Planner, PlanningConfig
+from uam_planner.trajectory import Trajectory
+from uam_sim.conformance import track_conformance
+from uam_sim.disturbance import DisturbanceConfig, FlightDraws, fly
+
+
+def cross():
+    """W (0, 0) - m (3000, 0) - E (6000, 0) and S (3000, -3000) - m - N (3000, 3000)."""
+    ids = ["W", "m", "E", "S", "N"]
+    enu = [(0, 0, 0), (3000, 0, 0), (6000, 0, 0), (3000, -3000, 0), (3000, 3000, 0)]
+    return network_from_enu("cross", ids, enu, [True, False, True, True, True],
+                            [("W", "m"), ("m", "E"), ("S", "m"), ("m", "N")])
+
+
+def flight(rid, route, points, t0):
+    pts = np.array(points, dtype=np.float64)
+    legs = np.sqrt(np.square(np.diff(pts, axis=0)).sum(axis=1))
+    times = t0 + np.concatenate(([0.0], np.cumsum(legs / 10.0)))
+    tr = Trajectory(times, pts)
+    return Flight(rid, route[0], route[-1], tuple(route), tr, float(times[0]), float(times[-1]),
+                  float(legs.sum()), 1.0, 0, "greedy", "greedy", 0)
+
+
+#: P: W at 0 s, m at 300 s, E at 600 s. Q: S at 33.33 s, m at 333.33 s, N at 633.33 s
+P = flight("P", ["W", "m", "E"], [(0, 0, 0), (3000, 0, 0), (6000, 0, 0)], 0.0)
+Q = flight("Q", ["S", "m", "N"], [(3000, -3000, 0), (3000, 0, 0), (3000, 3000, 0)], 100.0 / 3.0)
+#: a head wind of 1 m/s (from the east): P holds its airspeed of 10 m/s, 9 m/s over the ground
+HEAD_WIND = DisturbanceConfig(wind_speed_mps=1.0, wind_from_deg=90.0)
+
+
+def planner(reaction=True):
+    p = Planner(cross(), PlanningConfig(conformance=ConformanceBounds() if reaction else None),
+                "mwis", solve_mwis=None)
+    p.restore([P, Q])
+    return p
+
+
+def test_a_flight_slowed_by_a_head_wind_is_flagged_at_the_right_step():
+    flown = fly(P.trajectory, FlightDraws(), HEAD_WIND)
+    # at step n it has flown 9 n m, planned at 0.9 n s: late by 0.1 n s, over 10 s from n = 101
+    assert flown.position_at(100.0)[0] == pytest.approx(900.0)
+    tc = track_conformance("P", P.trajectory, flown, ConformanceBounds())
+    assert tc.first_nonconforming_s == pytest.approx(101.0)
+    assert tc.time_err_s[100] == pytest.approx(10.0) and tc.time_err_s[101] == pytest.approx(10.1)
+
+
+def _observe(p, flown, times):
+    for t in times:
+        assert p.observe("P", t, flown.position_at(t)) is None
+
+
+def test_its_updated_plan_keeps_separation_with_a_hand_placed_neighbour():
+    flown = fly(P.trajectory, FlightDraws(), HEAD_WIND)
+    p = planner()
+    _observe(p, flown, (100.0, 110.0, 120.0))
+    assert p.report_nonconforming("P", 101.0, "monitor") is None
+    res = p.plan(120.0, 4)
+    # the progress rate: planned 90 -> 108 s in 100 -> 120 s = 0.9. From (1080, 0) at 120 s the
+    # rejoin at 0.9 reaches m at 120 + 1920 / 9 = 333.33 s, with Q: a loss (both at m then).
+    naive = rejoin_trajectory(P.trajectory, 120.0, (1080.0, 0.0, 0.0), 0.9)
+    assert naive.position_at(1000.0 / 3.0) == pytest.approx([3000.0, 0.0, 0.0])
+    assert len(audit_flights([naive, Q.trajectory], separation_m=100.0).losses) == 1
+    # the alternatives keep 0.99 (10 % faster), 0.81, 0.72, 0.63 of the planned speed. Two paths
+    # crossing at right angles at speeds vp, vq with a time gap dt at the crossing come closest at
+    # dt vp vq / sqrt(vp^2 + vq^2): at 0.99 P reaches m at 120 + 1920 / 9.9 = 313.94 s, 19.39 s
+    # before Q: 136.4 m; 0.81: 23.70 s after, 149.2 m. The faster one weighs as much as the
+    # rejoin (no delay: weight 3), the slower ones less: the MWIS takes 0.99
+    (u,) = res.plan_updates
+    assert (u.request_id, u.kind, u.version, u.effective_s) == ("P", KIND, 2, 120.0)
+    assert u.flight.contingent is False and "time +12.0 s" in u.reason
+    new = u.flight.trajectory
+    assert new.departure_s == 120.0 and new.points_m[0] == pytest.approx([1080.0, 0.0, 0.0])
+    assert new.position_at(120.0 + 1920.0 / 9.9) == pytest.approx([3000.0, 0.0, 0.0])
+    assert new.arrival_s == pytest.approx(120.0 + 4920.0 / 9.9)
+    gap = 1000.0 / 3.0 - (120.0 + 1920.0 / 9.9)
+    a = audit_flights([new, Q.trajectory], separation_m=100.0)
+    assert a.losses == [] and a.min_separation_m == pytest.approx(gap * 99.0 / math.hypot(9.9, 10.0), abs=0.01)
+    # the planner's traffic picture: both flights, P's newest version
+    assert sorted((f.request_id, f.version) for f in p.active) == [("P", 2), ("Q", 1)]
+    assert res.report.nonconformance["kinds"] == {KIND: 1}
+
+
+def test_without_a_neighbour_it_rejoins_at_its_observed_speed_and_conforms_again():
+    flown = fly(P.trajectory, FlightDraws(), HEAD_WIND)
+    p = Planner(cross(), PlanningConfig(conformance=ConformanceBounds()), "mwis", solve_mwis=None)
+    p.restore([P])
+    _observe(p, flown, (100.0, 110.0, 120.0))
+    assert p.report_nonconforming("P", 101.0) is None
+    (u,) = p.plan(120.0, 4).plan_updates
+    new = u.flight.trajectory
+    assert new.arrival_s == pytest.approx(120.0 + 4920.0 / 9.0)   # the rejoin at 0.9
+    # flown on from (1080, 0) at its airspeed (speed error (1 + 0) / 0.9 - 1 against the new
+    # plan): 10 m/s air, 9 over the ground, the new plan's speed: conforming to the end
+    cont = fly(new, FlightDraws((1.0 / 0.9) - 1.0), HEAD_WIND)
+    tc = track_conformance("P", new, cont, ConformanceBounds())
+    assert tc.first_nonconforming_s is None
+    assert cont.arrival_s == pytest.approx(new.arrival_s, abs=1.0)
+
+
+def test_a_report_the_planner_cannot_confirm_changes_nothing():
+    p = planner()
+    # P on its plan at 120 s (1200, 0): the planner's own view conforms
+    assert p.observe("P", 120.0, (1200.0, 0.0, 0.0)) is None
+    assert p.report_nonconforming("P", 119.0, "forged") is None
+    res = p.plan(120.0, 4)
+    assert res.plan_updates == []
+    (rid, why), = res.report.nonconformance["refused"]
+    assert rid == "P" and "conforms in the planner's own view" in why
+    assert sorted((f.request_id, f.version) for f in p.active) == [("P", 1), ("Q", 1)]
+    # no fleet state of Q seen: refused, Q kept
+    assert p.report_nonconforming("Q", 140.0) is None
+    res = p.plan(150.0, 5)
+    assert res.plan_updates == [] and "no fleet state" in res.report.nonconformance["refused"][0][1]
+    assert {f.request_id for f in p.active} == {"P", "Q"}
+    # an unknown flight, a bad time, the reaction off: refused at once, naming the field
+    assert p.report_nonconforming("Z", 150.0).startswith("request_id: 'Z'")
+    assert p.report_nonconforming("P", math.nan).startswith("t_s: nan")
+    assert planner(reaction=False).report_nonconforming("P", 150.0).startswith("conformance:")
+    assert p.observe("P", 150.0, (math.inf, 0.0, 0.0)).startswith("position_m:")
+
+
+def test_with_no_deconflicted_update_it_stays_in_the_picture_as_a_contingency():
+    # Q' crosses P's position at the epoch itself: every update starts there, none keeps
+    # separation (each with one flight), so P flies the one that lands soonest (0.99 of the plan's
+    # speed), contingent, and stays active
+    flown = fly(P.trajectory, FlightDraws(), HEAD_WIND)
+    q2 = flight("Q2", ["S", "m", "N"], [(1080, -3000, 0), (1080, 0, 0), (1080, 3000, 0)], -180.0)
+    p = Planner(cross(), PlanningConfig(conformance=ConformanceBounds()), "mwis", solve_mwis=None)
+    p.restore([P, q2])
+    _observe(p, flown, (100.0, 110.0, 120.0))
+    assert p.report_nonconforming("P", 101.0) is None
+    (u,) = p.plan(120.0, 4).plan_updates
+    assert u.kind == "contingency" and u.flight.contingent
+    assert u.flight.arrival_s == pytest.approx(120.0 + 4920.0 / 9.9)
+    assert {f.request_id for f in p.active} == {"P", "Q2"}
+
+
+def test_the_runner_reacts_and_off_is_todays_run():
+    """The in-process runner with --reaction: its monitor reports, the planner confirms and
+    updates, the aircraft fly on; conformance improves and every update is recorded. Reaction
+    off is the run without the option, field for field (timings aside)."""
+    from uam_planner.network import load_network
+    from uam_sim.experiment_config import REPO_ROOT, make_config
+    from uam_sim.scenario import run_scenario
+    from uam_sim.sweep import TIMING_FIELDS
+    net = load_network(REPO_ROOT / "config" / "networks" / "tiny.yaml")
+    dist = {"speed_error": 0.3, "gust_std_mps": 0.5}
+    base = dict(epoch_s=30.0, time_limit_s=5.0, corpus_max_vertices=0, disturbance=dist)
+    off = run_scenario(net, "greedy", 3.0, 4, 300.0, make_config(base))
+    off2 = run_scenario(net, "greedy", 3.0, 4, 300.0, make_config(dict(base, reaction=False)))
+    on = run_scenario(net, "greedy", 3.0, 4, 300.0, make_config(dict(base, reaction=True)))
+    import json
+    strip = lambda s: json.dumps({k: v for k, v in s.items() if k not in TIMING_FIELDS},  # noqa: E731
+                                 sort_keys=True, default=str)
+    assert strip(off.summary) == strip(off2.summary) and off.flights == off2.flights
+    kinds = [r["kind"] for r in on.replans]
+    assert kinds and set(kinds) <= {KIND, "contingency"} and on.summary["nonconforming_updates"] > 0
+    assert on.summary["conf_conformance_percent"] > off.summary["conf_conformance_percent"]
+    assert on.summary["conf_longest_excursion_s"] < off.summary["conf_longest_excursion_s"]
+    # every update is a new version of a flight the run approved, decided at an epoch
+    ids = {f["request_id"] for f in on.flights}
+    assert all(r["request_id"] in ids and r["version"] >= 2 and r["t_s"] % 30.0 == 0 for r in on.replans)
+    # the plans (every version while in force) lose separation only where a contingency (flown,
+    # not deconflicted) is one of the pair
+    contingent = {r["request_id"] for r in on.replans if r["kind"] == "contingency"}
+    pairs = on.audit["loss_pairs"]
+    assert len(pairs) == min(on.summary["losses"], 20)
+    assert all(a in contingent or b in contingent for a, b, _d, _t in pairs)
