@@ -22,6 +22,16 @@ The outer layers of the default pipeline (Reduce, ComponentSplit) pass every gra
   because KaMIS overran even a 0.05 s limit on them (1-2 s at mean degree 40-44, past 8 s at
   100-150) and it holds the GIL; :func:`uam_solvers.solve_bounded` and the solve service bound
   any such overrun by a kill.
+* CP-SAT on the whole graph (the groups as at-most-one, no greedy hint) with
+  ``cpsat_fraction`` (0.8) of the time left, when KaMIS did not prove it and the graph is a
+  union of large cliques by structure (:meth:`AutoBackend._cpsat_suits`: the groups' clique
+  cover has >= ``cpsat_min_clique_cover`` = 8 vertices per clique, the triangle ratio is >=
+  0.25 and twice the edge density, at most 200,000 conflict pairs): the planner's
+  rolling-horizon graphs (issue 20; one request's candidates over ten epochs), on which KaMIS
+  runs to its limit and CP-SAT proves in 0.1-0.5 s CPU. On such graphs KaMIS first gets only a
+  probe (``kamis_probe_fraction`` 0.01 of the limit, at least 0.05 s). Above 2,000 vertices this
+  comes before LearnAndReduce. The paper-shaped, stress and planner-shaped synthetic graphs
+  (5 candidates per request) never take it.
 * otherwise, up to 2,000 vertices: auto's own ``Reduce(ComponentSplit(...))`` (exact
   reductions up to 256 vertices, connected components) and per component: branch and bound,
   KaMIS up to 64 vertices, CP-SAT up to ``exact_max_vertices`` (200; it honours its limit and
@@ -39,7 +49,7 @@ The outer layers of the default pipeline (Reduce, ComponentSplit) pass every gra
   the kernel is empty: planner-shaped 10,000 vertices in 0.13-0.2 s).
 
 ``proven_optimal`` is True only when the branch and bound completed, KaMIS finished, CP-SAT
-reported OPTIMAL for every component, or LearnAndReduce left nothing or a kernel KaMIS finished
+reported OPTIMAL on the whole graph or for every component, or LearnAndReduce left nothing or a kernel KaMIS finished
 (checked: the lifted set's integer weight is the reductions' offset plus the kernel optimum).
 """
 from __future__ import annotations
@@ -135,8 +145,11 @@ CPSAT_MIN_TRIANGLE_RATIO = 0.25
 CPSAT_MAX_PAIRS = 200_000
 CPSAT_MIN_CLIQUE_COVER = 8.0
 #: CPU seconds per conflict pair of building the CP-SAT model in Python (measured 2.7 us on
-#: 27,000 uncovered pairs): CP-SAT is skipped when building would take more than half its budget
+#: 27,000 uncovered pairs): CP-SAT is skipped when building would take more than a quarter of
+#: its budget (at load 20 a 145,000-pair model took ~3 s to build and load, and CP-SAT overran a
+#: 3.6 s budget to 6.8 s without a solution)
 CPSAT_BUILD_S_PER_PAIR = 3e-6
+CPSAT_MAX_BUILD_SHARE = 0.25
 KAMIS_PROBE_FRACTION = 0.01
 KAMIS_PROBE_MIN_S = 0.05
 #: integer weight of the heaviest vertex for LearnAndReduce (see learn_and_reduce_kernel)
@@ -527,7 +540,7 @@ class AutoBackend(Backend):
         if not self._cpsat_suits(problem, tri, pairs, opts):
             return None
         budget = (time_limit_s - (time.perf_counter() - t0)) * opts["cpsat_fraction"]
-        if budget < 0.02 or pairs * CPSAT_BUILD_S_PER_PAIR > 0.5 * budget:
+        if budget < 0.02 or pairs * CPSAT_BUILD_S_PER_PAIR > CPSAT_MAX_BUILD_SHARE * budget:
             return None
         res = self._exact.solve(problem, time_limit_s=budget, seed=seed,
                                 options={"hint": False})
