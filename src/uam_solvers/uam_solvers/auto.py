@@ -23,7 +23,7 @@ The outer layers of the default pipeline (Reduce, ComponentSplit) pass every gra
   100-150) and it holds the GIL; :func:`uam_solvers.solve_bounded` and the solve service bound
   any such overrun by a kill.
 * CP-SAT on the whole graph (the groups as at-most-one, no greedy hint) with
-  ``cpsat_fraction`` (0.8) of the time left, when KaMIS did not prove it and the graph is a
+  ``cpsat_fraction`` (0.9) of the time left, when KaMIS did not prove it and the graph is a
   union of large cliques by structure (:meth:`AutoBackend._cpsat_suits`: the groups' clique
   cover has >= ``cpsat_min_clique_cover`` = 8 vertices per clique, the triangle ratio is >=
   0.25 and twice the edge density, at most 200,000 conflict pairs): the planner's
@@ -140,7 +140,7 @@ TRIANGLE_SAMPLES = 4096
 #: as at-most-one proved them in 0.1-0.5 s CPU, 1.3-2.3 s wall at load 15). CP-SAT also proved
 #: every layered-corpus graph of 250-1,750 vertices (0.06-1.2 s wall at load 15) where KaMIS
 #: needed 0.001-2.4 s, so KaMIS first gets only a probe on these graphs.
-CPSAT_FRACTION = 0.8
+CPSAT_FRACTION = 0.9
 CPSAT_MIN_TRIANGLE_RATIO = 0.25
 CPSAT_MAX_PAIRS = 200_000
 CPSAT_MIN_CLIQUE_COVER = 8.0
@@ -495,7 +495,9 @@ class AutoBackend(Backend):
                 incumbent.stats = {**res.stats, "auto_method": "kamis (limit)"}
         if n <= self.split_max_vertices_parts:
             res = self._cpsat_whole(problem, time_limit_s, seed, opts, t0, tri, pairs)
-            if res is not None and res.proven_optimal:
+            if res is not None and (res.proven_optimal or _little_left(time_limit_s, t0)):
+                res = _better(res, incumbent)
+                res.backend, res.solve_time_s = self.name, time.perf_counter() - t0
                 return res
             incumbent = _better(incumbent, res)
             rest_s = max(time_limit_s - (time.perf_counter() - t0), 1e-3)
@@ -613,7 +615,7 @@ class AutoBackend(Backend):
         better of the two answers."""
         cp = self._cpsat_whole(problem, time_limit_s, seed, opts, t0, None,
                                int(problem.all_edges().shape[0]))
-        if cp is not None and cp.proven_optimal:
+        if cp is not None and (cp.proven_optimal or _little_left(time_limit_s, t0)):
             return cp
         res = self._solve_large_lr(problem, time_limit_s, seed, opts, t0)
         if cp is not None and cp.objective > res.objective:
@@ -708,6 +710,17 @@ class AutoBackend(Backend):
         return make_result(problem, sel, proven_optimal=False,
                            solve_time_s=time.perf_counter() - t0, backend=self.name,
                            stats={**kres.stats, **stats})
+
+
+#: after an unproven whole-graph CP-SAT, the rest of the pipeline (split, LearnAndReduce,
+#: CHILS: set-up 0.1-0.3 s under load) runs only when at least this much of the limit is left;
+#: otherwise CP-SAT's best set is the answer (at load 22 the follow-up with ~0.5 s left ran the
+#: in-process solve to 7.6 s of a 5 s limit)
+CPSAT_MIN_FOLLOW_S = 0.5
+
+
+def _little_left(time_limit_s: float, t0: float) -> bool:
+    return time_limit_s - (time.perf_counter() - t0) < CPSAT_MIN_FOLLOW_S
 
 
 def _better(a: MwisResult | None, b: MwisResult | None) -> MwisResult | None:
