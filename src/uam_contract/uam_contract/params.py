@@ -1,6 +1,7 @@
 """Every node's parameters, one table per node: the contract for declaration, run-time changes and docs.
 
-A :class:`Param` says a parameter's name, default (whose type is the parameter's type), meaning,
+A :class:`Param` (the one row class of :mod:`uam_contract.validation`, shared with the MWIS
+backends' options) says a parameter's name, default (whose type is the parameter's type), meaning,
 range or choices, and whether it may change while the node runs. The tables are plain data:
 :func:`uam_bringup.params.declare_table` declares a node's table on the node (rclpy), and
 ``python -m uam_contract.params`` prints them as Markdown (docs/parameters.md). A rule that needs
@@ -12,87 +13,19 @@ parameters are declared with dynamic typing and converted here.
 
 from __future__ import annotations
 
-import math
 import sys
-from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Callable
 
 from uam_contract import defaults as D
 from uam_contract.names import RERUN_MODES
 from uam_contract.stamps import DEFAULT_SCENARIO_START_UTC, SIM_CLOCK
+from uam_contract.validation import Param, choices_text
 
 INT32_MAX = 2**31 - 1
 
 
-@dataclass(frozen=True)
-class Param:
-    """One parameter: its default fixes its type; ``lo``/``hi`` bound numbers, ``choices`` strings;
-    ``read_only``: set at start-up only; ``check``: an extra rule, value -> '' or why not."""
-
-    name: str
-    default: Any
-    description: str
-    lo: float | None = None
-    hi: float | None = None
-    choices: tuple | None = None
-    read_only: bool = True
-    check: Callable[[Any], str] | None = None
-    #: a rule that needs a library (e.g. the known MWIS backends): named here, supplied by the
-    #: node that declares the table (uam_bringup.params.declare_table's ``rules``)
-    rule: str = ""
-
-    def validate(self, value):
-        """The value converted to the parameter's type; ValueError naming parameter and value."""
-        return check(self.name, value, self.default, self.lo, self.hi, self.choices, self.check)
-
-    def text(self) -> str:
-        t = self.description
-        if self.lo is not None or self.hi is not None:
-            t += f" (range [{self.lo if self.lo is not None else '-inf'}, {self.hi if self.hi is not None else 'inf'}])"
-        if self.choices:
-            t += f" (one of: {_choices_text(self.choices)})"
-        return t
-
-
-def check(name: str, value, default, lo=None, hi=None, choices=None, rule=None):
-    """Validate ``value`` of parameter ``name`` against the default's type, a range and choices."""
-    if isinstance(default, bool):
-        if not isinstance(value, bool):
-            raise ValueError(f"parameter {name}: {value!r} is not true or false")
-    elif isinstance(default, float):
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise ValueError(f"parameter {name}: {value!r} is not a finite number")
-        value = float(value)
-    elif isinstance(default, int):
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ValueError(f"parameter {name}: {value!r} is not an integer")
-    elif isinstance(default, str):
-        if isinstance(value, bool) and choices is not None and {"off", "on"} & set(choices):
-            # `-p rerun:=off`: ROS reads the argument as YAML, where off is the boolean false
-            value = _yaml_word(value)
-        elif not isinstance(value, str):
-            raise ValueError(f"parameter {name}: {value!r} is not a string")
-    if lo is not None and value < lo:
-        raise ValueError(f"parameter {name}: {value!r} is below the minimum {lo}")
-    if hi is not None and value > hi:
-        raise ValueError(f"parameter {name}: {value!r} is above the maximum {hi}")
-    if choices is not None and value not in choices:
-        raise ValueError(f"parameter {name}: {value!r} is not one of {_choices_text(choices)}")
-    if rule is not None:
-        why = rule(value)
-        if why:
-            raise ValueError(f"parameter {name}: {why}")
-    return value
-
-
-def _choices_text(choices) -> str:
-    """The choices as a reader sees them: the empty choice as ''."""
-    return ", ".join("''" if c == "" else str(c) for c in choices)
-
-
-def _yaml_word(value: bool) -> str:
-    """The word a choice parameter means by a YAML 1.1 boolean (off/on)."""
-    return "on" if value else "off"
+#: the choices as docs/parameters.md writes them (the '' choice as '')
+_choices_text = choices_text
 
 
 def _bool_alias(p: "Param") -> bool:

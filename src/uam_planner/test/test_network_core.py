@@ -166,7 +166,7 @@ CASES = {
                              r"corridors\[1\]\.from: missing"),
     "self loop": (_set(["corridors", 2, "to"], "W2"),
                   r"corridors\[2\]\.to: 'W2' equals from \(self loop\)"),
-    "unknown top-level field": (_set(["edges"], []), r"edges: unknown top-level field"),
+    "unknown top-level field": (_set(["edges"], []), r"edges: unknown field \(value \[\]; known: airspace, corridors"),
     "missing corridors": (_set(["corridors"], _DELETE), r"corridors: missing"),
     "bad origin": (_set(["origin", "lat"], -91.0), r"origin\.lat: -91\.0 is out of range"),
 }

@@ -18,14 +18,17 @@ import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Annotated, Any, Iterable, Mapping, Sequence
 
 import networkx as nx
 import numpy as np
+import pydantic
 import scipy.sparse
 import scipy.sparse.csgraph
 import yaml
+from pydantic import AfterValidator, PlainValidator
 
+from uam_contract.validation import parse
 from uam_planner.geo import enu_to_geodetic, geodetic_to_enu
 
 __all__ = [
@@ -417,27 +420,10 @@ def _parse_no_fly_zones(zones: Any, where: str = "no_fly_zones") -> tuple[NoFlyZ
         return ()
     if not isinstance(zones, (list, tuple)):
         raise NetworkError(f"{where}: expected a list, got {type(zones).__name__}")
-    out = []
-    for k, z in enumerate(zones):
-        w = f"{where}[{k}]"
-        if isinstance(z, NoFlyZone):
-            z = {"name": z.name, "lat": z.lat, "lon": z.lon, "radius_m": z.radius_m}
-        if not isinstance(z, Mapping):
-            raise NetworkError(f"{w}: {z!r} is not a mapping")
-        unknown = set(z) - {"name", "lat", "lon", "radius_m"}
-        if unknown:
-            raise NetworkError(f"{w}.{sorted(unknown)[0]}: unknown field")
-        for key in ("name", "lat", "lon", "radius_m"):
-            if key not in z:
-                raise NetworkError(f"{w}.{key}: missing")
-        if not isinstance(z["name"], str) or not z["name"]:
-            raise NetworkError(f"{w}.name: {z['name']!r} is not a non-empty string")
-        radius = _number(z["radius_m"], f"{w}.radius_m")
-        if radius <= 0:
-            raise NetworkError(f"{w}.radius_m: {z['radius_m']!r} is not positive")
-        out.append(NoFlyZone(z["name"], _in_range(z["lat"], -90.0, 90.0, f"{w}.lat"),
-                             _in_range(z["lon"], -180.0, 180.0, f"{w}.lon"), radius))
-    return tuple(out)
+    zones = [{"name": z.name, "lat": z.lat, "lon": z.lon, "radius_m": z.radius_m}
+             if isinstance(z, NoFlyZone) else z for z in zones]
+    return tuple(NoFlyZone(z.name, z.lat, z.lon, z.radius_m)
+                 for z in parse(list[_ZoneFile], _dicts(zones), where=where, error=NetworkError))
 
 
 # -- construction ------------------------------------------------------------------------------
@@ -483,13 +469,8 @@ def _parse_airspace(airspace) -> tuple[tuple, str]:
         return (), "semicircular"
     if not isinstance(airspace, Mapping):
         raise NetworkError(f"airspace: {airspace!r} is not a mapping {{levels_m, direction_rule}}")
-    unknown = set(airspace) - _AIRSPACE_KEYS
-    if unknown:
-        raise NetworkError(f"airspace.{sorted(unknown)[0]}: unknown field; allowed: "
-                           f"{sorted(_AIRSPACE_KEYS)}")
-    if "levels_m" not in airspace:
-        raise NetworkError("airspace.levels_m: missing")
-    return airspace["levels_m"], airspace.get("direction_rule", "semicircular")
+    a = parse(_AirspaceFile, dict(airspace), where="airspace", error=NetworkError)
+    return a.levels_m, a.direction_rule
 
 
 def _assemble(name: str, node_ids: Sequence[str], names: Sequence[str], is_aerodrome,
@@ -507,10 +488,6 @@ def _assemble(name: str, node_ids: Sequence[str], names: Sequence[str], is_aerod
                    levels_m=levels_m, direction_rule=direction_rule, pads_m=pads_m or {})
 
 
-_NODE_KEYS = {"id", "lat", "lon", "alt_m", "aerodrome", "name", "pads_m"}
-_CORRIDOR_KEYS = {"from", "to", "route"}
-
-
 def _number(value: Any, where: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise NetworkError(f"{where}: {value!r} is not a number")
@@ -525,6 +502,131 @@ def _in_range(value: Any, lo: float, hi: float, where: str) -> float:
     if not lo <= x <= hi:
         raise NetworkError(f"{where}: {value!r} is out of range [{lo:g}, {hi:g}]")
     return x
+
+
+# ---- the file schema (pydantic; issue 19, docs/architecture.md) ------------------------------
+# The structure, types and ranges of the YAML document, its nodes, corridors, no-fly zones and
+# airspace are these models (uam_contract.validation.parse: a refusal names the path, e.g.
+# ``nodes[3] (id 'W2').lat``, and the value). What needs the whole network (duplicate ids,
+# corridor ends, lengths, connectivity, levels above the aerodromes, pads, zones against nodes and
+# corridors) stays in the code below, after the models: geometry and graph checks, not a schema.
+# Numbers are any real number (numpy scalars from GraphML too, which pydantic's strict float
+# refuses), never a bool or a numeric string, as before.
+
+def _real(value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ValueError("is not a number")
+    if not math.isfinite(float(value)):
+        raise ValueError("is not finite")
+    return float(value)
+
+
+def _within(lo: float, hi: float):
+    def check(x: float) -> float:
+        if not lo <= x <= hi:
+            raise ValueError(f"is out of range [{lo:g}, {hi:g}]")
+        return x
+    return AfterValidator(check)
+
+
+def _positive_number(x: float) -> float:
+    if x <= 0:
+        raise ValueError("is not positive")
+    return x
+
+
+def _id_text(value: Any) -> str:
+    if not isinstance(value, str) or not value.strip():
+        raise ValueError("is not a non-empty string")
+    return value
+
+
+def _zone_name(value: Any) -> str:
+    if not isinstance(value, str) or not value:
+        raise ValueError("is not a non-empty string")
+    return value
+
+
+def _flag(value: Any) -> bool:
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError("is not true/false")
+    return bool(value)
+
+
+def _label(value: Any) -> str:
+    if value is None:
+        return ""
+    if not isinstance(value, str):
+        raise ValueError("is not a string")
+    return value
+
+
+_Real = Annotated[Any, PlainValidator(_real)]
+_Lat = Annotated[_Real, _within(-90.0, 90.0)]
+_Lon = Annotated[_Real, _within(-180.0, 180.0)]
+_Alt = Annotated[_Real, _within(*ALT_RANGE_M)]
+_Schema = pydantic.ConfigDict(extra="forbid")
+
+
+class _NodeFile(pydantic.BaseModel):
+    model_config = _Schema
+    id: Annotated[Any, PlainValidator(_id_text)]
+    lat: _Lat
+    lon: _Lon
+    alt_m: _Alt
+    aerodrome: Annotated[Any, PlainValidator(_flag)] = False
+    name: Annotated[Any, PlainValidator(_label)] = ""
+    pads_m: Any = None  # checked with the airspace (_check_airspace): needs the levels
+
+
+class _CorridorFile(pydantic.BaseModel):
+    model_config = _Schema
+    from_: Any = pydantic.Field(alias="from")  # a node id of this network: checked after the nodes
+    to: Any
+    route: Any = None
+
+
+class _ZoneFile(pydantic.BaseModel):
+    model_config = _Schema
+    name: Annotated[Any, PlainValidator(_zone_name)]
+    lat: _Lat
+    lon: _Lon
+    radius_m: Annotated[_Real, AfterValidator(_positive_number)]
+
+
+class _AirspaceFile(pydantic.BaseModel):
+    model_config = _Schema
+    levels_m: Any  # strictly increasing, above the aerodromes: _check_airspace
+    direction_rule: Any = "semicircular"
+
+
+class _NetworkFile(pydantic.BaseModel):
+    """The top level of the YAML document (docs/network-format.md)."""
+
+    model_config = _Schema
+    name: Any = None
+    description: Any = None
+    cruise_alt_m: Any = None
+    origin: Any = None  # {lat, lon, alt_m} or [lat, lon, alt_m]: _parse_origin
+    no_fly_zones: Any = None
+    nodes: Any
+    corridors: Any
+    airspace: Any = None
+
+
+def _dicts(items) -> list:
+    """Any mapping as a dict (pydantic reads dicts), anything else as it is (to be refused)."""
+    return [dict(x) if isinstance(x, Mapping) else x for x in items]
+
+
+def _node_tag(nodes):
+    """The id of a node after its index in a refusal (``nodes[3] (id 'W2').lat``)."""
+    def tag(loc: tuple) -> str:
+        i = loc[-1]
+        node = nodes[i] if isinstance(nodes, (list, tuple)) and i < len(nodes) else None
+        node_id = node.get("id") if isinstance(node, Mapping) else None
+        return f" (id {node_id!r})" if isinstance(node_id, str) and node_id.strip() else ""
+    return tag
 
 
 def _parse_origin(origin: Any, where: str = "origin") -> tuple[float, float, float]:
@@ -579,60 +681,25 @@ def build_network(name: str, nodes: list[dict], corridors: list[dict], origin=No
     aerodrome = np.zeros(n, dtype=bool)
     lla = np.zeros((n, 3))
     index: dict[str, int] = {}
-    for i, node in enumerate(nodes):
-        where = f"nodes[{i}]"
-        if not isinstance(node, Mapping):
-            raise NetworkError(f"{where}: {node!r} is not a mapping")
-        if "id" not in node:
-            raise NetworkError(f"{where}.id: missing")
-        node_id = node["id"]
-        if not isinstance(node_id, str) or not node_id.strip():
-            raise NetworkError(f"{where}.id: {node_id!r} is not a non-empty string")
-        where = f"nodes[{i}] (id {node_id!r})"
+    parsed = parse(list[_NodeFile], _dicts(nodes), where="nodes", error=NetworkError, tag=_node_tag(nodes))
+    for i, node in enumerate(parsed):
+        node_id = node.id
         if node_id in index:
-            raise NetworkError(f"{where}.id: {node_id!r} duplicates nodes[{index[node_id]}]")
-        unknown = set(node) - _NODE_KEYS
-        if unknown:
-            key = sorted(unknown)[0]
-            raise NetworkError(f"{where}.{key}: unknown field (value {node[key]!r}); "
-                               f"allowed: {sorted(_NODE_KEYS)}")
-        for key in ("lat", "lon", "alt_m"):
-            if key not in node:
-                raise NetworkError(f"{where}.{key}: missing")
-        lla[i] = (_in_range(node["lat"], -90.0, 90.0, f"{where}.lat"),
-                  _in_range(node["lon"], -180.0, 180.0, f"{where}.lon"),
-                  _in_range(node["alt_m"], *ALT_RANGE_M, f"{where}.alt_m"))
-        flag = node.get("aerodrome", False)
-        if not isinstance(flag, (bool, np.bool_)):
-            raise NetworkError(f"{where}.aerodrome: {flag!r} is not true/false")
-        aerodrome[i] = bool(flag)
-        label = node.get("name", "")
-        if label is None:
-            label = ""
-        if not isinstance(label, str):
-            raise NetworkError(f"{where}.name: {label!r} is not a string")
+            raise NetworkError(f"nodes[{i}] (id {node_id!r}).id: {node_id!r} duplicates nodes[{index[node_id]}]")
+        lla[i] = (node.lat, node.lon, node.alt_m)
+        aerodrome[i] = node.aerodrome
         index[node_id] = i
         node_ids.append(node_id)
-        names.append(label)
-        if "pads_m" in node:
-            pads[node_id] = node["pads_m"]
+        names.append(node.name)
+        if "pads_m" in nodes[i]:
+            pads[node_id] = nodes[i]["pads_m"]
 
     pairs = np.zeros((len(corridors), 2), dtype=np.int64)
-    for k, cor in enumerate(corridors):
-        where = f"corridors[{k}]"
-        if not isinstance(cor, Mapping):
-            raise NetworkError(f"{where}: {cor!r} is not a mapping")
-        unknown = set(cor) - _CORRIDOR_KEYS
-        if unknown:
-            key = sorted(unknown)[0]
-            raise NetworkError(f"{where}.{key}: unknown field (value {cor[key]!r}); "
-                               f"allowed: {sorted(_CORRIDOR_KEYS)}")
-        for j, key in enumerate(("from", "to")):
-            if key not in cor:
-                raise NetworkError(f"{where}.{key}: missing")
-            ref = cor[key]
+    cors = parse(list[_CorridorFile], _dicts(corridors), where="corridors", error=NetworkError)
+    for k, cor in enumerate(cors):
+        for j, (key, ref) in enumerate((("from", cor.from_), ("to", cor.to))):
             if not isinstance(ref, str) or ref not in index:
-                raise NetworkError(f"{where}.{key}: {ref!r} is not a node id")
+                raise NetworkError(f"corridors[{k}].{key}: {ref!r} is not a node id")
             pairs[k, j] = index[ref]
 
     if n == 0:
@@ -737,23 +804,12 @@ def _zones_to_list(zones: Sequence[NoFlyZone]) -> list[dict]:
              "radius_m": float(z.radius_m)} for z in zones]
 
 
-_TOP_KEYS = {"name", "origin", "no_fly_zones", "nodes", "corridors", "description", "cruise_alt_m",
-             "airspace"}
-_AIRSPACE_KEYS = {"levels_m", "direction_rule"}
-
-
 def network_from_dict(data: Any, default_name: str = "network") -> Network:
     """Build a network from the YAML schema (see docs/network-format.md). Raises NetworkError."""
     if not isinstance(data, Mapping):
         raise NetworkError(f"document: expected a mapping with nodes and corridors, got "
                            f"{type(data).__name__}")
-    unknown = set(data) - _TOP_KEYS
-    if unknown:
-        key = sorted(unknown)[0]
-        raise NetworkError(f"{key}: unknown top-level field; allowed: {sorted(_TOP_KEYS)}")
-    for key in ("nodes", "corridors"):
-        if key not in data:
-            raise NetworkError(f"{key}: missing")
+    parse(_NetworkFile, dict(data), error=NetworkError)  # the top-level keys
     return build_network(data.get("name", default_name), data["nodes"], data["corridors"],
                          origin=data.get("origin"), no_fly_zones=data.get("no_fly_zones"),
                          airspace=data.get("airspace"))

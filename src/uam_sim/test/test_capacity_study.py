@@ -32,14 +32,14 @@ def write(tmp_path, **over):
 def test_bad_study_files_are_refused_naming_the_field(tmp_path):
     arm = {"name": "a", "network": "config/networks/singapore.yaml", "modes": ["paper"],
            "methods": ["greedy"], "rates": [2]}
-    for arms, msg in (([{**arm, "modes": ["wide"]}], r"arms\[0\].modes: 'wide' is not one of"),
-                      ([{**arm, "colour": 1}], r"arms\[0\].colour: unknown key"),
+    for arms, msg in (([{**arm, "modes": ["wide"]}], r"arms\[0\]\.modes\[0\]: 'wide' is not one of 'paper', 'slots'"),
+                      ([{**arm, "colour": 1}], r"arms\[0\]\.colour: unknown field \(value 1; known: methods, modes, name"),
                       ([arm, arm], r"arms\[1\].name: 'a' is used twice"),
                       ([{k: v for k, v in arm.items() if k != "rates"}], r"arms\[0\].rates: missing"),
-                      ([{**arm, "rates": [-1]}], r"arms\[a\] mode paper: rates: item -1")):
+                      ([{**arm, "rates": [-1]}], r"arms\[0\] \(a, mode paper\): rates: item -1")):
         with pytest.raises(ExperimentError, match=msg):
             load_capacity_config(write(tmp_path, arms=arms))
-    with pytest.raises(ExperimentError, match="base.network: set per arm"):
+    with pytest.raises(ExperimentError, match="base.network: 'x.yaml' is set per arm"):
         load_capacity_config(write(tmp_path, base={"network": "x.yaml"}))
 
 

@@ -94,7 +94,7 @@ def test_demand_file_parsing_sorts_and_fills_windows():
     ({"t_s": 0, "origin": "A", "destination": "B", "window_s": -1}, r"\[0\]\.window_s: -1"),
     ({"t_s": 9, "origin": "A", "destination": "B", "latest_s": 5}, r"\[0\]\.latest_s: 5"),
     ({"t_s": 0, "origin": "A", "destination": "B", "latest_s": 5, "window_s": 5}, r"latest_s"),
-    ({"t_s": 0, "origin": "A", "destination": "B", "speed": 5}, r"unknown field 'speed'"),
+    ({"t_s": 0, "origin": "A", "destination": "B", "speed": 5}, r"\[0\]\.speed: unknown field \(value 5; known: "),
 ])
 def test_demand_file_errors_name_the_field_and_value(item, match):
     with pytest.raises(DemandError, match=match):

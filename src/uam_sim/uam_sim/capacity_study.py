@@ -27,9 +27,13 @@ import sys
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
+from typing import Annotated, Literal, Optional, Union
 
 import numpy as np
+import pydantic
 import yaml
+
+from uam_contract.validation import parse
 
 from .experiment_config import AIRSPACE_MODES, ExperimentError, make_config
 from .files import write_csv
@@ -77,48 +81,57 @@ class CapacityConfig:
                 try:
                     cfg = make_config(data)
                 except ExperimentError as exc:
-                    raise ExperimentError(f"arms[{arm.name}] mode {mode}: {exc}") from None
+                    i = self.arms.index(arm)
+                    raise ExperimentError(f"arms[{i}] ({arm.name}, mode {mode}): {exc}") from None
                 out.append((arm, mode, cfg))
         return out
 
 
+class _ArmFile(pydantic.BaseModel):
+    """One arm as the study file writes it (structure and types; make_config checks the values)."""
+
+    model_config = pydantic.ConfigDict(extra="forbid", strict=True)
+    name: Union[str, int]
+    network: Union[str, dict]
+    modes: list[Literal[AIRSPACE_MODES]]
+    methods: list
+    rates: list
+    overrides: Optional[dict] = None
+
+
+class _StudyFile(pydantic.BaseModel):
+    """config/capacity-study.yaml: the study's keys (unknown keys refused, naming the path)."""
+
+    model_config = pydantic.ConfigDict(extra="forbid", strict=True)
+    base: Optional[dict] = None
+    arms: Optional[list[_ArmFile]] = None
+    instances: Optional[dict] = None
+    out: str = "results/capacity"
+    workers: Annotated[int, pydantic.Strict(False)] = 2  # "2" and 2.0 were accepted (int())
+    scheduler: Optional[str] = None
+
+
 def load_capacity_config(path, **overrides) -> CapacityConfig:
-    """Read config/capacity-study.yaml; raises ExperimentError naming a bad field."""
+    """Read config/capacity-study.yaml; raises ExperimentError naming a bad field (its path, e.g.
+    ``arms[2].modes[0]``) and the value."""
     data = yaml.safe_load(Path(path).read_text(encoding="utf-8")) or {}
     if not isinstance(data, dict):
         raise ExperimentError(f"{path}: expected a mapping")
-    unknown = set(data) - {"base", "arms", "instances", "out", "workers", "scheduler"}
-    if unknown:
-        raise ExperimentError(f"unknown key {sorted(unknown)[0]!r} in {path}")
-    base = dict(data.get("base") or {})
+    study = parse(_StudyFile, data, error=ExperimentError)
     for key in ("network", "methods", "rates", "airspace_mode", "out", "workers", "scheduler"):
-        if key in base:
-            raise ExperimentError(f"base.{key}: set per arm (or by a flag), not in base")
-    arms = []
-    names = set()
-    for i, a in enumerate(data.get("arms") or []):
-        if not isinstance(a, dict):
-            raise ExperimentError(f"arms[{i}]: {a!r} must be a mapping")
-        extra = set(a) - {"name", "network", "modes", "methods", "rates", "overrides"}
-        if extra:
-            raise ExperimentError(f"arms[{i}].{sorted(extra)[0]}: unknown key")
-        for key in ("name", "network", "modes", "methods", "rates"):
-            if key not in a:
-                raise ExperimentError(f"arms[{i}].{key}: missing")
-        if a["name"] in names:
-            raise ExperimentError(f"arms[{i}].name: {a['name']!r} is used twice")
-        names.add(a["name"])
-        modes = list(a["modes"])
-        for m in modes:
-            if m not in AIRSPACE_MODES:
-                raise ExperimentError(f"arms[{i}].modes: {m!r} is not one of {list(AIRSPACE_MODES)}")
-        arms.append(Arm(str(a["name"]), a["network"], modes, list(a["methods"]), list(a["rates"]),
-                        dict(a.get("overrides") or {})))
+        if key in (study.base or {}):
+            raise ExperimentError(f"base.{key}: {study.base[key]!r} is set per arm (or by a flag), not in base")
+    names = [a.name for a in study.arms or []]
+    for i, name in enumerate(names):
+        if name in names[:i]:
+            raise ExperimentError(f"arms[{i}].name: {name!r} is used twice")
+    arms = [Arm(str(a.name), a.network, list(a.modes), list(a.methods), list(a.rates),
+                dict(a.overrides or {})) for a in study.arms or []]
     if not arms:
         raise ExperimentError(f"arms: {path} defines no arm")
-    inst = {**INSTANCE_DEFAULTS, **(data.get("instances") or {})}
-    cfg = CapacityConfig(base, arms, inst, out=data.get("out", "results/capacity"),
-                         workers=int(data.get("workers", 2)), scheduler=data.get("scheduler"))
+    inst = {**INSTANCE_DEFAULTS, **(study.instances or {})}
+    cfg = CapacityConfig(dict(study.base or {}), arms, inst, out=study.out, workers=study.workers,
+                         scheduler=study.scheduler)
     cfg = replace(cfg, **{k: v for k, v in overrides.items() if v is not None})
     cfg.combos()  # validates every arm x mode
     return cfg

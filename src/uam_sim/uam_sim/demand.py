@@ -26,13 +26,16 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable, Sequence
+from typing import Annotated, Any, Iterable, Optional, Sequence, Union
 
 import numpy as np
+import pydantic
 import yaml
+from pydantic import AfterValidator, Strict
 
 from uam_contract.ids import MAX_NODE_ID_LENGTH, check_id, echo
-from uam_planner.objectives import check_priority
+from uam_contract.validation import parse
+from uam_planner.objectives import MAX_PRIORITY, check_priority
 from uam_planner.planning import FlightRequest
 
 DEFAULT_INTERVAL_S = 30.0
@@ -192,7 +195,67 @@ class DemandEntry:
                              priority=self.priority, operator_id=self.operator)
 
 
-_KEYS = {"t_s", "origin", "destination", "window_s", "latest_s", "id", "priority", "operator"}
+def _time(value: float) -> float:
+    if value < 0:
+        raise ValueError("must be a finite time >= 0")
+    return value
+
+
+def _window(value: float) -> float:
+    if value < 0:
+        raise ValueError("must be a finite number >= 0")
+    return value
+
+
+def _node_id(value):
+    if str(value) == "" or len(str(value)) > MAX_NODE_ID_LENGTH:
+        raise ValueError(f"must be a node id of 1 to {MAX_NODE_ID_LENGTH} characters")
+    return value
+
+
+def _wire_id(value):
+    problem = check_id("id", str(value))  # bounded at load as on the wire
+    if problem:
+        raise ValueError(problem.split(f"id: {echo(str(value))} ", 1)[-1])
+    return value
+
+
+def _priority(value: int) -> int:
+    if check_priority(value):
+        raise ValueError(f"is not an integer in [0, {MAX_PRIORITY}]")
+    return value
+
+
+def _operator(value: str) -> str:
+    problem = check_id("operator", value) if value != "" else ""
+    if problem:
+        raise ValueError(problem.split(f"operator: {echo(value)} ", 1)[-1])
+    return value
+
+
+_Time = Annotated[float, Strict()]
+_NodeId = Annotated[Union[Annotated[str, Strict()], Annotated[int, Strict()]], AfterValidator(_node_id)]
+
+
+class _EntryFile(pydantic.BaseModel):
+    """One request of a demand file as written (docs/demand-format.md): fields, types, ranges.
+    The checks across fields and entries (origin != destination, window_s or latest_s, unique
+    ids, the network's aerodromes) follow in :func:`parse_demand`."""
+
+    model_config = pydantic.ConfigDict(extra="forbid", allow_inf_nan=False)
+    t_s: Annotated[_Time, AfterValidator(_time)]
+    origin: _NodeId
+    destination: _NodeId
+    window_s: Optional[Annotated[_Time, AfterValidator(_window)]] = None
+    latest_s: Optional[_Time] = None
+    id: Optional[Annotated[Union[Annotated[str, Strict()], Annotated[int, Strict()]],
+                           AfterValidator(_wire_id)]] = None
+    # np.integer was accepted (check_priority): lax int, but never True, 1.5 or "1"
+    priority: Annotated[Any, AfterValidator(_priority)] = 0
+    operator: Annotated[Annotated[str, Strict()], AfterValidator(_operator)] = ""
+
+
+_KEYS = set(_EntryFile.model_fields)
 
 
 def parse_demand(data: Any, aerodrome_ids: Iterable[str] | None = None,
@@ -204,7 +267,9 @@ def parse_demand(data: Any, aerodrome_ids: Iterable[str] | None = None,
         aerodrome_ids: if given, origins and destinations must be among them.
         default_window_s: window [s] for entries giving neither window_s nor latest_s.
         where: prefix for error messages (the file name).
-    Raises DemandError naming the entry index, the field and the value. O(n log n).
+    Raises DemandError naming the entry index, the field and the value (``demand[17].priority:
+    300 is not an integer in [0, 255]``). The entries' schema is :class:`_EntryFile` (pydantic,
+    one validation of the whole list); O(n log n).
     """
     if isinstance(data, dict):
         if "requests" not in data:
@@ -213,65 +278,39 @@ def parse_demand(data: Any, aerodrome_ids: Iterable[str] | None = None,
         data = data["requests"]
     if not isinstance(data, list):
         raise DemandError(f"{where}: expected a list of requests, got {type(data).__name__}")
+    items = parse(list[_EntryFile], data, where=where, error=DemandError)
     known = set(aerodrome_ids) if aerodrome_ids is not None else None
     entries, seen = [], set()
-    for i, item in enumerate(data):
+    for i, item in enumerate(items):
         at = f"{where}[{i}]"
-        if not isinstance(item, dict):
-            raise DemandError(f"{at}: expected a mapping, got {item!r}")
-        unknown = set(item) - _KEYS
-        if unknown:
-            raise DemandError(f"{at}: unknown field {sorted(unknown)[0]!r} (known: {sorted(_KEYS)})")
-        for key in ("t_s", "origin", "destination"):
-            if key not in item:
-                raise DemandError(f"{at}.{key}: missing")
-        t = item["t_s"]
-        if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t) or t < 0:
-            raise DemandError(f"{at}.t_s: {t!r} must be a finite time >= 0")
         for key in ("origin", "destination"):
-            v = item[key]
-            if not isinstance(v, (str, int)) or isinstance(v, bool) or str(v) == "" \
-                    or len(str(v)) > MAX_NODE_ID_LENGTH:
-                raise DemandError(f"{at}.{key}: {echo(v)} must be a node id of 1 to {MAX_NODE_ID_LENGTH} characters")
+            v = getattr(item, key)
             if known is not None and str(v) not in known:
                 raise DemandError(f"{at}.{key}: {echo(v)} is not an aerodrome of the network")
-        if str(item["origin"]) == str(item["destination"]):
-            raise DemandError(f"{at}.destination: {item['destination']!r} equals the origin")
-        if "window_s" in item and "latest_s" in item:
+        if str(item.origin) == str(item.destination):
+            raise DemandError(f"{at}.destination: {item.destination!r} equals the origin")
+        if item.window_s is not None and item.latest_s is not None:
             raise DemandError(f"{at}.latest_s: give window_s or latest_s, not both")
-        if "latest_s" in item:
-            lat = item["latest_s"]
-            if isinstance(lat, bool) or not isinstance(lat, (int, float)) or not math.isfinite(lat) \
-                    or lat < t:
-                raise DemandError(f"{at}.latest_s: {lat!r} must be a finite time >= t_s {t!r}")
-            latest = float(lat)
+        t = data[i]["t_s"]  # as written (the message shows it so)
+        if item.latest_s is not None:
+            if item.latest_s < item.t_s:
+                raise DemandError(f"{at}.latest_s: {data[i]['latest_s']!r} must be a finite time >= t_s {t!r}")
+            latest = float(item.latest_s)
         else:
-            w = item.get("window_s", default_window_s)
+            w = item.window_s if item.window_s is not None else default_window_s
             if isinstance(w, bool) or not isinstance(w, (int, float)) or not math.isfinite(w) or w < 0:
-                raise DemandError(f"{at}.window_s: {w!r} must be a finite number >= 0")
+                raise DemandError(f"{at}.window_s: {w!r} must be a finite number >= 0")  # the default
             latest = float(t) + float(w)
-        rid = item.get("id", f"d{i:05d}")
-        if not isinstance(rid, (str, int)) or isinstance(rid, bool):
-            raise DemandError(f"{at}.id: {echo(rid)} must be a non-empty string")
-        rid = str(rid)
-        problem = check_id(f"{at}.id", rid)  # bounded at load as on the wire
-        if problem:
-            raise DemandError(problem)
+        rid = str(item.id) if item.id is not None else f"d{i:05d}"
+        if item.id is None:
+            problem = check_id(f"{at}.id", rid)
+            if problem:
+                raise DemandError(problem)
         if rid in seen:
             raise DemandError(f"{at}.id: {rid!r} is used by an earlier request")
         seen.add(rid)
-        prio = item.get("priority", 0)
-        problem = check_priority(prio)
-        if problem:
-            raise DemandError(f"{at}.{problem}")
-        op = item.get("operator", "")
-        if op != "":
-            problem = check_id(f"{at}.operator", op) if isinstance(op, str) else \
-                f"{at}.operator: {echo(op)} must be an operator id"
-            if problem:
-                raise DemandError(problem)
-        entries.append(DemandEntry(rid, float(t), str(item["origin"]), str(item["destination"]),
-                                   latest, int(prio), op))
+        entries.append(DemandEntry(rid, float(item.t_s), str(item.origin), str(item.destination),
+                                   latest, int(item.priority), item.operator))
     order = sorted(range(len(entries)), key=lambda j: (entries[j].t_s, j))
     return [entries[j] for j in order]
 

@@ -4,13 +4,15 @@ checked: a bad value raises :class:`ExperimentError` naming the field and the va
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Literal, Optional, Union
 
 import yaml
+from pydantic import ConfigDict, Field, Strict
 
 from uam_contract import defaults
+from uam_contract.validation import parse
 from uam_planner.planning import AirspaceConfig, PlanningConfig
 
 DEFAULT_METHODS = ("fifo", "firstfit", "greedy", "exact", "sa", "tabu", "qpu-emulator")
@@ -39,6 +41,21 @@ REPO_ROOT = Path(__file__).resolve().parents[3]
 
 class ExperimentError(ValueError):
     """Bad experiment configuration; the message names the field and the value."""
+
+
+# The schema of an experiment file (pydantic; issue 19, docs/architecture.md): the annotations of
+# ExperimentConfig's fields are what make_config validates (uam_contract.validation.parse: unknown
+# keys, types, ranges; a refusal names the field and the value). The values are kept as given (a
+# duration of 3500 stays the int 3500), since a cell's key hashes them. Ranges owned elsewhere
+# (k, the airspace, the buffers: PlanningConfig; the demand mix: RequestGenerator; disturbance and
+# conformance fields) are checked there, after the schema.
+Str = Annotated[str, Strict()]
+Int = Annotated[int, Strict()]
+Float = Annotated[float, Strict()]  # an int is a number too (strict refuses True and "5")
+Positive = Annotated[float, Strict(), Field(gt=0)]
+Bool = Annotated[bool, Strict()]
+List = list  # a tuple is a list too
+Mapping = Annotated[dict, Strict()]
 
 
 @dataclass
@@ -110,55 +127,57 @@ class ExperimentConfig:
             for slow backends), seed, time_limit_s (per run); TTS(0.99) via uam_solvers.tts.
     """
 
-    network: Any = "config/networks/singapore.yaml"
-    methods: list = field(default_factory=lambda: list(DEFAULT_METHODS))
-    include_qpu: bool = True
-    rates: list = field(default_factory=lambda: list(DEFAULT_RATES))
-    seeds: list = field(default_factory=lambda: list(range(5)))
-    duration_s: float = 3500.0
-    epoch_s: float = defaults.EPOCH_S          # the paper's values, from uam_contract.defaults
-    interval_s: float = defaults.INTERVAL_S
-    window_s: float = defaults.WINDOW_S
-    separation_m: float = defaults.SEPARATION_M
-    k: int = defaults.K
-    penalty_factor: float = defaults.PENALTY_FACTOR
-    speed_mps: float = defaults.SPEED_MPS
-    separation_model: str = "sphere"
-    vertical_separation_m: float = AirspaceConfig.vertical_separation_m
-    departure_slot_s: float = defaults.DEPARTURE_SLOT_S
-    climb_rate_mps: float = AirspaceConfig.climb_rate_mps
-    descent_rate_mps: float = AirspaceConfig.descent_rate_mps
-    time_limit_s: float = 10.0
-    solver_options: dict = field(default_factory=dict)
-    demand_file: str | None = None
-    constraints_file: str | None = None
-    corpus_max_vertices: int = 60
-    audit: bool = True
-    out: str = "results"
-    workers: int = 2
-    scheduler: str | None = None
-    airspace_mode: str = "paper"
-    cumulative_rates: list | None = None
-    objective: str = "paper"
-    baseline_order: str = "arrival"
-    priority_share: float = 0.0
-    priority_class: int = 1
-    operators: list = field(default_factory=list)
-    horizon_epochs: int = 1
-    commit_ahead: bool = False
-    fair_window_s: float = 0.0
-    lead_time_s: float = 0.0
-    operator_lead_times_s: list = field(default_factory=list)
-    metrics_warmup_s: float = 0.0
-    spatial_buffer_m: float = 0.0
-    temporal_buffer_s: float = 0.0
-    disturbance: dict = field(default_factory=dict)
-    conformance: dict = field(default_factory=dict)
-    tts: dict = field(default_factory=lambda: {
+    network: Union[Str, Path, dict] = "config/networks/singapore.yaml"
+    methods: Union[Str, List] = field(default_factory=lambda: list(DEFAULT_METHODS))
+    include_qpu: Bool = True
+    rates: Any = field(default_factory=lambda: list(DEFAULT_RATES))  # a list or "1,2,4": _num_list
+    seeds: Any = field(default_factory=lambda: list(range(5)))  # a count, a list or "3,7": _seeds
+    duration_s: Positive = 3500.0
+    epoch_s: Positive = defaults.EPOCH_S          # the paper's values, from uam_contract.defaults
+    interval_s: Positive = defaults.INTERVAL_S
+    window_s: Positive = defaults.WINDOW_S
+    separation_m: Positive = defaults.SEPARATION_M
+    k: Int = defaults.K
+    penalty_factor: Float = defaults.PENALTY_FACTOR
+    speed_mps: Positive = defaults.SPEED_MPS
+    separation_model: Str = "sphere"
+    vertical_separation_m: Float = AirspaceConfig.vertical_separation_m
+    departure_slot_s: Float = defaults.DEPARTURE_SLOT_S
+    climb_rate_mps: Float = AirspaceConfig.climb_rate_mps
+    descent_rate_mps: Float = AirspaceConfig.descent_rate_mps
+    time_limit_s: Positive = 10.0
+    solver_options: Mapping = field(default_factory=dict)
+    demand_file: Optional[Union[Str, Path]] = None
+    constraints_file: Optional[Union[Str, Path]] = None
+    corpus_max_vertices: Int = 60
+    audit: Bool = True
+    out: Union[Str, Path] = "results"
+    workers: Annotated[int, Strict(), Field(ge=1)] = 2
+    scheduler: Optional[Str] = None  # "local" or tcp://HOST:PORT: dask_cluster.validate_scheduler
+    airspace_mode: Literal[AIRSPACE_MODES] = "paper"
+    cumulative_rates: Any = None  # None, a list or "1,4": _num_list
+    objective: Str = "paper"  # the choices: PlanningConfig
+    baseline_order: Str = "arrival"
+    priority_share: Float = 0.0  # ranges of the demand mix: RequestGenerator
+    priority_class: Int = 1
+    operators: Union[Str, List] = field(default_factory=list)
+    horizon_epochs: Int = 1
+    commit_ahead: Bool = False
+    fair_window_s: Float = 0.0
+    lead_time_s: Float = 0.0
+    operator_lead_times_s: List = field(default_factory=list)
+    metrics_warmup_s: Float = 0.0
+    spatial_buffer_m: Float = 0.0  # ranges of the buffers: PlanningConfig
+    temporal_buffer_s: Float = 0.0
+    disturbance: Mapping = field(default_factory=dict)  # fields: DisturbanceConfig
+    conformance: Mapping = field(default_factory=dict)  # fields: ConformanceBounds
+    tts: Optional[Mapping] = field(default_factory=lambda: {
         "enabled": True, "instances": 629, "min_vertices": 5, "max_vertices": 50, "reads": 100,
         "repetitions": 5, "backend_instances": {"qpu-emulator": 60},
         "backends": ["exact", "greedy", "sa", "tabu", "qpu-emulator"], "p": 0.99, "seed": 0,
         "time_limit_s": 10.0})
+
+    __pydantic_config__ = ConfigDict(extra="forbid", allow_inf_nan=False)
 
     def airspace(self) -> AirspaceConfig:
         """The AirspaceConfig of these parameters (raises ValueError naming a bad field)."""
@@ -237,10 +256,7 @@ def make_config(data: dict | None = None, **overrides) -> ExperimentConfig:
     """An ExperimentConfig from a mapping (the YAML file) and overrides (flags; None = unset)."""
     data = dict(data or {})
     data.update({k: v for k, v in overrides.items() if v is not None})
-    names = {f.name for f in fields(ExperimentConfig)}
-    unknown = set(data) - names
-    if unknown:
-        raise ExperimentError(f"unknown parameter {sorted(unknown)[0]!r} (known: {sorted(names)})")
+    parse(ExperimentConfig, data, error=ExperimentError)  # unknown keys, types, ranges
     cfg = ExperimentConfig()
     tts = dict(cfg.tts)
     tts.update(data.pop("tts", None) or {})
@@ -262,26 +278,15 @@ def make_config(data: dict | None = None, **overrides) -> ExperimentConfig:
         raise ExperimentError(f"constraints_file: file {str(cfg.constraints_file)!r} does not exist")
     cfg.rates = [rate_label(r) for r in _num_list("rates", cfg.rates)]
     cfg.seeds = _seeds(cfg.seeds)
-    for name in ("duration_s", "epoch_s", "interval_s", "window_s", "separation_m", "speed_mps",
-                 "time_limit_s"):
-        v = getattr(cfg, name)
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
-            raise ExperimentError(f"{name}: {v!r} must be a positive finite number")
-    if isinstance(cfg.workers, bool) or not isinstance(cfg.workers, int) or cfg.workers < 1:
-        raise ExperimentError(f"workers: {cfg.workers!r} must be an integer >= 1")
     from .dask_cluster import validate_scheduler
     try:
         cfg.scheduler = validate_scheduler(cfg.scheduler)
     except ValueError as exc:
         raise ExperimentError(str(exc)) from None
-    if cfg.airspace_mode not in AIRSPACE_MODES:
-        raise ExperimentError(f"airspace_mode: {cfg.airspace_mode!r} is not one of {list(AIRSPACE_MODES)}")
     if cfg.airspace_mode != "paper":
         cfg = _apply_mode(cfg, given=set(data))
     if cfg.cumulative_rates is not None:
         cfg.cumulative_rates = [rate_label(r) for r in _num_list("cumulative_rates", cfg.cumulative_rates)]
-    if not isinstance(cfg.solver_options, dict):
-        raise ExperimentError(f"solver_options: {cfg.solver_options!r} must be a mapping")
     if isinstance(cfg.operators, str):
         cfg.operators = [o.strip() for o in cfg.operators.split(",") if o.strip()]
     try:
@@ -292,9 +297,6 @@ def make_config(data: dict | None = None, **overrides) -> ExperimentConfig:
                          operator_lead_times_s=cfg.operator_lead_times_s)
     except DemandError as exc:
         raise ExperimentError(str(exc)) from None
-    for name in ("disturbance", "conformance"):
-        if not isinstance(getattr(cfg, name), dict):
-            raise ExperimentError(f"{name}: {getattr(cfg, name)!r} must be a mapping")
     try:
         cfg.disturbance_config()
         cfg.conformance_bounds()

@@ -8,6 +8,7 @@ import subprocess
 import sys
 
 SRC = pathlib.Path(__file__).resolve().parents[1]
+CONTRACT = SRC.parent / "uam_contract"  # the one package below the solvers (option rows)
 
 SCRIPT = """
 import os, signal, time
@@ -24,6 +25,6 @@ except KeyboardInterrupt:
 
 def test_sigint_after_an_exact_solve_reaches_python():
     out = subprocess.run([sys.executable, "-c", SCRIPT], capture_output=True, text=True, timeout=120,
-                         env={"PYTHONPATH": str(SRC), "PATH": "/usr/bin:/bin"})
+                         env={"PYTHONPATH": f"{SRC}:{CONTRACT}", "PATH": "/usr/bin:/bin"})
     assert out.returncode == 0, (out.returncode, out.stderr[-2000:])
     assert "handled by python" in out.stdout

@@ -120,4 +120,4 @@ def test_every_backend_declares_its_options_dimod_style(name):
         assert key in params and spec.name == key
         assert spec.description, f"{name}.{key} has no description"
         # the declared default passes the declared check
-        assert spec.check(spec.default, name) == spec.default or spec.default is None
+        assert spec.validate(spec.default, context=f" (backend {name!r})") == spec.default or spec.default is None

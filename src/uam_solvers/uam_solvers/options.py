@@ -1,8 +1,9 @@
 """Declared backend options (in the style of dimod's ``Sampler.parameters``) and checks of the
 solve arguments every backend shares.
 
-Each backend lists its options as :class:`Option` objects in ``options_spec`` (name, kind,
-default, range or choices, description); :func:`parse_options` checks a caller's mapping
+Each backend lists its options as :class:`Option` rows in ``options_spec`` (name, kind,
+default, range or choices, description; the row class is :class:`uam_contract.validation.Param`,
+the one of the node parameters too); :func:`parse_options` checks a caller's mapping
 against it and returns every option with defaults filled in. An unknown name or a malformed
 value raises :class:`~uam_solvers.base.MwisInputError` naming ``options['key']``, the value and
 the backend, for every backend and before any solve starts (never a silent fallback).
@@ -11,8 +12,9 @@ from __future__ import annotations
 
 import math
 import numbers
-from dataclasses import dataclass, field
-from typing import Any, Callable, Mapping
+from typing import Any, Mapping
+
+from uam_contract.validation import Param
 
 from .errors import MwisInputError
 
@@ -23,77 +25,14 @@ __all__ = ["Option", "parse_options", "check_time_limit", "check_seed", "MAX_TIM
 MAX_TIME_LIMIT_S = 86_400.0
 
 
-@dataclass(frozen=True)
-class Option:
-    """One declared backend option.
-
-    kind: "int", "float", "bool", "str" or "any" (then ``validator`` does the checking).
-    lo, hi: inclusive numeric range (None: unbounded). choices: allowed values (str options).
-    nullable: None is allowed (and means "the backend decides", described in ``description``).
-    validator: optional ``f(value) -> value`` raising ValueError with a reason for "any" kinds.
-    """
-
-    name: str
-    kind: str
-    default: Any
-    description: str
-    lo: float | None = None
-    hi: float | None = None
-    choices: tuple = ()
-    nullable: bool = False
-    validator: Callable[[Any], Any] | None = field(default=None, compare=False)
-
-    def check(self, value: Any, backend: str) -> Any:
-        """``value`` converted to the option's kind, or MwisInputError naming option and value."""
-        def bad(why: str) -> MwisInputError:
-            return MwisInputError(f"options[{self.name!r}]: {value!r} {why} (backend {backend!r})")
-
-        if value is None:
-            if self.nullable or self.default is None:
-                return None
-            raise bad("is not allowed (no value)")
-        if self.kind == "int":
-            if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-                raise bad("is not an integer")
-            value = int(value)
-        elif self.kind == "float":
-            if isinstance(value, bool) or not isinstance(value, numbers.Real):
-                raise bad("is not a number")
-            value = float(value)
-            if not math.isfinite(value):
-                raise bad("is not finite")
-        elif self.kind == "bool":
-            if not isinstance(value, (bool,)) and not (isinstance(value, numbers.Integral)
-                                                        and value in (0, 1)):
-                raise bad("is not true or false")
-            value = bool(value)
-        elif self.kind == "str":
-            if not isinstance(value, str):
-                raise bad("is not a string")
-        if self.lo is not None and value < self.lo:
-            raise bad(f"is below the minimum {self.lo!r}")
-        if self.hi is not None and value > self.hi:
-            raise bad(f"is above the maximum {self.hi!r}")
-        if self.choices and value not in self.choices:
-            raise bad(f"is not one of {', '.join(map(repr, self.choices))}")
-        if self.validator is not None:
-            try:
-                value = self.validator(value)
-            except (TypeError, ValueError) as exc:
-                raise bad(str(exc)) from None
-        return value
-
-    def describe(self) -> str:
-        """One line: name, kind, default, range, description."""
-        rng = ""
-        if self.lo is not None or self.hi is not None:
-            rng = f" in [{self.lo if self.lo is not None else '-inf'}, {self.hi if self.hi is not None else 'inf'}]"
-        if self.choices:
-            rng = f" one of {', '.join(map(str, self.choices))}"
-        return f"{self.name} ({self.kind}{rng}, default {self.default!r}): {self.description}"
+#: A backend option is a row of the one table type of node parameters and backend options,
+#: :class:`uam_contract.validation.Param` (one validator): ``Option(name, kind, default,
+#: description, lo=, hi=, choices=, nullable=, validator=)`` builds it; ``validator`` becomes its
+#: ``convert`` (``f(value) -> value`` raising ValueError with the reason).
+Option = Param.option
 
 
-def parse_options(backend: str, spec: Mapping[str, Option], options: Mapping[str, Any] | None
+def parse_options(backend: str, spec: Mapping[str, Param], options: Mapping[str, Any] | None
                   ) -> dict:
     """Every declared option of ``spec``: the caller's value checked, else the default.
 
@@ -128,7 +67,7 @@ _PARSED: dict = {}
 _PARSED_MAX = 512
 
 
-def _parse_options(backend: str, spec: Mapping[str, Option], options: Mapping[str, Any]) -> dict:
+def _parse_options(backend: str, spec: Mapping[str, Param], options: Mapping[str, Any]) -> dict:
     unknown = [k for k in options if k not in spec]
     if unknown:
         known = ", ".join(sorted(spec)) or "none"
@@ -137,7 +76,9 @@ def _parse_options(backend: str, spec: Mapping[str, Option], options: Mapping[st
             f"(value {options[unknown[0]]!r}; known options: {known})")
     out = {}
     for name, opt in spec.items():
-        out[name] = opt.check(options[name], backend) if name in options else opt.default
+        out[name] = (opt.validate(options[name], label=f"options[{name!r}]", context=f" (backend {backend!r})",
+                                  error=MwisInputError)
+                     if name in options else opt.default)
     return out
 
 
