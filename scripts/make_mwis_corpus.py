@@ -56,6 +56,28 @@ CASES = {
                                 "pads_per_vertiport": 4}}, 25.0),
 }
 
+#: the planner's rolling-horizon graphs (issue 21's family, issue 20 item: ``auto`` must prove
+#: them): the runs of scripts/bench_horizon.py with requests filed 120 s ahead, 120 s windows,
+#: layered Singapore in mode "both", objective count, 20 requests per 30 s, horizon H epochs;
+#: one request's candidates span up to H epochs as one group. Written to their own file:
+#:
+#:     python scripts/make_mwis_corpus.py --cases horizon-h5,horizon-h10 --duration 600 \
+#:         --per-bucket 3 --max-vertices 2600 --max-bytes 1000000 \
+#:         --out data/mwis/horizon-mwis.jsonl.gz
+#:
+#: (--max-vertices 2600: the runs answered by greedy leave more requests pending than CP-SAT's,
+#: so their warm-up epochs reach 4,000 vertices; the steady state, and the 1,600-2,300 vertices
+#: of the runs answered by CP-SAT, stay in)
+HORIZON_CASES = {"horizon-h5": 5, "horizon-h10": 10}
+
+
+def _horizon_config(args, h: int):
+    from uam_sim.experiment_config import make_config
+
+    return make_config(airspace_mode="both", objective="count", horizon_epochs=h,
+                       window_s=120.0, lead_time_s=120.0, time_limit_s=args.time_limit,
+                       workers=1, duration_s=args.duration, audit=False)
+
 
 def collect(args, label: str) -> tuple[list, dict]:
     """Every epoch's instance of one case's run: [(epoch, t_s, CorpusEntry)] and a summary."""
@@ -65,27 +87,38 @@ def collect(args, label: str) -> tuple[list, dict]:
     from uam_solvers.base import MwisProblem
     from uam_solvers.instances import CorpusEntry
 
-    spec, rate = CASES[label]
-    if label == "singapore-layered" and args.rate is not None:
-        rate = args.rate
-    if isinstance(spec, str):
-        spec = str(ROOT / spec)
-    cfg = make_config({"network": spec, "duration_s": args.duration, "audit": False,
-                       "time_limit_s": args.time_limit, "separation_model": "cylinder",
-                       "vertical_separation_m": 30.0, "departure_slot_s": args.slot_s})
-    net = load_network_spec(spec)
+    if label in HORIZON_CASES:
+        from uam_sim.experiment_config import resolve_path
+
+        cfg = _horizon_config(args, HORIZON_CASES[label])
+        rate = 20.0
+        net = load_network_spec(str(resolve_path(cfg.network)))
+        what = (f"airspace both, horizon {HORIZON_CASES[label]} epochs, window 120 s, lead "
+                f"120 s, objective count")
+    else:
+        spec, rate = CASES[label]
+        if label == "singapore-layered" and args.rate is not None:
+            rate = args.rate
+        if isinstance(spec, str):
+            spec = str(ROOT / spec)
+        cfg = make_config({"network": spec, "duration_s": args.duration, "audit": False,
+                           "time_limit_s": args.time_limit, "separation_model": "cylinder",
+                           "vertical_separation_m": 30.0, "departure_slot_s": args.slot_s})
+        net = load_network_spec(spec)
+        what = f"cylinder 100/30 m, {args.slot_s:g} s slots"
     found = []
 
     def observer(t_s, epoch_index, submitted, refused, result) -> None:
         rep = result.report
-        if rep.vertices < args.min_vertices:
+        if rep.vertices < args.min_vertices or (args.max_vertices
+                                                 and rep.vertices > args.max_vertices):
             return
         groups = groups_from_ids(rep.vertex_request_ids)
         edges = np.asarray(rep.edges_array, dtype=np.int64).reshape(-1, 2)
         problem = MwisProblem.from_arrays(np.asarray(rep.weights, dtype=np.float64), edges, groups)
         name = f"{label}-r{rate:g}-s{args.seed}-e{epoch_index:04d}-v{rep.vertices}"
-        source = (f"scripts/make_mwis_corpus.py: run_scenario({label}, cylinder 100/30 m, "
-                  f"{args.slot_s:g} s slots, rate {rate:g}/30 s, seed {args.seed}, method "
+        source = (f"scripts/make_mwis_corpus.py: run_scenario({label}, {what}, "
+                  f"rate {rate:g}/30 s, seed {args.seed}, method "
                   f"{args.method}, {args.duration:g} s) epoch {epoch_index} t={t_s:g} s")
         found.append((epoch_index, t_s, CorpusEntry(name, problem, source)))
 
@@ -131,7 +164,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", default=REAL_CORPUS)
     ap.add_argument("--cases", default="singapore-layered,city2000",
-                    help=f"comma-separated layered cases of {sorted(CASES)}")
+                    help=f"comma-separated cases of {sorted(CASES) + sorted(HORIZON_CASES)}")
     ap.add_argument("--rate", type=float, default=None,
                     help="singapore-layered: requests per 30 s (default 20)")
     ap.add_argument("--duration", type=float, default=3500.0, help="simulated seconds")
@@ -140,13 +173,15 @@ def main(argv=None) -> int:
     ap.add_argument("--method", default="greedy", help="backend answering the epochs")
     ap.add_argument("--time-limit", type=float, default=1.0, help="MWIS time limit [s]")
     ap.add_argument("--min-vertices", type=int, default=2)
+    ap.add_argument("--max-vertices", type=int, default=0,
+                    help="leave out instances above this size (0: none)")
     ap.add_argument("--per-bucket", type=int, default=10)
     ap.add_argument("--max-bytes", type=int, default=1_800_000)
     args = ap.parse_args(argv)
     picked = {}
     for label in [c for c in args.cases.split(",") if c]:
-        if label not in CASES:
-            ap.error(f"--cases: {label!r} is not one of {sorted(CASES)}")
+        if label not in CASES and label not in HORIZON_CASES:
+            ap.error(f"--cases: {label!r} is not one of {sorted(CASES) + sorted(HORIZON_CASES)}")
         found, summary = collect(args, label)
         print(f"{label}: {summary['epochs']} epochs, {summary['requests']} requests, "
               f"{summary['approved']} approved, {len(found)} instances of >= "

@@ -22,6 +22,16 @@ The outer layers of the default pipeline (Reduce, ComponentSplit) pass every gra
   because KaMIS overran even a 0.05 s limit on them (1-2 s at mean degree 40-44, past 8 s at
   100-150) and it holds the GIL; :func:`uam_solvers.solve_bounded` and the solve service bound
   any such overrun by a kill.
+* CP-SAT on the whole graph (the groups as at-most-one, no greedy hint) with
+  ``cpsat_fraction`` (0.9) of the time left, when KaMIS did not prove it and the graph is a
+  union of large cliques by structure (:meth:`AutoBackend._cpsat_suits`: the groups' clique
+  cover has >= ``cpsat_min_clique_cover`` = 8 vertices per clique, the triangle ratio is >=
+  0.25 and twice the edge density, at most 200,000 conflict pairs): the planner's
+  rolling-horizon graphs (issue 20; one request's candidates over ten epochs), on which KaMIS
+  runs to its limit and CP-SAT proves in 0.1-0.5 s CPU. On such graphs KaMIS first gets only a
+  probe (``kamis_probe_fraction`` 0.01 of the limit, at least 0.05 s). Above 2,000 vertices this
+  comes before LearnAndReduce. The paper-shaped, stress and planner-shaped synthetic graphs
+  (5 candidates per request) never take it.
 * otherwise, up to 2,000 vertices: auto's own ``Reduce(ComponentSplit(...))`` (exact
   reductions up to 256 vertices, connected components) and per component: branch and bound,
   KaMIS up to 64 vertices, CP-SAT up to ``exact_max_vertices`` (200; it honours its limit and
@@ -39,7 +49,7 @@ The outer layers of the default pipeline (Reduce, ComponentSplit) pass every gra
   the kernel is empty: planner-shaped 10,000 vertices in 0.13-0.2 s).
 
 ``proven_optimal`` is True only when the branch and bound completed, KaMIS finished, CP-SAT
-reported OPTIMAL for every component, or LearnAndReduce left nothing or a kernel KaMIS finished
+reported OPTIMAL on the whole graph or for every component, or LearnAndReduce left nothing or a kernel KaMIS finished
 (checked: the lifted set's integer weight is the reductions' offset plus the kernel optimum).
 """
 from __future__ import annotations
@@ -123,6 +133,25 @@ KAMIS_MIN_TRIANGLE_EXCESS = 2.0
 KAMIS_CLUSTERED_MAX_PAIRS = 150_000
 #: two-paths :func:`triangle_ratio` samples (standard error at most 0.008)
 TRIANGLE_SAMPLES = 4096
+#: CP-SAT on the whole graph after KaMIS did not prove it, for graphs that are unions of
+#: cliques (issue 20, rolling-horizon graphs of the planner: 1,100-3,600 vertices, 85-100
+#: requests whose 20-90 candidates each span ten epochs, triangle ratio 0.31-0.60 at 10-30x the
+#: edge density; KaMIS branch-and-reduce ran to its limit on every one, CP-SAT with the groups
+#: as at-most-one proved them in 0.1-0.5 s CPU, 1.3-2.3 s wall at load 15). CP-SAT also proved
+#: every layered-corpus graph of 250-1,750 vertices (0.06-1.2 s wall at load 15) where KaMIS
+#: needed 0.001-2.4 s, so KaMIS first gets only a probe on these graphs.
+CPSAT_FRACTION = 0.9
+CPSAT_MIN_TRIANGLE_RATIO = 0.25
+CPSAT_MAX_PAIRS = 200_000
+CPSAT_MIN_CLIQUE_COVER = 8.0
+#: CPU seconds per conflict pair of building the CP-SAT model in Python (measured 2.7 us on
+#: 27,000 uncovered pairs): CP-SAT is skipped when building would take more than a quarter of
+#: its budget (at load 20 a 145,000-pair model took ~3 s to build and load, and CP-SAT overran a
+#: 3.6 s budget to 6.8 s without a solution)
+CPSAT_BUILD_S_PER_PAIR = 3e-6
+CPSAT_MAX_BUILD_SHARE = 0.25
+KAMIS_PROBE_FRACTION = 0.01
+KAMIS_PROBE_MIN_S = 0.05
 #: integer weight of the heaviest vertex for LearnAndReduce (see learn_and_reduce_kernel)
 LR_RESOLUTION = 10**6
 
@@ -318,6 +347,36 @@ class AutoBackend(Backend):
                                            "0.59-0.99; random graphs KaMIS overran on: 0.1-0.5; "
                                            "above 1: never)",
                                            lo=0.0, hi=2.0),
+        "cpsat_fraction": Option("cpsat_fraction", "float", CPSAT_FRACTION, "share of the "
+                                 "time left CP-SAT gets on the whole graph when KaMIS did not "
+                                 "prove it and the graph is a union of cliques (triangle test "
+                                 "cpsat_min_triangle_ratio; the planner's rolling-horizon graphs: "
+                                 "KaMIS ran to its limit, CP-SAT with the groups as at-most-one "
+                                 "proved them in 0.1-0.5 s CPU); 0: never", lo=0.0, hi=1.0),
+        "cpsat_min_triangle_ratio": Option("cpsat_min_triangle_ratio", "float",
+                                           CPSAT_MIN_TRIANGLE_RATIO, "graphs above 64 vertices "
+                                           "whose triangle ratio is at least this and twice "
+                                           "their edge density go to CP-SAT whole when KaMIS did "
+                                           "not prove them (horizon graphs 0.31-0.60, layered "
+                                           "0.59-0.99; G(n, p): about p, at 1x the density; "
+                                           "above 1: never)", lo=0.0, hi=2.0),
+        "cpsat_min_clique_cover": Option("cpsat_min_clique_cover", "float",
+                                         CPSAT_MIN_CLIQUE_COVER, "least mean size of the "
+                                         "cliques of the groups' clique cover (vertices per "
+                                         "group, a vertex outside every group counted as one) "
+                                         "for CP-SAT on the whole graph", lo=0.0, hi=1e9),
+        "cpsat_max_pairs": Option("cpsat_max_pairs", "int", CPSAT_MAX_PAIRS, "most conflict "
+                                  "pairs of a graph CP-SAT gets whole (its model is built in "
+                                  "Python, ~3 us per pair, and that cannot be interrupted)",
+                                  lo=0, hi=10**8),
+        "kamis_probe_fraction": Option("kamis_probe_fraction", "float", KAMIS_PROBE_FRACTION,
+                                       "share of the limit KaMIS gets first when CP-SAT follows "
+                                       "(a clique-structured graph, see cpsat_min_triangle_"
+                                       "ratio), at least kamis_probe_min_s: KaMIS proves the "
+                                       "layered runs' graphs in 1-70 ms, CP-SAT the rest", lo=0.0,
+                                       hi=1.0),
+        "kamis_probe_min_s": Option("kamis_probe_min_s", "float", KAMIS_PROBE_MIN_S, "least "
+                                    "time of that first KaMIS probe [s]", lo=0.0, hi=86_400.0),
         "exact_max_vertices": Option("exact_max_vertices", "int", 200, "largest component solved "
                                      "by CP-SAT (larger: CHILS)", lo=0, hi=100_000),
         "exact_fraction": Option("exact_fraction", "float", 0.5, "share of a kernel's time "
@@ -352,11 +411,21 @@ class AutoBackend(Backend):
         self._exact = CpSatBackend()
         self._chils = ChilsBackend()
         self._kamis = KamisBackend()
-        self._parts = None
-        if _parts:
+        self._with_parts = _parts
+        self._parts_pipeline = None
+
+    @property
+    def _parts(self):
+        """auto's own ``Reduce(ComponentSplit(...))`` (None inside it), built on first use: the
+        registry makes a fresh backend per solve and most solves never need it (KaMIS or the
+        branch and bound proves them), and building it cost ~0.1 ms of a 0.5 ms solve."""
+        if not self._with_parts:
+            return None
+        if self._parts_pipeline is None:
             from .layers import ComponentSplit, Reduce
 
-            self._parts = Reduce(ComponentSplit(_AutoPart()))
+            self._parts_pipeline = Reduce(ComponentSplit(_AutoPart()))
+        return self._parts_pipeline
 
     def available(self) -> tuple[bool, str]:
         ok, why = self._exact.available()
@@ -384,50 +453,102 @@ class AutoBackend(Backend):
             return self._solve_part(problem, time_limit_s, seed, opts, t0)
         if self._parts is None:  # a component handed over by the split below
             return self._solve_part(problem, time_limit_s, seed, opts, t0)
+        incumbent = None
+        tri = None
+        degree = conflict_degree(problem)
+        pairs = int(problem.all_edges().shape[0])
         if n <= opts["kamis_max_vertices"] and opts["kamis_fraction"] > 0:
-            degree = conflict_degree(problem)
-            tri = None
             clustered = False
-            incumbent = None
-            if degree > opts["kamis_max_degree"] and opts["kamis_min_triangle_ratio"] <= 1.0 \
-                    and problem.all_edges().shape[0] <= KAMIS_CLUSTERED_MAX_PAIRS:
+            cpsat_next = False
+            if degree > opts["kamis_max_degree"] and pairs <= max(KAMIS_CLUSTERED_MAX_PAIRS,
+                                                                   opts["cpsat_max_pairs"]):
                 tri = triangle_ratio(problem)
                 density = degree / max(n - 1, 1)
-                clustered = (tri >= opts["kamis_min_triangle_ratio"]
+                clustered = (opts["kamis_min_triangle_ratio"] <= 1.0
+                             and pairs <= KAMIS_CLUSTERED_MAX_PAIRS
+                             and tri >= opts["kamis_min_triangle_ratio"]
                              and tri >= KAMIS_MIN_TRIANGLE_EXCESS * density)
+                cpsat_next = self._cpsat_suits(problem, tri, pairs, opts)
             if degree <= opts["kamis_max_degree"] or clustered:
                 # what proves first: KaMIS branch-and-reduce on the whole graph (its exact
                 # reductions are faster than the Python layers, and it splits itself) with a
-                # small share of the limit, at most kamis_max_share_s; a return before 0.9 of
-                # the share is its completed search, a proof (a search stopped by the limit runs
-                # to it, as for the kamis backend), returned at once; otherwise the split below
-                # (CP-SAT, CHILS) gets the rest of the limit
+                # small share of the limit, at most kamis_max_share_s (a probe when CP-SAT
+                # follows); a return before 0.9 of the share is its completed search, a proof
+                # (a search stopped by the limit runs to it, as for the kamis backend), returned
+                # at once; otherwise CP-SAT (clique-structured graphs) and the split below
+                # (CP-SAT per component, CHILS) get the rest of the limit
                 fraction = opts["kamis_clustered_fraction" if clustered else "kamis_fraction"]
                 share = max(min(time_limit_s * fraction, opts["kamis_max_share_s"]), 1e-3)
+                if cpsat_next:
+                    share = min(share, max(time_limit_s * opts["kamis_probe_fraction"],
+                                           opts["kamis_probe_min_s"]))
                 res = self._kamis.solve(problem, time_limit_s=share, seed=seed,
                                         options={"finish_fraction": 0.9})
                 if res.proven_optimal:
-                    return make_result(problem, res.selected, proven_optimal=True,
-                                       solve_time_s=time.perf_counter() - t0, backend=self.name,
-                                       stats={**res.stats, "auto_method": "kamis",
-                                              "conflict_degree": degree,
-                                              **({} if tri is None else
-                                                 {"triangle_ratio": round(tri, 4)})})
+                    # KaMIS's result on this same problem, already checked and its objective
+                    # recomputed by make_result: relabelled, not rebuilt (~10 us)
+                    res.backend, res.solve_time_s = self.name, time.perf_counter() - t0
+                    res.stats = {**res.stats, "auto_method": "kamis", "conflict_degree": degree,
+                                 **({} if tri is None else {"triangle_ratio": round(tri, 4)})}
+                    return res
                 incumbent = res  # KaMIS's best set when its share ran out: kept if better
-        else:
-            incumbent = None
-        rest_s = max(time_limit_s - (time.perf_counter() - t0), 1e-3)
+                incumbent.stats = {**res.stats, "auto_method": "kamis (limit)"}
         if n <= self.split_max_vertices_parts:
+            res = self._cpsat_whole(problem, time_limit_s, seed, opts, t0, tri, pairs)
+            if res is not None and (res.proven_optimal or _little_left(time_limit_s, t0)):
+                res = _better(res, incumbent)
+                res.backend, res.solve_time_s = self.name, time.perf_counter() - t0
+                return res
+            incumbent = _better(incumbent, res)
+            rest_s = max(time_limit_s - (time.perf_counter() - t0), 1e-3)
             # exact reductions and component split, each component by _solve_part
             res = self._parts.solve(problem, time_limit_s=rest_s, seed=seed, options=opts)
             if incumbent is not None and incumbent.objective > res.objective:
                 res = make_result(problem, incumbent.selected, proven_optimal=False,
                                   solve_time_s=0.0, backend=self.name,
-                                  stats={**incumbent.stats, "auto_method": "kamis (limit)",
-                                         "after_kamis": res.stats.get("auto_method", "")})
+                                  stats={**incumbent.stats,
+                                         "after": res.stats.get("auto_method", "")})
             res.solve_time_s = time.perf_counter() - t0
             return res
         return self._solve_large(problem, time_limit_s, seed, opts, t0)
+
+    def _cpsat_suits(self, problem: MwisProblem, tri: float | None, pairs: int,
+                     opts: dict) -> bool:
+        """Whether CP-SAT gets the whole graph when KaMIS did not prove it: above 64 vertices,
+        at most ``cpsat_max_pairs`` conflict pairs, cliques of at least ``cpsat_min_clique_cover``
+        vertices on average in the cover the groups give (CP-SAT's at-most-one constraints; the
+        horizon graphs: 12-45, the layered runs' 5-70, the synthetic paper-shaped, stress and
+        planner-shaped graphs 5: unchanged; without groups CP-SAT needed 1.5-5x longer on these
+        graphs), and a union of cliques by structure (the triangle ratio of the full graph, groups included so they change nothing, at least
+        ``cpsat_min_triangle_ratio`` and twice the edge density; G(n, p) scores 1x)."""
+        if opts["cpsat_fraction"] <= 0 or problem.n <= SMALL_KAMIS_VERTICES \
+                or pairs > opts["cpsat_max_pairs"] or opts["cpsat_min_triangle_ratio"] > 1.0:
+            return False
+        grouped = sum(int(g.size) for g in problem.groups)
+        cover = len(problem.groups) + problem.n - grouped
+        if problem.n < opts["cpsat_min_clique_cover"] * max(cover, 1):
+            return False
+        if tri is None:
+            tri = triangle_ratio(problem)
+        density = 2.0 * pairs / max(problem.n * (problem.n - 1), 1)
+        return tri >= opts["cpsat_min_triangle_ratio"] and tri >= KAMIS_MIN_TRIANGLE_EXCESS * density
+
+    def _cpsat_whole(self, problem: MwisProblem, time_limit_s: float, seed: int, opts: dict,
+                     t0: float, tri: float | None, pairs: int) -> MwisResult | None:
+        """CP-SAT on the whole graph (the groups as at-most-one, no greedy hint: on the horizon
+        graphs the hint's greedy cost 0.05-0.09 s CPU and the search was no faster with it) with
+        ``cpsat_fraction`` of the time left, when :meth:`_cpsat_suits`; None otherwise. Its
+        proof is the exact backend's (OPTIMAL, checked by ``integer_proof_holds``)."""
+        if not self._cpsat_suits(problem, tri, pairs, opts):
+            return None
+        budget = (time_limit_s - (time.perf_counter() - t0)) * opts["cpsat_fraction"]
+        if budget < 0.02 or pairs * CPSAT_BUILD_S_PER_PAIR > CPSAT_MAX_BUILD_SHARE * budget:
+            return None
+        res = self._exact.solve(problem, time_limit_s=budget, seed=seed,
+                                options={"hint": False})
+        return make_result(problem, res.selected, proven_optimal=res.proven_optimal,
+                           solve_time_s=time.perf_counter() - t0, backend=self.name,
+                           stats={**res.stats, "auto_method": "cpsat (whole graph)"})
 
     def _solve_part(self, problem: MwisProblem, time_limit_s: float, seed: int, opts: dict,
                     t0: float) -> MwisResult:
@@ -487,6 +608,24 @@ class AutoBackend(Backend):
 
     def _solve_large(self, problem: MwisProblem, time_limit_s: float, seed: int, opts: dict,
                      t0: float) -> MwisResult:
+        """Above split_max_vertices: CP-SAT on the whole graph first when it is a union of
+        large cliques (:meth:`_cpsat_suits`: the planner's rolling-horizon graphs of 2,000-3,600
+        vertices, where LearnAndReduce removed 10-25 % and left CHILS a kernel too large),
+        returned when proven; otherwise :meth:`_solve_large_lr` with the time left, and the
+        better of the two answers."""
+        cp = self._cpsat_whole(problem, time_limit_s, seed, opts, t0, None,
+                               int(problem.all_edges().shape[0]))
+        if cp is not None and (cp.proven_optimal or _little_left(time_limit_s, t0)):
+            return cp
+        res = self._solve_large_lr(problem, time_limit_s, seed, opts, t0)
+        if cp is not None and cp.objective > res.objective:
+            cp.stats = {**cp.stats, "after": res.stats.get("auto_method", "")}
+            cp.solve_time_s = time.perf_counter() - t0
+            return cp
+        return res
+
+    def _solve_large_lr(self, problem: MwisProblem, time_limit_s: float, seed: int, opts: dict,
+                        t0: float) -> MwisResult:
         """Above split_max_vertices: a short LearnAndReduce probe (``lr_probe_fraction`` of the
         limit); when it removed some but less than ``lr_min_probe_removed`` of the graph, CHILS
         on the whole graph with the rest of the limit (issue 20: on the 10,000-vertex stress
@@ -571,6 +710,26 @@ class AutoBackend(Backend):
         return make_result(problem, sel, proven_optimal=False,
                            solve_time_s=time.perf_counter() - t0, backend=self.name,
                            stats={**kres.stats, **stats})
+
+
+#: after an unproven whole-graph CP-SAT, the rest of the pipeline (split, LearnAndReduce,
+#: CHILS: set-up 0.1-0.3 s under load) runs only when at least this much of the limit is left;
+#: otherwise CP-SAT's best set is the answer (at load 22 the follow-up with ~0.5 s left ran the
+#: in-process solve to 7.6 s of a 5 s limit)
+CPSAT_MIN_FOLLOW_S = 0.5
+
+
+def _little_left(time_limit_s: float, t0: float) -> bool:
+    return time_limit_s - (time.perf_counter() - t0) < CPSAT_MIN_FOLLOW_S
+
+
+def _better(a: MwisResult | None, b: MwisResult | None) -> MwisResult | None:
+    """The one of two answers (either may be None) with the larger objective; ``a`` on a tie."""
+    if b is None:
+        return a
+    if a is None or b.objective > a.objective:
+        return b
+    return a
 
 
 class _AutoPart(AutoBackend):

@@ -492,13 +492,20 @@ def deadline_benchmark(seed: int, backends, limit_s: float = 1.0, out=print) -> 
         f"(target <= {limit_s + 0.5:g} s).")
 
 
+#: time limit of the horizon corpus's solves: the planner node's (config/planner.yaml) and
+#: scripts/bench_horizon.py's
+HORIZON_LIMIT_S = 5.0
+
+
 def corpus_benchmark(path=None, limit_s: float = 1.0, repeats: int = TARGET_REPEATS,
-                     out=print) -> list[dict]:
+                     out=print, cpsat: bool = False) -> list[dict]:
     """Issue 20's target on the committed corpus of real planner instances (layered mode,
     ``instances.REAL_CORPUS``, written by scripts/make_mwis_corpus.py): per size bucket,
     ``auto`` end to end (``uam_solvers.solve`` from the arrays, as the planner calls it) against
     KaMIS branch-and-reduce called directly on the CSR, interleaved instance by instance, each
-    the best of ``repeats`` runs. Returns one dict per instance."""
+    the best of ``repeats`` runs; with ``cpsat`` also the exact backend (CP-SAT) called
+    directly, and auto's wall against it where both proved (the horizon corpus, which KaMIS does
+    not prove). Returns one dict per instance."""
     from .instances import SIZE_BUCKETS, load_corpus, real_corpus_path, size_bucket
 
     path = real_corpus_path() if path is None else path
@@ -510,7 +517,11 @@ def corpus_benchmark(path=None, limit_s: float = 1.0, repeats: int = TARGET_REPE
     for e in entries:
         p = e.problem
         (ok, dk, fk), (r, da) = _kamis_and_auto(p, limit_s, repeats)
-        rows.append({"name": e.name, "n": p.n, "m": int(p.all_edges().shape[0]),
+        oc, dc, pc = cpsat_direct(MwisProblem(weights=p.weights, edges=p.edges, groups=p.groups),
+                                  limit_s) if cpsat else (float("nan"), float("nan"), False)
+        rows.append({"cpsat_s": dc, "cpsat_proven": pc, "cpsat_obj": oc,
+                     "auto_fallback": r.fallback,
+                     "name": e.name, "n": p.n, "m": int(p.all_edges().shape[0]),
                      "bucket": size_bucket(p.n), "auto_s": da, "auto_proven": r.proven_optimal,
                      "auto_obj": r.objective, "auto_valid": p.is_independent(r.selected),
                      "auto_method": r.stats.get("auto_method", ""), "kamis_s": dk,
@@ -554,7 +565,30 @@ def corpus_benchmark(path=None, limit_s: float = 1.0, repeats: int = TARGET_REPE
         + (f"; ratio auto/KaMIS median {np.median(ratios):.2f}, instances above 2x: "
            f"{int((ratios > 2).sum())}" if ratios.size else "")
         + f"; every answer valid: {all(x['auto_valid'] for x in rows)}")
+    if cpsat:
+        both = [x for x in rows if x["auto_proven"] and x["cpsat_proven"]]
+        rc = np.array([x["auto_s"] / x["cpsat_s"] for x in both])
+        out(f"CP-SAT direct (the exact backend's model, one call each) proved "
+            f"{sum(x['cpsat_proven'] for x in rows)} of {len(rows)}, auto "
+            f"{sum(x['auto_proven'] for x in rows)} of {len(rows)} (methods: "
+            f"{', '.join(sorted({x['auto_method'] for x in rows}))}); auto fallbacks "
+            f"{sum(x['auto_fallback'] for x in rows)}"
+            + (f"; wall auto/CP-SAT where both proved: median {np.median(rc):.2f}, max "
+               f"{rc.max():.2f}; auto median {np.median([x['auto_s'] for x in both]):.3f} s, "
+               f"CP-SAT {np.median([x['cpsat_s'] for x in both]):.3f} s" if rc.size else "")
+            + f"; auto objective >= CP-SAT's: "
+              f"{sum(x['auto_obj'] >= x['cpsat_obj'] - 1e-9 * max(1.0, abs(x['cpsat_obj'])) for x in rows)}"
+              f"/{len(rows)}")
     return rows
+
+
+def horizon_corpus_benchmark(limit_s: float = HORIZON_LIMIT_S, out=print) -> list[dict]:
+    """Issue 20 on the committed rolling-horizon corpus (``instances.HORIZON_CORPUS``): auto
+    against KaMIS and CP-SAT called directly, at the planner node's limit."""
+    from .instances import HORIZON_CORPUS, real_corpus_path
+
+    return corpus_benchmark(real_corpus_path(HORIZON_CORPUS), limit_s, repeats=1, out=out,
+                            cpsat=True)
 
 
 def node_path_benchmark(seed: int, backends, limit_s: float = 1.0, out=print) -> None:
@@ -671,8 +705,8 @@ def main(argv=None) -> int:
     ap.add_argument("--deadline-limit", type=float, default=1.0)
     ap.add_argument("--real-corpus", nargs="?", const="", default=None, metavar="FILE",
                     help="only issue 20's table on real planner instances: auto vs KaMIS direct "
-                         "per size bucket (default file: the committed "
-                         "data/mwis/layered-mwis.jsonl.gz)")
+                         "per size bucket (default: the committed data/mwis/layered-mwis.jsonl.gz, "
+                         "then data/mwis/horizon-mwis.jsonl.gz at 5 s with CP-SAT direct too)")
     ap.add_argument("--corpus-limit", type=float, default=1.0,
                     help="time limit of --real-corpus solves [s]")
     ap.add_argument("--node-path", action="store_true",
@@ -685,6 +719,8 @@ def main(argv=None) -> int:
         print(_machine())
         if args.real_corpus is not None:
             corpus_benchmark(args.real_corpus or None, args.corpus_limit)
+            if not args.real_corpus:
+                horizon_corpus_benchmark()
         if args.node_path:
             node_path_benchmark(args.seed, [b for b in args.large_backends.split(",") if b],
                                 args.deadline_limit)
@@ -694,6 +730,7 @@ def main(argv=None) -> int:
         print(_machine())
         grouped_benchmark(args.seed, [15, 50, 100, 250, 500], args.mid_seeds)
         corpus_benchmark(None, args.corpus_limit)
+        horizon_corpus_benchmark()
         deadline_benchmark(args.seed, [b for b in args.large_backends.split(",") if b],
                            args.deadline_limit)
         return 0

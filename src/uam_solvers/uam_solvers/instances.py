@@ -61,21 +61,28 @@ def size_bucket(n: int) -> int:
     return -1
 
 
-def real_corpus_path() -> Path:
-    """Where the committed real corpus is: under the current directory or the repository that
-    holds this source file (the bench runs from a checkout)."""
+#: the committed corpus of the planner's rolling-horizon graphs (issue 20/21: H = 5 and 10,
+#: requests filed 120 s ahead), relative to the repository
+HORIZON_CORPUS = "data/mwis/horizon-mwis.jsonl.gz"
+
+
+def real_corpus_path(name: str = REAL_CORPUS) -> Path:
+    """Where a committed real corpus (``REAL_CORPUS`` or ``HORIZON_CORPUS``) is: under the
+    current directory or the repository that holds this source file (the bench runs from a
+    checkout)."""
     here = Path(__file__).resolve()
     for base in (Path.cwd(), *here.parents):
-        cand = base / REAL_CORPUS
+        cand = base / name
         if cand.is_file():
             return cand
-    raise MwisInputError(f"the real corpus {REAL_CORPUS} was not found under {Path.cwd()} or "
+    raise MwisInputError(f"the real corpus {name} was not found under {Path.cwd()} or "
                          f"above {here.parent} (write it with scripts/make_mwis_corpus.py)")
 
 __all__ = [
     "CORPUS_FORMAT",
     "CORPUS_READERS",
     "REAL_CORPUS",
+    "HORIZON_CORPUS",
     "SIZE_BUCKETS",
     "real_corpus_path",
     "size_bucket",

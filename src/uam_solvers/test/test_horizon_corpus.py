@@ -1,0 +1,101 @@
+"""The committed corpus of the planner's rolling-horizon graphs (issue 20): `auto` proves them
+through CP-SAT on the whole graph (KaMIS branch-and-reduce does not finish them), by their
+structure, and the change leaves the synthetic paper-shaped graphs' route as it was. No timing
+assertions: the limits are generous and the verdicts are the solvers' own."""
+
+import numpy as np
+import pytest
+
+from uam_solvers import solve
+from uam_solvers.auto import AutoBackend, triangle_ratio
+from uam_solvers.base import MwisProblem
+from uam_solvers.instances import (HORIZON_CORPUS, grouped_random_instance, load_corpus,
+                                   real_corpus_path)
+from uam_solvers.options import parse_options
+
+
+@pytest.fixture(scope="module")
+def corpus():
+    return load_corpus(real_corpus_path(HORIZON_CORPUS))
+
+
+def test_the_horizon_corpus_is_small_and_holds_both_horizons(corpus):
+    assert real_corpus_path(HORIZON_CORPUS).stat().st_size < 1_100_000
+    names = [e.name for e in corpus]
+    assert {n.split("-r")[0] for n in names} == {"horizon-h5", "horizon-h10"}
+    assert max(e.problem.n for e in corpus) > 2000
+    for e in corpus:
+        assert e.problem.groups and "horizon" in e.source and "epoch" in e.source
+
+
+def _smallest_clique_structured(corpus):
+    a = AutoBackend()
+    opts = a.validate_options({})
+    for e in sorted(corpus, key=lambda e: e.problem.n):
+        p = e.problem
+        if p.n > 600 and a._cpsat_suits(p, None, int(p.all_edges().shape[0]), opts):
+            return p
+    raise AssertionError("no clique-structured horizon graph above 600 vertices")
+
+
+def test_auto_proves_a_horizon_graph_by_cpsat_with_or_without_a_kamis_proof(corpus):
+    p = _smallest_clique_structured(corpus)
+    r = solve(p.weights, p.edges, list(p.groups), backend="auto", time_limit_s=30.0)
+    assert p.is_independent(r.selected) and not r.fallback
+    assert r.proven_optimal, r.stats
+    ex = solve(p.weights, p.edges, list(p.groups), backend="exact", time_limit_s=30.0)
+    if ex.proven_optimal:
+        assert r.objective == pytest.approx(ex.objective, rel=1e-12)
+    if r.stats["auto_method"] != "kamis":
+        assert r.stats["auto_method"] == "cpsat (whole graph)"
+    # the same graph without CP-SAT's route: not proven through the old route, or proven the same
+    off = solve(p.weights, p.edges, list(p.groups), backend="auto", time_limit_s=1.0,
+                options={"cpsat_fraction": 0.0})
+    assert p.is_independent(off.selected)
+    assert "cpsat (whole graph)" not in str(off.stats.get("auto_method"))
+
+
+def test_the_cpsat_route_is_chosen_by_structure_not_by_size():
+    a = AutoBackend()
+    opts = a.validate_options({})
+    # paper-shaped graphs (requests of 5 candidates): the clique cover is 5 per clique, below 8
+    p = grouped_random_instance(500, 0)
+    assert not a._cpsat_suits(p, None, int(p.all_edges().shape[0]), opts)
+    # a random graph of large groups: G(n, p) triangles are at the edge density, refused
+    rng = np.random.default_rng(1)
+    n = 400
+    iu, ju = np.triu_indices(n, 1)
+    keep = rng.random(iu.size) < 0.3
+    groups = [list(range(i, i + 20)) for i in range(0, n, 20)]
+    g = MwisProblem.from_arrays(rng.random(n) + 0.5, np.stack([iu[keep], ju[keep]], 1), groups)
+    assert triangle_ratio(g) < 2 * 2 * g.all_edges().shape[0] / (n * (n - 1))
+    assert not a._cpsat_suits(g, None, int(g.all_edges().shape[0]), opts)
+    # off by option
+    assert not a._cpsat_suits(g, None, 0, {**opts, "cpsat_fraction": 0.0})
+
+
+def test_cached_options_never_take_a_bool_for_a_number_or_skip_a_check():
+    from uam_solvers.chszla import KamisBackend
+    from uam_solvers.errors import MwisInputError
+
+    spec = KamisBackend.options_spec
+    assert parse_options("kamis", spec, {"finish_fraction": 1})["finish_fraction"] == 1
+    with pytest.raises(MwisInputError, match="finish_fraction"):
+        parse_options("kamis", spec, {"finish_fraction": 2})
+    with pytest.raises(MwisInputError, match="finish_fraction"):
+        parse_options("kamis", spec, {"finish_fraction": 2})  # again: refused, not cached
+    a = parse_options("kamis", spec, {"finish_fraction": 0.5})
+    a["finish_fraction"] = 0.7  # a caller's copy: the cache is not changed through it
+    assert parse_options("kamis", spec, {"finish_fraction": 0.5})["finish_fraction"] == 0.5
+    with pytest.raises(MwisInputError, match="unknown option"):
+        parse_options("kamis", spec, {"nope": 1})
+
+
+def test_a_cached_number_does_not_let_true_through():
+    from uam_solvers.chszla import KamisBackend
+    from uam_solvers.errors import MwisInputError
+
+    spec = KamisBackend.options_spec
+    parse_options("kamis", spec, {"finish_fraction": 1})  # cached: 1 == True and hash(1) == hash(True)
+    with pytest.raises(MwisInputError, match="finish_fraction"):
+        parse_options("kamis", spec, {"finish_fraction": True})
