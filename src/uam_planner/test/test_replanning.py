@@ -126,15 +126,90 @@ def test_two_replanned_flights_that_would_conflict_get_compatible_alternatives(p
     #   Q -> C lands 152 (w = 1 + 300/392), Q -> Wp via C, mp lands 300 (w = 1 + 300/540)
     # P -> C conflicts with both of Q's (Q is 40 m from C when P lands there at 148).
     # MWIS: {P -> Wp, Q -> C} = 3.447 beats {P -> C} alone = 1.773 and {P -> Wp, Q -> Wp}.
-    # First-fit in approval order: P takes C, Q has nothing left: a contingency.
+    # First-fit in approval order: P takes C, Q has nothing left: a contingency, deconflicted as
+    # a fixed flight: holding 30 s at mq (100 -> 130) it reaches C at 130 + 52 = 182, when P
+    # has landed (148; at 148 Q is at (0, 820), 340 m from P), so P keeps C.
     if policy == "mwis":
         assert got == {"P": ("diverted", "Wp"), "Q": ("diverted", "C")}
     else:
         assert got == {"P": ("diverted", "C"), "Q": ("contingency", "C")}
         q = next(u for u in res.plan_updates if u.request_id == "Q")
-        assert q.flight.contingent and "not deconflicted" in q.reason
+        assert q.flight.contingent and "deconflicted as a fixed flight" in q.reason
+        assert "holding 30 s" in q.reason
+        np.testing.assert_allclose(q.flight.trajectory.times_s, [0.0, 100.0, 130.0, 182.0])
         assert flight_state(q.flight, 120.0) == "Contingent"
+        assert res.report.replan.contingencies_fixed == 1 and res.report.replan.unresolved == 0
     assert res.report.replan.affected == 2 and res.report.replan.policy == policy
+    assert min_flown_separation(res.plan_updates) >= 100.0
+
+
+def min_flown_separation(updates, others=()):
+    """The exact minimum distance between what flies (each update's chained versions and the
+    flights ``others``), over every pair."""
+    from uam_planner.separation import min_separation_m
+    trs = [flown_trajectory([u.previous, u.flight]) for u in updates if u.flight is not None]
+    trs += [f.trajectory for f in others]
+    return min((min_separation_m(a, b) for a, b in itertools.combinations(trs, 2)), default=math.inf)
+
+
+#: over lane q only, east of mq: x in [400, 600], y in [900, 1100], 0-500 m, from t = 60 s
+QEAST = Constraint("qeast", 1, "storm cell", 60.0, 1000.0, lower_m=-10.0, upper_m=500.0,
+                   rings_m=(np.array([(400.0, 900.0), (600.0, 900.0), (600.0, 1100.0), (400.0, 1100.0)]),))
+WQ_CLOSED = Constraint("Wq-closed", 1, "fire", 60.0, 1000.0, vertiport_id="Wq")
+
+
+def contingency_case(monkeypatch=None, holds=None):
+    """Q (Wq -> Eq, mq at 100) meets QEAST at x = 400 at t = 140; Wq is closed. From its branch
+    point mq (t = 100) every alternative passes C: C itself (lands 100 + 52 = 152) and Wp through C and mp
+    (lands 300; Wq, the other of the 3 nearest vertiports, is closed; Eq only through the cell). R (Wp -> mp -> C, unaffected) lands at C at 148, when Q is at
+    (0, 520) on any of them: 40 m, a loss. So Q has no vertex: a contingency."""
+    if holds is not None:
+        import uam_planner.replanning as rp
+        monkeypatch.setattr(rp, "HOLD_S", holds)
+    p = planner()
+    res = fly(p, req("Q", "Wq", "Eq"), req("R", "Wp", "C"))
+    r = next(f for f in res.approved if f.request_id == "R")
+    np.testing.assert_allclose(r.trajectory.times_s, [0.0, 100.0, 148.0])
+    assert p.update_constraint("add", QEAST, 60.0) is None
+    assert p.update_constraint("add", WQ_CLOSED, 60.0) is None
+    return p, r, p.plan(60.0, 2)
+
+
+def test_a_contingency_that_would_meet_a_neighbour_holds_and_keeps_separation():
+    # Before: Q's contingency flew its least-conflicting alternative (C, landing at 152) NOT
+    # deconflicted: 40 m from R at t = 148. Now it is a fixed flight: holding 30 s at mq (to 130)
+    # then C at 182 loses separation with nobody (at 148 Q is still at (0, 820), 340 m from R),
+    # so R is not touched.
+    p, r, res = contingency_case()
+    (u,) = res.plan_updates
+    assert (u.request_id, u.kind, u.flight.destination_id) == ("Q", "contingency", "C")
+    np.testing.assert_allclose(u.flight.trajectory.times_s, [0.0, 100.0, 130.0, 182.0])
+    np.testing.assert_allclose(u.flight.trajectory.points_m[1:3], [(0, 1000, 0), (0, 1000, 0)])
+    assert "holding 30 s at its branch point, deconflicted as a fixed flight" in u.reason
+    assert "constraint 'qeast' v1 (storm cell)" in u.reason
+    rep = res.report.replan
+    assert (rep.contingencies_fixed, rep.pulled_in, rep.unresolved, rep.cascade_rounds) == (1, 0, 0, 1)
+    assert [f.request_id for f in p.active] == ["R", "Q"]
+    assert min_flown_separation(res.plan_updates, [r]) >= 100.0
+
+
+def test_without_holds_the_neighbour_is_pulled_in_and_replanned_around_the_contingency(monkeypatch):
+    # No holds: every alternative of Q meets R (one airborne flight each); the soonest landing,
+    # C at 152, is fixed. R (unaffected) is pulled into the re-plan: its plan (C at 148) meets Q,
+    # from its branch point mp (t = 100) it diverts to the nearest free vertiport: Wp or Ep
+    # (1,000 m, both land at 200; Wp first, the lower index), never near Q (x = 0, y >= 480).
+    p, r, res = contingency_case(monkeypatch, holds=())
+    got = {u.request_id: u for u in res.plan_updates}
+    q, rr = got["Q"], got["R"]
+    assert (q.kind, q.flight.destination_id, q.flight.arrival_s) == ("contingency", "C", pytest.approx(152.0))
+    assert (rr.kind, rr.flight.destination_id, rr.version) == ("diverted", "Wp", 2)
+    np.testing.assert_allclose(rr.flight.trajectory.times_s, [0.0, 100.0, 200.0])
+    assert "contingency flight 'Q'" in rr.reason and "'qeast'" in rr.reason
+    assert rr.constraint_ids == ("qeast",)
+    rep = res.report.replan
+    assert (rep.affected, rep.pulled_in, rep.contingencies_fixed, rep.unresolved) == (1, 1, 1, 0)
+    assert sorted(f.request_id for f in p.active) == ["Q", "R"]
+    assert min_flown_separation(res.plan_updates) >= 100.0
 
 
 def test_a_flight_that_would_enter_only_after_the_window_closes_is_not_replanned():

@@ -59,6 +59,13 @@ DELAY_SCALE_S = 300.0
 DIVERT_VERTIPORTS = 3
 BRANCH_WAYPOINTS = 2
 STAGE2_BELOW = 4
+#: contingency rounds after the first graph: each unsaved airborne flight becomes a FIXED
+#: contingency and the graph is solved again around it (docs/replanning.md, "Contingencies")
+CASCADE_ROUNDS = 3
+#: unaffected flights pulled into one re-plan at most (those a contingency would meet)
+CASCADE_MAX_PULLED = 200
+#: holds [s] a contingency may take at its branch point before flying on or landing
+HOLD_S = (30.0, 60.0, 120.0)
 _EPS_T = 1e-9
 
 
@@ -130,6 +137,11 @@ class ReplanReport:
     backend_used: str = ""
     fallback: bool = False
     fallback_reason: str = ""
+    cascade_rounds: int = 0     # contingency rounds after the first graph
+    pulled_in: int = 0          # unaffected flights re-planned around a contingency
+    contingencies_fixed: int = 0  # contingencies deconflicted as fixed flights
+    unresolved: int = 0         # contingencies flown NOT deconflicted (bound, or unavoidable clash)
+    unavoidable: int = 0        # no constraint-free alternative at all (already inside): plan flown
 
 
 # ---- states and versions ----------------------------------------------------------------------
@@ -532,25 +544,69 @@ def _constraint_free(alts: list, cset: ConstraintSet, t_eff: float, network, ori
     return [a for a, w in zip(alts, which.tolist()) if w < 0]
 
 
-def _least_conflicting(alts: list, unaffected: list, chosen: dict, contingencies: list, config,
-                       t_eff: float):
-    """A contingency's plan: of its constraint-free alternatives, the one that loses separation
-    with the fewest flights (unaffected, chosen, and the contingencies decided before it), then
-    the one landing soonest."""
+def _keep_alt(f, network) -> _Alt:
+    return _Alt(f.trajectory, "kept", W_KEEP, network.node_index(f.destination_id),
+                tuple(f.route_node_ids), f.length_m, f.route_index, f.candidate_index)
+
+
+def _held(a: _Alt, t_eff: float, hold_s: float) -> _Alt | None:
+    """``a`` with a hover of ``hold_s`` at its first waypoint at or after ``t_eff`` (the branch
+    point: the prefix before it is the old plan's, so it still chains); None if that waypoint is
+    its landing."""
+    times, pts = a.trajectory.times_s, a.trajectory.points_m
+    k = int(np.searchsorted(times, t_eff - _EPS_T, side="left"))
+    if k >= times.shape[0] - 1:
+        return None
+    t = np.concatenate((times[:k + 1], [times[k] + hold_s], times[k + 1:] + hold_s))
+    p = np.concatenate((pts[:k + 1], pts[k:k + 1], pts[k + 1:]))
+    return replace(a, trajectory=Trajectory._trusted(t, p, None))  # a hover: times still increase
+
+
+def _contingency_choice(alts: list, active: Sequence, in_replan: set, fixed: dict, chosen: dict,
+                        config, t_eff: float, cset: ConstraintSet, network):
+    """A contingency's plan: of its constraint-free alternatives, each also held ``HOLD_S`` at
+    its branch point (kept only if it still stays out), the one that loses separation with the
+    fewest FIXED flights (other contingencies, flights with no way out: ideally none), then the
+    fewest airborne unaffected flights, then the fewest not departed (airborne flights outrank
+    them), then the fewest flights chosen by the graph (re-decided in the next round), then the
+    soonest landing. Returns (alternative, hold [s], indices in ``active`` of the unaffected
+    flights it loses separation with, airborne first, whether it meets a fixed flight)."""
     from .separation import SegmentSet, conflicting_pairs
-    others = [f.trajectory for f in unaffected] + [x.trajectory for x in chosen.values()] + \
-        [f.trajectory for f in contingencies if f.contingent]
-    n_conf = np.zeros(len(alts), dtype=np.int64)
+    cands, holds = list(alts), [0.0] * len(alts)
+    for h in HOLD_S:
+        more = [x for x in (_held(a, t_eff, h) for a in alts) if x is not None]
+        more = _constraint_free(more, cset, t_eff, network, None)
+        cands += more
+        holds += [h] * len(more)
+    fx = [a.trajectory for a in fixed.values()]
+    un = [j for j in range(len(active)) if j not in in_replan]
+    ch = [a.trajectory for a in chosen.values()]
+    others = fx + [active[j].trajectory for j in un] + ch
+    n = len(cands)
+    n_fx, n_air, n_gnd, n_ch = (np.zeros(n, dtype=np.int64) for _ in range(4))
+    hits: list = [set() for _ in range(n)]
     if others:
         oset = SegmentSet.from_trajectories(others)
         oset = oset.take(oset.t1_s >= t_eff) if len(oset) else oset
         if len(oset):
-            pairs = conflicting_pairs(SegmentSet.from_trajectories([x.trajectory for x in alts]), oset,
-                                      config.separation)
-            for i in np.unique(pairs[:, 0]).tolist():
-                n_conf[i] = np.unique(pairs[pairs[:, 0] == i, 1]).size
-    k = min(range(len(alts)), key=lambda i: (int(n_conf[i]), alts[i].trajectory.arrival_s, -alts[i].weight))
-    return alts[k]
+            pairs = np.unique(conflicting_pairs(SegmentSet.from_trajectories([x.trajectory for x in cands]),
+                                                oset, config.separation)[:, :2], axis=0)
+            for c_, o_ in pairs.tolist():
+                if o_ < len(fx):
+                    n_fx[c_] += 1
+                elif o_ < len(fx) + len(un):
+                    j = un[o_ - len(fx)]
+                    hits[c_].add(j)
+                    if active[j].departure_s < t_eff:
+                        n_air[c_] += 1
+                    else:
+                        n_gnd[c_] += 1
+                else:
+                    n_ch[c_] += 1
+    k = min(range(n), key=lambda i: (int(n_fx[i]), int(n_air[i]), int(n_gnd[i]), int(n_ch[i]),
+                                     cands[i].trajectory.arrival_s, -cands[i].weight))
+    got = sorted(hits[k], key=lambda j: (active[j].departure_s >= t_eff, j))
+    return cands[k], holds[k], got, bool(n_fx[k])
 
 
 def replan(t_eff: float, epoch_index: int, active: Sequence, requests: dict, network, config,
@@ -593,97 +649,166 @@ def replan(t_eff: float, epoch_index: int, active: Sequence, requests: dict, net
         return list(active), [], rep
     from .conflict_graph import discard_against_active
     router = _Router(network, cache, cset, t_eff)
-    unaffected = [f for j, f in enumerate(active) if j not in affected]
-    act = SegmentSet.from_trajectories([f.trajectory for f in unaffected])
-    act = act.take(act.t1_s >= t_eff) if len(act) else act
-    per_flight, clean = [], []
+    why = dict(affected)        # index in active -> (constraint index, entry time)
+    pulled_by: dict = {}        # index -> request_id of the contingency it was pulled in for
+    clean: dict = {}            # index -> its constraint-free alternatives, preference order
+    fixed: dict = {}            # index -> _Alt flown as a FIXED flight (contingency or no way out)
+    unavoidable: set = set()    # no constraint-free alternative at all: it flies its plan
+    unresolved: dict = {}       # contingencies flown not deconflicted -> why
+    hold_of: dict = {}          # index -> seconds held at the branch point by its contingency
+    work = list(idx)            # flights being decided by the graph
+    in_replan = set(idx)
     for i in idx:
-        f = active[i]
-        airborne = f.departure_s < t_eff
-        rep.affected_airborne += int(airborne)
-        rep.affected_not_departed += int(not airborne)
-        origin = None if airborne else network.node_index(f.origin_id)
-        alts = _airborne_alternatives(f, t_eff, network, config, router) if airborne else \
-            _ground_alternatives(f, requests.get(f.request_id), t_eff, network, cache, departures)
-        alts = _constraint_free(alts, cset, t_eff, network, origin)
-        keep = _constraint_free([_Alt(f.trajectory, "kept", W_KEEP, network.node_index(f.destination_id),
-                                      tuple(f.route_node_ids), f.length_m, f.route_index,
-                                      f.candidate_index)], cset, t_eff, network, origin)
-        per_flight.append(keep + alts)
-    # stage 2: a flight left with fewer than STAGE2_BELOW alternatives that keep separation
-    # with the unaffected flights gets the rest (other pads, the next branch point)
-    flat1 = [a.trajectory for alts in per_flight for a in alts]
-    gone = discard_against_active(flat1, act, config.separation) if flat1 and len(act) \
-        else np.zeros(len(flat1), dtype=bool)
-    pos = 0
-    for r, i in enumerate(idx):
-        n = len(per_flight[r])
-        mine = gone[pos:pos + n]
-        pos += n
-        clean.append(list(per_flight[r]))
-        per_flight[r] = [a for a, g in zip(per_flight[r], mine.tolist()) if not g]
-        f = active[i]
-        if len(per_flight[r]) < STAGE2_BELOW and f.departure_s < t_eff:
-            more = _constraint_free(_airborne_alternatives(f, t_eff, network, config, router, stage=2),
-                                    cset, t_eff, network, None)
-            per_flight[r] += more
-            clean[r] += more
-            rep.stage2 += 1
-    for alts in per_flight:
-        alts.sort(key=lambda a: -a.weight)  # stable: preference order within the flight
-    flat = [a for alts in per_flight for a in alts]
-    req_of = np.repeat(np.arange(len(idx)), [len(a) for a in per_flight]).astype(np.int64)
-    cand_idx = np.concatenate([np.arange(len(a)) for a in per_flight]).astype(np.int64) \
-        if flat else np.zeros(0, np.int64)
-    rep.alternatives = len(flat1) + sum(len(c) for c in clean) - len(flat1)
-    graph = build_conflict_graph([a.trajectory for a in flat], req_of, cand_idx,
-                                 np.array([a.weight for a in flat], dtype=np.float64), len(idx),
-                                 act, config.separation)
-    rep.vertices, rep.edges = graph.n_vertices, graph.n_edges
-    ts = time.perf_counter()
-    if graph.n_vertices == 0:
-        selected = np.zeros(0, dtype=np.int64)
-    else:
-        selected, er = select(graph, policy)
-        rep.backend_used, rep.fallback, rep.fallback_reason = er.backend_used, er.fallback, er.fallback_reason
-    rep.solve_time_s = time.perf_counter() - ts
-    chosen = {}
-    for v in selected.tolist():
-        src = int(graph.vertex_source[v])
-        chosen[int(req_of[src])] = flat[src]
+        rep.affected_airborne += int(active[i].departure_s < t_eff)
+        rep.affected_not_departed += int(active[i].departure_s >= t_eff)
+
+    def act_set(extra=()):
+        trs = [f.trajectory for j, f in enumerate(active) if j not in in_replan] + \
+            [a.trajectory for a in fixed.values()] + list(extra)
+        s_ = SegmentSet.from_trajectories(trs)
+        return s_.take(s_.t1_s >= t_eff) if len(s_) else s_
+
+    def generate(todo, act):
+        """Alternatives of the flights ``todo`` (stage 2 for those with too few survivors)."""
+        lists = []
+        for i in todo:
+            f = active[i]
+            airborne = f.departure_s < t_eff
+            origin = None if airborne else network.node_index(f.origin_id)
+            alts = _airborne_alternatives(f, t_eff, network, config, router) if airborne else \
+                _ground_alternatives(f, requests.get(f.request_id), t_eff, network, cache, departures)
+            alts = _constraint_free(alts, cset, t_eff, network, origin)
+            keep = _constraint_free([_keep_alt(f, network)], cset, t_eff, network, origin)
+            lists.append(keep + alts)
+        flat1 = [a.trajectory for alts in lists for a in alts]
+        gone = discard_against_active(flat1, act, config.separation) if flat1 and len(act) \
+            else np.zeros(len(flat1), dtype=bool)
+        pos = 0
+        for r, i in enumerate(todo):
+            n = len(lists[r])
+            left = n - int(gone[pos:pos + n].sum())
+            pos += n
+            f = active[i]
+            if left < STAGE2_BELOW and f.departure_s < t_eff:
+                lists[r] += _constraint_free(_airborne_alternatives(f, t_eff, network, config, router, stage=2),
+                                             cset, t_eff, network, None)
+                rep.stage2 += 1
+            lists[r].sort(key=lambda a: -a.weight)  # stable: preference order within the flight
+            clean[i] = lists[r]
+            rep.alternatives += len(lists[r])
+
+    chosen: dict = {}           # index -> _Alt chosen by the graph
+    rounds = 0
+    while True:
+        todo = [i for i in work if i not in clean]
+        if todo:
+            generate(todo, act_set())
+            # an airborne flight with no constraint-free alternative at all (already inside, or
+            # entering before its branch point) flies its plan: fixed before the graph
+            for i in todo:
+                if not clean[i] and active[i].departure_s < t_eff:
+                    fixed[i] = _keep_alt(active[i], network)
+                    unavoidable.add(i)
+            work = [i for i in work if i not in fixed]
+        act = act_set()
+        per_flight = [clean[i] for i in work]
+        flat = [a for alts in per_flight for a in alts]
+        req_of = np.repeat(np.arange(len(work)), [len(a) for a in per_flight]).astype(np.int64)
+        cand_idx = np.concatenate([np.arange(len(a)) for a in per_flight]).astype(np.int64) \
+            if flat else np.zeros(0, np.int64)
+        graph = build_conflict_graph([a.trajectory for a in flat], req_of, cand_idx,
+                                     np.array([a.weight for a in flat], dtype=np.float64), len(work),
+                                     act, config.separation)
+        if rounds == 0:
+            rep.vertices, rep.edges = graph.n_vertices, graph.n_edges
+        ts = time.perf_counter()
+        if graph.n_vertices == 0:
+            selected = np.zeros(0, dtype=np.int64)
+        else:
+            selected, er = select(graph, policy)
+            rep.backend_used = er.backend_used
+            if er.fallback:  # any round's fallback is reported
+                rep.fallback, rep.fallback_reason = True, er.fallback_reason
+        rep.solve_time_s += time.perf_counter() - ts
+        chosen = {}
+        for v in selected.tolist():
+            src = int(graph.vertex_source[v])
+            chosen[work[int(req_of[src])]] = flat[src]
+        unsaved = [i for i in work if i not in chosen and active[i].departure_s < t_eff]
+        if not unsaved or rounds >= CASCADE_ROUNDS:
+            break
+        rounds += 1
+        # each unsaved airborne flight becomes a contingency, deconflicted as a FIXED flight
+        # (airborne flights outrank flights not departed); the flights it would lose separation
+        # with are re-planned around it: chosen ones in the next graph, unaffected ones pulled in
+        for i in unsaved:
+            a, hold, hits, clash = _contingency_choice(clean[i], active, in_replan, fixed, chosen, config,
+                                                       t_eff, cset, network)
+            fixed[i], hold_of[i] = a, hold
+            if clash:  # it cannot avoid another fixed flight: flown, the loss reported
+                unresolved[i] = "it cannot avoid another contingency"
+
+            chosen.pop(i, None)
+            for j in hits:
+                if len(pulled_by) >= CASCADE_MAX_PULLED:
+                    unresolved.setdefault(i, f"the cascade's bound of {CASCADE_MAX_PULLED} flights pulled in")
+                    break
+                pulled_by[j] = active[i].request_id
+                why[j] = why[i]
+                in_replan.add(j)
+                work.append(j)
+        work = [i for i in work if i not in fixed]
+    rep.cascade_rounds, rep.pulled_in = rounds, len(pulled_by)
+    # past the bound: the last unsaved airborne flights fly their least-conflicting alternative,
+    # NOT deconflicted (reported: ReplanReport.unresolved, the reason, the audit of what flew)
+    for i in [i for i in work if i not in chosen and active[i].departure_s < t_eff]:
+        a, hold, _hits, _clash = _contingency_choice(clean[i], active, in_replan, fixed, chosen, config,
+                                                     t_eff, cset, network)
+        fixed[i], hold_of[i] = a, hold
+        unresolved[i] = f"the cascade's bound of {CASCADE_ROUNDS} rounds"
+
+    rep.unavoidable, rep.unresolved = len(unavoidable), len(unresolved)
+    rep.contingencies_fixed = len(fixed) - len(unavoidable) - len(unresolved)
+
     updates, new_versions = [], []
     method = f"replan-{policy}"
-    for r, i in enumerate(idx):
+    order = [i for i in range(len(active)) if i in in_replan]
+    for i in order:
         f = active[i]
-        k_c, when = affected[i]
+        k_c, when = why[i]
         c = cset.constraints[k_c]
         cids = (c.constraint_id,)
         airborne = f.departure_s < t_eff
-        a = chosen.get(r)
-        contingent = False
-        if a is None and not airborne:
-            reason = (f"cancelled: its plan enters constraint {c.label()} at t = {when:g} s and no "
-                      f"route, level or departure in its window avoids it and keeps separation")
+        a = fixed.get(i, chosen.get(i))
+        contingent = i in fixed
+        by = pulled_by.get(i)
+        cause = (f"its plan enters constraint {c.label()} at t = {when:g} s" if by is None else
+                 f"its plan loses separation with contingency flight {by!r} (constraint {c.label()})")
+        if a is None:
+            reason = (f"cancelled: {cause} and no route, level or departure in its window avoids it "
+                      f"and keeps separation")
             updates.append(PlanUpdate(f.request_id, f.operator_id, f.version + 1, "cancelled", cids,
                                       reason, float(t_eff), None, f))
             continue
-        if a is None:
-            if clean[r]:
-                a = _least_conflicting(clean[r], unaffected, chosen, new_versions, config, t_eff)
-                what = (f"each of its {len(clean[r])} alternatives that stay out loses separation with "
-                        f"another flight; contingency landing at {network.node_ids[a.destination]!r}, "
-                        f"flown but not deconflicted")
-            else:
-                a = _Alt(f.trajectory, "kept", W_KEEP, network.node_index(f.destination_id),
-                         tuple(f.route_node_ids), f.length_m, f.route_index, f.candidate_index)
-                what = "no route avoids it: it flies its current plan (an incursion that cannot be avoided)"
+        if contingent:
             kind = "contingency"
-            contingent = True
-            reason = f"contingency: its plan enters constraint {c.label()} at t = {when:g} s; {what}"
+            land = network.node_ids[a.destination]
+            held = f" after holding {hold_of[i]:g} s at its branch point" if hold_of.get(i) else ""
+            if i in unavoidable:
+                what = "no route avoids it: it flies its current plan (an incursion that cannot be avoided)"
+            elif i in unresolved:
+                what = (f"each of its {len(clean[i])} alternatives that stay out loses separation with "
+                        f"another flight; contingency landing at {land!r}{held}, flown but not "
+                        f"deconflicted ({unresolved[i]})")
+            else:
+                what = (f"no alternative that stays out keeps separation with the others; contingency "
+                        f"landing at {land!r}{held}, deconflicted as a fixed flight (flights it would "
+                        f"meet are re-planned around it)")
+            reason = f"contingency: {cause}; {what}"
         else:
             kind = a.kind
-            reason = (f"{kind}: its plan entered constraint {c.label()} at t = {when:g} s"
-                      if kind != "kept" else f"kept: its plan stays out of constraint {c.label()}")
+            reason = (f"{kind}: {cause}".replace("enters", "entered", 1) if kind != "kept"
+                      else f"kept: its plan stays out of constraint {c.label()}")
             if kind == "diverted":
                 reason += f"; diverted to {network.node_ids[a.destination]!r}"
         nf = replace(f, destination_id=network.node_ids[a.destination], route_node_ids=a.route_node_ids,
@@ -699,4 +824,5 @@ def replan(t_eff: float, epoch_index: int, active: Sequence, requests: dict, net
         rep.kinds[u.kind] = rep.kinds.get(u.kind, 0) + 1
     rep.decision_time_s = time.perf_counter() - t0
     rep.decision_cpu_s = time.process_time() - c0
-    return unaffected + new_versions, updates, rep
+    kept_order = [f for j, f in enumerate(active) if j not in in_replan]
+    return kept_order + new_versions, updates, rep
