@@ -127,8 +127,21 @@ def one_run(net, cfg, seed: int, policy: str, args) -> dict:
            "pairs": res.audit.get("pairs_checked"), "incursions": res.summary.get("incursions"),
            "loss_pairs": res.audit.get("loss_pairs", [])[:3], "approved": res.summary["approved"],
            "requests": res.summary["requests"], "wall_s": wall}
-    handled = out["affected"] == (rep.affected if rep else 0)
+    handled = out["affected"] == (rep.affected + rep.pulled_in if rep else 0)
     contingent = {r["request_id"] for r in rows if r["kind"] == "contingency"}
+    # issue 22: contingencies are deconflicted as fixed flights; what is left is counted apart:
+    # flown not deconflicted (the cascade's bound), and flights with no way out (already inside)
+    unresolved = {u.request_id for u in clock.updates if u.kind == "contingency" and "not deconflicted" in u.reason}
+    unavoidable = {u.request_id for u in clock.updates if u.kind == "contingency" and "cannot be avoided" in u.reason}
+    out.update({"cascade_rounds": rep.cascade_rounds if rep else 0, "pulled_in": rep.pulled_in if rep else 0,
+                "contingencies_fixed": rep.contingencies_fixed if rep else 0,
+                "unresolved": len(unresolved), "unavoidable": len(unavoidable)})
+    pairs = res.audit.get("loss_pairs", [])
+    out["losses_with_unresolved"] = sum(1 for a, b, *_ in pairs if a in unresolved or b in unresolved) \
+        if (res.audit.get("losses") or 0) <= 20 else None
+    incs = res.audit.get("incursions") or []
+    out["incursions_unavoidable"] = sum(1 for x in incs if x[0] in unavoidable)
+    out["incursions_list"] = incs[:5]
     out["losses_without_contingency"] = sum(1 for a, b, *_ in res.audit.get("loss_pairs", [])
                                             if a not in contingent and b not in contingent) \
         if (res.audit.get("losses") or 0) <= 20 else None
@@ -147,7 +160,10 @@ def one_run(net, cfg, seed: int, policy: str, args) -> dict:
           f"mean added delay {out['reach_delay_mean_s']:.1f} s; audit of what flew: {out['losses']} "
           f"losses in {out['pairs']} pairs (min {out['min_sep']}; without a contingency flight: "
           f"{out['losses_without_contingency']}), {out['incursions']} incursions "
-          f"{out['loss_pairs']}; {out['approved']}/{out['requests']} approved; wall {wall:.0f} s; "
+          f"{out['loss_pairs']}; contingencies: {out['contingencies_fixed']} fixed, {out['unresolved']} "
+          f"flown not deconflicted, {out['unavoidable']} with no way out; {out['pulled_in']} flights pulled in, "
+          f"{out['cascade_rounds']} rounds; losses with an unresolved contingency {out['losses_with_unresolved']}, "
+          f"incursions by flights with no way out {out['incursions_unavoidable']}; {out['approved']}/{out['requests']} approved; wall {wall:.0f} s; "
           f"uptime: {uptime()}", flush=True)
     return out
 
@@ -174,7 +190,12 @@ def summarize(runs: dict) -> None:
               f"affected mean {m:.1f} [{lo:.1f}, {hi:.1f}], in all {kinds}; intents "
               f"{[r['intents'] for r in runs[p].values()]}; losses {[r['losses'] for r in runs[p].values()]} "
               f"(without a contingency flight {[r['losses_without_contingency'] for r in runs[p].values()]}), "
-              f"incursions {[r['incursions'] for r in runs[p].values()]}")
+              f"incursions {[r['incursions'] for r in runs[p].values()]} (by flights with no way out "
+              f"{[r.get('incursions_unavoidable') for r in runs[p].values()]}); contingencies fixed "
+              f"{[r.get('contingencies_fixed') for r in runs[p].values()]}, unresolved "
+              f"{[r.get('unresolved') for r in runs[p].values()]}, no way out "
+              f"{[r.get('unavoidable') for r in runs[p].values()]}; pulled in "
+              f"{[r.get('pulled_in') for r in runs[p].values()]}")
     if runs.get("mwis") and runs.get("firstfit"):
         a, b = runs["mwis"], runs["firstfit"]
         for metric in ("reach", "saved", "reach_delay_mean_s"):
