@@ -145,6 +145,8 @@ def one_run(net, cfg, seed: int, policy: str, args) -> dict:
     out["losses_without_contingency"] = sum(1 for a, b, *_ in res.audit.get("loss_pairs", [])
                                             if a not in contingent and b not in contingent) \
         if (res.audit.get("losses") or 0) <= 20 else None
+    if args.graph_inputs and "centre" in ann.info:
+        write_graph_inputs(net, seed, ann.info, args)
     if args.out:
         import json
         with open(args.out, "a") as fh:
@@ -166,6 +168,28 @@ def one_run(net, cfg, seed: int, policy: str, args) -> dict:
           f"incursions by flights with no way out {out['incursions_unavoidable']}; {out['approved']}/{out['requests']} approved; wall {wall:.0f} s; "
           f"uptime: {uptime()}", flush=True)
     return out
+
+
+def write_graph_inputs(net, seed: int, info: dict, args) -> None:
+    """The same scenario for the node graph (issue 22, "the same scenario through the node
+    graph"): the city as a network file and this seed's restriction as an announced GeoJSON
+    circle (ENU frame), for ``scripts/run_fleet.sh --network DIR/city.yaml --constraints
+    DIR/tfr-seed<N>.geojson --seed N --rate <per-hour / 120> --backend <method> --slot-s ...``."""
+    import json
+    from pathlib import Path
+    from uam_planner.network import save_network_yaml
+    d = Path(args.graph_inputs)
+    d.mkdir(parents=True, exist_ok=True)
+    if not (d / "city.yaml").exists():
+        save_network_yaml(net, d / "city.yaml", header=f"scripts/measure_replanning.py: generate_network("
+                          f"{args.nodes}, {args.vertiports}, seed 0, levels 60/90/120/150 m, 4 pads)")
+    start = info["t_s"] + args.lead
+    doc = {"type": "FeatureCollection", "frame": "enu", "features": [{
+        "type": "Feature", "geometry": {"type": "Point", "coordinates": list(info["centre"])},
+        "properties": {"id": "tfr-busiest", "version": 1, "reason": "restriction over the busiest area",
+                       "radius_m": args.radius, "lower_m": -1000.0, "upper_m": 100000.0,
+                       "start_s": start, "end_s": start + args.window, "announce_s": info["t_s"]}}]}
+    (d / f"tfr-seed{seed}.geojson").write_text(json.dumps(doc, indent=1) + "\n")
 
 
 def uptime() -> str:
@@ -222,6 +246,8 @@ def main(argv=None) -> int:
     ap.add_argument("--slot-s", type=float, default=5.0)
     ap.add_argument("--policies", nargs="+", default=["mwis", "firstfit"])
     ap.add_argument("--out", default=None, help="append one JSON line per run to this file")
+    ap.add_argument("--graph-inputs", default=None,
+                    help="write the city network and each seed's restriction (GeoJSON) here, for run_fleet.sh")
     ap.add_argument("--summarize", default=None, help="only summarise the JSON lines of this file")
     args = ap.parse_args(argv)
     if args.summarize:
