@@ -13,7 +13,8 @@ plan, from ``t_eff`` on, enters a constraint of the updated set during its windo
 - **airborne** (departure < t_eff): it flies on to its *branch point*, the first waypoint at or
   after t_eff (a corridor node, or its origin pad at the top of the climb), and from there gets,
   at its level, up to ``k`` routes to its destination's pad (**rerouted**) and the shortest
-  route to each of the ``DIVERT_VERTIPORTS`` nearest other vertiports, every pad (**diverted**);
+  route to each of the ``DIVERT_VERTIPORTS`` nearest other vertiports, every pad (**diverted**),
+  and turning back at once from where it is at t_eff to the pad it left (``_turn_back``);
   a flight left with fewer than ``STAGE2_BELOW`` of them that keep separation with the
   unaffected flights also gets the re-routes to its destination's other pads and all of these
   from its next waypoint (``BRANCH_WAYPOINTS``). Routes: penalised Dijkstra with the corridors
@@ -61,7 +62,7 @@ BRANCH_WAYPOINTS = 2
 STAGE2_BELOW = 4
 #: contingency rounds after the first graph: each unsaved airborne flight becomes a FIXED
 #: contingency and the graph is solved again around it (docs/replanning.md, "Contingencies")
-CASCADE_ROUNDS = 3
+CASCADE_ROUNDS = 8
 #: unaffected flights pulled into one re-plan at most (those a contingency would meet)
 CASCADE_MAX_PULLED = 200
 #: holds [s] a contingency may take at its branch point before flying on or landing
@@ -139,7 +140,7 @@ class ReplanReport:
     fallback_reason: str = ""
     cascade_rounds: int = 0     # contingency rounds after the first graph
     pulled_in: int = 0          # unaffected flights re-planned around a contingency
-    contingencies_fixed: int = 0  # contingencies deconflicted as fixed flights
+    contingencies_fixed: int = 0  # contingencies deconflicted (chosen in the graph, or fixed)
     unresolved: int = 0         # contingencies flown NOT deconflicted (bound, or unavoidable clash)
     unavoidable: int = 0        # no constraint-free alternative at all (already inside): plan flown
 
@@ -354,6 +355,7 @@ class _Alt:
     length_m: float
     route_index: int = 0
     candidate_index: int = 0
+    hold_s: float = 0.0         # hover at the branch point before flying on (a contingency's)
 
 
 def _tier(kind: str, delay_s: float) -> float:
@@ -422,6 +424,37 @@ class _Router:
                 got = []
             self._memo[key] = got
         return got
+
+
+def _turn_back(f, t_eff: float, network, config) -> _Alt | None:
+    """Airborne flight ``f`` turning back at once, from where it is at ``t_eff``, along the
+    waypoints it has flown to the pad it left (a diversion to its origin): the one option that
+    keeps the spacing of a stream of flights on one corridor that must all turn back (each
+    turning at its own next waypoint would meet its followers head-on). None if it has not
+    left the ground's vertical leg or has landed."""
+    tr = f.trajectory
+    times, pts = tr.times_s, tr.points_m
+    if not times[0] < t_eff < times[-1]:
+        return None
+    j = int(np.searchsorted(times, t_eff, side="right"))        # waypoints before t_eff: [0, j)
+    here = tr.position_at(t_eff)
+    back = pts[:j][::-1]
+    layered = network.layered
+    if layered and j <= 1:
+        return None  # still climbing from its pad
+    new = _extend(np.concatenate((times[:j], [t_eff])) if times[j - 1] < t_eff else times[:j],
+                  np.concatenate((pts[:j], [here])) if times[j - 1] < t_eff else pts[:j],
+                  back[1:] if times[j - 1] >= t_eff else back, float(config.speed_mps),
+                  float(config.airspace.descent_rate_mps), vertical_last=layered)
+    if new is None:
+        return None
+    o = network.node_index(f.origin_id)
+    route = list(f.route_node_ids)
+    k = max(0, min(len(route), j - (1 if layered else 0)))
+    node_ids = tuple(route[:k]) + tuple(reversed(route[:k]))[1:] if k > 1 else (f.origin_id,)
+    length = float(np.sqrt(np.square(np.diff(new.points_m, axis=0)).sum(axis=1)).sum())
+    return _Alt(new, "diverted", _tier("diverted", new.arrival_s - t_eff), o, node_ids, length,
+                f.route_index, f.candidate_index)
 
 
 def _airborne_alternatives(f, t_eff: float, network, config, router: _Router, stage: int = 1) -> list:
@@ -559,38 +592,54 @@ def _held(a: _Alt, t_eff: float, hold_s: float) -> _Alt | None:
         return None
     t = np.concatenate((times[:k + 1], [times[k] + hold_s], times[k + 1:] + hold_s))
     p = np.concatenate((pts[:k + 1], pts[k:k + 1], pts[k + 1:]))
-    return replace(a, trajectory=Trajectory._trusted(t, p, None))  # a hover: times still increase
+    return replace(a, trajectory=Trajectory._trusted(t, p, None), hold_s=float(hold_s))  # a hover
 
 
-def _contingency_choice(alts: list, active: Sequence, in_replan: set, fixed: dict, chosen: dict,
-                        config, t_eff: float, cset: ConstraintSet, network):
-    """A contingency's plan: of its constraint-free alternatives, each also held ``HOLD_S`` at
-    its branch point (kept only if it still stays out), the one that loses separation with the
-    fewest FIXED flights (other contingencies, flights with no way out: ideally none), then the
-    fewest airborne unaffected flights, then the fewest not departed (airborne flights outrank
-    them), then the fewest flights chosen by the graph (re-decided in the next round), then the
-    soonest landing. Returns (alternative, hold [s], indices in ``active`` of the unaffected
-    flights it loses separation with, airborne first, whether it meets a fixed flight)."""
-    from .separation import SegmentSet, conflicting_pairs
+def _contingency_weight(a: _Alt, t_eff: float) -> float:
+    """A contingency option's weight in the graph: in (0, 1), below every diversion's, the
+    soonest landing heaviest."""
+    return 0.999 / (1.0 + max(0.0, a.trajectory.arrival_s - t_eff) / DELAY_SCALE_S)
+
+
+def _contingency_candidates(alts: list, f, t_eff: float, cset: ConstraintSet, network,
+                            config) -> tuple[list, list]:
+    """A contingency's options: its constraint-free alternatives (turning back at once among
+    them), and each held ``HOLD_S`` at its branch point (for the turn-back: where it is at
+    t_eff), kept only if it still stays out. Returns (options, hold of each [s])."""
     cands, holds = list(alts), [0.0] * len(alts)
     for h in HOLD_S:
         more = [x for x in (_held(a, t_eff, h) for a in alts) if x is not None]
         more = _constraint_free(more, cset, t_eff, network, None)
         cands += more
         holds += [h] * len(more)
+    return cands, holds
+
+
+def _contingency_choice(options: tuple, active: Sequence, in_replan: set, fixed: dict, chosen: dict,
+                        config, t_eff: float, pending: Sequence = ()):
+    """A contingency's plan: of its ``options`` (from :func:`_contingency_candidates`), the one
+    that loses separation with the fewest FIXED flights (other contingencies, flights with no
+    way out: ideally none), then leaves the fewest of the flights still to be decided
+    (``pending``: each one's options) with no option that avoids it, then meets
+    the fewest airborne unaffected flights, then the fewest not departed (airborne flights
+    outrank them), then the fewest flights the graph chose (re-decided in the next round), then
+    lands soonest. Returns (option, hold [s], indices in ``active`` of the unaffected flights it
+    loses separation with, airborne first, whether it meets a fixed flight)."""
+    from .separation import SegmentSet, conflicting_pairs
+    cands, holds = options
     fx = [a.trajectory for a in fixed.values()]
     un = [j for j in range(len(active)) if j not in in_replan]
     ch = [a.trajectory for a in chosen.values()]
     others = fx + [active[j].trajectory for j in un] + ch
     n = len(cands)
-    n_fx, n_air, n_gnd, n_ch = (np.zeros(n, dtype=np.int64) for _ in range(4))
+    n_fx, n_air, n_gnd, n_ch, n_block = (np.zeros(n, dtype=np.int64) for _ in range(5))
     hits: list = [set() for _ in range(n)]
+    cset_ = SegmentSet.from_trajectories([x.trajectory for x in cands])
     if others:
         oset = SegmentSet.from_trajectories(others)
         oset = oset.take(oset.t1_s >= t_eff) if len(oset) else oset
         if len(oset):
-            pairs = np.unique(conflicting_pairs(SegmentSet.from_trajectories([x.trajectory for x in cands]),
-                                                oset, config.separation)[:, :2], axis=0)
+            pairs = np.unique(conflicting_pairs(cset_, oset, config.separation)[:, :2], axis=0)
             for c_, o_ in pairs.tolist():
                 if o_ < len(fx):
                     n_fx[c_] += 1
@@ -603,8 +652,32 @@ def _contingency_choice(alts: list, active: Sequence, in_replan: set, fixed: dic
                         n_gnd[c_] += 1
                 else:
                     n_ch[c_] += 1
-    k = min(range(n), key=lambda i: (int(n_fx[i]), int(n_air[i]), int(n_gnd[i]), int(n_ch[i]),
-                                     cands[i].trajectory.arrival_s, -cands[i].weight))
+    pend = [list(p_cands) for p_cands, _h in pending if p_cands]
+    if pend and fx:  # their options left: those that keep separation with the fixed flights
+        from .conflict_graph import discard_against_active
+        flat = [x for xs in pend for x in xs]
+        fset = SegmentSet.from_trajectories(fx)
+        gone = discard_against_active([x.trajectory for x in flat], fset.take(fset.t1_s >= t_eff),
+                                      config.separation)
+        live, pos = [], 0
+        for xs in pend:
+            live.append([x for x, g in zip(xs, gone[pos:pos + len(xs)].tolist()) if not g])
+            pos += len(xs)
+        pend = [xs for xs in live if xs]  # one with none left cannot be helped here
+    if pend:  # an option that would leave another flight no option that avoids it
+        owner = np.repeat(np.arange(len(pend)), [len(x) for x in pend])
+        size = np.array([len(x) for x in pend], dtype=np.int64)
+        pset = SegmentSet.from_trajectories([x.trajectory for xs in pend for x in xs])
+        pset = pset.take(pset.t1_s >= t_eff) if len(pset) else pset
+        if len(pset):
+            pairs = np.unique(conflicting_pairs(cset_, pset, config.separation)[:, :2], axis=0)
+            if len(pairs):
+                co = np.unique(np.stack((pairs[:, 0], owner[pairs[:, 1]]), axis=1), axis=0, return_counts=True)
+                (cc, oo), cnt = co[0].T, co[1]
+                full = cnt >= size[oo]
+                np.add.at(n_block, cc[full], 1)
+    k = min(range(n), key=lambda i: (int(n_fx[i]), int(n_block[i]), int(n_air[i]), int(n_gnd[i]),
+                                     int(n_ch[i]), cands[i].trajectory.arrival_s, -cands[i].weight))
     got = sorted(hits[k], key=lambda j: (active[j].departure_s >= t_eff, j))
     return cands[k], holds[k], got, bool(n_fx[k])
 
@@ -675,7 +748,8 @@ def replan(t_eff: float, epoch_index: int, active: Sequence, requests: dict, net
             f = active[i]
             airborne = f.departure_s < t_eff
             origin = None if airborne else network.node_index(f.origin_id)
-            alts = _airborne_alternatives(f, t_eff, network, config, router) if airborne else \
+            alts = _airborne_alternatives(f, t_eff, network, config, router) + \
+                [x for x in (_turn_back(f, t_eff, network, config),) if x is not None] if airborne else \
                 _ground_alternatives(f, requests.get(f.request_id), t_eff, network, cache, departures)
             alts = _constraint_free(alts, cset, t_eff, network, origin)
             keep = _constraint_free([_keep_alt(f, network)], cset, t_eff, network, origin)
@@ -698,6 +772,7 @@ def replan(t_eff: float, epoch_index: int, active: Sequence, requests: dict, net
             rep.alternatives += len(lists[r])
 
     chosen: dict = {}           # index -> _Alt chosen by the graph
+    held_opts: dict = {}        # index -> its contingency options in the graph (unsaved before)
     rounds = 0
     while True:
         todo = [i for i in work if i not in clean]
@@ -711,7 +786,7 @@ def replan(t_eff: float, epoch_index: int, active: Sequence, requests: dict, net
                     unavoidable.add(i)
             work = [i for i in work if i not in fixed]
         act = act_set()
-        per_flight = [clean[i] for i in work]
+        per_flight = [clean[i] + held_opts.get(i, []) for i in work]
         flat = [a for alts in per_flight for a in alts]
         req_of = np.repeat(np.arange(len(work)), [len(a) for a in per_flight]).astype(np.int64)
         cand_idx = np.concatenate([np.arange(len(a)) for a in per_flight]).astype(np.int64) \
@@ -738,12 +813,27 @@ def replan(t_eff: float, epoch_index: int, active: Sequence, requests: dict, net
         if not unsaved or rounds >= CASCADE_ROUNDS:
             break
         rounds += 1
+        fresh = [i for i in unsaved if i not in held_opts]
+        if fresh:
+            # first, the unsaved flights' contingency options join the graph (holds at the branch
+            # point, then each alternative; weights below every diversion): decided jointly
+            for i in fresh:
+                cands, _holds = _contingency_candidates(clean[i], active[i], t_eff, cset, network, config)
+                mine = {id(a) for a in clean[i]}
+                held_opts[i] = [replace(c, kind="contingency", weight=_contingency_weight(c, t_eff))
+                                for c in cands if id(c) not in mine]
+            continue
         # each unsaved airborne flight becomes a contingency, deconflicted as a FIXED flight
         # (airborne flights outrank flights not departed); the flights it would lose separation
         # with are re-planned around it: chosen ones in the next graph, unaffected ones pulled in
-        for i in unsaved:
-            a, hold, hits, clash = _contingency_choice(clean[i], active, in_replan, fixed, chosen, config,
-                                                       t_eff, cset, network)
+        options = {i: _contingency_candidates(clean[i], active[i], t_eff, cset, network, config) for i in unsaved}
+        for n_i, i in enumerate(unsaved):
+            # the others still to be decided: the round's later contingencies (every option, holds
+            # too) and the flights the graph saved (their alternatives: the next graph's choice)
+            pending = [options[u] for u in unsaved[n_i + 1:]] + \
+                [(clean[u], None) for u in work if u in chosen and u not in fixed]
+            a, hold, hits, clash = _contingency_choice(options[i], active, in_replan, fixed, chosen, config,
+                                                       t_eff, pending)
             fixed[i], hold_of[i] = a, hold
             if clash:  # it cannot avoid another fixed flight: flown, the loss reported
                 unresolved[i] = "it cannot avoid another contingency"
@@ -762,13 +852,14 @@ def replan(t_eff: float, epoch_index: int, active: Sequence, requests: dict, net
     # past the bound: the last unsaved airborne flights fly their least-conflicting alternative,
     # NOT deconflicted (reported: ReplanReport.unresolved, the reason, the audit of what flew)
     for i in [i for i in work if i not in chosen and active[i].departure_s < t_eff]:
-        a, hold, _hits, _clash = _contingency_choice(clean[i], active, in_replan, fixed, chosen, config,
-                                                     t_eff, cset, network)
+        a, hold, _hits, _clash = _contingency_choice(_contingency_candidates(clean[i], active[i], t_eff, cset, network, config),
+                                                     active, in_replan, fixed, chosen, config, t_eff)
         fixed[i], hold_of[i] = a, hold
         unresolved[i] = f"the cascade's bound of {CASCADE_ROUNDS} rounds"
 
     rep.unavoidable, rep.unresolved = len(unavoidable), len(unresolved)
-    rep.contingencies_fixed = len(fixed) - len(unavoidable) - len(unresolved)
+    rep.contingencies_fixed = len(fixed) - len(unavoidable) - len(unresolved) + \
+        sum(1 for a in chosen.values() if a.kind == "contingency")
 
     updates, new_versions = [], []
     method = f"replan-{policy}"
@@ -780,7 +871,9 @@ def replan(t_eff: float, epoch_index: int, active: Sequence, requests: dict, net
         cids = (c.constraint_id,)
         airborne = f.departure_s < t_eff
         a = fixed.get(i, chosen.get(i))
-        contingent = i in fixed
+        contingent = i in fixed or (a is not None and a.kind == "contingency")
+        if a is not None and a.kind == "contingency":
+            hold_of[i] = a.hold_s
         by = pulled_by.get(i)
         cause = (f"its plan enters constraint {c.label()} at t = {when:g} s" if by is None else
                  f"its plan loses separation with contingency flight {by!r} (constraint {c.label()})")
@@ -796,14 +889,18 @@ def replan(t_eff: float, epoch_index: int, active: Sequence, requests: dict, net
             held = f" after holding {hold_of[i]:g} s at its branch point" if hold_of.get(i) else ""
             if i in unavoidable:
                 what = "no route avoids it: it flies its current plan (an incursion that cannot be avoided)"
+            elif i not in fixed:
+                what = (f"no alternative that stays out keeps separation with the others; contingency "
+                        f"landing at {land!r}{held}, deconflicted with every other flight (chosen in "
+                        f"the graph)")
             elif i in unresolved:
                 what = (f"each of its {len(clean[i])} alternatives that stay out loses separation with "
                         f"another flight; contingency landing at {land!r}{held}, flown but not "
                         f"deconflicted ({unresolved[i]})")
             else:
                 what = (f"no alternative that stays out keeps separation with the others; contingency "
-                        f"landing at {land!r}{held}, deconflicted as a fixed flight (flights it would "
-                        f"meet are re-planned around it)")
+                        f"landing at {land!r}{held}, deconflicted with every other flight (fixed: the "
+                        f"flights it would meet are re-planned around it)")
             reason = f"contingency: {cause}; {what}"
         else:
             kind = a.kind
