@@ -826,7 +826,8 @@ def replan(t_eff: float, epoch_index: int, active: Sequence, requests: dict, net
         # each unsaved airborne flight becomes a contingency, deconflicted as a FIXED flight
         # (airborne flights outrank flights not departed); the flights it would lose separation
         # with are re-planned around it: chosen ones in the next graph, unaffected ones pulled in
-        options = {i: _contingency_candidates(clean[i], active[i], t_eff, cset, network, config) for i in unsaved}
+        options = {i: _contingency_candidates(clean[i], active[i], t_eff, cset, network, config)
+                   for i in unsaved}
         for n_i, i in enumerate(unsaved):
             # the others still to be decided: the round's later contingencies (every option, holds
             # too) and the flights the graph saved (their alternatives: the next graph's choice)
@@ -837,7 +838,6 @@ def replan(t_eff: float, epoch_index: int, active: Sequence, requests: dict, net
             fixed[i], hold_of[i] = a, hold
             if clash:  # it cannot avoid another fixed flight: flown, the loss reported
                 unresolved[i] = "it cannot avoid another contingency"
-
             chosen.pop(i, None)
             for j in hits:
                 if len(pulled_by) >= CASCADE_MAX_PULLED:
@@ -852,8 +852,8 @@ def replan(t_eff: float, epoch_index: int, active: Sequence, requests: dict, net
     # past the bound: the last unsaved airborne flights fly their least-conflicting alternative,
     # NOT deconflicted (reported: ReplanReport.unresolved, the reason, the audit of what flew)
     for i in [i for i in work if i not in chosen and active[i].departure_s < t_eff]:
-        a, hold, _hits, _clash = _contingency_choice(_contingency_candidates(clean[i], active[i], t_eff, cset, network, config),
-                                                     active, in_replan, fixed, chosen, config, t_eff)
+        options_i = _contingency_candidates(clean[i], active[i], t_eff, cset, network, config)
+        a, hold, _hits, _clash = _contingency_choice(options_i, active, in_replan, fixed, chosen, config, t_eff)
         fixed[i], hold_of[i] = a, hold
         unresolved[i] = f"the cascade's bound of {CASCADE_ROUNDS} rounds"
 
