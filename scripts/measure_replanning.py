@@ -127,11 +127,26 @@ def one_run(net, cfg, seed: int, policy: str, args) -> dict:
            "pairs": res.audit.get("pairs_checked"), "incursions": res.summary.get("incursions"),
            "loss_pairs": res.audit.get("loss_pairs", [])[:3], "approved": res.summary["approved"],
            "requests": res.summary["requests"], "wall_s": wall}
-    handled = out["affected"] == (rep.affected if rep else 0)
+    handled = out["affected"] == (rep.affected + rep.pulled_in if rep else 0)
     contingent = {r["request_id"] for r in rows if r["kind"] == "contingency"}
+    # issue 22: contingencies are deconflicted as fixed flights; what is left is counted apart:
+    # flown not deconflicted (the cascade's bound), and flights with no way out (already inside)
+    unresolved = {u.request_id for u in clock.updates if u.kind == "contingency" and "not deconflicted" in u.reason}
+    unavoidable = {u.request_id for u in clock.updates if u.kind == "contingency" and "cannot be avoided" in u.reason}
+    out.update({"cascade_rounds": rep.cascade_rounds if rep else 0, "pulled_in": rep.pulled_in if rep else 0,
+                "contingencies_fixed": rep.contingencies_fixed if rep else 0,
+                "unresolved": len(unresolved), "unavoidable": len(unavoidable)})
+    pairs = res.audit.get("loss_pairs", [])
+    out["losses_with_unresolved"] = sum(1 for a, b, *_ in pairs if a in unresolved or b in unresolved) \
+        if (res.audit.get("losses") or 0) <= 20 else None
+    incs = res.audit.get("incursions") or []
+    out["incursions_unavoidable"] = sum(1 for x in incs if x[0] in unavoidable)
+    out["incursions_list"] = incs[:5]
     out["losses_without_contingency"] = sum(1 for a, b, *_ in res.audit.get("loss_pairs", [])
                                             if a not in contingent and b not in contingent) \
         if (res.audit.get("losses") or 0) <= 20 else None
+    if args.graph_inputs and "centre" in ann.info:
+        write_graph_inputs(net, seed, ann.info, args)
     if args.out:
         import json
         with open(args.out, "a") as fh:
@@ -147,9 +162,34 @@ def one_run(net, cfg, seed: int, policy: str, args) -> dict:
           f"mean added delay {out['reach_delay_mean_s']:.1f} s; audit of what flew: {out['losses']} "
           f"losses in {out['pairs']} pairs (min {out['min_sep']}; without a contingency flight: "
           f"{out['losses_without_contingency']}), {out['incursions']} incursions "
-          f"{out['loss_pairs']}; {out['approved']}/{out['requests']} approved; wall {wall:.0f} s; "
+          f"{out['loss_pairs']}; contingencies: {out['contingencies_fixed']} fixed, {out['unresolved']} "
+          f"flown not deconflicted, {out['unavoidable']} with no way out; {out['pulled_in']} flights pulled in, "
+          f"{out['cascade_rounds']} rounds; losses with an unresolved contingency {out['losses_with_unresolved']}, "
+          f"incursions by flights with no way out {out['incursions_unavoidable']}; {out['approved']}/{out['requests']} approved; wall {wall:.0f} s; "
           f"uptime: {uptime()}", flush=True)
     return out
+
+
+def write_graph_inputs(net, seed: int, info: dict, args) -> None:
+    """The same scenario for the node graph (issue 22, "the same scenario through the node
+    graph"): the city as a network file and this seed's restriction as an announced GeoJSON
+    circle (ENU frame), for ``scripts/run_fleet.sh --network DIR/city.yaml --constraints
+    DIR/tfr-seed<N>.geojson --seed N --rate <per-hour / 120> --backend <method> --slot-s ...``."""
+    import json
+    from pathlib import Path
+    from uam_planner.network import save_network_yaml
+    d = Path(args.graph_inputs)
+    d.mkdir(parents=True, exist_ok=True)
+    if not (d / "city.yaml").exists():
+        save_network_yaml(net, d / "city.yaml", header=f"scripts/measure_replanning.py: generate_network("
+                          f"{args.nodes}, {args.vertiports}, seed 0, levels 60/90/120/150 m, 4 pads)")
+    start = info["t_s"] + args.lead
+    doc = {"type": "FeatureCollection", "frame": "enu", "features": [{
+        "type": "Feature", "geometry": {"type": "Point", "coordinates": list(info["centre"])},
+        "properties": {"id": "tfr-busiest", "version": 1, "reason": "restriction over the busiest area",
+                       "radius_m": args.radius, "lower_m": -1000.0, "upper_m": 100000.0,
+                       "start_s": start, "end_s": start + args.window, "announce_s": info["t_s"]}}]}
+    (d / f"tfr-seed{seed}.geojson").write_text(json.dumps(doc, indent=1) + "\n")
 
 
 def uptime() -> str:
@@ -174,7 +214,12 @@ def summarize(runs: dict) -> None:
               f"affected mean {m:.1f} [{lo:.1f}, {hi:.1f}], in all {kinds}; intents "
               f"{[r['intents'] for r in runs[p].values()]}; losses {[r['losses'] for r in runs[p].values()]} "
               f"(without a contingency flight {[r['losses_without_contingency'] for r in runs[p].values()]}), "
-              f"incursions {[r['incursions'] for r in runs[p].values()]}")
+              f"incursions {[r['incursions'] for r in runs[p].values()]} (by flights with no way out "
+              f"{[r.get('incursions_unavoidable') for r in runs[p].values()]}); contingencies fixed "
+              f"{[r.get('contingencies_fixed') for r in runs[p].values()]}, unresolved "
+              f"{[r.get('unresolved') for r in runs[p].values()]}, no way out "
+              f"{[r.get('unavoidable') for r in runs[p].values()]}; pulled in "
+              f"{[r.get('pulled_in') for r in runs[p].values()]}")
     if runs.get("mwis") and runs.get("firstfit"):
         a, b = runs["mwis"], runs["firstfit"]
         for metric in ("reach", "saved", "reach_delay_mean_s"):
@@ -201,6 +246,8 @@ def main(argv=None) -> int:
     ap.add_argument("--slot-s", type=float, default=5.0)
     ap.add_argument("--policies", nargs="+", default=["mwis", "firstfit"])
     ap.add_argument("--out", default=None, help="append one JSON line per run to this file")
+    ap.add_argument("--graph-inputs", default=None,
+                    help="write the city network and each seed's restriction (GeoJSON) here, for run_fleet.sh")
     ap.add_argument("--summarize", default=None, help="only summarise the JSON lines of this file")
     args = ap.parse_args(argv)
     if args.summarize:

@@ -14,6 +14,8 @@
 #   --horizon H        epochs the MWIS plans jointly (rolling horizon, default 1: the paper's)
 #   --commit-ahead B   true | false: with --horizon > 1, commit the horizon's later departures now
 #                      as reservations, never re-optimised (default false)
+#   --replan-policy R  mwis | firstfit: how the flights a constraint update affects are re-planned
+#                      (default: the policy's own; docs/replanning.md)
 #   --lead-time S      requests are filed S seconds before their earliest departure (default 0)
 #   --reaction B       true | false: the planner updates a nonconforming flight's intent (issue 23;
 #                      reports from the conformance monitor, checked by the planner; default false)
@@ -66,7 +68,7 @@ SPATIAL_BUFFER=0 TEMPORAL_BUFFER=0 WIND=0 WIND_FROM=270 GUST=0 SPEED_ERROR=0 DEL
 DEMAND="" CONSTRAINTS="" MODE=lockstep RTF=1 RERUN=save OUT="" FOXGLOVE_PORT=0 USS_PORT=0 RECORDER_NICE=19
 CONFORMANCE=auto
 SEPARATION="" SEPARATION_M=100 VERTICAL_M=30 SLOT_S=0 CLIMB=5 DESCENT=3
-OBJECTIVE=paper BASELINE_ORDER=arrival PRIORITY_SHARE=0 HORIZON=1 LEAD_TIME=0 COMMIT_AHEAD=false REACTION=false
+OBJECTIVE=paper BASELINE_ORDER=arrival PRIORITY_SHARE=0 HORIZON=1 LEAD_TIME=0 COMMIT_AHEAD=false REACTION=false REPLAN_POLICY=""
 die() { echo "run_fleet: $*" >&2; exit 2; }
 while [[ $# -gt 0 ]]; do
   case "$1" in
@@ -78,6 +80,7 @@ while [[ $# -gt 0 ]]; do
     --horizon) HORIZON="${2:?--horizon needs a value}"; shift 2;;
     --commit-ahead) COMMIT_AHEAD="${2:?--commit-ahead needs a value}"; shift 2;;
     --reaction) REACTION="${2:?--reaction needs a value}"; shift 2;;
+    --replan-policy) REPLAN_POLICY="${2?--replan-policy needs a value}"; shift 2;;
     --lead-time) LEAD_TIME="${2:?--lead-time needs a value}"; shift 2;;
     --rate) RATE="${2:?--rate needs a value}"; shift 2;;
     --duration) DURATION="${2:?--duration needs a value}"; shift 2;;
@@ -117,6 +120,7 @@ done
 [[ "$HORIZON" =~ ^[0-9]+$ ]] && (( HORIZON >= 1 && HORIZON <= 100 )) || die "--horizon: '$HORIZON' is not an integer in [1, 100]"
 [[ "$COMMIT_AHEAD" == true || "$COMMIT_AHEAD" == false ]] || die "--commit-ahead: '$COMMIT_AHEAD' is not true or false"
 [[ "$REACTION" == true || "$REACTION" == false ]] || die "--reaction: '$REACTION' is not true or false"
+[[ -z "$REPLAN_POLICY" || "$REPLAN_POLICY" == mwis || "$REPLAN_POLICY" == firstfit ]] || die "--replan-policy: '$REPLAN_POLICY' is not mwis or firstfit"
 [[ "$LEAD_TIME" =~ ^[0-9]+(\.[0-9]+)?$ ]] || die "--lead-time: '$LEAD_TIME' is not a number of seconds >= 0"
 [[ "$MODE" == lockstep || "$MODE" == realtime ]] || die "--mode: '$MODE' is not lockstep or realtime"
 [[ "$RERUN" =~ ^(off|save|spawn|connect)$ ]] || die "--rerun: '$RERUN' is not off, save, spawn or connect"
@@ -250,7 +254,7 @@ AIRSPACE=(-p "separation_model:=$SEPARATION" -p "separation_m:=$(f "$SEPARATION_
 start uam_planner planner planner --params-file config/planner.yaml -p "network:=$NETWORK" \
   -p "policy:=$POLICY" -p "backend:=$BACKEND" -p "seed:=$SEED" "${AIRSPACE[@]}" \
   -p "objective:=$OBJECTIVE" -p "baseline_order:=$BASELINE_ORDER" -p "horizon_epochs:=$HORIZON" \
-  -p "commit_ahead:=$COMMIT_AHEAD" -p "reaction:=$REACTION" \
+  -p "commit_ahead:=$COMMIT_AHEAD" -p "reaction:=$REACTION" ${REPLAN_POLICY:+-p "replan_policy:=$REPLAN_POLICY"} \
   -p "climb_rate_mps:=$(f "$CLIMB")" -p "descent_rate_mps:=$(f "$DESCENT")" -p "journal:=$OUT/planner-journal.jsonl" \
   -p "spatial_buffer_m:=$(f "$SPATIAL_BUFFER")" -p "temporal_buffer_s:=$(f "$TEMPORAL_BUFFER")" \
   ${CONSTRAINTS:+-p "constraints_file:=$CONSTRAINTS"}

@@ -78,6 +78,7 @@ def generate_launch_description() -> LaunchDescription:
                                                    "horizon_epochs": a["horizon_epochs"],
                                                    "commit_ahead": a["commit_ahead"],
                                                    "reaction": a["reaction"],
+                                                   "replan_policy": a["replan_policy"],
                                                    "journal": PathJoinSubstitution([out, "planner-journal.jsonl"]),
                                                    "climb_rate_mps": a["climb_rate"],
                                                    "descent_rate_mps": a["descent_rate"],

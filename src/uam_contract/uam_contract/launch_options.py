@@ -40,6 +40,8 @@ LAUNCH_OPTIONS: tuple[LaunchOption, ...] = (
                  "with --horizon > 1, commit the horizon's later departures now as reservations"),
     LaunchOption("--reaction", "REACTION", "reaction", "false",
                  "the planner updates a nonconforming flight's intent (reports checked against its own view)"),
+    LaunchOption("--replan-policy", "REPLAN_POLICY", "replan_policy", "",
+                 "re-plan of the flights a constraint update affects: mwis or firstfit; default: the policy's"),
     LaunchOption("--priority-share", "PRIORITY_SHARE", "priority_share", "0",
                  "share of random requests of priority class 1 (e.g. 0.05)"),
     LaunchOption("--lead-time", "LEAD_TIME", "lead_time_s", "0",

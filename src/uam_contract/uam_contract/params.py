@@ -100,6 +100,11 @@ PLANNER = (
     Param("commit_ahead", False, "with horizon_epochs > 1, commit every selected departure of the horizon at "
           "once as a reservation (an approved flight never re-optimised; only a constraint's re-planning may "
           "revoke it) instead of planning the later epochs again"),
+    Param("replan_policy", "", "how the flights a constraint update affects are re-planned "
+          "(docs/replanning.md): 'mwis' (one MWIS over every affected flight's alternatives, solved like "
+          "the epoch's), 'firstfit' (approval order, each one's first alternative that keeps separation); "
+          "'' = the planning policy's own (mwis for mwis, firstfit for fifo and firstfit)",
+          choices=("", "mwis", "firstfit")),
     Param("k", D.K, "candidate routes per request", 1, 100),
     Param("penalty_factor", D.PENALTY_FACTOR, "penalised Dijkstra factor for diverse candidates", 0.0, 1000.0),
     Param("speed_mps", D.SPEED_MPS, "cruise speed [m/s]", 0.001, 1000.0),

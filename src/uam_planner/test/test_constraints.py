@@ -397,11 +397,41 @@ def test_ed269_zones_through_uas_standards(tmp_path):
     assert (poly.lower_m, poly.upper_m) == (0.0, pytest.approx(121.92))   # 400 ft
     assert (circ.kind, circ.radius_m, circ.start_s, circ.end_s) == ("circle", 300.0, -math.inf, math.inf)
     assert circ.lower_m == 50.0 and circ.upper_m == math.inf  # origin at 0 m: AMSL = up
-    sched = ed269_zone(applicability=[{"permanent": "NO", "schedule": [
-        {"day": ["MON"], "startTime": "08:00Z", "endTime": "09:00Z"}]}])
-    with pytest.raises(ConstraintError, match=r"features\[0\] \(identifier 'TFR01'\).applicability\[0\]"
-                                              r".schedule: daily schedules are not supported"):
-        load_constraints_doc(tmp_path, {"features": [sched]}, net)
+    with pytest.raises(ConstraintError, match="ED-269"):
+        load_constraints_doc(tmp_path, {"features": [{"identifier": "X"}]}, net)
+
+
+def test_ed269_daily_schedules_become_time_windows(tmp_path):
+    # The scenario starts Monday 2025-01-06 00:00Z; the period runs to Tuesday 14th 08:30Z.
+    # MON, SAT 08:00Z-09:00Z: Monday 6th [28,800, 32,400) s, Saturday 11th from 5 x 86,400 +
+    # 28,800 = 460,800 s, Monday 13th from 7 x 86,400 + 28,800 = 633,600 s (each 3,600 s).
+    # TUE 22:00+0800-02:00+0800 (crosses midnight, Singapore time): Tuesday 7th 22:00 SGT = 7th
+    # 14:00Z = 86,400 + 50,400 = 136,800 s, to 151,200 s; Tuesday 14th 22:00 SGT = 14:00Z is
+    # after the period's end (08:30Z): left out.
+    sched = ed269_zone(applicability=[{"permanent": "NO", "startDateTime": "2025-01-06T00:00:00Z",
+                                       "endDateTime": "2025-01-14T08:30:00Z", "schedule": [
+        {"day": ["MON", "SAT"], "startTime": "08:00Z", "endTime": "09:00Z"},
+        {"day": ["TUE"], "startTime": "22:00+0800", "endTime": "02:00+0800"}]}])
+    s = load_constraints_doc(tmp_path, {"features": [sched]}, net := tiny())
+    got = [(c.constraint_id, c.start_s, c.end_s) for c in s.constraints]
+    assert got == [("TFR01.0.0", 28800.0, 32400.0), ("TFR01.0.1", 136800.0, 151200.0),
+                   ("TFR01.0.2", 460800.0, 464400.0), ("TFR01.0.3", 633600.0, 637200.0)], got
+    # every day (ANY) 23:30Z-00:30Z, cut to the period [00:10Z on the 6th, 01:00Z on the 8th)
+    # = [600, 176,400) s: the 5th's window (to 00:30Z on the 6th = 1,800 s) cut to [600, 1,800);
+    # the 6th's [84,600, 88,200); the 7th's [171,000, 174,600) whole.
+    every = ed269_zone(applicability=[{"permanent": "NO", "startDateTime": "2025-01-06T00:10:00Z",
+                                       "endDateTime": "2025-01-08T01:00:00Z", "schedule": [
+        {"day": ["ANY"], "startTime": "23:30Z", "endTime": "00:30Z"}]}])
+    s = load_constraints_doc(tmp_path, {"features": [every]}, net)
+    assert [(c.start_s, c.end_s) for c in s.constraints] == [(600.0, 1800.0), (84600.0, 88200.0),
+                                                             (171000.0, 174600.0)]
+    # a schedule with no period end runs SCHEDULE_HORIZON_DAYS from the scenario's start
+    from uam_planner.constraints import SCHEDULE_HORIZON_DAYS
+    open_ended = ed269_zone(applicability=[{"permanent": "NO", "schedule": [
+        {"day": ["ANY"], "startTime": "08:00Z", "endTime": "09:00Z"}]}])
+    s = load_constraints_doc(tmp_path, {"features": [open_ended]}, net)
+    assert len(s.constraints) == SCHEDULE_HORIZON_DAYS
+    assert s.constraints[-1].start_s == (SCHEDULE_HORIZON_DAYS - 1) * 86400.0 + 28800.0
     with pytest.raises(ConstraintError, match="ED-269"):
         load_constraints_doc(tmp_path, {"features": [{"identifier": "X"}]}, net)
 

@@ -76,20 +76,21 @@ def test_airborne_flight_is_diverted_to_the_nearest_free_vertiport():
     p = planner()
     fly(p, req("P", "Wp", "Ep"))
     # P: Wp at 0, mp at 100, Ep at 200; it would enter x = 400 at t = 140
-    assert p.update_constraint("add", EAST, 50.0) is None
-    assert p.plan(30.0, 1).plan_updates == []            # announced at 50: not yet
-    res = p.plan(60.0, 2)
+    assert p.update_constraint("add", EAST, 80.0) is None
+    assert p.plan(60.0, 2).plan_updates == []            # announced at 80: not yet
+    res = p.plan(90.0, 3)
     (u,) = res.plan_updates
-    # branch point mp (the first waypoint at or after t = 60); no route east avoids the cell;
-    # the nearest vertiports from mp: C (480 m, lands at 148: 88 s after t_eff), Wp (1000 m, 140 s
-    # after), Wq (1414 m; its route through C and mq lands at 300)
-    assert (u.kind, u.version, u.effective_s, u.constraint_ids) == ("diverted", 2, 60.0, ("east",))
+    # branch point mp (the first waypoint at or after t = 90); no route east avoids the cell;
+    # the nearest vertiports from mp: C (480 m, lands at 148: 58 s after t_eff), Wp (1000 m, 110 s
+    # after), Wq (1414 m; its route through C and mq lands at 300); turning back now from
+    # (-100, 0) lands at Wp at 90 + 90 = 180 (90 s after)
+    assert (u.kind, u.version, u.effective_s, u.constraint_ids) == ("diverted", 2, 90.0, ("east",))
     assert "constraint 'east' v1 (storm cell)" in u.reason and "'C'" in u.reason
     f = u.flight
-    assert (f.destination_id, f.route_node_ids, f.version, f.effective_s) == ("C", ("Wp", "mp", "C"), 2, 60.0)
+    assert (f.destination_id, f.route_node_ids, f.version, f.effective_s) == ("C", ("Wp", "mp", "C"), 2, 90.0)
     np.testing.assert_allclose(f.trajectory.times_s, [0.0, 100.0, 148.0])
     np.testing.assert_allclose(f.trajectory.points_m, [(-1000, 0, 0), (0, 0, 0), (0, 480, 0)])
-    assert f.weight == pytest.approx(divert_weight(88.0))   # lands 148 - 60 = 88 s after t_eff
+    assert f.weight == pytest.approx(divert_weight(58.0))   # lands 148 - 90 = 58 s after t_eff
     assert u.added_delay_s == pytest.approx(148.0 - 200.0)
     assert [g.request_id for g in p.active] == ["P"] and p.active[0] is f
     assert res.report.replan.kinds == {"diverted": 1} and res.report.replan.affected_airborne == 1
@@ -97,6 +98,40 @@ def test_airborne_flight_is_diverted_to_the_nearest_free_vertiport():
     flown = flown_trajectory([u.previous, f])
     np.testing.assert_allclose(flown.points_m[-1], (0, 480, 0))
     assert flight_state(f, 120.0) == "Activated" and flight_state(f, 149.0) == "Ended"
+
+
+def test_an_airborne_flight_turns_back_at_once_when_that_lands_soonest():
+    # at t_eff = 60 P is at (-400, 0): turning back now lands at Wp at 60 + 600 / 10 = 120 (60 s
+    # after t_eff, w = 1 + 300/360) beats C from mp (148: 88 s after) and Wp from mp (200)
+    p = planner()
+    fly(p, req("P", "Wp", "Ep"))
+    p.update_constraint("add", EAST, 60.0)
+    (u,) = p.plan(60.0, 2).plan_updates
+    f = u.flight
+    assert (u.kind, f.destination_id, f.route_node_ids) == ("diverted", "Wp", ("Wp",))
+    np.testing.assert_allclose(f.trajectory.times_s, [0.0, 60.0, 120.0])
+    np.testing.assert_allclose(f.trajectory.points_m, [(-1000, 0, 0), (-400, 0, 0), (-1000, 0, 0)])
+    assert f.weight == pytest.approx(divert_weight(60.0))
+    np.testing.assert_allclose(flown_trajectory([u.previous, f]).points_m[-1], (-1000, 0, 0))
+
+
+def test_a_stream_that_must_turn_back_keeps_its_spacing():
+    # P1 and P2 leave Wp 20 s apart (200 m) towards Ep; at t_eff = 60 the cell closes the way
+    # east and every other vertiport is behind them. Turning back at once (P1 from (-400, 0)
+    # lands at 120, P2 from (-600, 0) at 100) keeps their 200 m; P1 turning at mp (100) instead
+    # would meet P2 (then at (-200, 0), heading east) head-on.
+    p = planner()
+    fly(p, req("P1", "Wp", "Ep"))
+    assert p.submit(FlightRequest("P2", "Wp", "Ep", 0.0, 20.0, 40.0)) is None
+    (p2,) = p.plan(30.0, 1).approved
+    assert p2.departure_s == 30.0
+    for c in (EAST, Constraint("C-closed", 1, "", 60.0, 1000.0, vertiport_id="C")):
+        p.update_constraint("add", c, 60.0)
+    res = p.plan(60.0, 2)
+    got = {u.request_id: (u.kind, u.flight.destination_id, u.flight.arrival_s) for u in res.plan_updates}
+    # P2 departed at 30: at 60 it is at (-700, 0), back at Wp at 90
+    assert got == {"P1": ("diverted", "Wp", pytest.approx(120.0)), "P2": ("diverted", "Wp", pytest.approx(90.0))}
+    assert min_flown_separation(res.plan_updates) >= 100.0
 
 
 def test_an_occupied_alternate_sends_the_diversion_to_the_next_vertiport():
@@ -107,8 +142,9 @@ def test_an_occupied_alternate_sends_the_diversion_to_the_next_vertiport():
     res = p.plan(60.0, 2)
     (u,) = res.plan_updates
     # P -> C would land at 148 while R is 40 m away (at (0, 520)): a loss, so P turns back to Wp
+    # (at once, from (-400, 0) at t_eff = 60: lands at 120)
     assert (u.request_id, u.kind, u.flight.destination_id) == ("P", "diverted", "Wp")
-    np.testing.assert_allclose(u.flight.trajectory.times_s, [0.0, 100.0, 200.0])
+    np.testing.assert_allclose(u.flight.trajectory.times_s, [0.0, 60.0, 120.0])
     assert [f.request_id for f in p.active] == ["R", "P"]
 
 
@@ -117,24 +153,101 @@ def test_two_replanned_flights_that_would_conflict_get_compatible_alternatives(p
     p = planner(replan_policy=policy)
     fly(p, req("P", "Wp", "Ep"), req("Q", "Wq", "Eq"))
     wq_closed = Constraint("Wq-closed", 1, "fire", 60.0, 1000.0, vertiport_id="Wq")
-    assert p.update_constraint("add", EAST, 60.0) is None
-    assert p.update_constraint("add", wq_closed, 60.0) is None
-    res = p.plan(60.0, 2)
+    assert p.update_constraint("add", EAST, 90.0) is None
+    assert p.update_constraint("add", wq_closed, 90.0) is None
+    res = p.plan(90.0, 3)
     got = {u.request_id: (u.kind, u.flight.destination_id if u.flight else None) for u in res.plan_updates}
-    # Alternatives (branch at mp / mq at t = 100; Wq closed; the east lanes blocked):
-    #   P -> C lands 148 (w = 1 + 300/388), P -> Wp lands 200 (w = 1 + 300/440)
-    #   Q -> C lands 152 (w = 1 + 300/392), Q -> Wp via C, mp lands 300 (w = 1 + 300/540)
+    # Alternatives at t_eff = 90 (branch at mp / mq at t = 100; Wq closed; the east lanes blocked):
+    #   P -> C lands 148 (w = 1 + 300/358), P turning back now from (-100, 0) lands at Wp at 180
+    #   (w = 1 + 300/390), P -> Wp from mp lands 200 (w = 1 + 300/410)
+    #   Q -> C lands 152 (w = 1 + 300/362), Q -> Wp via C, mp lands 300 (w = 1 + 300/510)
     # P -> C conflicts with both of Q's (Q is 40 m from C when P lands there at 148).
-    # MWIS: {P -> Wp, Q -> C} = 3.447 beats {P -> C} alone = 1.773 and {P -> Wp, Q -> Wp}.
-    # First-fit in approval order: P takes C, Q has nothing left: a contingency.
+    # MWIS: {P -> Wp now, Q -> C} = 3.598 beats {P -> C} alone = 1.838.
+    # First-fit in approval order: P takes C, Q has nothing left: a contingency, deconflicted
+    # with every other flight: holding 30 s at mq (100 -> 130) it reaches C at 130 + 52 = 182,
+    # when P has landed (148; at 148 Q is at (0, 820), 340 m from P), so P keeps C.
     if policy == "mwis":
         assert got == {"P": ("diverted", "Wp"), "Q": ("diverted", "C")}
     else:
         assert got == {"P": ("diverted", "C"), "Q": ("contingency", "C")}
         q = next(u for u in res.plan_updates if u.request_id == "Q")
-        assert q.flight.contingent and "not deconflicted" in q.reason
+        assert q.flight.contingent and "deconflicted with every other flight" in q.reason
+        assert "holding 30 s" in q.reason
+        np.testing.assert_allclose(q.flight.trajectory.times_s, [0.0, 100.0, 130.0, 182.0])
         assert flight_state(q.flight, 120.0) == "Contingent"
+        assert res.report.replan.contingencies_fixed == 1 and res.report.replan.unresolved == 0
     assert res.report.replan.affected == 2 and res.report.replan.policy == policy
+    assert min_flown_separation(res.plan_updates) >= 100.0
+
+
+def min_flown_separation(updates, others=()):
+    """The exact minimum distance between what flies (each update's chained versions and the
+    flights ``others``), over every pair."""
+    from uam_planner.separation import min_separation_m
+    trs = [flown_trajectory([u.previous, u.flight]) for u in updates if u.flight is not None]
+    trs += [f.trajectory for f in others]
+    return min((min_separation_m(a, b) for a, b in itertools.combinations(trs, 2)), default=math.inf)
+
+
+#: over lane q only, east of mq: x in [400, 600], y in [900, 1100], 0-500 m, from t = 60 s
+QEAST = Constraint("qeast", 1, "storm cell", 60.0, 1000.0, lower_m=-10.0, upper_m=500.0,
+                   rings_m=(np.array([(400.0, 900.0), (600.0, 900.0), (600.0, 1100.0), (400.0, 1100.0)]),))
+WQ_CLOSED = Constraint("Wq-closed", 1, "fire", 60.0, 1000.0, vertiport_id="Wq")
+
+
+def contingency_case(monkeypatch=None, holds=None):
+    """Q (Wq -> Eq, mq at 100) meets QEAST at x = 400 at t = 140; Wq is closed. From its branch
+    point mq (t = 100) every alternative passes C: C itself (lands 100 + 52 = 152) and Wp through
+    C and mp (lands 300); Wq, the other of the 3 nearest vertiports, is closed, so is turning
+    back; Eq only through the cell. R (Wp -> mp -> C, unaffected) lands at C at 148, when Q is
+    at (0, 520) on any of them: 40 m, a loss. So Q has no vertex: a contingency."""
+    if holds is not None:
+        import uam_planner.replanning as rp
+        monkeypatch.setattr(rp, "HOLD_S", holds)
+    p = planner()
+    res = fly(p, req("Q", "Wq", "Eq"), req("R", "Wp", "C"))
+    r = next(f for f in res.approved if f.request_id == "R")
+    np.testing.assert_allclose(r.trajectory.times_s, [0.0, 100.0, 148.0])
+    assert p.update_constraint("add", QEAST, 60.0) is None
+    assert p.update_constraint("add", WQ_CLOSED, 60.0) is None
+    return p, r, p.plan(60.0, 2)
+
+
+def test_a_contingency_that_would_meet_a_neighbour_holds_and_keeps_separation():
+    # Before: Q's contingency flew its least-conflicting alternative (C, landing at 152) NOT
+    # deconflicted: 40 m from R at t = 148. Now it is a fixed flight: holding 30 s at mq (to 130)
+    # then C at 182 loses separation with nobody (at 148 Q is still at (0, 820), 340 m from R),
+    # so R is not touched.
+    p, r, res = contingency_case()
+    (u,) = res.plan_updates
+    assert (u.request_id, u.kind, u.flight.destination_id) == ("Q", "contingency", "C")
+    np.testing.assert_allclose(u.flight.trajectory.times_s, [0.0, 100.0, 130.0, 182.0])
+    np.testing.assert_allclose(u.flight.trajectory.points_m[1:3], [(0, 1000, 0), (0, 1000, 0)])
+    assert "holding 30 s at its branch point, deconflicted with every other flight" in u.reason
+    assert "constraint 'qeast' v1 (storm cell)" in u.reason
+    rep = res.report.replan
+    assert (rep.contingencies_fixed, rep.pulled_in, rep.unresolved, rep.cascade_rounds) == (1, 0, 0, 1)
+    assert [f.request_id for f in p.active] == ["R", "Q"]
+    assert min_flown_separation(res.plan_updates, [r]) >= 100.0
+
+
+def test_without_holds_the_neighbour_is_pulled_in_and_replanned_around_the_contingency(monkeypatch):
+    # No holds: every alternative of Q meets R (one airborne flight each); the soonest landing,
+    # C at 152, is fixed. R (unaffected) is pulled into the re-plan: its plan (C at 148) meets Q;
+    # turning back at once from (-400, 0) it lands at Wp at 120 (before Wp or Ep from mp, both
+    # at 200), never near Q (x = 0, y >= 480).
+    p, r, res = contingency_case(monkeypatch, holds=())
+    got = {u.request_id: u for u in res.plan_updates}
+    q, rr = got["Q"], got["R"]
+    assert (q.kind, q.flight.destination_id, q.flight.arrival_s) == ("contingency", "C", pytest.approx(152.0))
+    assert (rr.kind, rr.flight.destination_id, rr.version) == ("diverted", "Wp", 2)
+    np.testing.assert_allclose(rr.flight.trajectory.times_s, [0.0, 60.0, 120.0])
+    assert "contingency flight 'Q'" in rr.reason and "'qeast'" in rr.reason
+    assert rr.constraint_ids == ("qeast",)
+    rep = res.report.replan
+    assert (rep.affected, rep.pulled_in, rep.contingencies_fixed, rep.unresolved) == (1, 1, 1, 0)
+    assert sorted(f.request_id for f in p.active) == ["Q", "R"]
+    assert min_flown_separation(res.plan_updates) >= 100.0
 
 
 def test_a_flight_that_would_enter_only_after_the_window_closes_is_not_replanned():
@@ -322,12 +435,13 @@ def test_airborne_flight_diverted_to_the_free_pad_of_the_alternate():
     p = Planner(net, PlanningConfig(k=2), "mwis", solve_mwis=exact_mwis)
     fly(p, req("P", "Wp", "Ep"), req("R", "Wq", "C"))
     np.testing.assert_allclose(p.active[1].trajectory.times_s, [0.0, 12.0, 112.0, 164.0, 184.0], atol=0.05)
-    p.update_constraint("add", EAST, 60.0)
-    (u,) = p.plan(60.0, 2).plan_updates
+    p.update_constraint("add", EAST, 90.0)
+    (u,) = p.plan(90.0, 3).plan_updates
+    # At t_eff = 90 P is at (-220, 0, 60); turning back lands at 90 + 78 + 20 = 188 (98 s after).
     # Branch at mp (112 s). C pad 0: over it at 160, descending until 180 while R descends there
     # from 164: 12 m apart at 164, a loss. C pad 1 (150, 480): 502.9 m -> over it at 162.3, down at
-    # 182.3, never within 100 m of R: chosen (lands 122.3 s after t_eff: w = 1 + 300/422.3, above
-    # Wp's 1 + 300/472).
+    # 182.3, never within 100 m of R: chosen (lands 92.3 s after t_eff: w = 1 + 300/392.3, above
+    # turning back's 1 + 300/398 and Wp's from mp 1 + 300/442).
     assert (u.kind, u.flight.destination_id) == ("diverted", "C")
     tr = u.flight.trajectory
     np.testing.assert_allclose(tr.points_m[-2:], [(150, 480, 60), (150, 480, tr.points_m[-1, 2])])
@@ -335,7 +449,7 @@ def test_airborne_flight_diverted_to_the_free_pad_of_the_alternate():
     np.testing.assert_allclose(tr.times_s[-2:], [112.0 + math.hypot(150, 480) / 10.0,
                                                  112.0 + math.hypot(150, 480) / 10.0 + 20.0], atol=0.05)
     np.testing.assert_allclose(tr.times_s[:3], [0.0, 12.0, 112.0], atol=0.05)   # the old plan up to mp
-    assert u.flight.weight == pytest.approx(divert_weight(tr.arrival_s - 60.0))
+    assert u.flight.weight == pytest.approx(divert_weight(tr.arrival_s - 90.0))
 
 
 def test_clipped_from_cuts_at_any_instant():

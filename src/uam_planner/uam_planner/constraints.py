@@ -636,6 +636,54 @@ def _utc_s(text, start_ns: int, where: str) -> float:
     return (when.astimezone(timezone.utc) - epoch).total_seconds() - start_ns * 1e-9
 
 
+#: how far ahead an ED-269 daily schedule is expanded into windows when its period has no end
+#: [days]: ASTM F3548-21's planning horizon (constraints are planned up to 56 days ahead)
+SCHEDULE_HORIZON_DAYS = 56
+
+
+def _schedule_windows(schedule, lo_s: float, hi_s: float, start_ns: int, where: str) -> list:
+    """The (start_s, end_s) windows of ED-269 daily periods (``DailyPeriod``: ``day`` a list of
+    MON..SUN or ANY, ``startTime`` / ``endTime`` times of day with their time zone, through
+    ``uas_standards``' ``ED269TimeType``) inside the applicability period [lo_s, hi_s) in
+    simulation seconds. The weekday is that of the date in the times' own zone; an end at or
+    before the start crosses midnight (ends the next day). Days from the period's start, or the
+    scenario's start when it has none, to its end, or ``SCHEDULE_HORIZON_DAYS`` after the
+    scenario's start when it has none. Windows over before the scenario starts (t <= 0) are left
+    out (past occurrences of a recurring schedule, not a window in the past); each is cut to
+    the period. Raises ConstraintError naming the field."""
+    from datetime import datetime, timedelta, timezone
+    epoch = datetime(1970, 1, 1, tzinfo=timezone.utc)
+    t_start = epoch + timedelta(microseconds=start_ns // 1000)
+    first = t_start + timedelta(seconds=lo_s) if math.isfinite(lo_s) else t_start
+    last = t_start + timedelta(seconds=hi_s) if math.isfinite(hi_s) else \
+        t_start + timedelta(days=SCHEDULE_HORIZON_DAYS)
+    out = []
+    for j, dp in enumerate(schedule):
+        w = f"{where}[{j}]"
+        days = {str(getattr(d, "value", d)) for d in dp.day}
+        if not days:
+            raise ConstraintError(f"{w}.day: empty; give MON..SUN or ANY")
+        t_a, t_b = dp.startTime.time, dp.endTime.time
+        if t_a.tzinfo is None or t_b.tzinfo is None:
+            raise ConstraintError(f"{w}: startTime {str(dp.startTime)!r} / endTime {str(dp.endTime)!r} "
+                                  f"need a time zone")
+        d = (first.astimezone(t_a.tzinfo) - timedelta(days=1)).date()
+        while True:
+            a = datetime.combine(d, t_a.replace(tzinfo=None), tzinfo=t_a.tzinfo)
+            b = datetime.combine(d, t_b.replace(tzinfo=None), tzinfo=t_b.tzinfo)
+            if a > last:
+                break
+            if b <= a:
+                b += timedelta(days=1)
+            if "ANY" in days or a.strftime("%a").upper() in days:
+                s0 = max((a - t_start).total_seconds(), lo_s)
+                s1 = min((b - t_start).total_seconds(), hi_s)
+                if s1 > s0 and s1 > 0.0:
+                    out.append((s0, s1))
+            d += timedelta(days=1)
+    return sorted(out)
+
+
 def constraints_from_ed269(doc: Mapping, network, scenario_start_utc: str | None = None) -> list[Constraint]:
     """Constraints from an EUROCAE ED-269 UAS zone file, parsed with ``uas_standards``' types
     (``uas_standards.eurocae_ed269.ED269Schema``), where it fits this planner:
@@ -653,8 +701,8 @@ def constraints_from_ed269(doc: Mapping, network, scenario_start_utc: str | None
       unbounded;
     - ``permanent: YES`` is always active; otherwise ``startDateTime`` / ``endDateTime`` become
       simulation seconds after ``scenario_start_utc`` (default
-      ``uam_contract.stamps.DEFAULT_SCENARIO_START_UTC``); daily ``schedule`` periods are refused
-      (not supported).
+      ``uam_contract.stamps.DEFAULT_SCENARIO_START_UTC``); a daily ``schedule`` becomes one
+      window per day it applies (:func:`_schedule_windows`), each a constraint.
     Raises ConstraintError naming ``features[i]`` and the field.
     """
     from uam_contract.stamps import DEFAULT_SCENARIO_START_UTC, scenario_start_ns
@@ -678,15 +726,14 @@ def constraints_from_ed269(doc: Mapping, network, scenario_start_utc: str | None
         periods = []
         for k, a in enumerate(z.applicability):
             w = f"{where}.applicability[{k}]"
-            if a.get("schedule"):
-                raise ConstraintError(f"{w}.schedule: daily schedules are not supported")
-            if str(getattr(a.permanent, "value", a.permanent)) == "YES":
-                periods.append((-math.inf, math.inf))
-                continue
+            permanent = str(getattr(a.permanent, "value", a.permanent)) == "YES"
             t0 = _utc_s(a.startDateTime, start_ns, f"{w}.startDateTime") \
-                if a.get("startDateTime") else -math.inf
+                if a.get("startDateTime") and not permanent else -math.inf
             t1 = _utc_s(a.endDateTime, start_ns, f"{w}.endDateTime") \
-                if a.get("endDateTime") else math.inf
+                if a.get("endDateTime") and not permanent else math.inf
+            if a.get("schedule"):
+                periods.extend(_schedule_windows(a.schedule, t0, t1, start_ns, f"{w}.schedule"))
+                continue
             periods.append((t0, t1))
         n = len(z.geometry) * len(periods)
         for g, vol in enumerate(z.geometry):

@@ -13,7 +13,8 @@ plan, from ``t_eff`` on, enters a constraint of the updated set during its windo
 - **airborne** (departure < t_eff): it flies on to its *branch point*, the first waypoint at or
   after t_eff (a corridor node, or its origin pad at the top of the climb), and from there gets,
   at its level, up to ``k`` routes to its destination's pad (**rerouted**) and the shortest
-  route to each of the ``DIVERT_VERTIPORTS`` nearest other vertiports, every pad (**diverted**);
+  route to each of the ``DIVERT_VERTIPORTS`` nearest other vertiports, every pad (**diverted**),
+  and turning back at once from where it is at t_eff to the pad it left (``_turn_back``);
   a flight left with fewer than ``STAGE2_BELOW`` of them that keep separation with the
   unaffected flights also gets the re-routes to its destination's other pads and all of these
   from its next waypoint (``BRANCH_WAYPOINTS``). Routes: penalised Dijkstra with the corridors
@@ -59,6 +60,13 @@ DELAY_SCALE_S = 300.0
 DIVERT_VERTIPORTS = 3
 BRANCH_WAYPOINTS = 2
 STAGE2_BELOW = 4
+#: contingency rounds after the first graph: each unsaved airborne flight becomes a FIXED
+#: contingency and the graph is solved again around it (docs/replanning.md, "Contingencies")
+CASCADE_ROUNDS = 8
+#: unaffected flights pulled into one re-plan at most (those a contingency would meet)
+CASCADE_MAX_PULLED = 200
+#: holds [s] a contingency may take at its branch point before flying on or landing
+HOLD_S = (30.0, 60.0, 120.0)
 _EPS_T = 1e-9
 
 
@@ -130,6 +138,11 @@ class ReplanReport:
     backend_used: str = ""
     fallback: bool = False
     fallback_reason: str = ""
+    cascade_rounds: int = 0     # contingency rounds after the first graph
+    pulled_in: int = 0          # unaffected flights re-planned around a contingency
+    contingencies_fixed: int = 0  # contingencies deconflicted (chosen in the graph, or fixed)
+    unresolved: int = 0         # contingencies flown NOT deconflicted (bound, or unavoidable clash)
+    unavoidable: int = 0        # no constraint-free alternative at all (already inside): plan flown
 
 
 # ---- states and versions ----------------------------------------------------------------------
@@ -342,6 +355,7 @@ class _Alt:
     length_m: float
     route_index: int = 0
     candidate_index: int = 0
+    hold_s: float = 0.0         # hover at the branch point before flying on (a contingency's)
 
 
 def _tier(kind: str, delay_s: float) -> float:
@@ -410,6 +424,37 @@ class _Router:
                 got = []
             self._memo[key] = got
         return got
+
+
+def _turn_back(f, t_eff: float, network, config) -> _Alt | None:
+    """Airborne flight ``f`` turning back at once, from where it is at ``t_eff``, along the
+    waypoints it has flown to the pad it left (a diversion to its origin): the one option that
+    keeps the spacing of a stream of flights on one corridor that must all turn back (each
+    turning at its own next waypoint would meet its followers head-on). None if it has not
+    left the ground's vertical leg or has landed."""
+    tr = f.trajectory
+    times, pts = tr.times_s, tr.points_m
+    if not times[0] < t_eff < times[-1]:
+        return None
+    j = int(np.searchsorted(times, t_eff, side="right"))        # waypoints before t_eff: [0, j)
+    here = tr.position_at(t_eff)
+    back = pts[:j][::-1]
+    layered = network.layered
+    if layered and j <= 1:
+        return None  # still climbing from its pad
+    new = _extend(np.concatenate((times[:j], [t_eff])) if times[j - 1] < t_eff else times[:j],
+                  np.concatenate((pts[:j], [here])) if times[j - 1] < t_eff else pts[:j],
+                  back[1:] if times[j - 1] >= t_eff else back, float(config.speed_mps),
+                  float(config.airspace.descent_rate_mps), vertical_last=layered)
+    if new is None:
+        return None
+    o = network.node_index(f.origin_id)
+    route = list(f.route_node_ids)
+    k = max(0, min(len(route), j - (1 if layered else 0)))
+    node_ids = tuple(route[:k]) + tuple(reversed(route[:k]))[1:] if k > 1 else (f.origin_id,)
+    length = float(np.sqrt(np.square(np.diff(new.points_m, axis=0)).sum(axis=1)).sum())
+    return _Alt(new, "diverted", _tier("diverted", new.arrival_s - t_eff), o, node_ids, length,
+                f.route_index, f.candidate_index)
 
 
 def _airborne_alternatives(f, t_eff: float, network, config, router: _Router, stage: int = 1) -> list:
@@ -532,25 +577,109 @@ def _constraint_free(alts: list, cset: ConstraintSet, t_eff: float, network, ori
     return [a for a, w in zip(alts, which.tolist()) if w < 0]
 
 
-def _least_conflicting(alts: list, unaffected: list, chosen: dict, contingencies: list, config,
-                       t_eff: float):
-    """A contingency's plan: of its constraint-free alternatives, the one that loses separation
-    with the fewest flights (unaffected, chosen, and the contingencies decided before it), then
-    the one landing soonest."""
+def _keep_alt(f, network) -> _Alt:
+    return _Alt(f.trajectory, "kept", W_KEEP, network.node_index(f.destination_id),
+                tuple(f.route_node_ids), f.length_m, f.route_index, f.candidate_index)
+
+
+def _held(a: _Alt, t_eff: float, hold_s: float) -> _Alt | None:
+    """``a`` with a hover of ``hold_s`` at its first waypoint at or after ``t_eff`` (the branch
+    point: the prefix before it is the old plan's, so it still chains); None if that waypoint is
+    its landing."""
+    times, pts = a.trajectory.times_s, a.trajectory.points_m
+    k = int(np.searchsorted(times, t_eff - _EPS_T, side="left"))
+    if k >= times.shape[0] - 1:
+        return None
+    t = np.concatenate((times[:k + 1], [times[k] + hold_s], times[k + 1:] + hold_s))
+    p = np.concatenate((pts[:k + 1], pts[k:k + 1], pts[k + 1:]))
+    return replace(a, trajectory=Trajectory._trusted(t, p, None), hold_s=float(hold_s))  # a hover
+
+
+def _contingency_weight(a: _Alt, t_eff: float) -> float:
+    """A contingency option's weight in the graph: in (0, 1), below every diversion's, the
+    soonest landing heaviest."""
+    return 0.999 / (1.0 + max(0.0, a.trajectory.arrival_s - t_eff) / DELAY_SCALE_S)
+
+
+def _contingency_candidates(alts: list, f, t_eff: float, cset: ConstraintSet, network,
+                            config) -> tuple[list, list]:
+    """A contingency's options: its constraint-free alternatives (turning back at once among
+    them), and each held ``HOLD_S`` at its branch point (for the turn-back: where it is at
+    t_eff), kept only if it still stays out. Returns (options, hold of each [s])."""
+    cands, holds = list(alts), [0.0] * len(alts)
+    for h in HOLD_S:
+        more = [x for x in (_held(a, t_eff, h) for a in alts) if x is not None]
+        more = _constraint_free(more, cset, t_eff, network, None)
+        cands += more
+        holds += [h] * len(more)
+    return cands, holds
+
+
+def _contingency_choice(options: tuple, active: Sequence, in_replan: set, fixed: dict, chosen: dict,
+                        config, t_eff: float, pending: Sequence = ()):
+    """A contingency's plan: of its ``options`` (from :func:`_contingency_candidates`), the one
+    that loses separation with the fewest FIXED flights (other contingencies, flights with no
+    way out: ideally none), then leaves the fewest of the flights still to be decided
+    (``pending``: each one's options) with no option that avoids it, then meets
+    the fewest airborne unaffected flights, then the fewest not departed (airborne flights
+    outrank them), then the fewest flights the graph chose (re-decided in the next round), then
+    lands soonest. Returns (option, hold [s], indices in ``active`` of the unaffected flights it
+    loses separation with, airborne first, whether it meets a fixed flight)."""
     from .separation import SegmentSet, conflicting_pairs
-    others = [f.trajectory for f in unaffected] + [x.trajectory for x in chosen.values()] + \
-        [f.trajectory for f in contingencies if f.contingent]
-    n_conf = np.zeros(len(alts), dtype=np.int64)
+    cands, holds = options
+    fx = [a.trajectory for a in fixed.values()]
+    un = [j for j in range(len(active)) if j not in in_replan]
+    ch = [a.trajectory for a in chosen.values()]
+    others = fx + [active[j].trajectory for j in un] + ch
+    n = len(cands)
+    n_fx, n_air, n_gnd, n_ch, n_block = (np.zeros(n, dtype=np.int64) for _ in range(5))
+    hits: list = [set() for _ in range(n)]
+    cset_ = SegmentSet.from_trajectories([x.trajectory for x in cands])
     if others:
         oset = SegmentSet.from_trajectories(others)
         oset = oset.take(oset.t1_s >= t_eff) if len(oset) else oset
         if len(oset):
-            pairs = conflicting_pairs(SegmentSet.from_trajectories([x.trajectory for x in alts]), oset,
+            pairs = np.unique(conflicting_pairs(cset_, oset, config.separation)[:, :2], axis=0)
+            for c_, o_ in pairs.tolist():
+                if o_ < len(fx):
+                    n_fx[c_] += 1
+                elif o_ < len(fx) + len(un):
+                    j = un[o_ - len(fx)]
+                    hits[c_].add(j)
+                    if active[j].departure_s < t_eff:
+                        n_air[c_] += 1
+                    else:
+                        n_gnd[c_] += 1
+                else:
+                    n_ch[c_] += 1
+    pend = [list(p_cands) for p_cands, _h in pending if p_cands]
+    if pend and fx:  # their options left: those that keep separation with the fixed flights
+        from .conflict_graph import discard_against_active
+        flat = [x for xs in pend for x in xs]
+        fset = SegmentSet.from_trajectories(fx)
+        gone = discard_against_active([x.trajectory for x in flat], fset.take(fset.t1_s >= t_eff),
                                       config.separation)
-            for i in np.unique(pairs[:, 0]).tolist():
-                n_conf[i] = np.unique(pairs[pairs[:, 0] == i, 1]).size
-    k = min(range(len(alts)), key=lambda i: (int(n_conf[i]), alts[i].trajectory.arrival_s, -alts[i].weight))
-    return alts[k]
+        live, pos = [], 0
+        for xs in pend:
+            live.append([x for x, g in zip(xs, gone[pos:pos + len(xs)].tolist()) if not g])
+            pos += len(xs)
+        pend = [xs for xs in live if xs]  # one with none left cannot be helped here
+    if pend:  # an option that would leave another flight no option that avoids it
+        owner = np.repeat(np.arange(len(pend)), [len(x) for x in pend])
+        size = np.array([len(x) for x in pend], dtype=np.int64)
+        pset = SegmentSet.from_trajectories([x.trajectory for xs in pend for x in xs])
+        pset = pset.take(pset.t1_s >= t_eff) if len(pset) else pset
+        if len(pset):
+            pairs = np.unique(conflicting_pairs(cset_, pset, config.separation)[:, :2], axis=0)
+            if len(pairs):
+                co = np.unique(np.stack((pairs[:, 0], owner[pairs[:, 1]]), axis=1), axis=0, return_counts=True)
+                (cc, oo), cnt = co[0].T, co[1]
+                full = cnt >= size[oo]
+                np.add.at(n_block, cc[full], 1)
+    k = min(range(n), key=lambda i: (int(n_fx[i]), int(n_block[i]), int(n_air[i]), int(n_gnd[i]),
+                                     int(n_ch[i]), cands[i].trajectory.arrival_s, -cands[i].weight))
+    got = sorted(hits[k], key=lambda j: (active[j].departure_s >= t_eff, j))
+    return cands[k], holds[k], got, bool(n_fx[k])
 
 
 def replan(t_eff: float, epoch_index: int, active: Sequence, requests: dict, network, config,
@@ -593,97 +722,190 @@ def replan(t_eff: float, epoch_index: int, active: Sequence, requests: dict, net
         return list(active), [], rep
     from .conflict_graph import discard_against_active
     router = _Router(network, cache, cset, t_eff)
-    unaffected = [f for j, f in enumerate(active) if j not in affected]
-    act = SegmentSet.from_trajectories([f.trajectory for f in unaffected])
-    act = act.take(act.t1_s >= t_eff) if len(act) else act
-    per_flight, clean = [], []
+    why = dict(affected)        # index in active -> (constraint index, entry time)
+    pulled_by: dict = {}        # index -> request_id of the contingency it was pulled in for
+    clean: dict = {}            # index -> its constraint-free alternatives, preference order
+    fixed: dict = {}            # index -> _Alt flown as a FIXED flight (contingency or no way out)
+    unavoidable: set = set()    # no constraint-free alternative at all: it flies its plan
+    unresolved: dict = {}       # contingencies flown not deconflicted -> why
+    hold_of: dict = {}          # index -> seconds held at the branch point by its contingency
+    work = list(idx)            # flights being decided by the graph
+    in_replan = set(idx)
     for i in idx:
-        f = active[i]
-        airborne = f.departure_s < t_eff
-        rep.affected_airborne += int(airborne)
-        rep.affected_not_departed += int(not airborne)
-        origin = None if airborne else network.node_index(f.origin_id)
-        alts = _airborne_alternatives(f, t_eff, network, config, router) if airborne else \
-            _ground_alternatives(f, requests.get(f.request_id), t_eff, network, cache, departures)
-        alts = _constraint_free(alts, cset, t_eff, network, origin)
-        keep = _constraint_free([_Alt(f.trajectory, "kept", W_KEEP, network.node_index(f.destination_id),
-                                      tuple(f.route_node_ids), f.length_m, f.route_index,
-                                      f.candidate_index)], cset, t_eff, network, origin)
-        per_flight.append(keep + alts)
-    # stage 2: a flight left with fewer than STAGE2_BELOW alternatives that keep separation
-    # with the unaffected flights gets the rest (other pads, the next branch point)
-    flat1 = [a.trajectory for alts in per_flight for a in alts]
-    gone = discard_against_active(flat1, act, config.separation) if flat1 and len(act) \
-        else np.zeros(len(flat1), dtype=bool)
-    pos = 0
-    for r, i in enumerate(idx):
-        n = len(per_flight[r])
-        mine = gone[pos:pos + n]
-        pos += n
-        clean.append(list(per_flight[r]))
-        per_flight[r] = [a for a, g in zip(per_flight[r], mine.tolist()) if not g]
-        f = active[i]
-        if len(per_flight[r]) < STAGE2_BELOW and f.departure_s < t_eff:
-            more = _constraint_free(_airborne_alternatives(f, t_eff, network, config, router, stage=2),
-                                    cset, t_eff, network, None)
-            per_flight[r] += more
-            clean[r] += more
-            rep.stage2 += 1
-    for alts in per_flight:
-        alts.sort(key=lambda a: -a.weight)  # stable: preference order within the flight
-    flat = [a for alts in per_flight for a in alts]
-    req_of = np.repeat(np.arange(len(idx)), [len(a) for a in per_flight]).astype(np.int64)
-    cand_idx = np.concatenate([np.arange(len(a)) for a in per_flight]).astype(np.int64) \
-        if flat else np.zeros(0, np.int64)
-    rep.alternatives = len(flat1) + sum(len(c) for c in clean) - len(flat1)
-    graph = build_conflict_graph([a.trajectory for a in flat], req_of, cand_idx,
-                                 np.array([a.weight for a in flat], dtype=np.float64), len(idx),
-                                 act, config.separation)
-    rep.vertices, rep.edges = graph.n_vertices, graph.n_edges
-    ts = time.perf_counter()
-    if graph.n_vertices == 0:
-        selected = np.zeros(0, dtype=np.int64)
-    else:
-        selected, er = select(graph, policy)
-        rep.backend_used, rep.fallback, rep.fallback_reason = er.backend_used, er.fallback, er.fallback_reason
-    rep.solve_time_s = time.perf_counter() - ts
-    chosen = {}
-    for v in selected.tolist():
-        src = int(graph.vertex_source[v])
-        chosen[int(req_of[src])] = flat[src]
+        rep.affected_airborne += int(active[i].departure_s < t_eff)
+        rep.affected_not_departed += int(active[i].departure_s >= t_eff)
+
+    def act_set(extra=()):
+        trs = [f.trajectory for j, f in enumerate(active) if j not in in_replan] + \
+            [a.trajectory for a in fixed.values()] + list(extra)
+        s_ = SegmentSet.from_trajectories(trs)
+        return s_.take(s_.t1_s >= t_eff) if len(s_) else s_
+
+    def generate(todo, act):
+        """Alternatives of the flights ``todo`` (stage 2 for those with too few survivors)."""
+        lists = []
+        for i in todo:
+            f = active[i]
+            airborne = f.departure_s < t_eff
+            origin = None if airborne else network.node_index(f.origin_id)
+            alts = _airborne_alternatives(f, t_eff, network, config, router) + \
+                [x for x in (_turn_back(f, t_eff, network, config),) if x is not None] if airborne else \
+                _ground_alternatives(f, requests.get(f.request_id), t_eff, network, cache, departures)
+            alts = _constraint_free(alts, cset, t_eff, network, origin)
+            keep = _constraint_free([_keep_alt(f, network)], cset, t_eff, network, origin)
+            lists.append(keep + alts)
+        flat1 = [a.trajectory for alts in lists for a in alts]
+        gone = discard_against_active(flat1, act, config.separation) if flat1 and len(act) \
+            else np.zeros(len(flat1), dtype=bool)
+        pos = 0
+        for r, i in enumerate(todo):
+            n = len(lists[r])
+            left = n - int(gone[pos:pos + n].sum())
+            pos += n
+            f = active[i]
+            if left < STAGE2_BELOW and f.departure_s < t_eff:
+                lists[r] += _constraint_free(_airborne_alternatives(f, t_eff, network, config, router, stage=2),
+                                             cset, t_eff, network, None)
+                rep.stage2 += 1
+            lists[r].sort(key=lambda a: -a.weight)  # stable: preference order within the flight
+            clean[i] = lists[r]
+            rep.alternatives += len(lists[r])
+
+    chosen: dict = {}           # index -> _Alt chosen by the graph
+    held_opts: dict = {}        # index -> its contingency options in the graph (unsaved before)
+    rounds = 0
+    while True:
+        todo = [i for i in work if i not in clean]
+        if todo:
+            generate(todo, act_set())
+            # an airborne flight with no constraint-free alternative at all (already inside, or
+            # entering before its branch point) flies its plan: fixed before the graph
+            for i in todo:
+                if not clean[i] and active[i].departure_s < t_eff:
+                    fixed[i] = _keep_alt(active[i], network)
+                    unavoidable.add(i)
+            work = [i for i in work if i not in fixed]
+        act = act_set()
+        per_flight = [clean[i] + held_opts.get(i, []) for i in work]
+        flat = [a for alts in per_flight for a in alts]
+        req_of = np.repeat(np.arange(len(work)), [len(a) for a in per_flight]).astype(np.int64)
+        cand_idx = np.concatenate([np.arange(len(a)) for a in per_flight]).astype(np.int64) \
+            if flat else np.zeros(0, np.int64)
+        graph = build_conflict_graph([a.trajectory for a in flat], req_of, cand_idx,
+                                     np.array([a.weight for a in flat], dtype=np.float64), len(work),
+                                     act, config.separation)
+        if rounds == 0:
+            rep.vertices, rep.edges = graph.n_vertices, graph.n_edges
+        ts = time.perf_counter()
+        if graph.n_vertices == 0:
+            selected = np.zeros(0, dtype=np.int64)
+        else:
+            selected, er = select(graph, policy)
+            rep.backend_used = er.backend_used
+            if er.fallback:  # any round's fallback is reported
+                rep.fallback, rep.fallback_reason = True, er.fallback_reason
+        rep.solve_time_s += time.perf_counter() - ts
+        chosen = {}
+        for v in selected.tolist():
+            src = int(graph.vertex_source[v])
+            chosen[work[int(req_of[src])]] = flat[src]
+        unsaved = [i for i in work if i not in chosen and active[i].departure_s < t_eff]
+        if not unsaved or rounds >= CASCADE_ROUNDS:
+            break
+        rounds += 1
+        fresh = [i for i in unsaved if i not in held_opts]
+        if fresh:
+            # first, the unsaved flights' contingency options join the graph (holds at the branch
+            # point, then each alternative; weights below every diversion): decided jointly
+            for i in fresh:
+                cands, _holds = _contingency_candidates(clean[i], active[i], t_eff, cset, network, config)
+                mine = {id(a) for a in clean[i]}
+                held_opts[i] = [replace(c, kind="contingency", weight=_contingency_weight(c, t_eff))
+                                for c in cands if id(c) not in mine]
+            continue
+        # each unsaved airborne flight becomes a contingency, deconflicted as a FIXED flight
+        # (airborne flights outrank flights not departed); the flights it would lose separation
+        # with are re-planned around it: chosen ones in the next graph, unaffected ones pulled in
+        options = {i: _contingency_candidates(clean[i], active[i], t_eff, cset, network, config)
+                   for i in unsaved}
+        for n_i, i in enumerate(unsaved):
+            # the others still to be decided: the round's later contingencies (every option, holds
+            # too) and the flights the graph saved (their alternatives: the next graph's choice)
+            pending = [options[u] for u in unsaved[n_i + 1:]] + \
+                [(clean[u], None) for u in work if u in chosen and u not in fixed]
+            a, hold, hits, clash = _contingency_choice(options[i], active, in_replan, fixed, chosen, config,
+                                                       t_eff, pending)
+            fixed[i], hold_of[i] = a, hold
+            if clash:  # it cannot avoid another fixed flight: flown, the loss reported
+                unresolved[i] = "it cannot avoid another contingency"
+            chosen.pop(i, None)
+            for j in hits:
+                if len(pulled_by) >= CASCADE_MAX_PULLED:
+                    unresolved.setdefault(i, f"the cascade's bound of {CASCADE_MAX_PULLED} flights pulled in")
+                    break
+                pulled_by[j] = active[i].request_id
+                why[j] = why[i]
+                in_replan.add(j)
+                work.append(j)
+        work = [i for i in work if i not in fixed]
+    rep.cascade_rounds, rep.pulled_in = rounds, len(pulled_by)
+    # past the bound: the last unsaved airborne flights fly their least-conflicting alternative,
+    # NOT deconflicted (reported: ReplanReport.unresolved, the reason, the audit of what flew)
+    for i in [i for i in work if i not in chosen and active[i].departure_s < t_eff]:
+        options_i = _contingency_candidates(clean[i], active[i], t_eff, cset, network, config)
+        a, hold, _hits, _clash = _contingency_choice(options_i, active, in_replan, fixed, chosen, config, t_eff)
+        fixed[i], hold_of[i] = a, hold
+        unresolved[i] = f"the cascade's bound of {CASCADE_ROUNDS} rounds"
+
+    rep.unavoidable, rep.unresolved = len(unavoidable), len(unresolved)
+    rep.contingencies_fixed = len(fixed) - len(unavoidable) - len(unresolved) + \
+        sum(1 for a in chosen.values() if a.kind == "contingency")
+
     updates, new_versions = [], []
     method = f"replan-{policy}"
-    for r, i in enumerate(idx):
+    order = [i for i in range(len(active)) if i in in_replan]
+    for i in order:
         f = active[i]
-        k_c, when = affected[i]
+        k_c, when = why[i]
         c = cset.constraints[k_c]
         cids = (c.constraint_id,)
         airborne = f.departure_s < t_eff
-        a = chosen.get(r)
-        contingent = False
-        if a is None and not airborne:
-            reason = (f"cancelled: its plan enters constraint {c.label()} at t = {when:g} s and no "
-                      f"route, level or departure in its window avoids it and keeps separation")
+        a = fixed.get(i, chosen.get(i))
+        contingent = i in fixed or (a is not None and a.kind == "contingency")
+        if a is not None and a.kind == "contingency":
+            hold_of[i] = a.hold_s
+        by = pulled_by.get(i)
+        cause = (f"its plan enters constraint {c.label()} at t = {when:g} s" if by is None else
+                 f"its plan loses separation with contingency flight {by!r} (constraint {c.label()})")
+        if a is None:
+            reason = (f"cancelled: {cause} and no route, level or departure in its window avoids it "
+                      f"and keeps separation")
             updates.append(PlanUpdate(f.request_id, f.operator_id, f.version + 1, "cancelled", cids,
                                       reason, float(t_eff), None, f))
             continue
-        if a is None:
-            if clean[r]:
-                a = _least_conflicting(clean[r], unaffected, chosen, new_versions, config, t_eff)
-                what = (f"each of its {len(clean[r])} alternatives that stay out loses separation with "
-                        f"another flight; contingency landing at {network.node_ids[a.destination]!r}, "
-                        f"flown but not deconflicted")
-            else:
-                a = _Alt(f.trajectory, "kept", W_KEEP, network.node_index(f.destination_id),
-                         tuple(f.route_node_ids), f.length_m, f.route_index, f.candidate_index)
-                what = "no route avoids it: it flies its current plan (an incursion that cannot be avoided)"
+        if contingent:
             kind = "contingency"
-            contingent = True
-            reason = f"contingency: its plan enters constraint {c.label()} at t = {when:g} s; {what}"
+            land = network.node_ids[a.destination]
+            held = f" after holding {hold_of[i]:g} s at its branch point" if hold_of.get(i) else ""
+            if i in unavoidable:
+                what = "no route avoids it: it flies its current plan (an incursion that cannot be avoided)"
+            elif i not in fixed:
+                what = (f"no alternative that stays out keeps separation with the others; contingency "
+                        f"landing at {land!r}{held}, deconflicted with every other flight (chosen in "
+                        f"the graph)")
+            elif i in unresolved:
+                what = (f"each of its {len(clean[i])} alternatives that stay out loses separation with "
+                        f"another flight; contingency landing at {land!r}{held}, flown but not "
+                        f"deconflicted ({unresolved[i]})")
+            else:
+                what = (f"no alternative that stays out keeps separation with the others; contingency "
+                        f"landing at {land!r}{held}, deconflicted with every other flight (fixed: the "
+                        f"flights it would meet are re-planned around it)")
+            reason = f"contingency: {cause}; {what}"
         else:
             kind = a.kind
-            reason = (f"{kind}: its plan entered constraint {c.label()} at t = {when:g} s"
-                      if kind != "kept" else f"kept: its plan stays out of constraint {c.label()}")
+            reason = (f"{kind}: {cause}".replace("enters", "entered", 1) if kind != "kept"
+                      else f"kept: its plan stays out of constraint {c.label()}")
             if kind == "diverted":
                 reason += f"; diverted to {network.node_ids[a.destination]!r}"
         nf = replace(f, destination_id=network.node_ids[a.destination], route_node_ids=a.route_node_ids,
@@ -699,4 +921,5 @@ def replan(t_eff: float, epoch_index: int, active: Sequence, requests: dict, net
         rep.kinds[u.kind] = rep.kinds.get(u.kind, 0) + 1
     rep.decision_time_s = time.perf_counter() - t0
     rep.decision_cpu_s = time.process_time() - c0
-    return unaffected + new_versions, updates, rep
+    kept_order = [f for j, f in enumerate(active) if j not in in_replan]
+    return kept_order + new_versions, updates, rep

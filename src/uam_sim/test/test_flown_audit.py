@@ -95,6 +95,10 @@ def test_incursions_hand_computed():
     # in force only from t = 60 (the flight is then at x = 100, on the closed boundary): t = 60
     (late,) = incursions([flight], [(square(), 60.0, math.inf)])
     assert late.t_s == pytest.approx(60.0)
+    # ... so it was inside when the version came into force (airborne since 0): no plan could
+    # have avoided it, said so and reported all the same; the entry at 40 above could have been
+    assert late.inside_at_start and "already inside when it came into force: unavoidable" in late.describe()
+    assert not hit.inside_at_start
     # withdrawn at t = 30, before the flight reaches it: nothing
     assert incursions([flight], [(square(), 0.0, 30.0)]) == []
     # climbing: z = 2 t, x = -500 + 10 t; band from 150 m is reached at t = 75 (x = 250), inside

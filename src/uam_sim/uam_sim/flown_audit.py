@@ -243,10 +243,14 @@ class Incursion:
     constraint_version: int
     t_s: float
     what: str = "volume"   # "volume", "departure" or "arrival"
+    #: already inside at the instant the version came into force (a zone that appears with no
+    #: lead time over an airborne flight): no plan could have avoided it; reported all the same
+    inside_at_start: bool = False
 
     def describe(self) -> str:
         return (f"{self.key} enters constraint {self.constraint_id!r} v{self.constraint_version} "
-                f"({self.what}) at t = {self.t_s:g} s")
+                f"({self.what}) at t = {self.t_s:g} s" +
+                (" (already inside when it came into force: unavoidable)" if self.inside_at_start else ""))
 
 
 def incursions(flown: Iterable[Flown], intervals: Sequence[tuple[Any, float, float]]) -> list[Incursion]:
@@ -279,7 +283,8 @@ def incursions(flown: Iterable[Flown], intervals: Sequence[tuple[Any, float, flo
                     first = when
                     break
             if first is not None:
-                out.append(Incursion(f.key, c.constraint_id, c.version, float(first)))
+                out.append(Incursion(f.key, c.constraint_id, c.version, float(first),
+                                     inside_at_start=bool(first <= lo_t and t[0] < lo_t)))
     return sorted(out, key=lambda i: (i.t_s, i.key, i.constraint_id))
 
 

@@ -96,6 +96,7 @@ class PlannerNode(Node):
             seed=self.p["seed"], precompute_routes=self.p["precompute_routes"],
             objective=self.p["objective"], baseline_order=self.p["baseline_order"],
             horizon_epochs=self.p["horizon_epochs"], commit_ahead=self.p["commit_ahead"],
+            replan_policy=self.p["replan_policy"],
             fair_window_s=self.p["fair_window_s"],
             spatial_buffer_m=self.p["spatial_buffer_m"], temporal_buffer_s=self.p["temporal_buffer_s"],
             conformance=ConformanceBounds(self.p["reaction_lateral_m"], self.p["reaction_vertical_m"],
