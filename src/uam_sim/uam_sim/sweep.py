@@ -97,9 +97,17 @@ def run_cell(cfg_dict: dict, method: str, rate, seed: int, cells_dir: str) -> di
     res = run_scenario(net, method, rate, seed, cfg.duration_s, cfg, demand=demand)
     cell = {"key": key, "params": params, "summary": res.summary, "epochs": res.epochs,
             "flights": res.flights, "audit": res.audit, "instances": res.instances,
-            "rejections": res.rejections}
+            "rejections": res.rejections, "requests": res.requests,
+            # the commit that ran this cell (on a Dask worker: that worker's checkout), for the
+            # decision study's record; not part of the key
+            "ran_at": _commit()}
     write_json_atomic(Path(cells_dir) / f"{key}.json", cell)
     return cell
+
+
+def _commit() -> str:
+    from .machine import machine_info
+    return str(machine_info().get("commit", "unknown"))
 
 
 @dataclass
