@@ -230,13 +230,15 @@ def _terms_text(comp: dict) -> str:
                        if t["where"] else "") for t in comp["terms"]).lstrip("+ ")
 
 
-def report_text(d: Path) -> tuple[str, dict]:
+def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:
+    """The report's text and its derived tables; ``shown``: the directory as the report names it
+    (default ``d``), so a copy elsewhere rebuilds the same bytes."""
     study = json.loads((d / "study.json").read_text(encoding="utf-8"))
     runs, windows, e0 = _read(d, "runs.csv"), _read(d, "windows.csv"), _read(d, "e0.csv.gz")
     L = ["# The decision study: where optimisation matters (issue 24)", "",
          "Written by `uam_sim.decision_report` from the tables in this directory alone "
          "(`study.json`, `runs.csv`, `windows.csv`, `e0.csv.gz`): "
-         f"`python -m uam_sim.decision_report {d.as_posix()}` writes it again, byte for byte "
+         f"`python -m uam_sim.decision_report {shown or d.as_posix()}` writes it again, byte for byte "
          "(test/test_decision_report.py checks). The cells are run by "
          "`python -m uam_sim.decision_study --config config/decision-study.yaml --stage "
          "e0|pilot|full` (see its docstring and docs/decision-study/README.md).", ""]
@@ -407,9 +409,9 @@ def report_text(d: Path) -> tuple[str, dict]:
     return "\n".join(L).rstrip() + "\n", tables
 
 
-def write_decision_report(d) -> dict:
+def write_decision_report(d, shown: str | None = None) -> dict:
     d = Path(d)
-    text, tables = report_text(d)
+    text, tables = report_text(d, shown)
     (d / "REPORT.md").write_text(text, encoding="utf-8")
     write_csv(d / "comparisons.csv", tables.get("comparisons") or [])
     write_csv(d / "power.csv", tables.get("power") or [])

@@ -447,25 +447,32 @@ def e0_sample(found: list, bins: list, per_bin, seed: int) -> list:
     return sorted(out, key=lambda x: x[0])
 
 
-_SAMPLES: dict = {}  # the last reference run's sampled instances (a worker runs its solvers in turn)
+RECORD = "instances"  # the E0 cell that re-runs a reference run and keeps its sampled instances
 
 
 def e0_cell(conf: dict, solver: str, _rate, _seed, cells_dir: str) -> dict:
-    """One E0 cell: the reference run's sampled instances solved by ``solver``; written to
-    ``cells_dir/<key>.json`` (top-level, so a Dask worker can run it)."""
+    """One E0 cell, written to ``cells_dir/<key>.json`` (top-level, so a Dask worker can run it):
+    ``solver == RECORD``: re-run the reference run and keep its sampled instances (weights,
+    edges, groups); else: solve ``conf["sample"]`` (the instances of that run's RECORD cell,
+    sent with the task, so workers need no shared file system) with ``solver``."""
     from uam_planner.first_fit import first_fit_select
+    from uam_solvers.base import MwisProblem
     from uam_solvers.executor import SolveService
 
     from .sweep import _commit
     key = e0_key(conf, solver)
     e0 = conf["e0"]
-    skey = json.dumps([conf["experiment"], conf["method"], conf["rate"], conf["seed"],
-                       e0["bins"], e0["per_bin"], e0["seed"]], sort_keys=True, default=str)
-    if skey not in _SAMPLES:  # one re-run per reference run per worker process, not per solver
-        _SAMPLES.clear()
-        _SAMPLES[skey] = e0_sample(record_instances(conf), list(e0["bins"]), e0["per_bin"],
-                                   int(e0["seed"]))
-    sample = _SAMPLES[skey]
+    if solver == RECORD:
+        sample = e0_sample(record_instances(conf), list(e0["bins"]), e0["per_bin"], int(e0["seed"]))
+        cell = {"key": key, "format": E0_FORMAT, "run": conf["name"], "ran_at": _commit(),
+                "instances": [{"epoch": int(ep), "t_s": float(t), "weights": p.weights.tolist(),
+                               "edges": p.edges.tolist(), "groups": [g.tolist() for g in p.groups]}
+                              for ep, t, p in sample]}
+        write_json_atomic(Path(cells_dir) / f"{key}.json", cell)
+        return cell
+    sample = [(x["epoch"], x["t_s"], MwisProblem.from_arrays(
+        np.asarray(x["weights"], dtype=np.float64), np.asarray(x["edges"], dtype=np.int64).reshape(-1, 2),
+        x["groups"])) for x in conf["sample"]]
     ref = e0["reference"]
     limit = float(ref["time_limit_s"] if solver == REFERENCE else e0["time_limit_s"])
     backend = ref["backend"] if solver == REFERENCE else solver
@@ -493,17 +500,35 @@ def e0_cell(conf: dict, solver: str, _rate, _seed, cells_dir: str) -> dict:
     return cell
 
 
-def run_e0(cfg: dict, backends=None, progress: bool = True, compute: bool = True) -> list:
-    """Every missing (reference run, solver) E0 cell, then the rows of all finished ones."""
+def _run_e0_cells(cfg, todo, confs, keys, cells_dir, progress) -> dict:
+    def say(c, _cell):
+        if progress:
+            print(f"e0: {confs[c]['name']} {c[1]} done", flush=True)
+    if not todo:
+        return {}
+    remote = cfg["scheduler"] not in (None, "local")
+    if not remote and cfg["workers"] <= 1:
+        out = {}
+        for c in todo:
+            out[c] = e0_cell(confs[c], c[1], c[2], c[3], str(cells_dir))
+            say(c, out[c])
+        return out
+    from .dask_cluster import run_cells
+    return run_cells(None, todo, keys, cells_dir, e0_cell, scheduler=cfg["scheduler"] or "local",
+                     n_workers=min(cfg["workers"], len(todo)), cell_configs=confs, on_done=say)
+
+
+def run_e0(cfg: dict, backends=None, progress: bool = True, compute: bool = True,
+           runs=None) -> list:
+    """Every missing (reference run, solver) E0 cell, then the rows of all finished ones: first
+    the RECORD cell of each run that still needs a solver (in parallel), then the solvers."""
     from .sweep import _read_cell
     e0 = cfg["e0"]
-    solvers = list(backends or e0["backends"]) + ([REFERENCE] if REFERENCE not in (backends or []) else [])
-    if backends:
-        solvers = [s for s in solvers if s in backends or s == REFERENCE]
+    all_solvers = list(e0["backends"]) + [REFERENCE]
+    solvers = [s for s in all_solvers if not backends or s in backends]
     cells_dir = Path(cfg["cells"]) / "cells-e0"
     cells_dir.mkdir(parents=True, exist_ok=True)
-    confs, keys, todo, found = {}, {}, [], {}
-    all_solvers = list(e0["backends"]) + [REFERENCE]
+    confs, keys, todo, found, records = {}, {}, [], {}, {}
     for i, run in enumerate(e0["runs"]):
         conf = {"name": run["name"], "experiment": e0_experiment_config(cfg, run),
                 "method": e0["method"], "rate": run["rate"], "seed": int(run["seed"]), "e0": e0,
@@ -514,23 +539,29 @@ def run_e0(cfg: dict, backends=None, progress: bool = True, compute: bool = True
             cell = _read_cell(cells_dir / f"{key}.json", key)
             if cell is not None:
                 found[c] = cell
-            elif s in solvers:
+            elif s in solvers and (not runs or run["name"] in runs):
                 todo.append(c)
             confs[c], keys[c] = conf, key
+        rc = (i, RECORD, run["rate"], int(run["seed"]))
+        confs[rc], keys[rc] = conf, e0_key(conf, RECORD)
+        records[i] = rc
     if compute and todo:
-        from .dask_cluster import run_cells
-        remote = cfg["scheduler"] not in (None, "local")
-        if not remote and cfg["workers"] <= 1:
-            for c in todo:
-                found[c] = e0_cell(confs[c], c[1], c[2], c[3], str(cells_dir))
-                if progress:
-                    print(f"e0: {confs[c]['name']} {c[1]} done", flush=True)
-        else:
-            found.update(run_cells(None, todo, keys, cells_dir, e0_cell,
-                                   scheduler=cfg["scheduler"] or "local",
-                                   n_workers=min(cfg["workers"], len(todo)), cell_configs=confs,
-                                   on_done=(lambda c, _cell: print(f"e0: {confs[c]['name']} {c[1]} done",
-                                                                   flush=True)) if progress else None))
+        need = sorted({c[0] for c in todo})
+        rec = {}
+        missing_rec = []
+        for i in need:
+            cell = _read_cell(cells_dir / f"{keys[records[i]]}.json", keys[records[i]])
+            if cell is None:
+                missing_rec.append(records[i])
+            else:
+                rec[i] = cell
+        for c, cell in _run_e0_cells(cfg, missing_rec, confs, keys, cells_dir, progress).items():
+            rec[c[0]] = cell
+        for c in todo:
+            confs[c] = {**confs[c], "sample": rec[c[0]]["instances"]}
+        # the longest first (the reference), so the pool's tail is short
+        todo.sort(key=lambda c: (c[1] != REFERENCE, c[0]))
+        found.update(_run_e0_cells(cfg, todo, confs, keys, cells_dir, progress))
     rows = []
     for c in sorted(found, key=lambda c: (c[0], all_solvers.index(c[1]))):
         conf = confs[c]
@@ -565,14 +596,14 @@ def full_seeds(cfg: dict, out: Path, experiment: str) -> list:
 
 
 def run_stage(cfg: dict, stage: str, out: Path, experiments=None, backends=None,
-              compute: bool = True, progress: bool = True) -> dict:
+              compute: bool = True, progress: bool = True, runs=None) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     study = {k: cfg[k] for k in ("format", "base", "power", "steady_state", "e0", "experiments")}
     (out / "study.json").write_text(json.dumps(study, indent=1, default=str) + "\n")
     info: dict = {"stage": stage}
     if stage == "e0":
-        rows = run_e0(cfg, backends=backends, progress=progress, compute=compute)
+        rows = run_e0(cfg, backends=backends, progress=progress, compute=compute, runs=runs)
         write_csv(out / "e0.csv.gz", rows)
         info["e0_rows"] = len(rows)
     else:
@@ -613,6 +644,7 @@ def main(argv=None) -> int:
     ap.add_argument("--scheduler", default=None, help="local or tcp://HOST:8786")
     ap.add_argument("--experiments", default=None, help="comma list (default: every one)")
     ap.add_argument("--backends", default=None, help="E0: comma list of solvers to run now")
+    ap.add_argument("--runs", default=None, help="E0: comma list of e0.runs names to run now")
     ap.add_argument("--duration", type=float, default=None, help="override base.duration_s")
     ap.add_argument("--no-progress", action="store_true")
     args = ap.parse_args(argv)
@@ -634,8 +666,12 @@ def main(argv=None) -> int:
                 raise ExperimentError(f"--backends: {bad[0]!r} is not one of e0.backends "
                                       f"{cfg['e0']['backends']} or 'reference'")
         out = Path(args.out or cfg["out"])
+        e0_runs = [x for x in (args.runs or "").split(",") if x] or None
+        bad = [r for r in e0_runs or [] if r not in [x["name"] for x in cfg["e0"]["runs"]]]
+        if bad:
+            raise ExperimentError(f"--runs: {bad[0]!r} is not a name in e0.runs")
         info = run_stage(cfg, args.stage, out, experiments=exps, backends=backends,
-                         progress=not args.no_progress)
+                         progress=not args.no_progress, runs=e0_runs)
     except ExperimentError as exc:
         print(f"decision_study: {exc}", file=sys.stderr)
         return 2
