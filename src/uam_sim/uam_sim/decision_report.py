@@ -12,7 +12,7 @@ as "no effect". No number is written by hand.
 Statistics: paired per seed (every method of one cell at one seed plans the same requests),
 Student t intervals (``uam_sim.stats.mean_interval``), two-sided one-sample t p-values
 (``scipy.stats.ttest_1samp``) for the secondary comparisons, adjusted by Holm within each
-experiment (:func:`uam_sim.decision_study.holm`). Pooled estimates stack the per-seed relative
+experiment (:func:`uam_sim.stats.holm`). Pooled estimates stack the per-seed relative
 differences of every group of a comparison (a fixed-effect estimate of one shared relative
 effect; the pairs are independent runs) with a t interval over all pairs.
 """
@@ -28,9 +28,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .decision_study import holm, seeds_needed
 from .files import write_csv
-from .stats import mean_interval
+from .stats import holm, mean_interval, seeds_needed
 
 SIZE_BINS = [1, 8, 16, 32, 64, 128, 256, 512, 1024, 4096, 100000]
 E0_ORDER = ["firstfit", "greedy", "auto", "exact", "sa", "tabu", "qpu-emulator", "reference"]
@@ -302,7 +301,7 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:
     L += ["## Seeds from power", "",
           f"Per primary comparison, the paired SD of the seeds run so far gives the seeds a "
           f"{int(round(pw['level'] * 100))} % CI half-width of {_f(pw['half_width_pct'], 1)} % of the "
-          f"reference arm's mean needs (t interval; `uam_sim.decision_study.seeds_needed`); the "
+          f"reference arm's mean needs (t interval; `uam_sim.stats.seeds_needed`); the "
           f"study runs that many, capped at {pw['max_seeds']}.", ""]
     if prow:
         L += _table([[r["experiment"], r["comparison"], r["group"], r["seeds_run"], _f(r["paired_sd"], 2),

@@ -86,6 +86,7 @@ def run_cell(cfg_dict: dict, method: str, rate, seed: int, cells_dir: str) -> di
 
     Top-level so a process pool can call it; loads (and caches) the network in the worker.
     """
+    _commit()  # before the run, so an edit of the checkout during the run is not credited to it
     cfg = make_config(cfg_dict)
     params = cell_params(cfg, method, rate, seed)
     key = cell_key(params)
@@ -105,9 +106,16 @@ def run_cell(cfg_dict: dict, method: str, rate, seed: int, cells_dir: str) -> di
     return cell
 
 
+_COMMIT: list = []
+
+
 def _commit() -> str:
-    from .machine import machine_info
-    return str(machine_info().get("commit", "unknown"))
+    """The commit of the code this process runs: read once, at the first call after import
+    (a cell's code is what the process loaded, not what the checkout holds when it ends)."""
+    if not _COMMIT:
+        from .machine import machine_info
+        _COMMIT.append(str(machine_info().get("commit", "unknown")))
+    return _COMMIT[0]
 
 
 @dataclass
