@@ -267,11 +267,14 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:
         target = min(max(need), study["power"]["max_seeds"]) if need else None
         per_seed_runs = sum(len(c["rates"]) for c in exp["cells"]) * (n_arms // max(1, len(exp["cells"]))) \
             * len(exp["methods"])
-        miss.append([exp["name"], n_runs, ", ".join(map(str, seeds)) or "none",
-                     target if target is not None else "pilot not run",
+        pilot = int(study["power"]["pilot_seeds"])
+        miss.append([exp["name"], per_seed_runs, n_runs, ", ".join(map(str, seeds)) or "none",
+                     max(0, pilot * per_seed_runs - n_runs) if target is None else 0,
+                     target if target is not None else "pilot not complete",
                      "-" if target is None else max(0, target * per_seed_runs - n_runs)])
-    L += _table(miss, ["experiment", "runs in runs.csv", "seeds present", "seeds the power needs (capped)",
-                       "runs still missing"])
+    L += _table(miss, ["experiment", "runs per seed", "runs in runs.csv", "seeds present",
+                       f"pilot runs missing ({study['power']['pilot_seeds']} seeds)",
+                       "seeds the power needs (capped)", "runs still missing at that"])
     e0_runs = [r["name"] for r in study["e0"]["runs"]]
     solvers = list(study["e0"]["backends"]) + ["reference"]
     if e0 is not None:
