@@ -238,7 +238,7 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:
          "Written by `uam_sim.decision_report` from the tables in this directory alone "
          "(`study.json`, `runs.csv`, `windows.csv`, `e0.csv.gz`): "
          f"`python -m uam_sim.decision_report {shown or d.as_posix()}` writes it again, byte for byte "
-         "(test/test_decision_report.py checks). The cells are run by "
+         "(src/uam_sim/test/test_decision_study.py checks). The cells are run by "
          "`python -m uam_sim.decision_study --config config/decision-study.yaml --stage "
          "e0|pilot|full` (see its docstring and docs/decision-study/README.md).", ""]
     tables = {}
