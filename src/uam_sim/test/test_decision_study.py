@@ -167,6 +167,7 @@ def test_the_study_runs_resumes_and_its_report_rebuilds_from_the_tables(tmp_path
     write_decision_report(out)
     assert (out / "REPORT.md").read_text() == first
     assert "## E0: matched shadow solves" in first and "| E1 | p |" in first
+    assert "- E1 primary `p` (approved_ss, pooled over every group): " in first  # answered
 
 
 @pytest.mark.skipif(not (COMMITTED / "REPORT.md").exists(), reason="no committed study yet")

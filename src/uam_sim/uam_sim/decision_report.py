@@ -367,6 +367,36 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:
                           "delay p95 [s]", "detour [m]", *[f"p95 delay prio {c[16:]} [s]" for c in prio],
                           "Jain", "solve median [s]", "solve max [s]", "overruns", "fallbacks"])
         L.append("")
+    # -- answers, one line per declared comparison and the optimiser's solve time
+    L += ["## Answers", "",
+          "One line per declared comparison, from the rows above (the pooled row where there is "
+          "one, else each group), and the solve time of the MWIS runs per experiment.", ""]
+    for exp in study["experiments"]:
+        rows = [r for r in comps if r["experiment"] == exp["name"]]
+        for kind in ("primary", "secondary"):
+            for c in exp[kind]:
+                mine = [r for r in rows if r["comparison"] == c["name"] and r["kind"].startswith(kind)
+                        and r.get("seeds", 0) >= 2]
+                pooled = [r for r in mine if r["kind"].endswith("pooled")]
+                if not mine:
+                    L.append(f"- {exp['name']} {kind} `{c['name']}`: not yet answered (fewer than "
+                             "2 paired seeds).")
+                    continue
+                r = pooled[0] if pooled else mine[0]
+                where = "pooled over every group" if pooled else r["group"]
+                ex = (r["rel_lo"] > 0 or r["rel_hi"] < 0) if math.isfinite(r.get("rel_lo", math.nan)) else False
+                L.append(f"- {exp['name']} {kind} `{c['name']}` ({c['metric']}, {where}): "
+                         f"{_f(r['rel_pct'], 2, True)} % [{_f(r['rel_lo'], 2, True)}, {_f(r['rel_hi'], 2, True)}]"
+                         + (f" {'above' if r['rel_lo'] > 0 else 'below'} 0." if ex
+                            else ", not resolved at this power."))
+        if runs is not None:
+            mw = runs[(runs["experiment"] == exp["name"]) & ~runs["method"].isin(["fifo", "firstfit"])]
+            if len(mw):
+                L.append(f"- {exp['name']} solve time of the MWIS runs ({len(mw)}): median of the "
+                         f"runs' medians {_f(mw['solve_time_median_s'].median(), 3)} s, longest "
+                         f"{_f(mw['solve_time_max_s'].max(), 2)} s; {int(mw['overruns'].sum())} "
+                         f"solves past limit + 0.4 s, {int(mw['fallbacks'].sum())} fallbacks.")
+    L.append("")
     # -- E0
     L += ["## E0: matched shadow solves", "",
           f"Each epoch's recorded instance of the reference runs (method {study['e0']['method']}), "
