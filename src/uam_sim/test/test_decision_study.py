@@ -142,6 +142,14 @@ def test_comparisons_and_verdicts_are_computed_from_the_rows(tmp_path):
     text = _verdict(q, "flights")
     assert "includes 0" in text and "not resolved at this power" in text
     assert "no effect" not in text and "no difference" not in text
+    # a varied integer read back as float (blanks in its column) still selects its rows
+    study["experiments"][0]["vary"] = {"horizon_epochs": [1, 5]}
+    runs = _runs([2, 3, 4]).assign(horizon_epochs=5.0)
+    study["experiments"][0]["primary"][0]["terms"] = [
+        {"sign": 1, "method": "greedy", "where": {"horizon_epochs": 5}},
+        {"sign": -1, "method": "firstfit", "where": {"horizon_epochs": 5}}]
+    h = next(r for r in comparison_rows(runs, study) if r["kind"] == "primary")
+    assert h["seeds"] == 3 and h["diff"] == pytest.approx(3.0)
 
 
 @pytest.mark.slow  # a tiny E0 (3 solvers + reference) and pilot: worker start-up dominates

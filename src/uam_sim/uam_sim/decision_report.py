@@ -53,6 +53,14 @@ def _table(rows: list, heads: list) -> list:
 
 # -- comparisons -------------------------------------------------------------------------------
 
+def _equal(col: pd.Series, v) -> pd.Series:
+    """col == v, numerically when v is a number (a column with blanks reads back as float: 5
+    must match 5.0), else as text."""
+    if isinstance(v, (int, float)) and not isinstance(v, bool):
+        return pd.to_numeric(col, errors="coerce") == float(v)
+    return col.astype(str) == str(v)
+
+
 def _groups(runs: pd.DataFrame, exp: dict, comp: dict) -> list:
     """[(label, {term index: {seed: value}}, scale {seed: value})] of one comparison."""
     rows = runs[runs["experiment"] == exp["name"]]
@@ -70,7 +78,7 @@ def _groups(runs: pd.DataFrame, exp: dict, comp: dict) -> list:
         for j, t in enumerate(comp["terms"]):
             sel = rows[rows["method"] == t["method"]]
             for k, v in {**g, **t["where"]}.items():
-                sel = sel[sel[k].astype(str) == str(v)]
+                sel = sel[_equal(sel[k], v)]
             vals[j] = dict(zip(sel["seed"].astype(int), sel[comp["metric"]].astype(float)))
         label = ", ".join(f"{k} {g[k]}" for k in keys) or "all"
         out.append((label, vals))
