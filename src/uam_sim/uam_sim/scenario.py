@@ -54,6 +54,9 @@ class ScenarioResult:
     rejections: list
     wall_s: float
     replans: list = field(default_factory=list)
+    #: every request submitted (id, earliest / latest departure, operator, priority): the
+    #: decision study's steady-state window and per-operator shares (issue 24)
+    requests: list = field(default_factory=list)
 
     def decisions(self) -> dict:
         """request id -> (epoch, candidate) of each approval: what must match across runs."""
@@ -334,7 +337,8 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
                 submitted.append(req)
                 earliest_s[req.request_id] = req.earliest_departure_s  # for the delay analysis
                 latest_s[req.request_id] = req.latest_departure_s
-                asked.append({"earliest_departure_s": req.earliest_departure_s,
+                asked.append({"request_id": req.request_id,
+                              "earliest_departure_s": req.earliest_departure_s,
                               "latest_departure_s": req.latest_departure_s,
                               "operator": req.operator_id, "priority": int(req.priority)})
                 reason = planner.submit(req)
@@ -493,4 +497,4 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
     summary["wall_s"] = wall
     summary["real_time_factor"] = duration_s / wall if wall > 0 else float("inf")
     return ScenarioResult(method, rate_label(rate), int(seed), float(duration_s), summary, epochs,
-                          flights, audit, instances, rejections, wall, replans)
+                          flights, audit, instances, rejections, wall, replans, asked)

@@ -173,3 +173,54 @@ def compare(cells: Sequence[dict], a: str, b: str, metric="approved", rates=None
                      "seeds": d.n, "positive": d.positive, "negative": d.negative,
                      "supported": d.supported, "paired": d, "paired_rel": rel})
     return rows
+
+
+# -- the decision study's (issue 24) --------------------------------------------------------------
+
+def seeds_needed(sd: float, target_half: float, level: float = 0.95, cap: int = 10_000) -> int:
+    """Smallest n >= 2 with t_{(1+level)/2, n-1} sd / sqrt(n) <= target_half (paired differences
+    of SD ``sd``); ``cap`` + 1 when even ``cap`` seeds do not reach it. sd 0 needs 2."""
+    from scipy.stats import t as student_t
+    if not (sd >= 0 and target_half > 0):
+        raise StatsError(f"seeds_needed: sd {sd!r} must be >= 0 and target {target_half!r} > 0")
+    n = 2
+    while n <= cap:
+        if student_t.ppf(0.5 + level / 2, n - 1) * sd / math.sqrt(n) <= target_half:
+            return n
+        n += 1 if n < 100 else max(1, n // 20)
+    return cap + 1
+
+
+def holm(pvalues) -> list:
+    """Holm's step-down adjusted p-values, in the input order.
+
+    Hand-written (10 lines) because statsmodels (whose ``multipletests(method="holm")`` is the
+    reference) is not pinned in requirements.txt and would add it, patsy and their wheels for this
+    one function; test_decision_study checks it against Holm's definition on hand-computed cases.
+    """
+    p = np.asarray(list(pvalues), dtype=float)
+    m = p.size
+    order = np.argsort(p, kind="stable")
+    adj = np.empty(m)
+    running = 0.0
+    for rank, i in enumerate(order):
+        running = max(running, min(1.0, (m - rank) * p[i]))
+        adj[i] = running
+    return adj.tolist()
+
+
+def mser_truncation(series, batch: int = 5) -> int:
+    """MSER-b (White 1997): the index d (a multiple of ``batch``) minimising the squared standard
+    error of the mean of the batch means after d, over d in the first half of the series."""
+    x = np.asarray(series, dtype=float)
+    nb = x.size // batch
+    if nb < 4:
+        return 0
+    z = x[: nb * batch].reshape(nb, batch).mean(axis=1)
+    best, best_k = math.inf, 0
+    for k in range(nb // 2 + 1):
+        rest = z[k:]
+        val = float(((rest - rest.mean()) ** 2).sum()) / rest.size ** 2
+        if val < best - 1e-12:
+            best, best_k = val, k
+    return best_k * batch

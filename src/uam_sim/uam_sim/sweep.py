@@ -86,6 +86,7 @@ def run_cell(cfg_dict: dict, method: str, rate, seed: int, cells_dir: str) -> di
 
     Top-level so a process pool can call it; loads (and caches) the network in the worker.
     """
+    _commit()  # before the run, so an edit of the checkout during the run is not credited to it
     cfg = make_config(cfg_dict)
     params = cell_params(cfg, method, rate, seed)
     key = cell_key(params)
@@ -97,9 +98,24 @@ def run_cell(cfg_dict: dict, method: str, rate, seed: int, cells_dir: str) -> di
     res = run_scenario(net, method, rate, seed, cfg.duration_s, cfg, demand=demand)
     cell = {"key": key, "params": params, "summary": res.summary, "epochs": res.epochs,
             "flights": res.flights, "audit": res.audit, "instances": res.instances,
-            "rejections": res.rejections}
+            "rejections": res.rejections, "requests": res.requests,
+            # the commit that ran this cell (on a Dask worker: that worker's checkout), for the
+            # decision study's record; not part of the key
+            "ran_at": _commit()}
     write_json_atomic(Path(cells_dir) / f"{key}.json", cell)
     return cell
+
+
+_COMMIT: list = []
+
+
+def _commit() -> str:
+    """The commit of the code this process runs: read once, at the first call after import
+    (a cell's code is what the process loaded, not what the checkout holds when it ends)."""
+    if not _COMMIT:
+        from .machine import machine_info
+        _COMMIT.append(str(machine_info().get("commit", "unknown")))
+    return _COMMIT[0]
 
 
 @dataclass

@@ -1,0 +1,194 @@
+"""The decision study (issue 24): config validation, the statistics it decides with (Holm, seeds
+from power, MSER-5), comparisons and verdicts computed from rows, E0 and the report rebuilt from
+its tables."""
+
+import json
+import math
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+from scipy.stats import t as student_t
+
+from uam_sim.decision_report import comparison_rows, power_rows, report_text, write_decision_report
+from uam_sim.decision_study import load_decision_config, run_stage
+from uam_sim.experiment_config import ExperimentError
+from uam_sim.stats import StatsError, holm, mser_truncation, seeds_needed
+
+REPO = Path(__file__).resolve().parents[3]
+COMMITTED = REPO / "docs" / "decision-study"
+
+
+def small(tmp_path, **over) -> Path:
+    data = {"out": str(tmp_path / "out"), "cells": str(tmp_path / "cells"), "workers": 1,
+            "base": {"duration_s": 240.0, "time_limit_s": 0.5, "corpus_max_vertices": 0,
+                     "include_qpu": False, "baseline_order": "priority", "priority_share": 0.05,
+                     "priority_class": 1, "operators": ["a", "b"],
+                     "operator_lead_times_s": [60.0, 0.0]},
+            "power": {"pilot_seeds": 2, "half_width_pct": 1.0, "max_seeds": 3},
+            "e0": {"duration_s": 240.0, "backends": ["firstfit", "greedy", "exact"],
+                   "time_limit_s": 0.5, "reference": {"backend": "exact", "time_limit_s": 2.0},
+                   "per_bin": 1,
+                   "runs": [{"name": "sg", "network": "config/networks/singapore.yaml",
+                             "mode": "both", "objective": "count", "rate": 4, "seed": 0}]},
+            "experiments": [{
+                "name": "E1", "question": "q", "methods": ["firstfit", "greedy"],
+                "vary": {"objective": ["paper", "count"]},
+                "cells": [{"name": "sg", "network": "config/networks/singapore.yaml",
+                           "mode": "both", "rates": [4]}],
+                "primary": [{"name": "p", "metric": "approved_ss", "terms": [
+                    {"sign": 1, "method": "greedy", "where": {"objective": "count"}},
+                    {"sign": -1, "method": "firstfit", "where": {"objective": "count"}}]}],
+                "secondary": [{"name": "s", "metric": "delay_mean_s", "terms": [
+                    {"sign": 1, "method": "greedy"}, {"sign": -1, "method": "firstfit"}]}]}]}
+    data.update(over)
+    p = tmp_path / f"study{len(list(tmp_path.glob('study*.yaml')))}.yaml"
+    p.write_text(yaml.safe_dump(data))
+    return p
+
+
+def test_the_committed_config_loads_and_declares_a_primary_per_experiment():
+    cfg = load_decision_config(REPO / "config" / "decision-study.yaml")
+    assert [e["name"] for e in cfg["experiments"]] == ["E1", "E2", "E3"]
+    assert all(e["primary"] for e in cfg["experiments"])
+    assert set(cfg["e0"]["backends"]) == {"firstfit", "greedy", "auto", "exact", "sa", "tabu",
+                                          "qpu-emulator"}
+
+
+def test_bad_study_files_are_refused_naming_the_field(tmp_path):
+    good = yaml.safe_load(small(tmp_path).read_text())
+    exp = good["experiments"][0]
+
+    def with_exp(**kw):
+        return small(tmp_path, experiments=[{**exp, **kw}])
+    prim = exp["primary"][0]
+    cases = [
+        (with_exp(primary=[]), r"experiments\[0\].primary: declare at least one"),
+        (with_exp(primary=[{**prim, "metric": "happiness"}]), r"primary\[0\].metric: 'happiness'"),
+        (with_exp(primary=[{**prim, "terms": [prim["terms"][0], prim["terms"][0]]}]),
+         r"primary\[0\].terms: signs must sum to 0"),
+        (with_exp(primary=[{**prim, "terms": [{**prim["terms"][0], "where": {"colour": 1}},
+                                              prim["terms"][1]]}]),
+         r"terms\[0\].where.colour: not a varied key"),
+        (with_exp(primary=[{**prim, "terms": [{**prim["terms"][0], "where": {"objective": "joy"}},
+                                              prim["terms"][1]]}]),
+         r"terms\[0\].where.objective: 'joy' is not one of"),
+        (with_exp(cells=[{**exp["cells"][0], "mode": "wide"}]), r"cells\[0\].mode: 'wide'"),
+        (small(tmp_path, power={"pilot_seeds": 1}), r"power.pilot_seeds: 1 must be an integer >= 2"),
+        (small(tmp_path, base={"seeds": 4}), r"base.seeds: set per cell"),
+    ]
+    for path, msg in cases:
+        with pytest.raises(ExperimentError, match=msg):
+            load_decision_config(path)
+
+
+def test_holm_matches_its_definition_on_a_hand_computed_case():
+    # sorted 0.005, 0.01, 0.03, 0.04 -> 4 x 0.005 = 0.02, 3 x 0.01 = 0.03, 2 x 0.03 = 0.06,
+    # max(0.06, 1 x 0.04) = 0.06; back in input order
+    assert holm([0.01, 0.04, 0.03, 0.005]) == pytest.approx([0.03, 0.06, 0.06, 0.02])
+    assert holm([0.5, 0.9]) == pytest.approx([1.0, 1.0])  # capped at 1
+    assert holm([]) == []
+
+
+def test_seeds_needed_is_the_smallest_n_whose_t_interval_reaches_the_target():
+    # t_{0.975,16} 10 / sqrt 17 = 5.14 > 5, t_{0.975,17} 10 / sqrt 18 = 4.97 <= 5
+    assert seeds_needed(10.0, 5.0) == 18
+    half = lambda n: student_t.ppf(0.975, n - 1) * 10.0 / math.sqrt(n)  # noqa: E731
+    assert half(18) <= 5.0 < half(17)
+    assert seeds_needed(0.0, 1.0) == 2
+    assert seeds_needed(1000.0, 0.001, cap=50) == 51  # unreachable: says so
+    with pytest.raises(StatsError, match="sd -1"):
+        seeds_needed(-1.0, 1.0)
+
+
+def test_mser5_truncates_a_ramp_and_keeps_a_stationary_series():
+    ramp = list(np.linspace(0, 9, 10)) + [10 + (1 if i % 2 else -1) for i in range(40)]
+    assert mser_truncation(ramp) == 10
+    flat = [10 + (1 if i % 2 else -1) * 0.1 * (i % 5) for i in range(50)]
+    assert mser_truncation(flat) == 0
+    assert mser_truncation([1, 2, 3]) == 0  # too short to batch
+
+
+def _runs(diffs, base=100.0):
+    rows = []
+    for s, d in enumerate(diffs):
+        for m, v in (("firstfit", base + s), ("greedy", base + s + d)):
+            rows.append({"experiment": "E1", "cell": "sg", "variant": "objective=count",
+                         "objective": "count", "method": m, "rate": 4, "seed": s,
+                         "approved_ss": v, "delay_mean_s": 5.0 + (d if m == "greedy" else 0)})
+    return pd.DataFrame(rows)
+
+
+def test_comparisons_and_verdicts_are_computed_from_the_rows(tmp_path):
+    study = load_decision_config(small(tmp_path))
+    study["experiments"][0]["vary"] = {"objective": ["count"]}
+    # greedy - firstfit = 2, 3, 4 flights: mean 3, t interval 3 +- 4.303 * 1 / sqrt 3
+    rows = comparison_rows(_runs([2, 3, 4]), study)
+    p = next(r for r in rows if r["kind"] == "primary")
+    assert p["diff"] == pytest.approx(3.0) and p["seeds"] == 3
+    assert p["diff_hi"] - 3.0 == pytest.approx(student_t.ppf(0.975, 2) / math.sqrt(3))
+    assert p["positive"] == 3
+    # its power row: sd 1, target 1 % of the firstfit mean (101) -> seeds for half-width 1.01
+    pw = power_rows(_runs([2, 3, 4]), study)[0]
+    assert pw["paired_sd"] == pytest.approx(1.0) and pw["target_half"] == pytest.approx(1.01)
+    assert pw["seeds_needed"] == seeds_needed(1.0, 1.01)
+    # the sentence follows the interval: excludes 0 here, includes 0 for -1, +1, +3
+    from uam_sim.decision_report import _verdict
+    assert "excludes 0, a difference above 0" in _verdict(p, "flights")
+    q = next(r for r in comparison_rows(_runs([-1, 1, 3]), study) if r["kind"] == "primary")
+    text = _verdict(q, "flights")
+    assert "includes 0" in text and "not resolved at this power" in text
+    assert "no effect" not in text and "no difference" not in text
+    # a varied integer read back as float (blanks in its column) still selects its rows
+    study["experiments"][0]["vary"] = {"horizon_epochs": [1, 5]}
+    runs = _runs([2, 3, 4]).assign(horizon_epochs=5.0)
+    study["experiments"][0]["primary"][0]["terms"] = [
+        {"sign": 1, "method": "greedy", "where": {"horizon_epochs": 5}},
+        {"sign": -1, "method": "firstfit", "where": {"horizon_epochs": 5}}]
+    h = next(r for r in comparison_rows(runs, study) if r["kind"] == "primary")
+    assert h["seeds"] == 3 and h["diff"] == pytest.approx(3.0)
+
+
+@pytest.mark.slow  # a tiny E0 (3 solvers + reference) and pilot: worker start-up dominates
+def test_the_study_runs_resumes_and_its_report_rebuilds_from_the_tables(tmp_path):
+    cfg = load_decision_config(small(tmp_path))
+    out = Path(cfg["out"])
+    run_stage(cfg, "e0", out, progress=False)
+    info = run_stage(cfg, "pilot", out, progress=False)
+    assert info["runs"] == 2 * 2 * 2  # 2 variants x 2 methods x 2 pilot seeds
+    runs = pd.read_csv(out / "runs.csv")
+    assert (runs["losses"] == 0).all() and (runs["overruns"] == 0).all()
+    assert runs["commit"].str.len().min() >= 40  # every cell says which commit ran it
+    e0 = pd.read_csv(out / "e0.csv.gz")
+    assert set(e0["solver"]) == {"firstfit", "greedy", "exact", "reference"}
+    best = e0.groupby(["run", "epoch"])["objective"].transform("max")
+    proven = e0[e0["proven_optimal"]]
+    # a proven optimum is the best any solver found on that instance
+    assert np.allclose(proven["objective"], best[proven.index])
+    # resumes: the finished cells are reused (the pilot again computes nothing)
+    again = run_stage(cfg, "pilot", out, progress=False)
+    assert again["runs"] == info["runs"]
+    first = (out / "REPORT.md").read_text()
+    write_decision_report(out)
+    assert (out / "REPORT.md").read_text() == first
+    assert "## E0: matched shadow solves" in first and "| E1 | p |" in first
+    assert "- E1 primary `p` (approved_ss, pooled over every group): " in first  # answered
+
+
+@pytest.mark.skipif(not (COMMITTED / "REPORT.md").exists(), reason="no committed study yet")
+def test_the_committed_report_rebuilds_byte_for_byte_from_the_committed_tables(tmp_path):
+    d = tmp_path / "decision-study"
+    d.mkdir()
+    for name in ("study.json", "runs.csv", "windows.csv", "e0.csv.gz"):
+        if (COMMITTED / name).exists():
+            shutil.copy(COMMITTED / name, d / name)
+    text, _tables = report_text(d, "docs/decision-study")  # named as the committed one
+    assert text == (COMMITTED / "REPORT.md").read_text(encoding="utf-8")
+    write_decision_report(d, "docs/decision-study")
+    for name in ("comparisons.csv", "power.csv", "e0_summary.csv"):
+        if (COMMITTED / name).exists():
+            assert (d / name).read_bytes() == (COMMITTED / name).read_bytes(), name
+    json.loads((d / "study.json").read_text())
