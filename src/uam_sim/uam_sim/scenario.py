@@ -136,6 +136,22 @@ def _apply_plan_updates(updates, by_id: dict, replans: list, t: float) -> None:
         row.update(destination=f.destination_id, departure_s=f.departure_s, arrival_s=f.arrival_s,
                    length_m=f.length_m, route=" ".join(f.route_node_ids), level_m=float(f.level_m))
 
+
+def _apply_reaction_updates(res, by_id, reaction, replans, t) -> None:
+    """The reaction's plan updates of one epoch (issue 23): the runner's row of each flight takes
+    the new version and arrival, the flight flies on from where it is at its observed rate, and
+    the update is listed with the run's re-plans."""
+    rates = (res.report.nonconformance or {}).get("rates", {})
+    for u in res.plan_updates:
+        row = by_id.get(u.request_id)
+        if row is not None and _is_reaction(u):
+            row["version"], row["replan"] = u.version, u.kind
+            row["arrival_s"] = u.flight.arrival_s
+            reaction.apply(u, row, rates[u.request_id])
+            replans.append({"t_s": t, "request_id": u.request_id, "kind": u.kind,
+                            "version": u.version, "constraints": "",
+                            "added_delay_s": u.added_delay_s, "airborne": True})
+
 def _is_reaction(u) -> bool:
     """A plan update of the reaction to nonconformance (``uam_planner.nonconformance``)."""
     return u.flight is not None and str(u.flight.method).startswith("nonconforming")
@@ -353,18 +369,7 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
         res = planner.plan(t, e)
         if res.plan_updates:
             if reaction is not None:
-                rates = (res.report.nonconformance or {}).get("rates", {})
-                for u in res.plan_updates:
-                    row = by_id.get(u.request_id)
-                    if row is None:
-                        continue
-                    if _is_reaction(u):
-                        row["version"], row["replan"] = u.version, u.kind
-                        row["arrival_s"] = u.flight.arrival_s
-                        reaction.apply(u, row, rates[u.request_id])
-                        replans.append({"t_s": t, "request_id": u.request_id, "kind": u.kind,
-                                        "version": u.version, "constraints": "",
-                                        "added_delay_s": u.added_delay_s, "airborne": True})
+                _apply_reaction_updates(res, by_id, reaction, replans, t)
                 _apply_plan_updates([u for u in res.plan_updates if not _is_reaction(u)], by_id,
                                     replans, t)
                 for u in res.plan_updates:   # a constraint re-plan: what flies changes now
@@ -429,16 +434,7 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
             t = e * cfg.epoch_s
             reaction.before_epoch(t, flights)
             res = planner.plan(t, e)
-            rates = (res.report.nonconformance or {}).get("rates", {})
-            for u in res.plan_updates:
-                row = by_id.get(u.request_id)
-                if row is not None and _is_reaction(u):
-                    row["version"], row["replan"] = u.version, u.kind
-                    row["arrival_s"] = u.flight.arrival_s
-                    reaction.apply(u, row, rates[u.request_id])
-                    replans.append({"t_s": t, "request_id": u.request_id, "kind": u.kind,
-                                    "version": u.version, "constraints": "",
-                                    "added_delay_s": u.added_delay_s, "airborne": True})
+            _apply_reaction_updates(res, by_id, reaction, replans, t)
             _apply_plan_updates([u for u in res.plan_updates if not _is_reaction(u)], by_id, replans, t)
             e += 1
     audit = {}
