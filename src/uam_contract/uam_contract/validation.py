@@ -215,6 +215,16 @@ def _known(model, loc) -> list[str] | None:
     return sorted(fields) if fields is not None else None
 
 
+# pydantic error types whose reason quotes one value of the error's context: (template, key)
+_BOUND_REASONS = {
+    "literal_error": ("is not one of {}", "expected"),
+    "greater_than_equal": ("is below the minimum {}", "ge"),
+    "less_than_equal": ("is above the maximum {}", "le"),
+    "greater_than": ("must be > {}", "gt"),
+    "less_than": ("must be < {}", "lt"),
+    "too_short": ("must have at least {} item(s)", "min_length"),
+    "too_long": ("must have at most {} item(s)", "max_length"),
+}
 _REASONS = {
     "int_type": "is not an integer", "int_parsing": "is not an integer",
     "int_from_float": "is not an integer",
@@ -243,20 +253,9 @@ def message(err: dict, where: str = "", model=None, tag=None) -> str:
         why = str(ctx.get("error", err["msg"]))
     elif typ in _REASONS:
         why = _REASONS[typ]
-    elif typ == "literal_error":
-        why = f"is not one of {ctx.get('expected')}"
-    elif typ == "greater_than_equal":
-        why = f"is below the minimum {ctx.get('ge')}"
-    elif typ == "less_than_equal":
-        why = f"is above the maximum {ctx.get('le')}"
-    elif typ == "greater_than":
-        why = f"must be > {ctx.get('gt')}"
-    elif typ == "less_than":
-        why = f"must be < {ctx.get('lt')}"
-    elif typ == "too_short":
-        why = f"must have at least {ctx.get('min_length')} item(s)"
-    elif typ == "too_long":
-        why = f"must have at most {ctx.get('max_length')} item(s)"
+    elif typ in _BOUND_REASONS:
+        template, key = _BOUND_REASONS[typ]
+        why = template.format(ctx.get(key))
     else:
         why = err["msg"][:1].lower() + err["msg"][1:]
     return f"{path}: {_echo(value)} {why}"

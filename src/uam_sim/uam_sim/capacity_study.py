@@ -245,10 +245,8 @@ def airborne_peak(flights, duration_s: float, step_s: float = 5.0) -> int:
 def source_instances(cfg: CapacityConfig) -> tuple[list, str]:
     """Re-run the instance study's source cell with an observer and keep every MWIS instance
     (the cells keep none above corpus_max_vertices); returns ([(epoch, MwisProblem)], label)."""
-    from uam_solvers.base import MwisProblem
-
     from .network_spec import load_network_spec
-    from .scenario import groups_from_ids, run_scenario
+    from .scenario import problem_from_report, run_scenario
 
     src = cfg.instances.get("source")
     if not src:
@@ -260,12 +258,9 @@ def source_instances(cfg: CapacityConfig) -> tuple[list, str]:
     found = []
 
     def keep(t_s, epoch, submitted, refused, result):
-        rep = result.report
-        if rep.vertices < 1:
-            return
-        edges = np.asarray(rep.edges_array, dtype=np.int64).reshape(-1, 2)
-        found.append((epoch, MwisProblem.from_arrays(np.asarray(rep.weights, dtype=np.float64), edges,
-                                                     groups_from_ids(rep.vertex_request_ids))))
+        problem = problem_from_report(result.report)
+        if problem is not None:
+            found.append((epoch, problem))
 
     run_scenario(load_network_spec(ecfg.network), src["method"], src["rate"], src["seed"],
                  ecfg.duration_s, ecfg, observer=keep)

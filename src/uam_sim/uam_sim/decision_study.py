@@ -365,20 +365,15 @@ def e0_key(conf: dict, solver: str) -> str:
 
 def record_instances(conf: dict) -> list:
     """Re-run the reference run with an observer; [(epoch, t_s, MwisProblem)] of every epoch."""
-    from uam_solvers.base import MwisProblem
-
     from .network_spec import load_network_spec
-    from .scenario import groups_from_ids, run_scenario
+    from .scenario import problem_from_report, run_scenario
     ecfg = make_config(conf["experiment"])
     found = []
 
     def keep(t_s, epoch, _submitted, _refused, result):
-        rep = result.report
-        if rep.vertices < 1:
-            return
-        edges = np.asarray(rep.edges_array, dtype=np.int64).reshape(-1, 2)
-        found.append((epoch, t_s, MwisProblem.from_arrays(
-            np.asarray(rep.weights, dtype=np.float64), edges, groups_from_ids(rep.vertex_request_ids))))
+        problem = problem_from_report(result.report)
+        if problem is not None:
+            found.append((epoch, t_s, problem))
     run_scenario(load_network_spec(ecfg.network), conf["method"], conf["rate"], conf["seed"],
                  ecfg.duration_s, ecfg, observer=keep)
     return found

@@ -189,6 +189,17 @@ def flight_draws(config: DisturbanceConfig, flight_id: str) -> FlightDraws:
     return FlightDraws(e, delay, float(z * config.altitude_error_m))
 
 
+def _plane_waves(rng, config, m: int):
+    """m plane waves of random heading, wavelength (0.5-2 x gust_length_m), period (0.5-2 x
+    gust_period_s) and phase, drawn from rng in that order: (wave vectors (m, 2), angular
+    frequencies, phases)."""
+    heading = rng.uniform(0.0, 2.0 * math.pi, m)
+    wavelength = config.gust_length_m * rng.uniform(0.5, 2.0, m)
+    period = config.gust_period_s * rng.uniform(0.5, 2.0, m)
+    k = (2.0 * math.pi / wavelength)[:, None] * np.stack([np.cos(heading), np.sin(heading)], 1)
+    return k, 2.0 * math.pi / period, rng.uniform(0.0, 2.0 * math.pi, m)
+
+
 class WindField:
     """Steady wind plus a seeded gust field over (x, y, t): ``at(xy (n, 2), t) -> (n, 2)`` [m/s]."""
 
@@ -199,24 +210,14 @@ class WindField:
         self.steady = -config.wind_speed_mps * np.array([math.sin(frm), math.cos(frm)])
         rng = np.random.default_rng([int(config.seed), 0x57494E44])
         m = GUST_MODES
-        heading = rng.uniform(0.0, 2.0 * math.pi, m)
-        wavelength = config.gust_length_m * rng.uniform(0.5, 2.0, m)
-        period = config.gust_period_s * rng.uniform(0.5, 2.0, m)
-        self.k = (2.0 * math.pi / wavelength)[:, None] * np.stack([np.cos(heading), np.sin(heading)], 1)
-        self.omega = 2.0 * math.pi / period
-        self.phase = rng.uniform(0.0, 2.0 * math.pi, m)
+        self.k, self.omega, self.phase = _plane_waves(rng, config, m)
         # each component: sum of m cosines of amplitude a: variance m a^2 / 2 = std^2
         amp = config.gust_std_mps * math.sqrt(2.0 / m)
         self.amp = amp * rng.choice([-1.0, 1.0], size=(m, 2))
         # the vertical gusts: their own plane waves (their own stream: the horizontal field is
         # the same with or without them)
         vr = np.random.default_rng([int(config.seed), 0x56455254])
-        vh = vr.uniform(0.0, 2.0 * math.pi, m)
-        vl = config.gust_length_m * vr.uniform(0.5, 2.0, m)
-        vp = config.gust_period_s * vr.uniform(0.5, 2.0, m)
-        self.kz = (2.0 * math.pi / vl)[:, None] * np.stack([np.cos(vh), np.sin(vh)], 1)
-        self.omega_z = 2.0 * math.pi / vp
-        self.phase_z = vr.uniform(0.0, 2.0 * math.pi, m)
+        self.kz, self.omega_z, self.phase_z = _plane_waves(vr, config, m)
         self.amp_z = config.vertical_gust_std_mps * math.sqrt(2.0 / m) * vr.choice([-1.0, 1.0], size=m)
 
     def gust(self, xy: np.ndarray, t_s) -> np.ndarray:

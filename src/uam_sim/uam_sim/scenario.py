@@ -92,6 +92,17 @@ def average_airborne(departures_s, arrivals_s, duration_s: float) -> float:
     return float(inside.sum() / duration_s)
 
 
+def problem_from_report(report):
+    """The MWIS instance an epoch's report describes (weights, edges, one group per request), or
+    None for an empty epoch: what the studies record from a run's observer."""
+    from uam_solvers.base import MwisProblem
+    if report.vertices < 1:
+        return None
+    edges = np.asarray(report.edges_array, dtype=np.int64).reshape(-1, 2)
+    return MwisProblem.from_arrays(np.asarray(report.weights, dtype=np.float64), edges,
+                                   groups_from_ids(report.vertex_request_ids))
+
+
 def groups_from_ids(ids: Sequence[str]) -> list:
     groups: dict = {}
     for v, rid in enumerate(ids):
