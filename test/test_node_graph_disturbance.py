@@ -75,7 +75,9 @@ def test_the_graph_reacts_to_a_nonconforming_flight_and_flies_its_update(ros_con
     # duplicated first approval, "already flying": counted in fly_errors, not a version)
     flown = {(p.operator_id, p.request_id, int(p.version)) for p in nodes["simulator"].flown_plans}
     assert all((p.operator_id, p.request_id, int(p.version)) in flown for p in updates)
-    assert nodes["simulator"].versions_received == len(updates)
+    # (>=, not ==: in real time the observer, another subscriber, may see fewer of the updates than
+    # the simulator did by the end of the run; 23 against 19 once in a fresh-clone run)
+    assert nodes["simulator"].versions_received >= len(updates)
     # the newest versions keep separation with each other from their effective times on
     from uam_planner.audit import audit_flights
     from uam_planner.replanning import clipped_from
