@@ -72,23 +72,49 @@ def flush_publishers(node, timeout_s: float) -> bool:
 def run_node(make_node, name: str, args=None, *, threads: int = 1, linger_s: float = 0.0,
              events_executor: bool = False) -> int:
     """:func:`_run_node`, under cProfile when ``UAM_PROFILE_DIR`` is set (the profile of the
-    main thread goes to ``$UAM_PROFILE_DIR/<name>.prof``, for ``python -m pstats``)."""
+    main thread goes to ``$UAM_PROFILE_DIR/<name>.prof``, for ``python -m pstats``); then the
+    process ends with its exit code (:func:`_exit_now`): this does not return."""
     import os
 
     out_dir = os.environ.get("UAM_PROFILE_DIR", "")
     if not out_dir:
-        return _run_node(make_node, name, args, threads=threads, linger_s=linger_s,
+        code = _run_node(make_node, name, args, threads=threads, linger_s=linger_s,
                          events_executor=events_executor)
-    import cProfile
-    from pathlib import Path
+    else:
+        import cProfile
+        from pathlib import Path
 
-    Path(out_dir).mkdir(parents=True, exist_ok=True)
-    prof = cProfile.Profile()
+        Path(out_dir).mkdir(parents=True, exist_ok=True)
+        prof = cProfile.Profile()
+        try:
+            code = prof.runcall(_run_node, make_node, name, args, threads=threads, linger_s=linger_s,
+                                events_executor=events_executor)
+        finally:
+            prof.dump_stats(str(Path(out_dir) / f"{name}.prof"))
+    _exit_now(code)
+
+
+def _exit_now(code: int) -> None:
+    """End the process once the node is cleaned up: the exit handlers run (the CPU report,
+    multiprocessing's reaping of worker processes), then ``os._exit``, skipping the interpreter's
+    finalization. Finalization could hang: in a fresh-clone CI run the solver node printed its
+    CPU report (an exit handler) at once on SIGINT and then did not end within run_fleet.sh's
+    10 s (frozen daemon threads and rclpy/DDS destructors run there in no set order). Nothing
+    of ours is left to finalize: recordings are closed by ``close()``, the node is destroyed and
+    rclpy shut down before this. Callback threads still blocked are abandoned, as they would be
+    by a kill; this is only called from a node process's main()."""
+    import atexit
+    import os
+
     try:
-        return prof.runcall(_run_node, make_node, name, args, threads=threads, linger_s=linger_s,
-                            events_executor=events_executor)
+        atexit._run_exitfuncs()  # noqa: SLF001 - the documented exit handlers, run once, here
     finally:
-        prof.dump_stats(str(Path(out_dir) / f"{name}.prof"))
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):
+                pass
+        os._exit(code)
 
 
 def _run_node(make_node, name: str, args=None, *, threads: int = 1, linger_s: float = 0.0,
