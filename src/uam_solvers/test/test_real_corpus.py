@@ -50,8 +50,16 @@ def test_a_gzip_corpus_round_trips_with_reproducible_bytes(tmp_path):
 def _kamis_proves(p: MwisProblem) -> tuple[bool, float]:
     from uam_solvers.bench import kamis_direct
 
-    obj, _, finished = kamis_direct(p, 10.0)
+    obj, _, finished = kamis_direct(p, GENEROUS_S)
     return finished, obj
+
+
+#: a limit no load exhausts on these graphs (KaMIS proves each in at most ~0.1 s quiet): a
+#: solve returns when it is proven, so the limit costs nothing, and the proof asserted below
+#: does not depend on wall time (issue 20: at 10 s, auto's KaMIS share of 1 s ran out at load
+#: ~28 and the test failed)
+GENEROUS_S = 600.0
+GENEROUS = {"kamis_max_share_s": 300.0}
 
 
 def _pick(corpus):
@@ -70,7 +78,8 @@ def _pick(corpus):
 def test_auto_is_valid_and_proves_where_kamis_proves(corpus):
     for e in _pick(corpus):
         p = e.problem
-        r = solve(p.weights, p.edges, list(p.groups), backend="auto", time_limit_s=10.0)
+        r = solve(p.weights, p.edges, list(p.groups), backend="auto", time_limit_s=GENEROUS_S,
+                  options=GENEROUS)
         assert p.is_independent(r.selected), e.name
         assert not r.fallback, (e.name, r.message)
         finished, kobj = _kamis_proves(p)
