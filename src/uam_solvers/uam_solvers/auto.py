@@ -48,6 +48,20 @@ The outer layers of the default pipeline (Reduce, ComponentSplit) pass every gra
   most ``lr_max_kernel_fraction`` (25 %) of the vertices, else on the whole graph (proven when
   the kernel is empty: planner-shaped 10,000 vertices in 0.13-0.2 s).
 
+Tied optima (issue 20): every path is deterministic for its seed, but which one proves first
+depends on the machine's speed (KaMIS's share is wall time), and tied optima differ between
+them. So when KaMIS was stopped by its share and CP-SAT or the split then proved the optimum,
+KaMIS runs again with at most ``tie_break_factor`` (3) times that share (at least
+``tie_break_min_s`` = 0.05 s, at most the time left) and its completed search's set is the
+answer, the set a faster machine returns (:meth:`AutoBackend._canonical`). So the proven set
+does not depend on the speed as long as KaMIS's search fits in that re-run; beyond it the first
+proof's set is returned with ``stats["tie_break"] = "kamis unfinished"``. Nothing is added when
+KaMIS proves first or nothing is proven. Limits, measured: KaMIS's completed set can depend on
+the limit it is given (it spends ~1 % of the limit in a time-bounded local search: one of 269
+comparisons over limits of 0.05-60 s differed, 10 s against 30 s on a 671-vertex corpus graph);
+on the horizon graphs, where KaMIS never finishes, the re-run costs 0.13-0.17 s of CPU
+(3 x the 0.05 s probe). Above 2,000 vertices (LearnAndReduce) this is not done.
+
 ``proven_optimal`` is True only when the branch and bound completed, KaMIS finished, CP-SAT
 reported OPTIMAL on the whole graph or for every component, or LearnAndReduce left nothing or a kernel KaMIS finished
 (checked: the lifted set's integer weight is the reductions' offset plus the kernel optimum).
