@@ -85,7 +85,10 @@ def test_no_kamis_share_means_the_split_path_with_the_same_optimum():
 
 def test_large_sparse_graph_is_solved_by_learn_and_reduce_and_the_proof_is_true():
     p = planner_instance(2500, seed=3)
-    res = uam_solvers.solve_problem(p, backend="auto", time_limit_s=2.0)
+    # no probe: whether a 20 ms probe gets past LearnAndReduce's set-up depends on the load (it
+    # did not at load ~11 and CHILS got the graph); the kernelisation itself is what is tested
+    res = uam_solvers.solve_problem(p, backend="auto", time_limit_s=20.0,
+                                    options={"lr_probe_fraction": 0.0})
     assert res.stats["auto_method"].startswith("learn-and-reduce")
     assert p.is_independent(res.selected)
     best = _kamis_optimum(p)
