@@ -97,3 +97,23 @@ def test_whole_weights_within_resolution_are_scaled_by_a_whole_factor_without_ro
     # whole weights above the resolution: the general (rounding) rule
     wi, scale = integer_weights(np.array([3000.0, 1500.0]), resolution=1000)
     assert wi.tolist() == [1000, 500]
+
+
+def test_normalised_groups_and_edges_are_the_set_definition_sorted_or_not():
+    # the fast paths for input already sorted and duplicate-free (issue 20) must give what the
+    # sort gives: random groups (with empty ones, duplicates, any order) and edge lists
+    rng = np.random.default_rng(5)
+    for _ in range(1500):
+        n = 8
+        groups = [rng.integers(0, n, rng.integers(0, 5)).tolist() for _ in range(rng.integers(0, 5))]
+        if rng.random() < 0.5:
+            groups = [sorted(set(g)) for g in groups]
+        e = rng.integers(0, n, (int(rng.integers(0, 9)), 2))
+        e = e[e[:, 0] != e[:, 1]]
+        if rng.random() < 0.5 and len(e):
+            e = np.unique(np.sort(e, axis=1), axis=0)
+        p = MwisProblem.from_arrays(np.ones(n), e, groups)
+        want_g = [sorted(set(g)) for g in groups if len(set(g)) >= 2]
+        assert [g.tolist() for g in p.groups] == want_g, groups
+        want_e = sorted({(int(min(a, b)), int(max(a, b))) for a, b in e})
+        assert [tuple(r) for r in p.edges.tolist()] == want_e, e

@@ -102,3 +102,27 @@ def test_options_and_sizes_outside_the_fast_path_take_the_pipeline():
     a = uam_solvers.solve(p.weights, p.edges, groups, backend="auto")
     b = uam_solvers.solve(p.weights, p.edges, list(p.groups), backend="auto")
     assert a.selected.tolist() == b.selected.tolist()
+
+
+def test_a_graph_without_useful_groups_goes_to_kamis_not_the_search():
+    # issue 20: 50 vertices given without groups are 50 one-vertex cliques; the search ran past
+    # its node limit (70 ms) before KaMIS (0.1 ms) took over. Both paths (the arrays' fast path
+    # and the pipeline) skip it alike, and the answer is the same optimum either way.
+    from uam_solvers.cliquebb import SMALL_MAX_COVER, clique_cover_size
+    from uam_solvers.instances import grouped_random_instance
+
+    p = grouped_random_instance(50, seed=0)
+    bare = MwisProblem.from_arrays(p.weights, p.edges)
+    assert clique_cover_size(p.n, p.groups) <= SMALL_MAX_COVER < clique_cover_size(bare.n, ())
+    assert solve_small_arrays(bare.weights, bare.edges, None, node_limit=10**6) is None
+    through = uam_solvers.solve(bare.weights, bare.edges, None, backend="auto", time_limit_s=60.0)
+    assert through.stats["auto_method"] == "kamis" and through.proven_optimal
+    grouped = uam_solvers.solve(p.weights, p.edges, list(p.groups), backend="auto",
+                                time_limit_s=60.0)
+    assert grouped.stats["auto_method"] == "clique-bb"
+    assert through.objective == pytest.approx(grouped.objective, abs=1e-9)
+    # the option lets the search take it again
+    forced = uam_solvers.solve_problem(bare, backend="auto", time_limit_s=60.0,
+                                       options={"bb_max_cover": 64, "bb_node_limit": 10**7})
+    assert forced.stats["auto_method"] == "clique-bb"
+    assert forced.objective == pytest.approx(through.objective, abs=1e-9)

@@ -361,6 +361,14 @@ def _normalise_groups(groups: Sequence[Any] | None, n: int) -> list[np.ndarray]:
         for gi, a in enumerate(arrays):
             _as_index_array(a, f"groups[{gi}]", n)
         raise
+    # fast path (issue 20): groups already sorted and duplicate-free (the planner's, and every
+    # MwisProblem's own) need no sort; the check is one comparison per vertex
+    if idx.size > 1:
+        rising = idx[1:] > idx[:-1]
+        starts = np.cumsum(lengths)[:-1]
+        rising[starts[(lengths[1:] > 0) & (starts > 0)] - 1] = True  # across a group boundary
+        if rising.all():
+            return _pieces(idx.astype(np.int32), lengths)
     gid = np.repeat(np.arange(lengths.size, dtype=np.int64), lengths)
     key = sorted_unique(gid * max(n, 1) + idx)
     gid, v = key // max(n, 1), key % max(n, 1)
@@ -411,7 +419,12 @@ def _normalise_edges(e: np.ndarray) -> np.ndarray:
     lo = np.minimum(e[:, 0], e[:, 1]).astype(np.int64)
     hi = np.maximum(e[:, 0], e[:, 1]).astype(np.int64)
     base = int(hi.max()) + 1
-    key = sorted_unique(lo * base + hi)
+    key = lo * base + hi
+    if key.size > 1 and bool((key[1:] > key[:-1]).all()):
+        # fast path (issue 20): already sorted and unique (the planner's edges, and every
+        # MwisProblem's own), no sort
+        return np.stack([lo, hi], axis=1)
+    key = sorted_unique(key)
     return np.stack([key // base, key % base], axis=1)
 
 

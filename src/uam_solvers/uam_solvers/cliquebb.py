@@ -33,12 +33,29 @@ import numpy as np
 
 from .base import MAX_TOTAL_WEIGHT, MwisProblem, MwisResult
 
-__all__ = ["clique_branch_and_bound", "exact_integer_weights", "solve_small_arrays",
-           "SMALL_MAX_VERTICES"]
+__all__ = ["clique_branch_and_bound", "clique_cover_size", "exact_integer_weights",
+           "solve_small_arrays", "SMALL_MAX_COVER", "SMALL_MAX_VERTICES"]
 
 #: Largest graph :func:`solve_small_arrays` takes (the ``auto`` backend's default
 #: ``bb_max_vertices``); larger ones go through the pipeline.
 SMALL_MAX_VERTICES = 64
+#: The search branches over the cliques of the cover the groups give (a vertex outside every
+#: group is a clique of its own); above this many cliques it is not tried (the ``auto``
+#: backend's default ``bb_max_cover``; KaMIS takes the graph). Measured on
+#: grouped_random_instance graphs without their groups (issue 20): 100-160 nodes (0.18 ms) at
+#: 15 cliques, 400-500 (0.6 ms) at 20, 1,000-1,900 (2.5 ms) at 25, past the 20,000-node limit
+#: (70 ms, then KaMIS) from 40; with the groups given, 13 cliques or fewer at 15-64 vertices,
+#: 6-190 nodes. KaMIS direct needs 0.1 ms on those graphs.
+SMALL_MAX_COVER = 16
+
+
+def clique_cover_size(n: int, groups) -> int:
+    """Cliques in the cover ``groups`` give a graph of ``n`` vertices: the groups, plus one for
+    each vertex outside every group."""
+    covered = set()
+    for g in groups:
+        covered.update(int(v) for v in g)
+    return len(groups) + n - len(covered)
 
 
 class _NodeLimit(Exception):
@@ -199,7 +216,8 @@ def _int_list(values: Any, n: int) -> list[int] | None:
 
 
 def solve_small_arrays(weights: Any, edges: Any, groups: Any, node_limit: int,
-                       max_vertices: int = SMALL_MAX_VERTICES) -> MwisResult | None:
+                       max_vertices: int = SMALL_MAX_VERTICES,
+                       max_cover: int = SMALL_MAX_COVER) -> MwisResult | None:
     """The ``auto`` backend's answer for a small, clean graph straight from the arrays.
 
     This is the fast path of :func:`uam_solvers.solve` for the 5-50 vertex graphs of a planning
@@ -250,6 +268,8 @@ def solve_small_arrays(weights: Any, edges: Any, groups: Any, node_limit: int,
                 gl = sorted(set(gl))
                 if len(gl) >= 2:
                     glists.append(gl)
+    if clique_cover_size(n, glists) > max_cover:
+        return None  # the pipeline's auto gives such a graph to KaMIS, not the search
     wl = w.tolist()
     sel, nodes = _search(n, exact_integer_weights(wl), us, vs, glists, node_limit)
     if sel is None:
