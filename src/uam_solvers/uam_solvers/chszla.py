@@ -90,6 +90,7 @@ class KamisBackend(Backend):
         wi, scale = integer_weights(problem.weights, resolution)
         indptr, indices = _csr(problem)
         budget_s = max(float(time_limit_s) - (time.perf_counter() - t0), 1e-3)
+        # (copies: the binding refuses the problem's read-only CSR arrays)
         int_obj, verts = branch_reduce(indptr.astype(np.int32), indices.astype(np.int32),
                                        wi.astype(np.int32), budget_s, int(seed) % (2**31))
         dt = time.perf_counter() - t0
@@ -98,9 +99,13 @@ class KamisBackend(Backend):
         # a finished search proves the integer optimum int_obj; it is claimed only when the
         # returned set has exactly that integer objective and its own weights agree with it
         proven = finished and integer_proof_holds(problem, sel, wi, scale, int(int_obj))
-        return make_result(problem, sel, proven_optimal=proven, solve_time_s=dt, backend=self.name,
-                           stats={"weight_scale": scale, "integer_objective": int(int_obj),
-                                  "finished_before_limit": int(finished)})
+        # the set was checked (distinct, in range, independent): sorted, not np.unique'd, and
+        # built once (issue 20: make_result's second pass cost ~5 us of a 190 us solve)
+        sel = np.sort(sel).astype(np.int32)
+        return MwisResult(selected=sel, objective=problem.objective(sel), proven_optimal=proven,
+                          solve_time_s=float(dt), backend=self.name,
+                          stats={"weight_scale": scale, "integer_objective": int(int_obj),
+                                 "finished_before_limit": int(finished)})
 
 
 class ChilsBackend(Backend):
