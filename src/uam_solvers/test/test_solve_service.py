@@ -37,6 +37,7 @@ def _gone(pid: int) -> bool:
 
 
 def _wait_for_workers(service, count, timeout_s=10.0):
+    assert service.wait_until_ready(120.0)  # a replacement after a kill or crash is started
     end = time.monotonic() + timeout_s
     while len(service.worker_pids()) != count and time.monotonic() < end:
         time.sleep(0.02)
@@ -147,3 +148,32 @@ def test_close_stops_every_worker():
     assert all(_gone(pid) for pid in pids)
     with pytest.raises(RuntimeError, match="closed"):
         svc.solve(paper_instance(3, seed=0), backend=tb.WorkerPidBackend())
+
+
+def test_after_a_kill_the_next_solve_is_served_by_the_replacement(service):
+    # issue 20 (noticed by issue 24): after a kill the replacement starts in the background;
+    # on a loaded machine the next solve fell back "no free small-lane worker (all busy)", and
+    # worker_pids() still counted the killed worker until it was reaped
+    problem = paper_instance(6, seed=2)
+    assert service.wait_until_ready(120.0)
+    before = set(service.worker_pids())
+    r = service.solve(problem, backend=tb.GilHoldingBackend(), time_limit_s=0.3)
+    assert r.fallback and r.stats["executor"] == "killed"
+    after = set(service.worker_pids())
+    assert len(before - after) == 1, "the killed worker is not counted, reaped or not"
+    assert service.wait_until_ready(120.0)  # a condition: the replacement is warm and idle
+    assert len(service.worker_pids()) == len(before)
+    again = service.solve(problem, backend=tb.WorkerPidBackend(), time_limit_s=1.0)
+    assert again.stats["executor"] == "worker" and not again.fallback
+    assert again.stats["pid"] not in before
+
+
+def test_wait_until_ready_checks_its_timeout_and_is_false_once_closed():
+    svc = SolveService(small_workers=1, large_workers=1, margin_s=0.3)
+    try:
+        assert svc.wait_until_ready(60.0)
+        with pytest.raises(MwisInputError, match="timeout_s"):
+            svc.wait_until_ready(-1.0)
+    finally:
+        svc.close()
+    assert not svc.wait_until_ready(1.0)

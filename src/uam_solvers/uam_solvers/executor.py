@@ -181,6 +181,7 @@ class _Worker:
 
     def __init__(self, ctx, lane: str):
         self.lane = lane
+        self.killed = False  # SIGKILL sent: no longer a worker, even before it is reaped
         self.conn, child = ctx.Pipe(duplex=True)
         self.process = ctx.Process(target=_worker_main, args=(child,), daemon=True,
                                    name=f"uam-solver-{lane}")
@@ -216,6 +217,7 @@ class _Worker:
     def signal_kill(self) -> None:
         """SIGKILL the process without waiting for it to be reaped (the kernel frees its CPU at
         once; :meth:`kill` joins it)."""
+        self.killed = True
         try:
             self.process.kill()
         except (OSError, ValueError):
@@ -292,6 +294,8 @@ class SolveService:
         self._size = {"small": small_workers, "large": large_workers}
         self._idle: dict[str, list[_Worker]] = {"small": [], "large": []}
         self._busy: set[_Worker] = set()
+        #: replacements being started (a killed or crashed worker's), per lane
+        self._replacing = {"small": 0, "large": 0}
         self._cond = threading.Condition()
         self._closed = False
         self.counts = {"inline": 0, "worker": 0, "killed": 0, "worker-crashed": 0,
@@ -317,10 +321,27 @@ class SolveService:
     # -- public API -----------------------------------------------------------------------
 
     def worker_pids(self) -> list[int]:
-        """Process ids of the live workers (idle and busy)."""
+        """Process ids of the live workers (idle and busy); a killed worker is not one, even
+        before it is reaped."""
         with self._cond:
             workers = [w for lane in self._idle.values() for w in lane] + list(self._busy)
-        return [w.pid for w in workers if w.process.is_alive()]
+        return [w.pid for w in workers if not w.killed and w.process.is_alive()]
+
+    def wait_until_ready(self, timeout_s: float = 60.0) -> bool:
+        """Wait until no replacement worker is being started (after a kill or a crash, the
+        replacement starts and warms up in the background: on a loaded machine that took
+        longer than a 1 s limit, and the next solve fell back "no free worker"). True when
+        every lane has its workers, False when ``timeout_s`` [s] passed first or the service
+        is closed. Waits on a condition, not a sleep."""
+        timeout_s = check_time_limit(timeout_s, "timeout_s", max_s=86_400.0)
+        end = time.monotonic() + timeout_s
+        with self._cond:
+            while not self._closed and any(self._replacing.values()):
+                left = end - time.monotonic()
+                if left <= 0:
+                    return False
+                self._cond.wait(left)
+            return not self._closed
 
     def close(self) -> None:
         """Stop every worker (killing busy ones); later solves raise RuntimeError."""
@@ -490,24 +511,32 @@ class SolveService:
         """SIGKILL ``worker`` now; reap it and start and warm its replacement on a thread (the
         caller's answer waits for neither)."""
         worker.signal_kill()
+        with self._cond:
+            self._replacing[worker.lane] += 1
         threading.Thread(target=self._replace, args=(worker,), daemon=True,
                          name="uam-solver-replace").start()
 
     def _replace(self, worker: _Worker) -> None:
-        """Kill ``worker`` and put a fresh one in its lane."""
-        worker.kill()
-        with self._cond:
-            self._busy.discard(worker)
-            if self._closed:
-                return
-        fresh = _Worker(self._ctx, worker.lane)
-        fresh.warm()
-        with self._cond:
-            if self._closed:
-                fresh.stop()
-                return
-            self._idle[worker.lane].append(fresh)
-            self._cond.notify()
+        """Kill ``worker`` and put a fresh one in its lane (counted in ``_replacing`` until
+        then, for :meth:`wait_until_ready`)."""
+        fresh = None
+        try:
+            worker.kill()
+            with self._cond:
+                self._busy.discard(worker)
+                if self._closed:
+                    return
+            fresh = _Worker(self._ctx, worker.lane)
+            fresh.warm()
+            with self._cond:
+                if self._closed:
+                    fresh.stop()
+                    return
+                self._idle[worker.lane].append(fresh)
+        finally:
+            with self._cond:
+                self._replacing[worker.lane] -= 1
+                self._cond.notify_all()
 
     @staticmethod
     def _fallback(problem: MwisProblem, requested: str, t0: float, how: str, waited: float,
