@@ -96,11 +96,41 @@ class ReplanClock:
         self.updates.extend(result.plan_updates)
 
 
+class DecisionWaits:
+    """Where a decision's wall time goes when it is not this process's CPU (issue 22, third
+    stop): around each ``uam_planner.replanning.replan_steps`` (the batch re-plan), the
+    process's voluntary context switches (it waited: I/O, a pipe to a solver worker, a lock),
+    involuntary ones (it was runnable but another process had the core: the machine's load),
+    major page faults (files read from disk) and the modules first imported in it."""
+
+    def __init__(self):
+        import uam_planner.replanning as replanning
+        self.rows, self._mod, self._orig = [], replanning, replanning.replan_steps
+        replanning.replan_steps = self._steps
+
+    def _steps(self, *a, **k):
+        import resource
+        r0, mods = resource.getrusage(resource.RUSAGE_SELF), set(sys.modules)
+        result = yield from self._orig(*a, **k)
+        r1 = resource.getrusage(resource.RUSAGE_SELF)
+        self.rows.append({"waits": r1.ru_nvcsw - r0.ru_nvcsw, "preempted": r1.ru_nivcsw - r0.ru_nivcsw,
+                          "major_faults": r1.ru_majflt - r0.ru_majflt,
+                          "imported": sorted(m for m in set(sys.modules) - mods if "." not in m)})
+        return result
+
+    def close(self):
+        self._mod.replan_steps = self._orig
+
+
 def one_run(net, cfg, seed: int, policy: str, args) -> dict:
     ann, clock = Announcer(policy, args), ReplanClock()
     rate = args.per_hour * 30.0 / 3600.0
+    waits = DecisionWaits()
     t0 = time.perf_counter()
-    res = run_scenario(net, args.method, rate, seed, args.duration, cfg, observer=clock, before_epoch=ann)
+    try:
+        res = run_scenario(net, args.method, rate, seed, args.duration, cfg, observer=clock, before_epoch=ann)
+    finally:
+        waits.close()
     wall = time.perf_counter() - t0
     rows = res.replans
     for r in clock.updates:
@@ -119,7 +149,8 @@ def one_run(net, cfg, seed: int, policy: str, args) -> dict:
            "reach_delay_mean_s": float(np.mean([r["added_delay_s"] for r in reach])) if reach else float("nan"),
            "decision_s": rep.decision_time_s if rep else float("nan"),
            "decision_cpu_s": rep.decision_cpu_s if rep else float("nan"),
-           "stage2": rep.stage2 if rep else 0,
+           "stage2": rep.stage2 if rep else 0, "graphs_solved": rep.graphs_solved if rep else 0,
+           "decision_waits": waits.rows[0] if waits.rows else {},
            "solve_s": rep.solve_time_s if rep else float("nan"),
            "vertices": rep.vertices if rep else 0, "edges": rep.edges if rep else 0,
            "alternatives": rep.alternatives if rep else 0, "fallback": rep.fallback if rep else False,
@@ -157,6 +188,7 @@ def one_run(net, cfg, seed: int, policy: str, args) -> dict:
           f"affected {out['affected']} {out['by_class']} (all decided in the epoch: {handled}); "
           f"graph {out['alternatives']} alternatives, {out['vertices']} vertices, {out['edges']} edges; "
           f"decision {1e3 * out['decision_s']:.0f} ms wall, {1e3 * out['decision_cpu_s']:.0f} ms CPU "
+          f"(off CPU: {out['decision_waits']}) "
           f"(solve {1e3 * out['solve_s']:.0f} ms, {out['stage2']} flights with stage-2 alternatives, "
           f"fallback {out['fallback']}); reach destination {out['reach']}, saved {out['saved']}, "
           f"mean added delay {out['reach_delay_mean_s']:.1f} s; audit of what flew: {out['losses']} "

@@ -1,6 +1,7 @@
 """Re-planning through the node graph (issue 22 items 4 and 6): a constraint announced during the
 run (``announce_s`` in the planner's ``constraints_file``) re-plans the flights it affects at
-the epoch it is announced at, exactly as the in-process runner does; the new versions reach the
+the epoch it is announced at, exactly as the in-process runner does (its MWIS graphs solved
+through the solver service, as the epochs' are); the new versions reach the
 operator as FlightPlan messages naming the constraint, the simulator flies them from the instant
 they take effect, and the recording's independent audit of what flew finds no incursion."""
 
@@ -65,6 +66,9 @@ def test_graph_replans_as_the_runner_does_and_the_recording_audits_what_flew(ros
                                                   else FlightPlan.STATE_ACTIVATED)
     assert nodes["simulator"].fly_errors == 0
     assert nodes["simulator"].versions_received == len(graph_updates)
+    # the re-plan's MWIS went through the solver service (issue 22, third stop), not a local
+    # solve, and gave the runner's decisions (above)
+    assert nodes["planner"].replan_graphs_by_service >= 1
     # the recording: the set published when it took effect, every version, audited as flown
     from uam_sim.analysis import summarize
     s = summarize(out)

@@ -44,6 +44,11 @@ from pathlib import Path
 from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
+# shapely (GEOS) at import, i.e. at the planner's start-up: imported lazily it was loaded inside
+# the first re-planning decision after a restriction appeared, whose wall time it inflated
+# (0.47 s of wall against 0.04 s of CPU, measured at load 8; the files read cold from disk on a
+# fresh machine), issue 22's third stop; about 30 ms when cached
+import shapely  # noqa: F401
 
 from .geo import geodetic_to_enu
 

@@ -458,15 +458,20 @@ def default_solve_mwis(config: PlanningConfig) -> Callable:
 
 def replan_selector(solve_mwis: Callable, config: PlanningConfig, epoch_index: int = 0,
                     t_s: float = 0.0) -> Callable:
-    """The ``select(graph, policy)`` of ``uam_planner.replanning.replan``: policy "mwis" calls
-    ``solve_mwis`` (the answer checked, greedy if invalid or failed), "firstfit" walks the
+    """The ``select(graph, policy[, answer])`` of ``uam_planner.replanning.replan``: policy
+    "mwis" checks ``answer`` (the solver service's, sent by the planner node) or, without one,
+    calls ``solve_mwis`` (either checked, greedy if invalid or failed), "firstfit" walks the
     vertices (``uam_planner.first_fit``); returns (selected, an EpochReport with backend_used,
     fallback and fallback_reason)."""
-    def select(graph, policy):
+    from .replanning import SOLVE_HERE
+
+    def select(graph, policy, answer=SOLVE_HERE):
         rep = EpochReport(epoch_index=int(epoch_index), t_s=float(t_s), policy=policy,
                           backend_requested=config.backend if policy == "mwis" else "firstfit")
-        answer = first_fit_select(graph.weights, graph.edges) if policy == "firstfit" \
-            else call_solver(solve_mwis, graph)
+        if policy == "firstfit":
+            answer = first_fit_select(graph.weights, graph.edges)
+        elif answer is SOLVE_HERE:
+            answer = call_solver(solve_mwis, graph)
         return checked_selection(graph, answer, rep), rep
     return select
 
@@ -1062,14 +1067,15 @@ class Planner:
         policy and "firstfit" for the baselines."""
         return self.config.replan_policy or ("mwis" if self.policy == "mwis" else "firstfit")
 
-    def _apply_constraint_updates(self, t_s: float, epoch_index: int) -> None:
+    def _apply_constraint_updates(self, t_s: float, epoch_index: int):
         """The one place constraint updates take effect (issue 22): at the epoch at ``t_s``,
         after landed flights are dropped and before the epoch's requests are planned. Applies
         every queued update due by ``t_s`` and, if one added or changed a constraint,
-        re-plans the affected flights (``uam_planner.replanning.replan``) and replaces them in
-        ``active`` by their new versions (cancelled ones removed)."""
+        re-plans the affected flights (``uam_planner.replanning.replan_steps``) and replaces
+        them in ``active`` by their new versions (cancelled ones removed). A generator: it
+        yields the re-plan's MWIS graphs (see :meth:`prepare_steps`)."""
         from dataclasses import replace
-        from .replanning import apply_updates, replan
+        from .replanning import apply_updates, replan_steps
         self._plan_updates, self._replan_report = [], None
         due = [u for u in self._queued_updates if u.t_s <= t_s]
         if not due:
@@ -1086,11 +1092,10 @@ class Planner:
             self._replan_report = ReplanReport(t_s=float(t_s), policy=self.replan_policy(), updates=labels)
             return
         cfg = self.config
-        active, updates, report = replan(t_s, epoch_index, self.active, self._requests, self.network,
-                                         cfg, self.cache, cset,
-                                         replan_selector(self.solve_mwis, cfg, epoch_index, t_s),
-                                         lambda t, r: departure_slots_s(t, r, cfg),
-                                         self.replan_policy(), labels=labels)
+        active, updates, report = yield from replan_steps(
+            t_s, epoch_index, self.active, self._requests, self.network, cfg, self.cache, cset,
+            replan_selector(self.solve_mwis, cfg, epoch_index, t_s),
+            lambda t, r: departure_slots_s(t, r, cfg), self.replan_policy(), labels=labels)
         self.active = active
         self._plan_updates, self._replan_report = updates, report
 
@@ -1214,8 +1219,19 @@ class Planner:
         """Prepare the epoch at ``t_s`` [s] up to its conflict graph; finish with :meth:`commit`.
 
         Requests submitted between prepare and commit wait for the next epoch. One prepared
-        epoch at a time.
+        epoch at a time. The re-plan's graphs (step 2) are solved with ``solve_mwis`` here;
+        :meth:`prepare_steps` hands them to the caller instead.
         """
+        from .replanning import SOLVE_HERE, run_steps
+        return run_steps(self.prepare_steps(t_s, epoch_index), lambda _graph: SOLVE_HERE)
+
+    def prepare_steps(self, t_s: float, epoch_index: int):
+        """:meth:`prepare` as a generator: it yields each MWIS graph of step 2's batch re-plan
+        (``uam_planner.replanning.replan_steps``) and takes back the solver's answer for it
+        (``send``: the answer, a reason string, or ``replanning.SOLVE_HERE``); its return value
+        is the PreparedEpoch. The planner node awaits the solver service between the steps, as
+        it does for the epoch's own graph; the decisions are those of :meth:`prepare` given the
+        same answers."""
         if not math.isfinite(t_s):
             raise ValueError(f"t_s must be finite, got {t_s!r}")
         if self._prepared is not None:
@@ -1225,7 +1241,7 @@ class Planner:
         if self._requests:
             alive = {f.request_id for f in self.active}
             self._requests = {k: r for k, r in self._requests.items() if k in alive}
-        self._apply_constraint_updates(t_s, epoch_index)
+        yield from self._apply_constraint_updates(t_s, epoch_index)
         self._react_to_nonconformance(t_s, epoch_index)
         if self.policy == "mwis":
             prep = prepare_epoch_mwis(t_s, epoch_index, self.pending, self.active, self.network, self.config,

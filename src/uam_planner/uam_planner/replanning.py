@@ -134,6 +134,7 @@ class ReplanReport:
     kinds: dict = field(default_factory=dict)        # kind -> count
     decision_time_s: float = 0.0                     # wall, for reports only
     decision_cpu_s: float = 0.0                      # process CPU time, for reports only
+    graphs_solved: int = 0                           # MWIS / first-fit selections (1 + cascade rounds)
     solve_time_s: float = 0.0
     backend_used: str = ""
     fallback: bool = False
@@ -682,10 +683,44 @@ def _contingency_choice(options: tuple, active: Sequence, in_replan: set, fixed:
     return cands[k], holds[k], got, bool(n_fx[k])
 
 
+#: sent back for a graph :func:`replan_steps` yielded: "solve it here", with ``select``'s own
+#: solver (what :func:`replan` and the in-process runner do; the planner node sends the solver
+#: service's answer instead)
+SOLVE_HERE = object()
+
+
+def run_steps(steps, answer_for: Callable):
+    """Drive a generator that yields MWIS graphs (:func:`replan_steps`,
+    ``Planner.prepare_steps``): each yielded graph gets ``answer_for(graph)`` sent back; returns
+    the generator's return value."""
+    try:
+        graph = next(steps)
+        while True:
+            graph = steps.send(answer_for(graph))
+    except StopIteration as done:
+        return done.value
+
+
 def replan(t_eff: float, epoch_index: int, active: Sequence, requests: dict, network, config,
            cache, cset: ConstraintSet, select: Callable, departures: Callable, policy: str = "mwis",
            affected: dict | None = None, labels: Sequence[str] = ()) -> tuple[list, list, ReplanReport]:
+    """Re-plan the flights of ``active`` that the constraints ``cset`` affect, at ``t_eff``:
+    :func:`replan_steps` with every graph solved by ``select`` itself (see there)."""
+    return run_steps(replan_steps(t_eff, epoch_index, active, requests, network, config, cache, cset,
+                                  select, departures, policy, affected, labels), lambda _graph: SOLVE_HERE)
+
+
+def replan_steps(t_eff: float, epoch_index: int, active: Sequence, requests: dict, network, config,
+                 cache, cset: ConstraintSet, select: Callable, departures: Callable, policy: str = "mwis",
+                 affected: dict | None = None, labels: Sequence[str] = ()):
     """Re-plan the flights of ``active`` that the constraints ``cset`` affect, at ``t_eff``.
+
+    A generator: with policy "mwis" it yields each round's ConflictGraph (the first graph and
+    each cascade round's) and takes back the solver's answer for it (``send``: an answer with
+    ``selected``, a reason string or an exception, as ``planning.checked_selection`` takes them;
+    or :data:`SOLVE_HERE`), so the planner node awaits the solver service for the re-plan as it
+    does for an epoch (docs/replanning.md); first-fit yields nothing. The decisions do not
+    depend on who solved: the answer is checked (greedy if invalid) and the rounds follow it.
 
     Args:
         t_eff: the epoch time the update takes effect [s].
@@ -695,17 +730,19 @@ def replan(t_eff: float, epoch_index: int, active: Sequence, requests: dict, net
             missing here keeps only its own departure time as a re-time option).
         network, config, cache: the planner's Network, PlanningConfig and CandidateCache.
         cset: the ConstraintSet after the update.
-        select: callable(graph, policy) -> (selected vertex indices, an object with
+        select: callable(graph, policy[, answer]) -> (selected vertex indices, an object with
             ``backend_used``, ``fallback``, ``fallback_reason``): the checked MWIS or first-fit
-            answer (the Planner's: ``uam_planner.planning.replan_selector``).
+            answer, solved by its own solver or from ``answer`` when given (the Planner's:
+            ``uam_planner.planning.replan_selector``).
         departures: callable(t_s, request) -> departure times a request may take at an epoch at
             t_s (the Planner's ``departure_slots_s`` with its config).
         policy: "mwis" or "firstfit".
         affected: optional {index in active: (constraint index, entry time)} (default:
             :func:`affected_flights`).
         labels: the updates' labels, for the report.
-    Returns: (new active list: unaffected flights in their order, then the new versions;
-        PlanUpdate per affected flight in ``active`` order; ReplanReport).
+    Returns (as the generator's return value): (new active list: unaffected flights in their
+        order, then the new versions; PlanUpdate per affected flight in ``active`` order;
+        ReplanReport).
     """
     from .conflict_graph import build_conflict_graph
     from .separation import SegmentSet
@@ -800,7 +837,9 @@ def replan(t_eff: float, epoch_index: int, active: Sequence, requests: dict, net
         if graph.n_vertices == 0:
             selected = np.zeros(0, dtype=np.int64)
         else:
-            selected, er = select(graph, policy)
+            answer = (yield graph) if policy == "mwis" else SOLVE_HERE
+            selected, er = select(graph, policy) if answer is SOLVE_HERE else select(graph, policy, answer)
+            rep.graphs_solved += 1
             rep.backend_used = er.backend_used
             if er.fallback:  # any round's fallback is reported
                 rep.fallback, rep.fallback_reason = True, er.fallback_reason

@@ -192,15 +192,16 @@ def audit_plans(plans: list[Any], separation_m=SEPARATION_M,
 
 
 def sweep_audit(trajectories: Sequence, separation_m, labels: Sequence | None = None,
-                chunk_pairs: int = 4_000_000, max_listed: int = 20) -> dict:
+                chunk_pairs: int = 4_000_000, max_listed: int = 20, prune: bool = True) -> dict:
     """Exact minimum separation over every pair of flights, by a time sweep over segments, as the
     study's tables want it (a dict).
 
     The sweep is ``uam_planner.audit.sweep_audit`` (every pair of straight segments of different
     flights whose time intervals overlap, closest approach clamped to the overlap, in numpy,
-    chunked; no spatial pruning, so it does not depend on the planner's broad phase; its tests
-    hold it equal to the brute-force ``uam_planner.audit.audit_flights``). One implementation
-    for the sphere and the cylinder; this function only converts its result.
+    chunked; ``prune`` (default) checks only the pairs its own grid hash finds near each other,
+    with the same result, so nothing depends on the planner's broad phase; its tests hold it
+    equal to the full sweep and to the brute-force ``uam_planner.audit.audit_flights``). One
+    implementation for the sphere and the cylinder; this function only converts its result.
 
     Args:
         trajectories: objects with ``times_s`` (p,) and ``points_m`` (p, 3).
@@ -209,17 +210,29 @@ def sweep_audit(trajectories: Sequence, separation_m, labels: Sequence | None = 
             vertically closer than V).
         labels: names for the pairs (default: indices).
         chunk_pairs: segment pairs per numpy chunk (memory bound).
+        prune: False checks every time-overlapping segment pair (the slow reference).
     Returns: {"min_separation_m" (None if no two flights share time), "pair_of_min",
     "min_time_s", "losses" (count of flight pairs with a loss), "loss_pairs" (up to max_listed,
     closest first: label, label, distance_m, t_s), "pairs_checked" (flight pairs with a common
     time), "separation_model"} (+ "vertical_separation_m" for the cylinder).
     Complexity: O(S log S + P) for S segments and P time-overlapping segment pairs.
     """
-    from uam_planner.audit import sweep_audit as planner_sweep
+    return sweep_audits(trajectories, [separation_m], labels, chunk_pairs, max_listed, prune)[0]
+
+
+def sweep_audits(trajectories: Sequence, models: Sequence, labels: Sequence | None = None,
+                 chunk_pairs: int = 4_000_000, max_listed: int = 20, prune: bool = True) -> list[dict]:
+    """:func:`sweep_audit` in several separation models with one candidate search
+    (``uam_planner.audit.sweep_audits``), one dict per model."""
+    from uam_planner.audit import sweep_audits as planner_sweeps
 
     labels = list(labels) if labels is not None else list(range(len(trajectories)))
-    model = _model(separation_m)
-    res = planner_sweep(list(trajectories), model, labels=labels, chunk_pairs=chunk_pairs)
+    models = [_model(m) for m in models]
+    results = planner_sweeps(list(trajectories), models, labels=labels, chunk_pairs=chunk_pairs, prune=prune)
+    return [_as_dict(res, model, max_listed) for res, model in zip(results, models)]
+
+
+def _as_dict(res, model, max_listed: int) -> dict:
     extra = {"separation_model": model.kind}
     if model.kind == "cylinder":
         extra["vertical_separation_m"] = float(model.vertical_separation_m)

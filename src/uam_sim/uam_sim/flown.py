@@ -28,7 +28,7 @@ import numpy as np
 from uam_planner.separation import SeparationModel, as_separation_model
 from uam_planner.trajectory import Trajectory
 
-from .audit import sweep_audit
+from .audit import sweep_audit, sweep_audits
 
 OUTCOME_APPROVED = 0  # uam_msgs/FlightPlan.OUTCOME_APPROVED
 
@@ -58,7 +58,8 @@ def max_speed_mps(tracks: Iterable[Trajectory]) -> float:
     return best
 
 
-def flown_audit(tracks: Mapping[str, Trajectory], separation, sample_step_s: float | None = None) -> dict:
+def flown_audit(tracks: Mapping[str, Trajectory], separation, sample_step_s: float | None = None,
+                prune: bool = True) -> dict:
     """Losses of separation in what flew.
 
     Args:
@@ -67,6 +68,8 @@ def flown_audit(tracks: Mapping[str, Trajectory], separation, sample_step_s: flo
             planning buffer.
         sample_step_s: the largest time between two samples of a track; None = the tracks are
             the motion itself (no sampling error).
+        prune: False checks every time-overlapping pair of pieces (the slow reference; the
+            result is the same, ``uam_planner.audit.sweep_audits``).
     Returns: the :func:`uam_sim.audit.sweep_audit` dict of the interpolated tracks, plus
     ``what`` ("flown"), ``sampling_bound_m`` (the bound above, 0 without sampling),
     ``possible_losses`` (pairs closer than the minimum plus the bound) and ``max_speed_mps``.
@@ -74,24 +77,28 @@ def flown_audit(tracks: Mapping[str, Trajectory], separation, sample_step_s: flo
     model = as_separation_model(separation)
     ids = sorted(tracks)
     trajs = [tracks[i] for i in ids]
-    out = sweep_audit(trajs, model, labels=ids)
     vmax = max_speed_mps(trajs)
     bound = vmax * float(sample_step_s) if sample_step_s else 0.0
-    possible = out["losses"]
     if bound > 0 and trajs:
+        # one candidate search for both minima (uam_planner.audit.sweep_audits)
         wide = SeparationModel(model.kind, model.separation_m + bound, model.vertical_separation_m + bound)
-        possible = sweep_audit(trajs, wide, labels=ids)["losses"]
+        out, wide_out = sweep_audits(trajs, [model, wide], labels=ids, prune=prune)
+        possible = wide_out["losses"]
+    else:
+        out = sweep_audit(trajs, model, labels=ids, prune=prune)
+        possible = out["losses"]
     out.update({"what": "flown", "sampling_bound_m": bound, "possible_losses": possible,
                 "max_speed_mps": vmax})
     return out
 
 
-def recording_flown(path, separation, bounds=None, plans=None) -> dict:
+def recording_flown(path, separation, bounds=None, plans=None, prune: bool = True) -> dict:
     """What flew in a recording: the flown tracks from every ``uam/fleet_state`` (positions read
     straight from the CDR), their exact audit in the true minimum (:func:`flown_audit`, sampling
     step = the largest gap between fleet states), and the F3548 conformance of each flown track
     with its approved plan (``uam_sim.conformance``). ``plans``: the approved FlightPlan messages
     (else read from ``uam/flight_plans``); a vehicle flies the plan of its ``operator/request`` id.
+    ``prune``: as :func:`flown_audit` (False: the slow reference sweep, the same result).
     Returns {} when the recording holds no fleet positions."""
     from uam_contract import names
     from uam_contract.names import resolved
@@ -125,7 +132,7 @@ def recording_flown(path, separation, bounds=None, plans=None) -> dict:
     ts = np.array([s[0] for s in samples])
     step = float(np.max(np.diff(ts))) if ts.size > 1 else 0.0
     tracks = tracks_from_samples(samples)
-    out = flown_audit(tracks, separation, sample_step_s=step)
+    out = flown_audit(tracks, separation, sample_step_s=step, prune=prune)
     out["sample_step_s"] = step
     from uam_contract.wire import scoped_id
     approved = {}

@@ -20,7 +20,8 @@ to decide when to plan.
 
 The epoch protocol: the simulator asks to plan epoch k at time t, naming the requests the
 demand source released for it; the planner waits (asynchronously) until each has arrived or
-``request_wait_timeout_s`` passed, prepares the epoch (conflict graph), awaits the solver service
+``request_wait_timeout_s`` passed, prepares the epoch (conflict graph; the batch re-plan of a
+constraint update first, its MWIS graphs through the solver service too), awaits the solver service
 (asynchronously; ``time_limit_s + solver_timeout_margin_s`` at most), commits the checked answer
 (the planning library is the one place that checks it and falls back to greedy) and answers with
 the epoch's plans and report. Asking again for the last epoch returns its outcome, for the epoch
@@ -152,6 +153,10 @@ class PlannerNode(Node):
 
         self._taken: set[str] = set()            # scoped ids decided or waiting: a reuse is a duplicate
         self._held: list | None = []             # requests that came before the first epoch call
+        # requests that came while an epoch's prepare awaited the solver service for its re-plan
+        # (Planner.prepare_steps): decided once the prepare is done, as if they came after it
+        self._deferred: list | None = None
+        self.replan_graphs_by_service = 0        # re-plan graphs solved through uam/solve_mwis
         self._waiting_per_operator: collections.Counter = collections.Counter()
         self._established: set[str] = set()      # operators with a request accepted before this epoch
         self._new_operators: set[str] = set()    # operators first accepted since the last epoch
@@ -324,6 +329,9 @@ class PlannerNode(Node):
             self.requests_received += 1
             if self._held is not None:  # the simulation time is not known yet: decided at the first epoch
                 self._held.append(msg)
+                return
+            if self._deferred is not None:  # an epoch's prepare awaits the solver: decided after it
+                self._deferred.append(msg)
                 return
             key = self._decide(msg)
             if key is not None:
@@ -573,10 +581,7 @@ class PlannerNode(Node):
         if missing:
             self.get_logger().warning(f"epoch {k}: planning without {len(missing)} expected request(s) that did "
                                       f"not arrive within {self.p['request_wait_timeout_s']:g} s: {missing[:5]}")
-        with self._lock:
-            self._read_inbox()   # issue 23: the fleet states and conformance reports received so far
-            prep = self.planner.prepare(t_s, k)   # applies the constraint updates due (docs/replanning.md)
-            self._publish_constraint_changes(t_s)
+        prep = await self._prepare(t_s, k)
         t0 = time.perf_counter()
         answer = await self._solve(prep.graph) if prep.needs_solver else None
         solve_s = time.perf_counter() - t0
@@ -629,6 +634,43 @@ class PlannerNode(Node):
             response.missing_request_ids = missing
             self._last = (k, response)
         return response
+
+    async def _prepare(self, t_s: float, k: int):
+        """``Planner.prepare`` with its batch re-plan's MWIS graphs (the constraint updates due,
+        docs/replanning.md) solved through the solver service, awaited as the epoch's own graph
+        is, so ``backend`` and the solver node's deadlines apply to them too. The lock is held
+        while the planner computes, not while it awaits; requests arriving meanwhile are decided
+        after the prepare (they wait for the next epoch, as in the in-process runner)."""
+        prep = graph = None
+        with self._lock:
+            self._read_inbox()   # issue 23: the fleet states and conformance reports received so far
+            steps = self.planner.prepare_steps(t_s, k)
+            self._deferred = []
+        try:
+            with self._lock:
+                try:
+                    graph = next(steps)
+                except StopIteration as done:
+                    prep = done.value
+            while prep is None:
+                answer = await self._solve(graph)
+                if self.p["use_solver_service"] and not isinstance(answer, (str, BaseException)):
+                    self.replan_graphs_by_service += 1
+                with self._lock:
+                    try:
+                        graph = steps.send(answer)
+                    except StopIteration as done:
+                        prep = done.value
+        finally:
+            with self._lock:
+                deferred, self._deferred = self._deferred or [], None
+                for msg in deferred:
+                    key = self._decide(msg)
+                    if key is not None:
+                        self._arrived(key)
+        with self._lock:
+            self._publish_constraint_changes(t_s)
+        return prep
 
     async def _solve(self, graph):
         """The solver's answer for ``graph``, or why there is none (the commit then falls back)."""
