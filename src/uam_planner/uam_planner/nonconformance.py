@@ -51,8 +51,8 @@ t_eff is what flew; the simulator flies the new version from the aircraft's stat
 
 from __future__ import annotations
 
+import bisect
 import math
-from collections import deque
 from dataclasses import dataclass, replace
 from typing import Callable, Sequence
 
@@ -144,12 +144,24 @@ class Observation:
     position_m: tuple
 
 
+#: observations kept per vehicle at most (a flood of forged fleet states cannot grow the book
+#: without bound; at the simulator's 1 s step the window holds about 120)
+MAX_OBSERVATIONS = 1024
+
+
 class PositionBook:
     """The planner's own observations of the airborne vehicles (from the fleet state), per
-    request id: the last ``SPEED_WINDOW_S`` seconds, in time order."""
+    request id, in time order. Observations are pruned to the last ``SPEED_WINDOW_S`` seconds
+    before the planner's epoch time (:meth:`prune`), not before the newest observation, and
+    every reader takes an ``until`` time: an observation stamped after the epoch (a forged or
+    a clock-skewed one) is not used before its time and cannot push the real ones out."""
 
     def __init__(self):
-        self._obs: dict[str, deque] = {}
+        self._obs: dict[str, list] = {}
+
+    def __len__(self) -> int:
+        """The number of vehicles with observations."""
+        return len(self._obs)
 
     def observe(self, request_id: str, t_s: float, position_m) -> str | None:
         """Record one observation; return None, or why it was refused (naming the field)."""
@@ -161,17 +173,41 @@ class PositionBook:
         p = np.asarray(position_m, dtype=np.float64).reshape(-1)
         if p.shape != (3,) or not np.isfinite(p).all():
             return f"position_m: {position_m!r} is not three finite numbers"
-        q = self._obs.setdefault(request_id, deque())
-        if q and t_s <= q[-1].t_s:
-            return None  # a repeated or late sample: the newest is kept
-        q.append(Observation(float(t_s), tuple(float(x) for x in p)))
-        while q and q[0].t_s < t_s - SPEED_WINDOW_S:
-            q.popleft()
+        q = self._obs.setdefault(request_id, [])
+        t = float(t_s)
+        if q and t <= q[-1].t_s:
+            i = bisect.bisect_left(q, t, key=lambda o: o.t_s)
+            if i < len(q) and q[i].t_s == t:
+                return None  # a repeated sample: the first one is kept
+            q.insert(i, Observation(t, tuple(float(x) for x in p)))
+        else:
+            q.append(Observation(t, tuple(float(x) for x in p)))
+        if len(q) > MAX_OBSERVATIONS:
+            del q[0]
         return None
 
-    def latest(self, request_id: str) -> Observation | None:
-        q = self._obs.get(request_id)
+    def prune(self, t_s: float) -> None:
+        """Drop the observations older than ``SPEED_WINDOW_S`` before the epoch at ``t_s``."""
+        lo = float(t_s) - SPEED_WINDOW_S
+        for q in self._obs.values():
+            if q and q[0].t_s < lo:
+                del q[:bisect.bisect_left(q, lo, key=lambda o: o.t_s)]
+
+    def _upto(self, request_id: str, until: float | None) -> list:
+        q = self._obs.get(request_id) or []
+        if until is None or not q or q[-1].t_s <= until + _EPS_T:
+            return q
+        return q[:bisect.bisect_right(q, until + _EPS_T, key=lambda o: o.t_s)]
+
+    def latest(self, request_id: str, until: float | None = None) -> Observation | None:
+        """The newest observation of ``request_id`` (stamped at or before ``until``)."""
+        q = self._upto(request_id, until)
         return q[-1] if q else None
+
+    def observations(self, request_id: str, since: float, until: float) -> list:
+        """The observations of ``request_id`` stamped in [since, until], in time order."""
+        q = self._upto(request_id, until)
+        return q[bisect.bisect_left(q, float(since), key=lambda o: o.t_s):]
 
     def forget(self, keep_ids) -> None:
         """Drop every vehicle not in ``keep_ids`` (landed flights)."""
@@ -179,12 +215,13 @@ class PositionBook:
         for k in [k for k in self._obs if k not in keep]:
             del self._obs[k]
 
-    def progress_rate(self, request_id: str, plan: Trajectory) -> float:
+    def progress_rate(self, request_id: str, plan: Trajectory, until: float | None = None) -> float:
         """The observed progress rate along ``plan``: planned seconds covered per second, from
         the oldest observation of the window to the newest (the planned time of each one's
         nearest path point), or, with less than ``MIN_SPEED_SPAN_S`` of observations, from the
-        plan's departure to the newest; 1 without observations; clipped to ``RATE_RANGE``."""
-        q = self._obs.get(request_id)
+        plan's departure to the newest; 1 without observations; clipped to ``RATE_RANGE``.
+        Only observations stamped at or before ``until`` count."""
+        q = self._upto(request_id, until)
         if not q:
             return 1.0
         last = q[-1]
@@ -303,7 +340,7 @@ def _least_conflicting(alts: list, others: list, config, t_eff: float):
 
 
 def react(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: PositionBook,
-          config, select: Callable, policy: str, network=None) -> tuple[list, list, dict]:
+          config, select: Callable, policy: str, network=None, fixed: Sequence = ()) -> tuple[list, list, dict]:
     """Update the intents of the nonconforming flights ``found`` at the epoch ``t_eff``.
 
     Args:
@@ -317,6 +354,8 @@ def react(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: P
             ``constraints``: alternatives that enter one are dropped).
         select: callable(graph, policy) -> (selected, report), ``planning.replan_selector``.
         policy: "mwis" or "firstfit".
+        fixed: more trajectories every update is deconflicted against (the overruns of other
+            flights, :func:`overruns`).
     Returns: (new active list: the others in their order, then the new versions; PlanUpdate per
     flight in ``active`` order; a report dict: flights, alternatives, vertices, edges, kinds).
     """
@@ -330,13 +369,14 @@ def react(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: P
     if not idx:
         return list(active), [], report
     others = [f for j, f in enumerate(active) if j not in found]
-    act = SegmentSet.from_trajectories([f.trajectory for f in others])
+    fixed = list(fixed)
+    act = SegmentSet.from_trajectories([f.trajectory for f in others] + fixed)
     act = act.take(act.t1_s >= t_eff) if len(act) else act
     per, rates = [], []
     for i in idx:
         f = active[i]
         obs = found[i][0]
-        rate = book.progress_rate(f.request_id, f.trajectory)
+        rate = book.progress_rate(f.request_id, f.trajectory, until=t_eff)
         rates.append(rate)
         report["rates"][f.request_id] = rate
         alts = []
@@ -386,7 +426,7 @@ def react(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: P
         if a is None:
             if not per[r]:
                 continue  # nothing left to fly: it is at its plan's end (it keeps its plan)
-            a = _least_conflicting(per[r], [f.trajectory for f in others] +
+            a = _least_conflicting(per[r], [f.trajectory for f in others] + fixed +
                                    [x.trajectory for x in new_versions], config, t_eff)
             kind = KIND_CONTINGENCY
             reason = (f"contingency: {what}; each of its {len(per[r])} updated intents loses "
@@ -405,3 +445,101 @@ def react(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: P
     replaced = {u.request_id for u in updates}
     keep = [f for j, f in enumerate(active) if j not in found or active[j].request_id not in replaced]
     return keep + new_versions, updates, report
+
+
+# ---- flights that fly past their plan (issue 23: the safety gap) -----------------------------
+#
+# A plan ends at its planned arrival; an aircraft that is late is still in the air then. The
+# planner used to drop a flight from its traffic picture at the planned arrival whatever it saw,
+# so new approvals could be planned into a late aircraft still flying. Now every epoch the
+# planner projects, from each of its own observations of a flight (the fleet state; never a
+# report), where the rest of the flight goes if it keeps its observed pace: the rest of its plan
+# from the observed position at min(1, observed progress rate) times the planned speed
+# (:func:`overrun_trajectory`; an aircraft that is late but faster than planned is taken at the
+# planned speed). When that projection lands later than the plan, the flight is *held*: the
+# projection (an :class:`Overrun`) is deconflicted against like an active flight, beside the plan
+# itself, until the projection has landed, even after the plan's arrival.
+#
+# What cannot make the planner forget a flight early: the plan is never dropped before its
+# planned arrival (as before); an overrun is never shortened by a later observation of the same
+# plan version (of the projections of every observation seen, the one that lands latest is kept:
+# a forged "on time" or "landed" fleet state cannot cancel a real late one), and the absence of
+# a vehicle from the fleet state (it landed, or it vanished) changes nothing (the projection from
+# its last sighting stands, and lands). What bounds it: a projection is cut at the plan's arrival
+# plus MAX_OVERRUN_SHARE of its planned flight time (the slowest progress rate the planner
+# believes, RATE_RANGE[0]), so forged observations cannot hold a flight for ever. Without
+# observations (the paper's mode in process, or a flight flying its plan exactly) nothing is held:
+# the results are the same bit for bit.
+
+#: a projection that lands at most this much after the plan's arrival holds nothing [s]
+#: (rounding: an aircraft flying its plan exactly projects onto its own plan)
+OVERRUN_TOLERANCE_S = 1e-3
+#: an overrun is cut at the plan's arrival plus this share of its planned flight time
+MAX_OVERRUN_SHARE = 1.0 / RATE_RANGE[0] - 1.0
+
+
+@dataclass(frozen=True, eq=False)
+class Overrun:
+    """A flight held past its plan: ``plan`` (its newest version, the one projected from),
+    ``flight`` (that plan's Flight with the projection as trajectory, the one deconflicted
+    against), ``observed_s`` (the observation the projection starts from) and ``cap_s`` (the
+    latest it may be held to)."""
+
+    request_id: str
+    plan: object
+    flight: object
+    observed_s: float
+    cap_s: float
+
+
+def overrun_trajectory(plan: Trajectory, obs: Observation, rate: float, cap_s: float) -> Trajectory | None:
+    """Where a flight seen at ``obs`` goes if it keeps its pace: the rest of ``plan`` from the
+    observed position (:func:`rejoin_trajectory`) at min(1, ``rate``) times the planned speed,
+    cut at ``cap_s``. None if nothing is left."""
+    tr = rejoin_trajectory(plan, obs.t_s, obs.position_m, min(1.0, float(rate)))
+    if tr is None or tr.arrival_s <= cap_s:
+        return tr
+    ts, ps = tr.times_s, tr.points_m
+    if cap_s <= ts[0]:
+        return None
+    keep = ts < cap_s
+    return Trajectory(np.append(ts[keep], cap_s), np.vstack((ps[keep], tr.position_at(cap_s))))
+
+
+def overruns(t_s: float, plans: dict, book: PositionBook, previous: dict) -> dict:
+    """The flights held past their plans at the epoch ``t_s``: request id -> :class:`Overrun`.
+
+    Args:
+        plans: request id -> the newest Flight of every flight the planner still holds (the
+            active ones and those already held).
+        book: the planner's own observations; those stamped in [plan departure, ``t_s``] count.
+        previous: the result of the last epoch (an overrun of the same plan version is only
+            ever replaced by one that lands later).
+    """
+    out = {}
+    for rid, f in plans.items():
+        prev = previous.get(rid)
+        if prev is not None and prev.plan is not f:
+            prev = None  # a new version (a re-plan from where it is): projected afresh
+        plan = f.trajectory
+        obs = book.observations(rid, plan.departure_s, t_s)
+        best = prev
+        if obs:
+            cap = float(f.arrival_s) + MAX_OVERRUN_SHARE * max(0.0, float(f.arrival_s) - float(f.departure_s))
+            rate = min(1.0, book.progress_rate(rid, plan, until=t_s))
+            # the landing each observation projects, to pick the latest (the rest of the plan from
+            # the nearest point at ``rate``; the rejoin's first leg is built for the chosen one)
+            _j, _l, _p, tau = nearest(plan, np.array([o.position_m for o in obs]))
+            land = np.array([o.t_s for o in obs]) + (float(plan.arrival_s) - tau) / rate
+            k = int(np.argmax(land))
+            if land[k] > float(f.arrival_s) + OVERRUN_TOLERANCE_S and \
+                    (best is None or land[k] > best.flight.arrival_s + OVERRUN_TOLERANCE_S):
+                tr = overrun_trajectory(plan, obs[k], rate, cap)
+                if tr is not None and tr.arrival_s > float(f.arrival_s) + OVERRUN_TOLERANCE_S and \
+                        (best is None or tr.arrival_s > best.flight.arrival_s):
+                    best = Overrun(rid, f, replace(f, trajectory=tr, departure_s=float(tr.departure_s),
+                                                   arrival_s=float(tr.arrival_s)),
+                                   float(obs[k].t_s), cap)
+        if best is not None:
+            out[rid] = best
+    return out

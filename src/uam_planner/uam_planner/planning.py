@@ -68,7 +68,7 @@ from .first_fit import as_firstfit, first_fit_select
 from .objectives import (BASELINE_ORDERS, OperatorShares, check_objective, check_priority,
                          epoch_weights, operator_of, order_requests)
 from .trajectory import Trajectory
-from .nonconformance import Claim, ConformanceBounds, PositionBook, react, verify
+from .nonconformance import Claim, ConformanceBounds, PositionBook, overruns, react, verify
 
 POLICIES = ("mwis", "fifo", "firstfit")  # firstfit: uam_planner.first_fit
 REPLAN_POLICIES = ("mwis", "firstfit")  # uam_planner.replanning
@@ -351,6 +351,10 @@ class EpochReport:
     #: the reaction to nonconforming flights of this epoch (``uam_planner.nonconformance.react``'s
     #: report dict, plus ``refused``: [(request_id, reason)] of the claims not acted on), or None
     nonconformance: object = None
+    #: the flights held past their plans at this epoch (issue 23: seen later than planned by the
+    #: planner's own observations): request id -> until when [s] (uam_planner.nonconformance
+    #: .overruns); empty when none
+    overruns: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -966,6 +970,9 @@ class Planner:
         self.positions = PositionBook()
         self._claims: list = []
         self._nonconformance_report = None
+        # flights held past their plans (issue 23, the safety gap; uam_planner.nonconformance
+        # .overruns): request id -> Overrun, deconflicted against until its projection lands
+        self.overruns: dict = {}
 
     @property
     def config(self) -> PlanningConfig:
@@ -1124,7 +1131,6 @@ class Planner:
         due by ``t_s`` that the planner's own view confirms get their intents updated from where
         the flights are (``uam_planner.nonconformance.react``), deconflicted in one batch."""
         self._nonconformance_report = None
-        self.positions.forget(f.request_id for f in self.active)
         due = [c for c in self._claims if c.t_s <= t_s]
         if not due or self.config.conformance is None:
             return
@@ -1136,16 +1142,21 @@ class Planner:
             if i is None:
                 refused.append((c.request_id, f"request_id: {c.request_id!r} is no longer active"))
                 continue
-            got, why = verify(self.active[i], self.positions.latest(c.request_id),
-                              self.config.conformance, t_s)
+            obs = self.positions.latest(c.request_id, until=t_s)
+            got, why = verify(self.active[i], obs, self.config.conformance, t_s)
             if got is None:
                 refused.append((c.request_id, why))
                 continue
-            found[i] = (self.positions.latest(c.request_id), got)
+            found[i] = (obs, got)
         cfg = self.config
+        mine = {self.active[i].request_id for i in found}
         active, updates, rep_ = react(t_s, epoch_index, self.active, found, self.positions, cfg,
                                       replan_selector(self.solve_mwis, cfg, epoch_index, t_s),
-                                      self.replan_policy(), self.network)
+                                      self.replan_policy(), self.network,
+                                      fixed=[o.flight.trajectory for k, o in self.overruns.items()
+                                             if k not in mine])
+        for u in updates:   # the new version is drawn from where it is: its overrun is redrawn
+            self.overruns.pop(u.request_id, None)
         rep_["refused"] = refused
         self.active = active
         self._plan_updates = list(self._plan_updates) + list(updates)
@@ -1220,6 +1231,7 @@ class Planner:
             raise ValueError(f"t_s must be finite, got {t_s!r}")
         if self._prepared is not None:
             raise RuntimeError(f"epoch {self._prepared.epoch_index} is prepared but not committed")
+        self._hold_overruns(t_s)
         self.active = [f for f in self.active if f.arrival_s >= t_s]
         self.shares.advance(t_s)
         if self._requests:
@@ -1227,12 +1239,16 @@ class Planner:
             self._requests = {k: r for k, r in self._requests.items() if k in alive}
         self._apply_constraint_updates(t_s, epoch_index)
         self._react_to_nonconformance(t_s, epoch_index)
+        # the traffic new requests are deconflicted against: the held flights' projections
+        # (first, so the active flights' segment index stays incremental) and the active flights
+        held = [o.flight for o in self.overruns.values()]
+        traffic = held + self.active if held else self.active
         if self.policy == "mwis":
-            prep = prepare_epoch_mwis(t_s, epoch_index, self.pending, self.active, self.network, self.config,
+            prep = prepare_epoch_mwis(t_s, epoch_index, self.pending, traffic, self.network, self.config,
                                       self.cache, self.active_index, self.shares,
                                       pair_cache=self.pair_cache)
         else:
-            args = (t_s, epoch_index, self.pending, self.active, self.network, self.config)
+            args = (t_s, epoch_index, self.pending, traffic, self.network, self.config)
             res = plan_epoch_fifo(*args, None, self.cache, self.active_index, self.shares) \
                 if self.policy == "fifo" else \
                 as_firstfit(plan_epoch_mwis(*args, first_fit_select, self.cache, self.active_index,
@@ -1240,8 +1256,30 @@ class Planner:
                                             horizon=1))  # uam_planner.first_fit; myopic
             prep = PreparedEpoch(t_s=float(t_s), epoch_index=int(epoch_index), pending=list(self.pending),
                                  report=res.report, result=res)
+        if held:
+            # a held flight still before its planned arrival is counted once (its plan is active)
+            twice = sum(1 for f in self.active if f.request_id in self.overruns)
+            prep.airborne_count -= twice
+            if prep.result is not None:
+                prep.result.report.active_flights -= twice
+            prep.report.overruns = {k: float(o.flight.arrival_s) for k, o in self.overruns.items()}
         self._prepared = prep
         return prep
+
+    def _hold_overruns(self, t_s: float) -> None:
+        """Step 1 of ``prepare``, before flights past their planned arrival are dropped: from
+        the planner's own observations, the flights that fly past their plans and how long they
+        are held (:func:`uam_planner.nonconformance.overruns`; docs/disturbances.md 2c). Then
+        the held flights whose projection has landed by ``t_s`` are let go, and observations of
+        flights the planner no longer holds are forgotten."""
+        plans = {o.request_id: o.plan for o in self.overruns.values()}
+        plans.update((f.request_id, f) for f in self.active)
+        self.positions.prune(t_s)
+        if self.overruns or self.positions:
+            self.overruns = {k: o for k, o in overruns(t_s, plans, self.positions, self.overruns).items()
+                             if o.flight.arrival_s >= t_s}
+        self.positions.forget(set(f.request_id for f in self.active if f.arrival_s >= t_s) |
+                              set(self.overruns))
 
     def commit(self, prep: PreparedEpoch, answer=None, solve_s: float = 0.0) -> EpochResult:
         """Commit a prepared epoch with the solver's ``answer`` (checked here, greedy fallback)

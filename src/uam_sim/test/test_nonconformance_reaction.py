@@ -9,8 +9,8 @@ import pytest
 
 from uam_planner.audit import audit_flights
 from uam_planner.network import network_from_enu
-from uam_planner.nonconformance import KIND, ConformanceBounds, rejoin_trajectory
-from uam_planner.planning import Flight, Planner, PlanningConfig
+from uam_planner.nonconformance import KIND, MAX_OVERRUN_SHARE, ConformanceBounds, rejoin_trajectory
+from uam_planner.planning import Flight, FlightRequest, Planner, PlanningConfig
 from uam_planner.trajectory import Trajectory
 from uam_sim.conformance import track_conformance
 from uam_sim.disturbance import DisturbanceConfig, FlightDraws, fly
@@ -178,3 +178,87 @@ def test_the_runner_reacts_and_off_is_todays_run():
     pairs = on.audit["loss_pairs"]
     assert len(pairs) == min(on.summary["losses"], 20)
     assert all(a in contingent or b in contingent for a, b, _d, _t in pairs)
+
+
+# ---- flights that fly past their plan (issue 23, the safety gap; uam_planner.nonconformance
+# .overruns, docs/disturbances.md 2c): held in the planner's traffic picture, by hand ---------
+#: P (W at 0 s, E at 600 s) in a 1 m/s head wind: 9 m/s over the ground, x = 9 t, lands at
+#: 6000 / 9 = 666.67 s, 66.7 s after its planned arrival
+LATE = fly(P.trajectory, FlightDraws(), HEAD_WIND)
+LANDS = 6000.0 / 9.0
+#: R leaves E for W (the only route: E - m - W, against P's last leg) as soon as it can
+R = FlightRequest("R", "E", "W", 630.0, 630.0, 700.0)
+
+
+def seen_planner(observe_until=None, flown=LATE):
+    """A planner holding P (no reaction: the default configuration), that has seen P in the
+    fleet state every 10 s up to ``observe_until`` (None: never)."""
+    p = Planner(cross(), PlanningConfig(), "mwis", solve_mwis=None)
+    p.restore([P])
+    if observe_until is not None:
+        observe_every_10_s(p, 10.0, observe_until, flown)
+    return p
+
+
+def observe_every_10_s(p, t0, t1, flown=LATE):
+    t = t0
+    while t <= t1 + 1e-9:
+        if flown.departure_s <= t < flown.arrival_s:      # the fleet state holds airborne vehicles
+            assert p.observe("P", t, flown.position_at(t)) is None
+        t += 10.0
+
+
+def test_a_late_flight_is_held_past_its_planned_arrival_and_nothing_is_approved_into_it():
+    assert LATE.arrival_s == pytest.approx(LANDS, abs=1.0)
+    # the gap: a planner that does not see the fleet forgets P at its planned arrival (600 s)
+    # and sends R head-on into it (P at 5670 m, R from 6000 m at 630 s: they meet at 19 t =
+    # 12300, t = 647.4 s)
+    blind = seen_planner()
+    blind.submit(R)
+    (r,) = blind.plan(630.0, 21).approved
+    assert len(audit_flights([r.trajectory, LATE], separation_m=100.0).losses) == 1
+
+    p = seen_planner(observe_until=630.0)
+    p.submit(R)
+    res = p.plan(630.0, 21)
+    # seen at 630 s at 5670 m: planned time 567 s, progress (567 - 459) / 120 = 0.9 over the
+    # 120 s window; the rest of the plan at 0.9 x 10 m/s lands at 630 + 330 / 9 = 666.67 s
+    assert res.approved == [] and res.waiting == [R]
+    assert res.report.overruns == {"P": pytest.approx(LANDS)}
+    assert res.report.active_flights == 1 and [f.request_id for f in p.active] == []
+    # 660 s: seen at 5940 m, still flying; R would leave E with P 60 m away: it waits
+    observe_every_10_s(p, 640.0, 660.0)
+    res = p.plan(660.0, 22)
+    assert res.approved == [] and res.report.overruns == {"P": pytest.approx(LANDS)}
+    # 690 s: P landed at 666.67 s (no fleet state shows it any more); R goes, clear of it
+    observe_every_10_s(p, 670.0, 690.0)
+    res = p.plan(690.0, 23)
+    (r,) = res.approved
+    assert r.departure_s == 690.0 and res.report.overruns == {} and p.overruns == {}
+    assert audit_flights([r.trajectory, LATE], separation_m=100.0).losses == []
+
+
+def test_a_flight_seen_on_its_plan_holds_nothing_and_changes_nothing():
+    # P flown exactly (no wind), seen every 10 s: it projects onto its own plan, nothing is
+    # held, and R is approved at 630 s as by the planner that sees nothing (bit for bit)
+    exact = fly(P.trajectory, FlightDraws(), type(HEAD_WIND)())
+    seen, blind = seen_planner(observe_until=630.0, flown=exact), seen_planner()
+    out = []
+    for p in (seen, blind):
+        p.submit(R)
+        res = p.plan(630.0, 21)
+        assert res.report.overruns == {} and p.overruns == {}
+        (r,) = res.approved
+        out.append((r.departure_s, r.trajectory.times_s.tobytes(), r.trajectory.points_m.tobytes()))
+    assert out[0] == out[1]
+
+
+def test_a_vehicle_that_vanishes_is_held_only_until_its_last_sighting_lands():
+    # seen up to 630 s (5670 m), then never again (it vanished from the fleet state): held until
+    # the projection from its last sighting lands, 666.67 s, then let go; the bound
+    # MAX_OVERRUN_SHARE x 600 s after the planned arrival is never reached
+    p = seen_planner(observe_until=630.0)
+    assert p.plan(630.0, 21).report.overruns == {"P": pytest.approx(LANDS)}
+    assert p.plan(660.0, 22).report.overruns == {"P": pytest.approx(LANDS)}
+    assert p.plan(690.0, 23).report.overruns == {}
+    assert 600.0 + MAX_OVERRUN_SHARE * 600.0 > LANDS
