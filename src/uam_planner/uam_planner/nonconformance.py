@@ -474,6 +474,7 @@ def react(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: P
 #: a projection that lands at most this much after the plan's arrival holds nothing [s]
 #: (rounding: an aircraft flying its plan exactly projects onto its own plan)
 OVERRUN_TOLERANCE_S = 1e-3
+OVERRUN_PACE = "observed"
 #: an overrun is cut at the plan's arrival plus this share of its planned flight time
 MAX_OVERRUN_SHARE = 1.0 / RATE_RANGE[0] - 1.0
 
@@ -526,7 +527,7 @@ def overruns(t_s: float, plans: dict, book: PositionBook, previous: dict) -> dic
         best = prev
         if obs:
             cap = float(f.arrival_s) + MAX_OVERRUN_SHARE * max(0.0, float(f.arrival_s) - float(f.departure_s))
-            rate = min(1.0, book.progress_rate(rid, plan, until=t_s))
+            rate = min(1.0, book.progress_rate(rid, plan, until=t_s)) if OVERRUN_PACE == "observed" else 1.0
             # the landing each observation projects, to pick the latest (the rest of the plan from
             # the nearest point at ``rate``; the rejoin's first leg is built for the chosen one)
             _j, _l, _p, tau = nearest(plan, np.array([o.position_m for o in obs]))

@@ -39,7 +39,7 @@ DEFAULT_NETWORK = {"synthetic": {"n_nodes": 400, "n_aerodromes": 30, "seed": 1}}
 COLUMNS = ("speed_error", "spatial_buffer_m", "temporal_buffer_s", "reaction", "runs", "requests", "flights",
            "approval_rate", "conformance_percent", "excursions_per_flight_hour", "longest_excursion_s",
            "nonconforming_flights", "replans", "flown_losses", "flown_min_separation_m",
-           "planned_losses", "nonconforming_updates", "reaction_contingencies")
+           "planned_losses", "nonconforming_updates", "reaction_contingencies", "held_past_plan")
 
 
 def _num_list(text: str) -> list[float]:
@@ -108,7 +108,10 @@ def aggregate(point: tuple, cells: list[dict]) -> dict:
             "flown_min_separation_m": min(mins) if mins else None,
             "planned_losses": sum(x["losses"] or 0 for x in s),
             "nonconforming_updates": sum(x.get("nonconforming_updates", 0) for x in s),
-            "reaction_contingencies": sum(x.get("reaction_contingencies", 0) for x in s)}
+            "reaction_contingencies": sum(x.get("reaction_contingencies", 0) for x in s),
+            # flights the planner held past their plans (issue 23's safety gap; 0 in cells run
+            # before it)
+            "held_past_plan": sum(x.get("held_past_plan", 0) for x in s)}
 
 
 def run(args) -> list[dict]:

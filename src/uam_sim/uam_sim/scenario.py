@@ -187,9 +187,12 @@ class _Reaction:
 
     OBSERVE_BACK_S = (20.0, 10.0, 0.0)
 
-    def __init__(self, planner, dcfg, wind, bounds, epoch_s: float):
+    def __init__(self, planner, dcfg, wind, bounds, epoch_s: float, report: bool = True):
         self.planner, self.dcfg, self.wind, self.bounds = planner, dcfg, wind, bounds
         self.epoch_s = float(epoch_s)
+        #: False: only the observations (the fleet state the planner sees, so it holds a late
+        #: flight past its plan: issue 23's safety gap), no conformance reports (reaction off)
+        self.report = bool(report)
 
     def before_epoch(self, t: float, rows) -> None:
         from .conformance import conforming, deviations
@@ -202,6 +205,8 @@ class _Reaction:
                 tb = t - back
                 if fl.departure_s <= tb:
                     self.planner.observe(rid, tb, fl.position_at(tb))
+            if not self.report:
+                continue
             ts, ps = fl.times_s, fl.points_m
             sel = (ts > t - self.epoch_s) & (ts <= t)
             if not sel.any():
@@ -346,6 +351,10 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
         wind = WindField(dcfg)
     reaction = _Reaction(planner, dcfg, wind, cfg.conformance_bounds(), cfg.epoch_s) \
         if disturbed and cfg.reaction else None
+    # what flies is not the plan: the planner sees the fleet (as the node sees /uam/fleet_state),
+    # so it holds a flight that flies past its plan (issue 23, the safety gap)
+    watch = reaction if reaction is not None else \
+        _Reaction(planner, dcfg, wind, cfg.conformance_bounds(), cfg.epoch_s, report=False) if disturbed else None
     n_epochs = int(math.ceil(duration_s / cfg.epoch_s - 1e-9))
     next_interval = 0
     epochs, flights, instances, rejections, replans = [], [], [], [], []
@@ -354,6 +363,7 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
     earliest_s: dict = {}
     latest_s: dict = {}
     asked = []  # every request submitted, for the decision metrics
+    held_ids: set = set()  # flights the planner held past their plans (issue 23)
     for e in range(n_epochs):
         t = e * cfg.epoch_s
         # every demand instant up to t, in time order (equal spacing when interval_s == epoch_s)
@@ -375,9 +385,10 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
             next_interval += 1
         if before_epoch is not None:
             before_epoch(planner, t, e)
-        if reaction is not None:
-            reaction.before_epoch(t, flights)
+        if watch is not None:
+            watch.before_epoch(t, flights)
         res = planner.plan(t, e)
+        held_ids.update(res.report.overruns)
         if res.plan_updates:
             if reaction is not None:
                 _apply_reaction_updates(res, by_id, reaction, replans, t)
@@ -445,6 +456,7 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
             t = e * cfg.epoch_s
             reaction.before_epoch(t, flights)
             res = planner.plan(t, e)
+            held_ids.update(res.report.overruns)
             _apply_reaction_updates(res, by_id, reaction, replans, t)
             _apply_plan_updates([u for u in res.plan_updates if not _is_reaction(u)], by_id, replans, t)
             e += 1
@@ -474,6 +486,7 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
     flown_summary = _flown_summary(flown, cfg, dcfg) if disturbed else {}
     if flown_summary:
         flown_summary["replans"] = len(replans)
+        flown_summary["held_past_plan"] = len(held_ids)
     for f in flights:
         del f["_traj"]
         for k in ("_flown", "_pieces", "_e", "_t0"):
