@@ -452,52 +452,62 @@ def react(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: P
 # A plan ends at its planned arrival; an aircraft that is late is still in the air then. The
 # planner used to drop a flight from its traffic picture at the planned arrival whatever it saw,
 # so new approvals could be planned into a late aircraft still flying. Now every epoch the
-# planner projects, from each of its own observations of a flight (the fleet state; never a
-# report), where the rest of the flight goes if it keeps its observed pace: the rest of its plan
-# from the observed position at min(1, observed progress rate) times the planned speed
-# (:func:`overrun_trajectory`; an aircraft that is late but faster than planned is taken at the
-# planned speed). When that projection lands later than the plan, the flight is *held*: the
-# projection (an :class:`Overrun`) is deconflicted against like an active flight, beside the plan
-# itself, until the projection has landed, even after the plan's arrival.
+# planner projects, from its own observations of a flight (the fleet state; never a report),
+# where the rest of the flight goes: the rest of its plan from the observed position at the
+# plan's speed, i.e. the remaining plan shifted by the observed lateness
+# (:func:`overrun_trajectory`). When a projection lands later than the plan, the flight is
+# *held* (an :class:`Overrun`): two projections are deconflicted against like active flights,
+# beside the plan itself, until they have landed, even after the plan's arrival:
 #
-# What cannot make the planner forget a flight early: the plan is never dropped before its
-# planned arrival (as before); an overrun is never shortened by a later observation of the same
-# plan version (of the projections of every observation seen, the one that lands latest is kept:
-# a forged "on time" or "landed" fleet state cannot cancel a real late one), and the absence of
-# a vehicle from the fleet state (it landed, or it vanished) changes nothing (the projection from
-# its last sighting stands, and lands). What bounds it: a projection is cut at the plan's arrival
-# plus MAX_OVERRUN_SHARE of its planned flight time (the slowest progress rate the planner
-# believes, RATE_RANGE[0]), so forged observations cannot hold a flight for ever. Without
-# observations (the paper's mode in process, or a flight flying its plan exactly) nothing is held:
-# the results are the same bit for bit.
+# - the *newest* sighting's (the best estimate of where the aircraft is: it follows a flight that
+#   recovers part of its lateness, which the plan and an older, later projection both miss);
+# - the *latest-landing* one of every sighting of this plan version (never shortened: a forged
+#   "on time" or "landed" fleet state cannot cancel a real late one).
+#
+# The absence of a vehicle from the fleet state (it landed, or it vanished) changes nothing: the
+# projections from its last sightings stand, and land. What bounds it: projections are cut at
+# the plan's arrival plus MAX_OVERRUN_SHARE of its planned flight time, so forged sightings cannot
+# hold a flight for ever. Without observations (the paper's mode in process), or for a flight
+# flying its plan exactly, nothing is held: the results are the same bit for bit.
 
 #: a projection that lands at most this much after the plan's arrival holds nothing [s]
 #: (rounding: an aircraft flying its plan exactly projects onto its own plan)
 OVERRUN_TOLERANCE_S = 1e-3
-OVERRUN_PACE = "observed"
-#: an overrun is cut at the plan's arrival plus this share of its planned flight time
+#: an overrun is cut at the plan's arrival plus this share of its planned flight time (the
+#: slowest progress rate the planner believes, RATE_RANGE[0], doubles a flight's time)
 MAX_OVERRUN_SHARE = 1.0 / RATE_RANGE[0] - 1.0
 
 
 @dataclass(frozen=True, eq=False)
 class Overrun:
     """A flight held past its plan: ``plan`` (its newest version, the one projected from),
-    ``flight`` (that plan's Flight with the projection as trajectory, the one deconflicted
-    against), ``observed_s`` (the observation the projection starts from) and ``cap_s`` (the
-    latest it may be held to)."""
+    ``latest`` (that plan's Flight with the latest-landing projection of its sightings as
+    trajectory), ``newest`` (the same with the newest sighting's projection, or None when that
+    one lands on time), ``observed_s`` (the sighting ``latest`` starts from) and ``cap_s`` (the
+    latest it may be held to). ``until_s``: when it is let go."""
 
     request_id: str
     plan: object
-    flight: object
+    latest: object
+    newest: object
     observed_s: float
     cap_s: float
 
+    @property
+    def until_s(self) -> float:
+        return float(self.latest.arrival_s)
 
-def overrun_trajectory(plan: Trajectory, obs: Observation, rate: float, cap_s: float) -> Trajectory | None:
-    """Where a flight seen at ``obs`` goes if it keeps its pace: the rest of ``plan`` from the
-    observed position (:func:`rejoin_trajectory`) at min(1, ``rate``) times the planned speed,
-    cut at ``cap_s``. None if nothing is left."""
-    tr = rejoin_trajectory(plan, obs.t_s, obs.position_m, min(1.0, float(rate)))
+    @property
+    def flights(self) -> list:
+        """The projections deconflicted against (Flights)."""
+        return [self.latest] + ([self.newest] if self.newest is not None else [])
+
+
+def overrun_trajectory(plan: Trajectory, obs: Observation, cap_s: float) -> Trajectory | None:
+    """Where a flight seen at ``obs`` goes if it flies the rest of ``plan`` at its planned speed
+    from there (:func:`rejoin_trajectory` at rate 1: the remaining plan shifted by the observed
+    lateness), cut at ``cap_s``. None if nothing is left."""
+    tr = rejoin_trajectory(plan, obs.t_s, obs.position_m, 1.0)
     if tr is None or tr.arrival_s <= cap_s:
         return tr
     ts, ps = tr.times_s, tr.points_m
@@ -514,8 +524,9 @@ def overruns(t_s: float, plans: dict, book: PositionBook, previous: dict) -> dic
         plans: request id -> the newest Flight of every flight the planner still holds (the
             active ones and those already held).
         book: the planner's own observations; those stamped in [plan departure, ``t_s``] count.
-        previous: the result of the last epoch (an overrun of the same plan version is only
-            ever replaced by one that lands later).
+        previous: the result of the last epoch (the latest-landing projection of a plan version
+            is only ever replaced by one that lands later).
+    Held flights whose projections have landed by ``t_s`` are left out.
     """
     out = {}
     for rid, f in plans.items():
@@ -523,24 +534,30 @@ def overruns(t_s: float, plans: dict, book: PositionBook, previous: dict) -> dic
         if prev is not None and prev.plan is not f:
             prev = None  # a new version (a re-plan from where it is): projected afresh
         plan = f.trajectory
+        arrival = float(f.arrival_s)
         obs = book.observations(rid, plan.departure_s, t_s)
-        best = prev
+        latest, observed_s, newest = (prev.latest, prev.observed_s, None) if prev is not None else (None, 0.0, None)
+        cap = float(f.arrival_s) + MAX_OVERRUN_SHARE * max(0.0, arrival - float(f.departure_s))
+
+        def held(tr):
+            return replace(f, trajectory=tr, departure_s=float(tr.departure_s), arrival_s=float(tr.arrival_s))
+
         if obs:
-            cap = float(f.arrival_s) + MAX_OVERRUN_SHARE * max(0.0, float(f.arrival_s) - float(f.departure_s))
-            rate = min(1.0, book.progress_rate(rid, plan, until=t_s)) if OVERRUN_PACE == "observed" else 1.0
-            # the landing each observation projects, to pick the latest (the rest of the plan from
-            # the nearest point at ``rate``; the rejoin's first leg is built for the chosen one)
+            # the landing each sighting projects (the rest of the plan from its nearest point at
+            # the plan's speed; the rejoin's first leg is built for the ones kept)
             _j, _l, _p, tau = nearest(plan, np.array([o.position_m for o in obs]))
-            land = np.array([o.t_s for o in obs]) + (float(plan.arrival_s) - tau) / rate
+            land = np.array([o.t_s for o in obs]) + (float(plan.arrival_s) - tau)
             k = int(np.argmax(land))
-            if land[k] > float(f.arrival_s) + OVERRUN_TOLERANCE_S and \
-                    (best is None or land[k] > best.flight.arrival_s + OVERRUN_TOLERANCE_S):
-                tr = overrun_trajectory(plan, obs[k], rate, cap)
-                if tr is not None and tr.arrival_s > float(f.arrival_s) + OVERRUN_TOLERANCE_S and \
-                        (best is None or tr.arrival_s > best.flight.arrival_s):
-                    best = Overrun(rid, f, replace(f, trajectory=tr, departure_s=float(tr.departure_s),
-                                                   arrival_s=float(tr.arrival_s)),
-                                   float(obs[k].t_s), cap)
-        if best is not None:
-            out[rid] = best
+            if land[k] > arrival + OVERRUN_TOLERANCE_S and \
+                    (latest is None or land[k] > latest.arrival_s + OVERRUN_TOLERANCE_S):
+                tr = overrun_trajectory(plan, obs[k], cap)
+                if tr is not None and tr.arrival_s > arrival + OVERRUN_TOLERANCE_S and \
+                        (latest is None or tr.arrival_s > latest.arrival_s):
+                    latest, observed_s = held(tr), float(obs[k].t_s)
+            if latest is not None and land[-1] > arrival + OVERRUN_TOLERANCE_S and obs[-1].t_s > observed_s:
+                tr = overrun_trajectory(plan, obs[-1], cap)
+                if tr is not None and tr.arrival_s > arrival + OVERRUN_TOLERANCE_S and tr.arrival_s >= t_s:
+                    newest = held(tr)
+        if latest is not None and latest.arrival_s >= t_s:
+            out[rid] = Overrun(rid, f, latest, newest, observed_s, cap)
     return out

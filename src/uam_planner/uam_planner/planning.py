@@ -50,7 +50,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable, Sequence
 
 import numpy as np
@@ -1153,8 +1153,8 @@ class Planner:
         active, updates, rep_ = react(t_s, epoch_index, self.active, found, self.positions, cfg,
                                       replan_selector(self.solve_mwis, cfg, epoch_index, t_s),
                                       self.replan_policy(), self.network,
-                                      fixed=[o.flight.trajectory for k, o in self.overruns.items()
-                                             if k not in mine])
+                                      fixed=[h.trajectory for k, o in self.overruns.items()
+                                             if k not in mine for h in o.flights])
         for u in updates:   # the new version is drawn from where it is: its overrun is redrawn
             self.overruns.pop(u.request_id, None)
         rep_["refused"] = refused
@@ -1239,10 +1239,11 @@ class Planner:
             self._requests = {k: r for k, r in self._requests.items() if k in alive}
         self._apply_constraint_updates(t_s, epoch_index)
         self._react_to_nonconformance(t_s, epoch_index)
-        # the traffic new requests are deconflicted against: the held flights' projections
-        # (first, so the active flights' segment index stays incremental) and the active flights
-        held = [o.flight for o in self.overruns.values()]
-        traffic = held + self.active if held else self.active
+        # the traffic new requests are deconflicted against: the active flights and the held
+        # flights' projections (new objects every epoch, after the active ones: the segment
+        # index stays incremental)
+        held = [replace(h) for o in self.overruns.values() for h in o.flights]
+        traffic = self.active + held if held else self.active
         if self.policy == "mwis":
             prep = prepare_epoch_mwis(t_s, epoch_index, self.pending, traffic, self.network, self.config,
                                       self.cache, self.active_index, self.shares,
@@ -1257,12 +1258,13 @@ class Planner:
             prep = PreparedEpoch(t_s=float(t_s), epoch_index=int(epoch_index), pending=list(self.pending),
                                  report=res.report, result=res)
         if held:
-            # a held flight still before its planned arrival is counted once (its plan is active)
-            twice = sum(1 for f in self.active if f.request_id in self.overruns)
+            # each held flight is counted once (its plan, if still active, or one projection)
+            planned = {f.request_id for f in self.active}
+            twice = sum(len(o.flights) - (k not in planned) for k, o in self.overruns.items())
             prep.airborne_count -= twice
             if prep.result is not None:
                 prep.result.report.active_flights -= twice
-            prep.report.overruns = {k: float(o.flight.arrival_s) for k, o in self.overruns.items()}
+            prep.report.overruns = {k: o.until_s for k, o in self.overruns.items()}
         self._prepared = prep
         return prep
 
@@ -1276,8 +1278,7 @@ class Planner:
         plans.update((f.request_id, f) for f in self.active)
         self.positions.prune(t_s)
         if self.overruns or self.positions:
-            self.overruns = {k: o for k, o in overruns(t_s, plans, self.positions, self.overruns).items()
-                             if o.flight.arrival_s >= t_s}
+            self.overruns = overruns(t_s, plans, self.positions, self.overruns)
         self.positions.forget(set(f.request_id for f in self.active if f.arrival_s >= t_s) |
                               set(self.overruns))
 

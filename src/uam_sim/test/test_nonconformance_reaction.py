@@ -221,15 +221,17 @@ def test_a_late_flight_is_held_past_its_planned_arrival_and_nothing_is_approved_
     p = seen_planner(observe_until=630.0)
     p.submit(R)
     res = p.plan(630.0, 21)
-    # seen at 630 s at 5670 m: planned time 567 s, progress (567 - 459) / 120 = 0.9 over the
-    # 120 s window; the rest of the plan at 0.9 x 10 m/s lands at 630 + 330 / 9 = 666.67 s
+    # seen at 630 s at 5670 m, planned there at 567 s: 63 s late; the rest of the plan shifted by
+    # that lands at 663 s, and R leaving E at 630 s meets that projection head-on
     assert res.approved == [] and res.waiting == [R]
-    assert res.report.overruns == {"P": pytest.approx(LANDS)}
+    assert res.report.overruns == {"P": pytest.approx(663.0)}
     assert res.report.active_flights == 1 and [f.request_id for f in p.active] == []
-    # 660 s: seen at 5940 m, still flying; R would leave E with P 60 m away: it waits
+    # 660 s: seen at 5940 m (planned at 594 s: 66 s late), held until 666 s; R would leave E with
+    # P 60 m away: it waits (the shift follows the growing lateness one sighting behind: the
+    # aircraft lands at 666.67 s)
     observe_every_10_s(p, 640.0, 660.0)
     res = p.plan(660.0, 22)
-    assert res.approved == [] and res.report.overruns == {"P": pytest.approx(LANDS)}
+    assert res.approved == [] and res.report.overruns == {"P": pytest.approx(666.0)}
     # 690 s: P landed at 666.67 s (no fleet state shows it any more); R goes, clear of it
     observe_every_10_s(p, 670.0, 690.0)
     res = p.plan(690.0, 23)
@@ -254,11 +256,11 @@ def test_a_flight_seen_on_its_plan_holds_nothing_and_changes_nothing():
 
 
 def test_a_vehicle_that_vanishes_is_held_only_until_its_last_sighting_lands():
-    # seen up to 630 s (5670 m), then never again (it vanished from the fleet state): held until
-    # the projection from its last sighting lands, 666.67 s, then let go; the bound
+    # seen up to 630 s (5670 m, 63 s late), then never again (it vanished from the fleet state):
+    # held until the projection from its last sighting lands, 663 s, then let go; the bound
     # MAX_OVERRUN_SHARE x 600 s after the planned arrival is never reached
     p = seen_planner(observe_until=630.0)
-    assert p.plan(630.0, 21).report.overruns == {"P": pytest.approx(LANDS)}
-    assert p.plan(660.0, 22).report.overruns == {"P": pytest.approx(LANDS)}
+    assert p.plan(630.0, 21).report.overruns == {"P": pytest.approx(663.0)}
+    assert p.plan(660.0, 22).report.overruns == {"P": pytest.approx(663.0)}
     assert p.plan(690.0, 23).report.overruns == {}
     assert 600.0 + MAX_OVERRUN_SHARE * 600.0 > LANDS
