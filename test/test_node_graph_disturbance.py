@@ -79,6 +79,11 @@ def test_the_graph_reacts_to_a_nonconforming_flight_and_flies_its_update(ros_con
     nc = [p for p in updates if p.update_kind == "nonconforming"]
     assert nc and all(p.state == FlightPlan.STATE_NONCONFORMING for p in nc)
     assert all("observed progress rate" in p.reason for p in updates)
+    # the rate the simulator flies each update on at is a field of the plan (issue 23 item 2),
+    # the one the reason names; every other plan carries 0
+    assert all(0.5 <= p.observed_progress_rate <= 1.5 and
+               f"observed progress rate {p.observed_progress_rate:.12g}" in p.reason for p in updates)
+    assert all(p.observed_progress_rate == 0.0 for p in obs.plans if int(p.version) <= 1)
     # every update was flown (realtime under a heavy load can make the simulator refuse a
     # duplicated first approval, "already flying": counted in fly_errors, not a version)
     flown = {(p.operator_id, p.request_id, int(p.version)) for p in nodes["simulator"].flown_plans}

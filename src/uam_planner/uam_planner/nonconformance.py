@@ -60,6 +60,7 @@ import numpy as np
 
 from uam_contract.params import CONFORMANCE_MONITOR
 
+from .replanning import PlanUpdate
 from .trajectory import Trajectory
 
 _DEFAULTS = {prm.name: prm.default for prm in CONFORMANCE_MONITOR}  # one source: the node's table
@@ -299,22 +300,19 @@ def rejoin_trajectory(plan: Trajectory, t0_s: float, q, rate: float) -> Trajecto
     return Trajectory(np.array(times), np.array(points))
 
 
-#: the reason of a nonconforming update names the observed progress rate after this word; the
-#: simulator reads it back (:func:`rate_of`) to fly the aircraft on at the airspeed it had
+#: the reason of a nonconforming update names the observed progress rate after these words (for
+#: a reader; the simulator reads ``ReactionUpdate.observed_rate``, on the wire
+#: ``FlightPlan.observed_progress_rate``)
 RATE_WORD = "observed progress rate"
 
 
-def rate_of(reason: str) -> float | None:
-    """The observed progress rate a nonconforming update's reason names (None if none)."""
-    i = reason.find(RATE_WORD)
-    if i < 0:
-        return None
-    word = reason[i + len(RATE_WORD):].split()[0].rstrip(";,)")
-    try:
-        v = float(word)
-    except ValueError:
-        return None
-    return v if math.isfinite(v) and RATE_RANGE[0] <= v <= RATE_RANGE[1] else None
+@dataclass(frozen=True, eq=False)
+class ReactionUpdate(PlanUpdate):
+    """A ``replanning.PlanUpdate`` of the reaction, with the observed progress rate it was
+    re-timed from (``observed_rate``; on the wire ``FlightPlan.observed_progress_rate``, which
+    the simulator flies it on at)."""
+
+    observed_rate: float = 0.0
 
 
 def _clipped(tr: Trajectory, t_s: float) -> Trajectory | None:
@@ -360,7 +358,6 @@ def react(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: P
     flight in ``active`` order; a report dict: flights, alternatives, vertices, edges, kinds).
     """
     from .conflict_graph import build_conflict_graph
-    from .replanning import PlanUpdate
     from .separation import SegmentSet
 
     idx = sorted(found)
@@ -438,8 +435,8 @@ def react(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: P
         nf = replace(f, trajectory=tr, arrival_s=float(tr.arrival_s), weight=float(a[1]),
                      method=f"nonconforming-{policy}", backend=backend, epoch_index=int(epoch_index),
                      version=f.version + 1, effective_s=float(t_eff), contingent=contingent)
-        updates.append(PlanUpdate(f.request_id, f.operator_id, nf.version, kind, (), reason,
-                                  float(t_eff), nf, f, nf.arrival_s - f.arrival_s))
+        updates.append(ReactionUpdate(f.request_id, f.operator_id, nf.version, kind, (), reason,
+                                      float(t_eff), nf, f, nf.arrival_s - f.arrival_s, float(rates[r])))
         new_versions.append(nf)
         report["kinds"][kind] = report["kinds"].get(kind, 0) + 1
     replaced = {u.request_id for u in updates}

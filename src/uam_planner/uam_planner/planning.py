@@ -973,6 +973,7 @@ class Planner:
         # flights held past their plans (issue 23, the safety gap; uam_planner.nonconformance
         # .overruns): request id -> Overrun, deconflicted against until its projection lands
         self.overruns: dict = {}
+        self.reaction_log: list = []   # the reports of the reactions between epochs
 
     @property
     def config(self) -> PlanningConfig:
@@ -1161,6 +1162,32 @@ class Planner:
         self.active = active
         self._plan_updates = list(self._plan_updates) + list(updates)
         self._nonconformance_report = rep_
+
+    def react_between(self, t_s: float, epoch_index: int) -> list:
+        """The reaction between epochs (issue 23 item 3; F3548 asks a nonconforming intent to be
+        updated within 5 s, an epoch is 30 s): the claims due by ``t_s`` are checked and acted on
+        now, exactly as at step 2b of :meth:`prepare` (the planner's own observations stamped up
+        to ``t_s``, its newest plans; every update deconflicted against every other active flight
+        and every held flight's projections from ``t_s`` on). Returns the PlanUpdates (also in
+        ``self.reaction_log``); the active flights take the new versions at once. Nothing else
+        changes: no request is planned, no flight dropped. Not while an epoch is prepared."""
+        if self._prepared is not None:
+            raise RuntimeError(f"epoch {self._prepared.epoch_index} is prepared but not committed")
+        if not math.isfinite(t_s):
+            raise ValueError(f"t_s must be finite, got {t_s!r}")
+        if self.config.conformance is None or not self._claims:
+            return []
+        self._hold_overruns(t_s)
+        saved, saved_rep = self._plan_updates, self._nonconformance_report
+        self._plan_updates = []
+        try:
+            self._react_to_nonconformance(t_s, epoch_index)
+            updates, rep = list(self._plan_updates), self._nonconformance_report
+        finally:
+            self._plan_updates, self._nonconformance_report = saved, saved_rep
+        if rep is not None and (updates or rep.get("refused")):
+            self.reaction_log.append(rep)
+        return updates
 
     def _default_solve(self, weights, edges, groups):
         return default_solve_mwis(self._config)(weights, edges, groups)

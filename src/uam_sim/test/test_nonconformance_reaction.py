@@ -79,6 +79,7 @@ def test_its_updated_plan_keeps_separation_with_a_hand_placed_neighbour():
     # rejoin (no delay: weight 3), the slower ones less: the MWIS takes 0.99
     (u,) = res.plan_updates
     assert (u.request_id, u.kind, u.version, u.effective_s) == ("P", KIND, 2, 120.0)
+    assert u.observed_rate == pytest.approx(0.9)   # what the simulator flies it on at (the wire field)
     assert u.flight.contingent is False and "time +12.0 s" in u.reason
     new = u.flight.trajectory
     assert new.departure_s == 120.0 and new.points_m[0] == pytest.approx([1080.0, 0.0, 0.0])
@@ -264,3 +265,52 @@ def test_a_vehicle_that_vanishes_is_held_only_until_its_last_sighting_lands():
     assert p.plan(660.0, 22).report.overruns == {"P": pytest.approx(663.0)}
     assert p.plan(690.0, 23).report.overruns == {}
     assert 600.0 + MAX_OVERRUN_SHARE * 600.0 > LANDS
+
+
+# ---- the reaction between epochs (issue 23 item 3: F3548's 5 s update; reaction_period_s) ----
+
+def test_between_epochs_the_update_comes_at_once_and_keeps_separation_with_the_neighbour():
+    # as test_its_updated_plan_keeps_separation_with_a_hand_placed_neighbour, but the planner
+    # reacts at 110 s, between the epochs at 90 and 120 s: seen at 100 and 110 s (planned 90 and
+    # 99 s: progress 0.9), from (990, 0) at 110 s the rejoin at 0.9 reaches m at 110 + 2010 / 9 =
+    # 333.33 s, with Q: a loss; 10 % faster (9.9 m/s) reaches m at 110 + 2010 / 9.9 = 313.03 s,
+    # 20.30 s before Q: 20.30 x 9.9 x 10 / sqrt(9.9^2 + 10^2) = 142.8 m
+    flown = fly(P.trajectory, FlightDraws(), HEAD_WIND)
+    p = planner()
+    _observe(p, flown, (100.0, 110.0))
+    assert p.report_nonconforming("P", 101.0, "monitor") is None
+    (u,) = p.react_between(110.0, 3)
+    assert (u.request_id, u.kind, u.version, u.effective_s) == ("P", KIND, 2, 110.0)
+    assert u.observed_rate == pytest.approx(0.9)
+    new = u.flight.trajectory
+    assert new.departure_s == 110.0 and new.points_m[0] == pytest.approx([990.0, 0.0, 0.0])
+    assert new.position_at(110.0 + 2010.0 / 9.9) == pytest.approx([3000.0, 0.0, 0.0])
+    gap = 1000.0 / 3.0 - (110.0 + 2010.0 / 9.9)
+    a = audit_flights([new, Q.trajectory], separation_m=100.0)
+    assert a.losses == [] and a.min_separation_m == pytest.approx(gap * 99.0 / math.hypot(9.9, 10.0), abs=0.01)
+    assert sorted((f.request_id, f.version) for f in p.active) == [("P", 2), ("Q", 1)]
+    # nothing is left for the epoch at 120 s: the claim was acted on, P conforms to its update
+    assert p.react_between(115.0, 3) == [] and p.plan(120.0, 4).plan_updates == []
+    # between epochs nothing else happens: no claim, no update; not while an epoch is prepared
+    prep = p.prepare(150.0, 5)
+    with pytest.raises(RuntimeError):
+        p.react_between(155.0, 5)
+    p.commit(prep)
+
+
+def test_the_runner_reacts_between_epochs():
+    """reaction_period_s = 5 s in the runner: updates take effect between epochs, and the
+    longest excursion is shorter than with the reaction at the epochs only (same seed)."""
+    from uam_planner.network import load_network
+    from uam_sim.experiment_config import REPO_ROOT, ExperimentError, make_config
+    from uam_sim.scenario import run_scenario
+    net = load_network(REPO_ROOT / "config" / "networks" / "tiny.yaml")
+    base = dict(epoch_s=30.0, time_limit_s=5.0, corpus_max_vertices=0, reaction=True,
+                disturbance={"speed_error": 0.3, "gust_std_mps": 0.5})
+    at_epochs = run_scenario(net, "greedy", 3.0, 4, 300.0, make_config(base))
+    often = run_scenario(net, "greedy", 3.0, 4, 300.0, make_config(dict(base, reaction_period_s=5.0)))
+    assert any(r["t_s"] % 30.0 != 0 for r in often.replans)
+    assert all(r["t_s"] % 5.0 == 0 for r in often.replans)
+    assert often.summary["conf_longest_excursion_s"] < at_epochs.summary["conf_longest_excursion_s"]
+    with pytest.raises(ExperimentError, match="reaction_period_s: 45"):
+        make_config(dict(base, reaction_period_s=45.0))
