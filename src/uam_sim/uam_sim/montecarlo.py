@@ -82,6 +82,7 @@ def point_configs(args) -> list[tuple[tuple, dict]]:
                                    "temporal_buffer_s": bt, "disturbance": dist,
                                    "conformance": args.conformance or {}, "out": args.out,
                                    "reaction": react,
+                                   "reaction_period_s": args.reaction_period if react else 0.0,
                                    "workers": args.workers, "scheduler": args.scheduler,
                                    "corpus_max_vertices": 0})
                 out.append(((e, bs, bt, react), asdict(cfg)))
@@ -223,6 +224,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--step", type=float, default=1.0, help="disturbance model step [s] (default 1)")
     p.add_argument("--reaction", type=_reaction, default=[False],
                    help="the planner's reaction to nonconforming flights: off (default), on or both")
+    p.add_argument("--reaction-period", type=float, default=0.0, metavar="S",
+                   help="with the reaction on, also react every S seconds between epochs (issue 23 "
+                        "item 3; 0 = at the epochs only)")
     p.add_argument("--conformance", type=key_values, help="conformance bounds, e.g. lateral_m=30,time_s=10")
     p.add_argument("--seeds", default="4", help="a count n (seeds 0..n-1) or a comma list")
     p.add_argument("--rate", type=float, default=10.0, help="requests per 30 s (default 10)")
