@@ -42,6 +42,8 @@
 #   --speed-error E    per-flight airspeed error, uniform in [-E, E] (default 0; 0.1 = +-10 %)
 #   --delay-mean S     mean departure delay [s], exponential (default 0); all disturbances 0 =
 #                      plans flown exactly (docs/disturbances.md)
+#   --vertical-gust G  vertical gusts: standard deviation [m/s] (default 0)
+#   --altitude-error M per-flight altitude-hold error, uniform in [-M, M] [m] (default 0)
 #   --mode M           lockstep | realtime (default lockstep)
 #   --rtf X            real-time factor in realtime mode (default 1)
 #   --rerun M          off | save | spawn | connect (default save: a .rrd next to the MCAP)
@@ -64,7 +66,7 @@ ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
 
 BACKEND=exact POLICY=mwis RATE=10 DURATION=3500 SEED=0 NETWORK=config/networks/singapore.yaml
-SPATIAL_BUFFER=0 TEMPORAL_BUFFER=0 WIND=0 WIND_FROM=270 GUST=0 SPEED_ERROR=0 DELAY_MEAN=0
+SPATIAL_BUFFER=0 TEMPORAL_BUFFER=0 WIND=0 WIND_FROM=270 GUST=0 SPEED_ERROR=0 DELAY_MEAN=0 VERTICAL_GUST=0 ALTITUDE_ERROR=0
 DEMAND="" CONSTRAINTS="" MODE=lockstep RTF=1 RERUN=save OUT="" FOXGLOVE_PORT=0 USS_PORT=0 RECORDER_NICE=19
 CONFORMANCE=auto
 SEPARATION="" SEPARATION_M=100 VERTICAL_M=30 SLOT_S=0 CLIMB=5 DESCENT=3
@@ -95,6 +97,8 @@ while [[ $# -gt 0 ]]; do
     --gust) GUST="${2:?--gust needs a value}"; shift 2;;
     --speed-error) SPEED_ERROR="${2:?--speed-error needs a value}"; shift 2;;
     --delay-mean) DELAY_MEAN="${2:?--delay-mean needs a value}"; shift 2;;
+    --vertical-gust) VERTICAL_GUST="${2:?--vertical-gust needs a value}"; shift 2;;
+    --altitude-error) ALTITUDE_ERROR="${2:?--altitude-error needs a value}"; shift 2;;
     --mode) MODE="${2:?--mode needs a value}"; shift 2;;
     --rtf) RTF="${2:?--rtf needs a value}"; shift 2;;
     --rerun) RERUN="${2:?--rerun needs a value}"; shift 2;;
@@ -130,8 +134,9 @@ done
 [[ "$FOXGLOVE_PORT" =~ ^[0-9]+$ ]] && (( FOXGLOVE_PORT <= 65535 )) || die "--foxglove-port: '$FOXGLOVE_PORT' is not a port 0..65535"
 [[ "$CONFORMANCE" =~ ^(auto|true|false)$ ]] || die "--conformance: '$CONFORMANCE' is not auto, true or false"
 if [[ "$CONFORMANCE" == auto ]]; then  # on only when the fleet can deviate from its plans
-  CONFORMANCE=$(awk -v w="$WIND" -v g="$GUST" -v s="$SPEED_ERROR" -v d="$DELAY_MEAN" \
-    'BEGIN { print ((w + 0 != 0 || g + 0 != 0 || s + 0 != 0 || d + 0 != 0) ? "true" : "false") }')
+  CONFORMANCE=$(awk -v w="$WIND" -v g="$GUST" -v s="$SPEED_ERROR" -v d="$DELAY_MEAN" -v z="$VERTICAL_GUST" \
+    -v a="$ALTITUDE_ERROR" \
+    'BEGIN { print ((w + 0 != 0 || g + 0 != 0 || s + 0 != 0 || d + 0 != 0 || z + 0 != 0 || a + 0 != 0) ? "true" : "false") }')
   [[ "$REACTION" == true ]] && CONFORMANCE=true   # the planner reacts to its reports
 fi
 [[ "$USS_PORT" =~ ^[0-9]+$ ]] && (( USS_PORT <= 65535 )) || die "--uss-port: '$USS_PORT' is not a port 0..65535"
@@ -140,7 +145,8 @@ fi
 for _flag in "separation-m:$SEPARATION_M" "vertical-separation-m:$VERTICAL_M" "slot-s:$SLOT_S" \
              "climb-rate:$CLIMB" "descent-rate:$DESCENT" "spatial-buffer-m:$SPATIAL_BUFFER" \
              "temporal-buffer-s:$TEMPORAL_BUFFER" "wind:$WIND" "wind-from:$WIND_FROM" "gust:$GUST" \
-             "speed-error:$SPEED_ERROR" "delay-mean:$DELAY_MEAN"; do
+             "speed-error:$SPEED_ERROR" "delay-mean:$DELAY_MEAN" "vertical-gust:$VERTICAL_GUST" \
+             "altitude-error:$ALTITUDE_ERROR"; do
   [[ "${_flag#*:}" =~ ^[0-9]+(\.[0-9]+)?$ ]] || die "--${_flag%%:*}: '${_flag#*:}' is not a number >= 0"
 done
 # as floats: ROS parameters typed double refuse an integer given on the command line
@@ -289,7 +295,8 @@ start uam_sim simulator simulator --params-file config/simulator.yaml -p "durati
   -p "mode:=$MODE" -p "real_time_factor:=$RTF" -p "wait_for_subscribers:=[$SIM_WAITS]" \
   -p "disturbance_seed:=$SEED" -p "wind_speed_mps:=$(f "$WIND")" \
   -p "wind_from_deg:=$(f "$WIND_FROM")" -p "gust_std_mps:=$(f "$GUST")" -p "speed_error:=$(f "$SPEED_ERROR")" \
-  -p "delay_mean_s:=$(f "$DELAY_MEAN")"
+  -p "delay_mean_s:=$(f "$DELAY_MEAN")" -p "vertical_gust_std_mps:=$(f "$VERTICAL_GUST")" \
+  -p "altitude_error_m:=$(f "$ALTITUDE_ERROR")"
 SIM_PID=${PIDS[-1]}
 T0=$SECONDS
 SIM_RC=0

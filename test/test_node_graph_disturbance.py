@@ -41,6 +41,14 @@ def test_fleet_state_is_what_flew_and_the_analysis_audits_it(ros_context, spin_u
             off_plan = max(off_plan, float(np.linalg.norm(p - planned)))
             compared += 1
     assert compared > 100 and off_plan > 10.0   # what flew is not the plan
+    # the planner sees the fleet state (issue 23's safety gap): it held flights seen behind
+    # their plans past their planned arrival, among them the one that landed latest against its
+    # plan (slow all the way: its speed error is drawn once). Not "only the late ones": a fast
+    # flight seen a fraction of a second behind in a gust is held that fraction past its plan
+    held = nodes["planner"].held_past_plan
+    latest = max(approved, key=lambda rid: flown[rid].arrival_s - approved[rid].arrival_s)
+    assert flown[latest].arrival_s - approved[latest].arrival_s > 20.0
+    assert held <= set(approved) and latest in held
     from uam_sim.analysis import format_summary, summarize
     summary = summarize(tmp_path / "run.mcap")
     assert summary.audit.ok and summary.flown["what"] == "flown"
@@ -71,6 +79,11 @@ def test_the_graph_reacts_to_a_nonconforming_flight_and_flies_its_update(ros_con
     nc = [p for p in updates if p.update_kind == "nonconforming"]
     assert nc and all(p.state == FlightPlan.STATE_NONCONFORMING for p in nc)
     assert all("observed progress rate" in p.reason for p in updates)
+    # the rate the simulator flies each update on at is a field of the plan (issue 23 item 2),
+    # the one the reason names; every other plan carries 0
+    assert all(0.5 <= p.observed_progress_rate <= 1.5 and
+               f"observed progress rate {p.observed_progress_rate:.12g}" in p.reason for p in updates)
+    assert all(p.observed_progress_rate == 0.0 for p in obs.plans if int(p.version) <= 1)
     # every update was flown (realtime under a heavy load can make the simulator refuse a
     # duplicated first approval, "already flying": counted in fly_errors, not a version)
     flown = {(p.operator_id, p.request_id, int(p.version)) for p in nodes["simulator"].flown_plans}

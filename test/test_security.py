@@ -395,3 +395,61 @@ def test_forged_conformance_reports_never_drop_a_flight_nor_change_a_conforming_
     flown = {f"{p.operator_id}/{p.request_id}" for p in sim.flown_plans}
     assert flown == {f"{p.operator_id}/{p.request_id}" for p in obs.plans
                      if p.outcome == FlightPlan.OUTCOME_APPROVED}
+
+
+def test_forged_or_missing_fleet_states_never_make_the_planner_forget_a_late_flight_early():
+    """Issue 23's safety gap: the planner holds a flight that flies past its plan (seen in its own
+    fleet state, uam_planner.nonconformance.overruns). No observation can make it let go early:
+    after a real sighting of the flight late, forged fleet states putting it on time at its
+    destination, one stamped far in the future, malformed ones and then none at all (the vehicle
+    vanishes) leave it held until the real sighting's projection lands; and forged sightings
+    cannot hold it for ever (the bound: its planned arrival plus its planned flight time).
+    By hand: P flies W (0, 0) -> E (6000, 0), planned 0 -> 600 s at 10 m/s, in fact at 9 m/s
+    (x = 9 t, lands at 666.67 s); R asks to leave E for W at 630 s, head-on into it."""
+    import numpy as np
+    from uam_planner.network import network_from_enu
+    from uam_planner.nonconformance import MAX_OVERRUN_SHARE
+    from uam_planner.planning import Flight, FlightRequest as Request, Planner, PlanningConfig
+    from uam_planner.trajectory import Trajectory
+
+    net = network_from_enu("line", ["W", "E"], [(0, 0, 0), (6000, 0, 0)], [True, True], [("W", "E")])
+    plan = Trajectory(np.array([0.0, 600.0]), np.array([[0.0, 0, 0], [6000.0, 0, 0]]))
+    p_flight = Flight("P", "W", "E", ("W", "E"), plan, 0.0, 600.0, 6000.0, 1.0, 0, "greedy", "greedy", 0)
+
+    def planner():
+        p = Planner(net, PlanningConfig(), "mwis", solve_mwis=None)
+        p.restore([p_flight])
+        for t in np.arange(10.0, 631.0, 10.0):          # the real fleet state, up to 630 s
+            assert p.observe("P", float(t), (9.0 * t, 0.0, 0.0)) is None
+        return p
+
+    p = planner()
+    assert p.submit(Request("R", "E", "W", 630.0, 630.0, 700.0)) is None
+    res = p.plan(630.0, 21)
+    # seen at 630 s at 5670 m, planned there at 567 s: the rest of the plan 63 s late lands at 663 s
+    assert res.approved == [] and res.report.overruns == {"P": pytest.approx(663.0)}
+    # the attack: on time at E every second, far in the future at W, malformed; no real state after
+    for t in range(631, 660):
+        assert p.observe("P", float(t), (6000.0, 0.0, 0.0)) is None
+    assert p.observe("P", 1e9, (0.0, 0.0, 0.0)) is None
+    assert p.observe("P", 640.0, (float("nan"), 0.0, 0.0)).startswith("position_m:")
+    assert p.observe("P", float("inf"), (0.0, 0.0, 0.0)).startswith("t_s:")
+    res = p.plan(660.0, 22)
+    assert res.approved == [] and res.report.overruns == {"P": pytest.approx(663.0)}   # still held
+    (r,) = p.plan(690.0, 23).approved                                                 # landed: R goes
+    assert r.departure_s == 690.0 and p.overruns == {}
+
+    # forged sightings of P back at W every 10 s: held, but never past 600 + 600 s
+    p = planner()
+    cap = 600.0 + MAX_OVERRUN_SHARE * 600.0
+    t = 640.0
+    for k in range(21, 45):
+        epoch = 30.0 * k
+        while t <= epoch:
+            p.observe("P", t, (0.0, 0.0, 0.0))
+            t += 10.0
+        held = p.plan(epoch, k).report.overruns
+        # 630 s: the real sighting's projection; from 660 s the forged ones (at W at 660 s: the
+        # whole plan again, landing at 1260 s), cut at the bound; then let go for good
+        assert held == ({"P": pytest.approx(663.0)} if epoch == 630.0 else
+                        {"P": pytest.approx(cap)} if epoch <= cap else {}), epoch

@@ -52,13 +52,14 @@ def generate_launch_description() -> LaunchDescription:
         "'", a["conformance"], "' == 'true' or ('", a["conformance"], "' == 'auto' and ('", a["reaction"],
         "' == 'true' or any(float(x) != 0 "
         "for x in ('", a["wind_speed_mps"], "', '", a["gust_std_mps"], "', '", a["speed_error"], "', '",
-        a["delay_mean_s"], "'))))"])
+        a["delay_mean_s"], "', '", a["vertical_gust_std_mps"], "', '", a["altitude_error_m"], "'))))"])
     recorder_prefix = "nice -n 19"
     sim_params = {"duration_s": a["duration"], "mode": a["mode"], "real_time_factor": a["rtf"],
                   # disturbances (issue 23), seeded by the run's seed
                   "disturbance_seed": a["seed"], "wind_speed_mps": a["wind_speed_mps"],
                   "wind_from_deg": a["wind_from_deg"], "gust_std_mps": a["gust_std_mps"],
-                  "speed_error": a["speed_error"], "delay_mean_s": a["delay_mean_s"]}
+                  "speed_error": a["speed_error"], "delay_mean_s": a["delay_mean_s"],
+                  "vertical_gust_std_mps": a["vertical_gust_std_mps"], "altitude_error_m": a["altitude_error_m"]}
     # as run_fleet.sh: the recorder is not in the lockstep loop, so it runs at a lower priority
     recorder = Node(package="uam_sim", executable="recorder", name="recorder", output="screen",
                     prefix=recorder_prefix,

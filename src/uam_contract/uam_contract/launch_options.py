@@ -74,6 +74,10 @@ LAUNCH_OPTIONS: tuple[LaunchOption, ...] = (
     LaunchOption("--speed-error", "SPEED_ERROR", "speed_error", "0",
                  "per-flight airspeed error bound, uniform (0.1 = +-10 %)"),
     LaunchOption("--delay-mean", "DELAY_MEAN", "delay_mean_s", "0", "mean departure delay [s] (exponential)"),
+    LaunchOption("--vertical-gust", "VERTICAL_GUST", "vertical_gust_std_mps", "0",
+                 "vertical gust standard deviation [m/s] (docs/disturbances.md)"),
+    LaunchOption("--altitude-error", "ALTITUDE_ERROR", "altitude_error_m", "0",
+                 "per-flight altitude-hold error bound, uniform [m]"),
     LaunchOption("--conformance", "CONFORMANCE", "conformance", "auto",
                  "start the conformance monitor: true, false, or auto = only when a disturbance is set "
                  "(an undisturbed fleet flies its plans exactly; the monitor costs more CPU than any other node)"),

@@ -51,8 +51,8 @@ t_eff is what flew; the simulator flies the new version from the aircraft's stat
 
 from __future__ import annotations
 
+import bisect
 import math
-from collections import deque
 from dataclasses import dataclass, replace
 from typing import Callable, Sequence
 
@@ -60,6 +60,7 @@ import numpy as np
 
 from uam_contract.params import CONFORMANCE_MONITOR
 
+from .replanning import PlanUpdate
 from .trajectory import Trajectory
 
 _DEFAULTS = {prm.name: prm.default for prm in CONFORMANCE_MONITOR}  # one source: the node's table
@@ -144,12 +145,24 @@ class Observation:
     position_m: tuple
 
 
+#: observations kept per vehicle at most (a flood of forged fleet states cannot grow the book
+#: without bound; at the simulator's 1 s step the window holds about 120)
+MAX_OBSERVATIONS = 1024
+
+
 class PositionBook:
     """The planner's own observations of the airborne vehicles (from the fleet state), per
-    request id: the last ``SPEED_WINDOW_S`` seconds, in time order."""
+    request id, in time order. Observations are pruned to the last ``SPEED_WINDOW_S`` seconds
+    before the planner's epoch time (:meth:`prune`), not before the newest observation, and
+    every reader takes an ``until`` time: an observation stamped after the epoch (a forged or
+    a clock-skewed one) is not used before its time and cannot push the real ones out."""
 
     def __init__(self):
-        self._obs: dict[str, deque] = {}
+        self._obs: dict[str, list] = {}
+
+    def __len__(self) -> int:
+        """The number of vehicles with observations."""
+        return len(self._obs)
 
     def observe(self, request_id: str, t_s: float, position_m) -> str | None:
         """Record one observation; return None, or why it was refused (naming the field)."""
@@ -161,17 +174,41 @@ class PositionBook:
         p = np.asarray(position_m, dtype=np.float64).reshape(-1)
         if p.shape != (3,) or not np.isfinite(p).all():
             return f"position_m: {position_m!r} is not three finite numbers"
-        q = self._obs.setdefault(request_id, deque())
-        if q and t_s <= q[-1].t_s:
-            return None  # a repeated or late sample: the newest is kept
-        q.append(Observation(float(t_s), tuple(float(x) for x in p)))
-        while q and q[0].t_s < t_s - SPEED_WINDOW_S:
-            q.popleft()
+        q = self._obs.setdefault(request_id, [])
+        t = float(t_s)
+        if q and t <= q[-1].t_s:
+            i = bisect.bisect_left(q, t, key=lambda o: o.t_s)
+            if i < len(q) and q[i].t_s == t:
+                return None  # a repeated sample: the first one is kept
+            q.insert(i, Observation(t, tuple(float(x) for x in p)))
+        else:
+            q.append(Observation(t, tuple(float(x) for x in p)))
+        if len(q) > MAX_OBSERVATIONS:
+            del q[0]
         return None
 
-    def latest(self, request_id: str) -> Observation | None:
-        q = self._obs.get(request_id)
+    def prune(self, t_s: float) -> None:
+        """Drop the observations older than ``SPEED_WINDOW_S`` before the epoch at ``t_s``."""
+        lo = float(t_s) - SPEED_WINDOW_S
+        for q in self._obs.values():
+            if q and q[0].t_s < lo:
+                del q[:bisect.bisect_left(q, lo, key=lambda o: o.t_s)]
+
+    def _upto(self, request_id: str, until: float | None) -> list:
+        q = self._obs.get(request_id) or []
+        if until is None or not q or q[-1].t_s <= until + _EPS_T:
+            return q
+        return q[:bisect.bisect_right(q, until + _EPS_T, key=lambda o: o.t_s)]
+
+    def latest(self, request_id: str, until: float | None = None) -> Observation | None:
+        """The newest observation of ``request_id`` (stamped at or before ``until``)."""
+        q = self._upto(request_id, until)
         return q[-1] if q else None
+
+    def observations(self, request_id: str, since: float, until: float) -> list:
+        """The observations of ``request_id`` stamped in [since, until], in time order."""
+        q = self._upto(request_id, until)
+        return q[bisect.bisect_left(q, float(since), key=lambda o: o.t_s):]
 
     def forget(self, keep_ids) -> None:
         """Drop every vehicle not in ``keep_ids`` (landed flights)."""
@@ -179,12 +216,13 @@ class PositionBook:
         for k in [k for k in self._obs if k not in keep]:
             del self._obs[k]
 
-    def progress_rate(self, request_id: str, plan: Trajectory) -> float:
+    def progress_rate(self, request_id: str, plan: Trajectory, until: float | None = None) -> float:
         """The observed progress rate along ``plan``: planned seconds covered per second, from
         the oldest observation of the window to the newest (the planned time of each one's
         nearest path point), or, with less than ``MIN_SPEED_SPAN_S`` of observations, from the
-        plan's departure to the newest; 1 without observations; clipped to ``RATE_RANGE``."""
-        q = self._obs.get(request_id)
+        plan's departure to the newest; 1 without observations; clipped to ``RATE_RANGE``.
+        Only observations stamped at or before ``until`` count."""
+        q = self._upto(request_id, until)
         if not q:
             return 1.0
         last = q[-1]
@@ -262,22 +300,19 @@ def rejoin_trajectory(plan: Trajectory, t0_s: float, q, rate: float) -> Trajecto
     return Trajectory(np.array(times), np.array(points))
 
 
-#: the reason of a nonconforming update names the observed progress rate after this word; the
-#: simulator reads it back (:func:`rate_of`) to fly the aircraft on at the airspeed it had
+#: the reason of a nonconforming update names the observed progress rate after these words (for
+#: a reader; the simulator reads ``ReactionUpdate.observed_rate``, on the wire
+#: ``FlightPlan.observed_progress_rate``)
 RATE_WORD = "observed progress rate"
 
 
-def rate_of(reason: str) -> float | None:
-    """The observed progress rate a nonconforming update's reason names (None if none)."""
-    i = reason.find(RATE_WORD)
-    if i < 0:
-        return None
-    word = reason[i + len(RATE_WORD):].split()[0].rstrip(";,)")
-    try:
-        v = float(word)
-    except ValueError:
-        return None
-    return v if math.isfinite(v) and RATE_RANGE[0] <= v <= RATE_RANGE[1] else None
+@dataclass(frozen=True, eq=False)
+class ReactionUpdate(PlanUpdate):
+    """A ``replanning.PlanUpdate`` of the reaction, with the observed progress rate it was
+    re-timed from (``observed_rate``; on the wire ``FlightPlan.observed_progress_rate``, which
+    the simulator flies it on at)."""
+
+    observed_rate: float = 0.0
 
 
 def _clipped(tr: Trajectory, t_s: float) -> Trajectory | None:
@@ -303,7 +338,7 @@ def _least_conflicting(alts: list, others: list, config, t_eff: float):
 
 
 def react(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: PositionBook,
-          config, select: Callable, policy: str, network=None) -> tuple[list, list, dict]:
+          config, select: Callable, policy: str, network=None, fixed: Sequence = ()) -> tuple[list, list, dict]:
     """Update the intents of the nonconforming flights ``found`` at the epoch ``t_eff``.
 
     Args:
@@ -317,11 +352,12 @@ def react(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: P
             ``constraints``: alternatives that enter one are dropped).
         select: callable(graph, policy) -> (selected, report), ``planning.replan_selector``.
         policy: "mwis" or "firstfit".
+        fixed: more trajectories every update is deconflicted against (the overruns of other
+            flights, :func:`overruns`).
     Returns: (new active list: the others in their order, then the new versions; PlanUpdate per
     flight in ``active`` order; a report dict: flights, alternatives, vertices, edges, kinds).
     """
     from .conflict_graph import build_conflict_graph
-    from .replanning import PlanUpdate
     from .separation import SegmentSet
 
     idx = sorted(found)
@@ -330,13 +366,14 @@ def react(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: P
     if not idx:
         return list(active), [], report
     others = [f for j, f in enumerate(active) if j not in found]
-    act = SegmentSet.from_trajectories([f.trajectory for f in others])
+    fixed = list(fixed)
+    act = SegmentSet.from_trajectories([f.trajectory for f in others] + fixed)
     act = act.take(act.t1_s >= t_eff) if len(act) else act
     per, rates = [], []
     for i in idx:
         f = active[i]
         obs = found[i][0]
-        rate = book.progress_rate(f.request_id, f.trajectory)
+        rate = book.progress_rate(f.request_id, f.trajectory, until=t_eff)
         rates.append(rate)
         report["rates"][f.request_id] = rate
         alts = []
@@ -386,7 +423,7 @@ def react(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: P
         if a is None:
             if not per[r]:
                 continue  # nothing left to fly: it is at its plan's end (it keeps its plan)
-            a = _least_conflicting(per[r], [f.trajectory for f in others] +
+            a = _least_conflicting(per[r], [f.trajectory for f in others] + fixed +
                                    [x.trajectory for x in new_versions], config, t_eff)
             kind = KIND_CONTINGENCY
             reason = (f"contingency: {what}; each of its {len(per[r])} updated intents loses "
@@ -398,10 +435,126 @@ def react(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: P
         nf = replace(f, trajectory=tr, arrival_s=float(tr.arrival_s), weight=float(a[1]),
                      method=f"nonconforming-{policy}", backend=backend, epoch_index=int(epoch_index),
                      version=f.version + 1, effective_s=float(t_eff), contingent=contingent)
-        updates.append(PlanUpdate(f.request_id, f.operator_id, nf.version, kind, (), reason,
-                                  float(t_eff), nf, f, nf.arrival_s - f.arrival_s))
+        updates.append(ReactionUpdate(f.request_id, f.operator_id, nf.version, kind, (), reason,
+                                      float(t_eff), nf, f, nf.arrival_s - f.arrival_s, float(rates[r])))
         new_versions.append(nf)
         report["kinds"][kind] = report["kinds"].get(kind, 0) + 1
     replaced = {u.request_id for u in updates}
     keep = [f for j, f in enumerate(active) if j not in found or active[j].request_id not in replaced]
     return keep + new_versions, updates, report
+
+
+# ---- flights that fly past their plan (issue 23: the safety gap) -----------------------------
+#
+# A plan ends at its planned arrival; an aircraft that is late is still in the air then. The
+# planner used to drop a flight from its traffic picture at the planned arrival whatever it saw,
+# so new approvals could be planned into a late aircraft still flying. Now every epoch the
+# planner projects, from its own observations of a flight (the fleet state; never a report),
+# where the rest of the flight goes: the rest of its plan from the observed position at the
+# plan's speed, i.e. the remaining plan shifted by the observed lateness
+# (:func:`overrun_trajectory`). When a projection lands later than the plan, the flight is
+# *held* (an :class:`Overrun`): two projections are deconflicted against like active flights,
+# beside the plan itself, until they have landed, even after the plan's arrival:
+#
+# - the *newest* sighting's (the best estimate of where the aircraft is: it follows a flight that
+#   recovers part of its lateness, which the plan and an older, later projection both miss);
+# - the *latest-landing* one of every sighting of this plan version (never shortened: a forged
+#   "on time" or "landed" fleet state cannot cancel a real late one).
+#
+# The absence of a vehicle from the fleet state (it landed, or it vanished) changes nothing: the
+# projections from its last sightings stand, and land. What bounds it: projections are cut at
+# the plan's arrival plus MAX_OVERRUN_SHARE of its planned flight time, so forged sightings cannot
+# hold a flight for ever. Without observations (the paper's mode in process), or for a flight
+# flying its plan exactly, nothing is held: the results are the same bit for bit.
+
+#: a projection that lands at most this much after the plan's arrival holds nothing [s]
+#: (rounding: an aircraft flying its plan exactly projects onto its own plan)
+OVERRUN_TOLERANCE_S = 1e-3
+#: an overrun is cut at the plan's arrival plus this share of its planned flight time (the
+#: slowest progress rate the planner believes, RATE_RANGE[0], doubles a flight's time)
+MAX_OVERRUN_SHARE = 1.0 / RATE_RANGE[0] - 1.0
+
+
+@dataclass(frozen=True, eq=False)
+class Overrun:
+    """A flight held past its plan: ``plan`` (its newest version, the one projected from),
+    ``latest`` (that plan's Flight with the latest-landing projection of its sightings as
+    trajectory), ``newest`` (the same with the newest sighting's projection, or None when that
+    one lands on time), ``observed_s`` (the sighting ``latest`` starts from) and ``cap_s`` (the
+    latest it may be held to). ``until_s``: when it is let go."""
+
+    request_id: str
+    plan: object
+    latest: object
+    newest: object
+    observed_s: float
+    cap_s: float
+
+    @property
+    def until_s(self) -> float:
+        return float(self.latest.arrival_s)
+
+    @property
+    def flights(self) -> list:
+        """The projections deconflicted against (Flights)."""
+        return [self.latest] + ([self.newest] if self.newest is not None else [])
+
+
+def overrun_trajectory(plan: Trajectory, obs: Observation, cap_s: float) -> Trajectory | None:
+    """Where a flight seen at ``obs`` goes if it flies the rest of ``plan`` at its planned speed
+    from there (:func:`rejoin_trajectory` at rate 1: the remaining plan shifted by the observed
+    lateness), cut at ``cap_s``. None if nothing is left."""
+    tr = rejoin_trajectory(plan, obs.t_s, obs.position_m, 1.0)
+    if tr is None or tr.arrival_s <= cap_s:
+        return tr
+    ts, ps = tr.times_s, tr.points_m
+    if cap_s <= ts[0]:
+        return None
+    keep = ts < cap_s
+    return Trajectory(np.append(ts[keep], cap_s), np.vstack((ps[keep], tr.position_at(cap_s))))
+
+
+def overruns(t_s: float, plans: dict, book: PositionBook, previous: dict) -> dict:
+    """The flights held past their plans at the epoch ``t_s``: request id -> :class:`Overrun`.
+
+    Args:
+        plans: request id -> the newest Flight of every flight the planner still holds (the
+            active ones and those already held).
+        book: the planner's own observations; those stamped in [plan departure, ``t_s``] count.
+        previous: the result of the last epoch (the latest-landing projection of a plan version
+            is only ever replaced by one that lands later).
+    Held flights whose projections have landed by ``t_s`` are left out.
+    """
+    out = {}
+    for rid, f in plans.items():
+        prev = previous.get(rid)
+        if prev is not None and prev.plan is not f:
+            prev = None  # a new version (a re-plan from where it is): projected afresh
+        plan = f.trajectory
+        arrival = float(f.arrival_s)
+        obs = book.observations(rid, plan.departure_s, t_s)
+        latest, observed_s, newest = (prev.latest, prev.observed_s, None) if prev is not None else (None, 0.0, None)
+        cap = float(f.arrival_s) + MAX_OVERRUN_SHARE * max(0.0, arrival - float(f.departure_s))
+
+        def held(tr):
+            return replace(f, trajectory=tr, departure_s=float(tr.departure_s), arrival_s=float(tr.arrival_s))
+
+        if obs:
+            # the landing each sighting projects (the rest of the plan from its nearest point at
+            # the plan's speed; the rejoin's first leg is built for the ones kept)
+            _j, _l, _p, tau = nearest(plan, np.array([o.position_m for o in obs]))
+            land = np.array([o.t_s for o in obs]) + (float(plan.arrival_s) - tau)
+            k = int(np.argmax(land))
+            if land[k] > arrival + OVERRUN_TOLERANCE_S and \
+                    (latest is None or land[k] > latest.arrival_s + OVERRUN_TOLERANCE_S):
+                tr = overrun_trajectory(plan, obs[k], cap)
+                if tr is not None and tr.arrival_s > arrival + OVERRUN_TOLERANCE_S and \
+                        (latest is None or tr.arrival_s > latest.arrival_s):
+                    latest, observed_s = held(tr), float(obs[k].t_s)
+            if latest is not None and land[-1] > arrival + OVERRUN_TOLERANCE_S and obs[-1].t_s > observed_s:
+                tr = overrun_trajectory(plan, obs[-1], cap)
+                if tr is not None and tr.arrival_s > arrival + OVERRUN_TOLERANCE_S and tr.arrival_s >= t_s:
+                    newest = held(tr)
+        if latest is not None and latest.arrival_s >= t_s:
+            out[rid] = Overrun(rid, f, latest, newest, observed_s, cap)
+    return out

@@ -50,7 +50,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable, Sequence
 
 import numpy as np
@@ -68,7 +68,7 @@ from .first_fit import as_firstfit, first_fit_select
 from .objectives import (BASELINE_ORDERS, OperatorShares, check_objective, check_priority,
                          epoch_weights, operator_of, order_requests)
 from .trajectory import Trajectory
-from .nonconformance import Claim, ConformanceBounds, PositionBook, react, verify
+from .nonconformance import Claim, ConformanceBounds, PositionBook, overruns, react, verify
 
 POLICIES = ("mwis", "fifo", "firstfit")  # firstfit: uam_planner.first_fit
 REPLAN_POLICIES = ("mwis", "firstfit")  # uam_planner.replanning
@@ -351,6 +351,10 @@ class EpochReport:
     #: the reaction to nonconforming flights of this epoch (``uam_planner.nonconformance.react``'s
     #: report dict, plus ``refused``: [(request_id, reason)] of the claims not acted on), or None
     nonconformance: object = None
+    #: the flights held past their plans at this epoch (issue 23: seen later than planned by the
+    #: planner's own observations): request id -> until when [s] (uam_planner.nonconformance
+    #: .overruns); empty when none
+    overruns: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -971,6 +975,10 @@ class Planner:
         self.positions = PositionBook()
         self._claims: list = []
         self._nonconformance_report = None
+        # flights held past their plans (issue 23, the safety gap; uam_planner.nonconformance
+        # .overruns): request id -> Overrun, deconflicted against until its projection lands
+        self.overruns: dict = {}
+        self.reaction_log: list = []   # the reports of the reactions between epochs
 
     @property
     def config(self) -> PlanningConfig:
@@ -1129,7 +1137,6 @@ class Planner:
         due by ``t_s`` that the planner's own view confirms get their intents updated from where
         the flights are (``uam_planner.nonconformance.react``), deconflicted in one batch."""
         self._nonconformance_report = None
-        self.positions.forget(f.request_id for f in self.active)
         due = [c for c in self._claims if c.t_s <= t_s]
         if not due or self.config.conformance is None:
             return
@@ -1141,20 +1148,51 @@ class Planner:
             if i is None:
                 refused.append((c.request_id, f"request_id: {c.request_id!r} is no longer active"))
                 continue
-            got, why = verify(self.active[i], self.positions.latest(c.request_id),
-                              self.config.conformance, t_s)
+            obs = self.positions.latest(c.request_id, until=t_s)
+            got, why = verify(self.active[i], obs, self.config.conformance, t_s)
             if got is None:
                 refused.append((c.request_id, why))
                 continue
-            found[i] = (self.positions.latest(c.request_id), got)
+            found[i] = (obs, got)
         cfg = self.config
+        mine = {self.active[i].request_id for i in found}
         active, updates, rep_ = react(t_s, epoch_index, self.active, found, self.positions, cfg,
                                       replan_selector(self.solve_mwis, cfg, epoch_index, t_s),
-                                      self.replan_policy(), self.network)
+                                      self.replan_policy(), self.network,
+                                      fixed=[h.trajectory for k, o in self.overruns.items()
+                                             if k not in mine for h in o.flights])
+        for u in updates:   # the new version is drawn from where it is: its overrun is redrawn
+            self.overruns.pop(u.request_id, None)
         rep_["refused"] = refused
         self.active = active
         self._plan_updates = list(self._plan_updates) + list(updates)
         self._nonconformance_report = rep_
+
+    def react_between(self, t_s: float, epoch_index: int) -> list:
+        """The reaction between epochs (issue 23 item 3; F3548 asks a nonconforming intent to be
+        updated within 5 s, an epoch is 30 s): the claims due by ``t_s`` are checked and acted on
+        now, exactly as at step 2b of :meth:`prepare` (the planner's own observations stamped up
+        to ``t_s``, its newest plans; every update deconflicted against every other active flight
+        and every held flight's projections from ``t_s`` on). Returns the PlanUpdates (also in
+        ``self.reaction_log``); the active flights take the new versions at once. Nothing else
+        changes: no request is planned, no flight dropped. Not while an epoch is prepared."""
+        if self._prepared is not None:
+            raise RuntimeError(f"epoch {self._prepared.epoch_index} is prepared but not committed")
+        if not math.isfinite(t_s):
+            raise ValueError(f"t_s must be finite, got {t_s!r}")
+        if self.config.conformance is None or not self._claims:
+            return []
+        self._hold_overruns(t_s)
+        saved, saved_rep = self._plan_updates, self._nonconformance_report
+        self._plan_updates = []
+        try:
+            self._react_to_nonconformance(t_s, epoch_index)
+            updates, rep = list(self._plan_updates), self._nonconformance_report
+        finally:
+            self._plan_updates, self._nonconformance_report = saved, saved_rep
+        if rep is not None and (updates or rep.get("refused")):
+            self.reaction_log.append(rep)
+        return updates
 
     def _default_solve(self, weights, edges, groups):
         return default_solve_mwis(self._config)(weights, edges, groups)
@@ -1236,6 +1274,7 @@ class Planner:
             raise ValueError(f"t_s must be finite, got {t_s!r}")
         if self._prepared is not None:
             raise RuntimeError(f"epoch {self._prepared.epoch_index} is prepared but not committed")
+        self._hold_overruns(t_s)
         self.active = [f for f in self.active if f.arrival_s >= t_s]
         self.shares.advance(t_s)
         if self._requests:
@@ -1243,12 +1282,17 @@ class Planner:
             self._requests = {k: r for k, r in self._requests.items() if k in alive}
         yield from self._apply_constraint_updates(t_s, epoch_index)
         self._react_to_nonconformance(t_s, epoch_index)
+        # the traffic new requests are deconflicted against: the active flights and the held
+        # flights' projections (new objects every epoch, after the active ones: the segment
+        # index stays incremental)
+        held = [replace(h) for o in self.overruns.values() for h in o.flights]
+        traffic = self.active + held if held else self.active
         if self.policy == "mwis":
-            prep = prepare_epoch_mwis(t_s, epoch_index, self.pending, self.active, self.network, self.config,
+            prep = prepare_epoch_mwis(t_s, epoch_index, self.pending, traffic, self.network, self.config,
                                       self.cache, self.active_index, self.shares,
                                       pair_cache=self.pair_cache)
         else:
-            args = (t_s, epoch_index, self.pending, self.active, self.network, self.config)
+            args = (t_s, epoch_index, self.pending, traffic, self.network, self.config)
             res = plan_epoch_fifo(*args, None, self.cache, self.active_index, self.shares) \
                 if self.policy == "fifo" else \
                 as_firstfit(plan_epoch_mwis(*args, first_fit_select, self.cache, self.active_index,
@@ -1256,8 +1300,30 @@ class Planner:
                                             horizon=1))  # uam_planner.first_fit; myopic
             prep = PreparedEpoch(t_s=float(t_s), epoch_index=int(epoch_index), pending=list(self.pending),
                                  report=res.report, result=res)
+        if held:
+            # each held flight is counted once (its plan, if still active, or one projection)
+            planned = {f.request_id for f in self.active}
+            twice = sum(len(o.flights) - (k not in planned) for k, o in self.overruns.items())
+            prep.airborne_count -= twice
+            if prep.result is not None:
+                prep.result.report.active_flights -= twice
+            prep.report.overruns = {k: o.until_s for k, o in self.overruns.items()}
         self._prepared = prep
         return prep
+
+    def _hold_overruns(self, t_s: float) -> None:
+        """Step 1 of ``prepare``, before flights past their planned arrival are dropped: from
+        the planner's own observations, the flights that fly past their plans and how long they
+        are held (:func:`uam_planner.nonconformance.overruns`; docs/disturbances.md 2c). Then
+        the held flights whose projection has landed by ``t_s`` are let go, and observations of
+        flights the planner no longer holds are forgotten."""
+        plans = {o.request_id: o.plan for o in self.overruns.values()}
+        plans.update((f.request_id, f) for f in self.active)
+        self.positions.prune(t_s)
+        if self.overruns or self.positions:
+            self.overruns = overruns(t_s, plans, self.positions, self.overruns)
+        self.positions.forget(set(f.request_id for f in self.active if f.arrival_s >= t_s) |
+                              set(self.overruns))
 
     def commit(self, prep: PreparedEpoch, answer=None, solve_s: float = 0.0) -> EpochResult:
         """Commit a prepared epoch with the solver's ``answer`` (checked here, greedy fallback)

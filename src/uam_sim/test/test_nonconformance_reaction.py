@@ -9,8 +9,8 @@ import pytest
 
 from uam_planner.audit import audit_flights
 from uam_planner.network import network_from_enu
-from uam_planner.nonconformance import KIND, ConformanceBounds, rejoin_trajectory
-from uam_planner.planning import Flight, Planner, PlanningConfig
+from uam_planner.nonconformance import KIND, MAX_OVERRUN_SHARE, ConformanceBounds, rejoin_trajectory
+from uam_planner.planning import Flight, FlightRequest, Planner, PlanningConfig
 from uam_planner.trajectory import Trajectory
 from uam_sim.conformance import track_conformance
 from uam_sim.disturbance import DisturbanceConfig, FlightDraws, fly
@@ -79,6 +79,7 @@ def test_its_updated_plan_keeps_separation_with_a_hand_placed_neighbour():
     # rejoin (no delay: weight 3), the slower ones less: the MWIS takes 0.99
     (u,) = res.plan_updates
     assert (u.request_id, u.kind, u.version, u.effective_s) == ("P", KIND, 2, 120.0)
+    assert u.observed_rate == pytest.approx(0.9)   # what the simulator flies it on at (the wire field)
     assert u.flight.contingent is False and "time +12.0 s" in u.reason
     new = u.flight.trajectory
     assert new.departure_s == 120.0 and new.points_m[0] == pytest.approx([1080.0, 0.0, 0.0])
@@ -178,3 +179,138 @@ def test_the_runner_reacts_and_off_is_todays_run():
     pairs = on.audit["loss_pairs"]
     assert len(pairs) == min(on.summary["losses"], 20)
     assert all(a in contingent or b in contingent for a, b, _d, _t in pairs)
+
+
+# ---- flights that fly past their plan (issue 23, the safety gap; uam_planner.nonconformance
+# .overruns, docs/disturbances.md 2c): held in the planner's traffic picture, by hand ---------
+#: P (W at 0 s, E at 600 s) in a 1 m/s head wind: 9 m/s over the ground, x = 9 t, lands at
+#: 6000 / 9 = 666.67 s, 66.7 s after its planned arrival
+LATE = fly(P.trajectory, FlightDraws(), HEAD_WIND)
+LANDS = 6000.0 / 9.0
+#: R leaves E for W (the only route: E - m - W, against P's last leg) as soon as it can
+R = FlightRequest("R", "E", "W", 630.0, 630.0, 700.0)
+
+
+def seen_planner(observe_until=None, flown=LATE):
+    """A planner holding P (no reaction: the default configuration), that has seen P in the
+    fleet state every 10 s up to ``observe_until`` (None: never)."""
+    p = Planner(cross(), PlanningConfig(), "mwis", solve_mwis=None)
+    p.restore([P])
+    if observe_until is not None:
+        observe_every_10_s(p, 10.0, observe_until, flown)
+    return p
+
+
+def observe_every_10_s(p, t0, t1, flown=LATE):
+    t = t0
+    while t <= t1 + 1e-9:
+        if flown.departure_s <= t < flown.arrival_s:      # the fleet state holds airborne vehicles
+            assert p.observe("P", t, flown.position_at(t)) is None
+        t += 10.0
+
+
+def test_a_late_flight_is_held_past_its_planned_arrival_and_nothing_is_approved_into_it():
+    assert LATE.arrival_s == pytest.approx(LANDS, abs=1.0)
+    # the gap: a planner that does not see the fleet forgets P at its planned arrival (600 s)
+    # and sends R head-on into it (P at 5670 m, R from 6000 m at 630 s: they meet at 19 t =
+    # 12300, t = 647.4 s)
+    blind = seen_planner()
+    blind.submit(R)
+    (r,) = blind.plan(630.0, 21).approved
+    assert len(audit_flights([r.trajectory, LATE], separation_m=100.0).losses) == 1
+
+    p = seen_planner(observe_until=630.0)
+    p.submit(R)
+    res = p.plan(630.0, 21)
+    # seen at 630 s at 5670 m, planned there at 567 s: 63 s late; the rest of the plan shifted by
+    # that lands at 663 s, and R leaving E at 630 s meets that projection head-on
+    assert res.approved == [] and res.waiting == [R]
+    assert res.report.overruns == {"P": pytest.approx(663.0)}
+    assert res.report.active_flights == 1 and [f.request_id for f in p.active] == []
+    # 660 s: seen at 5940 m (planned at 594 s: 66 s late), held until 666 s; R would leave E with
+    # P 60 m away: it waits (the shift follows the growing lateness one sighting behind: the
+    # aircraft lands at 666.67 s)
+    observe_every_10_s(p, 640.0, 660.0)
+    res = p.plan(660.0, 22)
+    assert res.approved == [] and res.report.overruns == {"P": pytest.approx(666.0)}
+    # 690 s: P landed at 666.67 s (no fleet state shows it any more); R goes, clear of it
+    observe_every_10_s(p, 670.0, 690.0)
+    res = p.plan(690.0, 23)
+    (r,) = res.approved
+    assert r.departure_s == 690.0 and res.report.overruns == {} and p.overruns == {}
+    assert audit_flights([r.trajectory, LATE], separation_m=100.0).losses == []
+
+
+def test_a_flight_seen_on_its_plan_holds_nothing_and_changes_nothing():
+    # P flown exactly (no wind), seen every 10 s: it projects onto its own plan, nothing is
+    # held, and R is approved at 630 s as by the planner that sees nothing (bit for bit)
+    exact = fly(P.trajectory, FlightDraws(), type(HEAD_WIND)())
+    seen, blind = seen_planner(observe_until=630.0, flown=exact), seen_planner()
+    out = []
+    for p in (seen, blind):
+        p.submit(R)
+        res = p.plan(630.0, 21)
+        assert res.report.overruns == {} and p.overruns == {}
+        (r,) = res.approved
+        out.append((r.departure_s, r.trajectory.times_s.tobytes(), r.trajectory.points_m.tobytes()))
+    assert out[0] == out[1]
+
+
+def test_a_vehicle_that_vanishes_is_held_only_until_its_last_sighting_lands():
+    # seen up to 630 s (5670 m, 63 s late), then never again (it vanished from the fleet state):
+    # held until the projection from its last sighting lands, 663 s, then let go; the bound
+    # MAX_OVERRUN_SHARE x 600 s after the planned arrival is never reached
+    p = seen_planner(observe_until=630.0)
+    assert p.plan(630.0, 21).report.overruns == {"P": pytest.approx(663.0)}
+    assert p.plan(660.0, 22).report.overruns == {"P": pytest.approx(663.0)}
+    assert p.plan(690.0, 23).report.overruns == {}
+    assert 600.0 + MAX_OVERRUN_SHARE * 600.0 > LANDS
+
+
+# ---- the reaction between epochs (issue 23 item 3: F3548's 5 s update; reaction_period_s) ----
+
+def test_between_epochs_the_update_comes_at_once_and_keeps_separation_with_the_neighbour():
+    # as test_its_updated_plan_keeps_separation_with_a_hand_placed_neighbour, but the planner
+    # reacts at 110 s, between the epochs at 90 and 120 s: seen at 100 and 110 s (planned 90 and
+    # 99 s: progress 0.9), from (990, 0) at 110 s the rejoin at 0.9 reaches m at 110 + 2010 / 9 =
+    # 333.33 s, with Q: a loss; 10 % faster (9.9 m/s) reaches m at 110 + 2010 / 9.9 = 313.03 s,
+    # 20.30 s before Q: 20.30 x 9.9 x 10 / sqrt(9.9^2 + 10^2) = 142.8 m
+    flown = fly(P.trajectory, FlightDraws(), HEAD_WIND)
+    p = planner()
+    _observe(p, flown, (100.0, 110.0))
+    assert p.report_nonconforming("P", 101.0, "monitor") is None
+    (u,) = p.react_between(110.0, 3)
+    assert (u.request_id, u.kind, u.version, u.effective_s) == ("P", KIND, 2, 110.0)
+    assert u.observed_rate == pytest.approx(0.9)
+    new = u.flight.trajectory
+    assert new.departure_s == 110.0 and new.points_m[0] == pytest.approx([990.0, 0.0, 0.0])
+    assert new.position_at(110.0 + 2010.0 / 9.9) == pytest.approx([3000.0, 0.0, 0.0])
+    gap = 1000.0 / 3.0 - (110.0 + 2010.0 / 9.9)
+    a = audit_flights([new, Q.trajectory], separation_m=100.0)
+    assert a.losses == [] and a.min_separation_m == pytest.approx(gap * 99.0 / math.hypot(9.9, 10.0), abs=0.01)
+    assert sorted((f.request_id, f.version) for f in p.active) == [("P", 2), ("Q", 1)]
+    # nothing is left for the epoch at 120 s: the claim was acted on, P conforms to its update
+    assert p.react_between(115.0, 3) == [] and p.plan(120.0, 4).plan_updates == []
+    # between epochs nothing else happens: no claim, no update; not while an epoch is prepared
+    prep = p.prepare(150.0, 5)
+    with pytest.raises(RuntimeError):
+        p.react_between(155.0, 5)
+    p.commit(prep)
+
+
+def test_the_runner_reacts_between_epochs():
+    """reaction_period_s = 5 s in the runner: updates take effect between epochs, and the
+    longest excursion is shorter than with the reaction at the epochs only (same seed)."""
+    from uam_planner.network import load_network
+    from uam_sim.experiment_config import REPO_ROOT, ExperimentError, make_config
+    from uam_sim.scenario import run_scenario
+    net = load_network(REPO_ROOT / "config" / "networks" / "tiny.yaml")
+    base = dict(epoch_s=30.0, time_limit_s=5.0, corpus_max_vertices=0, reaction=True,
+                disturbance={"speed_error": 0.3, "gust_std_mps": 0.5})
+    at_epochs = run_scenario(net, "greedy", 3.0, 4, 300.0, make_config(base))
+    often = run_scenario(net, "greedy", 3.0, 4, 300.0, make_config(dict(base, reaction_period_s=5.0)))
+    assert any(r["t_s"] % 30.0 != 0 for r in often.replans)
+    assert all(r["t_s"] % 5.0 == 0 for r in often.replans)
+    assert often.summary["conf_longest_excursion_s"] < at_epochs.summary["conf_longest_excursion_s"]
+    with pytest.raises(ExperimentError, match="reaction_period_s: 45"):
+        make_config(dict(base, reaction_period_s=45.0))

@@ -310,3 +310,41 @@ def test_exact_cdr_size_matches_what_dds_delivers():
         data = serialize_exact(msg)
         assert len(data) == cdr_size(msg)
         typestore.deserialize_cdr(data, name)  # rosbags checks the length strictly
+
+
+def test_a_flight_plan_recorded_before_observed_progress_rate_still_reads(tmp_path):
+    """Issue 23 item 2 added ``FlightPlan.observed_progress_rate`` (the last field). A recording
+    made before it holds the old definition in its schema and messages without the field:
+    read with the file's own schema, into today's class, the field at its default 0."""
+    from mcap_ros2.writer import Writer
+    from uam_sim.mcap_schema import DEFINITION_SEPARATOR, message_definition
+
+    new = message_definition("uam_msgs/msg/FlightPlan")
+    head, sep, deps = new.partition("\n" + DEFINITION_SEPARATOR)
+    old = head[:head.index("float64 observed_progress_rate")].rstrip("\n") + "\n" + sep + deps
+    assert "observed_progress_rate" not in old
+    fields = {"header": {"stamp": {"sec": 30, "nanosec": 0}, "frame_id": "enu"}, "operator_id": "op",
+              "request_id": "r1", "outcome": 0, "version": 2, "update_kind": "nonconforming",
+              "waypoints": [{"position": {"x": 1.0, "y": 2.0, "z": 3.0}, "time": {"sec": 31, "nanosec": 5}}],
+              "route_node_ids": ["A", "B"], "length_m": 42.0}
+
+    def one(path, definition, message):
+        with open(path, "wb") as f:
+            w = Writer(f)
+            schema = w.register_msgdef("uam_msgs/msg/FlightPlan", definition)
+            w.write_message("/uam/flight_plans", schema, message, log_time=30_000_000_000,
+                            publish_time=30_000_000_000)
+            w.finish()
+        (rec,) = list(read_messages(path))
+        return deserialize(rec)
+
+    msg = one(tmp_path / "old.mcap", old, fields)
+    assert isinstance(msg, FlightPlan) and msg.observed_progress_rate == 0.0
+    assert (msg.operator_id, msg.request_id, msg.version, msg.update_kind, msg.length_m) == \
+        ("op", "r1", 2, "nonconforming", 42.0)
+    assert list(msg.route_node_ids) == ["A", "B"] and msg.header.stamp.sec == 30
+    (wp,) = msg.waypoints
+    assert (wp.position.x, wp.position.z, wp.time.sec, wp.time.nanosec) == (1.0, 3.0, 31, 5)
+    # a plan of today's definition reads as before (rclpy), the field kept
+    msg = one(tmp_path / "new.mcap", new, dict(fields, observed_progress_rate=0.9))
+    assert isinstance(msg, FlightPlan) and msg.observed_progress_rate == 0.9 and msg.version == 2

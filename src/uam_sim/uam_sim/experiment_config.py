@@ -122,6 +122,9 @@ class ExperimentConfig:
             ``uam_planner.nonconformance``): the runner's monitor reports them, the planner
             checks each report against its own view and updates the intent; false (default) =
             no reaction. Needs ``disturbance``.
+        reaction_period_s: with ``reaction``, the runner's monitor also reports, and the
+            planner reacts, every this many seconds between epochs (``Planner.react_between``;
+            F3548 asks an update within 5 s); 0 (default) = only at the epochs.
         metrics_warmup_s: the decision metrics (delay, shares, ...) leave out requests whose
             earliest departure is before it (the warm-up); 0 = none.
         cumulative_rates: rates shown in the cumulative-approvals figure (default: up to 4 spread).
@@ -176,6 +179,7 @@ class ExperimentConfig:
     disturbance: Mapping = field(default_factory=dict)  # fields: DisturbanceConfig
     conformance: Mapping = field(default_factory=dict)  # fields: ConformanceBounds
     reaction: Bool = False
+    reaction_period_s: Float = 0.0
     tts: Optional[Mapping] = field(default_factory=lambda: {
         "enabled": True, "instances": 629, "min_vertices": 5, "max_vertices": 50, "reads": 100,
         "repetitions": 5, "backend_instances": {"qpu-emulator": 60},
@@ -282,6 +286,9 @@ def make_config(data: dict | None = None, **overrides) -> ExperimentConfig:
         raise ExperimentError(f"demand_file: file {str(cfg.demand_file)!r} does not exist")
     if cfg.constraints_file and not resolve_path(str(cfg.constraints_file)).is_file():
         raise ExperimentError(f"constraints_file: file {str(cfg.constraints_file)!r} does not exist")
+    rp = cfg.reaction_period_s
+    if not (math.isfinite(rp) and 0.0 <= rp <= cfg.epoch_s):
+        raise ExperimentError(f"reaction_period_s: {rp!r} is not in [0, epoch_s = {cfg.epoch_s:g}] s")
     cfg.rates = [rate_label(r) for r in _num_list("rates", cfg.rates)]
     cfg.seeds = _seeds(cfg.seeds)
     from .dask_cluster import validate_scheduler

@@ -35,6 +35,7 @@ class RecordedMessage:
     log_time_ns: int
     publish_time_ns: int
     qos_yaml: str = ""
+    schema: Any = None   # the file's mcap Schema record (its ros2msg definition), if any
 
 
 def read_messages(path: str | os.PathLike, topics: Sequence[str] | None = None) -> Iterator[RecordedMessage]:
@@ -47,7 +48,7 @@ def read_messages(path: str | os.PathLike, topics: Sequence[str] | None = None) 
                                                              log_time_order=True):
             yield RecordedMessage(channel.topic, schema.name if schema else "", message.data,
                                   message.log_time, message.publish_time,
-                                  channel.metadata.get("offered_qos_profiles", ""))
+                                  channel.metadata.get("offered_qos_profiles", ""), schema)
 
 
 def read_messages_tolerant(path: str | os.PathLike) -> Iterator[RecordedMessage]:
@@ -71,7 +72,7 @@ def read_messages_tolerant(path: str | os.PathLike) -> Iterator[RecordedMessage]
                 return  # the torn tail of a crashed recording
             yield RecordedMessage(channel.topic, schema.name if schema else "", message.data,
                                   message.log_time, message.publish_time,
-                                  channel.metadata.get("offered_qos_profiles", ""))
+                                  channel.metadata.get("offered_qos_profiles", ""), schema)
 
 
 #: The first bytes of every MCAP file (the specification's magic: 0x89 "MCAP0" CR LF).
@@ -147,9 +148,62 @@ def log_time_zero_ns(path: str | os.PathLike) -> int:
 
 
 def deserialize(record: RecordedMessage) -> Any:
-    """The rclpy message object of a recorded message (imports rclpy)."""
+    """The rclpy message object of a recorded message (imports rclpy).
+
+    A recording made with an older definition of the type (its schema differs from the
+    installed one, e.g. a ``FlightPlan`` before ``observed_progress_rate``, issue 23) is decoded
+    with its own schema (mcap_ros2's dynamic decoder) and copied into the installed class: the
+    fields it has keep their values, the newer ones keep their defaults (0, "", [])."""
     from rclpy.serialization import deserialize_message
-    return deserialize_message(record.data, message_class(record.type_name))
+    cls = message_class(record.type_name)
+    schema = record.schema
+    if schema is not None and schema.data and _differs(record.type_name, schema.data):
+        return _copy_into(cls, _old_decoder(schema)(record.data))
+    return deserialize_message(record.data, cls)
+
+
+_DIFFERS: dict = {}
+_DECODERS: dict = {}
+
+
+def _differs(type_name: str, schema_data: bytes) -> bool:
+    key = (type_name, bytes(schema_data))
+    if key not in _DIFFERS:
+        from .mcap_schema import message_definition
+        try:
+            _DIFFERS[key] = message_definition(type_name).strip() != bytes(schema_data).decode().strip()
+        except Exception:  # noqa: BLE001 - no installed definition to compare: rclpy decides
+            _DIFFERS[key] = False
+    return _DIFFERS[key]
+
+
+def _old_decoder(schema):
+    key = (schema.name, bytes(schema.data))
+    if key not in _DECODERS:
+        from mcap_ros2.decoder import DecoderFactory
+        _DECODERS[key] = DecoderFactory().decoder_for("cdr", schema)
+    return _DECODERS[key]
+
+
+def _copy_into(cls, old) -> Any:
+    """An instance of the installed message class ``cls`` with the fields ``old`` (a decoded
+    namespace) has, recursively; missing fields keep their defaults."""
+    msg = cls()
+    for name, typ in cls.get_fields_and_field_types().items():
+        if not hasattr(old, name):
+            continue
+        value = getattr(old, name)
+        base = typ.split("<")[0]
+        seq = base.startswith("sequence") or "[" in base
+        inner = typ[typ.index("<") + 1:typ.rindex(">")] if base.startswith("sequence") else typ.split("[")[0]
+        if "/" in inner:   # a message type (pkg/Type)
+            pkg, name_ = inner.split("/")[0], inner.split("/")[-1]
+            sub = message_class(f"{pkg}/msg/{name_}")
+            value = [_copy_into(sub, v) for v in value] if seq else _copy_into(sub, value)
+        elif seq and not isinstance(value, (bytes, str)):
+            value = list(value)
+        setattr(msg, name, value)
+    return msg
 
 
 def iter_decoded(path: str | Path, reader: str = "rclpy",

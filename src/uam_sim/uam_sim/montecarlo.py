@@ -39,7 +39,7 @@ DEFAULT_NETWORK = {"synthetic": {"n_nodes": 400, "n_aerodromes": 30, "seed": 1}}
 COLUMNS = ("speed_error", "spatial_buffer_m", "temporal_buffer_s", "reaction", "runs", "requests", "flights",
            "approval_rate", "conformance_percent", "excursions_per_flight_hour", "longest_excursion_s",
            "nonconforming_flights", "replans", "flown_losses", "flown_min_separation_m",
-           "planned_losses", "nonconforming_updates", "reaction_contingencies")
+           "planned_losses", "nonconforming_updates", "reaction_contingencies", "held_past_plan")
 
 
 def _num_list(text: str) -> list[float]:
@@ -82,6 +82,7 @@ def point_configs(args) -> list[tuple[tuple, dict]]:
                                    "temporal_buffer_s": bt, "disturbance": dist,
                                    "conformance": args.conformance or {}, "out": args.out,
                                    "reaction": react,
+                                   "reaction_period_s": args.reaction_period if react else 0.0,
                                    "workers": args.workers, "scheduler": args.scheduler,
                                    "corpus_max_vertices": 0})
                 out.append(((e, bs, bt, react), asdict(cfg)))
@@ -108,7 +109,10 @@ def aggregate(point: tuple, cells: list[dict]) -> dict:
             "flown_min_separation_m": min(mins) if mins else None,
             "planned_losses": sum(x["losses"] or 0 for x in s),
             "nonconforming_updates": sum(x.get("nonconforming_updates", 0) for x in s),
-            "reaction_contingencies": sum(x.get("reaction_contingencies", 0) for x in s)}
+            "reaction_contingencies": sum(x.get("reaction_contingencies", 0) for x in s),
+            # flights the planner held past their plans (issue 23's safety gap; 0 in cells run
+            # before it)
+            "held_past_plan": sum(x.get("held_past_plan", 0) for x in s)}
 
 
 def run(args) -> list[dict]:
@@ -220,6 +224,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--step", type=float, default=1.0, help="disturbance model step [s] (default 1)")
     p.add_argument("--reaction", type=_reaction, default=[False],
                    help="the planner's reaction to nonconforming flights: off (default), on or both")
+    p.add_argument("--reaction-period", type=float, default=0.0, metavar="S",
+                   help="with the reaction on, also react every S seconds between epochs (issue 23 "
+                        "item 3; 0 = at the epochs only)")
     p.add_argument("--conformance", type=key_values, help="conformance bounds, e.g. lateral_m=30,time_s=10")
     p.add_argument("--seeds", default="4", help="a count n (seeds 0..n-1) or a comma list")
     p.add_argument("--rate", type=float, default=10.0, help="requests per 30 s (default 10)")

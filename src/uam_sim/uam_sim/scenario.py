@@ -148,17 +148,17 @@ def _apply_plan_updates(updates, by_id: dict, replans: list, t: float) -> None:
                    length_m=f.length_m, route=" ".join(f.route_node_ids), level_m=float(f.level_m))
 
 
-def _apply_reaction_updates(res, by_id, reaction, replans, t) -> None:
-    """The reaction's plan updates of one epoch (issue 23): the runner's row of each flight takes
-    the new version and arrival, the flight flies on from where it is at its observed rate, and
-    the update is listed with the run's re-plans."""
-    rates = (res.report.nonconformance or {}).get("rates", {})
-    for u in res.plan_updates:
+def _apply_reaction_updates(updates, by_id, reaction, replans, t) -> None:
+    """The reaction's plan updates of one epoch, or of a reaction between epochs (issue 23): the
+    runner's row of each flight takes the new version and arrival, the flight flies on from
+    where it is at its observed rate (``ReactionUpdate.observed_rate``), and the update is
+    listed with the run's re-plans."""
+    for u in updates:
         row = by_id.get(u.request_id)
         if row is not None and _is_reaction(u):
             row["version"], row["replan"] = u.version, u.kind
             row["arrival_s"] = u.flight.arrival_s
-            reaction.apply(u, row, rates[u.request_id])
+            reaction.apply(u, row, u.observed_rate)
             replans.append({"t_s": t, "request_id": u.request_id, "kind": u.kind,
                             "version": u.version, "constraints": "",
                             "added_delay_s": u.added_delay_s, "airborne": True})
@@ -187,9 +187,14 @@ class _Reaction:
 
     OBSERVE_BACK_S = (20.0, 10.0, 0.0)
 
-    def __init__(self, planner, dcfg, wind, bounds, epoch_s: float):
+    def __init__(self, planner, dcfg, wind, bounds, epoch_s: float, report: bool = True,
+                 period_s: float = 0.0):
         self.planner, self.dcfg, self.wind, self.bounds = planner, dcfg, wind, bounds
         self.epoch_s = float(epoch_s)
+        self.period_s = float(period_s)   # > 0: react between epochs too (reaction_period_s)
+        #: False: only the observations (the fleet state the planner sees, so it holds a late
+        #: flight past its plan: issue 23's safety gap), no conformance reports (reaction off)
+        self.report = bool(report)
 
     def before_epoch(self, t: float, rows) -> None:
         from .conformance import conforming, deviations
@@ -202,14 +207,44 @@ class _Reaction:
                 tb = t - back
                 if fl.departure_s <= tb:
                     self.planner.observe(rid, tb, fl.position_at(tb))
+            if not self.report:
+                continue
             ts, ps = fl.times_s, fl.points_m
-            sel = (ts > t - self.epoch_s) & (ts <= t)
+            sel = (ts > t - self.epoch_s) & (ts <= t) & (ts > row.get("_t0", -math.inf))
             if not sel.any():
                 continue
             lat, ver, terr = deviations(row["_traj"], ts[sel], ps[sel])
             bad = np.flatnonzero(~conforming(lat, ver, terr, self.bounds))
             if bad.size:
                 self.planner.report_nonconforming(rid, float(ts[sel][bad[0]]), "runner monitor")
+
+    def between(self, t0: float, t1: float, rows, epoch_index: int, by_id, replans) -> None:
+        """The reaction between epochs (``reaction_period_s``): every ``period`` seconds in
+        (t0, t1) the planner observes every airborne flight, the monitor reports what it saw
+        since the last look (samples after the flight's newest version began), and the planner
+        reacts at once (``Planner.react_between``); the updates are flown from there."""
+        from .conformance import conforming, deviations
+        k = 1
+        while True:
+            tk = t0 + k * self.period_s
+            if tk >= t1 - 1e-9:
+                return
+            for row in rows:
+                fl = row.get("_flown")
+                if fl is None or row.get("cancelled") or not fl.departure_s < tk < fl.arrival_s:
+                    continue
+                rid = row["request_id"]
+                self.planner.observe(rid, tk, fl.position_at(tk))
+                ts, ps = fl.times_s, fl.points_m
+                sel = (ts > tk - self.period_s) & (ts <= tk) & (ts > row.get("_t0", -math.inf))
+                if not sel.any():
+                    continue
+                lat, ver, terr = deviations(row["_traj"], ts[sel], ps[sel])
+                bad = np.flatnonzero(~conforming(lat, ver, terr, self.bounds))
+                if bad.size:
+                    self.planner.report_nonconforming(rid, float(ts[sel][bad[0]]), "runner monitor")
+            _apply_reaction_updates(self.planner.react_between(tk, epoch_index), by_id, self, replans, tk)
+            k += 1
 
     def apply(self, u, row, rate: float) -> None:
         """Fly a nonconforming update of ``row`` from where the aircraft is."""
@@ -344,8 +379,13 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
         from .disturbance import WindField, fly_plans
         dcfg = _replace(cfg.disturbance_config(), seed=int(seed))
         wind = WindField(dcfg)
-    reaction = _Reaction(planner, dcfg, wind, cfg.conformance_bounds(), cfg.epoch_s) \
-        if disturbed and cfg.reaction else None
+    reaction = _Reaction(planner, dcfg, wind, cfg.conformance_bounds(), cfg.epoch_s,
+                         period_s=cfg.reaction_period_s) if disturbed and cfg.reaction else None
+    between = reaction is not None and 0.0 < cfg.reaction_period_s < cfg.epoch_s
+    # what flies is not the plan: the planner sees the fleet (as the node sees /uam/fleet_state),
+    # so it holds a flight that flies past its plan (issue 23, the safety gap)
+    watch = reaction if reaction is not None else \
+        _Reaction(planner, dcfg, wind, cfg.conformance_bounds(), cfg.epoch_s, report=False) if disturbed else None
     n_epochs = int(math.ceil(duration_s / cfg.epoch_s - 1e-9))
     next_interval = 0
     epochs, flights, instances, rejections, replans = [], [], [], [], []
@@ -354,6 +394,7 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
     earliest_s: dict = {}
     latest_s: dict = {}
     asked = []  # every request submitted, for the decision metrics
+    held_ids: set = set()  # flights the planner held past their plans (issue 23)
     for e in range(n_epochs):
         t = e * cfg.epoch_s
         # every demand instant up to t, in time order (equal spacing when interval_s == epoch_s)
@@ -375,12 +416,13 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
             next_interval += 1
         if before_epoch is not None:
             before_epoch(planner, t, e)
-        if reaction is not None:
-            reaction.before_epoch(t, flights)
+        if watch is not None:
+            watch.before_epoch(t, flights)
         res = planner.plan(t, e)
+        held_ids.update(res.report.overruns)
         if res.plan_updates:
             if reaction is not None:
-                _apply_reaction_updates(res, by_id, reaction, replans, t)
+                _apply_reaction_updates(res.plan_updates, by_id, reaction, replans, t)
                 _apply_plan_updates([u for u in res.plan_updates if not _is_reaction(u)], by_id,
                                     replans, t)
                 for u in res.plan_updates:   # a constraint re-plan: what flies changes now
@@ -419,6 +461,8 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
             for f, track in zip(new, fly_plans([f["_traj"] for f in new],
                                                [f["request_id"] for f in new], dcfg, wind)):
                 f["_flown"] = track
+        if between:   # issue 23 item 3: the reaction between this epoch and the next
+            reaction.between(t, t + cfg.epoch_s, flights, e, by_id, replans)
         epochs.append({"epoch": e, "t_s": t, "requests_cum": n_requests, "pending": rep.pending,
                        "eligible": rep.eligible, "candidates": rep.candidates,
                        "discarded": rep.discarded, "vertices": rep.vertices, "edges": rep.edges,
@@ -445,8 +489,11 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
             t = e * cfg.epoch_s
             reaction.before_epoch(t, flights)
             res = planner.plan(t, e)
-            _apply_reaction_updates(res, by_id, reaction, replans, t)
+            held_ids.update(res.report.overruns)
+            _apply_reaction_updates(res.plan_updates, by_id, reaction, replans, t)
             _apply_plan_updates([u for u in res.plan_updates if not _is_reaction(u)], by_id, replans, t)
+            if between:
+                reaction.between(t, t + cfg.epoch_s, flights, e, by_id, replans)
             e += 1
     audit = {}
     flown = [f for f in flights if not f.get("cancelled")]
@@ -474,6 +521,7 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
     flown_summary = _flown_summary(flown, cfg, dcfg) if disturbed else {}
     if flown_summary:
         flown_summary["replans"] = len(replans)
+        flown_summary["held_past_plan"] = len(held_ids)
     for f in flights:
         del f["_traj"]
         for k in ("_flown", "_pieces", "_e", "_t0"):

@@ -42,9 +42,14 @@ def cell_params(cfg: ExperimentConfig, method: str, rate, seed: int) -> dict:
                           ("operator_lead_times_s", []), ("metrics_warmup_s", 0.0),
                           # issue 23: buffers, disturbances and conformance bounds
                           ("spatial_buffer_m", 0.0), ("temporal_buffer_s", 0.0),
-                          ("disturbance", {}), ("conformance", {}), ("reaction", False)):
+                          ("disturbance", {}), ("conformance", {}), ("reaction", False),
+                          ("reaction_period_s", 0.0)):
         if getattr(cfg, name) != default:
             params[name] = getattr(cfg, name)
+    if cfg.disturbance:
+        # issue 23's safety gap: a disturbed run's planner sees the fleet and holds late flights
+        # (results differ from cells run before it, which are not reused)
+        params["planner_sees_fleet"] = 1
     if cfg.demand_file:
         params["demand"] = hashlib.sha256(resolve_path(cfg.demand_file).read_bytes()).hexdigest()
     if cfg.constraints_file:

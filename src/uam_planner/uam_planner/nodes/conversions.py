@@ -147,6 +147,8 @@ def plan_update_msg(update: Any, t_s: float, policy: str, request_id: str | None
     plan.effective_time = to_time(float(update.effective_s))
     plan.constraint_ids = [str(c) for c in update.constraint_ids]
     plan.update_kind = str(update.kind)
+    # issue 23: the reaction's updates carry the observed progress rate they were re-timed from
+    plan.observed_progress_rate = float(getattr(update, "observed_rate", 0.0) or 0.0)
     return plan
 
 

@@ -136,14 +136,18 @@ class PlannerNode(Node):
         # checked against it and against the planner's plan at the next epoch
         self.conformance_reports = 0
         self.conformance_reports_refused = 0
+        self.held_past_plan: set = set()   # request ids the planner ever held past their plans
         # the messages go to an inbox (a deque: appends are atomic) from their own callback group,
         # so a busy epoch never holds them up; the planner reads the inbox before each epoch
         self._inbox: collections.deque = collections.deque()
+        from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+        group = MutuallyExclusiveCallbackGroup()
+        # the fleet state always (issue 23's safety gap: a flight seen flying past its plan is
+        # held in the traffic picture until it lands, uam_planner.nonconformance.overruns); the
+        # conformance reports only with the reaction on
+        self.create_subscription(FleetState, c.TOPIC_FLEET, lambda msg: self._inbox.append(msg), qos.QOS_STREAM,
+                                 callback_group=group)
         if self.p["reaction"]:
-            from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-            group = MutuallyExclusiveCallbackGroup()
-            self.create_subscription(FleetState, c.TOPIC_FLEET, lambda msg: self._inbox.append(msg), qos.QOS_STREAM,
-                                     callback_group=group)
             self.create_subscription(Conformance, c.TOPIC_CONFORMANCE, lambda msg: self._inbox.append(msg), qos.QOS_STREAM,
                                      callback_group=group)
         self._client = self.create_client(SolveMwis, c.SERVICE_SOLVE, callback_group=self._group)
@@ -587,6 +591,7 @@ class PlannerNode(Node):
         solve_s = time.perf_counter() - t0
         with self._lock:
             result = self.planner.commit(prep, answer, solve_s)
+            self.held_past_plan.update(result.report.overruns)
             plans = [m.approved_plan(f, t_s, self.policy, request_id=wire.split_scoped(f.request_id)[1])
                      for f in result.approved]
             for plan, f in zip(plans, result.approved):

@@ -55,7 +55,7 @@ from uam_contract.params import SIMULATOR
 from uam_bringup.runtime import run_node
 from uam_sim.cdr import encode_clock, encode_fleet_state, encode_pose_array, yaw_quaternions
 from uam_sim.disturbance import WindField, fly_plans, from_simulator_params
-from uam_planner.nonconformance import rate_of
+from uam_planner.nonconformance import RATE_RANGE
 from uam_sim.fleet import Fleet
 
 RESEND_S = 2.0  # wall time after which an unanswered call is sent again (a restarted server lost it)
@@ -63,6 +63,14 @@ RESEND_S = 2.0  # wall time after which an unanswered call is sent again (a rest
 # (sent as soon as an epoch is flown) are handled while the fleet is stepped towards that epoch.
 STEPS_PER_TURN = 3
 
+
+
+def observed_rate(plan) -> float | None:
+    """The observed progress rate a plan update of the reaction carries
+    (``FlightPlan.observed_progress_rate``, issue 23), or None: 0 (every other plan), or a value
+    outside the rates the planner estimates (``uam_planner.nonconformance.RATE_RANGE``)."""
+    v = float(getattr(plan, "observed_progress_rate", 0.0) or 0.0)
+    return v if math.isfinite(v) and RATE_RANGE[0] <= v <= RATE_RANGE[1] else None
 
 class SimulatorNode(Node):
     def __init__(self, **kwargs):
@@ -364,7 +372,7 @@ class SimulatorNode(Node):
         cancelled flight (docs/replanning.md)."""
         self.versions_received += 1
         try:
-            rate = rate_of(plan.reason) if plan.outcome == FlightPlan.OUTCOME_APPROVED else None
+            rate = observed_rate(plan) if plan.outcome == FlightPlan.OUTCOME_APPROVED else None
             if rate is not None and plan.waypoints and self.wind is not None and self.fleet.flown(key) is not None:
                 # issue 23: a nonconforming flight's intent, updated from where it is: flown on
                 # from there at the airspeed it had (uam_sim.disturbance.fly_on), as the runner does
