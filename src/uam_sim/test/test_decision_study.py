@@ -66,7 +66,7 @@ def test_bad_study_files_are_refused_naming_the_field(tmp_path):
         return small(tmp_path, experiments=[{**exp, **kw}])
     prim = exp["primary"][0]
     cases = [
-        (with_exp(primary=[]), r"experiments\[0\].primary: declare at least one"),
+        (with_exp(primary=[]), r"experiments\[0\].primary: \[\] must have at least 1 item"),
         (with_exp(primary=[{**prim, "metric": "happiness"}]), r"primary\[0\].metric: 'happiness'"),
         (with_exp(primary=[{**prim, "terms": [prim["terms"][0], prim["terms"][0]]}]),
          r"primary\[0\].terms: signs must sum to 0"),
@@ -77,8 +77,23 @@ def test_bad_study_files_are_refused_naming_the_field(tmp_path):
                                               prim["terms"][1]]}]),
          r"terms\[0\].where.objective: 'joy' is not one of"),
         (with_exp(cells=[{**exp["cells"][0], "mode": "wide"}]), r"cells\[0\].mode: 'wide'"),
-        (small(tmp_path, power={"pilot_seeds": 1}), r"power.pilot_seeds: 1 must be an integer >= 2"),
-        (small(tmp_path, base={"seeds": 4}), r"base.seeds: set per cell"),
+        (small(tmp_path, power={"pilot_seeds": 1}), r"power.pilot_seeds: 1 is below the minimum 2"),
+        (small(tmp_path, power={"pilot_seeds": "3"}), r"power.pilot_seeds: '3' is not an integer"),
+        (small(tmp_path, power={"level": 1.5}), r"power.level: 1.5 must be < 1"),
+        (small(tmp_path, power={"covariate": "weather"}), r"power.covariate: 'weather' is not one of"),
+        (small(tmp_path, power={"colour": 1}), r"power.colour: unknown field"),
+        (small(tmp_path, e0={"per_bin": 0}), r"e0.per_bin: 0 is below the minimum 1"),
+        (small(tmp_path, e0={"runs": [{"name": "x", "network": "n.yaml", "mode": "both",
+                                       "rate": "fast", "seed": 0}]}),
+         r"e0.runs\[0\].rate: 'fast' is not a finite number"),
+        (with_exp(primary=[{**prim, "terms": [{**prim["terms"][0], "sign": 2},
+                                              prim["terms"][1]]}]),
+         r"primary\[0\].terms\[0\].sign: 2 is not one of"),
+        (with_exp(primary=[{**prim, "terms": [{**prim["terms"][0], "method": "exactt"},
+                                              prim["terms"][1]]}]),
+         r"primary\[0\].terms\[0\].method: 'exactt' is not one of the experiment's methods"),
+        (small(tmp_path, share_firstfit_across=["E9"]), r"share_firstfit_across\[0\]: 'E9' is not"),
+        (small(tmp_path, base={"seeds": 4}), r"base.seeds: 4 is set per cell"),
     ]
     for path, msg in cases:
         with pytest.raises(ExperimentError, match=msg):
