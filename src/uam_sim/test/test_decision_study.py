@@ -167,14 +167,47 @@ def test_comparisons_and_verdicts_are_computed_from_the_rows(tmp_path):
     assert h["seeds"] == 3 and h["diff"] == pytest.approx(3.0)
 
 
+def test_first_fit_flies_the_same_flights_under_every_objective():
+    """The assumption behind share_firstfit_across (E1 runs first-fit once, not once per
+    objective): first-fit's decisions do not depend on the weights. Here with priority classes,
+    operators with filing habits, slots and levels ("both"), so every objective's weights differ."""
+    from uam_planner.objectives import OBJECTIVES
+    from uam_sim.experiment_config import make_config
+    from uam_sim.network_spec import load_network_spec
+    from uam_sim.scenario import run_scenario
+    flown, weights = {}, {}
+    for objective in OBJECTIVES:
+        cfg = make_config({"network": str(REPO / "config/networks/singapore.yaml"),
+                           "airspace_mode": "both", "methods": ["firstfit"], "rates": [6],
+                           "duration_s": 420.0, "baseline_order": "priority",
+                           "priority_share": 0.3, "priority_class": 1,
+                           "operators": ["a", "b", "c"], "operator_lead_times_s": [300.0, 60.0, 0.0],
+                           "objective": objective, "fair_window_s": 300.0 if objective == "fair" else 0.0,
+                           "include_qpu": False, "tts": {"enabled": False}})
+        res = run_scenario(load_network_spec(cfg.network), "firstfit", 6, 0, cfg.duration_s, cfg)
+        flown[objective] = [{k: v for k, v in f.items() if k != "weight"} for f in res.flights]
+        weights[objective] = [f["weight"] for f in res.flights]
+    assert len(flown["paper"]) > 20
+    for objective in OBJECTIVES:
+        assert flown[objective] == flown["paper"], objective
+    assert len({tuple(w) for w in weights.values()}) > 1  # the objectives did weigh differently
+
+
 @pytest.mark.slow  # a tiny E0 (3 solvers + reference) and pilot: worker start-up dominates
 def test_the_study_runs_resumes_and_its_report_rebuilds_from_the_tables(tmp_path):
-    cfg = load_decision_config(small(tmp_path))
+    cfg = load_decision_config(small(tmp_path, share_firstfit_across=["E1"]))
     out = Path(cfg["out"])
     run_stage(cfg, "e0", out, progress=False)
     info = run_stage(cfg, "pilot", out, progress=False)
     assert info["runs"] == 2 * 2 * 2  # 2 variants x 2 methods x 2 pilot seeds
+    # first-fit ran once per seed (under the first objective) and stands for both variants
+    assert len(list((Path(cfg["cells"]) / "cells").glob("firstfit_*.json"))) == 2
     runs = pd.read_csv(out / "runs.csv")
+    ff = runs[runs["method"] == "firstfit"]
+    assert sorted(ff["objective"]) == ["count", "count", "paper", "paper"]
+    assert (ff["ran_under"] == "paper").all()
+    assert ff[ff["objective"] == "count"]["weight_sum_ss"].isna().all()
+    assert ff[ff["objective"] == "paper"]["weight_sum_ss"].notna().all()
     assert (runs["losses"] == 0).all() and (runs["overruns"] == 0).all()
     assert runs["commit"].str.len().min() >= 40  # every cell says which commit ran it
     e0 = pd.read_csv(out / "e0.csv.gz")

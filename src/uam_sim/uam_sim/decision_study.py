@@ -268,17 +268,30 @@ def variant_label(v: dict) -> str:
     return ",".join(f"{k}={v[k]}" for k in v) or "-"
 
 
+def shares_firstfit(cfg: dict, e: dict) -> bool:
+    """True when ``e``'s first-fit cells are shared across its objectives: first-fit ignores the
+    weights (``uam_planner.first_fit``: vertices in request order, candidates in candidate order),
+    so its decisions are the same under every objective; only each flight's recorded weight
+    differs. The first variant's first-fit cell then stands for every variant (its
+    ``weight_sum_ss`` is kept only in the row of its own objective). Guarded by
+    test_decision_study's test that first-fit flies the same flights under every objective."""
+    return e["name"] in cfg.get("share_firstfit_across", ()) and FIRSTFIT in e["methods"]
+
+
 def arms(cfg: dict, seeds, experiments=None) -> list:
-    """[(experiment, cell, variant, Arm)] of the chosen experiments at ``seeds``."""
+    """[(experiment, cell, variant, Arm)] of the chosen experiments at ``seeds`` (with
+    :func:`shares_firstfit`, first-fit only in each cell's first variant)."""
     out = []
     for e in cfg["experiments"]:
         if experiments and e["name"] not in experiments:
             continue
         for c in e["cells"]:
-            for v in _variant_list(e["vary"]):
+            for vi, v in enumerate(_variant_list(e["vary"])):
                 ov = {**e["overrides"], **c["overrides"], **v, "seeds": list(seeds)}
+                methods = [m for m in e["methods"]
+                           if not (vi and m == FIRSTFIT and shares_firstfit(cfg, e))]
                 arm = Arm(f"{e['name']}/{c['name']}/{variant_label(v)}", c["network"], [c["mode"]],
-                          list(e["methods"]), list(c["rates"]), ov)
+                          methods, list(c["rates"]), ov)
                 data = {**cfg["base"], **ov, "network": c["network"], "methods": arm.methods,
                         "rates": arm.rates, "airspace_mode": c["mode"]}
                 try:
@@ -342,15 +355,21 @@ def run_row(e, c, v, cell, window, time_limit_s: float) -> dict:
     n_in = len(ids_in)
     epochs = cell["epochs"]
     solve = [float(ep["solve_time_s"]) for ep in epochs if ep["vertices"] > 0]
+    ran_under = s.get("objective", "paper")
+    objective = v.get("objective", ran_under)
     row = {"experiment": e["name"], "cell": c["name"], "variant": variant_label(v), **v,
            "mode": c["mode"], "method": s["method"], "rate": s["rate"], "seed": s["seed"],
-           "objective": s.get("objective", "paper"),
+           "objective": objective,
+           # a shared first-fit cell (shares_firstfit): the objective whose run it is
+           "ran_under": ran_under,
            "duration_s": end, "warmup_epoch": d, "warmup_s": warm_s,
            "requests_ss": n_in, "approved_ss": approved,
            "expired_ss": n_in - approved - len(ids_in & refused),
            "refused_ss": len(ids_in & refused),
            "approval_rate_ss": approved / n_in if n_in else float("nan"),
-           "weight_sum_ss": float(sum(float(f["weight"]) for f in fl_in)),
+           # the flights' weights are those of the objective the cell ran under
+           "weight_sum_ss": (float(sum(float(f["weight"]) for f in fl_in))
+                             if objective == ran_under else float("nan")),
            "approved": s["approved"], "expired": s["expired"], "requests": s["requests"],
            "delay_mean_s": m.get("delay_mean_s", float("nan")),
            "delay_p95_s": m.get("delay_p95_s", float("nan")),
@@ -382,6 +401,13 @@ def tables(cfg: dict, results: list, entries: list) -> tuple[list, list]:
         e, c, v = by_arm[arm.name]
         limits[arm.name] = sweep.config.time_limit_s
         records += [(e, c, v, cell) for cell in sweep.cells]
+    # a shared first-fit cell (shares_firstfit) stands for every variant of its cell
+    for e, c, v, a in entries:
+        if shares_firstfit(cfg, e) and FIRSTFIT not in a.methods:
+            first = _variant_list(e["vary"])[0]
+            records += [(e, c, v, cell) for e2, c2, v2, cell in list(records)
+                        if e2 is e and c2 is c and v2 == first
+                        and cell["summary"]["method"] == FIRSTFIT]
     epoch_s = results[0][2].config.epoch_s if results else 30.0
     win = windows(records, cfg["steady_state"], epoch_s)
     rows = []
