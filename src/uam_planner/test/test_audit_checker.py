@@ -37,9 +37,13 @@ def test_audit_crossing_with_offset_and_disjoint_times():
     assert res.min_separation_m == pytest.approx(100.0 * math.sqrt(2.0))
 
 
+@pytest.mark.parametrize("bitmap", [True, False])  # how it counts the pairs it checked
 @pytest.mark.parametrize("kind", ["sphere", "cylinder"])
-def test_sweep_audit_matches_the_pair_walk(kind):
+def test_sweep_audit_matches_the_pair_walk(kind, bitmap, monkeypatch):
+    from uam_planner import audit
     from uam_planner.audit import audit_flights, sweep_audit
+    if not bitmap:
+        monkeypatch.setattr(audit, "PAIR_BITMAP_MAX", 0)
     from uam_planner.separation import SeparationModel
     from uam_planner.trajectory import Trajectory
     rng = np.random.default_rng(11)

@@ -169,6 +169,10 @@ def audit_flights(flights: Sequence[Any], separation_m=DEFAULT_SEPARATION_M,
     return AuditResult(best, best_pair, losses, checked, best_t)
 
 
+#: the largest n*n (flights squared) whose pair count :func:`sweep_audit` keeps in a bitmap
+PAIR_BITMAP_MAX = 64_000_000
+
+
 def sweep_audit(flights: Sequence[Any], separation_m=DEFAULT_SEPARATION_M,
                 labels: Sequence[Any] | None = None, chunk_pairs: int = 4_000_000) -> AuditResult:
     """The same audit as :func:`audit_flights` for thousands of flights, in numpy.
@@ -210,6 +214,11 @@ def sweep_audit(flights: Sequence[Any], separation_m=DEFAULT_SEPARATION_M,
     loss: dict = {}
     pair_codes = []
     n = len(items)
+    # pairs_checked counts distinct flight pairs: a bitmap of the n*n pair codes where it fits
+    # (up to 64 MB), else np.unique of each chunk's codes. Measured (issue 24, a 7,200 s decision-
+    # study cell, 3,023 flights): np.unique's hash of the 4M-pair chunks took 42 of the audit's
+    # 92 s, the bitmap a fraction of a second; the count is the same.
+    seen = np.zeros(n * n, dtype=bool) if n * n <= PAIR_BITMAP_MAX else None
     start = 0
     while start < t0.size:
         base = cum[start - 1] if start else 0
@@ -253,7 +262,10 @@ def sweep_audit(flights: Sequence[Any], separation_m=DEFAULT_SEPARATION_M,
         d = np.linalg.norm(rr + s[:, None] * dd_, axis=1)
         d = np.where(ok, d, np.inf)
         fa, fb = np.minimum(f[i], f[j]), np.maximum(f[i], f[j])
-        pair_codes.append(np.unique(fa * n + fb))
+        if seen is not None:
+            seen[fa * n + fb] = True
+        else:
+            pair_codes.append(np.unique(fa * n + fb))
         k = int(np.argmin(d))
         if d[k] < best:
             best, best_pair = float(d[k]), (labels[fa[k]], labels[fb[k]])
@@ -263,6 +275,9 @@ def sweep_audit(flights: Sequence[Any], separation_m=DEFAULT_SEPARATION_M,
             tt = float(lo[x] + s[x] * (hi[x] - lo[x]))
             if key not in loss or d[x] < loss[key][0]:
                 loss[key] = (float(d[x]), tt)
-    checked = int(np.unique(np.concatenate(pair_codes)).size) if pair_codes else 0
+    if seen is not None:
+        checked = int(np.count_nonzero(seen))
+    else:
+        checked = int(np.unique(np.concatenate(pair_codes)).size) if pair_codes else 0
     losses = [(labels[a], labels[b], dist, tt) for (a, b), (dist, tt) in sorted(loss.items())]
     return AuditResult(best, best_pair, losses, checked, best_t)

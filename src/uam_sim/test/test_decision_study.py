@@ -80,12 +80,11 @@ def test_bad_study_files_are_refused_naming_the_field(tmp_path):
         (small(tmp_path, power={"pilot_seeds": 1}), r"power.pilot_seeds: 1 is below the minimum 2"),
         (small(tmp_path, power={"pilot_seeds": "3"}), r"power.pilot_seeds: '3' is not an integer"),
         (small(tmp_path, power={"level": 1.5}), r"power.level: 1.5 must be < 1"),
-        (small(tmp_path, power={"covariate": "weather"}), r"power.covariate: 'weather' is not one of"),
         (small(tmp_path, power={"colour": 1}), r"power.colour: unknown field"),
         (small(tmp_path, e0={"per_bin": 0}), r"e0.per_bin: 0 is below the minimum 1"),
         (small(tmp_path, e0={"runs": [{"name": "x", "network": "n.yaml", "mode": "both",
                                        "rate": "fast", "seed": 0}]}),
-         r"e0.runs\[0\].rate: 'fast' is not a finite number"),
+         r"e0.runs\[0\].rate: 'fast' is not an integer or a finite number"),
         (with_exp(primary=[{**prim, "terms": [{**prim["terms"][0], "sign": 2},
                                               prim["terms"][1]]}]),
          r"primary\[0\].terms\[0\].sign: 2 is not one of"),
@@ -150,6 +149,10 @@ def test_comparisons_and_verdicts_are_computed_from_the_rows(tmp_path):
     pw = power_rows(_runs([2, 3, 4]), study)[0]
     assert pw["paired_sd"] == pytest.approx(1.0) and pw["target_half"] == pytest.approx(1.01)
     assert pw["seeds_needed"] == seeds_needed(1.0, 1.01)
+    # the minimal detectable effect at 80 % power: (t_0.975 + t_0.8, 2 df) * sd / sqrt(3)
+    assert pw["mde_now"] == pytest.approx((student_t.ppf(0.975, 2) + student_t.ppf(0.8, 2))
+                                          / math.sqrt(3))
+    assert pw["decides"] and pw["max_seeds"] == 3 and pw["mde_at_cap"] == pytest.approx(pw["mde_now"])
     # the sentence follows the interval: excludes 0 here, includes 0 for -1, +1, +3
     from uam_sim.decision_report import _verdict
     assert "excludes 0, a difference above 0" in _verdict(p, "flights")
@@ -157,6 +160,17 @@ def test_comparisons_and_verdicts_are_computed_from_the_rows(tmp_path):
     text = _verdict(q, "flights")
     assert "includes 0" in text and "not resolved at this power" in text
     assert "no effect" not in text and "no difference" not in text
+    # declared per: pooled (the same question at two rates), the pooled row sets the seeds: the
+    # stacked relative differences [%] over both groups, seeds per group = total / 2, rounded up
+    two = pd.concat([_runs([2, 3, 4]), _runs([1, 5, 3]).assign(rate=8)], ignore_index=True)
+    study["experiments"][0]["primary"][0]["per"] = "pooled"
+    prow = power_rows(two, study)
+    assert [r["decides"] for r in prow] == [False, False, True]
+    rel = np.array([100.0 * d / (100.0 + s) for s, d in enumerate([2, 3, 4])]
+                   + [100.0 * d / (100.0 + s) for s, d in enumerate([1, 5, 3])])
+    assert prow[2]["paired_sd"] == pytest.approx(rel.std(ddof=1)) and prow[2]["seeds_run"] == 6
+    assert prow[2]["seeds_needed"] == math.ceil(seeds_needed(rel.std(ddof=1), 1.0) / 2)
+    study["experiments"][0]["primary"][0]["per"] = "cell"
     # a varied integer read back as float (blanks in its column) still selects its rows
     study["experiments"][0]["vary"] = {"horizon_epochs": [1, 5]}
     runs = _runs([2, 3, 4]).assign(horizon_epochs=5.0)

@@ -79,6 +79,7 @@ REFERENCE = "reference"
 _Str = Annotated[str, pydantic.Strict()]
 _Int = Annotated[int, pydantic.Strict()]
 _Num = Annotated[float, pydantic.Strict()]  # an int is a number too; True and "5" are not
+_Rate = Union[_Int, _Num]  # kept as given (20 stays the int 20: a cell's key hashes its label)
 _Pos = Annotated[float, pydantic.Strict(), pydantic.Field(gt=0)]
 _Network = Union[_Str, dict]
 
@@ -105,7 +106,7 @@ class _Cell(_Model):
     name: Union[_Str, _Int]
     network: _Network
     mode: Literal[AIRSPACE_MODES]
-    rates: Annotated[list[_Num], pydantic.Field(min_length=1)]
+    rates: Annotated[list[_Rate], pydantic.Field(min_length=1)]
     overrides: Optional[dict] = None
 
 
@@ -127,9 +128,6 @@ class _Power(_Model):
     level: Annotated[float, pydantic.Strict(), pydantic.Field(gt=0, lt=1)] = 0.95
     #: the power of the minimal detectable effect the report states at the seeds run
     mde_power: Annotated[float, pydantic.Strict(), pydantic.Field(gt=0, lt=1)] = 0.8
-    #: the control variate of the adjusted (CUPED) rows: the requests in the window, a count the
-    #: demand alone decides (the same in both arms of a pair; its mean is known: rate x window)
-    covariate: Optional[Literal["requests_ss"]] = "requests_ss"
 
 
 class _SteadyState(_Model):
@@ -148,7 +146,7 @@ class _E0Run(_Model):
     network: _Network
     mode: Literal[AIRSPACE_MODES]
     objective: Optional[_Str] = None
-    rate: _Num
+    rate: _Rate
     seed: _Int
     overrides: Optional[dict] = None
 
@@ -278,20 +276,46 @@ def shares_firstfit(cfg: dict, e: dict) -> bool:
     return e["name"] in cfg.get("share_firstfit_across", ()) and FIRSTFIT in e["methods"]
 
 
-def arms(cfg: dict, seeds, experiments=None) -> list:
+def primary_scope(e: dict) -> tuple[set, set | None, list]:
+    """What the experiment's primary comparisons read: (methods, rates or None for every rate,
+    variants [dicts] or [] for every variant) -- the cells a pilot needs for their paired SD."""
+    methods = {t["method"] for c in e["primary"] for t in c["terms"]}
+    terms = [t for c in e["primary"] for t in c["terms"]]
+    rates = ({float(t["where"]["rate"]) for t in terms}
+             if all("rate" in t["where"] for t in terms) else None)
+    variants = [v for v in _variant_list(e["vary"])
+                if any(all(v.get(k) == x for k, x in t["where"].items() if k in v) for t in terms)]
+    return methods, rates, variants
+
+
+def arms(cfg: dict, seeds, experiments=None, primary_only: bool = False) -> list:
     """[(experiment, cell, variant, Arm)] of the chosen experiments at ``seeds`` (with
-    :func:`shares_firstfit`, first-fit only in each cell's first variant)."""
+    :func:`shares_firstfit`, first-fit only in each cell's first variant; with ``primary_only``
+    only the methods, rates and variants the primary comparisons read, :func:`primary_scope`)."""
     out = []
     for e in cfg["experiments"]:
         if experiments and e["name"] not in experiments:
             continue
+        p_methods, p_rates, p_variants = primary_scope(e)
         for c in e["cells"]:
+            rates = [r for r in c["rates"] if not primary_only or p_rates is None
+                     or float(r) in p_rates]
             for vi, v in enumerate(_variant_list(e["vary"])):
                 ov = {**e["overrides"], **c["overrides"], **v, "seeds": list(seeds)}
                 methods = [m for m in e["methods"]
                            if not (vi and m == FIRSTFIT and shares_firstfit(cfg, e))]
+                if primary_only:
+                    if v in p_variants:
+                        keep = p_methods
+                    elif vi == 0 and shares_firstfit(cfg, e):
+                        keep = p_methods & {FIRSTFIT}  # the shared cell the primary reads
+                    else:
+                        keep = set()
+                    methods = [m for m in methods if m in keep]
+                    if not methods or not rates:
+                        continue
                 arm = Arm(f"{e['name']}/{c['name']}/{variant_label(v)}", c["network"], [c["mode"]],
-                          methods, list(c["rates"]), ov)
+                          methods, rates, ov)
                 data = {**cfg["base"], **ov, "network": c["network"], "methods": arm.methods,
                         "rates": arm.rates, "airspace_mode": c["mode"]}
                 try:
@@ -302,8 +326,9 @@ def arms(cfg: dict, seeds, experiments=None) -> list:
     return out
 
 
-def capacity_config(cfg: dict, seeds, out: Path, experiments=None) -> tuple[CapacityConfig, list]:
-    entries = arms(cfg, seeds, experiments)
+def capacity_config(cfg: dict, seeds, out: Path, experiments=None,
+                    primary_only: bool = False) -> tuple[CapacityConfig, list]:
+    entries = arms(cfg, seeds, experiments, primary_only=primary_only)
     cc = CapacityConfig(base=dict(cfg["base"]), arms=[a for *_x, a in entries],
                         instances={"source": None}, out=str(out), workers=cfg["workers"],
                         scheduler=cfg["scheduler"])
@@ -638,7 +663,8 @@ def full_seeds(cfg: dict, out: Path, experiment: str) -> list:
     if runs is None:
         raise ExperimentError(f"{out / 'runs.csv'}: run the pilot first (--stage pilot)")
     rows = [r for r in power_rows(runs, cfg) if r["experiment"] == experiment]
-    need = [int(r["seeds_needed"]) for r in rows if r.get("seeds_needed") not in (None, "")
+    need = [int(r["seeds_needed"]) for r in rows if r["decides"]
+            and r.get("seeds_needed") not in (None, "")
             and not (isinstance(r["seeds_needed"], float) and math.isnan(r["seeds_needed"]))]
     if not need:
         raise ExperimentError(f"{experiment}: the pilot has no rows for its primary comparisons")
@@ -646,7 +672,10 @@ def full_seeds(cfg: dict, out: Path, experiment: str) -> list:
 
 
 def run_stage(cfg: dict, stage: str, out: Path, experiments=None, backends=None,
-              compute: bool = True, progress: bool = True, runs=None) -> dict:
+              compute: bool = True, progress: bool = True, runs=None,
+              primary_only: bool = False) -> dict:
+    """One stage; ``primary_only`` (pilot, full): only the cells the primary comparisons read
+    (:func:`primary_scope`), the rest of each experiment later."""
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     study = {k: cfg[k] for k in ("format", "base", "power", "steady_state", "e0", "experiments")}
@@ -664,7 +693,10 @@ def run_stage(cfg: dict, stage: str, out: Path, experiments=None, backends=None,
         for name in names:
             seeds = pilot_seeds(cfg) if stage == "pilot" else (
                 full_seeds(cfg, out, name) if stage == "full" else pilot_seeds(cfg))
-            cc, ent = capacity_config(cfg, seeds, Path(cfg["cells"]), [name])
+            cc, ent = capacity_config(cfg, seeds, Path(cfg["cells"]), [name],
+                                      primary_only=primary_only)
+            if not cc.arms:
+                continue
             results += run_capacity_sweep(cc, compute=compute and stage != "tables", progress=progress)
             entries += ent
         # every experiment's finished cells, whatever stage made them (the tables stay whole)
@@ -710,6 +742,9 @@ def main(argv=None) -> int:
     ap.add_argument("--backends", default=None, help="E0: comma list of solvers to run now")
     ap.add_argument("--runs", default=None, help="E0: comma list of e0.runs names to run now")
     ap.add_argument("--duration", type=float, default=None, help="override base.duration_s")
+    ap.add_argument("--primary-only", action="store_true",
+                    help="pilot/full: only the methods, rates and variants the primary "
+                         "comparisons read (their power first; the rest of the cells later)")
     ap.add_argument("--no-progress", action="store_true")
     args = ap.parse_args(argv)
     try:
@@ -735,7 +770,8 @@ def main(argv=None) -> int:
         if bad:
             raise ExperimentError(f"--runs: {bad[0]!r} is not a name in e0.runs")
         info = run_stage(cfg, args.stage, out, experiments=exps, backends=backends,
-                         progress=not args.no_progress, runs=e0_runs)
+                         progress=not args.no_progress, runs=e0_runs,
+                         primary_only=args.primary_only)
     except ExperimentError as exc:
         print(f"decision_study: {exc}", file=sys.stderr)
         return 2
