@@ -327,6 +327,16 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:
                 commits.append(f"`{c}` ({n} rows of {name})")
     L.append("Commits that ran the cells (from each cell's own record): "
              + ("; ".join(commits) if commits else "none yet") + ".")
+    versions = []
+    for name, df in (("runs.csv", runs), ("e0.csv.gz", e0)):
+        if df is not None and "code_version" in df:
+            for c, n in df["code_version"].astype(str).value_counts().sort_index().items():
+                versions.append(f"`{c}` ({n} rows of {name})")
+    if versions:
+        L.append("")
+        L.append("Code versions of the cells (`uam_sim.sweep.code_version`, a hash of the run code "
+                 "that is part of each cell key; a cell of other code is never reused): "
+                 + "; ".join(versions) + ".")
     L.append("")
     # -- missing
     L += ["## What has run and what is missing", ""]
@@ -513,7 +523,8 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:
                      f"({int((x['gap_pct'] <= 1e-9).sum())} at the best known); "
                      f"{over} solves past limit + 0.4 s.")
         L += ["", f"Instances: {g[['run', 'epoch']].drop_duplicates().shape[0]}; proven optimum known "
-              f"for {int(g.drop_duplicates(['run', 'epoch'])['best_proven'].sum())} of them.", ""]
+              f"for {int(g.drop_duplicates(['run', 'epoch'])['best_proven'].sum())} of them.", "",
+              f"![E0: mean gap per solver and size bin]({E0_FIGURE})", ""]
     else:
         L += ["No E0 rows yet.", ""]
     # -- the paper's figures
@@ -527,6 +538,37 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:
     return "\n".join(L).rstrip() + "\n", tables
 
 
+E0_FIGURE = "figures/e0_gap_by_size.png"
+
+
+def e0_figure(rows: list, path: Path) -> Path:
+    """E0's matched gaps per solver against the size bin (from e0_summary's rows): the mean gap in
+    the objective [%] and the mean count gap (reference's approvals minus the solver's)."""
+    from .figures import plt, save_figure, style
+    df = pd.DataFrame(rows)
+    df["lo"] = df["bin"].str.extract(r"\[(\d+),")[0].astype(int)
+    fig, axes = plt.subplots(1, 2, figsize=(11, 3.8))
+    solvers = [x for x in E0_ORDER if x in set(df["solver"]) and x != "reference"]
+    for i, sv in enumerate(solvers):
+        x = df[df["solver"] == sv].sort_values("lo")
+        st = style(sv, i)
+        axes[0].plot(x["lo"], x["gap_mean_pct"].clip(lower=1e-4), label=sv, markersize=4, **st)
+        axes[1].plot(x["lo"], x["count_gap_mean"], label=sv, markersize=4, **st)
+    axes[0].set_yscale("log")
+    axes[0].set_ylabel("mean gap in the objective [%] (0 drawn at 1e-4)")
+    axes[1].set_ylabel("mean count gap [flights] (reference - solver)")
+    axes[1].axhline(0.0, color="grey", linewidth=0.8)
+    for ax in axes:
+        ax.set_xscale("log", base=2)
+        ax.set_xlabel("instance size bin: vertices from")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=7, ncol=2)
+    axes[0].set_title("E0: same instances, same limit", fontsize=9)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    save_figure(fig, path)
+    return path
+
+
 def write_decision_report(d, shown: str | None = None) -> dict:
     d = Path(d)
     text, tables = report_text(d, shown)
@@ -534,7 +576,10 @@ def write_decision_report(d, shown: str | None = None) -> dict:
     write_csv(d / "comparisons.csv", tables.get("comparisons") or [])
     write_csv(d / "power.csv", tables.get("power") or [])
     write_csv(d / "e0_summary.csv", tables.get("e0_summary") or [])
-    return {"report": str(d / "REPORT.md")}
+    out = {"report": str(d / "REPORT.md")}
+    if tables.get("e0_summary"):
+        out["e0_figure"] = str(e0_figure(tables["e0_summary"], d / E0_FIGURE))
+    return out
 
 
 def main(argv=None) -> int:
