@@ -66,7 +66,7 @@ def test_bad_study_files_are_refused_naming_the_field(tmp_path):
         return small(tmp_path, experiments=[{**exp, **kw}])
     prim = exp["primary"][0]
     cases = [
-        (with_exp(primary=[]), r"experiments\[0\].primary: declare at least one"),
+        (with_exp(primary=[]), r"experiments\[0\].primary: \[\] must have at least 1 item"),
         (with_exp(primary=[{**prim, "metric": "happiness"}]), r"primary\[0\].metric: 'happiness'"),
         (with_exp(primary=[{**prim, "terms": [prim["terms"][0], prim["terms"][0]]}]),
          r"primary\[0\].terms: signs must sum to 0"),
@@ -77,8 +77,22 @@ def test_bad_study_files_are_refused_naming_the_field(tmp_path):
                                               prim["terms"][1]]}]),
          r"terms\[0\].where.objective: 'joy' is not one of"),
         (with_exp(cells=[{**exp["cells"][0], "mode": "wide"}]), r"cells\[0\].mode: 'wide'"),
-        (small(tmp_path, power={"pilot_seeds": 1}), r"power.pilot_seeds: 1 must be an integer >= 2"),
-        (small(tmp_path, base={"seeds": 4}), r"base.seeds: set per cell"),
+        (small(tmp_path, power={"pilot_seeds": 1}), r"power.pilot_seeds: 1 is below the minimum 2"),
+        (small(tmp_path, power={"pilot_seeds": "3"}), r"power.pilot_seeds: '3' is not an integer"),
+        (small(tmp_path, power={"level": 1.5}), r"power.level: 1.5 must be < 1"),
+        (small(tmp_path, power={"colour": 1}), r"power.colour: unknown field"),
+        (small(tmp_path, e0={"per_bin": 0}), r"e0.per_bin: 0 is below the minimum 1"),
+        (small(tmp_path, e0={"runs": [{"name": "x", "network": "n.yaml", "mode": "both",
+                                       "rate": "fast", "seed": 0}]}),
+         r"e0.runs\[0\].rate: 'fast' is not an integer or a finite number"),
+        (with_exp(primary=[{**prim, "terms": [{**prim["terms"][0], "sign": 2},
+                                              prim["terms"][1]]}]),
+         r"primary\[0\].terms\[0\].sign: 2 is not one of"),
+        (with_exp(primary=[{**prim, "terms": [{**prim["terms"][0], "method": "exactt"},
+                                              prim["terms"][1]]}]),
+         r"primary\[0\].terms\[0\].method: 'exactt' is not one of the experiment's methods"),
+        (small(tmp_path, share_firstfit_across=["E9"]), r"share_firstfit_across\[0\]: 'E9' is not"),
+        (small(tmp_path, base={"seeds": 4}), r"base.seeds: 4 is set per cell"),
     ]
     for path, msg in cases:
         with pytest.raises(ExperimentError, match=msg):
@@ -135,6 +149,10 @@ def test_comparisons_and_verdicts_are_computed_from_the_rows(tmp_path):
     pw = power_rows(_runs([2, 3, 4]), study)[0]
     assert pw["paired_sd"] == pytest.approx(1.0) and pw["target_half"] == pytest.approx(1.01)
     assert pw["seeds_needed"] == seeds_needed(1.0, 1.01)
+    # the minimal detectable effect at 80 % power: (t_0.975 + t_0.8, 2 df) * sd / sqrt(3)
+    assert pw["mde_now"] == pytest.approx((student_t.ppf(0.975, 2) + student_t.ppf(0.8, 2))
+                                          / math.sqrt(3))
+    assert pw["decides"] and pw["max_seeds"] == 3 and pw["mde_at_cap"] == pytest.approx(pw["mde_now"])
     # the sentence follows the interval: excludes 0 here, includes 0 for -1, +1, +3
     from uam_sim.decision_report import _verdict
     assert "excludes 0, a difference above 0" in _verdict(p, "flights")
@@ -142,6 +160,17 @@ def test_comparisons_and_verdicts_are_computed_from_the_rows(tmp_path):
     text = _verdict(q, "flights")
     assert "includes 0" in text and "not resolved at this power" in text
     assert "no effect" not in text and "no difference" not in text
+    # declared per: pooled (the same question at two rates), the pooled row sets the seeds: the
+    # stacked relative differences [%] over both groups, seeds per group = total / 2, rounded up
+    two = pd.concat([_runs([2, 3, 4]), _runs([1, 5, 3]).assign(rate=8)], ignore_index=True)
+    study["experiments"][0]["primary"][0]["per"] = "pooled"
+    prow = power_rows(two, study)
+    assert [r["decides"] for r in prow] == [False, False, True]
+    rel = np.array([100.0 * d / (100.0 + s) for s, d in enumerate([2, 3, 4])]
+                   + [100.0 * d / (100.0 + s) for s, d in enumerate([1, 5, 3])])
+    assert prow[2]["paired_sd"] == pytest.approx(rel.std(ddof=1)) and prow[2]["seeds_run"] == 6
+    assert prow[2]["seeds_needed"] == math.ceil(seeds_needed(rel.std(ddof=1), 1.0) / 2)
+    study["experiments"][0]["primary"][0]["per"] = "cell"
     # a varied integer read back as float (blanks in its column) still selects its rows
     study["experiments"][0]["vary"] = {"horizon_epochs": [1, 5]}
     runs = _runs([2, 3, 4]).assign(horizon_epochs=5.0)
@@ -152,14 +181,47 @@ def test_comparisons_and_verdicts_are_computed_from_the_rows(tmp_path):
     assert h["seeds"] == 3 and h["diff"] == pytest.approx(3.0)
 
 
+def test_first_fit_flies_the_same_flights_under_every_objective():
+    """The assumption behind share_firstfit_across (E1 runs first-fit once, not once per
+    objective): first-fit's decisions do not depend on the weights. Here with priority classes,
+    operators with filing habits, slots and levels ("both"), so every objective's weights differ."""
+    from uam_planner.objectives import OBJECTIVES
+    from uam_sim.experiment_config import make_config
+    from uam_sim.network_spec import load_network_spec
+    from uam_sim.scenario import run_scenario
+    flown, weights = {}, {}
+    for objective in OBJECTIVES:
+        cfg = make_config({"network": str(REPO / "config/networks/singapore.yaml"),
+                           "airspace_mode": "both", "methods": ["firstfit"], "rates": [6],
+                           "duration_s": 420.0, "baseline_order": "priority",
+                           "priority_share": 0.3, "priority_class": 1,
+                           "operators": ["a", "b", "c"], "operator_lead_times_s": [300.0, 60.0, 0.0],
+                           "objective": objective, "fair_window_s": 300.0 if objective == "fair" else 0.0,
+                           "include_qpu": False, "tts": {"enabled": False}})
+        res = run_scenario(load_network_spec(cfg.network), "firstfit", 6, 0, cfg.duration_s, cfg)
+        flown[objective] = [{k: v for k, v in f.items() if k != "weight"} for f in res.flights]
+        weights[objective] = [f["weight"] for f in res.flights]
+    assert len(flown["paper"]) > 20
+    for objective in OBJECTIVES:
+        assert flown[objective] == flown["paper"], objective
+    assert len({tuple(w) for w in weights.values()}) > 1  # the objectives did weigh differently
+
+
 @pytest.mark.slow  # a tiny E0 (3 solvers + reference) and pilot: worker start-up dominates
 def test_the_study_runs_resumes_and_its_report_rebuilds_from_the_tables(tmp_path):
-    cfg = load_decision_config(small(tmp_path))
+    cfg = load_decision_config(small(tmp_path, share_firstfit_across=["E1"]))
     out = Path(cfg["out"])
     run_stage(cfg, "e0", out, progress=False)
     info = run_stage(cfg, "pilot", out, progress=False)
     assert info["runs"] == 2 * 2 * 2  # 2 variants x 2 methods x 2 pilot seeds
+    # first-fit ran once per seed (under the first objective) and stands for both variants
+    assert len(list((Path(cfg["cells"]) / "cells").glob("firstfit_*.json"))) == 2
     runs = pd.read_csv(out / "runs.csv")
+    ff = runs[runs["method"] == "firstfit"]
+    assert sorted(ff["objective"]) == ["count", "count", "paper", "paper"]
+    assert (ff["ran_under"] == "paper").all()
+    assert ff[ff["objective"] == "count"]["weight_sum_ss"].isna().all()
+    assert ff[ff["objective"] == "paper"]["weight_sum_ss"].notna().all()
     assert (runs["losses"] == 0).all() and (runs["overruns"] == 0).all()
     assert runs["commit"].str.len().min() >= 40  # every cell says which commit ran it
     e0 = pd.read_csv(out / "e0.csv.gz")

@@ -135,20 +135,38 @@ def comparison_rows(runs: pd.DataFrame, study: dict) -> list:
     return out
 
 
+def mde(sd: float, n: int, level: float = 0.95, power: float = 0.8) -> float:
+    """The minimal detectable effect of a paired mean of ``n`` differences with SD ``sd``: the
+    true difference a two-sided t test at ``level`` detects with probability ``power``,
+    (t_{(1+level)/2, n-1} + t_{power, n-1}) * sd / sqrt(n) (the usual approximation; n >= 2)."""
+    from scipy.stats import t as student_t
+    if n < 2 or not math.isfinite(sd):
+        return float("nan")
+    return float((student_t.ppf(0.5 + level / 2, n - 1) + student_t.ppf(power, n - 1))
+                 * sd / math.sqrt(n))
+
+
 def power_rows(runs: pd.DataFrame, study: dict) -> list:
     """Per primary comparison and group: the paired SD of the seeds run so far, the seeds a 95 %
-    CI half-width of ``half_width_pct`` % of the reference arm's approvals needs, and the
-    half-width the seeds run (and the cap) give."""
+    CI half-width of ``half_width_pct`` % of the reference arm's approvals needs, the half-width
+    and the minimal detectable effect (:func:`mde`, at ``power.mde_power``) the seeds run and the
+    cap give. Where the comparison has several groups, also its pooled row: the stacked per-seed
+    relative differences [%] (the same question asked in every group), whose seeds needed are
+    per group (the stack grows by one difference per group for each seed)."""
     from scipy.stats import t as student_t
     pw = study["power"]
     level = float(pw["level"])
+    mp = float(pw.get("mde_power", 0.8))
+    cap = int(pw["max_seeds"])
     rows = []
+    groups: dict = {}
     for r in comparison_rows(runs, study):
+        if r["kind"] == "primary" and r.get("seeds", 0) >= 1:
+            groups.setdefault((r["experiment"], r["comparison"]), []).append(r)
         if r["kind"] != "primary" or r.get("seeds", 0) < 2:
             continue
         target = pw["half_width_pct"] / 100.0 * abs(r["mean_base"])
         n_need = seeds_needed(r["sd"], target, level) if target > 0 else float("nan")
-        cap = int(pw["max_seeds"])
         q = student_t.ppf(0.5 + level / 2, r["seeds"] - 1)
         rows.append({"experiment": r["experiment"], "comparison": r["comparison"],
                      "metric": r["metric"], "group": r["group"], "seeds_run": r["seeds"],
@@ -157,8 +175,58 @@ def power_rows(runs: pd.DataFrame, study: dict) -> list:
                      "half_now": q * r["sd"] / math.sqrt(r["seeds"]),
                      "max_seeds": cap,
                      "half_at_cap": student_t.ppf(0.5 + level / 2, cap - 1) * r["sd"] / math.sqrt(cap),
-                     "reachable": bool(n_need <= cap) if isinstance(n_need, int) else False})
+                     "mde_now": mde(r["sd"], r["seeds"], level, mp),
+                     "mde_at_cap": mde(r["sd"], cap, level, mp),
+                     "reachable": bool(n_need <= cap) if isinstance(n_need, int) else False,
+                     "decides": _per(study, r) == "cell"})
+    for r in comparison_rows(runs, study):
+        mine = groups.get((r["experiment"], r["comparison"]), [])
+        if r["kind"] != "primary-pooled" or len(mine) < 2:
+            continue
+        rel = _stacked_relative(runs, study, r["experiment"], r["comparison"])
+        if len(rel) < 3:
+            continue
+        k = len(mine)
+        sd = float(np.std(rel, ddof=1))
+        target = float(pw["half_width_pct"])
+        n_total = seeds_needed(sd, target, level) if sd > 0 else len(rel)
+        per_group = int(math.ceil(n_total / k)) if isinstance(n_total, int) else float("nan")
+        q = student_t.ppf(0.5 + level / 2, len(rel) - 1)
+        n_cap = cap * k
+        rows.append({"experiment": r["experiment"], "comparison": r["comparison"],
+                     "metric": r["metric"] + " [% of base]", "group": f"pooled over {k} groups",
+                     "seeds_run": len(rel), "paired_sd": sd, "base_mean": 100.0,
+                     "target_half": target, "seeds_needed": per_group,
+                     "half_now": q * sd / math.sqrt(len(rel)), "max_seeds": cap,
+                     "half_at_cap": student_t.ppf(0.5 + level / 2, n_cap - 1) * sd / math.sqrt(n_cap),
+                     "mde_now": mde(sd, len(rel), level, mp), "mde_at_cap": mde(sd, n_cap, level, mp),
+                     "reachable": bool(per_group <= cap) if isinstance(per_group, int) else False,
+                     "decides": _per(study, r) == "pooled"})
     return rows
+
+
+def _per(study: dict, r: dict) -> str:
+    """The declared ``per`` of a comparison row's comparison: which power rows set its seeds
+    ("cell": every group's; "pooled": the pooled row's)."""
+    exp = next(e for e in study["experiments"] if e["name"] == r["experiment"])
+    comp = next(c for c in exp["primary"] + exp["secondary"] if c["name"] == r["comparison"])
+    return comp.get("per", "cell")
+
+
+def _stacked_relative(runs: pd.DataFrame, study: dict, experiment: str, comparison: str) -> list:
+    """The per-seed relative differences [%] of one comparison, stacked over its groups (the
+    numbers behind its pooled row)."""
+    exp = next(e for e in study["experiments"] if e["name"] == experiment)
+    comp = next(c for c in exp["primary"] + exp["secondary"] if c["name"] == comparison)
+    neg = next(j for j, t in enumerate(comp["terms"]) if t["sign"] < 0)
+    out = []
+    for _label, vals in _groups(runs, exp, comp):
+        seeds = sorted(set.intersection(*[set(v) for v in vals.values()])) if vals else []
+        for sd in seeds:
+            base = vals[neg][sd]
+            if base:
+                out.append(100.0 * sum(comp["terms"][j]["sign"] * vals[j][sd] for j in vals) / base)
+    return out
 
 
 # -- E0 ----------------------------------------------------------------------------------------
@@ -259,6 +327,16 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:
                 commits.append(f"`{c}` ({n} rows of {name})")
     L.append("Commits that ran the cells (from each cell's own record): "
              + ("; ".join(commits) if commits else "none yet") + ".")
+    versions = []
+    for name, df in (("runs.csv", runs), ("e0.csv.gz", e0)):
+        if df is not None and "code_version" in df:
+            for c, n in df["code_version"].astype(str).value_counts().sort_index().items():
+                versions.append(f"`{c}` ({n} rows of {name})")
+    if versions:
+        L.append("")
+        L.append("Code versions of the cells (`uam_sim.sweep.code_version`, a hash of the run code "
+                 "that is part of each cell key; a cell of other code is never reused): "
+                 + "; ".join(versions) + ".")
     L.append("")
     # -- missing
     L += ["## What has run and what is missing", ""]
@@ -271,7 +349,7 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:
         n_runs = 0 if have is None else len(have)
         seeds = sorted(set(have["seed"].astype(int))) if have is not None and len(have) else []
         need = [r["seeds_needed"] for r in prow if r["experiment"] == exp["name"]
-                and isinstance(r["seeds_needed"], int)]
+                and r["decides"] and isinstance(r["seeds_needed"], int)]
         target = min(max(need), study["power"]["max_seeds"]) if need else None
         per_seed_runs = sum(len(c["rates"]) for c in exp["cells"]) * (n_arms // max(1, len(exp["cells"]))) \
             * len(exp["methods"])
@@ -313,21 +391,31 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:
           f"Per primary comparison, the paired SD of the seeds run so far gives the seeds a "
           f"{int(round(pw['level'] * 100))} % CI half-width of {_f(pw['half_width_pct'], 1)} % of the "
           f"reference arm's mean needs (t interval; `uam_sim.stats.seeds_needed`); the "
-          f"study runs that many, capped at {pw['max_seeds']}.", ""]
+          f"study runs that many, capped at {pw['max_seeds']}. A comparison declared `per: pooled` "
+          "(the same question in every group) takes its seeds from its pooled row (per-seed "
+          "relative differences stacked over the groups, in % of the base arm); the others from "
+          "their groups (\"sets seeds\"). MDE: the minimal detectable effect, the true difference "
+          f"a two-sided test at {int(round(pw['level'] * 100))} % finds with probability "
+          f"{_f(pw.get('mde_power', 0.8) * 100, 0)} %, at the seeds run and at the cap.", ""]
     if prow:
-        L += _table([[r["experiment"], r["comparison"], r["group"], r["seeds_run"], _f(r["paired_sd"], 2),
+        L += _table([[r["experiment"], r["comparison"], r["group"], "yes" if r["decides"] else "no",
+                      r["seeds_run"], _f(r["paired_sd"], 2),
                       _f(r["target_half"], 2), r["seeds_needed"] if isinstance(r["seeds_needed"], int) else "-",
-                      _f(r["half_now"], 2), _f(r["half_at_cap"], 2)] for r in prow],
-                    ["experiment", "primary", "group", "seeds run", "paired SD", "target half-width",
-                     "seeds needed", "half-width now", f"half-width at {pw['max_seeds']} seeds"])
+                      _f(r["half_now"], 2), _f(r["half_at_cap"], 2), _f(r["mde_now"], 2),
+                      _f(r["mde_at_cap"], 2)] for r in prow],
+                    ["experiment", "primary", "group", "sets seeds", "seeds run", "paired SD",
+                     "target half-width", "seeds needed", "half-width now",
+                     f"half-width at {pw['max_seeds']} seeds", "MDE now",
+                     f"MDE at {pw['max_seeds']} seeds"])
         L.append("")
         for r in prow:
-            if not r["reachable"]:
+            if not r["reachable"] and r["decides"]:
                 L.append(f"- {r['experiment']} {r['comparison']} ({r['group']}): "
                          f"{r['seeds_needed'] if isinstance(r['seeds_needed'], int) and r['seeds_needed'] <= 10000 else 'more than 10,000'} "
                          f"seeds would be needed, more than the cap of {r['max_seeds']}: the study "
                          f"could not reach the target; at the cap the half-width is "
-                         f"{_f(r['half_at_cap'], 2)} (target {_f(r['target_half'], 2)}).")
+                         f"{_f(r['half_at_cap'], 2)} (target {_f(r['target_half'], 2)}) and the "
+                         f"smallest effect it would detect is {_f(r['mde_at_cap'], 2)}.")
     else:
         L.append("No pilot rows yet (`--stage pilot`).")
     L.append("")
@@ -435,7 +523,8 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:
                      f"({int((x['gap_pct'] <= 1e-9).sum())} at the best known); "
                      f"{over} solves past limit + 0.4 s.")
         L += ["", f"Instances: {g[['run', 'epoch']].drop_duplicates().shape[0]}; proven optimum known "
-              f"for {int(g.drop_duplicates(['run', 'epoch'])['best_proven'].sum())} of them.", ""]
+              f"for {int(g.drop_duplicates(['run', 'epoch'])['best_proven'].sum())} of them.", "",
+              f"![E0: mean gap per solver and size bin]({E0_FIGURE})", ""]
     else:
         L += ["No E0 rows yet.", ""]
     # -- the paper's figures
@@ -449,6 +538,37 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:
     return "\n".join(L).rstrip() + "\n", tables
 
 
+E0_FIGURE = "figures/e0_gap_by_size.png"
+
+
+def e0_figure(rows: list, path: Path) -> Path:
+    """E0's matched gaps per solver against the size bin (from e0_summary's rows): the mean gap in
+    the objective [%] and the mean count gap (reference's approvals minus the solver's)."""
+    from .figures import plt, save_figure, style
+    df = pd.DataFrame(rows)
+    df["lo"] = df["bin"].str.extract(r"\[(\d+),")[0].astype(int)
+    fig, axes = plt.subplots(1, 2, figsize=(11, 3.8))
+    solvers = [x for x in E0_ORDER if x in set(df["solver"]) and x != "reference"]
+    for i, sv in enumerate(solvers):
+        x = df[df["solver"] == sv].sort_values("lo")
+        st = style(sv, i)
+        axes[0].plot(x["lo"], x["gap_mean_pct"].clip(lower=1e-4), label=sv, markersize=4, **st)
+        axes[1].plot(x["lo"], x["count_gap_mean"], label=sv, markersize=4, **st)
+    axes[0].set_yscale("log")
+    axes[0].set_ylabel("mean gap in the objective [%] (0 drawn at 1e-4)")
+    axes[1].set_ylabel("mean count gap [flights] (reference - solver)")
+    axes[1].axhline(0.0, color="grey", linewidth=0.8)
+    for ax in axes:
+        ax.set_xscale("log", base=2)
+        ax.set_xlabel("instance size bin: vertices from")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=7, ncol=2)
+    axes[0].set_title("E0: same instances, same limit", fontsize=9)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    save_figure(fig, path)
+    return path
+
+
 def write_decision_report(d, shown: str | None = None) -> dict:
     d = Path(d)
     text, tables = report_text(d, shown)
@@ -456,7 +576,10 @@ def write_decision_report(d, shown: str | None = None) -> dict:
     write_csv(d / "comparisons.csv", tables.get("comparisons") or [])
     write_csv(d / "power.csv", tables.get("power") or [])
     write_csv(d / "e0_summary.csv", tables.get("e0_summary") or [])
-    return {"report": str(d / "REPORT.md")}
+    out = {"report": str(d / "REPORT.md")}
+    if tables.get("e0_summary"):
+        out["e0_figure"] = str(e0_figure(tables["e0_summary"], d / E0_FIGURE))
+    return out
 
 
 def main(argv=None) -> int:

@@ -51,8 +51,10 @@ import sys
 import time
 from dataclasses import asdict
 from pathlib import Path
+from typing import Annotated, Literal, Optional, Union
 
 import numpy as np
+import pydantic
 import yaml
 
 from .capacity_study import Arm, CapacityConfig, run_capacity_sweep
@@ -69,132 +71,185 @@ REFERENCE = "reference"
 
 
 # -- configuration -------------------------------------------------------------------------------
+# The study file's schema (pydantic, issue 19's style: uam_sim.experiment_config, capacity_study):
+# structure, types and ranges; a refusal names the path and the value (``experiments[0].primary[0]
+# .metric: 'joy' is not one of ...``). What needs two fields at once (a term's ``where`` keys are
+# the experiment's varied keys; a contrast's signs sum to 0) is checked after, in the same style.
 
-def _need(d: dict, key: str, where: str):
-    if key not in d:
-        raise ExperimentError(f"{where}.{key}: missing")
-    return d[key]
+_Str = Annotated[str, pydantic.Strict()]
+_Int = Annotated[int, pydantic.Strict()]
+_Num = Annotated[float, pydantic.Strict()]  # an int is a number too; True and "5" are not
+_Rate = Union[_Int, _Num]  # kept as given (20 stays the int 20: a cell's key hashes its label)
+_Pos = Annotated[float, pydantic.Strict(), pydantic.Field(gt=0)]
+_Network = Union[_Str, dict]
 
 
-def _check_comparison(c: dict, where: str, variants: dict) -> dict:
-    if not isinstance(c, dict):
-        raise ExperimentError(f"{where}: {c!r} must be a mapping")
-    extra = set(c) - {"name", "metric", "terms", "per", "scale"}
-    if extra:
-        raise ExperimentError(f"{where}.{sorted(extra)[0]}: unknown key")
-    name = str(_need(c, "name", where))
-    metric = str(_need(c, "metric", where))
-    if metric not in METRICS:
-        raise ExperimentError(f"{where}.metric: {metric!r} is not one of {list(METRICS)}")
-    terms = _need(c, "terms", where)
-    if not isinstance(terms, list) or len(terms) < 2:
-        raise ExperimentError(f"{where}.terms: {terms!r} needs at least two terms")
-    out = []
-    for j, t in enumerate(terms):
+class _Model(pydantic.BaseModel):
+    model_config = pydantic.ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
+
+
+class _Term(_Model):
+    sign: Literal[1, -1]
+    method: _Str
+    where: Optional[dict] = None
+
+
+class _Comparison(_Model):
+    name: Union[_Str, _Int]
+    metric: Literal[METRICS]
+    terms: Annotated[list[_Term], pydantic.Field(min_length=2)]
+    per: Literal["cell", "pooled"] = "cell"
+    scale: Optional[_Num] = None  # accepted before the schema (unused)
+
+
+class _Cell(_Model):
+    name: Union[_Str, _Int]
+    network: _Network
+    mode: Literal[AIRSPACE_MODES]
+    rates: Annotated[list[_Rate], pydantic.Field(min_length=1)]
+    overrides: Optional[dict] = None
+
+
+class _Experiment(_Model):
+    name: Union[_Str, _Int]
+    question: _Str = ""
+    cells: Annotated[list[_Cell], pydantic.Field(min_length=1)]
+    vary: dict[_Str, Annotated[list, pydantic.Field(min_length=1)]] = {}
+    methods: Annotated[list[_Str], pydantic.Field(min_length=1)]
+    primary: Annotated[list[_Comparison], pydantic.Field(min_length=1)]
+    secondary: list[_Comparison] = []
+    overrides: Optional[dict] = None
+
+
+class _Power(_Model):
+    pilot_seeds: Annotated[int, pydantic.Strict(), pydantic.Field(ge=2)] = 3
+    half_width_pct: _Pos = 1.0
+    max_seeds: Annotated[int, pydantic.Strict(), pydantic.Field(ge=2)] = 30
+    level: Annotated[float, pydantic.Strict(), pydantic.Field(gt=0, lt=1)] = 0.95
+    #: the power of the minimal detectable effect the report states at the seeds run
+    mde_power: Annotated[float, pydantic.Strict(), pydantic.Field(gt=0, lt=1)] = 0.8
+
+
+class _SteadyState(_Model):
+    method: Literal["mser5", "none"] = "mser5"
+    series: _Str = "active"
+    reference_method: _Str = FIRSTFIT
+
+
+class _Reference(_Model):
+    backend: _Str = "exact"
+    time_limit_s: _Pos = 30.0
+
+
+class _E0Run(_Model):
+    name: _Str
+    network: _Network
+    mode: Literal[AIRSPACE_MODES]
+    objective: Optional[_Str] = None
+    rate: _Rate
+    seed: _Int
+    overrides: Optional[dict] = None
+
+
+class _E0(_Model):
+    runs: list[_E0Run] = []
+    backends: Annotated[list[_Str], pydantic.Field(min_length=1)] = [
+        FIRSTFIT, "greedy", "auto", "exact", "sa", "tabu", "qpu-emulator"]
+    time_limit_s: _Pos = 1.0
+    reference: _Reference = _Reference()
+    bins: Annotated[list[_Int], pydantic.Field(min_length=2)] = [
+        1, 8, 16, 32, 64, 128, 256, 512, 1024, 4096, 100000]
+    per_bin: Optional[Annotated[int, pydantic.Strict(), pydantic.Field(ge=1)]] = 4
+    method: _Str = FIRSTFIT
+    duration_s: Optional[_Pos] = None
+    seed: _Int = 0
+
+
+class _StudyFile(_Model):
+    """config/decision-study.yaml (docs/decision-study/README.md)."""
+
+    out: _Str = "docs/decision-study"
+    cells: _Str = "results/decision-study"
+    workers: Annotated[int, pydantic.Strict(), pydantic.Field(ge=1)] = 2
+    scheduler: Optional[_Str] = None
+    base: dict = {}
+    power: _Power = _Power()
+    steady_state: _SteadyState = _SteadyState()
+    e0: _E0 = _E0()
+    experiments: Annotated[list[_Experiment], pydantic.Field(min_length=1)]
+    #: experiments whose first-fit cell is shared across the varied objective (first-fit's
+    #: decisions do not depend on the weights: test_decision_study guards it); see
+    #: :func:`shared_firstfit`
+    share_firstfit_across: list[_Str] = []
+
+
+def _check_comparison(c: _Comparison, where: str, variants: dict, methods: list) -> dict:
+    """A comparison of the file as the study uses it; its terms checked against the experiment."""
+    terms = []
+    for j, t in enumerate(c.terms):
         tw = f"{where}.terms[{j}]"
-        if not isinstance(t, dict) or set(t) - {"sign", "method", "where"}:
-            raise ExperimentError(f"{tw}: {t!r} must be a mapping of sign, method, where")
-        sign = _need(t, "sign", tw)
-        if sign not in (1, -1):
-            raise ExperimentError(f"{tw}.sign: {sign!r} must be 1 or -1")
-        sel = dict(t.get("where") or {})
+        if t.method not in methods:
+            raise ExperimentError(f"{tw}.method: {t.method!r} is not one of the experiment's "
+                                  f"methods {methods}")
+        sel = dict(t.where or {})
         for k, v in sel.items():
             if k not in variants and k not in ("rate", "cell"):
                 raise ExperimentError(f"{tw}.where.{k}: not a varied key ({sorted(variants)}), "
                                       f"'rate' or 'cell'")
             if k in variants and v not in variants[k]:
                 raise ExperimentError(f"{tw}.where.{k}: {v!r} is not one of {variants[k]}")
-        out.append({"sign": int(sign), "method": str(_need(t, "method", tw)), "where": sel})
-    if sum(t["sign"] for t in out) != 0:
+        terms.append({"sign": int(t.sign), "method": t.method, "where": sel})
+    if sum(t["sign"] for t in terms) != 0:
         raise ExperimentError(f"{where}.terms: signs must sum to 0 (a contrast), got "
-                              f"{[t['sign'] for t in out]}")
-    per = c.get("per", "cell")
-    if per not in ("cell", "pooled"):
-        raise ExperimentError(f"{where}.per: {per!r} must be 'cell' or 'pooled'")
-    return {"name": name, "metric": metric, "terms": out, "per": per}
+                              f"{[t['sign'] for t in terms]}")
+    return {"name": str(c.name), "metric": c.metric, "terms": terms, "per": c.per}
 
 
 def load_decision_config(path) -> dict:
-    """Read config/decision-study.yaml into a plain dict (validated; errors name the field)."""
+    """Read config/decision-study.yaml into a plain dict (validated by :class:`_StudyFile`;
+    errors name the field's path and the value)."""
+    from uam_contract.validation import parse
     data = yaml.safe_load(Path(path).read_text(encoding="utf-8")) or {}
     if not isinstance(data, dict):
         raise ExperimentError(f"{path}: expected a mapping")
-    unknown = set(data) - {"base", "power", "steady_state", "e0", "experiments", "out",
-                           "cells", "workers", "scheduler"}
-    if unknown:
-        raise ExperimentError(f"unknown key {sorted(unknown)[0]!r} in {path}")
-    power = {"pilot_seeds": 3, "half_width_pct": 1.0, "max_seeds": 30, "level": 0.95,
-             **(data.get("power") or {})}
-    for k in ("pilot_seeds", "max_seeds"):
-        if not isinstance(power[k], int) or isinstance(power[k], bool) or power[k] < 2:
-            raise ExperimentError(f"power.{k}: {power[k]!r} must be an integer >= 2")
-    if not (isinstance(power["half_width_pct"], (int, float)) and power["half_width_pct"] > 0):
-        raise ExperimentError(f"power.half_width_pct: {power['half_width_pct']!r} must be > 0")
-    ss = {"method": "mser5", "series": "active", "reference_method": FIRSTFIT,
-          **(data.get("steady_state") or {})}
-    if ss["method"] not in ("mser5", "none"):
-        raise ExperimentError(f"steady_state.method: {ss['method']!r} must be 'mser5' or 'none'")
+    study = parse(_StudyFile, data, error=ExperimentError)
     exps = []
-    for i, e in enumerate(data.get("experiments") or []):
+    for i, e in enumerate(study.experiments):
         w = f"experiments[{i}]"
-        if not isinstance(e, dict):
-            raise ExperimentError(f"{w}: {e!r} must be a mapping")
-        extra = set(e) - {"name", "question", "cells", "vary", "methods", "primary", "secondary",
-                          "overrides"}
-        if extra:
-            raise ExperimentError(f"{w}.{sorted(extra)[0]}: unknown key")
-        name = str(_need(e, "name", w))
-        variants = {str(k): list(v) for k, v in (e.get("vary") or {}).items()}
-        for k, v in variants.items():
-            if not v:
-                raise ExperimentError(f"{w}.vary.{k}: empty list")
-        cells = []
-        for j, c in enumerate(_need(e, "cells", w)):
-            cw = f"{w}.cells[{j}]"
-            if not isinstance(c, dict) or set(c) - {"name", "network", "mode", "rates", "overrides"}:
-                raise ExperimentError(f"{cw}: {c!r} must be a mapping of name, network, mode, "
-                                      f"rates, overrides")
-            mode = _need(c, "mode", cw)
-            if mode not in AIRSPACE_MODES:
-                raise ExperimentError(f"{cw}.mode: {mode!r} is not one of {list(AIRSPACE_MODES)}")
-            cells.append({"name": str(_need(c, "name", cw)), "network": _need(c, "network", cw),
-                          "mode": mode, "rates": list(_need(c, "rates", cw)),
-                          "overrides": dict(c.get("overrides") or {})})
-        primary = [_check_comparison(c, f"{w}.primary[{j}]", variants)
-                   for j, c in enumerate(_need(e, "primary", w))]
-        if not primary:
-            raise ExperimentError(f"{w}.primary: declare at least one primary comparison")
-        secondary = [_check_comparison(c, f"{w}.secondary[{j}]", variants)
-                     for j, c in enumerate(e.get("secondary") or [])]
-        exps.append({"name": name, "question": str(e.get("question", "")), "cells": cells,
-                     "vary": variants, "methods": list(_need(e, "methods", w)),
-                     "overrides": dict(e.get("overrides") or {}),
+        variants = {str(k): list(v) for k, v in e.vary.items()}
+        cells = [{"name": str(c.name), "network": c.network, "mode": c.mode, "rates": list(c.rates),
+                  "overrides": dict(c.overrides or {})} for c in e.cells]
+        primary = [_check_comparison(c, f"{w}.primary[{j}]", variants, e.methods)
+                   for j, c in enumerate(e.primary)]
+        secondary = [_check_comparison(c, f"{w}.secondary[{j}]", variants, e.methods)
+                     for j, c in enumerate(e.secondary)]
+        exps.append({"name": str(e.name), "question": e.question, "cells": cells,
+                     "vary": variants, "methods": list(e.methods),
+                     "overrides": dict(e.overrides or {}),
                      "primary": primary, "secondary": secondary})
-    if not exps:
-        raise ExperimentError(f"experiments: {path} declares none")
     names = [e["name"] for e in exps]
-    if len(set(names)) != len(names):
-        raise ExperimentError(f"experiments: a name is used twice in {names}")
-    e0 = {"runs": [], "backends": [FIRSTFIT, "greedy", "auto", "exact", "sa", "tabu",
-                                   "qpu-emulator"],
-          "time_limit_s": 1.0, "reference": {"backend": "exact", "time_limit_s": 30.0},
-          "bins": [1, 8, 16, 32, 64, 128, 256, 512, 1024, 4096, 100000], "per_bin": 4,
-          "method": FIRSTFIT, "duration_s": None, "seed": 0, **(data.get("e0") or {})}
-    for j, r in enumerate(e0["runs"]):
-        rw = f"e0.runs[{j}]"
-        for k in ("name", "network", "mode", "rate", "seed"):
-            _need(r, k, rw)
-        if r["mode"] not in AIRSPACE_MODES:
-            raise ExperimentError(f"{rw}.mode: {r['mode']!r} is not one of {list(AIRSPACE_MODES)}")
-    cfg = {"format": FORMAT, "base": dict(data.get("base") or {}), "power": power,
-           "steady_state": ss, "e0": e0, "experiments": exps,
-           "out": data.get("out", "docs/decision-study"),
-           "cells": data.get("cells", "results/decision-study"), "workers": int(data.get("workers", 2)),
-           "scheduler": data.get("scheduler")}
+    for i, name in enumerate(names):
+        if name in names[:i]:
+            raise ExperimentError(f"experiments[{i}].name: {name!r} is used twice")
+    for j, name in enumerate(study.share_firstfit_across):
+        if name not in names:
+            raise ExperimentError(f"share_firstfit_across[{j}]: {name!r} is not an experiment "
+                                  f"({names})")
+        e = exps[names.index(name)]
+        if FIRSTFIT not in e["methods"] or set(e["vary"]) != {"objective"}:
+            raise ExperimentError(f"share_firstfit_across[{j}]: {name!r} must run {FIRSTFIT!r} "
+                                  f"and vary only 'objective' (it varies {sorted(e['vary'])})")
+    e0 = study.e0.model_dump()
+    e0["runs"] = [{k: v for k, v in r.items() if v is not None} for r in e0["runs"]]
+    cfg = {"format": FORMAT, "base": dict(study.base), "power": study.power.model_dump(),
+           "steady_state": study.steady_state.model_dump(), "e0": e0, "experiments": exps,
+           "out": study.out, "cells": study.cells, "workers": study.workers,
+           "scheduler": study.scheduler, "share_firstfit_across": list(study.share_firstfit_across)}
     for key in ("network", "methods", "rates", "airspace_mode", "out", "workers", "scheduler",
                 "seeds"):
         if key in cfg["base"]:
-            raise ExperimentError(f"base.{key}: set per cell (or by the study), not in base")
+            raise ExperimentError(f"base.{key}: {cfg['base'][key]!r} is set per cell (or by the "
+                                  f"study), not in base")
     arms(cfg, [0, 1])  # validates every cell x variant through make_config
     return cfg
 
@@ -211,17 +266,56 @@ def variant_label(v: dict) -> str:
     return ",".join(f"{k}={v[k]}" for k in v) or "-"
 
 
-def arms(cfg: dict, seeds, experiments=None) -> list:
-    """[(experiment, cell, variant, Arm)] of the chosen experiments at ``seeds``."""
+def shares_firstfit(cfg: dict, e: dict) -> bool:
+    """True when ``e``'s first-fit cells are shared across its objectives: first-fit ignores the
+    weights (``uam_planner.first_fit``: vertices in request order, candidates in candidate order),
+    so its decisions are the same under every objective; only each flight's recorded weight
+    differs. The first variant's first-fit cell then stands for every variant (its
+    ``weight_sum_ss`` is kept only in the row of its own objective). Guarded by
+    test_decision_study's test that first-fit flies the same flights under every objective."""
+    return e["name"] in cfg.get("share_firstfit_across", ()) and FIRSTFIT in e["methods"]
+
+
+def primary_scope(e: dict) -> tuple[set, set | None, list]:
+    """What the experiment's primary comparisons read: (methods, rates or None for every rate,
+    variants [dicts] or [] for every variant) -- the cells a pilot needs for their paired SD."""
+    methods = {t["method"] for c in e["primary"] for t in c["terms"]}
+    terms = [t for c in e["primary"] for t in c["terms"]]
+    rates = ({float(t["where"]["rate"]) for t in terms}
+             if all("rate" in t["where"] for t in terms) else None)
+    variants = [v for v in _variant_list(e["vary"])
+                if any(all(v.get(k) == x for k, x in t["where"].items() if k in v) for t in terms)]
+    return methods, rates, variants
+
+
+def arms(cfg: dict, seeds, experiments=None, primary_only: bool = False) -> list:
+    """[(experiment, cell, variant, Arm)] of the chosen experiments at ``seeds`` (with
+    :func:`shares_firstfit`, first-fit only in each cell's first variant; with ``primary_only``
+    only the methods, rates and variants the primary comparisons read, :func:`primary_scope`)."""
     out = []
     for e in cfg["experiments"]:
         if experiments and e["name"] not in experiments:
             continue
+        p_methods, p_rates, p_variants = primary_scope(e)
         for c in e["cells"]:
-            for v in _variant_list(e["vary"]):
+            rates = [r for r in c["rates"] if not primary_only or p_rates is None
+                     or float(r) in p_rates]
+            for vi, v in enumerate(_variant_list(e["vary"])):
                 ov = {**e["overrides"], **c["overrides"], **v, "seeds": list(seeds)}
+                methods = [m for m in e["methods"]
+                           if not (vi and m == FIRSTFIT and shares_firstfit(cfg, e))]
+                if primary_only:
+                    if v in p_variants:
+                        keep = p_methods
+                    elif vi == 0 and shares_firstfit(cfg, e):
+                        keep = p_methods & {FIRSTFIT}  # the shared cell the primary reads
+                    else:
+                        keep = set()
+                    methods = [m for m in methods if m in keep]
+                    if not methods or not rates:
+                        continue
                 arm = Arm(f"{e['name']}/{c['name']}/{variant_label(v)}", c["network"], [c["mode"]],
-                          list(e["methods"]), list(c["rates"]), ov)
+                          methods, rates, ov)
                 data = {**cfg["base"], **ov, "network": c["network"], "methods": arm.methods,
                         "rates": arm.rates, "airspace_mode": c["mode"]}
                 try:
@@ -232,8 +326,9 @@ def arms(cfg: dict, seeds, experiments=None) -> list:
     return out
 
 
-def capacity_config(cfg: dict, seeds, out: Path, experiments=None) -> tuple[CapacityConfig, list]:
-    entries = arms(cfg, seeds, experiments)
+def capacity_config(cfg: dict, seeds, out: Path, experiments=None,
+                    primary_only: bool = False) -> tuple[CapacityConfig, list]:
+    entries = arms(cfg, seeds, experiments, primary_only=primary_only)
     cc = CapacityConfig(base=dict(cfg["base"]), arms=[a for *_x, a in entries],
                         instances={"source": None}, out=str(out), workers=cfg["workers"],
                         scheduler=cfg["scheduler"])
@@ -285,15 +380,21 @@ def run_row(e, c, v, cell, window, time_limit_s: float) -> dict:
     n_in = len(ids_in)
     epochs = cell["epochs"]
     solve = [float(ep["solve_time_s"]) for ep in epochs if ep["vertices"] > 0]
+    ran_under = s.get("objective", "paper")
+    objective = v.get("objective", ran_under)
     row = {"experiment": e["name"], "cell": c["name"], "variant": variant_label(v), **v,
            "mode": c["mode"], "method": s["method"], "rate": s["rate"], "seed": s["seed"],
-           "objective": s.get("objective", "paper"),
+           "objective": objective,
+           # a shared first-fit cell (shares_firstfit): the objective whose run it is
+           "ran_under": ran_under,
            "duration_s": end, "warmup_epoch": d, "warmup_s": warm_s,
            "requests_ss": n_in, "approved_ss": approved,
            "expired_ss": n_in - approved - len(ids_in & refused),
            "refused_ss": len(ids_in & refused),
            "approval_rate_ss": approved / n_in if n_in else float("nan"),
-           "weight_sum_ss": float(sum(float(f["weight"]) for f in fl_in)),
+           # the flights' weights are those of the objective the cell ran under
+           "weight_sum_ss": (float(sum(float(f["weight"]) for f in fl_in))
+                             if objective == ran_under else float("nan")),
            "approved": s["approved"], "expired": s["expired"], "requests": s["requests"],
            "delay_mean_s": m.get("delay_mean_s", float("nan")),
            "delay_p95_s": m.get("delay_p95_s", float("nan")),
@@ -311,7 +412,8 @@ def run_row(e, c, v, cell, window, time_limit_s: float) -> dict:
            "overruns": sum(t > time_limit_s + DEFAULT_MARGIN_S for t in solve),
            "fallbacks": s.get("fallbacks", 0),
            "proven_optimal_share": s.get("proven_optimal_share", float("nan")),
-           "wall_s": s.get("wall_s"), "commit": cell.get("ran_at", "unrecorded")}
+           "wall_s": s.get("wall_s"), "commit": cell.get("ran_at", "unrecorded"),
+           "code_version": cell.get("code_version", "unrecorded")}
     return row
 
 
@@ -324,6 +426,13 @@ def tables(cfg: dict, results: list, entries: list) -> tuple[list, list]:
         e, c, v = by_arm[arm.name]
         limits[arm.name] = sweep.config.time_limit_s
         records += [(e, c, v, cell) for cell in sweep.cells]
+    # a shared first-fit cell (shares_firstfit) stands for every variant of its cell
+    for e, c, v, a in entries:
+        if shares_firstfit(cfg, e) and FIRSTFIT not in a.methods:
+            first = _variant_list(e["vary"])[0]
+            records += [(e, c, v, cell) for e2, c2, v2, cell in list(records)
+                        if e2 is e and c2 is c and v2 == first
+                        and cell["summary"]["method"] == FIRSTFIT]
     epoch_s = results[0][2].config.epoch_s if results else 30.0
     win = windows(records, cfg["steady_state"], epoch_s)
     rows = []
@@ -353,14 +462,16 @@ def e0_experiment_config(cfg: dict, run: dict) -> dict:
 
 
 def e0_key(conf: dict, solver: str) -> str:
-    from .sweep import cell_params
+    """The E0 cell's key: its run's parameters, solver and sample, and the code version (a cell
+    of other code is stale: never reused, never deleted)."""
+    from .sweep import cell_params, code_version
     ecfg = make_config(conf["experiment"])
     params = {"format": E0_FORMAT, "run": cell_params(ecfg, conf["method"], conf["rate"],
                                                        conf["seed"]),
               "solver": solver, "sample": {k: conf["e0"][k] for k in ("bins", "per_bin", "seed")},
               "limit": (conf["e0"]["reference"] if solver == REFERENCE else conf["e0"]["time_limit_s"])}
     digest = hashlib.sha256(json.dumps(params, sort_keys=True, default=str).encode()).hexdigest()[:16]
-    return f"e0_{conf['name']}_{solver}_{digest}"
+    return f"e0_{conf['name']}_{solver}_{digest}_c{code_version()}"
 
 
 def record_instances(conf: dict) -> list:
@@ -415,13 +526,14 @@ def e0_cell(conf: dict, solver: str, _rate, _seed, cells_dir: str) -> dict:
     from uam_solvers.base import MwisProblem
     from uam_solvers.executor import SolveService
 
-    from .sweep import _commit
+    from .sweep import _commit, code_version
+    _commit(), code_version()  # before the run: the code this process loaded
     key = e0_key(conf, solver)
     e0 = conf["e0"]
     if solver == RECORD:
         sample = e0_sample(record_instances(conf), list(e0["bins"]), e0["per_bin"], int(e0["seed"]))
         cell = {"key": key, "format": E0_FORMAT, "run": conf["name"], "ran_at": _commit(),
-                "instances": [{"epoch": int(ep), "t_s": float(t), "weights": p.weights.tolist(),
+                "code_version": code_version(), "instances": [{"epoch": int(ep), "t_s": float(t), "weights": p.weights.tolist(),
                                "edges": p.edges.tolist(), "groups": [g.tolist() for g in p.groups]}
                               for ep, t, p in sample]}
         write_json_atomic(Path(cells_dir) / f"{key}.json", cell)
@@ -453,7 +565,7 @@ def e0_cell(conf: dict, solver: str, _rate, _seed, cells_dir: str) -> dict:
                          "count": int(sel.size), "proven_optimal": proven, "fallback": fb,
                          "wall_s": wall})
     cell = {"key": key, "format": E0_FORMAT, "run": conf["name"], "rows": rows,
-            "instances": len(sample), "ran_at": _commit()}
+            "instances": len(sample), "ran_at": _commit(), "code_version": code_version()}
     write_json_atomic(Path(cells_dir) / f"{key}.json", cell)
     return cell
 
@@ -477,16 +589,18 @@ def _run_e0_cells(cfg, todo, confs, keys, cells_dir, progress) -> dict:
 
 
 def run_e0(cfg: dict, backends=None, progress: bool = True, compute: bool = True,
-           runs=None) -> list:
+           runs=None, stale: list | None = None) -> list:
     """Every missing (reference run, solver) E0 cell, then the rows of all finished ones: first
-    the RECORD cell of each run that still needs a solver (in parallel), then the solvers."""
-    from .sweep import _read_cell
+    the RECORD cell of each run that still needs a solver (in parallel), then the solvers.
+    Cells of another code version are appended to ``stale`` (paths; not reused)."""
+    from .sweep import _read_cell, stale_cells
     e0 = cfg["e0"]
     all_solvers = list(e0["backends"]) + [REFERENCE]
     solvers = [s for s in all_solvers if not backends or s in backends]
     cells_dir = Path(cfg["cells"]) / "cells-e0"
     cells_dir.mkdir(parents=True, exist_ok=True)
     confs, keys, todo, found, records = {}, {}, [], {}, {}
+    stale = [] if stale is None else stale
     for i, run in enumerate(e0["runs"]):
         conf = {"name": run["name"], "experiment": e0_experiment_config(cfg, run),
                 "method": e0["method"], "rate": run["rate"], "seed": int(run["seed"]), "e0": e0,
@@ -497,8 +611,10 @@ def run_e0(cfg: dict, backends=None, progress: bool = True, compute: bool = True
             cell = _read_cell(cells_dir / f"{key}.json", key)
             if cell is not None:
                 found[c] = cell
-            elif s in solvers and (not runs or run["name"] in runs):
-                todo.append(c)
+            else:
+                stale.extend(stale_cells(cells_dir, key))
+                if s in solvers and (not runs or run["name"] in runs):
+                    todo.append(c)
             confs[c], keys[c] = conf, key
         rc = (i, RECORD, run["rate"], int(run["seed"]))
         confs[rc], keys[rc] = conf, e0_key(conf, RECORD)
@@ -528,7 +644,8 @@ def run_e0(cfg: dict, backends=None, progress: bool = True, compute: bool = True
                          "network": json.dumps(conf["experiment"]["network"]) if isinstance(
                              conf["experiment"]["network"], dict) else conf["experiment"]["network"],
                          "run_objective": conf["objective"], "rate": conf["rate"], "seed": conf["seed"],
-                         **r, "commit": found[c].get("ran_at", "unrecorded")})
+                         **r, "commit": found[c].get("ran_at", "unrecorded"),
+                         "code_version": found[c].get("code_version", "unrecorded")})
     return rows
 
 
@@ -546,7 +663,8 @@ def full_seeds(cfg: dict, out: Path, experiment: str) -> list:
     if runs is None:
         raise ExperimentError(f"{out / 'runs.csv'}: run the pilot first (--stage pilot)")
     rows = [r for r in power_rows(runs, cfg) if r["experiment"] == experiment]
-    need = [int(r["seeds_needed"]) for r in rows if r.get("seeds_needed") not in (None, "")
+    need = [int(r["seeds_needed"]) for r in rows if r["decides"]
+            and r.get("seeds_needed") not in (None, "")
             and not (isinstance(r["seeds_needed"], float) and math.isnan(r["seeds_needed"]))]
     if not need:
         raise ExperimentError(f"{experiment}: the pilot has no rows for its primary comparisons")
@@ -554,14 +672,19 @@ def full_seeds(cfg: dict, out: Path, experiment: str) -> list:
 
 
 def run_stage(cfg: dict, stage: str, out: Path, experiments=None, backends=None,
-              compute: bool = True, progress: bool = True, runs=None) -> dict:
+              compute: bool = True, progress: bool = True, runs=None,
+              primary_only: bool = False) -> dict:
+    """One stage; ``primary_only`` (pilot, full): only the cells the primary comparisons read
+    (:func:`primary_scope`), the rest of each experiment later."""
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     study = {k: cfg[k] for k in ("format", "base", "power", "steady_state", "e0", "experiments")}
     (out / "study.json").write_text(json.dumps(study, indent=1, default=str) + "\n")
     info: dict = {"stage": stage}
+    stale: list = []
     if stage == "e0":
-        rows = run_e0(cfg, backends=backends, progress=progress, compute=compute, runs=runs)
+        rows = run_e0(cfg, backends=backends, progress=progress, compute=compute, runs=runs,
+                      stale=stale)
         write_csv(out / "e0.csv.gz", rows)
         info["e0_rows"] = len(rows)
     else:
@@ -570,7 +693,10 @@ def run_stage(cfg: dict, stage: str, out: Path, experiments=None, backends=None,
         for name in names:
             seeds = pilot_seeds(cfg) if stage == "pilot" else (
                 full_seeds(cfg, out, name) if stage == "full" else pilot_seeds(cfg))
-            cc, ent = capacity_config(cfg, seeds, Path(cfg["cells"]), [name])
+            cc, ent = capacity_config(cfg, seeds, Path(cfg["cells"]), [name],
+                                      primary_only=primary_only)
+            if not cc.arms:
+                continue
             results += run_capacity_sweep(cc, compute=compute and stage != "tables", progress=progress)
             entries += ent
         # every experiment's finished cells, whatever stage made them (the tables stay whole)
@@ -578,17 +704,25 @@ def run_stage(cfg: dict, stage: str, out: Path, experiments=None, backends=None,
         for e in cfg["experiments"]:
             seeds = list(range(cfg["power"]["max_seeds"]))
             cc, ent = capacity_config(cfg, seeds, Path(cfg["cells"]), [e["name"]])
-            all_results += run_capacity_sweep(cc, compute=False, progress=False)
+            done = run_capacity_sweep(cc, compute=False, progress=False)
+            all_results += done
             all_entries += ent
+            stale += [p for _a, _m, sw in done for p in sw.stale]
         rows, wrows = tables(cfg, all_results, all_entries)
         write_csv(out / "runs.csv", rows)
         write_csv(out / "windows.csv", wrows)
         info["runs"] = len(rows)
         info["missing_at_max_seeds"] = sum(len(sw.missing) for _a, _m, sw in all_results)
         if stage == "tables":  # the finished E0 cells too
-            e0_rows = run_e0(cfg, progress=False, compute=False)
+            e0_rows = run_e0(cfg, progress=False, compute=False, stale=stale)
             write_csv(out / "e0.csv.gz", e0_rows)
             info["e0_rows"] = len(e0_rows)
+    stale = sorted(set(stale))
+    info["stale_cells"] = len(stale)
+    if stale:
+        # reported, never reused or deleted: cells of other run code (another code version)
+        print(f"decision_study: {len(stale)} stale cell(s) in {cfg['cells']} (another code "
+              f"version; not reused, not deleted), e.g. {stale[0]}", file=sys.stderr)
     info["wall_s"] = time.perf_counter() - t0
     from .decision_report import write_decision_report
     write_decision_report(out)
@@ -608,6 +742,9 @@ def main(argv=None) -> int:
     ap.add_argument("--backends", default=None, help="E0: comma list of solvers to run now")
     ap.add_argument("--runs", default=None, help="E0: comma list of e0.runs names to run now")
     ap.add_argument("--duration", type=float, default=None, help="override base.duration_s")
+    ap.add_argument("--primary-only", action="store_true",
+                    help="pilot/full: only the methods, rates and variants the primary "
+                         "comparisons read (their power first; the rest of the cells later)")
     ap.add_argument("--no-progress", action="store_true")
     args = ap.parse_args(argv)
     try:
@@ -633,7 +770,8 @@ def main(argv=None) -> int:
         if bad:
             raise ExperimentError(f"--runs: {bad[0]!r} is not a name in e0.runs")
         info = run_stage(cfg, args.stage, out, experiments=exps, backends=backends,
-                         progress=not args.no_progress, runs=e0_runs)
+                         progress=not args.no_progress, runs=e0_runs,
+                         primary_only=args.primary_only)
     except ExperimentError as exc:
         print(f"decision_study: {exc}", file=sys.stderr)
         return 2

@@ -73,9 +73,125 @@ def without_timing(cell: dict) -> dict:
     return c
 
 
-def cell_key(params: dict) -> str:
+# -- the code version ------------------------------------------------------------------------------
+
+#: packages whose every module (but ``nodes/`` and tests) is run code: the planner, the solvers
+#: (backends are loaded by name, so an import walk would miss them) and the shared contract
+RUN_PACKAGES = ("uam_contract", "uam_planner", "uam_solvers")
+#: the simulator modules a run starts from; the run code of ``uam_sim`` is these and every
+#: ``uam_sim`` module they import (anywhere in the file, function-level imports included), so
+#: the studies, reports, figures and this sweep module are not part of it
+RUN_ROOTS = ("uam_sim.scenario", "uam_sim.demand", "uam_sim.network_spec",
+             "uam_sim.experiment_config", "uam_sim.flights")
+#: files beside the packages whose content decides what a run computes: the pinned libraries
+PIN_FILES = ("requirements.txt",)
+
+
+def _package_dir(name: str) -> Path:
+    import importlib.util
+    spec = importlib.util.find_spec(name)
+    if spec is None or not spec.submodule_search_locations:
+        raise RuntimeError(f"code version: package {name!r} not found")
+    return Path(list(spec.submodule_search_locations)[0])
+
+
+def _imported_modules(path: Path, module: str, package: str) -> set:
+    """Every ``package`` module ``path`` (module ``module``) imports, at any level of the file."""
+    import ast
+    tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
+    parts = module.split(".")
+    is_pkg = path.name == "__init__.py"
+    out = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = parts[: len(parts) - node.level + (1 if is_pkg else 0)]
+                mod = ".".join(base + ([node.module] if node.module else []))
+            else:
+                mod = node.module or ""
+            out.add(mod)
+            out.update(f"{mod}.{a.name}" for a in node.names)  # "from . import x": x may be a module
+    return {m for m in out if m == package or m.startswith(package + ".")}
+
+
+def run_code_files() -> list:
+    """[(label, path)] of the run code, sorted: every module of :data:`RUN_PACKAGES` but their
+    ``nodes/`` and tests, the ``uam_sim`` modules reachable by imports from :data:`RUN_ROOTS`,
+    and the pinned requirements (:data:`PIN_FILES`, where the checkout has them)."""
+    files = {}
+    for pkg in RUN_PACKAGES:
+        root = _package_dir(pkg)
+        for f in sorted(root.rglob("*.py")):
+            rel = f.relative_to(root)
+            if rel.parts[0] in ("nodes", "test", "tests"):
+                continue
+            files[f"{pkg}/{rel.as_posix()}"] = f
+    sim = _package_dir("uam_sim")
+    seen, todo = set(), list(RUN_ROOTS)
+    while todo:
+        mod = todo.pop()
+        if mod in seen:
+            continue
+        rel = Path(*mod.split(".")[1:])
+        f = sim / rel.with_suffix(".py") if mod != "uam_sim" else sim / "__init__.py"
+        if not f.is_file():
+            f = sim / rel / "__init__.py"
+            if not f.is_file():
+                continue  # "from .x import name": the name is not a module
+        seen.add(mod)
+        files[f"uam_sim/{f.relative_to(sim).as_posix()}"] = f
+        todo.extend(_imported_modules(f, mod, "uam_sim") - seen)
+    repo = sim.parents[2]
+    for name in PIN_FILES:
+        if (repo / name).is_file():
+            files[name] = repo / name
+    return sorted(files.items())
+
+
+_CODE: list = []
+
+
+def code_version() -> str:
+    """A hash of the run code (:func:`run_code_files`: labels and contents), 12 hex digits.
+
+    Part of every cell key, so a cell computed by other code is never reused silently (docs,
+    tests, studies and reports are not run code, so editing them keeps the cells). Read once per
+    process, at its first call, like :func:`_commit`: a cell's code is what the process loaded.
+    """
+    if not _CODE:
+        _CODE.append(files_version(run_code_files()))
+    return _CODE[0]
+
+
+def files_version(files) -> str:
+    """12 hex digits of the SHA-256 of [(label, path)]: each label and the file's bytes."""
+    h = hashlib.sha256()
+    for label, path in files:
+        h.update(label.encode() + b"\0" + Path(path).read_bytes() + b"\0")
+    return h.hexdigest()[:12]
+
+
+def cell_stem(params: dict) -> str:
+    """The part of a cell key its parameters decide: method, rate, seed and their hash."""
     digest = hashlib.sha256(json.dumps(params, sort_keys=True).encode()).hexdigest()[:16]
     return f"{params['method']}_r{params['rate']}_s{params['seed']}_{digest}"
+
+
+def cell_key(params: dict, code: str | None = None) -> str:
+    """The cell's key (its file name): :func:`cell_stem` and the code version (default: this
+    process's :func:`code_version`)."""
+    return f"{cell_stem(params)}_c{code or code_version()}"
+
+
+def stale_cells(cells_dir: Path, key: str) -> list:
+    """Files in ``cells_dir`` with ``key``'s parameters but another code version (or none: cells
+    from before keys carried it). They are never reused, nor deleted: the studies report them."""
+    stem = key.rsplit("_c", 1)[0]
+    out = [p for p in Path(cells_dir).glob(f"{stem}_c*.json") if p.stem != key]
+    legacy = Path(cells_dir) / f"{stem}.json"
+    return sorted(out + ([legacy] if legacy.is_file() else []))
 
 
 def _read_cell(path: Path, key: str) -> dict | None:
@@ -92,6 +208,7 @@ def run_cell(cfg_dict: dict, method: str, rate, seed: int, cells_dir: str) -> di
     Top-level so a process pool can call it; loads (and caches) the network in the worker.
     """
     _commit()  # before the run, so an edit of the checkout during the run is not credited to it
+    code_version()
     cfg = make_config(cfg_dict)
     params = cell_params(cfg, method, rate, seed)
     key = cell_key(params)
@@ -104,6 +221,7 @@ def run_cell(cfg_dict: dict, method: str, rate, seed: int, cells_dir: str) -> di
     cell = {"key": key, "params": params, "summary": res.summary, "epochs": res.epochs,
             "flights": res.flights, "audit": res.audit, "instances": res.instances,
             "rejections": res.rejections, "requests": res.requests,
+            "code_version": code_version(),
             # the commit that ran this cell (on a Dask worker: that worker's checkout), for the
             # decision study's record; not part of the key
             "ran_at": _commit()}
@@ -133,6 +251,8 @@ class SweepResult:
     reused: list
     wall_s: float
     missing: list = field(default_factory=list)
+    #: files with a cell's parameters but another code version (not reused, not deleted)
+    stale: list = field(default_factory=list)
 
 
 def sweep_methods(cfg: ExperimentConfig) -> list:
@@ -168,6 +288,7 @@ def run_sweep(cfg: ExperimentConfig, progress: bool = True, compute: bool = True
     grid = [(m, r, s) for m in sweep_methods(cfg) for r in cfg.rates for s in cfg.seeds]
     found: dict = {}
     todo = []
+    stale = []
     for m, r, s in grid:
         key = cell_key(cell_params(cfg, m, r, s))
         cell = _read_cell(cells_dir / f"{key}.json", key)
@@ -175,13 +296,14 @@ def run_sweep(cfg: ExperimentConfig, progress: bool = True, compute: bool = True
             found[(m, r, s)] = cell
         else:
             todo.append((m, r, s))
+            stale += stale_cells(cells_dir, key)
     reused = list(found)
     # seeds outermost: an interrupted sweep has every (method, rate) for the first seeds
     seed_rank = {sd: i for i, sd in enumerate(cfg.seeds)}
     todo.sort(key=lambda c: seed_rank[c[2]])
     if not compute:
         return SweepResult(cfg, [found[c] for c in grid if c in found], [], reused,
-                           time.perf_counter() - t0, missing=todo)
+                           time.perf_counter() - t0, missing=todo, stale=stale)
     bar = None
     if progress and todo:
         from tqdm import tqdm
@@ -202,4 +324,4 @@ def run_sweep(cfg: ExperimentConfig, progress: bool = True, compute: bool = True
     if bar:
         bar.close()
     return SweepResult(cfg, [found[c] for c in grid], list(todo), reused,
-                       time.perf_counter() - t0)
+                       time.perf_counter() - t0, stale=stale)
