@@ -47,7 +47,10 @@ def test_solve_bounded_kills_a_gil_holding_backend_and_answers_with_the_fallback
     deadline = time.monotonic() + 10.0
     while not (before - set(svc.worker_pids())) and time.monotonic() < deadline:
         time.sleep(0.01)
-    killed = before - set(svc.worker_pids())
+    killed = before - set(svc.worker_pids())  # not counted from the kill on, reaped or not
+    deadline = time.monotonic() + 10.0  # the reaping is off the answer's path: wait for it
+    while not all(_gone(pid) for pid in killed) and time.monotonic() < deadline:
+        time.sleep(0.01)
     assert len(killed) == 1 and _gone(killed.pop())
 
 

@@ -63,9 +63,9 @@ def test_gil_holding_backend_is_killed_at_the_deadline(service):
     # SIGKILL is sent before the answer, the reaping is off the answer's path (issue 20):
     # wait (a condition) until the killed worker is gone
     deadline = time.monotonic() + 10.0
-    while not (before - set(service.worker_pids())) and time.monotonic() < deadline:
+    killed = before - set(service.worker_pids())  # not counted from the kill on, reaped or not
+    while not all(_gone(pid) for pid in killed) and time.monotonic() < deadline:
         time.sleep(0.01)
-    killed = before - set(service.worker_pids())
     assert len(killed) == 1 and all(_gone(pid) for pid in killed)  # nothing left running
     _wait_for_workers(service, 2)  # replaced by a fresh worker (started in the background)
     again = service.solve(problem, backend=tb.WorkerPidBackend(), time_limit_s=1.0)
