@@ -196,8 +196,20 @@ class _Reaction:
         #: flight past its plan: issue 23's safety gap), no conformance reports (reaction off)
         self.report = bool(report)
 
-    def before_epoch(self, t: float, rows) -> None:
+    def _report(self, row, fl, t: float, window_s: float) -> None:
+        """The monitor's look at ``row``'s samples in (t - window_s, t] after its newest version
+        began: the first nonconforming one, if any, is reported to the planner."""
         from .conformance import conforming, deviations
+        ts, ps = fl.times_s, fl.points_m
+        sel = (ts > t - window_s) & (ts <= t) & (ts > row.get("_t0", -math.inf))
+        if not sel.any():
+            return
+        lat, ver, terr = deviations(row["_traj"], ts[sel], ps[sel])
+        bad = np.flatnonzero(~conforming(lat, ver, terr, self.bounds))
+        if bad.size:
+            self.planner.report_nonconforming(row["request_id"], float(ts[sel][bad[0]]), "runner monitor")
+
+    def before_epoch(self, t: float, rows) -> None:
         for row in rows:
             fl = row.get("_flown")
             if fl is None or row.get("cancelled") or not fl.departure_s < t < fl.arrival_s:
@@ -207,23 +219,14 @@ class _Reaction:
                 tb = t - back
                 if fl.departure_s <= tb:
                     self.planner.observe(rid, tb, fl.position_at(tb))
-            if not self.report:
-                continue
-            ts, ps = fl.times_s, fl.points_m
-            sel = (ts > t - self.epoch_s) & (ts <= t) & (ts > row.get("_t0", -math.inf))
-            if not sel.any():
-                continue
-            lat, ver, terr = deviations(row["_traj"], ts[sel], ps[sel])
-            bad = np.flatnonzero(~conforming(lat, ver, terr, self.bounds))
-            if bad.size:
-                self.planner.report_nonconforming(rid, float(ts[sel][bad[0]]), "runner monitor")
+            if self.report:
+                self._report(row, fl, t, self.epoch_s)
 
     def between(self, t0: float, t1: float, rows, epoch_index: int, by_id, replans) -> None:
         """The reaction between epochs (``reaction_period_s``): every ``period`` seconds in
         (t0, t1) the planner observes every airborne flight, the monitor reports what it saw
         since the last look (samples after the flight's newest version began), and the planner
         reacts at once (``Planner.react_between``); the updates are flown from there."""
-        from .conformance import conforming, deviations
         k = 1
         while True:
             tk = t0 + k * self.period_s
@@ -233,16 +236,8 @@ class _Reaction:
                 fl = row.get("_flown")
                 if fl is None or row.get("cancelled") or not fl.departure_s < tk < fl.arrival_s:
                     continue
-                rid = row["request_id"]
-                self.planner.observe(rid, tk, fl.position_at(tk))
-                ts, ps = fl.times_s, fl.points_m
-                sel = (ts > tk - self.period_s) & (ts <= tk) & (ts > row.get("_t0", -math.inf))
-                if not sel.any():
-                    continue
-                lat, ver, terr = deviations(row["_traj"], ts[sel], ps[sel])
-                bad = np.flatnonzero(~conforming(lat, ver, terr, self.bounds))
-                if bad.size:
-                    self.planner.report_nonconforming(rid, float(ts[sel][bad[0]]), "runner monitor")
+                self.planner.observe(row["request_id"], tk, fl.position_at(tk))
+                self._report(row, fl, tk, self.period_s)
             _apply_reaction_updates(self.planner.react_between(tk, epoch_index), by_id, self, replans, tk)
             k += 1
 
