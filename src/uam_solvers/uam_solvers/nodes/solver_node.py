@@ -122,6 +122,8 @@ class SolverNode(Node):
         SIGTERM when the node's process dies), so none survives, and a SIGINT is never answered
         later than run_fleet.sh's 10 s (a run stopped during the start-up failed that)."""
         with self._lock:
+            if self._closed and self.solve_service is None:
+                return  # closed already (close() and then destroy_node())
             self._closed = True
         if self._starter.is_alive() and threading.current_thread() is not self._starter:
             self._starter.join(STARTER_JOIN_S)
