@@ -31,6 +31,10 @@ def test_empty_graph_and_empty_edges():
         ([1, float("nan"), 3], [], None, {}, "weights[1]: nan is not finite"),
         ([1, 2, float("inf")], [], None, {}, "weights[2]: inf is not finite"),
         ([1, -0.5, 3], [], None, {}, "weights[1]: -0.5 is negative"),
+        ([1, float("-inf"), 3], [], None, {}, "weights[1]: -inf is not finite"),
+        ([-1.0, float("nan")], [], None, {}, "weights[1]: nan is not finite"),  # finite first
+        (np.array([1.0, 2.0]), np.array([[0, 1], [1, 2]], np.int32), None, {},
+         "edges[1]: (1, 2) has a vertex out of range [0, 2)"),
         ([[1, 2]], [], None, {}, "weights: expected a 1-D array, got shape (1, 2)"),
         ([1, 2, 3], [[0, 1, 2]], None, {}, "edges: expected shape (m, 2), got (1, 3)"),
         ([1, 2, 3], [0, 1], None, {}, "edges: expected shape (m, 2), got (2,)"),
