@@ -31,11 +31,18 @@ def test_empty_graph_and_empty_edges():
         ([1, float("nan"), 3], [], None, {}, "weights[1]: nan is not finite"),
         ([1, 2, float("inf")], [], None, {}, "weights[2]: inf is not finite"),
         ([1, -0.5, 3], [], None, {}, "weights[1]: -0.5 is negative"),
+        ([1, float("-inf"), 3], [], None, {}, "weights[1]: -inf is not finite"),
+        ([-1.0, float("nan")], [], None, {}, "weights[1]: nan is not finite"),  # finite first
+        (np.array([1.0, 2.0]), np.array([[0, 1], [1, 2]], np.int32), None, {},
+         "edges[1]: (1, 2) has a vertex out of range [0, 2)"),
         ([[1, 2]], [], None, {}, "weights: expected a 1-D array, got shape (1, 2)"),
         ([1, 2, 3], [[0, 1, 2]], None, {}, "edges: expected shape (m, 2), got (1, 3)"),
         ([1, 2, 3], [0, 1], None, {}, "edges: expected shape (m, 2), got (2,)"),
         ([1, 2, 3], [[0, 1.5]], None, {}, "edges[0]: (0.0, 1.5) is not a pair of integer vertex indices"),
         ([1, 2, 3], [], [[0, 1], [2, 7]], {}, "groups[1][1]: vertex 7 is out of range [0, 3)"),
+        ([1, 2, 3], [], [np.array([0, 1]), np.array([2, 7])], {},
+         "groups[1][1]: vertex 7 is out of range [0, 3)"),
+        ([1, 2, 3], [], [np.array([0, 1]), np.array([-1, 2])], {}, "groups[1][0]: vertex -1"),
         ([1, 2, 3], [], None, {"max_vertices": 2}, "weights: 3 vertices exceed the limit max_vertices=2"),
         (["a", 2], [], None, {}, "weights: not numeric"),
     ],
@@ -115,5 +122,10 @@ def test_normalised_groups_and_edges_are_the_set_definition_sorted_or_not():
         p = MwisProblem.from_arrays(np.ones(n), e, groups)
         want_g = [sorted(set(g)) for g in groups if len(set(g)) >= 2]
         assert [g.tolist() for g in p.groups] == want_g, groups
+        # the same groups as 1-D integer arrays (the planner's; base._clean_groups' fast path)
+        dtype = (np.int32, np.int64, np.uint32)[int(rng.integers(0, 3))]
+        pa = MwisProblem.from_arrays(np.ones(n), e, [np.asarray(g, dtype=dtype) for g in groups])
+        assert [g.tolist() for g in pa.groups] == want_g, (groups, dtype)
+        assert all(g.dtype == np.int32 for g in pa.groups)
         want_e = sorted({(int(min(a, b)), int(max(a, b))) for a, b in e})
         assert [tuple(r) for r in p.edges.tolist()] == want_e, e

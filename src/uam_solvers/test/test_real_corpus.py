@@ -102,6 +102,16 @@ def test_triangle_ratio_separates_planner_graphs_from_random_ones(corpus):
     bare = MwisProblem.from_arrays(p.weights, p.all_edges())
     assert triangle_ratio(bare) == triangle_ratio(p)
     assert triangle_ratio(p) == triangle_ratio(p)  # deterministic
+    # exact at the extremes: every two-path of a clique closes, none of a bipartite graph
+    a, b = np.triu_indices(40, 1)
+    assert triangle_ratio(MwisProblem.from_arrays(np.ones(40), np.stack([a, b], 1))) == 1.0
+    a, b = np.meshgrid(np.arange(20), np.arange(20, 45))
+    kb = MwisProblem.from_arrays(np.ones(45), np.stack([a.ravel(), b.ravel()], 1))
+    assert triangle_ratio(kb) == 0.0
+    # a clique K20 beside K(20, 25), sampled by two-path count: the share of the clique's
+    assert abs(triangle_ratio(MwisProblem.from_arrays(
+        np.ones(85), np.concatenate([kb.edges + 40, np.stack(np.triu_indices(20, 1), 1)])))
+        - 20 * 19 * 18 / (20 * 19 * 18 + 20 * 25 * 24 + 25 * 20 * 19)) < 0.03
 
 
 def test_size_buckets_partition_the_sizes():

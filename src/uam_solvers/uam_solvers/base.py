@@ -164,19 +164,23 @@ class MwisProblem:
         n = int(w.shape[0])
         if max_vertices is not None and n > max_vertices:
             raise MwisInputError(f"weights: {n} vertices exceed the limit max_vertices={max_vertices}")
-        bad = ~np.isfinite(w)
-        if bad.any():
-            i = int(np.flatnonzero(bad)[0])
-            raise MwisInputError(f"weights[{i}]: {float(w[i])!r} is not finite")
-        bad = w < 0
-        if bad.any():
-            i = int(np.flatnonzero(bad)[0])
-            raise MwisInputError(f"weights[{i}]: {float(w[i])!r} is negative")
+        if n:
+            i = int(np.argmax(w))  # (a NaN is its own maximum: it fails the test below)
+            wmax = float(w[i])
+        # all finite and >= 0 (a NaN fails both comparisons): one reduction and the maximum;
+        # otherwise the passes below name the first bad weight (issue 20: ~3 us of a small solve)
+        if n and not (float(w.min()) >= 0.0 and math.isfinite(wmax)):
+            bad = ~np.isfinite(w)
+            if bad.any():
+                i = int(np.flatnonzero(bad)[0])
+                raise MwisInputError(f"weights[{i}]: {float(w[i])!r} is not finite")
+            bad = w < 0
+            if bad.any():
+                i = int(np.flatnonzero(bad)[0])
+                raise MwisInputError(f"weights[{i}]: {float(w[i])!r} is negative")
         if n:
             # Objectives are float64 sums: refuse weights whose total could overflow (scaled
             # sum, so the check itself cannot overflow).
-            i = int(np.argmax(w))
-            wmax = float(w[i])
             if wmax > 0 and wmax * float(np.sum(w / wmax)) > MAX_TOTAL_WEIGHT:
                 raise MwisInputError(
                     f"weights[{i}]: {wmax!r} is too large: the total weight must stay below "
@@ -187,9 +191,14 @@ class MwisProblem:
             e = np.zeros((0, 2), dtype=np.int64)
         if e.ndim != 2 or e.shape[1] != 2:
             raise MwisInputError(f"edges: expected shape (m, 2), got {e.shape}")
-        e64, bad2 = _index_values(e, "edges", n)
-        bad = bad2.any(axis=1)
-        if bad.any():
+        if e.dtype.kind == "i" and e.size and int(e.min()) >= 0 and int(e.max()) < n:
+            # signed integers all in range (the planner's edges): nothing to report, so no
+            # per-element mask (issue 20: two reductions instead of four array passes)
+            e64, bad = e.astype(np.int64, copy=False), None
+        else:
+            e64, bad2 = _index_values(e, "edges", n)
+            bad = bad2.any(axis=1)
+        if bad is not None and bad.any():
             i = int(np.flatnonzero(bad)[0])
             pair = repr(tuple(e[i].tolist()))
             if e.dtype.kind in "fO" and any(
@@ -364,10 +373,33 @@ def _normalise_groups(groups: Sequence[Any] | None, n: int) -> list[np.ndarray]:
         # fast path (issue 20): 1-D integer arrays (MwisProblem's own groups, the planner's)
         # need none of the per-group conversion below; the range is checked on the whole
         arrays = groups
+        clean = _clean_groups(arrays, n)
+        if clean is not None:
+            return clean
     else:
         arrays = _group_arrays(groups, n)
     lengths = np.fromiter((a.size for a in arrays), dtype=np.int64, count=len(arrays))
     return _normalise_groups_tail(arrays, lengths, n)
+
+
+def _clean_groups(arrays: list[np.ndarray], n: int) -> list[np.ndarray] | None:
+    """The groups as :func:`_normalise_groups_tail` returns them when they are already clean:
+    1-D signed-integer arrays of at least two vertices each, in [0, n), each strictly
+    increasing (so sorted and duplicate-free). None otherwise (the full path then checks, sorts
+    and names a bad value). The same result in fewer numpy calls (issue 20: ~27 -> ~15 us of a
+    0.35 ms ``auto`` solve at 100 vertices, 20 groups)."""
+    lens = [a.size for a in arrays]
+    if min(lens) < 2:
+        return None
+    flat = np.concatenate(arrays)
+    if flat.dtype.kind != "i" or int(flat.min()) < 0 or int(flat.max()) >= n:
+        return None
+    rising = flat[1:] > flat[:-1]
+    ends = np.cumsum(lens)
+    rising[ends[:-1] - 1] = True  # across a group boundary
+    if not rising.all():
+        return None
+    return _pieces(flat.astype(np.int32), np.asarray(lens, dtype=np.int64))
 
 
 def _group_arrays(groups: list, n: int) -> list[np.ndarray]:
@@ -528,7 +560,7 @@ def integer_weights(weights: np.ndarray, resolution: int = 10**6) -> tuple[np.nd
     wmax = float(w[i])
     if wmax <= 0.0:
         return np.zeros(w.shape, dtype=np.int64), 1.0
-    if wmax <= resolution and np.all(w == np.floor(w)):
+    if wmax <= resolution and wmax.is_integer() and np.all(w == np.floor(w)):
         # Integer weights (uam_planner.objectives: lexicographic and priority objectives) are
         # multiplied by a whole factor, so every sum keeps its exact order and a proof on the
         # integer weights is a proof on the input (all weights 1.0 still become ``resolution``).
@@ -542,7 +574,8 @@ def integer_weights(weights: np.ndarray, resolution: int = 10**6) -> tuple[np.nd
             f"(resolution {resolution} / {wmax!r} overflows float64; multiply the weights by "
             "a constant, which changes no optimum)")
     wi = np.rint((w / wmax) * float(resolution)).astype(np.int64)
-    wi[(wi == 0) & (w > 0)] = 1
+    if not wi.all():  # (only then the mask: issue 20, ~2 us of a small solve)
+        wi[(wi == 0) & (w > 0)] = 1
     return wi, scale
 
 
