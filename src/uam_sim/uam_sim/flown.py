@@ -96,8 +96,11 @@ def recording_flown(path, separation, bounds=None, plans=None, prune: bool = Tru
     """What flew in a recording: the flown tracks from every ``uam/fleet_state`` (positions read
     straight from the CDR), their exact audit in the true minimum (:func:`flown_audit`, sampling
     step = the largest gap between fleet states), and the F3548 conformance of each flown track
-    with its approved plan (``uam_sim.conformance``). ``plans``: the approved FlightPlan messages
-    (else read from ``uam/flight_plans``); a vehicle flies the plan of its ``operator/request`` id.
+    with its plan: each sample with the plan version in force at that instant (version 1 from
+    the departure, each later version from its ``effective_time``;
+    ``uam_sim.conformance.versioned_conformance``). ``plans``: the FlightPlan messages, every
+    version (else read from ``uam/flight_plans``); a vehicle flies the plans of its
+    ``operator/request`` id.
     ``prune``: as :func:`flown_audit` (False: the slow reference sweep, the same result).
     Returns {} when the recording holds no fleet positions."""
     from uam_contract import names
@@ -106,7 +109,7 @@ def recording_flown(path, separation, bounds=None, plans=None, prune: bool = Tru
 
     from .audit import trajectory_of
     from .cdr import fleet_state_digest
-    from .conformance import ConformanceBounds, f3548_statistics, track_conformance
+    from .conformance import ConformanceBounds, f3548_statistics, versioned_conformance
     from .mcap_reader import deserialize, is_complete, read_messages, read_messages_tolerant
 
     fleet_topic, plan_topic = resolved(names.TOPIC_FLEET), resolved(names.TOPIC_PLANS)
@@ -135,16 +138,36 @@ def recording_flown(path, separation, bounds=None, plans=None, prune: bool = Tru
     out = flown_audit(tracks, separation, sample_step_s=step, prune=prune)
     out["sample_step_s"] = step
     from uam_contract.wire import scoped_id
-    approved = {}
+    from .flown_audit import effective_s as version_effective_s, plan_version
+    versions: dict = {}   # key -> {version: plan}, the first message of each version
     for p in (plans if plans is not None else found_plans):
         # the vehicle id of a plan: operator/request (uam_sim.analysis.request_key)
         key = scoped_id(p.operator_id, p.request_id) if p.operator_id else str(p.request_id)
-        if int(p.outcome) == OUTCOME_APPROVED and key not in approved:
+        if plan_version(p) == 1 and int(p.outcome) != OUTCOME_APPROVED:
+            continue
+        versions.setdefault(key, {}).setdefault(plan_version(p), p)
+    # each flown track against the plan version in force at each of its samples (issue 22 item
+    # 5): version 1 from the departure, version n + 1 from the instant it took effect; a
+    # cancellation (no waypoints) ends the flight, so no sample should follow it (one that does
+    # is compared with the version before)
+    pieces_of = {}
+    for key, by_v in versions.items():
+        if 1 not in by_v:
+            continue  # updates without an approval: the analysis' chain check reports them
+        pieces = []
+        for v in sorted(by_v):
+            p = by_v[v]
+            if not p.waypoints:
+                continue
             t, pts = trajectory_of(p)
             if t.size >= 2 and np.all(np.diff(t) > 0):
-                approved[key] = Trajectory(t, pts)
+                pieces.append((version_effective_s(p), Trajectory(t, pts)))
+        if pieces:
+            pieces_of[key] = pieces
     bounds = bounds or ConformanceBounds()
-    conf = [track_conformance(vid, approved[vid], tr, bounds) for vid, tr in tracks.items() if vid in approved]
+    conf = [versioned_conformance(vid, pieces_of[vid], tr, bounds) for vid, tr in tracks.items()
+            if vid in pieces_of]
+    out["versioned_flights"] = sum(len(pieces_of[v]) > 1 for v in tracks if v in pieces_of)
     out["conformance"] = f3548_statistics(conf).as_dict()
     out["conformance_bounds"] = {"lateral_m": bounds.lateral_m, "vertical_m": bounds.vertical_m,
                                  "time_s": bounds.time_s}
