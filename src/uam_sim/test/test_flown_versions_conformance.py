@@ -70,3 +70,65 @@ def test_conformance_follows_each_version_from_the_instant_it_takes_effect(tmp_p
     # time in conformance: r1 100 s, r2 81 s of 100
     assert c["conformance_percent"] == pytest.approx(100.0 * 181.0 / 200.0)
     assert got["versioned_flights"] == 2
+
+
+def _record(path, tracks, steps):
+    from builtin_interfaces.msg import Time
+    from geometry_msgs.msg import Point
+    from uam_msgs.msg import FleetState, VehicleState
+
+    from uam_sim.mcap_writer import McapRecorder
+
+    rec = McapRecorder(path)
+    rec.add_topic("/uam/fleet_state", FleetState)
+    with rec:
+        for k in steps:
+            fs = FleetState(step_index=k, vehicles=[
+                VehicleState(vehicle_id=f"op/{rid}", position=Point(x=float(x), y=float(y), z=float(z)))
+                for rid, tr in sorted(tracks.items()) for x, y, z in [tr.position_at(float(k))]])
+            fs.header.stamp = Time(sec=k)
+            rec.write("/uam/fleet_state", fs, k * 1_000_000_000)
+
+
+def test_the_chord_across_the_top_of_a_climb_is_not_a_loss(tmp_path):
+    """The city run's 6 "flown losses" (third stop), by hand. A cruises at 90 m east along y = 0,
+    x = 10 t - 208; B climbs at 5 m/s on its pad at (0, 0) and levels off at 120 m at t = 10.5 s,
+    then hovers there. Planned: while B climbs A is more than 103 m away; from 10.5 s they are
+    exactly V = 30 m apart (a tie: separated), so no loss, although A passes under B. Sampled
+    every second, B's chord on [10, 11] s rises from 117.5 m to 120 m while A comes within 100 m
+    (from 10.8 s): the chords lose separation (98 m at 11 s), the aircraft do not."""
+    pytest.importorskip("uam_msgs.msg", reason="needs the built workspace (source scripts/env.sh)")
+    import numpy as np
+
+    from uam_planner.audit import audit_flights
+    from uam_planner.trajectory import Trajectory
+    from uam_sim.flown import recording_flown
+
+    a = Trajectory(np.array([0.0, 40.0]), np.array([(-208.0, 0, 90), (192.0, 0, 90)]))
+    b = Trajectory(np.array([0.0, 10.5, 40.0]), np.array([(0, 0, 67.5), (0, 0, 120), (0, 0, 120.0)]))
+    assert audit_flights([a, b], CYLINDER).losses == []          # the plans keep separation
+    plans = [_plan("a", 1, 0, [(0, -208, 0, 90), (40, 192, 0, 90)]),
+             _plan("b", 1, 0, [(0, 0, 0, 67.5), (10.5, 0, 0, 120), (40, 0, 0, 120)])]
+    # Time(sec=int(10.5)) would truncate: the waypoint at 10.5 s, exactly
+    plans[1].waypoints[1].time.sec, plans[1].waypoints[1].time.nanosec = 10, 500_000_000
+    path = tmp_path / "climb.mcap"
+    _record(path, {"a": a, "b": b}, range(0, 41))
+    got = recording_flown(path, CYLINDER, plans=plans)
+    assert got["losses"] == 0          # (before this stop: 1, the chord's)
+    assert got["interpolated_losses"] == 1
+    assert got["interpolated_loss_pairs"][0][2] == pytest.approx(98.0) and got["interpolated_loss_pairs"][0][3] == pytest.approx(11.0)
+    # B's piece [10, 11] s: vertical speed 5 then 0 m/s, bound 5 x 1 / 4 = 1.25 m; every other
+    # piece is on a single plan segment (bound 0): the chord needs dz < 28.75 m to prove a loss
+    # (it is >= 29.5 m where A is within 100 m), and comes within 31.25 m: a possible loss
+    assert got["losses"] == 0
+    # (the reported bound is the largest pair bound: twice the largest piece bound)
+    assert got["sampling_bound_v_m"] == pytest.approx(2.5) and got["sampling_bound_m"] == 0.0
+    assert got["possible_losses"] == 1 and got["possible_loss_pairs"][0][2] == pytest.approx(98.0)
+    assert got["pieces"] == 80 and got["pieces_exact"] == 79
+    # the same tracks 2 m lower for A (dz 32 m): cleared, not even possible
+    a2 = Trajectory(a.times_s, a.points_m - [0, 0, 2])
+    plans[0] = _plan("a", 1, 0, [(0, -208, 0, 88), (40, 192, 0, 88)])
+    path2 = tmp_path / "climb2.mcap"
+    _record(path2, {"a": a2, "b": b}, range(0, 41))
+    got = recording_flown(path2, CYLINDER, plans=plans)
+    assert got["interpolated_losses"] == 0 and got["losses"] == 0 and got["possible_losses"] == 0
