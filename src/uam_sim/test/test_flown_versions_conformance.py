@@ -125,6 +125,7 @@ def test_the_chord_across_the_top_of_a_climb_is_not_a_loss(tmp_path):
     assert got["sampling_bound_v_m"] == pytest.approx(2.5) and got["sampling_bound_m"] == 0.0
     assert got["possible_losses"] == 1 and got["possible_loss_pairs"][0][2] == pytest.approx(98.0)
     assert got["pieces"] == 80 and got["pieces_exact"] == 79
+    assert got["samples_off_plan"] == 0 and got["tracks_without_plan"] == 0
     # the same tracks 2 m lower for A (dz 32 m): cleared, not even possible
     a2 = Trajectory(a.times_s, a.points_m - [0, 0, 2])
     plans[0] = _plan("a", 1, 0, [(0, -208, 0, 88), (40, 192, 0, 88)])
@@ -132,3 +133,11 @@ def test_the_chord_across_the_top_of_a_climb_is_not_a_loss(tmp_path):
     _record(path2, {"a": a2, "b": b}, range(0, 41))
     got = recording_flown(path2, CYLINDER, plans=plans)
     assert got["interpolated_losses"] == 0 and got["losses"] == 0 and got["possible_losses"] == 0
+    # a sample off its plan (A 5 m north at 20 s) is counted, and its two pieces take the
+    # global bound (the ball of the largest chord speed, sqrt(10^2 + 5^2) m/s, x 1 s / 2 each)
+    off = Trajectory(np.arange(0.0, 41.0), a2.position_at(np.arange(0.0, 41.0)) + np.where(
+        np.arange(41)[:, None] == 20, [0, 5.0, 0], [0, 0, 0]))
+    path3 = tmp_path / "off.mcap"
+    _record(path3, {"a": off, "b": b}, range(0, 41))
+    got = recording_flown(path3, CYLINDER, plans=plans)
+    assert got["samples_off_plan"] == 1 and got["pieces_exact"] == 77

@@ -757,7 +757,8 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
                      "corner at the top of a climb or descent); sampling error per pair and axis at most "
                      f"{fl['sampling_bound_m']:.1f} m horizontal, {fl.get('sampling_bound_v_m', 0.0):.2f} m vertical "
                      f"(per piece, from the plan flown there: 0 on {fl.get('pieces_exact', 0)} of "
-                     f"{fl.get('pieces', 0)} pieces), {fl['possible_losses']} pair(s) it cannot clear")
+                     f"{fl.get('pieces', 0)} pieces), {fl['possible_losses']} pair(s) it cannot clear; "
+                     f"{fl.get('samples_off_plan', '-')} sample(s) off their plan as flown")
         cf = fl["conformance"]
         lines.append(f"Conformance      {cf['conformance_percent']:.2f} % of {cf['flight_hours']:.2f} flight hours, "
                      f"{cf['excursions']} excursions ({cf['excursions_per_flight_hour']:.2f} per flight hour), "

@@ -97,22 +97,25 @@ LISTED = 20
 ON_PLAN_M = 1e-3
 
 
-def piece_bounds(track: Trajectory, plan: Trajectory | None, vh: float, vz: float) -> tuple[np.ndarray, np.ndarray]:
+def piece_bounds(track: Trajectory, plan: Trajectory | None, vh: float,
+                 vz: float) -> tuple[np.ndarray, np.ndarray, int]:
     """Per piece of ``track``: the bound of one aircraft's horizontal and vertical distance from
     the chord (see the module docstring): from the plan's velocities where both samples lie on
-    ``plan``, else ``vh dt / 2`` and ``vz dt / 2``."""
+    ``plan``, else ``vh dt / 2`` and ``vz dt / 2``; and how many samples are off the plan (by
+    more than ON_PLAN_M, or outside its times; 0 without a plan)."""
     t = track.times_s
     dt = np.diff(t)
     eh, ev = vh * dt / 2.0, vz * dt / 2.0
     if plan is None or t.size < 2:
-        return eh, ev
+        return eh, ev, 0
     pt = plan.times_s
     inside = (t >= pt[0] - 1e-9) & (t <= pt[-1] + 1e-9)
     q = plan.position_at(np.clip(t, pt[0], pt[-1]), clamp=True)
     on = inside & (np.sqrt(np.square(q - track.points_m).sum(axis=1)) <= ON_PLAN_M)
     ok = on[:-1] & on[1:]
+    off = int(t.size - on.sum())
     if not ok.any():
-        return eh, ev
+        return eh, ev, off
     _a, _b, _p, v = plan.segments()
     first = np.clip(np.searchsorted(pt, t[:-1], side="right") - 1, 0, v.shape[0] - 1)
     last = np.clip(np.searchsorted(pt, t[1:], side="left") - 1, 0, v.shape[0] - 1)
@@ -125,7 +128,7 @@ def piece_bounds(track: Trajectory, plan: Trajectory | None, vh: float, vz: floa
         dh = w[:, None, :2] - w[None, :, :2]
         eh[k] = float(np.sqrt(np.square(dh).sum(axis=2)).max()) * dt[k] / 4.0
         ev[k] = float(w[:, 2].max() - w[:, 2].min()) * dt[k] / 4.0
-    return eh, ev
+    return eh, ev, off
 
 
 def _pair_within(a: Trajectory, ea: tuple, b: Trajectory, eb: tuple, model, sign: float):
@@ -199,7 +202,9 @@ def flown_audit(tracks: Mapping[str, Trajectory], separation, sample_step_s: flo
     ``what`` ("flown"), ``sampling_bound_m`` / ``sampling_bound_v_m`` (the largest pair bound,
     horizontal and vertical; 0 without sampling), ``possible_losses`` (pairs the samples cannot
     clear), ``max_speed_mps``; with ``plans``: ``losses`` / ``loss_pairs`` the proven ones,
-    ``interpolated_losses`` / ``interpolated_loss_pairs`` the chords' own, ``pieces_on_plan``.
+    ``interpolated_losses`` / ``interpolated_loss_pairs`` the chords' own, ``samples_off_plan``
+    (samples more than 1 mm from their plan as flown), ``tracks_without_plan``, ``pieces`` and
+    ``pieces_exact`` (bound 0 on both axes).
     """
     model = as_separation_model(separation)
     ids = sorted(tracks)
@@ -236,6 +241,9 @@ def flown_audit(tracks: Mapping[str, Trajectory], separation, sample_step_s: flo
                 proven.append([a, b, d, t])
         out["interpolated_losses"], out["interpolated_loss_pairs"] = out["losses"], out["loss_pairs"][:LISTED]
         out["losses"], out["loss_pairs"] = len(proven), sorted(proven, key=lambda x: x[2])
+        # samples not on the plan flown (what the simulator flies: 0 without disturbances)
+        out["samples_off_plan"] = sum(b[2] for i, b in bounds.items() if i in plans)
+        out["tracks_without_plan"] = sum(i not in plans for i in ids)
         # pieces whose bound is 0 on both axes (on the plan, straight and level or one segment)
         out["pieces_exact"] = sum(int(((b[0] == 0) & (b[1] == 0)).sum()) for b in bounds.values())
         out["pieces"] = sum(int(b[0].size) for b in bounds.values())
