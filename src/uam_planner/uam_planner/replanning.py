@@ -889,7 +889,7 @@ def replan_steps(t_eff: float, epoch_index: int, active: Sequence, requests: dic
                                                        t_eff, pending, held_now())
             fixed[i], hold_of[i] = a, hold
             if clash:  # it cannot avoid another fixed flight: flown, the loss reported
-                unresolved[i] = "it cannot avoid another contingency"
+                unresolved[i] = "it cannot avoid another contingency (or a flight held past its plan)"
             chosen.pop(i, None)
             for j in hits:
                 if len(pulled_by) >= CASCADE_MAX_PULLED:
