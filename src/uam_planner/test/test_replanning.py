@@ -462,3 +462,61 @@ def test_clipped_from_cuts_at_any_instant():
     c = clipped_from(tr, 200.0 - 1e-12)         # within rounding of the arrival
     assert c.times_s[-1] == 200.0 and c.times_s[0] < 200.0
     np.testing.assert_allclose(clipped_from(tr, 100.0).points_m[0], (1000, 0, 0))
+
+
+def held_at(x_m, t0=60.0, t1=300.0, rid="H"):
+    """A flight the planner holds past its plan (issue 23): its projection hovers at (x, 0, 0)."""
+    return rid, Trajectory(np.array([t0, t1]), np.array([(x_m, 0.0, 0.0), (x_m, 0.0, 0.0)]))
+
+
+@pytest.mark.parametrize("policy", ["mwis", "firstfit"])
+def test_the_replan_avoids_a_flight_held_past_its_plan(policy):
+    # P (Wp 0 -> mp 100 -> Ep 200) meets the cell at t_eff = 60 at (-400, 0): alone it turns back
+    # to Wp (lands at 120, test above). A late flight H is held hovering at (-700, 0) from 60 to
+    # 300 s (its projection): turning back passes it at t = 90, 0 m away. So P must take the next
+    # alternative, C from mp (lands at 148), which stays >= 400 m from H ((-400,0)->(0,0)->(0,480)).
+    from uam_planner.planning import departure_slots_s, replan_selector
+    from uam_planner.replanning import replan
+    from uam_planner.separation import SegmentSet, conflicting_pairs
+
+    def run(held):
+        p = planner()
+        fly(p, req("P", "Wp", "Ep"))
+        from uam_planner.replanning import ConstraintUpdate, apply_updates
+        cfg = p.config
+        cset = apply_updates(cfg.constraints, [ConstraintUpdate("add", EAST, 60.0, 0)], p.network)
+        from dataclasses import replace as dc_replace
+        cfg = dc_replace(cfg, constraints=cset)
+        _active, updates, _rep = replan(60.0, 2, p.active, p._requests, p.network, cfg, p.cache, cset,
+                                        replan_selector(p.solve_mwis, cfg, 2, 60.0),
+                                        lambda t, r: departure_slots_s(t, r, cfg), policy, held=held)
+        (u,) = updates
+        return u
+
+    alone = run([])
+    assert (alone.kind, alone.flight.destination_id, alone.flight.route_node_ids) == ("diverted", "Wp", ("Wp",))
+    h = held_at(-700.0)
+    u = run([h])
+    assert (u.kind, u.flight.destination_id, u.flight.route_node_ids) == ("diverted", "C", ("Wp", "mp", "C"))
+    np.testing.assert_allclose(u.flight.trajectory.times_s, [0.0, 100.0, 148.0])
+    a, b = SegmentSet.from_trajectories([u.flight.trajectory]), SegmentSet.from_trajectories([h[1]])
+    sep = planner().config.separation
+    assert len(conflicting_pairs(a, b, sep)) == 0
+    assert len(conflicting_pairs(SegmentSet.from_trajectories([alone.flight.trajectory]), b, sep)) > 0
+    # a flight's own projection does not block its own re-plan
+    assert run([("P", h[1])]).flight.destination_id == "Wp"
+
+
+def test_the_planner_passes_its_held_flights_to_the_replan(monkeypatch):
+    # the same case through Planner.plan: the planner's overruns (issue 23) reach the re-plan
+    from dataclasses import replace as dc_replace
+    from types import SimpleNamespace
+    p = planner()
+    fly(p, req("P", "Wp", "Ep"))
+    rid, tr = held_at(-700.0)
+    ghost = dc_replace(p.active[0], request_id=rid, trajectory=tr, departure_s=60.0, arrival_s=300.0)
+    monkeypatch.setattr(Planner, "_hold_overruns", lambda self, t: None)
+    p.overruns = {rid: SimpleNamespace(flights=[ghost], until_s=300.0)}
+    p.update_constraint("add", EAST, 60.0)
+    (u,) = p.plan(60.0, 2).plan_updates
+    assert (u.kind, u.flight.destination_id) == ("diverted", "C")

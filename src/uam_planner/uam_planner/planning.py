@@ -1103,7 +1103,10 @@ class Planner:
         active, updates, report = yield from replan_steps(
             t_s, epoch_index, self.active, self._requests, self.network, cfg, self.cache, cset,
             replan_selector(self.solve_mwis, cfg, epoch_index, t_s),
-            lambda t, r: departure_slots_s(t, r, cfg), self.replan_policy(), labels=labels)
+            lambda t, r: departure_slots_s(t, r, cfg), self.replan_policy(), labels=labels,
+            # the flights held past their plans (issue 23) are in the air: every re-planned
+            # version avoids their projections as it avoids the other active flights
+            held=[(k, h.trajectory) for k, o in self.overruns.items() for h in o.flights])
         self.active = active
         self._plan_updates, self._replan_report = updates, report
 

@@ -617,18 +617,19 @@ def _contingency_candidates(alts: list, f, t_eff: float, cset: ConstraintSet, ne
 
 
 def _contingency_choice(options: tuple, active: Sequence, in_replan: set, fixed: dict, chosen: dict,
-                        config, t_eff: float, pending: Sequence = ()):
+                        config, t_eff: float, pending: Sequence = (), held: Sequence = ()):
     """A contingency's plan: of its ``options`` (from :func:`_contingency_candidates`), the one
     that loses separation with the fewest FIXED flights (other contingencies, flights with no
     way out: ideally none), then leaves the fewest of the flights still to be decided
     (``pending``: each one's options) with no option that avoids it, then meets
     the fewest airborne unaffected flights, then the fewest not departed (airborne flights
     outrank them), then the fewest flights the graph chose (re-decided in the next round), then
-    lands soonest. Returns (option, hold [s], indices in ``active`` of the unaffected flights it
+    lands soonest. ``held``: trajectories of flights held past their plans, counted as fixed
+    flights. Returns (option, hold [s], indices in ``active`` of the unaffected flights it
     loses separation with, airborne first, whether it meets a fixed flight)."""
     from .separation import SegmentSet, conflicting_pairs
     cands, holds = options
-    fx = [a.trajectory for a in fixed.values()]
+    fx = [a.trajectory for a in fixed.values()] + list(held)
     un = [j for j in range(len(active)) if j not in in_replan]
     ch = [a.trajectory for a in chosen.values()]
     others = fx + [active[j].trajectory for j in un] + ch
@@ -703,16 +704,18 @@ def run_steps(steps, answer_for: Callable):
 
 def replan(t_eff: float, epoch_index: int, active: Sequence, requests: dict, network, config,
            cache, cset: ConstraintSet, select: Callable, departures: Callable, policy: str = "mwis",
-           affected: dict | None = None, labels: Sequence[str] = ()) -> tuple[list, list, ReplanReport]:
+           affected: dict | None = None, labels: Sequence[str] = (),
+           held: Sequence = ()) -> tuple[list, list, ReplanReport]:
     """Re-plan the flights of ``active`` that the constraints ``cset`` affect, at ``t_eff``:
     :func:`replan_steps` with every graph solved by ``select`` itself (see there)."""
     return run_steps(replan_steps(t_eff, epoch_index, active, requests, network, config, cache, cset,
-                                  select, departures, policy, affected, labels), lambda _graph: SOLVE_HERE)
+                                  select, departures, policy, affected, labels, held),
+                     lambda _graph: SOLVE_HERE)
 
 
 def replan_steps(t_eff: float, epoch_index: int, active: Sequence, requests: dict, network, config,
                  cache, cset: ConstraintSet, select: Callable, departures: Callable, policy: str = "mwis",
-                 affected: dict | None = None, labels: Sequence[str] = ()):
+                 affected: dict | None = None, labels: Sequence[str] = (), held: Sequence = ()):
     """Re-plan the flights of ``active`` that the constraints ``cset`` affect, at ``t_eff``.
 
     A generator: with policy "mwis" it yields each round's ConflictGraph (the first graph and
@@ -740,6 +743,11 @@ def replan_steps(t_eff: float, epoch_index: int, active: Sequence, requests: dic
         affected: optional {index in active: (constraint index, entry time)} (default:
             :func:`affected_flights`).
         labels: the updates' labels, for the report.
+        held: ``(request_id, Trajectory)`` of the flights the planner holds past their plans
+            (issue 23, ``uam_planner.nonconformance.overruns``: each a projection of where a
+            late flight may still be): every alternative and every contingency is deconflicted
+            against them as against fixed flights (they are in the air: nothing re-plans them
+            here). A flight's own projections are left out while that flight is re-planned.
     Returns (as the generator's return value): (new active list: unaffected flights in their
         order, then the new versions; PlanUpdate per affected flight in ``active`` order;
         ReplanReport).
@@ -772,9 +780,14 @@ def replan_steps(t_eff: float, epoch_index: int, active: Sequence, requests: dic
         rep.affected_airborne += int(active[i].departure_s < t_eff)
         rep.affected_not_departed += int(active[i].departure_s >= t_eff)
 
+    def held_now():
+        """The held projections of flights not being re-planned (fixed for every decision)."""
+        mine = {active[j].request_id for j in in_replan}
+        return [tr for rid, tr in held if rid not in mine]
+
     def act_set(extra=()):
         trs = [f.trajectory for j, f in enumerate(active) if j not in in_replan] + \
-            [a.trajectory for a in fixed.values()] + list(extra)
+            [a.trajectory for a in fixed.values()] + held_now() + list(extra)
         s_ = SegmentSet.from_trajectories(trs)
         return s_.take(s_.t1_s >= t_eff) if len(s_) else s_
 
@@ -873,10 +886,10 @@ def replan_steps(t_eff: float, epoch_index: int, active: Sequence, requests: dic
             pending = [options[u] for u in unsaved[n_i + 1:]] + \
                 [(clean[u], None) for u in work if u in chosen and u not in fixed]
             a, hold, hits, clash = _contingency_choice(options[i], active, in_replan, fixed, chosen, config,
-                                                       t_eff, pending)
+                                                       t_eff, pending, held_now())
             fixed[i], hold_of[i] = a, hold
             if clash:  # it cannot avoid another fixed flight: flown, the loss reported
-                unresolved[i] = "it cannot avoid another contingency"
+                unresolved[i] = "it cannot avoid another contingency (or a flight held past its plan)"
             chosen.pop(i, None)
             for j in hits:
                 if len(pulled_by) >= CASCADE_MAX_PULLED:
@@ -892,7 +905,8 @@ def replan_steps(t_eff: float, epoch_index: int, active: Sequence, requests: dic
     # NOT deconflicted (reported: ReplanReport.unresolved, the reason, the audit of what flew)
     for i in [i for i in work if i not in chosen and active[i].departure_s < t_eff]:
         options_i = _contingency_candidates(clean[i], active[i], t_eff, cset, network, config)
-        a, hold, _hits, _clash = _contingency_choice(options_i, active, in_replan, fixed, chosen, config, t_eff)
+        a, hold, _hits, _clash = _contingency_choice(options_i, active, in_replan, fixed, chosen, config, t_eff,
+                                                     held=held_now())
         fixed[i], hold_of[i] = a, hold
         unresolved[i] = f"the cascade's bound of {CASCADE_ROUNDS} rounds"
 

@@ -215,7 +215,11 @@ def test_flown_closest_approach_on_hand_tracks():
     res = flown_audit(far, 100.0, sample_step_s=15.0)
     assert res["losses"] == 0 and res["possible_losses"] == 1
     assert res["min_separation_m"] == pytest.approx(130.0)
-    assert flown_audit(far, 100.0, sample_step_s=1.0)["possible_losses"] == 0   # 10 m bound
+    # per piece and axis (no plans: the ball of the largest speed): A's 15 s piece 10 x 15 / 2 =
+    # 75 m, B's 10 s pieces 50 m, so the pair's bound is 125 m: 230 m away is cleared
+    farther = {"a": tracks["a"], "b": Trajectory(b[0], b[1] + [0, 200, 0])}
+    assert flown_audit(farther, 100.0, sample_step_s=15.0)["possible_losses"] == 0
+    assert flown_audit(far, 100.0, sample_step_s=15.0)["possible_loss_pairs"][0][:2] == ["a", "b"]
 
 
 def test_a_kinked_flown_track_is_interpolated_linearly():

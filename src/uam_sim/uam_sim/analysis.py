@@ -749,11 +749,16 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
     if fl:  # issue 23: the audit above is of what was planned; this one of what flew
         ms = fl["min_separation_m"]
         verdict = f"LOSS OF SEPARATION in {fl['losses']} pair(s)" if fl["losses"] else "OK"
-        lines.append(f"Flown audit      {verdict} (what flew: the fleet states, linear between samples "
-                     f"{fl['sample_step_s']:g} s apart; the audit above is of the plans): minimum separation "
+        lines.append(f"Flown audit      {verdict} (what flew: the fleet states, samples "
+                     f"{fl['sample_step_s']:g} s apart; the audit above is of the plans): losses proven by the "
+                     f"samples {fl['losses']}; between samples, the chords' minimum "
                      + ("-" if ms is None else f"{ms:.1f} m")
-                     + f"; sampling error at most {fl['sampling_bound_m']:.1f} m per pair, "
-                     f"{fl['possible_losses']} pair(s) within it of the minimum")
+                     + f" and {fl.get('interpolated_losses', fl['losses'])} chord loss(es) (a chord cuts the "
+                     "corner at the top of a climb or descent); sampling error per pair and axis at most "
+                     f"{fl['sampling_bound_m']:.1f} m horizontal, {fl.get('sampling_bound_v_m', 0.0):.2f} m vertical "
+                     f"(per piece, from the plan flown there: 0 on {fl.get('pieces_exact', 0)} of "
+                     f"{fl.get('pieces', 0)} pieces), {fl['possible_losses']} pair(s) it cannot clear; "
+                     f"{fl.get('samples_off_plan', '-')} sample(s) off their plan as flown")
         cf = fl["conformance"]
         lines.append(f"Conformance      {cf['conformance_percent']:.2f} % of {cf['flight_hours']:.2f} flight hours, "
                      f"{cf['excursions']} excursions ({cf['excursions_per_flight_hour']:.2f} per flight hour), "

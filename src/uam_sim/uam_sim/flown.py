@@ -6,20 +6,41 @@ of every pair of such tracks is computed exactly by the same sweep as the plans'
 (:func:`uam_sim.audit.sweep_audit`: every pair of time-overlapping straight pieces, closest
 approach clamped to the overlap).
 
-The sampling error, bounded: if an aircraft's speed never exceeds ``v`` between two samples
-``dt`` apart, its true position at any time of that interval is within ``v dt / 2`` of the linear
-interpolation (write the chord point as ``(1-l) x0 + l x1``; the true point is within ``v l dt``
-of ``x0`` and ``v (1-l) dt`` of ``x1``, so within ``2 l (1-l) v dt <= v dt / 2`` of it). Two
-aircraft are then at most ``v dt`` closer than their interpolated tracks: a pair is a **loss**
-when the interpolated tracks come closer than the minimum, and a **possible loss** when they come
-closer than the minimum plus that bound (``sampling_bound_m``, with v the largest speed of the
-sampled tracks; the cylinder's V is widened by the same bound). In process the simulated
-aircraft flies exactly the interpolation of the model's samples, so the losses are exact there;
-the bound then covers the model's own motion inside a step.
+The sampling error, bounded **per axis and per piece** (issue 22, fourth stop). Between two
+samples ``dt`` apart the true position differs from the chord (the linear interpolation) by
+``f(t) = integral of (v - mean v)``, zero at both samples; if the velocity stays in a set of
+diameter ``D`` on that interval, ``|f(t)| <= D dt / 4`` (the worst case: one velocity for a
+share ``l`` of ``dt``, another for the rest, ``|f| = l (1 - l) D dt``). Applied to the horizontal
+velocity (``D_h``) and to the vertical speed (its range ``R_v``) separately:
+
+- a piece whose samples both lie on the flight's plan (every version as flown, to 1 mm: what
+  the simulator flies) takes ``D_h`` and ``R_v`` from the plan's velocities over that interval:
+  **0 on a straight level piece** (cruise), ``R_v dt / 4`` at the top of a climb (5 m/s, 1 s:
+  1.25 m), the change of heading at a corridor node for ``D_h``. The plan is the assumption
+  here (that the aircraft flies its plan's profile between two samples that lie on it);
+- any other piece (no plan, or a sample off it) takes the global bound: a velocity anywhere in
+  the ball of the largest sampled speed, per axis (``D = 2 v``: ``v_h dt / 2``, ``v_z dt / 2``;
+  ``v_h``, ``v_z`` the largest horizontal and vertical chord speeds, and the plan's).
+
+A pair's bound at an instant is the sum of the two aircraft's, per axis. With those bounds a pair
+is a **loss** when even the most favourable motion within them loses separation (the chords
+closer than ``H - e_h`` while vertically closer than ``V - e_v``; the sphere: closer than the
+minimum minus the 3D bound): proven by the samples. It is a **possible loss** when the chords come
+within ``H + e_h`` while within ``V + e_v``: the samples cannot exclude it. The chords' own losses
+(``interpolated_losses``) are reported too: the linear interpolation cuts the corner at the top
+of each climb and descent, so two aircraft at adjacent levels (exactly V apart) seem to lose
+separation there while the aircraft, on their plans, never do (the city run's 6 "flown losses"
+of the third stop, e.g. at t = 1,671 s: one aircraft levelling off at 120 m 0.17 s after a sample,
+the chord below 120 m until the next one, 86.5 m from one cruising at 90 m).
+
+Without plans (``plans=None``) every piece takes the global bound, and ``losses`` are the chords'
+(the tracks taken as the motion: in process the simulated aircraft flies exactly the
+interpolation of the model's samples, so they are exact there).
 """
 
 from __future__ import annotations
 
+import math
 from collections import defaultdict
 from typing import Iterable, Mapping
 
@@ -28,7 +49,7 @@ import numpy as np
 from uam_planner.separation import SeparationModel, as_separation_model
 from uam_planner.trajectory import Trajectory
 
-from .audit import sweep_audit, sweep_audits
+from .audit import TIE_RELATIVE, sweep_audit, sweep_audits
 
 OUTCOME_APPROVED = 0  # uam_msgs/FlightPlan.OUTCOME_APPROVED
 
@@ -58,8 +79,113 @@ def max_speed_mps(tracks: Iterable[Trajectory]) -> float:
     return best
 
 
+def _axis_speeds(tracks: Iterable[Trajectory]) -> tuple[float, float]:
+    """The largest horizontal and vertical speed of any piece of the tracks [m/s]."""
+    vh = vz = 0.0
+    for tr in tracks:
+        _t0, _t1, _p0, v = tr.segments()
+        if v.shape[0]:
+            vh = max(vh, float(np.sqrt(np.square(v[:, :2]).sum(axis=1)).max()))
+            vz = max(vz, float(np.abs(v[:, 2]).max()))
+    return vh, vz
+
+
+#: pairs listed per kind in the result
+LISTED = 20
+
+#: a sample within this of its plan's position counts as on the plan [m]
+ON_PLAN_M = 1e-3
+
+
+def piece_bounds(track: Trajectory, plan: Trajectory | None, vh: float,
+                 vz: float) -> tuple[np.ndarray, np.ndarray, int]:
+    """Per piece of ``track``: the bound of one aircraft's horizontal and vertical distance from
+    the chord (see the module docstring): from the plan's velocities where both samples lie on
+    ``plan``, else ``vh dt / 2`` and ``vz dt / 2``; and how many samples are off the plan (by
+    more than ON_PLAN_M, or outside its times; 0 without a plan)."""
+    t = track.times_s
+    dt = np.diff(t)
+    eh, ev = vh * dt / 2.0, vz * dt / 2.0
+    if plan is None or t.size < 2:
+        return eh, ev, 0
+    pt = plan.times_s
+    inside = (t >= pt[0] - 1e-9) & (t <= pt[-1] + 1e-9)
+    q = plan.position_at(np.clip(t, pt[0], pt[-1]), clamp=True)
+    on = inside & (np.sqrt(np.square(q - track.points_m).sum(axis=1)) <= ON_PLAN_M)
+    ok = on[:-1] & on[1:]
+    off = int(t.size - on.sum())
+    if not ok.any():
+        return eh, ev, off
+    _a, _b, _p, v = plan.segments()
+    first = np.clip(np.searchsorted(pt, t[:-1], side="right") - 1, 0, v.shape[0] - 1)
+    last = np.clip(np.searchsorted(pt, t[1:], side="left") - 1, 0, v.shape[0] - 1)
+    eh, ev = eh.copy(), ev.copy()
+    one = ok & (last <= first)
+    eh[one] = 0.0
+    ev[one] = 0.0
+    for k in np.flatnonzero(ok & (last > first)).tolist():
+        w = v[first[k]:last[k] + 1]
+        dh = w[:, None, :2] - w[None, :, :2]
+        eh[k] = float(np.sqrt(np.square(dh).sum(axis=2)).max()) * dt[k] / 4.0
+        ev[k] = float(w[:, 2].max() - w[:, 2].min()) * dt[k] / 4.0
+    return eh, ev, off
+
+
+def _pair_within(a: Trajectory, ea: tuple, b: Trajectory, eb: tuple, model, sign: float):
+    """Whether two tracks come within the minimum widened (``sign`` +1) or shrunk (-1) by their
+    per-piece bounds: (the smallest distance where they do, horizontal for the cylinder, or
+    inf; its time). Exact on every sub-interval of the merged sample times (both linear)."""
+    lo, hi = max(a.times_s[0], b.times_s[0]), min(a.times_s[-1], b.times_s[-1])
+    if hi < lo:
+        return math.inf, math.nan
+    g = np.unique(np.concatenate([a.times_s, b.times_s, [lo, hi]]))
+    g = g[(g >= lo) & (g <= hi)]
+    if g.size == 1:
+        g = np.array([g[0], g[0]])
+    t0, t1 = g[:-1], g[1:]
+    mid = 0.5 * (t0 + t1)
+    ia = np.clip(np.searchsorted(a.times_s, mid, side="right") - 1, 0, a.times_s.size - 2)
+    ib = np.clip(np.searchsorted(b.times_s, mid, side="right") - 1, 0, b.times_s.size - 2)
+    eh = ea[0][ia] + eb[0][ib]
+    ev = ea[1][ia] + eb[1][ib]
+    r0 = a.position_at(t0, clamp=True) - b.position_at(t0, clamp=True)
+    r1 = a.position_at(t1, clamp=True) - b.position_at(t1, clamp=True)
+    d = r1 - r0
+    H, V = model.separation_m, model.vertical_separation_m
+    if model.kind == "cylinder":
+        ch, cv = H + sign * eh, V + sign * ev
+        # the s in [0, 1] where |dz(s)| < cv (a tie, exactly cv, is separated)
+        z0, dz = r0[:, 2], d[:, 2]
+        cvt = cv * (1.0 - TIE_RELATIVE)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            sa = (-cvt - z0) / dz
+            sb = (cvt - z0) / dz
+        s_lo = np.where(dz != 0, np.minimum(sa, sb), np.where(np.abs(z0) < cvt, 0.0, 1.0))
+        s_hi = np.where(dz != 0, np.maximum(sa, sb), np.where(np.abs(z0) < cvt, 1.0, 0.0))
+        s_lo, s_hi = np.maximum(s_lo, 0.0), np.minimum(s_hi, 1.0)
+        live = (cv > 0) & ((s_hi > s_lo) | ((dz == 0) & (np.abs(z0) < cvt)))
+        p0, dp = r0[:, :2], d[:, :2]
+        limit = ch
+    else:
+        live = np.ones(t0.size, dtype=bool)
+        s_lo, s_hi = np.zeros(t0.size), np.ones(t0.size)
+        p0, dp = r0, d
+        limit = H + sign * np.sqrt(np.square(eh) + np.square(ev))
+    A = np.square(dp).sum(axis=1)
+    B = (p0 * dp).sum(axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s_star = np.where(A > 0, -B / A, 0.0)
+    s_star = np.clip(s_star, s_lo, s_hi)
+    dist = np.sqrt(np.square(p0 + s_star[:, None] * dp).sum(axis=1))
+    hit = live & (limit > 0) & (dist < limit * (1.0 - TIE_RELATIVE))
+    if not hit.any():
+        return math.inf, math.nan
+    k = int(np.flatnonzero(hit)[np.argmin(dist[hit])])
+    return float(dist[k]), float(t0[k] + s_star[k] * (t1[k] - t0[k]))
+
+
 def flown_audit(tracks: Mapping[str, Trajectory], separation, sample_step_s: float | None = None,
-                prune: bool = True) -> dict:
+                prune: bool = True, plans: Mapping[str, Trajectory] | None = None) -> dict:
     """Losses of separation in what flew.
 
     Args:
@@ -70,24 +196,60 @@ def flown_audit(tracks: Mapping[str, Trajectory], separation, sample_step_s: flo
             the motion itself (no sampling error).
         prune: False checks every time-overlapping pair of pieces (the slow reference; the
             result is the same, ``uam_planner.audit.sweep_audits``).
+        plans: vehicle id -> its plan as flown (every version from its instant): the per-piece
+            bounds of the module docstring, and ``losses`` are then those the samples prove.
     Returns: the :func:`uam_sim.audit.sweep_audit` dict of the interpolated tracks, plus
-    ``what`` ("flown"), ``sampling_bound_m`` (the bound above, 0 without sampling),
-    ``possible_losses`` (pairs closer than the minimum plus the bound) and ``max_speed_mps``.
+    ``what`` ("flown"), ``sampling_bound_m`` / ``sampling_bound_v_m`` (the largest pair bound,
+    horizontal and vertical; 0 without sampling), ``possible_losses`` (pairs the samples cannot
+    clear), ``max_speed_mps``; with ``plans``: ``losses`` / ``loss_pairs`` the proven ones,
+    ``interpolated_losses`` / ``interpolated_loss_pairs`` the chords' own, ``samples_off_plan``
+    (samples more than 1 mm from their plan as flown), ``tracks_without_plan``, ``pieces`` and
+    ``pieces_exact`` (bound 0 on both axes).
     """
     model = as_separation_model(separation)
     ids = sorted(tracks)
     trajs = [tracks[i] for i in ids]
     vmax = max_speed_mps(trajs)
-    bound = vmax * float(sample_step_s) if sample_step_s else 0.0
-    if bound > 0 and trajs:
-        # one candidate search for both minima (uam_planner.audit.sweep_audits)
-        wide = SeparationModel(model.kind, model.separation_m + bound, model.vertical_separation_m + bound)
-        out, wide_out = sweep_audits(trajs, [model, wide], labels=ids, prune=prune)
-        possible = wide_out["losses"]
-    else:
+    vh, vz = _axis_speeds(trajs)
+    if plans:
+        ph, pz = _axis_speeds([plans[i] for i in ids if i in plans])
+        vh, vz = max(vh, ph), max(vz, pz)
+    if not sample_step_s or not trajs:
         out = sweep_audit(trajs, model, labels=ids, prune=prune)
-        possible = out["losses"]
-    out.update({"what": "flown", "sampling_bound_m": bound, "possible_losses": possible,
+        out.update({"what": "flown", "sampling_bound_m": 0.0, "sampling_bound_v_m": 0.0,
+                    "possible_losses": out["losses"], "max_speed_mps": vmax})
+        return out
+    bounds = {i: piece_bounds(tracks[i], (plans or {}).get(i), vh, vz) for i in ids}
+    bh = 2.0 * max((float(b[0].max()) for b in bounds.values() if b[0].size), default=0.0)
+    bv = 2.0 * max((float(b[1].max()) for b in bounds.values() if b[1].size), default=0.0)
+    # one candidate search for both minima (uam_planner.audit.sweep_audits): the chords in the
+    # minimum, and in the minimum widened by the largest pair bound (a superset of the possible)
+    if model.kind == "cylinder":
+        wide = SeparationModel(model.kind, model.separation_m + bh, model.vertical_separation_m + bv)
+    else:
+        wide = SeparationModel(model.kind, model.separation_m + math.hypot(bh, bv), model.vertical_separation_m)
+    out, wide_out = sweep_audits(trajs, [model, wide], labels=ids, prune=prune, max_listed=None)
+    possible, proven = [], []
+    for a, b, _d, _t in wide_out["loss_pairs"]:
+        d, t = _pair_within(tracks[a], bounds[a], tracks[b], bounds[b], model, +1.0)
+        if math.isfinite(d):
+            possible.append([a, b, d, t])
+    if plans is not None:
+        for a, b, _d, _t in out["loss_pairs"]:
+            d, t = _pair_within(tracks[a], bounds[a], tracks[b], bounds[b], model, -1.0)
+            if math.isfinite(d):
+                proven.append([a, b, d, t])
+        out["interpolated_losses"], out["interpolated_loss_pairs"] = out["losses"], out["loss_pairs"][:LISTED]
+        out["losses"], out["loss_pairs"] = len(proven), sorted(proven, key=lambda x: x[2])
+        # samples not on the plan flown (what the simulator flies: 0 without disturbances)
+        out["samples_off_plan"] = sum(b[2] for i, b in bounds.items() if i in plans)
+        out["tracks_without_plan"] = sum(i not in plans for i in ids)
+        # pieces whose bound is 0 on both axes (on the plan, straight and level or one segment)
+        out["pieces_exact"] = sum(int(((b[0] == 0) & (b[1] == 0)).sum()) for b in bounds.values())
+        out["pieces"] = sum(int(b[0].size) for b in bounds.values())
+    out["loss_pairs"] = out["loss_pairs"][:LISTED]
+    out.update({"what": "flown", "sampling_bound_m": bh, "sampling_bound_v_m": bv,
+                "possible_losses": len(possible), "possible_loss_pairs": sorted(possible, key=lambda x: x[2])[:LISTED],
                 "max_speed_mps": vmax})
     return out
 
@@ -96,8 +258,11 @@ def recording_flown(path, separation, bounds=None, plans=None, prune: bool = Tru
     """What flew in a recording: the flown tracks from every ``uam/fleet_state`` (positions read
     straight from the CDR), their exact audit in the true minimum (:func:`flown_audit`, sampling
     step = the largest gap between fleet states), and the F3548 conformance of each flown track
-    with its approved plan (``uam_sim.conformance``). ``plans``: the approved FlightPlan messages
-    (else read from ``uam/flight_plans``); a vehicle flies the plan of its ``operator/request`` id.
+    with its plan: each sample with the plan version in force at that instant (version 1 from
+    the departure, each later version from its ``effective_time``;
+    ``uam_sim.conformance.versioned_conformance``). ``plans``: the FlightPlan messages, every
+    version (else read from ``uam/flight_plans``); a vehicle flies the plans of its
+    ``operator/request`` id.
     ``prune``: as :func:`flown_audit` (False: the slow reference sweep, the same result).
     Returns {} when the recording holds no fleet positions."""
     from uam_contract import names
@@ -106,7 +271,7 @@ def recording_flown(path, separation, bounds=None, plans=None, prune: bool = Tru
 
     from .audit import trajectory_of
     from .cdr import fleet_state_digest
-    from .conformance import ConformanceBounds, f3548_statistics, track_conformance
+    from .conformance import ConformanceBounds, f3548_statistics, versioned_conformance
     from .mcap_reader import deserialize, is_complete, read_messages, read_messages_tolerant
 
     fleet_topic, plan_topic = resolved(names.TOPIC_FLEET), resolved(names.TOPIC_PLANS)
@@ -132,19 +297,49 @@ def recording_flown(path, separation, bounds=None, plans=None, prune: bool = Tru
     ts = np.array([s[0] for s in samples])
     step = float(np.max(np.diff(ts))) if ts.size > 1 else 0.0
     tracks = tracks_from_samples(samples)
-    out = flown_audit(tracks, separation, sample_step_s=step, prune=prune)
-    out["sample_step_s"] = step
     from uam_contract.wire import scoped_id
-    approved = {}
+    from .flown_audit import effective_s as version_effective_s, plan_version
+    versions: dict = {}   # key -> {version: plan}, the first message of each version
     for p in (plans if plans is not None else found_plans):
         # the vehicle id of a plan: operator/request (uam_sim.analysis.request_key)
         key = scoped_id(p.operator_id, p.request_id) if p.operator_id else str(p.request_id)
-        if int(p.outcome) == OUTCOME_APPROVED and key not in approved:
+        if plan_version(p) == 1 and int(p.outcome) != OUTCOME_APPROVED:
+            continue
+        versions.setdefault(key, {}).setdefault(plan_version(p), p)
+    # each flown track against the plan version in force at each of its samples (issue 22 item
+    # 5): version 1 from the departure, version n + 1 from the instant it took effect; a
+    # cancellation (no waypoints) ends the flight, so no sample should follow it (one that does
+    # is compared with the version before)
+    pieces_of = {}
+    for key, by_v in versions.items():
+        if 1 not in by_v:
+            continue  # updates without an approval: the analysis' chain check reports them
+        pieces = []
+        for v in sorted(by_v):
+            p = by_v[v]
+            if not p.waypoints:
+                continue
             t, pts = trajectory_of(p)
             if t.size >= 2 and np.all(np.diff(t) > 0):
-                approved[key] = Trajectory(t, pts)
+                pieces.append((version_effective_s(p), Trajectory(t, pts)))
+        if pieces:
+            pieces_of[key] = pieces
+    # the audit, with each piece's sampling bound from the plan flown there (module docstring)
+    flown_plans = {}
+    for key, pieces in pieces_of.items():
+        if len(pieces) == 1:
+            flown_plans[key] = pieces[0][1]
+        else:
+            from .flown_audit import flown_trajectory
+            f, _gaps = flown_trajectory(key, [by for _v, by in sorted(versions[key].items())])
+            if f.times_s.size >= 2 and np.all(np.diff(f.times_s) > 0):
+                flown_plans[key] = Trajectory(f.times_s, f.points_m)
+    out = flown_audit(tracks, separation, sample_step_s=step, prune=prune, plans=flown_plans)
+    out["sample_step_s"] = step
     bounds = bounds or ConformanceBounds()
-    conf = [track_conformance(vid, approved[vid], tr, bounds) for vid, tr in tracks.items() if vid in approved]
+    conf = [versioned_conformance(vid, pieces_of[vid], tr, bounds) for vid, tr in tracks.items()
+            if vid in pieces_of]
+    out["versioned_flights"] = sum(len(pieces_of[v]) > 1 for v in tracks if v in pieces_of)
     out["conformance"] = f3548_statistics(conf).as_dict()
     out["conformance_bounds"] = {"lateral_m": bounds.lateral_m, "vertical_m": bounds.vertical_m,
                                  "time_s": bounds.time_s}
