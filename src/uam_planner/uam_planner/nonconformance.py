@@ -102,9 +102,20 @@ class ConformanceBounds:
                 raise ValueError(f"ConformanceBounds.{name}: {v!r} must be a positive finite number")
 
 
-def nearest(plan: Trajectory, points_m) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+#: a path point counts as "as near" as the nearest one when within this of it [m]: where a plan
+#: comes back over itself (a turn-back, a diversion along the way it came) the passes are at
+#: the same distance from any point, and the one meant is the one nearest in planned time
+TIE_M = 1.0
+
+
+def nearest(plan: Trajectory, points_m, times_s=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """For each point (n, 3): the plan's segment index j, the share along it, the nearest point
-    of the planned path (3D, exact per segment) and its planned time tau*."""
+    of the planned path (3D, exact per segment) and its planned time tau*.
+
+    With ``times_s`` (n,), the times of the points: among the segments whose nearest point is
+    within ``TIE_M`` of the nearest distance, the one whose tau* is nearest to the point's time.
+    Without it, a path that doubles back matches every point to its earlier pass (a flight
+    flying its turn-back on time read as late by the whole out-and-back)."""
     q = np.asarray(points_m, dtype=np.float64).reshape(-1, 3)
     a = plan.points_m[:-1]                     # (s, 3)
     d = plan.points_m[1:] - a
@@ -114,19 +125,29 @@ def nearest(plan: Trajectory, points_m) -> tuple[np.ndarray, np.ndarray, np.ndar
     lam = np.clip(lam, 0.0, 1.0)
     near = a[None] + lam[..., None] * d[None]
     dist2 = np.square(q[:, None, :] - near).sum(axis=2)
-    j = np.argmin(dist2, axis=1)
+    t0, t1 = plan.times_s[:-1], plan.times_s[1:]
+    if times_s is None:
+        j = np.argmin(dist2, axis=1)
+    else:
+        t = np.asarray(times_s, dtype=np.float64).reshape(-1)
+        dist = np.sqrt(dist2)
+        tied = dist <= dist.min(axis=1, keepdims=True) + TIE_M
+        taus = t0[None] + lam * (t1 - t0)[None]
+        j = np.argmin(np.where(tied, np.abs(taus - t[:, None]), np.inf), axis=1)
     rows = np.arange(q.shape[0])
     lj = lam[rows, j]
-    tau = plan.times_s[j] + lj * (plan.times_s[j + 1] - plan.times_s[j])
+    tau = t0[j] + lj * (t1[j] - t0[j])
     return j, lj, near[rows, j], tau
 
 
 def deviations(plan: Trajectory, times_s, points_m) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Lateral [m], vertical [m] (signed: above) and time [s] (positive = late) errors of
-    samples against ``plan``. Args: ``times_s`` (n,), ``points_m`` (n, 3). O(n p)."""
+    samples against ``plan``, each against the path point nearest in space (nearest in planned
+    time among passes as near: :func:`nearest`). Args: ``times_s`` (n,), ``points_m`` (n, 3).
+    O(n p)."""
     t = np.asarray(times_s, dtype=np.float64).reshape(-1)
     q = np.asarray(points_m, dtype=np.float64).reshape(-1, 3)
-    _j, _l, pt, tau = nearest(plan, q)
+    _j, _l, pt, tau = nearest(plan, q, t)
     off = q - pt
     return np.sqrt(np.square(off[:, :2]).sum(axis=1)), off[:, 2], t - tau
 

@@ -77,6 +77,25 @@ def test_speed_error_and_delay():
     assert terr[0] == pytest.approx(7.0) and lat[0] == 0.0 and ver[0] == 0.0
 
 
+def test_a_turn_back_flown_on_time_conforms_on_the_way_back():
+    # A -> B -> A at 10 m/s (a turn-back diversion flies back the way it came): at 150 s the
+    # aircraft is at x = 500 on the way back, exactly on plan. Both passes are 0 m away; the one
+    # meant is the return (planned 150 s), not the outbound (planned 50 s: "100 s late").
+    back = Trajectory(np.array([0.0, 100.0, 200.0]),
+                      np.array([[0.0, 0.0, 50.0], [1000.0, 0.0, 50.0], [0.0, 0.0, 50.0]]))
+    lat, ver, terr = deviations(back, [50.0, 150.0, 160.0], [[500.0, 0.0, 50.0], [500.0, 0.0, 50.0],
+                                                             [400.0, 5.0, 50.0]])
+    assert list(terr) == pytest.approx([0.0, 0.0, 0.0]) and list(lat) == pytest.approx([0.0, 0.0, 5.0])
+    # a late aircraft on the outbound leg is still read as late, not as early on the return
+    _lat, _ver, late = deviations(back, [70.0], [[500.0, 0.0, 50.0]])
+    assert late[0] == pytest.approx(20.0)
+    t = np.arange(0.0, 201.0)
+    pts = np.stack([np.where(t <= 100.0, 10.0 * t, 2000.0 - 10.0 * t), np.zeros_like(t),
+                    np.full_like(t, 50.0)], axis=1)
+    tc = track_conformance("a", back, Trajectory(t, pts), ConformanceBounds())
+    assert tc.conforming.all() and tc.first_nonconforming_s is None
+
+
 def test_draws_are_seeded_per_flight_and_within_bounds():
     cfg = DisturbanceConfig(speed_error=0.1, delay_mean_s=20.0, delay_max_s=30.0, seed=3)
     a = [flight_draws(cfg, f"r{i}") for i in range(200)]
