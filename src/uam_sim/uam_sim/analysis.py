@@ -740,7 +740,7 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
         kinds = ", ".join(f"{n} {k}" for k, n in s.plan_updates.items()) or "none"
         lines.append(f"Plan updates     {kinds}; {s.constraints_in_force} constraint version(s) in force")
         n_in = sum("unavoidable)" in x for x in s.incursions)
-        verdict = "OK: none" if not s.incursions else f"{len(s.incursions)} INCURSION(S)" + \
+        verdict = "OK: no incursion" if not s.incursions else f"{len(s.incursions)} INCURSION(S)" + \
             (f", {n_in} of them by flights already inside when it came into force (unavoidable)" if n_in else "")
         lines.append(f"Constraint audit {verdict} (every flown version from the instant it took effect)")
         for text in s.incursions[:20]:
