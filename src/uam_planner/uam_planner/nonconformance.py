@@ -221,8 +221,14 @@ class PositionBook:
         the oldest observation of the window to the newest (the planned time of each one's
         nearest path point), or, with less than ``MIN_SPEED_SPAN_S`` of observations, from the
         plan's departure to the newest; 1 without observations; clipped to ``RATE_RANGE``.
-        Only observations stamped at or before ``until`` count."""
+        Only observations stamped in [the plan's departure, ``until``] count: one made before
+        this version began was made against an older one (a nonconforming update starts where
+        the aircraft was, so an older sighting projects onto its first point and would read as
+        standing still; the rate, relative to this version, would collapse towards
+        ``RATE_RANGE[0]`` and the next update be timed far too slow: issue 23, fourth stop)."""
         q = self._upto(request_id, until)
+        if q and q[0].t_s < plan.departure_s - _EPS_T:
+            q = q[bisect.bisect_left(q, float(plan.departure_s) - _EPS_T, key=lambda o: o.t_s):]
         if not q:
             return 1.0
         last = q[-1]
