@@ -345,7 +345,22 @@ def _least_conflicting(alts: list, others: list, config, t_eff: float):
 
 def react(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: PositionBook,
           config, select: Callable, policy: str, network=None, fixed: Sequence = ()) -> tuple[list, list, dict]:
+    """:func:`react_steps` with its MWIS graph solved by ``select`` here (no caller's answer)."""
+    from .replanning import SOLVE_HERE, run_steps
+    return run_steps(react_steps(t_eff, epoch_index, active, found, book, config, select, policy,
+                                 network, fixed), lambda _graph: SOLVE_HERE)
+
+
+def react_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: PositionBook,
+                config, select: Callable, policy: str, network=None, fixed: Sequence = ()):
     """Update the intents of the nonconforming flights ``found`` at the epoch ``t_eff``.
+
+    A generator, as ``replanning.replan_steps``: with policy "mwis" it yields the one conflict
+    graph of the alternatives and takes back the solver's answer for it (``send``: an answer,
+    a reason string, or ``replanning.SOLVE_HERE`` to solve it with ``select``'s own solver), so
+    the planner node awaits the solver service for it (``Planner.prepare_steps``,
+    ``Planner.react_between_steps``); the answer is checked (greedy if invalid) by ``select``.
+    The decisions are those of :func:`react` given the same answer.
 
     Args:
         t_eff: the epoch time [s] (the update takes effect then).
@@ -413,7 +428,9 @@ def react(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: P
     chosen = {}
     backend = policy
     if graph.n_vertices:
-        selected, er = select(graph, policy)
+        from .replanning import SOLVE_HERE
+        answer = (yield graph) if policy == "mwis" else SOLVE_HERE
+        selected, er = select(graph, policy) if answer is SOLVE_HERE else select(graph, policy, answer)
         backend = er.backend_used or policy
         for v in np.asarray(selected).tolist():
             src = int(graph.vertex_source[v])

@@ -335,6 +335,48 @@ def test_a_second_update_is_timed_from_the_sightings_of_the_version_in_force_onl
     assert track_conformance("P", v3, cont, ConformanceBounds()).first_nonconforming_s is None
 
 
+def test_the_reaction_graph_is_handed_to_the_caller_and_its_answer_taken():
+    # Planner.prepare_steps / react_between_steps yield the reaction's MWIS graph, as the
+    # constraint re-plan's, so the planner node solves it through the solver service. Same case
+    # as test_its_updated_plan_keeps_separation_with_a_hand_placed_neighbour: the alternatives
+    # are the rates 0.9 (a loss with Q: not a vertex), 0.81, 0.99, 0.72, 0.63. A caller answering
+    # with the 0.81 one gets it (P at m at 120 + 1920 / 8.1 = 357.04 s, 23.70 s after Q: 149.2 m)
+    from uam_planner.replanning import SOLVE_HERE
+    from types import SimpleNamespace
+    flown = fly(P.trajectory, FlightDraws(), HEAD_WIND)
+    for between in (False, True):
+        p = planner()
+        _observe(p, flown, (100.0, 110.0, 120.0))
+        assert p.report_nonconforming("P", 101.0, "monitor") is None
+        steps = p.react_between_steps(120.0, 4) if between else p.prepare_steps(120.0, 4)
+        graph = next(steps)
+        assert graph.n_vertices == 4   # the rejoin at 0.9 loses separation with Q
+        v = int(np.flatnonzero(graph.vertex_source == 1)[0])   # the alternative at 0.81
+        try:
+            steps.send(SimpleNamespace(selected=[v], backend="by-caller"))
+            raise AssertionError("one graph only")
+        except StopIteration as done:
+            out = done.value
+        (u,) = out if between else p.commit(out).plan_updates
+        assert u.kind == KIND and u.flight.backend == "by-caller"
+        assert u.flight.trajectory.position_at(120.0 + 1920.0 / 8.1) == pytest.approx([3000.0, 0.0, 0.0])
+        gap = 120.0 + 1920.0 / 8.1 - 1000.0 / 3.0
+        a = audit_flights([u.flight.trajectory, Q.trajectory], separation_m=100.0)
+        assert a.losses == [] and a.min_separation_m == pytest.approx(gap * 81.0 / math.hypot(8.1, 10.0), abs=0.01)
+        # solved here (SOLVE_HERE: the planner's own solver) it is the 0.99 one, as before
+        p = planner()
+        _observe(p, flown, (100.0, 110.0, 120.0))
+        p.report_nonconforming("P", 101.0, "monitor")
+        steps = p.react_between_steps(120.0, 4) if between else p.prepare_steps(120.0, 4)
+        next(steps)
+        try:
+            steps.send(SOLVE_HERE)
+        except StopIteration as done:
+            out = done.value
+        (u,) = out if between else p.commit(out).plan_updates
+        assert u.flight.trajectory.position_at(120.0 + 1920.0 / 9.9) == pytest.approx([3000.0, 0.0, 0.0])
+
+
 def test_the_runner_reacts_between_epochs():
     """reaction_period_s = 5 s in the runner: updates take effect between epochs, and the
     longest excursion is shorter than with the reaction at the epochs only (same seed)."""
