@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import math
 import sys
 import time
 from dataclasses import asdict
@@ -39,7 +40,28 @@ DEFAULT_NETWORK = {"synthetic": {"n_nodes": 400, "n_aerodromes": 30, "seed": 1}}
 COLUMNS = ("speed_error", "spatial_buffer_m", "temporal_buffer_s", "reaction", "runs", "requests", "flights",
            "approval_rate", "conformance_percent", "excursions_per_flight_hour", "longest_excursion_s",
            "nonconforming_flights", "replans", "flown_losses", "flown_min_separation_m",
-           "planned_losses", "nonconforming_updates", "reaction_contingencies", "held_past_plan")
+           "planned_losses", "nonconforming_updates", "reaction_contingencies", "held_past_plan",
+           "approval_ci95_low", "approval_ci95_high", "flown_losses_per_flight_upper95")
+
+
+def spread_ci95(values) -> tuple[float, float]:
+    """The 95 % confidence interval of the mean of per-run values (Student's t over the runs:
+    the runs are independent, the flights of one run are not); (nan, nan) below 2 runs."""
+    from scipy import stats
+    v = np.asarray(list(values), dtype=np.float64)
+    if v.size < 2:
+        return math.nan, math.nan
+    half = float(stats.t.ppf(0.975, v.size - 1) * v.std(ddof=1) / math.sqrt(v.size))
+    return float(v.mean() - half), float(v.mean() + half)
+
+
+def poisson_upper95(k: int, n: int) -> float:
+    """The one-sided 95 % upper bound of a rate per flight from k events in n flights (exact
+    Poisson: chi2(0.95, 2k + 2) / 2 / n; 0 events: 3.0 / n, the rule of three); nan for n = 0."""
+    from scipy import stats
+    if n <= 0:
+        return math.nan
+    return float(stats.chi2.ppf(0.95, 2 * int(k) + 2) / 2.0 / n)
 
 
 def _num_list(text: str) -> list[float]:
@@ -112,7 +134,11 @@ def aggregate(point: tuple, cells: list[dict]) -> dict:
             "reaction_contingencies": sum(x.get("reaction_contingencies", 0) for x in s),
             # flights the planner held past their plans (issue 23's safety gap; 0 in cells run
             # before it)
-            "held_past_plan": sum(x.get("held_past_plan", 0) for x in s)}
+            "held_past_plan": sum(x.get("held_past_plan", 0) for x in s),
+            # uncertainty: the approval rate's spread over the runs, the flown-loss rate's bound
+            **dict(zip(("approval_ci95_low", "approval_ci95_high"),
+                       spread_ci95(x["approved"] / x["requests"] for x in s if x["requests"]))),
+            "flown_losses_per_flight_upper95": poisson_upper95(sum(x["flown_losses"] for x in s), appr)}
 
 
 def run(args) -> list[dict]:
@@ -153,16 +179,21 @@ def run(args) -> list[dict]:
 
 def format_table(rows: list[dict]) -> str:
     head = ("| speed error | buffer m | buffer s | reaction | runs | flights | approval | conformance | "
-            "exc/h | longest exc s | updates | flown losses | flown min sep m | planned losses |")
-    out = [head, "|" + "---|" * 14]
+            "exc/h | longest exc s | updates | flown losses | flown min sep m | planned losses | "
+            "approval 95 % CI (runs) | flown losses / flight, 95 % upper |")
+    out = [head, "|" + "---|" * 16]
     for r in rows:
         ms = r["flown_min_separation_m"]
+        lo, hi = r.get("approval_ci95_low", math.nan), r.get("approval_ci95_high", math.nan)
+        ci = "-" if not (math.isfinite(lo) and math.isfinite(hi)) else f"{100 * lo:.1f}-{100 * hi:.1f} %"
+        up = r.get("flown_losses_per_flight_upper95", math.nan)
         out.append(f"| {100 * r['speed_error']:.0f} % | {r['spatial_buffer_m']:g} | {r['temporal_buffer_s']:g} | "
                    f"{'on' if r['reaction'] else 'off'} | "
                    f"{r['runs']} | {r['flights']} | {100 * r['approval_rate']:.1f} % | "
                    f"{r['conformance_percent']:.2f} % | {r['excursions_per_flight_hour']:.2f} | "
                    f"{r['longest_excursion_s']:.0f} | {r['nonconforming_updates']} | {r['flown_losses']} | "
-                   f"{'-' if ms is None else f'{ms:.1f}'} | {r['planned_losses']} |")
+                   f"{'-' if ms is None else f'{ms:.1f}'} | {r['planned_losses']} | {ci} | "
+                   f"{'-' if not math.isfinite(up) else f'{up:.4f}'} |")
     return "\n".join(out)
 
 
