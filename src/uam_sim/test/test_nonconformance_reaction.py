@@ -391,5 +391,22 @@ def test_the_runner_reacts_between_epochs():
     assert any(r["t_s"] % 30.0 != 0 for r in often.replans)
     assert all(r["t_s"] % 5.0 == 0 for r in often.replans)
     assert often.summary["conf_longest_excursion_s"] < at_epochs.summary["conf_longest_excursion_s"]
+    # the plans the planner deconflicted keep separation (the reaction's contingencies apart)
+    assert at_epochs.summary["losses_deconflicted"] == 0 and often.summary["losses_deconflicted"] == 0
     with pytest.raises(ExperimentError, match="reaction_period_s: 45"):
         make_config(dict(base, reaction_period_s=45.0))
+
+
+def test_the_plans_audit_names_each_piece_by_its_kind():
+    # a flight planned W -> E from 0 s, updated at 100 s as a contingency: the plan until
+    # 100 s - 1 ms, then the contingency; the audit leaves the contingency out of the losses of
+    # the deconflicted plans (scenario.run_scenario's summary "losses_deconflicted")
+    from uam_sim.scenario import planned_pieces
+    a = P.trajectory
+    b = rejoin_trajectory(a, 100.0, (900.0, 0.0, 0.0), 0.9)
+    row = {"_traj": b, "_pieces": [(0.0, a), (100.0, b)], "_kinds": ["plan", "contingency"]}
+    (pa, ka), (pb, kb) = planned_pieces(row, kinds=True)
+    assert (ka, kb) == ("plan", "contingency")
+    assert pa.arrival_s == pytest.approx(100.0 - 1e-3) and pb is b
+    assert [t.arrival_s for t in planned_pieces(row)] == [pa.arrival_s, b.arrival_s]
+    assert planned_pieces({"_traj": a}, kinds=True) == [(a, "plan")]

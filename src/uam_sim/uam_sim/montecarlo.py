@@ -41,7 +41,8 @@ COLUMNS = ("speed_error", "spatial_buffer_m", "temporal_buffer_s", "reaction", "
            "approval_rate", "conformance_percent", "excursions_per_flight_hour", "longest_excursion_s",
            "nonconforming_flights", "replans", "flown_losses", "flown_min_separation_m",
            "planned_losses", "nonconforming_updates", "reaction_contingencies", "held_past_plan",
-           "approval_ci95_low", "approval_ci95_high", "flown_losses_per_flight_upper95")
+           "approval_ci95_low", "approval_ci95_high", "flown_losses_per_flight_upper95",
+           "planned_losses_deconflicted")
 
 
 def spread_ci95(values) -> tuple[float, float]:
@@ -130,6 +131,10 @@ def aggregate(point: tuple, cells: list[dict]) -> dict:
             "flown_losses": sum(x["flown_losses"] for x in s),
             "flown_min_separation_m": min(mins) if mins else None,
             "planned_losses": sum(x["losses"] or 0 for x in s),
+            # of which between plans the planner deconflicted (the reaction's contingencies left
+            # out; without the reaction every plan is deconflicted)
+            "planned_losses_deconflicted": sum((x["losses_deconflicted"] if "losses_deconflicted" in x
+                                                else x["losses"]) or 0 for x in s),
             "nonconforming_updates": sum(x.get("nonconforming_updates", 0) for x in s),
             "reaction_contingencies": sum(x.get("reaction_contingencies", 0) for x in s),
             # flights the planner held past their plans (issue 23's safety gap; 0 in cells run
@@ -180,8 +185,8 @@ def run(args) -> list[dict]:
 def format_table(rows: list[dict]) -> str:
     head = ("| speed error | buffer m | buffer s | reaction | runs | flights | approval | conformance | "
             "exc/h | longest exc s | updates | flown losses | flown min sep m | planned losses | "
-            "approval 95 % CI (runs) | flown losses / flight, 95 % upper |")
-    out = [head, "|" + "---|" * 16]
+            "of which deconflicted | approval 95 % CI (runs) | flown losses / flight, 95 % upper |")
+    out = [head, "|" + "---|" * 17]
     for r in rows:
         ms = r["flown_min_separation_m"]
         lo, hi = r.get("approval_ci95_low", math.nan), r.get("approval_ci95_high", math.nan)
@@ -192,7 +197,8 @@ def format_table(rows: list[dict]) -> str:
                    f"{r['runs']} | {r['flights']} | {100 * r['approval_rate']:.1f} % | "
                    f"{r['conformance_percent']:.2f} % | {r['excursions_per_flight_hour']:.2f} | "
                    f"{r['longest_excursion_s']:.0f} | {r['nonconforming_updates']} | {r['flown_losses']} | "
-                   f"{'-' if ms is None else f'{ms:.1f}'} | {r['planned_losses']} | {ci} | "
+                   f"{'-' if ms is None else f'{ms:.1f}'} | {r['planned_losses']} | "
+                   f"{r.get('planned_losses_deconflicted', r['planned_losses'])} | {ci} | "
                    f"{'-' if not math.isfinite(up) else f'{up:.4f}'} |")
     return "\n".join(out)
 
