@@ -387,3 +387,13 @@ def test_vertical_gusts_are_seeded_and_have_the_stated_spread():
     h = DisturbanceConfig(gust_std_mps=1.0, seed=2)
     hv = DisturbanceConfig(gust_std_mps=1.0, seed=2, vertical_gust_std_mps=0.5)
     assert np.array_equal(WindField(h).gust(xy, t), WindField(hv).gust(xy, t))
+
+
+def test_montecarlo_existing_only_runs_nothing(tmp_path, capsys):
+    # --existing-only: the table of the cells already in --out; with none there, no row and no run
+    from uam_sim.montecarlo import main
+    assert main(["--speed-errors", "0.1", "--spatial-buffers", "0,10", "--temporal-buffers", "0",
+                 "--seeds", "3", "--out", str(tmp_path), "--existing-only"]) == 0
+    assert list((tmp_path / "cells").iterdir()) == []
+    assert (tmp_path / "montecarlo.csv").read_text().count("\n") == 1   # the header only
+    assert "0 points" in capsys.readouterr().out

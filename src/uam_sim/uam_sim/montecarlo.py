@@ -167,6 +167,8 @@ def run(args) -> list[dict]:
             keys[c] = key
             confs[c] = conf
     todo.sort(key=lambda c: c[3])  # seeds outermost: an interrupted run has every point's first seeds
+    if getattr(args, "existing_only", False):
+        todo = []   # the table of the cells already there (an interrupted or a running study)
     if todo and args.workers <= 1 and args.scheduler in (None, "local"):
         for c in todo:
             found[c] = run_cell(confs[c], c[1], c[2], c[3], str(cells_dir))
@@ -178,7 +180,8 @@ def run(args) -> list[dict]:
     rows = []
     for i, (pt, conf) in enumerate(points):
         cells = [v for c, v in found.items() if c[0] == i]
-        rows.append(aggregate(pt, cells))
+        if cells:
+            rows.append(aggregate(pt, cells))
     return rows
 
 
@@ -274,6 +277,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scheduler", default=None, help="'local' or tcp://HOST:8786")
     p.add_argument("--out", default="results/montecarlo")
     p.add_argument("--figure", help="also write the figure (PNG) here")
+    p.add_argument("--existing-only", action="store_true",
+                   help="run nothing: the table (and figure) of the cells already in --out, seeds "
+                        "that are not there left out (a point without any is not listed)")
     return p
 
 
