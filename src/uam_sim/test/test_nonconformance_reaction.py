@@ -393,6 +393,8 @@ def test_the_runner_reacts_between_epochs():
     assert often.summary["conf_longest_excursion_s"] < at_epochs.summary["conf_longest_excursion_s"]
     # the plans the planner deconflicted keep separation (the reaction's contingencies apart)
     assert at_epochs.summary["losses_deconflicted"] == 0 and often.summary["losses_deconflicted"] == 0
+    for r in (at_epochs, often):
+        assert 0 <= r.summary["flown_losses_with_contingency"] <= r.summary["flown_losses"]
     with pytest.raises(ExperimentError, match="reaction_period_s: 45"):
         make_config(dict(base, reaction_period_s=45.0))
 

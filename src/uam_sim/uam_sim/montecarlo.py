@@ -42,7 +42,7 @@ COLUMNS = ("speed_error", "spatial_buffer_m", "temporal_buffer_s", "reaction", "
            "nonconforming_flights", "replans", "flown_losses", "flown_min_separation_m",
            "planned_losses", "nonconforming_updates", "reaction_contingencies", "held_past_plan",
            "approval_ci95_low", "approval_ci95_high", "flown_losses_per_flight_upper95",
-           "planned_losses_deconflicted")
+           "planned_losses_deconflicted", "flown_losses_with_contingency")
 
 
 def spread_ci95(values) -> tuple[float, float]:
@@ -143,7 +143,12 @@ def aggregate(point: tuple, cells: list[dict]) -> dict:
             # uncertainty: the approval rate's spread over the runs, the flown-loss rate's bound
             **dict(zip(("approval_ci95_low", "approval_ci95_high"),
                        spread_ci95(x["approved"] / x["requests"] for x in s if x["requests"]))),
-            "flown_losses_per_flight_upper95": poisson_upper95(sum(x["flown_losses"] for x in s), appr)}
+            "flown_losses_per_flight_upper95": poisson_upper95(sum(x["flown_losses"] for x in s), appr),
+            # of the flown losses, those with a flight flown as a contingency (None: not known
+            # for every run: cells from before the count, or more losses than listed)
+            "flown_losses_with_contingency": (sum(x["flown_losses_with_contingency"] for x in s)
+                                              if all(x.get("flown_losses_with_contingency") is not None
+                                                     for x in s) else None)}
 
 
 def run(args) -> list[dict]:

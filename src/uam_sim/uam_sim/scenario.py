@@ -317,6 +317,12 @@ def _flown_summary(flights: list, cfg: ExperimentConfig, dcfg) -> dict:
     out.update({"flown_min_separation_m": audit["min_separation_m"], "flown_losses": audit["losses"],
                 "replans": 0})
     if cfg.reaction:
+        # which flown losses involve a flight the reaction flew as a contingency (its plan not
+        # deconflicted): the listed pairs (the closest 20; exact while there are no more)
+        cont = {f["request_id"] for f in flights if "contingency" in (f.get("_kinds") or ())}
+        pairs = audit.get("loss_pairs") or []
+        out["flown_losses_with_contingency"] = sum(1 for a, b, *_ in pairs if a in cont or b in cont) \
+            if len(pairs) == audit["losses"] else None
         out["nonconforming_updates"] = sum(1 for f in flights if f.get("_pieces"))
         out["reaction_contingencies"] = sum(1 for f in flights if f.get("replan") == "contingency"
                                             and f.get("_pieces"))
