@@ -91,6 +91,10 @@ def test_the_graph_reacts_to_a_nonconforming_flight_and_flies_its_update(ros_con
     # (>=, not ==: in real time the observer, another subscriber, may see fewer of the updates than
     # the simulator did by the end of the run; 23 against 19 once in a fresh-clone run)
     assert nodes["simulator"].versions_received >= len(updates)
+    # the reaction's conflict graphs went through the solver service, as the epoch's (fourth
+    # stop: Planner.prepare_steps yields them; the node solved them locally before). No
+    # constraint is set here, so every re-plan graph it counts is a reaction's
+    assert nodes["planner"].replan_graphs_by_service >= 1
     # the newest versions keep separation with each other from their effective times on
     from uam_planner.audit import audit_flights
     from uam_planner.replanning import clipped_from

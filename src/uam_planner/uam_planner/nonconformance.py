@@ -242,8 +242,14 @@ class PositionBook:
         the oldest observation of the window to the newest (the planned time of each one's
         nearest path point), or, with less than ``MIN_SPEED_SPAN_S`` of observations, from the
         plan's departure to the newest; 1 without observations; clipped to ``RATE_RANGE``.
-        Only observations stamped at or before ``until`` count."""
+        Only observations stamped in [the plan's departure, ``until``] count: one made before
+        this version began was made against an older one (a nonconforming update starts where
+        the aircraft was, so an older sighting projects onto its first point and would read as
+        standing still; the rate, relative to this version, would collapse towards
+        ``RATE_RANGE[0]`` and the next update be timed far too slow: issue 23, fourth stop)."""
         q = self._upto(request_id, until)
+        if q and q[0].t_s < plan.departure_s - _EPS_T:
+            q = q[bisect.bisect_left(q, float(plan.departure_s) - _EPS_T, key=lambda o: o.t_s):]
         if not q:
             return 1.0
         last = q[-1]
@@ -360,7 +366,22 @@ def _least_conflicting(alts: list, others: list, config, t_eff: float):
 
 def react(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: PositionBook,
           config, select: Callable, policy: str, network=None, fixed: Sequence = ()) -> tuple[list, list, dict]:
+    """:func:`react_steps` with its MWIS graph solved by ``select`` here (no caller's answer)."""
+    from .replanning import SOLVE_HERE, run_steps
+    return run_steps(react_steps(t_eff, epoch_index, active, found, book, config, select, policy,
+                                 network, fixed), lambda _graph: SOLVE_HERE)
+
+
+def react_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: PositionBook,
+                config, select: Callable, policy: str, network=None, fixed: Sequence = ()):
     """Update the intents of the nonconforming flights ``found`` at the epoch ``t_eff``.
+
+    A generator, as ``replanning.replan_steps``: with policy "mwis" it yields the one conflict
+    graph of the alternatives and takes back the solver's answer for it (``send``: an answer,
+    a reason string, or ``replanning.SOLVE_HERE`` to solve it with ``select``'s own solver), so
+    the planner node awaits the solver service for it (``Planner.prepare_steps``,
+    ``Planner.react_between_steps``); the answer is checked (greedy if invalid) by ``select``.
+    The decisions are those of :func:`react` given the same answer.
 
     Args:
         t_eff: the epoch time [s] (the update takes effect then).
@@ -428,7 +449,9 @@ def react(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: P
     chosen = {}
     backend = policy
     if graph.n_vertices:
-        selected, er = select(graph, policy)
+        from .replanning import SOLVE_HERE
+        answer = (yield graph) if policy == "mwis" else SOLVE_HERE
+        selected, er = select(graph, policy) if answer is SOLVE_HERE else select(graph, policy, answer)
         backend = er.backend_used or policy
         for v in np.asarray(selected).tolist():
             src = int(graph.vertex_source[v])

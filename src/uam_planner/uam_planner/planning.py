@@ -68,7 +68,7 @@ from .first_fit import as_firstfit, first_fit_select
 from .objectives import (BASELINE_ORDERS, OperatorShares, check_objective, check_priority,
                          epoch_weights, operator_of, order_requests)
 from .trajectory import Trajectory
-from .nonconformance import Claim, ConformanceBounds, PositionBook, overruns, react, verify
+from .nonconformance import Claim, ConformanceBounds, PositionBook, overruns, react_steps, verify
 
 POLICIES = ("mwis", "fifo", "firstfit")  # firstfit: uam_planner.first_fit
 REPLAN_POLICIES = ("mwis", "firstfit")  # uam_planner.replanning
@@ -1135,10 +1135,11 @@ class Planner:
         self._claims.append(Claim(request_id, float(t_s), str(source)))
         return None
 
-    def _react_to_nonconformance(self, t_s: float, epoch_index: int) -> None:
+    def _react_to_nonconformance(self, t_s: float, epoch_index: int):
         """Step 2b of ``prepare`` (after the constraint re-plan, before new requests): the claims
         due by ``t_s`` that the planner's own view confirms get their intents updated from where
-        the flights are (``uam_planner.nonconformance.react``), deconflicted in one batch."""
+        the flights are (``uam_planner.nonconformance.react_steps``), deconflicted in one batch.
+        A generator: it yields the batch's MWIS graph (see :meth:`prepare_steps`)."""
         self._nonconformance_report = None
         due = [c for c in self._claims if c.t_s <= t_s]
         if not due or self.config.conformance is None:
@@ -1159,11 +1160,10 @@ class Planner:
             found[i] = (obs, got)
         cfg = self.config
         mine = {self.active[i].request_id for i in found}
-        active, updates, rep_ = react(t_s, epoch_index, self.active, found, self.positions, cfg,
-                                      replan_selector(self.solve_mwis, cfg, epoch_index, t_s),
-                                      self.replan_policy(), self.network,
-                                      fixed=[h.trajectory for k, o in self.overruns.items()
-                                             if k not in mine for h in o.flights])
+        active, updates, rep_ = yield from react_steps(
+            t_s, epoch_index, self.active, found, self.positions, cfg,
+            replan_selector(self.solve_mwis, cfg, epoch_index, t_s), self.replan_policy(), self.network,
+            fixed=[h.trajectory for k, o in self.overruns.items() if k not in mine for h in o.flights])
         for u in updates:   # the new version is drawn from where it is: its overrun is redrawn
             self.overruns.pop(u.request_id, None)
         rep_["refused"] = refused
@@ -1172,13 +1172,21 @@ class Planner:
         self._nonconformance_report = rep_
 
     def react_between(self, t_s: float, epoch_index: int) -> list:
+        """:meth:`react_between_steps` with the reaction's MWIS graph solved here (``solve_mwis``)."""
+        from .replanning import SOLVE_HERE, run_steps
+        return run_steps(self.react_between_steps(t_s, epoch_index), lambda _graph: SOLVE_HERE)
+
+    def react_between_steps(self, t_s: float, epoch_index: int):
         """The reaction between epochs (issue 23 item 3; F3548 asks a nonconforming intent to be
         updated within 5 s, an epoch is 30 s): the claims due by ``t_s`` are checked and acted on
         now, exactly as at step 2b of :meth:`prepare` (the planner's own observations stamped up
         to ``t_s``, its newest plans; every update deconflicted against every other active flight
         and every held flight's projections from ``t_s`` on). Returns the PlanUpdates (also in
         ``self.reaction_log``); the active flights take the new versions at once. Nothing else
-        changes: no request is planned, no flight dropped. Not while an epoch is prepared."""
+        changes: no request is planned, no flight dropped. Not while an epoch is prepared.
+        A generator, as :meth:`prepare_steps`: it yields the reaction's MWIS graph and takes back
+        the solver's answer (the planner node awaits the solver service for it); its return
+        value is the list of PlanUpdates."""
         if self._prepared is not None:
             raise RuntimeError(f"epoch {self._prepared.epoch_index} is prepared but not committed")
         if not math.isfinite(t_s):
@@ -1189,7 +1197,7 @@ class Planner:
         saved, saved_rep = self._plan_updates, self._nonconformance_report
         self._plan_updates = []
         try:
-            self._react_to_nonconformance(t_s, epoch_index)
+            yield from self._react_to_nonconformance(t_s, epoch_index)
             updates, rep = list(self._plan_updates), self._nonconformance_report
         finally:
             self._plan_updates, self._nonconformance_report = saved, saved_rep
@@ -1268,7 +1276,8 @@ class Planner:
 
     def prepare_steps(self, t_s: float, epoch_index: int):
         """:meth:`prepare` as a generator: it yields each MWIS graph of step 2's batch re-plan
-        (``uam_planner.replanning.replan_steps``) and takes back the solver's answer for it
+        (``uam_planner.replanning.replan_steps``) and of step 2b's reaction to nonconforming
+        flights (``uam_planner.nonconformance.react_steps``), and takes back the solver's answer for it
         (``send``: the answer, a reason string, or ``replanning.SOLVE_HERE``); its return value
         is the PreparedEpoch. The planner node awaits the solver service between the steps, as
         it does for the epoch's own graph; the decisions are those of :meth:`prepare` given the
@@ -1284,7 +1293,7 @@ class Planner:
             alive = {f.request_id for f in self.active}
             self._requests = {k: r for k, r in self._requests.items() if k in alive}
         yield from self._apply_constraint_updates(t_s, epoch_index)
-        self._react_to_nonconformance(t_s, epoch_index)
+        yield from self._react_to_nonconformance(t_s, epoch_index)
         # the traffic new requests are deconflicted against: the active flights and the held
         # flights' projections (new objects every epoch, after the active ones: the segment
         # index stays incremental)

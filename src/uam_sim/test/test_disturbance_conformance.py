@@ -321,6 +321,16 @@ def test_montecarlo_aggregates_a_point_by_hand():
     assert row["approval_rate"] == pytest.approx(0.8) and row["conformance_percent"] == pytest.approx(97.5)
     assert row["excursions_per_flight_hour"] == pytest.approx(0.2) and row["longest_excursion_s"] == 12.0
     assert row["flown_losses"] == 1 and row["flown_min_separation_m"] == 80.0 and row["flights"] == 80
+    # the approval rate over the runs, 0.75 and 0.8333: mean 0.7917, Student's t (1 degree of
+    # freedom, 12.706) x sd / sqrt(2) = 12.706 x |0.75 - 0.8333| / 2 = 0.5294 either side
+    assert row["approval_ci95_low"] == pytest.approx(0.7917 - 0.5294, abs=1e-3)
+    assert row["approval_ci95_high"] == pytest.approx(0.7917 + 0.5294, abs=1e-3)
+    # 1 flown loss in 80 flights: the exact Poisson bound chi2(0.95, 4) / 2 / 80 = 9.4877 / 160
+    assert row["flown_losses_per_flight_upper95"] == pytest.approx(9.4877 / 160.0, rel=1e-4)
+    from uam_sim.montecarlo import format_table, poisson_upper95, spread_ci95
+    assert poisson_upper95(0, 1000) == pytest.approx(2.9957 / 1000.0, rel=1e-4)   # the rule of three
+    assert all(math.isnan(x) for x in spread_ci95([0.5]))
+    assert "26.2-132.1 %" in format_table([row]) and "0.0593" in format_table([row])
 
 
 def test_the_planner_keeps_the_buffered_separation_and_the_audit_the_minimum():
@@ -400,3 +410,13 @@ def test_vertical_gusts_are_seeded_and_have_the_stated_spread():
     h = DisturbanceConfig(gust_std_mps=1.0, seed=2)
     hv = DisturbanceConfig(gust_std_mps=1.0, seed=2, vertical_gust_std_mps=0.5)
     assert np.array_equal(WindField(h).gust(xy, t), WindField(hv).gust(xy, t))
+
+
+def test_montecarlo_existing_only_runs_nothing(tmp_path, capsys):
+    # --existing-only: the table of the cells already in --out; with none there, no row and no run
+    from uam_sim.montecarlo import main
+    assert main(["--speed-errors", "0.1", "--spatial-buffers", "0,10", "--temporal-buffers", "0",
+                 "--seeds", "3", "--out", str(tmp_path), "--existing-only"]) == 0
+    assert list((tmp_path / "cells").iterdir()) == []
+    assert (tmp_path / "montecarlo.csv").read_text().count("\n") == 1   # the header only
+    assert "0 points" in capsys.readouterr().out

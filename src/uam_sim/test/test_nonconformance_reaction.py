@@ -298,6 +298,85 @@ def test_between_epochs_the_update_comes_at_once_and_keeps_separation_with_the_n
     p.commit(prep)
 
 
+def test_a_second_update_is_timed_from_the_sightings_of_the_version_in_force_only():
+    # issue 23 fourth stop (the root cause of the planned losses with reaction_period_s = 5): as
+    # above, P is updated at 110 s to v2, from (990, 0) at 9 m/s (rate 0.9; v2 reaches (1080, 0)
+    # at 120 s). It flies v2 exactly to 120 s, then a gust puts it 40 m north: seen at (1170, 40)
+    # at 130 s. Its nearest point on v2 is (1170, 0), planned at 110 + 180 / 9 = 130 s: on time.
+    # The rate against v2 from its own sightings (110 -> 130 s, planned 110 -> 130 s) is 1.0,
+    # so v3 is timed at 9 m/s. The sighting at 100 s (900, 0), made against v1, projects onto
+    # v2's first point (planned 110 s): counted, it reads (130 - 110) / (130 - 100) = 2 / 3, and
+    # v3 is timed at 6 m/s while the aircraft flies 9 m/s over the ground: 3 m/s ahead, 0.5 s of
+    # plan per second, out of the 10 s bound 20 s later (and updated again, at 2 / 3 of that...)
+    flown = fly(P.trajectory, FlightDraws(), HEAD_WIND)
+    p = Planner(cross(), PlanningConfig(conformance=ConformanceBounds()), "mwis", solve_mwis=None)
+    p.restore([P])
+    _observe(p, flown, (100.0, 110.0))
+    assert p.report_nonconforming("P", 101.0, "monitor") is None
+    (u2,) = p.react_between(110.0, 3)
+    v2 = u2.flight.trajectory
+    assert u2.observed_rate == pytest.approx(0.9) and v2.position_at(120.0) == pytest.approx([1080.0, 0.0, 0.0])
+    assert p.observe("P", 120.0, (1080.0, 0.0, 0.0)) is None
+    assert p.observe("P", 130.0, (1170.0, 40.0, 0.0)) is None
+    assert p.positions.progress_rate("P", v2, until=130.0) == pytest.approx(1.0)
+    assert p.report_nonconforming("P", 130.0, "monitor") is None
+    (u3,) = p.react_between(130.0, 3)
+    assert (u3.version, u3.kind, u3.effective_s) == (3, KIND, 130.0)
+    assert u3.observed_rate == pytest.approx(1.0)
+    v3 = u3.flight.trajectory
+    # from (1170, 40) straight to m (3000, 0): 1830.44 m at 9 m/s, then 3000 m at 9 m/s
+    first = math.hypot(1830.0, 40.0)
+    assert v3.points_m[1] == pytest.approx([3000.0, 0.0, 0.0])
+    assert v3.times_s[1] == pytest.approx(130.0 + first / 9.0)
+    assert v3.arrival_s == pytest.approx(130.0 + first / 9.0 + 3000.0 / 9.0)
+    # flown on at its airspeed (10 m/s, 9 over the ground against the head wind): the
+    # speed error against v3 is (1 + (1 / 0.9 - 1)) / 1.0 - 1, and it conforms to its end
+    cont = fly(v3, FlightDraws(1.0 / 0.9 - 1.0), HEAD_WIND)
+    assert track_conformance("P", v3, cont, ConformanceBounds()).first_nonconforming_s is None
+
+
+def test_the_reaction_graph_is_handed_to_the_caller_and_its_answer_taken():
+    # Planner.prepare_steps / react_between_steps yield the reaction's MWIS graph, as the
+    # constraint re-plan's, so the planner node solves it through the solver service. Same case
+    # as test_its_updated_plan_keeps_separation_with_a_hand_placed_neighbour: the alternatives
+    # are the rates 0.9 (a loss with Q: not a vertex), 0.81, 0.99, 0.72, 0.63. A caller answering
+    # with the 0.81 one gets it (P at m at 120 + 1920 / 8.1 = 357.04 s, 23.70 s after Q: 149.2 m)
+    from uam_planner.replanning import SOLVE_HERE
+    from types import SimpleNamespace
+    flown = fly(P.trajectory, FlightDraws(), HEAD_WIND)
+    for between in (False, True):
+        p = planner()
+        _observe(p, flown, (100.0, 110.0, 120.0))
+        assert p.report_nonconforming("P", 101.0, "monitor") is None
+        steps = p.react_between_steps(120.0, 4) if between else p.prepare_steps(120.0, 4)
+        graph = next(steps)
+        assert graph.n_vertices == 4   # the rejoin at 0.9 loses separation with Q
+        v = int(np.flatnonzero(graph.vertex_source == 1)[0])   # the alternative at 0.81
+        try:
+            steps.send(SimpleNamespace(selected=[v], backend="by-caller"))
+            raise AssertionError("one graph only")
+        except StopIteration as done:
+            out = done.value
+        (u,) = out if between else p.commit(out).plan_updates
+        assert u.kind == KIND and u.flight.backend == "by-caller"
+        assert u.flight.trajectory.position_at(120.0 + 1920.0 / 8.1) == pytest.approx([3000.0, 0.0, 0.0])
+        gap = 120.0 + 1920.0 / 8.1 - 1000.0 / 3.0
+        a = audit_flights([u.flight.trajectory, Q.trajectory], separation_m=100.0)
+        assert a.losses == [] and a.min_separation_m == pytest.approx(gap * 81.0 / math.hypot(8.1, 10.0), abs=0.01)
+        # solved here (SOLVE_HERE: the planner's own solver) it is the 0.99 one, as before
+        p = planner()
+        _observe(p, flown, (100.0, 110.0, 120.0))
+        p.report_nonconforming("P", 101.0, "monitor")
+        steps = p.react_between_steps(120.0, 4) if between else p.prepare_steps(120.0, 4)
+        next(steps)
+        try:
+            steps.send(SOLVE_HERE)
+        except StopIteration as done:
+            out = done.value
+        (u,) = out if between else p.commit(out).plan_updates
+        assert u.flight.trajectory.position_at(120.0 + 1920.0 / 9.9) == pytest.approx([3000.0, 0.0, 0.0])
+
+
 def test_the_runner_reacts_between_epochs():
     """reaction_period_s = 5 s in the runner: updates take effect between epochs, and the
     longest excursion is shorter than with the reaction at the epochs only (same seed)."""
@@ -312,5 +391,24 @@ def test_the_runner_reacts_between_epochs():
     assert any(r["t_s"] % 30.0 != 0 for r in often.replans)
     assert all(r["t_s"] % 5.0 == 0 for r in often.replans)
     assert often.summary["conf_longest_excursion_s"] < at_epochs.summary["conf_longest_excursion_s"]
+    # the plans the planner deconflicted keep separation (the reaction's contingencies apart)
+    assert at_epochs.summary["losses_deconflicted"] == 0 and often.summary["losses_deconflicted"] == 0
+    for r in (at_epochs, often):
+        assert 0 <= r.summary["flown_losses_with_contingency"] <= r.summary["flown_losses"]
     with pytest.raises(ExperimentError, match="reaction_period_s: 45"):
         make_config(dict(base, reaction_period_s=45.0))
+
+
+def test_the_plans_audit_names_each_piece_by_its_kind():
+    # a flight planned W -> E from 0 s, updated at 100 s as a contingency: the plan until
+    # 100 s - 1 ms, then the contingency; the audit leaves the contingency out of the losses of
+    # the deconflicted plans (scenario.run_scenario's summary "losses_deconflicted")
+    from uam_sim.scenario import planned_pieces
+    a = P.trajectory
+    b = rejoin_trajectory(a, 100.0, (900.0, 0.0, 0.0), 0.9)
+    row = {"_traj": b, "_pieces": [(0.0, a), (100.0, b)], "_kinds": ["plan", "contingency"]}
+    (pa, ka), (pb, kb) = planned_pieces(row, kinds=True)
+    assert (ka, kb) == ("plan", "contingency")
+    assert pa.arrival_s == pytest.approx(100.0 - 1e-3) and pb is b
+    assert [t.arrival_s for t in planned_pieces(row)] == [pa.arrival_s, b.arrival_s]
+    assert planned_pieces({"_traj": a}, kinds=True) == [(a, "plan")]

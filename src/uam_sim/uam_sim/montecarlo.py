@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import math
 import sys
 import time
 from dataclasses import asdict
@@ -39,7 +40,29 @@ DEFAULT_NETWORK = {"synthetic": {"n_nodes": 400, "n_aerodromes": 30, "seed": 1}}
 COLUMNS = ("speed_error", "spatial_buffer_m", "temporal_buffer_s", "reaction", "runs", "requests", "flights",
            "approval_rate", "conformance_percent", "excursions_per_flight_hour", "longest_excursion_s",
            "nonconforming_flights", "replans", "flown_losses", "flown_min_separation_m",
-           "planned_losses", "nonconforming_updates", "reaction_contingencies", "held_past_plan")
+           "planned_losses", "nonconforming_updates", "reaction_contingencies", "held_past_plan",
+           "approval_ci95_low", "approval_ci95_high", "flown_losses_per_flight_upper95",
+           "planned_losses_deconflicted", "flown_losses_with_contingency")
+
+
+def spread_ci95(values) -> tuple[float, float]:
+    """The 95 % confidence interval of the mean of per-run values (Student's t over the runs:
+    the runs are independent, the flights of one run are not); (nan, nan) below 2 runs."""
+    from scipy import stats
+    v = np.asarray(list(values), dtype=np.float64)
+    if v.size < 2:
+        return math.nan, math.nan
+    half = float(stats.t.ppf(0.975, v.size - 1) * v.std(ddof=1) / math.sqrt(v.size))
+    return float(v.mean() - half), float(v.mean() + half)
+
+
+def poisson_upper95(k: int, n: int) -> float:
+    """The one-sided 95 % upper bound of a rate per flight from k events in n flights (exact
+    Poisson: chi2(0.95, 2k + 2) / 2 / n; 0 events: 3.0 / n, the rule of three); nan for n = 0."""
+    from scipy import stats
+    if n <= 0:
+        return math.nan
+    return float(stats.chi2.ppf(0.95, 2 * int(k) + 2) / 2.0 / n)
 
 
 def _num_list(text: str) -> list[float]:
@@ -108,11 +131,24 @@ def aggregate(point: tuple, cells: list[dict]) -> dict:
             "flown_losses": sum(x["flown_losses"] for x in s),
             "flown_min_separation_m": min(mins) if mins else None,
             "planned_losses": sum(x["losses"] or 0 for x in s),
+            # of which between plans the planner deconflicted (the reaction's contingencies left
+            # out; without the reaction every plan is deconflicted)
+            "planned_losses_deconflicted": sum((x["losses_deconflicted"] if "losses_deconflicted" in x
+                                                else x["losses"]) or 0 for x in s),
             "nonconforming_updates": sum(x.get("nonconforming_updates", 0) for x in s),
             "reaction_contingencies": sum(x.get("reaction_contingencies", 0) for x in s),
             # flights the planner held past their plans (issue 23's safety gap; 0 in cells run
             # before it)
-            "held_past_plan": sum(x.get("held_past_plan", 0) for x in s)}
+            "held_past_plan": sum(x.get("held_past_plan", 0) for x in s),
+            # uncertainty: the approval rate's spread over the runs, the flown-loss rate's bound
+            **dict(zip(("approval_ci95_low", "approval_ci95_high"),
+                       spread_ci95(x["approved"] / x["requests"] for x in s if x["requests"]))),
+            "flown_losses_per_flight_upper95": poisson_upper95(sum(x["flown_losses"] for x in s), appr),
+            # of the flown losses, those with a flight flown as a contingency (None: not known
+            # for every run: cells from before the count, or more losses than listed)
+            "flown_losses_with_contingency": (sum(x["flown_losses_with_contingency"] for x in s)
+                                              if all(x.get("flown_losses_with_contingency") is not None
+                                                     for x in s) else None)}
 
 
 def run(args) -> list[dict]:
@@ -136,6 +172,8 @@ def run(args) -> list[dict]:
             keys[c] = key
             confs[c] = conf
     todo.sort(key=lambda c: c[3])  # seeds outermost: an interrupted run has every point's first seeds
+    if getattr(args, "existing_only", False):
+        todo = []   # the table of the cells already there (an interrupted or a running study)
     if todo and args.workers <= 1 and args.scheduler in (None, "local"):
         for c in todo:
             found[c] = run_cell(confs[c], c[1], c[2], c[3], str(cells_dir))
@@ -147,22 +185,29 @@ def run(args) -> list[dict]:
     rows = []
     for i, (pt, conf) in enumerate(points):
         cells = [v for c, v in found.items() if c[0] == i]
-        rows.append(aggregate(pt, cells))
+        if cells:
+            rows.append(aggregate(pt, cells))
     return rows
 
 
 def format_table(rows: list[dict]) -> str:
     head = ("| speed error | buffer m | buffer s | reaction | runs | flights | approval | conformance | "
-            "exc/h | longest exc s | updates | flown losses | flown min sep m | planned losses |")
-    out = [head, "|" + "---|" * 14]
+            "exc/h | longest exc s | updates | flown losses | flown min sep m | planned losses | "
+            "of which deconflicted | approval 95 % CI (runs) | flown losses / flight, 95 % upper |")
+    out = [head, "|" + "---|" * 17]
     for r in rows:
         ms = r["flown_min_separation_m"]
+        lo, hi = r.get("approval_ci95_low", math.nan), r.get("approval_ci95_high", math.nan)
+        ci = "-" if not (math.isfinite(lo) and math.isfinite(hi)) else f"{100 * lo:.1f}-{100 * hi:.1f} %"
+        up = r.get("flown_losses_per_flight_upper95", math.nan)
         out.append(f"| {100 * r['speed_error']:.0f} % | {r['spatial_buffer_m']:g} | {r['temporal_buffer_s']:g} | "
                    f"{'on' if r['reaction'] else 'off'} | "
                    f"{r['runs']} | {r['flights']} | {100 * r['approval_rate']:.1f} % | "
                    f"{r['conformance_percent']:.2f} % | {r['excursions_per_flight_hour']:.2f} | "
                    f"{r['longest_excursion_s']:.0f} | {r['nonconforming_updates']} | {r['flown_losses']} | "
-                   f"{'-' if ms is None else f'{ms:.1f}'} | {r['planned_losses']} |")
+                   f"{'-' if ms is None else f'{ms:.1f}'} | {r['planned_losses']} | "
+                   f"{r.get('planned_losses_deconflicted', r['planned_losses'])} | {ci} | "
+                   f"{'-' if not math.isfinite(up) else f'{up:.4f}'} |")
     return "\n".join(out)
 
 
@@ -237,6 +282,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scheduler", default=None, help="'local' or tcp://HOST:8786")
     p.add_argument("--out", default="results/montecarlo")
     p.add_argument("--figure", help="also write the figure (PNG) here")
+    p.add_argument("--existing-only", action="store_true",
+                   help="run nothing: the table (and figure) of the cells already in --out, seeds "
+                        "that are not there left out (a point without any is not listed)")
     return p
 
 

@@ -253,6 +253,7 @@ class _Reaction:
         row["_t0"] = t0
         row.setdefault("_pieces", [(float(row["_traj"].departure_s), row["_traj"])])
         row["_pieces"].append((t0, new))
+        row.setdefault("_kinds", ["plan"]).append(u.kind)   # each piece's kind, for the audit
         row["_traj"] = new
 
     def refly(self, row) -> None:
@@ -280,19 +281,22 @@ def _until(tr, u: float):
     return Trajectory(np.append(tr.times_s[keep], u), np.vstack((tr.points_m[keep], tr.position_at(u))))
 
 
-def planned_pieces(row) -> list:
+def planned_pieces(row, kinds: bool = False) -> list:
     """The plans of a flight row as flown in time: each version until the next took effect
     (a nonconforming update does not chain with the version before it; 1 ms apart, so the
-    plans' audit does not compare a flight with itself)."""
+    plans' audit does not compare a flight with itself). With ``kinds``: (trajectory, kind)
+    pairs, kind "plan" for the first version and the reaction's ``PlanUpdate.kind`` after
+    ("nonconforming", deconflicted; "contingency", flown but not deconflicted)."""
     pieces = row.get("_pieces")
     if not pieces:
-        return [row["_traj"]]
+        return [(row["_traj"], "plan")] if kinds else [row["_traj"]]
+    names = row.get("_kinds") or ["plan"] * len(pieces)
     out = []
     for k, (t0, tr) in enumerate(pieces):
         nxt = pieces[k + 1][0] - 1e-3 if k + 1 < len(pieces) else math.inf
         cut = _until(tr, nxt)
         if cut is not None and cut.times_s.shape[0] >= 2:
-            out.append(cut)
+            out.append((cut, names[k]) if kinds else cut)
     return out
 
 
@@ -313,6 +317,12 @@ def _flown_summary(flights: list, cfg: ExperimentConfig, dcfg) -> dict:
     out.update({"flown_min_separation_m": audit["min_separation_m"], "flown_losses": audit["losses"],
                 "replans": 0})
     if cfg.reaction:
+        # which flown losses involve a flight the reaction flew as a contingency (its plan not
+        # deconflicted): the listed pairs (the closest 20; exact while there are no more)
+        cont = {f["request_id"] for f in flights if "contingency" in (f.get("_kinds") or ())}
+        pairs = audit.get("loss_pairs") or []
+        out["flown_losses_with_contingency"] = sum(1 for a, b, *_ in pairs if a in cont or b in cont) \
+            if len(pairs) == audit["losses"] else None
         out["nonconforming_updates"] = sum(1 for f in flights if f.get("_pieces"))
         out["reaction_contingencies"] = sum(1 for f in flights if f.get("replan") == "contingency"
                                             and f.get("_pieces"))
@@ -494,8 +504,15 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
     flown = [f for f in flights if not f.get("cancelled")]
     if cfg.audit:
         # in the run's separation model (the paper's sphere, or the cylinder); what flew
-        pieces = [(f["request_id"], p) for f in flown for p in planned_pieces(f)]
-        audit = sweep_audit([p for _r, p in pieces], cfg.separation(), labels=[r for r, _p in pieces])
+        pieces = [(f["request_id"], p, k) for f in flown for p, k in planned_pieces(f, kinds=True)]
+        audit = sweep_audit([p for _r, p, _k in pieces], cfg.separation(), labels=[r for r, _p, _k in pieces])
+        if reaction is not None:
+            # the plans the planner deconflicted (every version but the reaction's contingencies,
+            # which are flown, announced and deconflicted against by later plans, but not
+            # themselves deconflicted: docs/disturbances.md 2b): their losses must be 0
+            dec = [(r, p) for r, p, k in pieces if k != "contingency"]
+            audit["losses_deconflicted"] = audit["losses"] if len(dec) == len(pieces) else \
+                sweep_audit([p for _r, p in dec], cfg.separation(), labels=[r for r, _p in dec])["losses"]
     extra = {}
     if planner.constraint_log or planner.initial_constraints:
         from uam_planner.replanning import KINDS, audit_incursions, constraint_timeline
@@ -519,7 +536,7 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
         flown_summary["held_past_plan"] = len(held_ids)
     for f in flights:
         del f["_traj"]
-        for k in ("_flown", "_pieces", "_e", "_t0"):
+        for k in ("_flown", "_pieces", "_e", "_t0", "_kinds"):
             f.pop(k, None)
     mwis_epochs = [r for r in epochs if r["vertices"] > 0]
     summary = {
@@ -536,6 +553,7 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
         "fallbacks": int(sum(r["fallback"] for r in epochs)),
         "min_separation_m": audit.get("min_separation_m"),
         "losses": audit.get("losses"),
+        **({"losses_deconflicted": audit.get("losses_deconflicted")} if reaction is not None else {}),
         "objective": cfg.objective,
         # requests still within their window at the end (filed ahead) are left out
         **{k: v for k, v in run_metrics(flights, asked, warmup_s=cfg.metrics_warmup_s or None,
