@@ -375,13 +375,18 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:
           f"Chosen from the data: {ss['method'].upper()} (White's MSER with batches of 5 epochs, "
           f"truncation searched over the first half of the run) on the mean over seeds of the "
           f"reference method's ({ss['reference_method']}) per-epoch `{ss['series']}` (flights in "
-          "the air), per cell; every method of a cell uses that cell's window. A request counts "
-          "when its earliest departure is at or after the truncation and its latest departure at "
-          "or before the run's end.", ""]
+          "the air), per variant; then one window per experiment cell and rate, the latest of "
+          "its variants' truncations, which every method and variant uses (so a comparison "
+          "across variants, as E2's horizons, counts the same requests in both arms). A request "
+          "counts when its earliest departure is at or after the truncation and its latest "
+          "departure at or before the run's end.", ""]
     if windows is not None:
-        L += _table([[r["experiment"], r["cell"], r["variant"], r["rate"], r["truncation_epoch"],
+        own = "variant_truncation_epoch" in windows.columns
+        L += _table([[r["experiment"], r["cell"], r["variant"], r["rate"], r["reference_method"],
+                      r["variant_truncation_epoch"] if own else "-", r["truncation_epoch"],
                       _f(r["warmup_s"], 0)] for r in windows.to_dict("records")],
-                    ["experiment", "cell", "variant", "rate", "truncation epoch", "warm-up [s]"])
+                    ["experiment", "cell", "variant", "rate", "reference method",
+                     "variant's own truncation", "truncation epoch (used)", "warm-up [s]"])
     else:
         L.append("No run yet.")
     L.append("")
