@@ -501,10 +501,14 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:
                         u = "%" if str(pr[0]["group"]).startswith("pooled") \
                             else UNITS.get(c["metric"], "")
                         where_p = "" if u == "%" else f" ({pr[0]['group']})"
-                        power = (f" With {pr[0]['seeds_run']} seeds{where_p} the smallest true difference "
+                        n_what = "paired differences (seeds x groups)" if u == "%" else "seeds"
+                        power = (f" With {pr[0]['seeds_run']} {n_what}{where_p} the smallest true difference "
                                  f"found with 80 % probability (MDE) is {_f(pr[0]['mde_now'], 2)} "
                                  f"{u}; at the cap of {pr[0]['max_seeds']} seeds "
                                  f"{_f(pr[0]['mde_at_cap'], 2)} {u}.")
+                        if u == "%":
+                            power = power.replace(f"at the cap of {pr[0]['max_seeds']} seeds",
+                                                  f"at the cap of {pr[0]['max_seeds']} seeds per group")
                 half = (r["rel_hi"] - r["rel_lo"]) / 2 if math.isfinite(r.get("rel_lo", math.nan)) \
                     else math.nan
                 L.append(f"- {exp['name']} {kind} `{c['name']}` ({c['metric']}, {where}): "
