@@ -10,6 +10,7 @@ from uam_planner.audit import audit_flights, pair_min_distance
 from uam_planner.separation import (SeparationModel, conflicting_pairs, loss_intervals_s,
                                     min_separation_m)
 from uam_planner.trajectory import Trajectory
+from uam_planner import separation
 
 CYL = SeparationModel("cylinder", 100.0, 30.0)
 SPHERE = SeparationModel("sphere", 100.0)
@@ -209,9 +210,11 @@ def _levels_with_touches(rng, n):
 
 
 @pytest.mark.parametrize("model", [CYL, SPHERE])
-def test_z_cells_in_the_keys_give_the_same_pairs_and_distances_to_the_last_bit(model):
+def test_z_cells_in_the_keys_give_the_same_pairs_and_distances_to_the_last_bit(model, monkeypatch):
     """z_cell_m only narrows the broad phase: the same pairs and the same float distances (the
-    exact kernel sees the same piece pairs), with fewer piece pairs sharing a cell at levels."""
+    exact kernel sees the same piece pairs), with fewer piece pairs sharing a cell at levels.
+    (The cylinder keys z by default: the plain path here is the one without that default.)"""
+    monkeypatch.setattr(separation, "_CYLINDER_Z_KEYS", False)
     rng = np.random.default_rng(11)
     flights = _levels_with_touches(rng, 120)
     groups = rng.integers(0, 40, len(flights))
@@ -263,3 +266,51 @@ def test_one_call_across_two_sets_with_ranks_and_groups_equals_the_call_within_t
         conflicting_pairs(flights[:2], flights[2:4], rank_a=[0, 1])
     with pytest.raises(ValueError, match="groups_a and groups_b"):
         conflicting_pairs(flights[:2], flights[2:4], groups_b=[0, 1])
+
+
+def _both_paths(monkeypatch, *args, **kw):
+    """conflicting_pairs(*args, **kw) with its broad-phase shortcuts (the default) and without
+    (separation._CYLINDER_Z_KEYS and _SKIP_OWN_RUNS off): (pairs, distances, stats) of each."""
+    out = []
+    for on in (True, False):
+        monkeypatch.setattr(separation, "_CYLINDER_Z_KEYS", on)
+        monkeypatch.setattr(separation, "_SKIP_OWN_RUNS", on)
+        st = {}
+        pairs, dist = conflicting_pairs(*args, return_distances=True, stats=st, **kw)
+        out.append((pairs, dist, st))
+    return out
+
+
+@pytest.mark.parametrize("model", [CYL, SPHERE])
+def test_broad_phase_shortcuts_give_the_same_pairs_and_distances_to_the_last_bit(model,
+                                                                                 monkeypatch):
+    """Issue 24's speed-up of conflicting_pairs (z cells for the cylinder by default; within one
+    set, no pairs made inside a trajectory's or a request's run of a cell) against the plain
+    path it replaced, which stays in the code: the same pairs, the same distances bit for bit,
+    the same exact checks, and fewer pairs made where the shortcut applies (so it ran). Random
+    flights on levels V apart (touching boxes, a rounding step off) and at random altitudes."""
+    rng = np.random.default_rng(24)
+    flights = _levels_with_touches(rng, 150) + random_flights(rng, 60, rng.uniform(0, 160, 30))
+    n = len(flights)
+    req_sorted = np.sort(rng.integers(0, 60, n))        # the planner's order: by request
+    req_mixed = rng.permutation(req_sorted)              # labels that decrease: the plain path
+    first = np.concatenate(([0], np.cumsum(rng.integers(1, 4, 80))))
+    shift = rng.uniform(0.0, 30.0, first[-1])
+    cases = [
+        ("one set", (flights,), {}),
+        ("one set, sorted groups", (flights,), {"groups_a": req_sorted, "bucket_s": 120.0}),
+        ("one set, unsorted groups", (flights,), {"groups_a": req_mixed}),
+        ("two sets", (flights[:90], flights[90:]), {}),
+        ("two sets, shifts", (flights[:80], flights[80:]), {"shifts_a": (first, shift)}),
+    ]
+    for name, args, kw in cases:
+        (p1, d1, s1), (p0, d0, s0) = _both_paths(monkeypatch, *args, separation_m=model, **kw)
+        assert len(p0) > 20, name
+        assert p1.tolist() == p0.tolist(), name
+        assert d1.dtype == d0.dtype and d1.tobytes() == d0.tobytes(), name
+        assert s1["exact_checks"] == s0["exact_checks"], name
+        shortcut = (model.kind == "cylinder") or (len(args) == 1 and name != "one set, unsorted groups")
+        if shortcut:
+            assert s1["pairs_sharing_cell"] < s0["pairs_sharing_cell"], name
+        else:
+            assert s1["pairs_sharing_cell"] == s0["pairs_sharing_cell"], name

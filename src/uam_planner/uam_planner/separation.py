@@ -54,6 +54,15 @@ _MAX_PAIRS_PER_CHUNK = 1 << 17
 # coming near (filtering cost). Any cell_m >= separation_m gives the same, exact answer.
 DEFAULT_CELL_SEPARATIONS = 12.0
 DEFAULT_BUCKET_CELLS = 1.0
+# Two broad-phase shortcuts of conflicting_pairs (issue 24: 63 % of a study cell's CPU was in it).
+# Neither changes a result to the last bit: both only leave out piece pairs the box filter drops
+# (the exact kernel sees the same piece pairs, in the same orientation). Off only in the tests
+# that compare the two paths (test_separation_exact.py, test_separation_cylinder.py).
+# - the cylinder's vertical reach V as z cells of the keys when z_cell_m is not given;
+# - within one set, the partners of an entry start after its run of one trajectory (or group)
+#   in its cell, where the labels are checked not to decrease within every cell.
+_CYLINDER_Z_KEYS = True
+_SKIP_OWN_RUNS = True
 
 
 _KERNEL_BLOCK = 8192
@@ -678,19 +687,31 @@ def _sorted_keys(ra, rb, single: bool, na: int, n_items: int, grid: _Grid,
     return _SortedKeys(items, keys, cell_key, kt, ky, kx)
 
 
-def _cell_mates(sk: _SortedKeys, single: bool):
+def _cell_mates(sk: _SortedKeys, single: bool, run_label=None):
     """Per sorted entry that has partners in its cell: (its position, the first partner's
     position, the number of partners): within one set the entries after it in its cell, across
-    two sets (only for a's entries) the b entries of its cell."""
+    two sets (only for a's entries) the b entries of its cell.
+
+    ``run_label`` (within one set): each sorted entry's label (its trajectory, or its group),
+    non-decreasing within every cell; the partners then start after the entry's run of equal
+    labels in its cell, so pairs of one trajectory (group), which the box filter would drop
+    first, are never made (the pairs made are the ones the filter would keep, in its order)."""
     m = sk.keys.shape[0]
     bounds = np.flatnonzero(np.diff(sk.cell_key)) + 1
     g_start = np.concatenate(([0], bounds))
     g_end = np.concatenate((bounds, [m]))
     g_of = np.repeat(np.arange(g_start.shape[0]), g_end - g_start)
     if single:
-        # Item at sorted position p pairs with positions p+1 .. end of its cell.
+        # Item at sorted position p pairs with positions p+1 .. end of its cell (with
+        # run_label: from the end of its run of equal labels in its cell).
         left_pos = np.arange(m, dtype=np.int64)
-        right_first = left_pos + 1
+        if run_label is None:
+            right_first = left_pos + 1
+        else:
+            brk = np.flatnonzero((sk.cell_key[1:] != sk.cell_key[:-1])
+                                 | (run_label[1:] != run_label[:-1])) + 1
+            r_end = np.concatenate((brk, [m]))
+            right_first = np.repeat(r_end, np.diff(np.concatenate(([0], r_end))))
         n_right = g_end[g_of] - right_first
     else:
         # Within a cell the A items (side 0) sort before the B items (side 1).
@@ -756,12 +777,14 @@ def _piece_table(pa: _Pieces, pb: _Pieces, sa: SegmentSet, sb: SegmentSet, singl
                        None if iz0 is None else iz0[items])
 
 
-def _box_filter(l, r, pt: _PieceTable, sk: _SortedKeys, grid: _Grid, single: bool, groups):
+def _box_filter(l, r, pt: _PieceTable, sk: _SortedKeys, grid: _Grid, single: bool, groups,
+                runs_skipped: bool = False):
     """The sorted-entry pairs (l, r) that may come near: different trajectories (and groups),
     overlapping inflated boxes in z, t, x and y, kept only in their canonical cell (the one
     holding the low corner of the boxes' intersection), so a pair sharing several cells is
-    checked once. Returns the pairs' item ids (i, j)."""
-    if single:
+    checked once. Returns the pairs' item ids (i, j). ``runs_skipped``: within one set, the
+    pairs already are of different trajectories and groups (:func:`_cell_mates`' run_label)."""
+    if single and not runs_skipped:
         ti = pt.S_traj[l]
         tj = pt.S_traj[r]
         ok = ti != tj
@@ -818,12 +841,20 @@ def _narrow_phase(i, j, pt: _PieceTable, model: SeparationModel, first, shift, r
     cnt = first[ta + 1] - first[ta]
     cand = np.repeat(first[ta], cnt) + (np.arange(int(cnt.sum()), dtype=np.int64)
                                         - np.repeat(np.cumsum(cnt) - cnt, cnt))
-    i = np.repeat(i, cnt)
-    j = np.repeat(j, cnt)
+    # gather each piece pair's values once, then repeat them per candidate (the same values as
+    # gathering at the repeated indices, for a fraction of the gathers)
+    j_rep = np.repeat(j, cnt)
     dt = shift[cand]
-    extra = int(i.size) - int(cnt.size)
-    d = model.segment_measure(pt.P_t0[i] + dt, pt.P_t1[i] + dt, pt.P_p0[i], pt.P_v[i],
-                              pt.P_t0[j], pt.P_t1[j], pt.P_p0[j], pt.P_v[j])
+    extra = int(j_rep.size) - int(cnt.size)
+    t0i = np.repeat(pt.P_t0[i], cnt)
+    t0i += dt
+    t1i = np.repeat(pt.P_t1[i], cnt)
+    t1i += dt
+    d = model.segment_measure(t0i, t1i, np.repeat(pt.P_p0[i], cnt, axis=0),
+                              np.repeat(pt.P_v[i], cnt, axis=0),
+                              np.repeat(pt.P_t0[j], cnt), np.repeat(pt.P_t1[j], cnt),
+                              np.repeat(pt.P_p0[j], cnt, axis=0), np.repeat(pt.P_v[j], cnt, axis=0))
+    j = j_rep
     lose = d < separation_m
     if not lose.any():
         return None, extra
@@ -864,7 +895,8 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
         return_distances: also return each pair's exact minimum distance [m] (for the
             cylinder: the minimum horizontal distance while vertically closer than V).
         stats: optional dict that receives broad-phase counts (segments, pieces, keys, pairs
-            sharing a cell, exact checks) and wall times, for benchmarks.
+            sharing a cell that were made, i.e. without a set's own runs, exact checks) and wall
+            times, for benchmarks.
         shifts_a: optional ``(first, shift_s)``, only with ``trajs_b``: trajectory j of a stands
             for the candidates ``first[j] .. first[j+1]-1``, candidate c being trajectory j
             flown ``shift_s[c] >= 0`` seconds later (departure slots). The broad phase then runs
@@ -877,9 +909,10 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
             first argument, so a pair's distance is the one, to the last bit, that a call within
             one set ordered by rank computes (the kernel's rounding is not symmetric); one call
             then stands for the two orientations.
-        z_cell_m: optional height [m] of z cells in the broad phase's keys (None: z is only
-            filtered, not keyed). The same pairs and distances either way (the exact kernel sees
-            the same piece pairs); with flight levels V apart and ``z_cell_m`` = V, pieces
+        z_cell_m: optional height [m] of z cells in the broad phase's keys (None: the
+            cylinder's V, the sphere's z only filtered, not keyed). The same pairs and distances
+            either way (the exact kernel sees the same piece pairs); with flight levels V apart
+            and ``z_cell_m`` = V, pieces
             cruising on different levels no longer share a cell (the rolling horizon's dense
             graphs: see ``uam_planner.conflict_graph.CandidatePairCache``).
     Returns:
@@ -890,6 +923,12 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
     """
     model = as_separation_model(separation_m)
     separation_m = model.separation_m
+    if z_cell_m is None and model.kind == "cylinder" and _CYLINDER_Z_KEYS:
+        # The cylinder's vertical reach V as z cells: pieces cruising on levels V apart share no
+        # cell, so their pairs are never made (the z filter would drop them all); the same piece
+        # pairs reach the exact kernel, so the same pairs and distances to the last bit
+        # (see z_cell_m below), for about half the cell-mate pairs at flight levels.
+        z_cell_m = model.vertical_reach_m
     single = trajs_b is None
     sa = _as_segment_set(trajs_a)
     sb = sa if single else _as_segment_set(trajs_b)
@@ -938,7 +977,18 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
             ra, rb = ra[:6], rb[:6]
     n_items = na + (0 if single else pb.t0.shape[0])
     sk = _sorted_keys(ra, rb, single, na, n_items, grid, clock)
-    left_pos, right_first, n_right = _cell_mates(sk, single)
+    run_label = None
+    if single and _SKIP_OWN_RUNS:
+        # Within a cell the entries sort by piece (packed codes, or the widened lexsort), so by
+        # trajectory: a trajectory's entries are one run, and so are a group's when the labels
+        # do not decrease with the trajectory (the planner's request order). Checked, not
+        # assumed: if the labels decrease anywhere within a cell, this call makes every pair
+        # and filters it as before.
+        s_traj = sa.traj[pa.seg][sk.items]
+        lab = s_traj if groups is None else groups[s_traj]
+        if bool(np.all((lab[1:] >= lab[:-1]) | (sk.cell_key[1:] != sk.cell_key[:-1]))):
+            run_label = lab
+    left_pos, right_first, n_right = _cell_mates(sk, single, run_label)
     iz0 = None
     if grid.z_bounds is not None:
         iz0 = ra[6] if single else np.concatenate((ra[6], rb[6]))
@@ -964,7 +1014,7 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
         lrep = np.repeat(lp, nr)
         rpos = np.repeat(rf, nr) + (np.arange(cnt, dtype=np.int64) - np.repeat(np.cumsum(nr) - nr, nr))
         start = stop
-        i, j = _box_filter(lrep, rpos, pt, sk, grid, single, groups)
+        i, j = _box_filter(lrep, rpos, pt, sk, grid, single, groups, run_label is not None)
         n_exact += int(i.size)
         if i.size == 0:
             continue

@@ -126,6 +126,32 @@ def test_mser5_truncates_a_ramp_and_keeps_a_stationary_series():
     assert mser_truncation([1, 2, 3]) == 0  # too short to batch
 
 
+def test_every_variant_of_a_cell_and_rate_is_measured_in_one_window():
+    """The window is the latest of the variants' MSER-5 truncations, per experiment cell and
+    rate: a comparison across variants (E2's horizons) counts the same requests in both arms
+    (a window per variant gave E2's pilot 8 % more requests in its H = 5 arm)."""
+    from uam_sim.decision_study import windows
+
+    def cell(ramp, rate=20, method="firstfit"):
+        series = list(np.linspace(0, 9, ramp)) + [10 + (1 if i % 2 else -1) for i in range(60)]
+        return {"summary": {"rate": rate, "method": method},
+                "epochs": [{"active": x, "t_s": 30.0 * k} for k, x in enumerate(series)]}
+    e, c = {"name": "E2"}, {"name": "sg"}
+    h1, h5 = {"horizon_epochs": 1}, {"horizon_epochs": 5}
+    records = [(e, c, h1, cell(10)), (e, c, h5, cell(25)), (e, c, h1, cell(5, rate=40))]
+    ss = {"method": "mser5", "series": "active", "reference_method": "firstfit"}
+    w = windows(records, ss, 30.0)
+    own = {k: mser_truncation([ep["active"] for ep in r[3]["epochs"]])
+           for k, r in zip(("h1", "h5", "h1r40"), records)}
+    assert own["h1"] < own["h5"]  # the variants' own truncations differ
+    assert w[("E2", "sg", "horizon_epochs=1", 20)] == (own["h5"], 30.0 * own["h5"], "firstfit",
+                                                       own["h1"])
+    assert w[("E2", "sg", "horizon_epochs=5", 20)] == (own["h5"], 30.0 * own["h5"], "firstfit",
+                                                       own["h5"])
+    # another rate keeps its own window
+    assert w[("E2", "sg", "horizon_epochs=1", 40)][0] == own["h1r40"]
+
+
 def _runs(diffs, base=100.0):
     rows = []
     for s, d in enumerate(diffs):

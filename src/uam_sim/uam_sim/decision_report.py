@@ -328,15 +328,21 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:
     L.append("Commits that ran the cells (from each cell's own record): "
              + ("; ".join(commits) if commits else "none yet") + ".")
     versions = []
-    for name, df in (("runs.csv", runs), ("e0.csv.gz", e0)):
+    parts = [(f"runs.csv, {x}", runs[runs["experiment"] == x]) for x in
+             sorted(set(runs["experiment"].astype(str)))] if runs is not None and \
+        "experiment" in runs else [("runs.csv", runs)]
+    for name, df in parts + [("e0.csv.gz", e0)]:
         if df is not None and "code_version" in df:
             for c, n in df["code_version"].astype(str).value_counts().sort_index().items():
                 versions.append(f"`{c}` ({n} rows of {name})")
     if versions:
         L.append("")
-        L.append("Code versions of the cells (`uam_sim.sweep.code_version`, a hash of the run code "
-                 "that is part of each cell key; a cell of other code is never reused): "
-                 + "; ".join(versions) + ".")
+        L.append("Code versions of the cells, per table (`uam_sim.sweep.code_version`, a hash of "
+                 "the run code that is part of each cell key; a cell of other code is never "
+                 "reused): " + "; ".join(versions) + ". Every number below is of the code "
+                 "versions named here: a checkout whose run code differs (any later merge of run "
+                 "code) has a code version of its own, at which none of these cells has run; "
+                 "the study would compute them again (`stale_cells` in its summary line).")
     L.append("")
     # -- missing
     L += ["## What has run and what is missing", ""]
@@ -375,13 +381,18 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:
           f"Chosen from the data: {ss['method'].upper()} (White's MSER with batches of 5 epochs, "
           f"truncation searched over the first half of the run) on the mean over seeds of the "
           f"reference method's ({ss['reference_method']}) per-epoch `{ss['series']}` (flights in "
-          "the air), per cell; every method of a cell uses that cell's window. A request counts "
-          "when its earliest departure is at or after the truncation and its latest departure at "
-          "or before the run's end.", ""]
+          "the air), per variant; then one window per experiment cell and rate, the latest of "
+          "its variants' truncations, which every method and variant uses (so a comparison "
+          "across variants, as E2's horizons, counts the same requests in both arms). A request "
+          "counts when its earliest departure is at or after the truncation and its latest "
+          "departure at or before the run's end.", ""]
     if windows is not None:
-        L += _table([[r["experiment"], r["cell"], r["variant"], r["rate"], r["truncation_epoch"],
+        own = "variant_truncation_epoch" in windows.columns
+        L += _table([[r["experiment"], r["cell"], r["variant"], r["rate"], r["reference_method"],
+                      r["variant_truncation_epoch"] if own else "-", r["truncation_epoch"],
                       _f(r["warmup_s"], 0)] for r in windows.to_dict("records")],
-                    ["experiment", "cell", "variant", "rate", "truncation epoch", "warm-up [s]"])
+                    ["experiment", "cell", "variant", "rate", "reference method",
+                     "variant's own truncation", "truncation epoch (used)", "warm-up [s]"])
     else:
         L.append("No run yet.")
     L.append("")
@@ -481,10 +492,31 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:
                 r = pooled[0] if pooled else mine[0]
                 where = "pooled over every group" if pooled else r["group"]
                 ex = (r["rel_lo"] > 0 or r["rel_hi"] < 0) if math.isfinite(r.get("rel_lo", math.nan)) else False
+                power = ""
+                if kind == "primary":
+                    # what the seeds run can detect: the power table's row that sets the seeds
+                    pr = [p for p in prow if p["experiment"] == exp["name"]
+                          and p["comparison"] == c["name"] and p.get("decides")]
+                    if pr and math.isfinite(float(pr[0].get("mde_now", math.nan))):
+                        u = "%" if str(pr[0]["group"]).startswith("pooled") \
+                            else UNITS.get(c["metric"], "")
+                        where_p = "" if u == "%" else f" ({pr[0]['group']})"
+                        n_what = "paired differences (seeds x groups)" if u == "%" else "seeds"
+                        power = (f" With {pr[0]['seeds_run']} {n_what}{where_p} the smallest true difference "
+                                 f"found with 80 % probability (MDE) is {_f(pr[0]['mde_now'], 2)} "
+                                 f"{u}; at the cap of {pr[0]['max_seeds']} seeds "
+                                 f"{_f(pr[0]['mde_at_cap'], 2)} {u}.")
+                        if u == "%":
+                            power = power.replace(f"at the cap of {pr[0]['max_seeds']} seeds",
+                                                  f"at the cap of {pr[0]['max_seeds']} seeds per group")
+                half = (r["rel_hi"] - r["rel_lo"]) / 2 if math.isfinite(r.get("rel_lo", math.nan)) \
+                    else math.nan
                 L.append(f"- {exp['name']} {kind} `{c['name']}` ({c['metric']}, {where}): "
                          f"{_f(r['rel_pct'], 2, True)} % [{_f(r['rel_lo'], 2, True)}, {_f(r['rel_hi'], 2, True)}]"
                          + (f" {'above' if r['rel_lo'] > 0 else 'below'} 0." if ex
-                            else ", not resolved at this power."))
+                            else f", not resolved at this power: the interval includes 0 (half-width "
+                                 f"{_f(half, 2)} %), so an effect of that size is neither shown nor "
+                                 "excluded; this is not evidence of no effect.") + power)
         if runs is not None:
             mw = runs[(runs["experiment"] == exp["name"]) & ~runs["method"].isin(["fifo", "firstfit"])]
             if len(mw):
