@@ -95,11 +95,18 @@ def test_a_resume_with_an_empty_airborne_list_never_makes_the_planner_forget_the
         planner = nodes["planner"]
         held = len(planner.planner.active)
         assert held > 0, "the attack needs aircraft in the air"
-        k = planner._next_epoch
-        # with the simulator's own token (no DDS security: anyone on the domain can read it)
-        res = rogue.call(executor, spin_until, rogue.plan, PlanEpoch.Request(
-            epoch_index=k, epoch_time=m.to_time(k * 30.0), epoch_s=30.0, resume=True, airborne=[],
-            session=sim.session))
+        # with the simulator's own token (no DDS security: anyone on the domain can read it).
+        # The simulator runs on in the same executor: when its own call of epoch k came first,
+        # the answer is "in progress" (nothing applied either); then it is tried at the next
+        for _attempt in range(20):
+            assert spin_until(executor, lambda: planner._inflight is None, timeout_s=60)
+            k, held = planner._next_epoch, len(planner.planner.active)
+            res = rogue.call(executor, spin_until, rogue.plan, PlanEpoch.Request(
+                epoch_index=k, epoch_time=m.to_time(k * 30.0), epoch_s=30.0, resume=True,
+                airborne=[], session=sim.session))
+            assert len(planner.planner.active) >= held
+            if res.status != PlanEpoch.Response.STATUS_IN_PROGRESS:
+                break
         assert res.status == PlanEpoch.Response.STATUS_REFUSED and "resume" in res.message, res.message
         assert len(planner.planner.active) >= held
         return res

@@ -255,10 +255,11 @@ class PositionBook:
         last = q[-1]
         first = q[0]
         if last.t_s - first.t_s >= MIN_SPEED_SPAN_S:
-            _j, _l, _p, tau = nearest(plan, np.array([first.position_m, last.position_m]))
+            _j, _l, _p, tau = nearest(plan, np.array([first.position_m, last.position_m]),
+                                      [first.t_s, last.t_s])
             rate = (tau[1] - tau[0]) / (last.t_s - first.t_s)
         elif last.t_s - plan.departure_s >= MIN_SPEED_SPAN_S:
-            _j, _l, _p, tau = nearest(plan, np.array([last.position_m]))
+            _j, _l, _p, tau = nearest(plan, np.array([last.position_m]), [last.t_s])
             rate = (tau[0] - plan.departure_s) / (last.t_s - plan.departure_s)
         else:
             return 1.0
@@ -300,13 +301,16 @@ def verify(flight, obs: Observation | None, bounds: ConformanceBounds, t_eff: fl
 
 # ---- the update -------------------------------------------------------------------------------
 
-def rejoin_trajectory(plan: Trajectory, t0_s: float, q, rate: float) -> Trajectory | None:
+def rejoin_trajectory(plan: Trajectory, t0_s: float, q, rate: float,
+                      first_pass: bool = False) -> Trajectory | None:
     """From ``q`` at ``t0_s`` straight to the first waypoint of ``plan`` beyond the point of
     its path nearest to ``q``, then the plan's remaining waypoints; every leg at ``rate`` times
     the plan's speed (the first at the speed of the segment it rejoins). None if nothing is
-    left (it is at the plan's end)."""
+    left (it is at the plan's end). Where the path comes back over itself, the pass nearest in
+    planned time to ``t0_s`` (:func:`nearest`), or with ``first_pass`` the first one (the most
+    of the plan left: the held projection of a late flight, never a shorter hold)."""
     q = np.asarray(q, dtype=np.float64).reshape(3)
-    j, lam, _p, _tau = nearest(plan, q[None])
+    j, lam, _p, _tau = nearest(plan, q[None], None if first_pass else [t0_s])
     j = int(j[0])
     nxt = j + 1
     pts = plan.points_m
@@ -548,7 +552,7 @@ def overrun_trajectory(plan: Trajectory, obs: Observation, cap_s: float) -> Traj
     """Where a flight seen at ``obs`` goes if it flies the rest of ``plan`` at its planned speed
     from there (:func:`rejoin_trajectory` at rate 1: the remaining plan shifted by the observed
     lateness), cut at ``cap_s``. None if nothing is left."""
-    tr = rejoin_trajectory(plan, obs.t_s, obs.position_m, 1.0)
+    tr = rejoin_trajectory(plan, obs.t_s, obs.position_m, 1.0, first_pass=True)
     if tr is None or tr.arrival_s <= cap_s:
         return tr
     ts, ps = tr.times_s, tr.points_m
@@ -585,7 +589,9 @@ def overruns(t_s: float, plans: dict, book: PositionBook, previous: dict) -> dic
 
         if obs:
             # the landing each sighting projects (the rest of the plan from its nearest point at
-            # the plan's speed; the rejoin's first leg is built for the ones kept)
+            # the plan's speed; the rejoin's first leg is built for the ones kept). Without the
+            # sightings' times on purpose: where the path comes back over itself the first pass
+            # is taken, the earliest planned time, so the latest landing (never a shorter hold)
             _j, _l, _p, tau = nearest(plan, np.array([o.position_m for o in obs]))
             land = np.array([o.t_s for o in obs]) + (float(plan.arrival_s) - tau)
             k = int(np.argmax(land))

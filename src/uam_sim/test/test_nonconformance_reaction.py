@@ -412,3 +412,17 @@ def test_the_plans_audit_names_each_piece_by_its_kind():
     assert pa.arrival_s == pytest.approx(100.0 - 1e-3) and pb is b
     assert [t.arrival_s for t in planned_pieces(row)] == [pa.arrival_s, b.arrival_s]
     assert planned_pieces({"_traj": a}, kinds=True) == [(a, "plan")]
+
+
+def test_on_a_path_that_comes_back_over_itself_a_late_flight_is_held_from_its_first_pass():
+    # A -> B -> A at 10 m/s. Seen at 170 s at x = 500: on the way out 120 s late, or on the way
+    # back 20 s late; one sighting cannot tell. The hold takes the first pass (lands at
+    # 170 + 150 = 320 s), never the shorter one (220 s); the reaction's rejoin, which re-times a
+    # flight known to be on its version, takes the pass nearest in planned time (on the way back).
+    from uam_planner.nonconformance import Observation, overrun_trajectory
+    back = Trajectory(np.array([0.0, 100.0, 200.0]),
+                      np.array([[0.0, 0.0, 50.0], [1000.0, 0.0, 50.0], [0.0, 0.0, 50.0]]))
+    held = overrun_trajectory(back, Observation(170.0, (500.0, 0.0, 50.0)), cap_s=1e9)
+    assert held.arrival_s == pytest.approx(320.0)
+    rejoin = rejoin_trajectory(back, 170.0, (500.0, 0.0, 50.0), 1.0)
+    assert rejoin.arrival_s == pytest.approx(220.0)
