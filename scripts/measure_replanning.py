@@ -157,7 +157,10 @@ def one_run(net, cfg, seed: int, policy: str, args) -> dict:
            "losses": res.audit.get("losses"), "min_sep": res.audit.get("min_separation_m"),
            "pairs": res.audit.get("pairs_checked"), "incursions": res.summary.get("incursions"),
            "loss_pairs": res.audit.get("loss_pairs", [])[:3], "approved": res.summary["approved"],
-           "requests": res.summary["requests"], "wall_s": wall}
+           "requests": res.summary["requests"], "wall_s": wall,
+           # the decision itself, exactly (every plan update's fields and trajectories' bytes):
+           # code changes for speed must leave it unchanged (issue 22, fourth stop)
+           "updates_sha256": decision_digest(clock.updates)}
     handled = out["affected"] == (rep.affected + rep.pulled_in if rep else 0)
     contingent = {r["request_id"] for r in rows if r["kind"] == "contingency"}
     # issue 22: contingencies are deconflicted as fixed flights; what is left is counted apart:
@@ -198,8 +201,15 @@ def one_run(net, cfg, seed: int, policy: str, args) -> dict:
           f"flown not deconflicted, {out['unavoidable']} with no way out; {out['pulled_in']} flights pulled in, "
           f"{out['cascade_rounds']} rounds; losses with an unresolved contingency {out['losses_with_unresolved']}, "
           f"incursions by flights with no way out {out['incursions_unavoidable']}; {out['approved']}/{out['requests']} approved; wall {wall:.0f} s; "
-          f"uptime: {uptime()}", flush=True)
+          f"updates sha256 {out['updates_sha256'][:16]}; uptime: {uptime()}", flush=True)
     return out
+
+
+def decision_digest(updates) -> str:
+    """SHA-256 of plan updates (``scripts/profile_replanning.decision_digest``)."""
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    from profile_replanning import decision_digest as digest
+    return digest(updates)
 
 
 def write_graph_inputs(net, seed: int, info: dict, args) -> None:
