@@ -109,13 +109,28 @@ class DecisionWaits:
         replanning.replan_steps = self._steps
 
     def _steps(self, *a, **k):
+        import gc
         import resource
+        gcs = {"s": 0.0, "n": [0, 0, 0], "t0": 0.0}
+
+        def on_gc(phase, info):  # the cyclic garbage collector's CPU time inside the decision
+            if phase == "start":
+                gcs["t0"] = time.process_time()
+            else:
+                gcs["s"] += time.process_time() - gcs["t0"]
+                gcs["n"][info["generation"]] += 1
+        gc.callbacks.append(on_gc)
         r0, mods = resource.getrusage(resource.RUSAGE_SELF), set(sys.modules)
-        result = yield from self._orig(*a, **k)
+        try:
+            result = yield from self._orig(*a, **k)
+        finally:
+            gc.callbacks.remove(on_gc)
         r1 = resource.getrusage(resource.RUSAGE_SELF)
         self.rows.append({"waits": r1.ru_nvcsw - r0.ru_nvcsw, "preempted": r1.ru_nivcsw - r0.ru_nivcsw,
                           "major_faults": r1.ru_majflt - r0.ru_majflt,
-                          "imported": sorted(m for m in set(sys.modules) - mods if "." not in m)})
+                          "imported": sorted(m for m in set(sys.modules) - mods if "." not in m),
+                          "gc_cpu_ms": round(1e3 * gcs["s"]), "gc_collections": gcs["n"],
+                          "gc_tracked_objects": len(gc.get_objects())})
         return result
 
     def close(self):

@@ -813,11 +813,24 @@ def replan_steps(t_eff: float, epoch_index: int, active: Sequence, requests: dic
         mine = {active[j].request_id for j in in_replan}
         return [tr for rid, tr in held if rid not in mine]
 
+    act_memo: dict = {}
+
     def act_set(extra=()):
+        # the same flights in the same order give the same set: built again only when the
+        # flights re-planned or the fixed ones changed (issue 22, fourth stop: the cascade's
+        # rounds rebuilt it from ~1,200 trajectories each time)
+        key = (frozenset(in_replan), tuple((i, id(a)) for i, a in fixed.items())) if not extra else None
+        got = act_memo.get(key) if key is not None else None
+        if got is not None:
+            return got[0]
         trs = [f.trajectory for j, f in enumerate(active) if j not in in_replan] + \
             [a.trajectory for a in fixed.values()] + held_now() + list(extra)
         s_ = SegmentSet.from_trajectories(trs)
-        return s_.take(s_.t1_s >= t_eff) if len(s_) else s_
+        s_ = s_.take(s_.t1_s >= t_eff) if len(s_) else s_
+        if key is not None:
+            act_memo.clear()
+            act_memo[key] = (s_, list(fixed.values()))  # holds them: their ids stay theirs
+        return s_
 
     def generate(todo, act):
         """Alternatives of the flights ``todo`` (stage 2 for those with too few survivors)."""
@@ -856,20 +869,16 @@ def replan_steps(t_eff: float, epoch_index: int, active: Sequence, requests: dic
     rounds = 0
     while True:
         todo = [i for i in work if i not in clean]
-        act = None
         if todo:
-            act = act_set()
-            generate(todo, act)
+            generate(todo, act_set())
             # an airborne flight with no constraint-free alternative at all (already inside, or
             # entering before its branch point) flies its plan: fixed before the graph
             for i in todo:
                 if not clean[i] and active[i].departure_s < t_eff:
                     fixed[i] = _keep_alt(active[i], network)
                     unavoidable.add(i)
-                    act = None  # a new fixed flight: the set changes
             work = [i for i in work if i not in fixed]
-        if act is None:  # (otherwise the one generate used: nothing it is made of has changed)
-            act = act_set()
+        act = act_set()
         per_flight = [clean[i] + held_opts.get(i, []) for i in work]
         flat = [a for alts in per_flight for a in alts]
         req_of = np.repeat(np.arange(len(work)), [len(a) for a in per_flight]).astype(np.int64)
