@@ -576,3 +576,21 @@ def test_constraint_free_in_one_call_is_one_call_per_flight():
     assert batch == [_constraint_free(a, cset, 5.0, net, o) for a, o in groups]
     assert [[id(a) for a in g] for g in batch] == [[id(to_c)], [id(late), id(to_c)], [], [],
                                                    [id(from_ep), id(to_c)]]
+
+
+def test_nearest_vertiports_in_the_order_of_the_sort_by_distance_then_index():
+    """The diversion targets (``_nearest``) against the former sort by (hypot, index), on random
+    points and on a ring of nodes all exactly as far from the point (ties: lowest index first)."""
+    from uam_planner.replanning import _nearest
+    rng = np.random.default_rng(7)
+    xy = np.concatenate((rng.uniform(-5000.0, 5000.0, (300, 2)),
+                         [(100.0, 0.0), (-100.0, 0.0), (0.0, 100.0), (0.0, -100.0)]))
+    nodes = np.array([i for i in range(xy.shape[0]) if i % 7 or i >= 300], dtype=np.int64)
+
+    def reference(at, n):
+        return sorted(nodes.tolist(), key=lambda a: (float(np.hypot(*(xy[a] - at))), a))[:n]
+
+    for at in [rng.uniform(-5000.0, 5000.0, 2) for _ in range(200)] + [np.zeros(2)]:
+        for n in (1, 3, 10):
+            assert _nearest(xy, nodes, at, n) == reference(at, n)
+    assert _nearest(xy, nodes, np.zeros(2), 4) == [300, 301, 302, 303]  # the tied ring, by index
