@@ -109,13 +109,28 @@ class DecisionWaits:
         replanning.replan_steps = self._steps
 
     def _steps(self, *a, **k):
+        import gc
         import resource
+        gcs = {"s": 0.0, "n": [0, 0, 0], "t0": 0.0}
+
+        def on_gc(phase, info):  # the cyclic garbage collector's CPU time inside the decision
+            if phase == "start":
+                gcs["t0"] = time.process_time()
+            else:
+                gcs["s"] += time.process_time() - gcs["t0"]
+                gcs["n"][info["generation"]] += 1
+        gc.callbacks.append(on_gc)
         r0, mods = resource.getrusage(resource.RUSAGE_SELF), set(sys.modules)
-        result = yield from self._orig(*a, **k)
+        try:
+            result = yield from self._orig(*a, **k)
+        finally:
+            gc.callbacks.remove(on_gc)
         r1 = resource.getrusage(resource.RUSAGE_SELF)
         self.rows.append({"waits": r1.ru_nvcsw - r0.ru_nvcsw, "preempted": r1.ru_nivcsw - r0.ru_nivcsw,
                           "major_faults": r1.ru_majflt - r0.ru_majflt,
-                          "imported": sorted(m for m in set(sys.modules) - mods if "." not in m)})
+                          "imported": sorted(m for m in set(sys.modules) - mods if "." not in m),
+                          "gc_cpu_ms": round(1e3 * gcs["s"]), "gc_collections": gcs["n"],
+                          "gc_tracked_objects": len(gc.get_objects())})
         return result
 
     def close(self):
@@ -157,7 +172,10 @@ def one_run(net, cfg, seed: int, policy: str, args) -> dict:
            "losses": res.audit.get("losses"), "min_sep": res.audit.get("min_separation_m"),
            "pairs": res.audit.get("pairs_checked"), "incursions": res.summary.get("incursions"),
            "loss_pairs": res.audit.get("loss_pairs", [])[:3], "approved": res.summary["approved"],
-           "requests": res.summary["requests"], "wall_s": wall}
+           "requests": res.summary["requests"], "wall_s": wall,
+           # the decision itself, exactly (every plan update's fields and trajectories' bytes):
+           # code changes for speed must leave it unchanged (issue 22, fourth stop)
+           "updates_sha256": decision_digest(clock.updates)}
     handled = out["affected"] == (rep.affected + rep.pulled_in if rep else 0)
     contingent = {r["request_id"] for r in rows if r["kind"] == "contingency"}
     # issue 22: contingencies are deconflicted as fixed flights; what is left is counted apart:
@@ -198,8 +216,15 @@ def one_run(net, cfg, seed: int, policy: str, args) -> dict:
           f"flown not deconflicted, {out['unavoidable']} with no way out; {out['pulled_in']} flights pulled in, "
           f"{out['cascade_rounds']} rounds; losses with an unresolved contingency {out['losses_with_unresolved']}, "
           f"incursions by flights with no way out {out['incursions_unavoidable']}; {out['approved']}/{out['requests']} approved; wall {wall:.0f} s; "
-          f"uptime: {uptime()}", flush=True)
+          f"updates sha256 {out['updates_sha256'][:16]}; uptime: {uptime()}", flush=True)
     return out
+
+
+def decision_digest(updates) -> str:
+    """SHA-256 of plan updates (``scripts/profile_replanning.decision_digest``)."""
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    from profile_replanning import decision_digest as digest
+    return digest(updates)
 
 
 def write_graph_inputs(net, seed: int, info: dict, args) -> None:

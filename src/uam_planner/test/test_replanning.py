@@ -520,3 +520,77 @@ def test_the_planner_passes_its_held_flights_to_the_replan(monkeypatch):
     p.update_constraint("add", EAST, 60.0)
     (u,) = p.plan(60.0, 2).plan_updates
     assert (u.kind, u.flight.destination_id) == ("diverted", "C")
+
+
+# ---- issue 22, fourth stop: the decision's speed-ups decide exactly what the old code did ---------
+
+def test_pad_of_a_point_is_the_one_the_norm_and_argmin_pick():
+    """``_pad_of_point`` in scalars against the former numpy formula (the reference here), to the
+    index, on random points and on points exactly as near to two pads (the first wins)."""
+    from uam_planner.replanning import _pad_of_point
+    net = network_from_enu("pads", ["A", "B", "m"], [(0, 0, 0), (1000, 0, 0), (500, 300, 0)],
+                           [True, True, False], [("A", "m"), ("m", "B")],
+                           airspace={"levels_m": [60.0], "direction_rule": "none"},
+                           pads_m={"A": [[0.0, 0.0], [30.0, 0.0], [0.0, 30.0], [30.0, 30.0]]})
+    centre = net.enu_m[0, :2]
+    pads = net.pads_of(0)
+
+    def reference(xy):
+        return int(np.argmin(np.linalg.norm(centre + np.asarray(pads) - np.asarray(xy)[:2], axis=1)))
+
+    rng = np.random.default_rng(22)
+    pts = [rng.uniform(-60.0, 90.0, 2) for _ in range(2000)]
+    pts += [(15.0, 0.0), (15.0, 15.0), (0.0, 15.0), (30.0, 15.0), (15.0, 30.0)]  # exact ties
+    pts += [(x, y, 60.0) for x, y in rng.uniform(-5.0, 35.0, (200, 2))]        # with a height
+    got = [_pad_of_point(net, 0, p) for p in pts]
+    assert got == [reference(p) for p in pts]
+    assert got[2000:2005] == [0, 0, 0, 1, 2]
+    assert _pad_of_point(net, 1, (999.0, 5.0)) == 0          # one pad: always 0
+
+
+def test_constraint_free_in_one_call_is_one_call_per_flight():
+    """The batched constraint test of the re-plan (every affected flight's alternatives in one
+    ``ConstraintSet.violations`` call) keeps exactly the alternatives a call per flight keeps,
+    in their order, with closures at the origin of the flights not departed only."""
+    from uam_planner.constraints import ConstraintSet
+    from uam_planner.replanning import _Alt, _constraint_free, _constraint_free_many
+    net = lanes()
+    closed = Constraint("shut", 1, "Ep closed", 0.0, 1000.0, vertiport_id="Ep")
+    cset = ConstraintSet([EAST, closed], net)
+    wp, ep, c, eq = (net.node_index(x) for x in ("Wp", "Ep", "C", "Eq"))
+
+    def alt(xs, dest, t0=0.0):
+        pts = np.array([(x, y, 0.0) for x, y in xs])
+        legs = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+        return _Alt(Trajectory(t0 + np.concatenate(([0.0], np.cumsum(legs / 10.0))), pts), "rerouted",
+                    1.5, dest, (), float(legs.sum()))
+
+    through = alt([(-1000, 0), (0, 0), (1000, 0)], ep)              # enters EAST, lands at the closure
+    to_c = alt([(-1000, 0), (0, 0), (0, 480)], c)                   # stays out
+    north = alt([(-1000, 1000), (0, 1000), (1000, 1000)], eq)       # enters EAST
+    late = alt([(-1000, 1000), (0, 1000), (0, 480)], c, 2000.0)    # after both windows
+    from_ep = alt([(1000, 0), (1000, 480), (700, 480)], c, 10.0)    # leaves the closed Ep, east of EAST
+    groups = [([through, to_c], None), ([north, late, to_c], wp), ([], None), ([from_ep], ep),
+              ([from_ep, to_c], None)]
+    batch = _constraint_free_many(groups, cset, 5.0, net)
+    assert batch == [_constraint_free(a, cset, 5.0, net, o) for a, o in groups]
+    assert [[id(a) for a in g] for g in batch] == [[id(to_c)], [id(late), id(to_c)], [], [],
+                                                   [id(from_ep), id(to_c)]]
+
+
+def test_nearest_vertiports_in_the_order_of_the_sort_by_distance_then_index():
+    """The diversion targets (``_nearest``) against the former sort by (hypot, index), on random
+    points and on a ring of nodes all exactly as far from the point (ties: lowest index first)."""
+    from uam_planner.replanning import _nearest
+    rng = np.random.default_rng(7)
+    xy = np.concatenate((rng.uniform(-5000.0, 5000.0, (300, 2)),
+                         [(100.0, 0.0), (-100.0, 0.0), (0.0, 100.0), (0.0, -100.0)]))
+    nodes = np.array([i for i in range(xy.shape[0]) if i % 7 or i >= 300], dtype=np.int64)
+
+    def reference(at, n):
+        return sorted(nodes.tolist(), key=lambda a: (float(np.hypot(*(xy[a] - at))), a))[:n]
+
+    for at in [rng.uniform(-5000.0, 5000.0, 2) for _ in range(200)] + [np.zeros(2)]:
+        for n in (1, 3, 10):
+            assert _nearest(xy, nodes, at, n) == reference(at, n)
+    assert _nearest(xy, nodes, np.zeros(2), 4) == [300, 301, 302, 303]  # the tied ring, by index
