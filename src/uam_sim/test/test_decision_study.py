@@ -264,6 +264,12 @@ def test_the_study_runs_resumes_and_its_report_rebuilds_from_the_tables(tmp_path
     assert (out / "REPORT.md").read_text() == first
     assert "## E0: matched shadow solves" in first and "| E1 | p |" in first
     assert "- E1 primary `p` (approved_ss, pooled over every group): " in first  # answered
+    # the tables rebuilt where no cell of this code version is (a later version, another cells
+    # folder): the finished tables are kept, not replaced by empty ones
+    before = {n: (out / n).read_bytes() for n in ("runs.csv", "windows.csv", "e0.csv.gz")}
+    run_stage(dict(cfg, cells=str(tmp_path / "no-cells")), "tables", out, progress=False)
+    assert {n: (out / n).read_bytes() for n in before} == before
+    assert (out / "REPORT.md").read_text() == first
 
 
 @pytest.mark.skipif(not (COMMITTED / "REPORT.md").exists(), reason="no committed study yet")

@@ -720,13 +720,23 @@ def run_stage(cfg: dict, stage: str, out: Path, experiments=None, backends=None,
             all_entries += ent
             stale += [p for _a, _m, sw in done for p in sw.stale]
         rows, wrows = tables(cfg, all_results, all_entries)
-        write_csv(out / "runs.csv", rows)
-        write_csv(out / "windows.csv", wrows)
+        if rows or not (out / "runs.csv").exists():
+            write_csv(out / "runs.csv", rows)
+            write_csv(out / "windows.csv", wrows)
+        else:  # as for e0.csv.gz below: an empty table never replaces a finished one
+            print(f"decision_study: no finished run cell at this code version in {cfg['cells']}; "
+                  f"{out / 'runs.csv'} and windows.csv kept as they were", file=sys.stderr)
         info["runs"] = len(rows)
         info["missing_at_max_seeds"] = sum(len(sw.missing) for _a, _m, sw in all_results)
         if stage == "tables":  # the finished E0 cells too
             e0_rows = run_e0(cfg, progress=False, compute=False, stale=stale)
-            write_csv(out / "e0.csv.gz", e0_rows)
+            if e0_rows or not (out / "e0.csv.gz").exists():
+                write_csv(out / "e0.csv.gz", e0_rows)
+            else:
+                # no E0 cell at this code version: the table of an earlier one is kept (writing
+                # an empty one threw away a committed table, and the report then failed on it)
+                print(f"decision_study: no E0 cell at this code version in {cfg['cells']}; "
+                      f"{out / 'e0.csv.gz'} kept as it was", file=sys.stderr)
             info["e0_rows"] = len(e0_rows)
     stale = sorted(set(stale))
     info["stale_cells"] = len(stale)
