@@ -95,10 +95,9 @@ if [[ "$(cat "$VENV/.uam-requirements" 2>/dev/null)" != "$REQ_HASH" ]]; then
     || fail "could not upgrade pip in .venv (is PyPI reachable?)"
   PIP_ARGS=()
   for f in "${REQ_FILES[@]}"; do PIP_ARGS+=(-r "$f"); done
-  # --no-compile: pip byte-compiles every module of every package (ortools, scipy, rerun, ...);
-  # measured with a warm wheel cache, 71.6 s -> 43.5 s wall; Python compiles the modules that are
-  # imported, once, on first import
-  "$VPY" -m pip install --disable-pip-version-check --progress-bar off --no-compile "${PIP_ARGS[@]}" \
+  # (not --no-compile: it saved 28 s here, but the tests then compiled on import, in every
+  # worker and node process at once: a fresh-clone run's tests took 410 s instead of 348 s)
+  "$VPY" -m pip install --disable-pip-version-check --progress-bar off "${PIP_ARGS[@]}" \
     || fail "pip could not install ${REQ_FILES[*]} (see pip's message above)"
   "$VPY" - <<'EOF' || fail "installed packages do not import (see the traceback above)"
 import numpy, networkx, scipy, yaml, dimod, dwave.samplers, dwave.system, minorminer, ortools, mcap, \
