@@ -94,6 +94,10 @@ def run_node(make_node, name: str, args=None, *, threads: int = 1, linger_s: flo
     _exit_now(code)
 
 
+#: how long a node's exit handlers may take before the process ends anyway [s]
+EXIT_HANDLERS_S = 3.0
+
+
 def _exit_now(code: int) -> None:
     """End the process once the node is cleaned up: the exit handlers run (the CPU report,
     multiprocessing's reaping of worker processes), then ``os._exit``, skipping the interpreter's
@@ -105,16 +109,26 @@ def _exit_now(code: int) -> None:
     by a kill; this is only called from a node process's main()."""
     import atexit
     import os
+    import threading
 
-    try:
-        atexit._run_exitfuncs()  # noqa: SLF001 - the documented exit handlers, run once, here
-    finally:
+    def flush_and_exit() -> None:
         for stream in (sys.stdout, sys.stderr):
             try:
                 stream.flush()
             except (OSError, ValueError):
                 pass
         os._exit(code)
+
+    # The exit handlers get EXIT_HANDLERS_S at most: in a fresh-clone CI run the recorder printed
+    # its CPU report (the last of ours) and then hung in a handler registered at import (logging's
+    # or multiprocessing's, which take locks another thread may hold) past run_fleet.sh's 10 s.
+    watchdog = threading.Timer(EXIT_HANDLERS_S, flush_and_exit)
+    watchdog.daemon = True
+    watchdog.start()
+    try:
+        atexit._run_exitfuncs()  # noqa: SLF001 - the documented exit handlers, run once, here
+    finally:
+        flush_and_exit()
 
 
 def _run_node(make_node, name: str, args=None, *, threads: int = 1, linger_s: float = 0.0,
