@@ -125,6 +125,14 @@ def _exit_now(code: int) -> None:
     watchdog = threading.Timer(EXIT_HANDLERS_S, flush_and_exit)
     watchdog.daemon = True
     watchdog.start()
+    # and a bound that needs no Python thread: the request generator once printed its CPU report
+    # and hung on past 10 s with this watchdog armed (a handler blocked holding the GIL, so the
+    # thread never ran). SIGALRM's default action ends the process (exit status 142) in the
+    # kernel one second after the watchdog was due.
+    import signal
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGALRM, signal.SIG_DFL)
+        signal.alarm(int(EXIT_HANDLERS_S) + 1)
     try:
         atexit._run_exitfuncs()  # noqa: SLF001 - the documented exit handlers, run once, here
     finally:
