@@ -190,6 +190,10 @@ SIMULATOR = (
     Param("ack_timeout_s", 120.0, "wall time [s] to wait for an epoch's outcome before ending the run with "
           "an error",
           0.1, 86400.0),
+    Param("reaction_period_s", 0.0, "with the planner's reaction on (its parameter reaction): the simulator "
+          "also asks the planner to react every this many seconds between epochs, in lockstep, and flies "
+          "the updates from that instant (the runner's reaction_period_s, docs/disturbances.md); 0 = at "
+          "epochs only; otherwise less than epoch_s", 0.0, 86400.0),
     # disturbances (issue 23, uam_sim.disturbance, docs/disturbances.md): all 0 = plans flown exactly
     Param("wind_speed_mps", 0.0, "steady wind speed [m/s]; 0 with the other levels 0 = plans flown exactly "
           "(the paper's)", 0.0, 100.0),
