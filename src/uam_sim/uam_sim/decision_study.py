@@ -423,7 +423,12 @@ def run_row(e, c, v, cell, window, time_limit_s: float) -> dict:
            "fallbacks": s.get("fallbacks", 0),
            "proven_optimal_share": s.get("proven_optimal_share", float("nan")),
            "wall_s": s.get("wall_s"), "commit": cell.get("ran_at", "unrecorded"),
-           "code_version": cell.get("code_version", "unrecorded")}
+           "code_version": cell.get("code_version", "unrecorded"),
+           # the machine's load before / after the run and the run's CPU (sweep.run_cell; cells
+           # from before they were recorded: empty)
+           "load_before": (cell.get("load") or [None, None])[0],
+           "load_after": (cell.get("load") or [None, None])[1],
+           "cpu_s": cell.get("cpu_s")}
     return row
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -62,11 +63,15 @@ def cell_params(cfg: ExperimentConfig, method: str, rate, seed: int) -> dict:
 TIMING_FIELDS = frozenset({"wall_s", "real_time_factor", "solve_time_s", "planning_time_s",
                            "solve_time_mean_s", "solve_time_max_s", "solve_time_median_s",
                            "solve_time_p95_s"})
+#: the cell fields that describe the machine during the run (its load, the run's CPU)
+MACHINE_FIELDS = frozenset({"load", "cpu_s"})
 
 
 def without_timing(cell: dict) -> dict:
     """A copy of a cell with its wall-clock fields set to None (to compare two runs of it)."""
     c = json.loads(json.dumps(cell))
+    for k in MACHINE_FIELDS & set(c):
+        c[k] = None
     for row in [c["summary"], *c["epochs"]]:
         for k in TIMING_FIELDS & set(row):
             row[k] = None
@@ -217,6 +222,7 @@ def run_cell(cfg_dict: dict, method: str, rate, seed: int, cells_dir: str) -> di
     if cfg.demand_file:
         demand = DemandSchedule(load_demand(resolve_path(cfg.demand_file), net.aerodrome_ids),
                                 cfg.interval_s)
+    load0, cpu0 = os.getloadavg()[0], time.process_time()
     res = run_scenario(net, method, rate, seed, cfg.duration_s, cfg, demand=demand)
     cell = {"key": key, "params": params, "summary": res.summary, "epochs": res.epochs,
             "flights": res.flights, "audit": res.audit, "instances": res.instances,
@@ -224,7 +230,12 @@ def run_cell(cfg_dict: dict, method: str, rate, seed: int, cells_dir: str) -> di
             "code_version": code_version(),
             # the commit that ran this cell (on a Dask worker: that worker's checkout), for the
             # decision study's record; not part of the key
-            "ran_at": _commit()}
+            "ran_at": _commit(),
+            # the machine's 1-min load average before and after the run, and the run's CPU s:
+            # solve limits are wall-clock, so a cell run on a loaded machine can fall back more
+            # (the decision study's runs.csv carries them beside the fallbacks); not in the key
+            "load": [round(load0, 2), round(os.getloadavg()[0], 2)],
+            "cpu_s": round(time.process_time() - cpu0, 3)}
     write_json_atomic(Path(cells_dir) / f"{key}.json", cell)
     return cell
 
