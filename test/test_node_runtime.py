@@ -132,3 +132,38 @@ def test_a_sigint_while_a_finished_node_exits_does_not_kill_it(ros_domain_id):
     proc = subprocess.run([sys.executable, "-c", ENDS_AT_ONCE], env=env, capture_output=True,
                           text=True, timeout=60)
     assert proc.returncode == 0, (proc.returncode, proc.stderr)
+
+
+STUCK_HANDLER = """
+import atexit, re, sys, time
+from uam_bringup import runtime
+def stuck_{kind}():
+    if "{kind}" == "sleeping":
+        time.sleep(60)            # releases the GIL: the watchdog thread ends the process
+    else:
+        re.match(r"(a+)+$", "a" * 60 + "b")   # holds the GIL for ever: only SIGALRM ends it
+atexit.register(stuck_{kind})
+print("handlers armed", flush=True)
+runtime._exit_now(7)
+"""
+
+
+def test_a_hung_exit_handler_is_cut_off_and_named_whether_or_not_it_holds_the_gil():
+    """A node's exit handlers get EXIT_HANDLERS_S (then the watchdog thread os._exit's with the
+    node's code), or one second more if a handler holds the GIL (SIGALRM's default action ends the
+    process); either way faulthandler prints the stuck handler's stack first, so the hang that
+    run_fleet.sh's 10 s caught twice in CI (the recorder, the request generator) names itself."""
+    from uam_bringup.runtime import EXIT_HANDLERS_S
+
+    t0 = time.monotonic()
+    procs = {kind: subprocess.Popen([sys.executable, "-c", STUCK_HANDLER.format(kind=kind)],
+                                    stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+             for kind in ("sleeping", "gil_holding")}
+    out = {kind: p.communicate(timeout=60) for kind, p in procs.items()}
+    took = time.monotonic() - t0
+    for kind, (stdout, stderr) in out.items():
+        assert "handlers armed" in stdout
+        assert f"stuck_{kind}" in stderr, (kind, stderr[-2000:])   # the dump names the handler
+    assert procs["sleeping"].returncode == 7                        # the node's own exit code
+    assert procs["gil_holding"].returncode == -signal.SIGALRM      # ended in the kernel
+    assert took < EXIT_HANDLERS_S + 1 + 20                          # bounded (generous for load)

@@ -130,6 +130,14 @@ def _exit_now(code: int) -> None:
     # thread never ran). SIGALRM's default action ends the process (exit status 142) in the
     # kernel one second after the watchdog was due.
     import signal
+    # and what hangs, if one does: faulthandler's own C thread (no GIL needed) prints every
+    # Python thread's stack to stderr half a second before the watchdog is due, so the next
+    # such hang names its handler (which one hung is not known yet: BENCHMARKS.md, fifth stop)
+    import faulthandler
+    try:
+        faulthandler.dump_traceback_later(EXIT_HANDLERS_S - 0.5, exit=False)
+    except (RuntimeError, ValueError, OSError):  # no usable stderr
+        pass
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGALRM, signal.SIG_DFL)
         signal.alarm(int(EXIT_HANDLERS_S) + 1)
