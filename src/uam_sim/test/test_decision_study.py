@@ -250,6 +250,8 @@ def test_the_study_runs_resumes_and_its_report_rebuilds_from_the_tables(tmp_path
     assert ff[ff["objective"] == "paper"]["weight_sum_ss"].notna().all()
     assert (runs["losses"] == 0).all() and (runs["overruns"] == 0).all()
     assert runs["commit"].str.len().min() >= 40  # every cell says which commit ran it
+    # and the machine it ran on: wall-clock limits make fallbacks depend on load
+    assert runs["load_before"].notna().all() and (runs["cpu_s"] > 0).all()
     e0 = pd.read_csv(out / "e0.csv.gz")
     assert set(e0["solver"]) == {"firstfit", "greedy", "exact", "reference"}
     best = e0.groupby(["run", "epoch"])["objective"].transform("max")
@@ -264,6 +266,7 @@ def test_the_study_runs_resumes_and_its_report_rebuilds_from_the_tables(tmp_path
     assert (out / "REPORT.md").read_text() == first
     assert "## E0: matched shadow solves" in first and "| E1 | p |" in first
     assert "- E1 primary `p` (approved_ss, pooled over every group): " in first  # answered
+    assert "Machine load (1-min average, the larger of before and after each run) median" in first
     # the tables rebuilt where no cell of this code version is (a later version, another cells
     # folder): the finished tables are kept, not replaced by empty ones
     before = {n: (out / n).read_bytes() for n in ("runs.csv", "windows.csv", "e0.csv.gz")}

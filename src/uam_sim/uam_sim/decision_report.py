@@ -299,6 +299,25 @@ UNITS = {"approved_ss": "flights", "expired_ss": "requests", "requests_ss": "req
          "weight_sum_ss": "(weight)"}
 
 
+def _load_text(ex: pd.DataFrame) -> str:
+    """The machine's load during an experiment's runs (1-min average before and after each run,
+    sweep.run_cell), and where the fallbacks were: solve limits are wall-clock, so load can
+    decide a fallback; '' for runs from before the load was recorded."""
+    if "load_before" not in ex or not ex["load_before"].notna().any():
+        return ""
+    lo = ex[["load_before", "load_after"]].max(axis=1)
+    known = lo.notna()
+    txt = (f" Machine load (1-min average, the larger of before and after each run) median "
+           f"{_f(lo[known].median(), 1)}, max {_f(lo[known].max(), 1)} over {int(known.sum())} runs")
+    fb = ex[known & (ex["fallbacks"] > 0)]
+    if len(fb):
+        txt += (f"; the {int(fb['fallbacks'].sum())} fallbacks were in {len(fb)} runs at load "
+                f"{_f(lo[fb.index].min(), 1)} to {_f(lo[fb.index].max(), 1)}")
+    if known.sum() < len(ex):
+        txt += f"; {int(len(ex) - known.sum())} runs have no load recorded"
+    return txt + "."
+
+
 def _terms_text(comp: dict) -> str:
     return " ".join(("+ " if t["sign"] > 0 else "- ") + t["method"]
                     + (" (" + ", ".join(f"{k} {v}" for k, v in t["where"].items()) + ")"
@@ -523,7 +542,8 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:
                 L.append(f"- {exp['name']} solve time of the MWIS runs ({len(mw)}): median of the "
                          f"runs' medians {_f(mw['solve_time_median_s'].median(), 3)} s, longest "
                          f"{_f(mw['solve_time_max_s'].max(), 2)} s; {int(mw['overruns'].sum())} "
-                         f"solves past limit + 0.4 s, {int(mw['fallbacks'].sum())} fallbacks.")
+                         f"solves past limit + 0.4 s, {int(mw['fallbacks'].sum())} fallbacks."
+                         + _load_text(runs[runs["experiment"] == exp["name"]]))
     L.append("")
     # -- E0
     L += ["## E0: matched shadow solves", "",
