@@ -548,7 +548,9 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:
     # -- E0
     L += ["## E0: matched shadow solves", "",
           f"Each epoch's recorded instance of the reference runs (method {study['e0']['method']}), "
-          f"a seeded sample of up to {study['e0']['per_bin']} per size bin, solved by every solver at "
+          + (f"a seeded sample of up to {study['e0']['per_bin']} per size bin, " if study['e0'].get('per_bin')
+             else "every epoch's instance (no sampling), ")
+          + f"solved by every solver at "
           f"{_f(study['e0']['time_limit_s'], 1)} s and by the reference "
           f"({study['e0']['reference']['backend']}, {_f(study['e0']['reference']['time_limit_s'], 0)} s). "
           "Gap = (best known - objective) / best known, the best known being the best of every "
