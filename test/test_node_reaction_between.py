@@ -1,0 +1,145 @@
+"""The node graph's reaction between epochs (issue 23): with the simulator's ``reaction_period_s``
+the simulator asks the planner to react (``uam/react``) every period between two epochs, in
+lockstep, and flies the updates from that instant; the planner solves the reaction's MWIS graphs
+through the solver service. Held to the in-process runner with the same configuration: the
+same observations, approvals, plan versions and reaction updates (ids, versions, times, plans),
+at the epochs and between them."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip("rclpy", reason="needs the built workspace (scripts/test.sh sources it)")
+
+from graph_harness import TINY, build_graph, decisions, run_to_end, shutdown  # noqa: E402
+from uam_msgs.msg import FlightPlan  # noqa: E402
+
+from uam_contract import wire  # noqa: E402
+from uam_planner.nodes import conversions as m  # noqa: E402
+
+pytestmark = pytest.mark.ros
+
+RATE, SEED, DURATION, PERIOD = 3.0, 5, 300.0, 10.0
+#: +-30 % speed error: flights late or early by 10 s within a minute, so the reaction acts often
+SPEED_ERROR = 0.3
+
+
+class _Scoped:
+    """The runner's demand with the node's request ids: the planner node keys every request by
+    ``operator_id/request_id`` (wire.scoped_id) and the simulator draws each flight's speed error
+    by that key, the runner by the request's own id; scoped here, both draw the same flights."""
+
+    def __init__(self, demand):
+        self.demand = demand
+
+    def requests_at(self, t_s, interval_index):
+        return [dataclasses.replace(r, request_id=wire.scoped_id("generator", r.request_id))
+                for r in self.demand.requests_at(t_s, interval_index)]
+
+
+class _Spy:
+    """Every observation and plan update of each Planner instance (the runner's and the node's
+    live in this process: one class, told apart by the instance)."""
+
+    def __init__(self, monkeypatch):
+        from uam_planner import planning
+        self.observed: dict = {}     # id(planner) -> {(request id, t): position}
+        self.between: dict = {}      # id(planner) -> [(t, PlanUpdate)] of react_between_steps
+        spy = self
+        observe, steps = planning.Planner.observe, planning.Planner.react_between_steps
+
+        def _observe(planner, request_id, t_s, position_m):
+            spy.observed.setdefault(id(planner), {}).setdefault((request_id, float(t_s)), tuple(position_m))
+            return observe(planner, request_id, t_s, position_m)
+
+        def _steps(planner, t_s, epoch_index):
+            updates = yield from steps(planner, t_s, epoch_index)
+            spy.between.setdefault(id(planner), []).extend((float(t_s), u) for u in updates)
+            return updates
+
+        monkeypatch.setattr(planning.Planner, "observe", _observe)
+        monkeypatch.setattr(planning.Planner, "react_between_steps", _steps)
+
+
+def _runner(spy_epochs: list):
+    from uam_planner.network import load_network
+    from uam_sim.demand import RequestGenerator
+    from uam_sim.experiment import make_config, run_scenario
+    cfg = make_config(epoch_s=30.0, time_limit_s=5.0, audit=False, disturbance={"speed_error": SPEED_ERROR},
+                      reaction=True, reaction_period_s=PERIOD)
+    net = load_network(TINY)
+    demand = _Scoped(RequestGenerator(net.aerodrome_ids, RATE, cfg.interval_s, cfg.window_s, SEED))
+
+    def observer(t_s, _e, _submitted, _refused, res):
+        spy_epochs.extend((float(t_s), u) for u in res.plan_updates)
+    return run_scenario(net, "greedy", RATE, SEED, DURATION, cfg, demand=demand, observer=observer)
+
+
+def _key(p) -> str:
+    return wire.scoped_id(p.operator_id, p.request_id)
+
+
+def test_the_graph_reacts_between_epochs_as_the_runner_does(ros_context, spin_until, monkeypatch):
+    spy = _Spy(monkeypatch)
+    served = []
+    from uam_solvers.nodes.solver_node import SolverNode
+    on_solve = SolverNode._on_solve
+
+    def counting(node, request, response):   # every graph the solver service solved
+        served.append(len(request.weights))
+        return on_solve(node, request, response)
+    monkeypatch.setattr(SolverNode, "_on_solve", counting)
+
+    sim = {"speed_error": SPEED_ERROR, "disturbance_seed": SEED, "reaction_period_s": PERIOD}
+    executor, nodes, obs = build_graph(ros_context, rate=RATE, seed=SEED, duration_s=DURATION, backend="greedy",
+                                       simulator_extra=sim, planner_extra={"reaction": True}, conformance=True)
+    try:
+        run_to_end(executor, nodes, obs, spin_until, timeout_s=120.0)
+    finally:
+        shutdown(executor, nodes)
+    planner, simulator = nodes["planner"], nodes["simulator"]
+    assert not simulator.error, simulator.error
+    at_epochs: list = []
+    ref = _runner(at_epochs)
+    node_id = id(planner.planner)
+    runner_id = next(k for k in spy.observed if k != node_id)
+
+    # the same observations: every (flight, time) the planner saw, at the same place, up to the
+    # graph's end (the runner goes on until the last flight has landed)
+    node_obs = spy.observed[node_id]
+    runner_obs = {k: v for k, v in spy.observed[runner_id].items() if k[1] < DURATION}
+    assert set(node_obs) == set(runner_obs) and runner_obs
+    assert max(float(np.max(np.abs(np.subtract(node_obs[k], runner_obs[k])))) for k in runner_obs) < 1e-6
+    assert {t % 30.0 for _rid, t in runner_obs} == {0.0, 10.0, 20.0}
+
+    # the same approvals, and the same plan updates (flight, version, kind, instant) at the
+    # epochs and between them
+    assert {wire.scoped_id("generator", k): v for k, v in decisions(obs.plans).items()} == ref.decisions()
+    graph_updates = sorted((_key(p), int(p.version), p.update_kind, m.from_time(p.effective_time))
+                           for p in obs.plans if int(p.version) > 1)
+    runner_updates = sorted((r["request_id"], int(r["version"]), r["kind"], float(r["t_s"]))
+                            for r in ref.replans if r["t_s"] < DURATION)
+    assert graph_updates == runner_updates, (graph_updates, runner_updates)
+    between = [u for u in graph_updates if u[3] % 30.0 != 0.0]
+    assert between and len(between) < len(graph_updates), "updates both between epochs and at them"
+    # ... on the same trajectories (the new version from its instant on, every waypoint)
+    runner_plans = {(u.request_id, int(u.version)): u.flight.trajectory
+                    for _t, u in at_epochs + spy.between[runner_id] if u.flight is not None}
+    for p in obs.plans:
+        if int(p.version) > 1:
+            mine, theirs = m.trajectory_from_plan(p), runner_plans[(_key(p), int(p.version))]
+            assert mine.times_s == pytest.approx(theirs.times_s, abs=1e-6)
+            assert mine.points_m == pytest.approx(theirs.points_m, abs=1e-6)
+    # the node's own accounts of it: every reaction instant asked and answered, every update flown
+    assert simulator.reactions_asked == int(DURATION // 30.0) * 2
+    assert simulator.react_versions_received == len(between) == planner.between_updates
+    assert simulator.fly_errors == 0
+
+    # the between-epoch reaction's MWIS graphs went through the solver service, none solved in
+    # the planner: every graph the solver served is an epoch's, an at-epoch reaction's or one of these
+    assert planner.between_graphs_by_service >= 1
+    epoch_graphs = sum(1 for r in obs.reports if r.vertices > 0)
+    assert len(served) == epoch_graphs + planner.replan_graphs_by_service + planner.between_graphs_by_service
