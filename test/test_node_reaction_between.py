@@ -143,3 +143,70 @@ def test_the_graph_reacts_between_epochs_as_the_runner_does(ros_context, spin_un
     assert planner.between_graphs_by_service >= 1
     epoch_graphs = sum(1 for r in obs.reports if r.vertices > 0)
     assert len(served) == epoch_graphs + planner.replan_graphs_by_service + planner.between_graphs_by_service
+
+
+def test_reaction_calls_out_of_order_from_another_session_or_outside_the_epoch_are_refused(ros_context, spin_until):
+    """The planner serves uam/react only for the simulator it bound to, after the epoch it planned
+    last and strictly before the next, in time order; every other call is refused naming the field,
+    and the planner goes on serving (here the caller plays the simulator)."""
+    from rclpy.executors import MultiThreadedExecutor
+    from uam_msgs.srv import PlanEpoch, React
+    from uam_bringup.reaction import SERVICE_REACT
+    from uam_contract import names as c
+    from graph_harness import make_planner
+    planner = make_planner(ros_context, backend="greedy", reaction=True, use_solver_service=False,
+                           request_wait_timeout_s=0.2)
+    caller = rclpy.create_node("caller", context=ros_context)
+    executor = MultiThreadedExecutor(num_threads=2, context=ros_context)
+    for n in (planner, caller):
+        executor.add_node(n)
+    plan, react = caller.create_client(PlanEpoch, c.SERVICE_PLAN_EPOCH), caller.create_client(React, SERVICE_REACT)
+
+    def call(client, request):
+        assert spin_until(executor, client.service_is_ready, 30)
+        fut = client.call_async(request)
+        assert spin_until(executor, fut.done, 30), "the planner did not answer"
+        return fut.result()
+
+    def reacting(t_s, epoch_index=0, session="sim", epoch_s=30.0):
+        return call(react, React.Request(epoch_index=epoch_index, react_time=m.to_time(t_s), epoch_s=epoch_s,
+                                         session=session))
+    try:
+        early = reacting(10.0)   # nothing planned yet
+        assert early.status == React.Response.STATUS_REFUSED and "no epoch planned yet" in early.message
+        res = call(plan, PlanEpoch.Request(epoch_index=0, epoch_time=m.to_time(0.0), epoch_s=30.0, session="sim"))
+        assert res.status == PlanEpoch.Response.STATUS_PLANNED
+        refused = {
+            "session": reacting(10.0, session="rogue"),
+            "epoch_s": reacting(10.0, epoch_s=60.0),
+            "epoch_index": reacting(40.0, epoch_index=1),
+            "react_time": reacting(30.0),             # the next epoch's time, not between
+        }
+        for field, r in refused.items():
+            assert r.status == React.Response.STATUS_REFUSED and r.message.startswith(field), (field, r.message)
+        first = reacting(20.0)
+        assert first.status == React.Response.STATUS_REACTED and list(first.plans) == [], first.message
+        assert reacting(20.0).message == first.message     # a repeat: the same answer
+        late = reacting(10.0)                                # out of order
+        assert late.status == React.Response.STATUS_REFUSED and "not after the last reaction" in late.message
+        # the planner still serves the run: the next epoch, then a reaction after it
+        res = call(plan, PlanEpoch.Request(epoch_index=1, epoch_time=m.to_time(30.0), epoch_s=30.0, session="sim"))
+        assert res.status == PlanEpoch.Response.STATUS_PLANNED, res.message
+        assert reacting(40.0, epoch_index=1).status == React.Response.STATUS_REACTED
+        assert planner.reactions_between == 2
+    finally:
+        for n in (planner, caller):
+            executor.remove_node(n)
+        executor.shutdown(timeout_sec=5)
+        caller.destroy_node()
+        planner.destroy_node()
+
+
+@pytest.mark.parametrize("period,why", [(30.0, "is not less than epoch_s 30 s"),
+                                        (2.5, "is not a multiple of step_s 1 s")])
+def test_the_simulator_refuses_a_reaction_period_it_cannot_keep_at_start(ros_context, period, why):
+    from graph_harness import params
+    from uam_sim.nodes.simulator_node import SimulatorNode
+    with pytest.raises(ValueError) as exc:
+        SimulatorNode(context=ros_context, parameter_overrides=params(reaction_period_s=period))
+    assert str(exc.value).startswith(f"parameter reaction_period_s: {period:g} s") and why in str(exc.value)
