@@ -35,6 +35,12 @@ time ``epoch_index * epoch_s`` with the ``epoch_s`` of that first call, with at 
 it adds flights, never removes them; with a ``journal`` the claim is checked against the
 planner's own approvals and refused when it contradicts them. The end of the run is taken only
 from the bound simulator.
+The reaction between epochs (issue 23): uam/react (React), called by the bound simulator at each
+instant of its ``reaction_period_s`` strictly between the epoch planned last and the next, in
+time order; the planner waits for the fleet state (and the monitor's report) of that instant,
+runs Planner.react_between_steps with its MWIS graphs through uam/solve_mwis, publishes the new
+versions and answers with them. From the first such call it observes the fleet at the in-process
+runner's instants only (epoch t - 20, t - 10, t; each reaction instant): docs/disturbances.md.
 The planning itself is uam_planner.planning.Planner, shared with the in-process experiment runner.
 """
 

@@ -23,6 +23,15 @@ the state (flights in the air, requests decided). Plans on uam/flight_plans are 
 
 The run ends at ``duration_s``: the simulator announces ``finished``, and the other nodes exit.
 
+The reaction between epochs (issue 23, ``reaction_period_s`` > 0, less than ``epoch_s``): at every
+instant epoch time + k x period strictly between two epochs the fleet stops, its state of that
+instant is published, the planner is asked to react (uam/react, uam_msgs/srv/React) and the new
+plan versions of its answer are flown from that instant (a nonconforming update from where the
+aircraft is, at its airspeed, uam_sim.disturbance.fly_on). In that mode an epoch's fleet state is
+published before the epoch is asked for (its departures appear from the next step) and the next
+epoch is asked for only when the fleet reaches it, so the planner sees the fleet at the instants
+the in-process runner's monitor does (docs/disturbances.md).
+
 One partner each (docs/security.md): every call carries this simulator's run token
 (``session``); it binds to the first planner and the first demand source that answer (their
 tokens, announced on uam/epoch_sync as ``partners``) and ends the run, with the reason, when an
