@@ -22,7 +22,7 @@ from uam_planner.nodes import conversions as m  # noqa: E402
 
 pytestmark = pytest.mark.ros
 
-RATE, SEED, DURATION, PERIOD = 3.0, 5, 300.0, 10.0
+RATE, SEED, DURATION = 3.0, 5, 300.0
 #: +-30 % speed error: flights late or early by 10 s within a minute, so the reaction acts often
 SPEED_ERROR = 0.3
 
@@ -64,12 +64,12 @@ class _Spy:
         monkeypatch.setattr(planning.Planner, "react_between_steps", _steps)
 
 
-def _runner(spy_epochs: list):
+def _runner(spy_epochs: list, period: float):
     from uam_planner.network import load_network
     from uam_sim.demand import RequestGenerator
     from uam_sim.experiment import make_config, run_scenario
     cfg = make_config(epoch_s=30.0, time_limit_s=5.0, audit=False, disturbance={"speed_error": SPEED_ERROR},
-                      reaction=True, reaction_period_s=PERIOD)
+                      reaction=True, reaction_period_s=period)
     net = load_network(TINY)
     demand = _Scoped(RequestGenerator(net.aerodrome_ids, RATE, cfg.interval_s, cfg.window_s, SEED))
 
@@ -82,7 +82,12 @@ def _key(p) -> str:
     return wire.scoped_id(p.operator_id, p.request_id)
 
 
-def test_the_graph_reacts_between_epochs_as_the_runner_does(ros_context, spin_until, monkeypatch):
+@pytest.mark.parametrize("period", [0.0, 10.0], ids=["at-epochs", "every-10s"])
+def test_the_graph_reacts_as_the_runner_does(ros_context, spin_until, monkeypatch, period):
+    """At the epochs only (period 0) and every 10 s between them too: the same observations,
+    approvals and plan updates as the runner (before the simulator published an epoch's fleet
+    state first and the planner observed at the runner's instants, the lockstep graph reacted to
+    nothing at the epochs: its planner read fleet states 30 s old and refused every report)."""
     spy = _Spy(monkeypatch)
     served = []
     from uam_solvers.nodes.solver_node import SolverNode
@@ -93,7 +98,7 @@ def test_the_graph_reacts_between_epochs_as_the_runner_does(ros_context, spin_un
         return on_solve(node, request, response)
     monkeypatch.setattr(SolverNode, "_on_solve", counting)
 
-    sim = {"speed_error": SPEED_ERROR, "disturbance_seed": SEED, "reaction_period_s": PERIOD}
+    sim = {"speed_error": SPEED_ERROR, "disturbance_seed": SEED, "reaction_period_s": period}
     executor, nodes, obs = build_graph(ros_context, rate=RATE, seed=SEED, duration_s=DURATION, backend="greedy",
                                        simulator_extra=sim, planner_extra={"reaction": True}, conformance=True)
     try:
@@ -103,17 +108,19 @@ def test_the_graph_reacts_between_epochs_as_the_runner_does(ros_context, spin_un
     planner, simulator = nodes["planner"], nodes["simulator"]
     assert not simulator.error, simulator.error
     at_epochs: list = []
-    ref = _runner(at_epochs)
+    ref = _runner(at_epochs, period)
     node_id = id(planner.planner)
     runner_id = next(k for k in spy.observed if k != node_id)
 
     # the same observations: every (flight, time) the planner saw, at the same place, up to the
-    # graph's end (the runner goes on until the last flight has landed)
+    # graph's last call (the runner goes on after the end until the last flight has landed: its
+    # epoch at DURATION observes at DURATION - 20 and - 10 too)
     node_obs = spy.observed[node_id]
-    runner_obs = {k: v for k, v in spy.observed[runner_id].items() if k[1] < DURATION}
+    last_call = DURATION - (period or 30.0)
+    runner_obs = {k: v for k, v in spy.observed[runner_id].items() if k[1] <= last_call}
     assert set(node_obs) == set(runner_obs) and runner_obs
     assert max(float(np.max(np.abs(np.subtract(node_obs[k], runner_obs[k])))) for k in runner_obs) < 1e-6
-    assert {t % 30.0 for _rid, t in runner_obs} == {0.0, 10.0, 20.0}
+    assert {t % 30.0 for _rid, t in runner_obs} == {0.0, 10.0, 20.0}   # t - 20, t - 10, t; t_k
 
     # the same approvals, and the same plan updates (flight, version, kind, instant) at the
     # epochs and between them
@@ -124,23 +131,27 @@ def test_the_graph_reacts_between_epochs_as_the_runner_does(ros_context, spin_un
                             for r in ref.replans if r["t_s"] < DURATION)
     assert graph_updates == runner_updates, (graph_updates, runner_updates)
     between = [u for u in graph_updates if u[3] % 30.0 != 0.0]
-    assert between and len(between) < len(graph_updates), "updates both between epochs and at them"
+    if period:
+        assert between and len(between) < len(graph_updates), "updates both between epochs and at them"
+    else:
+        assert graph_updates and not between
     # ... on the same trajectories (the new version from its instant on, every waypoint)
     runner_plans = {(u.request_id, int(u.version)): u.flight.trajectory
-                    for _t, u in at_epochs + spy.between[runner_id] if u.flight is not None}
+                    for _t, u in at_epochs + spy.between.get(runner_id, []) if u.flight is not None}
     for p in obs.plans:
         if int(p.version) > 1:
             mine, theirs = m.trajectory_from_plan(p), runner_plans[(_key(p), int(p.version))]
             assert mine.times_s == pytest.approx(theirs.times_s, abs=1e-6)
             assert mine.points_m == pytest.approx(theirs.points_m, abs=1e-6)
     # the node's own accounts of it: every reaction instant asked and answered, every update flown
-    assert simulator.reactions_asked == int(DURATION // 30.0) * 2
+    assert simulator.reactions_asked == (int(DURATION // 30.0) * 2 if period else 0)
     assert simulator.react_versions_received == len(between) == planner.between_updates
     assert simulator.fly_errors == 0
 
-    # the between-epoch reaction's MWIS graphs went through the solver service, none solved in
-    # the planner: every graph the solver served is an epoch's, an at-epoch reaction's or one of these
-    assert planner.between_graphs_by_service >= 1
+    # the reaction's MWIS graphs went through the solver service, none solved in the planner:
+    # every graph the solver served is an epoch's, an at-epoch reaction's or a between-epoch one
+    assert planner.replan_graphs_by_service >= 1   # no constraint here: each is a reaction's
+    assert (planner.between_graphs_by_service >= 1) == bool(period)
     epoch_graphs = sum(1 for r in obs.reports if r.vertices > 0)
     assert len(served) == epoch_graphs + planner.replan_graphs_by_service + planner.between_graphs_by_service
 

@@ -163,7 +163,10 @@ class PlannerNode(Node):
         # monitor's report) of each call's time
         self._react_service = None
         self._observe_from_calls = False
-        self._fleet_buffer: dict[int, FleetState] = {}   # stamp (us) -> fleet state, in that mode
+        # stamp (us) -> {vehicle id: position}, in that mode: the first position received of each
+        # vehicle at each time is kept (as PositionBook keeps the first of a repeated sample), so
+        # a forged state stamped like a real one neither hides nor moves a vehicle seen in it
+        self._fleet_buffer: dict[int, dict] = {}
         self._stamp_lock = threading.Lock()
         self._latest_fleet_s = -math.inf    # the newest fleet state / conformance report received
         self._latest_conformance_s = -math.inf
@@ -274,7 +277,9 @@ class PlannerNode(Node):
             msg = self._inbox.popleft()
             if isinstance(msg, FleetState):
                 if self._observe_from_calls:
-                    self._fleet_buffer[stamp_key(m.from_time(msg.header.stamp))] = msg
+                    seen = self._fleet_buffer.setdefault(stamp_key(m.from_time(msg.header.stamp)), {})
+                    for v in msg.vehicles:
+                        seen.setdefault(v.vehicle_id, (v.position.x, v.position.y, v.position.z))
                 else:
                     self._on_fleet(msg)
             else:
@@ -297,15 +302,11 @@ class PlannerNode(Node):
         if now is None:
             self.get_logger().warning(f"t = {t_s:g} s: no fleet state of that time received; no vehicle observed")
         else:
-            airborne = {v.vehicle_id for v in now.vehicles}
             for back in (OBSERVE_BACK_S if at_epoch else (0.0,)):
                 tb = t_s - back
-                state = self._fleet_buffer.get(stamp_key(tb))
-                if state is None:
-                    continue
-                for v in state.vehicles:
-                    if v.vehicle_id in airborne:
-                        self.planner.observe(v.vehicle_id, tb, (v.position.x, v.position.y, v.position.z))
+                for vid, pos in (self._fleet_buffer.get(stamp_key(tb)) or {}).items():
+                    if vid in now:   # airborne at t_s
+                        self.planner.observe(vid, tb, pos)
         lo = stamp_key(t_s - max(OBSERVE_BACK_S))
         for key in [k for k in self._fleet_buffer if k < lo]:
             del self._fleet_buffer[key]
@@ -595,6 +596,8 @@ class PlannerNode(Node):
                     return self._refuse_call(request, response, PlanEpoch.Response.STATUS_REFUSED, problem)
             if self.bound_simulator is None:
                 self._bind(request.session, resumed=bool(request.resume))
+            if request.observe_at_instants:   # issue 23: the simulator stops at each instant it asks about
+                self._observe_from_calls = True
             self._epoch_s = float(request.epoch_s)
             if self._held is not None:
                 self._decide_held(t_s, bool(request.resume))

@@ -125,6 +125,11 @@ class SimulatorNode(Node):
         # issue 23: what flies (off by default: the plans themselves)
         self.disturbance = from_simulator_params(self.p, self.step_s)
         self.wind = WindField(self.disturbance) if self.disturbance.enabled else None
+        # issue 23: with disturbances (what flies is not the plan) or a reaction between epochs,
+        # the fleet state of an epoch is published before the epoch is asked for, the next epoch
+        # is asked for only when the fleet is there, and the planner observes the fleet at the
+        # in-process runner's instants (PlanEpoch.observe_at_instants): its view is the runner's
+        self.observe_mode = bool(self.react_steps) or self.wind is not None
         self._plan_trajs: dict = {}  # with disturbances: each flight's plan (spliced over its versions)
         self._speed_errors: dict = {}  # after a nonconforming update: the speed error against its plan
         self.step_index = 0                 # t = step_index * step_s
@@ -307,7 +312,8 @@ class SimulatorNode(Node):
     def _ask_planner(self) -> None:
         t = self._epoch_t
         req = PlanEpoch.Request(epoch_index=self._waiting_epoch, epoch_time=m.to_time(t), epoch_s=float(self.epoch_s),
-                                expected_request_ids=self._expected, resume=self._resume, session=self.session)
+                                expected_request_ids=self._expected, resume=self._resume, session=self.session,
+                                observe_at_instants=self.observe_mode)
         if self._resume:
             req.airborne = [p for p in self._flying.values() if m.from_time(p.arrival_time) >= t]
             req.decided_request_ids = list(self._decided)
@@ -388,7 +394,7 @@ class SimulatorNode(Node):
         self._waiting_epoch = None
         self._early = None
         t_next = (epoch + 1) * self.epoch_s
-        if self.react_steps:
+        if self.observe_mode:
             # reacting between epochs: the state of this instant was published before the call
             # (_step_once), and the next epoch is asked for only when the fleet is there, after
             # the reactions in between (they change what the planner holds)
@@ -553,8 +559,8 @@ class SimulatorNode(Node):
         k = self._epoch_at(self.step_index)
         if k is not None and self.t_s < self.duration_s - 1e-9:  # epochs at t < duration, as the runner
             if self._waiting_epoch is None:
-                if self.react_steps:
-                    # reacting between epochs: the state of this instant (before the epoch's
+                if self.observe_mode:
+                    # disturbed or reacting between epochs: the state of this instant (before the epoch's
                     # departures) is published first: the planner and the monitor see the fleet
                     # at t before the epoch, as the runner's monitor does
                     self._publish_state()
