@@ -221,3 +221,35 @@ def test_the_simulator_refuses_a_reaction_period_it_cannot_keep_at_start(ros_con
     with pytest.raises(ValueError) as exc:
         SimulatorNode(context=ros_context, parameter_overrides=params(reaction_period_s=period))
     assert str(exc.value).startswith(f"parameter reaction_period_s: {period:g} s") and why in str(exc.value)
+
+
+def test_observing_at_instants_keeps_the_first_position_of_each_vehicle(ros_context):
+    """In the observe-at-instants mode the planner keeps, of each vehicle at each time, the first
+    position received (as PositionBook keeps the first of a repeated sample): a second fleet state
+    stamped like the real one, which moves one vehicle and leaves the other out, changes nothing;
+    a vehicle absent from the state of the call's time is not observed at the earlier instants."""
+    from geometry_msgs.msg import Point
+    from uam_msgs.msg import FleetState, VehicleState
+    from graph_harness import make_planner
+    planner = make_planner(ros_context, backend="greedy", reaction=True, use_solver_service=False)
+
+    def state(t_s, vehicles):
+        msg = FleetState(vehicles=[VehicleState(vehicle_id=v, position=Point(x=x, y=0.0, z=90.0))
+                                   for v, x in vehicles])
+        msg.header.stamp = m.to_time(t_s)
+        return msg
+    try:
+        planner._observe_from_calls = True
+        for msg in (state(40.0, [("op/a", 1.0), ("op/b", 2.0), ("op/gone", 3.0)]),
+                    state(50.0, [("op/a", 11.0), ("op/b", 12.0)]),
+                    state(60.0, [("op/a", 21.0), ("op/b", 22.0)]),
+                    state(60.0, [("op/a", 999.0)])):          # forged: a moved, b left out
+            planner._on_fleet_msg(msg)
+        with planner._lock:
+            planner._read_inbox(60.0, at_epoch=True)
+        book = planner.planner.positions
+        assert [o.position_m[0] for o in book.observations("op/a", 0.0, 60.0)] == [1.0, 11.0, 21.0]
+        assert [o.position_m[0] for o in book.observations("op/b", 0.0, 60.0)] == [2.0, 12.0, 22.0]
+        assert book.latest("op/gone") is None       # not airborne at 60 s: not observed at all
+    finally:
+        planner.destroy_node()
