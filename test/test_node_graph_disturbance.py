@@ -63,9 +63,11 @@ def test_the_graph_reacts_to_a_nonconforming_flight_and_flies_its_update(ros_con
     report against the fleet state it saw and its plan, updates the intent from where the
     aircraft is (a FlightPlan of version 2, update_kind nonconforming, state Nonconforming) and
     the simulator flies it on from there; the plans keep separation, the analysis reads it."""
-    # +-30 %: late or early by 10 s within a minute; real time x 10 (lockstep outruns the one-process
-    # harness: the planner would read fleet states 80 s old and rightly refuse every report)
-    sim = {"speed_error": 0.3, "disturbance_seed": 2, "mode": "realtime", "real_time_factor": 10.0}
+    # +-30 %: late or early by 10 s within a minute; in lockstep (before issue 23's fifth stop the
+    # lockstep graph asked for the next epoch at once and its planner read fleet states 30 s old,
+    # refusing every report: this test ran in real time x 10; now a disturbed simulator publishes
+    # an epoch's fleet state before asking for it and the planner waits for it)
+    sim = {"speed_error": 0.3, "disturbance_seed": 2}
     executor, nodes, obs = build_graph(ros_context, rate=3.0, seed=5, duration_s=300.0, backend="greedy",
                                        simulator_extra=sim, planner_extra={"reaction": True},
                                        conformance=True, record_to=tmp_path / "run.mcap")

@@ -35,6 +35,12 @@ time ``epoch_index * epoch_s`` with the ``epoch_s`` of that first call, with at 
 it adds flights, never removes them; with a ``journal`` the claim is checked against the
 planner's own approvals and refused when it contradicts them. The end of the run is taken only
 from the bound simulator.
+The reaction between epochs (issue 23): uam/react (React), called by the bound simulator at each
+instant of its ``reaction_period_s`` strictly between the epoch planned last and the next, in
+time order; the planner waits for the fleet state (and the monitor's report) of that instant,
+runs Planner.react_between_steps with its MWIS graphs through uam/solve_mwis, publishes the new
+versions and answers with them. From the first such call it observes the fleet at the in-process
+runner's instants only (epoch t - 20, t - 10, t; each reaction instant): docs/disturbances.md.
 The planning itself is uam_planner.planning.Planner, shared with the in-process experiment runner.
 """
 
@@ -54,7 +60,7 @@ from rclpy.node import Node
 from rclpy.task import Future
 from std_msgs.msg import String
 from uam_msgs.msg import Conformance, EpochSync, FleetState, FlightPlan, FlightRequest, PlanningReport
-from uam_msgs.srv import PlanEpoch, SolveMwis, UpdateConstraint
+from uam_msgs.srv import PlanEpoch, React, SolveMwis, UpdateConstraint
 
 from uam_contract import names as c
 from uam_planner.nodes import conversions as m
@@ -62,6 +68,7 @@ from uam_bringup import qos
 from uam_contract import wire
 from uam_bringup.journal import Journal, newest_versions
 from uam_bringup.params import declare_table
+from uam_bringup.reaction import OBSERVE_BACK_S, SERVICE_REACT, stamp_key
 from uam_contract.params import PLANNER
 from uam_solvers.nodes import param_rules
 from uam_bringup.runtime import run_node
@@ -145,11 +152,31 @@ class PlannerNode(Node):
         # the fleet state always (issue 23's safety gap: a flight seen flying past its plan is
         # held in the traffic picture until it lands, uam_planner.nonconformance.overruns); the
         # conformance reports only with the reaction on
-        self.create_subscription(FleetState, c.TOPIC_FLEET, lambda msg: self._inbox.append(msg), qos.QOS_STREAM,
+        self.create_subscription(FleetState, c.TOPIC_FLEET, self._on_fleet_msg, qos.QOS_STREAM,
                                  callback_group=group)
         if self.p["reaction"]:
-            self.create_subscription(Conformance, c.TOPIC_CONFORMANCE, lambda msg: self._inbox.append(msg), qos.QOS_STREAM,
+            self.create_subscription(Conformance, c.TOPIC_CONFORMANCE, self._on_conformance_msg, qos.QOS_STREAM,
                                      callback_group=group)
+        # the reaction between epochs (uam/react, issue 23): the simulator calls it at each
+        # reaction instant; from the first such call on the planner takes its observations at the
+        # in-process runner's instants only (_observe_at), waiting for the fleet state (and the
+        # monitor's report) of each call's time
+        self._react_service = None
+        self._observe_from_calls = False
+        # stamp (us) -> {vehicle id: position}, in that mode: the first position received of each
+        # vehicle at each time is kept (as PositionBook keeps the first of a repeated sample), so
+        # a forged state stamped like a real one neither hides nor moves a vehicle seen in it
+        self._fleet_buffer: dict[int, dict] = {}
+        self._stamp_lock = threading.Lock()
+        self._latest_fleet_s = -math.inf    # the newest fleet state / conformance report received
+        self._latest_conformance_s = -math.inf
+        self._stamp_waiters: list = []
+        self._react_inflight: tuple | None = None   # (epoch_index, stamp) of the reaction computed
+        self._last_react: tuple | None = None       # ((epoch_index, stamp), response) of the last one
+        self._last_react_s = -math.inf
+        self.reactions_between = 0                  # reactions between epochs answered
+        self.between_graphs_by_service = 0          # their MWIS graphs solved through uam/solve_mwis
+        self.between_updates = 0                    # plan versions they published
         self._client = self.create_client(SolveMwis, c.SERVICE_SOLVE, callback_group=self._group)
         self._service = None  # offered once the solver is up (or its start-up wait is over)
         self._started_at = time.monotonic()
@@ -190,15 +217,99 @@ class PlannerNode(Node):
             f"{self.config.separation.kind}, departure slot {self.config.airspace.departure_slot_s:g} s, "
             f"{len(self.config.constraints or ())} constraint(s)")
 
-    def _read_inbox(self) -> None:
-        """Under the lock, before an epoch: every fleet state and conformance report received,
-        in the order received."""
+    def _on_fleet_msg(self, msg: FleetState) -> None:
+        self._inbox.append(msg)
+        self._stamped(m.from_time(msg.header.stamp), None)
+
+    def _on_conformance_msg(self, msg: Conformance) -> None:
+        self._inbox.append(msg)
+        self._stamped(None, m.from_time(msg.header.stamp))
+
+    def _stamped(self, fleet_s, conformance_s) -> None:
+        """A message arrived: wake the calls waiting for its time (``_await_stamps``)."""
+        with self._stamp_lock:
+            if fleet_s is not None:
+                self._latest_fleet_s = max(self._latest_fleet_s, fleet_s)
+            if conformance_s is not None:
+                self._latest_conformance_s = max(self._latest_conformance_s, conformance_s)
+            for t_s, need_conf, fut in self._stamp_waiters:
+                if not fut.done() and self._stamps_reached(t_s, need_conf):
+                    fut.set_result(True)
+
+    def _stamps_reached(self, t_s: float, need_conformance: bool) -> bool:
+        return self._latest_fleet_s >= t_s - 1e-6 and \
+            (not need_conformance or self._latest_conformance_s >= t_s - 1e-6)
+
+    async def _await_stamps(self, t_s: float) -> None:
+        """In the reaction-between-epochs mode: wait (at most ``request_wait_timeout_s``) until the
+        fleet state of ``t_s`` and, when a monitor publishes, its report of that fleet state have
+        arrived. The simulator publishes them before it calls (it is blocked at t_s meanwhile),
+        but a topic and a service are not ordered, so a call can come first."""
+        if not self._observe_from_calls:
+            return
+        need_conf = bool(self.p["reaction"]) and \
+            self.count_publishers(self.resolve_topic_name(c.TOPIC_CONFORMANCE)) > 0
+        fut = Future()
+        entry = (float(t_s), need_conf, fut)
+        with self._stamp_lock:
+            if self._stamps_reached(t_s, need_conf):
+                return
+            self._stamp_waiters.append(entry)
+        timer = self.create_timer(self.p["request_wait_timeout_s"], lambda: fut.done() or fut.set_result(False),
+                                  callback_group=self._group, clock=self._steady)
+        try:
+            ok = await fut
+        finally:
+            self.destroy_timer(timer)
+            with self._stamp_lock:
+                self._stamp_waiters.remove(entry)
+        if not ok:
+            self.get_logger().warning(
+                f"t = {t_s:g} s: the fleet state{' and the conformance report' if need_conf else ''} of that "
+                f"time did not arrive within {self.p['request_wait_timeout_s']:g} s; going on with what came")
+
+    def _read_inbox(self, t_s: float | None = None, at_epoch: bool = True) -> None:
+        """Under the lock, before an epoch (or a reaction between epochs) at ``t_s``: every fleet
+        state and conformance report received, in the order received. In the reaction-between-
+        epochs mode the fleet states are kept aside and observed at the runner's instants only
+        (:meth:`_observe_at`)."""
         while self._inbox:
             msg = self._inbox.popleft()
             if isinstance(msg, FleetState):
-                self._on_fleet(msg)
+                if self._observe_from_calls:
+                    seen = self._fleet_buffer.setdefault(stamp_key(m.from_time(msg.header.stamp)), {})
+                    for v in msg.vehicles:
+                        seen.setdefault(v.vehicle_id, (v.position.x, v.position.y, v.position.z))
+                else:
+                    self._on_fleet(msg)
             else:
                 self._on_conformance(msg)
+        if self._observe_from_calls and t_s is not None:
+            self._observe_at(float(t_s), at_epoch)
+
+    def _observe_at(self, t_s: float, at_epoch: bool) -> None:
+        """The planner's observations for a call at ``t_s``, as the in-process runner's monitor
+        makes them (``uam_sim.scenario._Reaction``): before an epoch, every vehicle airborne at
+        t_s (in its fleet state) at t_s - 20, t_s - 10 and t_s; between epochs, at t_s only.
+
+        Why the node follows the runner and not the other way round: the runner is the run code of
+        the studies (their cells are keyed by its version, and the Monte-Carlo numbers of
+        docs/disturbances.md were measured with it), and the progress rate a nonconforming update
+        is timed at is estimated from these sightings, so a planner that counted every 1 s fleet
+        state would time its updates differently from what was measured; one sighting every 10 s
+        is also what a USS gets from a real surveillance feed more than a 1 Hz truth stream."""
+        now = self._fleet_buffer.get(stamp_key(t_s))
+        if now is None:
+            self.get_logger().warning(f"t = {t_s:g} s: no fleet state of that time received; no vehicle observed")
+        else:
+            for back in (OBSERVE_BACK_S if at_epoch else (0.0,)):
+                tb = t_s - back
+                for vid, pos in (self._fleet_buffer.get(stamp_key(tb)) or {}).items():
+                    if vid in now:   # airborne at t_s
+                        self.planner.observe(vid, tb, pos)
+        lo = stamp_key(t_s - max(OBSERVE_BACK_S))
+        for key in [k for k in self._fleet_buffer if k < lo]:
+            del self._fleet_buffer[key]
 
     def _on_fleet(self, msg: FleetState) -> None:
         """The planner's own observation of every vehicle in the fleet state."""
@@ -248,6 +359,7 @@ class PlannerNode(Node):
             shared_service()
         self._service = self.create_service(PlanEpoch, c.SERVICE_PLAN_EPOCH, self._on_plan_epoch,
                                             callback_group=self._group)
+        self._react_service = self.create_service(React, SERVICE_REACT, self._on_react, callback_group=self._group)
         self.get_logger().info(f"serving {self.resolve_service_name(c.SERVICE_PLAN_EPOCH)}")
 
     # ---- live constraints (issue 22, uam_planner.live_constraints) ---------------------------
@@ -449,6 +561,10 @@ class PlannerNode(Node):
                 return self._refuse_call(request, response, PlanEpoch.Response.STATUS_REFUSED, problem)
             if self._last is not None and self._last[0] == k:
                 return self._last[1]
+            if self._react_inflight is not None:
+                return self._refuse_call(request, response, PlanEpoch.Response.STATUS_REFUSED,
+                                         f"epoch_index: {k} asked while the reaction at t = "
+                                         f"{self._react_inflight[1] * 1e-6:g} s is being computed")
             if self._inflight is not None:
                 # answered at once: a waiting repeat would be one more suspended task that the
                 # executor resumes at every wake-up
@@ -480,6 +596,8 @@ class PlannerNode(Node):
                     return self._refuse_call(request, response, PlanEpoch.Response.STATUS_REFUSED, problem)
             if self.bound_simulator is None:
                 self._bind(request.session, resumed=bool(request.resume))
+            if request.observe_at_instants:   # issue 23: the simulator stops at each instant it asks about
+                self._observe_from_calls = True
             self._epoch_s = float(request.epoch_s)
             if self._held is not None:
                 self._decide_held(t_s, bool(request.resume))
@@ -647,8 +765,9 @@ class PlannerNode(Node):
         while the planner computes, not while it awaits; requests arriving meanwhile are decided
         after the prepare (they wait for the next epoch, as in the in-process runner)."""
         prep = graph = None
+        await self._await_stamps(t_s)   # in the reaction-between-epochs mode only
         with self._lock:
-            self._read_inbox()   # issue 23: the fleet states and conformance reports received so far
+            self._read_inbox(t_s)   # issue 23: the fleet states and conformance reports received so far
             steps = self.planner.prepare_steps(t_s, k)
             self._deferred = []
         try:
@@ -676,6 +795,126 @@ class PlannerNode(Node):
         with self._lock:
             self._publish_constraint_changes(t_s)
         return prep
+
+    # ---- the reaction between epochs (issue 23) ------------------------------------------------
+    def _check_react(self, request: React.Request, t_s: float) -> str:
+        """Why this reaction call is not one this planner serves now, or ''."""
+        session = request.session
+        if not session or len(session) > wire.MAX_ID_LENGTH:
+            return f"session: {wire.echo(session)} must be the simulator's run token (1 to {wire.MAX_ID_LENGTH} characters)"
+        if self.bound_simulator is None:
+            return "react: no epoch planned yet; a reaction comes between two epochs of the bound simulator"
+        if session != self.bound_simulator:
+            return (f"session: {wire.echo(session)} is not the simulator this planner serves "
+                    f"({self.bound_simulator!r}); a second simulator is refused")
+        if not self.p["reaction"]:
+            return "reaction: the planner's reaction to nonconformance is off (parameter reaction); nothing to react with"
+        if not (math.isfinite(request.epoch_s) and request.epoch_s == self._epoch_s):
+            return f"epoch_s: {request.epoch_s!r} is not the run's epoch length {self._epoch_s!r} s"
+        if self._inflight is not None:
+            return f"react: epoch {self._inflight} is being planned"
+        last = self._next_epoch - 1
+        if int(request.epoch_index) != last:
+            return f"epoch_index: {request.epoch_index} is not the epoch planned last ({last})"
+        lo, hi = self._last_epoch_s, self._last_epoch_s + self._epoch_s
+        if not (math.isfinite(t_s) and lo + 1e-6 < t_s < hi - 1e-6):
+            return (f"react_time: {t_s!r} s is not strictly between the epoch at {lo:g} s and the next "
+                    f"at {hi:g} s")
+        return ""
+
+    async def _on_react(self, request: React.Request, response: React.Response):
+        """The simulator's call at a reaction instant between epochs: the claims due are checked
+        and acted on now (``Planner.react_between_steps``, its MWIS graphs through the solver
+        service), the new versions published and returned. A repeat of the last call gets its
+        answer again; an older instant, another session or a time outside the epoch is refused."""
+        t_s = m.from_time(request.react_time)
+        k = int(request.epoch_index)
+        with self._lock:
+            problem = self._check_react(request, t_s)
+            key = (k, stamp_key(t_s))
+            if not problem and self._last_react is not None and self._last_react[0] == key:
+                return self._last_react[1]
+            if not problem and self._react_inflight is not None:
+                if self._react_inflight == key:
+                    response.status, response.session = React.Response.STATUS_IN_PROGRESS, self.session
+                    response.message = f"the reaction at t = {t_s:g} s is being computed"
+                    return response
+                problem = (f"react_time: {t_s:g} s asked while the reaction at "
+                           f"{self._react_inflight[1] * 1e-6:g} s is being computed")
+            if not problem and t_s <= self._last_react_s + 1e-6:
+                problem = (f"react_time: {t_s:g} s is not after the last reaction, at "
+                           f"{self._last_react_s:g} s (reactions come in time order)")
+            if problem:
+                response.status, response.session = React.Response.STATUS_REFUSED, self.session
+                response.message = wire.bounded(problem)
+                self._log_refused_call("react: " + problem)
+                return response
+            self._react_inflight = key
+            self._observe_from_calls = True
+        try:
+            return await self._react(k, t_s, key, response)
+        finally:
+            with self._lock:
+                self._react_inflight = None
+
+    async def _react(self, k: int, t_s: float, key: tuple, response: React.Response):
+        await self._await_stamps(t_s)
+        with self._lock:
+            self._read_inbox(t_s, at_epoch=False)
+            steps = self.planner.react_between_steps(t_s, k)
+            self._deferred = []
+        updates, error = None, ""
+        try:
+            graph = None
+            with self._lock:
+                try:
+                    graph = next(steps)
+                except StopIteration as done:
+                    updates = done.value
+            while updates is None:
+                answer = await self._solve(graph)
+                if self.p["use_solver_service"] and not isinstance(answer, (str, BaseException)):
+                    self.between_graphs_by_service += 1
+                with self._lock:
+                    try:
+                        graph = steps.send(answer)
+                    except StopIteration as done:
+                        updates = done.value
+        except (ValueError, RuntimeError) as exc:   # the planner's own refusal: nothing changed
+            error = f"react: {exc}"
+        finally:
+            with self._lock:
+                deferred, self._deferred = self._deferred or [], None
+                for msg in deferred:
+                    rid = self._decide(msg)
+                    if rid is not None:
+                        self._arrived(rid)
+        with self._lock:
+            response.session = self.session
+            if error:
+                response.status, response.message = React.Response.STATUS_REFUSED, wire.bounded(error)
+                self._log_refused_call(error)
+                return response
+            plans = []
+            for u in updates:
+                if u.kind == "kept":
+                    continue
+                op, rid = wire.split_scoped(u.request_id)
+                plan = m.plan_update_msg(u, t_s, self.policy, request_id=rid)
+                plan.operator_id = op
+                plans.append(plan)
+            if self.journal is not None:
+                self.journal.append(plans)  # before anyone can hold them
+            for plan in plans:
+                self._publish_plan(plan)
+            self.reactions_between += 1
+            self.between_updates += len(plans)
+            self._last_react_s = t_s
+            response.status = React.Response.STATUS_REACTED
+            response.message = f"reaction at t = {t_s:g} s (after epoch {k}): {len(plans)} update(s)"
+            response.plans = plans
+            self._last_react = (key, response)
+        return response
 
     async def _solve(self, graph):
         """The solver's answer for ``graph``, or why there is none (the commit then falls back)."""

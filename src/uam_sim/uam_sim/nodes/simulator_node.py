@@ -23,6 +23,15 @@ the state (flights in the air, requests decided). Plans on uam/flight_plans are 
 
 The run ends at ``duration_s``: the simulator announces ``finished``, and the other nodes exit.
 
+The reaction between epochs (issue 23, ``reaction_period_s`` > 0, less than ``epoch_s``): at every
+instant epoch time + k x period strictly between two epochs the fleet stops, its state of that
+instant is published, the planner is asked to react (uam/react, uam_msgs/srv/React) and the new
+plan versions of its answer are flown from that instant (a nonconforming update from where the
+aircraft is, at its airspeed, uam_sim.disturbance.fly_on). In that mode an epoch's fleet state is
+published before the epoch is asked for (its departures appear from the next step) and the next
+epoch is asked for only when the fleet reaches it, so the planner sees the fleet at the instants
+the in-process runner's monitor does (docs/disturbances.md).
+
 One partner each (docs/security.md): every call carries this simulator's run token
 (``session``); it binds to the first planner and the first demand source that answer (their
 tokens, announced on uam/epoch_sync as ``partners``) and ends the run, with the reason, when an
@@ -44,13 +53,14 @@ from geometry_msgs.msg import PoseArray
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from uam_msgs.msg import EpochSync, FleetState, FlightPlan
-from uam_msgs.srv import PlanEpoch, ReleaseDemand
+from uam_msgs.srv import PlanEpoch, React, ReleaseDemand
 
 from uam_contract import names as c
 from uam_planner.nodes import conversions as m
 from uam_bringup import qos
 from uam_contract import wire
 from uam_bringup.params import declare_table
+from uam_bringup.reaction import SERVICE_REACT
 from uam_contract.params import SIMULATOR
 from uam_bringup.runtime import run_node
 from uam_sim.cdr import encode_clock, encode_fleet_state, encode_pose_array, yaw_quaternions
@@ -85,6 +95,19 @@ class SimulatorNode(Node):
         if not math.isclose(ratio, round(ratio), rel_tol=0, abs_tol=1e-9):
             raise ValueError(f"parameter epoch_s: {self.epoch_s} is not a multiple of step_s {self.step_s}")
         self.steps_per_epoch = int(round(ratio))
+        # the reaction between epochs (issue 23): every reaction_period_s between two epochs the
+        # planner is asked to react (uam/react), in lockstep, and its updates are flown from there
+        self.reaction_period_s = float(self.p["reaction_period_s"])
+        self.react_steps = 0
+        if self.reaction_period_s > 0:
+            if not self.reaction_period_s < self.epoch_s:
+                raise ValueError(f"parameter reaction_period_s: {self.reaction_period_s:g} s is not less than "
+                                 f"epoch_s {self.epoch_s:g} s (0 = react at epochs only)")
+            r = self.reaction_period_s / self.step_s
+            if not math.isclose(r, round(r), rel_tol=0, abs_tol=1e-9):
+                raise ValueError(f"parameter reaction_period_s: {self.reaction_period_s:g} s is not a multiple "
+                                 f"of step_s {self.step_s:g} s")
+            self.react_steps = int(round(r))
 
         self._clock_pub = self.create_publisher(Clock, c.TOPIC_CLOCK, qos.QOS_CLOCK)
         self._fleet_pub = self.create_publisher(FleetState, c.TOPIC_FLEET, qos.QOS_STREAM)
@@ -93,11 +116,20 @@ class SimulatorNode(Node):
         self._plan_client = self.create_client(PlanEpoch, c.SERVICE_PLAN_EPOCH)
         self._demand_client = self.create_client(ReleaseDemand, c.SERVICE_RELEASE_DEMAND) \
             if self.p["use_demand_service"] else None
+        self._react_client = self.create_client(React, SERVICE_REACT) if self.react_steps else None
+        self._waiting_react: int | None = None   # the step index of the reaction asked for
+        self.reactions_asked = 0            # reactions between epochs answered
+        self.react_versions_received = 0    # plan versions in their answers, flown from their instant
 
         self.fleet = Fleet()
         # issue 23: what flies (off by default: the plans themselves)
         self.disturbance = from_simulator_params(self.p, self.step_s)
         self.wind = WindField(self.disturbance) if self.disturbance.enabled else None
+        # issue 23: with disturbances (what flies is not the plan) or a reaction between epochs,
+        # the fleet state of an epoch is published before the epoch is asked for, the next epoch
+        # is asked for only when the fleet is there, and the planner observes the fleet at the
+        # in-process runner's instants (PlanEpoch.observe_at_instants): its view is the runner's
+        self.observe_mode = bool(self.react_steps) or self.wind is not None
         self._plan_trajs: dict = {}  # with disturbances: each flight's plan (spliced over its versions)
         self._speed_errors: dict = {}  # after a nonconforming update: the speed error against its plan
         self.step_index = 0                 # t = step_index * step_s
@@ -159,7 +191,7 @@ class SimulatorNode(Node):
     def _servers(self) -> list[str]:
         """Why the services are not served by exactly one node each ('' entries dropped)."""
         out = []
-        for client in (self._plan_client, self._demand_client):
+        for client in (self._plan_client, self._demand_client, self._react_client):
             if client is None:
                 continue
             n = self.count_services(client.srv_name)
@@ -173,6 +205,8 @@ class SimulatorNode(Node):
             missing.append(self._plan_client.srv_name)
         if self._demand_client is not None and not self._demand_client.service_is_ready():
             missing.append(self._demand_client.srv_name)
+        if self._react_client is not None and not self._react_client.service_is_ready():
+            missing.append(self._react_client.srv_name)
         missing += self._servers()
         if self.wait_for:
             subscribers = {info.node_name for info in
@@ -278,7 +312,8 @@ class SimulatorNode(Node):
     def _ask_planner(self) -> None:
         t = self._epoch_t
         req = PlanEpoch.Request(epoch_index=self._waiting_epoch, epoch_time=m.to_time(t), epoch_s=float(self.epoch_s),
-                                expected_request_ids=self._expected, resume=self._resume, session=self.session)
+                                expected_request_ids=self._expected, resume=self._resume, session=self.session,
+                                observe_at_instants=self.observe_mode)
         if self._resume:
             req.airborne = [p for p in self._flying.values() if m.from_time(p.arrival_time) >= t]
             req.decided_request_ids = list(self._decided)
@@ -359,6 +394,12 @@ class SimulatorNode(Node):
         self._waiting_epoch = None
         self._early = None
         t_next = (epoch + 1) * self.epoch_s
+        if self.observe_mode:
+            # reacting between epochs: the state of this instant was published before the call
+            # (_step_once), and the next epoch is asked for only when the fleet is there, after
+            # the reactions in between (they change what the planner holds)
+            self.step_index += 1
+            return
         if self.mode == "lockstep" and t_next < self.duration_s - 1e-9:
             # asked before this step's state is published: the demand source and the planner
             # start on the next epoch meanwhile (their answers are handled on later turns)
@@ -411,6 +452,46 @@ class SimulatorNode(Node):
     def _epoch_at(self, step_index: int) -> int | None:
         return step_index // self.steps_per_epoch if step_index % self.steps_per_epoch == 0 else None
 
+    def _react_at(self, step_index: int) -> bool:
+        """A reaction instant: epoch time + k x reaction_period_s, strictly between two epochs."""
+        r = step_index % self.steps_per_epoch
+        return bool(self.react_steps) and r != 0 and r % self.react_steps == 0
+
+    def _ask_react(self) -> None:
+        """Ask the planner to react at this instant (its fleet state is published): the answer's
+        versions are flown from here (_on_react) before the fleet steps on."""
+        self._waiting_react = self.step_index
+        self._wait_started = time.monotonic()
+        req = React.Request(epoch_index=self.step_index // self.steps_per_epoch, react_time=m.to_time(self.t_s),
+                            epoch_s=float(self.epoch_s), session=self.session)
+        self._send(self._react_client, req, self._on_react)
+
+    def _on_react(self, res: React.Response) -> None:
+        t = self.t_s
+        if not res.session or len(res.session) > wire.MAX_ID_LENGTH:
+            self._end_with_error(f"the planner's answer for the reaction at t = {t:g} s has no valid session "
+                                 f"({wire.echo(res.session)})")
+            return
+        if not self._partner("planner", res.session):
+            return
+        if res.status != React.Response.STATUS_REACTED:
+            self._end_with_error(f"the planner refused the reaction at t = {t:g} s: {wire.bounded(res.message)}")
+            return
+        self._call = None
+        for plan in res.plans:
+            self.plans_received += 1
+            if int(getattr(plan, "version", 0)) > 1:
+                self.react_versions_received += 1
+                self._fly_version(wire.scoped_id(plan.operator_id, plan.request_id), plan)
+        self.reactions_asked += 1
+        self._waiting_react = None
+        if self._blocked_since is not None:
+            self.blocked_wall_s += time.monotonic() - self._blocked_since
+            self._blocked_since = None
+        self.step_index += 1
+        if self.mode == "lockstep":
+            self._run_until_blocked()
+
     def _on_timer(self) -> None:
         if self.finished:
             return
@@ -435,9 +516,11 @@ class SimulatorNode(Node):
                 self._step_timer = self.create_timer(0.0, self._run_until_blocked)
             self._run_until_blocked()
             return
-        if self._waiting_epoch is not None and self._call is not None:
+        if (self._waiting_epoch is not None or self._waiting_react is not None) and self._call is not None:
             if now - self._wait_started > self.ack_timeout_s:
-                self._end_with_error(f"no answer for epoch {self._waiting_epoch} within {self.ack_timeout_s:g} s")
+                what = f"epoch {self._waiting_epoch}" if self._waiting_react is None else \
+                    f"the reaction at t = {self.t_s:g} s"
+                self._end_with_error(f"no answer for {what} within {self.ack_timeout_s:g} s")
             elif self._call is not None and now - self._call_sent > RESEND_S:
                 client, _fut, request, on_done = self._call
                 self._send(client, request, on_done, again=True)  # a restarted server lost the first
@@ -449,6 +532,8 @@ class SimulatorNode(Node):
         """At an epoch's step whose outcome has not arrived yet (one that arrived early is flown
         by the next step)."""
         k = self._epoch_at(self.step_index)
+        if self._waiting_react is not None and self._waiting_react == self.step_index:
+            return True
         return (k is not None and self.t_s < self.duration_s - 1e-9 and self._waiting_epoch == k
                 and self._early is None)
 
@@ -474,9 +559,19 @@ class SimulatorNode(Node):
         k = self._epoch_at(self.step_index)
         if k is not None and self.t_s < self.duration_s - 1e-9:  # epochs at t < duration, as the runner
             if self._waiting_epoch is None:
+                if self.observe_mode:
+                    # disturbed or reacting between epochs: the state of this instant (before the epoch's
+                    # departures) is published first: the planner and the monitor see the fleet
+                    # at t before the epoch, as the runner's monitor does
+                    self._publish_state()
                 self._start_epoch(k, self.t_s)
             elif self._waiting_epoch == k and self._early is not None:
                 self._fly(self._early)  # planned while the fleet was stepped here
+            return
+        if self._react_at(self.step_index) and self.t_s < self.duration_s - 1e-9:
+            if self._waiting_react is None:
+                self._publish_state()
+                self._ask_react()
             return
         self._publish_state()
         self.step_index += 1
