@@ -764,27 +764,14 @@ class PlannerNode(Node):
         is, so ``backend`` and the solver node's deadlines apply to them too. The lock is held
         while the planner computes, not while it awaits; requests arriving meanwhile are decided
         after the prepare (they wait for the next epoch, as in the in-process runner)."""
-        prep = graph = None
+        prep = None
         await self._await_stamps(t_s)   # in the reaction-between-epochs mode only
         with self._lock:
             self._read_inbox(t_s)   # issue 23: the fleet states and conformance reports received so far
             steps = self.planner.prepare_steps(t_s, k)
             self._deferred = []
         try:
-            with self._lock:
-                try:
-                    graph = next(steps)
-                except StopIteration as done:
-                    prep = done.value
-            while prep is None:
-                answer = await self._solve(graph)
-                if self.p["use_solver_service"] and not isinstance(answer, (str, BaseException)):
-                    self.replan_graphs_by_service += 1
-                with self._lock:
-                    try:
-                        graph = steps.send(answer)
-                    except StopIteration as done:
-                        prep = done.value
+            prep = await self._drive_steps(steps, "replan_graphs_by_service")
         finally:
             with self._lock:
                 deferred, self._deferred = self._deferred or [], None
@@ -857,6 +844,25 @@ class PlannerNode(Node):
             with self._lock:
                 self._react_inflight = None
 
+    async def _drive_steps(self, steps, served_counter: str):
+        """Run a planner step generator (``prepare_steps``, ``react_between_steps``) to its value:
+        each MWIS graph it yields is solved through ``_solve`` (awaited outside the lock), and
+        the attribute ``served_counter`` counts the graphs the solver service answered."""
+        with self._lock:
+            try:
+                graph = next(steps)
+            except StopIteration as done:
+                return done.value
+        while True:
+            answer = await self._solve(graph)
+            if self.p["use_solver_service"] and not isinstance(answer, (str, BaseException)):
+                setattr(self, served_counter, getattr(self, served_counter) + 1)
+            with self._lock:
+                try:
+                    graph = steps.send(answer)
+                except StopIteration as done:
+                    return done.value
+
     async def _react(self, k: int, t_s: float, key: tuple, response: React.Response):
         await self._await_stamps(t_s)
         with self._lock:
@@ -865,21 +871,7 @@ class PlannerNode(Node):
             self._deferred = []
         updates, error = None, ""
         try:
-            graph = None
-            with self._lock:
-                try:
-                    graph = next(steps)
-                except StopIteration as done:
-                    updates = done.value
-            while updates is None:
-                answer = await self._solve(graph)
-                if self.p["use_solver_service"] and not isinstance(answer, (str, BaseException)):
-                    self.between_graphs_by_service += 1
-                with self._lock:
-                    try:
-                        graph = steps.send(answer)
-                    except StopIteration as done:
-                        updates = done.value
+            updates = await self._drive_steps(steps, "between_graphs_by_service")
         except (ValueError, RuntimeError) as exc:   # the planner's own refusal: nothing changed
             error = f"react: {exc}"
         finally:
