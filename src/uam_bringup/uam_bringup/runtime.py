@@ -39,8 +39,14 @@ def init_with_stop_event(args=None):
 
     stop = threading.Event()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+
+    def on_signal(_signum, _frame) -> None:
+        if not stop.is_set():
+            stop.signalled_at = time.monotonic()  # for the clean-up's timing report
+        stop.set()
+
     for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda _signum, _frame: stop.set())
+        signal.signal(sig, on_signal)
     return stop
 
 
@@ -70,7 +76,7 @@ def flush_publishers(node, timeout_s: float) -> bool:
 
 
 def run_node(make_node, name: str, args=None, *, threads: int = 1, linger_s: float = 0.0,
-             events_executor: bool = False) -> int:
+             events_executor: bool = False, stateless: bool = False) -> int:
     """:func:`_run_node`, under cProfile when ``UAM_PROFILE_DIR`` is set (the profile of the
     main thread goes to ``$UAM_PROFILE_DIR/<name>.prof``, for ``python -m pstats``); then the
     process ends with its exit code (:func:`_exit_now`): this does not return."""
@@ -79,7 +85,7 @@ def run_node(make_node, name: str, args=None, *, threads: int = 1, linger_s: flo
     out_dir = os.environ.get("UAM_PROFILE_DIR", "")
     if not out_dir:
         code = _run_node(make_node, name, args, threads=threads, linger_s=linger_s,
-                         events_executor=events_executor)
+                         events_executor=events_executor, stateless=stateless)
     else:
         import cProfile
         from pathlib import Path
@@ -88,7 +94,7 @@ def run_node(make_node, name: str, args=None, *, threads: int = 1, linger_s: flo
         prof = cProfile.Profile()
         try:
             code = prof.runcall(_run_node, make_node, name, args, threads=threads, linger_s=linger_s,
-                                events_executor=events_executor)
+                                events_executor=events_executor, stateless=stateless)
         finally:
             prof.dump_stats(str(Path(out_dir) / f"{name}.prof"))
     _exit_now(code)
@@ -148,7 +154,7 @@ def _exit_now(code: int) -> None:
 
 
 def _run_node(make_node, name: str, args=None, *, threads: int = 1, linger_s: float = 0.0,
-              events_executor: bool = False) -> int:
+              events_executor: bool = False, stateless: bool = False) -> int:
     """The main() of a node: init, spin until the node is ``finished`` or a signal, clean up.
 
     ``make_node()`` builds the node (a ValueError or OSError from it is a configuration error,
@@ -162,13 +168,18 @@ def _run_node(make_node, name: str, args=None, *, threads: int = 1, linger_s: fl
     ``events_executor`` spins rclpy's C++ EventsExecutor instead of the
     SingleThreadedExecutor: far less overhead per message (the recorder takes ~14,000 messages
     a paper run; BENCHMARKS.md), but it does not run coroutine callbacks, so only for nodes
-    without async callbacks.
+    without async callbacks. After a signal, a watcher (:func:`_watch_stop`) prints every
+    thread's stack if the node has not ended STOP_DUMP_S later; a ``stateless`` node (nothing to
+    save: the solver) is then ended by it too, with exit code 0 and a warning naming the wait.
     """
     import rclpy
     from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
 
     report_cpu_time_at_exit(name)
     stop = init_with_stop_event(args)
+    import threading
+    threading.Thread(target=_watch_stop, args=(name, stop, stateless), daemon=True,
+                     name="uam-stop-watch").start()
     node = None
     try:
         node = make_node()
@@ -196,16 +207,76 @@ def _run_node(make_node, name: str, args=None, *, threads: int = 1, linger_s: fl
         print(f"{name}: {exc}", file=sys.stderr)
         return 2
     finally:
+        cleanup = _CleanupTimer(name, getattr(stop, "signalled_at", None))
         try:
             if node is not None:
                 try:
                     if hasattr(node, "close"):
                         node.close()
+                        cleanup.phase("close")
                 finally:
                     node.destroy_node()
+                    cleanup.phase("destroy_node")
             rclpy.try_shutdown()
+            cleanup.phase("rclpy shutdown")
         finally:
+            cleanup.done()
             _ignore_stop_signals()
+
+
+#: after a signal, a node not ended this long after it prints every thread's stack [s]; a
+#: stateless node is ended then (run_fleet.sh kills a node 10 s after its SIGINT and reports it)
+STOP_DUMP_S = 7.0
+
+
+def _watch_stop(name: str, stop, stateless: bool) -> None:
+    """The stop watcher of :func:`_run_node` (a daemon thread): waits for the signal, then
+    arms faulthandler, whose own C thread (no GIL needed) prints every thread's stack if the
+    process is still running STOP_DUMP_S after the signal; for a ``stateless`` node it then
+    ends the process itself, exit code 0, saying so. Why: in fresh-clone CI runs the solver
+    node now and then did not end within run_fleet.sh's 10 s of a SIGINT; its log ended with
+    its CPU report and no stack, so the exit handlers, which _exit_now bounds and dumps, were
+    not what hung, and which part did is not known yet (BENCHMARKS.md, fifth and sixth stops).
+    A process that ends in time prints nothing: os._exit takes this thread with it."""
+    import faulthandler
+    import os
+
+    stop.wait()
+    t_signal = getattr(stop, "signalled_at", time.monotonic())
+    try:
+        faulthandler.dump_traceback_later(max(STOP_DUMP_S - (time.monotonic() - t_signal), 0.01), exit=False)
+    except (RuntimeError, ValueError, OSError):  # no usable stderr
+        pass
+    if not stateless:
+        return
+    time.sleep(max(STOP_DUMP_S + 0.3 - (time.monotonic() - t_signal), 0.0))
+    print(f"[{name}] WARNING: not ended {time.monotonic() - t_signal:.1f} s after the stop signal "
+          f"(every thread's stack is above); this node keeps no state, so it ends now",
+          file=sys.stderr, flush=True)
+    os._exit(0)
+
+
+class _CleanupTimer:
+    """Times a node's clean-up phase by phase; after a signal it prints the phases' times (and
+    how long the spin loop took to see the signal) to stderr, so that a slow stop names its
+    phase (see :func:`_watch_stop`). A normal end prints nothing."""
+
+    def __init__(self, name: str, signalled_at: float | None):
+        self.name, self.signalled_at = name, signalled_at
+        self.t0 = self.last = time.monotonic()
+        self.phases: list[tuple[str, float]] = []
+
+    def phase(self, label: str) -> None:
+        now = time.monotonic()
+        self.phases.append((label, now - self.last))
+        self.last = now
+
+    def done(self) -> None:
+        if self.signalled_at is None:
+            return
+        parts = ", ".join(f"{label} {dt:.2f} s" for label, dt in self.phases)
+        print(f"[{self.name}] stopped by a signal: the loop ended {self.t0 - self.signalled_at:.2f} s after it; "
+              f"clean-up {self.last - self.t0:.2f} s ({parts or 'nothing to clean'})", file=sys.stderr, flush=True)
 
 
 def _ignore_stop_signals() -> None:

@@ -205,7 +205,7 @@ class SolverNode(Node):
 
 
 def main(args=None) -> int:
-    return run_node(SolverNode, "solver", args, threads=4)
+    return run_node(SolverNode, "solver", args, threads=4, stateless=True)
 
 
 if __name__ == "__main__":
