@@ -19,6 +19,9 @@
 #   --lead-time S      requests are filed S seconds before their earliest departure (default 0)
 #   --reaction B       true | false: the planner updates a nonconforming flight's intent (issue 23;
 #                      reports from the conformance monitor, checked by the planner; default false)
+#   --reaction-period S with --reaction true, the planner also reacts every S seconds between
+#                      epochs (a multiple of the simulator's step, less than the epoch; default 0:
+#                      at epochs only; docs/disturbances.md)
 #   --rate R           requests per 30 s (default 10, the paper's middle rate)
 #   --duration S       simulated seconds (default 3500)
 #   --seed N           seed of the demand and of stochastic solvers (default 0)
@@ -70,7 +73,7 @@ SPATIAL_BUFFER=0 TEMPORAL_BUFFER=0 WIND=0 WIND_FROM=270 GUST=0 SPEED_ERROR=0 DEL
 DEMAND="" CONSTRAINTS="" MODE=lockstep RTF=1 RERUN=save OUT="" FOXGLOVE_PORT=0 USS_PORT=0 RECORDER_NICE=19
 CONFORMANCE=auto
 SEPARATION="" SEPARATION_M=100 VERTICAL_M=30 SLOT_S=0 CLIMB=5 DESCENT=3
-OBJECTIVE=paper BASELINE_ORDER=arrival PRIORITY_SHARE=0 HORIZON=1 LEAD_TIME=0 COMMIT_AHEAD=false REACTION=false REPLAN_POLICY=""
+OBJECTIVE=paper BASELINE_ORDER=arrival PRIORITY_SHARE=0 HORIZON=1 LEAD_TIME=0 COMMIT_AHEAD=false REACTION=false REACTION_PERIOD=0 REPLAN_POLICY=""
 die() { echo "run_fleet: $*" >&2; exit 2; }
 while [[ $# -gt 0 ]]; do
   case "$1" in
@@ -82,6 +85,7 @@ while [[ $# -gt 0 ]]; do
     --horizon) HORIZON="${2:?--horizon needs a value}"; shift 2;;
     --commit-ahead) COMMIT_AHEAD="${2:?--commit-ahead needs a value}"; shift 2;;
     --reaction) REACTION="${2:?--reaction needs a value}"; shift 2;;
+    --reaction-period) REACTION_PERIOD="${2:?--reaction-period needs a value}"; shift 2;;
     --replan-policy) REPLAN_POLICY="${2?--replan-policy needs a value}"; shift 2;;
     --lead-time) LEAD_TIME="${2:?--lead-time needs a value}"; shift 2;;
     --rate) RATE="${2:?--rate needs a value}"; shift 2;;
@@ -146,9 +150,12 @@ for _flag in "separation-m:$SEPARATION_M" "vertical-separation-m:$VERTICAL_M" "s
              "climb-rate:$CLIMB" "descent-rate:$DESCENT" "spatial-buffer-m:$SPATIAL_BUFFER" \
              "temporal-buffer-s:$TEMPORAL_BUFFER" "wind:$WIND" "wind-from:$WIND_FROM" "gust:$GUST" \
              "speed-error:$SPEED_ERROR" "delay-mean:$DELAY_MEAN" "vertical-gust:$VERTICAL_GUST" \
-             "altitude-error:$ALTITUDE_ERROR"; do
+             "altitude-error:$ALTITUDE_ERROR" "reaction-period:$REACTION_PERIOD"; do
   [[ "${_flag#*:}" =~ ^[0-9]+(\.[0-9]+)?$ ]] || die "--${_flag%%:*}: '${_flag#*:}' is not a number >= 0"
 done
+if [[ "$REACTION" != true ]] && awk -v p="$REACTION_PERIOD" 'BEGIN { exit !(p + 0 > 0) }'; then
+  die "--reaction-period: '$REACTION_PERIOD' needs --reaction true (the planner reacts only then)"
+fi
 # as floats: ROS parameters typed double refuse an integer given on the command line
 f() { [[ "$1" == *.* ]] && echo "$1" || echo "$1.0"; }
 [[ -f "$NETWORK" ]] || die "--network: no file '$NETWORK'"
@@ -296,7 +303,7 @@ start uam_sim simulator simulator --params-file config/simulator.yaml -p "durati
   -p "disturbance_seed:=$SEED" -p "wind_speed_mps:=$(f "$WIND")" \
   -p "wind_from_deg:=$(f "$WIND_FROM")" -p "gust_std_mps:=$(f "$GUST")" -p "speed_error:=$(f "$SPEED_ERROR")" \
   -p "delay_mean_s:=$(f "$DELAY_MEAN")" -p "vertical_gust_std_mps:=$(f "$VERTICAL_GUST")" \
-  -p "altitude_error_m:=$(f "$ALTITUDE_ERROR")"
+  -p "altitude_error_m:=$(f "$ALTITUDE_ERROR")" -p "reaction_period_s:=$(f "$REACTION_PERIOD")"
 SIM_PID=${PIDS[-1]}
 T0=$SECONDS
 SIM_RC=0

@@ -162,7 +162,7 @@ def test_reaction_calls_out_of_order_from_another_session_or_outside_the_epoch_a
     and the planner goes on serving (here the caller plays the simulator)."""
     from rclpy.executors import MultiThreadedExecutor
     from uam_msgs.srv import PlanEpoch, React
-    from uam_bringup.reaction import SERVICE_REACT
+    from uam_contract.names import SERVICE_REACT
     from uam_contract import names as c
     from graph_harness import make_planner
     planner = make_planner(ros_context, backend="greedy", reaction=True, use_solver_service=False,

@@ -191,11 +191,15 @@ def test_a_killed_run_fleet_stops_every_node_and_no_node_holds_the_domain_lock(t
         assert make_reader(f).get_summary() is not None  # the recorder closed the file on SIGTERM
 
 
-def test_bad_objective_order_and_priority_share_are_refused_naming_the_flag():
-    """Issue 21: the flags are checked before any node starts."""
+def test_bad_objective_order_priority_share_and_reaction_period_are_refused_naming_the_flag():
+    """Issues 21 and 23: the flags are checked before any node starts."""
     for args, words in [(["--objective", "best"], "--objective: 'best' is not paper, count, delay, priority or fair"),
                         (["--baseline-order", "random"], "--baseline-order: 'random' is not arrival or priority"),
-                        (["--priority-share", "1.5"], "--priority-share: '1.5' is not a number in [0, 1]")]:
+                        (["--priority-share", "1.5"], "--priority-share: '1.5' is not a number in [0, 1]"),
+                        # issue 23: the reaction between epochs needs the planner's reaction on
+                        (["--reaction-period", "5"], "--reaction-period: '5' needs --reaction true"),
+                        (["--reaction", "true", "--reaction-period", "-5"],
+                         "--reaction-period: '-5' is not a number >= 0")]:
         res = subprocess.run(["bash", str(ROOT / "scripts" / "run_fleet.sh"), *args], capture_output=True,
                              text=True, timeout=60)
         assert res.returncode == 2 and words in res.stderr, (args, res.stderr)

@@ -59,7 +59,9 @@ def generate_launch_description() -> LaunchDescription:
                   "disturbance_seed": a["seed"], "wind_speed_mps": a["wind_speed_mps"],
                   "wind_from_deg": a["wind_from_deg"], "gust_std_mps": a["gust_std_mps"],
                   "speed_error": a["speed_error"], "delay_mean_s": a["delay_mean_s"],
-                  "vertical_gust_std_mps": a["vertical_gust_std_mps"], "altitude_error_m": a["altitude_error_m"]}
+                  "vertical_gust_std_mps": a["vertical_gust_std_mps"], "altitude_error_m": a["altitude_error_m"],
+                  # the reaction between epochs (issue 23; with reaction:=true)
+                  "reaction_period_s": a["reaction_period_s"]}
     # as run_fleet.sh: the recorder is not in the lockstep loop, so it runs at a lower priority
     recorder = Node(package="uam_sim", executable="recorder", name="recorder", output="screen",
                     prefix=recorder_prefix,

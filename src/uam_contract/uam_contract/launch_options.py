@@ -40,6 +40,9 @@ LAUNCH_OPTIONS: tuple[LaunchOption, ...] = (
                  "with --horizon > 1, commit the horizon's later departures now as reservations"),
     LaunchOption("--reaction", "REACTION", "reaction", "false",
                  "the planner updates a nonconforming flight's intent (reports checked against its own view)"),
+    LaunchOption("--reaction-period", "REACTION_PERIOD", "reaction_period_s", "0",
+                 "with --reaction true, the planner also reacts every this many seconds between epochs "
+                 "(a multiple of the simulator's step, less than the epoch; 0 = at epochs only)"),
     LaunchOption("--replan-policy", "REPLAN_POLICY", "replan_policy", "",
                  "re-plan of the flights a constraint update affects: mwis or firstfit; default: the policy's"),
     LaunchOption("--priority-share", "PRIORITY_SHARE", "priority_share", "0",

@@ -27,6 +27,8 @@ TOPIC_CLOCK = "/clock"
 SERVICE_SOLVE = "uam/solve_mwis"
 SERVICE_PLAN_EPOCH = "uam/plan_epoch"
 SERVICE_RELEASE_DEMAND = "uam/release_demand"
+# issue 23: the simulator asks the planner to react between epochs (uam_msgs/srv/React)
+SERVICE_REACT = "uam/react"
 # live airspace constraints (issue 22): the planner serves updates and publishes the set it plans with
 SERVICE_UPDATE_CONSTRAINT = "uam/update_constraint"
 TOPIC_CONSTRAINTS = "uam/constraints"

@@ -74,6 +74,17 @@ def test_versions_that_do_not_chain_are_named():
         "k: version 2 takes effect at 20 s, before constraint 'sq' was announced (30 s)"]
     nameless = plan(EAST, version=2, effective=50.0, kind="retimed")
     assert chain_problems("k", [v0, nameless], announced) == ["k: version 2 (retimed) names no constraint"]
+    # issue 23: the reaction to nonconformance updates a flight for what it flew, not for a
+    # constraint: it names none, and that is no problem (a constraint it does name is checked)
+    reacted = plan(EAST, version=2, effective=50.0, kind="nonconforming")
+    assert chain_problems("k", [v0, reacted], announced) == []
+    contingent = plan(EAST, version=2, effective=50.0, kind="contingency")
+    assert chain_problems("k", [v0, contingent], announced) == ["k: version 2 (contingency) names no constraint"]
+    contingent.reason = "re-timed from the observed progress rate 0.91; no conflict-free plan"
+    assert chain_problems("k", [v0, contingent], announced) == []
+    reacted_named = plan(EAST, version=2, effective=50.0, kind="nonconforming", ids=["other"])
+    assert chain_problems("k", [v0, reacted_named], announced) == [
+        "k: version 2 names constraint 'other', never announced on the constraint topic"]
 
 
 def test_flown_versions_flags_updates_without_an_approval():

@@ -12,9 +12,11 @@ effective instant of version 2, then version 2 up to that of version 3, and so o
 **Chaining** (:func:`chain_problems`): the versions of a request must be 1, 2, ..., n with no gap
 (a version n + 1 without n is a plan the recording lost, or one nobody issued), each effective
 no earlier than its predecessor, each update (n >= 2) naming at least one constraint that the
-planner announced on ``uam/constraints`` at or before it took effect, and a version that takes
-over a flight in the air must start where the flight was at that instant (to 1 mm). A
-recording that breaks any of these is NOT VERIFIED.
+planner announced on ``uam/constraints`` at or before it took effect (except an update of the
+reaction to nonconformance, issue 23, :func:`reaction_update`: the flight itself caused it, so it
+names none), and a version that takes over a flight in the air must start where the flight was
+at that instant (to 1 mm; again except a reaction update, which starts where the aircraft was).
+A recording that breaks any of these is NOT VERIFIED.
 
 **Incursions** (:func:`incursions`): every flown trajectory, from the instant each version took
 effect, against every constraint version while the planner had it in force (from the epoch it
@@ -97,6 +99,16 @@ class Flown:
         return self.versions[-1]
 
 
+def reaction_update(p: Any) -> bool:
+    """Whether plan version ``p`` is an update of the reaction to nonconformance (issue 23,
+    ``uam_planner.nonconformance``): kind ``nonconforming``, or a contingency re-timed from the
+    flight's observed progress rate (its reason says so). It starts where the aircraft was, not
+    where its plan had it, and no constraint caused it."""
+    from uam_planner.nonconformance import KIND, RATE_WORD
+
+    return str(getattr(p, "update_kind", "")) == KIND or RATE_WORD in str(getattr(p, "reason", ""))
+
+
 def chain_problems(key: str, versions: Sequence[Any], announced: dict[str, float]) -> list[str]:
     """Why the versions of one request do not chain (empty when they do); see the module docstring.
 
@@ -119,7 +131,7 @@ def chain_problems(key: str, versions: Sequence[Any], announced: dict[str, float
     for p in versions[1:]:
         ids = [str(i) for i in getattr(p, "constraint_ids", [])]
         e = effective_s(p)
-        if not ids:
+        if not ids and not reaction_update(p):
             out.append(f"{key}: version {plan_version(p)} ({getattr(p, 'update_kind', '') or 'update'}) names no "
                        "constraint")
         for cid in ids:
@@ -152,9 +164,7 @@ def flown_trajectory(key: str, versions: Sequence[Any]) -> tuple[Flown, list[str
             gap = float(np.linalg.norm(points[-1][-1] - cx[0]))
             # a nonconforming flight's update (issue 23, uam_planner.nonconformance) starts where
             # the aircraft was, not where its plan was: that gap is why it was updated
-            moved = str(getattr(p, "update_kind", "")) == "nonconforming" or \
-                "observed progress rate" in str(getattr(p, "reason", ""))
-            if gap > CONTINUITY_M and not moved:
+            if gap > CONTINUITY_M and not reaction_update(p):
                 problems.append(f"{key}: version {plan_version(p)} starts {gap:.3f} m from where version "
                                 f"{plan_version(versions[n - 1])} had the flight at {ct[0]:g} s")
             ct, cx = ct[1:], cx[1:]

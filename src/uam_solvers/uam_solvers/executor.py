@@ -199,8 +199,10 @@ class _Worker:
                 me._config["daemon"] = True
         child.close()
 
-    def warm(self, timeout_s: float = 60.0) -> None:
-        """Run the warm-up job (first-call costs) and wait for it."""
+    def warm(self, timeout_s: float = 60.0, closing=lambda: False) -> None:
+        """Run the warm-up job (first-call costs) and wait for it. A lost pipe is reported
+        unless ``closing()`` says the service is being closed: then the worker died with it
+        (a replacement warmed while the process exits), which is no fault."""
         try:
             self.conn.send("warm")
             if self.conn.poll(timeout_s):
@@ -208,7 +210,8 @@ class _Worker:
                 if reply[1]:
                     log.warning("solver worker warm-up: %s", reply[1])
         except (EOFError, OSError) as exc:
-            log.warning("solver worker warm-up failed: %s", exc)
+            if not closing():
+                log.warning("solver worker warm-up failed: %s", exc)
 
     @property
     def pid(self) -> int | None:
@@ -279,8 +282,14 @@ def _stop_workers(idle: list[_Worker], busy: list[_Worker], grace_s: float = 0.5
 _LIVE: "weakref.WeakSet[SolveService]" = weakref.WeakSet()
 
 
+#: set when the interpreter exits (before the services close): a worker lost then is no fault
+_EXITING = False
+
+
 @atexit.register
 def _close_all() -> None:
+    global _EXITING
+    _EXITING = True
     for service in list(_LIVE):
         service.close()
 
@@ -556,7 +565,7 @@ class SolveService:
                 if self._closed:
                     return
             fresh = _Worker(self._ctx, worker.lane)
-            fresh.warm()
+            fresh.warm(closing=lambda: self._closed or _EXITING)
             with self._cond:
                 if self._closed:
                     fresh.stop()

@@ -68,7 +68,7 @@ from uam_bringup import qos
 from uam_contract import wire
 from uam_bringup.journal import Journal, newest_versions
 from uam_bringup.params import declare_table
-from uam_bringup.reaction import OBSERVE_BACK_S, SERVICE_REACT, stamp_key
+from uam_bringup.reaction import OBSERVE_BACK_S, stamp_key
 from uam_contract.params import PLANNER
 from uam_solvers.nodes import param_rules
 from uam_bringup.runtime import run_node
@@ -359,7 +359,7 @@ class PlannerNode(Node):
             shared_service()
         self._service = self.create_service(PlanEpoch, c.SERVICE_PLAN_EPOCH, self._on_plan_epoch,
                                             callback_group=self._group)
-        self._react_service = self.create_service(React, SERVICE_REACT, self._on_react, callback_group=self._group)
+        self._react_service = self.create_service(React, c.SERVICE_REACT, self._on_react, callback_group=self._group)
         self.get_logger().info(f"serving {self.resolve_service_name(c.SERVICE_PLAN_EPOCH)}")
 
     # ---- live constraints (issue 22, uam_planner.live_constraints) ---------------------------

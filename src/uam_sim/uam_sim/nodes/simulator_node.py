@@ -60,7 +60,6 @@ from uam_planner.nodes import conversions as m
 from uam_bringup import qos
 from uam_contract import wire
 from uam_bringup.params import declare_table
-from uam_bringup.reaction import SERVICE_REACT
 from uam_contract.params import SIMULATOR
 from uam_bringup.runtime import run_node
 from uam_sim.cdr import encode_clock, encode_fleet_state, encode_pose_array, yaw_quaternions
@@ -116,7 +115,7 @@ class SimulatorNode(Node):
         self._plan_client = self.create_client(PlanEpoch, c.SERVICE_PLAN_EPOCH)
         self._demand_client = self.create_client(ReleaseDemand, c.SERVICE_RELEASE_DEMAND) \
             if self.p["use_demand_service"] else None
-        self._react_client = self.create_client(React, SERVICE_REACT) if self.react_steps else None
+        self._react_client = self.create_client(React, c.SERVICE_REACT) if self.react_steps else None
         self._waiting_react: int | None = None   # the step index of the reaction asked for
         self.reactions_asked = 0            # reactions between epochs answered
         self.react_versions_received = 0    # plan versions in their answers, flown from their instant
