@@ -111,3 +111,7 @@ def test_the_graph_reacts_to_a_nonconforming_flight_and_flies_its_update(ros_con
     from uam_sim.analysis import summarize
     summary = summarize(tmp_path / "run.mcap")
     assert summary.flown["what"] == "flown"
+    # the recording holds what the run did: every update chains onto its approval (a
+    # nonconformance update names no constraint, and that is right: before this was checked the
+    # analysis of every reaction run called it NOT VERIFIED)
+    assert summary.problems == [], summary.problems
