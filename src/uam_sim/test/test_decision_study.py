@@ -273,6 +273,24 @@ def test_the_study_runs_resumes_and_its_report_rebuilds_from_the_tables(tmp_path
     run_stage(dict(cfg, cells=str(tmp_path / "no-cells")), "tables", out, progress=False)
     assert {n: (out / n).read_bytes() for n in before} == before
     assert (out / "REPORT.md").read_text() == first
+    # seventh stop: cells live where they ran (not committed). The rows of an experiment (an E0
+    # run) with no cell here are kept as committed, not dropped, when the tables are rebuilt
+    # from the cells of others; the experiments with cells are recomputed from them
+    runs_before = pd.read_csv(out / "runs.csv", dtype=str, keep_default_na=False)
+    other = runs_before.assign(experiment="E9")
+    pd.concat([runs_before, other]).to_csv(out / "runs.csv", index=False)
+    win = pd.read_csv(out / "windows.csv", dtype=str, keep_default_na=False)
+    pd.concat([win, win.assign(experiment="E9")]).to_csv(out / "windows.csv", index=False)
+    e0_before = pd.read_csv(out / "e0.csv.gz", dtype=str, keep_default_na=False)
+    pd.concat([e0_before, e0_before.assign(run="zz")]).to_csv(out / "e0.csv.gz", index=False)
+    run_stage(cfg, "tables", out, progress=False)
+    runs_after = pd.read_csv(out / "runs.csv", dtype=str, keep_default_na=False)
+    assert runs_after[runs_after["experiment"] == "E9"].reset_index(drop=True).equals(
+        other.reset_index(drop=True))
+    assert runs_after[runs_after["experiment"] != "E9"].reset_index(drop=True).equals(runs_before)
+    assert (pd.read_csv(out / "windows.csv", dtype=str)["experiment"] == "E9").sum() == len(win)
+    e0_after = pd.read_csv(out / "e0.csv.gz", dtype=str, keep_default_na=False)
+    assert len(e0_after) == 2 * len(e0_before) and (e0_after["run"] == "zz").sum() == len(e0_before)
 
 
 @pytest.mark.skipif(not (COMMITTED / "REPORT.md").exists(), reason="no committed study yet")

@@ -667,6 +667,34 @@ def run_e0(cfg: dict, backends=None, progress: bool = True, compute: bool = True
 
 # -- the driver ----------------------------------------------------------------------------------
 
+def with_committed_rows(path: Path, rows: list, key: str, order: list, cells: str) -> list:
+    """``rows`` (from the cells in ``cells``) and the rows of the table at ``path`` whose ``key``
+    (an experiment; an E0 reference run) has no row in ``rows``, kept as they are (text), in
+    the config's ``order`` of the keys. Why: cells live where they ran (``results/``, not
+    committed), so a stage run on another machine, or after the cells were lost, would
+    otherwise replace the finished tables of every experiment it did not compute with nothing
+    (the cells of d3795b835634 were lost with their machine, seventh stop). A kept group is
+    named on stderr with its rows and code versions; a group with rows here replaces the
+    committed one whole (its window and its pairs come from one computation)."""
+    if not path.exists():
+        return rows
+    import pandas as pd
+    old = pd.read_csv(path, dtype=str, keep_default_na=False)
+    if key not in old.columns:
+        return rows
+    have = {str(r[key]) for r in rows}
+    kept = old[~old[key].isin(have)]
+    for value, group in kept.groupby(key, sort=False):
+        codes = ", ".join(sorted(set(group["code_version"]))) if "code_version" in group else "unrecorded"
+        print(f"decision_study: {key} {value}: no cell of it in {cells}; its {len(group)} row(s) of "
+              f"{path.name} kept as committed (code version {codes})", file=sys.stderr)
+    if not rows or kept.empty:  # one source only: its own order (a rebuild changes no byte)
+        return list(rows) + kept.to_dict("records")
+    rank = {str(v): i for i, v in enumerate(order)}
+    merged = list(rows) + kept.to_dict("records")
+    return sorted(merged, key=lambda r: rank.get(str(r[key]), len(rank)))  # stable: rows' order kept
+
+
 def pilot_seeds(cfg: dict) -> list:
     return list(range(cfg["power"]["pilot_seeds"]))
 
@@ -701,6 +729,8 @@ def run_stage(cfg: dict, stage: str, out: Path, experiments=None, backends=None,
     if stage == "e0":
         rows = run_e0(cfg, backends=backends, progress=progress, compute=compute, runs=runs,
                       stale=stale)
+        rows = with_committed_rows(out / "e0.csv.gz", rows, "run", [r["name"] for r in cfg["e0"]["runs"]],
+                                   cfg["cells"])
         write_csv(out / "e0.csv.gz", rows)
         info["e0_rows"] = len(rows)
     else:
@@ -725,6 +755,9 @@ def run_stage(cfg: dict, stage: str, out: Path, experiments=None, backends=None,
             all_entries += ent
             stale += [p for _a, _m, sw in done for p in sw.stale]
         rows, wrows = tables(cfg, all_results, all_entries)
+        names_all = [e["name"] for e in cfg["experiments"]]
+        rows = with_committed_rows(out / "runs.csv", rows, "experiment", names_all, cfg["cells"])
+        wrows = with_committed_rows(out / "windows.csv", wrows, "experiment", names_all, cfg["cells"])
         if rows or not (out / "runs.csv").exists():
             write_csv(out / "runs.csv", rows)
             write_csv(out / "windows.csv", wrows)
@@ -735,6 +768,8 @@ def run_stage(cfg: dict, stage: str, out: Path, experiments=None, backends=None,
         info["missing_at_max_seeds"] = sum(len(sw.missing) for _a, _m, sw in all_results)
         if stage == "tables":  # the finished E0 cells too
             e0_rows = run_e0(cfg, progress=False, compute=False, stale=stale)
+            e0_rows = with_committed_rows(out / "e0.csv.gz", e0_rows, "run",
+                                          [r["name"] for r in cfg["e0"]["runs"]], cfg["cells"])
             if e0_rows or not (out / "e0.csv.gz").exists():
                 write_csv(out / "e0.csv.gz", e0_rows)
             else:
