@@ -167,3 +167,47 @@ def test_a_hung_exit_handler_is_cut_off_and_named_whether_or_not_it_holds_the_gi
     assert procs["sleeping"].returncode == 7                        # the node's own exit code
     assert procs["gil_holding"].returncode == -signal.SIGALRM      # ended in the kernel
     assert took < EXIT_HANDLERS_S + 1 + 20                          # bounded (generous for load)
+
+
+HUNG_CLEANUP = """
+import sys, time
+from rclpy.node import Node
+from uam_bringup.runtime import run_node
+class Hung(Node):
+    def __init__(self):
+        super().__init__("hung_cleanup")
+        self.timer = self.create_timer(0.05, self.tick)
+    def tick(self):
+        print("spinning", flush=True)   # once: the node is in its spin loop
+        self.timer.cancel()
+    def close(self):
+        print("closing", flush=True)
+        def stuck_in_close():
+            time.sleep(60)
+        stuck_in_close()
+sys.exit(run_node(Hung, "hung_cleanup", None, stateless={stateless}))
+"""
+
+
+def test_a_stateless_node_stuck_after_a_signal_names_its_stack_and_ends_itself(ros_domain_id):
+    """Seventh stop: the solver node now and then outlived run_fleet.sh's 10 s after a SIGINT,
+    with no clue where. After a signal the runtime's watcher prints every thread's stack if the
+    node has not ended UAM_STOP_DUMP_S later (7 s; 1 s here), and a stateless node (the solver)
+    is then ended with exit code 0 and a warning; the clean-up's phases are timed and printed."""
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain_id), UAM_STOP_DUMP_S="1.0")
+    proc = subprocess.Popen([sys.executable, "-c", HUNG_CLEANUP.format(stateless=True)], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline().strip() == "spinning"
+        t0 = time.monotonic()
+        proc.send_signal(signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    took = time.monotonic() - t0
+    assert "closing" in stdout
+    assert proc.returncode == 0, (proc.returncode, stderr[-2000:])
+    assert "stuck_in_close" in stderr, stderr[-2000:]          # the stack names where it hangs
+    assert "[hung_cleanup] WARNING: not ended" in stderr and "keeps no state" in stderr
+    assert 1.0 <= took < 1.0 + 15                               # bounded (generous for load)

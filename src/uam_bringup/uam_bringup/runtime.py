@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import resource
 import sys
 import time
@@ -225,8 +226,17 @@ def _run_node(make_node, name: str, args=None, *, threads: int = 1, linger_s: fl
 
 
 #: after a signal, a node not ended this long after it prints every thread's stack [s]; a
-#: stateless node is ended then (run_fleet.sh kills a node 10 s after its SIGINT and reports it)
+#: stateless node is ended then (run_fleet.sh kills a node 10 s after its SIGINT and reports it).
+#: ``UAM_STOP_DUMP_S`` sets another value (the runtime's test uses 1 s)
 STOP_DUMP_S = 7.0
+
+
+def _stop_dump_s() -> float:
+    try:
+        value = float(os.environ.get("UAM_STOP_DUMP_S", STOP_DUMP_S))
+    except ValueError:
+        return STOP_DUMP_S
+    return value if 0.0 < value < 3600.0 else STOP_DUMP_S
 
 
 def _watch_stop(name: str, stop, stateless: bool) -> None:
@@ -243,13 +253,14 @@ def _watch_stop(name: str, stop, stateless: bool) -> None:
 
     stop.wait()
     t_signal = getattr(stop, "signalled_at", time.monotonic())
+    dump_s = _stop_dump_s()
     try:
-        faulthandler.dump_traceback_later(max(STOP_DUMP_S - (time.monotonic() - t_signal), 0.01), exit=False)
+        faulthandler.dump_traceback_later(max(dump_s - (time.monotonic() - t_signal), 0.01), exit=False)
     except (RuntimeError, ValueError, OSError):  # no usable stderr
         pass
     if not stateless:
         return
-    time.sleep(max(STOP_DUMP_S + 0.3 - (time.monotonic() - t_signal), 0.0))
+    time.sleep(max(dump_s + 0.3 - (time.monotonic() - t_signal), 0.0))
     print(f"[{name}] WARNING: not ended {time.monotonic() - t_signal:.1f} s after the stop signal "
           f"(every thread's stack is above); this node keeps no state, so it ends now",
           file=sys.stderr, flush=True)
