@@ -1163,7 +1163,8 @@ class Planner:
         active, updates, rep_ = yield from react_steps(
             t_s, epoch_index, self.active, found, self.positions, cfg,
             replan_selector(self.solve_mwis, cfg, epoch_index, t_s), self.replan_policy(), self.network,
-            fixed=[h.trajectory for k, o in self.overruns.items() if k not in mine for h in o.flights])
+            fixed=[h.trajectory for k, o in self.overruns.items() if k not in mine for h in o.flights],
+            fixed_ids=[k for k, o in self.overruns.items() if k not in mine for _h in o.flights])
         for u in updates:   # the new version is drawn from where it is: its overrun is redrawn
             self.overruns.pop(u.request_id, None)
         rep_["refused"] = refused

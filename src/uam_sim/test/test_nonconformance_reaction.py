@@ -167,7 +167,8 @@ def test_the_runner_reacts_and_off_is_todays_run():
                                  sort_keys=True, default=str)
     assert strip(off.summary) == strip(off2.summary) and off.flights == off2.flights
     kinds = [r["kind"] for r in on.replans]
-    assert kinds and set(kinds) <= {KIND, "contingency"} and on.summary["nonconforming_updates"] > 0
+    # (a neighbour re-timed so that a nonconforming flight keeps separation: "yielded")
+    assert kinds and set(kinds) <= {KIND, "contingency", "yielded"} and on.summary["nonconforming_updates"] > 0
     assert on.summary["conf_conformance_percent"] > off.summary["conf_conformance_percent"]
     assert on.summary["conf_longest_excursion_s"] < off.summary["conf_longest_excursion_s"]
     # every update is a new version of a flight the run approved, decided at an epoch
@@ -426,3 +427,43 @@ def test_on_a_path_that_comes_back_over_itself_a_late_flight_is_held_from_its_fi
     assert held.arrival_s == pytest.approx(320.0)
     rejoin = rejoin_trajectory(back, 170.0, (500.0, 0.0, 50.0), 1.0)
     assert rejoin.arrival_s == pytest.approx(220.0)
+
+
+def test_a_neighbour_yields_so_that_a_nonconforming_flight_keeps_separation():
+    """Seventh stop (uam_planner.nonconformance.YIELD_SHARES): each of P's five updates meets
+    one crossing flight at m, so alone P would be a contingency (flown, not deconflicted). Its
+    least-conflicting update (0.99 of the planned speed, the soonest to land) meets only Q3;
+    Q3, airborne and conforming, yields: 10 % faster from where its plan is at the epoch, it is
+    at m 17.6 s before P, 129.5 m at their closest; P's update is deconflicted, nobody loses
+    separation."""
+    from uam_planner.nonconformance import KIND_YIELD
+    flown = fly(P.trajectory, FlightDraws(), HEAD_WIND)
+    # P's updates from (1080, 0) at 120 s reach m at 120 + 1920 / v, v = 9 x (1, 1.1, 0.9, 0.8, 0.7)
+    at_m = [120.0 + 1920.0 / (9.0 * s) for s in (1.1, 1.0, 0.9, 0.8, 0.7)]
+    # one northbound flight on S - m - N at m at each of those instants (Q's own is the second)
+    qs = [flight(f"Q{k}", ["S", "m", "N"], [(3000, -3000, 0), (3000, 0, 0), (3000, 3000, 0)], t - 300.0)
+          for k, t in enumerate(at_m)]
+    p = Planner(cross(), PlanningConfig(conformance=ConformanceBounds()), "mwis", solve_mwis=None)
+    p.restore([P, *qs])
+    _observe(p, flown, (100.0, 110.0, 120.0))
+    assert p.report_nonconforming("P", 101.0) is None
+    res = p.plan(120.0, 4)
+    by = {u.request_id: u for u in res.plan_updates}
+    assert set(by) == {"P", "Q0"}
+    assert by["P"].kind == KIND and not by["P"].flight.contingent
+    assert by["P"].flight.trajectory.position_at(at_m[0]) == pytest.approx([3000.0, 0.0, 0.0])
+    q0 = by["Q0"]
+    assert q0.kind == KIND_YIELD and q0.version == 2 and q0.effective_s == 120.0
+    assert q0.observed_rate == 0.0 and "speed x1.1" in q0.reason and "P" in q0.reason
+    # re-timed from where its plan is at 120 s (3000, -1939.4), 11 m/s: chains onto its plan
+    new_q = q0.flight.trajectory
+    assert new_q.points_m[0] == pytest.approx(qs[0].trajectory.position_at(120.0))
+    t_q = 120.0 + (3000.0 - (120.0 - (at_m[0] - 300.0)) * 10.0) / 11.0
+    assert new_q.position_at(t_q) == pytest.approx([3000.0, 0.0, 0.0])
+    newest = [f.trajectory for f in p.active]
+    assert sorted((f.request_id, f.version) for f in p.active) == \
+        [("P", 2), ("Q0", 2), ("Q1", 1), ("Q2", 1), ("Q3", 1), ("Q4", 1)]
+    a = audit_flights(newest, separation_m=100.0)
+    dt = at_m[0] - t_q
+    assert a.losses == [] and a.min_separation_m == pytest.approx(dt * 9.9 * 11.0 / math.hypot(9.9, 11.0), abs=0.5)
+    assert res.report.nonconformance["kinds"] == {KIND: 1, KIND_YIELD: 1}

@@ -14,7 +14,8 @@ effective instant of version 2, then version 2 up to that of version 3, and so o
 no earlier than its predecessor, each update (n >= 2) naming at least one constraint that the
 planner announced on ``uam/constraints`` at or before it took effect (except an update of the
 reaction to nonconformance, issue 23, :func:`reaction_update`: the flight itself caused it, so it
-names none), and a version that takes over a flight in the air must start where the flight was
+names none; nor does a neighbour re-timed so that a nonconforming flight keeps separation,
+``yielded``), and a version that takes over a flight in the air must start where the flight was
 at that instant (to 1 mm; again except a reaction update, which starts where the aircraft was).
 A recording that breaks any of these is NOT VERIFIED.
 
@@ -99,6 +100,9 @@ class Flown:
         return self.versions[-1]
 
 
+from uam_planner.nonconformance import KIND_YIELD  # noqa: E402  (a neighbour yields: no constraint)
+
+
 def reaction_update(p: Any) -> bool:
     """Whether plan version ``p`` is an update of the reaction to nonconformance (issue 23,
     ``uam_planner.nonconformance``): kind ``nonconforming``, or a contingency re-timed from the
@@ -131,7 +135,7 @@ def chain_problems(key: str, versions: Sequence[Any], announced: dict[str, float
     for p in versions[1:]:
         ids = [str(i) for i in getattr(p, "constraint_ids", [])]
         e = effective_s(p)
-        if not ids and not reaction_update(p):
+        if not ids and not reaction_update(p) and str(getattr(p, "update_kind", "")) != KIND_YIELD:
             out.append(f"{key}: version {plan_version(p)} ({getattr(p, 'update_kind', '') or 'update'}) names no "
                        "constraint")
         for cid in ids:

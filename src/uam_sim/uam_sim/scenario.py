@@ -163,6 +163,26 @@ def _apply_reaction_updates(updates, by_id, reaction, replans, t) -> None:
                             "version": u.version, "constraints": "",
                             "added_delay_s": u.added_delay_s, "airborne": True})
 
+def _apply_disturbed_updates(updates, by_id, reaction, replans, t) -> None:
+    """One batch of plan updates of a disturbed run with the reaction on (an epoch's, a reaction
+    between epochs, one after the end): the reaction's updates fly on from where each aircraft is
+    (:func:`_apply_reaction_updates`); every other one (a constraint re-plan, a neighbour that
+    yields to a nonconforming flight: ``uam_planner.nonconformance.KIND_YIELD``) replaces the
+    row's plan from its effective instant and the spliced plan is flown again, as the simulator
+    node flies it."""
+    from .disturbance import fly_plans
+    _apply_reaction_updates(updates, by_id, reaction, replans, t)
+    _apply_plan_updates([u for u in updates if not _is_reaction(u)], by_id, replans, t)
+    for u in updates:   # a re-plan that is not the reaction's: what flies changes now
+        row = by_id.get(u.request_id)
+        if row is None or _is_reaction(u) or row.get("cancelled") or "_flown" not in row:
+            continue
+        if row.get("_t0") is not None:
+            reaction.refly(row)
+        else:
+            row["_flown"] = fly_plans([row["_traj"]], [row["request_id"]], reaction.dcfg, reaction.wind)[0]
+
+
 def _is_reaction(u) -> bool:
     """A plan update of the reaction to nonconformance (``uam_planner.nonconformance``)."""
     return u.flight is not None and str(u.flight.method).startswith("nonconforming")
@@ -238,7 +258,7 @@ class _Reaction:
                     continue
                 self.planner.observe(row["request_id"], tk, fl.position_at(tk))
                 self._report(row, fl, tk, self.period_s)
-            _apply_reaction_updates(self.planner.react_between(tk, epoch_index), by_id, self, replans, tk)
+            _apply_disturbed_updates(self.planner.react_between(tk, epoch_index), by_id, self, replans, tk)
             k += 1
 
     def apply(self, u, row, rate: float) -> None:
@@ -427,17 +447,7 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
         held_ids.update(res.report.overruns)
         if res.plan_updates:
             if reaction is not None:
-                _apply_reaction_updates(res.plan_updates, by_id, reaction, replans, t)
-                _apply_plan_updates([u for u in res.plan_updates if not _is_reaction(u)], by_id,
-                                    replans, t)
-                for u in res.plan_updates:   # a constraint re-plan: what flies changes now
-                    row = by_id.get(u.request_id)
-                    if row is None or _is_reaction(u) or row.get("cancelled") or "_flown" not in row:
-                        continue
-                    if row.get("_t0") is not None:
-                        reaction.refly(row)
-                    else:
-                        row["_flown"] = fly_plans([row["_traj"]], [row["request_id"]], dcfg, wind)[0]
+                _apply_disturbed_updates(res.plan_updates, by_id, reaction, replans, t)
             else:
                 _apply_plan_updates(res.plan_updates, by_id, replans, t)
         if observer is not None:
@@ -495,8 +505,7 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
             reaction.before_epoch(t, flights)
             res = planner.plan(t, e)
             held_ids.update(res.report.overruns)
-            _apply_reaction_updates(res.plan_updates, by_id, reaction, replans, t)
-            _apply_plan_updates([u for u in res.plan_updates if not _is_reaction(u)], by_id, replans, t)
+            _apply_disturbed_updates(res.plan_updates, by_id, reaction, replans, t)
             if between:
                 reaction.between(t, t + cfg.epoch_s, flights, e, by_id, replans)
             e += 1
@@ -533,6 +542,8 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
     flown_summary = _flown_summary(flown, cfg, dcfg) if disturbed else {}
     if flown_summary:
         flown_summary["replans"] = len(replans)
+        if cfg.reaction:   # flights re-timed so that a nonconforming one keeps separation
+            flown_summary["reaction_yields"] = sum(1 for r in replans if r["kind"] == "yielded")
         flown_summary["held_past_plan"] = len(held_ids)
     for f in flights:
         del f["_traj"]

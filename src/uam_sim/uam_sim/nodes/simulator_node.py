@@ -432,7 +432,20 @@ class SimulatorNode(Node):
                 from uam_planner.replanning import spliced
                 new = spliced(self._plan_trajs[key], m.trajectory_from_plan(plan), m.from_time(plan.effective_time))
                 self._plan_trajs[key] = new
-                self.fleet.replace(key, fly_plans([new], [key], self.disturbance, self.wind)[0])
+                if key in self._speed_errors and self.fleet.flown(key) is not None:
+                    # updated by the reaction before: flown on from that update (its start) with
+                    # the speed error it left, what flew before kept (the runner's _Reaction.refly)
+                    import numpy as np
+                    from uam_planner.trajectory import Trajectory
+                    from uam_sim.disturbance import FlightDraws, fly_batch
+                    old = self.fleet.flown(key)
+                    cont = fly_batch([new], [FlightDraws(self._speed_errors[key], 0.0)], self.disturbance,
+                                     self.wind)[0]
+                    keep = old.times_s < new.departure_s - 1e-9
+                    self.fleet.replace(key, Trajectory(np.concatenate((old.times_s[keep], cont.times_s)),
+                                                       np.concatenate((old.points_m[keep], cont.points_m))))
+                else:
+                    self.fleet.replace(key, fly_plans([new], [key], self.disturbance, self.wind)[0])
                 self._flying[key] = plan
                 self.flown_plans.append(plan)
             elif plan.outcome == FlightPlan.OUTCOME_APPROVED and plan.waypoints:
