@@ -416,11 +416,14 @@ def _neighbour_alternatives(f, t_eff: float, config, network) -> list:
                         2.0 + 1.0 / (1.0 + d / DELAY_SCALE_S), f"departure {d:+g} s"))
         airborne = False
     else:                                            # in the air: the rest of its plan re-timed
+        from .replanning import spliced
         q = tr0.position_at(t_eff)
         for share in YIELD_SHARES:
-            tr = rejoin_trajectory(tr0, t_eff, q, share)
-            if tr is None or tr.arrival_s <= t_eff:
+            rest = rejoin_trajectory(tr0, t_eff, q, share)
+            if rest is None or rest.arrival_s <= t_eff:
                 continue
+            tr = spliced(tr0, rest, t_eff)           # its plan up to t_eff, then the rest re-timed
+            # (so the version keeps its departure, as a constraint re-plan's does)
             delay = max(0.0, tr.arrival_s - tr0.arrival_s)
             out.append((tr, 2.0 + 1.0 / (1.0 + delay / DELAY_SCALE_S), f"speed x{share:g} from t = {t_eff:g} s"))
         airborne = True
@@ -545,8 +548,8 @@ def react_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict, b
         policy: "mwis" or "firstfit".
         fixed: more trajectories every update is deconflicted against (the overruns of other
             flights, :func:`overruns`).
-        fixed_ids: the request id of each of ``fixed`` (a flight held past its plan does not
-            yield: its projections stay where its observations put them).
+        fixed_ids: the request id of each of ``fixed`` (a flight held past its plan may yield:
+            its own projections do not block its moves, but stay while it keeps its plan).
     Returns: (new active list: the others in their order, then the new versions; PlanUpdate per
     flight in ``active`` order; a report dict: flights, alternatives, vertices, edges, kinds).
     """

@@ -455,9 +455,12 @@ def test_a_neighbour_yields_so_that_a_nonconforming_flight_keeps_separation():
     q0 = by["Q0"]
     assert q0.kind == KIND_YIELD and q0.version == 2 and q0.effective_s == 120.0
     assert q0.observed_rate == 0.0 and "speed x1.1" in q0.reason and "P" in q0.reason
-    # re-timed from where its plan is at 120 s (3000, -1939.4), 11 m/s: chains onto its plan
+    # re-timed from where its plan is at 120 s (3000, -1939.4), 11 m/s: its plan up to then
+    # (the same departure), the rest 10 % faster
     new_q = q0.flight.trajectory
-    assert new_q.points_m[0] == pytest.approx(qs[0].trajectory.position_at(120.0))
+    assert q0.flight.departure_s == qs[0].departure_s == new_q.departure_s
+    assert new_q.position_at(120.0) == pytest.approx(qs[0].trajectory.position_at(120.0))
+    assert new_q.position_at(60.0) == pytest.approx(qs[0].trajectory.position_at(60.0))
     t_q = 120.0 + (3000.0 - (120.0 - (at_m[0] - 300.0)) * 10.0) / 11.0
     assert new_q.position_at(t_q) == pytest.approx([3000.0, 0.0, 0.0])
     newest = [f.trajectory for f in p.active]
