@@ -170,7 +170,7 @@ def test_a_hung_exit_handler_is_cut_off_and_named_whether_or_not_it_holds_the_gi
 
 
 HUNG_CLEANUP = """
-import sys, time
+import sys, threading
 from rclpy.node import Node
 from uam_bringup.runtime import run_node
 class Hung(Node):
@@ -183,7 +183,7 @@ class Hung(Node):
     def close(self):
         print("closing", flush=True)
         def stuck_in_close():
-            time.sleep(60)
+            threading.Event().wait()   # never set: hangs until the watcher ends the process
         stuck_in_close()
 sys.exit(run_node(Hung, "hung_cleanup", None, stateless={stateless}))
 """

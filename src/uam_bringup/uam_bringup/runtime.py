@@ -249,7 +249,6 @@ def _watch_stop(name: str, stop, stateless: bool) -> None:
     not what hung, and which part did is not known yet (BENCHMARKS.md, fifth and sixth stops).
     A process that ends in time prints nothing: os._exit takes this thread with it."""
     import faulthandler
-    import os
 
     stop.wait()
     t_signal = getattr(stop, "signalled_at", time.monotonic())

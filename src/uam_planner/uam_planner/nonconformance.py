@@ -614,8 +614,8 @@ def react_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict, b
             [chosen[r][0] for r in sorted(chosen)], config, select, policy, network, report)
         chosen.update(saved)
         report["yield_saved"], report["yield_moved"] = len(saved), len(moved)
-    others = [moved_flight(f, moved[j], t_eff, epoch_index, policy, backend) if j in moved else f
-              for j, f in enumerate(active) if j not in found]
+    yielded = {j: moved_flight(active[j], moved[j], t_eff, epoch_index, policy, backend) for j in moved}
+    others = [yielded.get(j, f) for j, f in enumerate(active) if j not in found]
     updates, new_versions = [], []
     for r, i in enumerate(idx):
         f = active[i]
@@ -644,8 +644,7 @@ def react_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict, b
         new_versions.append(nf)
         report["kinds"][kind] = report["kinds"].get(kind, 0) + 1
     for j in sorted(moved):                           # the neighbours that yield
-        f, (tr, _w, how) = active[j], moved[j]
-        nf = moved_flight(f, moved[j], t_eff, epoch_index, policy, backend)
+        f, nf, how = active[j], yielded[j], moved[j][2]
         saved_ids = ", ".join(active[idx[r]].request_id for r in sorted(saved))
         updates.append(ReactionUpdate(f.request_id, f.operator_id, nf.version, KIND_YIELD, (),
                                       f"{KIND_YIELD}: {how} so that the nonconforming {saved_ids} "

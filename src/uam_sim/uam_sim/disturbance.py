@@ -385,11 +385,19 @@ def fly_on(flown: Trajectory, new_plan: Trajectory, speed_error: float, rate: fl
     aircraft's speed error against the new plan is (1 + e) / rate - 1. Returns (the flown
     track, that speed error, to be used for the next update of the same flight)."""
     e_new = (1.0 + float(speed_error)) / float(rate) - 1.0
-    t0 = float(new_plan.departure_s)
-    cont = fly_batch([new_plan], [FlightDraws(e_new, 0.0)], config, wind)[0]
+    return fly_from(flown, new_plan, e_new, config, wind), e_new
+
+
+def fly_from(flown: Trajectory, plan: Trajectory, speed_error: float, config: DisturbanceConfig,
+             wind: WindField | None = None) -> Trajectory:
+    """``flown`` up to ``plan``'s start, then the model flying ``plan`` from its first point with
+    ``speed_error`` and no departure delay (:func:`fly_on`; a re-plan of a flight a
+    nonconforming update moved before, flown on from that update by the runner and the node)."""
+    t0 = float(plan.departure_s)
+    cont = fly_batch([plan], [FlightDraws(speed_error, 0.0)], config, wind)[0]
     keep = flown.times_s < t0 - 1e-9
-    return (Trajectory(np.concatenate((flown.times_s[keep], cont.times_s)),
-                       np.concatenate((flown.points_m[keep], cont.points_m))), e_new)
+    return Trajectory(np.concatenate((flown.times_s[keep], cont.times_s)),
+                      np.concatenate((flown.points_m[keep], cont.points_m)))
 
 
 #: simulator parameter -> DisturbanceConfig field (uam_contract.params.SIMULATOR)

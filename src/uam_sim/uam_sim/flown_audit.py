@@ -44,6 +44,7 @@ from typing import Any, Iterable, Sequence
 import numpy as np
 
 from uam_contract.stamps import stamp_s
+from uam_planner.nonconformance import KIND, KIND_YIELD, RATE_WORD
 
 #: a version taking over a flight in the air must start within this of where the flight was [m]
 CONTINUITY_M = 1e-3
@@ -100,16 +101,11 @@ class Flown:
         return self.versions[-1]
 
 
-from uam_planner.nonconformance import KIND_YIELD  # noqa: E402  (a neighbour yields: no constraint)
-
-
 def reaction_update(p: Any) -> bool:
     """Whether plan version ``p`` is an update of the reaction to nonconformance (issue 23,
     ``uam_planner.nonconformance``): kind ``nonconforming``, or a contingency re-timed from the
     flight's observed progress rate (its reason says so). It starts where the aircraft was, not
     where its plan had it, and no constraint caused it."""
-    from uam_planner.nonconformance import KIND, RATE_WORD
-
     return str(getattr(p, "update_kind", "")) == KIND or RATE_WORD in str(getattr(p, "reason", ""))
 
 
@@ -135,7 +131,7 @@ def chain_problems(key: str, versions: Sequence[Any], announced: dict[str, float
     for p in versions[1:]:
         ids = [str(i) for i in getattr(p, "constraint_ids", [])]
         e = effective_s(p)
-        if not ids and not reaction_update(p) and str(getattr(p, "update_kind", "")) != KIND_YIELD:
+        if not ids and not (reaction_update(p) or str(getattr(p, "update_kind", "")) == KIND_YIELD):
             out.append(f"{key}: version {plan_version(p)} ({getattr(p, 'update_kind', '') or 'update'}) names no "
                        "constraint")
         for cid in ids:

@@ -279,14 +279,9 @@ class _Reaction:
     def refly(self, row) -> None:
         """After a constraint re-plan of a row the reaction changed before: fly its spliced plan
         from the last nonconforming update on."""
-        from .disturbance import FlightDraws, fly_batch
-        from uam_planner.trajectory import Trajectory
-        t0 = row["_t0"]
-        fl = row["_flown"]
-        cont = fly_batch([row["_traj"]], [FlightDraws(row["_e"], 0.0)], self.dcfg, self.wind)[0]
-        keep = fl.times_s < t0 - 1e-9
-        row["_flown"] = Trajectory(np.concatenate((fl.times_s[keep], cont.times_s)),
-                                   np.concatenate((fl.points_m[keep], cont.points_m)))
+        from .disturbance import fly_from
+        # (the spliced plan starts where that update did: at row["_t0"])
+        row["_flown"] = fly_from(row["_flown"], row["_traj"], row["_e"], self.dcfg, self.wind)
         row["_pieces"][-1] = (row["_pieces"][-1][0], row["_traj"])
 
 

@@ -435,15 +435,9 @@ class SimulatorNode(Node):
                 if key in self._speed_errors and self.fleet.flown(key) is not None:
                     # updated by the reaction before: flown on from that update (its start) with
                     # the speed error it left, what flew before kept (the runner's _Reaction.refly)
-                    import numpy as np
-                    from uam_planner.trajectory import Trajectory
-                    from uam_sim.disturbance import FlightDraws, fly_batch
-                    old = self.fleet.flown(key)
-                    cont = fly_batch([new], [FlightDraws(self._speed_errors[key], 0.0)], self.disturbance,
-                                     self.wind)[0]
-                    keep = old.times_s < new.departure_s - 1e-9
-                    self.fleet.replace(key, Trajectory(np.concatenate((old.times_s[keep], cont.times_s)),
-                                                       np.concatenate((old.points_m[keep], cont.points_m))))
+                    from uam_sim.disturbance import fly_from
+                    self.fleet.replace(key, fly_from(self.fleet.flown(key), new, self._speed_errors[key],
+                                                     self.disturbance, self.wind))
                 else:
                     self.fleet.replace(key, fly_plans([new], [key], self.disturbance, self.wind)[0])
                 self._flying[key] = plan
