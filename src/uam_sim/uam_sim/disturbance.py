@@ -301,8 +301,12 @@ def fly_batch(plans: Sequence[Trajectory], draws: Sequence[FlightDraws], config:
     decay = math.exp(-k * dt)
     gain = (1.0 - decay) / k
     rows = np.arange(n)
-    out_t: list[list[float]] = [[] for _ in range(n)]
-    out_p: list[list[np.ndarray]] = [[] for _ in range(n)]
+    # Samples are recorded a step at a time as (rows, times, positions) arrays and split per
+    # flight at the end: a per-row Python append was most of this function's time (profiled on
+    # a 900 s Monte-Carlo run, BENCHMARKS.md "eighth stop").
+    rec_r: list[np.ndarray] = []
+    rec_t: list[np.ndarray] = []
+    rec_p: list[np.ndarray] = []
     active = np.ones(n, dtype=bool)
     steady = wind.steady
     min_share = MIN_GROUND_SPEED_SHARE
@@ -314,9 +318,9 @@ def fly_batch(plans: Sequence[Trajectory], draws: Sequence[FlightDraws], config:
         pos[:, :2] += off[r]
         if vertical:
             pos[:, 2] += hoff[r]
-        for j, row in enumerate(r.tolist()):
-            out_t[row].append(float(t[row]))
-            out_p[row].append(pos[j])
+        rec_r.append(r)
+        rec_t.append(t[r])
+        rec_p.append(pos)
         done = s[r] >= length[r]
         if done.any():
             active[r[done]] = False
@@ -365,7 +369,12 @@ def fly_batch(plans: Sequence[Trajectory], draws: Sequence[FlightDraws], config:
         step = np.maximum(step, 1e-6)  # strictly increasing sample times
         s[r] = np.where(last, length[r], s_new)
         t[r] = t[r] + step
-    return [Trajectory(np.array(out_t[i]), np.array(out_p[i])) for i in range(n)]
+    all_r = np.concatenate(rec_r)
+    order = np.argsort(all_r, kind="stable")        # per flight, in time order
+    all_t = np.concatenate(rec_t)[order]
+    all_p = np.concatenate(rec_p)[order]
+    cuts = np.cumsum(np.bincount(all_r, minlength=n))[:-1]
+    return [Trajectory(ts, ps) for ts, ps in zip(np.split(all_t, cuts), np.split(all_p, cuts))]
 
 
 def fly_plans(plans: Sequence[Trajectory], flight_ids: Sequence[str], config: DisturbanceConfig,

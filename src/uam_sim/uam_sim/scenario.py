@@ -221,13 +221,16 @@ class _Reaction:
         began: the first nonconforming one, if any, is reported to the planner."""
         from .conformance import conforming, deviations
         ts, ps = fl.times_s, fl.points_m
-        sel = (ts > t - window_s) & (ts <= t) & (ts > row.get("_t0", -math.inf))
-        if not sel.any():
+        # the window by bisection (times strictly increasing: Trajectory checks it); a mask over
+        # the whole track was a fifth of a Monte-Carlo run's time (BENCHMARKS.md, eighth stop)
+        lo = max(t - window_s, row.get("_t0", -math.inf))
+        i0, i1 = np.searchsorted(ts, lo, side="right"), np.searchsorted(ts, t, side="right")
+        if i1 <= i0:
             return
-        lat, ver, terr = deviations(row["_traj"], ts[sel], ps[sel])
+        lat, ver, terr = deviations(row["_traj"], ts[i0:i1], ps[i0:i1])
         bad = np.flatnonzero(~conforming(lat, ver, terr, self.bounds))
         if bad.size:
-            self.planner.report_nonconforming(row["request_id"], float(ts[sel][bad[0]]), "runner monitor")
+            self.planner.report_nonconforming(row["request_id"], float(ts[i0 + bad[0]]), "runner monitor")
 
     def before_epoch(self, t: float, rows) -> None:
         for row in rows:
