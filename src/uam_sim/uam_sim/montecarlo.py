@@ -42,7 +42,7 @@ COLUMNS = ("speed_error", "spatial_buffer_m", "temporal_buffer_s", "reaction", "
            "nonconforming_flights", "replans", "flown_losses", "flown_min_separation_m",
            "planned_losses", "nonconforming_updates", "reaction_contingencies", "held_past_plan",
            "approval_ci95_low", "approval_ci95_high", "flown_losses_per_flight_upper95",
-           "planned_losses_deconflicted", "flown_losses_with_contingency")
+           "planned_losses_deconflicted", "flown_losses_with_contingency", "flown_losses_near_vertiport")
 
 
 def spread_ci95(values) -> tuple[float, float]:
@@ -148,7 +148,12 @@ def aggregate(point: tuple, cells: list[dict]) -> dict:
             # for every run: cells from before the count, or more losses than listed)
             "flown_losses_with_contingency": (sum(x["flown_losses_with_contingency"] for x in s)
                                               if all(x.get("flown_losses_with_contingency") is not None
-                                                     for x in s) else None)}
+                                                     for x in s) else None),
+            # of the flown losses, those near a vertiport both flights use (None: not known for
+            # every run), scenario.VERTIPORT_AREA_M
+            "flown_losses_near_vertiport": (sum(x["flown_losses_near_vertiport"] for x in s)
+                                            if all(x.get("flown_losses_near_vertiport") is not None
+                                                   for x in s) else None)}
 
 
 def run(args) -> list[dict]:
@@ -193,8 +198,9 @@ def run(args) -> list[dict]:
 def format_table(rows: list[dict]) -> str:
     head = ("| speed error | buffer m | buffer s | reaction | runs | flights | approval | conformance | "
             "exc/h | longest exc s | updates | flown losses | flown min sep m | planned losses | "
-            "of which deconflicted | approval 95 % CI (runs) | flown losses / flight, 95 % upper |")
-    out = [head, "|" + "---|" * 17]
+            "of which deconflicted | approval 95 % CI (runs) | flown losses / flight, 95 % upper | "
+            "flown losses near a vertiport |")
+    out = [head, "|" + "---|" * 18]
     for r in rows:
         ms = r["flown_min_separation_m"]
         lo, hi = r.get("approval_ci95_low", math.nan), r.get("approval_ci95_high", math.nan)
@@ -207,7 +213,8 @@ def format_table(rows: list[dict]) -> str:
                    f"{r['longest_excursion_s']:.0f} | {r['nonconforming_updates']} | {r['flown_losses']} | "
                    f"{'-' if ms is None else f'{ms:.1f}'} | {r['planned_losses']} | "
                    f"{r.get('planned_losses_deconflicted', r['planned_losses'])} | {ci} | "
-                   f"{'-' if not math.isfinite(up) else f'{up:.4f}'} |")
+                   f"{'-' if not math.isfinite(up) else f'{up:.4f}'} | "
+                   f"{'-' if r.get('flown_losses_near_vertiport') is None else r['flown_losses_near_vertiport']} |")
     return "\n".join(out)
 
 

@@ -318,6 +318,25 @@ def planned_pieces(row, kinds: bool = False) -> list:
     return out
 
 
+#: a flown loss counts as "near a vertiport" when both aircraft are within this horizontal
+#: distance [m] of a vertiport (a first or last point of a track) that both flights use:
+#: twice the paper's 100 m separation, the area where one departs or lands beside the other
+VERTIPORT_AREA_M = 200.0
+
+
+def near_shared_vertiport(a, b, t: float, radius_m: float) -> bool:
+    """True when flown tracks ``a`` and ``b`` share a vertiport (an end point of one within
+    1 m horizontally of an end point of the other) and at ``t`` both are within ``radius_m``
+    of it horizontally."""
+    pa, pb = a.position_at(t, clamp=True)[:2], b.position_at(t, clamp=True)[:2]
+    for va in (a.points_m[0, :2], a.points_m[-1, :2]):
+        for vb in (b.points_m[0, :2], b.points_m[-1, :2]):
+            if math.dist(va, vb) <= 1.0 and math.dist(pa, va) <= radius_m \
+                    and math.dist(pb, va) <= radius_m:
+                return True
+    return False
+
+
 def _flown_summary(flights: list, cfg: ExperimentConfig, dcfg) -> dict:
     """What flew (issue 23): the exact audit of the flown tracks in the true minimum
     (:func:`uam_sim.flown.flown_audit`) and the F3548 conformance statistics of the run."""
@@ -344,6 +363,13 @@ def _flown_summary(flights: list, cfg: ExperimentConfig, dcfg) -> dict:
         out["nonconforming_updates"] = sum(1 for f in flights if f.get("_pieces"))
         out["reaction_contingencies"] = sum(1 for f in flights if f.get("replan") == "contingency"
                                             and f.get("_pieces"))
+    # where the flown losses are: near a vertiport both flights use (where no airborne buffer
+    # reaches: the synthetic city's vertiports are single points, no pads) or en route
+    pairs = audit.get("loss_pairs") or []
+    out["flown_losses_near_vertiport"] = sum(
+        1 for a, b, _d, t in pairs
+        if near_shared_vertiport(tracks[a], tracks[b], float(t), VERTIPORT_AREA_M)) \
+        if len(pairs) == audit["losses"] else None
     return out
 
 
