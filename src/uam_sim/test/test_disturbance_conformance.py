@@ -243,18 +243,23 @@ def test_flown_closest_approach_on_hand_tracks():
 
 def test_a_flown_loss_is_placed_near_a_shared_vertiport_or_en_route():
     from uam_sim.scenario import VERTIPORT_AREA_M, near_shared_vertiport
-    # A lands at the vertiport V = (0, 0): from (1000, 0) at t = 0 to V at t = 100 (10 m/s).
-    # B departs V at t = 90 northwards at 10 m/s: at t = 95 A is at x = 50, B at y = 50, both
-    # within 200 m of V, which both use: near the vertiport.
-    a = Trajectory(np.array([0.0, 100.0]), np.array([[1000.0, 0, 0], [0.0, 0, 0]]))
+    # A lands at the vertiport V = (0, 0): from (1000, 0) at t = 0 to V at t = 100 (10 m/s),
+    # its flown track ending 15 m off V (drift). B departs V at t = 90 northwards at 10 m/s:
+    # at t = 95 A is at x = 50 (about), B at y = 50, both within 200 m of V, which both plans
+    # use: near the vertiport.
+    a = Trajectory(np.array([0.0, 100.0]), np.array([[1000.0, 0, 0], [0.0, 15, 0]]))
     b = Trajectory(np.array([90.0, 190.0]), np.array([[0.0, 0, 0], [0.0, 1000, 0]]))
+    ends_a, ends_b = [(1000.0, 0.0), (0.0, 0.0)], [(0.0, 0.0), (0.0, 1000.0)]
     assert VERTIPORT_AREA_M == 200.0
-    assert near_shared_vertiport(a, b, 95.0, VERTIPORT_AREA_M)
+    assert near_shared_vertiport(a, b, 95.0, VERTIPORT_AREA_M, ends_a, ends_b)
+    # the flown end points alone (15 m apart) would not tell: the plans' ends are what count
+    assert not near_shared_vertiport(a, b, 95.0, VERTIPORT_AREA_M, [(0.0, 15.0)], ends_b)
     # at t = 60 A is 400 m out (B not yet flying: clamped at V): not near
-    assert not near_shared_vertiport(a, b, 60.0, VERTIPORT_AREA_M)
-    # C flies past V's area on a track of its own (no shared end point): en route
+    assert not near_shared_vertiport(a, b, 60.0, VERTIPORT_AREA_M, ends_a, ends_b)
+    # C flies past V's area between vertiports of its own: en route
     c = Trajectory(np.array([0.0, 100.0]), np.array([[-500.0, 50, 0], [500.0, 50, 0]]))
-    assert not near_shared_vertiport(a, c, 95.0, VERTIPORT_AREA_M)
+    assert not near_shared_vertiport(a, c, 95.0, VERTIPORT_AREA_M, ends_a,
+                                     [(-500.0, 50.0), (500.0, 50.0)])
 
 
 def test_a_kinked_flown_track_is_interpolated_linearly():

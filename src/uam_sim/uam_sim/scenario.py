@@ -324,17 +324,26 @@ def planned_pieces(row, kinds: bool = False) -> list:
 VERTIPORT_AREA_M = 200.0
 
 
-def near_shared_vertiport(a, b, t: float, radius_m: float) -> bool:
-    """True when flown tracks ``a`` and ``b`` share a vertiport (an end point of one within
-    1 m horizontally of an end point of the other) and at ``t`` both are within ``radius_m``
-    of it horizontally."""
+def near_shared_vertiport(a, b, t: float, radius_m: float, ends_a, ends_b) -> bool:
+    """True when flights ``a`` and ``b`` (flown tracks) share a vertiport (one of ``ends_a``,
+    the xy of ``a``'s planned origin and destination, within 1 m of one of ``ends_b``) and at
+    ``t`` both are within ``radius_m`` of it horizontally. The ends come from the plans: a flown
+    track ends wherever the lateral drift left the aircraft, metres off the vertiport."""
     pa, pb = a.position_at(t, clamp=True)[:2], b.position_at(t, clamp=True)[:2]
-    for va in (a.points_m[0, :2], a.points_m[-1, :2]):
-        for vb in (b.points_m[0, :2], b.points_m[-1, :2]):
+    for va in ends_a:
+        for vb in ends_b:
             if math.dist(va, vb) <= 1.0 and math.dist(pa, va) <= radius_m \
                     and math.dist(pb, va) <= radius_m:
                 return True
     return False
+
+
+def planned_ends(row) -> tuple:
+    """The xy of a flight row's planned origin (its first version's first point) and
+    destination (its newest version's last point)."""
+    pieces = row.get("_pieces")
+    first = pieces[0][1] if pieces else row["_traj"]
+    return (tuple(first.points_m[0, :2]), tuple(row["_traj"].points_m[-1, :2]))
 
 
 def _flown_summary(flights: list, cfg: ExperimentConfig, dcfg) -> dict:
@@ -366,9 +375,11 @@ def _flown_summary(flights: list, cfg: ExperimentConfig, dcfg) -> dict:
     # where the flown losses are: near a vertiport both flights use (where no airborne buffer
     # reaches: the synthetic city's vertiports are single points, no pads) or en route
     pairs = audit.get("loss_pairs") or []
+    ends = {f["request_id"]: planned_ends(f) for f in flights} if pairs else {}
     out["flown_losses_near_vertiport"] = sum(
         1 for a, b, _d, t in pairs
-        if near_shared_vertiport(tracks[a], tracks[b], float(t), VERTIPORT_AREA_M)) \
+        if near_shared_vertiport(tracks[a], tracks[b], float(t), VERTIPORT_AREA_M,
+                                 ends[a], ends[b])) \
         if len(pairs) == audit["losses"] else None
     return out
 
