@@ -151,6 +151,10 @@ PLANNER = (
           0.001, 10000.0),
     Param("reaction_time_s", 10.0, "the planner's time conformance bound [s] (the monitor's time_s)",
           0.001, 86400.0),
+    Param("conflict_probe_s", 0.0, "with the reaction on: the conflict probe's look-ahead [s]; at each "
+          "reaction the airborne flights whose rest of plan, flown from where the planner last saw them at "
+          "their observed speed, loses the minimum within it are updated too (docs/disturbances.md); 0 = "
+          "no probe", 0.0, 3600.0),
 )
 
 SOLVER = (

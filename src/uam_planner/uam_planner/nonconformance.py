@@ -301,6 +301,73 @@ def verify(flight, obs: Observation | None, bounds: ConformanceBounds, t_eff: fl
     return (lat, ver, terr), None
 
 
+# ---- the conflict probe ------------------------------------------------------------------------
+#
+# Conformance alone misses what a speed error does to two flights that both conform: each may be
+# up to the time bound (10 s, 100 m at 10 m/s) off its schedule, so two plans separated by the
+# minimum can meet (BENCHMARKS.md: most flown losses at 10 % speed error were between two
+# conforming flights). The probe looks ahead from the planner's own observations: every airborne
+# flight's rest of plan flown from where it was last seen at its observed progress rate (the
+# same projection a nonconforming update starts from, :func:`rejoin_trajectory`), cut at
+# ``lookahead_s``; a pair of projections closer than the true minimum (exact, continuous time)
+# is a predicted loss of separation, and both flights are updated from where they are exactly
+# as nonconforming ones are, in the same batch (deconflicted against each other and every other
+# flight; a flight the batch cannot save keeps its plan: it conforms, it is not a contingency).
+# What it rests on is the planner's own fleet state, never a report.
+
+def _cut_until(tr: Trajectory, t_s: float) -> Trajectory | None:
+    """The part of ``tr`` up to ``t_s`` (None if it departs at or after it)."""
+    t = float(t_s)
+    if t <= tr.departure_s:
+        return None
+    if t >= tr.arrival_s:
+        return tr
+    ts, ps = tr.times_s, tr.points_m
+    j = int(np.searchsorted(ts, t, side="left"))          # first waypoint at or after t
+    if ts[j] - t <= _EPS_T:
+        return Trajectory._trusted(ts[:j + 1].copy(), ps[:j + 1].copy(), None)
+    w = (t - ts[j - 1]) / (ts[j] - ts[j - 1])
+    here = ps[j - 1] + w * (ps[j] - ps[j - 1])
+    return Trajectory._trusted(np.concatenate((ts[:j], [t])), np.concatenate((ps[:j], [here])), None)
+
+
+def predicted_conflicts(active: Sequence, book: PositionBook, t_s: float, lookahead_s: float,
+                        separation, exclude=()) -> dict:
+    """The flights of ``active`` predicted to lose ``separation`` (the true minimum) within
+    ``lookahead_s`` of ``t_s`` when each flies the rest of its plan from its newest observation
+    (at most ``MAX_AGE_S`` old) at its observed progress rate. Returns index in ``active`` ->
+    (observation, the request ids it is predicted to meet). Flights without a recent observation,
+    not airborne on their plan at ``t_s``, or in ``exclude`` (indices) are not probed. O(F log F)
+    broad phase (``separation.conflicting_pairs``)."""
+    from .separation import conflicting_pairs
+
+    idx, obs_of, preds = [], {}, []
+    skip = set(exclude)
+    for i, f in enumerate(active):
+        tr = f.trajectory
+        if i in skip or not tr.departure_s < t_s < f.arrival_s:
+            continue
+        obs = book.latest(f.request_id, until=t_s)
+        if obs is None or obs.t_s < t_s - MAX_AGE_S or not tr.departure_s < obs.t_s < f.arrival_s:
+            continue
+        rate = book.progress_rate(f.request_id, tr, until=t_s)
+        pred = rejoin_trajectory(tr, obs.t_s, obs.position_m, rate)
+        pred = _cut_until(pred, t_s + lookahead_s) if pred is not None else None
+        if pred is None or pred.times_s.shape[0] < 2:
+            continue
+        idx.append(i)
+        obs_of[i] = obs
+        preds.append(pred)
+    out: dict = {}
+    if len(preds) < 2:
+        return out
+    for a, b in np.asarray(conflicting_pairs(preds, separation_m=separation)).reshape(-1, 2).tolist():
+        ia, ib = idx[a], idx[b]
+        out.setdefault(ia, (obs_of[ia], []))[1].append(active[ib].request_id)
+        out.setdefault(ib, (obs_of[ib], []))[1].append(active[ia].request_id)
+    return out
+
+
 # ---- the update -------------------------------------------------------------------------------
 
 def rejoin_trajectory(plan: Trajectory, t0_s: float, q, rate: float,
@@ -337,6 +404,8 @@ def rejoin_trajectory(plan: Trajectory, t0_s: float, q, rate: float,
 #: a reader; the simulator reads ``ReactionUpdate.observed_rate``, on the wire
 #: ``FlightPlan.observed_progress_rate``)
 RATE_WORD = "observed progress rate"
+#: the weight of a probed flight's keep-its-plan alternative: below every update's (2-3)
+KEEP_WEIGHT = 1.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -525,7 +594,7 @@ def react(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: P
 
 def react_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: PositionBook,
                 config, select: Callable, policy: str, network=None, fixed: Sequence = (),
-                fixed_ids: Sequence = ()):
+                fixed_ids: Sequence = (), probed: dict | None = None):
     """Update the intents of the nonconforming flights ``found`` at the epoch ``t_eff``.
 
     A generator, as ``replanning.replan_steps``: with policy "mwis" it yields the one conflict
@@ -550,6 +619,9 @@ def react_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict, b
             flights, :func:`overruns`).
         fixed_ids: the request id of each of ``fixed`` (a flight held past its plan may yield:
             its own projections do not block its moves, but stay while it keeps its plan).
+        probed: index in ``active`` -> the request ids it is predicted to meet, for the flights
+            of ``found`` the conflict probe found (:func:`predicted_conflicts`; they conform):
+            one the batch cannot save keeps its plan (no contingency).
     Returns: (new active list: the others in their order, then the new versions; PlanUpdate per
     flight in ``active`` order; a report dict: flights, alternatives, vertices, edges, kinds).
     """
@@ -566,6 +638,7 @@ def react_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict, b
     act = SegmentSet.from_trajectories([f.trajectory for f in others] + fixed)
     act = act.take(act.t1_s >= t_eff) if len(act) else act
     per, rates = [], []
+    keep: dict = {}   # row -> the keep-its-plan alternative of a probed flight
     for i in idx:
         f = active[i]
         obs = found[i][0]
@@ -582,6 +655,11 @@ def react_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict, b
                 base = tr.arrival_s
             alts.append((tr, 2.0 + 1.0 / (1.0 + max(0.0, tr.arrival_s - base) / DELAY_SCALE_S)))
         alts = _constraint_free(alts, f, config, network, t_eff, True) or alts[:1]
+        if probed and i in probed:
+            # it conforms: keeping its plan is an alternative too (the least preferred), so the
+            # batch never leaves it with a plan the others' updates were not deconflicted from
+            keep[len(per)] = (f.trajectory, KEEP_WEIGHT)
+            alts = alts + [keep[len(per)]]
         per.append(alts)
     flat = [a for alts in per for a in alts]
     report["alternatives"] = len(flat)
@@ -602,8 +680,13 @@ def react_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict, b
         for v in np.asarray(selected).tolist():
             src = int(graph.vertex_source[v])
             chosen[int(req_of[src])] = flat[src]
+    if keep and any(r not in chosen for r in keep):
+        # a probed flight whose own plan conflicts with the batch's fixed traffic (a held
+        # projection): no probe update of this batch is taken, every probed flight keeps its plan
+        chosen = {r: a for r, a in chosen.items() if r not in keep}
+        report["probe_dropped"] = len(keep)
     # the flights no alternative of their own saves: their neighbours may yield (YIELD_SHARES)
-    unsaved = {r: per[r] for r in range(len(idx)) if r not in chosen and per[r]}
+    unsaved = {r: per[r] for r in range(len(idx)) if r not in chosen and per[r] and r not in keep}
     saved: dict = {}
     moved: dict = {}
     if unsaved:
@@ -623,6 +706,14 @@ def react_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict, b
         what = (f"nonconforming at t = {obs.t_s:g} s (lateral {lat:.1f} m, vertical {ver:.1f} m, "
                 f"time {terr:+.1f} s); intent updated from where it is, {RATE_WORD} {rates[r]:.12g}")
         a = chosen.get(r)
+        if r in keep:
+            what = (f"predicted to lose separation with {', '.join(probed[i])} at the observed "
+                    f"speeds (conflict probe, seen at t = {obs.t_s:g} s: lateral {lat:.1f} m, "
+                    f"time {terr:+.1f} s); intent updated from where it is, {RATE_WORD} {rates[r]:.12g}")
+            if a is None or a is keep[r]:
+                report["probe_kept"] = report.get("probe_kept", 0) + 1
+                continue  # it conforms: it keeps its plan rather than fly a contingency
+            report["probe_updates"] = report.get("probe_updates", 0) + 1
         contingent = a is None
         if a is None:
             if not per[r]:

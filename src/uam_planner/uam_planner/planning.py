@@ -68,7 +68,8 @@ from .first_fit import as_firstfit, first_fit_select
 from .objectives import (BASELINE_ORDERS, OperatorShares, check_objective, check_priority,
                          epoch_weights, operator_of, order_requests)
 from .trajectory import Trajectory
-from .nonconformance import Claim, ConformanceBounds, PositionBook, overruns, react_steps, verify
+from .nonconformance import (Claim, ConformanceBounds, PositionBook, deviations, overruns,
+                             predicted_conflicts, react_steps, verify)
 
 POLICIES = ("mwis", "fifo", "firstfit")  # firstfit: uam_planner.first_fit
 REPLAN_POLICIES = ("mwis", "firstfit")  # uam_planner.replanning
@@ -214,6 +215,11 @@ class PlanningConfig:
         spatial_buffer_m, temporal_buffer_s: planning buffers on the separation (issue 23,
             docs/disturbances.md); 0 = today's. The planner keeps ``separation`` (the minimum
             widened by both), every audit keeps ``minimum_separation``.
+        conflict_probe_s: with ``conformance`` set, the conflict probe's look-ahead [s]
+            (``uam_planner.nonconformance.predicted_conflicts``): at every reaction, flights
+            whose rest of plan, flown from where the planner last saw them at their observed
+            progress rate, loses the true minimum within it are updated as nonconforming ones
+            are; 0 (default) = no probe (only reported, confirmed nonconformance is acted on).
         conformance: the reaction to nonconforming flights (issue 23 item 3,
             ``uam_planner.nonconformance``): a ConformanceBounds the planner checks each
             nonconformance report against (its own plan, its own observation) before it updates
@@ -240,6 +246,7 @@ class PlanningConfig:
     spatial_buffer_m: float = 0.0
     temporal_buffer_s: float = 0.0
     conformance: ConformanceBounds | None = None
+    conflict_probe_s: float = 0.0
 
     @property
     def minimum_separation(self) -> SeparationModel:
@@ -275,7 +282,7 @@ class PlanningConfig:
         if self.constraints is not None and not isinstance(self.constraints, ConstraintSet):
             raise ValueError(f"PlanningConfig.constraints must be a ConstraintSet or None, got "
                              f"{type(self.constraints).__name__}")
-        for name in ("spatial_buffer_m", "temporal_buffer_s"):
+        for name in ("spatial_buffer_m", "temporal_buffer_s", "conflict_probe_s"):
             _positive("PlanningConfig", name, getattr(self, name), allow_zero=True)
         if self.conformance is not None and not isinstance(self.conformance, ConformanceBounds):
             raise ValueError(f"PlanningConfig.conformance must be a ConformanceBounds or None, got "
@@ -1142,7 +1149,8 @@ class Planner:
         A generator: it yields the batch's MWIS graph (see :meth:`prepare_steps`)."""
         self._nonconformance_report = None
         due = [c for c in self._claims if c.t_s <= t_s]
-        if not due or self.config.conformance is None:
+        probe_s = float(self.config.conflict_probe_s)
+        if (not due and not probe_s) or self.config.conformance is None:
             return
         self._claims = [c for c in self._claims if c.t_s > t_s]
         where = {f.request_id: i for i, f in enumerate(self.active)}
@@ -1171,6 +1179,42 @@ class Planner:
         self.active = active
         self._plan_updates = list(self._plan_updates) + list(updates)
         self._nonconformance_report = rep_
+        if probe_s:
+            yield from self._probe(t_s, epoch_index, {u.request_id for u in updates})
+
+    def _probe(self, t_s: float, epoch_index: int, updated: set):
+        """The conflict probe (``PlanningConfig.conflict_probe_s``, docs/disturbances.md), after
+        the reaction to reported nonconformance: the airborne flights not updated just now whose
+        rest of plan, flown from the planner's own newest sighting at their observed progress
+        rate, loses the true minimum with another's within the look-ahead are updated from where
+        they are, in one batch (each may also keep its plan: it conforms). A generator: it
+        yields the batch's MWIS graph."""
+        cfg = self.config
+        skip = [i for i, f in enumerate(self.active) if f.request_id in updated]
+        probed = {i: ids for i, (_obs, ids) in predicted_conflicts(
+            self.active, self.positions, t_s, float(cfg.conflict_probe_s), cfg.minimum_separation,
+            exclude=skip).items()}
+        if not probed:
+            return
+        found = {}
+        for i in probed:
+            obs = self.positions.latest(self.active[i].request_id, until=t_s)
+            errs = deviations(self.active[i].trajectory, [obs.t_s], [obs.position_m])
+            found[i] = (obs, tuple(float(x[0]) for x in errs))
+        mine = {self.active[i].request_id for i in found}
+        active, updates, rep_ = yield from react_steps(
+            t_s, epoch_index, self.active, found, self.positions, cfg,
+            replan_selector(self.solve_mwis, cfg, epoch_index, t_s), self.replan_policy(), self.network,
+            fixed=[h.trajectory for k, o in self.overruns.items() if k not in mine for h in o.flights],
+            fixed_ids=[k for k, o in self.overruns.items() if k not in mine for _h in o.flights],
+            probed=probed)
+        for u in updates:
+            self.overruns.pop(u.request_id, None)
+        self.active = active
+        self._plan_updates = list(self._plan_updates) + list(updates)
+        rep = self._nonconformance_report or {}
+        rep["probe"] = {k: v for k, v in rep_.items() if k != "rates"}
+        self._nonconformance_report = rep
 
     def react_between(self, t_s: float, epoch_index: int) -> list:
         """:meth:`react_between_steps` with the reaction's MWIS graph solved here (``solve_mwis``)."""
@@ -1192,7 +1236,7 @@ class Planner:
             raise RuntimeError(f"epoch {self._prepared.epoch_index} is prepared but not committed")
         if not math.isfinite(t_s):
             raise ValueError(f"t_s must be finite, got {t_s!r}")
-        if self.config.conformance is None or not self._claims:
+        if self.config.conformance is None or (not self._claims and not self.config.conflict_probe_s):
             return []
         self._hold_overruns(t_s)
         saved, saved_rep = self._plan_updates, self._nonconformance_report

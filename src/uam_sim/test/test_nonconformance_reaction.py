@@ -470,3 +470,49 @@ def test_a_neighbour_yields_so_that_a_nonconforming_flight_keeps_separation():
     dt = at_m[0] - t_q
     assert a.losses == [] and a.min_separation_m == pytest.approx(dt * 9.9 * 11.0 / math.hypot(9.9, 11.0), abs=0.5)
     assert res.report.nonconformance["kinds"] == {KIND: 1, KIND_YIELD: 1}
+
+
+# ---- the conflict probe (PlanningConfig.conflict_probe_s) ---------------------------------------
+
+#: Q2: S at 20 s, m at 320 s, N at 620 s: 20 s after P at m, 20 x 10 x 10 / sqrt(200) = 141.4 m
+Q2 = flight("Q2", ["S", "m", "N"], [(3000, -3000, 0), (3000, 0, 0), (3000, 3000, 0)], 20.0)
+
+
+def probe_planner(probe_s):
+    from uam_planner.nonconformance import ConformanceBounds as CB
+    p = Planner(cross(), PlanningConfig(conformance=CB(), conflict_probe_s=probe_s), "mwis",
+                solve_mwis=None)
+    p.restore([P, Q2])
+    flown = fly(P.trajectory, FlightDraws(), HEAD_WIND)  # 9 m/s over the ground
+    for t in (50.0, 60.0):
+        assert p.observe("P", t, flown.position_at(t)) is None
+        assert p.observe("Q2", t, Q2.trajectory.position_at(t)) is None
+    return p
+
+
+def test_the_probe_predicts_a_loss_between_two_conforming_flights_from_their_observed_speeds():
+    from uam_planner.nonconformance import predicted_conflicts
+    # P at 60 s: x = 540 m, planned 54 s: 6 s late, it conforms (10 s bound); progress 0.9. Flown
+    # from there at 9 m/s it reaches m at 60 + 2460 / 9 = 333.33 s, Q2 (on its plan) at 320 s:
+    # 81 (t - 333.33) + 100 (t - 320) = 0 at t = 325.97 s, dx = -66.3 m, dy = 59.7 m: 89.2 m
+    p = probe_planner(300.0)
+    got = predicted_conflicts(p.active, p.positions, 60.0, 300.0, 100.0)
+    assert {p.active[i].request_id: ids for i, (_o, ids) in got.items()} == {"P": ["Q2"], "Q2": ["P"]}
+    # the meeting is 266 s ahead: a look-ahead of 200 s does not see it; the plans keep 141 m
+    assert predicted_conflicts(p.active, p.positions, 60.0, 200.0, 100.0) == {}
+    assert audit_flights([P.trajectory, Q2.trajectory], separation_m=100.0).losses == []
+
+
+def test_the_probe_updates_both_before_either_is_nonconforming_and_the_new_plans_keep_separation():
+    p = probe_planner(300.0)
+    ups = p.react_between(60.0, 2)
+    assert sorted(u.request_id for u in ups) == ["P", "Q2"]
+    assert all(u.kind == KIND and "conflict probe" in u.reason and u.effective_s == 60.0 for u in ups)
+    new = {u.request_id: u.flight.trajectory for u in ups}
+    assert new["P"].points_m[0] == pytest.approx([540.0, 0.0, 0.0])
+    assert audit_flights(list(new.values()), separation_m=100.0).losses == []
+    # what P really flies (9 m/s from 540 m at 60 s) keeps separation with Q2's new plan too
+    flown_p = Trajectory(np.array([60.0, 60.0 + 5460.0 / 9.0]), np.array([[540.0, 0, 0], [6000.0, 0, 0]]))
+    assert audit_flights([flown_p, new["Q2"]], separation_m=100.0).losses == []
+    # off (the default): no report, nothing happens
+    assert probe_planner(0.0).react_between(60.0, 2) == []

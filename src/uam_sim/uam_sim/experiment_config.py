@@ -125,6 +125,9 @@ class ExperimentConfig:
         reaction_period_s: with ``reaction``, the runner's monitor also reports, and the
             planner reacts, every this many seconds between epochs (``Planner.react_between``;
             F3548 asks an update within 5 s); 0 (default) = only at the epochs.
+        conflict_probe_s: with ``reaction``, the planner's conflict probe look-ahead [s]
+            (``PlanningConfig.conflict_probe_s``: conforming flights predicted to lose the
+            minimum at their observed speeds are updated too); 0 (default) = no probe.
         metrics_warmup_s: the decision metrics (delay, shares, ...) leave out requests whose
             earliest departure is before it (the warm-up); 0 = none.
         cumulative_rates: rates shown in the cumulative-approvals figure (default: up to 4 spread).
@@ -180,6 +183,7 @@ class ExperimentConfig:
     conformance: Mapping = field(default_factory=dict)  # fields: ConformanceBounds
     reaction: Bool = False
     reaction_period_s: Float = 0.0
+    conflict_probe_s: Float = 0.0  # with the reaction: PlanningConfig.conflict_probe_s
     tts: Optional[Mapping] = field(default_factory=lambda: {
         "enabled": True, "instances": 629, "min_vertices": 5, "max_vertices": 50, "reads": 100,
         "repetitions": 5, "backend_instances": {"qpu-emulator": 60},
@@ -215,7 +219,8 @@ class ExperimentConfig:
                               commit_ahead=self.commit_ahead, fair_window_s=self.fair_window_s,
                               spatial_buffer_m=self.spatial_buffer_m,
                               temporal_buffer_s=self.temporal_buffer_s,
-                              conformance=self.conformance_bounds() if self.reaction else None)
+                              conformance=self.conformance_bounds() if self.reaction else None,
+                              conflict_probe_s=self.conflict_probe_s if self.reaction else 0.0)
 
     def disturbance_config(self):
         """The DisturbanceConfig of ``disturbance`` (off when empty); its seed is the cell's."""

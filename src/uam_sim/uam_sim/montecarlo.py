@@ -42,7 +42,8 @@ COLUMNS = ("speed_error", "spatial_buffer_m", "temporal_buffer_s", "reaction", "
            "nonconforming_flights", "replans", "flown_losses", "flown_min_separation_m",
            "planned_losses", "nonconforming_updates", "reaction_contingencies", "held_past_plan",
            "approval_ci95_low", "approval_ci95_high", "flown_losses_per_flight_upper95",
-           "planned_losses_deconflicted", "flown_losses_with_contingency", "flown_losses_near_vertiport")
+           "planned_losses_deconflicted", "flown_losses_with_contingency", "flown_losses_near_vertiport",
+           "probe_updates")
 
 
 def spread_ci95(values) -> tuple[float, float]:
@@ -106,6 +107,7 @@ def point_configs(args) -> list[tuple[tuple, dict]]:
                                    "conformance": args.conformance or {}, "out": args.out,
                                    "reaction": react,
                                    "reaction_period_s": args.reaction_period if react else 0.0,
+                                   "conflict_probe_s": getattr(args, "probe", 0.0) if react else 0.0,
                                    "workers": args.workers, "scheduler": args.scheduler,
                                    "corpus_max_vertices": 0})
                 out.append(((e, bs, bt, react), asdict(cfg)))
@@ -153,7 +155,9 @@ def aggregate(point: tuple, cells: list[dict]) -> dict:
             # every run), scenario.VERTIPORT_AREA_M
             "flown_losses_near_vertiport": (sum(x["flown_losses_near_vertiport"] for x in s)
                                             if all(x.get("flown_losses_near_vertiport") is not None
-                                                   for x in s) else None)}
+                                                   for x in s) else None),
+            # updates the planner's conflict probe asked for (0 without the probe)
+            "probe_updates": sum(x.get("reaction_probe_updates", 0) for x in s)}
 
 
 def run(args) -> list[dict]:
@@ -279,6 +283,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--reaction-period", type=float, default=0.0, metavar="S",
                    help="with the reaction on, also react every S seconds between epochs (issue 23 "
                         "item 3; 0 = at the epochs only)")
+    p.add_argument("--probe", type=float, default=0.0, metavar="S",
+                   help="with the reaction on, the planner's conflict probe look-ahead [s] "
+                        "(PlanningConfig.conflict_probe_s; 0 = no probe, default)")
     p.add_argument("--conformance", type=key_values, help="conformance bounds, e.g. lateral_m=30,time_s=10")
     p.add_argument("--seeds", default="4", help="a count n (seeds 0..n-1) or a comma list")
     p.add_argument("--rate", type=float, default=10.0, help="requests per 30 s (default 10)")

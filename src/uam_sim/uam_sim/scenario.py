@@ -161,7 +161,8 @@ def _apply_reaction_updates(updates, by_id, reaction, replans, t) -> None:
             reaction.apply(u, row, u.observed_rate)
             replans.append({"t_s": t, "request_id": u.request_id, "kind": u.kind,
                             "version": u.version, "constraints": "",
-                            "added_delay_s": u.added_delay_s, "airborne": True})
+                            "added_delay_s": u.added_delay_s, "airborne": True,
+                            **({"probe": True} if "conflict probe" in u.reason else {})})
 
 def _apply_disturbed_updates(updates, by_id, reaction, replans, t) -> None:
     """One batch of plan updates of a disturbed run with the reaction on (an epoch's, a reaction
@@ -579,6 +580,8 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
         flown_summary["replans"] = len(replans)
         if cfg.reaction:   # flights re-timed so that a nonconforming one keeps separation
             flown_summary["reaction_yields"] = sum(1 for r in replans if r["kind"] == "yielded")
+            if cfg.conflict_probe_s:   # updates the planner's conflict probe asked for
+                flown_summary["reaction_probe_updates"] = sum(1 for r in replans if r.get("probe"))
         flown_summary["held_past_plan"] = len(held_ids)
     for f in flights:
         del f["_traj"]

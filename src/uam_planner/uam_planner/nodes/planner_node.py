@@ -109,6 +109,7 @@ class PlannerNode(Node):
             spatial_buffer_m=self.p["spatial_buffer_m"], temporal_buffer_s=self.p["temporal_buffer_s"],
             conformance=ConformanceBounds(self.p["reaction_lateral_m"], self.p["reaction_vertical_m"],
                                           self.p["reaction_time_s"]) if self.p["reaction"] else None,
+            conflict_probe_s=self.p["conflict_probe_s"] if self.p["reaction"] else 0.0,
             airspace=AirspaceConfig(**{f: self.p[f] for f in (
                 "separation_model", "vertical_separation_m", "departure_slot_s", "climb_rate_mps",
                 "descent_rate_mps")}))
