@@ -352,6 +352,8 @@ def predicted_conflicts(active: Sequence, book: PositionBook, t_s: float, lookah
             continue
         rate = book.progress_rate(f.request_id, tr, until=t_s)
         pred = rejoin_trajectory(tr, obs.t_s, obs.position_m, rate)
+        # from now (a sighting may be a step old: what it predicts before now is past) on
+        pred = _clipped(pred, t_s) if pred is not None else None
         pred = _cut_until(pred, t_s + lookahead_s) if pred is not None else None
         if pred is None or pred.times_s.shape[0] < 2:
             continue
