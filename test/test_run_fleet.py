@@ -105,7 +105,17 @@ def _start(out: pathlib.Path | None, env: dict, log: pathlib.Path, duration: str
         args += ["--mode", "realtime", "--rtf", "20"]
     if out is not None:
         args += ["--out", str(out)]
-    return subprocess.Popen(args, cwd=ROOT, env=env, stdout=log.open("w"), stderr=subprocess.STDOUT)
+    return subprocess.Popen(args, cwd=ROOT, env=env, stdout=log.open("w"), stderr=subprocess.STDOUT,
+                            preexec_fn=_default_signals)
+
+
+def _default_signals() -> None:
+    """The stop signals at their defaults in the script's process: a signal ignored when a shell
+    starts cannot be trapped by it (bash), and a test suite run under ``nohup`` (SIGHUP ignored)
+    or as a background job would otherwise hand run_fleet.sh an untrappable SIGHUP (the SIGHUP
+    test then timed out in such a run, eighth stop)."""
+    for sig in (signal.SIGHUP, signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.SIG_DFL)
 
 
 def _running(proc: subprocess.Popen, log: pathlib.Path, n: int = 5) -> dict[int, str]:
