@@ -315,22 +315,6 @@ def verify(flight, obs: Observation | None, bounds: ConformanceBounds, t_eff: fl
 # flight; a flight the batch cannot save keeps its plan: it conforms, it is not a contingency).
 # What it rests on is the planner's own fleet state, never a report.
 
-def _cut_until(tr: Trajectory, t_s: float) -> Trajectory | None:
-    """The part of ``tr`` up to ``t_s`` (None if it departs at or after it)."""
-    t = float(t_s)
-    if t <= tr.departure_s:
-        return None
-    if t >= tr.arrival_s:
-        return tr
-    ts, ps = tr.times_s, tr.points_m
-    j = int(np.searchsorted(ts, t, side="left"))          # first waypoint at or after t
-    if ts[j] - t <= _EPS_T:
-        return Trajectory._trusted(ts[:j + 1].copy(), ps[:j + 1].copy(), None)
-    w = (t - ts[j - 1]) / (ts[j] - ts[j - 1])
-    here = ps[j - 1] + w * (ps[j] - ps[j - 1])
-    return Trajectory._trusted(np.concatenate((ts[:j], [t])), np.concatenate((ps[:j], [here])), None)
-
-
 def predicted_conflicts(active: Sequence, book: PositionBook, t_s: float, lookahead_s: float,
                         separation, exclude=()) -> dict:
     """The flights of ``active`` predicted to lose ``separation`` (the true minimum) within
@@ -339,6 +323,7 @@ def predicted_conflicts(active: Sequence, book: PositionBook, t_s: float, lookah
     (observation, the request ids it is predicted to meet). Flights without a recent observation,
     not airborne on their plan at ``t_s``, or in ``exclude`` (indices) are not probed. O(F log F)
     broad phase (``separation.conflicting_pairs``)."""
+    from .replanning import clipped_until
     from .separation import conflicting_pairs
 
     idx, obs_of, preds = [], {}, []
@@ -354,7 +339,7 @@ def predicted_conflicts(active: Sequence, book: PositionBook, t_s: float, lookah
         pred = rejoin_trajectory(tr, obs.t_s, obs.position_m, rate)
         # from now (a sighting may be a step old: what it predicts before now is past) on
         pred = _clipped(pred, t_s) if pred is not None else None
-        pred = _cut_until(pred, t_s + lookahead_s) if pred is not None else None
+        pred = clipped_until(pred, t_s + lookahead_s) if pred is not None else None
         if pred is None or pred.times_s.shape[0] < 2:
             continue
         idx.append(i)

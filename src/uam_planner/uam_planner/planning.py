@@ -1166,21 +1166,30 @@ class Planner:
                 refused.append((c.request_id, why))
                 continue
             found[i] = (obs, got)
+        updates, rep_ = yield from self._update_batch(t_s, epoch_index, found)
+        rep_["refused"] = refused
+        self._nonconformance_report = rep_
+        if probe_s:
+            yield from self._probe(t_s, epoch_index, {u.request_id for u in updates})
+
+    def _update_batch(self, t_s: float, epoch_index: int, found: dict, probed: dict | None = None):
+        """One batch of the reaction (``nonconformance.react_steps``) on the active flights,
+        deconflicted against every other one and the held flights' projections; the new
+        versions replace the old in ``self.active`` and join this epoch's plan updates.
+        A generator (it yields the batch's MWIS graph); returns (updates, report)."""
         cfg = self.config
         mine = {self.active[i].request_id for i in found}
         active, updates, rep_ = yield from react_steps(
             t_s, epoch_index, self.active, found, self.positions, cfg,
             replan_selector(self.solve_mwis, cfg, epoch_index, t_s), self.replan_policy(), self.network,
             fixed=[h.trajectory for k, o in self.overruns.items() if k not in mine for h in o.flights],
-            fixed_ids=[k for k, o in self.overruns.items() if k not in mine for _h in o.flights])
+            fixed_ids=[k for k, o in self.overruns.items() if k not in mine for _h in o.flights],
+            probed=probed)
         for u in updates:   # the new version is drawn from where it is: its overrun is redrawn
             self.overruns.pop(u.request_id, None)
-        rep_["refused"] = refused
         self.active = active
         self._plan_updates = list(self._plan_updates) + list(updates)
-        self._nonconformance_report = rep_
-        if probe_s:
-            yield from self._probe(t_s, epoch_index, {u.request_id for u in updates})
+        return updates, rep_
 
     def _probe(self, t_s: float, epoch_index: int, updated: set):
         """The conflict probe (``PlanningConfig.conflict_probe_s``, docs/disturbances.md), after
@@ -1191,27 +1200,16 @@ class Planner:
         yields the batch's MWIS graph."""
         cfg = self.config
         skip = [i for i, f in enumerate(self.active) if f.request_id in updated]
-        probed = {i: ids for i, (_obs, ids) in predicted_conflicts(
-            self.active, self.positions, t_s, float(cfg.conflict_probe_s), cfg.minimum_separation,
-            exclude=skip).items()}
-        if not probed:
+        got = predicted_conflicts(self.active, self.positions, t_s, float(cfg.conflict_probe_s),
+                                  cfg.minimum_separation, exclude=skip)
+        if not got:
             return
         found = {}
-        for i in probed:
-            obs = self.positions.latest(self.active[i].request_id, until=t_s)
+        for i, (obs, _ids) in got.items():   # the sighting the projection started from
             errs = deviations(self.active[i].trajectory, [obs.t_s], [obs.position_m])
             found[i] = (obs, tuple(float(x[0]) for x in errs))
-        mine = {self.active[i].request_id for i in found}
-        active, updates, rep_ = yield from react_steps(
-            t_s, epoch_index, self.active, found, self.positions, cfg,
-            replan_selector(self.solve_mwis, cfg, epoch_index, t_s), self.replan_policy(), self.network,
-            fixed=[h.trajectory for k, o in self.overruns.items() if k not in mine for h in o.flights],
-            fixed_ids=[k for k, o in self.overruns.items() if k not in mine for _h in o.flights],
-            probed=probed)
-        for u in updates:
-            self.overruns.pop(u.request_id, None)
-        self.active = active
-        self._plan_updates = list(self._plan_updates) + list(updates)
+        _updates, rep_ = yield from self._update_batch(
+            t_s, epoch_index, found, probed={i: ids for i, (_obs, ids) in got.items()})
         rep = self._nonconformance_report or {}
         rep["probe"] = {k: v for k, v in rep_.items() if k != "rates"}
         self._nonconformance_report = rep

@@ -213,6 +213,19 @@ def clipped_from(tr: Trajectory, t_s: float) -> Trajectory | None:
     return Trajectory._trusted(times, points, None)  # a cut of a valid trajectory
 
 
+def clipped_until(tr: Trajectory, t_s: float) -> Trajectory | None:
+    """The part of ``tr`` before ``t_s``, ending at its position then (None if it departs at or
+    after ``t_s``)."""
+    t = float(t_s)
+    if tr.departure_s >= t:
+        return None
+    if tr.arrival_s <= t:
+        return tr
+    keep = tr.times_s < t
+    return Trajectory._trusted(np.append(tr.times_s[keep], t),     # a cut of a valid trajectory
+                               np.vstack((tr.points_m[keep], tr.position_at(t))), None)
+
+
 # ---- the constraint state ----------------------------------------------------------------------
 
 def check_update(action: str, constraint, t_s, current: dict, network) -> str | None:

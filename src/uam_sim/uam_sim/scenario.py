@@ -11,6 +11,7 @@ from typing import Sequence
 import numpy as np
 
 from uam_planner.planning import Planner
+from uam_planner.replanning import clipped_until
 
 from .audit import sweep_audit
 from .flights import run_metrics
@@ -289,17 +290,6 @@ class _Reaction:
         row["_pieces"][-1] = (row["_pieces"][-1][0], row["_traj"])
 
 
-def _until(tr, u: float):
-    """The part of ``tr`` before ``u`` (None if it starts at or after u)."""
-    from uam_planner.trajectory import Trajectory
-    if tr.departure_s >= u:
-        return None
-    if tr.arrival_s <= u:
-        return tr
-    keep = tr.times_s < u
-    return Trajectory(np.append(tr.times_s[keep], u), np.vstack((tr.points_m[keep], tr.position_at(u))))
-
-
 def planned_pieces(row, kinds: bool = False) -> list:
     """The plans of a flight row as flown in time: each version until the next took effect
     (a nonconforming update does not chain with the version before it; 1 ms apart, so the
@@ -313,7 +303,7 @@ def planned_pieces(row, kinds: bool = False) -> list:
     out = []
     for k, (t0, tr) in enumerate(pieces):
         nxt = pieces[k + 1][0] - 1e-3 if k + 1 < len(pieces) else math.inf
-        cut = _until(tr, nxt)
+        cut = clipped_until(tr, nxt)
         if cut is not None and cut.times_s.shape[0] >= 2:
             out.append((cut, names[k]) if kinds else cut)
     return out
