@@ -211,3 +211,52 @@ def test_a_stateless_node_stuck_after_a_signal_names_its_stack_and_ends_itself(r
     assert "stuck_in_close" in stderr, stderr[-2000:]          # the stack names where it hangs
     assert "[hung_cleanup] WARNING: not ended" in stderr and "keeps no state" in stderr
     assert 1.0 <= took < 1.0 + 15                               # bounded (generous for load)
+
+
+GIL_HOLDING_DESTROY = """
+import ctypes, sys
+from rclpy.node import Node
+from uam_bringup.runtime import run_node
+class Node_(Node):
+    def __init__(self):
+        super().__init__("gil_holding_destroy")
+        self.timer = self.create_timer(0.05, self.tick)
+    def tick(self):
+        print("spinning", flush=True)
+        self.timer.cancel()
+    def close(self):
+        print("closed", flush=True)
+    def destroy_node(self):
+        # what the solver node's destroy_node did in a loaded run: spin in C holding the GIL
+        # (ctypes.PyDLL keeps the GIL across the call), which no Python-level watcher can cut
+        print("destroying", flush=True)
+        ctypes.PyDLL(None).sleep(60)
+        return super().destroy_node()
+sys.exit(run_node(Node_, "gil_holding_destroy", None, stateless={stateless}))
+"""
+
+
+@pytest.mark.parametrize("stateless", [True, False])
+def test_after_a_signal_a_node_is_closed_and_not_destroyed_so_a_hanging_destroy_cannot_keep_it(
+        ros_domain_id, stateless):
+    """Ninth stop: in a loaded run the solver node hung in rclpy's destroy_node() holding the
+    GIL (faulthandler showed the main thread there, state R), so its stop watcher could not end
+    it and run_fleet.sh killed it after 10 s. After a stop signal every node is now closed and
+    its process ends without destroy_node() or rclpy's shutdown; its exit code is its own."""
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain_id))
+    proc = subprocess.Popen([sys.executable, "-c", GIL_HOLDING_DESTROY.format(stateless=stateless)], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline().strip() == "spinning"
+        t0 = time.monotonic()
+        proc.send_signal(signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=90)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    took = time.monotonic() - t0
+    assert "closed" in stdout, (stdout, stderr[-2000:])
+    assert "destroying" not in stdout
+    assert proc.returncode == 0, (proc.returncode, stderr[-2000:])
+    assert "[gil_holding_destroy] stopped by a signal" in stderr     # the clean-up is still timed
+    assert took < 30, took   # a minute if destroy_node ran (bounded generously for load)

@@ -209,6 +209,14 @@ def _run_node(make_node, name: str, args=None, *, threads: int = 1, linger_s: fl
         return 2
     finally:
         cleanup = _CleanupTimer(name, getattr(stop, "signalled_at", None))
+        # After a stop signal the node is closed (its recording, journal or worker processes) and
+        # then left to the process's end (_exit_now), neither destroyed nor rclpy shut down: in a
+        # loaded run the solver node's destroy_node() spun in rclpy's C++ holding the GIL for more
+        # than 10 s (faulthandler: main thread in Node.destroy_node, state R), so neither its stop
+        # watcher nor its exit handlers could run and run_fleet.sh killed it. Nothing is lost by
+        # skipping it: os._exit follows, and the DDS participant's peers drop it by its lease. A
+        # node that ended by itself is still destroyed and shut down as before.
+        signalled = stop.is_set()
         try:
             if node is not None:
                 try:
@@ -216,10 +224,12 @@ def _run_node(make_node, name: str, args=None, *, threads: int = 1, linger_s: fl
                         node.close()
                         cleanup.phase("close")
                 finally:
-                    node.destroy_node()
-                    cleanup.phase("destroy_node")
-            rclpy.try_shutdown()
-            cleanup.phase("rclpy shutdown")
+                    if not signalled:
+                        node.destroy_node()
+                        cleanup.phase("destroy_node")
+            if not signalled:
+                rclpy.try_shutdown()
+                cleanup.phase("rclpy shutdown")
         finally:
             cleanup.done()
             _ignore_stop_signals()

@@ -63,6 +63,9 @@ from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from uam_msgs.msg import FlightPlan
 
+# imported here, not where the first constraint set arrives: at nice 19 under load that import
+# took more than run_fleet.sh's 10 s when it fell into the drain of a stopping recorder
+from uam_planner.live_constraints import constraints_from_text
 from uam_sim.analysis import format_steps, missing_steps, request_key
 from uam_sim.audit import AIRSPACE_METADATA, airspace_metadata
 from uam_sim.cdr import fleet_state_digest, fleet_state_step_index, leading_stamp_ns
@@ -404,7 +407,6 @@ class RecorderNode(Node):
 
     def _draw_constraints(self, msg, log_ns: int) -> None:
         """The constraint set (uam/constraints, issue 22) in Rerun and the view topics."""
-        from uam_planner.live_constraints import constraints_from_text
         try:
             t_s, found = constraints_from_text(msg.data)
         except ValueError as exc:  # recorded as it came; only the drawing is skipped
