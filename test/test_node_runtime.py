@@ -169,6 +169,22 @@ def test_a_hung_exit_handler_is_cut_off_and_named_whether_or_not_it_holds_the_gi
     assert took < EXIT_HANDLERS_S + 1 + 20                          # bounded (generous for load)
 
 
+def _sigint_once_spinning(script: str, env: dict, timeout_s: float):
+    """Run a node script, SIGINT it once it prints "spinning"; (process, stdout, stderr, seconds
+    from the signal to its end)."""
+    proc = subprocess.Popen([sys.executable, "-c", script], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline().strip() == "spinning"
+        t0 = time.monotonic()
+        proc.send_signal(signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=timeout_s)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    return proc, stdout, stderr, time.monotonic() - t0
+
+
 HUNG_CLEANUP = """
 import sys, threading
 from rclpy.node import Node
@@ -195,17 +211,7 @@ def test_a_stateless_node_stuck_after_a_signal_names_its_stack_and_ends_itself(r
     node has not ended UAM_STOP_DUMP_S later (7 s; 1 s here), and a stateless node (the solver)
     is then ended with exit code 0 and a warning; the clean-up's phases are timed and printed."""
     env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain_id), UAM_STOP_DUMP_S="1.0")
-    proc = subprocess.Popen([sys.executable, "-c", HUNG_CLEANUP.format(stateless=True)], env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        assert proc.stdout.readline().strip() == "spinning"
-        t0 = time.monotonic()
-        proc.send_signal(signal.SIGINT)
-        stdout, stderr = proc.communicate(timeout=30)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-    took = time.monotonic() - t0
+    proc, stdout, stderr, took = _sigint_once_spinning(HUNG_CLEANUP.format(stateless=True), env, 30)
     assert "closing" in stdout
     assert proc.returncode == 0, (proc.returncode, stderr[-2000:])
     assert "stuck_in_close" in stderr, stderr[-2000:]          # the stack names where it hangs
@@ -244,17 +250,7 @@ def test_after_a_signal_a_node_is_closed_and_not_destroyed_so_a_hanging_destroy_
     it and run_fleet.sh killed it after 10 s. After a stop signal every node is now closed and
     its process ends without destroy_node() or rclpy's shutdown; its exit code is its own."""
     env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain_id))
-    proc = subprocess.Popen([sys.executable, "-c", GIL_HOLDING_DESTROY.format(stateless=stateless)], env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        assert proc.stdout.readline().strip() == "spinning"
-        t0 = time.monotonic()
-        proc.send_signal(signal.SIGINT)
-        stdout, stderr = proc.communicate(timeout=90)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-    took = time.monotonic() - t0
+    proc, stdout, stderr, took = _sigint_once_spinning(GIL_HOLDING_DESTROY.format(stateless=stateless), env, 90)
     assert "closed" in stdout, (stdout, stderr[-2000:])
     assert "destroying" not in stdout
     assert proc.returncode == 0, (proc.returncode, stderr[-2000:])
