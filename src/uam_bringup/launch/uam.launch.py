@@ -81,6 +81,7 @@ def generate_launch_description() -> LaunchDescription:
                                                    "horizon_epochs": a["horizon_epochs"],
                                                    "commit_ahead": a["commit_ahead"],
                                                    "reaction": a["reaction"],
+                                                   "conflict_probe_s": a["conflict_probe_s"],
                                                    "replan_policy": a["replan_policy"],
                                                    "journal": PathJoinSubstitution([out, "planner-journal.jsonl"]),
                                                    "climb_rate_mps": a["climb_rate"],

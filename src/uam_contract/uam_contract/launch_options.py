@@ -43,6 +43,10 @@ LAUNCH_OPTIONS: tuple[LaunchOption, ...] = (
     LaunchOption("--reaction-period", "REACTION_PERIOD", "reaction_period_s", "0",
                  "with --reaction true, the planner also reacts every this many seconds between epochs "
                  "(a multiple of the simulator's step, less than the epoch; 0 = at epochs only)"),
+    LaunchOption("--probe", "PROBE", "conflict_probe_s", "0",
+                 "with --reaction true, the conflict probe's look-ahead [s]: at each reaction the planner "
+                 "projects airborne flights from their sightings and updates pairs that would lose "
+                 "separation within it (docs/disturbances.md; 0 = off)"),
     LaunchOption("--replan-policy", "REPLAN_POLICY", "replan_policy", "",
                  "re-plan of the flights a constraint update affects: mwis or firstfit; default: the policy's"),
     LaunchOption("--priority-share", "PRIORITY_SHARE", "priority_share", "0",
