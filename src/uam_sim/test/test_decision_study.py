@@ -13,6 +13,7 @@ import pytest
 import yaml
 from scipy.stats import t as student_t
 
+from uam_sim import sweep
 from uam_sim.decision_report import comparison_rows, power_rows, report_text, write_decision_report
 from uam_sim.decision_study import load_decision_config, run_stage
 from uam_sim.experiment_config import ExperimentError
@@ -291,6 +292,34 @@ def test_the_study_runs_resumes_and_its_report_rebuilds_from_the_tables(tmp_path
     assert (pd.read_csv(out / "windows.csv", dtype=str)["experiment"] == "E9").sum() == len(win)
     e0_after = pd.read_csv(out / "e0.csv.gz", dtype=str, keep_default_na=False)
     assert len(e0_after) == 2 * len(e0_before) and (e0_after["run"] == "zz").sum() == len(e0_before)
+    # cells computed by other run code (a worktree at a study's frozen code) are collected with
+    # the code version pinned, and give the same rows as at their own code
+    runs_own = pd.read_csv(out / "runs.csv", dtype=str, keep_default_na=False)
+    frozen = tmp_path / "frozen-cells"
+    own = sweep.code_version()
+    for f in Path(cfg["cells"]).rglob("*.json"):
+        dest = frozen / f.relative_to(cfg["cells"]).parent / f.name.replace(own, "0123456789ab")
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        dest.write_text(f.read_text().replace(own, "0123456789ab"))
+    try:
+        sweep.pin_code_version("0123456789ab")
+        run_stage(dict(cfg, cells=str(frozen)), "tables", out, progress=False)
+    finally:
+        sweep._CODE[:] = [own]
+    runs_pinned = pd.read_csv(out / "runs.csv", dtype=str, keep_default_na=False)
+    assert (runs_pinned[runs_pinned["experiment"] != "E9"]["code_version"] == "0123456789ab").all()
+    assert runs_pinned.drop(columns="code_version").equals(runs_own.drop(columns="code_version"))
+
+
+def test_a_pinned_code_version_is_only_for_collecting_tables(tmp_path, capsys):
+    from uam_sim.decision_study import main
+
+    assert main(["--stage", "full", "--code-version", "d3795b835634", "--out", str(tmp_path)]) == 2
+    assert "--code-version d3795b835634: only with --stage tables" in capsys.readouterr().err
+    assert main(["--stage", "tables", "--code-version", "D3795B", "--out", str(tmp_path)]) == 2
+    assert "--code-version: code version: 'D3795B' is not 12 lowercase hex digits" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="code version: 12 is not"):
+        sweep.pin_code_version(12)
 
 
 @pytest.mark.skipif(not (COMMITTED / "REPORT.md").exists(), reason="no committed study yet")

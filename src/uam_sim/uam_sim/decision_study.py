@@ -807,8 +807,22 @@ def main(argv=None) -> int:
                     help="pilot/full: only the methods, rates and variants the primary "
                          "comparisons read (their power first; the rest of the cells later)")
     ap.add_argument("--no-progress", action="store_true")
+    ap.add_argument("--code-version", default=None, metavar="V",
+                    help="tables only: collect the cells of run code version V (12 hex digits, "
+                         "e.g. computed in a worktree at the study's frozen code) instead of "
+                         "this checkout's")
     args = ap.parse_args(argv)
     try:
+        if args.code_version is not None:
+            if args.stage != "tables":
+                raise ExperimentError(f"--code-version {args.code_version}: only with --stage "
+                                      f"tables (a cell computed here is of this checkout's code, "
+                                      f"not {args.code_version}), got --stage {args.stage}")
+            from .sweep import pin_code_version
+            try:
+                pin_code_version(args.code_version)
+            except ValueError as exc:
+                raise ExperimentError(f"--code-version: {exc}") from None
         cfg = load_decision_config(args.config)
         if args.cells is not None:
             cfg["cells"] = args.cells

@@ -7,6 +7,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -168,6 +169,19 @@ def code_version() -> str:
     if not _CODE:
         _CODE.append(files_version(run_code_files()))
     return _CODE[0]
+
+
+def pin_code_version(version: str) -> None:
+    """Read and write cells as of run code ``version`` (12 hex digits) in this process instead of
+    its own :func:`code_version`: for collecting into tables the cells that another checkout
+    computed (a worktree at a study's frozen run code, so that the committed tables stay of one
+    code version). Only for processes that compute no cell (``decision_study --stage tables
+    --code-version V`` refuses any other stage): a cell computed here would carry a code version
+    that is not its own. Raises ValueError naming the value."""
+    if not (isinstance(version, str) and re.fullmatch(r"[0-9a-f]{12}", version)):
+        raise ValueError(f"code version: {version!r} is not 12 lowercase hex digits "
+                         f"(uam_sim.sweep.code_version)")
+    _CODE[:] = [version]
 
 
 def files_version(files) -> str:
