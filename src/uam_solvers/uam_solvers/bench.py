@@ -245,8 +245,9 @@ def large_benchmark(sizes, limits, seed: int, backends, out=print) -> dict:
 # ---- reference solvers called directly (no layers, no validation): the yardsticks ----------
 
 def kamis_direct(p: MwisProblem, limit_s: float) -> tuple[float, float, bool]:
-    """chszlablib KaMIS branch-and-reduce on the CSR: (objective, wall s incl. CSR and integer
-    weights, finished before 0.9 of the limit)."""
+    """chszlablib KaMIS branch-and-reduce on the CSR: (objective, wall s incl. the integer
+    weights and the int32 copies; the CSR itself is the problem's cached one, built once, so
+    after the first call it costs nothing here; finished before 0.9 of the limit)."""
     from chszlablib._kamis_wmis import branch_reduce
 
     from .base import integer_weights
@@ -285,6 +286,11 @@ def cpsat_direct(p: MwisProblem, limit_s: float) -> tuple[float, float, bool]:
 #: 2-core machine at load 8 single runs of a few milliseconds were inflated up to 40x at
 #: random by preemption (a 0.4 ms solve measured 17.9 ms once), which decided medians of 5.
 TARGET_REPEATS = 3
+#: issue 20: what auto may add to KaMIS's time on a graph KaMIS proves in well under a
+#: millisecond: the fixed cost of checking the caller's arrays, the groups and the answer (its
+#: proof recomputed in the caller's weights), ~0.2-0.4 ms from 15 to 500 vertices (profile in
+#: BENCHMARKS.md); the 2x target is read as "within 2x, or at most this much over KaMIS"
+EXCESS_MS = 0.5
 
 
 def _kamis_and_auto(p: MwisProblem, limit_s: float, repeats: int):
@@ -320,10 +326,11 @@ def _mid_row(label: str, problems, limit_s: float, cpsat: bool = True,
     a = np.array(rows, dtype=float)
     both = (a[:, 1] > 0) & (a[:, 3] > 0)
     ratio = f"{np.median(a[both, 0] / a[both, 2]):.2f}" if both.any() else "-"
+    excess = f"{np.median(a[both, 0] - a[both, 2]) * 1e3:.2f}" if both.any() else "-"
     cp = (f"{np.median(a[:, 4]) * 1e3:.2f} | {int(a[:, 5].sum())}" if cpsat else "- | -")
     return (f"| {label} | {len(rows)} | {np.median(a[:, 0]) * 1e3:.2f} | {int(a[:, 1].sum())} | "
             f"{np.median(a[:, 2]) * 1e3:.2f} | {int(a[:, 3].sum())} | {cp} | "
-            f"{ratio} | {int(a[:, 6].sum())}/{len(rows)} |")
+            f"{ratio} | {excess} | {int(a[:, 6].sum())}/{len(rows)} |")
 
 
 def _corpus_files(paths) -> list:
@@ -366,8 +373,8 @@ def target_benchmark(n_small: int, seed: int, mid_sizes, mid_seeds: int, corpora
         f"KaMIS direct; runs under 1 s: best of {TARGET_REPEATS}, interleaved)\n")
     out("| family, vertices | instances | auto median ms | auto proven | KaMIS direct "
         "median ms | KaMIS finished | CP-SAT direct median ms | CP-SAT proven | median ratio auto/KaMIS "
-        "(both proven) | auto = best objective |")
-    out("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+        "(both proven) | median auto - KaMIS ms (both proven) | auto = best objective |")
+    out("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for n in mid_sizes:
         out(_mid_row(f"planner_instance {n}", [planner_instance(n, seed + s)
                                                 for s in range(mid_seeds)], 10.0))
@@ -559,11 +566,19 @@ def corpus_benchmark(path=None, limit_s: float = 1.0, repeats: int = TARGET_REPE
             f"| - | {sum(x['auto_valid'] for x in rs)}/{len(rs)} | {geq}/{len(rs)} |")
     kf = [x for x in rows if x["kamis_finished"]]
     missed = [x["name"] for x in kf if not x["auto_proven"]]
-    ratios = np.array([x["auto_s"] / x["kamis_s"] for x in kf if x["auto_proven"]])
+    pk = [x for x in kf if x["auto_proven"]]
+    ratios = np.array([x["auto_s"] / x["kamis_s"] for x in pk])
+    # the fixed cost of checking the caller's arrays and the answer: an instance is slow only
+    # when auto is both above 2x of KaMIS and more than EXCESS_MS over it
+    excess = np.array([(x["auto_s"] - x["kamis_s"]) * 1e3 for x in pk])
+    slow = [x["name"] for x, r, d in zip(pk, ratios, excess) if r > 2 and d > EXCESS_MS]
     out(f"\nauto proved {len(kf) - len(missed)} of the {len(kf)} instances KaMIS finished"
         + (f" (not: {', '.join(missed)})" if missed else "")
         + (f"; ratio auto/KaMIS median {np.median(ratios):.2f}, instances above 2x: "
-           f"{int((ratios > 2).sum())}" if ratios.size else "")
+           f"{int((ratios > 2).sum())} (auto - KaMIS on those: max "
+           f"{excess[ratios > 2].max() if (ratios > 2).any() else 0:.2f} ms); above 2x and more "
+           f"than {EXCESS_MS:g} ms over KaMIS: {len(slow)}" + (f" ({', '.join(slow)})" if slow else "")
+           if ratios.size else "")
         + f"; every answer valid: {all(x['auto_valid'] for x in rows)}")
     if cpsat:
         both = [x for x in rows if x["auto_proven"] and x["cpsat_proven"]]
@@ -665,13 +680,26 @@ def grouped_benchmark(seed: int, sizes, seeds: int, limit_s: float = 1.0, out=pr
         "`uam_solvers.solve` from the arrays, end to end; KaMIS on the CSR)\n")
     out("| graphs, vertices | instances | auto median ms | auto proven | KaMIS direct median ms "
         "| KaMIS finished | CP-SAT direct median ms | CP-SAT proven | median ratio auto/KaMIS "
-        "(both proven) | auto = best objective |")
-    out("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+        "(both proven) | median auto - KaMIS ms (both proven) | auto = best objective |")
+    out("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for n in sizes:
         ps = [grouped_random_instance(n, seed + s) for s in range(seeds)]
         out(_mid_row(f"with groups {n}", ps, limit_s, cpsat=False))
         bare = [MwisProblem.from_arrays(p.weights, p.edges) for p in ps]
         out(_mid_row(f"same, no groups {n}", bare, limit_s, cpsat=False))
+    # the issue's 10,000 vertices on the same family (its measurement: proven in 26 ms warm):
+    # auto at the limit, proof and gap to the best of auto and KaMIS with 10 s each
+    out(f"\n10,000 vertices of the same family at {limit_s:g} s (after a warm solve; gap to the best "
+        f"of auto and KaMIS direct with 10 s each)\n")
+    out("| instance | auto ms | auto proven | auto's method | gap to best known |")
+    out("|---|---:|---:|---|---:|")
+    for s in range(seeds):
+        p = grouped_random_instance(10_000, seed + s)
+        r, da = _solve_arrays(p, "auto", limit_s, 0)
+        best = max(r.objective, _solve_arrays(p, "auto", 10.0, 0)[0].objective,
+                   kamis_direct(p, 10.0)[0])
+        out(f"| grouped_random_instance(10000, {seed + s}) | {da * 1e3:.1f} | {r.proven_optimal} | "
+            f"{r.stats.get('auto_method', '')} | {100 * (best - r.objective) / best:.4f} % |")
 
 
 def main(argv=None) -> int:
