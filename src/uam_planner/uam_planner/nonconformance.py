@@ -620,6 +620,10 @@ def react_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict, b
               "edges": 0, "kinds": {}, "rates": {}}
     if not idx:
         return list(active), [], report
+    if probed and set(probed) == set(found):
+        # a batch of the conflict probe alone (every flight conforms): its own solve
+        return (yield from _probe_batch_steps(t_eff, epoch_index, active, found, book, config,
+                                              select, policy, network, fixed, probed, report))
     others = [f for j, f in enumerate(active) if j not in found]
     fixed = list(fixed)
     act = SegmentSet.from_trajectories([f.trajectory for f in others] + fixed)
@@ -733,6 +737,157 @@ def react_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict, b
     replaced = {u.request_id for u in updates}
     keep = [f for j, f in enumerate(active) if active[j].request_id not in replaced]
     return keep + new_versions, updates, report
+
+
+#: the conflict probe's time shifts [s]: a probed flight may reach this much later (earlier when
+#: negative) than its projection within PROBE_SHIFT_WINDOW_S, then fly the projection shifted
+#: by it (speed x 0.67 to 1.09 for that minute; tenth stop: the re-timings by SHARES hold the
+#: new speed for the rest of the flight, 100-400 s of delay, and met some other flight far
+#: ahead in most batches)
+PROBE_SHIFTS_S = (-5.0, 5.0, 10.0, 20.0, 30.0)
+PROBE_SHIFT_WINDOW_S = 60.0
+#: added to every alternative of a probed flight (its own plan included), so that the solve
+#: covers every probed flight first (with keep 1 and updates 2-3 leaving one out could score
+#: more than keeping both plans)
+PROBE_COVER = 100.0
+
+
+def shifted_trajectory(base: Trajectory, t0_s: float, delta_s: float,
+                       window_s: float = PROBE_SHIFT_WINDOW_S) -> Trajectory | None:
+    """``base`` (the same path) ``delta_s`` later (earlier when negative) by ``t0_s + window_s``:
+    its times after ``t0_s`` stretched by (1 + delta / window) up to then, shifted by delta from
+    there on. None when the times would not increase (delta <= -window)."""
+    ts, ps = base.times_s, base.points_m
+    tb = float(t0_s) + float(window_s)
+    if tb < ts[-1] and not np.any(np.isclose(ts, tb)):
+        k = int(np.searchsorted(ts, tb))
+        ts = np.insert(ts, k, tb)
+        ps = np.insert(ps, k, base.position_at(tb), axis=0)
+    rel = ts - float(t0_s)
+    new = np.where(rel <= window_s, float(t0_s) + rel * (1.0 + delta_s / window_s), ts + delta_s)
+    if np.any(np.diff(new) <= 0):
+        return None
+    return Trajectory(new, ps)
+
+
+def _probe_batch_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict,
+                       book: PositionBook, config, select: Callable, policy: str, network,
+                       fixed: Sequence, probed: dict, report: dict):
+    """:func:`react_steps` for a batch of the conflict probe alone (every flight conforms).
+
+    Each probed flight's alternatives: re-joins of its plan from where it is at its observed
+    rate x (1, SHARES), its projection shifted by PROBE_SHIFTS_S within PROBE_SHIFT_WINDOW_S,
+    and keeping its plan (weight KEEP_WEIGHT), each + PROBE_COVER. Keeping its plan conflicts
+    with what its plan meets and with what its projection (from its newest sighting at its
+    observed rate, up to the look-ahead) meets: it flies as projected, not as planned. The
+    solve is repeated: a flight the answer leaves without an alternative keeps its plan, its
+    plan and projection become fixed traffic, and the others are solved again (until every
+    flight left has one). Before the tenth stop one flight left out dropped every update of the
+    batch: 14 of 20 flown losses at 25 m in 41 seeds were such batches (BENCHMARKS.md).
+    A generator as :func:`react_steps`: it yields each round's graph."""
+    from .conflict_graph import _unique_pairs, build_conflict_graph
+    from .replanning import SOLVE_HERE, clipped_until
+    from .separation import SegmentSet, conflicting_pairs
+
+    idx = sorted(found)
+    look = float(config.conflict_probe_s)
+    per, rates, proj = [], [], []
+    for i in idx:
+        f = active[i]
+        obs = found[i][0]
+        rate = book.progress_rate(f.request_id, f.trajectory, until=t_eff)
+        rates.append(rate)
+        report["rates"][f.request_id] = rate
+        alts, base = [], None
+        for share in (1.0,) + tuple(SHARES):
+            tr = rejoin_trajectory(f.trajectory, obs.t_s, obs.position_m, rate * share)
+            if tr is None or tr.arrival_s <= t_eff:
+                continue
+            if base is None:
+                base = tr.arrival_s
+            alts.append((tr, 2.0 + 1.0 / (1.0 + max(0.0, tr.arrival_s - base) / DELAY_SCALE_S)))
+        own = rejoin_trajectory(f.trajectory, obs.t_s, obs.position_m, rate)
+        if own is not None and alts:
+            for delta in PROBE_SHIFTS_S:
+                tr = shifted_trajectory(own, float(obs.t_s), delta)
+                if tr is None or tr.arrival_s <= t_eff:
+                    continue
+                alts.append((tr, 2.0 + 1.0 / (1.0 + max(0.0, tr.arrival_s - base) / DELAY_SCALE_S)))
+        alts = _constraint_free(alts, f, config, network, t_eff, True) or alts[:1]
+        per.append(alts + [(f.trajectory, KEEP_WEIGHT)])   # the last one: keep its plan
+        pr = _clipped(own, t_eff) if own is not None else None
+        pr = clipped_until(pr, t_eff + look) if pr is not None else None
+        proj.append(pr if pr is not None and pr.times_s.shape[0] >= 2 else None)
+    others = [f.trajectory for j, f in enumerate(active) if j not in found] + list(fixed)
+    rows, extra, chosen, backend = list(range(len(idx))), [], {}, policy
+    report["alternatives"] = sum(len(a) for a in per)
+    while rows:
+        flat = [(r, c, a) for r in rows for c, a in enumerate(per[r])]
+        req_of = np.repeat(np.arange(len(rows)), [len(per[r]) for r in rows]).astype(np.int64)
+        cand = np.array([c for _r, c, _a in flat], dtype=np.int64)
+        act = SegmentSet.from_trajectories(others + extra)
+        act = act.take(act.t1_s >= t_eff) if len(act) else act
+        trs = [_clipped(a[0], t_eff) or a[0] for _r, _c, a in flat]
+        graph = build_conflict_graph(trs, req_of, cand,
+                                     np.array([a[1] + PROBE_COVER for _r, _c, a in flat]),
+                                     len(rows), act, config.separation)
+        src = np.asarray(graph.vertex_source).tolist()
+        add = []
+        for v, s_v in enumerate(src):
+            r, c, _a = flat[s_v]
+            if c != len(per[r]) - 1 or proj[r] is None:
+                continue                                # not a keep vertex, or nothing projected
+            us = [u for u, s_u in enumerate(src) if flat[s_u][0] != r]
+            if us:
+                pairs = np.asarray(conflicting_pairs([proj[r]], [trs[src[u]] for u in us],
+                                                     config.separation)).reshape(-1, 2)
+                add += [(min(v, us[y]), max(v, us[y])) for y in pairs[:, 1].tolist()]
+        if add:
+            edges = _unique_pairs(np.concatenate((np.asarray(graph.edges, np.int64).reshape(-1, 2),
+                                                  np.array(add, np.int64))), graph.n_vertices)
+            graph = replace(graph, edges=edges.astype(np.int32),
+                            n_conflict_edges=graph.n_conflict_edges + len(add))
+        report["vertices"] += graph.n_vertices
+        report["edges"] += graph.n_edges
+        got = {}
+        if graph.n_vertices:
+            answer = (yield graph) if policy == "mwis" else SOLVE_HERE
+            selected, er = select(graph, policy) if answer is SOLVE_HERE else select(graph, policy, answer)
+            backend = er.backend_used or policy
+            for v in np.asarray(selected).tolist():
+                r, c, a = flat[src[v]]
+                got[r] = (c, a)
+        left = [r for r in rows if r not in got]
+        if not left:
+            chosen.update(got)
+            break
+        for r in left:                                  # it keeps its plan, flown as projected
+            rows.remove(r)
+            extra += [active[idx[r]].trajectory] + ([proj[r]] if proj[r] is not None else [])
+            report["probe_released"] = report.get("probe_released", 0) + 1
+    updates, new_versions = [], []
+    for r, i in enumerate(idx):
+        f = active[i]
+        obs, (lat, _ver, terr) = found[i]
+        ch = chosen.get(r)
+        if ch is None or ch[0] == len(per[r]) - 1:
+            report["probe_kept"] = report.get("probe_kept", 0) + 1
+            continue
+        report["probe_updates"] = report.get("probe_updates", 0) + 1
+        what = (f"predicted to lose separation with {', '.join(probed[i])} at the observed "
+                f"speeds (conflict probe, seen at t = {obs.t_s:g} s: lateral {lat:.1f} m, "
+                f"time {terr:+.1f} s); intent updated from where it is, {RATE_WORD} {rates[r]:.12g}")
+        tr, wgt = ch[1]
+        nf = replace(f, trajectory=tr, arrival_s=float(tr.arrival_s), weight=float(wgt),
+                     method=f"nonconforming-{policy}", backend=backend, epoch_index=int(epoch_index),
+                     version=f.version + 1, effective_s=float(t_eff), contingent=False)
+        updates.append(ReactionUpdate(f.request_id, f.operator_id, nf.version, KIND, (),
+                                      f"{KIND}: {what}", float(t_eff), nf, f,
+                                      nf.arrival_s - f.arrival_s, float(rates[r])))
+        new_versions.append(nf)
+        report["kinds"][KIND] = report["kinds"].get(KIND, 0) + 1
+    replaced = {u.request_id for u in updates}
+    return [f for f in active if f.request_id not in replaced] + new_versions, updates, report
 
 
 def moved_flight(f, alt, t_eff: float, epoch_index: int, policy: str, backend: str):

@@ -516,3 +516,44 @@ def test_the_probe_updates_both_before_either_is_nonconforming_and_the_new_plans
     assert audit_flights([flown_p, new["Q2"]], separation_m=100.0).losses == []
     # off (the default): no report, nothing happens
     assert probe_planner(0.0).react_between(60.0, 2) == []
+
+
+def test_a_time_shift_reaches_its_delay_within_the_window_on_the_same_path():
+    from uam_planner.nonconformance import shifted_trajectory
+    # 0 -> 6000 m at 10 m/s from 0 s; +10 s within 60 s: the first 600 m take 70 s (8.57 m/s),
+    # then the same speed as before, 10 s later: at 600 m at 70 s, at the end at 610 s
+    base = Trajectory(np.array([0.0, 600.0]), np.array([[0.0, 0, 0], [6000.0, 0, 0]]))
+    late = shifted_trajectory(base, 0.0, 10.0, 60.0)
+    assert late.arrival_s == pytest.approx(610.0)
+    assert late.position_at(70.0) == pytest.approx([600.0, 0, 0])
+    assert late.position_at(35.0) == pytest.approx([300.0, 0, 0])
+    early = shifted_trajectory(base, 0.0, -5.0, 60.0)   # 600 m in 55 s (10.9 m/s)
+    assert early.arrival_s == pytest.approx(595.0) and early.position_at(55.0) == pytest.approx([600.0, 0, 0])
+    assert shifted_trajectory(base, 0.0, -60.0, 60.0) is None   # would stop the clock
+
+
+def test_a_probed_flight_the_batch_cannot_save_keeps_its_plan_and_the_other_is_still_updated():
+    from uam_planner.nonconformance import deviations, predicted_conflicts, react_steps
+    from uam_planner.planning import replan_selector
+    from uam_planner.replanning import SOLVE_HERE, run_steps
+    p = probe_planner(300.0)                 # P 6 s late at 60 s, predicted to meet Q2 (89.2 m)
+    got = predicted_conflicts(p.active, p.positions, 60.0, 300.0, 100.0)
+    found = {i: (obs, tuple(float(x[0]) for x in deviations(p.active[i].trajectory, [obs.t_s],
+                                                             [obs.position_m])))
+             for i, (obs, _ids) in got.items()}
+    # a vehicle hovering on Q2's route 600 m ahead of it, (3000, -2000), from 60 s to 700 s:
+    # every alternative of Q2 passes it (its own plan too, at 120 s); P's route is 2 km away
+    hover = Trajectory(np.array([60.0, 700.0]), np.array([[3000.0, -2000.0, 0.0]] * 2))
+    steps = react_steps(60.0, 2, p.active, found, p.positions, p.config,
+                        replan_selector(None, p.config, 2, 60.0), "mwis", p.network,
+                        fixed=[hover], fixed_ids=["H"],
+                        probed={i: ids for i, (_o, ids) in got.items()})
+    _active, ups, rep = run_steps(steps, lambda _graph: SOLVE_HERE)
+    # Q2 has no alternative: it keeps its plan; P is solved again against Q2's plan and
+    # projection and updated (before the tenth stop the whole batch was dropped: no update)
+    assert [u.request_id for u in ups] == ["P"]
+    assert ups[0].kind == KIND and "conflict probe" in ups[0].reason
+    assert rep["probe_released"] == 1 and rep["probe_kept"] == 1 and rep["probe_updates"] == 1
+    new_p = ups[0].flight.trajectory
+    assert new_p.points_m[0] == pytest.approx([540.0, 0.0, 0.0])
+    assert audit_flights([new_p, Q2.trajectory], separation_m=100.0).losses == []
