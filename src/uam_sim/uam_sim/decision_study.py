@@ -745,9 +745,14 @@ def run_stage(cfg: dict, stage: str, out: Path, experiments=None, backends=None,
                 continue
             results += run_capacity_sweep(cc, compute=compute and stage != "tables", progress=progress)
             entries += ent
-        # every experiment's finished cells, whatever stage made them (the tables stay whole)
+        # every experiment's finished cells, whatever stage made them (the tables stay whole);
+        # the tables stage with --experiments: only those, the others' rows kept as committed
+        # (tenth stop: E1 and E2 share some cells with E3 - same network, rate, method and
+        # parameters - so cells computed for E3 alone would have replaced their whole tables)
         all_results, all_entries = [], []
         for e in cfg["experiments"]:
+            if stage == "tables" and experiments and e["name"] not in experiments:
+                continue
             seeds = list(range(cfg["power"]["max_seeds"]))
             cc, ent = capacity_config(cfg, seeds, Path(cfg["cells"]), [e["name"]])
             done = run_capacity_sweep(cc, compute=False, progress=False)
@@ -799,7 +804,9 @@ def main(argv=None) -> int:
     ap.add_argument("--cells", default=None, help="where cells are kept (default: the config's cells)")
     ap.add_argument("--workers", type=int, default=None)
     ap.add_argument("--scheduler", default=None, help="local or tcp://HOST:8786")
-    ap.add_argument("--experiments", default=None, help="comma list (default: every one)")
+    ap.add_argument("--experiments", default=None,
+                    help="comma list (default: every one); with --stage tables, only these are "
+                         "collected from the cells, the others' rows kept as committed")
     ap.add_argument("--backends", default=None, help="E0: comma list of solvers to run now")
     ap.add_argument("--runs", default=None, help="E0: comma list of e0.runs names to run now")
     ap.add_argument("--duration", type=float, default=None, help="override base.duration_s")
