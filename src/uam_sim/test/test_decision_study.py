@@ -309,6 +309,17 @@ def test_the_study_runs_resumes_and_its_report_rebuilds_from_the_tables(tmp_path
     runs_pinned = pd.read_csv(out / "runs.csv", dtype=str, keep_default_na=False)
     assert (runs_pinned[runs_pinned["experiment"] != "E9"]["code_version"] == "0123456789ab").all()
     assert runs_pinned.drop(columns="code_version").equals(runs_own.drop(columns="code_version"))
+    # the tables stage with experiments named collects only those: E1 has cells here, but asked
+    # for E9 alone it keeps E1's rows as they are (tenth stop: cells computed for one experiment
+    # that another shares replaced the other's whole table)
+    marked = runs_pinned.assign(cpu_s=lambda d: d["cpu_s"].where(d["experiment"] != "E1", "-1"))
+    marked.to_csv(out / "runs.csv", index=False)
+    run_stage(cfg, "tables", out, progress=False, experiments=["E9"])
+    again = pd.read_csv(out / "runs.csv", dtype=str, keep_default_na=False)
+    assert (again[again["experiment"] == "E1"]["cpu_s"] == "-1").all()
+    run_stage(cfg, "tables", out, progress=False)          # all of them: E1 from its cells again
+    again = pd.read_csv(out / "runs.csv", dtype=str, keep_default_na=False)
+    assert (again[again["experiment"] == "E1"]["cpu_s"] != "-1").all()
 
 
 def test_a_pinned_code_version_is_only_for_collecting_tables(tmp_path, capsys):
