@@ -570,6 +570,40 @@ def _yield_steps(t_eff: float, unsaved: dict, others: list, held: list, chosen_t
     return {}, {}
 
 
+def _delay_weight(tr: Trajectory, base_arrival_s: float) -> float:
+    """An update's weight: 2 + 1 / (1 + its delay past the earliest update's / DELAY_SCALE_S)."""
+    return 2.0 + 1.0 / (1.0 + max(0.0, tr.arrival_s - base_arrival_s) / DELAY_SCALE_S)
+
+
+def _observed_updates(idx: list, active: Sequence, found: dict, book: PositionBook, t_eff: float,
+                      report: dict) -> tuple[list, list]:
+    """For each flight ``active[i]``, i in ``idx``: its observed progress rate (also into
+    ``report["rates"]``) and :func:`_rejoin_alternatives` from its sighting in ``found``."""
+    rates, rejoins = [], []
+    for i in idx:
+        f = active[i]
+        rate = book.progress_rate(f.request_id, f.trajectory, until=t_eff)
+        rates.append(rate)
+        report["rates"][f.request_id] = rate
+        rejoins.append(_rejoin_alternatives(f, found[i][0], rate, t_eff))
+    return rates, rejoins
+
+
+def _rejoin_alternatives(f, obs, rate: float, t_eff: float) -> tuple[list, float | None]:
+    """The updates of ``f`` from its sighting ``obs``: its plan re-joined at the observed rate
+    x (1, SHARES), those still flying after ``t_eff``, with their weights; and the first one's
+    arrival (None when none is left)."""
+    alts, base = [], None
+    for share in (1.0,) + tuple(SHARES):
+        tr = rejoin_trajectory(f.trajectory, obs.t_s, obs.position_m, rate * share)
+        if tr is None or tr.arrival_s <= t_eff:
+            continue
+        if base is None:
+            base = tr.arrival_s
+        alts.append((tr, _delay_weight(tr, base)))
+    return alts, base
+
+
 def react(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: PositionBook,
           config, select: Callable, policy: str, network=None, fixed: Sequence = (),
           fixed_ids: Sequence = ()) -> tuple[list, list, dict]:
@@ -628,23 +662,12 @@ def react_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict, b
     fixed = list(fixed)
     act = SegmentSet.from_trajectories([f.trajectory for f in others] + fixed)
     act = act.take(act.t1_s >= t_eff) if len(act) else act
-    per, rates = [], []
+    per = []
     keep: dict = {}   # row -> the keep-its-plan alternative of a probed flight
-    for i in idx:
+    rates, rejoins = _observed_updates(idx, active, found, book, t_eff, report)
+    for r, i in enumerate(idx):
         f = active[i]
-        obs = found[i][0]
-        rate = book.progress_rate(f.request_id, f.trajectory, until=t_eff)
-        rates.append(rate)
-        report["rates"][f.request_id] = rate
-        alts = []
-        base = None
-        for share in (1.0,) + tuple(SHARES):
-            tr = rejoin_trajectory(f.trajectory, obs.t_s, obs.position_m, rate * share)
-            if tr is None or tr.arrival_s <= t_eff:
-                continue
-            if base is None:
-                base = tr.arrival_s
-            alts.append((tr, 2.0 + 1.0 / (1.0 + max(0.0, tr.arrival_s - base) / DELAY_SCALE_S)))
+        alts, _base = rejoins[r]
         alts = _constraint_free(alts, f, config, network, t_eff, True) or alts[:1]
         if probed and i in probed:
             # it conforms: keeping its plan is an alternative too (the least preferred), so the
@@ -791,28 +814,19 @@ def _probe_batch_steps(t_eff: float, epoch_index: int, active: Sequence, found: 
 
     idx = sorted(found)
     look = float(config.conflict_probe_s)
-    per, rates, proj = [], [], []
-    for i in idx:
+    per, proj = [], []
+    rates, rejoins = _observed_updates(idx, active, found, book, t_eff, report)
+    for r, i in enumerate(idx):
         f = active[i]
         obs = found[i][0]
-        rate = book.progress_rate(f.request_id, f.trajectory, until=t_eff)
-        rates.append(rate)
-        report["rates"][f.request_id] = rate
-        alts, base = [], None
-        for share in (1.0,) + tuple(SHARES):
-            tr = rejoin_trajectory(f.trajectory, obs.t_s, obs.position_m, rate * share)
-            if tr is None or tr.arrival_s <= t_eff:
-                continue
-            if base is None:
-                base = tr.arrival_s
-            alts.append((tr, 2.0 + 1.0 / (1.0 + max(0.0, tr.arrival_s - base) / DELAY_SCALE_S)))
-        own = rejoin_trajectory(f.trajectory, obs.t_s, obs.position_m, rate)
+        alts, base = rejoins[r]
+        own = rejoin_trajectory(f.trajectory, obs.t_s, obs.position_m, rates[r])
         if own is not None and alts:
             for delta in PROBE_SHIFTS_S:
                 tr = shifted_trajectory(own, float(obs.t_s), delta)
                 if tr is None or tr.arrival_s <= t_eff:
                     continue
-                alts.append((tr, 2.0 + 1.0 / (1.0 + max(0.0, tr.arrival_s - base) / DELAY_SCALE_S)))
+                alts.append((tr, _delay_weight(tr, base)))
         alts = _constraint_free(alts, f, config, network, t_eff, True) or alts[:1]
         per.append(alts + [(f.trajectory, KEEP_WEIGHT)])   # the last one: keep its plan
         pr = _clipped(own, t_eff) if own is not None else None
