@@ -589,19 +589,41 @@ def _observed_updates(idx: list, active: Sequence, found: dict, book: PositionBo
     return rates, rejoins
 
 
-def _rejoin_alternatives(f, obs, rate: float, t_eff: float) -> tuple[list, float | None]:
+def _rejoin_alternatives(f, obs, rate: float, t_eff: float) -> tuple[list, float | None, Trajectory | None]:
     """The updates of ``f`` from its sighting ``obs``: its plan re-joined at the observed rate
-    x (1, SHARES), those still flying after ``t_eff``, with their weights; and the first one's
-    arrival (None when none is left)."""
-    alts, base = [], None
+    x (1, SHARES), those still flying after ``t_eff``, with their weights; the first one's
+    arrival (None when none is left); and the re-join at the observed rate itself (its
+    projection, also when it lands before ``t_eff``; None when there is none)."""
+    alts, base, own = [], None, None
     for share in (1.0,) + tuple(SHARES):
         tr = rejoin_trajectory(f.trajectory, obs.t_s, obs.position_m, rate * share)
+        if share == 1.0:
+            own = tr
         if tr is None or tr.arrival_s <= t_eff:
             continue
         if base is None:
             base = tr.arrival_s
         alts.append((tr, _delay_weight(tr, base)))
-    return alts, base
+    return alts, base, own
+
+
+def _probe_reason(ids, obs, lat: float, terr: float, rate: float) -> str:
+    """Why the conflict probe updates a flight (the text of its ReactionUpdate)."""
+    return (f"predicted to lose separation with {', '.join(ids)} at the observed speeds (conflict "
+            f"probe, seen at t = {obs.t_s:g} s: lateral {lat:.1f} m, time {terr:+.1f} s); intent "
+            f"updated from where it is, {RATE_WORD} {rate:.12g}")
+
+
+def _reaction_update(f, alt, kind: str, reason: str, policy: str, backend: str, epoch_index: int,
+                     t_eff: float, rate: float, contingent: bool):
+    """The new version of ``f`` flying ``alt`` (trajectory, weight) from ``t_eff``, and its
+    ReactionUpdate."""
+    tr = alt[0]
+    nf = replace(f, trajectory=tr, arrival_s=float(tr.arrival_s), weight=float(alt[1]),
+                 method=f"nonconforming-{policy}", backend=backend, epoch_index=int(epoch_index),
+                 version=f.version + 1, effective_s=float(t_eff), contingent=contingent)
+    return nf, ReactionUpdate(f.request_id, f.operator_id, nf.version, kind, (), reason,
+                              float(t_eff), nf, f, nf.arrival_s - f.arrival_s, float(rate))
 
 
 def react(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: PositionBook,
@@ -667,7 +689,7 @@ def react_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict, b
     rates, rejoins = _observed_updates(idx, active, found, book, t_eff, report)
     for r, i in enumerate(idx):
         f = active[i]
-        alts, _base = rejoins[r]
+        alts, _base, _own = rejoins[r]
         alts = _constraint_free(alts, f, config, network, t_eff, True) or alts[:1]
         if probed and i in probed:
             # it conforms: keeping its plan is an alternative too (the least preferred), so the
@@ -721,9 +743,7 @@ def react_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict, b
                 f"time {terr:+.1f} s); intent updated from where it is, {RATE_WORD} {rates[r]:.12g}")
         a = chosen.get(r)
         if r in keep:
-            what = (f"predicted to lose separation with {', '.join(probed[i])} at the observed "
-                    f"speeds (conflict probe, seen at t = {obs.t_s:g} s: lateral {lat:.1f} m, "
-                    f"time {terr:+.1f} s); intent updated from where it is, {RATE_WORD} {rates[r]:.12g}")
+            what = _probe_reason(probed[i], obs, lat, terr, rates[r])
             if a is None or a is keep[r]:
                 report["probe_kept"] = report.get("probe_kept", 0) + 1
                 continue  # it conforms: it keeps its plan rather than fly a contingency
@@ -740,12 +760,9 @@ def react_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict, b
         else:
             kind = KIND
             reason = f"{KIND}: {what}"
-        tr = a[0]
-        nf = replace(f, trajectory=tr, arrival_s=float(tr.arrival_s), weight=float(a[1]),
-                     method=f"nonconforming-{policy}", backend=backend, epoch_index=int(epoch_index),
-                     version=f.version + 1, effective_s=float(t_eff), contingent=contingent)
-        updates.append(ReactionUpdate(f.request_id, f.operator_id, nf.version, kind, (), reason,
-                                      float(t_eff), nf, f, nf.arrival_s - f.arrival_s, float(rates[r])))
+        nf, up = _reaction_update(f, a, kind, reason, policy, backend, epoch_index, t_eff,
+                                  rates[r], contingent)
+        updates.append(up)
         new_versions.append(nf)
         report["kinds"][kind] = report["kinds"].get(kind, 0) + 1
     for j in sorted(moved):                           # the neighbours that yield
@@ -819,8 +836,7 @@ def _probe_batch_steps(t_eff: float, epoch_index: int, active: Sequence, found: 
     for r, i in enumerate(idx):
         f = active[i]
         obs = found[i][0]
-        alts, base = rejoins[r]
-        own = rejoin_trajectory(f.trajectory, obs.t_s, obs.position_m, rates[r])
+        alts, base, own = rejoins[r]
         if own is not None and alts:
             for delta in PROBE_SHIFTS_S:
                 tr = shifted_trajectory(own, float(obs.t_s), delta)
@@ -888,16 +904,10 @@ def _probe_batch_steps(t_eff: float, epoch_index: int, active: Sequence, found: 
             report["probe_kept"] = report.get("probe_kept", 0) + 1
             continue
         report["probe_updates"] = report.get("probe_updates", 0) + 1
-        what = (f"predicted to lose separation with {', '.join(probed[i])} at the observed "
-                f"speeds (conflict probe, seen at t = {obs.t_s:g} s: lateral {lat:.1f} m, "
-                f"time {terr:+.1f} s); intent updated from where it is, {RATE_WORD} {rates[r]:.12g}")
-        tr, wgt = ch[1]
-        nf = replace(f, trajectory=tr, arrival_s=float(tr.arrival_s), weight=float(wgt),
-                     method=f"nonconforming-{policy}", backend=backend, epoch_index=int(epoch_index),
-                     version=f.version + 1, effective_s=float(t_eff), contingent=False)
-        updates.append(ReactionUpdate(f.request_id, f.operator_id, nf.version, KIND, (),
-                                      f"{KIND}: {what}", float(t_eff), nf, f,
-                                      nf.arrival_s - f.arrival_s, float(rates[r])))
+        what = _probe_reason(probed[i], obs, lat, terr, rates[r])
+        nf, up = _reaction_update(f, ch[1], KIND, f"{KIND}: {what}", policy, backend, epoch_index,
+                                  t_eff, rates[r], False)
+        updates.append(up)
         new_versions.append(nf)
         report["kinds"][KIND] = report["kinds"].get(KIND, 0) + 1
     replaced = {u.request_id for u in updates}
