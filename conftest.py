@@ -13,6 +13,9 @@ from __future__ import annotations
 
 import fcntl
 import os
+import shutil
+import subprocess
+import sys
 import time
 from typing import Callable
 
@@ -73,3 +76,122 @@ def spin_until(executor, condition: Callable[[], bool], timeout_s: float = 10.0,
 @pytest.fixture(name="spin_until")
 def spin_until_fixture():
     return spin_until
+
+
+# ---------------------------------------------------------------------------------------------
+# Hang watchdog: a test stuck in native code is stopped, with its stacks, within a bound
+# ---------------------------------------------------------------------------------------------
+# pytest-timeout (pytest.ini) raises in the main thread from SIGALRM: that needs the main thread
+# to come back to the interpreter. A thread spinning in native code with the GIL held (rclpy's
+# destroy_node() did in a loaded run, BENCHMARKS.md ninth stop) never does, and neither does any
+# other Python thread: a CI run once sat at 1068 of 1071 tests until its 90 min were up, with
+# nothing printed. So each test process gets a watcher process (it needs no GIL of ours): told
+# when each test starts and ends, it prints the native and Python stacks of a test process whose
+# test ran UAM_TEST_HANG_S seconds (default 240, past pytest-timeout's 180; 0 = off) with
+# py-spy, then sends SIGABRT (pytest's faulthandler prints every thread's Python stack, and the
+# test is reported failed: under xdist "worker crashed", the other tests go on).
+
+_WATCHER = r"""
+import os, select, signal, subprocess, sys, time
+pid, hang_s, pyspy = int(sys.argv[1]), float(sys.argv[2]), sys.argv[3]
+current, since, buf = None, 0.0, b""
+while True:
+    wait = None if current is None else max(0.0, since + hang_s - time.monotonic())
+    if select.select([0], [], [], wait)[0]:
+        chunk = os.read(0, 65536)
+        if not chunk:
+            sys.exit(0)  # the test process closed the pipe (it ended)
+        *lines, buf = (buf + chunk).split(b"\n")
+        for line in lines:
+            if line.startswith(b"start "):
+                current, since = line[6:].decode(errors="replace"), time.monotonic()
+            elif line == b"end":
+                current = None
+        continue
+    err = sys.stderr
+    print(f"\n[test watchdog] {current} still running after {hang_s:g} s in test process "
+          f"{pid}: its stacks, then SIGABRT", file=err, flush=True)
+    try:
+        for tid in sorted(os.listdir(f"/proc/{pid}/task"), key=int):
+            with open(f"/proc/{pid}/task/{tid}/stat") as f:
+                stat = f.read().rsplit(")", 1)[1].split()
+            with open(f"/proc/{pid}/task/{tid}/wchan") as f:
+                wchan = f.read().strip()
+            print(f"[test watchdog] thread {tid}: state {stat[0]}, kernel wait {wchan or '-'}",
+                  file=err, flush=True)
+    except OSError as exc:
+        print(f"[test watchdog] /proc/{pid}: {exc}", file=err, flush=True)
+    if pyspy:
+        try:
+            subprocess.run([pyspy, "dump", "--native", "--pid", str(pid)], stdout=err,
+                           stderr=err, timeout=120)
+        except (OSError, subprocess.SubprocessError) as exc:
+            print(f"[test watchdog] py-spy: {exc}", file=err, flush=True)
+    try:
+        os.kill(pid, signal.SIGABRT)
+        end = time.monotonic() + 20
+        while time.monotonic() < end:
+            os.kill(pid, 0)  # ProcessLookupError once it is gone
+            with open(f"/proc/{pid}/stat") as f:
+                if f.read().rsplit(")", 1)[1].split()[0] == "Z":
+                    sys.exit(0)
+            time.sleep(0.1)
+        os.kill(pid, signal.SIGKILL)  # SIGABRT handled and survived: end it
+    except (ProcessLookupError, FileNotFoundError):
+        pass
+    sys.exit(0)
+"""
+
+
+def _hang_s() -> float:
+    raw = os.environ.get("UAM_TEST_HANG_S", "240")
+    try:
+        value = float(raw)
+    except ValueError:
+        raise pytest.UsageError(f"UAM_TEST_HANG_S: {raw!r} is not a number of seconds") from None
+    if not value >= 0:
+        raise pytest.UsageError(f"UAM_TEST_HANG_S: {raw!r} is not a number >= 0")
+    return value
+
+
+def _watchdog(config):
+    """This test process's watcher (started with its first test), or None when off."""
+    w = getattr(config, "_uam_watchdog", False)
+    if w is False:
+        w = None
+        hang_s = _hang_s()
+        if hang_s > 0:
+            pyspy = shutil.which("py-spy") or shutil.which("py-spy", path=os.path.dirname(sys.executable)) or ""
+            w = subprocess.Popen([sys.executable, "-c", _WATCHER, str(os.getpid()), repr(hang_s), pyspy],
+                                 stdin=subprocess.PIPE)
+        config._uam_watchdog = w
+    return w
+
+
+def _tell(config, line: str) -> None:
+    w = _watchdog(config)
+    if w is not None and w.poll() is None:
+        try:
+            w.stdin.write(line.encode() + b"\n")
+            w.stdin.flush()
+        except OSError:
+            pass
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_protocol(item, nextitem):
+    _tell(item.config, f"start {item.nodeid}")
+    try:
+        yield
+    finally:
+        _tell(item.config, "end")
+
+
+def pytest_unconfigure(config):
+    w = getattr(config, "_uam_watchdog", None)
+    if w:
+        try:
+            w.stdin.close()
+            w.wait(10)
+        except (OSError, subprocess.TimeoutExpired):
+            w.kill()
