@@ -37,11 +37,27 @@ def _claim_domain_id() -> tuple[int, object]:
 
 
 @pytest.fixture(scope="session")
-def ros_domain_id():
-    """This test run's own ROS domain id (held for the whole run)."""
+def ros_process_domain_id():
+    """The ROS domain id of the node *processes* this test process starts (run_fleet.sh, a
+    node run with ``python -m``), held for the whole run; also this process's ROS_DOMAIN_ID, so
+    a process started without one names it too. It is not the domain of the in-process nodes
+    (:func:`ros_domain_id`): a node process ends at once after a stop signal (os._exit, without
+    destroying its DDS participant) or is killed, and Fast DDS's shared-memory transport then
+    can leave that domain's ports (files in /dev/shm, reused by the next participant of the
+    domain) corrupted for the processes still in it (eProsima/Fast-DDS#1144); a CI run hung in
+    an in-process graph test that came after such runs in its domain."""
     domain_id, lock = _claim_domain_id()
     os.environ["ROS_DOMAIN_ID"] = str(domain_id)
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    yield domain_id
+    lock.close()
+
+
+@pytest.fixture(scope="session")
+def ros_domain_id(ros_process_domain_id):
+    """This test process's own ROS domain id for its in-process nodes (held for the whole run;
+    node processes it starts use :func:`ros_process_domain_id`)."""
+    domain_id, lock = _claim_domain_id()
     yield domain_id
     lock.close()
 

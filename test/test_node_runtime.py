@@ -77,8 +77,8 @@ def _wait_file(path: pathlib.Path, timeout_s: float) -> bool:
     return False
 
 
-def test_a_node_that_ends_waits_until_a_stopped_subscriber_has_acknowledged_its_messages(tmp_path, ros_domain_id):
-    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain_id))
+def test_a_node_that_ends_waits_until_a_stopped_subscriber_has_acknowledged_its_messages(tmp_path, ros_process_domain_id):
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_process_domain_id))
     count, go = tmp_path / "count", tmp_path / "go"
     sub = subprocess.Popen([sys.executable, "-c", SUBSCRIBER, str(count), "20"], env=env)
     pub = None
@@ -125,10 +125,10 @@ sys.exit(run_node(Done, "ends_at_once", None))
 """
 
 
-def test_a_sigint_while_a_finished_node_exits_does_not_kill_it(ros_domain_id):
+def test_a_sigint_while_a_finished_node_exits_does_not_kill_it(ros_process_domain_id):
     """A normal run logged "node 'planner' exited with code 130": the SIGINT run_fleet.sh sends
     at the end reached the planner while the interpreter was finalizing."""
-    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain_id))
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_process_domain_id))
     proc = subprocess.run([sys.executable, "-c", ENDS_AT_ONCE], env=env, capture_output=True,
                           text=True, timeout=60)
     assert proc.returncode == 0, (proc.returncode, proc.stderr)
@@ -205,12 +205,12 @@ sys.exit(run_node(Hung, "hung_cleanup", None, stateless={stateless}))
 """
 
 
-def test_a_stateless_node_stuck_after_a_signal_names_its_stack_and_ends_itself(ros_domain_id):
+def test_a_stateless_node_stuck_after_a_signal_names_its_stack_and_ends_itself(ros_process_domain_id):
     """Seventh stop: the solver node now and then outlived run_fleet.sh's 10 s after a SIGINT,
     with no clue where. After a signal the runtime's watcher prints every thread's stack if the
     node has not ended UAM_STOP_DUMP_S later (7 s; 1 s here), and a stateless node (the solver)
     is then ended with exit code 0 and a warning; the clean-up's phases are timed and printed."""
-    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain_id), UAM_STOP_DUMP_S="1.0")
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_process_domain_id), UAM_STOP_DUMP_S="1.0")
     proc, stdout, stderr, took = _sigint_once_spinning(HUNG_CLEANUP.format(stateless=True), env, 30)
     assert "closing" in stdout
     assert proc.returncode == 0, (proc.returncode, stderr[-2000:])
@@ -244,12 +244,12 @@ sys.exit(run_node(Node_, "gil_holding_destroy", None, stateless={stateless}))
 
 @pytest.mark.parametrize("stateless", [True, False])
 def test_after_a_signal_a_node_is_closed_and_not_destroyed_so_a_hanging_destroy_cannot_keep_it(
-        ros_domain_id, stateless):
+        ros_process_domain_id, stateless):
     """Ninth stop: in a loaded run the solver node hung in rclpy's destroy_node() holding the
     GIL (faulthandler showed the main thread there, state R), so its stop watcher could not end
     it and run_fleet.sh killed it after 10 s. After a stop signal every node is now closed and
     its process ends without destroy_node() or rclpy's shutdown; its exit code is its own."""
-    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain_id))
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_process_domain_id))
     proc, stdout, stderr, took = _sigint_once_spinning(GIL_HOLDING_DESTROY.format(stateless=stateless), env, 90)
     assert "closed" in stdout, (stdout, stderr[-2000:])
     assert "destroying" not in stdout

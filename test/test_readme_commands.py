@@ -102,8 +102,8 @@ def test_readme_commands_are_extracted_from_the_sections():
     assert not any(c.startswith("ros2 ") for c in cmds), cmds
 
 
-def test_every_readme_command_runs_as_written(tmp_path, ros_domain_id):
-    env = fresh_env(tmp_path, ros_domain_id)
+def test_every_readme_command_runs_as_written(tmp_path, ros_process_domain_id):
+    env = fresh_env(tmp_path, ros_process_domain_id)
     demo_out = tmp_path / "demo"
     study = tmp_path / "study"
     mcap = demo_out / "run.mcap"
@@ -163,8 +163,8 @@ def test_every_readme_command_runs_as_written(tmp_path, ros_domain_id):
     assert "PROBLEM" not in checked.stdout, checked.stdout[-2000:]
 
 
-def test_run_fleet_help_and_backend_list_say_what_the_script_does(tmp_path, ros_domain_id):
-    env = fresh_env(tmp_path, ros_domain_id)
+def test_run_fleet_help_and_backend_list_say_what_the_script_does(tmp_path, ros_process_domain_id):
+    env = fresh_env(tmp_path, ros_process_domain_id)
     helped = run("scripts/run_fleet.sh --help", env)
     assert helped.returncode == 0
     # the help ended mid-sentence ("... the kernel (each is started")

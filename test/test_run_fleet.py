@@ -35,11 +35,11 @@ def _node_processes(out_dir: pathlib.Path) -> list[str]:
     return [line for line in ps.splitlines() if str(out_dir) in line and "/lib/uam_" in line]
 
 
-def test_sigterm_mid_run_stops_every_node_and_keeps_the_recording(tmp_path, ros_domain_id):
+def test_sigterm_mid_run_stops_every_node_and_keeps_the_recording(tmp_path, ros_process_domain_id):
     from mcap.reader import make_reader
 
     out = tmp_path / "run"
-    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain_id))
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_process_domain_id))
     proc = subprocess.Popen(
         ["bash", str(ROOT / "scripts" / "run_fleet.sh"), "--network", "config/networks/tiny.yaml",
          "--rate", "2", "--duration", "100000", "--mode", "realtime", "--rtf", "20", "--rerun", "off",
@@ -143,10 +143,10 @@ def test_two_runs_started_in_the_same_second_without_out_get_their_own_folders(t
         assert "Safety audit     OK" in (folder / "summary.txt").read_text()
 
 
-def test_sighup_stops_every_node(tmp_path, ros_domain_id):
+def test_sighup_stops_every_node(tmp_path, ros_process_domain_id):
     log = tmp_path / "run.log"
     # with the conformance monitor asked for (by default it runs only with a disturbance set)
-    proc = _start(tmp_path / "run", dict(os.environ, ROS_DOMAIN_ID=str(ros_domain_id)), log,
+    proc = _start(tmp_path / "run", dict(os.environ, ROS_DOMAIN_ID=str(ros_process_domain_id)), log,
                   extra=("--conformance", "true"))
     try:
         nodes = _running(proc, log, n=6)

@@ -16,14 +16,14 @@ ROOT = pathlib.Path(__file__).resolve().parents[1]
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 
-def test_run_fleet_passes_the_seed_to_the_planner_and_matches_the_runner(tmp_path, ros_domain_id):
+def test_run_fleet_passes_the_seed_to_the_planner_and_matches_the_runner(tmp_path, ros_process_domain_id):
     """Finding: --seed seeded the demand but not the solver."""
     from graph_harness import in_process
 
     from uam_sim.analysis import iter_decoded
 
     out = tmp_path / "run"
-    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain_id))
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_process_domain_id))
     proc = subprocess.run(
         ["bash", str(ROOT / "scripts" / "run_fleet.sh"), "--network", "config/networks/tiny.yaml", "--rate", "3",
          "--duration", "150", "--seed", "5", "--backend", "sa", "--rerun", "off", "--out", str(out)],
@@ -36,7 +36,7 @@ def test_run_fleet_passes_the_seed_to_the_planner_and_matches_the_runner(tmp_pat
 
 
 def test_run_fleet_layered_with_slots_and_cylinder_matches_the_runner_and_audits_in_the_cylinder(
-        tmp_path, ros_domain_id):
+        tmp_path, ros_process_domain_id):
     """Issue 10: run_fleet.sh --network singapore-layered --slot-s 5 reaches the planner and the
     recorder; the analysis audits in the recorded cylinder. Issue 19: the cylinder is the layered
     network's own model, taken without --separation (with the sphere, its levels 30 m apart
@@ -46,7 +46,7 @@ def test_run_fleet_layered_with_slots_and_cylinder_matches_the_runner_and_audits
     from uam_sim.analysis import iter_decoded, summarize
 
     out = tmp_path / "run"
-    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain_id))
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_process_domain_id))
     proc = subprocess.run(
         ["bash", str(ROOT / "scripts" / "run_fleet.sh"), "--network", "config/networks/singapore-layered.yaml",
          "--slot-s", "5", "--vertical-separation-m", "30", "--rate", "3",

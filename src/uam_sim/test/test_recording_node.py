@@ -116,10 +116,10 @@ def test_records_every_topic_and_closes_on_the_simulators_finish(ros_context, sp
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
-def test_sigterm_and_ctrl_c_close_the_file_properly(tmp_path, sig):
+def test_sigterm_and_ctrl_c_close_the_file_properly(tmp_path, sig, ros_process_domain_id):
     """A recorder process stopped with SIGTERM or Ctrl-C leaves a complete file listing every topic."""
     out = tmp_path / "term.mcap"
-    env = dict(os.environ)
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_process_domain_id))  # not the in-process nodes' domain
     env["PYTHONPATH"] = str(ROOT / "src" / "uam_sim") + os.pathsep + str(ROOT / "src" / "uam_planner") \
         + os.pathsep + env.get("PYTHONPATH", "")
     proc = subprocess.Popen([sys.executable, "-m", "uam_sim.nodes.recorder_node", "--ros-args",
