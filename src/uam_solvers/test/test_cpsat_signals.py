@@ -12,6 +12,9 @@ CONTRACT = SRC.parent / "uam_contract"  # the one package below the solvers (opt
 
 SCRIPT = """
 import os, signal, time
+# Python's own Ctrl-C handling, as in a terminal: a test run started as a background job (or by a
+# caller that ignores SIGINT) hands its children SIGINT ignored, and Python keeps it ignored
+signal.signal(signal.SIGINT, signal.default_int_handler)
 from uam_solvers import solve
 solve([1.0, 2.0, 1.5], [[0, 1], [1, 2]], backend="exact", time_limit_s=1.0)
 try:
