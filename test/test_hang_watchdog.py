@@ -39,7 +39,8 @@ def test_a_test_stuck_in_native_code_is_stopped_with_its_stacks(tmp_path):
     assert res.returncode != 0, out
     assert "test_stuck.py::test_stuck_in_native_code_with_the_gil still running after 3 s" in out, out
     assert "state S, kernel wait futex" in out, out  # each thread's kernel state
-    assert "pthread_mutex_lock" in out, out  # py-spy's native stack of the stuck thread
+    if "Python v3" in out:  # py-spy could read the process (it needs ptrace: root or a child)
+        assert "pthread_mutex_lock" in out, out  # the native stack of the stuck thread
     assert "Fatal Python error: Aborted" in out and "test_stuck.py\", line 8" in out, out  # faulthandler
 
 
