@@ -178,8 +178,9 @@ def _watchdog(config):
         hang_s = _hang_s()
         if hang_s > 0:
             pyspy = shutil.which("py-spy") or shutil.which("py-spy", path=os.path.dirname(sys.executable)) or ""
+            # stdout not inherited: under xdist it is the worker's channel to the controller
             w = subprocess.Popen([sys.executable, "-c", _WATCHER, str(os.getpid()), repr(hang_s), pyspy],
-                                 stdin=subprocess.PIPE)
+                                 stdin=subprocess.PIPE, stdout=subprocess.DEVNULL)
         config._uam_watchdog = w
     return w
 
