@@ -12,7 +12,10 @@ bash scripts/setup.sh
 # shellcheck disable=SC1091
 source scripts/env.sh
 WORKERS=(); n="${UAM_TEST_WORKERS:-2}"
-if [[ "$n" != 0 ]] && python -c "import xdist" 2>/dev/null; then WORKERS=(-n "$n" --dist loadfile); fi
+# a worker that crashes (conftest.py's hang watchdog aborts one stuck in native code) is replaced
+# twice at most: xdist gives its test file again to the next worker, so a test that hangs every
+# time would otherwise cost UAM_TEST_HANG_S nine times over
+if [[ "$n" != 0 ]] && python -c "import xdist" 2>/dev/null; then WORKERS=(-n "$n" --dist loadfile --max-worker-restart 2); fi
 set +e
 python -m pytest "${WORKERS[@]}" "$@"
 rc=$?
