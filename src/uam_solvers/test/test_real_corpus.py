@@ -148,3 +148,24 @@ def test_dense_clustered_planner_graphs_go_to_kamis_whole_with_or_without_groups
         r = solve(q.weights, q.edges, list(q.groups), backend="auto", time_limit_s=10.0)
         assert r.stats["auto_method"] == "kamis" and r.proven_optimal, r.stats
         assert "triangle_ratio" in r.stats
+
+
+def test_the_route_s_ratio_is_drawn_again_only_near_a_threshold(corpus):
+    """auto's gate (issue 20): 1,024 two-paths, and the 4,096-sample estimate where the first is
+    within 4 standard errors of a threshold the route compares it with; the route's decisions
+    on the corpus are those of the 4,096-sample estimate."""
+    from uam_solvers.auto import (KAMIS_MIN_TRIANGLE_RATIO, TRIANGLE_FIRST_SAMPLES, TRIANGLE_SAMPLES,
+                                  gate_triangle_ratio)
+
+    dense = [e.problem for e in corpus if conflict_degree(e.problem) > 32]
+    p = dense[0]
+    first, full = triangle_ratio(p, TRIANGLE_FIRST_SAMPLES), triangle_ratio(p, TRIANGLE_SAMPLES)
+    assert first != full  # two estimates, so the test can tell which one came back
+    assert gate_triangle_ratio(p, (0.05,)) == first  # far from the threshold: the first
+    assert gate_triangle_ratio(p, (first + 0.01,)) == full  # near it: drawn again
+    assert gate_triangle_ratio(p, (0.05, first - 0.02)) == full  # any threshold near counts
+    for q in dense:
+        density = 2.0 * q.all_edges().shape[0] / (q.n * (q.n - 1))
+        for t in (KAMIS_MIN_TRIANGLE_RATIO, 2 * density):
+            assert (gate_triangle_ratio(q, (KAMIS_MIN_TRIANGLE_RATIO, 2 * density)) >= t) == \
+                (triangle_ratio(q) >= t)
