@@ -144,16 +144,11 @@ while True:
         except (OSError, subprocess.SubprocessError) as exc:
             print(f"[test watchdog] py-spy: {exc}", file=err, flush=True)
     try:
+        gone = os.pidfd_open(pid)  # readable once the process has ended
         os.kill(pid, signal.SIGABRT)
-        end = time.monotonic() + 20
-        while time.monotonic() < end:
-            os.kill(pid, 0)  # ProcessLookupError once it is gone
-            with open(f"/proc/{pid}/stat") as f:
-                if f.read().rsplit(")", 1)[1].split()[0] == "Z":
-                    sys.exit(0)
-            time.sleep(0.1)
-        os.kill(pid, signal.SIGKILL)  # SIGABRT handled and survived: end it
-    except (ProcessLookupError, FileNotFoundError):
+        if not select.select([gone], [], [], 20)[0]:
+            os.kill(pid, signal.SIGKILL)  # SIGABRT handled and survived: end it
+    except ProcessLookupError:
         pass
     sys.exit(0)
 """
