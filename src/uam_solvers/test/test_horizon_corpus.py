@@ -101,3 +101,87 @@ def test_a_cached_number_does_not_let_true_through():
     parse_options("kamis", spec, {"finish_fraction": 1})  # cached: 1 == True and hash(1) == hash(True)
     with pytest.raises(MwisInputError, match="finish_fraction"):
         parse_options("kamis", spec, {"finish_fraction": True})
+
+
+def _kamis_calls(monkeypatch, finishes_at_s=None, answer=None):
+    """Record the limits auto gives KaMIS on the whole graph; with ``finishes_at_s`` KaMIS is a
+    stand-in that returns ``answer`` (an optimum found beforehand), proven only when given at
+    least that long, as a search stopped by its limit would otherwise."""
+    from uam_solvers.base import make_result
+    from uam_solvers.chszla import KamisBackend
+
+    calls = []
+    real = KamisBackend.solve
+
+    def recording(self, problem, *, time_limit_s=10.0, seed=0, options=None):
+        calls.append(float(time_limit_s))
+        if finishes_at_s is None:
+            return real(self, problem, time_limit_s=time_limit_s, seed=seed, options=options)
+        return make_result(problem, answer, proven_optimal=time_limit_s >= finishes_at_s,
+                           solve_time_s=min(time_limit_s, finishes_at_s), backend="kamis")
+
+    monkeypatch.setattr(KamisBackend, "solve", recording)
+    return calls
+
+
+def _kamis_then_cpsat(corpus):
+    """The horizon graph of 910 vertices: clustered (KaMIS gets it first) and clique-structured
+    (CP-SAT follows), so KaMIS gets only its probe."""
+    [e] = [e for e in corpus if e.name.endswith("-v910")]
+    a = AutoBackend()
+    p = e.problem
+    assert a._cpsat_suits(p, None, int(p.all_edges().shape[0]), a.validate_options({}))
+    return p
+
+
+def test_the_kamis_probe_before_cpsat_gets_the_tie_break_budget_once(corpus, monkeypatch):
+    # twelfth stop: on a graph that goes to CP-SAT, KaMIS's probe (0.01 of the limit, at least
+    # 0.05 s) is given the tie-break's budget (3 x that: 0.15 s at 1 s) at once, and no re-run
+    # follows a CP-SAT proof: one KaMIS call, not a probe and a re-run
+    import uam_solvers.auto as auto_mod
+
+    p = _kamis_then_cpsat(corpus)
+    calls = _kamis_calls(monkeypatch)
+    r = solve(p.weights, p.edges, list(p.groups), backend="auto", time_limit_s=1.0)
+    assert p.is_independent(r.selected)
+    assert calls == [pytest.approx(0.15)], r.stats
+    if r.proven_optimal and r.stats["auto_method"] != "kamis":
+        assert r.stats["tie_break"] == "kamis unfinished"
+    # at most a quarter of the limit: at 0.4 s the probe is 0.1 s
+    calls.clear()
+    solve(p.weights, p.edges, list(p.groups), backend="auto", time_limit_s=0.4)
+    assert calls[0] == pytest.approx(0.1)
+    # with the tie-break off the probe stays the probe
+    calls.clear()
+    solve(p.weights, p.edges, list(p.groups), backend="auto", time_limit_s=1.0,
+          options={"tie_break": False})
+    assert calls == [pytest.approx(0.05)]
+    assert auto_mod.KAMIS_PROBE_MAX_SHARE == 0.25
+
+
+def test_a_graph_kamis_proves_past_the_old_probe_is_answered_by_kamis_alone(corpus, monkeypatch):
+    # KaMIS (a stand-in) finishes in 0.1 s: past the old 0.05 s probe, within the 0.15 s budget.
+    # Before, CP-SAT proved first and the tie-break's re-run returned KaMIS's set; now KaMIS
+    # answers at once: the same set, one KaMIS call and no CP-SAT
+    import uam_solvers.auto as auto_mod
+    from uam_solvers.cpsat import CpSatBackend
+
+    p = _kamis_then_cpsat(corpus)
+    ex = solve(p.weights, p.edges, list(p.groups), backend="exact", time_limit_s=60.0)
+    assert ex.proven_optimal
+    calls = _kamis_calls(monkeypatch, finishes_at_s=0.1, answer=ex.selected)
+    now = solve(p.weights, p.edges, list(p.groups), backend="auto", time_limit_s=1.0)
+    assert now.proven_optimal and now.stats["auto_method"] == "kamis"
+    assert "tie_break" not in now.stats and calls == [pytest.approx(0.15)]
+    assert now.selected.tolist() == sorted(ex.selected.tolist())
+    calls.clear()
+    monkeypatch.setattr(auto_mod, "KAMIS_PROBE_MAX_SHARE", 0.0)  # the probe as it was
+    cpsat = []
+    real = CpSatBackend.solve
+    monkeypatch.setattr(CpSatBackend, "solve",
+                        lambda self, *a, **k: cpsat.append(1) or real(self, *a, **k))
+    before = solve(p.weights, p.edges, list(p.groups), backend="auto", time_limit_s=1.0)
+    assert calls[0] == pytest.approx(0.05) and cpsat  # the probe ran out, CP-SAT followed
+    if before.stats.get("tie_break") == "kamis":     # CP-SAT proved, the re-run finished
+        assert calls == [pytest.approx(0.05), pytest.approx(0.15)]
+        assert before.selected.tolist() == now.selected.tolist()

@@ -29,7 +29,8 @@ The outer layers of the default pipeline (Reduce, ComponentSplit) pass every gra
   0.25 and twice the edge density, at most 200,000 conflict pairs): the planner's
   rolling-horizon graphs (issue 20; one request's candidates over ten epochs), on which KaMIS
   runs to its limit and CP-SAT proves in 0.1-0.5 s CPU. On such graphs KaMIS first gets only a
-  probe (``kamis_probe_fraction`` 0.01 of the limit, at least 0.05 s). Above 2,000 vertices this
+  probe (``kamis_probe_fraction`` 0.01 of the limit, at least 0.05 s; with the tie-break on,
+  the tie-break's budget, 3 x that, at most a quarter of the limit: see below). Above 2,000 vertices this
   comes before LearnAndReduce. The paper-shaped, stress and planner-shaped synthetic graphs
   (5 candidates per request) never take it.
 * otherwise, up to 2,000 vertices: auto's own ``Reduce(ComponentSplit(...))`` (exact
@@ -59,8 +60,14 @@ proof's set is returned with ``stats["tie_break"] = "kamis unfinished"``. Nothin
 KaMIS proves first or nothing is proven. Limits, measured: KaMIS's completed set can depend on
 the limit it is given (it spends ~1 % of the limit in a time-bounded local search: one of 269
 comparisons over limits of 0.05-60 s differed, 10 s against 30 s on a 671-vertex corpus graph);
-on the horizon graphs, where KaMIS never finishes, the re-run costs 0.13-0.17 s of CPU
-(3 x the 0.05 s probe). Above 2,000 vertices (LearnAndReduce) this is not done.
+on the horizon graphs, where KaMIS never finishes, the re-run cost 0.13-0.17 s of CPU
+(3 x the 0.05 s probe). So on the graphs that go to CP-SAT (``_cpsat_suits``) the probe is
+given that budget up front (twelfth stop; at most a quarter of the limit): the same canonical
+set (KaMIS's, whenever it completes within the budget), without the re-run: a graph KaMIS
+proves in 0.05-0.15 s is answered by KaMIS alone (the layered corpus's 671- and 1,274-vertex
+graphs: 55-70 ms; before, probe + CP-SAT + re-run, 2.4-3.8x KaMIS's time), and one it does not
+prove pays the budget once, not probe + budget. Above 2,000 vertices (LearnAndReduce) this
+is not done.
 
 ``proven_optimal`` is True only when the branch and bound completed, KaMIS finished, CP-SAT
 reported OPTIMAL on the whole graph or for every component, or LearnAndReduce left nothing or a kernel KaMIS finished
@@ -175,6 +182,9 @@ CPSAT_BUILD_S_PER_PAIR = 3e-6
 CPSAT_MAX_BUILD_SHARE = 0.25
 KAMIS_PROBE_FRACTION = 0.01
 KAMIS_PROBE_MIN_S = 0.05
+#: the probe is given the tie-break's re-run budget (tie_break_factor x the probe above, at
+#: least tie_break_min_s: 0.15 s at a 1 s limit) up front, but at most this share of the limit
+KAMIS_PROBE_MAX_SHARE = 0.25
 #: the canonical tie-break (issue 20; AutoBackend._canonical): when KaMIS's first share ran
 #: out and CP-SAT or the split proved the optimum, KaMIS runs again with at most this many
 #: times that share (at least TIE_BREAK_MIN_S, at most the time left): its completed search is
@@ -426,7 +436,9 @@ class AutoBackend(Backend):
         "kamis_probe_fraction": Option("kamis_probe_fraction", "float", KAMIS_PROBE_FRACTION,
                                        "share of the limit KaMIS gets first when CP-SAT follows "
                                        "(a clique-structured graph, see cpsat_min_triangle_"
-                                       "ratio), at least kamis_probe_min_s: KaMIS proves the "
+                                       "ratio), at least kamis_probe_min_s (with tie_break "
+                                       "on, tie_break_factor x that, at most a quarter of the "
+                                       "limit, and no re-run after): KaMIS proves the "
                                        "layered runs' graphs in 1-70 ms, CP-SAT the rest", lo=0.0,
                                        hi=1.0),
         "kamis_probe_min_s": Option("kamis_probe_min_s", "float", KAMIS_PROBE_MIN_S, "least "
@@ -522,6 +534,7 @@ class AutoBackend(Backend):
         incumbent = None
         tri = None
         share = 0.0  # KaMIS's first share on the whole graph (0: KaMIS did not run)
+        tie_budget_s = None  # the tie-break's re-run budget (None: tie_break_factor x share)
         degree = conflict_degree(problem)
         pairs = int(problem.all_edges().shape[0])
         if n <= opts["kamis_max_vertices"] and opts["kamis_fraction"] > 0:
@@ -549,8 +562,16 @@ class AutoBackend(Backend):
                 fraction = opts["kamis_clustered_fraction" if clustered else "kamis_fraction"]
                 share = max(min(time_limit_s * fraction, opts["kamis_max_share_s"]), 1e-3)
                 if cpsat_next:
-                    share = min(share, max(time_limit_s * opts["kamis_probe_fraction"],
-                                           opts["kamis_probe_min_s"]))
+                    # the probe is given the tie-break's budget at once (twelfth stop): the
+                    # re-run after a CP-SAT proof would spend it anyway, so the canonical set is
+                    # the same; a graph KaMIS proves within it (the layered corpus's 671 and
+                    # 1,274 vertices: 55-70 ms, past the 0.05 s probe) needs no CP-SAT and no
+                    # re-run, and one it does not (the horizon graphs) pays the budget once
+                    probe = max(time_limit_s * opts["kamis_probe_fraction"], opts["kamis_probe_min_s"])
+                    if opts["tie_break"]:
+                        tie_budget_s = self._tie_budget(probe, opts)
+                        probe = max(probe, min(tie_budget_s, time_limit_s * KAMIS_PROBE_MAX_SHARE))
+                    share = min(share, probe)
                 res = self._kamis.solve(problem, time_limit_s=share, seed=seed,
                                         options={"finish_fraction": 0.9})
                 if res.proven_optimal:
@@ -567,7 +588,8 @@ class AutoBackend(Backend):
             if res is not None and (res.proven_optimal or _little_left(time_limit_s, t0)):
                 res = _better(res, incumbent)
                 res.backend, res.solve_time_s = self.name, time.perf_counter() - t0
-                return self._canonical(problem, res, share, time_limit_s, seed, opts, t0)
+                return self._canonical(problem, res, share, time_limit_s, seed, opts, t0,
+                                       tie_budget_s)
             incumbent = _better(incumbent, res)
             rest_s = max(time_limit_s - (time.perf_counter() - t0), 1e-3)
             # exact reductions and component split, each component by _solve_part
@@ -578,11 +600,20 @@ class AutoBackend(Backend):
                                   stats={**incumbent.stats,
                                          "after": res.stats.get("auto_method", "")})
             res.solve_time_s = time.perf_counter() - t0
-            return self._canonical(problem, res, share, time_limit_s, seed, opts, t0)
+            return self._canonical(problem, res, share, time_limit_s, seed, opts, t0,
+                                       tie_budget_s)
         return self._solve_large(problem, time_limit_s, seed, opts, t0)
 
+    @staticmethod
+    def _tie_budget(share: float, opts: dict) -> float:
+        """The most time the tie-break's KaMIS re-run gets after a first share of ``share`` s
+        (before the time left caps it): ``tie_break_factor`` x ``share``, at least
+        ``tie_break_min_s``."""
+        return max(opts["tie_break_factor"] * share, opts["tie_break_min_s"])
+
     def _canonical(self, problem: MwisProblem, res: MwisResult, share: float,
-                   time_limit_s: float, seed: int, opts: dict, t0: float) -> MwisResult:
+                   time_limit_s: float, seed: int, opts: dict, t0: float,
+                   tie_budget_s: float | None = None) -> MwisResult:
         """The canonical tie-break among proven optima (issue 20): ``res`` was proven by CP-SAT
         or the split after KaMIS's first share (``share`` [s], 0: KaMIS did not run) ran out.
         On a faster machine KaMIS would have finished and answered, and tied optima differ
@@ -597,7 +628,11 @@ class AutoBackend(Backend):
         if not (res.proven_optimal and share > 0 and opts["tie_break"]):
             return res
         left = time_limit_s - (time.perf_counter() - t0) - opts["safety_s"]
-        budget = min(left, max(opts["tie_break_factor"] * share, opts["tie_break_min_s"]))
+        full = self._tie_budget(share, opts) if tie_budget_s is None else tie_budget_s
+        if full <= share:  # the first share had the whole re-run budget: it did not finish
+            res.stats = {**res.stats, "tie_break": "kamis unfinished"}
+            return res
+        budget = min(left, full)
         if budget <= share:  # not even the first share again: it cannot finish
             res.stats = {**res.stats, "tie_break": "no time left"}
             return res
