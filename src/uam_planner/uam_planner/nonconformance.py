@@ -77,6 +77,16 @@ MAX_AGE_S = 10.0
 SPEED_WINDOW_S = 120.0
 #: ... from at least this much time (else from the plan's departure) [s]
 MIN_SPEED_SPAN_S = 10.0
+#: a rate read from less than this time on the plan version (since its departure, within the
+#: window) is drawn towards 1 (the aircraft flies the version it was given) in proportion:
+#: ``1 + (rate - 1) x span / RATE_FULL_SPAN_S`` (twelfth stop). Measured over the 893 reaction
+#: updates of ten Monte-Carlo runs (10 % speed error, the reaction every 5 s, probe 120 s):
+#: rates read from under 60 s of a version had an SD of 0.12-0.14, from 60 s or more 0.047;
+#: 31 updates timed from the short ones were reported nonconforming again within 90 s (9 of
+#: them left as contingencies), none of the long ones; and in 5 of the 6 runs with a flown
+#: loss with a contingency the contingency went back to a rate read from 25 s or less (one
+#: of 1.33 read in a climb 10 s after departure) [s]
+RATE_FULL_SPAN_S = 60.0
 #: the estimated progress rate is clipped to this range (performance: an eVTOL does not fly
 #: at half or twice its planned speed; a wild estimate would not be flown anyway)
 RATE_RANGE = (0.5, 1.5)
@@ -243,7 +253,9 @@ class PositionBook:
         """The observed progress rate along ``plan``: planned seconds covered per second, from
         the oldest observation of the window to the newest (the planned time of each one's
         nearest path point), or, with less than ``MIN_SPEED_SPAN_S`` of observations, from the
-        plan's departure to the newest; 1 without observations; clipped to ``RATE_RANGE``.
+        plan's departure to the newest; 1 without observations; drawn towards 1 while the
+        version has flown less than ``RATE_FULL_SPAN_S`` within the window (a rate read from a
+        few seconds is mostly gusts and climbs); clipped to ``RATE_RANGE``.
         Only observations stamped in [the plan's departure, ``until``] count: one made before
         this version began was made against an older one (a nonconforming update starts where
         the aircraft was, so an older sighting projects onto its first point and would read as
@@ -265,6 +277,10 @@ class PositionBook:
             rate = (tau[0] - plan.departure_s) / (last.t_s - plan.departure_s)
         else:
             return 1.0
+        # the evidence: how long the aircraft has flown this version, within the window
+        span = last.t_s - max(float(plan.departure_s), last.t_s - SPEED_WINDOW_S)
+        if span < RATE_FULL_SPAN_S:
+            rate = 1.0 + (rate - 1.0) * max(span, 0.0) / RATE_FULL_SPAN_S
         return float(np.clip(rate, *RATE_RANGE))
 
 

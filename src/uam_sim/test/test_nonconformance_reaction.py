@@ -557,3 +557,27 @@ def test_a_probed_flight_the_batch_cannot_save_keeps_its_plan_and_the_other_is_s
     new_p = ups[0].flight.trajectory
     assert new_p.points_m[0] == pytest.approx([540.0, 0.0, 0.0])
     assert audit_flights([new_p, Q2.trajectory], separation_m=100.0).losses == []
+
+
+def test_a_rate_read_from_a_short_time_on_the_version_is_drawn_towards_one():
+    # twelfth stop (RATE_FULL_SPAN_S = 60 s): a plan of 10 m/s along x from t = 0, flown at
+    # 7 m/s. Seen at 10 and 20 s (70, 140 m; planned at 7 and 14 s) the raw rate is 0.7, but 20 s
+    # on the version is little evidence (gusts, a climb): 1 - 0.3 x 20 / 60 = 0.9. From 60 s on
+    # it is read as it is: 0.7. A version that began at 100 s (a reaction's update, from where
+    # the aircraft was) starts afresh: 30 s on it give half the correction.
+    from uam_planner.nonconformance import RATE_FULL_SPAN_S, PositionBook
+
+    assert RATE_FULL_SPAN_S == 60.0
+    plan = Trajectory(np.array([0.0, 300.0]), np.array([[0.0, 0.0, 0.0], [3000.0, 0.0, 0.0]]))
+    book = PositionBook()
+    for t in range(10, 131, 10):
+        assert book.observe("P", float(t), (7.0 * t, 0.0, 0.0)) is None
+    assert book.progress_rate("P", plan, until=20.0) == pytest.approx(0.9)
+    assert book.progress_rate("P", plan, until=40.0) == pytest.approx(1.0 - 0.3 * 40.0 / 60.0)
+    assert book.progress_rate("P", plan, until=60.0) == pytest.approx(0.7)
+    assert book.progress_rate("P", plan, until=130.0) == pytest.approx(0.7)
+    # v2 from (700, 0) at 100 s at 8 m/s; the aircraft flies on at 7 m/s (rate 7 / 8 on v2)
+    v2 = Trajectory(np.array([100.0, 100.0 + 2300.0 / 8.0]),
+                    np.array([[700.0, 0.0, 0.0], [3000.0, 0.0, 0.0]]))
+    raw = 7.0 / 8.0
+    assert book.progress_rate("P", v2, until=130.0) == pytest.approx(1.0 + (raw - 1.0) * 30.0 / 60.0)
