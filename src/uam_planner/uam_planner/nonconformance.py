@@ -425,20 +425,36 @@ def _clipped(tr: Trajectory, t_s: float) -> Trajectory | None:
     return clipped_from(tr, t_s)
 
 
-def _least_conflicting(alts: list, others: list, config, t_eff: float):
+def _least_conflicting(alts: list, others: list, config, t_eff: float, true_first: bool = False):
     """Of (trajectory, weight) alternatives, the one that loses separation (from t_eff on) with
-    the fewest of ``others``, then the one that lands soonest."""
+    the fewest of ``others``, then the one that lands soonest. With ``true_first`` (a
+    contingency's choice, twelfth stop) the fewest losses of the true minimum
+    (``config.minimum_separation``) come first, then of the buffered separation: with a buffer,
+    an alternative that only cuts into the buffer of one flight had ranked below one that keeps
+    the buffer from none of two others but crosses a third at a few metres."""
     from .separation import SegmentSet, conflicting_pairs
-    n_conf = np.zeros(len(alts), dtype=np.int64)
+
+    def counts(separation) -> np.ndarray:
+        n_conf = np.zeros(len(alts), dtype=np.int64)
+        if oset is not None and len(oset):
+            pairs = conflicting_pairs(aset, oset, separation)
+            for i in np.unique(pairs[:, 0]).tolist():
+                n_conf[i] = np.unique(pairs[pairs[:, 0] == i, 1]).size
+        return n_conf
+
     oset = SegmentSet.from_trajectories(others) if others else None
     if oset is not None and len(oset):
         oset = oset.take(oset.t1_s >= t_eff)
+    aset = None
     if oset is not None and len(oset):
         aset = SegmentSet.from_trajectories([_clipped(a[0], t_eff) or a[0] for a in alts])
-        pairs = conflicting_pairs(aset, oset, config.separation)
-        for i in np.unique(pairs[:, 0]).tolist():
-            n_conf[i] = np.unique(pairs[pairs[:, 0] == i, 1]).size
-    k = min(range(len(alts)), key=lambda i: (int(n_conf[i]), alts[i][0].arrival_s))
+    n_conf = counts(config.separation)
+    if true_first and config.minimum_separation != config.separation:
+        n_true = counts(config.minimum_separation)
+        k = min(range(len(alts)), key=lambda i: (int(n_true[i]), int(n_conf[i]),
+                                                 alts[i][0].arrival_s))
+    else:
+        k = min(range(len(alts)), key=lambda i: (int(n_conf[i]), alts[i][0].arrival_s))
     return alts[k]
 
 
@@ -769,7 +785,8 @@ def react_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict, b
             if not per[r]:
                 continue  # nothing left to fly: it is at its plan's end (it keeps its plan)
             a = _least_conflicting(per[r], [f.trajectory for f in others] + fixed +
-                                   [x.trajectory for x in new_versions], config, t_eff)
+                                   [x.trajectory for x in new_versions], config, t_eff,
+                                   true_first=True)
             kind = KIND_CONTINGENCY
             reason = (f"contingency: {what}; each of its {len(per[r])} updated intents loses "
                       f"separation with another flight: flown but not deconflicted")

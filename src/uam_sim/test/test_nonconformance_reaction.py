@@ -581,3 +581,27 @@ def test_a_rate_read_from_a_short_time_on_the_version_is_drawn_towards_one():
                     np.array([[700.0, 0.0, 0.0], [3000.0, 0.0, 0.0]]))
     raw = 7.0 / 8.0
     assert book.progress_rate("P", v2, until=130.0) == pytest.approx(1.0 + (raw - 1.0) * 30.0 / 60.0)
+
+
+def test_a_contingency_keeps_the_true_minimum_before_the_buffer():
+    # twelfth stop: with a 25 m buffer (125 m kept), alternative A passes 50 m from O1 (a loss
+    # of the true minimum, one flight inside the buffer) and B 110 m from O1 and from O2 (inside
+    # the buffer of two flights, the true minimum kept). By buffered conflicts alone A (1) beat
+    # B (2); a contingency's choice now counts losses of the true minimum first: B
+    from uam_planner.nonconformance import _least_conflicting
+
+    cfg = PlanningConfig(spatial_buffer_m=25.0)
+    assert cfg.separation.separation_m == 125.0 and cfg.minimum_separation.separation_m == 100.0
+
+    def line(y, t1=100.0):
+        return Trajectory(np.array([0.0, t1]), np.array([[0.0, y, 0.0], [1000.0, y, 0.0]]))
+
+    a, b = (line(0.0), 3.0), (line(-60.0, 110.0), 2.0)
+    others = [line(50.0), line(-170.0, 110.0)]
+    assert _least_conflicting([a, b], others, cfg, 0.0) is a
+    assert _least_conflicting([a, b], others, cfg, 0.0, true_first=True) is b
+    assert _least_conflicting([b, a], others, cfg, 0.0, true_first=True) is b
+    # without a buffer the two orders are one: fewest losses, then the soonest arrival
+    cfg0 = PlanningConfig()
+    assert _least_conflicting([a, b], others, cfg0, 0.0, true_first=True) is \
+        _least_conflicting([a, b], others, cfg0, 0.0)
