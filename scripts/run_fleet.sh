@@ -245,7 +245,10 @@ start() {  # start <pkg> <exe> <log name> [ros args...]; NODE_NICE=N start ... l
   PIDS+=($!) NAMES+=("$name")
 }
 alive() {  # a child that exited stays a zombie until reaped, and kill -0 still succeeds on it
-  [[ -r /proc/$1/stat ]] && [[ "$(cut -d' ' -f3 /proc/$1/stat 2>/dev/null)" != Z ]]
+  # (LAST_STATE: the state it was last seen in, for the message of a node that does not stop:
+  # twice a "did not stop" node was gone when described a moment later, state unknown)
+  LAST_STATE=$(cut -d' ' -f3 /proc/$1/stat 2>/dev/null)
+  [[ -n "$LAST_STATE" ]] && [[ "$LAST_STATE" != Z ]]
 }
 describe() {  # what a node that does not stop is doing: its threads' states and kernel waits
   local pid=$1 t
@@ -270,7 +273,7 @@ stop_all() {
     limit=10; [[ "${NAMES[$i]}" == recorder ]] && limit=$RECORDER_STOP_S
     while alive "${PIDS[$i]}" && (( SECONDS < t0 + limit )); do sleep 0.1; done
     if alive "${PIDS[$i]}"; then
-      echo "run_fleet: node '${NAMES[$i]}' (pid ${PIDS[$i]}) did not stop within $limit s; killing it" >&2
+      echo "run_fleet: node '${NAMES[$i]}' (pid ${PIDS[$i]}) did not stop within $limit s (last seen in state '$LAST_STATE'); killing it" >&2
       describe "${PIDS[$i]}" >&2
       kill -KILL "${PIDS[$i]}" 2>/dev/null || true
     fi
