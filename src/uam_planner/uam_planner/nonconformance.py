@@ -449,12 +449,9 @@ def _least_conflicting(alts: list, others: list, config, t_eff: float, true_firs
     if oset is not None and len(oset):
         aset = SegmentSet.from_trajectories([_clipped(a[0], t_eff) or a[0] for a in alts])
     n_conf = counts(config.separation)
-    if true_first and config.minimum_separation != config.separation:
-        n_true = counts(config.minimum_separation)
-        k = min(range(len(alts)), key=lambda i: (int(n_true[i]), int(n_conf[i]),
-                                                 alts[i][0].arrival_s))
-    else:
-        k = min(range(len(alts)), key=lambda i: (int(n_conf[i]), alts[i][0].arrival_s))
+    n_true = counts(config.minimum_separation) \
+        if true_first and config.minimum_separation != config.separation else np.zeros_like(n_conf)
+    k = min(range(len(alts)), key=lambda i: (int(n_true[i]), int(n_conf[i]), alts[i][0].arrival_s))
     return alts[k]
 
 

@@ -534,7 +534,7 @@ class AutoBackend(Backend):
         incumbent = None
         tri = None
         share = 0.0  # KaMIS's first share on the whole graph (0: KaMIS did not run)
-        tie_budget_s = None  # the tie-break's re-run budget (None: tie_break_factor x share)
+        tie_budget_s = 0.0  # the tie-break's re-run budget (_tie_budget of KaMIS's first share)
         degree = conflict_degree(problem)
         pairs = int(problem.all_edges().shape[0])
         if n <= opts["kamis_max_vertices"] and opts["kamis_fraction"] > 0:
@@ -560,18 +560,19 @@ class AutoBackend(Backend):
                 # at once; otherwise CP-SAT (clique-structured graphs) and the split below
                 # (CP-SAT per component, CHILS) get the rest of the limit
                 fraction = opts["kamis_clustered_fraction" if clustered else "kamis_fraction"]
-                share = max(min(time_limit_s * fraction, opts["kamis_max_share_s"]), 1e-3)
+                cap = max(min(time_limit_s * fraction, opts["kamis_max_share_s"]), 1e-3)
+                share = cap
                 if cpsat_next:
+                    share = min(cap, max(time_limit_s * opts["kamis_probe_fraction"],
+                                         opts["kamis_probe_min_s"]))
+                tie_budget_s = self._tie_budget(share, opts)
+                if cpsat_next and opts["tie_break"]:
                     # the probe is given the tie-break's budget at once (twelfth stop): the
                     # re-run after a CP-SAT proof would spend it anyway, so the canonical set is
                     # the same; a graph KaMIS proves within it (the layered corpus's 671 and
                     # 1,274 vertices: 55-70 ms, past the 0.05 s probe) needs no CP-SAT and no
                     # re-run, and one it does not (the horizon graphs) pays the budget once
-                    probe = max(time_limit_s * opts["kamis_probe_fraction"], opts["kamis_probe_min_s"])
-                    if opts["tie_break"]:
-                        tie_budget_s = self._tie_budget(probe, opts)
-                        probe = max(probe, min(tie_budget_s, time_limit_s * KAMIS_PROBE_MAX_SHARE))
-                    share = min(share, probe)
+                    share = max(share, min(tie_budget_s, time_limit_s * KAMIS_PROBE_MAX_SHARE, cap))
                 res = self._kamis.solve(problem, time_limit_s=share, seed=seed,
                                         options={"finish_fraction": 0.9})
                 if res.proven_optimal:
@@ -613,7 +614,7 @@ class AutoBackend(Backend):
 
     def _canonical(self, problem: MwisProblem, res: MwisResult, share: float,
                    time_limit_s: float, seed: int, opts: dict, t0: float,
-                   tie_budget_s: float | None = None) -> MwisResult:
+                   tie_budget_s: float) -> MwisResult:
         """The canonical tie-break among proven optima (issue 20): ``res`` was proven by CP-SAT
         or the split after KaMIS's first share (``share`` [s], 0: KaMIS did not run) ran out.
         On a faster machine KaMIS would have finished and answered, and tied optima differ
@@ -628,11 +629,10 @@ class AutoBackend(Backend):
         if not (res.proven_optimal and share > 0 and opts["tie_break"]):
             return res
         left = time_limit_s - (time.perf_counter() - t0) - opts["safety_s"]
-        full = self._tie_budget(share, opts) if tie_budget_s is None else tie_budget_s
-        if full <= share:  # the first share had the whole re-run budget: it did not finish
+        if tie_budget_s <= share:  # the first share had the whole re-run budget: unfinished
             res.stats = {**res.stats, "tie_break": "kamis unfinished"}
             return res
-        budget = min(left, full)
+        budget = min(left, tie_budget_s)
         if budget <= share:  # not even the first share again: it cannot finish
             res.stats = {**res.stats, "tie_break": "no time left"}
             return res
