@@ -518,6 +518,40 @@ def test_the_probe_updates_both_before_either_is_nonconforming_and_the_new_plans
     assert probe_planner(0.0).react_between(60.0, 2) == []
 
 
+def test_the_probe_sees_a_flight_due_to_depart_and_updates_the_airborne_one_against_its_plan():
+    # thirteenth stop: flights due to depart within the look-ahead are projected on their plan.
+    # A vertiport V at (3000, -1500) on the south leg; R leaves it at 183.33 s, at m at 333.33 s:
+    # its plan keeps 33.33 s x 10 m/s / sqrt(2) = 235.7 m from P's plan (P at m at 300 s). P,
+    # 6 s late at 60 s and flown on at 0.9 of its speed, reaches m at 333.33 s too: the
+    # projection of P meets R's plan there (0 m) while R is still on the ground at 60 s
+    from uam_planner.nonconformance import ConformanceBounds as CB, predicted_conflicts
+
+    net = network_from_enu("cross-v", ["W", "m", "E", "V", "N"],
+                           [(0, 0, 0), (3000, 0, 0), (6000, 0, 0), (3000, -1500, 0), (3000, 3000, 0)],
+                           [True, False, True, True, True],
+                           [("W", "m"), ("m", "E"), ("V", "m"), ("m", "N")])
+    R = flight("R", ["V", "m", "N"], [(3000, -1500, 0), (3000, 0, 0), (3000, 3000, 0)], 550.0 / 3.0)
+    assert audit_flights([P.trajectory, R.trajectory], separation_m=100.0).min_separation_m == \
+        pytest.approx(1000.0 / 3.0 / math.sqrt(2.0), rel=1e-4)
+    p = Planner(net, PlanningConfig(conformance=CB(), conflict_probe_s=300.0), "mwis", solve_mwis=None)
+    p.restore([P, R])
+    flown = fly(P.trajectory, FlightDraws(), HEAD_WIND)  # 9 m/s over the ground
+    for t in (50.0, 60.0):
+        assert p.observe("P", t, flown.position_at(t)) is None
+    got = predicted_conflicts(p.active, p.positions, 60.0, 300.0, 100.0)
+    # only P is probed: R has not been seen (nothing to update it from), it is met as planned
+    assert {p.active[i].request_id: ids for i, (_o, ids) in got.items()} == {"P": ["R"]}
+    # R departs after the look-ahead's end: not projected, nothing predicted
+    assert predicted_conflicts(p.active, p.positions, 60.0, 120.0, 100.0) == {}
+    ups = p.react_between(60.0, 2)
+    assert [u.request_id for u in ups] == ["P"] and "conflict probe" in ups[0].reason
+    new_p = ups[0].flight.trajectory
+    assert new_p.points_m[0] == pytest.approx([540.0, 0.0, 0.0])
+    # P's new plan keeps the minimum from R's plan, which R keeps (version 1, not updated)
+    assert audit_flights([new_p, R.trajectory], separation_m=100.0).losses == []
+    assert {f.request_id: f.version for f in p.active}["R"] == 1
+
+
 def test_a_time_shift_reaches_its_delay_within_the_window_on_the_same_path():
     from uam_planner.nonconformance import shifted_trajectory
     # 0 -> 6000 m at 10 m/s from 0 s; +10 s within 60 s: the first 600 m take 70 s (8.57 m/s),
