@@ -26,6 +26,8 @@
 #                      the airborne flights are projected at their observed progress and pairs
 #                      predicted to lose separation within S s are re-planned (default 0: off;
 #                      docs/disturbances.md, 2b')
+#   --probe-margin M   with --probe, the probe's margin [m]: it predicts losses of the minimum + M
+#                      and deconflicts its own updates with at least that (default 0)
 #   --rate R           requests per 30 s (default 10, the paper's middle rate)
 #   --duration S       simulated seconds (default 3500)
 #   --seed N           seed of the demand and of stochastic solvers (default 0)
@@ -77,7 +79,7 @@ SPATIAL_BUFFER=0 TEMPORAL_BUFFER=0 WIND=0 WIND_FROM=270 GUST=0 SPEED_ERROR=0 DEL
 DEMAND="" CONSTRAINTS="" MODE=lockstep RTF=1 RERUN=save OUT="" FOXGLOVE_PORT=0 USS_PORT=0 RECORDER_NICE=19 RECORDER_STOP_S=60
 CONFORMANCE=auto
 SEPARATION="" SEPARATION_M=100 VERTICAL_M=30 SLOT_S=0 CLIMB=5 DESCENT=3
-OBJECTIVE=paper BASELINE_ORDER=arrival PRIORITY_SHARE=0 HORIZON=1 LEAD_TIME=0 COMMIT_AHEAD=false REACTION=false REACTION_PERIOD=0 PROBE=0 REPLAN_POLICY=""
+OBJECTIVE=paper BASELINE_ORDER=arrival PRIORITY_SHARE=0 HORIZON=1 LEAD_TIME=0 COMMIT_AHEAD=false REACTION=false REACTION_PERIOD=0 PROBE=0 PROBE_MARGIN=0 REPLAN_POLICY=""
 die() { echo "run_fleet: $*" >&2; exit 2; }
 while [[ $# -gt 0 ]]; do
   case "$1" in
@@ -91,6 +93,7 @@ while [[ $# -gt 0 ]]; do
     --reaction) REACTION="${2:?--reaction needs a value}"; shift 2;;
     --reaction-period) REACTION_PERIOD="${2:?--reaction-period needs a value}"; shift 2;;
     --probe) PROBE="${2:?--probe needs a value}"; shift 2;;
+    --probe-margin) PROBE_MARGIN="${2:?--probe-margin needs a value}"; shift 2;;
     --replan-policy) REPLAN_POLICY="${2?--replan-policy needs a value}"; shift 2;;
     --lead-time) LEAD_TIME="${2:?--lead-time needs a value}"; shift 2;;
     --rate) RATE="${2:?--rate needs a value}"; shift 2;;
@@ -155,7 +158,8 @@ for _flag in "separation-m:$SEPARATION_M" "vertical-separation-m:$VERTICAL_M" "s
              "climb-rate:$CLIMB" "descent-rate:$DESCENT" "spatial-buffer-m:$SPATIAL_BUFFER" \
              "temporal-buffer-s:$TEMPORAL_BUFFER" "wind:$WIND" "wind-from:$WIND_FROM" "gust:$GUST" \
              "speed-error:$SPEED_ERROR" "delay-mean:$DELAY_MEAN" "vertical-gust:$VERTICAL_GUST" \
-             "altitude-error:$ALTITUDE_ERROR" "reaction-period:$REACTION_PERIOD" "probe:$PROBE"; do
+             "altitude-error:$ALTITUDE_ERROR" "reaction-period:$REACTION_PERIOD" "probe:$PROBE" \
+             "probe-margin:$PROBE_MARGIN"; do
   [[ "${_flag#*:}" =~ ^[0-9]+(\.[0-9]+)?$ ]] || die "--${_flag%%:*}: '${_flag#*:}' is not a number >= 0"
 done
 if [[ "$REACTION" != true ]] && awk -v p="$REACTION_PERIOD" 'BEGIN { exit !(p + 0 > 0) }'; then
@@ -163,6 +167,9 @@ if [[ "$REACTION" != true ]] && awk -v p="$REACTION_PERIOD" 'BEGIN { exit !(p + 
 fi
 if [[ "$REACTION" != true ]] && awk -v p="$PROBE" 'BEGIN { exit !(p + 0 > 0) }'; then
   die "--probe: '$PROBE' needs --reaction true (the probe runs at the planner's reactions)"
+fi
+if awk -v p="$PROBE" -v m="$PROBE_MARGIN" 'BEGIN { exit !(m + 0 > 0 && p + 0 <= 0) }'; then
+  die "--probe-margin: '$PROBE_MARGIN' needs --probe > 0 (the margin is the probe's)"
 fi
 # as floats: ROS parameters typed double refuse an integer given on the command line
 f() { [[ "$1" == *.* ]] && echo "$1" || echo "$1.0"; }
@@ -294,7 +301,7 @@ AIRSPACE=(-p "separation_model:=$SEPARATION" -p "separation_m:=$(f "$SEPARATION_
 start uam_planner planner planner --params-file config/planner.yaml -p "network:=$NETWORK" \
   -p "policy:=$POLICY" -p "backend:=$BACKEND" -p "seed:=$SEED" "${AIRSPACE[@]}" \
   -p "objective:=$OBJECTIVE" -p "baseline_order:=$BASELINE_ORDER" -p "horizon_epochs:=$HORIZON" \
-  -p "commit_ahead:=$COMMIT_AHEAD" -p "reaction:=$REACTION" -p "conflict_probe_s:=$(f "$PROBE")" ${REPLAN_POLICY:+-p "replan_policy:=$REPLAN_POLICY"} \
+  -p "commit_ahead:=$COMMIT_AHEAD" -p "reaction:=$REACTION" -p "conflict_probe_s:=$(f "$PROBE")" -p "conflict_probe_margin_m:=$(f "$PROBE_MARGIN")" ${REPLAN_POLICY:+-p "replan_policy:=$REPLAN_POLICY"} \
   -p "climb_rate_mps:=$(f "$CLIMB")" -p "descent_rate_mps:=$(f "$DESCENT")" -p "journal:=$OUT/planner-journal.jsonl" \
   -p "spatial_buffer_m:=$(f "$SPATIAL_BUFFER")" -p "temporal_buffer_s:=$(f "$TEMPORAL_BUFFER")" \
   ${CONSTRAINTS:+-p "constraints_file:=$CONSTRAINTS"}

@@ -82,6 +82,7 @@ def generate_launch_description() -> LaunchDescription:
                                                    "commit_ahead": a["commit_ahead"],
                                                    "reaction": a["reaction"],
                                                    "conflict_probe_s": a["conflict_probe_s"],
+                                                   "conflict_probe_margin_m": a["conflict_probe_margin_m"],
                                                    "replan_policy": a["replan_policy"],
                                                    "journal": PathJoinSubstitution([out, "planner-journal.jsonl"]),
                                                    "climb_rate_mps": a["climb_rate"],

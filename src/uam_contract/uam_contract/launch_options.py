@@ -47,6 +47,9 @@ LAUNCH_OPTIONS: tuple[LaunchOption, ...] = (
                  "with --reaction true, the conflict probe's look-ahead [s]: at each reaction the planner "
                  "projects airborne flights from their sightings and updates pairs that would lose "
                  "separation within it (docs/disturbances.md; 0 = off)"),
+    LaunchOption("--probe-margin", "PROBE_MARGIN", "conflict_probe_margin_m", "0",
+                 "with --probe, the probe's margin [m]: it predicts losses of the minimum + this and "
+                 "deconflicts its updates with at least that (0 = the true minimum)"),
     LaunchOption("--replan-policy", "REPLAN_POLICY", "replan_policy", "",
                  "re-plan of the flights a constraint update affects: mwis or firstfit; default: the policy's"),
     LaunchOption("--priority-share", "PRIORITY_SHARE", "priority_share", "0",

@@ -155,6 +155,10 @@ PLANNER = (
           "reaction the airborne flights whose rest of plan, flown from where the planner last saw them at "
           "their observed speed, loses the minimum within it are updated too (docs/disturbances.md); 0 = "
           "no probe", 0.0, 3600.0),
+    Param("conflict_probe_margin_m", 0.0, "with the conflict probe on: its margin [m]; it predicts losses "
+          "of the minimum widened by this much and deconflicts its own updates with at least that (a "
+          "tactical buffer between the flights predicted to come close; docs/disturbances.md); 0 = the "
+          "true minimum", 0.0, 10000.0),
 )
 
 SOLVER = (

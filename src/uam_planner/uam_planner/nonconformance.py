@@ -857,6 +857,18 @@ def shifted_trajectory(base: Trajectory, t0_s: float, delta_s: float,
     return Trajectory(new, ps)
 
 
+def probe_batch_separation(config):
+    """The separation a batch of the conflict probe alone deconflicts with: the wider of the
+    planner's (``config.separation``, with the buffers) and the probe's
+    (``config.probe_separation``, the true minimum + ``conflict_probe_margin_m``)."""
+    from .separation import SeparationModel
+    a, b = config.separation, getattr(config, "probe_separation", config.separation)
+    if b.separation_m <= a.separation_m and b.vertical_separation_m <= a.vertical_separation_m:
+        return a
+    return SeparationModel(a.kind, max(a.separation_m, b.separation_m),
+                           max(a.vertical_separation_m, b.vertical_separation_m))
+
+
 def _probe_batch_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict,
                        book: PositionBook, config, select: Callable, policy: str, network,
                        fixed: Sequence, probed: dict, report: dict):
@@ -878,6 +890,7 @@ def _probe_batch_steps(t_eff: float, epoch_index: int, active: Sequence, found: 
 
     idx = sorted(found)
     look = float(config.conflict_probe_s)
+    sep = probe_batch_separation(config)
     per, proj = [], []
     rates, rejoins = _observed_updates(idx, active, found, book, t_eff, report)
     for r, i in enumerate(idx):
@@ -907,7 +920,7 @@ def _probe_batch_steps(t_eff: float, epoch_index: int, active: Sequence, found: 
         trs = [_clipped(a[0], t_eff) or a[0] for _r, _c, a in flat]
         graph = build_conflict_graph(trs, req_of, cand,
                                      np.array([a[1] + PROBE_COVER for _r, _c, a in flat]),
-                                     len(rows), act, config.separation)
+                                     len(rows), act, sep)
         src = np.asarray(graph.vertex_source).tolist()
         add = []
         for v, s_v in enumerate(src):
@@ -917,7 +930,7 @@ def _probe_batch_steps(t_eff: float, epoch_index: int, active: Sequence, found: 
             us = [u for u, s_u in enumerate(src) if flat[s_u][0] != r]
             if us:
                 pairs = np.asarray(conflicting_pairs([proj[r]], [trs[src[u]] for u in us],
-                                                     config.separation)).reshape(-1, 2)
+                                                     sep)).reshape(-1, 2)
                 add += [(min(v, us[y]), max(v, us[y])) for y in pairs[:, 1].tolist()]
         if add:
             edges = _unique_pairs(np.concatenate((np.asarray(graph.edges, np.int64).reshape(-1, 2),

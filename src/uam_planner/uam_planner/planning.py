@@ -220,6 +220,11 @@ class PlanningConfig:
             whose rest of plan, flown from where the planner last saw them at their observed
             progress rate, loses the true minimum within it are updated as nonconforming ones
             are; 0 (default) = no probe (only reported, confirmed nonconformance is acted on).
+        conflict_probe_margin_m: with the probe on, its margin [m] (thirteenth stop): it predicts
+            losses of the true minimum widened by this much (``probe_separation``), and its own
+            batches deconflict their updates with the wider of that and ``separation``: a
+            tactical buffer kept only between the flights that are predicted to come close,
+            beside the strategic buffer every plan keeps; 0 (default) = the true minimum.
         conformance: the reaction to nonconforming flights (issue 23 item 3,
             ``uam_planner.nonconformance``): a ConformanceBounds the planner checks each
             nonconformance report against (its own plan, its own observation) before it updates
@@ -247,6 +252,17 @@ class PlanningConfig:
     temporal_buffer_s: float = 0.0
     conformance: ConformanceBounds | None = None
     conflict_probe_s: float = 0.0
+    conflict_probe_margin_m: float = 0.0
+
+    @property
+    def probe_separation(self) -> SeparationModel:
+        """What the conflict probe predicts losses of: the true minimum widened by
+        ``conflict_probe_margin_m`` (sphere: S + m; cylinder: H + m, V unchanged)."""
+        m = float(self.conflict_probe_margin_m)
+        base = self.minimum_separation
+        if not m:
+            return base
+        return SeparationModel(base.kind, base.separation_m + m, base.vertical_separation_m)
 
     @property
     def minimum_separation(self) -> SeparationModel:
@@ -282,7 +298,8 @@ class PlanningConfig:
         if self.constraints is not None and not isinstance(self.constraints, ConstraintSet):
             raise ValueError(f"PlanningConfig.constraints must be a ConstraintSet or None, got "
                              f"{type(self.constraints).__name__}")
-        for name in ("spatial_buffer_m", "temporal_buffer_s", "conflict_probe_s"):
+        for name in ("spatial_buffer_m", "temporal_buffer_s", "conflict_probe_s",
+                     "conflict_probe_margin_m"):
             _positive("PlanningConfig", name, getattr(self, name), allow_zero=True)
         if self.conformance is not None and not isinstance(self.conformance, ConformanceBounds):
             raise ValueError(f"PlanningConfig.conformance must be a ConformanceBounds or None, got "
@@ -1201,7 +1218,7 @@ class Planner:
         cfg = self.config
         skip = [i for i, f in enumerate(self.active) if f.request_id in updated]
         got = predicted_conflicts(self.active, self.positions, t_s, float(cfg.conflict_probe_s),
-                                  cfg.minimum_separation, exclude=skip)
+                                  cfg.probe_separation, exclude=skip)
         if not got:
             return
         found = {}

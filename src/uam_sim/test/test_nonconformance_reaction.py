@@ -552,6 +552,48 @@ def test_the_probe_sees_a_flight_due_to_depart_and_updates_the_airborne_one_agai
     assert {f.request_id: f.version for f in p.active}["R"] == 1
 
 
+def test_the_probe_margin_widens_what_it_predicts_and_what_its_updates_keep():
+    # thirteenth stop: PlanningConfig.conflict_probe_margin_m
+    from uam_planner.nonconformance import ConformanceBounds as CB, predicted_conflicts, probe_batch_separation
+
+    cfg = PlanningConfig(conformance=CB(), conflict_probe_s=300.0, conflict_probe_margin_m=30.0,
+                         spatial_buffer_m=10.0)
+    assert cfg.probe_separation.separation_m == 130.0 and cfg.separation.separation_m == 110.0
+    assert probe_batch_separation(cfg).separation_m == 130.0
+    assert probe_batch_separation(PlanningConfig(spatial_buffer_m=50.0, conflict_probe_margin_m=30.0)) \
+        .separation_m == 150.0
+    assert PlanningConfig().probe_separation == PlanningConfig().minimum_separation
+    with pytest.raises(ValueError, match="conflict_probe_margin_m"):
+        PlanningConfig(conflict_probe_margin_m=-1.0)
+    # P, 6 s late at 60 s, flown on at 0.9 (9 m/s) reaches m at 333.33 s; Q6 (due to depart S at
+    # 80 s: projected on its plan) reaches m at 380 s, 46.67 s later: the projections' closest
+    # approach is 46.67 x 10 x 9 / sqrt(181) = 312.2 m: no loss of 100 m, nor of 100 + 200 m,
+    # one of 100 + 250 m
+    p = Planner(cross(), cfg, "mwis", solve_mwis=None)
+    q6 = flight("Q6", ["S", "m", "N"], [(3000, -3000, 0), (3000, 0, 0), (3000, 3000, 0)], 80.0)
+    p.restore([P, q6])
+    flown = fly(P.trajectory, FlightDraws(), HEAD_WIND)
+    for t in (50.0, 60.0):
+        assert p.observe("P", t, flown.position_at(t)) is None
+    d = 140.0 / 3.0 * 90.0 / math.sqrt(181.0)
+    assert d == pytest.approx(312.2, abs=0.1)
+    for margin, hit in ((0.0, False), (200.0, False), (250.0, True)):
+        sep = PlanningConfig(conflict_probe_margin_m=margin).probe_separation
+        got = predicted_conflicts(p.active, p.positions, 60.0, 300.0, sep)
+        assert bool(got) == hit, (margin, got)
+    # with a margin of 250 m the probe updates P (Q6 is on the ground), and P's new plan keeps
+    # 350 m from Q6's
+    p2 = Planner(cross(), PlanningConfig(conformance=CB(), conflict_probe_s=300.0,
+                                         conflict_probe_margin_m=250.0), "mwis", solve_mwis=None)
+    p2.restore([P, q6])
+    for t in (50.0, 60.0):
+        assert p2.observe("P", t, flown.position_at(t)) is None
+    ups = p2.react_between(60.0, 2)
+    assert [u.request_id for u in ups] == ["P"] and "conflict probe" in ups[0].reason
+    new = {f.request_id: f.trajectory for f in p2.active}
+    assert audit_flights([new["P"], new["Q6"]], separation_m=350.0).losses == []
+
+
 def test_a_time_shift_reaches_its_delay_within_the_window_on_the_same_path():
     from uam_planner.nonconformance import shifted_trajectory
     # 0 -> 6000 m at 10 m/s from 0 s; +10 s within 60 s: the first 600 m take 70 s (8.57 m/s),

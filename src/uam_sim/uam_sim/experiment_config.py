@@ -128,6 +128,8 @@ class ExperimentConfig:
         conflict_probe_s: with ``reaction``, the planner's conflict probe look-ahead [s]
             (``PlanningConfig.conflict_probe_s``: conforming flights predicted to lose the
             minimum at their observed speeds are updated too); 0 (default) = no probe.
+        conflict_probe_margin_m: with the probe, its margin [m]
+            (``PlanningConfig.conflict_probe_margin_m``); 0 (default) = the true minimum.
         metrics_warmup_s: the decision metrics (delay, shares, ...) leave out requests whose
             earliest departure is before it (the warm-up); 0 = none.
         cumulative_rates: rates shown in the cumulative-approvals figure (default: up to 4 spread).
@@ -184,6 +186,7 @@ class ExperimentConfig:
     reaction: Bool = False
     reaction_period_s: Float = 0.0
     conflict_probe_s: Float = 0.0  # with the reaction: PlanningConfig.conflict_probe_s
+    conflict_probe_margin_m: Float = 0.0  # with the probe: PlanningConfig.conflict_probe_margin_m
     tts: Optional[Mapping] = field(default_factory=lambda: {
         "enabled": True, "instances": 629, "min_vertices": 5, "max_vertices": 50, "reads": 100,
         "repetitions": 5, "backend_instances": {"qpu-emulator": 60},
@@ -220,7 +223,9 @@ class ExperimentConfig:
                               spatial_buffer_m=self.spatial_buffer_m,
                               temporal_buffer_s=self.temporal_buffer_s,
                               conformance=self.conformance_bounds() if self.reaction else None,
-                              conflict_probe_s=self.conflict_probe_s if self.reaction else 0.0)
+                              conflict_probe_s=self.conflict_probe_s if self.reaction else 0.0,
+                              conflict_probe_margin_m=self.conflict_probe_margin_m
+                              if self.reaction and self.conflict_probe_s else 0.0)
 
     def disturbance_config(self):
         """The DisturbanceConfig of ``disturbance`` (off when empty); its seed is the cell's."""

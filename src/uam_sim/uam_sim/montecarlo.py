@@ -108,6 +108,8 @@ def point_configs(args) -> list[tuple[tuple, dict]]:
                                    "reaction": react,
                                    "reaction_period_s": args.reaction_period if react else 0.0,
                                    "conflict_probe_s": getattr(args, "probe", 0.0) if react else 0.0,
+                                   "conflict_probe_margin_m": getattr(args, "probe_margin", 0.0)
+                                   if react and getattr(args, "probe", 0.0) else 0.0,
                                    "workers": args.workers, "scheduler": args.scheduler,
                                    "corpus_max_vertices": 0})
                 out.append(((e, bs, bt, react), asdict(cfg)))
@@ -286,6 +288,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--probe", type=float, default=0.0, metavar="S",
                    help="with the reaction on, the planner's conflict probe look-ahead [s] "
                         "(PlanningConfig.conflict_probe_s; 0 = no probe, default)")
+    p.add_argument("--probe-margin", type=float, default=0.0, metavar="M",
+                   help="with the probe, its margin [m]: it predicts losses of the minimum + M and "
+                        "deconflicts its own updates with at least that (PlanningConfig."
+                        "conflict_probe_margin_m; 0 = the true minimum, default)")
     p.add_argument("--conformance", type=key_values, help="conformance bounds, e.g. lateral_m=30,time_s=10")
     p.add_argument("--seeds", default="4", help="a count n (seeds 0..n-1) or a comma list")
     p.add_argument("--rate", type=float, default=10.0, help="requests per 30 s (default 10)")

@@ -45,7 +45,8 @@ def cell_params(cfg: ExperimentConfig, method: str, rate, seed: int) -> dict:
                           # issue 23: buffers, disturbances and conformance bounds
                           ("spatial_buffer_m", 0.0), ("temporal_buffer_s", 0.0),
                           ("disturbance", {}), ("conformance", {}), ("reaction", False),
-                          ("reaction_period_s", 0.0), ("conflict_probe_s", 0.0)):
+                          ("reaction_period_s", 0.0), ("conflict_probe_s", 0.0),
+                          ("conflict_probe_margin_m", 0.0)):
         if getattr(cfg, name) != default:
             params[name] = getattr(cfg, name)
     if cfg.disturbance:

@@ -110,6 +110,8 @@ class PlannerNode(Node):
             conformance=ConformanceBounds(self.p["reaction_lateral_m"], self.p["reaction_vertical_m"],
                                           self.p["reaction_time_s"]) if self.p["reaction"] else None,
             conflict_probe_s=self.p["conflict_probe_s"] if self.p["reaction"] else 0.0,
+            conflict_probe_margin_m=self.p["conflict_probe_margin_m"]
+            if self.p["reaction"] and self.p["conflict_probe_s"] else 0.0,
             airspace=AirspaceConfig(**{f: self.p[f] for f in (
                 "separation_model", "vertical_separation_m", "departure_slot_s", "climb_rate_mps",
                 "descent_rate_mps")}))
