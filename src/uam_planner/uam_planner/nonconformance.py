@@ -331,6 +331,34 @@ def verify(flight, obs: Observation | None, bounds: ConformanceBounds, t_eff: fl
 # flight; a flight the batch cannot save keeps its plan: it conforms, it is not a contingency).
 # What it rests on is the planner's own fleet state, never a report.
 
+def projections(active: Sequence, book: PositionBook, t_s: float, lookahead_s: float,
+                exclude=()) -> list:
+    """(index in ``active``, its newest observation, its projection) of every flight of
+    ``active`` airborne on its plan at ``t_s`` with an observation at most ``MAX_AGE_S`` old (not
+    in ``exclude``): the rest of its plan flown from that sighting at its observed progress rate
+    (:func:`rejoin_trajectory`), from ``t_s`` to ``t_s + lookahead_s``."""
+    from .replanning import clipped_until
+
+    out = []
+    skip = set(exclude)
+    for i, f in enumerate(active):
+        tr = f.trajectory
+        if i in skip or not tr.departure_s < t_s < f.arrival_s:
+            continue
+        obs = book.latest(f.request_id, until=t_s)
+        if obs is None or obs.t_s < t_s - MAX_AGE_S or not tr.departure_s < obs.t_s < f.arrival_s:
+            continue
+        rate = book.progress_rate(f.request_id, tr, until=t_s)
+        pred = rejoin_trajectory(tr, obs.t_s, obs.position_m, rate)
+        # from now (a sighting may be a step old: what it predicts before now is past) on
+        pred = _clipped(pred, t_s) if pred is not None else None
+        pred = clipped_until(pred, t_s + lookahead_s) if pred is not None else None
+        if pred is None or pred.times_s.shape[0] < 2:
+            continue
+        out.append((i, obs, pred))
+    return out
+
+
 def predicted_conflicts(active: Sequence, book: PositionBook, t_s: float, lookahead_s: float,
                         separation, exclude=()) -> dict:
     """The flights of ``active`` predicted to lose ``separation`` (the true minimum) within
@@ -346,9 +374,15 @@ def predicted_conflicts(active: Sequence, book: PositionBook, t_s: float, lookah
 
     idx, obs_of, preds = [], {}, []
     skip = set(exclude)
+    airborne = {i: (obs, pred) for i, obs, pred in projections(active, book, t_s, lookahead_s, skip)}
     for i, f in enumerate(active):
         tr = f.trajectory
         if i in skip:
+            continue
+        if i in airborne:
+            obs_of[i], pred = airborne[i]
+            idx.append(i)
+            preds.append(pred)
             continue
         if t_s <= tr.departure_s < t_s + lookahead_s:
             # due to depart within the look-ahead: not seen yet, so flown as planned (thirteenth
@@ -360,22 +394,6 @@ def predicted_conflicts(active: Sequence, book: PositionBook, t_s: float, lookah
             if pred is not None and pred.times_s.shape[0] >= 2:
                 idx.append(i)
                 preds.append(pred)
-            continue
-        if not tr.departure_s < t_s < f.arrival_s:
-            continue
-        obs = book.latest(f.request_id, until=t_s)
-        if obs is None or obs.t_s < t_s - MAX_AGE_S or not tr.departure_s < obs.t_s < f.arrival_s:
-            continue
-        rate = book.progress_rate(f.request_id, tr, until=t_s)
-        pred = rejoin_trajectory(tr, obs.t_s, obs.position_m, rate)
-        # from now (a sighting may be a step old: what it predicts before now is past) on
-        pred = _clipped(pred, t_s) if pred is not None else None
-        pred = clipped_until(pred, t_s + lookahead_s) if pred is not None else None
-        if pred is None or pred.times_s.shape[0] < 2:
-            continue
-        idx.append(i)
-        obs_of[i] = obs
-        preds.append(pred)
     out: dict = {}
     if len(preds) < 2:
         return out
@@ -683,7 +701,7 @@ def react(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: P
 
 def react_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: PositionBook,
                 config, select: Callable, policy: str, network=None, fixed: Sequence = (),
-                fixed_ids: Sequence = (), probed: dict | None = None):
+                fixed_ids: Sequence = (), probed: dict | None = None, held: Sequence = ()):
     """Update the intents of the nonconforming flights ``found`` at the epoch ``t_eff``.
 
     A generator, as ``replanning.replan_steps``: with policy "mwis" it yields the one conflict
@@ -711,6 +729,9 @@ def react_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict, b
         probed: index in ``active`` -> the request ids it is predicted to meet, for the flights
             of ``found`` the conflict probe found (:func:`predicted_conflicts`; they conform):
             one the batch cannot save keeps its plan (no contingency).
+        held: indices in ``active`` of flights due to depart that the probed flights are
+            predicted to meet (a batch of the probe alone: they may be held on the pad,
+            :func:`_probe_batch_steps`).
     Returns: (new active list: the others in their order, then the new versions; PlanUpdate per
     flight in ``active`` order; a report dict: flights, alternatives, vertices, edges, kinds).
     """
@@ -725,7 +746,8 @@ def react_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict, b
     if probed and set(probed) == set(found):
         # a batch of the conflict probe alone (every flight conforms): its own solve
         return (yield from _probe_batch_steps(t_eff, epoch_index, active, found, book, config,
-                                              select, policy, network, fixed, probed, report))
+                                              select, policy, network, fixed, probed, report,
+                                              held))
     others = [f for j, f in enumerate(active) if j not in found]
     fixed = list(fixed)
     act = SegmentSet.from_trajectories([f.trajectory for f in others] + fixed)
@@ -837,6 +859,12 @@ PROBE_SHIFT_WINDOW_S = 60.0
 #: covers every probed flight first (with keep 1 and updates 2-3 leaving one out could score
 #: more than keeping both plans)
 PROBE_COVER = 100.0
+#: the conflict probe's holds on the pad [s] (thirteenth stop): a flight due to depart that a
+#: probed flight is predicted to meet may leave this much later (its whole plan shifted)
+HOLD_SHIFTS_S = (10.0, 20.0, 30.0, 60.0)
+#: the weight of a flight due to depart keeping its plan: above every hold's (2 + 1 / (1 + hold /
+#: DELAY_SCALE_S) < 3), so the batch holds one only when the airborne flights cannot move instead
+HOLD_KEEP_WEIGHT = 3.0
 
 
 def shifted_trajectory(base: Trajectory, t0_s: float, delta_s: float,
@@ -871,7 +899,7 @@ def probe_batch_separation(config):
 
 def _probe_batch_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict,
                        book: PositionBook, config, select: Callable, policy: str, network,
-                       fixed: Sequence, probed: dict, report: dict):
+                       fixed: Sequence, probed: dict, report: dict, held: Sequence = ()):
     """:func:`react_steps` for a batch of the conflict probe alone (every flight conforms).
 
     Each probed flight's alternatives: re-joins of its plan from where it is at its observed
@@ -883,12 +911,19 @@ def _probe_batch_steps(t_eff: float, epoch_index: int, active: Sequence, found: 
     plan and projection become fixed traffic, and the others are solved again (until every
     flight left has one). Before the tenth stop one flight left out dropped every update of the
     batch: 14 of 20 flown losses at 25 m in 41 seeds were such batches (BENCHMARKS.md).
+    ``held`` (thirteenth stop): flights due to depart that a probed flight is predicted to meet
+    join the batch too, with their plan (weight HOLD_KEEP_WEIGHT) and their plan shifted later by
+    each of HOLD_SHIFTS_S (held on the pad; weight by the delay, below keeping it), each +
+    PROBE_COVER; a hold is a plan update of kind ``yielded`` (the flight is not airborne: no
+    observation to update it from, its new plan is the old one later).
     A generator as :func:`react_steps`: it yields each round's graph."""
     from .conflict_graph import _unique_pairs, build_conflict_graph
     from .replanning import SOLVE_HERE, clipped_until
     from .separation import SegmentSet, conflicting_pairs
 
     idx = sorted(found)
+    hold = sorted({int(i) for i in held if i not in found and active[i].departure_s > t_eff})
+    rows_i = idx + hold          # the batch's rows: the probed flights, then those on the ground
     look = float(config.conflict_probe_s)
     sep = probe_batch_separation(config)
     per, proj = [], []
@@ -908,8 +943,18 @@ def _probe_batch_steps(t_eff: float, epoch_index: int, active: Sequence, found: 
         pr = _clipped(own, t_eff) if own is not None else None
         pr = clipped_until(pr, t_eff + look) if pr is not None else None
         proj.append(pr if pr is not None and pr.times_s.shape[0] >= 2 else None)
-    others = [f.trajectory for j, f in enumerate(active) if j not in found] + list(fixed)
-    rows, extra, chosen, backend = list(range(len(idx))), [], {}, policy
+    for i in hold:
+        f = active[i]
+        tr = f.trajectory
+        shifted = [Trajectory(tr.times_s + d, tr.points_m) for d in HOLD_SHIFTS_S]
+        alts = [(s, _delay_weight(s, tr.arrival_s)) for s in shifted]
+        alts = _constraint_free(alts, f, config, network, t_eff, False)
+        per.append(alts + [(tr, HOLD_KEEP_WEIGHT)])        # the last one: keep its plan
+        proj.append(None)
+    ground = set(hold)
+    others = [f.trajectory for j, f in enumerate(active) if j not in found and j not in ground] + \
+        list(fixed)
+    rows, extra, chosen, backend = list(range(len(rows_i))), [], {}, policy
     report["alternatives"] = sum(len(a) for a in per)
     while rows:
         flat = [(r, c, a) for r in rows for c, a in enumerate(per[r])]
@@ -953,7 +998,7 @@ def _probe_batch_steps(t_eff: float, epoch_index: int, active: Sequence, found: 
             break
         for r in left:                                  # it keeps its plan, flown as projected
             rows.remove(r)
-            extra += [active[idx[r]].trajectory] + ([proj[r]] if proj[r] is not None else [])
+            extra += [active[rows_i[r]].trajectory] + ([proj[r]] if proj[r] is not None else [])
             report["probe_released"] = report.get("probe_released", 0) + 1
     updates, new_versions = [], []
     for r, i in enumerate(idx):
@@ -970,6 +1015,24 @@ def _probe_batch_steps(t_eff: float, epoch_index: int, active: Sequence, found: 
         updates.append(up)
         new_versions.append(nf)
         report["kinds"][KIND] = report["kinds"].get(KIND, 0) + 1
+    for r in range(len(idx), len(rows_i)):                # on the ground: held, or keeps its plan
+        f = active[rows_i[r]]
+        ch = chosen.get(r)
+        if ch is None or ch[0] == len(per[r]) - 1:
+            continue
+        tr = ch[1][0]
+        delay = float(tr.departure_s - f.departure_s)
+        met = sorted(active[idx[q]].request_id for q in range(len(idx))
+                     if f.request_id in probed.get(idx[q], ()))
+        nf = moved_flight(f, (tr, ch[1][1], ""), t_eff, epoch_index, policy, backend)
+        updates.append(ReactionUpdate(
+            f.request_id, f.operator_id, nf.version, KIND_YIELD, (),
+            f"{KIND_YIELD}: held on the pad {delay:g} s (departs at {tr.departure_s:g} s) so that "
+            f"{', '.join(met) or 'the probed flights'} keep(s) separation (conflict probe)",
+            float(t_eff), nf, f, nf.arrival_s - f.arrival_s, 0.0))
+        new_versions.append(nf)
+        report["probe_held"] = report.get("probe_held", 0) + 1
+        report["kinds"][KIND_YIELD] = report["kinds"].get(KIND_YIELD, 0) + 1
     replaced = {u.request_id for u in updates}
     return [f for f in active if f.request_id not in replaced] + new_versions, updates, report
 

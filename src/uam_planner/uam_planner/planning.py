@@ -1189,7 +1189,8 @@ class Planner:
         if probe_s:
             yield from self._probe(t_s, epoch_index, {u.request_id for u in updates})
 
-    def _update_batch(self, t_s: float, epoch_index: int, found: dict, probed: dict | None = None):
+    def _update_batch(self, t_s: float, epoch_index: int, found: dict, probed: dict | None = None,
+                      held: Sequence = ()):
         """One batch of the reaction (``nonconformance.react_steps``) on the active flights,
         deconflicted against every other one and the held flights' projections; the new
         versions replace the old in ``self.active`` and join this epoch's plan updates.
@@ -1201,7 +1202,7 @@ class Planner:
             replan_selector(self.solve_mwis, cfg, epoch_index, t_s), self.replan_policy(), self.network,
             fixed=[h.trajectory for k, o in self.overruns.items() if k not in mine for h in o.flights],
             fixed_ids=[k for k, o in self.overruns.items() if k not in mine for _h in o.flights],
-            probed=probed)
+            probed=probed, held=held)
         for u in updates:   # the new version is drawn from where it is: its overrun is redrawn
             self.overruns.pop(u.request_id, None)
         self.active = active
@@ -1225,8 +1226,13 @@ class Planner:
         for i, (obs, _ids) in got.items():   # the sighting the projection started from
             errs = deviations(self.active[i].trajectory, [obs.t_s], [obs.position_m])
             found[i] = (obs, tuple(float(x[0]) for x in errs))
+        # the flights due to depart that they are predicted to meet may be held on the pad
+        where = {f.request_id: i for i, f in enumerate(self.active)}
+        held = sorted({where[r] for _obs, ids in got.values() for r in ids
+                       if r in where and where[r] not in got
+                       and self.active[where[r]].departure_s > t_s})
         _updates, rep_ = yield from self._update_batch(
-            t_s, epoch_index, found, probed={i: ids for i, (_obs, ids) in got.items()})
+            t_s, epoch_index, found, probed={i: ids for i, (_obs, ids) in got.items()}, held=held)
         rep = self._nonconformance_report or {}
         rep["probe"] = {k: v for k, v in rep_.items() if k != "rates"}
         self._nonconformance_report = rep
@@ -1354,11 +1360,12 @@ class Planner:
             self._requests = {k: r for k, r in self._requests.items() if k in alive}
         yield from self._apply_constraint_updates(t_s, epoch_index)
         yield from self._react_to_nonconformance(t_s, epoch_index)
-        # the traffic new requests are deconflicted against: the active flights and the held
-        # flights' projections (new objects every epoch, after the active ones: the segment
-        # index stays incremental)
+        # the traffic new requests are deconflicted against: the active flights, the held
+        # flights' projections and, with the conflict probe, the airborne flights' projections
+        # (new objects every epoch, after the active ones: the segment index stays incremental)
         held = [replace(h) for o in self.overruns.values() for h in o.flights]
-        traffic = self.active + held if held else self.active
+        seen = self._projected_traffic(t_s)
+        traffic = self.active + held + seen if held or seen else self.active
         if self.policy == "mwis":
             prep = prepare_epoch_mwis(t_s, epoch_index, self.pending, traffic, self.network, self.config,
                                       self.cache, self.active_index, self.shares,
@@ -1372,16 +1379,35 @@ class Planner:
                                             horizon=1))  # uam_planner.first_fit; myopic
             prep = PreparedEpoch(t_s=float(t_s), epoch_index=int(epoch_index), pending=list(self.pending),
                                  report=res.report, result=res)
-        if held:
-            # each held flight is counted once (its plan, if still active, or one projection)
+        if held or seen:
+            # each held flight is counted once (its plan, if still active, or one projection),
+            # each projected one as its plan
             planned = {f.request_id for f in self.active}
             twice = sum(len(o.flights) - (k not in planned) for k, o in self.overruns.items())
+            twice += len(seen)
             prep.airborne_count -= twice
             if prep.result is not None:
                 prep.result.report.active_flights -= twice
-            prep.report.overruns = {k: o.until_s for k, o in self.overruns.items()}
+            if held:
+                prep.report.overruns = {k: o.until_s for k, o in self.overruns.items()}
         self._prepared = prep
         return prep
+
+    def _projected_traffic(self, t_s: float) -> list:
+        """With the conflict probe on (``conflict_probe_s``): every airborne flight's projection
+        (from the planner's newest sighting at its observed progress rate, up to the look-ahead;
+        ``nonconformance.projections``) as a Flight, traffic that new requests are deconflicted
+        against beside its plan. Thirteenth stop: a flight approved to leave a vertiport at
+        once kept the buffer from the plan of a flight landing there 15 s later, which landed
+        4 s early (seen early by the probe): 91 m flown at a 25 m buffer. Empty otherwise."""
+        cfg = self.config
+        if cfg.conformance is None or not cfg.conflict_probe_s:
+            return []
+        from .nonconformance import projections
+        return [replace(self.active[i], trajectory=pred, departure_s=float(pred.departure_s),
+                        arrival_s=float(pred.arrival_s))
+                for i, _obs, pred in projections(self.active, self.positions, t_s,
+                                                 float(cfg.conflict_probe_s))]
 
     def _hold_overruns(self, t_s: float) -> None:
         """Step 1 of ``prepare``, before flights past their planned arrival are dropped: from

@@ -552,6 +552,53 @@ def test_the_probe_sees_a_flight_due_to_depart_and_updates_the_airborne_one_agai
     assert {f.request_id: f.version for f in p.active}["R"] == 1
 
 
+def test_a_flight_due_to_depart_is_held_on_the_pad_when_the_airborne_one_cannot_move():
+    # thirteenth stop. P (6 s late at 60 s, 9 m/s) and R (due to leave V at 183.33 s) as above:
+    # P's projection and R's plan meet at m at 333.33 s. A vehicle hovers on P's route at
+    # (1500, 0) from 60 s to 700 s: every alternative of P passes it (its plan too), so P is
+    # released (keeps its plan); R is held on the pad instead. Held d s, R is at m d s after P's
+    # projection: 10 x 9 / sqrt(181) d = 6.69 d m apart at closest, so 10 s (66.9 m) is too little
+    # and 20 s (133.8 m) the least hold that keeps 100 m
+    from uam_planner.nonconformance import (KIND_YIELD, ConformanceBounds as CB, deviations,
+                                            predicted_conflicts, react_steps)
+    from uam_planner.planning import replan_selector
+    from uam_planner.replanning import SOLVE_HERE, run_steps
+
+    net = network_from_enu("cross-v", ["W", "m", "E", "V", "N"],
+                           [(0, 0, 0), (3000, 0, 0), (6000, 0, 0), (3000, -1500, 0), (3000, 3000, 0)],
+                           [True, False, True, True, True],
+                           [("W", "m"), ("m", "E"), ("V", "m"), ("m", "N")])
+    R = flight("R", ["V", "m", "N"], [(3000, -1500, 0), (3000, 0, 0), (3000, 3000, 0)], 550.0 / 3.0)
+    p = Planner(net, PlanningConfig(conformance=CB(), conflict_probe_s=300.0), "mwis", solve_mwis=None)
+    p.restore([P, R])
+    flown = fly(P.trajectory, FlightDraws(), HEAD_WIND)
+    for t in (50.0, 60.0):
+        assert p.observe("P", t, flown.position_at(t)) is None
+    got = predicted_conflicts(p.active, p.positions, 60.0, 300.0, 100.0)
+    found = {i: (obs, tuple(float(x[0]) for x in deviations(p.active[i].trajectory, [obs.t_s],
+                                                             [obs.position_m])))
+             for i, (obs, _ids) in got.items()}
+    hover = Trajectory(np.array([60.0, 700.0]), np.array([[1500.0, 0.0, 0.0]] * 2))
+    r_index = [f.request_id for f in p.active].index("R")
+    steps = react_steps(60.0, 2, p.active, found, p.positions, p.config,
+                        replan_selector(None, p.config, 2, 60.0), "mwis", p.network,
+                        fixed=[hover], fixed_ids=["H"],
+                        probed={i: ids for i, (_o, ids) in got.items()}, held=[r_index])
+    active, ups, rep = run_steps(steps, lambda _graph: SOLVE_HERE)
+    assert [(u.request_id, u.kind) for u in ups] == [("R", KIND_YIELD)]
+    assert rep["probe_released"] == 1 and rep["probe_held"] == 1
+    new_r = ups[0].flight
+    assert new_r.departure_s == pytest.approx(550.0 / 3.0 + 20.0) and new_r.version == 2
+    assert "held on the pad 20 s" in ups[0].reason and "P" in ups[0].reason
+    assert new_r.trajectory.points_m == pytest.approx(R.trajectory.points_m)
+    # what P really flies (9 m/s from 540 m at 60 s) keeps the minimum from R's new plan
+    flown_p = Trajectory(np.array([60.0, 60.0 + 5460.0 / 9.0]), np.array([[540.0, 0, 0], [6000.0, 0, 0]]))
+    a = audit_flights([flown_p, new_r.trajectory], separation_m=100.0)
+    assert a.losses == [] and a.min_separation_m == pytest.approx(20.0 * 90.0 / math.sqrt(181.0), rel=1e-3)
+    # P keeps its plan (released), R has its second version
+    assert {f.request_id: f.version for f in active} == {"P": 1, "R": 2}
+
+
 def test_the_probe_margin_widens_what_it_predicts_and_what_its_updates_keep():
     # thirteenth stop: PlanningConfig.conflict_probe_margin_m
     from uam_planner.nonconformance import ConformanceBounds as CB, predicted_conflicts, probe_batch_separation
