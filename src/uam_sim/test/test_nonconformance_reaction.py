@@ -599,6 +599,45 @@ def test_a_flight_due_to_depart_is_held_on_the_pad_when_the_airborne_one_cannot_
     assert {f.request_id: f.version for f in active} == {"P": 1, "R": 2}
 
 
+def test_with_the_probe_a_new_request_keeps_the_minimum_from_where_a_flight_is_seen():
+    # thirteenth stop: with the probe on, new requests are deconflicted against the airborne
+    # flights' projections too. P flies 10.3 m/s over the ground (0.3 m/s tail wind): at 180 s
+    # at 1854 m, 5.2 s early (it conforms; a late flight is held by its overrun already), its
+    # projection reaches m at 180 + 1146 / 10.3 = 291.26 s. T may leave V (3000, -1050) at 180 s
+    # only: at m at 285 s, 15 s before P's plan (106.1 m apart at closest) but 6.26 s before P's
+    # projection (6.26 x 103 / sqrt(206.09) = 44.9 m)
+    from uam_planner.nonconformance import ConformanceBounds as CB
+
+    net = network_from_enu("cross-v", ["W", "m", "E", "V", "N"],
+                           [(0, 0, 0), (3000, 0, 0), (6000, 0, 0), (3000, -1050, 0), (3000, 3000, 0)],
+                           [True, False, True, True, True],
+                           [("W", "m"), ("m", "E"), ("V", "m"), ("m", "N")])
+    flown = fly(P.trajectory, FlightDraws(), DisturbanceConfig(wind_speed_mps=0.3, wind_from_deg=270.0))
+    assert flown.position_at(180.0)[0] == pytest.approx(1854.0)
+    T = FlightRequest("T", "V", "N", 180.0, 180.0, 180.0)
+    got = {}
+    for probe_s in (0.0, 300.0):
+        p = Planner(net, PlanningConfig(conformance=CB(), conflict_probe_s=probe_s), "mwis",
+                    solve_mwis=None)
+        p.restore([P])
+        for t in np.arange(10.0, 181.0, 10.0):
+            assert p.observe("P", float(t), flown.position_at(float(t))) is None
+        p.submit(T)
+        got[probe_s] = p.plan(180.0, 6)
+    # without the probe T is approved against P's plan, and meets P as it flies
+    (t_plan,) = got[0.0].approved
+    assert audit_flights([t_plan.trajectory, P.trajectory], separation_m=100.0).min_separation_m == \
+        pytest.approx(150.0 / math.sqrt(2.0), rel=1e-3)
+    a = audit_flights([t_plan.trajectory, flown], separation_m=100.0)
+    assert len(a.losses) == 1 and a.min_separation_m == pytest.approx(44.9, abs=0.5)
+    # with it, T's one candidate is not approved into P's projection (it is discarded: it
+    # expires with its window),
+    # and P's plan is not changed (nothing is predicted to meet it)
+    res = got[300.0]
+    assert res.approved == [] and (res.report.candidates, res.report.vertices) == (1, 0), res.report
+    assert res.plan_updates == []
+
+
 def test_the_probe_margin_widens_what_it_predicts_and_what_its_updates_keep():
     # thirteenth stop: PlanningConfig.conflict_probe_margin_m
     from uam_planner.nonconformance import ConformanceBounds as CB, predicted_conflicts, probe_batch_separation
