@@ -212,7 +212,11 @@ def test_bad_objective_order_priority_share_and_reaction_period_are_refused_nami
                          "--reaction-period: '-5' is not a number >= 0"),
                         # ... and so does the conflict probe, which runs at its reactions
                         (["--probe", "60"], "--probe: '60' needs --reaction true"),
-                        (["--reaction", "true", "--probe", "soon"], "--probe: 'soon' is not a number >= 0")]:
+                        (["--reaction", "true", "--probe", "soon"], "--probe: 'soon' is not a number >= 0"),
+                        # ... and the probe's margin needs the probe (thirteenth stop)
+                        (["--reaction", "true", "--probe-margin", "50"], "--probe-margin: '50' needs --probe > 0"),
+                        (["--reaction", "true", "--probe", "60", "--probe-margin", "-1"],
+                         "--probe-margin: '-1' is not a number >= 0")]:
         res = subprocess.run(["bash", str(ROOT / "scripts" / "run_fleet.sh"), *args], capture_output=True,
                              text=True, timeout=60)
         assert res.returncode == 2 and words in res.stderr, (args, res.stderr)
