@@ -690,6 +690,65 @@ def _reaction_update(f, alt, kind: str, reason: str, policy: str, backend: str, 
                               float(t_eff), nf, f, nf.arrival_s - f.arrival_s, float(rate))
 
 
+def _divert_alternatives(f, obs, rate: float, t_eff: float, network, config, router) -> list:
+    """Re-routes of ``f`` to its destination and diversions to the nearest vertiports
+    (``replanning._airborne_alternatives``: stage 1, from the next waypoint) flown from its
+    sighting ``obs``: straight to its plan's next waypoint, then the new route, every leg at
+    ``rate`` times the planned speeds (as the re-joins: the aircraft keeps its airspeed). Each a
+    ``replanning._Alt`` whose route is the flight's whole route (the part flown, then the new
+    one), best first (re-routes by added delay, then diversions by time to land)."""
+    from .replanning import _airborne_alternatives
+
+    plan = f.trajectory
+    q = np.asarray(obs.position_m, dtype=np.float64).reshape(3)
+    j, _lam, _p, _tau = nearest(plan, q[None], [float(obs.t_s)])
+    nxt = int(j[0]) + 1
+    own = rejoin_trajectory(plan, float(obs.t_s), q, rate)
+    route = tuple(f.route_node_ids)
+    if own is None or own.times_s.shape[0] < 2 or nxt < 1 or nxt > len(route):
+        return []
+    # the re-join's waypoint i >= 1 is the plan's waypoint nxt + i - 1: its route from the node
+    # before that one on (on a layered network waypoint w is over route node w - 1, else w)
+    pseudo = replace(f, trajectory=own, departure_s=float(own.departure_s),
+                     arrival_s=float(own.arrival_s), route_node_ids=route[nxt - 1:])
+    a = config.airspace
+    cfg = replace(config, speed_mps=float(config.speed_mps) * rate,
+                  airspace=replace(a, descent_rate_mps=float(a.descent_rate_mps) * rate))
+    # branch at the re-join's first waypoint after the sighting (the plan's next one)
+    alts = _airborne_alternatives(pseudo, float(own.times_s[0]) + 1e-3, network, cfg, router)
+    out = []
+    for al in alts:
+        tr = al.trajectory
+        if tr.arrival_s <= t_eff:
+            continue
+        out.append(replace(al, route_node_ids=route[:nxt - 1] + tuple(al.route_node_ids),
+                           length_m=float(f.length_m) if al.kind == "rerouted" and
+                           tuple(al.route_node_ids) == route[nxt - 1:] else float(al.length_m)))
+    out.sort(key=lambda al: -al.weight)
+    return out
+
+
+def _first_clear(alts: list, others: list, config, t_eff: float):
+    """The first of ``alts`` (``_Alt``) that keeps ``config.separation`` from every trajectory of
+    ``others`` from ``t_eff`` on (exact, continuous time), or None."""
+    from .separation import SegmentSet, conflicting_pairs
+
+    if not alts:
+        return None
+    trs = [_clipped(a.trajectory, t_eff) or a.trajectory for a in alts]
+    oset = SegmentSet.from_trajectories(others) if others else None
+    if oset is not None and len(oset):
+        oset = oset.take(oset.t1_s >= t_eff)
+    if oset is None or not len(oset):
+        return alts[0]
+    bad = set(np.asarray(conflicting_pairs(SegmentSet.from_trajectories(trs), oset,
+                                           config.separation)).reshape(-1, 2)[:, 0].tolist())
+    for k, a in enumerate(alts):
+        if k not in bad:
+            return a
+    return None
+
+
 def react(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: PositionBook,
           config, select: Callable, policy: str, network=None, fixed: Sequence = (),
           fixed_ids: Sequence = ()) -> tuple[list, list, dict]:
@@ -701,7 +760,8 @@ def react(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: P
 
 def react_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: PositionBook,
                 config, select: Callable, policy: str, network=None, fixed: Sequence = (),
-                fixed_ids: Sequence = (), probed: dict | None = None, held: Sequence = ()):
+                fixed_ids: Sequence = (), probed: dict | None = None, held: Sequence = (),
+                router=None):
     """Update the intents of the nonconforming flights ``found`` at the epoch ``t_eff``.
 
     A generator, as ``replanning.replan_steps``: with policy "mwis" it yields the one conflict
@@ -732,6 +792,10 @@ def react_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict, b
         held: indices in ``active`` of flights due to depart that the probed flights are
             predicted to meet (a batch of the probe alone: they may be held on the pad,
             :func:`_probe_batch_steps`).
+        router: a ``replanning._Router`` of the planner's network (thirteenth stop): a flight
+            that no re-timing saves (nor its neighbours' yields) is re-routed to its destination
+            or diverted to one of the nearest vertiports from where it is
+            (:func:`_divert_alternatives`) before it is flown as a contingency; None = not tried.
     Returns: (new active list: the others in their order, then the new versions; PlanUpdate per
     flight in ``active`` order; a report dict: flights, alternatives, vertices, edges, kinds).
     """
@@ -803,6 +867,23 @@ def react_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict, b
         report["yield_saved"], report["yield_moved"] = len(saved), len(moved)
     yielded = {j: moved_flight(active[j], moved[j], t_eff, epoch_index, policy, backend) for j in moved}
     others = [yielded.get(j, f) for j, f in enumerate(active) if j not in found]
+    # the flights still unsaved: re-routed or diverted from where they are, one at a time in
+    # index order, each clear of every other flight, the held projections and what is chosen
+    diverted: dict = {}       # row -> the _Alt flown (its destination and route change)
+    left = [r for r in range(len(idx)) if r not in chosen and per[r] and r not in keep]
+    if left and router is not None and network is not None:
+        taken = [chosen[r][0] for r in sorted(chosen)]
+        for r in left:
+            f = active[idx[r]]
+            alt = _first_clear(_divert_alternatives(f, found[idx[r]][0], rates[r], t_eff, network,
+                                                    config, router),
+                               [g.trajectory for g in others] + list(fixed) + taken, config, t_eff)
+            if alt is not None:
+                diverted[r] = alt
+                chosen[r] = (alt.trajectory, alt.weight)
+                taken.append(alt.trajectory)
+        report["diverted"] = sum(1 for a in diverted.values() if a.kind == "diverted")
+        report["rerouted"] = sum(1 for a in diverted.values() if a.kind == "rerouted")
     updates, new_versions = [], []
     for r, i in enumerate(idx):
         f = active[i]
@@ -829,8 +910,16 @@ def react_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict, b
         else:
             kind = KIND
             reason = f"{KIND}: {what}"
+        if r in diverted:
+            d = diverted[r]
+            reason += (f"; {d.kind} to {network.node_ids[d.destination]!r} (no re-timing kept "
+                       f"separation)")
+            f = replace(f, destination_id=network.node_ids[d.destination],
+                        route_node_ids=tuple(d.route_node_ids), length_m=float(d.length_m))
         nf, up = _reaction_update(f, a, kind, reason, policy, backend, epoch_index, t_eff,
                                   rates[r], contingent)
+        if r in diverted:   # the update's previous version is the flight as it was
+            up = replace(up, previous=active[i])
         updates.append(up)
         new_versions.append(nf)
         report["kinds"][kind] = report["kinds"].get(kind, 0) + 1

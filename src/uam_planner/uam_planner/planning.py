@@ -1195,14 +1195,17 @@ class Planner:
         deconflicted against every other one and the held flights' projections; the new
         versions replace the old in ``self.active`` and join this epoch's plan updates.
         A generator (it yields the batch's MWIS graph); returns (updates, report)."""
+        from .replanning import _Router
         cfg = self.config
         mine = {self.active[i].request_id for i in found}
+        router = _Router(self.network, self.cache, cfg.constraints if cfg.constraints is not None
+                         else (), t_s)
         active, updates, rep_ = yield from react_steps(
             t_s, epoch_index, self.active, found, self.positions, cfg,
             replan_selector(self.solve_mwis, cfg, epoch_index, t_s), self.replan_policy(), self.network,
             fixed=[h.trajectory for k, o in self.overruns.items() if k not in mine for h in o.flights],
             fixed_ids=[k for k, o in self.overruns.items() if k not in mine for _h in o.flights],
-            probed=probed, held=held)
+            probed=probed, held=held, router=router)
         for u in updates:   # the new version is drawn from where it is: its overrun is redrawn
             self.overruns.pop(u.request_id, None)
         self.active = active

@@ -638,6 +638,46 @@ def test_with_the_probe_a_new_request_keeps_the_minimum_from_where_a_flight_is_s
     assert res.plan_updates == []
 
 
+def test_a_flight_no_re_timing_saves_is_diverted_before_it_flies_a_contingency():
+    # thirteenth stop: P 12 s late at 120 s (nonconforming) and a vehicle hovering on its route
+    # at (4500, 0) from 60 s to 2000 s: every re-join of P to E passes it, and nothing can yield
+    # (a fixed projection). Before, P flew a contingency through it; now it is diverted at m to
+    # the nearest other vertiport that keeps separation: W, S and N are 3 km from m (ties by
+    # index: W first), flown at its observed rate (0.9: 9 m/s), clear of the hovering vehicle
+    from uam_planner.nonconformance import (KIND, KIND_CONTINGENCY, deviations, react_steps)
+    from uam_planner.planning import replan_selector
+    from uam_planner.replanning import SOLVE_HERE, _Router, run_steps
+
+    flown = fly(P.trajectory, FlightDraws(), HEAD_WIND)
+    hover = Trajectory(np.array([60.0, 2000.0]), np.array([[4500.0, 0.0, 0.0]] * 2))
+    out = {}
+    for divert in (False, True):
+        p = Planner(cross(), PlanningConfig(conformance=ConformanceBounds()), "mwis", solve_mwis=None)
+        p.restore([P])
+        _observe(p, flown, (100.0, 110.0, 120.0))
+        obs = p.positions.latest("P", until=120.0)
+        errs = tuple(float(x[0]) for x in deviations(P.trajectory, [obs.t_s], [obs.position_m]))
+        assert errs[2] == pytest.approx(12.0, abs=0.01)        # 12 s late: nonconforming
+        steps = react_steps(120.0, 4, p.active, {0: (obs, errs)}, p.positions, p.config,
+                            replan_selector(None, p.config, 4, 120.0), "mwis", p.network,
+                            fixed=[hover], fixed_ids=["H"],
+                            router=_Router(p.network, p.cache, (), 120.0) if divert else None)
+        _active, ups, rep = run_steps(steps, lambda _graph: SOLVE_HERE)
+        (out[divert],) = ups
+    before, after = out[False], out[True]
+    assert before.kind == KIND_CONTINGENCY and before.flight.contingent
+    assert len(audit_flights([before.flight.trajectory, hover], separation_m=100.0).losses) == 1
+    assert after.kind == KIND and not after.flight.contingent
+    assert "diverted to 'W'" in after.reason and after.flight.destination_id == "W"
+    assert after.flight.route_node_ids == ("W", "m", "W") and after.previous is P
+    new = after.flight.trajectory
+    # from where P is (1080, 0) at 120 s to m at 9 m/s (333.33 s), then back to W at 9 m/s
+    assert new.points_m[0] == pytest.approx([1080.0, 0.0, 0.0])
+    assert new.position_at(1000.0 / 3.0) == pytest.approx([3000.0, 0.0, 0.0])
+    assert new.arrival_s == pytest.approx(1000.0 / 3.0 + 3000.0 / 9.0)
+    assert audit_flights([new, hover], separation_m=100.0).losses == []
+
+
 def test_the_probe_margin_widens_what_it_predicts_and_what_its_updates_keep():
     # thirteenth stop: PlanningConfig.conflict_probe_margin_m
     from uam_planner.nonconformance import ConformanceBounds as CB, predicted_conflicts, probe_batch_separation

@@ -159,11 +159,16 @@ def _apply_reaction_updates(updates, by_id, reaction, replans, t) -> None:
         if row is not None and _is_reaction(u):
             row["version"], row["replan"] = u.version, u.kind
             row["arrival_s"] = u.flight.arrival_s
+            other_pad = u.flight.destination_id != u.previous.destination_id
+            if other_pad:   # diverted (thirteenth stop)
+                row.update(destination=u.flight.destination_id, route=" ".join(u.flight.route_node_ids),
+                           length_m=u.flight.length_m)
             reaction.apply(u, row, u.observed_rate)
             replans.append({"t_s": t, "request_id": u.request_id, "kind": u.kind,
                             "version": u.version, "constraints": "",
                             "added_delay_s": u.added_delay_s, "airborne": True,
-                            **({"probe": True} if "conflict probe" in u.reason else {})})
+                            **({"probe": True} if "conflict probe" in u.reason else {}),
+                            **({"diverted": True} if other_pad else {})})
 
 def _apply_disturbed_updates(updates, by_id, reaction, replans, t) -> None:
     """One batch of plan updates of a disturbed run with the reaction on (an epoch's, a reaction
@@ -361,8 +366,9 @@ def _flown_summary(flights: list, cfg: ExperimentConfig, dcfg) -> dict:
         out["flown_losses_with_contingency"] = sum(1 for a, b, *_ in pairs if a in cont or b in cont) \
             if len(pairs) == audit["losses"] else None
         out["nonconforming_updates"] = sum(1 for f in flights if f.get("_pieces"))
-        out["reaction_contingencies"] = sum(1 for f in flights if f.get("replan") == "contingency"
-                                            and f.get("_pieces"))
+        # every flight flown as a contingency at some time (before the thirteenth stop only those
+        # whose newest version was one)
+        out["reaction_contingencies"] = len(cont)
     # where the flown losses are: near a vertiport both flights use (where no airborne buffer
     # reaches: the synthetic city's vertiports are single points, no pads) or en route
     pairs = audit.get("loss_pairs") or []
@@ -570,6 +576,8 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
         flown_summary["replans"] = len(replans)
         if cfg.reaction:   # flights re-timed so that a nonconforming one keeps separation
             flown_summary["reaction_yields"] = sum(1 for r in replans if r["kind"] == "yielded")
+            # nonconforming flights diverted to another vertiport (thirteenth stop)
+            flown_summary["reaction_diversions"] = sum(1 for r in replans if r.get("diverted"))
             if cfg.conflict_probe_s:   # updates the planner's conflict probe asked for
                 flown_summary["reaction_probe_updates"] = sum(1 for r in replans if r.get("probe"))
         flown_summary["held_past_plan"] = len(held_ids)
