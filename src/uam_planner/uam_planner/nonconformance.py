@@ -467,27 +467,30 @@ def _least_conflicting(alts: list, others: list, config, t_eff: float, true_firs
     (``config.minimum_separation``) come first, then of the buffered separation: with a buffer,
     an alternative that only cuts into the buffer of one flight had ranked below one that keeps
     the buffer from none of two others but crosses a third at a few metres."""
-    from .separation import SegmentSet, conflicting_pairs
-
-    def counts(separation) -> np.ndarray:
-        n_conf = np.zeros(len(alts), dtype=np.int64)
-        if oset is not None and len(oset):
-            pairs = conflicting_pairs(aset, oset, separation)
-            for i in np.unique(pairs[:, 0]).tolist():
-                n_conf[i] = np.unique(pairs[pairs[:, 0] == i, 1]).size
-        return n_conf
-
-    oset = SegmentSet.from_trajectories(others) if others else None
-    if oset is not None and len(oset):
-        oset = oset.take(oset.t1_s >= t_eff)
-    aset = None
-    if oset is not None and len(oset):
-        aset = SegmentSet.from_trajectories([_clipped(a[0], t_eff) or a[0] for a in alts])
-    n_conf = counts(config.separation)
-    n_true = counts(config.minimum_separation) \
+    trs = [a[0] for a in alts]
+    n_conf = _conflict_counts(trs, others, config.separation, t_eff)
+    n_true = _conflict_counts(trs, others, config.minimum_separation, t_eff) \
         if true_first and config.minimum_separation != config.separation else np.zeros_like(n_conf)
     k = min(range(len(alts)), key=lambda i: (int(n_true[i]), int(n_conf[i]), alts[i][0].arrival_s))
     return alts[k]
+
+
+def _conflict_counts(trajectories: list, others: list, separation, t_eff: float) -> np.ndarray:
+    """For each of ``trajectories`` (from ``t_eff`` on), how many of ``others`` it loses
+    ``separation`` with (exact, continuous time)."""
+    from .separation import SegmentSet, conflicting_pairs
+
+    n_conf = np.zeros(len(trajectories), dtype=np.int64)
+    oset = SegmentSet.from_trajectories(others) if others else None
+    if oset is not None and len(oset):
+        oset = oset.take(oset.t1_s >= t_eff)
+    if oset is None or not len(oset) or not trajectories:
+        return n_conf
+    aset = SegmentSet.from_trajectories([_clipped(tr, t_eff) or tr for tr in trajectories])
+    pairs = conflicting_pairs(aset, oset, separation)
+    for i in np.unique(pairs[:, 0]).tolist():
+        n_conf[i] = np.unique(pairs[pairs[:, 0] == i, 1]).size
+    return n_conf
 
 
 #: **Neighbours yield** (seventh stop; issue 23 item 3, "re-deconflicted against its
@@ -679,13 +682,14 @@ def _probe_reason(ids, obs, lat: float, terr: float, rate: float) -> str:
 
 
 def _reaction_update(f, alt, kind: str, reason: str, policy: str, backend: str, epoch_index: int,
-                     t_eff: float, rate: float, contingent: bool):
-    """The new version of ``f`` flying ``alt`` (trajectory, weight) from ``t_eff``, and its
+                     t_eff: float, rate: float, contingent: bool, **changes):
+    """The new version of ``f`` flying ``alt`` (trajectory, weight) from ``t_eff`` (with
+    ``changes`` to its other fields: a diversion's destination and route), and its
     ReactionUpdate."""
     tr = alt[0]
     nf = replace(f, trajectory=tr, arrival_s=float(tr.arrival_s), weight=float(alt[1]),
                  method=f"nonconforming-{policy}", backend=backend, epoch_index=int(epoch_index),
-                 version=f.version + 1, effective_s=float(t_eff), contingent=contingent)
+                 version=f.version + 1, effective_s=float(t_eff), contingent=contingent, **changes)
     return nf, ReactionUpdate(f.request_id, f.operator_id, nf.version, kind, (), reason,
                               float(t_eff), nf, f, nf.arrival_s - f.arrival_s, float(rate))
 
@@ -731,22 +735,8 @@ def _divert_alternatives(f, obs, rate: float, t_eff: float, network, config, rou
 def _first_clear(alts: list, others: list, config, t_eff: float):
     """The first of ``alts`` (``_Alt``) that keeps ``config.separation`` from every trajectory of
     ``others`` from ``t_eff`` on (exact, continuous time), or None."""
-    from .separation import SegmentSet, conflicting_pairs
-
-    if not alts:
-        return None
-    trs = [_clipped(a.trajectory, t_eff) or a.trajectory for a in alts]
-    oset = SegmentSet.from_trajectories(others) if others else None
-    if oset is not None and len(oset):
-        oset = oset.take(oset.t1_s >= t_eff)
-    if oset is None or not len(oset):
-        return alts[0]
-    bad = set(np.asarray(conflicting_pairs(SegmentSet.from_trajectories(trs), oset,
-                                           config.separation)).reshape(-1, 2)[:, 0].tolist())
-    for k, a in enumerate(alts):
-        if k not in bad:
-            return a
-    return None
+    n_conf = _conflict_counts([a.trajectory for a in alts], others, config.separation, t_eff)
+    return next((a for a, n in zip(alts, n_conf.tolist()) if n == 0), None)
 
 
 def react(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: PositionBook,
@@ -910,26 +900,23 @@ def react_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict, b
         else:
             kind = KIND
             reason = f"{KIND}: {what}"
+        changes = {}
         if r in diverted:
             d = diverted[r]
             reason += (f"; {d.kind} to {network.node_ids[d.destination]!r} (no re-timing kept "
                        f"separation)")
-            f = replace(f, destination_id=network.node_ids[d.destination],
-                        route_node_ids=tuple(d.route_node_ids), length_m=float(d.length_m))
+            changes = {"destination_id": network.node_ids[d.destination],
+                       "route_node_ids": tuple(d.route_node_ids), "length_m": float(d.length_m)}
         nf, up = _reaction_update(f, a, kind, reason, policy, backend, epoch_index, t_eff,
-                                  rates[r], contingent)
-        if r in diverted:   # the update's previous version is the flight as it was
-            up = replace(up, previous=active[i])
+                                  rates[r], contingent, **changes)
         updates.append(up)
         new_versions.append(nf)
         report["kinds"][kind] = report["kinds"].get(kind, 0) + 1
     for j in sorted(moved):                           # the neighbours that yield
         f, nf, how = active[j], yielded[j], moved[j][2]
         saved_ids = ", ".join(active[idx[r]].request_id for r in sorted(saved))
-        updates.append(ReactionUpdate(f.request_id, f.operator_id, nf.version, KIND_YIELD, (),
-                                      f"{KIND_YIELD}: {how} so that the nonconforming {saved_ids} "
-                                      f"keep(s) separation", float(t_eff), nf, f,
-                                      nf.arrival_s - f.arrival_s, 0.0))
+        updates.append(_yield_update(f, nf, f"{KIND_YIELD}: {how} so that the nonconforming "
+                                            f"{saved_ids} keep(s) separation", t_eff))
         new_versions.append(nf)
         report["kinds"][KIND_YIELD] = report["kinds"].get(KIND_YIELD, 0) + 1
     replaced = {u.request_id for u in updates}
@@ -979,7 +966,7 @@ def probe_batch_separation(config):
     planner's (``config.separation``, with the buffers) and the probe's
     (``config.probe_separation``, the true minimum + ``conflict_probe_margin_m``)."""
     from .separation import SeparationModel
-    a, b = config.separation, getattr(config, "probe_separation", config.separation)
+    a, b = config.separation, config.probe_separation
     if b.separation_m <= a.separation_m and b.vertical_separation_m <= a.vertical_separation_m:
         return a
     return SeparationModel(a.kind, max(a.separation_m, b.separation_m),
@@ -1114,16 +1101,22 @@ def _probe_batch_steps(t_eff: float, epoch_index: int, active: Sequence, found: 
         met = sorted(active[idx[q]].request_id for q in range(len(idx))
                      if f.request_id in probed.get(idx[q], ()))
         nf = moved_flight(f, (tr, ch[1][1], ""), t_eff, epoch_index, policy, backend)
-        updates.append(ReactionUpdate(
-            f.request_id, f.operator_id, nf.version, KIND_YIELD, (),
-            f"{KIND_YIELD}: held on the pad {delay:g} s (departs at {tr.departure_s:g} s) so that "
-            f"{', '.join(met) or 'the probed flights'} keep(s) separation (conflict probe)",
-            float(t_eff), nf, f, nf.arrival_s - f.arrival_s, 0.0))
+        updates.append(_yield_update(
+            f, nf, f"{KIND_YIELD}: held on the pad {delay:g} s (departs at {tr.departure_s:g} s) so "
+            f"that {', '.join(met) or 'the probed flights'} keep(s) separation (conflict probe)",
+            t_eff))
         new_versions.append(nf)
         report["probe_held"] = report.get("probe_held", 0) + 1
         report["kinds"][KIND_YIELD] = report["kinds"].get(KIND_YIELD, 0) + 1
     replaced = {u.request_id for u in updates}
     return [f for f in active if f.request_id not in replaced] + new_versions, updates, report
+
+
+def _yield_update(f, nf, reason: str, t_eff: float):
+    """The ReactionUpdate of ``f`` moved to ``nf`` so that others keep separation (a neighbour
+    that yields, a flight held on the pad): kind ``yielded``, no observed rate."""
+    return ReactionUpdate(f.request_id, f.operator_id, nf.version, KIND_YIELD, (), reason,
+                          float(t_eff), nf, f, nf.arrival_s - f.arrival_s, 0.0)
 
 
 def moved_flight(f, alt, t_eff: float, epoch_index: int, policy: str, backend: str):

@@ -1229,11 +1229,10 @@ class Planner:
         for i, (obs, _ids) in got.items():   # the sighting the projection started from
             errs = deviations(self.active[i].trajectory, [obs.t_s], [obs.position_m])
             found[i] = (obs, tuple(float(x[0]) for x in errs))
-        # the flights due to depart that they are predicted to meet may be held on the pad
+        # the flights they are predicted to meet: those due to depart may be held on the pad
+        # (``_probe_batch_steps`` keeps only those)
         where = {f.request_id: i for i, f in enumerate(self.active)}
-        held = sorted({where[r] for _obs, ids in got.values() for r in ids
-                       if r in where and where[r] not in got
-                       and self.active[where[r]].departure_s > t_s})
+        held = sorted({where[r] for _obs, ids in got.values() for r in ids if r in where})
         _updates, rep_ = yield from self._update_batch(
             t_s, epoch_index, found, probed={i: ids for i, (_obs, ids) in got.items()}, held=held)
         rep = self._nonconformance_report or {}
