@@ -15,6 +15,28 @@ def test_edges_are_normalised_and_groups_expand_to_cliques():
     assert (p.n, p.m) == (4, 2)
 
 
+@pytest.mark.parametrize("seed", range(30))
+def test_all_edges_is_the_union_of_listed_pairs_and_group_cliques(seed):
+    """Groups fully, partly or not listed among the edges (the planner lists them; a caller
+    may not), disjoint or overlapping: all_edges() is always the set union."""
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(2, 40))
+    perm = rng.permutation(n).tolist()
+    groups, start = [], 0
+    while start < n:
+        k = int(rng.integers(1, 6))
+        groups.append(perm[start:start + k])
+        start += k
+    if rng.random() < 0.3:
+        groups.append(rng.choice(n, size=min(n, 3), replace=False).tolist())  # overlaps
+    pairs = {(min(u, v), max(u, v)) for g in groups for i, u in enumerate(g) for v in g[i + 1:]}
+    listed = {e for e in pairs if rng.random() < [1.0, 0.9, 0.0][seed % 3]}
+    extra = {(int(u), int(v)) for u, v in rng.integers(0, n, size=(n, 2)) if u < v}
+    edges = sorted(listed | extra) or np.zeros((0, 2), dtype=np.int64)
+    p = MwisProblem.from_arrays(np.ones(n), edges, groups)
+    assert sorted(map(tuple, p.all_edges().tolist())) == sorted(pairs | listed | extra)
+
+
 def test_empty_graph_and_empty_edges():
     p = MwisProblem.from_arrays([], [])
     assert p.n == 0 and p.all_edges().shape == (0, 2)

@@ -335,16 +335,17 @@ def _groups_listed(n: int, edges: np.ndarray, groups: Sequence[np.ndarray]) -> b
     the expansion and its binary search cost ~25 us of a 400 us ``auto`` solve at 100
     vertices; the planner always lists its group cliques). False also when it cannot tell
     cheaply (overlapping groups): the caller then expands the pairs."""
-    sizes = np.fromiter((g.size for g in groups), dtype=np.int64, count=len(groups))
+    sizes = [g.size for g in groups]
     members = np.concatenate(groups)
     gid = np.full(n, -1, dtype=np.int64)
-    gid[members] = np.repeat(np.arange(sizes.size, dtype=np.int64), sizes)
+    gid[members] = np.repeat(np.arange(len(sizes), dtype=np.int64), sizes)
     if np.count_nonzero(gid >= 0) != members.size:  # overlapping groups
         return False
     a = gid[edges[:, 0]]
-    inside = a[(a >= 0) & (a == gid[edges[:, 1]])]
-    return bool(np.array_equal(np.bincount(inside, minlength=sizes.size),
-                               sizes * (sizes - 1) // 2))
+    # the edges are unique pairs, so no group holds more than k (k - 1) / 2 of them: the total
+    # is reached only when every group's count is (no per-group count: ~8 us, issue 20)
+    inside = np.count_nonzero((a >= 0) & (a == gid[edges[:, 1]]))
+    return inside == sum(k * (k - 1) // 2 for k in sizes)
 
 
 def _group_pairs(groups: Sequence[np.ndarray]) -> np.ndarray:
