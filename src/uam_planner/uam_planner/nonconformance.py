@@ -732,10 +732,12 @@ def _divert_alternatives(f, obs, rate: float, t_eff: float, network, config, rou
     return out
 
 
-def _first_clear(alts: list, others: list, config, t_eff: float):
-    """The first of ``alts`` (``_Alt``) that keeps ``config.separation`` from every trajectory of
-    ``others`` from ``t_eff`` on (exact, continuous time), or None."""
-    n_conf = _conflict_counts([a.trajectory for a in alts], others, config.separation, t_eff)
+def _first_clear(alts: list, others: list, config, t_eff: float, separation=None):
+    """The first of ``alts`` (``_Alt``) that keeps ``separation`` (default
+    ``config.separation``) from every trajectory of ``others`` from ``t_eff`` on (exact,
+    continuous time), or None."""
+    sep = config.separation if separation is None else separation
+    n_conf = _conflict_counts([a.trajectory for a in alts], others, sep, t_eff)
     return next((a for a, n in zip(alts, n_conf.tolist()) if n == 0), None)
 
 
@@ -801,7 +803,7 @@ def react_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict, b
         # a batch of the conflict probe alone (every flight conforms): its own solve
         return (yield from _probe_batch_steps(t_eff, epoch_index, active, found, book, config,
                                               select, policy, network, fixed, probed, report,
-                                              held))
+                                              held, router))
     others = [f for j, f in enumerate(active) if j not in found]
     fixed = list(fixed)
     act = SegmentSet.from_trajectories([f.trajectory for f in others] + fixed)
@@ -975,7 +977,8 @@ def probe_batch_separation(config):
 
 def _probe_batch_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict,
                        book: PositionBook, config, select: Callable, policy: str, network,
-                       fixed: Sequence, probed: dict, report: dict, held: Sequence = ()):
+                       fixed: Sequence, probed: dict, report: dict, held: Sequence = (),
+                       router=None):
     """:func:`react_steps` for a batch of the conflict probe alone (every flight conforms).
 
     Each probed flight's alternatives: re-joins of its plan from where it is at its observed
@@ -992,6 +995,13 @@ def _probe_batch_steps(t_eff: float, epoch_index: int, active: Sequence, found: 
     each of HOLD_SHIFTS_S (held on the pad; weight by the delay, below keeping it), each +
     PROBE_COVER; a hold is a plan update of kind ``yielded`` (the flight is not airborne: no
     observation to update it from, its new plan is the old one later).
+    ``router`` (fourteenth stop, as in :func:`react_steps`): a probed flight the solve leaves
+    keeping its plan while that plan or its projection still meets another flight (no re-timing
+    and no hold cleared it: a head-on pair on one corridor, say) is re-routed to its destination
+    or diverted from where it is (:func:`_divert_alternatives`), one flight at a time in index
+    order, clear of everything else at the batch's separation: minutes ahead, where the
+    reaction's diversion comes only once a flight is reported nonconforming. Twelfth and
+    thirteenth stops: the probe saw such pairs at every look for 120-150 s and kept both plans.
     A generator as :func:`react_steps`: it yields each round's graph."""
     from .conflict_graph import _unique_pairs, build_conflict_graph
     from .replanning import SOLVE_HERE, clipped_until
@@ -1076,18 +1086,29 @@ def _probe_batch_steps(t_eff: float, epoch_index: int, active: Sequence, found: 
             rows.remove(r)
             extra += [active[rows_i[r]].trajectory] + ([proj[r]] if proj[r] is not None else [])
             report["probe_released"] = report.get("probe_released", 0) + 1
+    diverted = _probe_diversions(t_eff, idx, rows_i, active, found, rates, per, proj, chosen,
+                                 others, (), sep, config, network, router, report)
     updates, new_versions = [], []
     for r, i in enumerate(idx):
         f = active[i]
         obs, (lat, _ver, terr) = found[i]
         ch = chosen.get(r)
+        d = diverted.get(r)
+        if d is not None:
+            ch = (-1, (d.trajectory, d.weight))
         if ch is None or ch[0] == len(per[r]) - 1:
             report["probe_kept"] = report.get("probe_kept", 0) + 1
             continue
         report["probe_updates"] = report.get("probe_updates", 0) + 1
         what = _probe_reason(probed[i], obs, lat, terr, rates[r])
+        changes = {}
+        if d is not None:
+            what += (f"; {d.kind} to {network.node_ids[d.destination]!r} from where it is (no "
+                     f"re-timing kept separation)")
+            changes = {"destination_id": network.node_ids[d.destination],
+                       "route_node_ids": tuple(d.route_node_ids), "length_m": float(d.length_m)}
         nf, up = _reaction_update(f, ch[1], KIND, f"{KIND}: {what}", policy, backend, epoch_index,
-                                  t_eff, rates[r], False)
+                                  t_eff, rates[r], False, **changes)
         updates.append(up)
         new_versions.append(nf)
         report["kinds"][KIND] = report["kinds"].get(KIND, 0) + 1
@@ -1110,6 +1131,45 @@ def _probe_batch_steps(t_eff: float, epoch_index: int, active: Sequence, found: 
         report["kinds"][KIND_YIELD] = report["kinds"].get(KIND_YIELD, 0) + 1
     replaced = {u.request_id for u in updates}
     return [f for f in active if f.request_id not in replaced] + new_versions, updates, report
+
+
+def _probe_diversions(t_eff: float, idx: list, rows_i: list, active: Sequence, found: dict,
+                      rates: list, per: list, proj: list, chosen: dict, others: list,
+                      fixed: Sequence, sep, config, network, router, report: dict) -> dict:
+    """The re-routes and diversions of :func:`_probe_batch_steps` (see there): {row: _Alt} for
+    the probed (airborne) rows the solve left keeping their plan whose plan or projection still
+    meets the rest of the traffic as the batch leaves it (``others``: the plans outside the
+    batch, ``fixed``; each other row's update, or its plan and projection). One row at a time
+    in index order, each clear at ``sep`` of all of that and of the re-routes taken before it;
+    a row whose conflict an earlier re-route removed keeps its plan."""
+    if router is None or network is None:
+        return {}
+
+    def flies(r):          # what row r flies as the batch leaves it (its update, or plan + projection)
+        if r in out:
+            return [out[r].trajectory]
+        ch = chosen.get(r)
+        if ch is not None and ch[0] != len(per[r]) - 1:
+            return [ch[1][0]]
+        f = active[rows_i[r]]
+        return [f.trajectory] + ([proj[r]] if proj[r] is not None else [])
+
+    out: dict = {}
+    for r in range(len(idx)):
+        ch = chosen.get(r)
+        if ch is not None and ch[0] != len(per[r]) - 1:
+            continue                                    # it is updated already
+        rest = list(others) + list(fixed) + [t for q in range(len(rows_i)) if q != r for t in flies(q)]
+        if not _conflict_counts(flies(r), rest, sep, t_eff).any():
+            continue                                    # what it meets has moved: it keeps its plan
+        f = active[idx[r]]
+        alt = _first_clear(_divert_alternatives(f, found[idx[r]][0], rates[r], t_eff, network,
+                                                config, router), rest, config, t_eff, sep)
+        if alt is not None:
+            out[r] = alt
+            key = "probe_" + alt.kind
+            report[key] = report.get(key, 0) + 1
+    return out
 
 
 def _yield_update(f, nf, reason: str, t_eff: float):

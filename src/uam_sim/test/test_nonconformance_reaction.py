@@ -807,3 +807,65 @@ def test_a_contingency_keeps_the_true_minimum_before_the_buffer():
     cfg0 = PlanningConfig()
     assert _least_conflicting([a, b], others, cfg0, 0.0, true_first=True) is \
         _least_conflicting([a, b], others, cfg0, 0.0)
+
+
+def test_the_probe_re_routes_a_flight_no_re_timing_saves_from_a_head_on_meeting():
+    # fourteenth stop. W (0, 0) - m (3000, 0) - E (6000, 0), m - N (3000, 3000) - E. P flies W ->
+    # m -> E from 0 s (m at 300 s, E at 600 s) and conforms (seen on its plan at 40 and 50 s);
+    # R leaves E at 60 s for W over m (the plan of a flight flown as a contingency, say): head-on,
+    # 10 t = 6000 - 10 (t - 60) at t = 330 s, 300 m past m. No re-timing of P and no hold of R
+    # parts them (head-on on one corridor they meet whatever the times). Before, the probe kept
+    # both plans at every look; now P is re-routed from m over N to E: at m at 300 s, R is 600 m
+    # east of m coming west; P goes north, both at 10 m/s: (600 - 10 s)^2 + (10 s)^2 is least at
+    # s = 30 s, 300 sqrt(2) = 424.3 m
+    from uam_planner.nonconformance import (ConformanceBounds as CB, deviations, predicted_conflicts,
+                                            react_steps)
+    from uam_planner.planning import replan_selector
+    from uam_planner.replanning import SOLVE_HERE, _Router, run_steps
+
+    net = network_from_enu("cross-ne", ["W", "m", "E", "N"],
+                           [(0, 0, 0), (3000, 0, 0), (6000, 0, 0), (3000, 3000, 0)],
+                           [True, False, True, True],
+                           [("W", "m"), ("m", "E"), ("m", "N"), ("N", "E")])
+    R = flight("R", ["E", "m", "W"], [(6000, 0, 0), (3000, 0, 0), (0, 0, 0)], 60.0)
+    assert len(audit_flights([P.trajectory, R.trajectory], separation_m=100.0).losses) == 1
+    out = {}
+    for reroute in (False, True):
+        p = Planner(net, PlanningConfig(conformance=CB(), conflict_probe_s=300.0), "mwis",
+                    solve_mwis=None)
+        p.restore([P, R])
+        for t in (40.0, 50.0):
+            assert p.observe("P", t, P.trajectory.position_at(t)) is None
+        got = predicted_conflicts(p.active, p.positions, 50.0, 300.0, 100.0)
+        assert {p.active[i].request_id: ids for i, (_o, ids) in got.items()} == {"P": ["R"]}
+        found = {i: (obs, tuple(float(x[0]) for x in deviations(p.active[i].trajectory, [obs.t_s],
+                                                                 [obs.position_m])))
+                 for i, (obs, _ids) in got.items()}
+        steps = react_steps(50.0, 2, p.active, found, p.positions, p.config,
+                            replan_selector(None, p.config, 2, 50.0), "mwis", p.network,
+                            probed={i: ids for i, (_o, ids) in got.items()},
+                            held=[[f.request_id for f in p.active].index("R")],
+                            router=_Router(p.network, p.cache, (), 50.0) if reroute else None)
+        out[reroute] = run_steps(steps, lambda _graph: SOLVE_HERE)
+    _a, ups, rep = out[False]
+    assert ups == [] and rep["probe_kept"] == 1
+    _a, ups, rep = out[True]
+    (u,) = ups
+    assert u.request_id == "P" and u.kind == KIND and not u.flight.contingent
+    assert "conflict probe" in u.reason and "rerouted to 'E'" in u.reason
+    assert u.flight.route_node_ids == ("W", "m", "N", "E") and u.flight.destination_id == "E"
+    assert rep["probe_rerouted"] == 1 and rep["probe_updates"] == 1
+    new = u.flight.trajectory
+    assert new.position_at(300.0) == pytest.approx([3000.0, 0.0, 0.0])
+    assert new.position_at(600.0) == pytest.approx([3000.0, 3000.0, 0.0])
+    assert new.arrival_s == pytest.approx(600.0 + 3000.0 * math.sqrt(2.0) / 10.0)
+    a = audit_flights([new, R.trajectory], separation_m=100.0)
+    assert a.losses == [] and a.min_separation_m == pytest.approx(300.0 * math.sqrt(2.0), rel=1e-3)
+    # the planner's own path (its probe between epochs) re-routes it the same way
+    p = Planner(net, PlanningConfig(conformance=CB(), conflict_probe_s=300.0), "mwis", solve_mwis=None)
+    p.restore([P, R])
+    for t in (40.0, 50.0):
+        assert p.observe("P", t, P.trajectory.position_at(t)) is None
+    (u2,) = p.react_between(50.0, 2)
+    assert u2.flight.route_node_ids == ("W", "m", "N", "E")
+    assert u2.flight.trajectory.arrival_s == pytest.approx(new.arrival_s)

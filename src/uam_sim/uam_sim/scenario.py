@@ -160,7 +160,8 @@ def _apply_reaction_updates(updates, by_id, reaction, replans, t) -> None:
             row["version"], row["replan"] = u.version, u.kind
             row["arrival_s"] = u.flight.arrival_s
             other_pad = u.flight.destination_id != u.previous.destination_id
-            if other_pad:   # diverted (thirteenth stop)
+            if other_pad or tuple(u.flight.route_node_ids) != tuple(u.previous.route_node_ids):
+                # diverted (thirteenth stop) or re-routed to its destination (fourteenth)
                 row.update(destination=u.flight.destination_id, route=" ".join(u.flight.route_node_ids),
                            length_m=u.flight.length_m)
             reaction.apply(u, row, u.observed_rate)
