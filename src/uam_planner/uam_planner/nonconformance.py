@@ -996,8 +996,9 @@ def _probe_batch_steps(t_eff: float, epoch_index: int, active: Sequence, found: 
     PROBE_COVER; a hold is a plan update of kind ``yielded`` (the flight is not airborne: no
     observation to update it from, its new plan is the old one later).
     ``router`` (fourteenth stop, as in :func:`react_steps`): a probed flight the solve leaves
-    keeping its plan while that plan or its projection still meets another flight (no re-timing
-    and no hold cleared it: a head-on pair on one corridor, say) is re-routed to its destination
+    keeping its plan while that plan or its projection still loses the true minimum with another
+    flight (no re-timing and no hold cleared it: a head-on pair on one corridor, say) is
+    re-routed to its destination
     or diverted from where it is (:func:`_divert_alternatives`), one flight at a time in index
     order, clear of everything else at the batch's separation: minutes ahead, where the
     reaction's diversion comes only once a flight is reported nonconforming. Twelfth and
@@ -1138,10 +1139,11 @@ def _probe_diversions(t_eff: float, idx: list, rows_i: list, active: Sequence, f
                       fixed: Sequence, sep, config, network, router, report: dict) -> dict:
     """The re-routes and diversions of :func:`_probe_batch_steps` (see there): {row: _Alt} for
     the probed (airborne) rows the solve left keeping their plan whose plan or projection still
-    meets the rest of the traffic as the batch leaves it (``others``: the plans outside the
-    batch, ``fixed``; each other row's update, or its plan and projection). One row at a time
-    in index order, each clear at ``sep`` of all of that and of the re-routes taken before it;
-    a row whose conflict an earlier re-route removed keeps its plan."""
+    loses the true minimum (``config.minimum_separation``) with the rest of the traffic as the
+    batch leaves it (``others``: the plans outside the batch, ``fixed``; each other row's
+    update, or its plan and projection). One row at a time in index order, each clear at
+    ``sep`` (the batch's separation) of all of that and of the re-routes taken before it; a row
+    whose conflict an earlier re-route removed keeps its plan."""
     if router is None or network is None:
         return {}
 
@@ -1160,8 +1162,11 @@ def _probe_diversions(t_eff: float, idx: list, rows_i: list, active: Sequence, f
         if ch is not None and ch[0] != len(per[r]) - 1:
             continue                                    # it is updated already
         rest = list(others) + list(fixed) + [t for q in range(len(rows_i)) if q != r for t in flies(q)]
-        if not _conflict_counts(flies(r), rest, sep, t_eff).any():
-            continue                                    # what it meets has moved: it keeps its plan
+        if not _conflict_counts(flies(r), rest, config.minimum_separation, t_eff).any():
+            # no loss of the true minimum is left to avoid (the margin alone is the re-timings'
+            # business: re-routing for it diverted ~2 conforming flights a run, fourteenth stop),
+            # or what it meets has moved: it keeps its plan
+            continue
         f = active[idx[r]]
         alt = _first_clear(_divert_alternatives(f, found[idx[r]][0], rates[r], t_eff, network,
                                                 config, router), rest, config, t_eff, sep)
