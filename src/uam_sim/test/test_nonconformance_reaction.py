@@ -869,3 +869,41 @@ def test_the_probe_re_routes_a_flight_no_re_timing_saves_from_a_head_on_meeting(
     (u2,) = p.react_between(50.0, 2)
     assert u2.flight.route_node_ids == ("W", "m", "N", "E")
     assert u2.flight.trajectory.arrival_s == pytest.approx(new.arrival_s)
+
+
+def test_the_probes_margin_is_kept_from_the_batchs_flights_and_the_buffer_from_the_others():
+    # fourteenth stop. P (6 s late at 60 s, 9 m/s) and Q2 as in probe_planner, a 50 m margin
+    # (the batch's separation 150 m). T flies beside P's route, 120 m north of it, W -> E at
+    # 10 m/s from 0 s (a held projection, fixed traffic): every alternative of P passes within
+    # 150 m of T (at 60 s P is at x = 540, T at 600: 134.2 m; P's own plan keeps 120 m), none
+    # within 100 m at first. Before, the batch kept every update 150 m from T as well: P had no
+    # alternative and kept its plan. Now T, outside the batch, is kept at the planner's
+    # separation (100 m, no buffer) and P is updated, 150 m clear of Q2
+    from uam_planner.nonconformance import (ConformanceBounds as CB, deviations, predicted_conflicts,
+                                            react_steps)
+    from uam_planner.planning import replan_selector
+    from uam_planner.replanning import SOLVE_HERE, run_steps
+
+    cfg = PlanningConfig(conformance=CB(), conflict_probe_s=300.0, conflict_probe_margin_m=50.0)
+    p = Planner(cross(), cfg, "mwis", solve_mwis=None)
+    p.restore([P, Q2])
+    flown = fly(P.trajectory, FlightDraws(), HEAD_WIND)
+    for t in (50.0, 60.0):
+        assert p.observe("P", t, flown.position_at(t)) is None
+        assert p.observe("Q2", t, Q2.trajectory.position_at(t)) is None
+    T = Trajectory(np.array([0.0, 600.0]), np.array([[0.0, 120.0, 0.0], [6000.0, 120.0, 0.0]]))
+    assert math.hypot(600.0 - 540.0, 120.0) == pytest.approx(134.16, abs=0.01)
+    got = predicted_conflicts(p.active, p.positions, 60.0, 300.0, cfg.probe_separation)
+    found = {i: (obs, tuple(float(x[0]) for x in deviations(p.active[i].trajectory, [obs.t_s],
+                                                             [obs.position_m])))
+             for i, (obs, _ids) in got.items()}
+    steps = react_steps(60.0, 2, p.active, found, p.positions, p.config,
+                        replan_selector(None, p.config, 2, 60.0), "mwis", p.network,
+                        fixed=[T], fixed_ids=["T"], probed={i: ids for i, (_o, ids) in got.items()})
+    active, ups, rep = run_steps(steps, lambda _graph: SOLVE_HERE)
+    new = {f.request_id: f.trajectory for f in active}
+    assert "P" in [u.request_id for u in ups]
+    assert new["P"].points_m[0] == pytest.approx([540.0, 0.0, 0.0])
+    a = audit_flights([new["P"], T], separation_m=100.0)
+    assert a.losses == [] and a.min_separation_m < 150.0
+    assert audit_flights([new["P"], new["Q2"]], separation_m=150.0).losses == []
