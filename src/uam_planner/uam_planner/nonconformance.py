@@ -998,9 +998,9 @@ def _probe_batch_steps(t_eff: float, epoch_index: int, active: Sequence, found: 
     ``router`` (fourteenth stop, as in :func:`react_steps`): a probed flight the solve leaves
     keeping its plan while that plan or its projection still loses the true minimum with another
     flight (no re-timing and no hold cleared it: a head-on pair on one corridor, say) is
-    re-routed to its destination
-    or diverted from where it is (:func:`_divert_alternatives`), one flight at a time in index
-    order, clear of everything else at the batch's separation: minutes ahead, where the
+    re-routed to its destination or diverted from where it is (:func:`_divert_alternatives`),
+    one flight at a time in index order, clear of everything else at the batch's separation
+    (minimum + margin, also from flights outside the batch): minutes ahead, where the
     reaction's diversion comes only once a flight is reported nonconforming. Twelfth and
     thirteenth stops: the probe saw such pairs at every look for 120-150 s and kept both plans.
     A generator as :func:`react_steps`: it yields each round's graph."""
@@ -1049,8 +1049,8 @@ def _probe_batch_steps(t_eff: float, epoch_index: int, active: Sequence, found: 
         # the margin is kept from the batch's own flights (the rows, the released ones' plans and
         # projections: those predicted to come close); every other flight at the planner's
         # buffered separation, as every plan keeps it (fourteenth stop: against all traffic at
-        # minimum + margin, a shift that parted the pair met a third flight planned at the
-        # buffer, and the batch kept both plans: seed 14, 86.5 m flown at 10 and 15 m)
+        # minimum + margin, an update that parted the pair could be refused for a third flight
+        # planned at the buffer)
         ok = ~((_conflict_counts(trs, others, config.separation, t_eff) > 0) |
                (_conflict_counts(trs, extra, sep, t_eff) > 0))
         flat = [x for x, k in zip(flat, ok.tolist()) if k]
