@@ -732,6 +732,13 @@ def _divert_alternatives(f, obs, rate: float, t_eff: float, network, config, rou
     return out
 
 
+def _route_changes(alt, network) -> dict:
+    """The fields of a flight that a re-route or diversion (``_Alt`` of
+    :func:`_divert_alternatives`) changes besides its trajectory (:func:`_reaction_update`)."""
+    return {"destination_id": network.node_ids[alt.destination],
+            "route_node_ids": tuple(alt.route_node_ids), "length_m": float(alt.length_m)}
+
+
 def _first_clear(alts: list, others: list, config, t_eff: float, separation=None):
     """The first of ``alts`` (``_Alt``) that keeps ``separation`` (default
     ``config.separation``) from every trajectory of ``others`` from ``t_eff`` on (exact,
@@ -905,10 +912,8 @@ def react_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict, b
         changes = {}
         if r in diverted:
             d = diverted[r]
-            reason += (f"; {d.kind} to {network.node_ids[d.destination]!r} (no re-timing kept "
-                       f"separation)")
-            changes = {"destination_id": network.node_ids[d.destination],
-                       "route_node_ids": tuple(d.route_node_ids), "length_m": float(d.length_m)}
+            changes = _route_changes(d, network)
+            reason += f"; {d.kind} to {changes['destination_id']!r} (no re-timing kept separation)"
         nf, up = _reaction_update(f, a, kind, reason, policy, backend, epoch_index, t_eff,
                                   rates[r], contingent, **changes)
         updates.append(up)
@@ -1096,7 +1101,7 @@ def _probe_batch_steps(t_eff: float, epoch_index: int, active: Sequence, found: 
             extra += [active[rows_i[r]].trajectory] + ([proj[r]] if proj[r] is not None else [])
             report["probe_released"] = report.get("probe_released", 0) + 1
     diverted = _probe_diversions(t_eff, idx, rows_i, active, found, rates, per, proj, chosen,
-                                 others, (), sep, config, network, router, report)
+                                 others, sep, config, network, router, report)
     updates, new_versions = [], []
     for r, i in enumerate(idx):
         f = active[i]
@@ -1112,10 +1117,9 @@ def _probe_batch_steps(t_eff: float, epoch_index: int, active: Sequence, found: 
         what = _probe_reason(probed[i], obs, lat, terr, rates[r])
         changes = {}
         if d is not None:
-            what += (f"; {d.kind} to {network.node_ids[d.destination]!r} from where it is (no "
+            changes = _route_changes(d, network)
+            what += (f"; {d.kind} to {changes['destination_id']!r} from where it is (no "
                      f"re-timing kept separation)")
-            changes = {"destination_id": network.node_ids[d.destination],
-                       "route_node_ids": tuple(d.route_node_ids), "length_m": float(d.length_m)}
         nf, up = _reaction_update(f, ch[1], KIND, f"{KIND}: {what}", policy, backend, epoch_index,
                                   t_eff, rates[r], False, **changes)
         updates.append(up)
@@ -1144,12 +1148,12 @@ def _probe_batch_steps(t_eff: float, epoch_index: int, active: Sequence, found: 
 
 def _probe_diversions(t_eff: float, idx: list, rows_i: list, active: Sequence, found: dict,
                       rates: list, per: list, proj: list, chosen: dict, others: list,
-                      fixed: Sequence, sep, config, network, router, report: dict) -> dict:
+                      sep, config, network, router, report: dict) -> dict:
     """The re-routes and diversions of :func:`_probe_batch_steps` (see there): {row: _Alt} for
     the probed (airborne) rows the solve left keeping their plan whose plan or projection still
     loses the true minimum (``config.minimum_separation``) with the rest of the traffic as the
-    batch leaves it (``others``: the plans outside the batch, ``fixed``; each other row's
-    update, or its plan and projection). One row at a time in index order, each clear at
+    batch leaves it (``others``: the plans outside the batch and the fixed traffic; each other
+    row's update, or its plan and projection). One row at a time in index order, each clear at
     ``sep`` (the batch's separation) of all of that and of the re-routes taken before it; a row
     whose conflict an earlier re-route removed keeps its plan."""
     if router is None or network is None:
@@ -1169,7 +1173,7 @@ def _probe_diversions(t_eff: float, idx: list, rows_i: list, active: Sequence, f
         ch = chosen.get(r)
         if ch is not None and ch[0] != len(per[r]) - 1:
             continue                                    # it is updated already
-        rest = list(others) + list(fixed) + [t for q in range(len(rows_i)) if q != r for t in flies(q)]
+        rest = list(others) + [t for q in range(len(rows_i)) if q != r for t in flies(q)]
         if not _conflict_counts(flies(r), rest, config.minimum_separation, t_eff).any():
             # no loss of the true minimum is left to avoid (the margin alone is the re-timings'
             # business: re-routing for it diverted ~2 conforming flights a run, fourteenth stop),
