@@ -1008,6 +1008,8 @@ def _probe_batch_steps(t_eff: float, epoch_index: int, active: Sequence, found: 
     (minimum + margin, also from flights outside the batch): minutes ahead, where the
     reaction's diversion comes only once a flight is reported nonconforming. Twelfth and
     thirteenth stops: the probe saw such pairs at every look for 120-150 s and kept both plans.
+    Where nothing keeps the batch's separation, such a flight takes the widest berth that keeps
+    the true minimum (fifteenth stop; see :func:`_probe_diversions`).
     A generator as :func:`react_steps`: it yields each round's graph."""
     from .conflict_graph import _unique_pairs, build_conflict_graph
     from .replanning import SOLVE_HERE, clipped_until
@@ -1100,8 +1102,8 @@ def _probe_batch_steps(t_eff: float, epoch_index: int, active: Sequence, found: 
             rows.remove(r)
             extra += [active[rows_i[r]].trajectory] + ([proj[r]] if proj[r] is not None else [])
             report["probe_released"] = report.get("probe_released", 0) + 1
-    diverted = _probe_diversions(t_eff, idx, rows_i, active, found, rates, per, proj, chosen,
-                                 others, sep, config, network, router, report)
+    diverted, widest = _probe_diversions(t_eff, idx, rows_i, active, found, rates, per, proj,
+                                         chosen, others, sep, config, network, router, report)
     updates, new_versions = [], []
     for r, i in enumerate(idx):
         f = active[i]
@@ -1120,6 +1122,9 @@ def _probe_batch_steps(t_eff: float, epoch_index: int, active: Sequence, found: 
             changes = _route_changes(d, network)
             what += (f"; {d.kind} to {changes['destination_id']!r} from where it is (no "
                      f"re-timing kept separation)")
+        if r in widest:
+            what += (f"; the widest berth left: {widest[r]:.1f} m at the closest (nothing kept "
+                     f"{sep.separation_m:g} m)")
         nf, up = _reaction_update(f, ch[1], KIND, f"{KIND}: {what}", policy, backend, epoch_index,
                                   t_eff, rates[r], False, **changes)
         updates.append(up)
@@ -1148,16 +1153,18 @@ def _probe_batch_steps(t_eff: float, epoch_index: int, active: Sequence, found: 
 
 def _probe_diversions(t_eff: float, idx: list, rows_i: list, active: Sequence, found: dict,
                       rates: list, per: list, proj: list, chosen: dict, others: list,
-                      sep, config, network, router, report: dict) -> dict:
+                      sep, config, network, router, report: dict) -> tuple[dict, dict]:
     """The re-routes and diversions of :func:`_probe_batch_steps` (see there): {row: _Alt} for
     the probed (airborne) rows the solve left keeping their plan whose plan or projection still
     loses the true minimum (``config.minimum_separation``) with the rest of the traffic as the
     batch leaves it (``others``: the plans outside the batch and the fixed traffic; each other
     row's update, or its plan and projection). One row at a time in index order, each clear at
     ``sep`` (the batch's separation) of all of that and of the re-routes taken before it; a row
-    whose conflict an earlier re-route removed keeps its plan."""
-    if router is None or network is None:
-        return {}
+    whose conflict an earlier re-route removed keeps its plan. A row with no re-route or
+    diversion clear at ``sep`` (or no ``router``) takes, of its re-timings ``per[r]``, the one
+    whose closest approach to all of that is the widest, if it keeps the true minimum (into
+    ``chosen``, as if the solve had picked it), else the widest such re-route or diversion
+    (``report["probe_widest"]`` counts both; the second dict: {row: its closest approach [m]})."""
 
     def flies(r):          # what row r flies as the batch leaves it (its update, or plan + projection)
         if r in out:
@@ -1169,6 +1176,7 @@ def _probe_diversions(t_eff: float, idx: list, rows_i: list, active: Sequence, f
         return [f.trajectory] + ([proj[r]] if proj[r] is not None else [])
 
     out: dict = {}
+    widest: dict = {}
     for r in range(len(idx)):
         ch = chosen.get(r)
         if ch is not None and ch[0] != len(per[r]) - 1:
@@ -1180,13 +1188,59 @@ def _probe_diversions(t_eff: float, idx: list, rows_i: list, active: Sequence, f
             # or what it meets has moved: it keeps its plan
             continue
         f = active[idx[r]]
-        alt = _first_clear(_divert_alternatives(f, found[idx[r]][0], rates[r], t_eff, network,
-                                                config, router), rest, config, t_eff, sep)
+        diverts = [] if router is None or network is None else _divert_alternatives(
+            f, found[idx[r]][0], rates[r], t_eff, network, config, router)
+        alt = _first_clear(diverts, rest, config, t_eff, sep)
+        if alt is None:
+            # nothing keeps the batch's separation: the widest berth that still keeps the true
+            # minimum, a re-timing before a re-route or diversion (fifteenth stop, seed 14: the
+            # early flight's every re-timing met a third flight at the buffer, the other's
+            # every one came within 150 m of its projection; both kept their plans, projected
+            # 81-91 m apart, and flew 86.5 m apart, where the other flight flown 10 % faster
+            # would have kept 109.5 m)
+            minimum = config.minimum_separation
+            retimed = per[r][:-1]
+            got = _widest([a[0] for a in retimed], rest, sep, minimum, t_eff)
+            if got is not None:
+                chosen[r] = (got[0], retimed[got[0]])
+                widest[r] = got[1]
+                report["probe_widest"] = report.get("probe_widest", 0) + 1
+                continue
+            got = _widest([a.trajectory for a in diverts], rest, sep, minimum, t_eff)
+            if got is not None:
+                alt = diverts[got[0]]
+                widest[r] = got[1]
+                report["probe_widest"] = report.get("probe_widest", 0) + 1
         if alt is not None:
             out[r] = alt
             key = "probe_" + alt.kind
             report[key] = report.get(key, 0) + 1
-    return out
+    return out, widest
+
+
+def _widest(trajectories: list, others: list, separation, minimum,
+            t_eff: float) -> tuple[int, float] | None:
+    """(index, closest approach [m]) of the one of ``trajectories`` (from ``t_eff`` on) whose
+    closest approach to ``others`` is the widest (exact, continuous time; ``separation`` or more
+    counts as ``separation``; the first of equals), or None when none keeps ``minimum`` from all
+    of them."""
+    from .separation import SegmentSet, as_separation_model, conflicting_pairs
+
+    if not trajectories:
+        return None
+    sep = as_separation_model(separation)
+    near = np.full(len(trajectories), float(sep.separation_m))
+    oset = SegmentSet.from_trajectories(others) if others else None
+    if oset is not None and len(oset):
+        oset = oset.take(oset.t1_s >= t_eff)
+    if oset is not None and len(oset):
+        aset = SegmentSet.from_trajectories([_clipped(tr, t_eff) or tr for tr in trajectories])
+        pairs, dist = conflicting_pairs(aset, oset, sep, return_distances=True)
+        np.minimum.at(near, np.asarray(pairs[:, 0], dtype=np.int64), np.asarray(dist))
+    k = int(np.argmax(near))
+    if _conflict_counts([trajectories[k]], others, minimum, t_eff)[0]:
+        return None
+    return k, float(near[k])
 
 
 def _yield_update(f, nf, reason: str, t_eff: float):

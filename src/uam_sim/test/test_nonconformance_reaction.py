@@ -907,3 +907,49 @@ def test_the_probes_margin_is_kept_from_the_batchs_flights_and_the_buffer_from_t
     a = audit_flights([new["P"], T], separation_m=100.0)
     assert a.losses == [] and a.min_separation_m < 150.0
     assert audit_flights([new["P"], new["Q2"]], separation_m=150.0).losses == []
+
+
+def test_a_probed_pair_nothing_parts_by_the_margin_takes_the_widest_berth_that_keeps_the_minimum():
+    # fifteenth stop. P (6 s late at 60 s, 9 m/s) and Q2 as in probe_planner, projected 89.2 m
+    # apart at m; a margin of 800 m: no re-timing of either keeps 900 m from the other, so the
+    # solve leaves both keeping their plans (before: nothing else happened, and the pair flew
+    # as projected, inside the true minimum; seed 14 of the Monte-Carlo did so at 86.5 m). Now
+    # P takes, of its re-timings, the one whose closest approach to Q2's plan and projection is
+    # the widest (its slowest re-join, 0.9 x 0.7 of its planned speed: 5460 m at 6.3 m/s, in at
+    # 926.7 s), Q2 then keeps its plan, and the reason says how close it passes
+    from uam_planner.nonconformance import (ConformanceBounds as CB, deviations, predicted_conflicts,
+                                            react_steps)
+    from uam_planner.planning import replan_selector
+    from uam_planner.replanning import SOLVE_HERE, run_steps
+    from uam_planner.separation import min_separation_m
+
+    cfg = PlanningConfig(conformance=CB(), conflict_probe_s=300.0, conflict_probe_margin_m=800.0)
+    p = Planner(cross(), cfg, "mwis", solve_mwis=None)
+    p.restore([P, Q2])
+    flown = fly(P.trajectory, FlightDraws(), HEAD_WIND)
+    for t in (50.0, 60.0):
+        assert p.observe("P", t, flown.position_at(t)) is None
+        assert p.observe("Q2", t, Q2.trajectory.position_at(t)) is None
+    got = predicted_conflicts(p.active, p.positions, 60.0, 300.0, cfg.probe_separation)
+    found = {i: (obs, tuple(float(x[0]) for x in deviations(p.active[i].trajectory, [obs.t_s],
+                                                             [obs.position_m])))
+             for i, (obs, _ids) in got.items()}
+    steps = react_steps(60.0, 2, p.active, found, p.positions, p.config,
+                        replan_selector(None, p.config, 2, 60.0), "mwis", p.network,
+                        probed={i: ids for i, (_o, ids) in got.items()})
+    active, ups, rep = run_steps(steps, lambda _graph: SOLVE_HERE)
+    assert rep["probe_released"] == 2 and rep["probe_widest"] == 1
+    (u,) = ups
+    assert u.request_id == "P" and u.kind == KIND and not u.flight.contingent
+    new = u.flight.trajectory
+    assert new.points_m[0] == pytest.approx([540.0, 0.0, 0.0])
+    assert new.arrival_s == pytest.approx(60.0 + 5460.0 / 6.3)
+    gap = min_separation_m(new, Q2.trajectory)
+    assert 100.0 < gap < 900.0
+    assert f"the widest berth left: {gap:.1f} m" in u.reason and "nothing kept 900 m" in u.reason
+    # every other re-join of P passes Q2 closer
+    from uam_planner.nonconformance import SHARES, rejoin_trajectory
+    obs = p.positions.latest("P")
+    for share in (1.0,) + SHARES[:-1]:
+        other = rejoin_trajectory(P.trajectory, obs.t_s, obs.position_m, 0.9 * share)
+        assert min_separation_m(other, Q2.trajectory) < gap
