@@ -96,6 +96,30 @@ def test_a_turn_back_flown_on_time_conforms_on_the_way_back():
     assert tc.conforming.all() and tc.first_nonconforming_s is None
 
 
+def test_a_turn_back_whose_passes_lie_metres_apart_is_matched_to_the_pass_at_the_right_time():
+    # fifteenth stop (seed 12 of the Monte-Carlo at 15 m): a diversion along the way it came
+    # starts where the aircraft was, a few metres off the corridor, so the outbound pass runs
+    # (0, 4) -> (1000, 0) and the return (1000, 0) -> (0, 0) at 10 m/s (planned at x = 500:
+    # 50.0 s out, 150.0 s back). At 150 s the aircraft flies the return on time, 1.8 m to the
+    # side of it: (500, 1.8). The outbound pass is nearer (0.2 m: it is at y = 2 there) but
+    # 100 s off; before, a pass was considered only within 1 m of the nearest, so it was read
+    # 100 s late
+    back = Trajectory(np.array([0.0, 100.0, 200.0]),
+                      np.array([[0.0, 4.0, 50.0], [1000.0, 0.0, 50.0], [0.0, 0.0, 50.0]]))
+    lat, _ver, terr = deviations(back, [150.0, 50.0], [[500.0, 1.8, 50.0], [500.0, 2.0, 50.0]])
+    assert terr[0] == pytest.approx(0.0, abs=1e-9) and lat[0] == pytest.approx(1.8)
+    # on the way out at 50 s, on the outbound pass: matched to it (0 s, 0 m), not to the return
+    assert terr[1] == pytest.approx(0.0, abs=1e-6) and lat[1] == pytest.approx(0.0, abs=1e-3)
+    # late on the way out by 20 s (at 70 s at x = 500), it is read as 20 s late on the outbound
+    # pass (max(0 / 30, 20 / 10) = 2), not 80 s early on the return (max(2 / 30, 80 / 10) = 8)
+    _lat, _ver, late = deviations(back, [70.0], [[500.0, 2.0, 50.0]])
+    assert late[0] == pytest.approx(20.0, abs=1e-6)
+    tc = track_conformance("a", back, Trajectory(np.array([100.0, 150.0, 200.0]),
+                                                 np.array([[1000.0, 0.0, 50.0], [500.0, 1.8, 50.0],
+                                                           [0.0, 0.0, 50.0]])), ConformanceBounds())
+    assert tc.conforming.all()
+
+
 def test_draws_are_seeded_per_flight_and_within_bounds():
     cfg = DisturbanceConfig(speed_error=0.1, delay_mean_s=20.0, delay_max_s=30.0, seed=3)
     a = [flight_draws(cfg, f"r{i}") for i in range(200)]
