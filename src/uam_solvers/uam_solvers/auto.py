@@ -212,23 +212,43 @@ def triangle_ratio(problem: MwisProblem, samples: int = TRIANGLE_SAMPLES) -> flo
     total = float(wv.sum())
     if n < 3 or total <= 0:
         return 0.0
-    rng = np.random.default_rng(0)
-    v = np.searchsorted(np.cumsum(wv), rng.random(samples) * total, side="right")
+    u1, u2, u3 = _triangle_draws(samples)
+    v = np.searchsorted(np.cumsum(wv), u1 * total, side="right")
     v = np.minimum(v, n - 1)
     d = deg[v]
-    i = (rng.random(samples) * d).astype(np.int64)
-    j = (rng.random(samples) * (d - 1)).astype(np.int64)
+    i = (u2 * d).astype(np.int64)
+    j = (u3 * (d - 1)).astype(np.int64)
     j += j >= i
-    a = indices[indptr[v] + i].astype(np.int64)
-    b = indices[indptr[v] + j].astype(np.int64)
-    keys = np.repeat(np.arange(n, dtype=np.int64) * n, deg) + indices  # sorted: rows, then cols
-    q = a * n + b
+    start = indptr[v]
+    a = indices[start + i]
+    b = indices[start + j]
+    # a pair conflicts when its key u * n + v (u < v) is among the conflict pairs' sorted keys
+    # (problem.edge_keys(), cached: half the CSR's entries, nothing rebuilt per call)
+    q = np.minimum(a, b).astype(np.int64) * n + np.maximum(a, b)
+    keys = problem.edge_keys()
     # the count does not depend on the queries' order; sorted, the binary searches walk the
     # keys in order (issue 20: 0.35-0.4 -> ~0.13 ms of the 1 ms this took at 500-1,000 vertices,
     # as much as KaMIS needs to prove such a graph)
     q.sort()
     pos = np.minimum(np.searchsorted(keys, q), keys.size - 1)
     return float(np.count_nonzero(keys[pos] == q)) / samples
+
+
+#: the uniform draws of :func:`triangle_ratio` per sample count, from default_rng(0): the same
+#: numbers every call, drawn once (issue 20: a new generator and its draws cost ~40 us a call)
+_TRIANGLE_DRAWS: dict = {}
+
+
+def _triangle_draws(samples: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    draws = _TRIANGLE_DRAWS.get(samples)
+    if draws is None:
+        rng = np.random.default_rng(0)
+        draws = tuple(rng.random(samples) for _ in range(3))
+        for x in draws:
+            x.setflags(write=False)
+        if len(_TRIANGLE_DRAWS) < 16:
+            _TRIANGLE_DRAWS[samples] = draws
+    return draws
 
 
 def gate_triangle_ratio(problem: MwisProblem, thresholds) -> float:
