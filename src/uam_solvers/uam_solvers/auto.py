@@ -213,7 +213,7 @@ def triangle_ratio(problem: MwisProblem, samples: int = TRIANGLE_SAMPLES) -> flo
     if n < 3 or total <= 0:
         return 0.0
     u1, u2, u3 = _triangle_draws(samples)
-    v = np.searchsorted(np.cumsum(wv), u1 * total, side="right")
+    v = np.searchsorted(np.cumsum(wv), u1 * total, side="right")  # ascending, as u1
     v = np.minimum(v, n - 1)
     d = deg[v]
     i = (u2 * d).astype(np.int64)
@@ -240,10 +240,16 @@ _TRIANGLE_DRAWS: dict = {}
 
 
 def _triangle_draws(samples: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The three uniform draws of ``samples`` two-paths (vertex, first and second neighbour),
+    reordered together so that the first ascends: the same two-paths, the count does not
+    depend on their order, and the binary search over the vertices runs ~3x faster on sorted
+    queries."""
     draws = _TRIANGLE_DRAWS.get(samples)
     if draws is None:
         rng = np.random.default_rng(0)
         draws = tuple(rng.random(samples) for _ in range(3))
+        order = np.argsort(draws[0], kind="stable")
+        draws = tuple(x[order] for x in draws)
         for x in draws:
             x.setflags(write=False)
         if len(_TRIANGLE_DRAWS) < 16:
