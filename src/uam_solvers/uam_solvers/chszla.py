@@ -44,7 +44,9 @@ def _available() -> tuple[bool, str]:
 
 
 def _checked(problem: MwisProblem, vertices: Any, backend: str) -> np.ndarray:
-    sel = np.asarray(vertices, dtype=np.int64).reshape(-1)
+    """The solver's vertices, sorted, checked against ``problem`` (RuntimeError if invalid):
+    the sorted int64 set the validation layer then finds checked (its int32 copy)."""
+    sel = np.sort(np.asarray(vertices, dtype=np.int64).reshape(-1))
     ok, why = check_selection(problem, sel)
     if not ok:
         raise RuntimeError(f"{backend}: chszlablib returned an invalid answer: {why}")
@@ -99,9 +101,9 @@ class KamisBackend(Backend):
         # a finished search proves the integer optimum int_obj; it is claimed only when the
         # returned set has exactly that integer objective and its own weights agree with it
         proven = finished and integer_proof_holds(problem, sel, wi, scale, int(int_obj))
-        # the set was checked (distinct, in range, independent): sorted, not np.unique'd, and
+        # the set was checked (distinct, in range, independent) and sorted: not np.unique'd,
         # built once (issue 20: make_result's second pass cost ~5 us of a 190 us solve)
-        sel = np.sort(sel).astype(np.int32)
+        sel = sel.astype(np.int32)
         return MwisResult(selected=sel, objective=problem.objective(sel), proven_optimal=proven,
                           solve_time_s=float(dt), backend=self.name,
                           stats={"weight_scale": scale, "integer_objective": int(int_obj),
