@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from uam_solvers.base import (MwisInputError, MwisProblem, brute_force_mwis, check_selection,
-                              integer_weights)
+                              csr_from_edges, integer_weights)
 
 
 def test_edges_are_normalised_and_groups_expand_to_cliques():
@@ -151,3 +151,83 @@ def test_normalised_groups_and_edges_are_the_set_definition_sorted_or_not():
         assert all(g.dtype == np.int32 for g in pa.groups)
         want_e = sorted({(int(min(a, b)), int(max(a, b))) for a, b in e})
         assert [tuple(r) for r in p.edges.tolist()] == want_e, e
+
+
+def _reference_structure(n, pairs):
+    """The sorted keys u * n + v and the CSR (neighbours sorted) of a set of pairs u < v,
+    computed plainly."""
+    keys = sorted(u * n + v for u, v in pairs)
+    nbrs = [[] for _ in range(n)]
+    for u, v in pairs:
+        nbrs[u].append(v)
+        nbrs[v].append(u)
+    indptr = np.cumsum([0] + [len(x) for x in nbrs])
+    return keys, indptr.tolist(), [w for x in nbrs for w in sorted(x)]
+
+
+def _structure(p):
+    indptr, indices = p.csr()
+    return p.edge_keys().tolist(), indptr.tolist(), indices.tolist()
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_cached_pair_keys_and_csr_equal_a_fresh_computation(seed):
+    """The structure MwisProblem computes once and shares (the pairs' keys kept by from_arrays,
+    the listed-groups check on them, the CSR, the triangle gate's keys) equals the plain
+    computation, for problems built by from_arrays and by the constructor, groups of
+    consecutive vertices (the planner's) or not, listed, partly listed or overlapping."""
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(2, 40))
+    order = np.arange(n) if seed % 2 else rng.permutation(n)
+    groups, start = [], 0
+    while start < n:
+        k = int(rng.integers(1, 6))
+        groups.append(sorted(order[start:start + k].tolist()))
+        start += k
+    if seed % 5 == 0:
+        groups.append(sorted(rng.choice(n, size=min(n, 3), replace=False).tolist()))  # overlaps
+    pairs = {(u, v) for g in groups for i, u in enumerate(g) for v in g[i + 1:]}
+    listed = {e for e in pairs if rng.random() < [1.0, 0.9, 0.0][seed % 3]}
+    extra = {(int(u), int(v)) for u, v in rng.integers(0, n, size=(n, 2)) if u < v}
+    edges = sorted(listed | extra) or np.zeros((0, 2), dtype=np.int64)
+    expected = _reference_structure(n, pairs | listed | extra)
+    p = MwisProblem.from_arrays(rng.random(n), edges, groups)
+    q = MwisProblem(weights=p.weights, edges=p.edges, groups=p.groups)
+    assert _structure(p) == _structure(q) == expected
+    # the keys from_arrays keeps are the ones used: a wrong one would show
+    if listed | extra and seed % 3 == 0:
+        bad = MwisProblem.from_arrays(p.weights, edges, groups)
+        keys = bad.__dict__["_listed_keys"].copy()
+        keys[-1] += 1
+        bad.__dict__["_listed_keys"] = keys
+        assert _structure(bad) != expected
+
+
+def test_csr_of_unsorted_or_sorted_pairs_is_the_same():
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        n = int(rng.integers(2, 30))
+        pairs = {(int(u), int(v)) for u, v in rng.integers(0, n, size=(2 * n, 2)) if u < v}
+        if not pairs:
+            continue
+        e = np.array(sorted(pairs))
+        _, indptr, indices = _reference_structure(n, pairs)
+        for arr in (e, e[rng.permutation(len(e))]):
+            ip, ix = csr_from_edges(n, arr)
+            assert (ip.tolist(), ix.tolist()) == (indptr, indices)
+            assert ip.dtype == np.int64 and ix.dtype == np.int32
+
+
+def test_a_remembered_valid_selection_never_passes_another():
+    """check_selection answers a selection it found valid on this problem without checking it
+    again; any other selection is checked in full."""
+    p = MwisProblem.from_arrays(np.ones(5), [[0, 1], [1, 2], [3, 4]], groups=[[2, 3]])
+    p.csr()
+    assert check_selection(p, np.array([0, 2, 4])) == (True, "")
+    assert check_selection(p, np.array([0, 2, 4], dtype=np.int32)) == (True, "")
+    assert check_selection(p, np.array([0, 2, 3]))[1] == "selected: vertices 2 and 3 conflict"
+    assert check_selection(p, np.array([0, 1, 4]))[1] == "selected: vertices 0 and 1 conflict"
+    assert check_selection(p, np.array([0, 2, 4, 4]))[1] == "selected: contains duplicate vertices"
+    assert check_selection(p, np.array([0, 2, 5]))[0] is False
+    assert check_selection(p, np.array([0.0, 2.0, 4.0]))[0] is False
+    assert check_selection(p, np.array([0, 2, 4])) == (True, "")

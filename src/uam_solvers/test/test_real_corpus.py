@@ -132,6 +132,44 @@ def test_triangle_ratio_separates_planner_graphs_from_random_ones(corpus):
         - 20 * 19 * 18 / (20 * 19 * 18 + 20 * 25 * 24 + 25 * 20 * 19)) < 0.03
 
 
+
+def _triangle_ratio_by_definition(p, samples):
+    """triangle_ratio as first written: the two-paths from default_rng(0) in draw order, each
+    looked up among both directions of every pair (what the route's thresholds were set on)."""
+    n = p.n
+    indptr, indices = p.csr()
+    deg = np.diff(indptr)
+    wv = deg.astype(np.float64) * (deg - 1)
+    total = float(wv.sum())
+    if n < 3 or total <= 0:
+        return 0.0
+    rng = np.random.default_rng(0)
+    v = np.minimum(np.searchsorted(np.cumsum(wv), rng.random(samples) * total, side="right"),
+                   n - 1)
+    d = deg[v]
+    i = (rng.random(samples) * d).astype(np.int64)
+    j = (rng.random(samples) * (d - 1)).astype(np.int64)
+    j += j >= i
+    a = indices[indptr[v] + i].astype(np.int64)
+    b = indices[indptr[v] + j].astype(np.int64)
+    keys = set((np.repeat(np.arange(n, dtype=np.int64) * n, deg) + indices).tolist())
+    return sum(q in keys for q in (a * n + b).tolist()) / samples
+
+
+def test_triangle_ratio_is_the_sampled_share_by_definition(corpus):
+    """The gate's shortcuts (its draws made once and reordered, the lookup in the cached keys of
+    the pairs) give exactly the ratio of its definition, so the route is unchanged."""
+    rng = np.random.default_rng(1)
+    graphs = [e.problem for e in corpus[::7]]
+    for n in (3, 30, 200):
+        a, b = np.triu_indices(n, 1)
+        keep = rng.random(a.size) < rng.random()
+        graphs.append(MwisProblem.from_arrays(np.ones(n), np.stack([a[keep], b[keep]], 1)))
+    for p in graphs:
+        for samples in (1024, 4096):
+            assert triangle_ratio(p, samples) == _triangle_ratio_by_definition(p, samples)
+
+
 def test_size_buckets_partition_the_sizes():
     assert size_bucket(1) == -1
     for i, (lo, hi) in enumerate(SIZE_BUCKETS):
