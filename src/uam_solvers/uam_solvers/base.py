@@ -206,7 +206,7 @@ class MwisProblem:
             # instead of ~15)
             u, v = e[:, 0], e[:, 1]
             if int(u[0]) >= 0 and int(v.max()) < n and bool((u < v).all()):
-                keys = u.astype(np.int64) * n + v
+                keys = u.astype(np.int64) * n + v.astype(np.int64)
                 if keys.size > 1 and not bool((keys[1:] > keys[:-1]).all()):
                     keys = None
         if keys is not None:
@@ -569,7 +569,7 @@ def csr_from_edges(n: int, edges: np.ndarray, sorted_keys: np.ndarray | None = N
             and e.dtype.kind in "iu":
         u, v = e[:, 0], e[:, 1]
         if sorted_keys is None:
-            keys = u.astype(np.int64) * n + v
+            keys = u.astype(np.int64) * n + v.astype(np.int64)
             ordered = m == 1 or bool((keys[1:] > keys[:-1]).all())
         else:
             ordered = True
