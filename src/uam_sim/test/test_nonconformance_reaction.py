@@ -871,6 +871,34 @@ def test_the_probe_re_routes_a_flight_no_re_timing_saves_from_a_head_on_meeting(
     assert u2.flight.trajectory.arrival_s == pytest.approx(new.arrival_s)
 
 
+def probe_batch_at_60(margin_m, fixed=(), fixed_ids=()):
+    """P (6 s late at 60 s, 9 m/s) and Q2 as in probe_planner, a probe of 300 s with a margin of
+    ``margin_m``: the batch of what it predicts at 60 s, solved here (``fixed``: traffic outside
+    the planner's book). Returns (planner, active after, updates, report)."""
+    from uam_planner.nonconformance import (ConformanceBounds as CB, deviations,
+                                            predicted_conflicts, react_steps)
+    from uam_planner.planning import replan_selector
+    from uam_planner.replanning import SOLVE_HERE, run_steps
+
+    cfg = PlanningConfig(conformance=CB(), conflict_probe_s=300.0, conflict_probe_margin_m=margin_m)
+    p = Planner(cross(), cfg, "mwis", solve_mwis=None)
+    p.restore([P, Q2])
+    flown = fly(P.trajectory, FlightDraws(), HEAD_WIND)
+    for t in (50.0, 60.0):
+        assert p.observe("P", t, flown.position_at(t)) is None
+        assert p.observe("Q2", t, Q2.trajectory.position_at(t)) is None
+    got = predicted_conflicts(p.active, p.positions, 60.0, 300.0, cfg.probe_separation)
+    found = {i: (obs, tuple(float(x[0]) for x in deviations(p.active[i].trajectory, [obs.t_s],
+                                                             [obs.position_m])))
+             for i, (obs, _ids) in got.items()}
+    steps = react_steps(60.0, 2, p.active, found, p.positions, p.config,
+                        replan_selector(None, p.config, 2, 60.0), "mwis", p.network,
+                        fixed=list(fixed), fixed_ids=list(fixed_ids),
+                        probed={i: ids for i, (_o, ids) in got.items()})
+    active, ups, rep = run_steps(steps, lambda _graph: SOLVE_HERE)
+    return p, active, ups, rep
+
+
 def test_the_probes_margin_is_kept_from_the_batchs_flights_and_the_buffer_from_the_others():
     # fourteenth stop. P (6 s late at 60 s, 9 m/s) and Q2 as in probe_planner, a 50 m margin
     # (the batch's separation 150 m). T flies beside P's route, 120 m north of it, W -> E at
@@ -879,28 +907,9 @@ def test_the_probes_margin_is_kept_from_the_batchs_flights_and_the_buffer_from_t
     # within 100 m at first. Before, the batch kept every update 150 m from T as well: P had no
     # alternative and kept its plan. Now T, outside the batch, is kept at the planner's
     # separation (100 m, no buffer) and P is updated, 150 m clear of Q2
-    from uam_planner.nonconformance import (ConformanceBounds as CB, deviations, predicted_conflicts,
-                                            react_steps)
-    from uam_planner.planning import replan_selector
-    from uam_planner.replanning import SOLVE_HERE, run_steps
-
-    cfg = PlanningConfig(conformance=CB(), conflict_probe_s=300.0, conflict_probe_margin_m=50.0)
-    p = Planner(cross(), cfg, "mwis", solve_mwis=None)
-    p.restore([P, Q2])
-    flown = fly(P.trajectory, FlightDraws(), HEAD_WIND)
-    for t in (50.0, 60.0):
-        assert p.observe("P", t, flown.position_at(t)) is None
-        assert p.observe("Q2", t, Q2.trajectory.position_at(t)) is None
     T = Trajectory(np.array([0.0, 600.0]), np.array([[0.0, 120.0, 0.0], [6000.0, 120.0, 0.0]]))
     assert math.hypot(600.0 - 540.0, 120.0) == pytest.approx(134.16, abs=0.01)
-    got = predicted_conflicts(p.active, p.positions, 60.0, 300.0, cfg.probe_separation)
-    found = {i: (obs, tuple(float(x[0]) for x in deviations(p.active[i].trajectory, [obs.t_s],
-                                                             [obs.position_m])))
-             for i, (obs, _ids) in got.items()}
-    steps = react_steps(60.0, 2, p.active, found, p.positions, p.config,
-                        replan_selector(None, p.config, 2, 60.0), "mwis", p.network,
-                        fixed=[T], fixed_ids=["T"], probed={i: ids for i, (_o, ids) in got.items()})
-    active, ups, rep = run_steps(steps, lambda _graph: SOLVE_HERE)
+    _p, active, ups, rep = probe_batch_at_60(50.0, fixed=[T], fixed_ids=["T"])
     new = {f.request_id: f.trajectory for f in active}
     assert "P" in [u.request_id for u in ups]
     assert new["P"].points_m[0] == pytest.approx([540.0, 0.0, 0.0])
@@ -917,27 +926,10 @@ def test_a_probed_pair_nothing_parts_by_the_margin_takes_the_widest_berth_that_k
     # P takes, of its re-timings, the one whose closest approach to Q2's plan and projection is
     # the widest (its slowest re-join, 0.9 x 0.7 of its planned speed: 5460 m at 6.3 m/s, in at
     # 926.7 s), Q2 then keeps its plan, and the reason says how close it passes
-    from uam_planner.nonconformance import (ConformanceBounds as CB, deviations, predicted_conflicts,
-                                            react_steps)
-    from uam_planner.planning import replan_selector
-    from uam_planner.replanning import SOLVE_HERE, run_steps
+    from uam_planner.nonconformance import SHARES, rejoin_trajectory
     from uam_planner.separation import min_separation_m
 
-    cfg = PlanningConfig(conformance=CB(), conflict_probe_s=300.0, conflict_probe_margin_m=800.0)
-    p = Planner(cross(), cfg, "mwis", solve_mwis=None)
-    p.restore([P, Q2])
-    flown = fly(P.trajectory, FlightDraws(), HEAD_WIND)
-    for t in (50.0, 60.0):
-        assert p.observe("P", t, flown.position_at(t)) is None
-        assert p.observe("Q2", t, Q2.trajectory.position_at(t)) is None
-    got = predicted_conflicts(p.active, p.positions, 60.0, 300.0, cfg.probe_separation)
-    found = {i: (obs, tuple(float(x[0]) for x in deviations(p.active[i].trajectory, [obs.t_s],
-                                                             [obs.position_m])))
-             for i, (obs, _ids) in got.items()}
-    steps = react_steps(60.0, 2, p.active, found, p.positions, p.config,
-                        replan_selector(None, p.config, 2, 60.0), "mwis", p.network,
-                        probed={i: ids for i, (_o, ids) in got.items()})
-    active, ups, rep = run_steps(steps, lambda _graph: SOLVE_HERE)
+    p, _active, ups, rep = probe_batch_at_60(800.0)
     assert rep["probe_released"] == 2 and rep["probe_widest"] == 1
     (u,) = ups
     assert u.request_id == "P" and u.kind == KIND and not u.flight.contingent
@@ -948,7 +940,6 @@ def test_a_probed_pair_nothing_parts_by_the_margin_takes_the_widest_berth_that_k
     assert 100.0 < gap < 900.0
     assert f"the widest berth left: {gap:.1f} m" in u.reason and "nothing kept 900 m" in u.reason
     # every other re-join of P passes Q2 closer
-    from uam_planner.nonconformance import SHARES, rejoin_trajectory
     obs = p.positions.latest("P")
     for share in (1.0,) + SHARES[:-1]:
         other = rejoin_trajectory(P.trajectory, obs.t_s, obs.position_m, 0.9 * share)
