@@ -481,19 +481,29 @@ def _least_conflicting(alts: list, others: list, config, t_eff: float, true_firs
     return alts[k]
 
 
-def _conflict_counts(trajectories: list, others: list, separation, t_eff: float) -> np.ndarray:
-    """For each of ``trajectories`` (from ``t_eff`` on), how many of ``others`` it loses
-    ``separation`` with (exact, continuous time)."""
-    from .separation import SegmentSet, conflicting_pairs
+def _segment_sets(trajectories: list, others: list, t_eff: float):
+    """(``trajectories`` from ``t_eff`` on, the segments of ``others`` still flown at
+    ``t_eff``) as SegmentSets for ``conflicting_pairs``, or None when either is empty."""
+    from .separation import SegmentSet
 
-    n_conf = np.zeros(len(trajectories), dtype=np.int64)
     oset = SegmentSet.from_trajectories(others) if others else None
     if oset is not None and len(oset):
         oset = oset.take(oset.t1_s >= t_eff)
     if oset is None or not len(oset) or not trajectories:
+        return None
+    return SegmentSet.from_trajectories([_clipped(tr, t_eff) or tr for tr in trajectories]), oset
+
+
+def _conflict_counts(trajectories: list, others: list, separation, t_eff: float) -> np.ndarray:
+    """For each of ``trajectories`` (from ``t_eff`` on), how many of ``others`` it loses
+    ``separation`` with (exact, continuous time)."""
+    from .separation import conflicting_pairs
+
+    n_conf = np.zeros(len(trajectories), dtype=np.int64)
+    sets = _segment_sets(trajectories, others, t_eff)
+    if sets is None:
         return n_conf
-    aset = SegmentSet.from_trajectories([_clipped(tr, t_eff) or tr for tr in trajectories])
-    pairs = conflicting_pairs(aset, oset, separation)
+    pairs = conflicting_pairs(*sets, separation)
     for i in np.unique(pairs[:, 0]).tolist():
         n_conf[i] = np.unique(pairs[pairs[:, 0] == i, 1]).size
     return n_conf
@@ -1209,12 +1219,10 @@ def _probe_diversions(t_eff: float, idx: list, rows_i: list, active: Sequence, f
             got = _widest([a[0] for a in retimed], rest, sep, minimum, t_eff)
             if got is not None:
                 chosen[r] = (got[0], retimed[got[0]])
-                widest[r] = got[1]
-                report["probe_widest"] = report.get("probe_widest", 0) + 1
-                continue
-            got = _widest([a.trajectory for a in diverts], rest, sep, minimum, t_eff)
+            else:
+                got = _widest([a.trajectory for a in diverts], rest, sep, minimum, t_eff)
+                alt = diverts[got[0]] if got is not None else None
             if got is not None:
-                alt = diverts[got[0]]
                 widest[r] = got[1]
                 report["probe_widest"] = report.get("probe_widest", 0) + 1
         if alt is not None:
@@ -1230,18 +1238,15 @@ def _widest(trajectories: list, others: list, separation, minimum,
     closest approach to ``others`` is the widest (exact, continuous time; ``separation`` or more
     counts as ``separation``; the first of equals), or None when none keeps ``minimum`` from all
     of them."""
-    from .separation import SegmentSet, as_separation_model, conflicting_pairs
+    from .separation import as_separation_model, conflicting_pairs
 
     if not trajectories:
         return None
     sep = as_separation_model(separation)
     near = np.full(len(trajectories), float(sep.separation_m))
-    oset = SegmentSet.from_trajectories(others) if others else None
-    if oset is not None and len(oset):
-        oset = oset.take(oset.t1_s >= t_eff)
-    if oset is not None and len(oset):
-        aset = SegmentSet.from_trajectories([_clipped(tr, t_eff) or tr for tr in trajectories])
-        pairs, dist = conflicting_pairs(aset, oset, sep, return_distances=True)
+    sets = _segment_sets(trajectories, others, t_eff)
+    if sets is not None:
+        pairs, dist = conflicting_pairs(*sets, sep, return_distances=True)
         np.minimum.at(near, np.asarray(pairs[:, 0], dtype=np.int64), np.asarray(dist))
     k = int(np.argmax(near))
     if _conflict_counts([trajectories[k]], others, minimum, t_eff)[0]:
