@@ -1152,8 +1152,9 @@ class Planner:
         if isinstance(t_s, bool) or not isinstance(t_s, (int, float, np.integer, np.floating)) \
                 or not math.isfinite(t_s):
             return f"t_s: {t_s!r} is not a finite time"
-        if not isinstance(request_id, str) or not any(f.request_id == request_id for f in self.active):
-            return f"request_id: {request_id!r} is not an active flight of this planner"
+        if not isinstance(request_id, str) or not (
+                any(f.request_id == request_id for f in self.active) or request_id in self.overruns):
+            return f"request_id: {request_id!r} is neither an active flight of this planner nor held past its plan"
         if any(c.request_id == request_id for c in self._claims):
             return None  # already queued: one update per flight and epoch
         self._claims.append(Claim(request_id, float(t_s), str(source)))
@@ -1171,19 +1172,31 @@ class Planner:
             return
         self._claims = [c for c in self._claims if c.t_s > t_s]
         where = {f.request_id: i for i, f in enumerate(self.active)}
-        found, refused = {}, []
+        found, refused, readmitted = {}, [], []
         for c in due:
             i = where.get(c.request_id)
-            if i is None:
-                refused.append((c.request_id, f"request_id: {c.request_id!r} is no longer active"))
+            held = self.overruns.get(c.request_id) if i is None else None
+            if i is None and held is None:
+                refused.append((c.request_id, f"request_id: {c.request_id!r} is neither active "
+                                              f"nor held past its plan"))
                 continue
             obs = self.positions.latest(c.request_id, until=t_s)
-            got, why = verify(self.active[i], obs, self.config.conformance, t_s)
+            got, why = verify(self.active[i] if held is None else held.plan, obs,
+                              self.config.conformance, t_s)
             if got is None:
                 refused.append((c.request_id, why))
                 continue
+            if held is not None:
+                # held past its plan (dropped from the active flights at this epoch, still in
+                # the air): its plan is updated like an active one's, from where it is
+                self.active.append(held.plan)
+                i = where[c.request_id] = len(self.active) - 1
+                readmitted.append(held.plan)
             found[i] = (obs, got)
         updates, rep_ = yield from self._update_batch(t_s, epoch_index, found)
+        if readmitted:   # one left without an update (nothing of its plan left) stays held only
+            gone = {id(f) for f in readmitted}
+            self.active = [f for f in self.active if id(f) not in gone]
         rep_["refused"] = refused
         self._nonconformance_report = rep_
         if probe_s:

@@ -268,6 +268,68 @@ def test_a_vehicle_that_vanishes_is_held_only_until_its_last_sighting_lands():
     assert 600.0 + MAX_OVERRUN_SHARE * 600.0 > LANDS
 
 
+def _late_planner_with_reaction(observe_until):
+    """As :func:`seen_planner`, with the reaction to nonconformance on."""
+    p = Planner(cross(), PlanningConfig(conformance=ConformanceBounds()), "mwis", solve_mwis=None)
+    p.restore([P])
+    observe_every_10_s(p, 10.0, observe_until)
+    return p
+
+
+def test_a_flight_still_flying_after_its_planned_arrival_is_updated_between_epochs():
+    # P (x = 9 t) reported late only at 605 s, after its planned arrival at 600 s; seen every
+    # 10 s up to 610 s. Progress over the window 490 -> 610 s: planned 441 -> 549 s, 0.9. From
+    # (5490, 0) at 610 s the rejoin at 0.9 (9 m/s) lands at 610 + 510 / 9 = 666.67 s, as it flies.
+    # Before the sixteenth stop the claim was refused ("not airborne on its plan") and P flew the
+    # end of its plan nonconforming until it landed (F3548: an excursion of at most 10 s)
+    p = _late_planner_with_reaction(610.0)
+    assert p.report_nonconforming("P", 605.0, "monitor") is None
+    (u,) = p.react_between(610.0, 20)
+    assert (u.request_id, u.kind, u.version, u.effective_s) == ("P", KIND, 2, 610.0)
+    assert u.observed_rate == pytest.approx(0.9) and "time +61.0 s" in u.reason
+    new = u.flight.trajectory
+    assert new.points_m[0] == pytest.approx([5490.0, 0.0, 0.0]) and new.departure_s == 610.0
+    assert new.arrival_s == pytest.approx(LANDS)
+    # what flies from there conforms to the new version to the end
+    tail = Trajectory(LATE.times_s[LATE.times_s >= 610.0], LATE.points_m[LATE.times_s >= 610.0])
+    assert track_conformance("P", new, tail, ConformanceBounds()).first_nonconforming_s is None
+    # and the planner's picture holds it: R, asked to leave E at 630 s head-on, waits
+    p.submit(R)
+    assert p.plan(630.0, 21).approved == [] and [(f.request_id, f.version) for f in p.active] == [("P", 2)]
+
+
+def test_a_flight_held_past_its_plan_is_updated_at_the_epoch_that_dropped_its_plan():
+    # P is seen every 10 s up to 630 s and reported at 625 s; at the epoch at 630 s its plan
+    # (arrival 600 s) leaves the active flights and P is held (overruns). The claim holds: its
+    # plan is updated from where it is, (5670, 0) at 630 s, at 0.9: landing at 630 + 330 / 9 =
+    # 666.67 s; the hold ends (the new version is active). Before the sixteenth stop the claim was
+    # refused ("no longer active") and P stayed nonconforming to its landing
+    p = _late_planner_with_reaction(630.0)
+    assert p.report_nonconforming("P", 625.0, "monitor") is None
+    p.submit(R)
+    res = p.plan(630.0, 21)
+    (u,) = res.plan_updates
+    assert (u.request_id, u.kind, u.version, u.effective_s) == ("P", KIND, 2, 630.0)
+    assert u.flight.trajectory.points_m[0] == pytest.approx([5670.0, 0.0, 0.0])
+    assert u.flight.trajectory.arrival_s == pytest.approx(LANDS)
+    assert [(f.request_id, f.version) for f in p.active] == [("P", 2)] and p.overruns == {}
+    assert res.report.nonconformance["refused"] == []
+    # R (E -> W at 630 s) is kept out of it, then leaves once P has landed, clear of what flew
+    assert res.approved == []
+    observe_every_10_s(p, 640.0, 660.0)
+    assert p.plan(660.0, 22).approved == []
+    observe_every_10_s(p, 670.0, 690.0)
+    (r,) = p.plan(690.0, 23).approved
+    assert r.departure_s == 690.0 and p.overruns == {}
+    assert audit_flights([r.trajectory, LATE], separation_m=100.0).losses == []
+
+
+def test_a_claim_about_a_flight_neither_active_nor_held_is_refused_by_name():
+    p = _late_planner_with_reaction(630.0)
+    assert p.report_nonconforming("X", 625.0) == \
+        "request_id: 'X' is neither an active flight of this planner nor held past its plan"
+
+
 # ---- the reaction between epochs (issue 23 item 3: F3548's 5 s update; reaction_period_s) ----
 
 def test_between_epochs_the_update_comes_at_once_and_keeps_separation_with_the_neighbour():
