@@ -1164,7 +1164,10 @@ class Planner:
         """Step 2b of ``prepare`` (after the constraint re-plan, before new requests): the claims
         due by ``t_s`` that the planner's own view confirms get their intents updated from where
         the flights are (``uam_planner.nonconformance.react_steps``), deconflicted in one batch.
-        A generator: it yields the batch's MWIS graph (see :meth:`prepare_steps`)."""
+        A claim may be about a flight held past its plan (``self.overruns``: late, still in the
+        air after its planned arrival): its newest version joins the batch like an active flight
+        and, updated, is active again. A generator: it yields the batch's MWIS graph (see
+        :meth:`prepare_steps`)."""
         self._nonconformance_report = None
         due = [c for c in self._claims if c.t_s <= t_s]
         probe_s = float(self.config.conflict_probe_s)
