@@ -1175,7 +1175,7 @@ class Planner:
             return
         self._claims = [c for c in self._claims if c.t_s > t_s]
         where = {f.request_id: i for i, f in enumerate(self.active)}
-        found, refused, readmitted = {}, [], []
+        found, refused, readmitted = {}, [], set()
         for c in due:
             i = where.get(c.request_id)
             held = self.overruns.get(c.request_id) if i is None else None
@@ -1183,23 +1183,22 @@ class Planner:
                 refused.append((c.request_id, f"request_id: {c.request_id!r} is neither active "
                                               f"nor held past its plan"))
                 continue
+            flight = self.active[i] if held is None else held.plan
             obs = self.positions.latest(c.request_id, until=t_s)
-            got, why = verify(self.active[i] if held is None else held.plan, obs,
-                              self.config.conformance, t_s)
+            got, why = verify(flight, obs, self.config.conformance, t_s)
             if got is None:
                 refused.append((c.request_id, why))
                 continue
             if held is not None:
                 # held past its plan (dropped from the active flights at this epoch, still in
                 # the air): its plan is updated like an active one's, from where it is
-                self.active.append(held.plan)
-                i = where[c.request_id] = len(self.active) - 1
-                readmitted.append(held.plan)
+                self.active.append(flight)
+                i = len(self.active) - 1
+                readmitted.add(id(flight))
             found[i] = (obs, got)
         updates, rep_ = yield from self._update_batch(t_s, epoch_index, found)
         if readmitted:   # one left without an update (nothing of its plan left) stays held only
-            gone = {id(f) for f in readmitted}
-            self.active = [f for f in self.active if id(f) not in gone]
+            self.active = [f for f in self.active if id(f) not in readmitted]
         rep_["refused"] = refused
         self._nonconformance_report = rep_
         if probe_s:

@@ -192,10 +192,11 @@ LANDS = 6000.0 / 9.0
 R = FlightRequest("R", "E", "W", 630.0, 630.0, 700.0)
 
 
-def seen_planner(observe_until=None, flown=LATE):
-    """A planner holding P (no reaction: the default configuration), that has seen P in the
-    fleet state every 10 s up to ``observe_until`` (None: never)."""
-    p = Planner(cross(), PlanningConfig(), "mwis", solve_mwis=None)
+def seen_planner(observe_until=None, flown=LATE, reaction=False):
+    """A planner holding P (by default no reaction: the default configuration), that has seen P
+    in the fleet state every 10 s up to ``observe_until`` (None: never)."""
+    p = Planner(cross(), PlanningConfig(conformance=ConformanceBounds() if reaction else None),
+                "mwis", solve_mwis=None)
     p.restore([P])
     if observe_until is not None:
         observe_every_10_s(p, 10.0, observe_until, flown)
@@ -268,21 +269,13 @@ def test_a_vehicle_that_vanishes_is_held_only_until_its_last_sighting_lands():
     assert 600.0 + MAX_OVERRUN_SHARE * 600.0 > LANDS
 
 
-def _late_planner_with_reaction(observe_until):
-    """As :func:`seen_planner`, with the reaction to nonconformance on."""
-    p = Planner(cross(), PlanningConfig(conformance=ConformanceBounds()), "mwis", solve_mwis=None)
-    p.restore([P])
-    observe_every_10_s(p, 10.0, observe_until)
-    return p
-
-
 def test_a_flight_still_flying_after_its_planned_arrival_is_updated_between_epochs():
     # P (x = 9 t) reported late only at 605 s, after its planned arrival at 600 s; seen every
     # 10 s up to 610 s. Progress over the window 490 -> 610 s: planned 441 -> 549 s, 0.9. From
     # (5490, 0) at 610 s the rejoin at 0.9 (9 m/s) lands at 610 + 510 / 9 = 666.67 s, as it flies.
     # Before the sixteenth stop the claim was refused ("not airborne on its plan") and P flew the
     # end of its plan nonconforming until it landed (F3548: an excursion of at most 10 s)
-    p = _late_planner_with_reaction(610.0)
+    p = seen_planner(610.0, reaction=True)
     assert p.report_nonconforming("P", 605.0, "monitor") is None
     (u,) = p.react_between(610.0, 20)
     assert (u.request_id, u.kind, u.version, u.effective_s) == ("P", KIND, 2, 610.0)
@@ -304,7 +297,7 @@ def test_a_flight_held_past_its_plan_is_updated_at_the_epoch_that_dropped_its_pl
     # plan is updated from where it is, (5670, 0) at 630 s, at 0.9: landing at 630 + 330 / 9 =
     # 666.67 s; the hold ends (the new version is active). Before the sixteenth stop the claim was
     # refused ("no longer active") and P stayed nonconforming to its landing
-    p = _late_planner_with_reaction(630.0)
+    p = seen_planner(630.0, reaction=True)
     assert p.report_nonconforming("P", 625.0, "monitor") is None
     p.submit(R)
     res = p.plan(630.0, 21)
@@ -325,7 +318,7 @@ def test_a_flight_held_past_its_plan_is_updated_at_the_epoch_that_dropped_its_pl
 
 
 def test_a_claim_about_a_flight_neither_active_nor_held_is_refused_by_name():
-    p = _late_planner_with_reaction(630.0)
+    p = seen_planner(630.0, reaction=True)
     assert p.report_nonconforming("X", 625.0) == \
         "request_id: 'X' is neither an active flight of this planner nor held past its plan"
 
