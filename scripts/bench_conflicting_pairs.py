@@ -31,9 +31,9 @@ def main(argv=None) -> int:
 
     import uam_planner.separation as sep
     from uam_planner import conflict_graph, nonconformance, planning, replanning
-    from uam_sim.decision_study import capacity_config, load_decision_config
-    from uam_sim.experiment_config import AIRSPACE_PRESETS
-    from uam_sim.sweep import run_cell
+    from uam_sim.studies.decision_study import capacity_config, load_decision_config
+    from uam_sim.runner.experiment_config import AIRSPACE_PRESETS
+    from uam_sim.runner.sweep import run_cell
 
     calls = []
     orig = sep.conflicting_pairs

@@ -28,8 +28,8 @@ import statistics
 
 def run(h: int, window_s: float, lead_s: float, backend: str, duration_s: float) -> dict:
     from uam_planner.network import load_network
-    from uam_sim.experiment_config import make_config, resolve_path
-    from uam_sim.scenario import run_scenario
+    from uam_sim.runner.experiment_config import make_config, resolve_path
+    from uam_sim.runner.scenario import run_scenario
     cfg = make_config(airspace_mode="both", objective="count", horizon_epochs=h,
                       window_s=window_s, lead_time_s=lead_s, time_limit_s=5.0, workers=1)
     res = run_scenario(load_network(resolve_path(cfg.network)), backend, 20, 0, duration_s, cfg)
@@ -50,8 +50,8 @@ def run_in_process(h: int, window_s: float, lead_s: float, duration_s: float) ->
     phases, and the decisions hash."""
     from uam_planner.network import load_network
     from uam_planner.planning import Planner
-    from uam_sim.demand import RequestGenerator
-    from uam_sim.experiment_config import make_config, resolve_path
+    from uam_sim.world.demand import RequestGenerator
+    from uam_sim.runner.experiment_config import make_config, resolve_path
     from uam_solvers.greedy import greedy_mwis
 
     class Answer:

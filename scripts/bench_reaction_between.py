@@ -1,7 +1,7 @@
 """Benchmark: the reaction between epochs (issue 23) through the node graph against the in-process
 runner, same scenario. The graph's nodes (solver, planner, request generator, simulator,
 conformance monitor; no recorder) run in this process on one multi-threaded executor, as in the
-node tests (test/graph_harness.py), in lockstep; the runner is uam_sim.scenario.run_scenario with
+node tests (test/graph_harness.py), in lockstep; the runner is uam_sim.runner.scenario.run_scenario with
 the same configuration (request ids scoped as the planner node scopes them, so both draw the same
 disturbances). Prints wall and CPU seconds of each, the plan updates at and between epochs, and
 whether the two agree (the property test/test_node_reaction_between.py asserts).
@@ -68,8 +68,8 @@ def run_graph(a):
 def run_runner(a):
     from uam_contract import wire
     from uam_planner.network import load_network
-    from uam_sim.demand import RequestGenerator
-    from uam_sim.experiment import make_config, run_scenario
+    from uam_sim.world.demand import RequestGenerator
+    from uam_sim.studies.experiment import make_config, run_scenario
 
     class Scoped:
         def __init__(self, d):

@@ -6,7 +6,7 @@
 
 1. Intents: the approvals of an in-process run on the Singapore network at ``--rate`` requests
    per 30 s (25 = 3,000 flights/h) for ``--duration`` simulated seconds (FIFO, fast), put into an
-   :class:`uam_sim.uss_server.IntentStore` and served by the real :class:`UssServer` (Flask on a
+   :class:`uam_sim.f3548.uss_server.IntentStore` and served by the real :class:`UssServer` (Flask on a
    werkzeug threaded server) on 127.0.0.1; the store's clock is at t = 0, so every intent is
    served whole (all its volumes: the largest answers).
 2. Nominal load (open loop): details requests arrive as a Poisson process of rate
@@ -35,10 +35,10 @@ import requests
 
 def build_store(args):
     from uam_planner.f3548 import IntentContext, VolumeSpec
-    from uam_sim.experiment_config import make_config
-    from uam_sim.network_spec import load_network_spec
-    from uam_sim.scenario import run_scenario
-    from uam_sim.uss_server import IntentStore
+    from uam_sim.runner.experiment_config import make_config
+    from uam_sim.runner.network_spec import load_network_spec
+    from uam_sim.runner.scenario import run_scenario
+    from uam_sim.f3548.uss_server import IntentStore
 
     net = load_network_spec(args.network)
     got = []
@@ -84,7 +84,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
 
     from uam_planner.f3548_schema import errors
-    from uam_sim.uss_server import UssServer
+    from uam_sim.f3548.uss_server import UssServer
 
     store, ids = build_store(args)
     srv = UssServer(store, port=0).start()

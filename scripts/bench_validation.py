@@ -44,9 +44,9 @@ def main(argv=None) -> int:
     from uam_contract.params import PLANNER
     from uam_planner.network import load_network, network_from_dict, network_to_dict
     from uam_planner.synthetic import generate_network
-    from uam_sim.capacity_study import load_capacity_config
-    from uam_sim.demand import load_demand, parse_demand
-    from uam_sim.experiment_config import load_config
+    from uam_sim.studies.capacity_study import load_capacity_config
+    from uam_sim.world.demand import load_demand, parse_demand
+    from uam_sim.runner.experiment_config import load_config
     from uam_solvers.options import parse_options
     from uam_solvers.registry import get_backend
 

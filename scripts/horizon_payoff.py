@@ -48,8 +48,8 @@ def main(argv=None) -> int:
     ap.add_argument("--backend", default="exact")
     a = ap.parse_args(argv)
     from uam_planner.network import load_network
-    from uam_sim.experiment_config import make_config, resolve_path
-    from uam_sim.scenario import run_scenario
+    from uam_sim.runner.experiment_config import make_config, resolve_path
+    from uam_sim.runner.scenario import run_scenario
     print("| seed | H | requests | approved | expired | delay mean [s] | min separation [m] | losses | fallbacks |")
     print("|---|---|---|---|---|---|---|---|---|")
     for seed in (int(s) for s in a.seeds.split(",")):

@@ -4,7 +4,7 @@
     source scripts/env.sh
     nice -n 5 python scripts/make_mwis_corpus.py        # writes data/mwis/layered-mwis.jsonl.gz
 
-Runs the in-process runner (``uam_sim.scenario.run_scenario``: the planner the nodes run) on
+Runs the in-process runner (``uam_sim.runner.scenario.run_scenario``: the planner the nodes run) on
 each case of ``--cases`` in the expanded airspace (cylinder H 100 m / V 30 m, ``--slot-s`` 5 s
 departure slots), for ``--duration`` (3,500) simulated seconds, demand seed ``--seed`` (0):
 
@@ -72,7 +72,7 @@ HORIZON_CASES = {"horizon-h5": 5, "horizon-h10": 10}
 
 
 def _horizon_config(args, h: int):
-    from uam_sim.experiment_config import make_config
+    from uam_sim.runner.experiment_config import make_config
 
     return make_config(airspace_mode="both", objective="count", horizon_epochs=h,
                        window_s=120.0, lead_time_s=120.0, time_limit_s=args.time_limit,
@@ -81,14 +81,14 @@ def _horizon_config(args, h: int):
 
 def collect(args, label: str) -> tuple[list, dict]:
     """Every epoch's instance of one case's run: [(epoch, t_s, CorpusEntry)] and a summary."""
-    from uam_sim.experiment_config import make_config
-    from uam_sim.network_spec import load_network_spec
-    from uam_sim.scenario import groups_from_ids, run_scenario
+    from uam_sim.runner.experiment_config import make_config
+    from uam_sim.runner.network_spec import load_network_spec
+    from uam_sim.runner.scenario import groups_from_ids, run_scenario
     from uam_solvers.base import MwisProblem
     from uam_solvers.instances import CorpusEntry
 
     if label in HORIZON_CASES:
-        from uam_sim.experiment_config import resolve_path
+        from uam_sim.runner.experiment_config import resolve_path
 
         cfg = _horizon_config(args, HORIZON_CASES[label])
         rate = 20.0

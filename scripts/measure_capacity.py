@@ -4,7 +4,7 @@
     .venv/bin/python scripts/measure_capacity.py singapore      # paper mode vs layered + slots
     .venv/bin/python scripts/measure_capacity.py city           # synthetic city, 4 levels
 
-``singapore``: the paper's demand (uam_sim.demand.RequestGenerator: ``--rate`` requests per 30 s
+``singapore``: the paper's demand (uam_sim.world.demand.RequestGenerator: ``--rate`` requests per 30 s
 between random distinct aerodromes, window 60 s, seeded) over ``--duration`` s, planned once in
 paper mode (config/networks/singapore.yaml, sphere 100 m, departure at the epoch) and once in
 the expanded airspace (singapore-layered.yaml, cylinder H 100 m / V 30 m, ``--slot-s`` slots),
@@ -37,7 +37,7 @@ for pkg in ("uam_planner", "uam_solvers", "uam_sim"):
 from uam_planner.audit import sweep_audit  # noqa: E402
 from uam_planner.network import load_network  # noqa: E402
 from uam_planner.planning import AirspaceConfig, Planner, PlanningConfig  # noqa: E402
-from uam_sim.demand import RequestGenerator  # noqa: E402
+from uam_sim.world.demand import RequestGenerator  # noqa: E402
 
 
 def run(net, cfg: PlanningConfig, demand, duration_s: float, instances_path=None,

@@ -3,7 +3,7 @@
 
     nice -n 5 .venv/bin/python scripts/measure_replanning.py --seeds 3
 
-Through the in-process runner ``uam_sim.scenario.run_scenario`` (the planner library, no ROS):
+Through the in-process runner ``uam_sim.runner.scenario.run_scenario`` (the planner library, no ROS):
 ``generate_network(--nodes, --vertiports, seed 0, levels 60/90/120/150 m, 4 pads)``, the
 expanded airspace (cylinder H 100 m / V 30 m, ``--slot-s`` departure slots), ``--per-hour``
 requests per hour from the seeded ``RequestGenerator``, epochs of 30 s, MWIS backend ``--method``.
@@ -18,7 +18,7 @@ same flights). Per run: intents (accepted or airborne) at the announcement, affe
 class and what happened to them, the re-plan decision wall time, the audit of what flew (every
 version from the instant it took effect, in the run's separation model: losses) and the
 constraint incursions (``uam_planner.replanning.audit_incursions``). Then MWIS against first-fit
-per seed (``uam_sim.stats.paired``: mean difference and 95 % t interval over seeds): flights
+per seed (``uam_sim.reports.stats.paired``: mean difference and 95 % t interval over seeds): flights
 still reaching their destination, flights saved (not cancelled, not a contingency), mean added
 delay of those reaching their destination. Wall times depend on the machine's load (printed
 with ``uptime``); the decisions do not.
@@ -36,10 +36,10 @@ import time
 import numpy as np
 
 from uam_planner.constraints import Constraint
-from uam_sim.experiment_config import make_config
-from uam_sim.network_spec import load_network_spec
-from uam_sim.scenario import run_scenario
-from uam_sim.stats import mean_interval, paired
+from uam_sim.runner.experiment_config import make_config
+from uam_sim.runner.network_spec import load_network_spec
+from uam_sim.runner.scenario import run_scenario
+from uam_sim.reports.stats import mean_interval, paired
 
 LEVELS_M = [60.0, 90.0, 120.0, 150.0]
 REACH = ("kept", "rerouted", "retimed")

@@ -1,12 +1,12 @@
 #!/usr/bin/env python3
-"""Issue 10's system-level measurements through the in-process runner (uam_sim.scenario).
+"""Issue 10's system-level measurements through the in-process runner (uam_sim.runner.scenario).
 
     nice -n 5 .venv/bin/python scripts/measure_system_airspace.py singapore
     nice -n 5 .venv/bin/python scripts/measure_system_airspace.py city --instances results/city-mwis.jsonl
 
-Both go through ``uam_sim.scenario.run_scenario`` with an ``ExperimentConfig`` (the runner's
+Both go through ``uam_sim.runner.scenario.run_scenario`` with an ``ExperimentConfig`` (the runner's
 airspace options, the same ones ``python -m uam_sim.experiment`` and ``scripts/run_fleet.sh``
-take), and the runner's own audit (``uam_sim.audit.sweep_audit``) in the run's separation model.
+take), and the runner's own audit (``uam_sim.audit.separation.sweep_audit``) in the run's separation model.
 
 ``singapore``: the paper's demand (``--rate`` requests per 30 s, window 60 s, seed ``--seed``)
 for ``--duration`` s, once in paper mode (config/networks/singapore.yaml, sphere 100 m, departure
@@ -38,10 +38,10 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 
-from uam_sim.capacity_study import airborne_peak  # noqa: E402
-from uam_sim.experiment_config import make_config  # noqa: E402
-from uam_sim.network_spec import load_network_spec  # noqa: E402
-from uam_sim.scenario import groups_from_ids, run_scenario  # noqa: E402
+from uam_sim.studies.capacity_study import airborne_peak  # noqa: E402
+from uam_sim.runner.experiment_config import make_config  # noqa: E402
+from uam_sim.runner.network_spec import load_network_spec  # noqa: E402
+from uam_sim.runner.scenario import groups_from_ids, run_scenario  # noqa: E402
 
 LEVELS_M = [60.0, 90.0, 120.0, 150.0]
 

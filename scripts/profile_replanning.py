@@ -59,9 +59,9 @@ def snapshot(args) -> int:
     sys.path.insert(0, "scripts")
     import measure_replanning as mr
     import uam_planner.replanning as rp
-    from uam_sim.experiment_config import make_config
-    from uam_sim.network_spec import load_network_spec
-    from uam_sim.scenario import run_scenario
+    from uam_sim.runner.experiment_config import make_config
+    from uam_sim.runner.network_spec import load_network_spec
+    from uam_sim.runner.scenario import run_scenario
     orig = rp.replan_steps
     saved = {}
 
@@ -99,8 +99,8 @@ def run(args) -> int:
     import subprocess
     import uam_planner.replanning as rp
     from uam_planner.planning import departure_slots_s, replan_selector
-    from uam_sim.scenario import _solver
-    from uam_sim.experiment_config import make_config
+    from uam_sim.runner.scenario import _solver
+    from uam_sim.runner.experiment_config import make_config
     with open(args.pickle, "rb") as fh:
         s = pickle.load(fh)
     cfg = s["config"]

@@ -131,10 +131,10 @@ def decisions(plans, operator_id="generator") -> dict:
 
 def in_process(rate, seed, duration_s, backend, policy="mwis", epoch_s=30.0, network=TINY, time_limit_s=5.0,
                **airspace):
-    """The same scenario through uam_sim.experiment's in-process runner (``airspace``: its
+    """The same scenario through uam_sim.studies.experiment's in-process runner (``airspace``: its
     separation_model, vertical_separation_m, departure_slot_s, ... options)."""
     from uam_planner.network import load_network
-    from uam_sim.experiment import make_config, run_scenario
+    from uam_sim.studies.experiment import make_config, run_scenario
     method = policy if policy in ("fifo", "firstfit") else backend
     cfg = make_config(epoch_s=float(epoch_s), time_limit_s=float(time_limit_s), audit=False, **airspace)
     return run_scenario(load_network(network), method, rate, seed, duration_s, cfg)

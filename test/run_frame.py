@@ -1,6 +1,6 @@
 """What a recording of a run that ended as planned holds beside its plans, for tests that write
 recordings by hand: the simulator's epoch announcements with its end, the run's airspace record
-and a passing recorder check (uam_sim.analysis.run_problems asks for all of them)."""
+and a passing recorder check (uam_sim.audit.analysis.run_problems asks for all of them)."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ def complete_run(rec, epochs: int = 1, epoch_s: float = 30.0, duration_s: float 
     from builtin_interfaces.msg import Time
     from uam_msgs.msg import EpochSync
 
-    from uam_sim.audit import AIRSPACE_METADATA, airspace_metadata
+    from uam_sim.audit.separation import AIRSPACE_METADATA, airspace_metadata
 
     duration = float(duration_s if duration_s is not None else epochs * epoch_s)
     if not rec.has_topic("/uam/epoch_sync"):

@@ -2,7 +2,7 @@
 
 The simulator asks the request generator to release an epoch's demand (uam/release_demand) and
 the planner to plan epoch k at time t (uam/plan_epoch), and flies the outcome it gets back.
-Each test holds the graph to the in-process runner (uam_sim.experiment.run_scenario): the same
+Each test holds the graph to the in-process runner (uam_sim.studies.experiment.run_scenario): the same
 seed gives the same approvals over the same epochs, whatever else happens on the wire.
 """
 

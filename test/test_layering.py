@@ -23,7 +23,7 @@ LIBRARY_RANK = {"uam_contract": 0, "uam_solvers": 1, "uam_planner": 2, "uam_sim"
 NODES_RANK = 5
 
 # Exceptions allowed (none): anything listed here that no longer holds fails the test too, so the
-# lists can only shrink. Issue 9 removed uam_solvers.instances -> uam_sim.analysis and
+# lists can only shrink. Issue 9 removed uam_solvers.instances -> uam_sim.audit.analysis and
 # recording <-> analysis; issue 11 removed layers <-> reductions and base <-> options.
 KNOWN_UPWARD_IMPORTS: set = set()
 KNOWN_CYCLES: set = set()
@@ -44,6 +44,28 @@ def _modules() -> dict[str, pathlib.Path]:
 def _rank(module: str) -> int:
     parts = module.split(".")
     return NODES_RANK if "nodes" in parts[1:2] else LIBRARY_RANK[parts[0]]
+
+
+# The rooms of uam_sim, lowest first (src/uam_sim/README.md): a module imports only from its own
+# room or a lower one. Rooms of one rank (the views and the F3548 interface) never import each
+# other. The top level holds the package's facade and the ``python -m uam_sim.<command>`` modules,
+# above every room; ``recording/__main__`` is the recording room's command, at that level too.
+SIM_ROOMS = {"world": 0, "recording": 1, "audit": 2, "views": 3, "f3548": 3, "runner": 4, "reports": 5,
+             "studies": 6}
+SIM_COMMANDS_RANK = 7
+
+
+def _sim_room(module: str) -> str | None:
+    parts = module.split(".")
+    if parts[0] != "uam_sim" or parts[1:2] == ["nodes"] or len(parts) < 2:
+        return None
+    if parts[-1] == "__main__" or len(parts) == 2 and parts[1] not in SIM_ROOMS:
+        return "commands"
+    return parts[1]
+
+
+def _sim_rank(room: str) -> int:
+    return SIM_COMMANDS_RANK if room == "commands" else SIM_ROOMS[room]
 
 
 def _imports(module: str, path: pathlib.Path, known: set[str]) -> set[str]:
@@ -99,6 +121,40 @@ def test_no_module_imports_a_layer_above_its_own():
     assert KNOWN_UPWARD_IMPORTS - upward == set(), "fixed: remove from KNOWN_UPWARD_IMPORTS"
 
 
+def test_uam_sim_rooms_import_only_their_own_or_lower_rooms():
+    g = _graph()
+    rooms = {_sim_room(m) for m in g} - {None}
+    assert set(SIM_ROOMS) <= rooms and "commands" in rooms, sorted(rooms - {None})
+    flat = [m for m in g if _sim_room(m) == "commands" and not m.endswith("__main__") and m != "uam_sim"
+            and _main_only(m) is False]
+    assert flat == [], f"a top-level uam_sim module that is not a command: {flat}"
+    bad = []
+    for a, b in g.edges:
+        ra, rb = _sim_room(a), _sim_room(b)
+        if ra is None or rb is None or ra == rb:
+            continue
+        if _sim_rank(rb) > _sim_rank(ra) or (_sim_rank(rb) == _sim_rank(ra) and ra != rb):
+            bad.append((a, b))
+    assert bad == [], sorted(bad)
+
+
+def _main_only(module: str) -> bool:
+    """True when a top-level module only imports a room's ``main`` and runs it (a command)."""
+    path = _modules()[module]
+    tree = ast.parse(path.read_text())
+    imports = [n for n in tree.body if isinstance(n, (ast.Import, ast.ImportFrom))]
+    return all(isinstance(n, ast.Import) or [a.name for a in n.names] == ["main"] for n in imports) and \
+        len([n for n in tree.body if isinstance(n, (ast.FunctionDef, ast.ClassDef))]) == 0
+
+
+def test_an_upward_room_import_is_seen():
+    assert _sim_rank(_sim_room("uam_sim.audit.analysis")) > _sim_rank(_sim_room("uam_sim.recording.cdr"))
+    assert _sim_rank(_sim_room("uam_sim.analysis")) > _sim_rank(_sim_room("uam_sim.studies.montecarlo"))
+    assert _sim_room("uam_sim.recording.__main__") == "commands"
+    assert _sim_room("uam_sim.nodes.simulator_node") is None
+    assert _main_only("uam_sim.analysis") and not _main_only("uam_sim.audit.analysis")
+
+
 def test_library_and_contract_modules_never_import_rclpy_at_import_time():
     """They work without ROS (the analysis of a recording, the experiment runner); a function may
     import rclpy.serialization lazily to turn message objects into CDR."""
@@ -139,8 +195,8 @@ def test_no_import_cycles_between_packages():
 
 def test_a_cycle_or_an_upward_import_is_seen():
     g = _graph()
-    assert _rank("uam_sim.analysis") > _rank("uam_solvers.base")  # such an edge would be upward
-    assert _rank("uam_bringup.params") > _rank("uam_sim.analysis") > _rank("uam_contract.names")
+    assert _rank("uam_sim.audit.analysis") > _rank("uam_solvers.base")  # such an edge would be upward
+    assert _rank("uam_bringup.params") > _rank("uam_sim.audit.analysis") > _rank("uam_contract.names")
     g.add_edge("uam_solvers.base", "uam_planner.planning")
     assert any(len(c) > 1 and "uam_solvers.base" in c for c in nx.strongly_connected_components(g))
 

@@ -16,7 +16,7 @@ from uam_contract import names as c  # noqa: E402
 from uam_planner.nodes import conversions as m  # noqa: E402
 from uam_planner.planning import Flight  # noqa: E402
 from uam_planner.trajectory import Trajectory  # noqa: E402
-from uam_sim.disturbance import DisturbanceConfig, FlightDraws, fly  # noqa: E402
+from uam_sim.world.disturbance import DisturbanceConfig, FlightDraws, fly  # noqa: E402
 from uam_sim.nodes.conformance_node import ConformanceNode  # noqa: E402
 
 pytestmark = pytest.mark.ros

@@ -57,7 +57,7 @@ def test_every_request_decided_once_safe_and_recorded(ros_context, spin_until, t
     assert len(obs.fleet) == duration + 1  # t = 0, 1, ..., 300 s
     assert max(len(f.vehicles) for f in obs.fleet) >= 1
     # The recording, decoded by the independent rosbags reader, holds the same run.
-    from uam_sim.analysis import summarize
+    from uam_sim.audit.analysis import summarize
     summary = summarize(tmp_path / "run.mcap", reader="rosbags")
     assert summary.complete_file
     assert summary.requests == len(request_ids)
@@ -77,7 +77,7 @@ def test_every_request_decided_once_safe_and_recorded(ros_context, spin_until, t
         assert entry.problem.objective(list(report.instance.selected)) == pytest.approx(report.objective)
     assert summary.audit.min_separation_m == pytest.approx(audit.min_separation_m, abs=1e-6)
     # Delay and detour of the recording are the in-process runner's (the experiment report's code).
-    from uam_sim.flights import run_metrics
+    from uam_sim.world.flights import run_metrics
     # (both leave out the requests still within their window at the end, as the runner does)
     lib_stats = run_metrics(in_process(rate, seed, duration, "exact").flights, end_s=duration)
     for name in ("flights", "delay_mean_s", "delayed_share", "detour_mean_pct", "shortest_share",

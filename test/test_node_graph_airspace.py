@@ -50,7 +50,7 @@ def test_layered_slots_cylinder_graph_equals_runner_and_is_audited_in_the_cylind
         assert route == runner[rid][1] and level == runner[rid][2]
         assert np.isclose(d, runner[rid][0])
     # the recording says the run's model; the analysis audits in it
-    from uam_sim.analysis import summarize
+    from uam_sim.audit.analysis import summarize
     summary = summarize(tmp_path / "run.mcap")
     assert summary.audit.separation_model == "cylinder"
     assert summary.audit.vertical_separation_m == 30.0

@@ -13,7 +13,7 @@ from graph_harness import build_graph, run_to_end, shutdown  # noqa: E402
 from uam_msgs.msg import FlightPlan  # noqa: E402
 
 from uam_planner.nodes import conversions as m  # noqa: E402
-from uam_sim.disturbance import DisturbanceConfig, fly_plans  # noqa: E402
+from uam_sim.world.disturbance import DisturbanceConfig, fly_plans  # noqa: E402
 
 pytestmark = pytest.mark.ros
 
@@ -49,7 +49,7 @@ def test_fleet_state_is_what_flew_and_the_analysis_audits_it(ros_context, spin_u
     latest = max(approved, key=lambda rid: flown[rid].arrival_s - approved[rid].arrival_s)
     assert flown[latest].arrival_s - approved[latest].arrival_s > 20.0
     assert held <= set(approved) and latest in held
-    from uam_sim.analysis import format_summary, summarize
+    from uam_sim.audit.analysis import format_summary, summarize
     summary = summarize(tmp_path / "run.mcap")
     assert summary.audit.ok and summary.flown["what"] == "flown"
     assert summary.flown["sample_step_s"] == 1.0 and summary.flown["pairs_checked"] > 0
@@ -108,7 +108,7 @@ def test_the_graph_reacts_to_a_nonconforming_flight_and_flies_its_update(ros_con
     trs = [clipped_from(m.trajectory_from_plan(p), t_last) for p in newest.values()
            if p.update_kind != "contingency"]
     assert audit_flights([t for t in trs if t is not None], separation_m=100.0).losses == []
-    from uam_sim.analysis import summarize
+    from uam_sim.audit.analysis import summarize
     summary = summarize(tmp_path / "run.mcap")
     assert summary.flown["what"] == "flown"
     # the recording holds what the run did: every update chains onto its approval (a

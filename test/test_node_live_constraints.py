@@ -157,7 +157,7 @@ def test_an_update_takes_effect_at_the_next_epoch_and_is_published_latched(ros_c
                and p.update_kind in ("rerouted", "retimed", "diverted", "cancelled", "contingency")
                and "'hub' v1" in p.reason for p in updates), [(p.update_kind, p.reason) for p in updates]
     assert sim.versions_received == len(updates)
-    from uam_sim.analysis import summarize
+    from uam_sim.audit.analysis import summarize
     s = summarize(out)
     assert s.verified, s.problems
     assert s.audit.ok and s.incursions == [] and s.constraints_in_force == 1

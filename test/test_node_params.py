@@ -87,7 +87,7 @@ def test_each_node_declares_exactly_its_table(ros_context, tmp_path):
 
     from rosgraph_msgs.msg import Clock
 
-    from uam_sim.mcap_writer import McapRecorder
+    from uam_sim.recording.mcap_writer import McapRecorder
     from uam_sim.nodes.recorder_node import RecorderNode
     from uam_sim.nodes.replay_node import ReplayNode
 

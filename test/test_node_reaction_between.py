@@ -66,8 +66,8 @@ class _Spy:
 
 def _runner(spy_epochs: list, period: float):
     from uam_planner.network import load_network
-    from uam_sim.demand import RequestGenerator
-    from uam_sim.experiment import make_config, run_scenario
+    from uam_sim.world.demand import RequestGenerator
+    from uam_sim.studies.experiment import make_config, run_scenario
     cfg = make_config(epoch_s=30.0, time_limit_s=5.0, audit=False, disturbance={"speed_error": SPEED_ERROR},
                       reaction=True, reaction_period_s=period)
     net = load_network(TINY)

@@ -70,7 +70,7 @@ def test_graph_replans_as_the_runner_does_and_the_recording_audits_what_flew(ros
     # solve, and gave the runner's decisions (above)
     assert nodes["planner"].replan_graphs_by_service >= 1
     # the recording: the set published when it took effect, every version, audited as flown
-    from uam_sim.analysis import summarize
+    from uam_sim.audit.analysis import summarize
     s = summarize(out)
     assert s.verified, s.problems
     assert s.audit.ok and s.incursions == [] and s.constraints_in_force == 1

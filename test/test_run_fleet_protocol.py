@@ -20,7 +20,7 @@ def test_run_fleet_passes_the_seed_to_the_planner_and_matches_the_runner(tmp_pat
     """Finding: --seed seeded the demand but not the solver."""
     from graph_harness import in_process
 
-    from uam_sim.analysis import iter_decoded
+    from uam_sim.audit.analysis import iter_decoded
 
     out = tmp_path / "run"
     env = dict(os.environ, ROS_DOMAIN_ID=str(ros_process_domain_id))
@@ -43,7 +43,7 @@ def test_run_fleet_layered_with_slots_and_cylinder_matches_the_runner_and_audits
     separated nothing)."""
     from graph_harness import in_process
 
-    from uam_sim.analysis import iter_decoded, summarize
+    from uam_sim.audit.analysis import iter_decoded, summarize
 
     out = tmp_path / "run"
     env = dict(os.environ, ROS_DOMAIN_ID=str(ros_process_domain_id))

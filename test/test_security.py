@@ -165,7 +165,7 @@ def test_release_demand_serves_only_the_bound_simulator_and_its_next_epoch(ros_c
 def test_a_second_planner_ends_the_run_with_a_reason_and_the_recording_does_not_verify(
         ros_context, spin_until, tmp_path):
     """Finding: a second planner on the domain took over; the simulator flew its answers."""
-    from uam_sim.analysis import summarize
+    from uam_sim.audit.analysis import summarize
 
     def attack(executor, nodes, rogue):
         _mid_run(executor, nodes, spin_until)
@@ -181,7 +181,7 @@ def test_a_second_planner_ends_the_run_with_a_reason_and_the_recording_does_not_
 
 def test_a_forged_end_of_run_changes_nothing_and_the_recording_does_not_verify(ros_context, spin_until, tmp_path):
     """Finding: a forged EpochSync(finished) cut the run short and the recording analysed as OK."""
-    from uam_sim.analysis import summarize
+    from uam_sim.audit.analysis import summarize
 
     def attack(executor, nodes, rogue):
         _mid_run(executor, nodes, spin_until)
@@ -314,7 +314,7 @@ def test_a_flood_of_new_operator_ids_cannot_push_out_the_operators_already_serve
 
 
 def test_ids_in_a_demand_file_are_bounded_at_load_as_on_the_wire(tmp_path):
-    from uam_sim.demand import DemandError, parse_demand
+    from uam_sim.world.demand import DemandError, parse_demand
 
     with pytest.raises(DemandError, match=r"\[0\]\.id: 'xxxx.*\(100000 characters\) must be 1 to 64"):
         parse_demand([{"t_s": 0, "origin": "A", "destination": "B", "id": "x" * 100_000}])

@@ -1,9 +1,9 @@
 """Short runs recorded in process, as the node graph's recorder would record them, for view tests.
 
-The planner runs in process (``uam_sim.experiment.run_scenario``); its decisions go to the
-recording at their decision times, and the fleet flying the approved plans (``uam_sim.fleet``)
+The planner runs in process (``uam_sim.studies.experiment.run_scenario``); its decisions go to the
+recording at their decision times, and the fleet flying the approved plans (``uam_sim.world.fleet``)
 is sampled every simulated second into ``/uam/fleet_state`` with the simulator's CDR encoder.
-With ``views=True`` the standard-message view topics (``uam_sim.std_msgs_export``) are added as
+With ``views=True`` the standard-message view topics (``uam_sim.views.std_msgs_export``) are added as
 the recorder adds them. Needs the built workspace (uam_msgs).
 """
 
@@ -33,12 +33,12 @@ def record_run(path, method: str = "greedy", network=None, rate: float = 4.0, se
     except ImportError:
         from uam_planner.nodes import messages as m
 
-    from uam_sim.cdr import encode_fleet_state
-    from uam_sim.experiment import make_config, run_scenario
-    from uam_sim.fleet import Fleet
+    from uam_sim.recording.cdr import encode_fleet_state
+    from uam_sim.studies.experiment import make_config, run_scenario
+    from uam_sim.world.fleet import Fleet
     from uam_sim.recording import McapRecorder, deserialize, RecordedMessage
-    from uam_sim.rerun_log import RerunLogger
-    from uam_sim.std_msgs_export import FRAME_ID, ViewExporter
+    from uam_sim.views.rerun_log import RerunLogger
+    from uam_sim.views.std_msgs_export import FRAME_ID, ViewExporter
 
     net = network if network is not None else load_network(TINY)
     cfg = make_config({"network": str(TINY), "out": str(Path(path).parent / "res"), "include_qpu": False,

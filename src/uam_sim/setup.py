@@ -24,11 +24,11 @@ setup(
             "replay = uam_sim.nodes.replay_node:main",
             "conformance_monitor = uam_sim.nodes.conformance_node:main",
             "uss = uam_sim.nodes.uss_node:main",
-            "export_f3548 = uam_sim.export_f3548:main",
-            "analyze = uam_sim.analysis:main",
-            "experiment = uam_sim.experiment:main",
+            "export_f3548 = uam_sim.f3548.export_f3548:main",
+            "analyze = uam_sim.audit.analysis:main",
+            "experiment = uam_sim.studies.experiment:main",
         ],
         # uam_solvers.instances reads .mcap corpora through this (it cannot import uam_sim)
-        "uam_solvers.corpus_readers": ["mcap = uam_sim.recorded_instances:corpus_entries"],
+        "uam_solvers.corpus_readers": ["mcap = uam_sim.recording.recorded_instances:corpus_entries"],
     },
 )

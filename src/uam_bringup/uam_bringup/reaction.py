@@ -6,7 +6,7 @@ which the planner takes its own observations in that mode (the service's name is
 from __future__ import annotations
 
 #: before an epoch at t the planner observes every flight airborne at t at t - 20, t - 10 and t:
-#: the in-process runner's monitor (``uam_sim.scenario._Reaction.OBSERVE_BACK_S``, held equal by
+#: the in-process runner's monitor (``uam_sim.runner.scenario._Reaction.OBSERVE_BACK_S``, held equal by
 #: test/test_node_reaction_between.py); between epochs, at the reaction instant only
 OBSERVE_BACK_S = (20.0, 10.0, 0.0)
 

@@ -2,7 +2,7 @@
 default").
 
 The planning library (``uam_planner.planning.PlanningConfig``, ``AirspaceConfig``,
-``uam_planner.separation``), the in-process runner (``uam_sim.experiment_config``), the audit and
+``uam_planner.separation``), the in-process runner (``uam_sim.runner.experiment_config``), the audit and
 the analysis, the node parameter tables (``uam_contract.params``) and the launcher table
 (``uam_contract.launch_options``, which ``scripts/run_fleet.sh`` and the launch file are held to
 by ``test/test_launchers.py``) read these names. The YAML files in ``config/`` cannot import

@@ -33,7 +33,7 @@ SERVICE_REACT = "uam/react"
 SERVICE_UPDATE_CONSTRAINT = "uam/update_constraint"
 TOPIC_CONSTRAINTS = "uam/constraints"
 
-# the standard-type views the recorder writes for generic viewers (uam_sim.std_msgs_export)
+# the standard-type views the recorder writes for generic viewers (uam_sim.views.std_msgs_export)
 TOPIC_VIEW_NETWORK = "uam/view/network"
 TOPIC_VIEW_ROUTES = "uam/view/routes"
 TOPIC_VIEW_FLEET = "uam/view/fleet"
@@ -41,7 +41,7 @@ TOPIC_VIEW_FIX_PREFIX = "uam/view/fix/"
 TOPIC_VIEW_NETWORK_POINTS = "uam/view/network_points"
 TOPIC_VIEW_CONSTRAINTS = "uam/view/constraints"
 TOPIC_VIEW_CONSTRAINT_POINTS = "uam/view/constraint_points"
-# the live Foxglove WebSocket's channels (uam_sim.foxglove_live)
+# the live Foxglove WebSocket's channels (uam_sim.views.foxglove_live)
 TOPIC_LIVE_NETWORK = "uam/live/network"
 TOPIC_LIVE_ROUTES = "uam/live/routes"
 TOPIC_LIVE_FLEET = "uam/live/fleet"
@@ -52,7 +52,7 @@ TOPIC_LIVE_METRICS = "uam/live/metrics"
 #: starts once the recorder hears the planner and the demand source
 RECORDER_WAITS_FOR = (TOPIC_PLANS, TOPIC_REPORTS, TOPIC_REQUESTS, TOPIC_SYNC)
 
-#: Rerun sinks of the recorder (uam_sim.rerun_log.RerunLogger)
+#: Rerun sinks of the recorder (uam_sim.views.rerun_log.RerunLogger)
 RERUN_MODES = ("off", "save", "spawn", "connect")
 
 

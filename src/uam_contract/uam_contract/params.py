@@ -202,7 +202,7 @@ SIMULATOR = (
           "also asks the planner to react every this many seconds between epochs, in lockstep, and flies "
           "the updates from that instant (the runner's reaction_period_s, docs/disturbances.md); 0 = at "
           "epochs only; otherwise less than epoch_s", 0.0, 86400.0),
-    # disturbances (issue 23, uam_sim.disturbance, docs/disturbances.md): all 0 = plans flown exactly
+    # disturbances (issue 23, uam_sim.world.disturbance, docs/disturbances.md): all 0 = plans flown exactly
     Param("wind_speed_mps", 0.0, "steady wind speed [m/s]; 0 with the other levels 0 = plans flown exactly "
           "(the paper's)", 0.0, 100.0),
     Param("wind_from_deg", 270.0, "direction the steady wind blows from [deg clockwise from north]", 0.0, 360.0),
@@ -325,7 +325,7 @@ REPLAY = (
 
 CONFORMANCE_MONITOR = (
     Param("lateral_m", 30.0, "lateral bound: horizontal distance from the nearest point of the planned path [m] "
-          "(uam_sim.conformance, docs/disturbances.md)", 0.001, 100000.0),
+          "(uam_sim.world.conformance, docs/disturbances.md)", 0.001, 100000.0),
     Param("vertical_m", 15.0, "vertical bound: height above or below that point [m]", 0.001, 10000.0),
     Param("time_s", 10.0, "time bound: |now - the planned time of that point| [s]", 0.001, 86400.0),
 )

@@ -134,9 +134,9 @@ def _holds_the_half_separation_box(f, vols, spec, times):
 
 
 def _run(tmp_path, separation_m, storm=True):
-    from uam_sim.experiment_config import make_config
-    from uam_sim.network_spec import load_network_spec
-    from uam_sim.scenario import run_scenario
+    from uam_sim.runner.experiment_config import make_config
+    from uam_sim.runner.network_spec import load_network_spec
+    from uam_sim.runner.scenario import run_scenario
     net = load_network_spec("config/networks/tiny.yaml")
     cfg = make_config({"network": "config/networks/tiny.yaml", "audit": False,
                        "separation_m": separation_m})

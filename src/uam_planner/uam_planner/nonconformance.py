@@ -5,7 +5,7 @@ intent's volumes of ASTM F3548-21, here a tube around the 4D trajectory): with p
 planned path nearest to q (3D, exact per segment) and tau* its planned time, the **lateral**
 error |q - p| horizontally <= ``lateral_m``, the **vertical** error |q_z - p_z| <= ``vertical_m``
 and the **time** error |t - tau*| <= ``time_s``. The same test serves the conformance monitor
-(``uam_sim.conformance``, which imports it from here) and the planner, which checks every
+(``uam_sim.world.conformance``, which imports it from here) and the planner, which checks every
 report against its own plan.
 
 **A report is a claim, not a fact.** The planner learns of a nonconforming flight from outside

@@ -4,11 +4,11 @@ is untouched."""
 
 import pytest
 
-from uam_sim.experiment_config import (AIRSPACE_PRESETS, REPO_ROOT, ExperimentConfig,
+from uam_sim.runner.experiment_config import (AIRSPACE_PRESETS, REPO_ROOT, ExperimentConfig,
                                        ExperimentError, make_config)
-from uam_sim.network_spec import load_network_spec
-from uam_sim.scenario import run_scenario
-from uam_sim.sweep import cell_key, cell_params
+from uam_sim.runner.network_spec import load_network_spec
+from uam_sim.runner.scenario import run_scenario
+from uam_sim.runner.sweep import cell_key, cell_params
 
 SG = "config/networks/singapore.yaml"
 SG_LAYERED = "config/networks/singapore-layered.yaml"

@@ -9,11 +9,11 @@ import pytest
 from uam_planner.network import load_network
 from uam_planner.separation import SeparationModel
 from uam_planner.trajectory import Trajectory
-from uam_sim.audit import (AIRSPACE_METADATA, airspace_metadata, audit_trajectories,
+from uam_sim.audit.separation import (AIRSPACE_METADATA, airspace_metadata, audit_trajectories,
                            separation_from_metadata, sweep_audit)
-from uam_sim.experiment_config import REPO_ROOT, ExperimentError, make_config
-from uam_sim.scenario import run_scenario
-from uam_sim.sweep import cell_params
+from uam_sim.runner.experiment_config import REPO_ROOT, ExperimentError, make_config
+from uam_sim.runner.scenario import run_scenario
+from uam_sim.runner.sweep import cell_params
 
 LAYERED = REPO_ROOT / "config" / "networks" / "singapore-layered.yaml"
 PAPER = REPO_ROOT / "config" / "networks" / "singapore.yaml"

@@ -11,10 +11,10 @@ from builtin_interfaces.msg import Time  # noqa: E402
 from geometry_msgs.msg import Point  # noqa: E402
 from uam_msgs.msg import FleetState, FlightPlan, FlightRequest, PlanningReport, VehicleState, Waypoint  # noqa: E402
 
-from uam_sim.analysis import format_summary, main, summarize  # noqa: E402
-from uam_sim.audit import AIRSPACE_METADATA, airspace_metadata  # noqa: E402
+from uam_sim.audit.analysis import format_summary, main, summarize  # noqa: E402
+from uam_sim.audit.separation import AIRSPACE_METADATA, airspace_metadata  # noqa: E402
 from run_frame import complete_run  # noqa: E402
-from uam_sim.mcap_writer import McapRecorder  # noqa: E402
+from uam_sim.recording.mcap_writer import McapRecorder  # noqa: E402
 
 NS = 1_000_000_000
 

@@ -15,10 +15,10 @@ from rclpy.qos import DurabilityPolicy, QoSProfile  # noqa: E402
 from uam_msgs.msg import (FleetState, FlightPlan, FlightRequest, MwisInstance,  # noqa: E402
                           PlanningReport, VehicleState, Waypoint)
 
-from uam_sim.analysis import format_summary, main, summarize  # noqa: E402
-from uam_sim.mcap_writer import McapRecorder  # noqa: E402
+from uam_sim.audit.analysis import format_summary, main, summarize  # noqa: E402
+from uam_sim.recording.mcap_writer import McapRecorder  # noqa: E402
 from run_frame import complete_run  # noqa: E402
-from uam_sim.recorded_instances import instances_from_mcap, recorded_instances  # noqa: E402
+from uam_sim.recording.recorded_instances import instances_from_mcap, recorded_instances  # noqa: E402
 
 NS = 1_000_000_000
 
@@ -177,8 +177,8 @@ def test_misspelled_options_are_errors_not_file_names(recording, capsys):
 
 
 def test_fleet_state_digest_reads_stamp_and_count_from_the_cdr():
-    from uam_sim.cdr import fleet_state_digest as _fleet_state_digest
-    from uam_sim.cdr import serialize_exact
+    from uam_sim.recording.cdr import fleet_state_digest as _fleet_state_digest
+    from uam_sim.recording.cdr import serialize_exact
 
     for frame in ("", "e", "enu", "a-longer-frame"):
         for n in (0, 1, 7):
@@ -195,7 +195,7 @@ def test_pruned_audit_equals_brute_force_on_random_flights():
     import numpy as np
     from uam_planner.audit import audit_flights
 
-    from uam_sim.audit import audit_trajectories
+    from uam_sim.audit.separation import audit_trajectories
 
     rng = np.random.default_rng(7)
     for trial in range(20):
@@ -286,7 +286,7 @@ def test_log_times_on_the_scenario_clock_give_the_same_analysis(recording, tmp_p
     """Issue 22: the recorder puts log times on the scenario's UTC clock (2025-01-06T00:00:00Z =
     1,736,121,600 s after the Unix epoch, + simulation time) and says so in the ``uam_clock``
     record; the readers subtract it, so the analysis, its times and its verdict are unchanged."""
-    from uam_sim.mcap_reader import CLOCK_METADATA, iter_decoded, log_time_zero_ns, read_messages, read_metadata
+    from uam_sim.recording.mcap_reader import CLOCK_METADATA, iter_decoded, log_time_zero_ns, read_messages, read_metadata
     from uam_sim.recording import parse_offered_qos
 
     zero = 1_736_121_600 * NS
@@ -310,7 +310,7 @@ def test_log_times_on_the_scenario_clock_give_the_same_analysis(recording, tmp_p
 
 
 def test_a_bad_clock_record_is_refused_naming_it(tmp_path):
-    from uam_sim.mcap_reader import CLOCK_METADATA, log_time_zero_ns
+    from uam_sim.recording.mcap_reader import CLOCK_METADATA, log_time_zero_ns
 
     bad = tmp_path / "bad.mcap"
     with McapRecorder(bad) as rec:

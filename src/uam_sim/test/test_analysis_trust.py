@@ -13,8 +13,8 @@ from builtin_interfaces.msg import Time  # noqa: E402
 from geometry_msgs.msg import Point  # noqa: E402
 from uam_msgs.msg import FleetState, FlightPlan, FlightRequest, PlanningReport, VehicleState, Waypoint  # noqa: E402
 
-from uam_sim.analysis import format_summary, main, summarize  # noqa: E402
-from uam_sim.mcap_writer import McapRecorder  # noqa: E402
+from uam_sim.audit.analysis import format_summary, main, summarize  # noqa: E402
+from uam_sim.recording.mcap_writer import McapRecorder  # noqa: E402
 from run_frame import complete_run  # noqa: E402
 
 NS = 1_000_000_000
@@ -141,7 +141,7 @@ def test_fleet_states_lost_on_the_way_make_the_recording_unverified(tmp_path):
 def test_missing_steps_are_counted_and_only_the_first_listed_even_for_a_forged_step_index():
     """A forged fleet state with step_index 2**64 - 1 (uint64 on the wire) is counted as a gap,
     not listed step by step (which would never end) nor an overflow."""
-    from uam_sim.analysis import missing_steps
+    from uam_sim.audit.analysis import missing_steps
 
     assert missing_steps([0, 1, 2]) == (0, [])
     assert missing_steps([5, 0, 3, 1]) == (2, [2, 4])
@@ -185,5 +185,5 @@ def test_requests_are_keyed_by_operator_and_a_refused_duplicate_is_not_a_decisio
 
 def test_the_key_separator_is_the_contracts():
     wire = pytest.importorskip("uam_contract.wire")
-    from uam_sim.analysis import SCOPE_SEPARATOR
+    from uam_sim.audit.analysis import SCOPE_SEPARATOR
     assert wire.scoped_id("op", "r1") == f"op{SCOPE_SEPARATOR}r1"

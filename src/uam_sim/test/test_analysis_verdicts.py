@@ -13,11 +13,11 @@ from geometry_msgs.msg import Point  # noqa: E402
 from run_frame import complete_run  # noqa: E402
 from uam_msgs.msg import EpochSync, FleetState, FlightPlan, FlightRequest, PlanningReport, VehicleState, Waypoint  # noqa: E402
 
-from uam_sim.analysis import main, summarize  # noqa: E402
-from uam_sim.audit import AIRSPACE_METADATA, airspace_metadata  # noqa: E402
-from uam_sim.mcap_reader import read_metadata  # noqa: E402
-from uam_sim.mcap_recover import recover  # noqa: E402
-from uam_sim.mcap_writer import McapRecorder  # noqa: E402
+from uam_sim.audit.analysis import main, summarize  # noqa: E402
+from uam_sim.audit.separation import AIRSPACE_METADATA, airspace_metadata  # noqa: E402
+from uam_sim.recording.mcap_reader import read_metadata  # noqa: E402
+from uam_sim.recording.mcap_recover import recover  # noqa: E402
+from uam_sim.recording.mcap_writer import McapRecorder  # noqa: E402
 
 NS = 1_000_000_000
 APPROVED = FlightPlan.OUTCOME_APPROVED

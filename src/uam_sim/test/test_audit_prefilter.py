@@ -10,7 +10,7 @@ import pytest
 
 from uam_planner.audit import audit_flights
 from uam_planner.separation import SeparationModel
-from uam_sim.audit import audit_trajectories
+from uam_sim.audit.separation import audit_trajectories
 
 
 def _flights(rng, n, box_m):

@@ -1,14 +1,14 @@
-"""The capacity study (uam_sim.capacity_study / capacity_report): arms x airspace modes run as the
+"""The capacity study (uam_sim.studies.capacity_study / capacity_report): arms x airspace modes run as the
 paper study's cells, one pool for all of them, tables and a report computed from the tables."""
 
 
 import pytest
 import yaml
 
-from uam_sim.capacity_report import write_capacity_report
-from uam_sim.capacity_study import load_capacity_config, run_capacity_study
-from uam_sim.experiment_config import ExperimentError
-from uam_sim.sweep import without_timing
+from uam_sim.reports.capacity_report import write_capacity_report
+from uam_sim.studies.capacity_study import load_capacity_config, run_capacity_study
+from uam_sim.runner.experiment_config import ExperimentError
+from uam_sim.runner.sweep import without_timing
 
 
 

@@ -4,8 +4,8 @@ silently; it is reported as stale and left where it is."""
 import json
 from pathlib import Path
 
-from uam_sim.experiment import make_config, run_sweep
-from uam_sim.sweep import (cell_key, cell_params, cell_stem, code_version, files_version,
+from uam_sim.studies.experiment import make_config, run_sweep
+from uam_sim.runner.sweep import (cell_key, cell_params, cell_stem, code_version, files_version,
                            run_code_files, stale_cells)
 
 NET = {"synthetic": {"n_nodes": 30, "n_aerodromes": 5, "seed": 2}}
@@ -20,12 +20,12 @@ def small(out):
 def test_the_run_code_is_the_planner_solvers_and_simulator_not_studies_docs_or_tests():
     labels = [label for label, _p in run_code_files()]
     for must in ("uam_planner/planning.py", "uam_planner/first_fit.py", "uam_solvers/auto.py",
-                 "uam_solvers/executor.py", "uam_contract/defaults.py", "uam_sim/scenario.py",
-                 "uam_sim/demand.py", "uam_sim/flights.py", "uam_sim/disturbance.py",
+                 "uam_solvers/executor.py", "uam_contract/defaults.py", "uam_sim/runner/scenario.py",
+                 "uam_sim/world/demand.py", "uam_sim/world/flights.py", "uam_sim/world/disturbance.py",
                  "requirements.txt"):
         assert must in labels, must
-    for never in ("uam_sim/decision_study.py", "uam_sim/decision_report.py", "uam_sim/sweep.py",
-                  "uam_sim/capacity_report.py", "uam_sim/figures.py"):
+    for never in ("uam_sim/studies/decision_study.py", "uam_sim/reports/decision_report.py", "uam_sim/runner/sweep.py",
+                  "uam_sim/reports/capacity_report.py", "uam_sim/reports/figures.py"):
         assert never not in labels, never
     assert not [x for x in labels if "/nodes/" in x or "/test/" in x or x.endswith(".md")]
 

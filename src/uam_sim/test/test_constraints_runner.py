@@ -7,11 +7,11 @@ import json
 import pytest
 
 from uam_planner.constraints import load_constraints
-from uam_sim.experiment import build_parser
-from uam_sim.experiment_config import ExperimentConfig, ExperimentError, make_config
-from uam_sim.network_spec import load_network_spec
-from uam_sim.scenario import run_scenario
-from uam_sim.sweep import cell_key, cell_params
+from uam_sim.studies.experiment import build_parser
+from uam_sim.runner.experiment_config import ExperimentConfig, ExperimentError, make_config
+from uam_sim.runner.network_spec import load_network_spec
+from uam_sim.runner.scenario import run_scenario
+from uam_sim.runner.sweep import cell_key, cell_params
 
 TINY = "config/networks/tiny.yaml"
 

@@ -5,9 +5,9 @@ from pathlib import Path
 
 import pytest
 
-from uam_sim.dask_cluster import DistributedError, run_cells, validate_scheduler
-from uam_sim.experiment import ExperimentError, make_config, run_sweep
-from uam_sim.sweep import cell_key, cell_params, run_cell, without_timing
+from uam_sim.runner.dask_cluster import DistributedError, run_cells, validate_scheduler
+from uam_sim.studies.experiment import ExperimentError, make_config, run_sweep
+from uam_sim.runner.sweep import cell_key, cell_params, run_cell, without_timing
 
 NET = {"synthetic": {"n_nodes": 30, "n_aerodromes": 5, "seed": 2}}
 

@@ -1,11 +1,11 @@
-"""uam_sim.flights.flight_metrics, the decision metrics (issue 21): hand-computed delay,
+"""uam_sim.world.flights.flight_metrics, the decision metrics (issue 21): hand-computed delay,
 detour, priority and fairness metrics, and the runner's summary carrying them."""
 
 import math
 
 import pytest
 
-from uam_sim.flights import jain_index, run_metrics as decision_metrics
+from uam_sim.world.flights import jain_index, run_metrics as decision_metrics
 
 
 def test_jain_index_hand_computed():
@@ -64,9 +64,9 @@ def test_decision_metrics_hand_computed():
 
 
 def test_runner_summary_carries_the_objective_and_metrics():
-    from uam_sim.experiment import make_config
-    from uam_sim.network_spec import load_network_spec
-    from uam_sim.scenario import run_scenario
+    from uam_sim.studies.experiment import make_config
+    from uam_sim.runner.network_spec import load_network_spec
+    from uam_sim.runner.scenario import run_scenario
 
     net = load_network_spec({"synthetic": {"n_nodes": 30, "n_aerodromes": 5, "seed": 2}})
     base = dict(priority_share=0.2, priority_class=2, operators=["a", "b"], audit=False)
@@ -97,9 +97,9 @@ def test_every_objective_is_deterministic_given_a_seed(horizon):
     operators in the demand and with a horizon; and the objectives do decide differently (the
     check is not vacuous)."""
     from uam_planner.objectives import OBJECTIVES
-    from uam_sim.experiment import make_config
-    from uam_sim.network_spec import load_network_spec
-    from uam_sim.scenario import run_scenario
+    from uam_sim.studies.experiment import make_config
+    from uam_sim.runner.network_spec import load_network_spec
+    from uam_sim.runner.scenario import run_scenario
 
     net = load_network_spec({"synthetic": {"n_nodes": 30, "n_aerodromes": 5, "seed": 2}})
     base = dict(priority_share=0.2, priority_class=2, operators=["a", "b"], audit=False,

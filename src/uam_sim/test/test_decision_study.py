@@ -13,11 +13,11 @@ import pytest
 import yaml
 from scipy.stats import t as student_t
 
-from uam_sim import sweep
-from uam_sim.decision_report import comparison_rows, power_rows, report_text, write_decision_report
-from uam_sim.decision_study import load_decision_config, run_stage
-from uam_sim.experiment_config import ExperimentError
-from uam_sim.stats import StatsError, holm, mser_truncation, seeds_needed
+from uam_sim.runner import sweep
+from uam_sim.reports.decision_report import comparison_rows, power_rows, report_text, write_decision_report
+from uam_sim.studies.decision_study import load_decision_config, run_stage
+from uam_sim.runner.experiment_config import ExperimentError
+from uam_sim.reports.stats import StatsError, holm, mser_truncation, seeds_needed
 
 REPO = Path(__file__).resolve().parents[3]
 COMMITTED = REPO / "docs" / "decision-study"
@@ -131,7 +131,7 @@ def test_every_variant_of_a_cell_and_rate_is_measured_in_one_window():
     """The window is the latest of the variants' MSER-5 truncations, per experiment cell and
     rate: a comparison across variants (E2's horizons) counts the same requests in both arms
     (a window per variant gave E2's pilot 8 % more requests in its H = 5 arm)."""
-    from uam_sim.decision_study import windows
+    from uam_sim.studies.decision_study import windows
 
     def cell(ramp, rate=20, method="firstfit"):
         series = list(np.linspace(0, 9, ramp)) + [10 + (1 if i % 2 else -1) for i in range(60)]
@@ -181,7 +181,7 @@ def test_comparisons_and_verdicts_are_computed_from_the_rows(tmp_path):
                                           / math.sqrt(3))
     assert pw["decides"] and pw["max_seeds"] == 3 and pw["mde_at_cap"] == pytest.approx(pw["mde_now"])
     # the sentence follows the interval: excludes 0 here, includes 0 for -1, +1, +3
-    from uam_sim.decision_report import _verdict
+    from uam_sim.reports.decision_report import _verdict
     assert "excludes 0, a difference above 0" in _verdict(p, "flights")
     q = next(r for r in comparison_rows(_runs([-1, 1, 3]), study) if r["kind"] == "primary")
     text = _verdict(q, "flights")
@@ -213,9 +213,9 @@ def test_first_fit_flies_the_same_flights_under_every_objective():
     objective): first-fit's decisions do not depend on the weights. Here with priority classes,
     operators with filing habits, slots and levels ("both"), so every objective's weights differ."""
     from uam_planner.objectives import OBJECTIVES
-    from uam_sim.experiment_config import make_config
-    from uam_sim.network_spec import load_network_spec
-    from uam_sim.scenario import run_scenario
+    from uam_sim.runner.experiment_config import make_config
+    from uam_sim.runner.network_spec import load_network_spec
+    from uam_sim.runner.scenario import run_scenario
     flown, weights = {}, {}
     for objective in OBJECTIVES:
         cfg = make_config({"network": str(REPO / "config/networks/singapore.yaml"),
@@ -323,7 +323,7 @@ def test_the_study_runs_resumes_and_its_report_rebuilds_from_the_tables(tmp_path
 
 
 def test_a_pinned_code_version_is_only_for_collecting_tables(tmp_path, capsys):
-    from uam_sim.decision_study import main
+    from uam_sim.studies.decision_study import main
 
     assert main(["--stage", "full", "--code-version", "d3795b835634", "--out", str(tmp_path)]) == 2
     assert "--code-version d3795b835634: only with --stage tables" in capsys.readouterr().err

@@ -1,11 +1,11 @@
-"""uam_sim.demand: the seeded request stream and demand files."""
+"""uam_sim.world.demand: the seeded request stream and demand files."""
 
 from collections import Counter
 from pathlib import Path
 
 import pytest
 
-from uam_sim.demand import (DemandError, DemandSchedule, RequestGenerator, load_demand,
+from uam_sim.world.demand import (DemandError, DemandSchedule, RequestGenerator, load_demand,
                             parse_demand, request_id)
 
 REPO = Path(__file__).resolve().parents[3]

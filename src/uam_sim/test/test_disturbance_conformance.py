@@ -12,12 +12,12 @@ import pytest
 from uam_planner.planning import AirspaceConfig, PlanningConfig
 from uam_planner.separation import SeparationModel
 from uam_planner.trajectory import Trajectory
-from uam_sim.conformance import (MAX_EXCURSION_S, MAX_EXCURSIONS_PER_FLIGHT_HOUR,
+from uam_sim.world.conformance import (MAX_EXCURSION_S, MAX_EXCURSIONS_PER_FLIGHT_HOUR,
                                  MIN_CONFORMANCE_PERCENT, ConformanceBounds, ConformanceMonitor,
                                  deviations, f3548_statistics, track_conformance)
-from uam_sim.disturbance import (DisturbanceConfig, FlightDraws, fly, fly_plans, flight_draws)
-from uam_sim.experiment_config import REPO_ROOT, ExperimentError, make_config
-from uam_sim.flown import flown_audit, tracks_from_samples
+from uam_sim.world.disturbance import (DisturbanceConfig, FlightDraws, fly, fly_plans, flight_draws)
+from uam_sim.runner.experiment_config import REPO_ROOT, ExperimentError, make_config
+from uam_sim.audit.flown import flown_audit, tracks_from_samples
 
 # east along y = 0 at z = 50 m, 1,000 m in 100 s (10 m/s)
 PLAN = Trajectory(np.array([0.0, 100.0]), np.array([[0.0, 0.0, 50.0], [1000.0, 0.0, 50.0]]))
@@ -132,7 +132,7 @@ def test_draws_are_seeded_per_flight_and_within_bounds():
 
 
 def test_gusts_are_seeded_and_have_the_stated_spread():
-    from uam_sim.disturbance import WindField
+    from uam_sim.world.disturbance import WindField
     cfg = DisturbanceConfig(gust_std_mps=2.0, seed=1)
     w = WindField(cfg)
     xy = np.random.default_rng(0).uniform(-20000, 20000, size=(20000, 2))
@@ -266,7 +266,7 @@ def test_flown_closest_approach_on_hand_tracks():
 
 
 def test_a_flown_loss_is_placed_near_a_shared_vertiport_or_en_route():
-    from uam_sim.scenario import VERTIPORT_AREA_M, near_shared_vertiport
+    from uam_sim.runner.scenario import VERTIPORT_AREA_M, near_shared_vertiport
     # A lands at the vertiport V = (0, 0): from (1000, 0) at t = 0 to V at t = 100 (10 m/s),
     # its flown track ending 15 m off V (drift). B departs V at t = 90 northwards at 10 m/s:
     # at t = 95 A is at x = 50 (about), B at y = 50, both within 200 m of V, which both plans
@@ -302,7 +302,7 @@ TINY = str(REPO_ROOT / "config" / "networks" / "tiny.yaml")
 
 
 def test_zero_disturbance_and_zero_buffers_give_todays_results_bit_for_bit():
-    from uam_sim.scenario import run_scenario
+    from uam_sim.runner.scenario import run_scenario
     from uam_planner.network import load_network
     net = load_network(TINY)
     # first-fit: the same planner, no solver worker processes (this test stays in make test-fast)
@@ -322,7 +322,7 @@ def test_zero_disturbance_and_zero_buffers_give_todays_results_bit_for_bit():
 
 
 def test_disturbed_run_is_seeded_and_reports_what_flew():
-    from uam_sim.scenario import run_scenario
+    from uam_sim.runner.scenario import run_scenario
     from uam_planner.network import load_network
     net = load_network(TINY)
     cfg = make_config({"network": TINY, "methods": ["firstfit"], "duration_s": 300.0,
@@ -350,8 +350,8 @@ def test_time_control_holds_a_slow_aircraft_near_its_plan():
 
 
 def test_montecarlo_aggregates_a_point_by_hand():
-    from uam_sim.experiment import key_values
-    from uam_sim.montecarlo import aggregate
+    from uam_sim.studies.experiment import key_values
+    from uam_sim.studies.montecarlo import aggregate
     assert key_values("speed_error=0.1, compensate_steady_wind=false") == {
         "speed_error": 0.1, "compensate_steady_wind": False}
     # two runs: 10 + 30 flight hours at 90 % and 100 %: flight-time weighted 97.5 %;
@@ -372,7 +372,7 @@ def test_montecarlo_aggregates_a_point_by_hand():
     assert row["approval_ci95_high"] == pytest.approx(0.7917 + 0.5294, abs=1e-3)
     # 1 flown loss in 80 flights: the exact Poisson bound chi2(0.95, 4) / 2 / 80 = 9.4877 / 160
     assert row["flown_losses_per_flight_upper95"] == pytest.approx(9.4877 / 160.0, rel=1e-4)
-    from uam_sim.montecarlo import format_table, poisson_upper95, spread_ci95
+    from uam_sim.studies.montecarlo import format_table, poisson_upper95, spread_ci95
     assert poisson_upper95(0, 1000) == pytest.approx(2.9957 / 1000.0, rel=1e-4)   # the rule of three
     assert all(math.isnan(x) for x in spread_ci95([0.5]))
     assert "26.2-132.1 %" in format_table([row]) and "0.0593" in format_table([row])
@@ -380,8 +380,8 @@ def test_montecarlo_aggregates_a_point_by_hand():
 
 def test_the_planner_keeps_the_buffered_separation_and_the_audit_the_minimum():
     from uam_planner.network import load_network
-    from uam_sim.audit import sweep_audit
-    from uam_sim.scenario import run_scenario
+    from uam_sim.audit.separation import sweep_audit
+    from uam_sim.runner.scenario import run_scenario
     net = load_network(TINY)
     got = {}
     for b in (0.0, 60.0):
@@ -443,7 +443,7 @@ def test_vertical_disturbances_leave_the_horizontal_track_and_draws_unchanged():
 
 
 def test_vertical_gusts_are_seeded_and_have_the_stated_spread():
-    from uam_sim.disturbance import WindField
+    from uam_sim.world.disturbance import WindField
     cfg = DisturbanceConfig(vertical_gust_std_mps=0.5, seed=2)
     xy = np.random.default_rng(0).uniform(-20000, 20000, size=(20000, 2))
     t = np.random.default_rng(1).uniform(0, 3600, 20000)
@@ -459,7 +459,7 @@ def test_vertical_gusts_are_seeded_and_have_the_stated_spread():
 
 def test_montecarlo_existing_only_runs_nothing(tmp_path, capsys):
     # --existing-only: the table of the cells already in --out; with none there, no row and no run
-    from uam_sim.montecarlo import main
+    from uam_sim.studies.montecarlo import main
     assert main(["--speed-errors", "0.1", "--spatial-buffers", "0,10", "--temporal-buffers", "0",
                  "--seeds", "3", "--out", str(tmp_path), "--existing-only"]) == 0
     assert list((tmp_path / "cells").iterdir()) == []

@@ -1,11 +1,11 @@
 """The first-fit baseline in the in-process runner: a method like fifo, on identical demand."""
 
 from uam_planner.planning import Planner
-from uam_sim.demand import RequestGenerator
-from uam_sim.experiment import make_config, run_sweep
-from uam_sim.experiment_config import DEFAULT_METHODS
-from uam_sim.network_spec import load_network_spec
-from uam_sim.sweep import cell_params
+from uam_sim.world.demand import RequestGenerator
+from uam_sim.studies.experiment import make_config, run_sweep
+from uam_sim.runner.experiment_config import DEFAULT_METHODS
+from uam_sim.runner.network_spec import load_network_spec
+from uam_sim.runner.sweep import cell_params
 
 NET = {"synthetic": {"n_nodes": 30, "n_aerodromes": 5, "seed": 2}}
 

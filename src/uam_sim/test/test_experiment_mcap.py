@@ -1,4 +1,4 @@
-"""uam_sim.experiment --from-mcap: a recording of a run gives the same metrics as the run itself."""
+"""uam_sim.studies.experiment --from-mcap: a recording of a run gives the same metrics as the run itself."""
 
 from __future__ import annotations
 
@@ -11,9 +11,9 @@ pytest.importorskip("uam_msgs.msg", reason="needs the built workspace (source sc
 from uam_msgs.msg import FlightPlan, FlightRequest, PlanningReport  # noqa: E402
 from uam_planner.nodes import conversions as m  # noqa: E402
 
-from uam_sim.experiment import main, make_config, run_scenario, study_from_mcaps  # noqa: E402
-from uam_sim.mcap_writer import McapRecorder  # noqa: E402
-from uam_sim.network_spec import load_network_spec  # noqa: E402
+from uam_sim.studies.experiment import main, make_config, run_scenario, study_from_mcaps  # noqa: E402
+from uam_sim.recording.mcap_writer import McapRecorder  # noqa: E402
+from uam_sim.runner.network_spec import load_network_spec  # noqa: E402
 
 NET = {"synthetic": {"n_nodes": 30, "n_aerodromes": 5, "seed": 2}}
 NS = 1_000_000_000
@@ -66,10 +66,10 @@ def test_recordings_give_the_runs_metrics(tmp_path):
 
 
 def test_a_recording_gives_the_runs_decision_metrics(tmp_path):
-    """Issue 21: uam_sim.analysis computes the runner's delay, per-class p95, operator shares and,
+    """Issue 21: uam_sim.audit.analysis computes the runner's delay, per-class p95, operator shares and,
     given the network, the detour in metres from a recording with the same implementation
-    (uam_sim.flights.run_metrics)."""
-    from uam_sim.analysis import format_summary, summarize
+    (uam_sim.world.flights.run_metrics)."""
+    from uam_sim.audit.analysis import format_summary, summarize
 
     cfg = make_config({"network": NET, "objective": "priority", "priority_share": 0.3,
                        "priority_class": 4, "operators": ["a", "b"], "audit": False})

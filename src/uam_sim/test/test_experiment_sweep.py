@@ -1,16 +1,16 @@
-"""uam_sim.experiment: small sweeps (two rates, two methods, one seed, short runs)."""
+"""uam_sim.studies.experiment: small sweeps (two rates, two methods, one seed, short runs)."""
 
 from pathlib import Path
 
 import pytest
 import yaml
 
-from uam_sim.demand import RequestGenerator
-from uam_sim.experiment import (ExperimentError, load_config, main, make_config, run_experiment,
+from uam_sim.world.demand import RequestGenerator
+from uam_sim.studies.experiment import (ExperimentError, load_config, main, make_config, run_experiment,
                                 run_scenario, run_sweep)
-from uam_sim.network_spec import load_network_spec
-from uam_sim.scenario import average_airborne
-from uam_sim.sweep import without_timing
+from uam_sim.runner.network_spec import load_network_spec
+from uam_sim.runner.scenario import average_airborne
+from uam_sim.runner.sweep import without_timing
 
 REPO = Path(__file__).resolve().parents[3]
 NET = {"synthetic": {"n_nodes": 30, "n_aerodromes": 5, "seed": 2}}
@@ -172,7 +172,7 @@ def test_command_line_runs_a_small_sweep(tmp_path):
 
 def test_sweep_audit_hand_computed_closest_approach():
     from uam_planner.trajectory import Trajectory
-    from uam_sim.audit import sweep_audit
+    from uam_sim.audit.separation import sweep_audit
     import numpy as np
     # r1 east at 10 m/s, z = 100; r2 north at 10 m/s, z = 150, two segments; r3 5 km away.
     # |d|^2 = 2 (10 t - 500)^2 + 50^2: closest 50 m at t = 50 s.
@@ -192,7 +192,7 @@ def test_sweep_audit_hand_computed_closest_approach():
 
 def test_sweep_audit_agrees_with_the_brute_force_audit():
     from uam_planner.audit import audit_flights
-    from uam_sim.audit import sweep_audit
+    from uam_sim.audit.separation import sweep_audit
     net = load_network_spec(NET)
     flown = []
     run_scenario(net, "greedy", 8, 3, 900.0, make_config({"audit": False}),

@@ -18,12 +18,12 @@ from uam_planner.f3548_schema import errors, validate_implicit  # noqa: E402
 from uam_planner.live_constraints import set_geojson  # noqa: E402
 from uam_planner.nodes import conversions as m  # noqa: E402
 
-from uam_sim.audit import AIRSPACE_METADATA, airspace_metadata  # noqa: E402
-from uam_sim.experiment_config import make_config  # noqa: E402
-from uam_sim.export_f3548 import main  # noqa: E402
-from uam_sim.mcap_writer import McapRecorder  # noqa: E402
-from uam_sim.network_spec import load_network_spec  # noqa: E402
-from uam_sim.scenario import run_scenario  # noqa: E402
+from uam_sim.audit.separation import AIRSPACE_METADATA, airspace_metadata  # noqa: E402
+from uam_sim.runner.experiment_config import make_config  # noqa: E402
+from uam_sim.f3548.export_f3548 import main  # noqa: E402
+from uam_sim.recording.mcap_writer import McapRecorder  # noqa: E402
+from uam_sim.runner.network_spec import load_network_spec  # noqa: E402
+from uam_sim.runner.scenario import run_scenario  # noqa: E402
 
 TINY = "config/networks/tiny.yaml"
 NS = 1_000_000_000

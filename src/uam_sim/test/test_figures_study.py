@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from uam_planner.network import network_from_enu
-from uam_sim.experiment import make_config, run_experiment
-from uam_sim.report import report_from_tables
-from uam_sim.figures import (central_corridors, corridor_use_m, flight_metrics, per_read_tts,
+from uam_sim.studies.experiment import make_config, run_experiment
+from uam_sim.reports.report import report_from_tables
+from uam_sim.reports.figures import (central_corridors, corridor_use_m, flight_metrics, per_read_tts,
                              warmup_time_s)
 
 

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from uam_planner.trajectory import Trajectory
-from uam_sim.cdr import encode_clock, encode_fleet_state, encode_pose_array, yaw_quaternions
-from uam_sim.fleet import PHASE_CRUISE, PHASE_LANDING, PHASE_TAKEOFF, Fleet
+from uam_sim.recording.cdr import encode_clock, encode_fleet_state, encode_pose_array, yaw_quaternions
+from uam_sim.world.fleet import PHASE_CRUISE, PHASE_LANDING, PHASE_TAKEOFF, Fleet
 
 
 def _fleet():
@@ -104,7 +104,7 @@ def test_stamps_ids_and_positions_are_read_from_the_cdr_without_deserializing():
     from geometry_msgs.msg import PoseArray
     from rosgraph_msgs.msg import Clock
     from uam_msgs.msg import FlightPlan, PlanningReport
-    from uam_sim.cdr import fleet_state_digest, fleet_state_step_index, leading_stamp_ns, serialize_exact
+    from uam_sim.recording.cdr import fleet_state_digest, fleet_state_step_index, leading_stamp_ns, serialize_exact
 
     cases = (("", []), ("enu", ["a"]), ("e", ["r00001_000", "x" * 13, "é", "b7"]),
              ("enu", [f"r{i:05d}_000" for i in range(40)]),          # one length: strided path

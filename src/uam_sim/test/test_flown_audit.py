@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from uam_planner.constraints import Constraint
-from uam_sim.flown_audit import (audit_incursions, chain_problems, constraint_intervals, flown_trajectory,
+from uam_sim.audit.flown_audit import (audit_incursions, chain_problems, constraint_intervals, flown_trajectory,
                                  flown_versions, incursions)
 
 

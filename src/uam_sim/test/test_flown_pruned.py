@@ -119,8 +119,8 @@ def test_the_recordings_flown_audit_is_the_full_sweeps(tmp_path):
     from geometry_msgs.msg import Point
     from uam_msgs.msg import FleetState, VehicleState
 
-    from uam_sim.flown import recording_flown
-    from uam_sim.mcap_writer import McapRecorder
+    from uam_sim.audit.flown import recording_flown
+    from uam_sim.recording.mcap_writer import McapRecorder
 
     rng = np.random.default_rng(7)
     n, steps = 40, 120

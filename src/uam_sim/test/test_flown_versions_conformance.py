@@ -27,9 +27,9 @@ def test_conformance_follows_each_version_from_the_instant_it_takes_effect(tmp_p
     from geometry_msgs.msg import Point
     from uam_msgs.msg import FleetState, VehicleState
 
-    from uam_sim.conformance import ConformanceBounds
-    from uam_sim.flown import recording_flown
-    from uam_sim.mcap_writer import McapRecorder
+    from uam_sim.world.conformance import ConformanceBounds
+    from uam_sim.audit.flown import recording_flown
+    from uam_sim.recording.mcap_writer import McapRecorder
 
     # version 1: east at 10 m/s, (0, 0) at 0 s to (1000, 0) at 100 s; version 2, in force from
     # 50 s: from (500, 0) north to (500, 500) at 100 s. r1 flies version 1 then version 2 (what
@@ -77,7 +77,7 @@ def _record(path, tracks, steps):
     from geometry_msgs.msg import Point
     from uam_msgs.msg import FleetState, VehicleState
 
-    from uam_sim.mcap_writer import McapRecorder
+    from uam_sim.recording.mcap_writer import McapRecorder
 
     rec = McapRecorder(path)
     rec.add_topic("/uam/fleet_state", FleetState)
@@ -102,7 +102,7 @@ def test_the_chord_across_the_top_of_a_climb_is_not_a_loss(tmp_path):
 
     from uam_planner.audit import audit_flights
     from uam_planner.trajectory import Trajectory
-    from uam_sim.flown import recording_flown
+    from uam_sim.audit.flown import recording_flown
 
     a = Trajectory(np.array([0.0, 40.0]), np.array([(-208.0, 0, 90), (192.0, 0, 90)]))
     b = Trajectory(np.array([0.0, 10.5, 40.0]), np.array([(0, 0, 67.5), (0, 0, 120), (0, 0, 120.0)]))

@@ -19,9 +19,9 @@ import pytest
 
 pytest.importorskip("foxglove")
 
-from uam_sim.foxglove_live import (TOPIC_FLEET, TOPIC_FLEET_GEO, TOPIC_METRICS,  # noqa: E402
+from uam_sim.views.foxglove_live import (TOPIC_FLEET, TOPIC_FLEET_GEO, TOPIC_METRICS,  # noqa: E402
                                    TOPIC_NETWORK, TOPIC_ROUTES, FoxgloveLive)
-from uam_sim.std_msgs_export import scenario_start_ns  # noqa: E402
+from uam_sim.views.std_msgs_export import scenario_start_ns  # noqa: E402
 
 START = "2025-01-06T00:00:00Z"
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from uam_sim.movie import RunPlans, UseCounter, main, make_movie, positions_at
+from uam_sim.views.movie import RunPlans, UseCounter, main, make_movie, positions_at
 
 
 def one_flight_run() -> RunPlans:
@@ -49,7 +49,7 @@ def two_runs(tmp_path_factory):
 
 
 def _expected_frames(paths, step_s):
-    from uam_sim.movie import read_plans
+    from uam_sim.views.movie import read_plans
     t_end = max(float(t[-1]) for p in paths for t in read_plans(p).times_s)
     return len(np.arange(0.0, t_end + 1e-9, step_s))
 
@@ -89,7 +89,7 @@ def test_the_movie_stops_at_the_run_s_end_unless_told_otherwise(tmp_path):
     pytest.importorskip("uam_msgs.msg", reason="needs the built workspace (source scripts/env.sh)")
     from PIL import Image
     from view_runs import record_run
-    from uam_sim.movie import movie_end_s, read_plans
+    from uam_sim.views.movie import movie_end_s, read_plans
 
     path = tmp_path / "cut.mcap"
     record_run(path, "greedy", rate=4.0, duration_s=120.0, views=False, stop_s=90.0)

@@ -12,8 +12,8 @@ from uam_planner.network import network_from_enu
 from uam_planner.nonconformance import KIND, MAX_OVERRUN_SHARE, ConformanceBounds, rejoin_trajectory
 from uam_planner.planning import Flight, FlightRequest, Planner, PlanningConfig
 from uam_planner.trajectory import Trajectory
-from uam_sim.conformance import track_conformance
-from uam_sim.disturbance import DisturbanceConfig, FlightDraws, fly
+from uam_sim.world.conformance import track_conformance
+from uam_sim.world.disturbance import DisturbanceConfig, FlightDraws, fly
 
 
 def cross():
@@ -153,9 +153,9 @@ def test_the_runner_reacts_and_off_is_todays_run():
     updates, the aircraft fly on; conformance improves and every update is recorded. Reaction
     off is the run without the option, field for field (timings aside)."""
     from uam_planner.network import load_network
-    from uam_sim.experiment_config import REPO_ROOT, make_config
-    from uam_sim.scenario import run_scenario
-    from uam_sim.sweep import TIMING_FIELDS
+    from uam_sim.runner.experiment_config import REPO_ROOT, make_config
+    from uam_sim.runner.scenario import run_scenario
+    from uam_sim.runner.sweep import TIMING_FIELDS
     net = load_network(REPO_ROOT / "config" / "networks" / "tiny.yaml")
     dist = {"speed_error": 0.3, "gust_std_mps": 0.5}
     base = dict(epoch_s=30.0, time_limit_s=5.0, corpus_max_vertices=0, disturbance=dist)
@@ -437,8 +437,8 @@ def test_the_runner_reacts_between_epochs():
     """reaction_period_s = 5 s in the runner: updates take effect between epochs, and the
     longest excursion is shorter than with the reaction at the epochs only (same seed)."""
     from uam_planner.network import load_network
-    from uam_sim.experiment_config import REPO_ROOT, ExperimentError, make_config
-    from uam_sim.scenario import run_scenario
+    from uam_sim.runner.experiment_config import REPO_ROOT, ExperimentError, make_config
+    from uam_sim.runner.scenario import run_scenario
     net = load_network(REPO_ROOT / "config" / "networks" / "tiny.yaml")
     base = dict(epoch_s=30.0, time_limit_s=5.0, corpus_max_vertices=0, reaction=True,
                 disturbance={"speed_error": 0.3, "gust_std_mps": 0.5})
@@ -459,7 +459,7 @@ def test_the_plans_audit_names_each_piece_by_its_kind():
     # a flight planned W -> E from 0 s, updated at 100 s as a contingency: the plan until
     # 100 s - 1 ms, then the contingency; the audit leaves the contingency out of the losses of
     # the deconflicted plans (scenario.run_scenario's summary "losses_deconflicted")
-    from uam_sim.scenario import planned_pieces
+    from uam_sim.runner.scenario import planned_pieces
     a = P.trajectory
     b = rejoin_trajectory(a, 100.0, (900.0, 0.0, 0.0), 0.9)
     row = {"_traj": b, "_pieces": [(0.0, a), (100.0, b)], "_kinds": ["plan", "contingency"]}

@@ -17,7 +17,7 @@ from uam_contract import params as P
 from uam_contract.launch_options import LAUNCH_OPTIONS
 from uam_planner import candidates, separation
 from uam_planner.planning import AirspaceConfig, PlanningConfig
-from uam_sim.experiment_config import ExperimentConfig
+from uam_sim.runner.experiment_config import ExperimentConfig
 
 ROOT = pathlib.Path(__file__).resolve().parents[3]
 CONFIG = ROOT / "config"

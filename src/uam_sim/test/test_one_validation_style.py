@@ -17,9 +17,9 @@ import yaml
 from uam_contract.params import PLANNER, SIMULATOR
 from uam_contract.validation import Param
 from uam_planner.network import NetworkError, network_from_dict
-from uam_sim.capacity_study import load_capacity_config
-from uam_sim.demand import DemandError, parse_demand
-from uam_sim.experiment_config import ExperimentError, make_config
+from uam_sim.studies.capacity_study import load_capacity_config
+from uam_sim.world.demand import DemandError, parse_demand
+from uam_sim.runner.experiment_config import ExperimentError, make_config
 from uam_solvers.errors import MwisInputError
 from uam_solvers.options import parse_options
 from uam_solvers.registry import get_backend

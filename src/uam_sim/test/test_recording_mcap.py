@@ -26,10 +26,10 @@ from rosgraph_msgs.msg import Clock  # noqa: E402
 from uam_msgs.msg import (EpochSync, FleetState, FlightPlan, FlightRequest,  # noqa: E402
                           MwisInstance, PlanningReport, VehicleState, Waypoint)
 
-from uam_sim.mcap_reader import (deserialize, is_complete, read_messages,  # noqa: E402
+from uam_sim.recording.mcap_reader import (deserialize, is_complete, read_messages,  # noqa: E402
                                  read_messages_tolerant)
-from uam_sim.mcap_schema import DEFINITION_SEPARATOR, RecordingError, message_definition  # noqa: E402
-from uam_sim.mcap_writer import McapRecorder  # noqa: E402
+from uam_sim.recording.mcap_schema import DEFINITION_SEPARATOR, RecordingError, message_definition  # noqa: E402
+from uam_sim.recording.mcap_writer import McapRecorder  # noqa: E402
 from uam_contract.qos_spec import offered_qos_yaml, parse_offered_qos  # noqa: E402
 from uam_contract.stamps import sim_stamp_ns  # noqa: E402
 
@@ -225,7 +225,7 @@ def test_torn_recording_still_yields_the_chunks_written_before_the_cut(tmp_path)
         import os, signal, sys
         from rosgraph_msgs.msg import Clock
         from builtin_interfaces.msg import Time
-        from uam_sim.mcap_writer import McapRecorder
+        from uam_sim.recording.mcap_writer import McapRecorder
         rec = McapRecorder({str(path)!r}, flush_period_s=None)
         rec.add_topic("/clock", Clock)
         for i in range(300):
@@ -254,7 +254,7 @@ def test_torn_recording_still_yields_the_chunks_written_before_the_cut(tmp_path)
             pass
     # ... and recover rewrites it into a complete file that every reader opens
 
-    from uam_sim.mcap_recover import recover
+    from uam_sim.recording.mcap_recover import recover
     fixed = tmp_path / "fixed.mcap"
     assert recover(path, fixed) == 200
     assert is_complete(fixed)
@@ -296,7 +296,7 @@ def test_exact_cdr_size_matches_what_dds_delivers():
     """
     from rosbags.typesys import Stores, get_typestore, get_types_from_msg
 
-    from uam_sim.cdr import cdr_size, serialize_exact
+    from uam_sim.recording.cdr import cdr_size, serialize_exact
 
     assert cdr_size(MwisInstance()) == 28
     assert cdr_size(MwisInstance(edges_u=[7])) == 32
@@ -317,7 +317,7 @@ def test_a_flight_plan_recorded_before_observed_progress_rate_still_reads(tmp_pa
     made before it holds the old definition in its schema and messages without the field:
     read with the file's own schema, into today's class, the field at its default 0."""
     from mcap_ros2.writer import Writer
-    from uam_sim.mcap_schema import DEFINITION_SEPARATOR, message_definition
+    from uam_sim.recording.mcap_schema import DEFINITION_SEPARATOR, message_definition
 
     new = message_definition("uam_msgs/msg/FlightPlan")
     head, sep, deps = new.partition("\n" + DEFINITION_SEPARATOR)

@@ -24,7 +24,7 @@ from uam_msgs.msg import (EpochSync, FleetState, FlightPlan, FlightRequest,  # n
 
 from uam_contract.names import resolved  # noqa: E402
 from uam_sim.nodes.recorder_node import RECORDED_TOPICS, RecorderNode  # noqa: E402
-from uam_sim.mcap_reader import is_complete, read_messages  # noqa: E402
+from uam_sim.recording.mcap_reader import is_complete, read_messages  # noqa: E402
 
 pytestmark = pytest.mark.ros
 ROOT = Path(__file__).resolve().parents[3]
@@ -101,7 +101,7 @@ def test_records_every_topic_and_closes_on_the_simulators_finish(ros_context, sp
     assert [m.log_time_ns for m in clouds] == [zero + k * NS for k in range(5)]
     fleet_times = [m.log_time_ns for m in msgs if m.topic == "/uam/fleet_state"]
     assert fleet_times == [zero + k * NS for k in range(5)]
-    from uam_sim.mcap_reader import iter_decoded, read_metadata
+    from uam_sim.recording.mcap_reader import iter_decoded, read_metadata
     assert read_metadata(out, "uam_clock") == {"log_time_zero_ns": str(zero),
                                                "log_time_start_utc": "2025-01-06T00:00:00Z"}
     # the readers give simulation time back (the analysis works in seconds from the start)
@@ -154,8 +154,8 @@ def test_recorder_checks_announced_approvals_and_never_deserializes_fleet_states
     the CDR bytes: those messages are never deserialized (they were most of the recorder's CPU)."""
     import uam_sim.nodes.recorder_node as recorder_module
     from uam_contract import names as c
-    from uam_sim.analysis import summarize
-    from uam_sim.mcap_reader import read_metadata
+    from uam_sim.audit.analysis import summarize
+    from uam_sim.recording.mcap_reader import read_metadata
 
     decoded = []
     real = recorder_module.deserialize_message

@@ -6,9 +6,9 @@ import json
 
 from uam_planner.constraints import Constraint, load_constraints
 from uam_planner.replanning import KINDS
-from uam_sim.experiment_config import make_config
-from uam_sim.network_spec import load_network_spec
-from uam_sim.scenario import run_scenario
+from uam_sim.runner.experiment_config import make_config
+from uam_sim.runner.network_spec import load_network_spec
+from uam_sim.runner.scenario import run_scenario
 
 TINY = "config/networks/tiny.yaml"
 

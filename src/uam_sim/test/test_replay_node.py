@@ -15,9 +15,9 @@ from rosgraph_msgs.msg import Clock  # noqa: E402
 from uam_msgs.msg import FleetState, FlightPlan  # noqa: E402
 
 from uam_sim.nodes.replay_node import ReplayNode  # noqa: E402
-from uam_sim.mcap_reader import read_messages  # noqa: E402
-from uam_sim.mcap_writer import McapRecorder  # noqa: E402
-from uam_sim.replay import load_plan  # noqa: E402
+from uam_sim.recording.mcap_reader import read_messages  # noqa: E402
+from uam_sim.recording.mcap_writer import McapRecorder  # noqa: E402
+from uam_sim.views.replay import load_plan  # noqa: E402
 
 NS = 1_000_000_000
 LATCHED = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
@@ -82,9 +82,9 @@ def test_a_replayed_run_recorded_again_gives_the_same_summary(ros_context, spin_
     from geometry_msgs.msg import Point
     from uam_msgs.msg import EpochSync, FlightRequest, PlanningReport, VehicleState, Waypoint
 
-    from uam_sim.audit import AIRSPACE_METADATA, airspace_metadata
+    from uam_sim.audit.separation import AIRSPACE_METADATA, airspace_metadata
 
-    from uam_sim.analysis import summarize
+    from uam_sim.audit.analysis import summarize
     from uam_contract.names import resolved
     from uam_sim.nodes.recorder_node import RECORDED_TOPICS, RecorderNode
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from uam_contract.qos_spec import QosSpec
-from uam_sim.replay import ReplayPlan, replay_qos, schedule_offsets_s
+from uam_sim.views.replay import ReplayPlan, replay_qos, schedule_offsets_s
 
 
 def test_offsets_scale_with_rate():

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from uam_sim.report import alternatives_vs_optimisation, beyond_paper, paper_checks
+from uam_sim.reports.report import alternatives_vs_optimisation, beyond_paper, paper_checks
 
 
 def _cells(approved: dict) -> list:

@@ -13,7 +13,7 @@ import pytest
 
 pytest.importorskip("rerun")
 
-from uam_sim.rerun_log import RerunLogger  # noqa: E402
+from uam_sim.views.rerun_log import RerunLogger  # noqa: E402
 
 
 def _cli() -> str | None:
@@ -111,7 +111,7 @@ def test_rrd_verifies_and_contains_the_entities(rrd):
 
 
 def test_blueprint_lays_out_the_views():
-    from uam_sim.rerun_log import make_blueprint, map_zoom, top_down_eye
+    from uam_sim.views.rerun_log import make_blueprint, map_zoom, top_down_eye
 
     net = tiny_network()
     position, target = top_down_eye(net)
@@ -134,7 +134,7 @@ def test_blueprint_lays_out_the_views():
 
 
 def test_corridor_levels_colour_corridors_and_default_to_one_level():
-    from uam_sim.rerun_log import LEVEL_COLORS, corridor_levels, level_colors
+    from uam_sim.views.rerun_log import LEVEL_COLORS, corridor_levels, level_colors
 
     net = tiny_network()
     assert corridor_levels(net).tolist() == [0, 0]
@@ -168,7 +168,7 @@ def test_mismatched_ids_and_positions_are_refused(tmp_path):
 def test_a_recording_becomes_an_rrd_with_the_view(tmp_path):
     """``python -m uam_sim.rerun_log RUN.mcap --network NET`` for runs recorded without Rerun."""
     pytest.importorskip("uam_msgs.msg", reason="needs the built workspace (source scripts/env.sh)")
-    from uam_sim.rerun_log import main
+    from uam_sim.views.rerun_log import main
     from view_runs import TINY, record_run
 
     mcap = tmp_path / "run.mcap"
@@ -181,7 +181,7 @@ def test_a_recording_becomes_an_rrd_with_the_view(tmp_path):
         assert f"entity_path: {entity}" in text, entity
     assert main([str(tmp_path / "missing.mcap")]) == 1
 def test_levels_of_a_layered_network_are_drawn_in_their_colours():
-    from uam_sim.rerun_log import LEVEL_COLORS, flight_level_index
+    from uam_sim.views.rerun_log import LEVEL_COLORS, flight_level_index
 
     # hand-computed: climb from a 5 m pad to 90 m, cruise, descend: level 1 of (60, 90, 120)
     route = [[0, 0, 5], [0, 0, 90], [1000, 0, 90], [2000, 0, 90], [2000, 0, 5]]
@@ -204,7 +204,7 @@ def test_levels_of_a_layered_network_are_drawn_in_their_colours():
     assert all(s[0, 2] == s[1, 2] for s in strips)
     assert tuple(kw["colors"][0]) == LEVEL_COLORS[0] and tuple(kw["colors"][-1]) == LEVEL_COLORS[2]
     # the side view's copy: the same corridors, heights exaggerated so the levels lie apart
-    from uam_sim.rerun_log import height_exaggeration, make_blueprint
+    from uam_sim.views.rerun_log import height_exaggeration, make_blueprint
     k = height_exaggeration(net)
     assert k == pytest.approx(0.25 * 2000.0 / 120.0)  # a quarter of the 2 km extent over 120 m
     _, side, side_kw = logged["side/network/corridors"]
@@ -253,7 +253,7 @@ def test_batched_fleet_logging_shows_every_step_as_logged(tmp_path, batch_steps)
     """However the positions are batched (send_columns), at every step the viewer shows that
     step's positions with their labels, the aircraft colour and size, and the routes of exactly
     the airborne flights (instance k = aircraft k), on the map too; close() sends the rest."""
-    from uam_sim.rerun_log import ROUTE_COLOR, VEHICLE_COLOR, VEHICLE_RADIUS_UI
+    from uam_sim.views.rerun_log import ROUTE_COLOR, VEHICLE_COLOR, VEHICLE_RADIUS_UI
 
     path = tmp_path / "f.rrd"
     rng = np.random.default_rng(3)
@@ -324,7 +324,7 @@ def test_graph_routes_match_their_aircraft_and_replanned_ones_show_as_such(tmp_p
     """In the node graph the simulator names a vehicle operator/request: its route must carry that
     key (it carried the bare request id, so every airborne route was drawn as a point). A plan
     version > 1 (issue 22) replaces the route, in the re-planned colour, and is not an approval."""
-    from uam_sim.rerun_log import REPLANNED_ROUTE_COLOR, ROUTE_COLOR
+    from uam_sim.views.rerun_log import REPLANNED_ROUTE_COLOR, ROUTE_COLOR
 
     def plan(version, xs, stamp_s):
         return NS(outcome=0, operator_id="generator", request_id="r1", version=version, header=NS(stamp=stamp(stamp_s)),

@@ -20,7 +20,7 @@ import pytest
 
 pytest.importorskip("uam_msgs.msg", reason="needs the built workspace (source scripts/env.sh)")
 
-from uam_sim.rerun_log import (AERODROME_COLOR, CORRIDOR_COLOR, LEVEL_COLORS, ROUTE_COLOR,  # noqa: E402
+from uam_sim.views.rerun_log import (AERODROME_COLOR, CORRIDOR_COLOR, LEVEL_COLORS, ROUTE_COLOR,  # noqa: E402
                                VEHICLE_COLOR)
 from view_runs import ROOT, record_run  # noqa: E402
 

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from uam_sim.stats import StatsError, compare, mean_interval, paired
+from uam_sim.reports.stats import StatsError, compare, mean_interval, paired
 
 
 def test_t_interval_by_hand():

@@ -13,7 +13,7 @@ import pytest
 
 pytest.importorskip("uam_msgs.msg", reason="needs the built workspace (source scripts/env.sh)")
 
-from uam_sim.std_msgs_export import (DEFAULT_SCENARIO_START_UTC, MARKER_LINE_LIST,  # noqa: E402
+from uam_sim.views.std_msgs_export import (DEFAULT_SCENARIO_START_UTC, MARKER_LINE_LIST,  # noqa: E402
                                      MARKER_LINE_STRIP, MARKER_TEXT_VIEW_FACING, TOPIC_FLEET_CLOUD,
                                      TOPIC_NETWORK, TOPIC_ROUTES, Marker, ViewExporter,
                                      encode_marker_array, encode_nav_sat_fix, encode_point_cloud,
@@ -222,7 +222,7 @@ def test_views_are_added_to_an_older_recording(tmp_path):
     """``python -m uam_sim.std_msgs_export`` copies a recording made without view topics and adds
     them; ``--log-time utc`` shifts every message by the scenario start."""
     from uam_sim.recording import read_messages
-    from uam_sim.std_msgs_export import main
+    from uam_sim.views.std_msgs_export import main
 
     src = tmp_path / "old.mcap"
     result, _ = record_run(src, "greedy", duration_s=60.0, views=False)
@@ -250,7 +250,7 @@ def test_bulk_fleet_encoding_decodes_to_the_same_messages_as_the_per_vehicle_pat
     from sensor_msgs.msg import NavSatFix, PointCloud2
 
     from uam_planner.network import load_network
-    from uam_sim.std_msgs_export import (TYPE_NAV_SAT_FIX, encode_nav_sat_fixes,
+    from uam_sim.views.std_msgs_export import (TYPE_NAV_SAT_FIX, encode_nav_sat_fixes,
                                          encode_point_cloud_fast)
 
     net = load_network(TINY)
@@ -281,7 +281,7 @@ def test_bulk_fleet_encoding_decodes_to_the_same_messages_as_the_per_vehicle_pat
 
 
 def test_lines_are_sampled_into_points_at_most_25_m_apart():
-    from uam_sim.std_msgs_export import sample_lines
+    from uam_sim.views.std_msgs_export import sample_lines
 
     # 100 m east: 0, 25, 50, 75, 100; 30 m north: two steps of 15 m; a point-long segment: twice
     got = sample_lines([[[0, 0, 0], [100, 0, 0]], [[0, 0, 10], [0, 30, 10]], [[5, 5, 5], [5, 5, 5]]])

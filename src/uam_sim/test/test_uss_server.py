@@ -14,7 +14,7 @@ from uam_planner.f3548 import IntentContext, VolumeSpec, constraint_entity_id, i
 from uam_planner.f3548_schema import errors
 from uam_planner.planning import Flight
 from uam_planner.trajectory import Trajectory
-from uam_sim.uss_server import MAX_URL_CHARS, IntentStore, UssServer
+from uam_sim.f3548.uss_server import MAX_URL_CHARS, IntentStore, UssServer
 
 ORIGIN = (1.29, 103.85, 0.0)
 
@@ -151,7 +151,7 @@ def test_fetch_another_usss_intents_into_a_constraints_file(server, tmp_path):
     """Intents in over HTTP: fetched from a USS, they load as constraints the planner avoids."""
     from uam_planner.airspace_files import load_airspace as load_constraints
     from uam_planner.network import load_network
-    from uam_sim.uss_server import main
+    from uam_sim.f3548.uss_server import main
 
     a = server.store.put_flight(flight("r1", 30.0))
     server.store.put_flight(flight("r2", 60.0))

@@ -24,7 +24,7 @@ study (5 to 50 vertices); `large_instance` gives up to 10,000+ vertices with loc
 Corpus files are JSON Lines, one instance per line; see docs/mwis-corpus-format.md and
 `save_corpus` / `load_corpus`. `read_instances` picks a reader by file suffix from
 `CORPUS_READERS` maps a file suffix to a reader: ``.jsonl``/``.json`` corpora, and ``.mcap``
-planner recordings (the MWIS instance of every PlanningReport, read through uam_sim.analysis).
+planner recordings (the MWIS instance of every PlanningReport, read through uam_sim.audit.analysis).
 """
 
 from __future__ import annotations

@@ -292,7 +292,7 @@ class PlannerNode(Node):
 
     def _observe_at(self, t_s: float, at_epoch: bool) -> None:
         """The planner's observations for a call at ``t_s``, as the in-process runner's monitor
-        makes them (``uam_sim.scenario._Reaction``): before an epoch, every vehicle airborne at
+        makes them (``uam_sim.runner.scenario._Reaction``): before an epoch, every vehicle airborne at
         t_s (in its fleet state) at t_s - 20, t_s - 10 and t_s; between epochs, at t_s only.
 
         Why the node follows the runner and not the other way round: the runner is the run code of

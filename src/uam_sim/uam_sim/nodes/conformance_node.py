@@ -5,7 +5,7 @@
 Subscribes to uam/flight_plans (the approved plans: the reference) and uam/fleet_state (the
 positions as flown), publishes uam/conformance (uam_msgs/Conformance) for every fleet state: per
 vehicle with a plan, conforming or not, the lateral, vertical and time errors and how long its
-excursion has lasted (uam_sim.conformance.ConformanceMonitor). The recorder records it. At the
+excursion has lasted (uam_sim.world.conformance.ConformanceMonitor). The recorder records it. At the
 end of the run (the simulator's ``finished`` announcement, once the fleet state of that time
 was compared) it logs the run's F3548 statistics and exits.
 
@@ -32,7 +32,7 @@ from uam_contract import names as c
 from uam_contract import wire
 from uam_contract.params import CONFORMANCE_MONITOR
 from uam_planner.nodes import conversions as m
-from uam_sim.conformance import ConformanceBounds, ConformanceMonitor
+from uam_sim.world.conformance import ConformanceBounds, ConformanceMonitor
 
 
 class ConformanceNode(Node):

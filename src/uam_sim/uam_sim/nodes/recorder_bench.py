@@ -50,7 +50,7 @@ def main(argv: list[str] | None = None) -> int:
     import rclpy
 
     from uam_contract.names import resolved
-    from uam_sim.mcap_reader import read_messages
+    from uam_sim.recording.mcap_reader import read_messages
     from uam_sim.nodes.recorder_node import RECORDED_TOPICS
 
     names = {resolved(t): t for t in RECORDED_TOPICS}

@@ -18,23 +18,23 @@ the topic's first message arrives, as rosbag2 does); topics that never carried a
 still listed, with the QoS the recorder subscribed with.
 
 Stamps are read straight from the CDR bytes where the type starts with a stamp (/clock,
-FleetState, PoseArray, FlightPlan, PlanningReport: :func:`uam_sim.cdr.leading_stamp_ns`), so the
+FleetState, PoseArray, FlightPlan, PlanningReport: :func:`uam_sim.recording.cdr.leading_stamp_ns`), so the
 per-step messages are never deserialized (Rerun gets fleet positions from
-:func:`uam_sim.cdr.fleet_state_digest`); plans and reports, a few hundred a run, are deserialized
+:func:`uam_sim.recording.cdr.fleet_state_digest`); plans and reports, a few hundred a run, are deserialized
 for the check below.
 
-Views for generic viewers (issue 12, :mod:`uam_sim.std_msgs_export`): with ``views`` on (the
+Views for generic viewers (issue 12, :mod:`uam_sim.views.std_msgs_export`): with ``views`` on (the
 default) the fleet, routes and network are also written in standard types (``/uam/view/*``:
 PointCloud2, NavSatFix, MarkerArray), stamped in simulation time as every other topic (or in
 real UTC from ``scenario_start_utc`` when it names an instant), for
 Foxglove and Rerun's MCAP import; ``foxglove_port`` > 0 serves a live Foxglove WebSocket view
-(:mod:`uam_sim.foxglove_live`).
+(:mod:`uam_sim.views.foxglove_live`).
 
 It checks what it received against what was announced: the approvals the planning reports
 announce, epoch by epoch, against the approved plans received. At the close it logs the result
 (a warning on a mismatch) and writes it into the file as the MCAP metadata record
 ``uam_recorder_check`` (``ok``, ``announced_approvals``, ``approved_plans``, ``verdict``), which
-``uam_sim.analysis`` reads.
+``uam_sim.audit.analysis`` reads.
 
 It watches who publishes (docs/security.md): the topics with one authority (the simulator's
 /clock, fleet state and poses; the planner's plans and reports; one announcer each of the
@@ -66,15 +66,15 @@ from uam_msgs.msg import FlightPlan
 # imported here, not where the first constraint set arrives: at nice 19 under load that import
 # took more than run_fleet.sh's 10 s when it fell into the drain of a stopping recorder
 from uam_planner.live_constraints import constraints_from_text
-from uam_sim.analysis import format_steps, missing_steps, request_key
-from uam_sim.audit import AIRSPACE_METADATA, airspace_metadata
-from uam_sim.cdr import fleet_state_digest, fleet_state_step_index, leading_stamp_ns
-from uam_sim.mcap_reader import CLOCK_METADATA
-from uam_sim.mcap_schema import message_class
-from uam_sim.mcap_writer import McapRecorder
+from uam_sim.audit.analysis import format_steps, missing_steps, request_key
+from uam_sim.audit.separation import AIRSPACE_METADATA, airspace_metadata
+from uam_sim.recording.cdr import fleet_state_digest, fleet_state_step_index, leading_stamp_ns
+from uam_sim.recording.mcap_reader import CLOCK_METADATA
+from uam_sim.recording.mcap_schema import message_class
+from uam_sim.recording.mcap_writer import McapRecorder
 from uam_contract.stamps import scenario_start_ns, sim_stamp_ns
-from uam_sim.rerun_log import RerunLogger
-from uam_sim.std_msgs_export import ViewExporter
+from uam_sim.views.rerun_log import RerunLogger
+from uam_sim.views.std_msgs_export import ViewExporter
 
 from uam_contract import names as c
 from uam_bringup.params import declare_table
@@ -209,7 +209,7 @@ class RecorderNode(Node):
             if p["views"]:
                 self.views = ViewExporter(network, p["scenario_start_utc"], fix_period_s=p["view_fix_period_s"])
             if p["foxglove_port"] > 0:
-                from uam_sim.foxglove_live import FoxgloveLive
+                from uam_sim.views.foxglove_live import FoxgloveLive
                 self.foxglove = FoxgloveLive(network, port=p["foxglove_port"], scenario_start_utc=p["scenario_start_utc"])
         except BaseException:
             self.recorder.close()
@@ -419,7 +419,7 @@ class RecorderNode(Node):
                 self._write_view(vm)
 
     def _write_view(self, vm) -> None:
-        """One view message (uam_sim.std_msgs_export.ViewMessage) at its simulation time."""
+        """One view message (uam_sim.views.std_msgs_export.ViewMessage) at its simulation time."""
         if not self.recorder.has_topic(vm.topic):
             self.recorder.add_topic(vm.topic, vm.type_name)
         self.recorder.write(vm.topic, vm.data, log_time_ns=self._channel_time_ns(vm.topic, vm.sim_time_ns))

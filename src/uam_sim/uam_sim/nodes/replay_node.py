@@ -3,7 +3,7 @@
 ``ros2 run uam_sim replay run.mcap --ros-args -p rate:=10.0``
 
 Every recorded topic is published with its recorded type and the QoS its publishers offered
-(reliability and durability; see ``uam_sim.replay.replay_qos``), the CDR bytes as recorded. A
+(reliability and durability; see ``uam_sim.views.replay.replay_qos``), the CDR bytes as recorded. A
 message recorded at log time t is published (t - t_first) / rate wall seconds after the start;
 ``rate:=0`` publishes everything as fast as possible. Because /clock is replayed too, nodes and
 viewers running with ``use_sim_time`` follow the recorded simulation time. The node exits when
@@ -22,9 +22,9 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.utilities import remove_ros_args
 
-from uam_sim.mcap_schema import message_class
+from uam_sim.recording.mcap_schema import message_class
 from uam_contract.qos_spec import QosSpec
-from uam_sim.replay import load_plan
+from uam_sim.views.replay import load_plan
 from uam_bringup.params import declare_table
 from uam_contract.params import REPLAY
 from uam_bringup.runtime import run_node

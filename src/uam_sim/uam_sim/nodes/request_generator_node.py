@@ -8,7 +8,7 @@ aerodromes of the network (seeded; earliest departure then, latest then + window
 them when the simulator asks (service uam/release_demand at each epoch: every demand instant at
 or before the epoch time not yet released) and answers with their ids, which the simulator hands
 to the planner: the planner waits for those requests, not for a count. The requests carry
-``operator_id`` (parameter, default "generator"). The stream is uam_sim.demand's, identical to
+``operator_id`` (parameter, default "generator"). The stream is uam_sim.world.demand's, identical to
 the in-process experiment runner's for the same seed. Parameters:
 uam_contract.params.REQUEST_GENERATOR (docs/parameters.md).
 """
@@ -31,7 +31,7 @@ from uam_bringup.params import declare_table
 from uam_contract.params import REQUEST_GENERATOR
 from uam_bringup.runtime import run_node
 from uam_planner.network import load_network
-from uam_sim.demand import DemandSchedule, RequestGenerator, load_demand
+from uam_sim.world.demand import DemandSchedule, RequestGenerator, load_demand
 
 
 class RequestGeneratorNode(Node):
@@ -104,7 +104,7 @@ class RequestGeneratorNode(Node):
         if k not in self._released:
             t_s = m.from_time(request.epoch_time)
             ids = []
-            # every demand instant up to t, in time order (as uam_sim.experiment.run_scenario)
+            # every demand instant up to t, in time order (as uam_sim.studies.experiment.run_scenario)
             while self._next_instant * self.interval_s <= t_s + 1e-9:
                 i = self._next_instant
                 for req in self.source.requests_at(i * self.interval_s, i):

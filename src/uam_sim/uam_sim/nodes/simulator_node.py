@@ -12,7 +12,7 @@ The epoch protocol, at each epoch time t = k * epoch_s < duration_s: ask the dem
 release the epoch's requests (uam/release_demand; it answers with their ids), then ask the
 planner to plan epoch k at t (uam/plan_epoch, naming those ids), and fly the approvals of the
 answer (exactly as planned, or, with disturbances on, as the path-following model of
-uam_sim.disturbance flies them: the fleet state is what flew); only then step on. Between epochs it steps as fast as it can
+uam_sim.world.disturbance flies them: the fleet state is what flew); only then step on. Between epochs it steps as fast as it can
 (lockstep) or at ``real_time_factor`` x wall time (realtime): the result does not depend on CPU
 speed. It starts once the planner's and the demand source's services are up and the nodes named
 in ``wait_for_subscribers`` subscribe to the fleet state (explicit readiness, no counts). A call
@@ -27,7 +27,7 @@ The reaction between epochs (issue 23, ``reaction_period_s`` > 0, less than ``ep
 instant epoch time + k x period strictly between two epochs the fleet stops, its state of that
 instant is published, the planner is asked to react (uam/react, uam_msgs/srv/React) and the new
 plan versions of its answer are flown from that instant (a nonconforming update from where the
-aircraft is, at its airspeed, uam_sim.disturbance.fly_on). In that mode an epoch's fleet state is
+aircraft is, at its airspeed, uam_sim.world.disturbance.fly_on). In that mode an epoch's fleet state is
 published before the epoch is asked for (its departures appear from the next step) and the next
 epoch is asked for only when the fleet reaches it, so the planner sees the fleet at the instants
 the in-process runner's monitor does (docs/disturbances.md).
@@ -62,10 +62,10 @@ from uam_contract import wire
 from uam_bringup.params import declare_table
 from uam_contract.params import SIMULATOR
 from uam_bringup.runtime import run_node
-from uam_sim.cdr import encode_clock, encode_fleet_state, encode_pose_array, yaw_quaternions
-from uam_sim.disturbance import WindField, fly_plans, from_simulator_params
+from uam_sim.recording.cdr import encode_clock, encode_fleet_state, encode_pose_array, yaw_quaternions
+from uam_sim.world.disturbance import WindField, fly_plans, from_simulator_params
 from uam_planner.nonconformance import RATE_RANGE
-from uam_sim.fleet import Fleet
+from uam_sim.world.fleet import Fleet
 
 RESEND_S = 2.0  # wall time after which an unanswered call is sent again (a restarted server lost it)
 # Lockstep steps this many fleet steps per executor turn, so the answers of the next epoch's calls
@@ -415,8 +415,8 @@ class SimulatorNode(Node):
             rate = observed_rate(plan) if plan.outcome == FlightPlan.OUTCOME_APPROVED else None
             if rate is not None and plan.waypoints and self.wind is not None and self.fleet.flown(key) is not None:
                 # issue 23: a nonconforming flight's intent, updated from where it is: flown on
-                # from there at the airspeed it had (uam_sim.disturbance.fly_on), as the runner does
-                from uam_sim.disturbance import flight_draws, fly_on
+                # from there at the airspeed it had (uam_sim.world.disturbance.fly_on), as the runner does
+                from uam_sim.world.disturbance import flight_draws, fly_on
                 new = m.trajectory_from_plan(plan)
                 e = self._speed_errors.get(key, flight_draws(self.disturbance, key).speed_error)
                 flown, self._speed_errors[key] = fly_on(self.fleet.flown(key), new, e, rate,
@@ -435,7 +435,7 @@ class SimulatorNode(Node):
                 if key in self._speed_errors and self.fleet.flown(key) is not None:
                     # updated by the reaction before: flown on from that update (its start) with
                     # the speed error it left, what flew before kept (the runner's _Reaction.refly)
-                    from uam_sim.disturbance import fly_from
+                    from uam_sim.world.disturbance import fly_from
                     self.fleet.replace(key, fly_from(self.fleet.flown(key), new, self._speed_errors[key],
                                                      self.disturbance, self.wind))
                 else:
@@ -588,8 +588,8 @@ class SimulatorNode(Node):
         self._clock_pub.publish(encode_clock(stamp.sec, stamp.nanosec))
         fs = self.fleet.sample(t)
         self.active_samples.append(len(fs))
-        # Serialized directly from the fleet arrays (uam_sim.cdr): same bytes as the message objects,
-        # a fraction of the cost (see uam_sim/cdr.py).
+        # Serialized directly from the fleet arrays (uam_sim.recording.cdr): same bytes as the message objects,
+        # a fraction of the cost (see uam_sim/recording/cdr.py).
         self._fleet_pub.publish(encode_fleet_state(
             stamp.sec, stamp.nanosec, c.FRAME_ID, self.step_index, fs.vehicle_ids, fs.positions_m,
             fs.velocities_mps, fs.phases, fs.segment_indices, fs.flown_m, fs.remaining_m))

@@ -8,7 +8,7 @@ It subscribes to ``uam/flight_plans`` (every approved plan and every new version
 replaces an operational intent; a cancellation ends it), ``uam/requests`` (each request's
 priority, which a FlightPlan does not carry), ``uam/constraints`` (the set the planner plans
 with) and ``/clock`` (states and volume clipping follow simulation time), and serves them with
-:class:`uam_sim.uss_server.UssServer` (Flask on a werkzeug thread; a bad request is answered
+:class:`uam_sim.f3548.uss_server.UssServer` (Flask on a werkzeug thread; a bad request is answered
 with the standard's error and never stops the node). Parameters: ``uam_contract.params.USS``.
 """
 
@@ -37,7 +37,7 @@ class UssNode(Node):
         from uam_planner.f3548 import IntentContext, VolumeSpec
         from uam_planner.network import load_network
         from uam_planner.separation import SeparationModel
-        from uam_sim.uss_server import IntentStore, UssServer
+        from uam_sim.f3548.uss_server import IntentStore, UssServer
 
         if not p["network"]:
             raise ValueError("parameter network: a network file is needed (its origin places the volumes)")

@@ -13,9 +13,9 @@ import numpy as np
 from uam_planner.planning import Planner
 from uam_planner.replanning import clipped_until
 
-from .audit import sweep_audit
-from .flights import run_metrics
-from .demand import RequestGenerator
+from ..audit.separation import sweep_audit
+from ..world.flights import run_metrics
+from ..world.demand import RequestGenerator
 from .experiment_config import BASELINES, ExperimentConfig, ExperimentError, rate_label
 
 
@@ -26,7 +26,7 @@ class ScenarioResult:
     Attributes:
         method, rate, seed, duration_s: the cell.
         summary: one tidy row (counts, average aircraft in the air, solve-time stats, audit, the
-            objective and the flight metrics of ``uam_sim.flights.run_metrics``: delay mean,
+            objective and the flight metrics of ``uam_sim.world.flights.run_metrics``: delay mean,
             p95 and delayed share from the earliest departure, detour, per-priority p95 delay,
             per-operator approval shares and Jain index, route lengths).
         epochs: one row per epoch (t_s, counts so far, MWIS size, solve time, fallback, ...).
@@ -178,7 +178,7 @@ def _apply_disturbed_updates(updates, by_id, reaction, replans, t) -> None:
     yields to a nonconforming flight: ``uam_planner.nonconformance.KIND_YIELD``) replaces the
     row's plan from its effective instant and the spliced plan is flown again, as the simulator
     node flies it."""
-    from .disturbance import fly_plans
+    from ..world.disturbance import fly_plans
     _apply_reaction_updates(updates, by_id, reaction, replans, t)
     _apply_plan_updates([u for u in updates if not _is_reaction(u)], by_id, replans, t)
     for u in updates:   # a re-plan that is not the reaction's: what flies changes now
@@ -201,7 +201,7 @@ class _Reaction:
     what the node graph's conformance monitor and fleet state do for the planner node:
 
     - before each epoch at t, every airborne flight's flown track is compared with its newest
-      plan version at every model sample in (t - epoch, t] (``uam_sim.conformance``, the
+      plan version at every model sample in (t - epoch, t] (``uam_sim.world.conformance``, the
       monitor's test); a flight nonconforming at a sample is *reported* to the planner
       (``Planner.report_nonconforming``, a claim it checks itself);
     - the planner *observes* every airborne flight (``Planner.observe``: the fleet state) at
@@ -227,7 +227,7 @@ class _Reaction:
     def _report(self, row, fl, t: float, window_s: float) -> None:
         """The monitor's look at ``row``'s samples in (t - window_s, t] after its newest version
         began: the first nonconforming one, if any, is reported to the planner."""
-        from .conformance import conforming, deviations
+        from ..world.conformance import conforming, deviations
         ts, ps = fl.times_s, fl.points_m
         # the window by bisection (times strictly increasing: Trajectory checks it); a mask over
         # the whole track was a fifth of a Monte-Carlo run's time (BENCHMARKS.md, eighth stop)
@@ -274,7 +274,7 @@ class _Reaction:
 
     def apply(self, u, row, rate: float) -> None:
         """Fly a nonconforming update of ``row`` from where the aircraft is."""
-        from .disturbance import flight_draws, fly_on
+        from ..world.disturbance import flight_draws, fly_on
         new = u.flight.trajectory
         t0 = float(new.departure_s)
         e = row.get("_e")
@@ -290,7 +290,7 @@ class _Reaction:
     def refly(self, row) -> None:
         """After a constraint re-plan of a row the reaction changed before: fly its spliced plan
         from the last nonconforming update on."""
-        from .disturbance import fly_from
+        from ..world.disturbance import fly_from
         # (the spliced plan starts where that update did: at row["_t0"])
         row["_flown"] = fly_from(row["_flown"], row["_traj"], row["_e"], self.dcfg, self.wind)
         row["_pieces"][-1] = (row["_pieces"][-1][0], row["_traj"])
@@ -345,9 +345,9 @@ def planned_ends(row) -> tuple:
 
 def _flown_summary(flights: list, cfg: ExperimentConfig, dcfg) -> dict:
     """What flew (issue 23): the exact audit of the flown tracks in the true minimum
-    (:func:`uam_sim.flown.flown_audit`) and the F3548 conformance statistics of the run."""
-    from .conformance import f3548_statistics, track_conformance, versioned_conformance
-    from .flown import flown_audit
+    (:func:`uam_sim.audit.flown.flown_audit`) and the F3548 conformance statistics of the run."""
+    from ..world.conformance import f3548_statistics, track_conformance, versioned_conformance
+    from ..audit.flown import flown_audit
 
     bounds = cfg.conformance_bounds()
     tracks = {f["request_id"]: f["_flown"] for f in flights}
@@ -434,7 +434,7 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
     disturbed = bool(cfg.disturbance)  # issue 23: what flies is the disturbance model's
     if disturbed:
         from dataclasses import replace as _replace
-        from .disturbance import WindField, fly_plans
+        from ..world.disturbance import WindField, fly_plans
         dcfg = _replace(cfg.disturbance_config(), seed=int(seed))
         wind = WindField(dcfg)
     reaction = _Reaction(planner, dcfg, wind, cfg.conformance_bounds(), cfg.epoch_s,

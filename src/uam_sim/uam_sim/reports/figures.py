@@ -1,6 +1,6 @@
 """Figures of the study in the paper's form (matplotlib, Agg backend), and the numbers behind them.
 
-Every figure function takes the cells of a sweep (dicts as written by ``uam_sim.experiment``) and
+Every figure function takes the cells of a sweep (dicts as written by ``uam_sim.studies.experiment``) and
 returns the table it plotted, so the report shows the same numbers. Mean and a 95 % confidence
 interval over seeds (Student t, n - 1 degrees of freedom) wherever the paper shows one line.
 
@@ -26,8 +26,8 @@ import numpy as np  # noqa: E402
 
 METHOD_ORDER = ("fifo", "firstfit", "greedy", "exact", "sa", "tabu", "qpu-emulator", "qpu", "kamis",
                 "chils")
-from .experiment_config import BASELINES  # noqa: E402  (planner policies, not MWIS solvers)
-from .flights import corridor_use_m, flight_metrics  # noqa: E402,F401  (re-exported)
+from ..runner.experiment_config import BASELINES  # noqa: E402  (planner policies, not MWIS solvers)
+from ..world.flights import corridor_use_m, flight_metrics  # noqa: E402,F401  (re-exported)
 # marker, line style and colour per method, so methods that overlap (exact, sa, tabu and the
 # emulator often approve the same flights) stay distinguishable in print and in greyscale
 STYLE = {"fifo": ("o", "-", "tab:blue"), "firstfit": ("s", "--", "tab:orange"),
@@ -60,7 +60,7 @@ def style(m: str, i: int = 0) -> dict:
 def mean_ci(values, level: float = 0.95) -> tuple[float, float, float]:
     """(mean, low, high) of a sample with a Student-t confidence interval; n = 1 gives a point.
 
-    The interval is ``uam_sim.stats.mean_interval``'s (the one CI helper); the figures only draw
+    The interval is ``uam_sim.reports.stats.mean_interval``'s (the one CI helper); the figures only draw
     a single seed as a point (a zero-width band) where the statistics say "no interval"."""
     from .stats import mean_interval
 
@@ -487,7 +487,7 @@ def central_corridors(network, share: float = 0.10) -> tuple[np.ndarray, np.ndar
 
 def _network(cfg):
     try:
-        from .network_spec import load_network_spec
+        from ..runner.network_spec import load_network_spec
         return load_network_spec(cfg.network)
     except Exception:  # a recording's network may not be loadable here; skip the corridor part
         return None

@@ -3,7 +3,7 @@
 A flown track is known at samples (the fleet states of a recording, every ``step_s``; or the
 disturbance model's samples in process) and taken as linear between them: the closest approach
 of every pair of such tracks is computed exactly by the same sweep as the plans' audit
-(:func:`uam_sim.audit.sweep_audit`: every pair of time-overlapping straight pieces, closest
+(:func:`uam_sim.audit.separation.sweep_audit`: every pair of time-overlapping straight pieces, closest
 approach clamped to the overlap).
 
 The sampling error, bounded **per axis and per piece** (issue 22, fourth stop). Between two
@@ -49,7 +49,7 @@ import numpy as np
 from uam_planner.separation import SeparationModel, as_separation_model
 from uam_planner.trajectory import Trajectory
 
-from .audit import TIE_RELATIVE, sweep_audit, sweep_audits
+from .separation import TIE_RELATIVE, sweep_audit, sweep_audits
 
 OUTCOME_APPROVED = 0  # uam_msgs/FlightPlan.OUTCOME_APPROVED
 
@@ -198,7 +198,7 @@ def flown_audit(tracks: Mapping[str, Trajectory], separation, sample_step_s: flo
             result is the same, ``uam_planner.audit.sweep_audits``).
         plans: vehicle id -> its plan as flown (every version from its instant): the per-piece
             bounds of the module docstring, and ``losses`` are then those the samples prove.
-    Returns: the :func:`uam_sim.audit.sweep_audit` dict of the interpolated tracks, plus
+    Returns: the :func:`uam_sim.audit.separation.sweep_audit` dict of the interpolated tracks, plus
     ``what`` ("flown"), ``sampling_bound_m`` / ``sampling_bound_v_m`` (the largest pair bound,
     horizontal and vertical; 0 without sampling), ``possible_losses`` (pairs the samples cannot
     clear), ``max_speed_mps``; with ``plans``: ``losses`` / ``loss_pairs`` the proven ones,
@@ -260,7 +260,7 @@ def recording_flown(path, separation, bounds=None, plans=None, prune: bool = Tru
     step = the largest gap between fleet states), and the F3548 conformance of each flown track
     with its plan: each sample with the plan version in force at that instant (version 1 from
     the departure, each later version from its ``effective_time``;
-    ``uam_sim.conformance.versioned_conformance``). ``plans``: the FlightPlan messages, every
+    ``uam_sim.world.conformance.versioned_conformance``). ``plans``: the FlightPlan messages, every
     version (else read from ``uam/flight_plans``); a vehicle flies the plans of its
     ``operator/request`` id.
     ``prune``: as :func:`flown_audit` (False: the slow reference sweep, the same result).
@@ -269,10 +269,10 @@ def recording_flown(path, separation, bounds=None, plans=None, prune: bool = Tru
     from uam_contract.names import resolved
     from uam_contract.stamps import stamp_s
 
-    from .audit import trajectory_of
-    from .cdr import fleet_state_digest
-    from .conformance import ConformanceBounds, f3548_statistics, versioned_conformance
-    from .mcap_reader import deserialize, is_complete, read_messages, read_messages_tolerant
+    from .separation import trajectory_of
+    from ..recording.cdr import fleet_state_digest
+    from ..world.conformance import ConformanceBounds, f3548_statistics, versioned_conformance
+    from ..recording.mcap_reader import deserialize, is_complete, read_messages, read_messages_tolerant
 
     fleet_topic, plan_topic = resolved(names.TOPIC_FLEET), resolved(names.TOPIC_PLANS)
     records = (read_messages(path, topics=[fleet_topic, plan_topic]) if is_complete(path)
@@ -301,7 +301,7 @@ def recording_flown(path, separation, bounds=None, plans=None, prune: bool = Tru
     from .flown_audit import effective_s as version_effective_s, plan_version
     versions: dict = {}   # key -> {version: plan}, the first message of each version
     for p in (plans if plans is not None else found_plans):
-        # the vehicle id of a plan: operator/request (uam_sim.analysis.request_key)
+        # the vehicle id of a plan: operator/request (uam_sim.audit.analysis.request_key)
         key = scoped_id(p.operator_id, p.request_id) if p.operator_id else str(p.request_id)
         if plan_version(p) == 1 and int(p.outcome) != OUTCOME_APPROVED:
             continue

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .experiment_config import ExperimentConfig
-from .files import write_json_atomic
+from ..runner.experiment_config import ExperimentConfig
+from ..runner.files import write_json_atomic
 
 
 def sample_tts_corpus(entries: list, n: int, min_v: int, max_v: int, seed: int) -> list:

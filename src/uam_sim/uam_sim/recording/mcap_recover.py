@@ -10,7 +10,7 @@ from .mcap_schema import ROS2_PROFILE, RecordingError, library_string
 from .mcap_writer import _COMPRESSION, bag_metadata_yaml
 
 
-#: written into every rebuilt file: uam_sim.analysis then never takes it for a complete run
+#: written into every rebuilt file: uam_sim.audit.analysis then never takes it for a complete run
 RECOVERED_METADATA = "uam_recovered"
 
 

@@ -4,9 +4,9 @@ Two implementations, both independent of the planner's separation code:
 
 - :func:`audit_trajectories` / :func:`audit_plans`: ``uam_planner.audit.pair_min_distance`` (a
   brute-force kernel) on the pairs whose bounding boxes come close (used on recordings by
-  :mod:`uam_sim.analysis`);
+  :mod:`uam_sim.audit.analysis`);
 - :func:`sweep_audit`: a vectorised time sweep over straight segments (used on in-process runs
-  by :mod:`uam_sim.scenario`, where runs have hundreds of long flights).
+  by :mod:`uam_sim.runner.scenario`, where runs have hundreds of long flights).
 
 Tests hold both equal to the brute force ``uam_planner.audit.audit_flights``.
 

@@ -9,8 +9,8 @@ from pathlib import Path
 from uam_contract import names
 from uam_contract.names import resolved
 
-from .mcap_reader import read_messages
-from .mcap_writer import McapRecorder
+from ..recording.mcap_reader import read_messages
+from ..recording.mcap_writer import McapRecorder
 
 FLEET, POSES, REPORTS = (resolved(t) for t in (names.TOPIC_FLEET, names.TOPIC_POSES, names.TOPIC_REPORTS))
 
@@ -64,7 +64,7 @@ def benchmark(path: str | os.PathLike, steps: int = 3500, vehicles: int = 70, se
     t0 = time.perf_counter()
     n_read = sum(1 for _ in read_messages(path))
     read_s = time.perf_counter() - t0
-    from .analysis import summarize
+    from ..audit.analysis import summarize
     t0 = time.perf_counter()
     summary = summarize(path)
     analyze_s = time.perf_counter() - t0

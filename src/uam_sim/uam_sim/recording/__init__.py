@@ -26,21 +26,18 @@ summary and no footer, but every chunk written before the cut is intact and its 
 back by :func:`read_messages_tolerant` (mcap's non-seeking reader, stopping at the torn record).
 At most the last ``flush_period_s`` of messages is lost.
 
-Where the parts live (this module is the command line and re-exports them for callers):
-:mod:`uam_sim.mcap_schema` (type names, definitions, hashes), :mod:`uam_contract.qos_spec` (offered
-QoS YAML), :mod:`uam_contract.stamps` (a message's simulation time), :mod:`uam_sim.cdr` (CDR bytes:
-exact size, fields read without deserializing), :mod:`uam_sim.mcap_writer` (the writer),
-:mod:`uam_sim.mcap_reader` (reading, decoding), :mod:`uam_sim.mcap_recover` (repairing a torn
-file), :mod:`uam_sim.recording_bench` (the write/read benchmark).
+Where the parts live (this package re-exports them for callers; ``__main__`` is the command line):
+:mod:`uam_sim.recording.mcap_schema` (type names, definitions, hashes), :mod:`uam_contract.qos_spec` (offered
+QoS YAML), :mod:`uam_contract.stamps` (a message's simulation time), :mod:`uam_sim.recording.cdr` (CDR bytes:
+exact size, fields read without deserializing), :mod:`uam_sim.recording.mcap_writer` (the writer),
+:mod:`uam_sim.recording.mcap_reader` (reading, decoding), :mod:`uam_sim.recording.mcap_recover` (repairing a torn
+file), :mod:`uam_sim.studies.recording_bench` (the write/read benchmark).
 
 None of them imports rclpy at import time; only :meth:`McapRecorder.write` with a message
 object (rather than CDR bytes) and deserializing import ``rclpy.serialization``.
 """
 
 from __future__ import annotations
-
-import sys
-from pathlib import Path
 
 from .cdr import cdr_size, serialize_exact
 from .mcap_reader import (RecordedMessage, deserialize, is_complete, iter_decoded, read_messages,
@@ -51,63 +48,12 @@ from .mcap_schema import (DEFINITION_SEPARATOR, MESSAGE_ENCODING, ROS2_PROFILE, 
                           message_definition, split_type_name, type_hash, type_name_of)
 from .mcap_writer import McapRecorder, bag_metadata_yaml
 from uam_contract.qos_spec import INFINITE_DURATION, QosSpec, offered_qos_yaml, parse_offered_qos
-from .recording_bench import benchmark
 from uam_contract.stamps import sim_stamp_ns
 
 __all__ = ["DEFINITION_SEPARATOR", "INFINITE_DURATION", "MESSAGE_ENCODING", "ROS2_PROFILE",
            "ROSBAG2_METADATA_VERSION", "SCHEMA_ENCODING", "McapRecorder", "QosSpec",
-           "RecordedMessage", "RecordingError", "bag_metadata_yaml", "benchmark", "cdr_size",
-           "deserialize", "is_complete", "iter_decoded", "library_string", "main", "message_class",
+           "RecordedMessage", "RecordingError", "bag_metadata_yaml", "cdr_size",
+           "deserialize", "is_complete", "iter_decoded", "library_string", "message_class",
            "message_definition", "offered_qos_yaml", "parse_offered_qos", "read_messages",
            "read_messages_tolerant", "recover", "serialize_exact", "sim_stamp_ns", "split_type_name",
            "type_hash", "type_name_of"]
-
-
-def main(argv: list[str] | None = None) -> int:
-    """``python -m uam_sim.recording recover TORN.mcap FIXED.mcap`` | ``info FILE.mcap`` | ``bench``."""
-    import argparse
-
-    ap = argparse.ArgumentParser(allow_abbrev=False, prog="python -m uam_sim.recording")
-    sub = ap.add_subparsers(dest="command", required=True)
-    rec = sub.add_parser("recover", help="rewrite a crash-cut recording into a complete file")
-    rec.add_argument("src")
-    rec.add_argument("dst")
-    info = sub.add_parser("info", help="topics, types and message counts")
-    info.add_argument("path")
-    bench = sub.add_parser("bench", help="write and read a paper-scale synthetic recording; print times")
-    bench.add_argument("--steps", type=int, default=3500)
-    bench.add_argument("--vehicles", type=int, default=70)
-    bench.add_argument("--out", default="", help="file to write (default: a temporary file)")
-    args = ap.parse_args(argv)
-    try:
-        if args.command == "bench":
-            import tempfile
-            with tempfile.TemporaryDirectory() as tmp:
-                r = benchmark(args.out or Path(tmp) / "bench.mcap", args.steps, args.vehicles)
-            print(f"{'messages':24s} {r['messages']:10d}")
-            print(f"{'file size [MB]':24s} {r['file_MB']:10.2f}")
-            for key, label in (("build_msgs_s", "build messages [s]"), ("serialize_s", "serialize (rclpy) [s]"),
-                               ("write_s", "write MCAP [s]"), ("read_s", "read back [s]"),
-                               ("analyze_s", "analysis [s]")):
-                print(f"{label:24s} {r[key]:10.3f}")
-            print(f"{'write rate [msg/s]':24s} {r['write_msgs_per_s']:10.0f}")
-            return 0
-        if args.command == "recover":
-            n = recover(args.src, args.dst)
-            print(f"recovered {n} messages into {args.dst}")
-            return 0
-        counts: dict[tuple[str, str], int] = {}
-        complete = is_complete(args.path)
-        for m in (read_messages(args.path) if complete else read_messages_tolerant(args.path)):
-            counts[(m.topic, m.type_name)] = counts.get((m.topic, m.type_name), 0) + 1
-        print(f"{args.path}: {'complete' if complete else 'INCOMPLETE (no summary: crash-cut)'}")
-        for (topic, type_name), n in sorted(counts.items()):
-            print(f"  {topic:28s} {type_name:36s} {n:8d}")
-        return 0
-    except (OSError, RecordingError) as exc:
-        print(f"recording: {exc}", file=sys.stderr)
-        return 1
-
-
-if __name__ == "__main__":
-    sys.exit(main())

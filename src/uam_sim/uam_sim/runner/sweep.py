@@ -12,7 +12,7 @@ import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from .demand import DemandSchedule, load_demand
+from ..world.demand import DemandSchedule, load_demand
 from .experiment_config import BASELINES, ExperimentConfig, make_config, rate_label, resolve_path
 from .files import write_json_atomic
 from .network_spec import load_network_spec, network_identity
@@ -88,8 +88,8 @@ RUN_PACKAGES = ("uam_contract", "uam_planner", "uam_solvers")
 #: the simulator modules a run starts from; the run code of ``uam_sim`` is these and every
 #: ``uam_sim`` module they import (anywhere in the file, function-level imports included), so
 #: the studies, reports, figures and this sweep module are not part of it
-RUN_ROOTS = ("uam_sim.scenario", "uam_sim.demand", "uam_sim.network_spec",
-             "uam_sim.experiment_config", "uam_sim.flights")
+RUN_ROOTS = ("uam_sim.runner.scenario", "uam_sim.world.demand", "uam_sim.runner.network_spec",
+             "uam_sim.runner.experiment_config", "uam_sim.world.flights")
 #: files beside the packages whose content decides what a run computes: the pinned libraries
 PIN_FILES = ("requirements.txt",)
 
@@ -181,7 +181,7 @@ def pin_code_version(version: str) -> None:
     that is not its own. Raises ValueError naming the value."""
     if not (isinstance(version, str) and re.fullmatch(r"[0-9a-f]{12}", version)):
         raise ValueError(f"code version: {version!r} is not 12 lowercase hex digits "
-                         f"(uam_sim.sweep.code_version)")
+                         f"(uam_sim.runner.sweep.code_version)")
     _CODE[:] = [version]
 
 
@@ -299,7 +299,7 @@ def run_sweep(cfg: ExperimentConfig, progress: bool = True, compute: bool = True
     """Run every missing cell, reuse the finished ones.
 
     Serial in this process when ``cfg.workers`` is 1 and no scheduler address is given; else on a
-    Dask cluster (:mod:`uam_sim.dask_cluster`): a LocalCluster of ``cfg.workers`` processes, or
+    Dask cluster (:mod:`uam_sim.runner.dask_cluster`): a LocalCluster of ``cfg.workers`` processes, or
     the cluster of ``cfg.scheduler``. Either way each cell is written as it finishes, by this
     process, so an interrupted sweep resumes.
 

@@ -36,7 +36,7 @@ AIRSPACE_PRESETS = {
     "levels": {"layered": True, "separation_model": "cylinder", "departure_slot_s": 0.0},
     "both": {"layered": True, "separation_model": "cylinder", "departure_slot_s": MODE_SLOT_S},
 }
-REPO_ROOT = Path(__file__).resolve().parents[3]
+REPO_ROOT = Path(__file__).resolve().parents[4]
 
 
 class ExperimentError(ValueError):
@@ -90,7 +90,7 @@ class ExperimentConfig:
             Dask LocalCluster of that many single-threaded worker processes.
         scheduler: None or "local" (a LocalCluster of ``workers`` processes; serial when
             workers = 1), or a Dask scheduler address "tcp://HOST:8786" whose workers run the
-            cells (uam_sim.dask_cluster). Does not affect results, so not part of a cell's key.
+            cells (uam_sim.runner.dask_cluster). Does not affect results, so not part of a cell's key.
         airspace_mode: the airspace of every cell (``AIRSPACE_PRESETS``): "paper" (the paper's
             model: one cruise altitude, 100 m sphere, departure at the epoch time); "slots" (+
             departure slots every ``MODE_SLOT_S`` s of the window); "levels" (+ the layered
@@ -114,10 +114,10 @@ class ExperimentConfig:
         operator_lead_times_s: extra lead time [s] per operator (filing habits), as ``operators``.
         spatial_buffer_m, temporal_buffer_s: planning buffers on the separation (issue 23;
             0 = today's); audits keep the true minimum.
-        disturbance: fields of ``uam_sim.disturbance.DisturbanceConfig`` (wind, gusts, speed
+        disturbance: fields of ``uam_sim.world.disturbance.DisturbanceConfig`` (wind, gusts, speed
             error, departure delay, path following); {} = none, the plans flown exactly. The
             flights' draws are seeded by the cell's seed (the ``seed`` field is ignored).
-        conformance: fields of ``uam_sim.conformance.ConformanceBounds`` ({} = the defaults).
+        conformance: fields of ``uam_sim.world.conformance.ConformanceBounds`` ({} = the defaults).
         reaction: the planner reacts to nonconforming flights (issue 23 item 3,
             ``uam_planner.nonconformance``): the runner's monitor reports them, the planner
             checks each report against its own view and updates the intent; false (default) =
@@ -229,11 +229,11 @@ class ExperimentConfig:
 
     def disturbance_config(self):
         """The DisturbanceConfig of ``disturbance`` (off when empty); its seed is the cell's."""
-        from .disturbance import DisturbanceConfig
+        from ..world.disturbance import DisturbanceConfig
         return DisturbanceConfig.from_mapping(self.disturbance)
 
     def conformance_bounds(self):
-        from .conformance import ConformanceBounds
+        from ..world.conformance import ConformanceBounds
         return ConformanceBounds(**dict(self.conformance or {}))
 
 
@@ -313,7 +313,7 @@ def make_config(data: dict | None = None, **overrides) -> ExperimentConfig:
     if isinstance(cfg.operators, str):
         cfg.operators = [o.strip() for o in cfg.operators.split(",") if o.strip()]
     try:
-        from .demand import DemandError, RequestGenerator
+        from ..world.demand import DemandError, RequestGenerator
         RequestGenerator(["a", "b"], 0, priority_share=cfg.priority_share,
                          priority_class=cfg.priority_class, operators=cfg.operators,
                          lead_time_s=cfg.lead_time_s,

@@ -220,7 +220,7 @@ class McapRecorder:
 
     def add_metadata(self, name: str, data: dict) -> None:
         """An MCAP metadata record ``name`` (values written as strings), e.g. the recorder's check
-        of what it received (read back by :func:`uam_sim.mcap_reader.read_metadata`)."""
+        of what it received (read back by :func:`uam_sim.recording.mcap_reader.read_metadata`)."""
         self._check_open()
         self._writer.add_metadata(name, {str(k): str(v) for k, v in data.items()})
 

@@ -96,7 +96,7 @@ class Fleet:
     def replace(self, vehicle_id: str, trajectory: Trajectory) -> None:
         """Fly ``trajectory`` for ``vehicle_id`` in place of what it flew (not a new flight): with
         disturbances, a new plan version is flown by the path-following model over the spliced
-        plan, whose track equals the old one up to the switch (uam_sim.disturbance is causal)."""
+        plan, whose track equals the old one up to the switch (uam_sim.world.disturbance is causal)."""
         if self._flights.pop(vehicle_id, None) is not None:
             self.total_added -= 1
         self.add(vehicle_id, trajectory)

@@ -1,5 +1,5 @@
 """The study's tables, figures and report from node-graph recordings (``--from-mcap``): each
-recording becomes one cell, through :mod:`uam_sim.analysis`."""
+recording becomes one cell, through :mod:`uam_sim.audit.analysis`."""
 
 from __future__ import annotations
 
@@ -10,13 +10,13 @@ from typing import Sequence
 
 import numpy as np
 
-from .analysis import summarize
-from .experiment_config import ExperimentConfig, rate_label
-from .machine import machine_info
-from .recorded_instances import instances_from_mcap
-from .scenario import epoch_statistics
-from .sweep import SweepResult
-from .tables import write_corpus, write_tables
+from ..audit.analysis import summarize
+from ..runner.experiment_config import ExperimentConfig, rate_label
+from ..runner.machine import machine_info
+from ..recording.recorded_instances import instances_from_mcap
+from ..runner.scenario import epoch_statistics
+from ..runner.sweep import SweepResult
+from ..runner.tables import write_corpus, write_tables
 from .tts_study import run_tts
 
 
@@ -88,11 +88,11 @@ def study_from_mcaps(paths: Sequence[str], cfg: ExperimentConfig, figures: bool 
                                                  "reason": "no MWIS instance was recorded"}
     figs = {}
     if figures:
-        from .figures import make_figures
+        from ..reports.figures import make_figures
         figs = make_figures(cells, cfg, tts, Path(cfg.out))
     outputs = {"sweep": sweep, "tables": tables, "corpus": corpus_path, "tts": tts,
                "figures": figs, "wall_s": time.perf_counter() - t0}
     if figures:
-        from .report import write_report
+        from ..reports.report import write_report
         outputs["report"] = write_report(sweep, outputs, machine_info(), Path(cfg.out))
     return outputs

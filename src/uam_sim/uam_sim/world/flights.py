@@ -1,6 +1,6 @@
 """What a run's approved flights measure, in one implementation (issue 21): for the in-process
-runner's summary (``uam_sim.scenario``), the analysis of a recording (``uam_sim.analysis``) and
-the experiment report (``uam_sim.report``, ``uam_sim.figures``). Plain functions over plain rows,
+runner's summary (``uam_sim.runner.scenario``), the analysis of a recording (``uam_sim.audit.analysis``) and
+the experiment report (``uam_sim.reports.report``, ``uam_sim.reports.figures``). Plain functions over plain rows,
 numpy only (no ROS, no plotting library).
 
 :func:`run_metrics` over the approved flights (and, for shares, every request);

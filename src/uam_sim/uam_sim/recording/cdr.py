@@ -24,7 +24,7 @@ ENCAPSULATION = b"\x00\x01\x00\x00"  # CDR_LE
 class CdrWriter:
     """The one CDR (XCDR1, little endian) writer of the package: primitives aligned to their size
     from the start of the payload, as rmw_fastrtps writes them. Used here for the simulator's
-    per-step messages and by ``uam_sim.std_msgs_export`` for the standard view messages."""
+    per-step messages and by ``uam_sim.views.std_msgs_export`` for the standard view messages."""
 
     __slots__ = ("buf",)
 

@@ -15,7 +15,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .mcap_reader import is_complete, read_messages, read_messages_tolerant
+from ..recording.mcap_reader import is_complete, read_messages, read_messages_tolerant
 from uam_contract.qos_spec import QosSpec, parse_offered_qos
 
 

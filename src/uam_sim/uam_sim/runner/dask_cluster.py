@@ -3,7 +3,7 @@
     python -m uam_sim.experiment --config config/experiment.yaml --scheduler tcp://HOST:8786
     python -m uam_sim.experiment --config config/experiment.yaml --scheduler local --workers 4
 
-Each cell is a pure function of its parameters (``uam_sim.sweep.run_cell``), so cells can run
+Each cell is a pure function of its parameters (``uam_sim.runner.sweep.run_cell``), so cells can run
 anywhere: a worker computes a cell in a scratch directory of its own and sends the cell back;
 the *driver* (the process that runs the sweep) writes it to ``<out>/cells/<key>.json`` atomically
 as each one finishes. So the workers need no shared file system and no ROS, only the project's
@@ -48,7 +48,7 @@ def validate_scheduler(value) -> str | None:
 
 
 def compute_cell(cell_fn: Callable, cfg_dict: dict, method: str, rate, seed: int) -> dict:
-    """Run ``cell_fn`` (``uam_sim.sweep.run_cell``) for one cell on a worker in a scratch
+    """Run ``cell_fn`` (``uam_sim.runner.sweep.run_cell``) for one cell on a worker in a scratch
     directory and return the cell dict (not kept there).
 
     Top-level so Dask pickles it (and ``cell_fn``) by reference; the worker imports the runner.
@@ -85,7 +85,7 @@ def run_cells(cfg_dict: dict, todo: Sequence[tuple], expected_keys: dict, cells_
             ending in (method, rate, seed), e.g. (arm-and-mode index, method, rate, seed).
         expected_keys: cell -> the key the driver computed; a worker's must match.
         cells_dir: where the driver writes each finished cell (atomically, as it arrives).
-        cell_fn: the cell runner, ``uam_sim.sweep.run_cell(cfg_dict, method, rate, seed, dir)``
+        cell_fn: the cell runner, ``uam_sim.runner.sweep.run_cell(cfg_dict, method, rate, seed, dir)``
             (passed in so this module does not import the sweep that uses it).
         scheduler: "local" or a scheduler address.
         n_workers: processes of the LocalCluster (ignored for an address).

@@ -1,0 +1,342 @@
+"""The F3548 USS-USS interface over HTTP (issue 25, item 3; docs/f3548.md): a Flask app that
+serves the operational intents and constraints of an :class:`IntentStore`, and a server thread.
+
+Endpoints (F3548-21, utm.yaml):
+
+- ``GET /uss/v1/operational_intents/{entityid}`` -> 200 ``GetOperationalIntentDetailsResponse``;
+- ``GET /uss/v1/constraints/{entityid}`` -> 200 ``GetConstraintDetailsResponse``;
+- errors as F3548 ``ErrorResponse`` ({"message": ...}): 400 for an id that is not F3548's UUIDv4
+  format or a request too large (URL over :data:`MAX_URL_CHARS` characters, a body over
+  :data:`MAX_BODY_BYTES`), 401 / 403 (auth ``scope``: no or undecodable bearer token / a token
+  without the endpoint's scope), 404 unknown (or ended) entity, 405 another method;
+- ``GET /uam_fleet/v1/operational_intents`` and ``/uam_fleet/v1/constraints`` (this project's, not F3548's: with
+  no DSS, the ids a tool can ask for).
+
+Auth (``auth``): ``off`` (the default, for local runs: no token is asked for) or ``scope``: a
+bearer token (RFC 6750) must be present and be a JWT whose ``scope`` claim holds the
+endpoint's scope (``utm.strategic_coordination`` for intents, ``utm.constraint_processing`` for
+constraints, as utm.yaml says). **The signature is not verified** (no authority's key is
+configured here): ``scope`` checks the standard's scopes, it does not authenticate anyone.
+
+The store holds each intent's volumes as JSON text once (from ``uam_planner.f3548``); a request
+only picks the volumes that end after the store's current time and fills in the state, so the
+cost of a request is one bisection and one string join. Thread-safe (one lock).
+"""
+
+from __future__ import annotations
+
+import base64
+import bisect
+import json
+import re
+import threading
+from dataclasses import dataclass
+
+from uam_planner.f3548 import (IntentContext, as_json, constraint_entity_id, f3548_constraint,
+                               intent_id, ovn, volume4d, volumes_for_limit)
+from uam_planner.replanning import flight_state
+
+#: F3548 EntityID (UUIDv4) as a path parameter
+ENTITY_ID = re.compile(r"^[0-9a-fA-F]{8}-[0-9a-fA-F]{4}-4[0-9a-fA-F]{3}-[89abAB][0-9a-fA-F]{3}-"
+                       r"[0-9a-fA-F]{12}$")
+MAX_URL_CHARS = 2048
+MAX_BODY_BYTES = 65536
+AUTH_MODES = ("off", "scope")
+PRUNE_EVERY_S = 30.0
+SCOPE_INTENTS = "utm.strategic_coordination"
+SCOPE_CONSTRAINTS = "utm.constraint_processing"
+
+
+@dataclass
+class _Intent:
+    flight: object
+    ends_s: list          # each volume's end [s], ascending
+    volumes_json: list    # each volume's JSON text
+
+
+class IntentStore:
+    """The live operational intents and constraints of one USS (thread-safe).
+
+    ``put_flight(flight)`` adds or replaces (a higher or equal version) the intent of a flight;
+    ``end(operator_id, request_id)`` removes it (a cancellation); ``set_constraints`` replaces the
+    constraint set; ``set_time`` moves the clock (simulation seconds) that states and volume
+    clipping use. ``details(id)`` / ``constraint_details(id)``: the response's JSON text or None.
+    """
+
+    def __init__(self, ctx: IntentContext):
+        self.ctx = ctx
+        self._lock = threading.Lock()
+        self._intents: dict[str, _Intent] = {}
+        self._constraints: dict[str, str] = {}
+        self._t_s = 0.0
+        self._pruned_s = 0.0
+
+    # ---- updates ---------------------------------------------------------------------------
+    def put_flight(self, flight) -> str:
+        """Add or replace the intent of ``flight`` (an older version never replaces a newer one).
+        Returns its entity id."""
+        oid = intent_id(flight.operator_id, flight.request_id)
+        vols, _ = volumes_for_limit(flight.trajectory, self.ctx.spec)
+        entry = _Intent(flight, [v.t1_s for v in vols],
+                        [json.dumps(as_json(volume4d(v, self.ctx)), separators=(",", ":"))
+                         for v in vols])
+        with self._lock:
+            old = self._intents.get(oid)
+            if old is None or int(old.flight.version) <= int(flight.version):
+                self._intents[oid] = entry
+        return oid
+
+    def end(self, operator_id: str, request_id: str) -> bool:
+        with self._lock:
+            return self._intents.pop(intent_id(operator_id, request_id), None) is not None
+
+    def set_constraints(self, constraints) -> None:
+        docs = {}
+        for c in constraints:
+            oc = f3548_constraint(c, self.ctx, self._t_s)
+            if oc is not None:
+                docs[constraint_entity_id(c.constraint_id)] = json.dumps(
+                    {"constraint": as_json(oc)}, separators=(",", ":"))
+        with self._lock:
+            self._constraints = docs
+
+    def set_time(self, t_s: float) -> None:
+        """Move the clock; every ``PRUNE_EVERY_S`` of simulation time the intents that ended
+        (arrival before the clock) are dropped, so a long run's store stays the size of what
+        is live (an intent's volumes are ~150 KiB of JSON on the Singapore network)."""
+        with self._lock:
+            self._t_s = max(self._t_s, float(t_s))
+            if self._t_s - self._pruned_s >= PRUNE_EVERY_S:
+                self._pruned_s = self._t_s
+                for oid in [k for k, e in self._intents.items() if e.flight.arrival_s < self._t_s]:
+                    del self._intents[oid]
+
+    @property
+    def time_s(self) -> float:
+        return self._t_s
+
+    def intent_ids(self) -> list:
+        with self._lock:
+            return sorted(self._intents)
+
+    def constraint_ids(self) -> list:
+        with self._lock:
+            return sorted(self._constraints)
+
+    # ---- reads -----------------------------------------------------------------------------
+    def details(self, entity_id: str) -> str | None:
+        """The GetOperationalIntentDetailsResponse of ``entity_id`` at the store's time, as JSON
+        text; None if unknown or Ended."""
+        with self._lock:
+            entry = self._intents.get(entity_id)
+            t = self._t_s
+        if entry is None:
+            return None
+        f = entry.flight
+        state = flight_state(f, t)
+        k = bisect.bisect_right(entry.ends_s, t)
+        if state == "Ended" or k >= len(entry.ends_s):
+            return None
+        vols = entry.volumes_json[k:]
+        first, last = json.loads(vols[0]), json.loads(vols[-1])
+        version = int(f.version)
+        ref = {"id": entity_id, "manager": self.ctx.manager, "uss_availability": "Unknown",
+               "version": version, "state": state, "ovn": ovn(entity_id, version),
+               "time_start": first["time_start"], "time_end": last["time_end"],
+               "uss_base_url": self.ctx.uss_base_url, "subscription_id": self.ctx.subscription_id}
+        joined = "[" + ",".join(vols) + "]"
+        nominal, off = ("[]", joined) if state == "Contingent" else (joined, "[]")
+        return ('{"operational_intent":{"reference":' + json.dumps(ref, separators=(",", ":"))
+                + ',"details":{"volumes":' + nominal + ',"off_nominal_volumes":' + off
+                + ',"priority":' + str(int(f.priority)) + '}}}')
+
+    def constraint_details(self, entity_id: str) -> str | None:
+        with self._lock:
+            return self._constraints.get(entity_id)
+
+
+def _error(status: int, message: str):
+    from flask import Response
+    return Response(json.dumps({"message": message}), status=status, mimetype="application/json")
+
+
+def _token_scopes(header: str | None):
+    """The scopes of a bearer JWT (signature NOT verified), or an error message."""
+    if not header or not header.startswith("Bearer "):
+        return None, "Authorization: a bearer access token is required (RFC 6750)"
+    parts = header[len("Bearer "):].strip().split(".")
+    if len(parts) != 3:
+        return None, "Authorization: the bearer token is not a JWT (3 dot-separated parts)"
+    try:
+        payload = json.loads(base64.urlsafe_b64decode(parts[1] + "=" * (-len(parts[1]) % 4)))
+        scope = payload["scope"]
+        return (scope.split() if isinstance(scope, str) else list(scope)), ""
+    except (ValueError, KeyError, TypeError):
+        return None, "Authorization: the bearer token's payload has no readable 'scope' claim"
+
+
+def create_app(store: IntentStore, auth: str = "off"):
+    """The Flask app serving ``store`` (module docstring)."""
+    from flask import Flask, Response, request
+    from werkzeug.exceptions import HTTPException
+
+    if auth not in AUTH_MODES:
+        raise ValueError(f"auth: {auth!r} is not one of {', '.join(AUTH_MODES)}")
+    app = Flask("uam_uss")
+    app.config["MAX_CONTENT_LENGTH"] = None  # refused below with the standard's 400
+
+    @app.before_request
+    def _limits():
+        url = request.full_path if request.query_string else request.path
+        if len(url) > MAX_URL_CHARS:
+            return _error(400, f"request: the URL has {len(url)} characters, more than "
+                               f"{MAX_URL_CHARS}")
+        if (request.content_length or 0) > MAX_BODY_BYTES:
+            return _error(400, f"request: a body of {request.content_length} bytes, more than "
+                               f"{MAX_BODY_BYTES}")
+        return None
+
+    def _check(entityid: str, scope: str):
+        if auth == "scope":
+            scopes, why = _token_scopes(request.headers.get("Authorization"))
+            if scopes is None:
+                return _error(401, why)
+            if scope not in scopes:
+                return _error(403, f"Authorization: the token's scopes {scopes} do not include "
+                                   f"{scope!r}")
+        if len(entityid) > 36 or not ENTITY_ID.match(entityid):
+            shown = entityid if len(entityid) <= 64 else entityid[:64] + "..."
+            return _error(400, f"entityid: {shown!r} is not an F3548 EntityID (a UUIDv4)")
+        return None
+
+    def _details(entityid, scope, lookup, missing: str):
+        """One details endpoint: the id and auth checks, then the stored document or a 404."""
+        bad = _check(entityid, scope)
+        if bad is not None:
+            return bad
+        body = lookup(entityid)
+        if body is None:
+            return _error(404, missing.format(entityid))
+        return Response(body, status=200, mimetype="application/json")
+
+    @app.get("/uss/v1/operational_intents/<path:entityid>")
+    def operational_intent(entityid):
+        return _details(entityid, SCOPE_INTENTS, store.details,
+                        "operational intent {} is not managed here (unknown or ended)")
+
+    @app.get("/uss/v1/constraints/<path:entityid>")
+    def constraint(entityid):
+        return _details(entityid, SCOPE_CONSTRAINTS, store.constraint_details,
+                        "constraint {} is not managed here")
+
+    @app.get("/uam_fleet/v1/operational_intents")
+    def list_intents():
+        return Response(json.dumps({"t_s": store.time_s, "ids": store.intent_ids()}),
+                        mimetype="application/json")
+
+    @app.get("/uam_fleet/v1/constraints")
+    def list_constraints():
+        return Response(json.dumps({"t_s": store.time_s, "ids": store.constraint_ids()}),
+                        mimetype="application/json")
+
+    @app.errorhandler(HTTPException)
+    def _http_error(exc):
+        return _error(exc.code or 500, f"{exc.name}: {request.method} {request.path[:200]}")
+
+    return app
+
+
+class UssServer:
+    """The app on a werkzeug threaded server in a daemon thread: ``UssServer(store, port=0)``
+    (0 = a free port, see ``.port``), ``.start()``, ``.stop()``. Binds ``host`` (default
+    loopback)."""
+
+    def __init__(self, store: IntentStore, host: str = "127.0.0.1", port: int = 0,
+                 auth: str = "off"):
+        from werkzeug.serving import WSGIRequestHandler, make_server
+
+        class _Quiet(WSGIRequestHandler):  # no log line per request (a load of them is the job)
+            def log_request(self, *args, **kwargs):
+                pass
+
+        self.store = store
+        self._server = make_server(host, int(port), create_app(store, auth), threaded=True,
+                                   request_handler=_Quiet)
+        self.host, self.port = host, int(self._server.server_port)
+        self._thread = threading.Thread(target=self._server.serve_forever, name="uss-http",
+                                        daemon=True)
+
+    @property
+    def url(self) -> str:
+        return f"http://{self.host}:{self.port}"
+
+    def start(self) -> "UssServer":
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._server.shutdown()
+        self._server.server_close()
+        self._thread.join(timeout=5)
+
+
+# ---- a client: another USS's intents into a file the planner reads --------------------------
+
+def fetch(base_url: str, ids=(), out=None, token: str = "", timeout_s: float = 10.0) -> dict:
+    """GET the details of operational intents ``ids`` (default: every id a uam_fleet server lists
+    at /uam_fleet/v1/operational_intents) from the USS at ``base_url``; each answer is checked
+    against the F3548 schema. Returns ``{"operational_intents": [...]}`` (written to ``out`` if
+    given), which ``--constraints FILE`` reads (docs/f3548.md, "In"). Raises ValueError naming the
+    id and the HTTP status of a failed request."""
+    import requests
+
+    from uam_planner.f3548_schema import errors
+
+    headers = {"Authorization": f"Bearer {token}"} if token else {}
+    base = base_url.rstrip("/")
+    if not ids:
+        r = requests.get(f"{base}/uam_fleet/v1/operational_intents", headers=headers, timeout=timeout_s)
+        if r.status_code != 200:
+            raise ValueError(f"{base}: listing the intents: HTTP {r.status_code} (give the ids)")
+        ids = r.json()["ids"]
+    docs = []
+    for oid in ids:
+        r = requests.get(f"{base}/uss/v1/operational_intents/{oid}", headers=headers, timeout=timeout_s)
+        if r.status_code != 200:
+            raise ValueError(f"operational intent {oid}: HTTP {r.status_code}: {r.text[:200]}")
+        errs = errors(r.json(), "GetOperationalIntentDetailsResponse")
+        if errs:
+            raise ValueError(f"operational intent {oid}: not a valid F3548 answer: {errs[:3]}")
+        docs.append(r.json()["operational_intent"])
+    result = {"operational_intents": docs}
+    if out is not None:
+        from pathlib import Path
+        Path(out).write_text(json.dumps(result))
+    return result
+
+
+def main(argv=None) -> int:
+    import argparse
+    import sys
+
+    ap = argparse.ArgumentParser(prog="python -m uam_sim.uss_server",
+                                 description="fetch: another USS's operational intents into a "
+                                             "JSON file for --constraints FILE")
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    f = sub.add_parser("fetch")
+    f.add_argument("base_url")
+    f.add_argument("ids", nargs="*", help="entity ids (default: all a uam_fleet server lists)")
+    f.add_argument("--out", required=True)
+    f.add_argument("--token", default="", help="bearer access token, if the USS asks for one")
+    args = ap.parse_args(argv)
+    try:
+        got = fetch(args.base_url, args.ids, args.out, args.token)
+    except (ValueError, OSError) as exc:
+        print(f"uss_server fetch: {exc}", file=sys.stderr)
+        return 2
+    print(f"uss_server fetch: {len(got['operational_intents'])} operational intents in {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,653 @@
+"""The decision study's report, from its tables alone (issue 24).
+
+    python -m uam_sim.decision_report docs/decision-study
+
+Reads ``study.json`` (the declared experiments and comparisons), ``runs.csv``, ``windows.csv``
+and ``e0.csv.gz`` (whichever exist) and writes ``comparisons.csv``, ``power.csv``,
+``e0_summary.csv`` and ``REPORT.md``. Every sentence that states a result is computed from those
+rows here: a comparison whose interval excludes 0 is called a difference in its direction; one
+whose interval includes 0 is reported as "not resolved at this power" with its half-width, never
+as "no effect". No number is written by hand.
+
+Statistics: paired per seed (every method of one cell at one seed plans the same requests),
+Student t intervals (``uam_sim.reports.stats.mean_interval``), two-sided one-sample t p-values
+(``scipy.stats.ttest_1samp``) for the secondary comparisons, adjusted by Holm within each
+experiment (:func:`uam_sim.reports.stats.holm`). Pooled estimates stack the per-seed relative
+differences of every group of a comparison (a fixed-effect estimate of one shared relative
+effect; the pairs are independent runs) with a t interval over all pairs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..runner.files import write_csv
+from .stats import holm, mean_interval, seeds_needed
+
+SIZE_BINS = [1, 8, 16, 32, 64, 128, 256, 512, 1024, 4096, 100000]
+E0_ORDER = ["firstfit", "greedy", "auto", "exact", "sa", "tabu", "qpu-emulator", "reference"]
+
+
+def _f(x, nd=1, sign=False) -> str:
+    try:
+        x = float(x)
+    except (TypeError, ValueError):
+        return "-"
+    if not math.isfinite(x):
+        return "-"
+    return f"{x:+,.{nd}f}" if sign else f"{x:,.{nd}f}"
+
+
+def _table(rows: list, heads: list) -> list:
+    out = ["| " + " | ".join(heads) + " |", "|" + "---|" * len(heads)]
+    out += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
+    return out
+
+
+# -- comparisons -------------------------------------------------------------------------------
+
+def _equal(col: pd.Series, v) -> pd.Series:
+    """col == v, numerically when v is a number (a column with blanks reads back as float: 5
+    must match 5.0), else as text."""
+    if isinstance(v, (int, float)) and not isinstance(v, bool):
+        return pd.to_numeric(col, errors="coerce") == float(v)
+    return col.astype(str) == str(v)
+
+
+def _groups(runs: pd.DataFrame, exp: dict, comp: dict) -> list:
+    """[(label, {term index: {seed: value}}, scale {seed: value})] of one comparison."""
+    rows = runs[runs["experiment"] == exp["name"]]
+    if rows.empty:
+        return []
+    fixed = set()
+    for t in comp["terms"]:
+        fixed |= set(t["where"])
+    free = [k for k in exp["vary"] if k not in fixed]
+    keys = (["cell"] if "cell" not in fixed else []) + (["rate"] if "rate" not in fixed else []) + free
+    out = []
+    combos = rows[keys].drop_duplicates().sort_values(keys).to_dict("records") if keys else [{}]
+    for g in combos:
+        vals = {}
+        for j, t in enumerate(comp["terms"]):
+            sel = rows[rows["method"] == t["method"]]
+            for k, v in {**g, **t["where"]}.items():
+                sel = sel[_equal(sel[k], v)]
+            vals[j] = dict(zip(sel["seed"].astype(int), sel[comp["metric"]].astype(float)))
+        label = ", ".join(f"{k} {g[k]}" for k in keys) or "all"
+        out.append((label, vals))
+    return out
+
+
+def comparison_rows(runs: pd.DataFrame, study: dict) -> list:
+    """One row per (experiment, comparison, group) plus a pooled row per comparison."""
+    from scipy.stats import ttest_1samp
+    level = float(study["power"]["level"])
+    out = []
+    for exp in study["experiments"]:
+        fam = []
+        for kind in ("primary", "secondary"):
+            for comp in exp[kind]:
+                neg = next(j for j, t in enumerate(comp["terms"]) if t["sign"] < 0)
+                rel_all = []
+                for label, vals in _groups(runs, exp, comp):
+                    seeds = sorted(set.intersection(*[set(v) for v in vals.values()])) if vals else []
+                    if not seeds:
+                        out.append({"experiment": exp["name"], "kind": kind, "comparison": comp["name"],
+                                    "metric": comp["metric"], "group": label, "seeds": 0})
+                        continue
+                    d = np.array([sum(comp["terms"][j]["sign"] * vals[j][s] for j in vals) for s in seeds])
+                    base = np.array([vals[neg][s] for s in seeds])
+                    m, lo, hi = mean_interval(d, level)
+                    ok = base != 0
+                    rel = 100.0 * d[ok] / base[ok]
+                    rm, rlo, rhi = mean_interval(rel, level)
+                    rel_all += rel.tolist()
+                    p = (float(ttest_1samp(d, 0.0).pvalue) if d.size >= 2 and np.std(d) > 0
+                         else (1.0 if d.size >= 2 and np.all(d == 0) else float("nan")))
+                    row = {"experiment": exp["name"], "kind": kind, "comparison": comp["name"],
+                           "metric": comp["metric"], "group": label, "seeds": len(seeds),
+                           "mean_base": float(base.mean()), "diff": m, "diff_lo": lo, "diff_hi": hi,
+                           "sd": float(d.std(ddof=1)) if d.size >= 2 else float("nan"),
+                           "rel_pct": rm, "rel_lo": rlo, "rel_hi": rhi,
+                           "positive": int((d > 0).sum()), "negative": int((d < 0).sum()), "p": p}
+                    out.append(row)
+                    if kind == "secondary":
+                        fam.append(row)
+                if len(rel_all) >= 2:
+                    rm, rlo, rhi = mean_interval(rel_all, level)
+                    out.append({"experiment": exp["name"], "kind": f"{kind}-pooled",
+                                "comparison": comp["name"], "metric": comp["metric"],
+                                "group": "pooled", "seeds": len(rel_all),
+                                "rel_pct": rm, "rel_lo": rlo, "rel_hi": rhi,
+                                "positive": int((np.array(rel_all) > 0).sum()),
+                                "negative": int((np.array(rel_all) < 0).sum())})
+        ps = [r["p"] for r in fam]
+        okp = [i for i, p in enumerate(ps) if isinstance(p, float) and math.isfinite(p)]
+        for i, a in zip(okp, holm([ps[i] for i in okp])):
+            fam[i]["p_holm"] = a
+    return out
+
+
+def mde(sd: float, n: int, level: float = 0.95, power: float = 0.8) -> float:
+    """The minimal detectable effect of a paired mean of ``n`` differences with SD ``sd``: the
+    true difference a two-sided t test at ``level`` detects with probability ``power``,
+    (t_{(1+level)/2, n-1} + t_{power, n-1}) * sd / sqrt(n) (the usual approximation; n >= 2)."""
+    from scipy.stats import t as student_t
+    if n < 2 or not math.isfinite(sd):
+        return float("nan")
+    return float((student_t.ppf(0.5 + level / 2, n - 1) + student_t.ppf(power, n - 1))
+                 * sd / math.sqrt(n))
+
+
+def power_rows(runs: pd.DataFrame, study: dict) -> list:
+    """Per primary comparison and group: the paired SD of the seeds run so far, the seeds a 95 %
+    CI half-width of ``half_width_pct`` % of the reference arm's approvals needs, the half-width
+    and the minimal detectable effect (:func:`mde`, at ``power.mde_power``) the seeds run and the
+    cap give. Where the comparison has several groups, also its pooled row: the stacked per-seed
+    relative differences [%] (the same question asked in every group), whose seeds needed are
+    per group (the stack grows by one difference per group for each seed)."""
+    from scipy.stats import t as student_t
+    pw = study["power"]
+    level = float(pw["level"])
+    mp = float(pw.get("mde_power", 0.8))
+    cap = int(pw["max_seeds"])
+    rows = []
+    groups: dict = {}
+    for r in comparison_rows(runs, study):
+        if r["kind"] == "primary" and r.get("seeds", 0) >= 1:
+            groups.setdefault((r["experiment"], r["comparison"]), []).append(r)
+        if r["kind"] != "primary" or r.get("seeds", 0) < 2:
+            continue
+        target = pw["half_width_pct"] / 100.0 * abs(r["mean_base"])
+        n_need = seeds_needed(r["sd"], target, level) if target > 0 else float("nan")
+        q = student_t.ppf(0.5 + level / 2, r["seeds"] - 1)
+        rows.append({"experiment": r["experiment"], "comparison": r["comparison"],
+                     "metric": r["metric"], "group": r["group"], "seeds_run": r["seeds"],
+                     "paired_sd": r["sd"], "base_mean": r["mean_base"], "target_half": target,
+                     "seeds_needed": n_need,
+                     "half_now": q * r["sd"] / math.sqrt(r["seeds"]),
+                     "max_seeds": cap,
+                     "half_at_cap": student_t.ppf(0.5 + level / 2, cap - 1) * r["sd"] / math.sqrt(cap),
+                     "mde_now": mde(r["sd"], r["seeds"], level, mp),
+                     "mde_at_cap": mde(r["sd"], cap, level, mp),
+                     "reachable": bool(n_need <= cap) if isinstance(n_need, int) else False,
+                     "decides": _per(study, r) == "cell"})
+    for r in comparison_rows(runs, study):
+        mine = groups.get((r["experiment"], r["comparison"]), [])
+        if r["kind"] != "primary-pooled" or len(mine) < 2:
+            continue
+        rel = _stacked_relative(runs, study, r["experiment"], r["comparison"])
+        if len(rel) < 3:
+            continue
+        k = len(mine)
+        sd = float(np.std(rel, ddof=1))
+        target = float(pw["half_width_pct"])
+        n_total = seeds_needed(sd, target, level) if sd > 0 else len(rel)
+        per_group = int(math.ceil(n_total / k)) if isinstance(n_total, int) else float("nan")
+        q = student_t.ppf(0.5 + level / 2, len(rel) - 1)
+        n_cap = cap * k
+        rows.append({"experiment": r["experiment"], "comparison": r["comparison"],
+                     "metric": r["metric"] + " [% of base]", "group": f"pooled over {k} groups",
+                     "seeds_run": len(rel), "paired_sd": sd, "base_mean": 100.0,
+                     "target_half": target, "seeds_needed": per_group,
+                     "half_now": q * sd / math.sqrt(len(rel)), "max_seeds": cap,
+                     "half_at_cap": student_t.ppf(0.5 + level / 2, n_cap - 1) * sd / math.sqrt(n_cap),
+                     "mde_now": mde(sd, len(rel), level, mp), "mde_at_cap": mde(sd, n_cap, level, mp),
+                     "reachable": bool(per_group <= cap) if isinstance(per_group, int) else False,
+                     "decides": _per(study, r) == "pooled"})
+    return rows
+
+
+def _per(study: dict, r: dict) -> str:
+    """The declared ``per`` of a comparison row's comparison: which power rows set its seeds
+    ("cell": every group's; "pooled": the pooled row's)."""
+    exp = next(e for e in study["experiments"] if e["name"] == r["experiment"])
+    comp = next(c for c in exp["primary"] + exp["secondary"] if c["name"] == r["comparison"])
+    return comp.get("per", "cell")
+
+
+def _stacked_relative(runs: pd.DataFrame, study: dict, experiment: str, comparison: str) -> list:
+    """The per-seed relative differences [%] of one comparison, stacked over its groups (the
+    numbers behind its pooled row)."""
+    exp = next(e for e in study["experiments"] if e["name"] == experiment)
+    comp = next(c for c in exp["primary"] + exp["secondary"] if c["name"] == comparison)
+    neg = next(j for j, t in enumerate(comp["terms"]) if t["sign"] < 0)
+    out = []
+    for _label, vals in _groups(runs, exp, comp):
+        seeds = sorted(set.intersection(*[set(v) for v in vals.values()])) if vals else []
+        for sd in seeds:
+            base = vals[neg][sd]
+            if base:
+                out.append(100.0 * sum(comp["terms"][j]["sign"] * vals[j][sd] for j in vals) / base)
+    return out
+
+
+# -- E0 ----------------------------------------------------------------------------------------
+
+def e0_gaps(e0: pd.DataFrame) -> pd.DataFrame:
+    """Each (run, epoch, solver) row with the best known objective (the best of every solver and
+    the reference on that instance), whether it is proven, and the gaps in objective and count."""
+    key = ["run", "epoch"]
+    best = e0.groupby(key)["objective"].max().rename("best_known")
+    proven = (e0[e0["proven_optimal"].astype(str) == "True"].groupby(key)["objective"].max()
+              .rename("proven_value"))
+    ref = e0[e0["solver"] == "reference"].set_index(key)
+    g = e0.join(best, on=key).join(proven, on=key)
+    g["best_proven"] = g["proven_value"].notna() & (np.isclose(g["proven_value"], g["best_known"]))
+    g["ref_count"] = g.set_index(key).index.map(ref["count"].to_dict() if not ref.empty else {})
+    g["gap_pct"] = np.where(g["best_known"] > 0, 100.0 * (g["best_known"] - g["objective"])
+                            / g["best_known"], 0.0)
+    g["count_gap"] = g["ref_count"] - g["count"]
+    g["bin"] = pd.cut(g["vertices"], SIZE_BINS, right=False).astype(str)
+    return g
+
+
+def e0_summary(e0: pd.DataFrame) -> list:
+    g = e0_gaps(e0)
+    rows = []
+    solvers = [s for s in E0_ORDER if s in set(g["solver"])] + sorted(set(g["solver"]) - set(E0_ORDER))
+    for s in solvers:
+        for lo, hi in zip(SIZE_BINS[:-1], SIZE_BINS[1:]):
+            x = g[(g["solver"] == s) & (g["vertices"] >= lo) & (g["vertices"] < hi)]
+            if x.empty:
+                continue
+            rows.append({"solver": s, "bin": f"[{lo}, {hi})", "instances": len(x),
+                         "gap_mean_pct": float(x["gap_pct"].mean()),
+                         "gap_max_pct": float(x["gap_pct"].max()),
+                         "at_best_share": float((x["gap_pct"] <= 1e-9).mean()),
+                         "count_gap_mean": float(x["count_gap"].mean()),
+                         "best_proven_share": float(x["best_proven"].mean()),
+                         "proven_share": float((x["proven_optimal"].astype(str) == "True").mean()),
+                         "fallbacks": int((x["fallback"].astype(str) == "True").sum()),
+                         "wall_median_s": float(x["wall_s"].median()),
+                         "wall_max_s": float(x["wall_s"].max())})
+    return rows
+
+
+# -- the report ---------------------------------------------------------------------------------
+
+def _read(d: Path, name: str):
+    p = d / name
+    return pd.read_csv(p) if p.exists() and p.stat().st_size > 0 else None
+
+
+def _verdict(r: dict, unit: str) -> str:
+    lo, hi = r.get("diff_lo", float("nan")), r.get("diff_hi", float("nan"))
+    txt = (f"{_f(r['diff'], 2, True)} {unit} [{_f(lo, 2, True)}, {_f(hi, 2, True)}] "
+           f"({_f(r['rel_pct'], 2, True)} % [{_f(r['rel_lo'], 2, True)}, {_f(r['rel_hi'], 2, True)}]), "
+           f"{r['seeds']} seeds, {r['positive']} positive / {r['negative']} negative")
+    if not (math.isfinite(lo) and math.isfinite(hi)):
+        return txt + ": no interval (fewer than 2 seeds)."
+    if lo > 0 or hi < 0:
+        return txt + f": the interval excludes 0, a difference {'above' if lo > 0 else 'below'} 0."
+    half = (hi - lo) / 2
+    return (txt + f": the interval includes 0, so the difference is not resolved at this power "
+            f"(half-width {_f(half, 2)} {unit}; effects smaller than that are neither shown nor "
+            f"excluded).")
+
+
+UNITS = {"approved_ss": "flights", "expired_ss": "requests", "requests_ss": "requests",
+         "approval_rate_ss": "(share)", "delay_mean_s": "s", "delay_p95_s": "s",
+         "detour_mean_m": "m", "detour_mean_pct": "%-points", "jain_index": "(index)",
+         "weight_sum_ss": "(weight)"}
+
+
+def _load_text(ex: pd.DataFrame) -> str:
+    """The machine's load during an experiment's runs (1-min average before and after each run,
+    sweep.run_cell), and where the fallbacks were: solve limits are wall-clock, so load can
+    decide a fallback; '' for runs from before the load was recorded."""
+    if "load_before" not in ex or not ex["load_before"].notna().any():
+        return ""
+    lo = ex[["load_before", "load_after"]].max(axis=1)
+    known = lo.notna()
+    txt = (f" Machine load (1-min average, the larger of before and after each run) median "
+           f"{_f(lo[known].median(), 1)}, max {_f(lo[known].max(), 1)} over {int(known.sum())} runs")
+    fb = ex[known & (ex["fallbacks"] > 0)]
+    if len(fb):
+        txt += (f"; the {int(fb['fallbacks'].sum())} fallbacks were in {len(fb)} runs at load "
+                f"{_f(lo[fb.index].min(), 1)} to {_f(lo[fb.index].max(), 1)}")
+    if known.sum() < len(ex):
+        txt += f"; {int(len(ex) - known.sum())} runs have no load recorded"
+    return txt + "."
+
+
+def _terms_text(comp: dict) -> str:
+    return " ".join(("+ " if t["sign"] > 0 else "- ") + t["method"]
+                    + (" (" + ", ".join(f"{k} {v}" for k, v in t["where"].items()) + ")"
+                       if t["where"] else "") for t in comp["terms"]).lstrip("+ ")
+
+
+def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:
+    """The report's text and its derived tables; ``shown``: the directory as the report names it
+    (default ``d``), so a copy elsewhere rebuilds the same bytes."""
+    study = json.loads((d / "study.json").read_text(encoding="utf-8"))
+    runs, windows, e0 = _read(d, "runs.csv"), _read(d, "windows.csv"), _read(d, "e0.csv.gz")
+    L = ["# The decision study: where optimisation matters (issue 24)", "",
+         "Written by `uam_sim.reports.decision_report` from the tables in this directory alone "
+         "(`study.json`, `runs.csv`, `windows.csv`, `e0.csv.gz`): "
+         f"`python -m uam_sim.decision_report {shown or d.as_posix()}` writes it again, byte for byte "
+         "(src/uam_sim/test/test_decision_study.py checks). The cells are run by "
+         "`python -m uam_sim.decision_study --config config/decision-study.yaml --stage "
+         "e0|pilot|full` (see its docstring and docs/decision-study/README.md).", ""]
+    tables = {}
+    # -- record
+    L += ["## Record", ""]
+    commits = []
+    for name, df in (("runs.csv", runs), ("e0.csv.gz", e0)):
+        if df is not None and "commit" in df:
+            for c, n in df["commit"].astype(str).value_counts().sort_index().items():
+                commits.append(f"`{c}` ({n} rows of {name})")
+    L.append("Commits that ran the cells (from each cell's own record): "
+             + ("; ".join(commits) if commits else "none yet") + ".")
+    versions = []
+    parts = [(f"runs.csv, {x}", runs[runs["experiment"] == x]) for x in
+             sorted(set(runs["experiment"].astype(str)))] if runs is not None and \
+        "experiment" in runs else [("runs.csv", runs)]
+    for name, df in parts + [("e0.csv.gz", e0)]:
+        if df is not None and "code_version" in df:
+            for c, n in df["code_version"].astype(str).value_counts().sort_index().items():
+                versions.append(f"`{c}` ({n} rows of {name})")
+    if versions:
+        L.append("")
+        L.append("Code versions of the cells, per table (`uam_sim.runner.sweep.code_version`, a hash of "
+                 "the run code that is part of each cell key; a cell of other code is never "
+                 "reused): " + "; ".join(versions) + ". Every number below is of the code "
+                 "versions named here: a checkout whose run code differs (any later merge of run "
+                 "code) has a code version of its own, at which none of these cells has run; "
+                 "the study would compute them again (`stale_cells` in its summary line).")
+    L.append("")
+    # -- missing
+    L += ["## What has run and what is missing", ""]
+    prow = power_rows(runs, study) if runs is not None else []
+    tables["power"] = prow
+    miss = []
+    for exp in study["experiments"]:
+        have = runs[runs["experiment"] == exp["name"]] if runs is not None else None
+        n_arms = len(exp["cells"]) * int(np.prod([len(v) for v in exp["vary"].values()]) if exp["vary"] else 1)
+        n_runs = 0 if have is None else len(have)
+        seeds = sorted(set(have["seed"].astype(int))) if have is not None and len(have) else []
+        need = [r["seeds_needed"] for r in prow if r["experiment"] == exp["name"]
+                and r["decides"] and isinstance(r["seeds_needed"], int)]
+        target = min(max(need), study["power"]["max_seeds"]) if need else None
+        per_seed_runs = sum(len(c["rates"]) for c in exp["cells"]) * (n_arms // max(1, len(exp["cells"]))) \
+            * len(exp["methods"])
+        pilot = int(study["power"]["pilot_seeds"])
+        miss.append([exp["name"], per_seed_runs, n_runs, ", ".join(map(str, seeds)) or "none",
+                     max(0, pilot * per_seed_runs - n_runs) if target is None else 0,
+                     target if target is not None else "pilot not complete",
+                     "-" if target is None else max(0, target * per_seed_runs - n_runs)])
+    L += _table(miss, ["experiment", "runs per seed", "runs in runs.csv", "seeds present",
+                       f"pilot runs missing ({study['power']['pilot_seeds']} seeds)",
+                       "seeds the power needs (capped)", "runs still missing at that"])
+    e0_runs = [r["name"] for r in study["e0"]["runs"]]
+    solvers = list(study["e0"]["backends"]) + ["reference"]
+    if e0 is not None:
+        done = set(zip(e0["run"].astype(str), e0["solver"].astype(str)))
+    else:
+        done = set()
+    absent = [f"{r} / {s}" for r in e0_runs for s in solvers if (r, s) not in done]
+    L += ["", "E0 cells (reference run / solver) missing: " + (", ".join(absent) if absent else "none") + ".", ""]
+    # -- steady state
+    ss = study["steady_state"]
+    L += ["## Steady-state window", "",
+          f"Chosen from the data: {ss['method'].upper()} (White's MSER with batches of 5 epochs, "
+          f"truncation searched over the first half of the run) on the mean over seeds of the "
+          f"reference method's ({ss['reference_method']}) per-epoch `{ss['series']}` (flights in "
+          "the air), per variant; then one window per experiment cell and rate, the latest of "
+          "its variants' truncations, which every method and variant uses (so a comparison "
+          "across variants, as E2's horizons, counts the same requests in both arms). A request "
+          "counts when its earliest departure is at or after the truncation and its latest "
+          "departure at or before the run's end.", ""]
+    if windows is not None:
+        own = "variant_truncation_epoch" in windows.columns
+        L += _table([[r["experiment"], r["cell"], r["variant"], r["rate"], r["reference_method"],
+                      r["variant_truncation_epoch"] if own else "-", r["truncation_epoch"],
+                      _f(r["warmup_s"], 0)] for r in windows.to_dict("records")],
+                    ["experiment", "cell", "variant", "rate", "reference method",
+                     "variant's own truncation", "truncation epoch (used)", "warm-up [s]"])
+    else:
+        L.append("No run yet.")
+    L.append("")
+    # -- power
+    pw = study["power"]
+    L += ["## Seeds from power", "",
+          f"Per primary comparison, the paired SD of the seeds run so far gives the seeds a "
+          f"{int(round(pw['level'] * 100))} % CI half-width of {_f(pw['half_width_pct'], 1)} % of the "
+          f"reference arm's mean needs (t interval; `uam_sim.reports.stats.seeds_needed`); the "
+          f"study runs that many, capped at {pw['max_seeds']}. A comparison declared `per: pooled` "
+          "(the same question in every group) takes its seeds from its pooled row (per-seed "
+          "relative differences stacked over the groups, in % of the base arm); the others from "
+          "their groups (\"sets seeds\"). MDE: the minimal detectable effect, the true difference "
+          f"a two-sided test at {int(round(pw['level'] * 100))} % finds with probability "
+          f"{_f(pw.get('mde_power', 0.8) * 100, 0)} %, at the seeds run and at the cap.", ""]
+    if prow:
+        L += _table([[r["experiment"], r["comparison"], r["group"], "yes" if r["decides"] else "no",
+                      r["seeds_run"], _f(r["paired_sd"], 2),
+                      _f(r["target_half"], 2), r["seeds_needed"] if isinstance(r["seeds_needed"], int) else "-",
+                      _f(r["half_now"], 2), _f(r["half_at_cap"], 2), _f(r["mde_now"], 2),
+                      _f(r["mde_at_cap"], 2)] for r in prow],
+                    ["experiment", "primary", "group", "sets seeds", "seeds run", "paired SD",
+                     "target half-width", "seeds needed", "half-width now",
+                     f"half-width at {pw['max_seeds']} seeds", "MDE now",
+                     f"MDE at {pw['max_seeds']} seeds"])
+        L.append("")
+        for r in prow:
+            if not r["reachable"] and r["decides"]:
+                L.append(f"- {r['experiment']} {r['comparison']} ({r['group']}): "
+                         f"{r['seeds_needed'] if isinstance(r['seeds_needed'], int) and r['seeds_needed'] <= 10000 else 'more than 10,000'} "
+                         f"seeds would be needed, more than the cap of {r['max_seeds']}: the study "
+                         f"could not reach the target; at the cap the half-width is "
+                         f"{_f(r['half_at_cap'], 2)} (target {_f(r['target_half'], 2)}) and the "
+                         f"smallest effect it would detect is {_f(r['mde_at_cap'], 2)}.")
+    else:
+        L.append("No pilot rows yet (`--stage pilot`).")
+    L.append("")
+    # -- experiments
+    comps = comparison_rows(runs, study) if runs is not None else []
+    tables["comparisons"] = comps
+    for exp in study["experiments"]:
+        L += [f"## {exp['name']}: {exp['question']}", ""]
+        L.append("Declared before running (config/decision-study.yaml, copied to study.json):")
+        for kind in ("primary", "secondary"):
+            for c in exp[kind]:
+                L.append(f"- {kind}: `{c['name']}`: {_terms_text(c)}, in `{c['metric']}`")
+        L.append("")
+        rows = [r for r in comps if r["experiment"] == exp["name"]]
+        if not rows:
+            L += ["No runs yet.", ""]
+            continue
+        for r in rows:
+            if r["kind"].endswith("pooled"):
+                L.append(f"- {r['kind']} `{r['comparison']}` over every group: "
+                         f"{_f(r['rel_pct'], 2, True)} % [{_f(r['rel_lo'], 2, True)}, {_f(r['rel_hi'], 2, True)}] "
+                         f"({r['seeds']} pairs, {r['positive']} positive)"
+                         + (": the interval excludes 0." if (r["rel_lo"] > 0 or r["rel_hi"] < 0)
+                            else ": the interval includes 0 (not resolved at this power)."))
+            elif r.get("seeds", 0) == 0:
+                L.append(f"- {r['kind']} `{r['comparison']}` ({r['group']}): no common seeds yet.")
+            else:
+                holm_txt = (f" (Holm-adjusted p {_f(r['p_holm'], 3)})" if "p_holm" in r else "")
+                L.append(f"- {r['kind']} `{r['comparison']}` ({r['group']}): "
+                         + _verdict(r, UNITS.get(r["metric"], ""))[:-1] + holm_txt + ".")
+        L.append("")
+        ex = runs[runs["experiment"] == exp["name"]]
+        keys = ["cell", "variant", "rate", "method"]
+        agg = ex.groupby(keys, sort=True)
+        prio = sorted(c for c in ex.columns if c.startswith("delay_p95_s_prio") and ex[c].notna().any())
+        out = []
+        for k, g in agg:
+            out.append([*k, len(g), _f(g["approved_ss"].mean()), _f(g["expired_ss"].mean()),
+                        _f(g["delay_mean_s"].mean()), _f(g["delay_p95_s"].mean()),
+                        _f(g["detour_mean_m"].mean(), 0),
+                        *[_f(g[c].mean()) for c in prio], _f(g["jain_index"].mean(), 3),
+                        _f(g["solve_time_median_s"].mean(), 3), _f(g["solve_time_max_s"].max(), 2),
+                        int(g["overruns"].sum()), int(g["fallbacks"].sum())])
+        L += _table(out, [*keys, "seeds", "approved (window)", "expired (window)", "delay mean [s]",
+                          "delay p95 [s]", "detour [m]", *[f"p95 delay prio {c[16:]} [s]" for c in prio],
+                          "Jain", "solve median [s]", "solve max [s]", "overruns", "fallbacks"])
+        L.append("")
+    # -- answers, one line per declared comparison and the optimiser's solve time
+    L += ["## Answers", "",
+          "One line per declared comparison, from the rows above (the pooled row where there is "
+          "one, else each group), and the solve time of the MWIS runs per experiment.", ""]
+    for exp in study["experiments"]:
+        rows = [r for r in comps if r["experiment"] == exp["name"]]
+        for kind in ("primary", "secondary"):
+            for c in exp[kind]:
+                mine = [r for r in rows if r["comparison"] == c["name"] and r["kind"].startswith(kind)
+                        and r.get("seeds", 0) >= 2]
+                pooled = [r for r in mine if r["kind"].endswith("pooled")]
+                if not mine:
+                    L.append(f"- {exp['name']} {kind} `{c['name']}`: not yet answered (fewer than "
+                             "2 paired seeds).")
+                    continue
+                r = pooled[0] if pooled else mine[0]
+                where = "pooled over every group" if pooled else r["group"]
+                ex = (r["rel_lo"] > 0 or r["rel_hi"] < 0) if math.isfinite(r.get("rel_lo", math.nan)) else False
+                power = ""
+                if kind == "primary":
+                    # what the seeds run can detect: the power table's row that sets the seeds
+                    pr = [p for p in prow if p["experiment"] == exp["name"]
+                          and p["comparison"] == c["name"] and p.get("decides")]
+                    if pr and math.isfinite(float(pr[0].get("mde_now", math.nan))):
+                        u = "%" if str(pr[0]["group"]).startswith("pooled") \
+                            else UNITS.get(c["metric"], "")
+                        where_p = "" if u == "%" else f" ({pr[0]['group']})"
+                        n_what = "paired differences (seeds x groups)" if u == "%" else "seeds"
+                        power = (f" With {pr[0]['seeds_run']} {n_what}{where_p} the smallest true difference "
+                                 f"found with 80 % probability (MDE) is {_f(pr[0]['mde_now'], 2)} "
+                                 f"{u}; at the cap of {pr[0]['max_seeds']} seeds "
+                                 f"{_f(pr[0]['mde_at_cap'], 2)} {u}.")
+                        if u == "%":
+                            power = power.replace(f"at the cap of {pr[0]['max_seeds']} seeds",
+                                                  f"at the cap of {pr[0]['max_seeds']} seeds per group")
+                half = (r["rel_hi"] - r["rel_lo"]) / 2 if math.isfinite(r.get("rel_lo", math.nan)) \
+                    else math.nan
+                L.append(f"- {exp['name']} {kind} `{c['name']}` ({c['metric']}, {where}): "
+                         f"{_f(r['rel_pct'], 2, True)} % [{_f(r['rel_lo'], 2, True)}, {_f(r['rel_hi'], 2, True)}]"
+                         + (f" {'above' if r['rel_lo'] > 0 else 'below'} 0." if ex
+                            else f", not resolved at this power: the interval includes 0 (half-width "
+                                 f"{_f(half, 2)} %), so an effect of that size is neither shown nor "
+                                 "excluded; this is not evidence of no effect.") + power)
+        if runs is not None:
+            mw = runs[(runs["experiment"] == exp["name"]) & ~runs["method"].isin(["fifo", "firstfit"])]
+            if len(mw):
+                L.append(f"- {exp['name']} solve time of the MWIS runs ({len(mw)}): median of the "
+                         f"runs' medians {_f(mw['solve_time_median_s'].median(), 3)} s, longest "
+                         f"{_f(mw['solve_time_max_s'].max(), 2)} s; {int(mw['overruns'].sum())} "
+                         f"solves past limit + 0.4 s, {int(mw['fallbacks'].sum())} fallbacks."
+                         + _load_text(runs[runs["experiment"] == exp["name"]]))
+    L.append("")
+    # -- E0
+    L += ["## E0: matched shadow solves", "",
+          f"Each epoch's recorded instance of the reference runs (method {study['e0']['method']}), "
+          + (f"a seeded sample of up to {study['e0']['per_bin']} per size bin, " if study['e0'].get('per_bin')
+             else "every epoch's instance (no sampling), ")
+          + f"solved by every solver at "
+          f"{_f(study['e0']['time_limit_s'], 1)} s and by the reference "
+          f"({study['e0']['reference']['backend']}, {_f(study['e0']['reference']['time_limit_s'], 0)} s). "
+          "Gap = (best known - objective) / best known, the best known being the best of every "
+          "solver on that instance; \"best proven\" = a proven-optimal answer reached it. Count gap "
+          "= the reference's number of approvals minus the solver's (negative: the solver approved "
+          "more flights with less weight).", ""]
+    e0s = e0_summary(e0) if e0 is not None else []
+    tables["e0_summary"] = e0s
+    if e0s:
+        L += _table([[r["solver"], r["bin"], r["instances"], _f(r["gap_mean_pct"], 3), _f(r["gap_max_pct"], 3),
+                      _f(100 * r["at_best_share"], 1), _f(r["count_gap_mean"], 2),
+                      _f(100 * r["best_proven_share"], 1), _f(100 * r["proven_share"], 1),
+                      r["fallbacks"], _f(r["wall_median_s"], 3), _f(r["wall_max_s"], 2)] for r in e0s],
+                    ["solver", "vertices", "instances", "gap mean [%]", "gap max [%]", "at best [%]",
+                     "count gap mean", "best proven [%]", "proven [%]", "fallbacks", "wall median [s]",
+                     "wall max [s]"])
+        L.append("")
+        g = e0_gaps(e0)
+        for s in [x for x in E0_ORDER if x in set(g["solver"])]:
+            x = g[g["solver"] == s]
+            m, lo, hi = mean_interval(x["gap_pct"].to_numpy(dtype=float))
+            over = int((x["wall_s"] > x["time_limit_s"] + 0.4).sum())
+            L.append(f"- {s}: mean gap {_f(m, 3)} % [{_f(lo, 3)}, {_f(hi, 3)}] over {len(x)} instances "
+                     f"({int((x['gap_pct'] <= 1e-9).sum())} at the best known); "
+                     f"{over} solves past limit + 0.4 s.")
+        L += ["", f"Instances: {g[['run', 'epoch']].drop_duplicates().shape[0]}; proven optimum known "
+              f"for {int(g.drop_duplicates(['run', 'epoch'])['best_proven'].sum())} of them.", "",
+              f"![E0: mean gap per solver and size bin]({E0_FIGURE})", ""]
+    else:
+        L += ["No E0 rows yet.", ""]
+    # -- the paper's figures
+    L += ["## The paper's figures", "",
+          "Reproduced in kind, not in numbers (our network is not the paper's): E3's approvals "
+          "against request rate on the paper's model corresponds to the paper's figure of approved "
+          "requests against the request rate, and E0's solve time per size bin to its "
+          "time-to-solution figure (the paper's figure numbers are not restated here; see "
+          "docs/paper-study/REPORT.md). The paper gives no value for the expanded airspace, the "
+          "objectives or the horizon.", ""]
+    return "\n".join(L).rstrip() + "\n", tables
+
+
+E0_FIGURE = "figures/e0_gap_by_size.png"
+
+
+def e0_figure(rows: list, path: Path) -> Path:
+    """E0's matched gaps per solver against the size bin (from e0_summary's rows): the mean gap in
+    the objective [%] and the mean count gap (reference's approvals minus the solver's)."""
+    from .figures import plt, save_figure, style
+    df = pd.DataFrame(rows)
+    df["lo"] = df["bin"].str.extract(r"\[(\d+),")[0].astype(int)
+    fig, axes = plt.subplots(1, 2, figsize=(11, 3.8))
+    solvers = [x for x in E0_ORDER if x in set(df["solver"]) and x != "reference"]
+    for i, sv in enumerate(solvers):
+        x = df[df["solver"] == sv].sort_values("lo")
+        st = style(sv, i)
+        axes[0].plot(x["lo"], x["gap_mean_pct"].clip(lower=1e-4), label=sv, markersize=4, **st)
+        axes[1].plot(x["lo"], x["count_gap_mean"], label=sv, markersize=4, **st)
+    axes[0].set_yscale("log")
+    axes[0].set_ylabel("mean gap in the objective [%] (0 drawn at 1e-4)")
+    axes[1].set_ylabel("mean count gap [flights] (reference - solver)")
+    axes[1].axhline(0.0, color="grey", linewidth=0.8)
+    for ax in axes:
+        ax.set_xscale("log", base=2)
+        ax.set_xlabel("instance size bin: vertices from")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=7, ncol=2)
+    axes[0].set_title("E0: same instances, same limit", fontsize=9)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    save_figure(fig, path)
+    return path
+
+
+def write_decision_report(d, shown: str | None = None) -> dict:
+    d = Path(d)
+    text, tables = report_text(d, shown)
+    (d / "REPORT.md").write_text(text, encoding="utf-8")
+    write_csv(d / "comparisons.csv", tables.get("comparisons") or [])
+    write_csv(d / "power.csv", tables.get("power") or [])
+    write_csv(d / "e0_summary.csv", tables.get("e0_summary") or [])
+    out = {"report": str(d / "REPORT.md")}
+    if tables.get("e0_summary"):
+        out["e0_figure"] = str(e0_figure(tables["e0_summary"], d / E0_FIGURE))
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="decision_report", description=__doc__.split("\n\n")[0])
+    ap.add_argument("dir", nargs="?", default="docs/decision-study")
+    args = ap.parse_args(argv)
+    d = Path(args.dir)
+    if not (d / "study.json").exists():
+        print(f"decision_report: {d / 'study.json'}: not found (run uam_sim.studies.decision_study first)",
+              file=sys.stderr)
+        return 2
+    print(write_decision_report(d)["report"])
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
