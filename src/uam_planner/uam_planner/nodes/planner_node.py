@@ -76,7 +76,7 @@ from uam_planner.airspace_files import load_airspace
 from uam_planner.constraints import ConstraintError
 from uam_planner.live_constraints import parse_update, set_geojson
 from uam_planner.network import load_network
-from uam_planner.nonconformance import ConformanceBounds
+from uam_planner.conformance import ConformanceBounds
 from uam_planner.planning import AirspaceConfig, Planner, PlanningConfig, call_solver, default_solve_mwis
 
 

@@ -64,7 +64,7 @@ from uam_contract.params import SIMULATOR
 from uam_bringup.runtime import run_node
 from uam_sim.recording.cdr import encode_clock, encode_fleet_state, encode_pose_array, yaw_quaternions
 from uam_sim.world.disturbance import WindField, fly_plans, from_simulator_params
-from uam_planner.nonconformance import RATE_RANGE
+from uam_planner.conformance import RATE_RANGE
 from uam_sim.world.fleet import Fleet
 
 RESEND_S = 2.0  # wall time after which an unanswered call is sent again (a restarted server lost it)

@@ -46,7 +46,7 @@ MAX_UPDATE_NONCONFORMING_S = float(f3548.OiMaxUpdateTimeNonconfSeconds)  # 5
 # the tube's bounds, the nearest-point errors and the inclusive test live below the simulator, in
 # the planner, which checks every conformance report against its own plan with the same code
 # (uam_planner.nonconformance; issue 23 item 3)
-from uam_planner.nonconformance import ConformanceBounds, conforming, deviations  # noqa: E402,F401
+from uam_planner.conformance import ConformanceBounds, conforming, deviations  # noqa: E402,F401
 
 
 @dataclass(frozen=True)
