@@ -40,7 +40,9 @@ def _recording(path, z_b: float, metadata: dict | None):
         rec.write("/uam/flight_plans", _plan("b", (0.0, -500.0), (0.0, 500.0), z_b), 0)
         rec.write("/uam/planning_reports", PlanningReport(epoch_index=0, approved=2), 0)
         for k in range(5):
-            fs = FleetState(step_index=k, vehicles=[VehicleState(vehicle_id=v) for v in ("a", "b")])
+            fs = FleetState(step_index=k, vehicles=[
+                VehicleState(vehicle_id="a", position=Point(x=-500.0 + 10.0 * k, y=0.0, z=60.0)),
+                VehicleState(vehicle_id="b", position=Point(x=0.0, y=-500.0 + 10.0 * k, z=z_b))])
             fs.header.stamp = Time(sec=k)
             rec.write("/uam/fleet_state", fs, k * NS)
         complete_run(rec, airspace_record=False)  # the airspace record is the test's own

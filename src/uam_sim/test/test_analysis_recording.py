@@ -47,6 +47,16 @@ FLIGHTS = {
 }
 
 
+def _on_plan(rid, t_s):
+    """Where ``rid``'s plan has it at ``t_s`` (the fleet flies its plans)."""
+    import numpy as np
+    from geometry_msgs.msg import Point
+
+    times = [w[0] for w in FLIGHTS[rid]]
+    x, y, z = (float(np.interp(t_s, times, [w[k] for w in FLIGHTS[rid]])) for k in (1, 2, 3))
+    return Point(x=x, y=y, z=z)
+
+
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory):
     path = tmp_path_factory.mktemp("an") / "synthetic.mcap"
@@ -76,7 +86,8 @@ def recording(tmp_path_factory):
         rec.write("/uam/planning_reports", empty, 30 * NS)
         # fleet states at t = 0..4 s with 3, 3, 2, 2, 0 vehicles: time-average over [0, 4] = 2.5
         for k, n in enumerate([3, 3, 2, 2, 0]):
-            fs = FleetState(step_index=k, vehicles=[VehicleState(vehicle_id=f"r{j + 1}") for j in range(n)])
+            fs = FleetState(step_index=k, vehicles=[VehicleState(vehicle_id=f"r{j + 1}", position=_on_plan(f"r{j + 1}", k))
+                                                    for j in range(n)])
             fs.header.stamp = t(k)
             rec.write("/uam/fleet_state", fs, k * NS)
         complete_run(rec, epochs=2)

@@ -35,7 +35,9 @@ def _fleet(rec: McapRecorder, ids: list[str], steps: int = 5, skip=()) -> None:
     for k in range(steps):
         if k in skip:
             continue
-        fs = FleetState(step_index=k, vehicles=[VehicleState(vehicle_id=v) for v in ids])
+        # 1 km apart, east at 10 m/s: what flew keeps separation (the tests judge the record)
+        fs = FleetState(step_index=k, vehicles=[VehicleState(vehicle_id=v, position=Point(x=10.0 * k, y=1000.0 * n, z=100.0))
+                                                for n, v in enumerate(ids)])
         fs.header.stamp = Time(sec=k)
         rec.write("/uam/fleet_state", fs, k * NS)
 

@@ -42,7 +42,10 @@ def _write(path, *, frame=True, extra=None, epochs=2, **frame_kw):
             rec.write("/uam/planning_reports", PlanningReport(epoch_index=epoch, approved=1), 30 * epoch * NS)
         for k in range(60):
             ids = ["r1"] + (["r2"] if k >= 30 else [])
-            fs = FleetState(step_index=k, vehicles=[VehicleState(vehicle_id=v) for v in ids])
+            # each where its plan has it (east at 10 m/s, r2 1 km north of r1)
+            fs = FleetState(step_index=k, vehicles=[VehicleState(
+                vehicle_id=v, position=Point(x=10.0 * (k - 30 * (v == "r2")), y=1000.0 * (v == "r2"), z=100.0))
+                for v in ids])
             fs.header.stamp = Time(sec=k)
             rec.write("/uam/fleet_state", fs, k * NS)
         if extra is not None:

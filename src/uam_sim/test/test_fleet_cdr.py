@@ -112,12 +112,13 @@ def test_stamps_ids_and_positions_are_read_from_the_cdr_without_deserializing():
              ("enu", ["é1", "é2", "é3"]))                            # one length, not ASCII
     for frame, ids in cases:
         pos = np.arange(3.0 * len(ids)).reshape(-1, 3) * 1.5 - 7.0
-        vel = np.ones((len(ids), 3))
+        vel = np.arange(3.0 * len(ids)).reshape(-1, 3) * -0.25 + 2.0
         data = encode_fleet_state(77, 123, frame, 5, ids, pos, vel, np.zeros(len(ids), np.uint8),
                                   np.arange(len(ids), dtype=np.uint32), np.ones(len(ids)), np.ones(len(ids)))
         d = fleet_state_digest(data, positions=True)
         assert d.vehicle_ids == ids and d.step_index == 5 == fleet_state_step_index(data)
         np.testing.assert_array_equal(d.positions_m, pos)
+        np.testing.assert_array_equal(d.velocities_mps, vel)
         assert leading_stamp_ns(data) == 77 * 10**9 + 123
     for msg in (Clock(clock=Time(sec=9, nanosec=8)), PoseArray(), FlightPlan(request_id="x"),
                 PlanningReport(epoch_index=3)):

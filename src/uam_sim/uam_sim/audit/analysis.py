@@ -748,7 +748,7 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
     fl = s.flown
     if fl:  # issue 23: the audit above is of what was planned; this one of what flew
         ms = fl["min_separation_m"]
-        verdict = f"LOSS OF SEPARATION in {fl['losses']} pair(s)" if fl["losses"] else "OK"
+        verdict = flown_verdict(fl)
         lines.append(f"Flown audit      {verdict} (what flew: the fleet states, samples "
                      f"{fl['sample_step_s']:g} s apart; the audit above is of the plans): losses proven by the "
                      f"samples {fl['losses']}; between samples, the chords' minimum "
@@ -759,6 +759,10 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
                      f"(per piece, from the plan flown there: 0 on {fl.get('pieces_exact', 0)} of "
                      f"{fl.get('pieces', 0)} pieces), {fl['possible_losses']} pair(s) it cannot clear; "
                      f"{fl.get('samples_off_plan', '-')} sample(s) off their plan as flown")
+        for a_, b_, d, t_ in fl.get("loss_pairs", [])[:20]:
+            lines.append(f"    loss {a_} / {b_}: {d:.1f} m at t = {t_:.1f} s")
+        for a_, b_, d, t_ in fl.get("unresolved_pairs", [])[:20]:
+            lines.append(f"    unresolved {a_} / {b_}: chords {d:.1f} m at t = {t_:.1f} s")
         cf = fl["conformance"]
         lines.append(f"Conformance      {cf['conformance_percent']:.2f} % of {cf['flight_hours']:.2f} flight hours, "
                      f"{cf['excursions']} excursions ({cf['excursions_per_flight_hour']:.2f} per flight hour), "
@@ -781,6 +785,21 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
     return "\n".join(lines)
 
 
+def flown_verdict(flown: dict) -> str:
+    """The verdict on what flew: a loss the samples prove, pairs they can neither prove nor
+    clear (unresolved: never OK), or OK."""
+    if flown.get("losses"):
+        return f"LOSS OF SEPARATION in {flown['losses']} pair(s)"
+    if flown.get("unresolved"):
+        return f"UNRESOLVED: {flown['unresolved']} pair(s) the samples can neither prove nor clear"
+    return "OK"
+
+
+def flown_failed(flown: dict) -> bool:
+    """Whether what flew lost separation or may have (exit 2)."""
+    return bool(flown) and flown_verdict(flown) != "OK"
+
+
 def _separation_from_flags(args):
     """The model the flags name (their unset parts from the recording), or None (the run's)."""
     if args.separation is None and args.separation_m is None and args.vertical_separation_m is None:
@@ -798,7 +817,8 @@ def _separation_from_flags(args):
 
 def main(argv: list[str] | None = None) -> int:
     """Command line: print the summary of a recording (exit 2 if the audit finds a loss of
-    separation or a flown trajectory entering a constraint in force, 3 if the recording lacks plans
+    separation between the plans or in what flew (or a flown pair it can neither prove nor
+    clear), or a flown trajectory entering a constraint in force, 3 if the recording lacks plans
     it should hold or its plan versions do not chain, so its audit cannot be trusted)."""
     ap = argparse.ArgumentParser(allow_abbrev=False, prog="analyze", description=__doc__.split("\n\n")[0])
     ap.add_argument("recording", help="the .mcap file of a run")
@@ -843,7 +863,7 @@ def main(argv: list[str] | None = None) -> int:
             print(format_summary(summary, epochs=not args.no_epochs))
     except BrokenPipeError:  # e.g. piped into `head`
         sys.stderr.close()
-    if (summary.audit is not None and not summary.audit.ok) or summary.incursions:
+    if (summary.audit is not None and not summary.audit.ok) or summary.incursions or flown_failed(summary.flown):
         return 2
     return 0 if summary.verified else 3
 

@@ -22,11 +22,25 @@ velocity (``D_h``) and to the vertical speed (its range ``R_v``) separately:
   the ball of the largest sampled speed, per axis (``D = 2 v``: ``v_h dt / 2``, ``v_z dt / 2``;
   ``v_h``, ``v_z`` the largest horizontal and vertical chord speeds, and the plan's).
 
-A pair's bound at an instant is the sum of the two aircraft's, per axis. With those bounds a pair
-is a **loss** when even the most favourable motion within them loses separation (the chords
+The error at the fraction ``l`` of a piece is at most ``l (1 - l) D dt``: 0 at both samples (a
+sample is where the aircraft was) and the piece's bound ``D dt / 4`` only at its middle. A
+pair's bound at an instant is the sum of the two aircraft's there, per axis. With those bounds a
+pair is a **loss** when even the most favourable motion within them loses separation (the chords
 closer than ``H - e_h`` while vertically closer than ``V - e_v``; the sphere: closer than the
-minimum minus the 3D bound): proven by the samples. It is a **possible loss** when the chords come
-within ``H + e_h`` while within ``V + e_v``: the samples cannot exclude it. The chords' own losses
+minimum minus the 3D bound): proven by the samples, and at a sample instant of both aircraft
+simply by the samples. It is a **possible loss** when the chords come within ``H + e_h`` while
+within ``V + e_v``: the samples cannot exclude it; a possible loss that is not a loss is
+*unresolved*, never cleared.
+
+**The simulator's own motion.** A fleet state carries each aircraft's velocity, which the
+simulator flies from that sample until its path's next vertex (``Fleet.sample``). Where the
+reported velocity equals the chord to the next sample (to ``STRAIGHT_MPS``) no single vertex
+lies inside the piece, so the aircraft flew the chord: the piece takes no bound (exact unless
+two or more vertices inside one piece average exactly to the first velocity). The disturbance
+model's tracks are linear between their samples, so a disturbed run's pieces are straight but
+where a version or the landing falls inside a step.
+
+The chords' own losses
 (``interpolated_losses``) are reported too: the linear interpolation cuts the corner at the top
 of each climb and descent, so two aircraft at adjacent levels (exactly V apart) seem to lose
 separation there while the aircraft, on their plans, never do (the city run's 6 "flown losses"
@@ -54,19 +68,31 @@ from .separation import TIE_RELATIVE, sweep_audit, sweep_audits
 OUTCOME_APPROVED = 0  # uam_msgs/FlightPlan.OUTCOME_APPROVED
 
 
-def tracks_from_samples(samples: Iterable[tuple[float, list, np.ndarray]]) -> dict[str, Trajectory]:
+def tracks_from_samples(samples: Iterable[tuple]) -> dict[str, Trajectory]:
     """Per vehicle, its track from fleet samples ``(t_s, vehicle_ids, positions (v, 3))`` in time
     order; a vehicle seen at one sample only has no track (nothing to interpolate)."""
+    return tracks_and_velocities(samples)[0]
+
+
+def tracks_and_velocities(samples: Iterable[tuple]) -> tuple[dict[str, Trajectory], dict[str, np.ndarray]]:
+    """:func:`tracks_from_samples`, and per vehicle the velocity reported at each of its samples
+    (k, 3) where the samples carry one ``(t_s, vehicle_ids, positions, velocities)``."""
     times: dict = defaultdict(list)
     pts: dict = defaultdict(list)
-    for t, ids, pos in samples:
-        for vid, p in zip(ids, np.asarray(pos, dtype=np.float64).reshape(-1, 3)):
+    vels: dict = defaultdict(list)
+    for sample in samples:
+        t, ids, pos = sample[:3]
+        vel = np.asarray(sample[3], dtype=np.float64).reshape(-1, 3) if len(sample) > 3 else None
+        for n, (vid, p) in enumerate(zip(ids, np.asarray(pos, dtype=np.float64).reshape(-1, 3))):
             if times[vid] and t <= times[vid][-1]:
                 continue  # a repeated sample (a duplicate message)
             times[vid].append(float(t))
             pts[vid].append(p)
-    return {vid: Trajectory(np.array(times[vid]), np.array(pts[vid]))
-            for vid in sorted(times) if len(times[vid]) >= 2}
+            if vel is not None:
+                vels[vid].append(vel[n])
+    keep = [vid for vid in sorted(times) if len(times[vid]) >= 2]
+    return ({vid: Trajectory(np.array(times[vid]), np.array(pts[vid])) for vid in keep},
+            {vid: np.array(vels[vid]) for vid in keep if len(vels[vid]) == len(times[vid])})
 
 
 def max_speed_mps(tracks: Iterable[Trajectory]) -> float:
@@ -97,12 +123,42 @@ LISTED = 20
 ON_PLAN_M = 1e-3
 
 
+#: a piece flew straight when the velocity reported at its first sample is its chord's to this [m/s]
+STRAIGHT_MPS = 1e-6
+
+
+def straight_pieces(track: Trajectory, velocities_mps: np.ndarray | None) -> np.ndarray:
+    """Per piece of ``track``: whether the simulator's own motion over it is the chord. The
+    simulator reports at each sample the velocity it flies from that sample until its next
+    vertex (``uam_sim.world.fleet.Fleet.sample``); where that velocity is the chord's (to
+    STRAIGHT_MPS) the next vertex is not inside the piece (one vertex inside would change the
+    average velocity), so the aircraft flew the chord. All False without velocities."""
+    n = track.times_s.size - 1
+    if velocities_mps is None or velocities_mps.shape[0] != track.times_s.size or n < 1:
+        return np.zeros(max(n, 0), dtype=bool)
+    _t0, _t1, _p0, chord = track.segments()
+    if chord.shape[0] != n:
+        return np.zeros(n, dtype=bool)
+    return np.abs(velocities_mps[:-1] - chord).max(axis=1) <= STRAIGHT_MPS
+
+
 def piece_bounds(track: Trajectory, plan: Trajectory | None, vh: float,
-                 vz: float) -> tuple[np.ndarray, np.ndarray, int]:
+                 vz: float, straight: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, int]:
     """Per piece of ``track``: the bound of one aircraft's horizontal and vertical distance from
-    the chord (see the module docstring): from the plan's velocities where both samples lie on
-    ``plan``, else ``vh dt / 2`` and ``vz dt / 2``; and how many samples are off the plan (by
-    more than ON_PLAN_M, or outside its times; 0 without a plan)."""
+    the chord (see the module docstring): 0 where the piece flew straight (``straight``, from
+    :func:`straight_pieces`); from the plan's velocities where both samples lie on ``plan``;
+    else ``vh dt / 2`` and ``vz dt / 2``; and how many samples are off the plan (by more than
+    ON_PLAN_M, or outside its times; 0 without a plan)."""
+    eh, ev, off = _piece_bounds(track, plan, vh, vz)
+    if straight is not None and straight.any():
+        eh, ev = eh.copy(), ev.copy()
+        eh[straight] = 0.0
+        ev[straight] = 0.0
+    return eh, ev, off
+
+
+def _piece_bounds(track: Trajectory, plan: Trajectory | None, vh: float,
+                  vz: float) -> tuple[np.ndarray, np.ndarray, int]:
     t = track.times_s
     dt = np.diff(t)
     eh, ev = vh * dt / 2.0, vz * dt / 2.0
@@ -131,23 +187,40 @@ def piece_bounds(track: Trajectory, plan: Trajectory | None, vh: float,
     return eh, ev, off
 
 
+def _bound_share(track: Trajectory, piece: np.ndarray, t0: np.ndarray, t1: np.ndarray) -> np.ndarray:
+    """The largest share of its piece's bound that ``track``'s sampling error can reach on
+    [t0, t1] inside ``piece``: the error at the fraction l of a piece is at most 4 l (1 - l)
+    times the piece's bound (module docstring: ``l (1 - l) D dt`` of ``D dt / 4``), so 0 at a
+    sample and 1 only at the middle of the piece."""
+    ts = track.times_s
+    start, span = ts[piece], ts[piece + 1] - ts[piece]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        l0 = np.where(span > 0, (t0 - start) / span, 0.0)
+        l1 = np.where(span > 0, (t1 - start) / span, 0.0)
+    m = np.clip(0.5, np.clip(l0, 0.0, 1.0), np.clip(l1, 0.0, 1.0))
+    return 4.0 * m * (1.0 - m)
+
+
 def _pair_within(a: Trajectory, ea: tuple, b: Trajectory, eb: tuple, model, sign: float):
     """Whether two tracks come within the minimum widened (``sign`` +1) or shrunk (-1) by their
     per-piece bounds: (the smallest distance where they do, horizontal for the cylinder, or
-    inf; its time). Exact on every sub-interval of the merged sample times (both linear)."""
+    inf; its time). Exact on every sub-interval of the merged sample times (both linear), each
+    taking the largest bound the two tracks reach on it, and at every sample instant of either
+    track, where that track's bound is 0 (a sample is where the aircraft was)."""
     lo, hi = max(a.times_s[0], b.times_s[0]), min(a.times_s[-1], b.times_s[-1])
     if hi < lo:
         return math.inf, math.nan
     g = np.unique(np.concatenate([a.times_s, b.times_s, [lo, hi]]))
     g = g[(g >= lo) & (g <= hi)]
-    if g.size == 1:
-        g = np.array([g[0], g[0]])
-    t0, t1 = g[:-1], g[1:]
+    # the sub-intervals between merged sample times, then each merged instant alone
+    t0 = np.concatenate([g[:-1], g])
+    t1 = np.concatenate([g[1:], g])
     mid = 0.5 * (t0 + t1)
     ia = np.clip(np.searchsorted(a.times_s, mid, side="right") - 1, 0, a.times_s.size - 2)
     ib = np.clip(np.searchsorted(b.times_s, mid, side="right") - 1, 0, b.times_s.size - 2)
-    eh = ea[0][ia] + eb[0][ib]
-    ev = ea[1][ia] + eb[1][ib]
+    fa, fb = _bound_share(a, ia, t0, t1), _bound_share(b, ib, t0, t1)
+    eh = ea[0][ia] * fa + eb[0][ib] * fb
+    ev = ea[1][ia] * fa + eb[1][ib] * fb
     r0 = a.position_at(t0, clamp=True) - b.position_at(t0, clamp=True)
     r1 = a.position_at(t1, clamp=True) - b.position_at(t1, clamp=True)
     d = r1 - r0
@@ -185,7 +258,8 @@ def _pair_within(a: Trajectory, ea: tuple, b: Trajectory, eb: tuple, model, sign
 
 
 def flown_audit(tracks: Mapping[str, Trajectory], separation, sample_step_s: float | None = None,
-                prune: bool = True, plans: Mapping[str, Trajectory] | None = None) -> dict:
+                prune: bool = True, plans: Mapping[str, Trajectory] | None = None,
+                velocities: Mapping[str, np.ndarray] | None = None) -> dict:
     """Losses of separation in what flew.
 
     Args:
@@ -198,6 +272,8 @@ def flown_audit(tracks: Mapping[str, Trajectory], separation, sample_step_s: flo
             result is the same, ``uam_planner.audit.sweep_audits``).
         plans: vehicle id -> its plan as flown (every version from its instant): the per-piece
             bounds of the module docstring, and ``losses`` are then those the samples prove.
+        velocities: vehicle id -> the velocity reported at each sample of its track: pieces
+            that flew straight (:func:`straight_pieces`) take no bound.
     Returns: the :func:`uam_sim.audit.separation.sweep_audit` dict of the interpolated tracks, plus
     ``what`` ("flown"), ``sampling_bound_m`` / ``sampling_bound_v_m`` (the largest pair bound,
     horizontal and vertical; 0 without sampling), ``possible_losses`` (pairs the samples cannot
@@ -217,9 +293,11 @@ def flown_audit(tracks: Mapping[str, Trajectory], separation, sample_step_s: flo
     if not sample_step_s or not trajs:
         out = sweep_audit(trajs, model, labels=ids, prune=prune)
         out.update({"what": "flown", "sampling_bound_m": 0.0, "sampling_bound_v_m": 0.0,
-                    "possible_losses": out["losses"], "max_speed_mps": vmax})
+                    "possible_losses": out["losses"], "unresolved": 0, "unresolved_pairs": [],
+                    "max_speed_mps": vmax})
         return out
-    bounds = {i: piece_bounds(tracks[i], (plans or {}).get(i), vh, vz) for i in ids}
+    straight = {i: straight_pieces(tracks[i], (velocities or {}).get(i)) for i in ids}
+    bounds = {i: piece_bounds(tracks[i], (plans or {}).get(i), vh, vz, straight[i]) for i in ids}
     bh = 2.0 * max((float(b[0].max()) for b in bounds.values() if b[0].size), default=0.0)
     bv = 2.0 * max((float(b[1].max()) for b in bounds.values() if b[1].size), default=0.0)
     # one candidate search for both minima (uam_planner.audit.sweep_audits): the chords in the
@@ -247,6 +325,10 @@ def flown_audit(tracks: Mapping[str, Trajectory], separation, sample_step_s: flo
         # pieces whose bound is 0 on both axes (on the plan, straight and level or one segment)
         out["pieces_exact"] = sum(int(((b[0] == 0) & (b[1] == 0)).sum()) for b in bounds.values())
         out["pieces"] = sum(int(b[0].size) for b in bounds.values())
+        out["pieces_straight"] = sum(int(s.sum()) for s in straight.values())
+    proven_pairs = {(a, b) for a, b, _d, _t in out["loss_pairs"]}
+    unresolved = sorted((x for x in possible if (x[0], x[1]) not in proven_pairs), key=lambda x: x[2])
+    out["unresolved"], out["unresolved_pairs"] = len(unresolved), unresolved[:LISTED]
     out["loss_pairs"] = out["loss_pairs"][:LISTED]
     out.update({"what": "flown", "sampling_bound_m": bh, "sampling_bound_v_m": bv,
                 "possible_losses": len(possible), "possible_loss_pairs": sorted(possible, key=lambda x: x[2])[:LISTED],
@@ -286,9 +368,10 @@ def recording_flown(path, separation, bounds=None, plans=None, prune: bool = Tru
                 msg = deserialize(rec)
                 ids = [v.vehicle_id for v in msg.vehicles]
                 pos = np.array([(v.position.x, v.position.y, v.position.z) for v in msg.vehicles]).reshape(-1, 3)
-                samples.append((stamp_s(msg.header.stamp), ids, pos))
+                vel = np.array([(v.velocity.x, v.velocity.y, v.velocity.z) for v in msg.vehicles]).reshape(-1, 3)
+                samples.append((stamp_s(msg.header.stamp), ids, pos, vel))
             else:
-                samples.append((stamp_s(d.header.stamp), d.vehicle_ids, d.positions_m))
+                samples.append((stamp_s(d.header.stamp), d.vehicle_ids, d.positions_m, d.velocities_mps))
         elif plans is None:
             found_plans.append(deserialize(rec))
     if not samples:
@@ -296,7 +379,7 @@ def recording_flown(path, separation, bounds=None, plans=None, prune: bool = Tru
     samples.sort(key=lambda s: s[0])
     ts = np.array([s[0] for s in samples])
     step = float(np.max(np.diff(ts))) if ts.size > 1 else 0.0
-    tracks = tracks_from_samples(samples)
+    tracks, velocities = tracks_and_velocities(samples)
     from uam_contract.wire import scoped_id
     from .flown_audit import effective_s as version_effective_s, plan_version
     versions: dict = {}   # key -> {version: plan}, the first message of each version
@@ -334,7 +417,8 @@ def recording_flown(path, separation, bounds=None, plans=None, prune: bool = Tru
             f, _gaps = flown_trajectory(key, [by for _v, by in sorted(versions[key].items())])
             if f.times_s.size >= 2 and np.all(np.diff(f.times_s) > 0):
                 flown_plans[key] = Trajectory(f.times_s, f.points_m)
-    out = flown_audit(tracks, separation, sample_step_s=step, prune=prune, plans=flown_plans)
+    out = flown_audit(tracks, separation, sample_step_s=step, prune=prune, plans=flown_plans,
+                      velocities=velocities)
     out["sample_step_s"] = step
     bounds = bounds or ConformanceBounds()
     conf = [versioned_conformance(vid, pieces_of[vid], tr, bounds) for vid, tr in tracks.items()
