@@ -146,3 +146,65 @@ def test_constraint_intervals_follow_the_recorded_sets():
     sets = [(0.0, [(v1, 0.0)]), (60.0, [(v2, 60.0)]), (120.0, [])]
     got = [(c.version, a, b) for c, a, b in constraint_intervals(sets)]
     assert got == [(1, 0.0, 60.0), (2, 60.0, 120.0)]
+
+
+# A reaction update (kind nonconforming) takes over at 50 s from where the aircraft was, 60 m
+# north of where version 1 had it: (0, 60) at 50 s, east to (100, 60) at 60 s, then north.
+# Joining the versions into one path (dropping that first waypoint) drew (0, 0) at 50 s ->
+# (100, 60) at 60 s, a path in no plan.
+def _reacted():
+    v1 = plan(EAST)
+    v2 = plan([(45, -50, 60, 100), (60, 100, 60, 100), (100, 100, 460, 100)], version=2, effective=50.0,
+              kind="nonconforming")
+    return v1, v2
+
+
+def _in_force_audit(other):
+    from uam_sim.audit.flown_audit import plans_in_force
+    from uam_sim.audit.separation import audit_trajectories
+
+    v1, v2 = _reacted()
+    flown, problems = flown_versions([("op/r1", v1)], {"op/r1": {2: v2}}, [])
+    assert problems == []
+    parts, labels = plans_in_force([v1, other], ["op/r1", "op/r2"], flown)
+    return audit_trajectories(parts, labels, 100.0), parts, labels
+
+
+def test_a_reaction_update_is_in_force_from_its_first_waypoint_and_no_phantom_path_is_audited():
+    v1, v2 = _reacted()
+    f, problems = flown_trajectory("op/r1", [v1, v2])
+    assert problems == []
+    # two parts: version 1 to 50 s; version 2 from where the aircraft was at 50 s
+    (t1, x1), (t2, x2) = f.trajectories()
+    assert t1.tolist() == [0.0, 50.0] and x1[-1].tolist() == [0.0, 0.0, 100.0]
+    assert t2.tolist() == [50.0, 60.0, 100.0] and x2[0].tolist() == [0.0, 60.0, 100.0]
+    # r2 from (50, -60) at 51 s, south: 77 m from the joined path at 51 s, 126 m from version 2
+    # (version 1 is no longer in force): no loss between the plans in force
+    r2 = plan([(51, 50, -60, 100), (100, 50, -550, 100)])
+    audit, parts, labels = _in_force_audit(r2)
+    assert labels == ["op/r1", "op/r1", "op/r2"]
+    assert audit.ok and audit.min_separation_m == pytest.approx(math.hypot(40.0, 120.0))
+
+
+def test_a_loss_on_a_reaction_updates_first_leg_is_found():
+    # r2 from (10, 140) at 51 s, north at 10 m/s: version 2's first leg passes 80 m from it at 51 s
+    # (the joined path was 134 m away and saw nothing)
+    r2 = plan([(51, 10, 140, 100), (100, 10, 630, 100)])
+    audit, _parts, _labels = _in_force_audit(r2)
+    assert not audit.ok
+    a, b, d, when = audit.losses[0]
+    assert (a, b) == ("op/r1", "op/r2") and d == pytest.approx(80.0) and when == pytest.approx(51.0)
+
+
+def test_a_cancellation_effective_at_the_departure_flew_nothing():
+    from uam_sim.audit.analysis import _departure_flown
+
+    v1 = plan([(10, -500, 0, 100), (110, 500, 0, 100)])
+    cancel = plan([], version=2, effective=10.0, ids=["sq"], kind="cancelled")
+    f, problems = flown_trajectory("op/r1", [v1, cancel])
+    assert problems == [] and len(f.times_s) == 0 and f.trajectories() == []
+    # so the analysis never expects it in the fleet states ("never flew" made the run NOT VERIFIED)
+    assert _departure_flown("op/r1", v1, {"op/r1": f}) == math.inf
+    # a cancellation one second later: it flew that second
+    f, _ = flown_trajectory("op/r1", [v1, plan([], version=2, effective=11.0, ids=["sq"], kind="cancelled")])
+    assert f.times_s.tolist() == [10.0, 11.0]

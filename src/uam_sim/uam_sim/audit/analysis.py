@@ -59,7 +59,7 @@ import numpy as np
 
 from uam_contract.defaults import SEPARATION_M
 
-from .separation import AIRSPACE_METADATA, SafetyAudit, audit_plans, separation_from_metadata, trajectory_of
+from .separation import AIRSPACE_METADATA, SafetyAudit, audit_plans, separation_from_metadata
 from ..world.flights import run_metrics, shortest_route_lengths_m
 from ..recording.mcap_reader import is_complete, iter_decoded, read_metadata, recorded_topics, require_mcap
 from ..recording.mcap_recover import RECOVERED_METADATA
@@ -504,11 +504,9 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
     with_instance = [e for e in epochs if e.vertices > 0 and e.policy in ("", "mwis")]
     max_active = int(max(fleet_n)) if fleet_n else 0
     if updates:  # what flew: every version from the instant it took effect (uam_sim.audit.flown_audit)
+        from .flown_audit import plans_in_force
         from .separation import audit_trajectories
-        flown_list = [(flown_by_key[lab].times_s, flown_by_key[lab].points_m) if lab in flown_by_key
-                      else trajectory_of(p) for p, lab in zip(approved_plans, labels)]
-        keep = [k for k, (t, _x) in enumerate(flown_list) if len(t) >= 2]
-        audit = audit_trajectories([flown_list[k] for k in keep], [labels[k] for k in keep], separation_m)
+        audit = audit_trajectories(*plans_in_force(approved_plans, labels, flown_by_key), separation_m)
     else:
         audit = audit_plans(approved_plans, separation_m, labels=labels)
     from .flown_audit import audit_incursions
@@ -566,7 +564,7 @@ def _departure_flown(key: str, plan: Any, flown_by_key: dict) -> float:
     has later versions (inf when a cancellation left nothing flown)."""
     f = flown_by_key.get(key)
     if f is not None:
-        return float(f.times_s[0]) if len(f.times_s) else math.inf
+        return float(f.times_s[0]) if len(f.times_s) >= 2 else math.inf
     return stamp_s(plan.waypoints[0].time) if plan.waypoints else 0.0
 
 

@@ -46,6 +46,8 @@ import numpy as np
 from uam_contract.stamps import stamp_s
 from uam_planner.nonconformance import KIND, KIND_YIELD, RATE_WORD
 
+from .separation import trajectory_of
+
 #: a version taking over a flight in the air must start within this of where the flight was [m]
 CONTINUITY_M = 1e-3
 
@@ -62,12 +64,6 @@ def effective_s(p: Any) -> float:
     if plan_version(p) == 1:
         return -math.inf
     return stamp_s(p.effective_time)
-
-
-def _waypoints(p: Any) -> tuple[np.ndarray, np.ndarray]:
-    t = np.array([stamp_s(w.time) for w in p.waypoints], dtype=np.float64)
-    x = np.array([(w.position.x, w.position.y, w.position.z) for w in p.waypoints], dtype=np.float64).reshape(-1, 3)
-    return t, x
 
 
 def _at(t: np.ndarray, x: np.ndarray, when: float) -> np.ndarray:
@@ -87,18 +83,26 @@ def _clip(t: np.ndarray, x: np.ndarray, lo: float, hi: float) -> tuple[np.ndarra
 
 @dataclass
 class Flown:
-    """What one request flew: its versions in order and the flown trajectory (times, points);
-    ``pieces``: (version, start_s, end_s) of each version's part."""
+    """What one request flew: its versions in order, each version's part while in force
+    (``segments``: (times, points), continuous within; a new segment where a reaction update
+    takes over from where the aircraft was, its first waypoint kept) and the whole as one
+    trajectory (``times_s``, ``points_m``: the segments joined, a new segment's first point
+    replacing its predecessor's last); ``pieces``: (version, start_s, end_s) of each part."""
 
     key: str
     versions: list
     times_s: np.ndarray
     points_m: np.ndarray
     pieces: list = field(default_factory=list)
+    segments: list = field(default_factory=list)
 
     @property
     def latest(self) -> Any:
         return self.versions[-1]
+
+    def trajectories(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """The parts in force, each a piecewise-linear trajectory of two points or more."""
+        return [(t, x) for t, x in (self.segments or [(self.times_s, self.points_m)]) if len(t) >= 2]
 
 
 def reaction_update(p: Any) -> bool:
@@ -146,38 +150,55 @@ def chain_problems(key: str, versions: Sequence[Any], announced: dict[str, float
 
 
 def flown_trajectory(key: str, versions: Sequence[Any]) -> tuple[Flown, list[str]]:
-    """The trajectory one request flew (see the module docstring) and any continuity problem."""
+    """The trajectory one request flew (see the module docstring) and any continuity problem.
+
+    Each version counts from the instant it takes effect until the next one does. A part of no
+    duration (a version replaced, or cancelled, the instant it began: a cancellation effective
+    at the departure) flew nothing. A version taking over in the air continues the segment it
+    takes over when it starts where the flight was (to CONTINUITY_M); a reaction update, which
+    starts where the aircraft was rather than where its plan had it, starts a segment of its
+    own with its first waypoint kept."""
     problems = []
-    times, points, pieces = [], [], []
+    segments: list[list] = []   # [[times...], [points...]] per segment
+    pieces = []
     for n, p in enumerate(versions):
         start = effective_s(p)
         end = effective_s(versions[n + 1]) if n + 1 < len(versions) else math.inf
         if not p.waypoints:
             continue  # a cancellation: nothing flown from here on (the previous part ends at `start`)
-        t, x = _waypoints(p)
+        t, x = trajectory_of(p)
         ct, cx = _clip(t, x, start, end)
-        if not len(ct):
-            continue
+        if len(ct) < 2 or not ct[-1] > ct[0]:
+            continue  # in force for no time: nothing flown
         piece = (plan_version(p), float(ct[0]), float(ct[-1]))
-        if times and len(ct) and ct[0] <= times[-1][-1] + 1e-9 and times[-1][-1] >= ct[0] - 1e-9:
+        last = segments[-1] if segments else None
+        if last is not None and ct[0] <= last[0][-1] + 1e-9:
             # taking over a flight in the air: it must start where the flight was
-            gap = float(np.linalg.norm(points[-1][-1] - cx[0]))
-            # a nonconforming flight's update (issue 23, uam_planner.nonconformance) starts where
-            # the aircraft was, not where its plan was: that gap is why it was updated
-            if gap > CONTINUITY_M and not reaction_update(p):
+            gap = float(np.linalg.norm(last[1][-1] - cx[0]))
+            if gap <= CONTINUITY_M:
+                last[0].extend(ct[1:].tolist())
+                last[1].extend(list(cx[1:]))
+                pieces.append(piece)
+                continue
+            # a nonconforming flight's update (uam_planner.nonconformance) starts where the
+            # aircraft was, not where its plan was: that gap is why it was updated
+            if not reaction_update(p):
                 problems.append(f"{key}: version {plan_version(p)} starts {gap:.3f} m from where version "
                                 f"{plan_version(versions[n - 1])} had the flight at {ct[0]:g} s")
-            ct, cx = ct[1:], cx[1:]
-            if not len(ct):
-                continue
-        times.append(ct)
-        points.append(cx)
+        segments.append([ct.tolist(), list(cx)])
         pieces.append(piece)
+    segs = [(np.array(s[0]), np.array(s[1]).reshape(-1, 3)) for s in segments]
+    times, points = [], []
+    for st, sx in segs:
+        if times and times[-1][-1] >= st[0] - 1e-9:
+            times[-1], points[-1] = times[-1][:-1], points[-1][:-1]  # where the aircraft was wins
+        times.append(st)
+        points.append(sx)
     if times:
         t_all, x_all = np.concatenate(times), np.vstack(points)
     else:
         t_all, x_all = np.zeros(0), np.zeros((0, 3))
-    return Flown(key, list(versions), t_all, x_all, pieces), problems
+    return Flown(key, list(versions), t_all, x_all, pieces, segs), problems
 
 
 def constraint_intervals(sets: Sequence[tuple[float, Sequence[tuple[Any, float]]]]) -> list[tuple[Any, float, float]]:
@@ -270,7 +291,7 @@ def incursions(flown: Iterable[Flown], intervals: Sequence[tuple[Any, float, flo
     for f in flown:
         if len(f.times_s) < 1:
             continue
-        t, x = f.times_s, f.points_m
+        t = f.times_s
         for c, since, until in intervals:
             lo_t, hi_t = max(since, float(c.start_s)), min(until, float(c.end_s))
             if not hi_t > lo_t:
@@ -283,19 +304,27 @@ def incursions(flown: Iterable[Flown], intervals: Sequence[tuple[Any, float, flo
                         out.append(Incursion(f.key, c.constraint_id, c.version, when, what))
                 continue
             first = None
-            for k in range(len(t) - 1):
-                a, b = max(t[k], lo_t), min(t[k + 1], hi_t)
-                if a > b or t[k + 1] < lo_t or t[k] >= hi_t:
-                    continue
-                p0, p1 = _at(t[k:k + 2], x[k:k + 2], a), _at(t[k:k + 2], x[k:k + 2], b)
-                when = _segment_entry(p0, p1, a, b, c)
-                if when is not None and when < hi_t:
+            for st, sx in f.trajectories():
+                when = _first_entry(st, sx, lo_t, hi_t, c)
+                if when is not None and (first is None or when < first):
                     first = when
-                    break
             if first is not None:
                 out.append(Incursion(f.key, c.constraint_id, c.version, float(first),
                                      inside_at_start=bool(first <= lo_t and t[0] < lo_t)))
     return sorted(out, key=lambda i: (i.t_s, i.key, i.constraint_id))
+
+
+def _first_entry(t: np.ndarray, x: np.ndarray, lo_t: float, hi_t: float, c) -> float | None:
+    """The earliest instant in [lo_t, hi_t) at which the trajectory (t, x) is inside ``c``."""
+    for k in range(len(t) - 1):
+        a, b = max(t[k], lo_t), min(t[k + 1], hi_t)
+        if a > b or t[k + 1] < lo_t or t[k] >= hi_t:
+            continue
+        p0, p1 = _at(t[k:k + 2], x[k:k + 2], a), _at(t[k:k + 2], x[k:k + 2], b)
+        when = _segment_entry(p0, p1, a, b, c)
+        if when is not None and when < hi_t:
+            return when
+    return None
 
 
 def announced_at(sets: Sequence[tuple[float, Sequence[tuple[Any, float]]]]) -> dict[str, float]:
@@ -335,6 +364,22 @@ def flown_versions(approved: Sequence[tuple[str, Any]], updates: dict, sets: Seq
     return flown, problems
 
 
+def plans_in_force(plans: Sequence[Any], labels: Sequence[str],
+                   flown_by_key: dict) -> tuple[list[tuple[np.ndarray, np.ndarray]], list[str]]:
+    """Every approved flight's plan while in force: one trajectory per part (a flight with later
+    versions: each version from the instant it took effect, :meth:`Flown.trajectories`; else its
+    plan), and the flight's label for each part, for :func:`uam_sim.audit.separation.audit_trajectories`
+    (which never pairs two parts of one label)."""
+    parts, part_labels = [], []
+    for p, label in zip(plans, labels):
+        f = flown_by_key.get(label)
+        for part in (f.trajectories() if f is not None else [trajectory_of(p)]):
+            if len(part[0]) >= 2:
+                parts.append(part)
+                part_labels.append(label)
+    return parts, part_labels
+
+
 def audit_incursions(plans: Sequence[Any], labels: Sequence[str], flown_by_key: dict,
                      sets: Sequence) -> tuple[list[Incursion], int]:
     """Incursions of every approved flight as flown (its versions where it has them, else its
@@ -346,11 +391,11 @@ def audit_incursions(plans: Sequence[Any], labels: Sequence[str], flown_by_key: 
     for p, label in zip(plans, labels):
         f = flown_by_key.get(label)
         if f is None:
-            t, x = _waypoints(p)
-            f = Flown(label, [p], t, x, [(plan_version(p), float(t[0]), float(t[-1]))] if len(t) else [])
+            t, x = trajectory_of(p)
+            f = Flown(label, [p], t, x, [(plan_version(p), float(t[0]), float(t[-1]))] if len(t) else [], [(t, x)])
         flights.append(f)
     return incursions(flights, intervals), len(intervals)
 
 
 __all__ = ["announced_at", "audit_incursions", "flown_versions", "CONTINUITY_M", "Flown", "Incursion", "chain_problems", "constraint_intervals", "effective_s",
-           "flown_trajectory", "incursions", "plan_version"]
+           "flown_trajectory", "incursions", "plan_version", "plans_in_force"]
