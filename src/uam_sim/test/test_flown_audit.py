@@ -166,8 +166,8 @@ def _in_force_audit(other):
     v1, v2 = _reacted()
     flown, problems = flown_versions([("op/r1", v1)], {"op/r1": {2: v2}}, [])
     assert problems == []
-    parts, labels = plans_in_force([v1, other], ["op/r1", "op/r2"], flown)
-    return audit_trajectories(parts, labels, 100.0), parts, labels
+    got = plans_in_force([v1, other], ["op/r1", "op/r2"], flown)
+    return audit_trajectories(got.parts, got.labels, 100.0, groups=got.groups), got.parts, got.labels
 
 
 def test_a_reaction_update_is_in_force_from_its_first_waypoint_and_no_phantom_path_is_audited():
@@ -208,3 +208,24 @@ def test_a_cancellation_effective_at_the_departure_flew_nothing():
     # a cancellation one second later: it flew that second
     f, _ = flown_trajectory("op/r1", [v1, plan([], version=2, effective=11.0, ids=["sq"], kind="cancelled")])
     assert f.times_s.tolist() == [10.0, 11.0]
+
+
+def test_a_contingency_versions_conflicts_are_a_class_of_their_own():
+    from uam_sim.audit.flown_audit import plans_in_force
+    from uam_sim.audit.separation import audit_trajectories
+
+    # r1's version 2, a contingency from 50 s, turns north through r2's path; r2 flies east 300 m
+    # north of r1, so only the contingency comes within the minimum (at (0, 300) at 80 s)
+    v1 = plan(EAST)
+    v2 = plan([(50, 0, 0, 100), (80, 0, 300, 100), (110, 0, 600, 100)], version=2, effective=50.0, kind="contingency")
+    r2 = plan([(0, -800, 300, 100), (100, 200, 300, 100)])
+    flown, problems = flown_versions([("op/r1", v1)], {"op/r1": {2: v2}}, [])
+    got = plans_in_force([v1, r2], ["op/r1", "op/r2"], flown)
+    assert got.labels == ["op/r1", "op/r1 v2 (contingency)", "op/r2"] and got.groups == ["op/r1", "op/r1", "op/r2"]
+    assert got.contingent == [False, True, False]
+    deconflicted = got.select([not c for c in got.contingent])
+    assert audit_trajectories(deconflicted.parts, deconflicted.labels, 100.0, groups=deconflicted.groups).ok
+    conflicts = audit_trajectories(got.parts, got.labels, 100.0, groups=got.groups,
+                                   only_pairs_with=got.contingent).losses
+    assert [c[:2] for c in conflicts] == [["op/r1 v2 (contingency)", "op/r2"]]
+    assert conflicts[0][2] == pytest.approx(0.0) and conflicts[0][3] == pytest.approx(80.0)

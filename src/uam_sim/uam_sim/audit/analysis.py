@@ -176,6 +176,10 @@ class RunSummary:
     #: their exact closest approach in the true minimum with the sampling bound, and their F3548
     #: conformance with the approved plans ({} when no fleet positions were recorded)
     flown: dict = field(default_factory=dict)
+    #: pairs closer than the minimum where at least one plan in force is a contingency (F3548
+    #: Contingent: not deconflicted by design): [label a, label b, distance m, t s, inside the
+    #: run (t <= the last fleet state)]; reported, not a loss between deconflicted plans
+    contingency_conflicts: list = field(default_factory=list)
 
     @property
     def verified(self) -> bool:
@@ -503,10 +507,17 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
     # a FIFO or first-fit epoch reports its graph but solves no MWIS: its selection is not one
     with_instance = [e for e in epochs if e.vertices > 0 and e.policy in ("", "mwis")]
     max_active = int(max(fleet_n)) if fleet_n else 0
+    contingency_conflicts: list = []
     if updates:  # what flew: every version from the instant it took effect (uam_sim.audit.flown_audit)
         from .flown_audit import plans_in_force
         from .separation import audit_trajectories
-        audit = audit_trajectories(*plans_in_force(approved_plans, labels, flown_by_key), separation_m)
+        in_force = plans_in_force(approved_plans, labels, flown_by_key)
+        ok = in_force.select([not c for c in in_force.contingent])  # the deconflicted plans
+        audit = audit_trajectories(ok.parts, ok.labels, separation_m, groups=ok.groups)
+        if any(in_force.contingent):  # not deconflicted by design: a class of its own
+            contingency_conflicts = audit_trajectories(in_force.parts, in_force.labels, separation_m,
+                                                       groups=in_force.groups,
+                                                       only_pairs_with=in_force.contingent).losses
     else:
         audit = audit_plans(approved_plans, separation_m, labels=labels)
     from .flown_audit import audit_incursions
@@ -555,6 +566,7 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
         run_end=run_end,
         plan_updates=_update_counts(updates),
         incursions=[i.describe() for i in found_incursions],
+        contingency_conflicts=[[a, b, d, w, bool(w <= fleet_end)] for a, b, d, w in contingency_conflicts],
         constraints_in_force=n_in_force,
     )
 
@@ -734,6 +746,13 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
                      f"{a.describe_minimum()}, {a.pairs_checked} overlapping pairs checked")
         for rid_a, rid_b, d, t in a.losses[:20]:
             lines.append(f"    {rid_a} / {rid_b}: {d:.1f} m at t = {t:.1f} s")
+    if s.contingency_conflicts:
+        inside = sum(1 for c in s.contingency_conflicts if c[4])
+        lines.append(f"Contingencies    {len(s.contingency_conflicts)} conflict(s) of a contingency plan (F3548 "
+                     f"Contingent, not deconflicted by design: what flew is audited below), {inside} of them "
+                     f"inside the run, {len(s.contingency_conflicts) - inside} after its end")
+        for a_, b_, d, when, within in s.contingency_conflicts[:20]:
+            lines.append(f"    {a_} / {b_}: {d:.1f} m at t = {when:.1f} s{'' if within else ' (after the run)'}")
     if s.plan_updates or s.constraints_in_force:
         kinds = ", ".join(f"{n} {k}" for k, n in s.plan_updates.items()) or "none"
         lines.append(f"Plan updates     {kinds}; {s.constraints_in_force} constraint version(s) in force")
@@ -747,24 +766,23 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
     if fl:  # issue 23: the audit above is of what was planned; this one of what flew
         ms = fl["min_separation_m"]
         verdict = flown_verdict(fl)
-        lines.append(f"Flown audit      {verdict} (what flew: the fleet states, samples "
-                     f"{fl['sample_step_s']:g} s apart; the audit above is of the plans): losses proven by the "
-                     f"samples {fl['losses']}; between samples, the chords' minimum "
-                     + ("-" if ms is None else f"{ms:.1f} m")
-                     + f" and {fl.get('interpolated_losses', fl['losses'])} chord loss(es) (a chord cuts the "
-                     "corner at the top of a climb or descent); sampling error per pair and axis at most "
-                     f"{fl['sampling_bound_m']:.1f} m horizontal, {fl.get('sampling_bound_v_m', 0.0):.2f} m vertical "
-                     f"(per piece, from the plan flown there: 0 on {fl.get('pieces_exact', 0)} of "
-                     f"{fl.get('pieces', 0)} pieces), {fl['possible_losses']} pair(s) it cannot clear; "
+        exact = (f"{fl.get('pieces_exact', 0):,} of {fl.get('pieces', 0):,} pieces exact (flown straight, "
+                 f"{fl.get('pieces_straight', 0):,} of them, or on a straight part of their plan)")
+        lines.append(f"Flown audit      {verdict} (what flew: the fleet states, samples {fl['sample_step_s']:g} s "
+                     f"apart): minimum " + ("-" if ms is None else f"{ms:.1f} m") + f" (the chords); "
+                     f"{fl['losses']} loss(es) proven, {fl.get('unresolved', 0)} pair(s) unresolved; {exact}, "
+                     f"elsewhere a sampling bound per pair of at most {fl['sampling_bound_m']:.1f} m horizontal, "
+                     f"{fl.get('sampling_bound_v_m', 0.0):.2f} m vertical; "
                      f"{fl.get('samples_off_plan', '-')} sample(s) off their plan as flown")
         for a_, b_, d, t_ in fl.get("loss_pairs", [])[:20]:
             lines.append(f"    loss {a_} / {b_}: {d:.1f} m at t = {t_:.1f} s")
         for a_, b_, d, t_ in fl.get("unresolved_pairs", [])[:20]:
             lines.append(f"    unresolved {a_} / {b_}: chords {d:.1f} m at t = {t_:.1f} s")
         cf = fl["conformance"]
-        lines.append(f"Conformance      {cf['conformance_percent']:.2f} % of {cf['flight_hours']:.2f} flight hours, "
-                     f"{cf['excursions']} excursions ({cf['excursions_per_flight_hour']:.2f} per flight hour), "
-                     f"longest {cf['longest_excursion_s']:.0f} s (F3548: >= 95 %, <= 18 per hour, <= 10 s)")
+        lines.append(f"Conformance      {conformance_verdict(cf)}: {cf['conformance_percent']:.2f} % of "
+                     f"{cf['flight_hours']:.2f} flight hours, {cf['excursions']} excursions "
+                     f"({cf['excursions_per_flight_hour']:.2f} per flight hour), longest "
+                     f"{cf['longest_excursion_s']:.0f} s (F3548: >= 95 %, <= 18 per hour, <= 10 s)")
     for problem in s.problems:
         lines.append(f"Recording check  {problem}")
     if s.recorder_check:
@@ -781,6 +799,23 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
                          f"{e.active_flights:6d} {e.solve_time_s * 1e3:10.2f}  {e.backend_used}"
                          f"{' (fallback)' if e.fallback else ''}")
     return "\n".join(lines)
+
+
+#: ASTM F3548-21's conformance limits: the share of flight time in conformance, excursions per
+#: flight hour, and the longest excursion [s]
+F3548_CONFORMANCE_PERCENT, F3548_EXCURSIONS_PER_HOUR, F3548_LONGEST_EXCURSION_S = 95.0, 18.0, 10.0
+
+
+def conformance_verdict(cf: dict) -> str:
+    """Whether the run's conformance statistics meet F3548's limits, naming the ones missed."""
+    missed = [name for name, bad in (
+        (f"{cf['conformance_percent']:.2f} % < {F3548_CONFORMANCE_PERCENT:g} %",
+         cf["conformance_percent"] < F3548_CONFORMANCE_PERCENT),
+        (f"{cf['excursions_per_flight_hour']:.2f} excursions per hour > {F3548_EXCURSIONS_PER_HOUR:g}",
+         cf["excursions_per_flight_hour"] > F3548_EXCURSIONS_PER_HOUR),
+        (f"longest {cf['longest_excursion_s']:.1f} s > {F3548_LONGEST_EXCURSION_S:g} s",
+         cf["longest_excursion_s"] > F3548_LONGEST_EXCURSION_S)) if bad]
+    return "F3548 limits met" if not missed else "F3548 limits NOT MET (" + "; ".join(missed) + ")"
 
 
 def flown_verdict(flown: dict) -> str:

@@ -44,9 +44,12 @@ from typing import Any, Iterable, Sequence
 import numpy as np
 
 from uam_contract.stamps import stamp_s
-from uam_planner.nonconformance import KIND, KIND_YIELD, RATE_WORD
+from uam_planner.nonconformance import KIND, KIND_CONTINGENCY, KIND_YIELD, RATE_WORD
 
 from .separation import trajectory_of
+
+#: FlightPlan.STATE_CONTINGENT (uam_msgs)
+STATE_CONTINGENT = 4
 
 #: a version taking over a flight in the air must start within this of where the flight was [m]
 CONTINUITY_M = 1e-3
@@ -84,10 +87,10 @@ def _clip(t: np.ndarray, x: np.ndarray, lo: float, hi: float) -> tuple[np.ndarra
 @dataclass
 class Flown:
     """What one request flew: its versions in order, each version's part while in force
-    (``segments``: (times, points), continuous within; a new segment where a reaction update
-    takes over from where the aircraft was, its first waypoint kept) and the whole as one
-    trajectory (``times_s``, ``points_m``: the segments joined, a new segment's first point
-    replacing its predecessor's last); ``pieces``: (version, start_s, end_s) of each part."""
+    (``segments``: (times, points), one per version, its first point kept: a reaction update's
+    is where the aircraft was) and the whole as one trajectory (``times_s``, ``points_m``: the
+    segments joined, a segment's first point replacing its predecessor's last); ``pieces``:
+    (version, start_s, end_s) of each part."""
 
     key: str
     versions: list
@@ -95,6 +98,8 @@ class Flown:
     points_m: np.ndarray
     pieces: list = field(default_factory=list)
     segments: list = field(default_factory=list)
+    #: the plan version of each segment
+    segment_versions: list = field(default_factory=list)
 
     @property
     def latest(self) -> Any:
@@ -102,7 +107,15 @@ class Flown:
 
     def trajectories(self) -> list[tuple[np.ndarray, np.ndarray]]:
         """The parts in force, each a piecewise-linear trajectory of two points or more."""
-        return [(t, x) for t, x in (self.segments or [(self.times_s, self.points_m)]) if len(t) >= 2]
+        return [(t, x) for t, x, _p in self.parts()]
+
+    def parts(self) -> list[tuple[np.ndarray, np.ndarray, Any]]:
+        """(times, points, plan version) of each part in force of two points or more."""
+        if not self.segments:
+            found = [(self.times_s, self.points_m, self.versions[0] if self.versions else None)]
+        else:
+            found = [(t, x, p) for (t, x), p in zip(self.segments, self.segment_versions or [None] * len(self.segments))]
+        return [(t, x, p) for t, x, p in found if len(t) >= 2]
 
 
 def reaction_update(p: Any) -> bool:
@@ -175,19 +188,14 @@ def flown_trajectory(key: str, versions: Sequence[Any]) -> tuple[Flown, list[str
         if last is not None and ct[0] <= last[0][-1] + 1e-9:
             # taking over a flight in the air: it must start where the flight was
             gap = float(np.linalg.norm(last[1][-1] - cx[0]))
-            if gap <= CONTINUITY_M:
-                last[0].extend(ct[1:].tolist())
-                last[1].extend(list(cx[1:]))
-                pieces.append(piece)
-                continue
             # a nonconforming flight's update (uam_planner.nonconformance) starts where the
             # aircraft was, not where its plan was: that gap is why it was updated
-            if not reaction_update(p):
+            if gap > CONTINUITY_M and not reaction_update(p):
                 problems.append(f"{key}: version {plan_version(p)} starts {gap:.3f} m from where version "
                                 f"{plan_version(versions[n - 1])} had the flight at {ct[0]:g} s")
-        segments.append([ct.tolist(), list(cx)])
+        segments.append([ct, cx, p])
         pieces.append(piece)
-    segs = [(np.array(s[0]), np.array(s[1]).reshape(-1, 3)) for s in segments]
+    segs = [(s[0], s[1]) for s in segments]
     times, points = [], []
     for st, sx in segs:
         if times and times[-1][-1] >= st[0] - 1e-9:
@@ -198,7 +206,7 @@ def flown_trajectory(key: str, versions: Sequence[Any]) -> tuple[Flown, list[str
         t_all, x_all = np.concatenate(times), np.vstack(points)
     else:
         t_all, x_all = np.zeros(0), np.zeros((0, 3))
-    return Flown(key, list(versions), t_all, x_all, pieces, segs), problems
+    return Flown(key, list(versions), t_all, x_all, pieces, segs, [s[2] for s in segments]), problems
 
 
 def constraint_intervals(sets: Sequence[tuple[float, Sequence[tuple[Any, float]]]]) -> list[tuple[Any, float, float]]:
@@ -364,20 +372,46 @@ def flown_versions(approved: Sequence[tuple[str, Any]], updates: dict, sets: Seq
     return flown, problems
 
 
-def plans_in_force(plans: Sequence[Any], labels: Sequence[str],
-                   flown_by_key: dict) -> tuple[list[tuple[np.ndarray, np.ndarray]], list[str]]:
-    """Every approved flight's plan while in force: one trajectory per part (a flight with later
-    versions: each version from the instant it took effect, :meth:`Flown.trajectories`; else its
-    plan), and the flight's label for each part, for :func:`uam_sim.audit.separation.audit_trajectories`
-    (which never pairs two parts of one label)."""
-    parts, part_labels = [], []
+def contingency(p: Any) -> bool:
+    """Whether plan version ``p`` is a contingency (F3548 Contingent): the flight could not be
+    saved by a deconflicted re-plan, so this version is not deconflicted by design."""
+    return str(getattr(p, "update_kind", "")) == KIND_CONTINGENCY or \
+        int(getattr(p, "state", 0) or 0) == STATE_CONTINGENT
+
+
+@dataclass
+class PlansInForce:
+    """Every approved flight's plan while in force, one trajectory per part (a flight with later
+    versions: each version from the instant it took effect; else its plan). ``labels``: the
+    flight's label, with `` v<n> (contingency)`` on a contingency version's part; ``groups``:
+    the flight's label, so that two parts of one flight are never a pair
+    (:func:`uam_sim.audit.separation.audit_trajectories`)."""
+
+    parts: list
+    labels: list
+    groups: list
+    contingent: list
+
+    def select(self, keep: Sequence[bool]) -> "PlansInForce":
+        k = [i for i, x in enumerate(keep) if x]
+        return PlansInForce(*([v[i] for i in k] for v in (self.parts, self.labels, self.groups, self.contingent)))
+
+
+def plans_in_force(plans: Sequence[Any], labels: Sequence[str], flown_by_key: dict) -> PlansInForce:
+    """The :class:`PlansInForce` of the approved ``plans`` (``labels``: one per plan) and the
+    flights with versions (``flown_by_key``, :func:`flown_versions`)."""
+    out = PlansInForce([], [], [], [])
     for p, label in zip(plans, labels):
         f = flown_by_key.get(label)
-        for part in (f.trajectories() if f is not None else [trajectory_of(p)]):
-            if len(part[0]) >= 2:
-                parts.append(part)
-                part_labels.append(label)
-    return parts, part_labels
+        for t, x, version in (f.parts() if f is not None else [(*trajectory_of(p), p)]):
+            if len(t) < 2:
+                continue
+            c = version is not None and contingency(version)
+            out.parts.append((t, x))
+            out.labels.append(f"{label} v{plan_version(version)} (contingency)" if c else label)
+            out.groups.append(label)
+            out.contingent.append(c)
+    return out
 
 
 def audit_incursions(plans: Sequence[Any], labels: Sequence[str], flown_by_key: dict,
@@ -398,4 +432,4 @@ def audit_incursions(plans: Sequence[Any], labels: Sequence[str], flown_by_key: 
 
 
 __all__ = ["announced_at", "audit_incursions", "flown_versions", "CONTINUITY_M", "Flown", "Incursion", "chain_problems", "constraint_intervals", "effective_s",
-           "flown_trajectory", "incursions", "plan_version", "plans_in_force"]
+           "flown_trajectory", "incursions", "plan_version", "plans_in_force", "PlansInForce", "contingency"]

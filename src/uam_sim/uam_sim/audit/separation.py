@@ -108,11 +108,14 @@ def trajectory_of(plan: Any) -> tuple[np.ndarray, np.ndarray]:
 
 
 def audit_trajectories(flights: list[tuple[np.ndarray, np.ndarray]], labels: list[str],
-                       separation_m=SEPARATION_M) -> SafetyAudit:
+                       separation_m=SEPARATION_M, groups: Sequence | None = None,
+                       only_pairs_with: Sequence[bool] | None = None) -> SafetyAudit:
     """Exact minimum separation and every loss of separation among piecewise-linear 4D flights.
 
     ``flights``: (times_s (p,), points_m (p, 3)) per flight, times increasing; flights of one
-    label (the parts of one flight, each version while in force) are never a pair. The exact closest
+    group (``groups``, default the labels: the parts of one flight, each version while in force)
+    are never a pair; with ``only_pairs_with`` (a flag per flight) only pairs with at least one
+    flagged flight are audited. The exact closest
     approach of a pair is ``uam_planner.audit.pair_min_distance`` (brute force over the pair's
     time-overlapping segment pairs). Pairs are taken in increasing order of a lower bound on
     their distance (the gap between the two flights' bounding boxes; pairs never airborne
@@ -145,9 +148,12 @@ def audit_trajectories(flights: list[tuple[np.ndarray, np.ndarray]], labels: lis
     lo = np.array([f[1].min(axis=0) for f in flights])
     hi = np.array([f[1].max(axis=0) for f in flights])
     iu, ju = np.triu_indices(n, k=1)
-    # airborne together, and not two parts of one flight (one label: its versions in force)
-    lab = np.array([str(x) for x in labels], dtype=object)
-    together = (t0[iu] <= t1[ju]) & (t0[ju] <= t1[iu]) & (lab[iu] != lab[ju])
+    # airborne together, and not two parts of one flight (one group: its versions in force)
+    grp = np.array([str(x) for x in (labels if groups is None else groups)], dtype=object)
+    together = (t0[iu] <= t1[ju]) & (t0[ju] <= t1[iu]) & (grp[iu] != grp[ju])
+    if only_pairs_with is not None:
+        flag = np.asarray(only_pairs_with, dtype=bool)
+        together &= flag[iu] | flag[ju]
     iu, ju = iu[together], ju[together]
     gap = np.maximum(0.0, np.maximum(lo[iu] - hi[ju], lo[ju] - hi[iu]))  # per axis, (k, 3)
     checked = 0
