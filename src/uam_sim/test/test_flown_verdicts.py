@@ -108,3 +108,20 @@ def test_the_analysis_exits_2_for_a_flown_loss_between_deconflicted_plans(tmp_pa
     out = capsys.readouterr().out
     assert "Safety audit     OK" in out  # the plans kept separation
     assert "Flown audit      LOSS OF SEPARATION in 1 pair(s)" in out and "loss r1 / r2: 60.0 m at t = 50.0 s" in out
+
+
+def test_one_turn_inside_a_step_is_rebuilt_from_the_reported_velocities():
+    from uam_sim.audit.flown import simulator_motion
+
+    # east at 10 m/s to (5, 0) at 0.5 s, then north at 10 m/s: samples at 0, 1, 2 s
+    t = np.array([0.0, 1.0, 2.0])
+    p = np.array([[0.0, 0.0, 50.0], [5.0, 5.0, 50.0], [5.0, 15.0, 50.0]])
+    v = np.array([[10.0, 0.0, 0.0], [0.0, 10.0, 0.0], [0.0, 10.0, 0.0]])
+    tr, exact = simulator_motion(Trajectory(t, p), v)
+    assert tr.times_s.tolist() == [0.0, 0.5, 1.0, 2.0] and exact.tolist() == [True, True, True]
+    np.testing.assert_allclose(tr.points_m[1], [5.0, 0.0, 50.0])
+    # velocities that no single turn explains: the piece is kept, not exact
+    bad = v.copy()
+    bad[0] = [10.0, 3.0, 0.0]
+    tr, exact = simulator_motion(Trajectory(t, p), bad)
+    assert tr.times_s.tolist() == [0.0, 1.0, 2.0] and exact.tolist() == [False, True]

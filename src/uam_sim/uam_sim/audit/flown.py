@@ -142,6 +142,47 @@ def straight_pieces(track: Trajectory, velocities_mps: np.ndarray | None) -> np.
     return np.abs(velocities_mps[:-1] - chord).max(axis=1) <= STRAIGHT_MPS
 
 
+#: a vertex found between two samples must reproduce the next sample to this [m]
+VERTEX_M = 1e-6
+
+
+def simulator_motion(track: Trajectory, velocities_mps: np.ndarray | None) -> tuple[Trajectory, np.ndarray]:
+    """The track as the simulator flew it, and per piece of it whether that piece is exact.
+
+    A piece flew straight (:func:`straight_pieces`), or turned once: with ``v0`` the velocity
+    reported at its first sample (flown until the path's next vertex) and ``v1`` the one at its
+    last (flown since the path's last vertex), one vertex at ``tau`` into the piece fits when
+    ``p0 + v0 tau + v1 (dt - tau) = p1``; where that holds in all three axes (to VERTEX_M) with
+    0 < tau < dt, the vertex ``p0 + v0 tau`` is inserted and both parts are exact. Any other
+    piece (two vertices or more in one step, no velocities) is kept, not exact."""
+    n = track.times_s.size - 1
+    straight = straight_pieces(track, velocities_mps)
+    if n < 1 or velocities_mps is None or straight.all() or velocities_mps.shape[0] != n + 1:
+        return track, straight
+    t, p, v = track.times_s, track.points_m, velocities_mps
+    times, points, exact = [t[:1]], [p[:1]], []
+    for k in range(n):
+        if not straight[k]:
+            dt = t[k + 1] - t[k]
+            dv = v[k] - v[k + 1]
+            rhs = p[k + 1] - p[k] - v[k + 1] * dt
+            den = float(dv @ dv)
+            tau = float(dv @ rhs) / den if den > 0 else -1.0
+            if 0.0 < tau < dt and float(np.abs(dv * tau - rhs).max()) <= VERTEX_M:
+                times.append(np.array([t[k] + tau]))
+                points.append((p[k] + v[k] * tau)[None, :])
+                exact.append(True)
+                straight_k = True
+            else:
+                straight_k = False
+        else:
+            straight_k = True
+        times.append(t[k + 1:k + 2])
+        points.append(p[k + 1:k + 2])
+        exact.append(straight_k)
+    return Trajectory(np.concatenate(times), np.vstack(points)), np.array(exact, dtype=bool)
+
+
 def piece_bounds(track: Trajectory, plan: Trajectory | None, vh: float,
                  vz: float, straight: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, int]:
     """Per piece of ``track``: the bound of one aircraft's horizontal and vertical distance from
@@ -272,8 +313,9 @@ def flown_audit(tracks: Mapping[str, Trajectory], separation, sample_step_s: flo
             result is the same, ``uam_planner.audit.sweep_audits``).
         plans: vehicle id -> its plan as flown (every version from its instant): the per-piece
             bounds of the module docstring, and ``losses`` are then those the samples prove.
-        velocities: vehicle id -> the velocity reported at each sample of its track: pieces
-            that flew straight (:func:`straight_pieces`) take no bound.
+        velocities: vehicle id -> the velocity reported at each sample of its track: the
+            tracks become the simulator's motion (:func:`simulator_motion`), whose exact pieces
+            take no bound.
     Returns: the :func:`uam_sim.audit.separation.sweep_audit` dict of the interpolated tracks, plus
     ``what`` ("flown"), ``sampling_bound_m`` / ``sampling_bound_v_m`` (the largest pair bound,
     horizontal and vertical; 0 without sampling), ``possible_losses`` (pairs the samples cannot
@@ -296,7 +338,13 @@ def flown_audit(tracks: Mapping[str, Trajectory], separation, sample_step_s: flo
                     "possible_losses": out["losses"], "unresolved": 0, "unresolved_pairs": [],
                     "max_speed_mps": vmax})
         return out
-    straight = {i: straight_pieces(tracks[i], (velocities or {}).get(i)) for i in ids}
+    if velocities:
+        motion = {i: simulator_motion(tracks[i], velocities.get(i)) for i in ids}
+        tracks = {i: motion[i][0] for i in ids}
+        trajs = [tracks[i] for i in ids]
+        straight = {i: motion[i][1] for i in ids}
+    else:
+        straight = {i: np.zeros(max(tracks[i].times_s.size - 1, 0), dtype=bool) for i in ids}
     bounds = {i: piece_bounds(tracks[i], (plans or {}).get(i), vh, vz, straight[i]) for i in ids}
     bh = 2.0 * max((float(b[0].max()) for b in bounds.values() if b[0].size), default=0.0)
     bv = 2.0 * max((float(b[1].max()) for b in bounds.values() if b[1].size), default=0.0)
