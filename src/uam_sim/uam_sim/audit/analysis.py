@@ -769,7 +769,7 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
         exact = (f"{fl.get('pieces_exact', 0):,} of {fl.get('pieces', 0):,} pieces exact (flown straight, "
                  f"{fl.get('pieces_straight', 0):,} of them, or on a straight part of their plan)")
         lines.append(f"Flown audit      {verdict} (what flew: the fleet states, samples {fl['sample_step_s']:g} s "
-                     f"apart): minimum " + ("-" if ms is None else f"{ms:.1f} m") + f" (the chords); "
+                     f"apart; the audit above is of the plans): minimum " + ("-" if ms is None else f"{ms:.1f} m") + f" (the chords); "
                      f"{fl['losses']} loss(es) proven, {fl.get('unresolved', 0)} pair(s) unresolved; {exact}, "
                      f"elsewhere a sampling bound per pair of at most {fl['sampling_bound_m']:.1f} m horizontal, "
                      f"{fl.get('sampling_bound_v_m', 0.0):.2f} m vertical; "

@@ -168,7 +168,7 @@ def simulator_motion(track: Trajectory, velocities_mps: np.ndarray | None) -> tu
             rhs = p[k + 1] - p[k] - v[k + 1] * dt
             den = float(dv @ dv)
             tau = float(dv @ rhs) / den if den > 0 else -1.0
-            if 0.0 < tau < dt and float(np.abs(dv * tau - rhs).max()) <= VERTEX_M:
+            if t[k] < t[k] + tau < t[k + 1] and float(np.abs(dv * tau - rhs).max()) <= VERTEX_M:
                 times.append(np.array([t[k] + tau]))
                 points.append((p[k] + v[k] * tau)[None, :])
                 exact.append(True)
