@@ -15,7 +15,7 @@ requests = pytest.importorskip("requests")
 from uam_msgs.msg import FlightPlan  # noqa: E402
 
 from graph_harness import TINY, build_graph, params, run_to_end, shutdown  # noqa: E402
-from uam_planner.f3548 import constraint_entity_id, intent_id  # noqa: E402
+from uam_planner.f3548 import constraint_entity_id, intent_id, intent_version  # noqa: E402
 from uam_planner.f3548_schema import errors  # noqa: E402
 
 pytestmark = pytest.mark.ros
@@ -63,8 +63,8 @@ def test_the_graph_serves_its_plans_as_f3548_intents(ros_context, spin_until, tm
             assert errors(r.json(), "GetOperationalIntentDetailsResponse") == []
             ref = r.json()["operational_intent"]["reference"]
             departs = p.departure_time.sec + p.departure_time.nanosec * 1e-9
-            assert ref["version"] == max(1, int(p.version))
             assert ref["state"] == ("Activated" if departs <= 0.0 else "Accepted")  # at t = 0
+            assert ref["version"] == intent_version(int(p.version), ref["state"])
         assert served >= 5
         r = requests.get(f"{base}/uss/v1/constraints/{constraint_entity_id('far')}", timeout=10)
         assert r.status_code == 200 and errors(r.json(), "GetConstraintDetailsResponse") == []

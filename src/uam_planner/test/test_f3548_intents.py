@@ -12,7 +12,7 @@ from shapely.geometry import Point
 
 from uam_planner.constraints import Constraint
 from uam_planner.f3548 import (PRECISION_M, F3548Error, IntentContext, VolumeSpec, as_json,
-                               f3548_constraint, first_intersection, intent_id, operational_intent,
+                               f3548_constraint, first_intersection, intent_id, intent_version, operational_intent,
                                ovn, rfc3339, trajectory_volumes, volumes_for_limit)
 from uam_planner.f3548_schema import errors, validate, validate_implicit
 from uam_planner.planning import Flight
@@ -59,9 +59,14 @@ def test_the_intent_reference_details_and_times():
     ref, det = oi.reference, oi.details
     assert UUID4.match(ref.id) and ref.id == intent_id("op1", "r1")
     assert intent_id("op1", "r1") != intent_id("op2", "r1")  # operators are told apart
-    assert (ref.version, ref.state, ref.manager, ref.uss_availability) == (2, "Accepted",
+    # plan version 2, Accepted: F3548 version 4 (1-3 were version 1's states)
+    assert (ref.version, ref.state, ref.manager, ref.uss_availability) == (4, "Accepted",
                                                                             "uam-fleet", "Unknown")
-    assert ref.ovn == ovn(ref.id, 2) and len(ref.ovn) == 32 and ref.ovn != ovn(ref.id, 1)
+    assert ref.ovn == ovn(ref.id, 4) and len(ref.ovn) == 32 and ref.ovn != ovn(ref.id, 1)
+    # airborne: a new version, the same details (every volume, whenever asked)
+    air = operational_intent(f, 35.0, ctx)
+    assert (air.reference.version, air.reference.state) == (5, "Activated")
+    assert as_json(air.details) == as_json(det) and as_json(operational_intent(f, 39.0, ctx)) == as_json(air)
     # 08:00+08:00 is 00:00Z; the plan flies from 30 s to 40 s
     assert ref.time_start.value == "2025-01-06T00:00:30.000000Z"
     assert ref.time_end.value == "2025-01-06T00:00:40.000000Z"
@@ -79,10 +84,10 @@ def test_the_intent_reference_details_and_times():
     assert rfc3339(0.0000015, start, up=True) == "2025-01-06T00:00:00.000002Z"
     # airborne: Activated; contingency: Contingent, no volumes, the plan off-nominal; Ended: None
     assert operational_intent(f, 35.0, ctx).reference.state == "Activated"
-    assert len(operational_intent(f, 35.0, ctx).details.volumes) == 1  # the finished piece is gone
+    assert len(operational_intent(f, 35.0, ctx).details.volumes) == 2  # every piece: details stay
     c = operational_intent(flight([30.0, 40.0], [[0, 0, 120], [100, 0, 120]], contingent=True), 35.0, ctx)
     assert c.reference.state == "Contingent" and c.details.volumes == [] \
-        and len(c.details.off_nominal_volumes) == 1
+        and len(c.details.off_nominal_volumes) == 2
     assert operational_intent(f, 41.0, ctx) is None
     with pytest.raises(F3548Error, match="state: 'Flying' is not an F3548"):
         operational_intent(f, 0.0, ctx, state="Flying")
@@ -169,7 +174,7 @@ def test_every_intent_of_a_short_run_is_valid_and_holds_its_flight(tmp_path, sep
         doc = {"operational_intent": as_json(oi)}
         assert errors(doc, "GetOperationalIntentDetailsResponse") == [], f.request_id
         validate_implicit(doc, "GetOperationalIntentDetailsResponse")
-        assert oi.reference.version == f.version
+        assert oi.reference.version == intent_version(f.version, oi.reference.state)
         vols = trajectory_volumes(f.trajectory, spec, t)
         _holds_the_half_separation_box(f, vols, spec, np.linspace(max(t, f.departure_s), f.arrival_s, 23))
     c = f3548_constraint(Constraint("storm", 1, "storm", 240.0, 900.0, center_m=(0.0, 0.0),

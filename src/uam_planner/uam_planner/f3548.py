@@ -34,7 +34,9 @@ straight lines in ENU; for pieces of ~50 m the two differ by far less than 1 cm.
 
 **References.** ``id``: a UUID in F3548's UUIDv4 format derived from (operator, request id) by
 SHA-1 (``uuid5`` with its version bits set to 4, as F3548's EntityID pattern demands), so the
-same flight has the same id in every run and every version. ``version``: the plan version.
+same flight has the same id in every run and every version. ``version``: a new one for every
+plan version and every state change (:func:`intent_version`), so an intent's details never
+change while its version stands; the details hold every volume of the plan version.
 ``ovn``: without a DSS no one issues OVNs, so it is the SHA-256 of (id, version), 32 hex digits
 (F3548: 16-128 characters). ``state``: :func:`uam_planner.replanning.flight_state`;
 a Contingent intent has no ``volumes`` and its plan in ``off_nominal_volumes`` (F3548);
@@ -214,6 +216,20 @@ def constraint_entity_id(constraint_id: str) -> str:
     return entity_id("constraint", constraint_id)
 
 
+#: each state's step within one plan version, in the order they can follow each other
+_STATE_STEP = {"Accepted": 0, "Activated": 1, "Nonconforming": 2, "Contingent": 2}
+
+
+def intent_version(plan_version: int, state: str) -> int:
+    """The F3548 version of an operational intent in ``state`` at plan version ``plan_version``:
+    a new one for every plan version and for every state change within one (F3548: an intent's
+    details never change while its version and OVN stand), ``3 (v - 1) + 1`` Accepted, ``+ 2``
+    Activated, ``+ 3`` Nonconforming or Contingent; it only grows as a flight goes on."""
+    if state not in _STATE_STEP:
+        raise F3548Error(f"state: {state!r} is not an F3548 operational intent state")
+    return 3 * (max(1, int(plan_version)) - 1) + _STATE_STEP[state] + 1
+
+
 def ovn(entity: str, version: int) -> str:
     """A local OVN (no DSS issues one here): 32 hex digits of SHA-256(id, version)."""
     return hashlib.sha256(f"{entity}:{int(version)}".encode()).hexdigest()[:32]
@@ -296,20 +312,20 @@ def volume4d(v: EnuVolume, ctx: IntentContext) -> api.Volume4D:
 
 def operational_intent(flight, t_s: float, ctx: IntentContext, state: str | None = None):
     """The F3548 OperationalIntent of ``flight`` (a ``planning.Flight``, its version) as known
-    at simulation time ``t_s``: state at ``t_s`` (or ``state``), volumes of the pieces that end
-    after ``t_s``; None when Ended. Raises F3548Error naming the field for a bad state."""
+    at simulation time ``t_s``: state at ``t_s`` (or ``state``), every volume of the plan
+    version (its details are the same whenever asked: F3548 changes them only with a new
+    version), the version :func:`intent_version`; None when Ended. Raises F3548Error naming
+    the field for a bad state."""
     from .replanning import flight_state
     st = state if state is not None else flight_state(flight, t_s)
     if st == "Ended":
         return None
-    if st not in ("Accepted", "Activated", "Nonconforming", "Contingent"):
-        raise F3548Error(f"state: {st!r} is not an F3548 operational intent state")
-    vols, _ = volumes_for_limit(flight.trajectory, ctx.spec, from_s=t_s)
+    version = intent_version(flight.version, st)
+    vols, _ = volumes_for_limit(flight.trajectory, ctx.spec)
     if not vols:
         return None
     v4 = [volume4d(v, ctx) for v in vols]
     oid = intent_id(flight.operator_id, flight.request_id)
-    version = int(flight.version)
     reference = api.OperationalIntentReference(
         id=oid, manager=ctx.manager, uss_availability="Unknown", version=version, state=st,
         ovn=ovn(oid, version), time_start=v4[0].time_start, time_end=v4[-1].time_end,

@@ -16,6 +16,7 @@ from uam_planner.constraints import Constraint  # noqa: E402
 from uam_planner.f3548 import constraint_entity_id, intent_id  # noqa: E402
 from uam_planner.f3548_schema import errors, validate_implicit  # noqa: E402
 from uam_planner.live_constraints import set_geojson  # noqa: E402
+from uam_planner.f3548 import intent_version  # noqa: E402
 from uam_planner.nodes import conversions as m  # noqa: E402
 
 from uam_sim.audit.separation import AIRSPACE_METADATA, airspace_metadata  # noqa: E402
@@ -83,7 +84,7 @@ def test_export_writes_every_version_valid(tmp_path):
         assert errors(doc, "GetOperationalIntentDetailsResponse") == []
         validate_implicit(doc, "GetOperationalIntentDetailsResponse")
         ref = doc["operational_intent"]["reference"]
-        assert (ref["id"], ref["version"]) == (oid, v)
+        assert (ref["id"], ref["version"]) == (oid, intent_version(v, ref["state"]))
     cancelled = [p for p in plans if p.outcome != FlightPlan.OUTCOME_APPROVED and int(p.version) > 1]
     for p in cancelled:
         assert any(r["request_id"] == p.request_id and r["state"] == "Ended" and r["file"] is None

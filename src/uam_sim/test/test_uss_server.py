@@ -54,6 +54,7 @@ def test_details_unknown_ids_and_the_clock(server):
     assert errors(doc, "GetOperationalIntentDetailsResponse") == []
     ref, det = doc["operational_intent"]["reference"], doc["operational_intent"]["details"]
     assert (ref["id"], ref["state"], ref["version"], det["priority"]) == (oid, "Accepted", 1, 2)
+    accepted = doc
     assert len(det["volumes"]) == 4 and det["off_nominal_volumes"] == []  # 20 s in 5 s pieces
     assert ref["time_start"]["value"] == "2025-01-06T00:00:30.000000Z"
     # unknown: the standard's 404 with an ErrorResponse
@@ -61,16 +62,24 @@ def test_details_unknown_ids_and_the_clock(server):
     r = get(server, f"/uss/v1/operational_intents/{unknown}")
     assert r.status_code == 404 and errors(r.json(), "ErrorResponse") == [] \
         and unknown in r.json()["message"]
-    # the clock: airborne at 42 s (Activated, the finished pieces gone), ended after 50 s
+    # the same version later: the same document (InterUSS: details never change without a
+    # new version)
+    store.set_time(29.0)
+    assert get(server, f"/uss/v1/operational_intents/{oid}").json() == accepted
+    # the clock: airborne at 42 s, Activated: a state change is a new version and OVN; every
+    # volume is still served (details are pruned only by a new version), ended after 50 s
     store.set_time(42.0)
     doc = get(server, f"/uss/v1/operational_intents/{oid}").json()
-    assert doc["operational_intent"]["reference"]["state"] == "Activated"
-    assert len(doc["operational_intent"]["details"]["volumes"]) == 2  # [40, 45] and [45, 50]
+    ref = doc["operational_intent"]["reference"]
+    assert (ref["state"], ref["version"]) == ("Activated", 2) and ref["ovn"] != accepted["operational_intent"]["reference"]["ovn"]
+    assert doc["operational_intent"]["details"] == accepted["operational_intent"]["details"]
+    store.set_time(47.0)
+    assert get(server, f"/uss/v1/operational_intents/{oid}").json() == doc
     # a new version replaces it, an older one does not
     store.put_flight(flight("r1", 60.0, version=3, contingent=True))
     store.put_flight(flight("r1", 90.0, version=2))
     doc = get(server, f"/uss/v1/operational_intents/{oid}").json()["operational_intent"]
-    assert doc["reference"]["version"] == 3 and doc["reference"]["state"] == "Accepted"
+    assert doc["reference"]["version"] == 7 and doc["reference"]["state"] == "Accepted"  # plan v3
     store.set_time(61.0)
     doc = get(server, f"/uss/v1/operational_intents/{oid}").json()["operational_intent"]
     assert doc["reference"]["state"] == "Contingent" and doc["details"]["volumes"] == [] \

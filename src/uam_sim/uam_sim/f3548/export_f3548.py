@@ -8,7 +8,8 @@ writes
 - ``DIR/operational_intents/<id>_v<version>.json``: one ``GetOperationalIntentDetailsResponse``
   per approved plan version (``uam/flight_plans``), as known at its decision (the plan's stamp):
   its state there (the FlightPlan's ``state`` where it has one, else
-  ``uam_planner.replanning.flight_state``), the volumes of the pieces that end after it;
+  ``uam_planner.replanning.flight_state``), every volume of the version, and the F3548
+  version of that plan version and state (``uam_planner.f3548.intent_version``);
 - ``DIR/constraints/<id>_v<version>.json``: one ``GetConstraintDetailsResponse`` per version of
   every prism constraint the planner published on ``uam/constraints`` (closures have no F3548
   form and are listed in the index only);

@@ -19,21 +19,21 @@ constraints, as utm.yaml says). **The signature is not verified** (no authority'
 configured here): ``scope`` checks the standard's scopes, it does not authenticate anyone.
 
 The store holds each intent's volumes as JSON text once (from ``uam_planner.f3548``); a request
-only picks the volumes that end after the store's current time and fills in the state, so the
-cost of a request is one bisection and one string join. Thread-safe (one lock).
+serves every volume of the plan version with the state at the store's time and the version of
+that state (``uam_planner.f3548.intent_version``: a state change is a new version, so the
+details of a version never change), at the cost of one string join. Thread-safe (one lock).
 """
 
 from __future__ import annotations
 
 import base64
-import bisect
 import json
 import re
 import threading
 from dataclasses import dataclass
 
 from uam_planner.f3548 import (IntentContext, as_json, constraint_entity_id, f3548_constraint,
-                               intent_id, ovn, volume4d, volumes_for_limit)
+                               intent_id, intent_version, ovn, volume4d, volumes_for_limit)
 from uam_planner.replanning import flight_state
 
 #: F3548 EntityID (UUIDv4) as a path parameter
@@ -134,12 +134,13 @@ class IntentStore:
             return None
         f = entry.flight
         state = flight_state(f, t)
-        k = bisect.bisect_right(entry.ends_s, t)
-        if state == "Ended" or k >= len(entry.ends_s):
+        if state == "Ended" or not entry.volumes_json:
             return None
-        vols = entry.volumes_json[k:]
+        # every volume of the plan version, whenever asked: its details change only with a new
+        # version (a new plan version or a state change, intent_version)
+        vols = entry.volumes_json
         first, last = json.loads(vols[0]), json.loads(vols[-1])
-        version = int(f.version)
+        version = intent_version(f.version, state)
         ref = {"id": entity_id, "manager": self.ctx.manager, "uss_availability": "Unknown",
                "version": version, "state": state, "ovn": ovn(entity_id, version),
                "time_start": first["time_start"], "time_end": last["time_end"],
