@@ -131,14 +131,23 @@ def constraint_feature(c: Constraint, **extra) -> dict:
     return {"type": "Feature", "geometry": geometry, "properties": props}
 
 
-def set_geojson(constraints: Iterable[Constraint], t_s: float, effective_s: dict[str, float] | None = None) -> str:
+def set_geojson(constraints: Iterable[Constraint], t_s: float, effective_s: dict[str, float] | None = None,
+                announced_s: dict[str, float] | None = None) -> str:
     """The set the planner plans with from ``t_s`` on, as the text of ``uam/constraints``: a
     GeoJSON FeatureCollection in ENU metres (``"frame": "enu"``), each feature with its window
-    (``start_s``, ``end_s``, null = unbounded), band and ``effective_s`` (when the planner began
-    planning with this version). Read back with :func:`constraints_from_text`."""
-    eff = effective_s or {}
-    feats = [constraint_feature(c, effective_s=float(eff.get(c.constraint_id, t_s)))
-             for c in sorted(constraints, key=lambda c: c.constraint_id)]
+    (``start_s``, ``end_s``, null = unbounded), band, ``effective_s`` (when the planner began
+    planning with this version) and, where known, ``announce_s`` (when the authority announced
+    it: ``announced_s``, else the constraint's own finite ``announce_s``; the audit reports what
+    flew inside it between the two). Read back with :func:`constraints_from_text`."""
+    eff, ann = effective_s or {}, announced_s or {}
+
+    def extra(c):
+        out = {"effective_s": float(eff.get(c.constraint_id, t_s))}
+        when = ann.get(c.constraint_id, c.announce_s)
+        if math.isfinite(when):
+            out["announce_s"] = float(when)
+        return out
+    feats = [constraint_feature(c, **extra(c)) for c in sorted(constraints, key=lambda c: c.constraint_id)]
     return json.dumps({"type": "FeatureCollection", "frame": "enu", "t_s": float(t_s), "features": feats},
                       separators=(",", ":"), allow_nan=False)
 

@@ -136,8 +136,8 @@ def test_a_reroute_that_leaves_the_constraint_in_time_has_no_incursion():
     sets = [(30.0, [(square(), 30.0)])]
     flown, problems = flown_versions([("op/r1", v0)], {"op/r1": {1: v1}}, sets)
     assert problems == []
-    assert audit_incursions([v0], ["op/r1"], flown, sets) == ([], 1)
-    found, _ = audit_incursions([v0], ["op/r1"], {}, sets)
+    assert audit_incursions([v0], ["op/r1"], flown, sets) == ([], 1, [])
+    found, _, _ = audit_incursions([v0], ["op/r1"], {}, sets)
     assert [i.t_s for i in found] == [pytest.approx(40.0)]
 
 
@@ -229,3 +229,20 @@ def test_a_contingency_versions_conflicts_are_a_class_of_their_own():
                                    only_pairs_with=got.contingent).losses
     assert [c[:2] for c in conflicts] == [["op/r1 v2 (contingency)", "op/r2"]]
     assert conflicts[0][2] == pytest.approx(0.0) and conflicts[0][3] == pytest.approx(80.0)
+
+
+def test_entries_between_the_announcement_and_the_planners_epoch_are_reported_apart():
+    from uam_planner.live_constraints import constraints_from_text, set_geojson
+
+    # the authority announces the square at 30 s; the planner applies it at its next epoch, 70 s.
+    # r1 flies east through it from x = -100 at 40 s: inside the authority's constraint before
+    # the planner's (it has left by 70 s, x = 200: no incursion as applied)
+    text = set_geojson([square()], 70.0, {"sq": 70.0}, {"sq": 30.0})
+    sets = [constraints_from_text(text)]
+    assert sets[0][1][0][0].announce_s == 30.0 and sets[0][1][0][1] == 70.0
+    v0 = plan(EAST)
+    found, n, gap = audit_incursions([v0], ["op/r1"], {}, sets)
+    assert (found, n) == ([], 1)
+    assert [(i.key, i.constraint_id, i.t_s) for i in gap] == [("op/r1", "sq", pytest.approx(40.0))]
+    # without the announcement recorded (or announced at the epoch itself) there is no gap
+    assert audit_incursions([v0], ["op/r1"], {}, [constraints_from_text(set_geojson([square()], 70.0, {"sq": 70.0}))])[2] == []

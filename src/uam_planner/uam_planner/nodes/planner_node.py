@@ -127,6 +127,8 @@ class PlannerNode(Node):
         # live constraints (issue 22): uam/update_constraint, queued in the planner and applied at
         # its next epoch (Planner.update_constraint); the set in force is published on uam/constraints
         self._constraint_effective: dict[str, float] = {c.constraint_id: 0.0 for c in self.config.constraints or ()}
+        # when the authority announced each live constraint version (the update's time)
+        self._constraint_announced: dict[str, float] = {}
         self._constraints_logged = 0        # entries of planner.constraint_log published
         self.constraint_updates_refused = 0
 
@@ -407,8 +409,10 @@ class PlannerNode(Node):
         for u in log[self._constraints_logged:]:
             if u.action == "withdraw":
                 self._constraint_effective.pop(u.constraint.constraint_id, None)
+                self._constraint_announced.pop(u.constraint.constraint_id, None)
             else:
                 self._constraint_effective[u.constraint.constraint_id] = float(u.applied_s)
+                self._constraint_announced[u.constraint.constraint_id] = float(u.t_s)
         self._constraints_logged = len(log)
         self._publish_constraints(t_s)
         self.get_logger().info(f"epoch at t = {t_s:g} s: constraint update(s) applied, "
@@ -416,7 +420,8 @@ class PlannerNode(Node):
 
     def _publish_constraints(self, t_s: float) -> None:
         self._constraints_pub.publish(String(data=set_geojson(self.config.constraints or (), t_s,
-                                                              self._constraint_effective)))
+                                                              self._constraint_effective,
+                                                              self._constraint_announced)))
 
     # ---- requests ----------------------------------------------------------------------------
     def _publish_plan(self, plan: FlightPlan) -> None:

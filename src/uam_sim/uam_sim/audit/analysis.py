@@ -170,6 +170,9 @@ class RunSummary:
     plan_updates: dict = field(default_factory=dict)
     #: entries of flown trajectories into constraints in force (uam_sim.audit.flown_audit.Incursion.describe)
     incursions: list = field(default_factory=list)
+    #: entries into a constraint version after the authority announced it and before the planner
+    #: applied it (at its next epoch): no plan could avoid them; reported apart
+    incursions_before_applied: list = field(default_factory=list)
     #: constraint versions the planner had in force during the run (from uam/constraints)
     constraints_in_force: int = 0
     #: the audit of what flew (issue 23, uam_sim.audit.flown.recording_flown): the fleet states' tracks,
@@ -521,7 +524,8 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
     else:
         audit = audit_plans(approved_plans, separation_m, labels=labels)
     from .flown_audit import audit_incursions
-    found_incursions, n_in_force = audit_incursions(approved_plans, labels, flown_by_key, constraint_sets)
+    found_incursions, n_in_force, gap_incursions = audit_incursions(approved_plans, labels, flown_by_key,
+                                                                    constraint_sets)
     # the run's end as the epochs show it: the last epoch's time + the epoch length (the median
     # step between epochs); requests still within their window then are left out, as in the runner
     ts = sorted({e.t_s for e in epochs})
@@ -566,6 +570,7 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
         run_end=run_end,
         plan_updates=_update_counts(updates),
         incursions=[i.describe() for i in found_incursions],
+        incursions_before_applied=[i.describe() for i in gap_incursions],
         contingency_conflicts=[[a, b, d, w, bool(w <= fleet_end)] for a, b, d, w in contingency_conflicts],
         constraints_in_force=n_in_force,
     )
@@ -762,6 +767,11 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
         lines.append(f"Constraint audit {verdict} (every flown version from the instant it took effect)")
         for text in s.incursions[:20]:
             lines.append(f"    {text}")
+        if s.incursions_before_applied:
+            lines.append(f"Constraint gap   {len(s.incursions_before_applied)} entry(ies) after the authority "
+                         "announced a constraint and before the planner applied it (its next epoch)")
+            for text in s.incursions_before_applied[:20]:
+                lines.append(f"    {text}")
     fl = s.flown
     if fl:  # issue 23: the audit above is of what was planned; this one of what flew
         ms = fl["min_separation_m"]

@@ -414,13 +414,8 @@ def plans_in_force(plans: Sequence[Any], labels: Sequence[str], flown_by_key: di
     return out
 
 
-def audit_incursions(plans: Sequence[Any], labels: Sequence[str], flown_by_key: dict,
-                     sets: Sequence) -> tuple[list[Incursion], int]:
-    """Incursions of every approved flight as flown (its versions where it has them, else its
-    plan) into the recorded constraints while in force; and how many constraint versions were."""
-    intervals = constraint_intervals(sets)
-    if not intervals:
-        return [], 0
+def _as_flown(plans: Sequence[Any], labels: Sequence[str], flown_by_key: dict) -> list[Flown]:
+    """Every approved flight as flown: its versions where it has them, else its plan."""
     flights = []
     for p, label in zip(plans, labels):
         f = flown_by_key.get(label)
@@ -428,8 +423,30 @@ def audit_incursions(plans: Sequence[Any], labels: Sequence[str], flown_by_key: 
             t, x = trajectory_of(p)
             f = Flown(label, [p], t, x, [(plan_version(p), float(t[0]), float(t[-1]))] if len(t) else [], [(t, x)])
         flights.append(f)
-    return incursions(flights, intervals), len(intervals)
+    return flights
+
+
+def announced_gaps(sets: Sequence[tuple[float, Sequence[tuple[Any, float]]]]) -> list[tuple[Any, float, float]]:
+    """(constraint version, announced_s, applied_s) of each version the planner applied after the
+    authority announced it (``announce_s`` recorded with it): while it bound the airspace but
+    not yet the planner's plans."""
+    return [(c, float(c.announce_s), float(since)) for c, since, _until in constraint_intervals(sets)
+            if math.isfinite(getattr(c, "announce_s", -math.inf)) and c.announce_s < since]
+
+
+def audit_incursions(plans: Sequence[Any], labels: Sequence[str], flown_by_key: dict,
+                     sets: Sequence) -> tuple[list[Incursion], int, list[Incursion]]:
+    """Incursions of every approved flight as flown (its versions where it has them, else its
+    plan) into the recorded constraints while the planner had them in force; how many
+    constraint versions were; and the entries while a version was announced but not yet
+    applied (:func:`announced_gaps`)."""
+    intervals = constraint_intervals(sets)
+    if not intervals:
+        return [], 0, []
+    flights = _as_flown(plans, labels, flown_by_key)
+    gaps = announced_gaps(sets)
+    return incursions(flights, intervals), len(intervals), (incursions(flights, gaps) if gaps else [])
 
 
 __all__ = ["announced_at", "audit_incursions", "flown_versions", "CONTINUITY_M", "Flown", "Incursion", "chain_problems", "constraint_intervals", "effective_s",
-           "flown_trajectory", "incursions", "plan_version", "plans_in_force", "PlansInForce", "contingency"]
+           "flown_trajectory", "incursions", "plan_version", "plans_in_force", "PlansInForce", "contingency", "announced_gaps"]
