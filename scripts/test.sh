@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# The project's test command: set up whatever is missing, then run every test (library and node
-# tests) in one pytest run. Extra arguments go to pytest, e.g. scripts/test.sh -k separation.
+# The project's test command: set up whatever is missing, lint (ruff), then run every test (library
+# and node tests) in one pytest run. Extra arguments go to pytest, e.g. scripts/test.sh -k separation.
 # The tests run in UAM_TEST_WORKERS pytest-xdist worker processes (default 2, one per core of the
 # reference machine; 0 = in this process), each test file on one worker (--dist loadfile: a file's
 # module fixtures, e.g. a solve service's worker pool, are built once). Each worker claims its own
@@ -16,6 +16,12 @@ WORKERS=(); n="${UAM_TEST_WORKERS:-2}"
 # twice at most: xdist gives its test file again to the next worker, so a test that hangs every
 # time would otherwise cost UAM_TEST_HANG_S nine times over
 if [[ "$n" != 0 ]] && python -c "import xdist" 2>/dev/null; then WORKERS=(-n "$n" --dist loadfile --max-worker-restart 2); fi
+# lint first (ruff.toml: unused and undefined names, syntax, complexity over 25), well under a
+# second: a finding fails the run as a failing test would
+if ! python -m ruff check --quiet src test; then
+  echo "scripts/test.sh: ruff found the problems above (ruff.toml); fix them or say why in a noqa comment" >&2
+  exit 1
+fi
 set +e
 python -m pytest "${WORKERS[@]}" "$@"
 rc=$?

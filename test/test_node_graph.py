@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-rclpy = pytest.importorskip("rclpy", reason="needs the built workspace (scripts/test.sh sources it)")
+pytest.importorskip("rclpy", reason="needs the built workspace (scripts/test.sh sources it)")
 
 import rclpy.parameter  # noqa: E402
 from graph_harness import build_graph, in_process, run_to_end, shutdown  # noqa: E402

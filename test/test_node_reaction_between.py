@@ -15,7 +15,6 @@ import pytest
 rclpy = pytest.importorskip("rclpy", reason="needs the built workspace (scripts/test.sh sources it)")
 
 from graph_harness import TINY, build_graph, decisions, run_to_end, shutdown  # noqa: E402
-from uam_msgs.msg import FlightPlan  # noqa: E402
 
 from uam_contract import wire  # noqa: E402
 from uam_planner.nodes import conversions as m  # noqa: E402

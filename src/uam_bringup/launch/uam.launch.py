@@ -12,7 +12,6 @@ itself and exits; the launch then stops the solver, a server). Needs ``launch`` 
 
 from __future__ import annotations
 
-import os
 
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, EmitEvent, GroupAction, RegisterEventHandler
@@ -44,7 +43,7 @@ def generate_launch_description() -> LaunchDescription:
     # recorder writes it into the MCAP for the analysis' audit
     airspace = {"separation_model": a["separation"], "separation_m": a["separation_m"],
                 "vertical_separation_m": a["vertical_separation_m"], "departure_slot_s": a["slot_s"]}
-    # as run_fleet.sh: the conformance monitor (issue 23) runs when asked, or with auto when a
+    # as run_fleet.sh: the conformance monitor runs when asked, or with auto when a
     # disturbance is set (an undisturbed fleet flies its plans exactly) or the planner reacts to
     # its reports (reaction:=true); the simulator then
     # waits for it as for the recorder
@@ -55,12 +54,12 @@ def generate_launch_description() -> LaunchDescription:
         a["delay_mean_s"], "', '", a["vertical_gust_std_mps"], "', '", a["altitude_error_m"], "'))))"])
     recorder_prefix = "nice -n 19"
     sim_params = {"duration_s": a["duration"], "mode": a["mode"], "real_time_factor": a["rtf"],
-                  # disturbances (issue 23), seeded by the run's seed
+                  # disturbances, seeded by the run's seed
                   "disturbance_seed": a["seed"], "wind_speed_mps": a["wind_speed_mps"],
                   "wind_from_deg": a["wind_from_deg"], "gust_std_mps": a["gust_std_mps"],
                   "speed_error": a["speed_error"], "delay_mean_s": a["delay_mean_s"],
                   "vertical_gust_std_mps": a["vertical_gust_std_mps"], "altitude_error_m": a["altitude_error_m"],
-                  # the reaction between epochs (issue 23; with reaction:=true)
+                  # the reaction between epochs (with reaction:=true)
                   "reaction_period_s": a["reaction_period_s"]}
     # as run_fleet.sh: the recorder is not in the lockstep loop, so it runs at a lower priority
     recorder = Node(package="uam_sim", executable="recorder", name="recorder", output="screen",
@@ -96,7 +95,7 @@ def generate_launch_description() -> LaunchDescription:
                                                              "priority_share": a["priority_share"],
                                                              "lead_time_s": a["lead_time_s"]}]),
         recorder,
-        # issue 23: compares every fleet state with the approved plans, publishes uam/conformance
+        # compares every fleet state with the approved plans, publishes uam/conformance
         # (only when asked, or with a disturbance set: conformance:=auto; at the recorder's nice value)
         Node(package="uam_sim", executable="conformance_monitor", name="conformance_monitor", output="screen",
              condition=IfCondition(conformance_on), prefix=recorder_prefix),

@@ -10,8 +10,8 @@ forget an aircraft.
 
 Format: one JSON object per line, ``{"session": <simulator session>, "plan": <base64 of the
 FlightPlan's CDR>}``, appended and flushed before the plan is published or answered (so every
-plan anyone can hold is in the journal first). Re-planned versions and cancellations (issue 22:
-``FlightPlan.version`` > 1) are journaled the same way, so a restarted planner takes each
+plan anyone can hold is in the journal first). Re-planned versions and cancellations
+(``FlightPlan.version`` > 1) are journaled the same way, so a restarted planner takes each
 flight's newest version (:func:`newest_versions`), not its first. Only the entries of the simulator session the
 planner resumes for count: a journal left over from another run is ignored and started afresh.
 """
@@ -30,7 +30,7 @@ from uam_contract.wire import scoped_id
 def newest_versions(plans, epoch_index: int, t_s: float) -> dict:
     """scoped request id -> the newest version of its plan that reached the simulator before the
     epoch ``epoch_index`` at ``t_s`` [s]: approvals of earlier epochs, and re-planned versions
-    (issue 22: ``version`` > 1; a cancellation too) decided before ``t_s``. Later ones were
+    (``version`` > 1; a cancellation too) decided before ``t_s``. Later ones were
     never answered (the simulator asks for that epoch again), so they never flew."""
     own: dict = {}
     for p in plans:

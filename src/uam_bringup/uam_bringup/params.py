@@ -46,7 +46,7 @@ def declare(node, name: str, default, description: str, lo=None, hi=None, choice
 
 
 def _descriptor(p: Param):
-    from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+    from rcl_interfaces.msg import IntegerRange, ParameterDescriptor
 
     desc = ParameterDescriptor(description=p.text(), read_only=p.read_only,
                                dynamic_typing=isinstance(p.default, float) or _bool_alias(p))

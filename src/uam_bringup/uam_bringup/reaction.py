@@ -1,4 +1,4 @@
-"""The node graph's reaction between epochs (issue 23, docs/disturbances.md): the instants at
+"""The node graph's reaction between epochs (docs/disturbances.md): the instants at
 which the planner takes its own observations in that mode (the service's name is
 ``uam_contract.names.SERVICE_REACT``).
 """

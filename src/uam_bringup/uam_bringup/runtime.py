@@ -139,7 +139,7 @@ def _exit_now(code: int) -> None:
     import signal
     # and what hangs, if one does: faulthandler's own C thread (no GIL needed) prints every
     # Python thread's stack to stderr half a second before the watchdog is due, so the next
-    # such hang names its handler (which one hung is not known yet: BENCHMARKS.md, fifth stop)
+    # such hang names its handler (which one hung is not known yet: BENCHMARKS.md)
     import faulthandler
     try:
         faulthandler.dump_traceback_later(EXIT_HANDLERS_S - 0.5, exit=False)
@@ -256,7 +256,7 @@ def _watch_stop(name: str, stop, stateless: bool) -> None:
     ends the process itself, exit code 0, saying so. Why: in fresh-clone CI runs the solver
     node now and then did not end within run_fleet.sh's 10 s of a SIGINT; its log ended with
     its CPU report and no stack, so the exit handlers, which _exit_now bounds and dumps, were
-    not what hung, and which part did is not known yet (BENCHMARKS.md, fifth and sixth stops).
+    not what hung, and which part did is not known yet (BENCHMARKS.md).
     A process that ends in time prints nothing: os._exit takes this thread with it."""
     import faulthandler
 

@@ -1,4 +1,4 @@
-"""The paper's model in numbers: each default defined once, here (issue 19, "one source for every
+"""The paper's model in numbers: each default defined once, here ("one source for every
 default").
 
 The planning library (``uam_planner.planning.PlanningConfig``, ``AirspaceConfig``,

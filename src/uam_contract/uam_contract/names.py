@@ -22,14 +22,14 @@ TOPIC_REPORTS = "uam/planning_reports"
 TOPIC_FLEET = "uam/fleet_state"
 TOPIC_POSES = "uam/fleet_poses"
 TOPIC_SYNC = "uam/epoch_sync"
-TOPIC_CONFORMANCE = "uam/conformance"   # issue 23: the conformance monitor's output
+TOPIC_CONFORMANCE = "uam/conformance"   # the conformance monitor's output
 TOPIC_CLOCK = "/clock"
 SERVICE_SOLVE = "uam/solve_mwis"
 SERVICE_PLAN_EPOCH = "uam/plan_epoch"
 SERVICE_RELEASE_DEMAND = "uam/release_demand"
-# issue 23: the simulator asks the planner to react between epochs (uam_msgs/srv/React)
+# the simulator asks the planner to react between epochs (uam_msgs/srv/React)
 SERVICE_REACT = "uam/react"
-# live airspace constraints (issue 22): the planner serves updates and publishes the set it plans with
+# live airspace constraints: the planner serves updates and publishes the set it plans with
 SERVICE_UPDATE_CONSTRAINT = "uam/update_constraint"
 TOPIC_CONSTRAINTS = "uam/constraints"
 

@@ -136,12 +136,12 @@ PLANNER = (
     Param("constraints_file", "", "airspace constraints to plan around from the first epoch: a GeoJSON "
           "FeatureCollection or an ED-269 UAS zone file (docs/constraints.md); no candidate entering one "
           "during its window is approved; '' for none (the paper's airspace)"),
-    Param("spatial_buffer_m", 0.0, "planning buffer added to the separation the planner keeps [m] (issue 23, "
+    Param("spatial_buffer_m", 0.0, "planning buffer added to the separation the planner keeps [m] ("
           "docs/disturbances.md; the audits keep the true minimum); 0 = none (the paper's)", 0.0, 100000.0),
     Param("temporal_buffer_s", 0.0, "temporal planning buffer [s]: plans keep the minimum plus the spatial "
           "buffer between any two times this far apart (the separation widened by v_max x it; "
           "docs/disturbances.md); 0 = none (the paper's)", 0.0, 3600.0),
-    Param("reaction", False, "react to nonconforming flights (issue 23, uam_planner.nonconformance): each "
+    Param("reaction", False, "react to nonconforming flights (uam_planner.nonconformance): each "
           "report on uam/conformance is checked against the planner's own plan and the fleet state it saw, "
           "and a confirmed one gets the flight's intent updated from where it is, deconflicted; false = "
           "reports ignored (the paper's)"),
@@ -202,7 +202,7 @@ SIMULATOR = (
           "also asks the planner to react every this many seconds between epochs, in lockstep, and flies "
           "the updates from that instant (the runner's reaction_period_s, docs/disturbances.md); 0 = at "
           "epochs only; otherwise less than epoch_s", 0.0, 86400.0),
-    # disturbances (issue 23, uam_sim.world.disturbance, docs/disturbances.md): all 0 = plans flown exactly
+    # disturbances (uam_sim.world.disturbance, docs/disturbances.md): all 0 = plans flown exactly
     Param("wind_speed_mps", 0.0, "steady wind speed [m/s]; 0 with the other levels 0 = plans flown exactly "
           "(the paper's)", 0.0, 100.0),
     Param("wind_from_deg", 270.0, "direction the steady wind blows from [deg clockwise from north]", 0.0, 360.0),
@@ -330,7 +330,7 @@ CONFORMANCE_MONITOR = (
     Param("time_s", 10.0, "time bound: |now - the planned time of that point| [s]", 0.001, 86400.0),
 )
 
-# the F3548 USS-USS interface (issue 25, docs/f3548.md; run_fleet.sh --uss-port)
+# the F3548 USS-USS interface (docs/f3548.md; run_fleet.sh --uss-port)
 USS = (
     Param("port", 8090, "TCP port of the HTTP server (0 = any free port, logged)", 0, 65535),
     Param("host", "127.0.0.1", "address to bind ('0.0.0.0' for every interface; loopback by default)",

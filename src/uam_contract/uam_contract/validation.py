@@ -1,4 +1,4 @@
-"""One validation style for every input (issue 19): a refusal names the field and the value.
+"""One validation style for every input: a refusal names the field and the value.
 
 Two tools, one message shape ``<field path>: <value> <why>``:
 

@@ -8,7 +8,7 @@ import pytest
 from uam_planner.audit import pair_min_distance
 from uam_planner.separation import (SegmentSet, conflicting_pairs, min_separation_m,
                                     segment_pair_min_distance)
-from uam_planner.trajectory import Trajectory, trajectory_from_points
+from uam_planner.trajectory import trajectory_from_points
 
 
 def line(p, q, dep=0.0, speed=10.0):

@@ -1,7 +1,7 @@
 """The one reader of the constraints files the runner (``--constraints``) and the planner node
 (``constraints_file``) take: GeoJSON and ED-269 (:mod:`uam_planner.constraints`), and F3548
-documents (another USS's operational intents, F3548 constraints: :mod:`uam_planner.f3548`,
-issue 25). It sits above both so that ``constraints`` never imports the F3548 module, which
+documents (another USS's operational intents, F3548 constraints: :mod:`uam_planner.f3548`).
+It sits above both so that ``constraints`` never imports the F3548 module, which
 builds on it (test/test_layering.py: no import cycles)."""
 
 from __future__ import annotations

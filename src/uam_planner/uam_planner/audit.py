@@ -332,7 +332,7 @@ def _near_pairs(seg, reach_m: float, max_entries: int = 8_000_000):
     # T from the speed of the fast segments, not of the fastest one: any T finds every pair (a
     # piece's box holds its part of the segment), T only sets the cost. A flown track can hold a
     # segment of a microsecond (a switch between versions) that moves metres: at ~10^6 m/s it
-    # made T = 1 ms for all, ~10^8 entries and a Monte-Carlo worker past 11 GiB (seventh stop);
+    # made T = 1 ms for all, ~10^8 entries and a Monte-Carlo worker past 11 GiB;
     # such a segment now spans a few cells in one piece instead
     vmax = min(float(speed.max()), 4.0 * float(np.quantile(speed, 0.99))) if S else 0.0
     T = min(max(c / vmax if vmax > 0 else 60.0, 1e-3), 60.0)
@@ -428,8 +428,8 @@ def sweep_audits(flights: Sequence[Any], models: Sequence[Any], labels: Sequence
     same order and with the same arithmetic as the full sweep: every loss, the minimum, its
     pair and time, and ``pairs_checked`` (flight pairs sharing time) are those of
     ``prune=False``, which checks every time-overlapping segment pair (O(P)). Pruned:
-    O(S log S) in the segments plus the pairs found near each other. Measured (BENCHMARKS.md,
-    issue 22 third stop): a city recording of 2,000 flights went from > 23 CPU-min to seconds.
+    O(S log S) in the segments plus the pairs found near each other. Measured (BENCHMARKS.md):
+    a city recording of 2,000 flights went from > 23 CPU-min to seconds.
     """
     import numpy as np
 

@@ -15,7 +15,7 @@ exact segment-pair separation checks per second:
   slots): the conflict graph of 10,000 candidates (about 143 requests x 5 routes x 2 levels x 7
   slots) against 2,000 airborne flights, built from the candidates' trajectories and the
   persistent active-flight index; target median < 1 s.
-- constraints (issue 22): ``prism_entry_times`` on random segments against a circle and polygons
+- constraints: ``prism_entry_times`` on random segments against a circle and polygons
   of 4, 100 and 1,000 vertices (F3548's most), every segment inside the polygon's bounding box
   (no cull: the worst case), in segment-prism checks per second; and the planner's constraint
   filter (``refuse_candidates``) on about 10,000 candidates of the layered city against a 2 km

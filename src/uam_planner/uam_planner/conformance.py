@@ -33,7 +33,7 @@ SPEED_WINDOW_S = 120.0
 MIN_SPEED_SPAN_S = 10.0
 #: a rate read from less than this time on the plan version (since its departure, within the
 #: window) is drawn towards 1 (the aircraft flies the version it was given) in proportion:
-#: ``1 + (rate - 1) x span / RATE_FULL_SPAN_S`` (twelfth stop). Measured over the 893 reaction
+#: ``1 + (rate - 1) x span / RATE_FULL_SPAN_S``. Measured over the 893 reaction
 #: updates of ten Monte-Carlo runs (10 % speed error, the reaction every 5 s, probe 120 s):
 #: rates read from under 60 s of a version had an SD of 0.12-0.14, from 60 s or more 0.047;
 #: 31 updates timed from the short ones were reported nonconforming again within 90 s (9 of
@@ -69,8 +69,8 @@ class ConformanceBounds:
 #: MATCH_S is least (the default lateral and time bounds of the conformance monitor: if a pass
 #: has the sample inside both, the one chosen does). Where a plan comes back over itself (a
 #: turn-back, a diversion along the way it came) the passes lie a few metres apart and the one
-#: meant is the one at the right time. Before the fifteenth stop the nearest pass won unless
-#: another was within 1 m of it: in seed 12 of the Monte-Carlo (15 m buffer) a flight diverted
+#: meant is the one at the right time. When the nearest pass won unless another was
+#: within 1 m of it: in seed 12 of the Monte-Carlo (15 m buffer) a flight diverted
 #: back along its way flew its return on time 1.7 m from the outbound pass, was read 14.9 s
 #: late, declared nonconforming and sent back out as a contingency into a flown loss
 MATCH_M = float(_DEFAULTS["lateral_m"])
@@ -216,7 +216,7 @@ class PositionBook:
         this version began was made against an older one (a nonconforming update starts where
         the aircraft was, so an older sighting projects onto its first point and would read as
         standing still; the rate, relative to this version, would collapse towards
-        ``RATE_RANGE[0]`` and the next update be timed far too slow: issue 23, fourth stop)."""
+        ``RATE_RANGE[0]`` and the next update be timed far too slow)."""
         q = self._upto(request_id, until)
         if q and q[0].t_s < plan.departure_s - _EPS_T:
             q = q[bisect.bisect_left(q, float(plan.departure_s) - _EPS_T, key=lambda o: o.t_s):]
@@ -256,7 +256,7 @@ def verify(flight, obs: Observation | None, bounds: ConformanceBounds, t_eff: fl
     at most ``MAX_AGE_S`` old, is outside ``bounds`` of the flight's current plan after its
     departure; else (None, the reason naming what did not hold).
 
-    A sighting after the plan's arrival counts (sixteenth stop): the vehicle is still in the
+    A sighting after the plan's arrival counts: the vehicle is still in the
     fleet state, so it is still in the air, late, and F3548 asks its intent to be updated like
     any other nonconforming one's. Before, such a flight flew the end of its plan with no
     update (held past it, ``overruns``): excursions of 11-15 s at the end of 3 of 174

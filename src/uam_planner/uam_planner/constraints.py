@@ -1,5 +1,5 @@
 """Airspace constraints: prisms and vertiport / pad closures, and the exact test of a flight
-against them (issue 22, "Decisions over a horizon, and an airspace that changes"; format and
+against them ("Decisions over a horizon, and an airspace that changes"; format and
 semantics: docs/constraints.md).
 
 A **volume constraint** is a prism: a horizontal region (a polygon, holes allowed, or a circle) in
@@ -41,13 +41,13 @@ import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 # shapely (GEOS) at import, i.e. at the planner's start-up: imported lazily it was loaded inside
 # the first re-planning decision after a restriction appeared, whose wall time it inflated
 # (0.47 s of wall against 0.04 s of CPU, measured at load 8; the files read cold from disk on a
-# fresh machine), issue 22's third stop; about 30 ms when cached
+# fresh machine); about 30 ms when cached
 import shapely  # noqa: F401
 
 from .geo import geodetic_to_enu
@@ -191,7 +191,6 @@ def _checked_rings(own: str, rings) -> tuple:
     """Rings as read-only (n, 2) arrays without a repeated closing vertex, checked: finite, at
     least 3 distinct vertices each, at most MAX_VERTICES in all, a valid polygon (shapely:
     no self-intersection, holes inside the shell) of positive area."""
-    import shapely
     from shapely.validation import explain_validity
 
     if not isinstance(rings, (list, tuple)) or not rings:
@@ -295,7 +294,6 @@ def _polygon_entry_indexed(ax, ay, dx, dy, c: "Constraint") -> np.ndarray:
     for meeting, so nothing is lost), on which the same closed-form test runs; whether a
     segment starts inside is GEOS's ``intersects_xy`` on the (prepared) polygon, boundary
     included. Same answers, O((m + pairs) log e) instead of O(m e)."""
-    import shapely
     cache = c._index
     if "tree" not in cache:
         px, py, ex, ey = _edges(c.rings_m)

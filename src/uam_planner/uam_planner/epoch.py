@@ -109,7 +109,7 @@ class EpochReport:
     #: the reaction to nonconforming flights of this epoch (``uam_planner.nonconformance.react``'s
     #: report dict, plus ``refused``: [(request_id, reason)] of the claims not acted on), or None
     nonconformance: object = None
-    #: the flights held past their plans at this epoch (issue 23: seen later than planned by the
+    #: the flights held past their plans at this epoch (seen later than planned by the
     #: planner's own observations): request id -> until when [s] (uam_planner.nonconformance
     #: .overruns); empty when none
     overruns: dict = field(default_factory=dict)
@@ -373,7 +373,7 @@ def _epoch_candidates(t_s: float, eligible: Sequence[FlightRequest], network, co
 
 
 def _without_constrained(cands: _Candidates, eligible, network, cset) -> _Candidates:
-    """The one constraint hook (issue 22): drop the candidates that enter a constraint during
+    """The one constraint hook: drop the candidates that enter a constraint during
     its window (``uam_planner.constraints``), before any separation check or graph; weights are
     kept as computed against the unconstrained best, so a detour still costs its detour."""
     reqs = [eligible[i] for i in cands.req_of]

@@ -1,4 +1,4 @@
-"""Plans as ASTM F3548-21 operational intents, constraints as F3548 constraints (issue 25;
+"""Plans as ASTM F3548-21 operational intents, constraints as F3548 constraints (
 docs/f3548.md). Built with ``uas_standards.astm.f3548.v21.api`` types; no ROS, no wall clock.
 
 **Volumes.** A trajectory (piecewise linear in time, ``uam_planner.trajectory``) becomes one

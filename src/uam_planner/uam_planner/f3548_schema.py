@@ -1,4 +1,4 @@
-"""Schema validation of the F3548 documents this project writes and serves (issue 25).
+"""Schema validation of the F3548 documents this project writes and serves.
 
 The F3548-21 OpenAPI (``utm.yaml``, interuss/astm-utm-protocol) is not shipped in the
 ``uas_standards`` wheel and states no licence, so it is not copied into this repository. This

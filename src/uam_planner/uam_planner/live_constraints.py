@@ -1,4 +1,4 @@
-"""Live airspace constraints (issue 22 item 1): the rules behind the planner node's ``uam/update_constraint``.
+"""Live airspace constraints: the rules behind the planner node's ``uam/update_constraint``.
 
 rclpy-free and duck-typed (anything with the fields of ``UpdateConstraint.Request``), so the
 rules are tested without a ROS graph; the planner node calls :func:`parse_update` and the

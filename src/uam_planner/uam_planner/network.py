@@ -504,7 +504,7 @@ def _in_range(value: Any, lo: float, hi: float, where: str) -> float:
     return x
 
 
-# ---- the file schema (pydantic; issue 19, docs/architecture.md) ------------------------------
+# ---- the file schema (pydantic, docs/architecture.md) ------------------------------
 # The structure, types and ranges of the YAML document, its nodes, corridors, no-fly zones and
 # airspace are these models (uam_contract.validation.parse: a refusal names the path, e.g.
 # ``nodes[3] (id 'W2').lat``, and the value). What needs the whole network (duplicate ids,

@@ -1,4 +1,4 @@
-"""The reaction to a nonconforming flight (issue 23 item 3; docs/disturbances.md), free of ROS.
+"""The reaction to a nonconforming flight (docs/disturbances.md), free of ROS.
 
 Whether a flight conforms, and what the planner itself observes of it, is
 :mod:`uam_planner.conformance` (its names are re-exported here).
@@ -21,7 +21,7 @@ the planner's traffic picture by a report (there is no cancellation here; a flig
 deconflicted alternative exists keeps flying its updated intent as a *contingency*, still
 active, so later requests are deconflicted against it).
 
-**The update** (at the epoch after the report, ``Planner.prepare`` step 2, right after issue 22's
+**The update** (at the epoch after the report, ``Planner.prepare`` step 2, right after the
 constraint re-plan; t_eff = the epoch time): the flight's intent is re-drawn *from where it is*
 at its *observed progress rate* f (planned seconds flown per second, so 0.9 = 10 % slow):
 from the observed position q at the observation time t0, straight to the first waypoint of its
@@ -30,8 +30,8 @@ timed at f times the plan's speed (:func:`rejoin_trajectory`). Alternatives: tha
 ``f``, and at ``SHARES`` x f (the aircraft asked to fly slower, which delays it, or 10 % faster,
 either of which can clear a neighbour). One conflict graph over every nonconforming flight's alternatives (one clique per
 flight), each alternative deconflicted exactly against every other active flight (the run's
-separation model, from t_eff on), solved by the planner's selector (the same as issue 22's
-batch re-planning: MWIS with the answer checked and greedy as fallback, or first-fit). Weights
+separation model, from t_eff on), solved by the planner's selector (the same as the
+batch re-planning of ``uam_planner.replanning``: MWIS with the answer checked and greedy as fallback, or first-fit). Weights
 2 + 1 / (1 + delay / 300 s), delay = arrival - the arrival of the rejoin at f (the tier of a
 re-route in ``uam_planner.replanning``; a faster one weighs as the rejoin at f). The chosen one
 becomes version + 1 (``PlanUpdate`` of kind ``nonconforming``, ``effective_s`` = t_eff); with none
@@ -233,7 +233,7 @@ def _clipped(tr: Trajectory, t_s: float) -> Trajectory | None:
 def _least_conflicting(alts: list, others: list, config, t_eff: float, true_first: bool = False):
     """Of (trajectory, weight) alternatives, the one that loses separation (from t_eff on) with
     the fewest of ``others``, then the one that lands soonest. With ``true_first`` (a
-    contingency's choice, twelfth stop) the fewest losses of the true minimum
+    contingency's choice) the fewest losses of the true minimum
     (``config.minimum_separation``) come first, then of the buffered separation: with a buffer,
     an alternative that only cuts into the buffer of one flight had ranked below one that keeps
     the buffer from none of two others but crosses a third at a few metres."""
@@ -273,7 +273,7 @@ def _conflict_counts(trajectories: list, others: list, separation, t_eff: float)
     return n_conf
 
 
-#: **Neighbours yield** (seventh stop; issue 23 item 3, "re-deconflicted against its
+#: **Neighbours yield** ("re-deconflicted against its
 #: neighbours"): a nonconforming flight none of whose own alternatives is conflict-free would be
 #: flown as a contingency, not deconflicted (in the Monte-Carlo at 10 % speed error and a 50 m
 #: buffer, 8 of the 9 flown losses of 11 runs had one). Before that, the flights its
@@ -571,7 +571,7 @@ def react_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict, b
         held: indices in ``active`` of flights due to depart that the probed flights are
             predicted to meet (a batch of the probe alone: they may be held on the pad,
             :func:`_probe_batch_steps`).
-        router: a ``replanning._Router`` of the planner's network (thirteenth stop): a flight
+        router: a ``replanning._Router`` of the planner's network: a flight
             that no re-timing saves (nor its neighbours' yields) is re-routed to its destination
             or diverted to one of the nearest vertiports from where it is
             (:func:`_divert_alternatives`) before it is flown as a contingency; None = not tried.
@@ -713,7 +713,7 @@ def react_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict, b
 
 #: the conflict probe's time shifts [s]: a probed flight may reach this much later (earlier when
 #: negative) than its projection within PROBE_SHIFT_WINDOW_S, then fly the projection shifted
-#: by it (speed x 0.67 to 1.09 for that minute; tenth stop: the re-timings by SHARES hold the
+#: by it (speed x 0.67 to 1.09 for that minute: the re-timings by SHARES hold the
 #: new speed for the rest of the flight, 100-400 s of delay, and met some other flight far
 #: ahead in most batches)
 PROBE_SHIFTS_S = (-5.0, 5.0, 10.0, 20.0, 30.0)
@@ -722,7 +722,7 @@ PROBE_SHIFT_WINDOW_S = 60.0
 #: covers every probed flight first (with keep 1 and updates 2-3 leaving one out could score
 #: more than keeping both plans)
 PROBE_COVER = 100.0
-#: the conflict probe's holds on the pad [s] (thirteenth stop): a flight due to depart that a
+#: the conflict probe's holds on the pad [s]: a flight due to depart that a
 #: probed flight is predicted to meet may leave this much later (its whole plan shifted)
 HOLD_SHIFTS_S = (10.0, 20.0, 30.0, 60.0)
 #: the weight of a flight due to depart keeping its plan: above every hold's (2 + 1 / (1 + hold /
@@ -773,23 +773,23 @@ def _probe_batch_steps(t_eff: float, epoch_index: int, active: Sequence, found: 
     observed rate, up to the look-ahead) meets: it flies as projected, not as planned. The
     solve is repeated: a flight the answer leaves without an alternative keeps its plan, its
     plan and projection become fixed traffic, and the others are solved again (until every
-    flight left has one). Before the tenth stop one flight left out dropped every update of the
-    batch: 14 of 20 flown losses at 25 m in 41 seeds were such batches (BENCHMARKS.md).
-    ``held`` (thirteenth stop): flights due to depart that a probed flight is predicted to meet
+    flight left has one). When one flight left out dropped every update of the
+    batch, 14 of 20 flown losses at 25 m in 41 seeds were such batches (BENCHMARKS.md).
+    ``held``: flights due to depart that a probed flight is predicted to meet
     join the batch too, with their plan (weight HOLD_KEEP_WEIGHT) and their plan shifted later by
     each of HOLD_SHIFTS_S (held on the pad; weight by the delay, below keeping it), each +
     PROBE_COVER; a hold is a plan update of kind ``yielded`` (the flight is not airborne: no
     observation to update it from, its new plan is the old one later).
-    ``router`` (fourteenth stop, as in :func:`react_steps`): a probed flight the solve leaves
+    ``router`` (as in :func:`react_steps`): a probed flight the solve leaves
     keeping its plan while that plan or its projection still loses the true minimum with another
     flight (no re-timing and no hold cleared it: a head-on pair on one corridor, say) is
     re-routed to its destination or diverted from where it is (:func:`_divert_alternatives`),
     one flight at a time in index order, clear of everything else at the batch's separation
     (minimum + margin, also from flights outside the batch): minutes ahead, where the
-    reaction's diversion comes only once a flight is reported nonconforming. Twelfth and
-    thirteenth stops: the probe saw such pairs at every look for 120-150 s and kept both plans.
+    reaction's diversion comes only once a flight is reported nonconforming. Without it the probe saw such pairs
+    at every look for 120-150 s and kept both plans.
     Where nothing keeps the batch's separation, such a flight takes the widest berth that keeps
-    the true minimum (fifteenth stop; see :func:`_probe_diversions`).
+    the true minimum (see :func:`_probe_diversions`).
     A generator as :func:`react_steps`: it yields each round's graph."""
     from .conflict_graph import _unique_pairs, build_conflict_graph
     from .replanning import SOLVE_HERE, clipped_until
@@ -835,7 +835,7 @@ def _probe_batch_steps(t_eff: float, epoch_index: int, active: Sequence, found: 
         trs = [_clipped(a[0], t_eff) or a[0] for _r, _c, a in flat]
         # the margin is kept from the batch's own flights (the rows, the released ones' plans and
         # projections: those predicted to come close); every other flight at the planner's
-        # buffered separation, as every plan keeps it (fourteenth stop: against all traffic at
+        # buffered separation, as every plan keeps it (against all traffic at
         # minimum + margin, an update that parted the pair could be refused for a third flight
         # planned at the buffer)
         ok = ~((_conflict_counts(trs, others, config.separation, t_eff) > 0) |
@@ -964,7 +964,7 @@ def _probe_diversions(t_eff: float, idx: list, rows_i: list, active: Sequence, f
         rest = list(others) + [t for q in range(len(rows_i)) if q != r for t in flies(q)]
         if not _conflict_counts(flies(r), rest, config.minimum_separation, t_eff).any():
             # no loss of the true minimum is left to avoid (the margin alone is the re-timings'
-            # business: re-routing for it diverted ~2 conforming flights a run, fourteenth stop),
+            # business: re-routing for it diverted ~2 conforming flights a run),
             # or what it meets has moved: it keeps its plan
             continue
         f = active[idx[r]]
@@ -973,7 +973,7 @@ def _probe_diversions(t_eff: float, idx: list, rows_i: list, active: Sequence, f
         alt = _first_clear(diverts, rest, config, t_eff, sep)
         if alt is None:
             # nothing keeps the batch's separation: the widest berth that still keeps the true
-            # minimum, a re-timing before a re-route or diversion (fifteenth stop, seed 14: the
+            # minimum, a re-timing before a re-route or diversion (seed 14: the
             # early flight's every re-timing met a third flight at the buffer, the other's
             # every one came within 150 m of its projection; both kept their plans, projected
             # 81-91 m apart, and flew 86.5 m apart; with this the early flight is re-timed at
@@ -1033,7 +1033,7 @@ def moved_flight(f, alt, t_eff: float, epoch_index: int, policy: str, backend: s
                    version=f.version + 1, effective_s=float(t_eff))
 
 
-# ---- flights that fly past their plan (issue 23: the safety gap) -----------------------------
+# ---- flights that fly past their plan (the safety gap) -----------------------------
 #
 # A plan ends at its planned arrival; an aircraft that is late is still in the air then. The
 # planner used to drop a flight from its traffic picture at the planned arrival whatever it saw,

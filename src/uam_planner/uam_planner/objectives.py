@@ -36,7 +36,6 @@ no wall time, no randomness. No rclpy.
 
 from __future__ import annotations
 
-import math
 from collections import Counter, deque
 from dataclasses import dataclass, field
 from typing import Sequence

@@ -97,7 +97,7 @@ class Planner:
         # requests decided (approved or expired) and approved per operator (the "fair"
         # objective's running shares, over the whole run or a sliding window)
         self.shares = OperatorShares(window_s=float(self.config.fair_window_s))
-        # constraint updates (issue 22, uam_planner.replanning): queued ones are applied at the
+        # constraint updates (uam_planner.replanning): queued ones are applied at the
         # first epoch at a time >= their t_s; applied ones are logged in order
         self._queued_updates: list = []
         self._update_seq = 0
@@ -106,12 +106,12 @@ class Planner:
         self._requests: dict = {}               # request_id -> FlightRequest of active flights
         self._plan_updates: list = []           # decided in prepare, returned by commit
         self._replan_report = None
-        # the reaction to nonconformance (issue 23, uam_planner.nonconformance): the planner's
+        # the reaction to nonconformance (uam_planner.nonconformance): the planner's
         # own observations of the vehicles and the reports (claims) not acted on yet
         self.positions = PositionBook()
         self._claims: list = []
         self._nonconformance_report = None
-        # flights held past their plans (issue 23, the safety gap; uam_planner.nonconformance
+        # flights held past their plans (the safety gap; uam_planner.nonconformance
         # .overruns): request id -> Overrun, deconflicted against until its projection lands
         self.overruns: dict = {}
         self.reaction_log: list = []   # the reports of the reactions between epochs
@@ -213,7 +213,7 @@ class Planner:
         return self.config.replan_policy or ("mwis" if self.policy == "mwis" else "firstfit")
 
     def _apply_constraint_updates(self, t_s: float, epoch_index: int):
-        """The one place constraint updates take effect (issue 22): at the epoch at ``t_s``,
+        """The one place constraint updates take effect: at the epoch at ``t_s``,
         after landed flights are dropped and before the epoch's requests are planned. Applies
         every queued update due by ``t_s`` and, if one added or changed a constraint,
         re-plans the affected flights (``uam_planner.replanning.replan_steps``) and replaces
@@ -242,7 +242,7 @@ class Planner:
             t_s, epoch_index, self.active, self._requests, self.network, cfg, self.cache, cset,
             replan_selector(self.solve_mwis, cfg, epoch_index, t_s),
             lambda t, r: departure_slots_s(t, r, cfg), self.replan_policy(), labels=labels,
-            # the flights held past their plans (issue 23) are in the air: every re-planned
+            # the flights held past their plans are in the air: every re-planned
             # version avoids their projections as it avoids the other active flights
             held=[(k, h.trajectory) for k, o in self.overruns.items() for h in o.flights])
         self.active = active
@@ -374,7 +374,7 @@ class Planner:
         return run_steps(self.react_between_steps(t_s, epoch_index), lambda _graph: SOLVE_HERE)
 
     def react_between_steps(self, t_s: float, epoch_index: int):
-        """The reaction between epochs (issue 23 item 3; F3548 asks a nonconforming intent to be
+        """The reaction between epochs (F3548 asks a nonconforming intent to be
         updated within 5 s, an epoch is 30 s): the claims due by ``t_s`` are checked and acted on
         now, exactly as at step 2b of :meth:`prepare` (the planner's own observations stamped up
         to ``t_s``, its newest plans; every update deconflicted against every other active flight

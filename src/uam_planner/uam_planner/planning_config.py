@@ -43,7 +43,7 @@ class FlightRequest:
 class Flight:
     """An approved flight: a request with its chosen route and 4D trajectory.
 
-    Plan versions (issue 22, docs/replanning.md): ``version`` counts the plans of one request
+    Plan versions (docs/replanning.md): ``version`` counts the plans of one request
     (1 = the approval; a re-plan on a constraint update makes version + 1) and ``effective_s``
     is when this version took effect (the first version: its departure, the default when nan
     is given; a re-plan: the epoch time at which the update was applied). A new version flies
@@ -161,21 +161,21 @@ class PlanningConfig:
             affected flight's alternatives), "firstfit" (the baseline: in approval order, each
             flight's first alternative in preference order that keeps separation), or ""
             (default: "mwis" for the MWIS policy, "firstfit" for FIFO and first-fit).
-        spatial_buffer_m, temporal_buffer_s: planning buffers on the separation (issue 23,
-            docs/disturbances.md); 0 = today's. The planner keeps ``separation`` (the minimum
+        spatial_buffer_m, temporal_buffer_s: planning buffers on the separation
+            (docs/disturbances.md); 0 = today's. The planner keeps ``separation`` (the minimum
             widened by both), every audit keeps ``minimum_separation``.
         conflict_probe_s: with ``conformance`` set, the conflict probe's look-ahead [s]
             (``uam_planner.nonconformance.predicted_conflicts``): at every reaction, flights
             whose rest of plan, flown from where the planner last saw them at their observed
             progress rate, loses the true minimum within it are updated as nonconforming ones
             are; 0 (default) = no probe (only reported, confirmed nonconformance is acted on).
-        conflict_probe_margin_m: with the probe on, its margin [m] (thirteenth stop): it predicts
+        conflict_probe_margin_m: with the probe on, its margin [m]: it predicts
             losses of the true minimum widened by this much (``probe_separation``), and its own
             batches deconflict their updates with the wider of that and ``separation``: a
             tactical buffer kept only between the flights that are predicted to come close,
             beside the strategic buffer every plan keeps; 0 (default) = the true minimum.
-        conformance: the reaction to nonconforming flights (issue 23 item 3,
-            ``uam_planner.nonconformance``): a ConformanceBounds the planner checks each
+        conformance: the reaction to nonconforming flights
+            (``uam_planner.nonconformance``): a ConformanceBounds the planner checks each
             nonconformance report against (its own plan, its own observation) before it updates
             the flight's intent; None (default) = no reaction, reports are ignored.
     """

@@ -1,4 +1,4 @@
-"""Batch re-planning when constraints change, plan versions and F3548 states (issue 22, items 3
+"""Batch re-planning when constraints change, plan versions and F3548 states (items 3
 and 4; docs/replanning.md). Free of ROS; no wall clock inside a decision.
 
 When the ``Planner`` applies a constraint update at an epoch time ``t_eff`` (an announced
@@ -54,7 +54,7 @@ from .trajectory import Trajectory
 
 ACTIONS = ("add", "change", "withdraw")
 KINDS = ("kept", "rerouted", "retimed", "diverted", "cancelled", "contingency")
-STATES = ("Accepted", "Activated", "Contingent", "Ended")  # ASTM F3548-21 (Nonconforming: issue 23)
+STATES = ("Accepted", "Activated", "Contingent", "Ended")  # ASTM F3548-21 (Nonconforming: uam_planner.nonconformance)
 W_KEEP = 4.0
 DELAY_SCALE_S = 300.0
 DIVERT_VERTIPORTS = 3
@@ -152,7 +152,7 @@ def flight_state(flight, t_s: float) -> str:
     """The ASTM F3548-21 state of ``flight`` (its newest version) at ``t_s`` [s]: 'Accepted'
     before departure, 'Activated' airborne, 'Contingent' airborne on a contingency plan,
     'Ended' after arrival. (A cancelled flight is Ended from its cancellation; a PlanUpdate of
-    kind 'cancelled' says so. Nonconforming needs a conformance monitor: issue 23.)"""
+    kind 'cancelled' says so. Nonconforming needs a conformance monitor: uam_planner.nonconformance.)"""
     if t_s > flight.arrival_s:
         return "Ended"
     if t_s < flight.departure_s:
@@ -298,7 +298,7 @@ def _pad_of_point(network, node: int, xy) -> int:
         return 0
     # in scalars, the same operations as ``argmin(norm(centre + pads - xy, axis=1))`` (each
     # distance is sqrt(dx * dx + dy * dy), correctly rounded either way): the same pad, without
-    # five numpy calls per flight end (issue 22, fourth stop: ~4,000 calls per re-plan)
+    # five numpy calls per flight end (~4,000 calls per re-plan)
     c = network.enu_m[node]
     cx, cy = float(c[0]), float(c[1])
     x, y = float(xy[0]), float(xy[1])
@@ -548,7 +548,7 @@ def _nearest(xy, nodes: np.ndarray, at, n: int) -> list:
     """The ``n`` of ``nodes`` (int64 indices into ``xy``) nearest to ``at`` horizontally, nearest
     first, ties by index: the order of sorting by ``(hypot(*(xy[a] - at)), a)`` (the hypot taken
     elementwise, the same values as one at a time), in two numpy calls instead of one lambda per
-    node (issue 22, fourth stop)."""
+    node."""
     dist = np.hypot(xy[nodes, 0] - at[0], xy[nodes, 1] - at[1])
     return nodes[np.lexsort((nodes, dist))[:n]].tolist()
 
@@ -759,7 +759,8 @@ def replan(t_eff: float, epoch_index: int, active: Sequence, requests: dict, net
                      lambda _graph: SOLVE_HERE)
 
 
-def replan_steps(t_eff: float, epoch_index: int, active: Sequence, requests: dict, network, config,
+# complexity over 25: the batch re-plan as one generator of solve steps (its stages share the batch); to be split into named steps
+def replan_steps(t_eff: float, epoch_index: int, active: Sequence, requests: dict, network, config,  # noqa: C901
                  cache, cset: ConstraintSet, select: Callable, departures: Callable, policy: str = "mwis",
                  affected: dict | None = None, labels: Sequence[str] = (), held: Sequence = ()):
     """Re-plan the flights of ``active`` that the constraints ``cset`` affect, at ``t_eff``.
@@ -790,7 +791,7 @@ def replan_steps(t_eff: float, epoch_index: int, active: Sequence, requests: dic
             :func:`affected_flights`).
         labels: the updates' labels, for the report.
         held: ``(request_id, Trajectory)`` of the flights the planner holds past their plans
-            (issue 23, ``uam_planner.nonconformance.overruns``: each a projection of where a
+            (``uam_planner.nonconformance.overruns``: each a projection of where a
             late flight may still be): every alternative and every contingency is deconflicted
             against them as against fixed flights (they are in the air: nothing re-plans them
             here). A flight's own projections are left out while that flight is re-planned.
@@ -835,7 +836,7 @@ def replan_steps(t_eff: float, epoch_index: int, active: Sequence, requests: dic
 
     def act_set(extra=()):
         # the same flights in the same order give the same set: built again only when the
-        # flights re-planned or the fixed ones changed (issue 22, fourth stop: the cascade's
+        # flights re-planned or the fixed ones changed (the cascade's
         # rounds rebuilt it from ~1,200 trajectories each time)
         key = (frozenset(in_replan), tuple((i, id(a)) for i, a in fixed.items())) if not extra else None
         got = act_memo.get(key) if key is not None else None
@@ -861,8 +862,8 @@ def replan_steps(t_eff: float, epoch_index: int, active: Sequence, requests: dic
                 [x for x in (_turn_back(f, t_eff, network, config),) if x is not None] if airborne else \
                 _ground_alternatives(f, requests.get(f.request_id), t_eff, network, cache, departures)
             groups += [([_keep_alt(f, network)], origin), (alts, origin)]
-        # every flight's alternatives tested against the constraints in one call (issue 22,
-        # fourth stop: one call per flight and kind was ~15 % of the decision)
+        # every flight's alternatives tested against the constraints in one call
+        # (one call per flight and kind was ~15 % of the decision)
         free = _constraint_free_many(groups, cset, t_eff, network)
         lists = [free[2 * r] + free[2 * r + 1] for r in range(len(todo))]
         flat1 = [a.trajectory for alts in lists for a in alts]
@@ -983,7 +984,6 @@ def replan_steps(t_eff: float, epoch_index: int, active: Sequence, requests: dic
         k_c, when = why[i]
         c = cset.constraints[k_c]
         cids = (c.constraint_id,)
-        airborne = f.departure_s < t_eff
         a = fixed.get(i, chosen.get(i))
         contingent = i in fixed or (a is not None and a.kind == "contingency")
         if a is not None and a.kind == "contingency":

@@ -54,7 +54,7 @@ _MAX_PAIRS_PER_CHUNK = 1 << 17
 # coming near (filtering cost). Any cell_m >= separation_m gives the same, exact answer.
 DEFAULT_CELL_SEPARATIONS = 12.0
 DEFAULT_BUCKET_CELLS = 1.0
-# Two broad-phase shortcuts of conflicting_pairs (issue 24: 63 % of a study cell's CPU was in it).
+# Two broad-phase shortcuts of conflicting_pairs (63 % of a study cell's CPU was in it).
 # Neither changes a result to the last bit: both only leave out piece pairs the box filter drops
 # (the exact kernel sees the same piece pairs, in the same orientation). Off only in the tests
 # that compare the two paths (test_separation_exact.py, test_separation_cylinder.py).

@@ -65,7 +65,7 @@ def test_a_fleet_of_flights_added_over_time_samples_each_flight_where_it_is():
 
 
 def test_direct_cdr_equals_rclpy_serialization():
-    rclpy = pytest.importorskip("rclpy", reason="needs the built workspace")
+    pytest.importorskip("rclpy", reason="needs the built workspace")
     from geometry_msgs.msg import Point, Pose, PoseArray, Quaternion, Vector3
     from rclpy.serialization import deserialize_message, serialize_message
     from uam_msgs.msg import FleetState, VehicleState

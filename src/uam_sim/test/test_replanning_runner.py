@@ -4,7 +4,7 @@ version, and the audit checks what flew (every version from the instant it took 
 
 import json
 
-from uam_planner.constraints import Constraint, load_constraints
+from uam_planner.constraints import load_constraints
 from uam_planner.replanning import KINDS
 from uam_sim.runner.experiment_config import make_config
 from uam_sim.runner.network_spec import load_network_spec

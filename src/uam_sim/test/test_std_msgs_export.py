@@ -160,7 +160,7 @@ def test_rosbags_reads_every_view_message_with_utc_stamps(run_mcap):
             counts[conn.msgtype] = counts.get(conn.msgtype, 0) + 1
             if conn.topic == "/uam/fleet_state":
                 fleet_sizes[t_ns] = [(v.position.x, v.position.y, v.position.z) for v in msg.vehicles]
-                fleet_ids = fleet_sizes.setdefault(("ids", t_ns), [v.vehicle_id for v in msg.vehicles])
+                fleet_sizes.setdefault(("ids", t_ns), [v.vehicle_id for v in msg.vehicles])
                 continue
             if not conn.topic.startswith("/uam/view/"):
                 continue

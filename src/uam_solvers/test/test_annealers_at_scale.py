@@ -1,6 +1,5 @@
 """sa, tabu and qpu-emulator on 10^4-vertex graphs (issue 11, "Annealers and QPU at scale"):
 decomposition instead of refusal or blocking, answers never worse than the greedy start."""
-import numpy as np
 import pytest
 
 from uam_solvers.annealing import SimulatedAnnealingBackend, TabuBackend

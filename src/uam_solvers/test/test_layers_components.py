@@ -5,7 +5,7 @@ import pytest
 
 import uam_solvers
 from uam_solvers.base import Backend, MwisProblem, brute_force_mwis, make_result
-from uam_solvers.layers import ComponentSplit, Reduce, ValidateFallback, induced_subproblem
+from uam_solvers.layers import ComponentSplit, Reduce, induced_subproblem
 
 
 class BruteForce(Backend):

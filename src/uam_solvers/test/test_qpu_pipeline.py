@@ -1,7 +1,6 @@
 """qpu (with the Advantage stand-in) and qpu-emulator: the whole embedding pipeline offline."""
 
 import dimod
-import numpy as np
 import pytest
 
 import uam_solvers.qpu as qpu_module

@@ -1,6 +1,5 @@
 """The MWIS QUBO, steepest descent and repair, against brute force on small graphs."""
 
-import itertools
 
 import numpy as np
 import pytest

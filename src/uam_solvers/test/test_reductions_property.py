@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from uam_solvers.base import Backend, MwisProblem, brute_force_mwis, make_result
+from uam_solvers.base import MwisProblem, brute_force_mwis
 from uam_solvers.reductions import complete_maximal, reduce_problem
 
 
@@ -69,7 +69,7 @@ def test_domination_direction_lighter_small_neighbourhood_removes_nothing():
 def test_twins_with_equal_weight_keep_one():
     # Two identical candidates (same closed neighbourhood, same weight): only one may be removed.
     p = MwisProblem.from_arrays([1.0, 1.0, 1.5], [[0, 1], [0, 2], [1, 2]])
-    red = reduce_problem(p)
+    reduce_problem(p)
     _, sel = _lifted_optimum(p)
     assert p.objective(sel) == 1.5
     q = MwisProblem.from_arrays([1.0, 1.0], [[0, 1]])

@@ -1,5 +1,4 @@
 """Backend registry: lookup by name, listing, unknown names, entry points, the CLI."""
-import numpy as np
 import pytest
 
 import uam_solvers

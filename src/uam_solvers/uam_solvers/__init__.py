@@ -99,7 +99,7 @@ def build_pipeline(backend: str | Backend, layers: bool = True) -> Backend:
 
 #: backends whose instances hold no state between solves (checked: their attributes are set in
 #: ``__init__`` only; ``auto`` builds its own split pipeline once, lazily): their default
-#: pipelines are built once per thread and reused by :func:`solve_problem` (issue 20: building
+#: pipelines are built once per thread and reused by :func:`solve_problem` (building
 #: one per solve, ``AutoBackend()`` with its three inner backends, the layers and the
 #: availability check, cost ~37 us of a 400 us ``auto`` solve at 100 vertices)
 _STATELESS_BACKENDS = frozenset({"auto", "kamis", "chils", "exact", "greedy"})

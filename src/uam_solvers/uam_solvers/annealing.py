@@ -23,7 +23,7 @@ malformed value is an MwisInputError naming it):
   (per read; default: the time limit shared over the reads), max_vertices (default
   `TABU_MAX_VERTICES` = 200: larger graphs are decomposed, see below).
 
-Large graphs (issue 11): above SA_DECOMPOSE_ABOVE (sa) or max_vertices (tabu) vertices, 200 by
+Large graphs: above SA_DECOMPOSE_ABOVE (sa) or max_vertices (tabu) vertices, 200 by
 default, the graph is decomposed (`uam_solvers.decompose`): the greedy answer is improved by
 subproblems of `subproblem_size` (200) vertices sampled by the same sampler until the time
 limit, so the answer is never worse than greedy and more time buys a better one. (Sampled

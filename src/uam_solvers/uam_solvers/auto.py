@@ -15,9 +15,9 @@ The outer layers of the default pipeline (Reduce, ComponentSplit) pass every gra
   >= ``kamis_min_triangle_ratio`` = 0.5 and >= twice the edge density, up to 150,000 conflict
   pairs: the layered runs' graphs of 250-1,750 vertices have mean degree 35-90 and KaMIS proves
   every one, in 1-700 ms; such a graph gets ``kamis_clustered_fraction`` = 0.85 of the limit,
-  and KaMIS's best set is kept when the split below finds no better, issue 20); the others
+  and KaMIS's best set is kept when the split below finds no better); the others
   get ``kamis_fraction`` (0.2) of the limit, at most ``kamis_max_share_s`` (1 s); a return before 0.9 of that share is its completed search, a proof, returned at once. The
-  groups do not enter the choice (issue 20: the earlier "interacting partners" score rose with
+  groups do not enter the choice (the earlier "interacting partners" score rose with
   the groups and kept KaMIS from graphs it proves in 1-2 ms). Denser graphs are kept from it
   because KaMIS overran even a 0.05 s limit on them (1-2 s at mean degree 40-44, past 8 s at
   100-150) and it holds the GIL; :func:`uam_solvers.solve_bounded` and the solve service bound
@@ -27,7 +27,7 @@ The outer layers of the default pipeline (Reduce, ComponentSplit) pass every gra
   union of large cliques by structure (:meth:`AutoBackend._cpsat_suits`: the groups' clique
   cover has >= ``cpsat_min_clique_cover`` = 8 vertices per clique, the triangle ratio is >=
   0.25 and twice the edge density, at most 200,000 conflict pairs): the planner's
-  rolling-horizon graphs (issue 20; one request's candidates over ten epochs), on which KaMIS
+  rolling-horizon graphs (one request's candidates over ten epochs), on which KaMIS
   runs to its limit and CP-SAT proves in 0.1-0.5 s CPU. On such graphs KaMIS first gets only a
   probe (``kamis_probe_fraction`` 0.01 of the limit, at least 0.05 s; with the tie-break on,
   the tie-break's budget, 3 x that, at most a quarter of the limit: see below). Above 2,000 vertices this
@@ -40,7 +40,7 @@ The outer layers of the default pipeline (Reduce, ComponentSplit) pass every gra
   has not proven within ``exact_fraction``), CHILS above.
 * above 2,000 vertices: chszlablib's LearnAndReduce exact kernelisation, first a probe with
   ``lr_probe_fraction`` (0.01) of the limit: when it removed less than ``lr_min_probe_removed``
-  (10 %) of the vertices, CHILS gets the whole graph and the rest of the limit at once (issue 20:
+  (10 %) of the vertices, CHILS gets the whole graph and the rest of the limit at once (
   the 10,000-vertex stress graph loses 0.6-2.4 % in the probe and 4 % in a full 0.2 s
   kernelisation, which took 0.3-0.43 s under load); otherwise LearnAndReduce goes on with the
   probe's kernel up to ``lr_fraction`` (0.2) of the limit, then KaMIS branch-and-reduce on a
@@ -49,7 +49,7 @@ The outer layers of the default pipeline (Reduce, ComponentSplit) pass every gra
   most ``lr_max_kernel_fraction`` (25 %) of the vertices, else on the whole graph (proven when
   the kernel is empty: planner-shaped 10,000 vertices in 0.13-0.2 s).
 
-Tied optima (issue 20): every path is deterministic for its seed, but which one proves first
+Tied optima: every path is deterministic for its seed, but which one proves first
 depends on the machine's speed (KaMIS's share is wall time), and tied optima differ between
 them. So when KaMIS was stopped by its share and CP-SAT or the split then proved the optimum,
 KaMIS runs again with at most ``tie_break_factor`` (3) times that share (at least
@@ -62,7 +62,7 @@ the limit it is given (it spends ~1 % of the limit in a time-bounded local searc
 comparisons over limits of 0.05-60 s differed, 10 s against 30 s on a 671-vertex corpus graph);
 on the horizon graphs, where KaMIS never finishes, the re-run cost 0.13-0.17 s of CPU
 (3 x the 0.05 s probe). So on the graphs that go to CP-SAT (``_cpsat_suits``) the probe is
-given that budget up front (twelfth stop; at most a quarter of the limit): the same canonical
+given that budget up front (at most a quarter of the limit): the same canonical
 set (KaMIS's, whenever it completes within the budget), without the re-run: a graph KaMIS
 proves in 0.05-0.15 s is answered by KaMIS alone (the layered corpus's 671- and 1,274-vertex
 graphs: 55-70 ms; before, probe + CP-SAT + re-run, 2.4-3.8x KaMIS's time), and one it does not
@@ -113,7 +113,7 @@ def interacting_partners(problem: MwisProblem) -> float:
     counts as a request of its own). A description of the instance only: ``auto`` no longer
     routes by it, because with the groups given the same graph scores higher (10.7-11.7 against
     6.5-7.0 without them on paper-shaped graphs of 500 vertices), which kept KaMIS from graphs
-    it proves in milliseconds (issue 20). O(n + m)."""
+    it proves in milliseconds. O(n + m)."""
     n = problem.n
     gid = np.arange(n, dtype=np.int64) + len(problem.groups)
     for i, g in enumerate(problem.groups):
@@ -160,11 +160,11 @@ TRIANGLE_SAMPLES = 4096
 #: most 0.016) and is drawn again with TRIANGLE_SAMPLES only when it lies within
 #: TRIANGLE_CLOSE_SE standard errors of a threshold the route compares it with: on the dense
 #: corpus graphs (city r25, 360-485 vertices, mean degree 25-39, ratio 0.88-0.98) the 4,096 took
-#: 0.4-0.7 ms of auto's ~2 ms, 1,024 0.14-0.27 ms (issue 20, eleventh stop)
+#: 0.4-0.7 ms of auto's ~2 ms, 1,024 0.14-0.27 ms
 TRIANGLE_FIRST_SAMPLES = 1024
 TRIANGLE_CLOSE_SE = 4.0
 #: CP-SAT on the whole graph after KaMIS did not prove it, for graphs that are unions of
-#: cliques (issue 20, rolling-horizon graphs of the planner: 1,100-3,600 vertices, 85-100
+#: cliques (rolling-horizon graphs of the planner: 1,100-3,600 vertices, 85-100
 #: requests whose 20-90 candidates each span ten epochs, triangle ratio 0.31-0.60 at 10-30x the
 #: edge density; KaMIS branch-and-reduce ran to its limit on every one, CP-SAT with the groups
 #: as at-most-one proved them in 0.1-0.5 s CPU, 1.3-2.3 s wall at load 15). CP-SAT also proved
@@ -185,7 +185,7 @@ KAMIS_PROBE_MIN_S = 0.05
 #: the probe is given the tie-break's re-run budget (tie_break_factor x the probe above, at
 #: least tie_break_min_s: 0.15 s at a 1 s limit) up front, but at most this share of the limit
 KAMIS_PROBE_MAX_SHARE = 0.25
-#: the canonical tie-break (issue 20; AutoBackend._canonical): when KaMIS's first share ran
+#: the canonical tie-break (AutoBackend._canonical): when KaMIS's first share ran
 #: out and CP-SAT or the split proved the optimum, KaMIS runs again with at most this many
 #: times that share (at least TIE_BREAK_MIN_S, at most the time left): its completed search is
 #: the canonical set. A CP-SAT re-solve maximising a tie key with the objective fixed was
@@ -227,7 +227,7 @@ def triangle_ratio(problem: MwisProblem, samples: int = TRIANGLE_SAMPLES) -> flo
     q = np.minimum(a, b).astype(np.int64) * n + np.maximum(a, b)
     keys = problem.edge_keys()
     # the count does not depend on the queries' order; sorted, the binary searches walk the
-    # keys in order (issue 20: 0.35-0.4 -> ~0.13 ms of the 1 ms this took at 500-1,000 vertices,
+    # keys in order (0.35-0.4 -> ~0.13 ms of the 1 ms this took at 500-1,000 vertices,
     # as much as KaMIS needs to prove such a graph)
     q.sort()
     pos = np.minimum(np.searchsorted(keys, q), keys.size - 1)
@@ -235,7 +235,7 @@ def triangle_ratio(problem: MwisProblem, samples: int = TRIANGLE_SAMPLES) -> flo
 
 
 #: the uniform draws of :func:`triangle_ratio` per sample count, from default_rng(0): the same
-#: numbers every call, drawn once (issue 20: a new generator and its draws cost ~40 us a call)
+#: numbers every call, drawn once (a new generator and its draws cost ~40 us a call)
 _TRIANGLE_DRAWS: dict = {}
 
 
@@ -593,7 +593,7 @@ class AutoBackend(Backend):
                                          opts["kamis_probe_min_s"]))
                 tie_budget_s = self._tie_budget(share, opts)
                 if cpsat_next and opts["tie_break"]:
-                    # the probe is given the tie-break's budget at once (twelfth stop): the
+                    # the probe is given the tie-break's budget at once: the
                     # re-run after a CP-SAT proof would spend it anyway, so the canonical set is
                     # the same; a graph KaMIS proves within it (the layered corpus's 671 and
                     # 1,274 vertices: 55-70 ms, past the 0.05 s probe) needs no CP-SAT and no
@@ -641,7 +641,7 @@ class AutoBackend(Backend):
     def _canonical(self, problem: MwisProblem, res: MwisResult, share: float,
                    time_limit_s: float, seed: int, opts: dict, t0: float,
                    tie_budget_s: float) -> MwisResult:
-        """The canonical tie-break among proven optima (issue 20): ``res`` was proven by CP-SAT
+        """The canonical tie-break among proven optima: ``res`` was proven by CP-SAT
         or the split after KaMIS's first share (``share`` [s], 0: KaMIS did not run) ran out.
         On a faster machine KaMIS would have finished and answered, and tied optima differ
         between the paths, so KaMIS runs again on the same graph with the same seed, with at
@@ -789,7 +789,7 @@ class AutoBackend(Backend):
                         t0: float) -> MwisResult:
         """Above split_max_vertices: a short LearnAndReduce probe (``lr_probe_fraction`` of the
         limit); when it removed some but less than ``lr_min_probe_removed`` of the graph, CHILS
-        on the whole graph with the rest of the limit (issue 20: on the 10,000-vertex stress
+        on the whole graph with the rest of the limit (on the 10,000-vertex stress
         graph the full kernelisation took 0.3-0.43 s of a 1 s limit to remove 4 %); otherwise
         LearnAndReduce again on the probe's kernel up to ``lr_fraction`` of the limit, then
         KaMIS branch-and-reduce on a small sparse kernel (a completed search is a proof), CHILS

@@ -174,7 +174,7 @@ class MwisProblem:
             i = int(np.argmax(w))  # (a NaN is its own maximum: it fails the test below)
             wmax = float(w[i])
         # all finite and >= 0 (a NaN fails both comparisons): one reduction and the maximum;
-        # otherwise the passes below name the first bad weight (issue 20: ~3 us of a small solve)
+        # otherwise the passes below name the first bad weight (~3 us of a small solve)
         if n and not (float(w.min()) >= 0.0 and math.isfinite(wmax)):
             bad = ~np.isfinite(w)
             if bad.any():
@@ -202,7 +202,7 @@ class MwisProblem:
             # already normalised (the planner's edges, every MwisProblem's own): in range, u < v
             # and strictly increasing keys u * n + v (sorted, unique; u[0] >= 0 then bounds
             # every u), checked in the caller's dtype; the keys are kept for the CSR, the
-            # listed-groups check and the triangle gate (issue 20: ~4 passes over the pairs
+            # listed-groups check and the triangle gate (~4 passes over the pairs
             # instead of ~15)
             u, v = e[:, 0], e[:, 1]
             if int(u[0]) >= 0 and int(v.max()) < n and bool((u < v).all()):
@@ -217,7 +217,7 @@ class MwisProblem:
             return problem
         if e.dtype.kind == "i" and e.size and int(e.min()) >= 0 and int(e.max()) < n:
             # signed integers all in range (the planner's edges): nothing to report, so no
-            # per-element mask (issue 20: two reductions instead of four array passes)
+            # per-element mask (two reductions instead of four array passes)
             e64, bad = e.astype(np.int64, copy=False), None
         else:
             e64, bad2 = _index_values(e, "edges", n)
@@ -361,7 +361,7 @@ def _edge_array(edges: Any) -> np.ndarray:
             a = None
         if a is None or a.shape != (2,):
             raise MwisInputError(f"edges[{i}]: {row!r} is not a pair of vertex indices")
-    raise MwisInputError(f"edges: not an (m, 2) array of vertex indices")
+    raise MwisInputError("edges: not an (m, 2) array of vertex indices")
 
 
 def _group_list(groups: Any) -> list:
@@ -388,7 +388,7 @@ def _groups_listed(n: int, edges: np.ndarray, groups: Sequence[np.ndarray],
     as MwisProblem keeps them). With the edges' ``keys`` (``u * n + v``, strictly increasing)
     and groups of consecutive vertices (the planner's): two binary searches per group member,
     O(n log m). Otherwise, for disjoint groups, the listed edges inside a group of k vertices
-    number exactly k (k - 1) / 2: O(n + m) without expanding the pairs (issue 20: the
+    number exactly k (k - 1) / 2: O(n + m) without expanding the pairs (the
     expansion and its binary search cost ~25 us of a 400 us ``auto`` solve at 100 vertices;
     the planner always lists its group cliques). False also when it cannot tell cheaply
     (overlapping groups of other shapes): the caller then expands the pairs."""
@@ -398,7 +398,7 @@ def _groups_listed(n: int, edges: np.ndarray, groups: Sequence[np.ndarray],
         # (keys strictly increasing) each member v's pairs (v, v + 1 .. last of its group):
         # their count sums to the groups' pair count exactly when every group is a range of
         # consecutive vertices (the planner's); then two binary searches per member tell
-        # whether all are listed (issue 20: ~70 -> ~25 us at 8,700 edges, against gathering
+        # whether all are listed (~70 -> ~25 us at 8,700 edges, against gathering
         # each edge's group below). Overlaps need no care here: each pair is looked up.
         size = np.array(sizes, dtype=np.int64)
         v = members.astype(np.int64)
@@ -415,7 +415,7 @@ def _groups_listed(n: int, edges: np.ndarray, groups: Sequence[np.ndarray],
         return False
     a = gid[edges[:, 0]]
     # the edges are unique pairs, so no group holds more than k (k - 1) / 2 of them: the total
-    # is reached only when every group's count is (no per-group count: ~8 us, issue 20)
+    # is reached only when every group's count is (no per-group count: ~8 us)
     inside = np.count_nonzero((a >= 0) & (a == gid[edges[:, 1]]))
     return inside == sum(k * (k - 1) // 2 for k in sizes)
 
@@ -423,7 +423,7 @@ def _groups_listed(n: int, edges: np.ndarray, groups: Sequence[np.ndarray],
 def _group_pairs(groups: Sequence[np.ndarray]) -> np.ndarray:
     """(p, 2) int64 pairs u < v inside every group (each group sorted and duplicate-free, as
     MwisProblem keeps them), in one vectorised expansion: no Python loop over the groups
-    (issue 20: the per-size loop with np.stack cost ~0.4 ms of auto's 0.7 ms overhead at 150
+    (the per-size loop with np.stack cost ~0.4 ms of auto's 0.7 ms overhead at 150
     vertices)."""
     lengths = np.fromiter((g.size for g in groups), dtype=np.int64, count=len(groups))
     flat = np.concatenate(groups).astype(np.int64)
@@ -443,7 +443,7 @@ def _normalise_groups(groups: Sequence[Any] | None, n: int) -> list[np.ndarray]:
     if not groups:
         return []
     if all(type(g) is np.ndarray and g.ndim == 1 and g.dtype.kind in "iu" for g in groups):
-        # fast path (issue 20): 1-D integer arrays (MwisProblem's own groups, the planner's)
+        # fast path: 1-D integer arrays (MwisProblem's own groups, the planner's)
         # need none of the per-group conversion below; the range is checked on the whole
         arrays = groups
         clean = _clean_groups(arrays, n)
@@ -459,7 +459,7 @@ def _clean_groups(arrays: list[np.ndarray], n: int) -> list[np.ndarray] | None:
     """The groups as :func:`_normalise_groups_tail` returns them when they are already clean:
     1-D signed-integer arrays of at least two vertices each, in [0, n), each strictly
     increasing (so sorted and duplicate-free). None otherwise (the full path then checks, sorts
-    and names a bad value). The same result in fewer numpy calls (issue 20: ~27 -> ~15 us of a
+    and names a bad value). The same result in fewer numpy calls (~27 -> ~15 us of a
     0.35 ms ``auto`` solve at 100 vertices, 20 groups)."""
     lens = [a.size for a in arrays]
     if min(lens) < 2:
@@ -470,7 +470,7 @@ def _clean_groups(arrays: list[np.ndarray], n: int) -> list[np.ndarray] | None:
     rising = flat[1:] > flat[:-1]
     if rising.all():
         # the groups ascending one after the other (the planner's): the ends are the bounds
-        # (issue 20: two reductions fewer, and the slices below without a numpy cumsum)
+        # (two reductions fewer, and the slices below without a numpy cumsum)
         if int(flat[0]) < 0 or int(flat[-1]) >= n:
             return None
     else:
@@ -518,7 +518,7 @@ def _normalise_groups_tail(arrays: list[np.ndarray], lengths: np.ndarray,
         for gi, a in enumerate(arrays):
             _as_index_array(a, f"groups[{gi}]", n)
         raise
-    # fast path (issue 20): groups already sorted and duplicate-free (the planner's, and every
+    # fast path: groups already sorted and duplicate-free (the planner's, and every
     # MwisProblem's own) need no sort; the check is one comparison per vertex
     if idx.size > 1:
         rising = idx[1:] > idx[:-1]
@@ -579,7 +579,7 @@ def csr_from_edges(n: int, edges: np.ndarray, sorted_keys: np.ndarray | None = N
             lo, hi = u.astype(np.int32), v.astype(np.int32)
             # sorted: each row's neighbours below it (the pairs (u, row), in u order) then
             # above it (the pairs (row, v), in v order) are already in order, so a stable
-            # counting sort by row, scipy's coo_tocsr, gives sorted rows in O(m) (issue 20:
+            # counting sort by row, scipy's coo_tocsr, gives sorted rows in O(m) (
             # 0.2 -> 0.05 ms at 8,700 edges, against the argsort below)
             indptr = np.empty(n + 1, dtype=np.int32)
             indices = np.empty(2 * m, dtype=np.int32)
@@ -605,7 +605,7 @@ def _normalise_edges(e: np.ndarray) -> np.ndarray:
     base = int(hi.max()) + 1
     key = lo * base + hi
     if key.size > 1 and bool((key[1:] > key[:-1]).all()):
-        # fast path (issue 20): already sorted and unique (the planner's edges, and every
+        # fast path: already sorted and unique (the planner's edges, and every
         # MwisProblem's own), no sort
         return np.stack([lo, hi], axis=1)
     key = sorted_unique(key)
@@ -631,11 +631,11 @@ def check_selection(problem: MwisProblem, selected: Any) -> tuple[bool, str]:
         return False, f"selected: expected integer vertex indices, got dtype {arr.dtype}"
     idx = arr.astype(np.int64, copy=False)
     # the last selection found valid on this problem, by its int64 values in order (a backend's
-    # check and the validation layer's see the same sorted set: checked once, issue 20)
+    # check and the validation layer's see the same sorted set: checked once)
     key = idx.tobytes()
     if problem.__dict__.get("_valid_selection") == key:
         return True, ""
-    if int(idx.min()) < 0 or int(idx.max()) >= problem.n:  # (two reductions: issue 20)
+    if int(idx.min()) < 0 or int(idx.max()) >= problem.n:  # (two reductions)
         bad = (idx < 0) | (idx >= problem.n)
         i = int(np.flatnonzero(bad)[0])
         return False, f"selected[{i}]: vertex {int(idx[i])} is out of range [0, {problem.n})"
@@ -646,7 +646,7 @@ def check_selection(problem: MwisProblem, selected: Any) -> tuple[bool, str]:
     csr = problem.__dict__.get("_csr")
     if csr is not None:
         # the CSR is built (every backend that solved it needs it): the selected vertices'
-        # neighbours, none selected, instead of every conflict pair (issue 20: ~50 -> ~10 us
+        # neighbours, none selected, instead of every conflict pair (~50 -> ~10 us
         # at 8,700 pairs); a conflict is then named from the pairs below
         indptr, indices = csr
         start = indptr[idx]
@@ -706,7 +706,7 @@ def integer_weights(weights: np.ndarray, resolution: int = 10**6) -> tuple[np.nd
             f"(resolution {resolution} / {wmax!r} overflows float64; multiply the weights by "
             "a constant, which changes no optimum)")
     wi = np.rint((w / wmax) * float(resolution)).astype(np.int64)
-    if not wi.all():  # (only then the mask: issue 20, ~2 us of a small solve)
+    if not wi.all():  # (only then the mask: ~2 us of a small solve)
         wi[(wi == 0) & (w > 0)] = 1
     return wi, scale
 

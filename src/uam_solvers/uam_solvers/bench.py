@@ -12,7 +12,7 @@ embedding alone can take more than a second). ``chils`` runs with a 0.1 s limit 
 always runs until its limit; with 0.02 s it misses optima even on 6-vertex graphs), the others
 with ``--small-limit`` (1 s).
 
-Targets (issue 11, printed first): ``auto`` end to end against KaMIS, CHILS and CP-SAT called
+Targets (printed first): ``auto`` end to end against KaMIS, CHILS and CP-SAT called
 directly in the same run: 5-50 vertices (the corpus below); 15-500 vertices on the
 planner-shaped family (``instances.planner_instance``: requests as cliques of 5 candidates,
 two interacting requests per request as measured on the planner's graphs), on real planner
@@ -25,7 +25,7 @@ Part 2 (scale): paper-shaped instances of 1,000 and 10,000 vertices
 10 s limit (end-to-end wall time shown), the gap to the best value any backend found, and
 whether the large-graph default (``chils``) is within 0.5 % of that best in 1 s.
 
-Issue 20 (each prints only its tables): ``--issue20`` (auto vs KaMIS on paper-shaped graphs
+The bounded-solve comparisons (each prints only its tables): ``--issue20`` (auto vs KaMIS on paper-shaped graphs
 with groups, on the committed real corpus, and every backend's wall through
 ``solve_bounded``), ``--real-corpus [FILE]`` (auto vs KaMIS branch-and-reduce called directly per
 size bucket on real planner instances; default the committed
@@ -286,7 +286,7 @@ def cpsat_direct(p: MwisProblem, limit_s: float) -> tuple[float, float, bool]:
 #: 2-core machine at load 8 single runs of a few milliseconds were inflated up to 40x at
 #: random by preemption (a 0.4 ms solve measured 17.9 ms once), which decided medians of 5.
 TARGET_REPEATS = 3
-#: issue 20: what auto may add to KaMIS's time on a graph KaMIS proves in well under a
+#: what auto may add to KaMIS's time on a graph KaMIS proves in well under a
 #: millisecond: the fixed cost of checking the caller's arrays, the groups and the answer (its
 #: proof recomputed in the caller's weights), ~0.2-0.4 ms from 15 to 500 vertices (profile in
 #: BENCHMARKS.md); the 2x target is read as "within 2x, or at most this much over KaMIS"
@@ -362,7 +362,7 @@ def target_benchmark(n_small: int, seed: int, mid_sizes, mid_seeds: int, corpora
         t_auto.append(dt_a)
         t_kam.append(dt_k)
         proven += r.proven_optimal
-    out(f"\n## Targets of `auto` (issue 11)\n\n5-50 vertices ({len(problems)} corpus instances, "
+    out(f"\n## Targets of `auto`\n\n5-50 vertices ({len(problems)} corpus instances, "
         f"`uam_solvers.solve` from the arrays, end to end, best of {TARGET_REPEATS} interleaved "
         f"runs per instance): median {np.median(t_auto) * 1e3:.3f} ms "
         f"(target <= 1 ms), p95 {np.percentile(t_auto, 95) * 1e3:.3f} ms; proven {proven}/"
@@ -468,13 +468,13 @@ def adversarial_graphs(seed: int) -> list:
 def deadline_benchmark(seed: int, backends, limit_s: float = 1.0, out=print) -> None:
     """Wall time against the limit of every backend through ``uam_solvers.solve_bounded`` (the
     in-process path of the runner and the planner: the process's shared SolveService) on the
-    adversarial graphs, one run each (issue 20: at most limit + 0.5 s)."""
+    adversarial graphs, one run each (at most limit + 0.5 s)."""
     from . import solve_bounded
     from .executor import shared_service
 
     t0 = time.perf_counter()
     shared_service()
-    out(f"\n## Deadlines in process (issue 20): `uam_solvers.solve_bounded`, limit {limit_s:g} s\n")
+    out(f"\n## Deadlines in process: `uam_solvers.solve_bounded`, limit {limit_s:g} s\n")
     out(f"(shared service started and warmed in {time.perf_counter() - t0:.2f} s, before the "
         "first solve; wall = the call, from the validated problem's arrays)\n")
     out("| graph | vertices | conflict pairs | " + " | ".join(backends) + " |")
@@ -506,7 +506,7 @@ HORIZON_LIMIT_S = 5.0
 
 def corpus_benchmark(path=None, limit_s: float = 1.0, repeats: int = TARGET_REPEATS,
                      out=print, cpsat: bool = False) -> list[dict]:
-    """Issue 20's target on the committed corpus of real planner instances (layered mode,
+    """target on the committed corpus of real planner instances (layered mode,
     ``instances.REAL_CORPUS``, written by scripts/make_mwis_corpus.py): per size bucket,
     ``auto`` end to end (``uam_solvers.solve`` from the arrays, as the planner calls it) against
     KaMIS branch-and-reduce called directly on the CSR, interleaved instance by instance, each
@@ -533,7 +533,7 @@ def corpus_benchmark(path=None, limit_s: float = 1.0, repeats: int = TARGET_REPE
                      "auto_obj": r.objective, "auto_valid": p.is_independent(r.selected),
                      "auto_method": r.stats.get("auto_method", ""), "kamis_s": dk,
                      "kamis_finished": fk, "kamis_obj": ok})
-    out(f"\n## `auto` on the real corpus (issue 20): {os.path.basename(str(path))}, "
+    out(f"\n## `auto` on the real corpus: {os.path.basename(str(path))}, "
         f"{len(entries)} instances, limit {limit_s:g} s\n")
     out(f"(`auto` by `uam_solvers.solve` from the arrays, end to end, as the planner calls it; "
         f"KaMIS branch-and-reduce on the prebuilt CSR, 'finished' = returned before 0.9 of the "
@@ -598,7 +598,7 @@ def corpus_benchmark(path=None, limit_s: float = 1.0, repeats: int = TARGET_REPE
 
 
 def horizon_corpus_benchmark(limit_s: float = HORIZON_LIMIT_S, out=print) -> list[dict]:
-    """Issue 20 on the committed rolling-horizon corpus (``instances.HORIZON_CORPUS``): auto
+    """The bounded-solve comparison on the committed rolling-horizon corpus (``instances.HORIZON_CORPUS``): auto
     against KaMIS and CP-SAT called directly, at the planner node's limit."""
     from .instances import HORIZON_CORPUS, real_corpus_path
 
@@ -607,7 +607,7 @@ def horizon_corpus_benchmark(limit_s: float = HORIZON_LIMIT_S, out=print) -> lis
 
 
 def node_path_benchmark(seed: int, backends, limit_s: float = 1.0, out=print) -> None:
-    """Issue 20: every backend through ``SolveService`` exactly as the solver node builds it
+    """every backend through ``SolveService`` exactly as the solver node builds it
     (``executor.node_service``: one worker per lane, small lane up to 2,000 vertices, margin
     0.4 s) on the adversarial graphs and the 10,000-vertex instance: wall against limit +
     0.5 s; then auto's gap at 1 s on the 10,000-vertex instance against the best known."""
@@ -619,7 +619,7 @@ def node_path_benchmark(seed: int, backends, limit_s: float = 1.0, out=print) ->
     started = time.perf_counter() - t0
     graphs = adversarial_graphs(seed) + [(f"large_instance(10000, {seed})",
                                           large_instance(10_000, seed))]
-    out(f"\n## Deadlines through the solver node's SolveService (issue 20), limit {limit_s:g} s\n")
+    out(f"\n## Deadlines through the solver node's SolveService, limit {limit_s:g} s\n")
     out(f"(`executor.node_service()`, the service `uam_solvers/nodes/solver_node.py` builds: "
         f"{NODE_LAYOUT}; started and warmed in {started:.2f} s; wall = `svc.solve(problem, ...)` "
         f"on the validated problem, what the node calls after converting the request)\n")
@@ -666,7 +666,7 @@ def node_path_benchmark(seed: int, backends, limit_s: float = 1.0, out=print) ->
 
 
 def grouped_benchmark(seed: int, sizes, seeds: int, limit_s: float = 1.0, out=print) -> None:
-    """Issue 20's target: ``auto`` end to end on paper-shaped graphs with the groups given
+    """target: ``auto`` end to end on paper-shaped graphs with the groups given
     (``instances.grouped_random_instance``) against KaMIS branch-and-reduce called directly,
     interleaved, best of TARGET_REPEATS; and the same graphs without their groups."""
     from .instances import grouped_random_instance
@@ -674,7 +674,7 @@ def grouped_benchmark(seed: int, sizes, seeds: int, limit_s: float = 1.0, out=pr
     warm = grouped_random_instance(300, seed + 1000)
     _solve_arrays(warm, "auto", limit_s, 0)
     kamis_direct(warm, limit_s)
-    out(f"\n## `auto` on paper-shaped graphs with groups (issue 20), limit {limit_s:g} s\n")
+    out(f"\n## `auto` on paper-shaped graphs with groups, limit {limit_s:g} s\n")
     out("(`grouped_random_instance`: requests of 5 candidates as cliques, listed among the edges "
         "and given as groups, plus random conflicts of 2.5 per vertex; `auto` by "
         "`uam_solvers.solve` from the arrays, end to end; KaMIS on the CSR)\n")
@@ -727,18 +727,18 @@ def main(argv=None) -> int:
                     help="uam-mwis-corpus/1 file of real planner instances (repeatable), e.g. "
                          "from scripts/measure_system_airspace.py --instances")
     ap.add_argument("--issue20", action="store_true",
-                    help="only issue 20's tables: auto vs KaMIS on paper-shaped graphs with "
+                    help="only tables: auto vs KaMIS on paper-shaped graphs with "
                          "groups (15-500 vertices), on the committed real corpus, and the "
                          "in-process deadline table (--node-path: the solver node's)")
     ap.add_argument("--deadline-limit", type=float, default=1.0)
     ap.add_argument("--real-corpus", nargs="?", const="", default=None, metavar="FILE",
-                    help="only issue 20's table on real planner instances: auto vs KaMIS direct "
+                    help="only table on real planner instances: auto vs KaMIS direct "
                          "per size bucket (default: the committed data/mwis/layered-mwis.jsonl.gz, "
                          "then data/mwis/horizon-mwis.jsonl.gz at 5 s with CP-SAT direct too)")
     ap.add_argument("--corpus-limit", type=float, default=1.0,
                     help="time limit of --real-corpus solves [s]")
     ap.add_argument("--node-path", action="store_true",
-                    help="only issue 20's table through the solver node's SolveService: every "
+                    help="only table through the solver node's SolveService: every "
                          "backend on the adversarial graphs and 10,000 vertices, and auto's gap "
                          "at 1 s on 10,000 vertices")
     args = ap.parse_args(argv)

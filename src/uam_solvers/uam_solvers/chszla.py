@@ -102,7 +102,7 @@ class KamisBackend(Backend):
         # returned set has exactly that integer objective and its own weights agree with it
         proven = finished and integer_proof_holds(problem, sel, wi, scale, int(int_obj))
         # the set was checked (distinct, in range, independent) and sorted: not np.unique'd,
-        # built once (issue 20: make_result's second pass cost ~5 us of a 190 us solve)
+        # built once (make_result's second pass cost ~5 us of a 190 us solve)
         sel = sel.astype(np.int32)
         return MwisResult(selected=sel, objective=problem.objective(sel), proven_optimal=proven,
                           solve_time_s=float(dt), backend=self.name,

@@ -4,7 +4,7 @@ Why hand-written: at the 5-50 vertices of one paper-scale planning epoch, KaMIS 
 chszlablib took 2.5 ms median (up to ~50 ms on some 50-vertex graphs) and CP-SAT ~3.5 ms, while
 the graph has at most ~10 requests of <= 5 candidates each. Branching per request (a clique:
 at most one candidate is chosen) over bitsets held in Python ints proves those optima in a
-fraction of a millisecond (BENCHMARKS.md, issue 11), with no extension call.
+fraction of a millisecond (BENCHMARKS.md), with no extension call.
 
 The vertices are partitioned into cliques ("blocks"): each clique group (one request's
 candidates) becomes a block (a vertex in several groups joins its first one), every other
@@ -42,7 +42,7 @@ SMALL_MAX_VERTICES = 64
 #: The search branches over the cliques of the cover the groups give (a vertex outside every
 #: group is a clique of its own); above this many cliques it is not tried (the ``auto``
 #: backend's default ``bb_max_cover``; KaMIS takes the graph). Measured on
-#: grouped_random_instance graphs without their groups (issue 20): 100-160 nodes (0.18 ms) at
+#: grouped_random_instance graphs without their groups: 100-160 nodes (0.18 ms) at
 #: 15 cliques, 400-500 (0.6 ms) at 20, 1,000-1,900 (2.5 ms) at 25, past the 20,000-node limit
 #: (70 ms, then KaMIS) from 40; with the groups given, 13 cliques or fewer at 15-64 vertices,
 #: 6-190 nodes. KaMIS direct needs 0.1 ms on those graphs.
@@ -73,7 +73,8 @@ def exact_integer_weights(weights: Sequence[float]) -> list[int]:
     return [p * (den // d) for p, d in ratios]
 
 
-def _search(n: int, wint: list[int], us: list[int], vs: list[int], groups: list[list[int]],
+# complexity over 25: the branch and bound's search loop; to be split into named steps
+def _search(n: int, wint: list[int], us: list[int], vs: list[int], groups: list[list[int]],  # noqa: C901
             node_limit: int) -> tuple[list[int] | None, int]:
     """The branch and bound on ``n`` vertices with exact integer weights ``wint``, conflict
     pairs ``(us[i], vs[i])`` (duplicates allowed) and clique groups (sorted, unique, size >= 2,
@@ -120,7 +121,7 @@ def _search(n: int, wint: list[int], us: list[int], vs: list[int], groups: list[
         masks.append(((1 << len(b)) - 1) << start)
         start += len(b)
     # the same closed neighbourhoods in the search's bit order, built again from the pairs
-    # (cheaper than moving every set bit of ``closed``: issue 20, ~45 of 117 us of set-up at
+    # (cheaper than moving every set bit of ``closed``: ~45 of 117 us of set-up at
     # 50 vertices)
     pbit = [bit[p] for p in pos]
     cl = [bit[i] for i in range(n)]
@@ -282,7 +283,7 @@ def solve_small_arrays(weights: Any, edges: Any, groups: Any, node_limit: int,
     if sel is None:
         return None
     # the answer checked against the input arrays themselves, as the pipeline's validation does
-    # (the groups on a bytearray: numpy scalars cost ~18 us of a 0.25 ms solve, issue 20)
+    # (the groups on a bytearray: numpy scalars cost ~18 us of a 0.25 ms solve)
     flags = bytearray(n)
     for v in sel:
         flags[v] = 1

@@ -42,7 +42,6 @@ import atexit
 import ctypes
 import logging
 import multiprocessing as mp
-import os
 import signal
 import threading
 import time
@@ -124,7 +123,7 @@ def _warm_up() -> None:
         if backend.available()[0]:
             backend.solve(tiny, time_limit_s=0.01, seed=0, options={})
     # auto's path above 2,000 vertices starts with LearnAndReduce: loading its library and
-    # models took 0.4-0.75 s of the first such solve under load (issue 20)
+    # models took 0.4-0.75 s of the first such solve under load
     from .auto import learn_and_reduce
 
     learn_and_reduce(*tiny.csr(), np.array([2, 4, 3, 2]), 0.01, 0)
@@ -592,12 +591,12 @@ class SolveService:
         return out
 
 
-#: The solver node's worker layout (issue 11): one worker per lane keeps the node within the two
+#: The solver node's worker layout: one worker per lane keeps the node within the two
 #: cores of the target machine; problems up to 2,000 vertices (every planner epoch of the
 #: paper's scenarios) use the small lane, so a city-scale graph never delays them; a worker may
 #: run ``margin_s`` past the request's limit before it is killed: 0.3 s as the shared service's
 #: (with 0.4 s killed solves answered at 1.40-1.47 s and, on a loaded machine, up to 1.69 s
-#: with a 1 s limit: BENCHMARKS.md, issue 20 second pass; the fallback is ready at the kill).
+#: with a 1 s limit: BENCHMARKS.md; the fallback is ready at the kill).
 NODE_LAYOUT = {"small_workers": 1, "large_workers": 1, "small_lane_max_vertices": 2000,
                "margin_s": 0.3}
 

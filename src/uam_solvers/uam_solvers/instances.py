@@ -61,7 +61,7 @@ def size_bucket(n: int) -> int:
     return -1
 
 
-#: the committed corpus of the planner's rolling-horizon graphs (issue 20/21: H = 5 and 10,
+#: the committed corpus of the planner's rolling-horizon graphs (H = 5 and 10,
 #: requests filed 120 s ahead), relative to the repository
 HORIZON_CORPUS = "data/mwis/horizon-mwis.jsonl.gz"
 
@@ -330,7 +330,7 @@ def planner_instance(n_vertices: int, seed: int, k: int = 5, mean_interactions: 
 
     `large_instance` with ``mean_interactions`` = 2 (a request conflicts with two others on
     average) instead of 8: measured on the planner's own instances (scripts/
-    measure_system_airspace.py, BENCHMARKS.md issue 11), a request interacts with 1.5 others
+    measure_system_airspace.py, BENCHMARKS.md), a request interacts with 1.5 others
     (median; max 6.7) in Singapore layered at 20 requests per 30 s and with 1.6 (max 3.6) in a
     2,000-node city at 3,000 requests/h. Requests are cliques of ``k`` candidates; other
     arguments go to `large_instance`.

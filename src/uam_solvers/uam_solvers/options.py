@@ -45,7 +45,7 @@ def parse_options(backend: str, spec: Mapping[str, Param], options: Mapping[str,
         raise MwisInputError(f"options: {options!r} is not a mapping of option name to value")
     # the same (backend, spec, options) gives the same checked dict: cached, because one solve
     # of `auto` checks its ~20 options three times (its pipeline, itself, its KaMIS call):
-    # 0.1-0.2 ms of a 0.5-1 ms solve on 50-250 vertex graphs (issue 20). The key holds each
+    # 0.1-0.2 ms of a 0.5-1 ms solve on 50-250 vertex graphs. The key holds each
     # value's type, so True is never taken for 1, and the spec itself, so a new spec misses.
     try:
         key = (backend, id(spec), tuple((k, type(v), v) for k, v in options.items()))

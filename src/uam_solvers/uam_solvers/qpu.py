@@ -376,7 +376,7 @@ def clique_embedding(child, size: int) -> dict | None:
     Every subproblem of at most ``size`` vertices is a subgraph of K_size, so this one embedding
     serves them all: measured here 0.2 s once (graph + busclique, chains of at most 4 qubits for
     K_30 on P16) where minorminer took ~0.4-1 s per subproblem under load, so that only 2-7
-    subproblems fitted in 1-5 s and none improved the greedy start (BENCHMARKS.md, issue 11).
+    subproblems fitted in 1-5 s and none improved the greedy start (BENCHMARKS.md).
     Cached per child object and size."""
     key = (id(child), int(size))
     entry = _CLIQUES.get(key)
@@ -525,7 +525,7 @@ def embedded_solve(problem: MwisProblem, child, *, backend: str, seed: int, time
     embedding_parameters = {
         "random_seed": _int_option(options, "embedding_seed", 0, 0),
         # half the limit by default (it was max(1, limit): minorminer uses its whole timeout,
-        # so a 1 s limit ran to 1.4 s and was killed; issue 20 contract test)
+        # so a 1 s limit ran to 1.4 s and was killed; the backend contract test)
         "timeout": _float_option(options, "embedding_timeout_s", max(0.5 * float(time_limit_s), 0.05)),
         "tries": _int_option(options, "embedding_tries", 10, 1),
     }

@@ -80,7 +80,7 @@ CSV_COLUMNS = ["instance", "n_vertices", "n_edges", "backend", "repetitions", "n
 #: confidence level of the intervals on p_read (Wilson score interval)
 CI_LEVEL = 0.95
 _Z = 1.959963984540054  # two-sided 95 % normal quantile
-#: the study wants p_read near this value estimated within CI_FACTOR (issue 11)
+#: the study wants p_read near this value estimated within CI_FACTOR
 CI_REFERENCE_P = 0.01
 CI_FACTOR = 1.5
 

@@ -1,4 +1,4 @@
-"""Announce a constraint to a running planner: a client of ``uam/update_constraint`` (issue 22).
+"""Announce a constraint to a running planner: a client of ``uam/update_constraint``.
 
     python -m uam_planner.nodes.constraint_client add FEATURE.geojson [--ros-args ...]
     python -m uam_planner.nodes.constraint_client change FEATURE.geojson

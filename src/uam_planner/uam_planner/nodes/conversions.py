@@ -102,7 +102,7 @@ def approved_plan(flight: Flight, t_s: float, policy: str, request_id: str | Non
                    for t, p in zip(traj.times_s, traj.points_m)],
         length_m=float(flight.length_m), weight=float(flight.weight), candidate_index=int(flight.candidate_index),
         method=policy, backend=flight.backend or "")
-    if hasattr(plan, "version"):  # plan versions (issue 22; FlightPlan.msg, docs/replanning.md)
+    if hasattr(plan, "version"):  # plan versions (FlightPlan.msg, docs/replanning.md)
         plan.version = int(getattr(flight, "version", 1))
         plan.effective_time = to_time(float(getattr(flight, "effective_s", flight.departure_s)))
         plan.state = plan_state(flight, t_s)
@@ -141,13 +141,13 @@ def plan_update_msg(update: Any, t_s: float, policy: str, request_id: str | None
         plan.reason = str(update.reason)
         if update.kind == "contingency":
             plan.state = FlightPlan.STATE_CONTINGENT
-        elif update.kind == "nonconforming":   # issue 23: it was outside its intent until now
+        elif update.kind == "nonconforming":   # it was outside its intent until now
             plan.state = FlightPlan.STATE_NONCONFORMING
     plan.version = int(update.version)
     plan.effective_time = to_time(float(update.effective_s))
     plan.constraint_ids = [str(c) for c in update.constraint_ids]
     plan.update_kind = str(update.kind)
-    # issue 23: the reaction's updates carry the observed progress rate they were re-timed from
+    # the reaction's updates carry the observed progress rate they were re-timed from
     plan.observed_progress_rate = float(getattr(update, "observed_rate", 0.0) or 0.0)
     return plan
 

@@ -35,7 +35,7 @@ time ``epoch_index * epoch_s`` with the ``epoch_s`` of that first call, with at 
 it adds flights, never removes them; with a ``journal`` the claim is checked against the
 planner's own approvals and refused when it contradicts them. The end of the run is taken only
 from the bound simulator.
-The reaction between epochs (issue 23): uam/react (React), called by the bound simulator at each
+The reaction between epochs: uam/react (React), called by the bound simulator at each
 instant of its ``reaction_period_s`` strictly between the epoch planned last and the next, in
 time order; the planner waits for the fleet state (and the monitor's report) of that instant,
 runs Planner.react_between_steps with its MWIS graphs through uam/solve_mwis, publishes the new
@@ -124,7 +124,7 @@ class PlannerNode(Node):
             except ValueError as exc:
                 raise ValueError(f"constraints_file: {exc}") from None
             self.planner.set_constraints(cset)
-        # live constraints (issue 22): uam/update_constraint, queued in the planner and applied at
+        # live constraints: uam/update_constraint, queued in the planner and applied at
         # its next epoch (Planner.update_constraint); the set in force is published on uam/constraints
         self._constraint_effective: dict[str, float] = {c.constraint_id: 0.0 for c in self.config.constraints or ()}
         # when the authority announced each live constraint version (the update's time)
@@ -143,7 +143,7 @@ class PlannerNode(Node):
                                                        self._on_update_constraint)
         self.create_subscription(FlightRequest, c.TOPIC_REQUESTS, self._on_request, qos.QOS_REQUESTS)
         self.create_subscription(EpochSync, c.TOPIC_SYNC, self._on_sync, qos.QOS_LATCHED)
-        # the reaction to nonconformance (issue 23, uam_planner.nonconformance): the fleet state is
+        # the reaction to nonconformance (uam_planner.nonconformance): the fleet state is
         # the planner's own view of where the vehicles are; a report on uam/conformance is a claim
         # checked against it and against the planner's plan at the next epoch
         self.conformance_reports = 0
@@ -154,7 +154,7 @@ class PlannerNode(Node):
         self._inbox: collections.deque = collections.deque()
         from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
         group = MutuallyExclusiveCallbackGroup()
-        # the fleet state always (issue 23's safety gap: a flight seen flying past its plan is
+        # the fleet state always (safety gap: a flight seen flying past its plan is
         # held in the traffic picture until it lands, uam_planner.nonconformance.overruns); the
         # conformance reports only with the reaction on
         self.create_subscription(FleetState, c.TOPIC_FLEET, self._on_fleet_msg, qos.QOS_STREAM,
@@ -162,7 +162,7 @@ class PlannerNode(Node):
         if self.p["reaction"]:
             self.create_subscription(Conformance, c.TOPIC_CONFORMANCE, self._on_conformance_msg, qos.QOS_STREAM,
                                      callback_group=group)
-        # the reaction between epochs (uam/react, issue 23): the simulator calls it at each
+        # the reaction between epochs (uam/react): the simulator calls it at each
         # reaction instant; from the first such call on the planner takes its observations at the
         # in-process runner's instants only (_observe_at), waiting for the fleet state (and the
         # monitor's report) of each call's time
@@ -367,7 +367,7 @@ class PlannerNode(Node):
         self._react_service = self.create_service(React, c.SERVICE_REACT, self._on_react, callback_group=self._group)
         self.get_logger().info(f"serving {self.resolve_service_name(c.SERVICE_PLAN_EPOCH)}")
 
-    # ---- live constraints (issue 22, uam_planner.live_constraints) ---------------------------
+    # ---- live constraints (uam_planner.live_constraints) ---------------------------
     def _projected_constraints(self) -> dict:
         """constraint id -> Constraint once every queued update is applied."""
         cur = {k.constraint_id: k for k in self.config.constraints or ()}
@@ -604,7 +604,7 @@ class PlannerNode(Node):
                     return self._refuse_call(request, response, PlanEpoch.Response.STATUS_REFUSED, problem)
             if self.bound_simulator is None:
                 self._bind(request.session, resumed=bool(request.resume))
-            if request.observe_at_instants:   # issue 23: the simulator stops at each instant it asks about
+            if request.observe_at_instants:   # the simulator stops at each instant it asks about
                 self._observe_from_calls = True
             self._epoch_s = float(request.epoch_s)
             if self._held is not None:
@@ -646,7 +646,7 @@ class PlannerNode(Node):
                 return f"resume: {exc}"
             # approvals of this epoch or later never reached the simulator (it asks for this
             # epoch again): they never flew, and none can be claimed; of the rest, each flight's
-            # newest version (re-plans, issue 22) is what flies
+            # newest version (re-plans) is what flies
             k = int(request.epoch_index)
             own = newest_versions(journaled, k, t_s)
             flying = {key for key, p in own.items() if p.outcome == FlightPlan.OUTCOME_APPROVED
@@ -722,7 +722,7 @@ class PlannerNode(Node):
                      for f in result.approved]
             for plan, f in zip(plans, result.approved):
                 plan.operator_id = wire.split_scoped(f.request_id)[0]
-            for u in result.plan_updates:   # new versions and cancellations (issue 22 item 4)
+            for u in result.plan_updates:   # new versions and cancellations
                 if u.kind == "kept":
                     continue
                 op, rid = wire.split_scoped(u.request_id)
@@ -775,7 +775,7 @@ class PlannerNode(Node):
         prep = None
         await self._await_stamps(t_s)   # in the reaction-between-epochs mode only
         with self._lock:
-            self._read_inbox(t_s)   # issue 23: the fleet states and conformance reports received so far
+            self._read_inbox(t_s)   # the fleet states and conformance reports received so far
             steps = self.planner.prepare_steps(t_s, k)
             self._deferred = []
         try:
@@ -791,7 +791,7 @@ class PlannerNode(Node):
             self._publish_constraint_changes(t_s)
         return prep
 
-    # ---- the reaction between epochs (issue 23) ------------------------------------------------
+    # ---- the reaction between epochs ------------------------------------------------
     def _check_react(self, request: React.Request, t_s: float) -> str:
         """Why this reaction call is not one this planner serves now, or ''."""
         session = request.session

@@ -166,7 +166,7 @@ class RunSummary:
         """The runner's decision metrics: ``flight_stats`` (one implementation, one set)."""
         return self.flight_stats
 
-    #: plan versions after the approval (version >= 2, issue 22): update kind -> count ("rerouted", ...)
+    #: plan versions after the approval (version >= 2): update kind -> count ("rerouted", ...)
     plan_updates: dict = field(default_factory=dict)
     #: entries of flown trajectories into constraints in force (uam_sim.audit.flown_audit.Incursion.describe)
     incursions: list = field(default_factory=list)
@@ -175,7 +175,7 @@ class RunSummary:
     incursions_before_applied: list = field(default_factory=list)
     #: constraint versions the planner had in force during the run (from uam/constraints)
     constraints_in_force: int = 0
-    #: the audit of what flew (issue 23, uam_sim.audit.flown.recording_flown): the fleet states' tracks,
+    #: the audit of what flew (uam_sim.audit.flown.recording_flown): the fleet states' tracks,
     #: their exact closest approach in the true minimum with the sampling bound, and their F3548
     #: conformance with the approved plans ({} when no fleet positions were recorded)
     flown: dict = field(default_factory=dict)
@@ -382,7 +382,8 @@ def run_problems(syncs: list, reports: dict, approved: list, flown_ids: set, fle
     return problems, forged, run_end
 
 
-def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SEPARATION_M,
+# complexity over 25: one pass over the messages, one branch per topic; to be split into a reader per topic
+def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SEPARATION_M,  # noqa: C901
                        path: str = "", reader: str = "", complete_file: bool = True,
                        network=None) -> RunSummary:
     """The summary of a stream of (topic, log_time_ns, message), e.g. from :func:`iter_decoded`.
@@ -405,7 +406,7 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
     epochs: list[EpochStats] = []
     syncs: list = []
     reports: dict[int, set] = {}
-    updates: dict[str, dict] = {}  # request key -> {plan key: plan} of its versions >= 2 (issue 22)
+    updates: dict[str, dict] = {}  # request key -> {plan key: plan} of its versions >= 2
     constraint_sets: list = []     # (t_s, [(constraint, effective_s)]) as the planner published them
     constraint_problems: list = []
     t_min, t_max = math.inf, -math.inf
@@ -427,14 +428,14 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
             request_rows.setdefault(key, {
                 "earliest_departure_s": stamp_s(msg.earliest_departure),
                 "latest_departure_s": stamp_s(msg.latest_departure),
-                "priority": int(getattr(msg, "priority", 0)),  # recordings before issue 21: 0
+                "priority": int(getattr(msg, "priority", 0)),  # recordings without priorities: 0
                 "operator": str(getattr(msg, "operator_id", "") or "")})
         elif topic == TOPIC_PLANS:
             if int(msg.outcome) == OUTCOME_DUPLICATE:
                 refused_duplicates += 1
                 continue
             rid = request_key(msg)
-            if int(getattr(msg, "version", 0) or 0) > 1:  # a new version of an approved plan (issue 22)
+            if int(getattr(msg, "version", 0) or 0) > 1:  # a new version of an approved plan
                 updates.setdefault(rid, {})[(int(msg.version),) + _plan_key(msg)] = msg
                 continue
             if rid in decisions:
@@ -773,7 +774,7 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
             for text in s.incursions_before_applied[:20]:
                 lines.append(f"    {text}")
     fl = s.flown
-    if fl:  # issue 23: the audit above is of what was planned; this one of what flew
+    if fl:  # the audit above is of what was planned; this one of what flew
         ms = fl["min_separation_m"]
         verdict = flown_verdict(fl)
         exact = (f"{fl.get('pieces_exact', 0):,} of {fl.get('pieces', 0):,} pieces exact (flown straight, "

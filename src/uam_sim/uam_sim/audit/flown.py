@@ -1,4 +1,4 @@
-"""The safety audit of what flew (issue 23): exact closest approach between flown tracks.
+"""The safety audit of what flew: exact closest approach between flown tracks.
 
 A flown track is known at samples (the fleet states of a recording, every ``step_s``; or the
 disturbance model's samples in process) and taken as linear between them: the closest approach
@@ -6,7 +6,7 @@ of every pair of such tracks is computed exactly by the same sweep as the plans'
 (:func:`uam_sim.audit.separation.sweep_audit`: every pair of time-overlapping straight pieces, closest
 approach clamped to the overlap).
 
-The sampling error, bounded **per axis and per piece** (issue 22, fourth stop). Between two
+The sampling error, bounded **per axis and per piece**. Between two
 samples ``dt`` apart the true position differs from the chord (the linear interpolation) by
 ``f(t) = integral of (v - mean v)``, zero at both samples; if the velocity stays in a set of
 diameter ``D`` on that interval, ``|f(t)| <= D dt / 4`` (the worst case: one velocity for a
@@ -43,8 +43,8 @@ where a version or the landing falls inside a step.
 The chords' own losses
 (``interpolated_losses``) are reported too: the linear interpolation cuts the corner at the top
 of each climb and descent, so two aircraft at adjacent levels (exactly V apart) seem to lose
-separation there while the aircraft, on their plans, never do (the city run's 6 "flown losses"
-of the third stop, e.g. at t = 1,671 s: one aircraft levelling off at 120 m 0.17 s after a sample,
+separation there while the aircraft, on their plans, never do (a city run's 6 "flown losses",
+e.g. at t = 1,671 s: one aircraft levelling off at 120 m 0.17 s after a sample,
 the chord below 120 m until the next one, 86.5 m from one cruising at 90 m).
 
 Without plans (``plans=None``) every piece takes the global bound, and ``losses`` are the chords'
@@ -437,8 +437,8 @@ def recording_flown(path, separation, bounds=None, plans=None, prune: bool = Tru
         if plan_version(p) == 1 and int(p.outcome) != OUTCOME_APPROVED:
             continue
         versions.setdefault(key, {}).setdefault(plan_version(p), p)
-    # each flown track against the plan version in force at each of its samples (issue 22 item
-    # 5): version 1 from the departure, version n + 1 from the instant it took effect; a
+    # each flown track against the plan version in force at each of its samples:
+    # version 1 from the departure, version n + 1 from the instant it took effect; a
     # cancellation (no waypoints) ends the flight, so no sample should follow it (one that does
     # is compared with the version before)
     pieces_of = {}

@@ -1,4 +1,4 @@
-"""Audit of what flew when plans change (issue 22 item 5): plan versions chained into the
+"""Audit of what flew when plans change: plan versions chained into the
 trajectories actually flown, and every flown trajectory checked against the airspace
 constraints in force.
 
@@ -13,7 +13,7 @@ effective instant of version 2, then version 2 up to that of version 3, and so o
 (a version n + 1 without n is a plan the recording lost, or one nobody issued), each effective
 no earlier than its predecessor, each update (n >= 2) naming at least one constraint that the
 planner announced on ``uam/constraints`` at or before it took effect (except an update of the
-reaction to nonconformance, issue 23, :func:`reaction_update`: the flight itself caused it, so it
+reaction to nonconformance, :func:`reaction_update`: the flight itself caused it, so it
 names none; nor does a neighbour re-timed so that a nonconforming flight keeps separation,
 ``yielded``), and a version that takes over a flight in the air must start where the flight was
 at that instant (to 1 mm; again except a reaction update, which starts where the aircraft was).
@@ -119,8 +119,8 @@ class Flown:
 
 
 def reaction_update(p: Any) -> bool:
-    """Whether plan version ``p`` is an update of the reaction to nonconformance (issue 23,
-    ``uam_planner.nonconformance``): kind ``nonconforming``, or a contingency re-timed from the
+    """Whether plan version ``p`` is an update of the reaction to nonconformance
+    (``uam_planner.nonconformance``): kind ``nonconforming``, or a contingency re-timed from the
     flight's observed progress rate (its reason says so). It starts where the aircraft was, not
     where its plan had it, and no constraint caused it."""
     return str(getattr(p, "update_kind", "")) == KIND or RATE_WORD in str(getattr(p, "reason", ""))

@@ -173,7 +173,7 @@ def audit_trajectories(flights: list[tuple[np.ndarray, np.ndarray]], labels: lis
             times, points = flights[i]
             plain[i] = ([float(t) for t in times], [tuple(map(float, p)) for p in points])
         return plain[i]
-    # A second, finer bound (issue 22, third stop: on the 2,000-flight city recording nearly every
+    # A second, finer bound (on the 2,000-flight city recording nearly every
     # pair's boxes overlap, and the loop below ran for tens of CPU-minutes): the pairs that come
     # within `reach` on each horizontal axis at some common instant, by uam_planner.audit's grid
     # hash over straight pieces. A pair it leaves out is at least `reach` apart at every common

@@ -1,5 +1,5 @@
-"""Export a recording's plans as ASTM F3548 operational intents, every version (issue 25;
-docs/f3548.md).
+"""Export a recording's plans as ASTM F3548 operational intents, every version
+(docs/f3548.md).
 
     python -m uam_sim.export_f3548 RUN.mcap --out DIR [--network FILE] [--piece-s 5]
 

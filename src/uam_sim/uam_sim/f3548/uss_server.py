@@ -1,4 +1,4 @@
-"""The F3548 USS-USS interface over HTTP (issue 25, item 3; docs/f3548.md): a Flask app that
+"""The F3548 USS-USS interface over HTTP (item 3; docs/f3548.md): a Flask app that
 serves the operational intents and constraints of an :class:`IntentStore`, and a server thread.
 
 Endpoints (F3548-21, utm.yaml):

@@ -1,4 +1,4 @@
-"""Conformance monitor node (issue 23): each flight compared with its plan at every fleet state.
+"""Conformance monitor node: each flight compared with its plan at every fleet state.
 
     ros2 run uam_sim conformance_monitor --ros-args -p lateral_m:=30.0 -p time_s:=10.0
 

@@ -23,7 +23,7 @@ per-step messages are never deserialized (Rerun gets fleet positions from
 :func:`uam_sim.recording.cdr.fleet_state_digest`); plans and reports, a few hundred a run, are deserialized
 for the check below.
 
-Views for generic viewers (issue 12, :mod:`uam_sim.views.std_msgs_export`): with ``views`` on (the
+Views for generic viewers (:mod:`uam_sim.views.std_msgs_export`): with ``views`` on (the
 default) the fleet, routes and network are also written in standard types (``/uam/view/*``:
 PointCloud2, NavSatFix, MarkerArray), stamped in simulation time as every other topic (or in
 real UTC from ``scenario_start_utc`` when it names an instant), for
@@ -125,7 +125,7 @@ class RecordingCheck:
 
     def on_plan(self, msg) -> None:
         if int(getattr(msg, "version", 0)) > 1:
-            return  # a re-planned version of an approval (issue 22): no report announces it as one
+            return  # a re-planned version of an approval: no report announces it as one
         if int(msg.outcome) == FlightPlan.OUTCOME_APPROVED:
             self.received.setdefault(int(msg.epoch_index), set()).add(request_key(msg))
 
@@ -198,7 +198,7 @@ class RecorderNode(Node):
         self.foxglove = None
         self.rerun = None
         self.recorder.add_metadata(AIRSPACE_METADATA, airspace)
-        # log times on the scenario's UTC clock (issue 22): sim time + this; readers subtract it
+        # log times on the scenario's UTC clock: sim time + this; readers subtract it
         self._log_zero_ns = scenario_start_ns(p["log_time_start_utc"])
         self.recorder.add_metadata(CLOCK_METADATA, {"log_time_zero_ns": self._log_zero_ns,
                                                     "log_time_start_utc": p["log_time_start_utc"]})
@@ -232,7 +232,7 @@ class RecorderNode(Node):
         self._stamp_first = {topic: _starts_with_stamp(cls) for topic, (cls, _qos) in RECORDED_TOPICS.items()}
         # recorded under the names they resolve to (namespace and remapping applied)
         self._names = {topic: self.resolve_topic_name(topic) for topic in RECORDED_TOPICS}
-        # Readiness (issue 9): the simulator starts once the recorder subscribes to the fleet state.
+        # Readiness: the simulator starts once the recorder subscribes to the fleet state.
         # Subscribing to it (and /clock, poses) only when the planner's and the demand source's
         # topics have matched publishers means the run starts only once the recorder hears them:
         # before, a run stopped early (or a short one under load) could record fleet states and
@@ -397,7 +397,7 @@ class RecorderNode(Node):
             if self.foxglove is not None:
                 self.foxglove.on_planning_report(msg)
         elif topic == c.TOPIC_REQUESTS and self.rerun.enabled:
-            # the earliest departures, for the Rerun view's delay panel (issue 21)
+            # the earliest departures, for the Rerun view's delay panel
             if msg is None:
                 msg = deserialize_message(data, cls)
             self.rerun.log_request_msg(msg)
@@ -406,7 +406,7 @@ class RecorderNode(Node):
         return msg
 
     def _draw_constraints(self, msg, log_ns: int) -> None:
-        """The constraint set (uam/constraints, issue 22) in Rerun and the view topics."""
+        """The constraint set (uam/constraints) in Rerun and the view topics."""
         try:
             t_s, found = constraints_from_text(msg.data)
         except ValueError as exc:  # recorded as it came; only the drawing is skipped
@@ -431,7 +431,7 @@ class RecorderNode(Node):
         the simulator announcing epoch k+1 before the others report epoch k), so stamps arrive out
         of order; MCAP tools expect each channel's log times in order (`rerun mcap check`
         reported unordered chunks). The message's own stamp is in its bytes. Returned on the
-        scenario's UTC clock (``log_time_start_utc`` + that simulation time, issue 22)."""
+        scenario's UTC clock (``log_time_start_utc`` + that simulation time)."""
         t = max(0, int(stamp_ns), self._channel_last_ns.get(topic, 0))
         self._channel_last_ns[topic] = t
         return t + self._log_zero_ns

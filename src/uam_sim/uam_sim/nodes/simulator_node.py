@@ -23,7 +23,7 @@ the state (flights in the air, requests decided). Plans on uam/flight_plans are 
 
 The run ends at ``duration_s``: the simulator announces ``finished``, and the other nodes exit.
 
-The reaction between epochs (issue 23, ``reaction_period_s`` > 0, less than ``epoch_s``): at every
+The reaction between epochs (``reaction_period_s`` > 0, less than ``epoch_s``): at every
 instant epoch time + k x period strictly between two epochs the fleet stops, its state of that
 instant is published, the planner is asked to react (uam/react, uam_msgs/srv/React) and the new
 plan versions of its answer are flown from that instant (a nonconforming update from where the
@@ -76,7 +76,7 @@ STEPS_PER_TURN = 3
 
 def observed_rate(plan) -> float | None:
     """The observed progress rate a plan update of the reaction carries
-    (``FlightPlan.observed_progress_rate``, issue 23), or None: 0 (every other plan), or a value
+    (``FlightPlan.observed_progress_rate``), or None: 0 (every other plan), or a value
     outside the rates the planner estimates (``uam_planner.nonconformance.RATE_RANGE``)."""
     v = float(getattr(plan, "observed_progress_rate", 0.0) or 0.0)
     return v if math.isfinite(v) and RATE_RANGE[0] <= v <= RATE_RANGE[1] else None
@@ -94,7 +94,7 @@ class SimulatorNode(Node):
         if not math.isclose(ratio, round(ratio), rel_tol=0, abs_tol=1e-9):
             raise ValueError(f"parameter epoch_s: {self.epoch_s} is not a multiple of step_s {self.step_s}")
         self.steps_per_epoch = int(round(ratio))
-        # the reaction between epochs (issue 23): every reaction_period_s between two epochs the
+        # the reaction between epochs: every reaction_period_s between two epochs the
         # planner is asked to react (uam/react), in lockstep, and its updates are flown from there
         self.reaction_period_s = float(self.p["reaction_period_s"])
         self.react_steps = 0
@@ -121,10 +121,10 @@ class SimulatorNode(Node):
         self.react_versions_received = 0    # plan versions in their answers, flown from their instant
 
         self.fleet = Fleet()
-        # issue 23: what flies (off by default: the plans themselves)
+        # what flies (off by default: the plans themselves)
         self.disturbance = from_simulator_params(self.p, self.step_s)
         self.wind = WindField(self.disturbance) if self.disturbance.enabled else None
-        # issue 23: with disturbances (what flies is not the plan) or a reaction between epochs,
+        # with disturbances (what flies is not the plan) or a reaction between epochs,
         # the fleet state of an epoch is published before the epoch is asked for, the next epoch
         # is asked for only when the fleet is there, and the planner observes the fleet at the
         # in-process runner's instants (PlanEpoch.observe_at_instants): its view is the runner's
@@ -136,7 +136,7 @@ class SimulatorNode(Node):
         self.approvals_received = 0         # of which approved
         self.flown_plans: list[FlightPlan] = []   # every approved plan flown, in order (for audits)
         self.fly_errors = 0                 # approved plans that could not be flown (should stay 0)
-        self.versions_received = 0          # re-planned versions and cancellations flown (issue 22)
+        self.versions_received = 0          # re-planned versions and cancellations flown
         self._flying: dict[str, FlightPlan] = {}   # scoped id -> approved plan, while it may be airborne
         self._decided: list[str] = []       # scoped ids of every request decided in an epoch answer
         self._waiting_epoch: int | None = None
@@ -372,7 +372,7 @@ class SimulatorNode(Node):
         for plan in res.plans:
             self.plans_received += 1
             key = wire.scoped_id(plan.operator_id, plan.request_id)
-            if int(getattr(plan, "version", 0)) > 1:   # a new version of a flight approved before (issue 22)
+            if int(getattr(plan, "version", 0)) > 1:   # a new version of a flight approved before
                 self._fly_version(key, plan)
                 continue
             self._decided.append(key)
@@ -414,7 +414,7 @@ class SimulatorNode(Node):
         try:
             rate = observed_rate(plan) if plan.outcome == FlightPlan.OUTCOME_APPROVED else None
             if rate is not None and plan.waypoints and self.wind is not None and self.fleet.flown(key) is not None:
-                # issue 23: a nonconforming flight's intent, updated from where it is: flown on
+                # a nonconforming flight's intent, updated from where it is: flown on
                 # from there at the airspeed it had (uam_sim.world.disturbance.fly_on), as the runner does
                 from uam_sim.world.disturbance import flight_draws, fly_on
                 new = m.trajectory_from_plan(plan)

@@ -1,5 +1,5 @@
 """USS node: the planner's live plans and constraints served over F3548's USS-USS interface
-(issue 25; docs/f3548.md).
+(docs/f3548.md).
 
 ``install/uam_sim/lib/uam_sim/uss --ros-args -p port:=8090 -p network:=config/networks/tiny.yaml``
 (``run_fleet.sh --uss-port 8090`` starts it with the run's network and separation model).

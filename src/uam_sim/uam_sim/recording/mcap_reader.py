@@ -19,7 +19,7 @@ from .mcap_schema import message_class
 #: The topic whose messages ``iter_decoded(fleet_digest_only=True)`` reads as digests.
 FLEET_STATE_TOPIC = resolved(names.TOPIC_FLEET)
 
-#: MCAP metadata record of the recording's clock (issue 22): ``log_time_zero_ns``, the log time
+#: MCAP metadata record of the recording's clock: ``log_time_zero_ns``, the log time
 #: [ns since the Unix epoch] of simulation time 0 (the scenario's UTC start), and
 #: ``log_time_start_utc``, that instant as ISO 8601 (or "sim": log times are simulation time).
 CLOCK_METADATA = "uam_clock"
@@ -151,7 +151,7 @@ def deserialize(record: RecordedMessage) -> Any:
     """The rclpy message object of a recorded message (imports rclpy).
 
     A recording made with an older definition of the type (its schema differs from the
-    installed one, e.g. a ``FlightPlan`` before ``observed_progress_rate``, issue 23) is decoded
+    installed one, e.g. a ``FlightPlan`` before ``observed_progress_rate``) is decoded
     with its own schema (mcap_ros2's dynamic decoder) and copied into the installed class: the
     fields it has keep their values, the newer ones keep their defaults (0, "", [])."""
     from rclpy.serialization import deserialize_message

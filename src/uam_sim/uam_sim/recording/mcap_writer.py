@@ -11,7 +11,7 @@ import copy
 import os
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
 import yaml
 

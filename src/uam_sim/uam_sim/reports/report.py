@@ -565,7 +565,6 @@ def _mwis_section(fig, figs: dict, cfg) -> None:
          f"{ms['eligible_per_instant']} x ceil(rate); the clique per request bounds the MWIS size "
          f"by the eligible requests <= {ms['eligible_per_instant']} x ceil(rate). Log scale, every "
          f"outlier drawn; epochs with an instance, pooled over the MWIS methods and seeds.") if ms else "")
-    st = figs.get("solve_time")
     fig("solve_time", "Solve time per epoch",
         ["method", "epochs", "median_s", "p95_s", "max_s", "share_under_0.1s", "share_proven_optimal",
          "share_backend_not_called", "fallbacks"],

@@ -175,7 +175,7 @@ def compare(cells: Sequence[dict], a: str, b: str, metric="approved", rates=None
     return rows
 
 
-# -- the decision study's (issue 24) --------------------------------------------------------------
+# -- the decision study's --------------------------------------------------------------
 
 def seeds_needed(sd: float, target_half: float, level: float = 0.95, cap: int = 10_000) -> int:
     """Smallest n >= 2 with t_{(1+level)/2, n-1} sd / sqrt(n) <= target_half (paired differences

@@ -125,7 +125,7 @@ def run_cells(cfg_dict: dict, todo: Sequence[tuple], expected_keys: dict, cells_
             write_json_atomic(cells_dir / f"{cell['key']}.json", cell)
             done[c] = cell
             # written: let the worker drop its copy. A held result is lost when the nanny
-            # restarts a worker (memory: seventh stop, a Monte-Carlo worker at 9.4 GiB) and then
+            # restarts a worker (memory: a Monte-Carlo worker at 9.4 GiB) and then
             # computed again; 47 finished cells were, for nothing
             del futs[fut]
             fut.release()

@@ -43,7 +43,7 @@ class ExperimentError(ValueError):
     """Bad experiment configuration; the message names the field and the value."""
 
 
-# The schema of an experiment file (pydantic; issue 19, docs/architecture.md): the annotations of
+# The schema of an experiment file (pydantic, docs/architecture.md): the annotations of
 # ExperimentConfig's fields are what make_config validates (uam_contract.validation.parse: unknown
 # keys, types, ranges; a refusal names the field and the value). The values are kept as given (a
 # duration of 3500 stays the int 3500), since a cell's key hashes them. Ranges owned elsewhere
@@ -112,14 +112,14 @@ class ExperimentConfig:
             once as reservations (never re-optimised) instead of planning them again.
         lead_time_s: requests are filed this long before their earliest departure [s].
         operator_lead_times_s: extra lead time [s] per operator (filing habits), as ``operators``.
-        spatial_buffer_m, temporal_buffer_s: planning buffers on the separation (issue 23;
-            0 = today's); audits keep the true minimum.
+        spatial_buffer_m, temporal_buffer_s: planning buffers on the separation
+            (0 = none); audits keep the true minimum.
         disturbance: fields of ``uam_sim.world.disturbance.DisturbanceConfig`` (wind, gusts, speed
             error, departure delay, path following); {} = none, the plans flown exactly. The
             flights' draws are seeded by the cell's seed (the ``seed`` field is ignored).
         conformance: fields of ``uam_sim.world.conformance.ConformanceBounds`` ({} = the defaults).
-        reaction: the planner reacts to nonconforming flights (issue 23 item 3,
-            ``uam_planner.nonconformance``): the runner's monitor reports them, the planner
+        reaction: the planner reacts to nonconforming flights
+            (``uam_planner.nonconformance``): the runner's monitor reports them, the planner
             checks each report against its own view and updates the intent; false (default) =
             no reaction. Needs ``disturbance``.
         reaction_period_s: with ``reaction``, the runner's monitor also reports, and the

@@ -38,7 +38,7 @@ class ScenarioResult:
             1..corpus_max_vertices vertices, with their epoch index.
         rejections: (request_id, reason) of requests the planner refused at submission.
         wall_s: wall time of the run.
-        replans: one row per plan update (issue 22, ``uam_planner.replanning``): t_s,
+        replans: one row per plan update (``uam_planner.replanning``): t_s,
             request_id, kind, version, constraint ids, added delay, airborne (bool); empty
             when no constraint changed during the run.
     """
@@ -56,7 +56,7 @@ class ScenarioResult:
     wall_s: float
     replans: list = field(default_factory=list)
     #: every request submitted (id, earliest / latest departure, operator, priority): the
-    #: decision study's steady-state window and per-operator shares (issue 24)
+    #: decision study's steady-state window and per-operator shares
     requests: list = field(default_factory=list)
 
     def decisions(self) -> dict:
@@ -150,7 +150,7 @@ def _apply_plan_updates(updates, by_id: dict, replans: list, t: float) -> None:
 
 
 def _apply_reaction_updates(updates, by_id, reaction, replans, t) -> None:
-    """The reaction's plan updates of one epoch, or of a reaction between epochs (issue 23): the
+    """The reaction's plan updates of one epoch, or of a reaction between epochs: the
     runner's row of each flight takes the new version and arrival, the flight flies on from
     where it is at its observed rate (``ReactionUpdate.observed_rate``), and the update is
     listed with the run's re-plans."""
@@ -161,7 +161,7 @@ def _apply_reaction_updates(updates, by_id, reaction, replans, t) -> None:
             row["arrival_s"] = u.flight.arrival_s
             other_pad = u.flight.destination_id != u.previous.destination_id
             if other_pad or tuple(u.flight.route_node_ids) != tuple(u.previous.route_node_ids):
-                # diverted (thirteenth stop) or re-routed to its destination (fourteenth)
+                # diverted or re-routed to its destination (fourteenth)
                 row.update(destination=u.flight.destination_id, route=" ".join(u.flight.route_node_ids),
                            length_m=u.flight.length_m)
             reaction.apply(u, row, u.observed_rate)
@@ -197,7 +197,7 @@ def _is_reaction(u) -> bool:
 
 
 class _Reaction:
-    """The in-process runner's side of the reaction to nonconformance (issue 23 item 3), doing
+    """The in-process runner's side of the reaction to nonconformance, doing
     what the node graph's conformance monitor and fleet state do for the planner node:
 
     - before each epoch at t, every airborne flight's flown track is compared with its newest
@@ -221,7 +221,7 @@ class _Reaction:
         self.epoch_s = float(epoch_s)
         self.period_s = float(period_s)   # > 0: react between epochs too (reaction_period_s)
         #: False: only the observations (the fleet state the planner sees, so it holds a late
-        #: flight past its plan: issue 23's safety gap), no conformance reports (reaction off)
+        #: flight past its plan: safety gap), no conformance reports (reaction off)
         self.report = bool(report)
 
     def _report(self, row, fl, t: float, window_s: float) -> None:
@@ -230,7 +230,7 @@ class _Reaction:
         from ..world.conformance import conforming, deviations
         ts, ps = fl.times_s, fl.points_m
         # the window by bisection (times strictly increasing: Trajectory checks it); a mask over
-        # the whole track was a fifth of a Monte-Carlo run's time (BENCHMARKS.md, eighth stop)
+        # the whole track was a fifth of a Monte-Carlo run's time (BENCHMARKS.md)
         lo = max(t - window_s, row.get("_t0", -math.inf))
         i0, i1 = np.searchsorted(ts, lo, side="right"), np.searchsorted(ts, t, side="right")
         if i1 <= i0:
@@ -344,7 +344,7 @@ def planned_ends(row) -> tuple:
 
 
 def _flown_summary(flights: list, cfg: ExperimentConfig, dcfg) -> dict:
-    """What flew (issue 23): the exact audit of the flown tracks in the true minimum
+    """What flew: the exact audit of the flown tracks in the true minimum
     (:func:`uam_sim.audit.flown.flown_audit`) and the F3548 conformance statistics of the run."""
     from ..world.conformance import f3548_statistics, track_conformance, versioned_conformance
     from ..audit.flown import flown_audit
@@ -367,8 +367,8 @@ def _flown_summary(flights: list, cfg: ExperimentConfig, dcfg) -> dict:
         out["flown_losses_with_contingency"] = sum(1 for a, b, *_ in pairs if a in cont or b in cont) \
             if len(pairs) == audit["losses"] else None
         out["nonconforming_updates"] = sum(1 for f in flights if f.get("_pieces"))
-        # every flight flown as a contingency at some time (before the thirteenth stop only those
-        # whose newest version was one)
+        # every flight flown as a contingency at some time (not only those whose newest version
+        # was one)
         out["reaction_contingencies"] = len(cont)
     # where the flown losses are: near a vertiport both flights use (where no airborne buffer
     # reaches: the synthetic city's vertiports are single points, no pads) or en route
@@ -382,7 +382,8 @@ def _flown_summary(flights: list, cfg: ExperimentConfig, dcfg) -> dict:
     return out
 
 
-def run_scenario(network, method: str, rate: float, seed: int, duration_s: float,
+# complexity over 25: the runner's epoch loop; to be split into named steps
+def run_scenario(network, method: str, rate: float, seed: int, duration_s: float,  # noqa: C901
                  config: ExperimentConfig | None = None, demand=None,
                  observer=None, before_epoch=None) -> ScenarioResult:
     """Run one scenario in process: requests from the seeded generator, one planner, one method.
@@ -431,7 +432,7 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
                                   priority_class=cfg.priority_class, operators=cfg.operators,
                                   lead_time_s=cfg.lead_time_s,
                                   operator_lead_times_s=cfg.operator_lead_times_s)
-    disturbed = bool(cfg.disturbance)  # issue 23: what flies is the disturbance model's
+    disturbed = bool(cfg.disturbance)  # what flies is the disturbance model's
     if disturbed:
         from dataclasses import replace as _replace
         from ..world.disturbance import WindField, fly_plans
@@ -441,7 +442,7 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
                          period_s=cfg.reaction_period_s) if disturbed and cfg.reaction else None
     between = reaction is not None and 0.0 < cfg.reaction_period_s < cfg.epoch_s
     # what flies is not the plan: the planner sees the fleet (as the node sees /uam/fleet_state),
-    # so it holds a flight that flies past its plan (issue 23, the safety gap)
+    # so it holds a flight that flies past its plan (the safety gap)
     watch = reaction if reaction is not None else \
         _Reaction(planner, dcfg, wind, cfg.conformance_bounds(), cfg.epoch_s, report=False) if disturbed else None
     n_epochs = int(math.ceil(duration_s / cfg.epoch_s - 1e-9))
@@ -452,7 +453,7 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
     earliest_s: dict = {}
     latest_s: dict = {}
     asked = []  # every request submitted, for the decision metrics
-    held_ids: set = set()  # flights the planner held past their plans (issue 23)
+    held_ids: set = set()  # flights the planner held past their plans
     for e in range(n_epochs):
         t = e * cfg.epoch_s
         # every demand instant up to t, in time order (equal spacing when interval_s == epoch_s)
@@ -509,7 +510,7 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
             for f, track in zip(new, fly_plans([f["_traj"] for f in new],
                                                [f["request_id"] for f in new], dcfg, wind)):
                 f["_flown"] = track
-        if between:   # issue 23 item 3: the reaction between this epoch and the next
+        if between:   # the reaction between this epoch and the next
             reaction.between(t, t + cfg.epoch_s, flights, e, by_id, replans)
         epochs.append({"epoch": e, "t_s": t, "requests_cum": n_requests, "pending": rep.pending,
                        "eligible": rep.eligible, "candidates": rep.candidates,
@@ -577,7 +578,7 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
         flown_summary["replans"] = len(replans)
         if cfg.reaction:   # flights re-timed so that a nonconforming one keeps separation
             flown_summary["reaction_yields"] = sum(1 for r in replans if r["kind"] == "yielded")
-            # nonconforming flights diverted to another vertiport (thirteenth stop)
+            # nonconforming flights diverted to another vertiport
             flown_summary["reaction_diversions"] = sum(1 for r in replans if r.get("diverted"))
             if cfg.conflict_probe_s:   # updates the planner's conflict probe asked for
                 flown_summary["reaction_probe_updates"] = sum(1 for r in replans if r.get("probe"))
@@ -608,7 +609,7 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
                                         end_s=duration_s).items() if k != "flights"},
         **extra,
     }
-    summary.update({k: v for k, v in flown_summary.items() if k not in extra})  # replans: issue 22's count
+    summary.update({k: v for k, v in flown_summary.items() if k not in extra})  # replans: count
     wall = time.perf_counter() - t_wall
     summary["wall_s"] = wall
     summary["real_time_factor"] = duration_s / wall if wall > 0 else float("inf")

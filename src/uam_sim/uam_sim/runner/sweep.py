@@ -37,12 +37,12 @@ def cell_params(cfg: ExperimentConfig, method: str, rate, seed: int) -> dict:
         params["solver_options"] = cfg.solver_options.get(method) or {}
     if cfg.airspace_mode != "paper":  # paper-mode keys stay as they were, so old cells resume
         params["airspace_mode"] = cfg.airspace_mode
-    # issue 21: only cells that leave the paper's objective, order or demand mix get the keys
+    # only cells that leave the paper's objective, order or demand mix get the keys
     for name, default in (("objective", "paper"), ("baseline_order", "arrival"),
                           ("priority_share", 0.0), ("priority_class", 1), ("operators", []),
                           ("horizon_epochs", 1), ("commit_ahead", False), ("fair_window_s", 0.0), ("lead_time_s", 0.0),
                           ("operator_lead_times_s", []), ("metrics_warmup_s", 0.0),
-                          # issue 23: buffers, disturbances and conformance bounds
+                          # buffers, disturbances and conformance bounds
                           ("spatial_buffer_m", 0.0), ("temporal_buffer_s", 0.0),
                           ("disturbance", {}), ("conformance", {}), ("reaction", False),
                           ("reaction_period_s", 0.0), ("conflict_probe_s", 0.0),
@@ -50,7 +50,7 @@ def cell_params(cfg: ExperimentConfig, method: str, rate, seed: int) -> dict:
         if getattr(cfg, name) != default:
             params[name] = getattr(cfg, name)
     if cfg.disturbance:
-        # issue 23's safety gap: a disturbed run's planner sees the fleet and holds late flights
+        # safety gap: a disturbed run's planner sees the fleet and holds late flights
         # (results differ from cells run before it, which are not reused)
         params["planner_sees_fleet"] = 1
     if cfg.demand_file:

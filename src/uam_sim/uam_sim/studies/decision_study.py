@@ -1,4 +1,4 @@
-"""The decision study (issue 24): where does optimisation matter, with power, matched shadow
+"""The decision study: where does optimisation matter, with power, matched shadow
 solves, objectives, horizon and contention.
 
     python -m uam_sim.decision_study --config config/decision-study.yaml --stage e0
@@ -71,7 +71,7 @@ REFERENCE = "reference"
 
 
 # -- configuration -------------------------------------------------------------------------------
-# The study file's schema (pydantic, issue 19's style: uam_sim.runner.experiment_config, capacity_study):
+# The study file's schema (pydantic, style: uam_sim.runner.experiment_config, capacity_study):
 # structure, types and ranges; a refusal names the path and the value (``experiments[0].primary[0]
 # .metric: 'joy' is not one of ...``). What needs two fields at once (a term's ``where`` keys are
 # the experiment's varied keys; a contrast's signs sum to 0) is checked after, in the same style.
@@ -673,7 +673,7 @@ def with_committed_rows(path: Path, rows: list, key: str, order: list, cells: st
     the config's ``order`` of the keys. Why: cells live where they ran (``results/``, not
     committed), so a stage run on another machine, or after the cells were lost, would
     otherwise replace the finished tables of every experiment it did not compute with nothing
-    (the cells of d3795b835634 were lost with their machine, seventh stop). A kept group is
+    (the cells of d3795b835634 were lost with their machine). A kept group is
     named on stderr with its rows and code versions; a group with rows here replaces the
     committed one whole (its window and its pairs come from one computation)."""
     if not path.exists():
@@ -747,7 +747,7 @@ def run_stage(cfg: dict, stage: str, out: Path, experiments=None, backends=None,
             entries += ent
         # every experiment's finished cells, whatever stage made them (the tables stay whole);
         # the tables stage with --experiments: only those, the others' rows kept as committed
-        # (tenth stop: E1 and E2 share some cells with E3 - same network, rate, method and
+        # (E1 and E2 share some cells with E3 - same network, rate, method and
         # parameters - so cells computed for E3 alone would have replaced their whole tables)
         all_results, all_entries = [], []
         for e in cfg["experiments"]:

@@ -126,7 +126,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="disturbances flown (uam_sim.world.disturbance.DisturbanceConfig fields), e.g. "
                         "speed_error=0.1,gust_std_mps=1.5,delay_mean_s=10 (default none)")
     p.add_argument("--reaction", action="store_true", default=None,
-                   help="the planner reacts to nonconforming flights (issue 23 item 3; needs --disturbance)")
+                   help="the planner reacts to nonconforming flights (needs --disturbance)")
     p.add_argument("--conformance", type=key_values, metavar="K=V,...",
                    help="conformance bounds (uam_sim.world.conformance.ConformanceBounds), e.g. lateral_m=30,time_s=10")
     p.add_argument("--tts-reads", type=int, help="reads per annealing run in the TTS study")

@@ -1,4 +1,4 @@
-"""Monte-Carlo of flights that do not fly to plan (issue 23): disturbance level x planning buffer.
+"""Monte-Carlo of flights that do not fly to plan: disturbance level x planning buffer.
 
     python -m uam_sim.montecarlo --speed-errors 0,0.05,0.1 --spatial-buffers 0,10,25,50 \
         --temporal-buffers 0,5,10 --seeds 4 --rate 10 --duration 1800 --workers 2 \
@@ -11,8 +11,8 @@ planner plans with the buffers and the aircraft fly the disturbance model
 the cells run on its Dask scheduler (a LocalCluster of ``--workers`` processes, or
 ``--scheduler tcp://HOST:8786``), are written as they finish and are reused by a later call
 (resumable). Per point it reports, over the point's runs: flights flown, approval rate, time in
-conformance (F3548), excursions per flight hour, longest excursion, re-plans (0: the reaction of
-issue 23 item 3 is not wired yet) and the **losses of separation in what flew**: the exact
+conformance (F3548), excursions per flight hour, longest excursion, re-plans (by the reaction to
+nonconformance, when it is on) and the **losses of separation in what flew**: the exact
 closest approach between the flown tracks (:func:`uam_sim.audit.flown.flown_audit`) in the true
 minimum, never the buffered one. Writes ``<out>/montecarlo.csv`` and prints the table.
 
@@ -141,7 +141,7 @@ def aggregate(point: tuple, cells: list[dict]) -> dict:
                                                 else x["losses"]) or 0 for x in s),
             "nonconforming_updates": sum(x.get("nonconforming_updates", 0) for x in s),
             "reaction_contingencies": sum(x.get("reaction_contingencies", 0) for x in s),
-            # flights the planner held past their plans (issue 23's safety gap; 0 in cells run
+            # flights the planner held past their plans (safety gap; 0 in cells run
             # before it)
             "held_past_plan": sum(x.get("held_past_plan", 0) for x in s),
             # uncertainty: the approval rate's spread over the runs, the flown-loss rate's bound
@@ -283,8 +283,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--reaction", type=_reaction, default=[False],
                    help="the planner's reaction to nonconforming flights: off (default), on or both")
     p.add_argument("--reaction-period", type=float, default=0.0, metavar="S",
-                   help="with the reaction on, also react every S seconds between epochs (issue 23 "
-                        "item 3; 0 = at the epochs only)")
+                   help="with the reaction on, also react every S seconds between epochs "
+                        "(0 = at the epochs only)")
     p.add_argument("--probe", type=float, default=0.0, metavar="S",
                    help="with the reaction on, the planner's conflict probe look-ahead [s] "
                         "(PlanningConfig.conflict_probe_s; 0 = no probe, default)")

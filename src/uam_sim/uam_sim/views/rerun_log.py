@@ -30,7 +30,7 @@ Entity layout (ENU metres, z up; geographic entities in WGS84 degrees):
 - ``metrics/approved_cumulative``, ``metrics/active_aircraft``, ``metrics/pending_requests``,
   ``metrics/mwis_vertices``, ``metrics/mwis_selected``, ``metrics/solve_time_s``: Scalars once
   per planning epoch;
-- the decisions operators value (issue 21), once per planning epoch from the plans and requests
+- the decisions operators value, once per planning epoch from the plans and requests
   logged so far: ``metrics/decisions/approved`` and ``metrics/decisions/expired`` (cumulative),
   ``metrics/delay/p95_s`` and ``metrics/delay/mean_s`` (the approved flights' departure - their
   request's earliest departure, over the run so far; numpy's linear percentile, as
@@ -65,7 +65,7 @@ from uam_contract.stamps import stamp_s
 
 MODES = RERUN_MODES
 TIMELINE = "sim_time"
-#: the second timeline (issue 22): the same instants on the scenario's UTC clock (a timestamp),
+#: the second timeline: the same instants on the scenario's UTC clock (a timestamp),
 #: when the logger is given the scenario's start (``utc_zero_ns``), as the MCAP's log times are
 UTC_TIMELINE = "utc"
 
@@ -196,9 +196,9 @@ def map_zoom(network: Any, pane_px: float = 200.0) -> float:
     return float(np.clip(np.log2(156543.03 * np.cos(np.radians(lat)) * pane_px / extent), 1.0, 18.0))
 
 
-#: colour of the route of a flight re-planned around a constraint (a plan version > 1, issue 22)
+#: colour of the route of a flight re-planned around a constraint (a plan version > 1)
 REPLANNED_ROUTE_COLOR = (255, 150, 40)
-#: colour of airspace constraints (issue 22) in Rerun and the standard-message views
+#: colour of airspace constraints in Rerun and the standard-message views
 CONSTRAINT_COLOR = (235, 60, 60)
 CONSTRAINT_RADIUS_UI = 1.5
 #: drawn height of a band open upwards [m], and of a vertiport closure's ring [m]
@@ -295,7 +295,7 @@ def make_blueprint(network: Any = None) -> Any:
                                 axis_x=axis, contents="$origin/**", plot_legend=legend)
     return rrb.Blueprint(
         rrb.Horizontal(rrb.Vertical(top_down, side_view, row_shares=[3, 1]) if layered else top_down,
-                       # the decision panels (issue 21) under the run's: the top-down view keeps
+                       # the decision panels under the run's: the top-down view keeps
                        # its 3/5 of the width
                        rrb.Vertical(geo, flights, mwis, selected, solve, decisions, delay, shares,
                                     row_shares=[3, 2, 2, 2, 2, 2, 2, 2]),
@@ -356,7 +356,7 @@ class RerunLogger:
         self._pending_since = 0.0
         self._approved_total = 0
         self._report_approved = 0
-        # the decisions operators value (issue 21), from the requests and plans logged so far
+        # the decisions operators value, from the requests and plans logged so far
         self._earliest: dict[str, float] = {}
         self._delays: list[float] = []
         self._expired_total = 0
@@ -560,7 +560,7 @@ class RerunLogger:
             self._rec.log(f"metrics/{name}", rr.Scalars(float(value)))
 
     def log_constraints(self, t_s: float, constraints: Sequence[Any]) -> None:
-        """The constraint set the planner plans with from ``t_s`` on (issue 22): each constraint an
+        """The constraint set the planner plans with from ``t_s`` on: each constraint an
         entity ``world/constraints/<id>`` (its prism's outline, :func:`constraint_outline`, labelled
         with id, version, band and window) and ``geo/constraints/<id>`` on the map, shown from
         ``max(t_s, start_s)`` and cleared at ``end_s``; those no longer in the set are cleared at
@@ -622,7 +622,7 @@ class RerunLogger:
     def log_flight_plan_msg(self, msg: Any) -> None:
         """A uam_msgs/FlightPlan: approved plans add a route and count towards the total;
         approvals and expiries count towards the decision panels (delay, operator shares); a
-        re-planned version (issue 22) redraws the route and counts as no new decision."""
+        re-planned version redraws the route and counts as no new decision."""
         if not self.enabled:
             return
         # the simulator names each vehicle operator/request (uam_contract.wire.scoped_id): the
@@ -631,7 +631,7 @@ class RerunLogger:
         op = str(getattr(msg, "operator_id", "") or "")
         key = f"{op}/{msg.request_id}" if op else str(msg.request_id)
         pts = [(w.position.x, w.position.y, w.position.z) for w in msg.waypoints]
-        if int(getattr(msg, "version", 0) or 0) > 1:  # a re-planned version (issue 22): not an approval
+        if int(getattr(msg, "version", 0) or 0) > 1:  # a re-planned version: not an approval
             if not hasattr(self, "_replanned"):
                 self._replanned = set()
             self._replanned.add(key)

@@ -45,7 +45,6 @@ import math
 import re
 import struct
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
 from typing import Any, Sequence
 
 import numpy as np
@@ -370,7 +369,7 @@ class ViewExporter:
                             sim_time_ns)]
 
     def constraint_messages(self, sim_time_ns: int, constraints: Sequence[Any]) -> list[ViewMessage]:
-        """The constraint set in force from ``sim_time_ns`` (issue 22): a MarkerArray (DELETEALL,
+        """The constraint set in force from ``sim_time_ns``: a MarkerArray (DELETEALL,
         then one LINE_LIST outline of each prism or closure and a text with its id, version, band
         and window) and the same outlines as a PointCloud2 (points every LINE_POINT_SPACING_M), for
         Rerun's MCAP import. An empty set clears both."""
@@ -522,7 +521,7 @@ def write_views(src: str, dst: str, network: Any = None,
                 extra = views.fleet_state_messages(deserialize(r))
             elif r.topic == resolved(names.TOPIC_PLANS):
                 extra = views.plan_messages(deserialize(r))
-            elif r.topic == resolved(names.TOPIC_CONSTRAINTS):  # issue 22: the set in force
+            elif r.topic == resolved(names.TOPIC_CONSTRAINTS):  # the set in force
                 from uam_planner.live_constraints import constraints_from_text
                 t_set, found = constraints_from_text(deserialize(r).data)
                 extra = views.constraint_messages(max(r.log_time_ns - zero_src, int(round(t_set * 1e9))),

@@ -1,4 +1,4 @@
-"""Conformance monitoring (issue 23): each flight compared with its plan, free of ROS.
+"""Conformance monitoring: each flight compared with its plan, free of ROS.
 
 A flight is *conforming* at time t, at flown position q, when q lies within the documented bounds
 of its plan (the intent's volumes of ASTM F3548-21, here a tube around the 4D trajectory):
@@ -27,7 +27,6 @@ planned time is within ``time_s`` of now.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Iterable, Sequence
 
@@ -45,7 +44,7 @@ MAX_UPDATE_NONCONFORMING_S = float(f3548.OiMaxUpdateTimeNonconfSeconds)  # 5
 
 # the tube's bounds, the nearest-point errors and the inclusive test live below the simulator, in
 # the planner, which checks every conformance report against its own plan with the same code
-# (uam_planner.nonconformance; issue 23 item 3)
+# (uam_planner.nonconformance)
 from uam_planner.conformance import ConformanceBounds, conforming, deviations  # noqa: E402,F401
 
 

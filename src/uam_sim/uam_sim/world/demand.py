@@ -11,7 +11,7 @@ Fractional rates: an interval issues ``floor(rate)`` requests plus one more with
 ``rate - floor(rate)`` (drawn from that interval's RNG). Rate 0.5 gives on average one request
 every other interval; the expected count per interval is exactly ``rate``.
 
-Priority and operator mixes (issue 21): with ``priority_share`` p > 0 each request is of class
+Priority and operator mixes: with ``priority_share`` p > 0 each request is of class
 ``priority_class`` with probability p (else class 0), and with ``operators`` each request gets one
 of the named operators uniformly; both are drawn from the interval's RNG after the paper's
 draws, so without them the stream is exactly the paper's.

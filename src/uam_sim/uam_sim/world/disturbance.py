@@ -1,4 +1,4 @@
-"""Disturbances: what an aircraft flies when the world is not the plan's (issue 23), free of ROS.
+"""Disturbances: what an aircraft flies when the world is not the plan's, free of ROS.
 
 A planned 4D trajectory and the flight's draws (speed error, departure delay) go in; the flown
 trajectory comes out, sampled every ``step_s`` and linear between samples (the simulator flies it
@@ -303,7 +303,7 @@ def fly_batch(plans: Sequence[Trajectory], draws: Sequence[FlightDraws], config:
     rows = np.arange(n)
     # Samples are recorded a step at a time as (rows, times, positions) arrays and split per
     # flight at the end: a per-row Python append was most of this function's time (profiled on
-    # a 900 s Monte-Carlo run, BENCHMARKS.md "eighth stop").
+    # a 900 s Monte-Carlo run, BENCHMARKS.md).
     rec_r: list[np.ndarray] = []
     rec_t: list[np.ndarray] = []
     rec_p: list[np.ndarray] = []
@@ -387,7 +387,7 @@ def fly_plans(plans: Sequence[Trajectory], flight_ids: Sequence[str], config: Di
 
 def fly_on(flown: Trajectory, new_plan: Trajectory, speed_error: float, rate: float,
            config: DisturbanceConfig, wind: WindField | None = None) -> tuple[Trajectory, float]:
-    """What flies after a nonconforming update (issue 23 item 3, ``uam_planner.nonconformance``):
+    """What flies after a nonconforming update (``uam_planner.nonconformance``):
     ``flown`` up to the new plan's start, then the model flying ``new_plan`` from its first point
     (where the aircraft was), on time, with the aircraft's airspeed as it flew: the update timed
     the new plan at ``rate`` (the observed progress rate) times the old plan's speeds, so the

@@ -1,4 +1,4 @@
-"""What a run's approved flights measure, in one implementation (issue 21): for the in-process
+"""What a run's approved flights measure, in one implementation: for the in-process
 runner's summary (``uam_sim.runner.scenario``), the analysis of a recording (``uam_sim.audit.analysis``) and
 the experiment report (``uam_sim.reports.report``, ``uam_sim.reports.figures``). Plain functions over plain rows,
 numpy only (no ROS, no plotting library).
