@@ -333,6 +333,7 @@ def test_a_pinned_code_version_is_only_for_collecting_tables(tmp_path, capsys):
         sweep.pin_code_version(12)
 
 
+@pytest.mark.slow  # several seconds of KaMIS / reports: make test runs it, test-fast does not
 @pytest.mark.skipif(not (COMMITTED / "REPORT.md").exists(), reason="no committed study yet")
 def test_the_committed_report_rebuilds_byte_for_byte_from_the_committed_tables(tmp_path):
     d = tmp_path / "decision-study"

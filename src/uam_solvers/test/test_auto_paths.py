@@ -56,6 +56,7 @@ def test_dense_graph_skips_whole_graph_kamis():
     assert p.is_independent(res.selected) and not res.fallback
 
 
+@pytest.mark.slow  # several seconds of KaMIS / reports: make test runs it, test-fast does not
 @pytest.mark.parametrize("n", [250, 500])
 def test_groups_do_not_change_the_route_and_kamis_proves_both(n):
     # issue 20: with the groups given these graphs score ~11 interacting requests per request
@@ -83,6 +84,7 @@ def test_no_kamis_share_means_the_split_path_with_the_same_optimum():
     assert split.objective == pytest.approx(_kamis_optimum(p), abs=1e-5)
 
 
+@pytest.mark.slow  # several seconds of KaMIS / reports: make test runs it, test-fast does not
 def test_large_sparse_graph_is_solved_by_learn_and_reduce_and_the_proof_is_true():
     p = planner_instance(2500, seed=3)
     # no probe: whether a 20 ms probe gets past LearnAndReduce's set-up depends on the load (it
@@ -101,6 +103,7 @@ def test_large_sparse_graph_is_solved_by_learn_and_reduce_and_the_proof_is_true(
         assert res.objective <= best + 1e-4
 
 
+@pytest.mark.slow  # several seconds of KaMIS / reports: make test runs it, test-fast does not
 def test_learn_and_reduce_kernel_lifts_optimal_kernel_answers():
     p = planner_instance(2200, seed=4)
     out = learn_and_reduce_kernel(p, 1.0, seed=0)
@@ -131,6 +134,7 @@ def test_learn_and_reduce_offset_on_hand_solved_graphs():
         k.lift(np.zeros(0, dtype=np.int64))
 
 
+@pytest.mark.slow  # several seconds of KaMIS / reports: make test runs it, test-fast does not
 def test_reduce_again_composes_lift_and_offset():
     # a short first kernelisation, then a second on its kernel: the lifted set's integer
     # weight is both offsets plus the kernel's, and a kernel optimum lifts to the optimum
@@ -151,6 +155,7 @@ def test_reduce_again_composes_lift_and_offset():
     assert p.objective(sel) == pytest.approx(_kamis_optimum(p), abs=1e-4)
 
 
+@pytest.mark.slow  # several seconds of KaMIS / reports: make test runs it, test-fast does not
 def test_probe_sends_an_irreducible_large_graph_to_chils_at_once():
     # the stress family: the short probe removes a few % (issue 20: the full 0.2 s
     # kernelisation cost 0.3-0.43 s of a 1 s limit on 10,000 vertices to remove 4 %)
@@ -208,6 +213,7 @@ def test_no_proof_claimed_when_the_lifted_weight_disagrees_with_the_offset(monke
     assert res.objective == pytest.approx(honest.objective, abs=1e-9)
 
 
+@pytest.mark.slow  # several seconds of KaMIS / reports: make test runs it, test-fast does not
 def test_kernel_kamis_that_does_not_finish_claims_nothing_and_lifts_once(monkeypatch):
     # KaMIS on the kernel stopped by its share (a stand-in that runs the real search and then
     # takes its whole share): its set is kept as an incumbent in kernel space, CHILS runs, the
@@ -236,6 +242,7 @@ def test_kernel_kamis_that_does_not_finish_claims_nothing_and_lifts_once(monkeyp
         assert res.objective == pytest.approx(best, abs=1e-4)
 
 
+@pytest.mark.slow  # several seconds of KaMIS / reports: make test runs it, test-fast does not
 def test_tied_optima_give_the_same_set_whichever_path_proves():
     # issue 20: with the same seed the proven set must not depend on the machine's speed. On
     # this graph (weights in quarters: many tied optima) KaMIS needs ~0.3 s; with a share that

@@ -75,6 +75,7 @@ def _pick(corpus):
     return out + dense[:2]
 
 
+@pytest.mark.slow  # several seconds of KaMIS / reports: make test runs it, test-fast does not
 def test_auto_is_valid_and_proves_where_kamis_proves(corpus):
     for e in _pick(corpus):
         p = e.problem
