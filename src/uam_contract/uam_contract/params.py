@@ -258,6 +258,21 @@ def _utc_rule(value: str) -> str:
     return ""
 
 
+def _run_choices_rule(value: str) -> str:
+    """'' or a JSON object of names to numbers, strings or booleans."""
+    if not value:
+        return ""
+    import json
+
+    try:
+        doc = json.loads(value)
+    except json.JSONDecodeError as exc:
+        return f"is not JSON ({exc})"
+    if not isinstance(doc, dict) or not all(isinstance(v, (int, float, str, bool)) for v in doc.values()):
+        return "must be a JSON object of names to numbers, strings or booleans"
+    return ""
+
+
 def _recorded_topics_rule(value) -> str:
     from uam_contract.names import RECORDED_TOPICS
 
@@ -303,6 +318,9 @@ RECORDER = (
     Param("separation_m", D.SEPARATION_M, "the run's separation minimum (cylinder: H) [m]", 0.001, 100000.0),
     Param("vertical_separation_m", D.VERTICAL_SEPARATION_M, "the run's vertical minimum V of the cylinder [m]", 0.001, 10000.0),
     Param("departure_slot_s", D.DEPARTURE_SLOT_S, "the run's departure slot [s] (0 = the paper's rule)", 0.0, 86400.0),
+    Param("run_choices", "", "the run's planning and flight choices as the launcher started the nodes with them, a "
+          "JSON object (objective, priority share, horizon, lead time, buffers, reaction, probe, disturbances), "
+          "written to the MCAP's uam_run metadata for the analysis' header; '' = none", check=_run_choices_rule),
     Param("wait_for_publishers", [""], "subscribe to the simulator's topics (/clock, uam/fleet_state, "
           "uam/fleet_poses) only once each of these recorded topics has a matched publisher: the simulator "
           "starts when the recorder subscribes to the fleet state, so the run then starts only when the "

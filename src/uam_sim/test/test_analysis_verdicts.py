@@ -146,3 +146,24 @@ def test_a_recovered_recording_keeps_its_airspace_and_is_never_complete(tmp_path
     assert s.audit.separation_model == "cylinder"
     assert not s.complete_file and not s.verified
     assert any("rebuilt from a recording cut short" in p for p in s.problems), s.problems
+
+
+def test_the_runs_choices_are_in_the_header(tmp_path):
+    from uam_contract.params import RECORDER
+    from uam_sim.audit.analysis import RUN_METADATA, format_summary
+
+    rule = next(p for p in RECORDER if p.name == "run_choices")
+    for bad, why in (("{objective", "is not JSON"), ("[1, 2]", "must be a JSON object"), ('{"a": [1]}', "must be a JSON object")):
+        with pytest.raises(ValueError, match=f"parameter run_choices: {why}"):
+            rule.validate(bad)
+    assert rule.validate('{"objective": "count"}') == '{"objective": "count"}'
+
+    def extra(rec):
+        rec.add_metadata(RUN_METADATA, {"objective": '"priority"', "priority_share": "0.05", "horizon": "5",
+                                        "lead_time_s": "300", "spatial_buffer_m": "10", "reaction": "true"})
+    s = summarize(_write(tmp_path / "choices.mcap", extra=extra))
+    assert s.run_choices == {"objective": "priority", "priority_share": 0.05, "horizon": 5, "lead_time_s": 300,
+                             "spatial_buffer_m": 10, "reaction": True}
+    assert ("Run choices      objective priority, priority share 0.05, horizon 5, lead time 300 s, "
+            "spatial buffer 10 m, reaction true (as launched)") in format_summary(s)
+    assert "Run choices      not recorded" in format_summary(summarize(_write(tmp_path / "none.mcap")))

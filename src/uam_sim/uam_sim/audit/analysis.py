@@ -69,6 +69,9 @@ from uam_contract.names import resolved
 
 #: the MCAP metadata record the recorder node writes with its check of what it received
 RECORDER_CHECK = "uam_recorder_check"
+#: the run's planning and flight choices as the launcher started the nodes with them (the
+#: recorder's ``run_choices`` parameter; values JSON-encoded)
+RUN_METADATA = "uam_run"
 
 OUTCOME_APPROVED, OUTCOME_REJECTED, OUTCOME_EXPIRED = 0, 1, 2
 OUTCOME_DUPLICATE = 3  # not a decision: a reused (operator_id, request_id) was refused
@@ -140,6 +143,9 @@ class RunSummary:
     problems: list = field(default_factory=list)
     #: what the recorder itself found (its ``uam_recorder_check`` metadata), {} if none
     recorder_check: dict = field(default_factory=dict)
+    #: the run's choices as launched (``uam_run`` metadata: objective, priority share, horizon,
+    #: lead time, buffers, reaction, probe, disturbances), {} if the recording has none
+    run_choices: dict = field(default_factory=dict)
     #: requests refused as reusing a taken (operator_id, request_id): OUTCOME_DUPLICATE answers,
     #: which are not decisions (the earlier request's decision stands)
     duplicate_requests_refused: int = 0
@@ -636,6 +642,7 @@ def summarize(path: str | Path, separation_m=None, reader: str = "rclpy",
     summary = summarize_messages(iter_decoded(path, reader, ANALYSED_TOPICS, fleet_digest_only=True),
                                  separation_m, str(path), reader, complete, network=network)
     summary.recorder_check = read_metadata(path, RECORDER_CHECK)
+    summary.run_choices = _decoded(read_metadata(path, RUN_METADATA))
     from .flown import recording_flown
     summary.flown = recording_flown(path, separation_m)
     if summary.recorder_check.get("ok") == "false":
@@ -703,10 +710,38 @@ def _flight_lines(whose: str, stats: dict) -> list[str]:
     return [delay_line, detour_line]
 
 
+def _decoded(meta: dict) -> dict:
+    """Metadata values written as JSON, decoded (a value that is not JSON is kept as text)."""
+    out = {}
+    for k, v in meta.items():
+        try:
+            out[k] = json.loads(v)
+        except (TypeError, ValueError):
+            out[k] = v
+    return out
+
+
+_UNITS = (("_mps", "m/s"), ("_deg", "deg"), ("_s", "s"), ("_m", "m"))
+
+
+def format_choices(choices: dict) -> str:
+    """The run's choices in one line, ``name value unit`` in the order given (the unit from the
+    name's suffix: ``lead_time_s`` 300 -> "lead time 300 s")."""
+    parts = []
+    for k, v in choices.items():
+        unit = next((u for suffix, u in _UNITS if k.endswith(suffix)), "")
+        name = k[: len(k) - len(next(s for s, u in _UNITS if u == unit))] if unit else k
+        text = str(v).lower() if isinstance(v, bool) else f"{v:g}" if isinstance(v, float) else str(v)
+        parts.append(f"{name.replace('_', ' ')} {text}{' ' + unit if unit else ''}")
+    return ", ".join(parts)
+
+
 def format_summary(s: RunSummary, epochs: bool = True) -> str:
     """A human-readable report of a RunSummary."""
     lines = [
         f"Recording        {s.path}{'' if s.complete_file else '  (INCOMPLETE: cut short, read what was written)'}",
+        f"Run choices      {format_choices(s.run_choices)} (as launched)" if s.run_choices else
+        "Run choices      not recorded (a recorder without run_choices)",
         f"Simulation time  {s.sim_start_s:.1f} s .. {s.sim_end_s:.1f} s",
         f"Requests         {s.requests}",
         f"  approved       {s.approved}",

@@ -52,6 +52,7 @@ finishes a chunk at least every ``flush_period_s`` of wall time, so a crash lose
 
 from __future__ import annotations
 
+import json
 import sys
 import time
 from pathlib import Path
@@ -66,7 +67,7 @@ from uam_msgs.msg import FlightPlan
 # imported here, not where the first constraint set arrives: at nice 19 under load that import
 # took more than run_fleet.sh's 10 s when it fell into the drain of a stopping recorder
 from uam_planner.live_constraints import constraints_from_text
-from uam_sim.audit.analysis import format_steps, missing_steps, request_key
+from uam_sim.audit.analysis import RUN_METADATA, format_steps, missing_steps, request_key
 from uam_sim.audit.separation import AIRSPACE_METADATA, airspace_metadata
 from uam_sim.recording.cdr import fleet_state_digest, fleet_state_step_index, leading_stamp_ns
 from uam_sim.recording.mcap_reader import CLOCK_METADATA
@@ -198,6 +199,8 @@ class RecorderNode(Node):
         self.foxglove = None
         self.rerun = None
         self.recorder.add_metadata(AIRSPACE_METADATA, airspace)
+        if p["run_choices"]:   # checked by its parameter rule: a JSON object of plain values
+            self.recorder.add_metadata(RUN_METADATA, {k: json.dumps(v) for k, v in json.loads(p["run_choices"]).items()})
         # log times on the scenario's UTC clock: sim time + this; readers subtract it
         self._log_zero_ns = scenario_start_ns(p["log_time_start_utc"])
         self.recorder.add_metadata(CLOCK_METADATA, {"log_time_zero_ns": self._log_zero_ns,
