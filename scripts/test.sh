@@ -22,8 +22,14 @@ if ! python -m ruff check --quiet src test; then
   echo "scripts/test.sh: ruff found the problems above (ruff.toml); fix them or say why in a noqa comment" >&2
   exit 1
 fi
+# a loaded machine: UAM_TEST_LOAD_FACTOR (default 1) scales the per-test limit (pytest.ini: 180 s),
+# the hang watchdog (240 s) and the few wall-time bounds of the tests (test/load_factor.py)
+LOAD_FACTOR="${UAM_TEST_LOAD_FACTOR:-1}"
+TIMEOUT_S=$(python -c "import sys; f = float(sys.argv[1]); assert f >= 1; print(int(180 * f))" "$LOAD_FACTOR") \
+  || { echo "scripts/test.sh: UAM_TEST_LOAD_FACTOR: '$LOAD_FACTOR' must be a number >= 1" >&2; exit 2; }
+export UAM_TEST_HANG_S="${UAM_TEST_HANG_S:-$(( TIMEOUT_S * 4 / 3 ))}"
 set +e
-python -m pytest "${WORKERS[@]}" "$@"
+python -m pytest --timeout="$TIMEOUT_S" "${WORKERS[@]}" "$@"
 rc=$?
 set -e
 exit $rc

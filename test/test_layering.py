@@ -242,3 +242,20 @@ def test_libraries_take_topic_names_from_the_contract():
         offenders += [f"{path.relative_to(ROOT)}:{n}" for n, line in enumerate(path.read_text().splitlines(), 1)
                       if literal.search(line)]
     assert offenders == []
+
+
+def test_the_load_factor_scales_and_refuses_nonsense(monkeypatch):
+    from load_factor import load_factor, slack
+
+    monkeypatch.delenv("UAM_TEST_LOAD_FACTOR", raising=False)
+    assert slack(20) == 20
+    monkeypatch.setenv("UAM_TEST_LOAD_FACTOR", "3")
+    assert slack(20) == 60
+    for bad in ("0.5", "fast"):
+        monkeypatch.setenv("UAM_TEST_LOAD_FACTOR", bad)
+        try:
+            load_factor()
+        except ValueError as exc:
+            assert "UAM_TEST_LOAD_FACTOR" in str(exc) and bad in str(exc)
+        else:
+            raise AssertionError(f"{bad!r} was accepted")
