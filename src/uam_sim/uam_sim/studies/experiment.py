@@ -129,6 +129,27 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the planner reacts to nonconforming flights (needs --disturbance)")
     p.add_argument("--conformance", type=key_values, metavar="K=V,...",
                    help="conformance bounds (uam_sim.world.conformance.ConformanceBounds), e.g. lateral_m=30,time_s=10")
+    # the planning and demand options of run_fleet.sh, by the same names and defaults
+    # (uam_sim.runner.experiment_config.ExperimentConfig; test_one_runner_options holds them equal)
+    from uam_planner.objectives import BASELINE_ORDERS, OBJECTIVES
+    p.add_argument("--objective", choices=OBJECTIVES,
+                   help="what the MWIS maximises (docs/objectives.md; default paper)")
+    p.add_argument("--baseline-order", dest="baseline_order", choices=BASELINE_ORDERS,
+                   help="the order of fifo and firstfit (default arrival)")
+    p.add_argument("--priority-share", type=float, dest="priority_share",
+                   help="share of random requests of priority class 1 (default 0)")
+    p.add_argument("--horizon", type=int, dest="horizon_epochs",
+                   help="epochs the MWIS plans jointly (rolling horizon; default 1, the paper's)")
+    p.add_argument("--commit-ahead", action="store_true", default=None, dest="commit_ahead",
+                   help="with --horizon > 1, commit the horizon's later departures now as reservations")
+    p.add_argument("--lead-time", type=float, dest="lead_time_s",
+                   help="requests are filed this many seconds before their earliest departure (default 0)")
+    p.add_argument("--reaction-period", type=float, dest="reaction_period_s",
+                   help="with --reaction, also react every S seconds between epochs (default 0: at epochs)")
+    p.add_argument("--probe", type=float, dest="conflict_probe_s",
+                   help="with --reaction, the conflict probe's look-ahead [s] (default 0: off)")
+    p.add_argument("--probe-margin", type=float, dest="conflict_probe_margin_m",
+                   help="with --probe, the probe's margin [m] (default 0)")
     p.add_argument("--tts-reads", type=int, help="reads per annealing run in the TTS study")
     p.add_argument("--tts-instances", type=int, help="instances in the TTS study")
     p.add_argument("--no-tts", action="store_true", help="skip the TTS study")
@@ -150,7 +171,9 @@ def main(argv: list | None = None) -> int:
                                           "separation_model", "vertical_separation_m",
                                           "departure_slot_s", "climb_rate_mps", "descent_rate_mps",
                                           "spatial_buffer_m", "temporal_buffer_s", "disturbance",
-                                          "conformance", "reaction")}
+                                          "conformance", "reaction", "objective", "baseline_order",
+                                          "priority_share", "horizon_epochs", "commit_ahead", "lead_time_s",
+                                          "reaction_period_s", "conflict_probe_s", "conflict_probe_margin_m")}
     try:
         base = yaml.safe_load(Path(args.config).read_text()) if args.config else {}
         base = base or {}

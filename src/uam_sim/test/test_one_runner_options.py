@@ -1,0 +1,61 @@
+"""The experiment runner takes the planning and demand options the node graph takes
+(scripts/run_fleet.sh), by the same names and with the same defaults."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+from uam_sim.runner.experiment_config import ExperimentConfig
+from uam_sim.studies.experiment import build_parser
+
+ROOT = Path(__file__).resolve().parents[3]
+
+# run_fleet.sh option -> ExperimentConfig field
+SHARED = {
+    "--objective": "objective", "--baseline-order": "baseline_order", "--priority-share": "priority_share",
+    "--horizon": "horizon_epochs", "--commit-ahead": "commit_ahead", "--lead-time": "lead_time_s",
+    "--reaction-period": "reaction_period_s", "--probe": "conflict_probe_s",
+    "--probe-margin": "conflict_probe_margin_m", "--spatial-buffer-m": "spatial_buffer_m",
+    "--temporal-buffer-s": "temporal_buffer_s", "--slot-s": "departure_slot_s", "--climb-rate": "climb_rate_mps",
+    "--descent-rate": "descent_rate_mps", "--vertical-separation-m": "vertical_separation_m",
+}
+
+
+def _run_fleet_defaults() -> dict:
+    """run_fleet.sh: option -> the default of the variable it sets."""
+    text = (ROOT / "scripts" / "run_fleet.sh").read_text()
+    inits = {}
+    for line in text.splitlines():
+        if re.match(r"^[A-Z_]+=\S*( [A-Z_]+=\S*)+\s*$", line):
+            inits.update(kv.split("=", 1) for kv in line.split())
+    out = {}
+    for opt, var in re.findall(r"^\s+(--[a-z-]+)\) ([A-Z_]+)=", text, re.M):
+        out[opt] = inits.get(var)
+    return out
+
+
+def _same(shell: str, value) -> bool:
+    if isinstance(value, bool):
+        return shell == str(value).lower()
+    if isinstance(value, (int, float)):
+        return float(shell) == float(value)
+    return shell.strip('"') == value
+
+
+def test_the_runner_takes_run_fleets_planning_options_with_its_defaults():
+    flags = {a for action in build_parser()._actions for a in action.option_strings}
+    shell = _run_fleet_defaults()
+    cfg = ExperimentConfig()
+    for opt, field in SHARED.items():
+        assert opt in flags, f"python -m uam_sim.experiment has no {opt}"
+        assert opt in shell, f"scripts/run_fleet.sh has no {opt}"
+        assert shell[opt] is not None and _same(shell[opt], getattr(cfg, field)), \
+            (opt, shell[opt], field, getattr(cfg, field))
+
+
+def test_a_flag_reaches_the_config():
+    args = build_parser().parse_args(["--objective", "count", "--horizon", "5", "--lead-time", "300",
+                                      "--probe", "120", "--probe-margin", "50"])
+    assert (args.objective, args.horizon_epochs, args.lead_time_s, args.conflict_probe_s,
+            args.conflict_probe_margin_m) == ("count", 5, 300.0, 120.0, 50.0)
