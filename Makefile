@@ -11,7 +11,7 @@ test:
 # The development loop: the library tests only (no ROS graph, no node, no subprocess run of the
 # graph, nothing marked slow); `make test-fast ARGS=--lf` reruns what failed last.
 test-fast:
-	bash scripts/test.sh -m "not ros and not slow" src/uam_planner/test src/uam_solvers/test src/uam_sim/test test/test_layering.py $(ARGS)
+	bash scripts/test.sh -m "not ros and not slow" src/uam_planner/test src/uam_solvers/test src/uam_sim/test test/test_layering.py test/test_examples.py $(ARGS)
 
 # The main job: a short default scenario through the whole ROS node graph (Singapore, paper rate
 # 10 requests per 30 s, 600 s simulated, exact MWIS), recorded to MCAP + Rerun, then analysed.

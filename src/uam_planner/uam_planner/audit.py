@@ -106,6 +106,15 @@ def pair_min_distance(a, b, vertical_m: float | None = None) -> tuple[float, flo
     ``a`` and ``b``: Trajectory, Flight or (times_s, points_m). (inf, nan) if never together.
     With ``vertical_m`` (the cylinder's V [m]) the distance is horizontal and only the times at
     which the vertical distance is below ``vertical_m`` count.
+
+    Examples:
+        Two flights east at 10 m/s, 50 m apart, and one crossing them from the south:
+
+        >>> east = ([0.0, 100.0], [(0, 0, 100), (1000, 0, 100)])
+        >>> pair_min_distance(east, ([0.0, 100.0], [(0, 50, 100), (1000, 50, 100)]))
+        (50.0, 0.0)
+        >>> pair_min_distance(east, ([0.0, 100.0], [(500, -500, 100), (500, 500, 100)]))
+        (0.0, 50.0)
     """
     ta, pa = _waypoints(a)
     tb, pb = _waypoints(b)

@@ -112,7 +112,21 @@ def deviations(plan: Trajectory, times_s, points_m) -> tuple[np.ndarray, np.ndar
     """Lateral [m], vertical [m] (signed: above) and time [s] (positive = late) errors of
     samples against ``plan``, each against the path point nearest in space (nearest in planned
     time among passes as near: :func:`nearest`). Args: ``times_s`` (n,), ``points_m`` (n, 3).
-    O(n p)."""
+    O(n p).
+
+    Examples:
+        A plan east at 10 m/s; the aircraft is 20 m north of it at 50 s, at the point planned
+        for 48 s (2 s late), within the monitor's default bounds:
+
+        >>> import numpy as np
+        >>> from uam_planner.trajectory import Trajectory
+        >>> plan = Trajectory(np.array([0.0, 100.0]), np.array([[0.0, 0, 100], [1000.0, 0, 100]]))
+        >>> lat, ver, late = deviations(plan, [50.0], [[480.0, 20.0, 100.0]])
+        >>> lat.tolist(), ver.tolist(), late.tolist()
+        ([20.0], [0.0], [2.0])
+        >>> conforming(lat, ver, late, ConformanceBounds()).tolist()
+        [True]
+    """
     t = np.asarray(times_s, dtype=np.float64).reshape(-1)
     q = np.asarray(points_m, dtype=np.float64).reshape(-1, 3)
     _j, _l, pt, tau = nearest(plan, q, t)

@@ -74,6 +74,22 @@ class Planner:
     ``submit`` validates and queues a request; ``plan(t_s, epoch_index)`` runs one epoch, keeps
     the waiting requests, adds the approvals to the active flights and drops flights that landed
     before t_s. Each request is decided once: approved, expired or rejected.
+
+    Examples:
+        Two requests between the same aerodromes, one each way, planned in one epoch (the MWIS
+        solved in process here; the default solves in worker processes with a deadline):
+
+        >>> from uam_planner.synthetic import generate_network
+        >>> from uam_solvers import solve
+        >>> net = generate_network(60, 6, seed=1)
+        >>> planner = Planner(net, solve_mwis=lambda w, e, g: solve(w, e, groups=g, backend="exact"))
+        >>> planner.submit(FlightRequest("r1", "A000", "A001", 0.0, 0.0, 60.0)) is None
+        True
+        >>> planner.submit(FlightRequest("r2", "A001", "A000", 0.0, 0.0, 60.0)) is None
+        True
+        >>> result = planner.plan(0.0, 0)
+        >>> sorted(f.request_id for f in result.approved), result.report.vertices
+        (['r1', 'r2'], 10)
     """
 
     def __init__(self, network, config: PlanningConfig | None = None, policy: str = "mwis",

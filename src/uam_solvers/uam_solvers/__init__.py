@@ -180,6 +180,14 @@ def solve(
     passed to the backend; ``layers`` enables component split and reductions.
     Output: an MwisResult whose ``selected`` is always an independent set of the input graph.
     Raises MwisInputError (bad arrays), UnknownBackendError, BackendUnavailable.
+
+    Examples:
+        A path of three vertices: the two ends weigh more together than the middle one.
+
+        >>> from uam_solvers import solve
+        >>> r = solve([1.0, 2.0, 1.5], [(0, 1), (1, 2)], backend="exact")
+        >>> r.selected.tolist(), r.objective, r.proven_optimal
+        ([0, 2], 2.5, True)
     """
     res = _checked_fast_path(weights, edges, groups, backend, time_limit_s, seed, options, layers, max_vertices)
     if res is not None:
