@@ -22,6 +22,12 @@ SHARED = {
 }
 
 
+def _launch_defaults() -> dict:
+    """The launchers' one table (uam_contract.launch_options): flag -> default."""
+    from uam_contract.launch_options import LAUNCH_OPTIONS
+    return {o.flag: o.default for o in LAUNCH_OPTIONS if o.flag}
+
+
 def _run_fleet_defaults() -> dict:
     """run_fleet.sh: option -> the default of the variable it sets."""
     text = (ROOT / "scripts" / "run_fleet.sh").read_text()
@@ -45,13 +51,30 @@ def _same(shell: str, value) -> bool:
 
 def test_the_runner_takes_run_fleets_planning_options_with_its_defaults():
     flags = {a for action in build_parser()._actions for a in action.option_strings}
-    shell = _run_fleet_defaults()
+    shell, table = _run_fleet_defaults(), _launch_defaults()
     cfg = ExperimentConfig()
     for opt, field in SHARED.items():
         assert opt in flags, f"python -m uam_sim.experiment has no {opt}"
         assert opt in shell, f"scripts/run_fleet.sh has no {opt}"
         assert shell[opt] is not None and _same(shell[opt], getattr(cfg, field)), \
             (opt, shell[opt], field, getattr(cfg, field))
+        if opt in table:  # the launchers' table, where it lists the option
+            assert _same(table[opt], getattr(cfg, field)), (opt, table[opt], field, getattr(cfg, field))
+
+
+def test_the_objectives_are_one_list_everywhere_they_are_named():
+    """uam_planner.objectives.OBJECTIVES is the list; the planner node's parameter choices, the
+    launchers' help, run_fleet.sh's check and the runner's flag take the same names."""
+    from uam_contract.launch_options import LAUNCH_OPTIONS
+    from uam_contract.params import PLANNER
+    from uam_planner.objectives import OBJECTIVES
+
+    assert next(p for p in PLANNER if p.name == "objective").choices == OBJECTIVES
+    assert next(a for a in build_parser()._actions if "--objective" in a.option_strings).choices == OBJECTIVES
+    help_text = next(o.help for o in LAUNCH_OPTIONS if o.flag == "--objective")
+    assert all(name in help_text for name in OBJECTIVES), help_text
+    check = re.search(r'\$OBJECTIVE" =~ \^\(([a-z|]+)\)\$', (ROOT / "scripts" / "run_fleet.sh").read_text())
+    assert check and tuple(check.group(1).split("|")) == OBJECTIVES
 
 
 def test_a_flag_reaches_the_config():
