@@ -77,3 +77,19 @@ def test_cli_prints_one_line_per_backend(capsys):
     assert EXPECTED <= set(names)
     assert any(line.startswith("greedy") and "[available]" in line for line in lines)
     assert registry.main(["bogus"]) == 2
+
+
+class _PluginSampler:
+    """A third party's sampling backend, as an entry point would name it (traits only here)."""
+
+    samples = True
+
+
+def test_a_sampler_is_known_as_one_everywhere_by_its_class_alone(monkeypatch):
+    from uam_solvers import registry
+    from uam_solvers.tts import ANNEALING_BACKENDS  # derived from the registry at import
+
+    assert set(registry.sampling_backends()) == set(ANNEALING_BACKENDS) == {"sa", "tabu", "qpu", "qpu-emulator"}
+    assert not registry.backend_class("exact").samples and registry.backend_class("sa").samples
+    monkeypatch.setattr(registry, "_entry_points", lambda: {"plugin-sampler": f"{__name__}:_PluginSampler"})
+    assert "plugin-sampler" in registry.sampling_backends()

@@ -197,6 +197,8 @@ def empty_result(problem: MwisProblem, backend: str, started: float) -> MwisResu
 class _QuboSamplerBackend(Backend):
     """Shared pipeline: QUBO -> sampler -> steepest descent -> repair -> best read."""
 
+    samples = True
+
     backend_options: set[str] = set()
 
     def _decompose_above(self, options: Mapping[str, Any]) -> int:

@@ -805,6 +805,10 @@ class Backend(ABC):
     thread_inline_max_vertices: int | None = None
     #: Declared options, name -> :class:`uam_solvers.options.Option` (type, default, range).
     options_spec: Mapping[str, Any] = {}
+    #: True for backends that draw samples (reads) of a QUBO and answer the best read: they
+    #: never prove an answer optimal, and the TTS study counts their reads
+    #: (``uam_solvers.registry.sampling_backends``; every list of samplers derives from it).
+    samples: bool = False
 
     @property
     def parameters(self) -> dict[str, list]:

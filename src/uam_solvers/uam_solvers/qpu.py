@@ -666,6 +666,7 @@ class QpuBackend(Backend):
     (10), solver (DWaveSampler solver selection, e.g. a name).
     """
 
+    samples = True
     name = "qpu"
     description = ("D-Wave Advantage QPU (DWaveSampler + minorminer embedding), 1 us anneals, "
                    "100 reads, majority-vote chains, descent + repair; needs a D-Wave token")
@@ -732,6 +733,7 @@ class QpuEmulatorBackend(Backend):
     annealing_time_us is not used.
     """
 
+    samples = True
     name = "qpu-emulator"
     description = ("the qpu embedding pipeline on a simulated Advantage graph (Pegasus P16, "
                    "simulated annealing); chain statistics, no QPU times")

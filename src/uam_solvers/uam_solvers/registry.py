@@ -19,8 +19,8 @@ from importlib import metadata
 
 from .base import Backend
 
-__all__ = ["BUILTIN_BACKENDS", "ENTRY_POINT_GROUP", "UnknownBackendError", "get_backend",
-           "list_backends", "backend_names"]
+__all__ = ["BUILTIN_BACKENDS", "ENTRY_POINT_GROUP", "UnknownBackendError", "backend_class", "get_backend",
+           "list_backends", "backend_names", "sampling_backends"]
 
 ENTRY_POINT_GROUP = "uam_solvers.backends"
 
@@ -94,6 +94,30 @@ def get_backend(name: str) -> Backend:
     if not isinstance(backend, Backend):
         raise TypeError(f"backend {name!r}: {table[name]} is not a uam_solvers Backend")
     return backend
+
+
+def backend_class(name: str) -> type:
+    """The class of the backend called ``name``, not instantiated (its traits are class
+    attributes: ``Backend.samples``, ...). UnknownBackendError as :func:`get_backend`."""
+    table = _table()
+    if not isinstance(name, str) or name not in table:
+        raise UnknownBackendError(
+            f"backend: unknown name {name!r}; known backends: {', '.join(backend_names())}"
+        )
+    return _load(table[name])
+
+
+def sampling_backends() -> tuple[str, ...]:
+    """The names of the backends that sample (``Backend.samples``), in :func:`backend_names`
+    order; a backend whose module does not import is left out (it cannot run here)."""
+    out = []
+    for name in backend_names():
+        try:
+            if getattr(backend_class(name), "samples", False):
+                out.append(name)
+        except ImportError:
+            continue
+    return tuple(out)
 
 
 def list_backends() -> list[tuple[str, str, bool, str]]:

@@ -57,6 +57,7 @@ from typing import Iterable, Mapping, Sequence
 import numpy as np
 
 from uam_solvers.base import MwisInputError, MwisProblem, check_selection
+from uam_solvers.registry import sampling_backends
 from uam_solvers.instances import (
     CorpusEntry,
     generate_corpus_entries,
@@ -67,7 +68,9 @@ from uam_solvers.instances import (
 TARGET_PROBABILITY = 0.99
 DETERMINISTIC_PENALTY_S = 10.0
 DEFAULT_STUDY_NUM_READS = 10_000
-ANNEALING_BACKENDS = frozenset({"sa", "tabu", "qpu", "qpu-emulator"})
+#: the sampling backends (``Backend.samples``, read through the registry): a new sampler is in
+#: the TTS study by its class alone
+ANNEALING_BACKENDS = frozenset(sampling_backends())
 DETERMINISTIC_BACKENDS = frozenset({"greedy", "exact", "kamis", "gurobi"})
 
 CSV_COLUMNS = ["instance", "n_vertices", "n_edges", "backend", "repetitions", "num_reads",

@@ -26,6 +26,8 @@ import numpy as np  # noqa: E402
 
 METHOD_ORDER = ("fifo", "firstfit", "greedy", "exact", "sa", "tabu", "qpu-emulator", "qpu", "kamis",
                 "chils")
+from uam_solvers.registry import sampling_backends  # noqa: E402
+
 from ..runner.experiment_config import BASELINES  # noqa: E402  (planner policies, not MWIS solvers)
 from ..world.flights import corridor_use_m, flight_metrics  # noqa: E402,F401  (re-exported)
 # marker, line style and colour per method, so methods that overlap (exact, sa, tabu and the
@@ -297,7 +299,9 @@ def mwis_size_figure(cells, path: Path, k: int, window_s: float, interval_s: flo
 
 # backends whose proven_optimal flag is False whenever they ran on a non-empty graph, so a
 # proven-optimal epoch is one the reductions and component splitting solved without them
-NEVER_PROVING = ("sa", "tabu", "qpu-emulator", "qpu")
+#: the backends that never prove an answer optimal: the samplers (``Backend.samples``, through
+#: the registry)
+NEVER_PROVING = sampling_backends()
 
 
 def solve_time_figure(cells, path: Path) -> dict:
