@@ -145,12 +145,6 @@ done
 [[ "$SEED" =~ ^[0-9]+$ ]] || die "--seed: '$SEED' is not an integer >= 0"
 [[ "$FOXGLOVE_PORT" =~ ^[0-9]+$ ]] && (( FOXGLOVE_PORT <= 65535 )) || die "--foxglove-port: '$FOXGLOVE_PORT' is not a port 0..65535"
 [[ "$CONFORMANCE" =~ ^(auto|true|false)$ ]] || die "--conformance: '$CONFORMANCE' is not auto, true or false"
-if [[ "$CONFORMANCE" == auto ]]; then  # on only when the fleet can deviate from its plans
-  CONFORMANCE=$(awk -v w="$WIND" -v g="$GUST" -v s="$SPEED_ERROR" -v d="$DELAY_MEAN" -v z="$VERTICAL_GUST" \
-    -v a="$ALTITUDE_ERROR" \
-    'BEGIN { print ((w + 0 != 0 || g + 0 != 0 || s + 0 != 0 || d + 0 != 0 || z + 0 != 0 || a + 0 != 0) ? "true" : "false") }')
-  [[ "$REACTION" == true ]] && CONFORMANCE=true   # the planner reacts to its reports
-fi
 [[ "$USS_PORT" =~ ^[0-9]+$ ]] && (( USS_PORT <= 65535 )) || die "--uss-port: '$USS_PORT' is not a port 0..65535"
 [[ "$RTF" =~ ^[0-9]+(\.[0-9]+)?$ ]] || die "--rtf: '$RTF' is not a positive number"
 [[ -z "$SEPARATION" || "$SEPARATION" == sphere || "$SEPARATION" == cylinder ]] || die "--separation: '$SEPARATION' is not sphere or cylinder"
@@ -171,6 +165,10 @@ fi
 if awk -v p="$PROBE" -v m="$PROBE_MARGIN" 'BEGIN { exit !(m + 0 > 0 && p + 0 <= 0) }'; then
   die "--probe-margin: '$PROBE_MARGIN' needs --probe > 0 (the margin is the probe's)"
 fi
+# auto: the monitor runs when the fleet can deviate from its plans or the planner reacts to its
+# reports (the one rule: uam_contract.disturbances, which the launch file reads too)
+CONFORMANCE=$(python -m uam_contract.disturbances "$CONFORMANCE" "$REACTION" "$WIND" "$GUST" "$SPEED_ERROR" \
+  "$DELAY_MEAN" "$VERTICAL_GUST" "$ALTITUDE_ERROR") || die "--conformance: could not be decided (above)"
 # as floats: ROS parameters typed double refuse an integer given on the command line
 f() { [[ "$1" == *.* ]] && echo "$1" || echo "$1.0"; }
 [[ -f "$NETWORK" ]] || die "--network: no file '$NETWORK'"

@@ -8,7 +8,8 @@ import importlib
 
 import pytest
 
-MODULES = ("uam_solvers", "uam_planner.audit", "uam_planner.conformance", "uam_planner.planning")
+MODULES = ("uam_solvers", "uam_planner.audit", "uam_planner.conformance", "uam_planner.planning",
+           "uam_contract.disturbances")
 
 
 @pytest.mark.parametrize("name", MODULES)

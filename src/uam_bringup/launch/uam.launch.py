@@ -47,11 +47,12 @@ def generate_launch_description() -> LaunchDescription:
     # disturbance is set (an undisturbed fleet flies its plans exactly) or the planner reacts to
     # its reports (reaction:=true); the simulator then
     # waits for it as for the recorder
+    # (the one rule: uam_contract.disturbances.conformance_monitor_on, as run_fleet.sh calls it)
     conformance_on = PythonExpression([
-        "'", a["conformance"], "' == 'true' or ('", a["conformance"], "' == 'auto' and ('", a["reaction"],
-        "' == 'true' or any(float(x) != 0 "
-        "for x in ('", a["wind_speed_mps"], "', '", a["gust_std_mps"], "', '", a["speed_error"], "', '",
-        a["delay_mean_s"], "', '", a["vertical_gust_std_mps"], "', '", a["altitude_error_m"], "'))))"])
+        "uam_contract.disturbances.conformance_monitor_on('", a["conformance"], "', '", a["reaction"], "', '",
+        a["wind_speed_mps"], "', '", a["gust_std_mps"], "', '", a["speed_error"], "', '", a["delay_mean_s"], "', '",
+        a["vertical_gust_std_mps"], "', '", a["altitude_error_m"], "')"],
+        python_modules=["uam_contract", "uam_contract.disturbances"])
     recorder_prefix = "nice -n 19"
     sim_params = {"duration_s": a["duration"], "mode": a["mode"], "real_time_factor": a["rtf"],
                   # disturbances, seeded by the run's seed

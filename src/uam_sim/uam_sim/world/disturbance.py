@@ -60,6 +60,8 @@ from typing import Sequence
 
 import numpy as np
 
+from uam_contract.disturbances import disturbances_on
+
 from uam_planner.trajectory import Trajectory
 
 #: plane waves summed in the gust field
@@ -146,8 +148,8 @@ class DisturbanceConfig:
     @property
     def enabled(self) -> bool:
         """True when any disturbance is on (else the plan is flown exactly)."""
-        return bool(self.wind_speed_mps or self.gust_std_mps or self.speed_error or self.delay_mean_s
-                    or self.vertical)
+        return disturbances_on(self.wind_speed_mps, self.gust_std_mps, self.speed_error, self.delay_mean_s,
+                               self.vertical_gust_std_mps, self.altitude_error_m)
 
     @property
     def vertical(self) -> bool:
