@@ -165,10 +165,6 @@ fi
 if awk -v p="$PROBE" -v m="$PROBE_MARGIN" 'BEGIN { exit !(m + 0 > 0 && p + 0 <= 0) }'; then
   die "--probe-margin: '$PROBE_MARGIN' needs --probe > 0 (the margin is the probe's)"
 fi
-# auto: the monitor runs when the fleet can deviate from its plans or the planner reacts to its
-# reports (the one rule: uam_contract.disturbances, which the launch file reads too)
-CONFORMANCE=$(python -m uam_contract.disturbances "$CONFORMANCE" "$REACTION" "$WIND" "$GUST" "$SPEED_ERROR" \
-  "$DELAY_MEAN" "$VERTICAL_GUST" "$ALTITUDE_ERROR") || die "--conformance: could not be decided (above)"
 # as floats: ROS parameters typed double refuse an integer given on the command line
 f() { [[ "$1" == *.* ]] && echo "$1" || echo "$1.0"; }
 [[ -f "$NETWORK" ]] || die "--network: no file '$NETWORK'"
@@ -179,6 +175,10 @@ bash scripts/setup.sh >/tmp/uam-setup-$$.log 2>&1 || { cat /tmp/uam-setup-$$.log
 rm -f /tmp/uam-setup-$$.log
 # shellcheck disable=SC1091
 source scripts/env.sh
+# auto: the monitor runs when the fleet can deviate from its plans or the planner reacts to its
+# reports (the one rule: uam_contract.disturbances, which the launch file reads too)
+CONFORMANCE=$(python -m uam_contract.disturbances "$CONFORMANCE" "$REACTION" "$WIND" "$GUST" "$SPEED_ERROR" \
+  "$DELAY_MEAN" "$VERTICAL_GUST" "$ALTITUDE_ERROR") || die "--conformance: could not be decided (above)"
 if [[ "$BACKEND" == list ]]; then
   echo "MWIS backends (this script runs --backend exact unless told otherwise; the solver node"
   echo "started on its own uses default_backend from config/solver.yaml, 'auto'):"
