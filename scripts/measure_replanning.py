@@ -17,7 +17,7 @@ decided within it. Each seed runs twice from the same demand, re-plan policy ``m
 same flights). Per run: intents (accepted or airborne) at the announcement, affected flights by
 class and what happened to them, the re-plan decision wall time, the audit of what flew (every
 version from the instant it took effect, in the run's separation model: losses) and the
-constraint incursions (``uam_planner.replanning.audit_incursions``). Then MWIS against first-fit
+constraint incursions (``uam_sim.audit.flown_audit.incursions``, through the runner). Then MWIS against first-fit
 per seed (``uam_sim.reports.stats.paired``: mean difference and 95 % t interval over seeds): flights
 still reaching their destination, flights saved (not cancelled, not a contingency), mean added
 delay of those reaching their destination. Wall times depend on the machine's load (printed

@@ -185,17 +185,6 @@ def spliced(old: Trajectory, new: Trajectory, effective_s: float, tol_m: float =
     return Trajectory(times, points)
 
 
-def flown_trajectory(versions: Sequence) -> Trajectory | None:
-    """The trajectory flown by one flight given its versions in order (Flight objects with
-    ``trajectory`` and ``effective_s``, or None for a cancellation): each version from the
-    instant it took effect. None if nothing flew (cancelled before departure)."""
-    flown = None
-    for v in versions:
-        if v is None:  # cancelled: only a flight that had not departed is ever cancelled
-            return None
-        flown = v.trajectory if flown is None else spliced(flown, v.trajectory, v.effective_s)
-    return flown
-
 
 def clipped_from(tr: Trajectory, t_s: float) -> Trajectory | None:
     """The part of ``tr`` at or after ``t_s`` (None if it has landed by then)."""
@@ -310,38 +299,6 @@ def _pad_of_point(network, node: int, xy) -> int:
             best, k = d, i
     return k
 
-
-def audit_incursions(flown: dict, timeline: Sequence, network, ends: dict) -> list:
-    """Constraint incursions of what flew: (request_id, constraint label, t_s) for each flight
-    whose flown trajectory enters a constraint version while it was in force (its window cut
-    to [from_s, until_s)), by the same exact test the planner uses.
-
-    Args:
-        flown: request_id -> flown Trajectory.
-        timeline: from :func:`constraint_timeline`.
-        network: the Network.
-        ends: request_id -> (origin_id, destination_id) (the destination it landed at).
-    """
-    cs = []
-    for k, (c, since, until) in enumerate(timeline):
-        lo, hi = max(c.start_s, since), min(c.end_s, until)
-        if not hi > lo:
-            continue
-        cs.append(replace(c, constraint_id=f"{c.constraint_id}#{k}", start_s=lo, end_s=hi,
-                          announce_s=-math.inf))
-    if not cs or not flown:
-        return []
-    labels = {f"{c.constraint_id}#{k}": c.label() for k, (c, _a, _b) in enumerate(timeline)}
-    cset = ConstraintSet(cs, network)
-    ids = list(flown)
-    trs = [flown[i] for i in ids]
-    o = np.array([network.node_index(ends[i][0]) for i in ids], dtype=np.int64)
-    d = np.array([network.node_index(ends[i][1]) for i in ids], dtype=np.int64)
-    po = np.array([_pad_of_point(network, oi, tr.points_m[0]) for oi, tr in zip(o.tolist(), trs)])
-    pd = np.array([_pad_of_point(network, di, tr.points_m[-1]) for di, tr in zip(d.tolist(), trs)])
-    which, when = cset.violations(trs, o, d, po, pd)
-    return [(ids[i], labels[cset.constraints[int(which[i])].constraint_id], float(when[i]))
-            for i in np.flatnonzero(which >= 0).tolist()]
 
 
 # ---- affected flights and their alternatives ---------------------------------------------------

@@ -246,3 +246,22 @@ def test_entries_between_the_announcement_and_the_planners_epoch_are_reported_ap
     assert [(i.key, i.constraint_id, i.t_s) for i in gap] == [("op/r1", "sq", pytest.approx(40.0))]
     # without the announcement recorded (or announced at the epoch itself) there is no gap
     assert audit_incursions([v0], ["op/r1"], {}, [constraints_from_text(set_geojson([square()], 70.0, {"sq": 70.0}))])[2] == []
+
+
+def test_a_pad_closure_is_entered_only_from_that_pad():
+    from uam_planner.synthetic import generate_network
+
+    net = generate_network(60, 6, seed=1, levels_m=(60.0, 90.0), pads_per_vertiport=2)
+    a = net.enu_m[net.node_index("A000")]
+    pads = a[:2] + net.pads_of(net.node_index("A000"))
+    # r1 departs from A000's pad 1 at t = 0 and climbs away; pad 0 is closed, then pad 1
+    v0 = plan([(0, pads[1][0], pads[1][1], 0), (20, pads[1][0], pads[1][1], 60), (100, 0, 0, 60)],
+              origin="A000", destination="A001")
+    flight = flown_trajectory("op/r1", [v0])[0]
+    closed = [(Constraint("pad0", 1, "", 0.0, 100.0, vertiport_id="A000", pad_index=0), 0.0, math.inf)]
+    assert incursions([flight], closed, net) == []
+    (unknown,) = incursions([flight], closed)       # no network: the pad cannot be told
+    assert unknown.what == "departure (pad not known)"
+    closed1 = [(Constraint("pad1", 1, "", 0.0, 100.0, vertiport_id="A000", pad_index=1), 0.0, math.inf)]
+    (dep,) = incursions([flight], closed1, net)
+    assert (dep.what, dep.t_s) == ("departure", 0.0)

@@ -532,7 +532,7 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
         audit = audit_plans(approved_plans, separation_m, labels=labels)
     from .flown_audit import audit_incursions
     found_incursions, n_in_force, gap_incursions = audit_incursions(approved_plans, labels, flown_by_key,
-                                                                    constraint_sets)
+                                                                    constraint_sets, network)
     # the run's end as the epochs show it: the last epoch's time + the epoch length (the median
     # step between epochs); requests still within their window then are left out, as in the runner
     ts = sorted({e.t_s for e in epochs})

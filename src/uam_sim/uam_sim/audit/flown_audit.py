@@ -292,9 +292,26 @@ class Incursion:
                 (" (already inside when it came into force: unavoidable)" if self.inside_at_start else ""))
 
 
-def incursions(flown: Iterable[Flown], intervals: Sequence[tuple[Any, float, float]]) -> list[Incursion]:
+def pad_of(network, vertiport_id: str, xy) -> int | None:
+    """The index of the pad of ``vertiport_id`` nearest to ``xy`` (ENU m), from the network's pad
+    layout; None without a network or for a vertiport it does not know."""
+    if network is None:
+        return None
+    try:
+        node = network.node_index(vertiport_id)
+    except Exception:  # noqa: BLE001 - an unknown id: the pad cannot be told
+        return None
+    pads = network.enu_m[node][:2] + network.pads_of(node)
+    return int(np.argmin(np.sqrt(np.square(pads - np.asarray(xy, dtype=np.float64)[:2]).sum(axis=1))))
+
+
+def incursions(flown: Iterable[Flown], intervals: Sequence[tuple[Any, float, float]],
+               network=None) -> list[Incursion]:
     """Every entry of a flown trajectory into a constraint version while it was in force and in
-    its window (see the module docstring), earliest per (flight, constraint version)."""
+    its window (see the module docstring), earliest per (flight, constraint version). A closure
+    of one pad (``pad_index``) is entered by a departure or arrival at that pad, told from the
+    ``network``'s pad layout; without a network the pad cannot be told, and such an entry is
+    reported with "(pad not known)"."""
     out = []
     for f in flown:
         if len(f.times_s) < 1:
@@ -306,10 +323,19 @@ def incursions(flown: Iterable[Flown], intervals: Sequence[tuple[Any, float, flo
                 continue
             if c.kind == "closure":
                 latest = f.latest
-                for what, when, node in (("departure", float(t[0]), getattr(f.versions[0], "origin_id", "")),
-                                         ("arrival", float(t[-1]), getattr(latest, "destination_id", ""))):
-                    if node == c.vertiport_id and lo_t <= when < hi_t:
-                        out.append(Incursion(f.key, c.constraint_id, c.version, when, what))
+                for what, when, node, xy in (
+                        ("departure", float(t[0]), getattr(f.versions[0], "origin_id", ""), f.points_m[0]),
+                        ("arrival", float(t[-1]), getattr(latest, "destination_id", ""), f.points_m[-1])):
+                    if node != c.vertiport_id or not lo_t <= when < hi_t:
+                        continue
+                    pad = getattr(c, "pad_index", None)
+                    if pad is not None:
+                        found = pad_of(network, node, xy)
+                        if found is not None and found != pad:
+                            continue  # another pad of the vertiport: open
+                        if found is None:
+                            what += " (pad not known)"
+                    out.append(Incursion(f.key, c.constraint_id, c.version, when, what))
                 continue
             first = None
             for st, sx in f.trajectories():
@@ -435,7 +461,7 @@ def announced_gaps(sets: Sequence[tuple[float, Sequence[tuple[Any, float]]]]) ->
 
 
 def audit_incursions(plans: Sequence[Any], labels: Sequence[str], flown_by_key: dict,
-                     sets: Sequence) -> tuple[list[Incursion], int, list[Incursion]]:
+                     sets: Sequence, network=None) -> tuple[list[Incursion], int, list[Incursion]]:
     """Incursions of every approved flight as flown (its versions where it has them, else its
     plan) into the recorded constraints while the planner had them in force; how many
     constraint versions were; and the entries while a version was announced but not yet
@@ -445,8 +471,9 @@ def audit_incursions(plans: Sequence[Any], labels: Sequence[str], flown_by_key: 
         return [], 0, []
     flights = _as_flown(plans, labels, flown_by_key)
     gaps = announced_gaps(sets)
-    return incursions(flights, intervals), len(intervals), (incursions(flights, gaps) if gaps else [])
+    return (incursions(flights, intervals, network), len(intervals),
+            incursions(flights, gaps, network) if gaps else [])
 
 
 __all__ = ["announced_at", "audit_incursions", "flown_versions", "CONTINUITY_M", "Flown", "Incursion", "chain_problems", "constraint_intervals", "effective_s",
-           "flown_trajectory", "incursions", "plan_version", "plans_in_force", "PlansInForce", "contingency", "announced_gaps"]
+           "flown_trajectory", "incursions", "plan_version", "plans_in_force", "PlansInForce", "contingency", "announced_gaps", "pad_of"]

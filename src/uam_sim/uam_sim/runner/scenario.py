@@ -315,6 +315,24 @@ def planned_pieces(row, kinds: bool = False) -> list:
     return out
 
 
+def _incursions_as_flown(flown: list, timeline: list, network) -> list:
+    """(request id, constraint label, t_s) of every entry of a flight as flown into a constraint
+    version while the planner had it in force: the audit the analysis of a recording runs
+    (``uam_sim.audit.flown_audit.incursions``), on the runner's flights."""
+    from types import SimpleNamespace
+
+    from ..audit.flown_audit import Flown, incursions
+
+    flights = []
+    for f in flown:
+        tr = f["_traj"]
+        ends = SimpleNamespace(origin_id=f["origin"], destination_id=f["destination"])
+        flights.append(Flown(f["request_id"], [ends], tr.times_s, tr.points_m, [], [(tr.times_s, tr.points_m)]))
+    labels = {(c.constraint_id, c.version): c.label() for c, _a, _b in timeline}
+    return [(i.key, labels[(i.constraint_id, i.constraint_version)], float(i.t_s))
+            for i in incursions(flights, timeline, network)]
+
+
 #: a flown loss counts as "near a vertiport" when both aircraft are within this horizontal
 #: distance [m] of a vertiport (a first or last point of a track) that both flights use:
 #: twice the paper's 100 m separation, the area where one departs or lands beside the other
@@ -410,7 +428,7 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
     ``plan_updates`` replace the flight rows' plans (``ScenarioResult.replans`` lists them), the
     audit checks what flew (every version from the instant it took effect; cancelled flights
     flew nothing) and, when any constraint was in force, the summary adds ``replans``,
-    ``replan_<kind>`` counts and ``incursions`` (``uam_planner.replanning.audit_incursions``).
+    ``replan_<kind>`` counts and ``incursions`` (``uam_sim.audit.flown_audit.incursions``, as for a recording).
     """
     cfg = config if config is not None else ExperimentConfig()
     t_wall = time.perf_counter()
@@ -558,11 +576,9 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
                 sweep_audit([p for _r, p in dec], cfg.separation(), labels=[r for r, _p in dec])["losses"]
     extra = {}
     if planner.constraint_log or planner.initial_constraints:
-        from uam_planner.replanning import KINDS, audit_incursions, constraint_timeline
+        from uam_planner.replanning import KINDS, constraint_timeline
         timeline = constraint_timeline(planner.initial_constraints, planner.constraint_log)
-        inc = audit_incursions({f["request_id"]: f["_traj"] for f in flown}, timeline, network,
-                               {f["request_id"]: (f["origin"], f["destination"]) for f in flown}) \
-            if cfg.audit else []
+        inc = _incursions_as_flown(flown, timeline, network) if cfg.audit else []
         extra = {"replans": len(replans), **{f"replan_{k}": sum(r["kind"] == k for r in replans)
                                              for k in KINDS},
                  "incursions": len(inc) if cfg.audit else None}
