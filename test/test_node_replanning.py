@@ -77,6 +77,27 @@ def test_graph_replans_as_the_runner_does_and_the_recording_audits_what_flew(ros
     assert sum(s.plan_updates.values()) == len(graph_updates)
     assert s.approved == len(ref.decisions())
     assert ref.summary["replans"] == len(graph_updates)
+    # the plans in force (uam_sim.audit.flown_audit): each flight's parts follow each other
+    # without a gap in time or space, and every fleet-state sample of this undisturbed run lies on
+    # the part in force at its instant (to 1 mm), so what flew is exactly the record
+    from uam_contract.wire import scoped_id
+    from uam_sim.audit.flown_audit import flown_versions, plan_version
+    key = lambda p: scoped_id(p.operator_id, p.request_id) if p.operator_id else p.request_id  # noqa: E731
+    approved = [(key(p), p) for p in obs.plans if p.outcome == FlightPlan.OUTCOME_APPROVED and plan_version(p) == 1]
+    updates: dict = {}
+    for p in obs.plans:
+        if plan_version(p) > 1:
+            updates.setdefault(key(p), {})[plan_version(p)] = p
+    flown, problems = flown_versions(approved, updates, [])
+    assert all("never announced" in x for x in problems), problems  # no constraint sets given here
+    checked = 0
+    for f in flown.values():
+        parts = f.trajectories()
+        for (t0, x0), (t1, x1) in zip(parts, parts[1:]):
+            assert t1[0] == pytest.approx(t0[-1], abs=1e-9) and max(abs(x1[0] - x0[-1])) <= 1e-3, f.key
+            checked += 1
+    assert checked > 0 or not any(len(f.trajectories()) > 1 for f in flown.values())
+    assert s.flown["samples_off_plan"] == 0 and s.flown["tracks_without_plan"] == 0, s.flown
 
 
 def test_a_restarted_planner_takes_each_flights_newest_journaled_version(tmp_path):
