@@ -371,15 +371,22 @@ def constraint_volumes(c, ctx: IntentContext) -> list:
     return [api.Volume4D(**v4)]
 
 
-def f3548_constraint(c, ctx: IntentContext, t_s: float = 0.0):
+#: the reference's end of a constraint without an end: F3548 requires one; a fixed instant (this
+#: long after the scenario's start) keeps a version's reference the same whenever it is served [s]
+OPEN_END_S = 10_000_000.0
+
+
+def f3548_constraint(c, ctx: IntentContext):
     """An F3548 Constraint (reference and details) of a prism Constraint; its id is derived from
-    the constraint's id, its version is the constraint's. None for a closure."""
+    the constraint's id, its version is the constraint's. None for a closure. The same document
+    whenever it is asked for (F3548: a version's details never change): an open start is the
+    scenario's start, an open end :data:`OPEN_END_S` after it."""
     if c.vertiport_id is not None:
         return None
     vols = constraint_volumes(c, ctx)
     cid = constraint_entity_id(c.constraint_id)
-    start = vols[0].time_start if "time_start" in vols[0] else ctx.time(t_s)
-    end = vols[0].time_end if "time_end" in vols[0] else ctx.time(t_s + 86400.0, up=True)
+    start = vols[0].time_start if "time_start" in vols[0] else ctx.time(0.0)
+    end = vols[0].time_end if "time_end" in vols[0] else ctx.time(OPEN_END_S, up=True)
     reference = api.ConstraintReference(
         id=cid, manager=ctx.manager, uss_availability="Unknown", version=int(c.version),
         ovn=ovn(cid, c.version), time_start=start, time_end=end, uss_base_url=ctx.uss_base_url)

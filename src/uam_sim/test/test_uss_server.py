@@ -135,6 +135,15 @@ def test_constraint_details(server):
     assert get(server, "/uam_fleet/v1/constraints").json()["ids"] == [cid]
     assert get(server, f"/uss/v1/constraints/{constraint_entity_id('closed')}").status_code == 404
     assert get(server, "/uss/v1/constraints/nope").status_code == 400
+    # a version's document never changes: a constraint without an end, served, then the set
+    # republished later with another constraint added: the same reference and details
+    import math
+    forever = Constraint("zone", 1, "", 0.0, math.inf, center_m=(500.0, 0.0), radius_m=100.0)
+    store.set_constraints([forever])
+    first = get(server, f"/uss/v1/constraints/{constraint_entity_id('zone')}").json()
+    store.set_time(5000.0)
+    store.set_constraints([forever, Constraint("other", 1, "", 0.0, 50.0, center_m=(0.0, 0.0), radius_m=10.0)])
+    assert get(server, f"/uss/v1/constraints/{constraint_entity_id('zone')}").json() == first
 
 
 def test_auth_scope_checks_the_standards_scopes():

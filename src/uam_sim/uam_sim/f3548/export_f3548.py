@@ -104,7 +104,7 @@ def export(recording, out_dir, network_file: str, piece_s: float = 5.0,
                 cid = constraint_entity_id(con.constraint_id)
                 row = {"id": cid, "constraint_id": con.constraint_id, "version": con.version,
                        "published_s": t_s, "file": None}
-                doc = f3548_constraint(con, ctx, t_s)
+                doc = f3548_constraint(con, ctx)
                 if doc is not None:
                     body = {"constraint": as_json(doc)}
                     validate(body, "GetConstraintDetailsResponse")

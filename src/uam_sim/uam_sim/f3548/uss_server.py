@@ -93,7 +93,7 @@ class IntentStore:
     def set_constraints(self, constraints) -> None:
         docs = {}
         for c in constraints:
-            oc = f3548_constraint(c, self.ctx, self._t_s)
+            oc = f3548_constraint(c, self.ctx)
             if oc is not None:
                 docs[constraint_entity_id(c.constraint_id)] = json.dumps(
                     {"constraint": as_json(oc)}, separators=(",", ":"))
