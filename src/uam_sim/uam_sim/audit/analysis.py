@@ -388,8 +388,53 @@ def run_problems(syncs: list, reports: dict, approved: list, flown_ids: set, fle
     return problems, forged, run_end
 
 
-# complexity over 25: one pass over the messages, one branch per topic; to be split into a reader per topic
-def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SEPARATION_M,  # noqa: C901
+def _epoch_stats(msg) -> EpochStats:
+    """One planning report as a row of the epoch table."""
+    return EpochStats(
+        epoch_index=int(msg.epoch_index), t_s=stamp_s(msg.header.stamp),
+        eligible_requests=int(msg.eligible_requests), vertices=int(msg.vertices),
+        edges=int(msg.edges), selected=len(msg.instance.selected),
+        approved=int(msg.approved), expired=int(msg.expired), rejected=int(msg.rejected),
+        active_flights=int(msg.active_flights), objective=float(msg.objective),
+        solve_time_s=float(msg.solve_time_s), backend_used=str(msg.backend_used),
+        fallback=bool(msg.fallback), policy=str(getattr(msg, "policy", "")))
+
+
+def _rejection_reasons(plans: list) -> tuple[dict, dict]:
+    """The refusals' reasons grouped with their numbers as N (count per group), and each number's
+    range per group ("... by 270 s" and "... by 300 s" are one group, 270..300)."""
+    reasons: dict[str, int] = {}
+    values: dict[str, list] = {}
+    for p in plans:
+        if int(p.outcome) != OUTCOME_APPROVED:
+            key = _REASON_NUMBER.sub("N", str(p.reason))
+            reasons[key] = reasons.get(key, 0) + 1
+            numbers = [float(x) for x in _REASON_NUMBER.findall(str(p.reason))]
+            ranges = values.setdefault(key, [[x, x] for x in numbers])
+            for r, x in zip(ranges, numbers):
+                r[0], r[1] = min(r[0], x), max(r[1], x)
+    return reasons, values
+
+
+def _audit_plans_in_force(approved_plans: list, labels: list, flown_by_key: dict, updates: dict,
+                          separation_m) -> tuple[SafetyAudit, list]:
+    """The separation audit of the deconflicted plans in force and the conflicts of contingency
+    versions ([a, b, distance, t]); without plan updates, of the approved plans as they are."""
+    if not updates:
+        return audit_plans(approved_plans, separation_m, labels=labels), []
+    from .flown_audit import plans_in_force
+    from .separation import audit_trajectories
+    in_force = plans_in_force(approved_plans, labels, flown_by_key)
+    ok = in_force.select([not c for c in in_force.contingent])  # the deconflicted plans
+    audit = audit_trajectories(ok.parts, ok.labels, separation_m, groups=ok.groups)
+    if not any(in_force.contingent):
+        return audit, []
+    # not deconflicted by design: a class of its own
+    return audit, audit_trajectories(in_force.parts, in_force.labels, separation_m, groups=in_force.groups,
+                                     only_pairs_with=in_force.contingent).losses
+
+
+def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SEPARATION_M,
                        path: str = "", reader: str = "", complete_file: bool = True,
                        network=None) -> RunSummary:
     """The summary of a stream of (topic, log_time_ns, message), e.g. from :func:`iter_decoded`.
@@ -461,14 +506,7 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
                 (int(msg.approved), int(msg.expired), int(msg.eligible_requests), int(msg.vertices)))
             if len(reports[int(msg.epoch_index)]) > 1 or any(e.epoch_index == int(msg.epoch_index) for e in epochs):
                 continue  # a repeat (or a second report) of an epoch counts once in the table
-            epochs.append(EpochStats(
-                epoch_index=int(msg.epoch_index), t_s=stamp_s(msg.header.stamp),
-                eligible_requests=int(msg.eligible_requests), vertices=int(msg.vertices),
-                edges=int(msg.edges), selected=len(msg.instance.selected),
-                approved=int(msg.approved), expired=int(msg.expired), rejected=int(msg.rejected),
-                active_flights=int(msg.active_flights), objective=float(msg.objective),
-                solve_time_s=float(msg.solve_time_s), backend_used=str(msg.backend_used),
-                fallback=bool(msg.fallback), policy=str(getattr(msg, "policy", ""))))
+            epochs.append(_epoch_stats(msg))
     plans = [p for ps in decisions.values() for p in ps]
     outcomes = [int(p.outcome) for p in plans]
     conflicting = {rid: [_OUTCOME_NAMES.get(int(p.outcome), str(int(p.outcome))) for p in ps]
@@ -487,16 +525,7 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
         for k, p in enumerate(mine):
             approved_plans.append(p)
             labels.append(rid if k == 0 else f"{rid}#{k + 1}")
-    reasons: dict[str, int] = {}
-    values: dict[str, list] = {}
-    for p in plans:
-        if int(p.outcome) != OUTCOME_APPROVED:
-            key = _REASON_NUMBER.sub("N", str(p.reason))  # "... by 270 s" and "... by 300 s" together
-            reasons[key] = reasons.get(key, 0) + 1
-            numbers = [float(x) for x in _REASON_NUMBER.findall(str(p.reason))]
-            ranges = values.setdefault(key, [[x, x] for x in numbers])
-            for r, x in zip(ranges, numbers):
-                r[0], r[1] = min(r[0], x), max(r[1], x)
+    reasons, values = _rejection_reasons(plans)
     flights = [_flight_row(p, label, request_rows.get(request_key(p)))
                for p, label in zip(approved_plans, labels)]
     if network is not None:  # the detour in metres, as the runner measures it
@@ -517,19 +546,8 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
     # a FIFO or first-fit epoch reports its graph but solves no MWIS: its selection is not one
     with_instance = [e for e in epochs if e.vertices > 0 and e.policy in ("", "mwis")]
     max_active = int(max(fleet_n)) if fleet_n else 0
-    contingency_conflicts: list = []
-    if updates:  # what flew: every version from the instant it took effect (uam_sim.audit.flown_audit)
-        from .flown_audit import plans_in_force
-        from .separation import audit_trajectories
-        in_force = plans_in_force(approved_plans, labels, flown_by_key)
-        ok = in_force.select([not c for c in in_force.contingent])  # the deconflicted plans
-        audit = audit_trajectories(ok.parts, ok.labels, separation_m, groups=ok.groups)
-        if any(in_force.contingent):  # not deconflicted by design: a class of its own
-            contingency_conflicts = audit_trajectories(in_force.parts, in_force.labels, separation_m,
-                                                       groups=in_force.groups,
-                                                       only_pairs_with=in_force.contingent).losses
-    else:
-        audit = audit_plans(approved_plans, separation_m, labels=labels)
+    audit, contingency_conflicts = _audit_plans_in_force(approved_plans, labels, flown_by_key, updates,
+                                                         separation_m)
     from .flown_audit import audit_incursions
     found_incursions, n_in_force, gap_incursions = audit_incursions(approved_plans, labels, flown_by_key,
                                                                     constraint_sets, network)
