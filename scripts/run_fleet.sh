@@ -362,6 +362,8 @@ while alive "$SIM_PID" && (( INTERRUPTED == 0 )); do
   for i in "${!PIDS[@]}"; do
     if (( INTERRUPTED == 0 )) && [[ "${PIDS[$i]}" != "$SIM_PID" && "${NAMES[$i]}" != solver ]] && ! alive "${PIDS[$i]}" \
         && ! grep -q "run finished" "$OUT/simulator.log" 2>/dev/null; then
+      # a stop signal trapped while this check ran stopped the node itself: not a failure
+      (( INTERRUPTED == 0 )) || break
       echo "run_fleet: node '${NAMES[$i]}' exited before the end of the run; its log ($OUT/${NAMES[$i]}.log) ends with:" >&2
       tail -n 5 "$OUT/${NAMES[$i]}.log" >&2
       stop_all INT
