@@ -14,7 +14,7 @@ import pytest
 from uam_planner.constraints import Constraint, ConstraintSet, load_constraints
 from uam_planner.network import network_from_enu
 from uam_planner.planning import AirspaceConfig, FlightRequest, Planner, PlanningConfig
-from uam_planner.replanning import DELAY_SCALE_S, _pad_of_point, constraint_timeline, flight_state, spliced
+from uam_planner.replanning import DELAY_SCALE_S, pad_of_point, constraint_timeline, flight_state, spliced
 from uam_planner.trajectory import Trajectory
 
 
@@ -59,8 +59,8 @@ def audit_incursions(flown: dict, timeline: Sequence, network, ends: dict) -> li
     trs = [flown[i] for i in ids]
     o = np.array([network.node_index(ends[i][0]) for i in ids], dtype=np.int64)
     d = np.array([network.node_index(ends[i][1]) for i in ids], dtype=np.int64)
-    po = np.array([_pad_of_point(network, oi, tr.points_m[0]) for oi, tr in zip(o.tolist(), trs)])
-    pd = np.array([_pad_of_point(network, di, tr.points_m[-1]) for di, tr in zip(d.tolist(), trs)])
+    po = np.array([pad_of_point(network, oi, tr.points_m[0]) for oi, tr in zip(o.tolist(), trs)])
+    pd = np.array([pad_of_point(network, di, tr.points_m[-1]) for di, tr in zip(d.tolist(), trs)])
     which, when = cset.violations(trs, o, d, po, pd)
     return [(ids[i], labels[cset.constraints[int(which[i])].constraint_id], float(when[i]))
             for i in np.flatnonzero(which >= 0).tolist()]
@@ -574,9 +574,9 @@ def test_the_planner_passes_its_held_flights_to_the_replan(monkeypatch):
 # ---- issue 22, fourth stop: the decision's speed-ups decide exactly what the old code did ---------
 
 def test_pad_of_a_point_is_the_one_the_norm_and_argmin_pick():
-    """``_pad_of_point`` in scalars against the former numpy formula (the reference here), to the
+    """``pad_of_point`` in scalars against the former numpy formula (the reference here), to the
     index, on random points and on points exactly as near to two pads (the first wins)."""
-    from uam_planner.replanning import _pad_of_point
+    from uam_planner.replanning import pad_of_point
     net = network_from_enu("pads", ["A", "B", "m"], [(0, 0, 0), (1000, 0, 0), (500, 300, 0)],
                            [True, True, False], [("A", "m"), ("m", "B")],
                            airspace={"levels_m": [60.0], "direction_rule": "none"},
@@ -591,10 +591,10 @@ def test_pad_of_a_point_is_the_one_the_norm_and_argmin_pick():
     pts = [rng.uniform(-60.0, 90.0, 2) for _ in range(2000)]
     pts += [(15.0, 0.0), (15.0, 15.0), (0.0, 15.0), (30.0, 15.0), (15.0, 30.0)]  # exact ties
     pts += [(x, y, 60.0) for x, y in rng.uniform(-5.0, 35.0, (200, 2))]        # with a height
-    got = [_pad_of_point(net, 0, p) for p in pts]
+    got = [pad_of_point(net, 0, p) for p in pts]
     assert got == [reference(p) for p in pts]
     assert got[2000:2005] == [0, 0, 0, 1, 2]
-    assert _pad_of_point(net, 1, (999.0, 5.0)) == 0          # one pad: always 0
+    assert pad_of_point(net, 1, (999.0, 5.0)) == 0          # one pad: always 0
 
 
 def test_constraint_free_in_one_call_is_one_call_per_flight():

@@ -299,13 +299,13 @@ def _constraint_free(alts: list, f, config, network, t_eff: float, airborne: boo
     cset = config.constraints
     if not alts or cset is None or not len(cset):
         return alts
-    from .replanning import _pad_of_point
+    from .replanning import pad_of_point
     d = network.node_index(f.destination_id)
     o = -1 if airborne else network.node_index(f.origin_id)
     trs = [_clipped(a[0], t_eff) or a[0] for a in alts]
     which, _ = cset.violations(trs, np.full(len(alts), o, dtype=np.int64),
                                np.full(len(alts), d, dtype=np.int64), np.zeros(len(alts), dtype=np.int64),
-                               np.array([_pad_of_point(network, d, a[0].points_m[-1]) for a in alts]))
+                               np.array([pad_of_point(network, d, a[0].points_m[-1]) for a in alts]))
     return [a for a, w in zip(alts, which.tolist()) if w < 0]
 
 

@@ -280,7 +280,7 @@ def constraint_timeline(initial: Sequence[Constraint], applied: Sequence[Constra
     return out
 
 
-def _pad_of_point(network, node: int, xy) -> int:
+def pad_of_point(network, node: int, xy) -> int:
     """Index of the pad of ``node`` nearest to ``xy`` (the first of equally near ones)."""
     pads = network.pads_of(node)
     if len(pads) <= 1:
@@ -320,8 +320,8 @@ def affected_flights(active: Sequence, cset: ConstraintSet, t_eff: float, networ
         di = network.node_index(f.destination_id)
         o.append(oi if f.departure_s >= t_eff else -1)
         d.append(di)
-        po.append(_pad_of_point(network, oi, f.trajectory.points_m[0]))
-        pd.append(_pad_of_point(network, di, f.trajectory.points_m[-1]))
+        po.append(pad_of_point(network, oi, f.trajectory.points_m[0]))
+        pd.append(pad_of_point(network, di, f.trajectory.points_m[-1]))
     if not rows:
         return {}
     which, when = cset.violations(trs, np.array(o), np.array(d), np.array(po), np.array(pd))
@@ -455,7 +455,7 @@ def _airborne_alternatives(f, t_eff: float, network, config, router: _Router, st
     speed = float(config.speed_mps)
     descent = float(config.airspace.descent_rate_mps)
     xy = network.enu_m[:, :2]
-    dest_pad = _pad_of_point(network, dest, pts[-1])
+    dest_pad = pad_of_point(network, dest, pts[-1])
     alts = []
     others = np.array([int(a) for a in network.aerodrome_indices if int(a) != dest], dtype=np.int64)
     for k in range(k0, k0 + (1 if stage == 1 else BRANCH_WAYPOINTS)):
@@ -569,9 +569,9 @@ def _constraint_free_many(groups: list, cset: ConstraintSet, t_eff: float, netwo
     trs = [clipped_from(a.trajectory, t_eff) for a, _o in flat]
     o = np.array([origin if origin is not None else -1 for _a, origin in flat], dtype=np.int64)
     d = np.array([a.destination for a, _o in flat], dtype=np.int64)
-    po = np.array([_pad_of_point(network, max(origin, 0), a.trajectory.points_m[0]) if origin is not None
+    po = np.array([pad_of_point(network, max(origin, 0), a.trajectory.points_m[0]) if origin is not None
                    else 0 for a, origin in flat])
-    pd = np.array([_pad_of_point(network, a.destination, a.trajectory.points_m[-1]) for a, _o in flat])
+    pd = np.array([pad_of_point(network, a.destination, a.trajectory.points_m[-1]) for a, _o in flat])
     which, _ = cset.violations(trs, o, d, po, pd)
     ok = (which < 0).tolist()
     out, pos = [], 0

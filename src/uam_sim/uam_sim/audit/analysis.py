@@ -747,10 +747,10 @@ def format_choices(choices: dict) -> str:
     name's suffix: ``lead_time_s`` 300 -> "lead time 300 s")."""
     parts = []
     for k, v in choices.items():
-        unit = next((u for suffix, u in _UNITS if k.endswith(suffix)), "")
-        name = k[: len(k) - len(next(s for s, u in _UNITS if u == unit))] if unit else k
+        suffix, unit = next(((s, u) for s, u in _UNITS if k.endswith(s)), ("", ""))
+        name = k[: len(k) - len(suffix)].replace("_", " ")
         text = str(v).lower() if isinstance(v, bool) else f"{v:g}" if isinstance(v, float) else str(v)
-        parts.append(f"{name.replace('_', ' ')} {text}{' ' + unit if unit else ''}")
+        parts.append(f"{name} {text}{' ' + unit if unit else ''}")
     return ", ".join(parts)
 
 

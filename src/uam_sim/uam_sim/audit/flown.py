@@ -146,6 +146,18 @@ def straight_pieces(track: Trajectory, velocities_mps: np.ndarray | None) -> np.
 VERTEX_M = 1e-6
 
 
+def _one_turn(dt: float, p0: np.ndarray, p1: np.ndarray, v0: np.ndarray, v1: np.ndarray) -> float | None:
+    """The instant ``tau`` into a piece of one turn from ``v0`` to ``v1`` that leads from ``p0``
+    to ``p1`` (``p0 + v0 tau + v1 (dt - tau) = p1`` in every axis, to VERTEX_M), or None."""
+    dv = v0 - v1
+    rhs = p1 - p0 - v1 * dt
+    den = float(dv @ dv)
+    if den <= 0:
+        return None
+    tau = float(dv @ rhs) / den
+    return tau if float(np.abs(dv * tau - rhs).max()) <= VERTEX_M else None
+
+
 def simulator_motion(track: Trajectory, velocities_mps: np.ndarray | None) -> tuple[Trajectory, np.ndarray]:
     """The track as the simulator flew it, and per piece of it whether that piece is exact.
 
@@ -162,44 +174,37 @@ def simulator_motion(track: Trajectory, velocities_mps: np.ndarray | None) -> tu
     t, p, v = track.times_s, track.points_m, velocities_mps
     times, points, exact = [t[:1]], [p[:1]], []
     for k in range(n):
-        if not straight[k]:
-            dt = t[k + 1] - t[k]
-            dv = v[k] - v[k + 1]
-            rhs = p[k + 1] - p[k] - v[k + 1] * dt
-            den = float(dv @ dv)
-            tau = float(dv @ rhs) / den if den > 0 else -1.0
-            if t[k] < t[k] + tau < t[k + 1] and float(np.abs(dv * tau - rhs).max()) <= VERTEX_M:
+        piece_exact = bool(straight[k])
+        if not piece_exact:
+            tau = _one_turn(t[k + 1] - t[k], p[k], p[k + 1], v[k], v[k + 1])
+            if tau is not None and t[k] < t[k] + tau < t[k + 1]:
                 times.append(np.array([t[k] + tau]))
                 points.append((p[k] + v[k] * tau)[None, :])
                 exact.append(True)
-                straight_k = True
-            else:
-                straight_k = False
-        else:
-            straight_k = True
+                piece_exact = True
         times.append(t[k + 1:k + 2])
         points.append(p[k + 1:k + 2])
-        exact.append(straight_k)
+        exact.append(piece_exact)
     return Trajectory(np.concatenate(times), np.vstack(points)), np.array(exact, dtype=bool)
 
 
 def piece_bounds(track: Trajectory, plan: Trajectory | None, vh: float,
-                 vz: float, straight: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, int]:
+                 vz: float, exact: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, int]:
     """Per piece of ``track``: the bound of one aircraft's horizontal and vertical distance from
-    the chord (see the module docstring): 0 where the piece flew straight (``straight``, from
-    :func:`straight_pieces`); from the plan's velocities where both samples lie on ``plan``;
-    else ``vh dt / 2`` and ``vz dt / 2``; and how many samples are off the plan (by more than
-    ON_PLAN_M, or outside its times; 0 without a plan)."""
-    eh, ev, off = _piece_bounds(track, plan, vh, vz)
-    if straight is not None and straight.any():
-        eh, ev = eh.copy(), ev.copy()
-        eh[straight] = 0.0
-        ev[straight] = 0.0
+    the chord (see the module docstring): 0 where the piece is ``exact`` (the simulator's own
+    motion, :func:`simulator_motion`); from the plan's velocities where both samples lie on
+    ``plan``; else ``vh dt / 2`` and ``vz dt / 2``; and how many samples are off the plan (by more
+    than ON_PLAN_M, or outside its times; 0 without a plan)."""
+    eh, ev, off = _plan_bounds(track, plan, vh, vz)
+    if exact is not None:
+        eh[exact] = 0.0
+        ev[exact] = 0.0
     return eh, ev, off
 
 
-def _piece_bounds(track: Trajectory, plan: Trajectory | None, vh: float,
-                  vz: float) -> tuple[np.ndarray, np.ndarray, int]:
+def _plan_bounds(track: Trajectory, plan: Trajectory | None, vh: float,
+                 vz: float) -> tuple[np.ndarray, np.ndarray, int]:
+    """:func:`piece_bounds` but for the exact pieces (new arrays, the caller's to change)."""
     t = track.times_s
     dt = np.diff(t)
     eh, ev = vh * dt / 2.0, vz * dt / 2.0
@@ -216,7 +221,6 @@ def _piece_bounds(track: Trajectory, plan: Trajectory | None, vh: float,
     _a, _b, _p, v = plan.segments()
     first = np.clip(np.searchsorted(pt, t[:-1], side="right") - 1, 0, v.shape[0] - 1)
     last = np.clip(np.searchsorted(pt, t[1:], side="left") - 1, 0, v.shape[0] - 1)
-    eh, ev = eh.copy(), ev.copy()
     one = ok & (last <= first)
     eh[one] = 0.0
     ev[one] = 0.0
@@ -342,10 +346,10 @@ def flown_audit(tracks: Mapping[str, Trajectory], separation, sample_step_s: flo
         motion = {i: simulator_motion(tracks[i], velocities.get(i)) for i in ids}
         tracks = {i: motion[i][0] for i in ids}
         trajs = [tracks[i] for i in ids]
-        straight = {i: motion[i][1] for i in ids}
+        exact = {i: motion[i][1] for i in ids}
     else:
-        straight = {i: np.zeros(max(tracks[i].times_s.size - 1, 0), dtype=bool) for i in ids}
-    bounds = {i: piece_bounds(tracks[i], (plans or {}).get(i), vh, vz, straight[i]) for i in ids}
+        exact = {i: np.zeros(max(tracks[i].times_s.size - 1, 0), dtype=bool) for i in ids}
+    bounds = {i: piece_bounds(tracks[i], (plans or {}).get(i), vh, vz, exact[i]) for i in ids}
     bh = 2.0 * max((float(b[0].max()) for b in bounds.values() if b[0].size), default=0.0)
     bv = 2.0 * max((float(b[1].max()) for b in bounds.values() if b[1].size), default=0.0)
     # one candidate search for both minima (uam_planner.audit.sweep_audits): the chords in the
@@ -373,7 +377,8 @@ def flown_audit(tracks: Mapping[str, Trajectory], separation, sample_step_s: flo
         # pieces whose bound is 0 on both axes (on the plan, straight and level or one segment)
         out["pieces_exact"] = sum(int(((b[0] == 0) & (b[1] == 0)).sum()) for b in bounds.values())
         out["pieces"] = sum(int(b[0].size) for b in bounds.values())
-        out["pieces_straight"] = sum(int(s.sum()) for s in straight.values())
+        # pieces exact from the simulator's reported motion (flown straight, or one turn rebuilt)
+        out["pieces_straight"] = sum(int(s.sum()) for s in exact.values())
     proven_pairs = {(a, b) for a, b, _d, _t in out["loss_pairs"]}
     unresolved = sorted((x for x in possible if (x[0], x[1]) not in proven_pairs), key=lambda x: x[2])
     out["unresolved"], out["unresolved_pairs"] = len(unresolved), unresolved[:LISTED]

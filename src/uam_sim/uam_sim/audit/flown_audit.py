@@ -87,10 +87,11 @@ def _clip(t: np.ndarray, x: np.ndarray, lo: float, hi: float) -> tuple[np.ndarra
 @dataclass
 class Flown:
     """What one request flew: its versions in order, each version's part while in force
-    (``segments``: (times, points), one per version, its first point kept: a reaction update's
-    is where the aircraft was) and the whole as one trajectory (``times_s``, ``points_m``: the
-    segments joined, a segment's first point replacing its predecessor's last); ``pieces``:
-    (version, start_s, end_s) of each part."""
+    (``segments``: (times, points, plan version), one per version, its first point kept: a
+    reaction update's is where the aircraft was; none given: the whole trajectory is the first
+    version's) and the whole as one trajectory (``times_s``, ``points_m``: the segments joined, a
+    segment's first point replacing its predecessor's last); ``pieces``: (version, start_s,
+    end_s) of each part."""
 
     key: str
     versions: list
@@ -98,8 +99,6 @@ class Flown:
     points_m: np.ndarray
     pieces: list = field(default_factory=list)
     segments: list = field(default_factory=list)
-    #: the plan version of each segment
-    segment_versions: list = field(default_factory=list)
 
     @property
     def latest(self) -> Any:
@@ -111,11 +110,8 @@ class Flown:
 
     def parts(self) -> list[tuple[np.ndarray, np.ndarray, Any]]:
         """(times, points, plan version) of each part in force of two points or more."""
-        if not self.segments:
-            found = [(self.times_s, self.points_m, self.versions[0] if self.versions else None)]
-        else:
-            found = [(t, x, p) for (t, x), p in zip(self.segments, self.segment_versions or [None] * len(self.segments))]
-        return [(t, x, p) for t, x, p in found if len(t) >= 2]
+        found = self.segments or [(self.times_s, self.points_m, self.versions[0] if self.versions else None)]
+        return [s for s in found if len(s[0]) >= 2]
 
 
 def reaction_update(p: Any) -> bool:
@@ -172,7 +168,7 @@ def flown_trajectory(key: str, versions: Sequence[Any]) -> tuple[Flown, list[str
     starts where the aircraft was rather than where its plan had it, starts a segment of its
     own with its first waypoint kept."""
     problems = []
-    segments: list[list] = []   # [[times...], [points...]] per segment
+    segments: list[tuple] = []   # (times, points, plan version) per version in force
     pieces = []
     for n, p in enumerate(versions):
         start = effective_s(p)
@@ -193,11 +189,10 @@ def flown_trajectory(key: str, versions: Sequence[Any]) -> tuple[Flown, list[str
             if gap > CONTINUITY_M and not reaction_update(p):
                 problems.append(f"{key}: version {plan_version(p)} starts {gap:.3f} m from where version "
                                 f"{plan_version(versions[n - 1])} had the flight at {ct[0]:g} s")
-        segments.append([ct, cx, p])
+        segments.append((ct, cx, p))
         pieces.append(piece)
-    segs = [(s[0], s[1]) for s in segments]
     times, points = [], []
-    for st, sx in segs:
+    for st, sx, _p in segments:
         if times and times[-1][-1] >= st[0] - 1e-9:
             times[-1], points[-1] = times[-1][:-1], points[-1][:-1]  # where the aircraft was wins
         times.append(st)
@@ -206,7 +201,7 @@ def flown_trajectory(key: str, versions: Sequence[Any]) -> tuple[Flown, list[str
         t_all, x_all = np.concatenate(times), np.vstack(points)
     else:
         t_all, x_all = np.zeros(0), np.zeros((0, 3))
-    return Flown(key, list(versions), t_all, x_all, pieces, segs, [s[2] for s in segments]), problems
+    return Flown(key, list(versions), t_all, x_all, pieces, segments), problems
 
 
 def constraint_intervals(sets: Sequence[tuple[float, Sequence[tuple[Any, float]]]]) -> list[tuple[Any, float, float]]:
@@ -293,16 +288,18 @@ class Incursion:
 
 
 def pad_of(network, vertiport_id: str, xy) -> int | None:
-    """The index of the pad of ``vertiport_id`` nearest to ``xy`` (ENU m), from the network's pad
-    layout; None without a network or for a vertiport it does not know."""
+    """The index of the pad of ``vertiport_id`` nearest to ``xy`` (ENU m), as the planner tells
+    it (``uam_planner.replanning.pad_of_point``); None without a network or for a vertiport it
+    does not know."""
+    from uam_planner.network import NetworkError
+    from uam_planner.replanning import pad_of_point
+
     if network is None:
         return None
     try:
-        node = network.node_index(vertiport_id)
-    except Exception:  # noqa: BLE001 - an unknown id: the pad cannot be told
+        return pad_of_point(network, network.node_index(vertiport_id), xy)
+    except NetworkError:  # an unknown id: the pad cannot be told
         return None
-    pads = network.enu_m[node][:2] + network.pads_of(node)
-    return int(np.argmin(np.sqrt(np.square(pads - np.asarray(xy, dtype=np.float64)[:2]).sum(axis=1))))
 
 
 def incursions(flown: Iterable[Flown], intervals: Sequence[tuple[Any, float, float]],
@@ -447,7 +444,7 @@ def _as_flown(plans: Sequence[Any], labels: Sequence[str], flown_by_key: dict) -
         f = flown_by_key.get(label)
         if f is None:
             t, x = trajectory_of(p)
-            f = Flown(label, [p], t, x, [(plan_version(p), float(t[0]), float(t[-1]))] if len(t) else [], [(t, x)])
+            f = Flown(label, [p], t, x, [(plan_version(p), float(t[0]), float(t[-1]))] if len(t) else [])
         flights.append(f)
     return flights
 

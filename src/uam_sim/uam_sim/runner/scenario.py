@@ -327,7 +327,7 @@ def _incursions_as_flown(flown: list, timeline: list, network) -> list:
     for f in flown:
         tr = f["_traj"]
         ends = SimpleNamespace(origin_id=f["origin"], destination_id=f["destination"])
-        flights.append(Flown(f["request_id"], [ends], tr.times_s, tr.points_m, [], [(tr.times_s, tr.points_m)]))
+        flights.append(Flown(f["request_id"], [ends], tr.times_s, tr.points_m))
     labels = {(c.constraint_id, c.version): c.label() for c, _a, _b in timeline}
     return [(i.key, labels[(i.constraint_id, i.constraint_version)], float(i.t_s))
             for i in incursions(flights, timeline, network)]
