@@ -77,19 +77,21 @@ def test_graph_replans_as_the_runner_does_and_the_recording_audits_what_flew(ros
     assert sum(s.plan_updates.values()) == len(graph_updates)
     assert s.approved == len(ref.decisions())
     assert ref.summary["replans"] == len(graph_updates)
-    # the plans in force (uam_sim.audit.flown_audit): each flight's parts follow each other
+    # the plans in force (uam_sim.audit.record): each flight's parts follow each other
     # without a gap in time or space, and every fleet-state sample of this undisturbed run lies on
     # the part in force at its instant (to 1 mm), so what flew is exactly the record
     from uam_contract.wire import scoped_id
-    from uam_sim.audit.flown_audit import flown_versions, plan_version
+    from uam_sim.audit.flown_audit import plan_version
+    from uam_sim.audit.record import RunRecord
     key = lambda p: scoped_id(p.operator_id, p.request_id) if p.operator_id else p.request_id  # noqa: E731
     approved = [(key(p), p) for p in obs.plans if p.outcome == FlightPlan.OUTCOME_APPROVED and plan_version(p) == 1]
     updates: dict = {}
     for p in obs.plans:
         if plan_version(p) > 1:
             updates.setdefault(key(p), {})[plan_version(p)] = p
-    flown, problems = flown_versions(approved, updates, [])
-    assert all("never announced" in x for x in problems), problems  # no constraint sets given here
+    record = RunRecord.from_plans(approved, updates, [])
+    assert all("never announced" in x for x in record.problems), record.problems  # no constraint sets given here
+    flown = {f.key: f.flown for f in record.flights if f.updated}
     checked = 0
     for f in flown.values():
         parts = f.trajectories()

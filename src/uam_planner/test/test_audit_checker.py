@@ -57,3 +57,21 @@ def test_sweep_audit_matches_the_pair_walk(kind):
     assert {(i, j) for i, j, _, _ in a.losses} == {(i, j) for i, j, _, _ in b.losses}
     assert len(a.losses) > 10 and b.pairs_checked == a.pairs_checked
     assert b.min_separation_m == pytest.approx(a.min_separation_m)
+
+
+def test_the_sweep_counts_a_loss_per_flight_pair_and_never_pairs_two_parts_of_one_flight():
+    # flight A in two parts (its version 1 until 50 s, version 2 from there, from the same point):
+    # B flies beside both parts 50 m away, so there is one losing flight pair, not two; and the
+    # parts, which touch at 50 s, are never a pair
+    from uam_planner.audit import sweep_audit
+    from uam_planner.trajectory import Trajectory
+
+    a1 = Trajectory(np.array([0.0, 50.0]), np.array([[0.0, 0.0, 100.0], [500.0, 0.0, 100.0]]))
+    a2 = Trajectory(np.array([50.0, 100.0]), np.array([[500.0, 0.0, 100.0], [1000.0, 0.0, 100.0]]))
+    b = Trajectory(np.array([0.0, 100.0]), np.array([[0.0, 50.0, 100.0], [1000.0, 50.0, 100.0]]))
+    by_part = sweep_audit([a1, a2, b], 100.0, labels=["A", "A", "B"])
+    # by part: the two parts of A a "loss" at 0 m, and A-B counted once per part
+    assert [(x, y) for x, y, *_ in by_part.losses] == [("A", "A"), ("A", "B"), ("A", "B")]
+    got = sweep_audit([a1, a2, b], 100.0, groups=["A", "A", "B"])
+    assert [(x, y) for x, y, *_ in got.losses] == [("A", "B")]
+    assert got.min_separation_m == pytest.approx(50.0) and got.pairs_checked == 1

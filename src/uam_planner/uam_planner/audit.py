@@ -427,9 +427,14 @@ def _sorted_unique(x):
 
 
 def sweep_audits(flights: Sequence[Any], models: Sequence[Any], labels: Sequence[Any] | None = None,
-                 chunk_pairs: int = 4_000_000, prune: bool = True) -> list[AuditResult]:
+                 chunk_pairs: int = 4_000_000, prune: bool = True,
+                 groups: Sequence[Any] | None = None) -> list[AuditResult]:
     """:func:`sweep_audit` in several separation models at once (e.g. the true minimum and the
     minimum widened by a sampling bound): one candidate search, one result per model.
+
+    ``groups`` (one name per trajectory): trajectories of one group are the parts of one flight
+    (each plan version while in force): never a pair, and the results name the groups (losses
+    and ``pairs_checked`` per pair of groups); ``labels`` is then ignored.
 
     ``prune=True`` (the default) checks only the segment pairs that a grid hash on time buckets
     and horizontal cells finds within reach of each other (:func:`_near_pairs`, reach = twice
@@ -450,6 +455,12 @@ def sweep_audits(flights: Sequence[Any], models: Sequence[Any], labels: Sequence
         return [AuditResult(math.inf, None, [], 0) for _m in models]
     seg = _segments(items)
     n = len(items)
+    if groups is not None:  # a segment belongs to its group: the sweep pairs groups
+        labels = list(dict.fromkeys(groups))
+        index = {g: k for k, g in enumerate(labels)}
+        of = np.array([index[g] for g in groups], dtype=np.int64)
+        seg = (*seg[:4], of[seg[4]])
+        n = len(labels)
     if not prune:
         tallies, checked = _full_sweep(seg, models, n, chunk_pairs)
         return [t.result(labels, checked) for t in tallies]
@@ -475,7 +486,7 @@ def sweep_audits(flights: Sequence[Any], models: Sequence[Any], labels: Sequence
 
 def sweep_audit(flights: Sequence[Any], separation_m=DEFAULT_SEPARATION_M,
                 labels: Sequence[Any] | None = None, chunk_pairs: int = 4_000_000,
-                prune: bool = True) -> AuditResult:
+                prune: bool = True, groups: Sequence[Any] | None = None) -> AuditResult:
     """The same audit as :func:`audit_flights` for thousands of flights, in numpy.
 
     Every pair of straight segments of different flights whose time intervals overlap is
@@ -489,4 +500,4 @@ def sweep_audit(flights: Sequence[Any], separation_m=DEFAULT_SEPARATION_M,
     that share time. Unpruned O(S log S + P) for S segments and P time-overlapping segment
     pairs, chunked.
     """
-    return sweep_audits(flights, [separation_m], labels, chunk_pairs, prune)[0]
+    return sweep_audits(flights, [separation_m], labels, chunk_pairs, prune, groups)[0]

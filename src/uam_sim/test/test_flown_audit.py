@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from uam_planner.constraints import Constraint
-from uam_sim.audit.flown_audit import (audit_incursions, chain_problems, constraint_intervals, flown_trajectory,
-                                 flown_versions, incursions)
+from uam_sim.audit.flown_audit import chain_problems, constraint_intervals, flown_trajectory, incursions
+from uam_sim.audit.record import RunRecord
 
 
 def t(sec: float) -> NS:
@@ -87,10 +87,11 @@ def test_versions_that_do_not_chain_are_named():
         "k: version 2 names constraint 'other', never announced on the constraint topic"]
 
 
-def test_flown_versions_flags_updates_without_an_approval():
+def test_the_record_flags_updates_without_an_approval():
     sets = [(30.0, [(square(), 30.0)])]
-    flown, problems = flown_versions([], {"op/r1": {2: plan(EAST, version=2, effective=50.0, ids=["sq"])}}, sets)
-    assert flown == {} and problems == ["op/r1: 1 plan update(s) for a request with no approval in the recording"]
+    record = RunRecord.from_plans([], {"op/r1": {2: plan(EAST, version=2, effective=50.0, ids=["sq"])}}, sets)
+    assert record.flights == [] and record.problems == [
+        "op/r1: 1 plan update(s) for a request with no approval in the recording"]
 
 
 def test_incursions_hand_computed():
@@ -134,10 +135,10 @@ def test_a_reroute_that_leaves_the_constraint_in_time_has_no_incursion():
     v0 = plan(EAST)
     v1 = plan([(30, -200, 0, 100), (60, -200, 300, 100)], version=2, effective=30.0, ids=["sq"], kind="rerouted")
     sets = [(30.0, [(square(), 30.0)])]
-    flown, problems = flown_versions([("op/r1", v0)], {"op/r1": {1: v1}}, sets)
-    assert problems == []
-    assert audit_incursions([v0], ["op/r1"], flown, sets) == ([], 1, [])
-    found, _, _ = audit_incursions([v0], ["op/r1"], {}, sets)
+    record = RunRecord.from_plans([("op/r1", v0)], {"op/r1": {1: v1}}, sets)
+    assert record.problems == [] and len(record.applied) == 1
+    assert record.incursions() == ([], [])
+    found, _ = RunRecord.from_plans([("op/r1", v0)], {}, sets).incursions()
     assert [i.t_s for i in found] == [pytest.approx(40.0)]
 
 
@@ -160,14 +161,13 @@ def _reacted():
 
 
 def _in_force_audit(other):
-    from uam_sim.audit.flown_audit import plans_in_force
-    from uam_sim.audit.separation import audit_trajectories
-
     v1, v2 = _reacted()
-    flown, problems = flown_versions([("op/r1", v1)], {"op/r1": {2: v2}}, [])
-    assert problems == []
-    got = plans_in_force([v1, other], ["op/r1", "op/r2"], flown)
-    return audit_trajectories(got.parts, got.labels, 100.0, groups=got.groups), got.parts, got.labels
+    record = RunRecord.from_plans([("op/r1", v1), ("op/r2", other)], {"op/r1": {2: v2}})
+    assert record.problems == []
+    got = record.in_force()
+    audit, conflicts = record.audit_plans(100.0)
+    assert conflicts == []
+    return audit, got.parts, got.labels
 
 
 def test_a_reaction_update_is_in_force_from_its_first_waypoint_and_no_phantom_path_is_audited():
@@ -204,14 +204,15 @@ def test_a_cancellation_effective_at_the_departure_flew_nothing():
     f, problems = flown_trajectory("op/r1", [v1, cancel])
     assert problems == [] and len(f.times_s) == 0 and f.trajectories() == []
     # so the analysis never expects it in the fleet states ("never flew" made the run NOT VERIFIED)
-    assert _departure_flown("op/r1", v1, {"op/r1": f}) == math.inf
+    record = RunRecord.from_plans([("op/r1", v1)], {"op/r1": {2: cancel}}, [(10.0, [(square(), 10.0)])])
+    assert record.problems == [] and record.flights[0].flown.trajectories() == []
+    assert _departure_flown("op/r1", v1, record.by_key()) == math.inf
     # a cancellation one second later: it flew that second
     f, _ = flown_trajectory("op/r1", [v1, plan([], version=2, effective=11.0, ids=["sq"], kind="cancelled")])
     assert f.times_s.tolist() == [10.0, 11.0]
 
 
 def test_a_contingency_versions_conflicts_are_a_class_of_their_own():
-    from uam_sim.audit.flown_audit import plans_in_force
     from uam_sim.audit.separation import audit_trajectories
 
     # r1's version 2, a contingency from 50 s, turns north through r2's path; r2 flies east 300 m
@@ -219,8 +220,8 @@ def test_a_contingency_versions_conflicts_are_a_class_of_their_own():
     v1 = plan(EAST)
     v2 = plan([(50, 0, 0, 100), (80, 0, 300, 100), (110, 0, 600, 100)], version=2, effective=50.0, kind="contingency")
     r2 = plan([(0, -800, 300, 100), (100, 200, 300, 100)])
-    flown, problems = flown_versions([("op/r1", v1)], {"op/r1": {2: v2}}, [])
-    got = plans_in_force([v1, r2], ["op/r1", "op/r2"], flown)
+    record = RunRecord.from_plans([("op/r1", v1), ("op/r2", r2)], {"op/r1": {2: v2}})
+    got = record.in_force()
     assert got.labels == ["op/r1", "op/r1 v2 (contingency)", "op/r2"] and got.groups == ["op/r1", "op/r1", "op/r2"]
     assert got.contingent == [False, True, False]
     deconflicted = got.select([not c for c in got.contingent])
@@ -229,6 +230,8 @@ def test_a_contingency_versions_conflicts_are_a_class_of_their_own():
                                    only_pairs_with=got.contingent).losses
     assert [c[:2] for c in conflicts] == [["op/r1 v2 (contingency)", "op/r2"]]
     assert conflicts[0][2] == pytest.approx(0.0) and conflicts[0][3] == pytest.approx(80.0)
+    audit, found = record.audit_plans(100.0)
+    assert audit.ok and found == conflicts
 
 
 def test_entries_between_the_announcement_and_the_planners_epoch_are_reported_apart():
@@ -241,11 +244,13 @@ def test_entries_between_the_announcement_and_the_planners_epoch_are_reported_ap
     sets = [constraints_from_text(text)]
     assert sets[0][1][0][0].announce_s == 30.0 and sets[0][1][0][1] == 70.0
     v0 = plan(EAST)
-    found, n, gap = audit_incursions([v0], ["op/r1"], {}, sets)
-    assert (found, n) == ([], 1)
+    record = RunRecord.from_plans([("op/r1", v0)], {}, sets)
+    found, gap = record.incursions()
+    assert (found, len(record.applied)) == ([], 1)
     assert [(i.key, i.constraint_id, i.t_s) for i in gap] == [("op/r1", "sq", pytest.approx(40.0))]
     # without the announcement recorded (or announced at the epoch itself) there is no gap
-    assert audit_incursions([v0], ["op/r1"], {}, [constraints_from_text(set_geojson([square()], 70.0, {"sq": 70.0}))])[2] == []
+    unannounced = [constraints_from_text(set_geojson([square()], 70.0, {"sq": 70.0}))]
+    assert RunRecord.from_plans([("op/r1", v0)], {}, unannounced).incursions()[1] == []
 
 
 def test_a_pad_closure_is_entered_only_from_that_pad():

@@ -455,19 +455,26 @@ def test_the_runner_reacts_between_epochs():
         make_config(dict(base, reaction_period_s=45.0))
 
 
-def test_the_plans_audit_names_each_piece_by_its_kind():
-    # a flight planned W -> E from 0 s, updated at 100 s as a contingency: the plan until
-    # 100 s - 1 ms, then the contingency; the audit leaves the contingency out of the losses of
-    # the deconflicted plans (scenario.run_scenario's summary "losses_deconflicted")
-    from uam_sim.runner.scenario import planned_pieces
+def test_the_runners_record_keeps_each_version_in_force_by_its_kind():
+    # a flight planned W -> E from 0 s, updated at 100 s as a contingency: the plan until 100 s,
+    # then the contingency, one flight (never a pair with itself); the audit leaves the
+    # contingency out of the losses of the deconflicted plans (scenario.run_scenario's summary
+    # "losses_deconflicted")
+    from uam_sim.audit.record import PlanVersion
+    from uam_planner.nonconformance import RATE_WORD
+    from uam_sim.runner.scenario import run_record
     a = P.trajectory
     b = rejoin_trajectory(a, 100.0, (900.0, 0.0, 0.0), 0.9)
-    row = {"_traj": b, "_pieces": [(0.0, a), (100.0, b)], "_kinds": ["plan", "contingency"]}
-    (pa, ka), (pb, kb) = planned_pieces(row, kinds=True)
-    assert (ka, kb) == ("plan", "contingency")
-    assert pa.arrival_s == pytest.approx(100.0 - 1e-3) and pb is b
-    assert [t.arrival_s for t in planned_pieces(row)] == [pa.arrival_s, b.arrival_s]
-    assert planned_pieces({"_traj": a}, kinds=True) == [(a, "plan")]
+    row = {"request_id": "r1", "_versions": [PlanVersion.of(1, -math.inf, a),
+                                             PlanVersion.of(2, 100.0, b, update_kind="contingency",
+                                                            reason=f"re-timed from the {RATE_WORD} 0.9")]}
+    record = run_record([row])
+    assert record.problems == []
+    got = record.in_force()
+    assert got.labels == ["r1", "r1 v2 (contingency)"] and got.groups == ["r1", "r1"]
+    assert got.contingent == [False, True]
+    (ta, _xa), (tb, _xb) = got.parts
+    assert ta[-1] == 100.0 and tb[0] == 100.0 and tb[-1] == b.arrival_s
 
 
 def test_on_a_path_that_comes_back_over_itself_a_late_flight_is_held_from_its_first_pass():

@@ -416,24 +416,6 @@ def _rejection_reasons(plans: list) -> tuple[dict, dict]:
     return reasons, values
 
 
-def _audit_plans_in_force(approved_plans: list, labels: list, flown_by_key: dict, updates: dict,
-                          separation_m) -> tuple[SafetyAudit, list]:
-    """The separation audit of the deconflicted plans in force and the conflicts of contingency
-    versions ([a, b, distance, t]); without plan updates, of the approved plans as they are."""
-    if not updates:
-        return audit_plans(approved_plans, separation_m, labels=labels), []
-    from .flown_audit import plans_in_force
-    from .separation import audit_trajectories
-    in_force = plans_in_force(approved_plans, labels, flown_by_key)
-    ok = in_force.select([not c for c in in_force.contingent])  # the deconflicted plans
-    audit = audit_trajectories(ok.parts, ok.labels, separation_m, groups=ok.groups)
-    if not any(in_force.contingent):
-        return audit, []
-    # not deconflicted by design: a class of its own
-    return audit, audit_trajectories(in_force.parts, in_force.labels, separation_m, groups=in_force.groups,
-                                     only_pairs_with=in_force.contingent).losses
-
-
 def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SEPARATION_M,
                        path: str = "", reader: str = "", complete_file: bool = True,
                        network=None) -> RunSummary:
@@ -513,18 +495,16 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
                    for rid, ps in decisions.items() if len(ps) > 1}
     all_approved = [(rid, p) for rid, ps in decisions.items() for p in ps if int(p.outcome) == OUTCOME_APPROVED]
     fleet_end = max(fleet_t) if fleet_t else -math.inf
-    from .flown_audit import flown_versions
-    flown_by_key, version_problems = flown_versions(all_approved, updates, constraint_sets)
+    from .record import RunRecord
+    everything = RunRecord.from_plans(all_approved, updates, constraint_sets)
+    flown_by_key = everything.by_key()
     run, forged, run_end = run_problems(
         syncs, reports, [(rid, int(p.epoch_index), _departure_flown(rid, p, flown_by_key))
                          for rid, p in all_approved], flown, fleet_end)
-    forged_set = set(forged)
-    approved_plans, labels = [], []
-    for rid, ps in decisions.items():
-        mine = [p for p in ps if int(p.outcome) == OUTCOME_APPROVED and rid not in forged_set]
-        for k, p in enumerate(mine):
-            approved_plans.append(p)
-            labels.append(rid if k == 0 else f"{rid}#{k + 1}")
+    # the record of the run: every approval but the forged ones, each flight's versions in force
+    record = everything.without(forged)
+    approved_plans = [f.versions[0] for f in record.flights]
+    labels = [f.key for f in record.flights]
     reasons, values = _rejection_reasons(plans)
     flights = [_flight_row(p, label, request_rows.get(request_key(p)))
                for p, label in zip(approved_plans, labels)]
@@ -546,11 +526,12 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
     # a FIFO or first-fit epoch reports its graph but solves no MWIS: its selection is not one
     with_instance = [e for e in epochs if e.vertices > 0 and e.policy in ("", "mwis")]
     max_active = int(max(fleet_n)) if fleet_n else 0
-    audit, contingency_conflicts = _audit_plans_in_force(approved_plans, labels, flown_by_key, updates,
-                                                         separation_m)
-    from .flown_audit import audit_incursions
-    found_incursions, n_in_force, gap_incursions = audit_incursions(approved_plans, labels, flown_by_key,
-                                                                    constraint_sets, network)
+    if record.updated:
+        audit, contingency_conflicts = record.audit_plans(separation_m)
+    else:  # the approved plans as they are (the paper's runs)
+        audit, contingency_conflicts = audit_plans(approved_plans, separation_m, labels=labels), []
+    found_incursions, gap_incursions = record.incursions(network)
+    n_in_force = len(record.applied)
     # the run's end as the epochs show it: the last epoch's time + the epoch length (the median
     # step between epochs); requests still within their window then are left out, as in the runner
     ts = sorted({e.t_s for e in epochs})
@@ -561,7 +542,7 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
         for op in sorted({f["operator_id"] for f in flights}):
             by_operator[op] = run_metrics([f for f in flights if f["operator_id"] == op],
                                           [r for r in requests if r["operator"] == op], end_s=end_s)
-    return RunSummary(
+    summary = RunSummary(
         path=str(path), reader=reader, complete_file=complete_file,
         sim_start_s=t_min if math.isfinite(t_min) else 0.0,
         sim_end_s=t_max if math.isfinite(t_max) else 0.0,
@@ -590,7 +571,7 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
         duplicate_requests_refused=refused_duplicates,
         problems=integrity_problems(epochs, [(request_key(p), int(p.epoch_index)) for p in approved_plans], flown,
                                     max_active, audit, conflicting, fleet_steps) + run
-        + constraint_problems + version_problems,
+        + constraint_problems + everything.problems,
         forged_plans=forged,
         run_end=run_end,
         plan_updates=_update_counts(updates),
@@ -599,14 +580,18 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
         contingency_conflicts=[[a, b, d, w, bool(w <= fleet_end)] for a, b, d, w in contingency_conflicts],
         constraints_in_force=n_in_force,
     )
+    # the run's record (uam_sim.audit.record): what the flown audit reads; not part of the JSON
+    summary.record = record
+    return summary
 
 
-def _departure_flown(key: str, plan: Any, flown_by_key: dict) -> float:
-    """When a flight departs as flown: its plan's first waypoint, or the flown trajectory's when it
-    has later versions (inf when a cancellation left nothing flown)."""
-    f = flown_by_key.get(key)
-    if f is not None:
-        return float(f.times_s[0]) if len(f.times_s) >= 2 else math.inf
+def _departure_flown(key: str, plan: Any, flights: dict) -> float:
+    """When a flight departs as flown: its plan's first waypoint, or its path in force's when it
+    has later versions (inf when a cancellation left nothing flown). ``flights``: label ->
+    ``uam_sim.audit.record.FlightRecord``."""
+    f = flights.get(key)
+    if f is not None and f.updated:
+        return float(f.flown.times_s[0]) if len(f.flown.times_s) >= 2 else math.inf
     return stamp_s(plan.waypoints[0].time) if plan.waypoints else 0.0
 
 
@@ -662,7 +647,7 @@ def summarize(path: str | Path, separation_m=None, reader: str = "rclpy",
     summary.recorder_check = read_metadata(path, RECORDER_CHECK)
     summary.run_choices = _decoded(read_metadata(path, RUN_METADATA))
     from .flown import recording_flown
-    summary.flown = recording_flown(path, separation_m)
+    summary.flown = recording_flown(path, separation_m, record=getattr(summary, "record", None))
     if summary.recorder_check.get("ok") == "false":
         summary.problems.append(f"the recorder found: {summary.recorder_check.get('verdict', '?')}")
     if recovered:

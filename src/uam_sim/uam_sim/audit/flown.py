@@ -389,7 +389,26 @@ def flown_audit(tracks: Mapping[str, Trajectory], separation, sample_step_s: flo
     return out
 
 
-def recording_flown(path, separation, bounds=None, plans=None, prune: bool = True) -> dict:
+def _record_of_plans(plans):
+    """The run's record (:class:`uam_sim.audit.record.RunRecord`) of FlightPlan messages, every
+    version: a vehicle flies the plans of its ``operator/request`` id, the first message of each
+    version counts."""
+    from uam_contract.wire import scoped_id
+
+    from .flown_audit import plan_version
+    from .record import RunRecord
+    approved, updates = [], {}
+    for p in plans:
+        key = scoped_id(p.operator_id, p.request_id) if p.operator_id else str(p.request_id)
+        if plan_version(p) == 1:
+            if int(p.outcome) == OUTCOME_APPROVED and all(k != key for k, _ in approved):
+                approved.append((key, p))
+        else:
+            updates.setdefault(key, {}).setdefault(plan_version(p), p)
+    return RunRecord.from_plans(approved, updates)
+
+
+def recording_flown(path, separation, bounds=None, plans=None, prune: bool = True, record=None) -> dict:
     """What flew in a recording: the flown tracks from every ``uam/fleet_state`` (positions read
     straight from the CDR), their exact audit in the true minimum (:func:`flown_audit`, sampling
     step = the largest gap between fleet states), and the F3548 conformance of each flown track
@@ -399,19 +418,20 @@ def recording_flown(path, separation, bounds=None, plans=None, prune: bool = Tru
     version (else read from ``uam/flight_plans``); a vehicle flies the plans of its
     ``operator/request`` id.
     ``prune``: as :func:`flown_audit` (False: the slow reference sweep, the same result).
-    Returns {} when the recording holds no fleet positions."""
+    ``record``: the run's :class:`uam_sim.audit.record.RunRecord` (the analysis passes its own;
+    else built from ``plans``). Returns {} when the recording holds no fleet positions."""
     from uam_contract import names
     from uam_contract.names import resolved
     from uam_contract.stamps import stamp_s
 
-    from .separation import trajectory_of
     from ..recording.cdr import fleet_state_digest
     from ..world.conformance import ConformanceBounds, f3548_statistics, versioned_conformance
     from ..recording.mcap_reader import deserialize, is_complete, read_messages, read_messages_tolerant
 
     fleet_topic, plan_topic = resolved(names.TOPIC_FLEET), resolved(names.TOPIC_PLANS)
-    records = (read_messages(path, topics=[fleet_topic, plan_topic]) if is_complete(path)
-               else sorted((r for r in read_messages_tolerant(path) if r.topic in (fleet_topic, plan_topic)),
+    topics = (fleet_topic,) if plans is not None or record is not None else (fleet_topic, plan_topic)
+    records = (read_messages(path, topics=list(topics)) if is_complete(path)
+               else sorted((r for r in read_messages_tolerant(path) if r.topic in topics),
                            key=lambda r: r.log_time_ns))
     samples, found_plans = [], []
     for rec in records:
@@ -425,7 +445,7 @@ def recording_flown(path, separation, bounds=None, plans=None, prune: bool = Tru
                 samples.append((stamp_s(msg.header.stamp), ids, pos, vel))
             else:
                 samples.append((stamp_s(d.header.stamp), d.vehicle_ids, d.positions_m, d.velocities_mps))
-        elif plans is None:
+        else:
             found_plans.append(deserialize(rec))
     if not samples:
         return {}
@@ -433,43 +453,14 @@ def recording_flown(path, separation, bounds=None, plans=None, prune: bool = Tru
     ts = np.array([s[0] for s in samples])
     step = float(np.max(np.diff(ts))) if ts.size > 1 else 0.0
     tracks, velocities = tracks_and_velocities(samples)
-    from uam_contract.wire import scoped_id
-    from .flown_audit import effective_s as version_effective_s, plan_version
-    versions: dict = {}   # key -> {version: plan}, the first message of each version
-    for p in (plans if plans is not None else found_plans):
-        # the vehicle id of a plan: operator/request (uam_sim.audit.analysis.request_key)
-        key = scoped_id(p.operator_id, p.request_id) if p.operator_id else str(p.request_id)
-        if plan_version(p) == 1 and int(p.outcome) != OUTCOME_APPROVED:
-            continue
-        versions.setdefault(key, {}).setdefault(plan_version(p), p)
-    # each flown track against the plan version in force at each of its samples:
-    # version 1 from the departure, version n + 1 from the instant it took effect; a
-    # cancellation (no waypoints) ends the flight, so no sample should follow it (one that does
-    # is compared with the version before)
-    pieces_of = {}
-    for key, by_v in versions.items():
-        if 1 not in by_v:
-            continue  # updates without an approval: the analysis' chain check reports them
-        pieces = []
-        for v in sorted(by_v):
-            p = by_v[v]
-            if not p.waypoints:
-                continue
-            t, pts = trajectory_of(p)
-            if t.size >= 2 and np.all(np.diff(t) > 0):
-                pieces.append((version_effective_s(p), Trajectory(t, pts)))
-        if pieces:
-            pieces_of[key] = pieces
-    # the audit, with each piece's sampling bound from the plan flown there (module docstring)
-    flown_plans = {}
-    for key, pieces in pieces_of.items():
-        if len(pieces) == 1:
-            flown_plans[key] = pieces[0][1]
-        else:
-            from .flown_audit import flown_trajectory
-            f, _gaps = flown_trajectory(key, [by for _v, by in sorted(versions[key].items())])
-            if f.times_s.size >= 2 and np.all(np.diff(f.times_s) > 0):
-                flown_plans[key] = Trajectory(f.times_s, f.points_m)
+    if record is None:
+        record = _record_of_plans(plans if plans is not None else found_plans)
+    # each flown track against its flight's plan in force (uam_sim.audit.record): the sampling
+    # bound from the plan flown there, the conformance with the version in force at each sample
+    # (version 1 from the departure, version n + 1 from the instant it took effect)
+    flights = record.by_key()
+    flown_plans = record.paths()
+    pieces_of = {key: pieces for key, f in flights.items() if (pieces := f.pieces())}
     out = flown_audit(tracks, separation, sample_step_s=step, prune=prune, plans=flown_plans,
                       velocities=velocities)
     out["sample_step_s"] = step

@@ -66,7 +66,16 @@ def effective_s(p: Any) -> float:
     until a later version takes over)."""
     if plan_version(p) == 1:
         return -math.inf
-    return stamp_s(p.effective_time)
+    given = getattr(p, "effective_s", None)  # a record's PlanVersion carries it in seconds
+    return float(given) if given is not None else stamp_s(p.effective_time)
+
+
+def version_trajectory(p: Any) -> tuple[np.ndarray, np.ndarray]:
+    """(times_s, points_m) of a plan version: a FlightPlan's waypoints, or a record's
+    ``PlanVersion`` arrays."""
+    if hasattr(p, "times_s"):
+        return np.asarray(p.times_s, dtype=np.float64), np.asarray(p.points_m, dtype=np.float64).reshape(-1, 3)
+    return trajectory_of(p)
 
 
 def _at(t: np.ndarray, x: np.ndarray, when: float) -> np.ndarray:
@@ -175,7 +184,7 @@ def flown_trajectory(key: str, versions: Sequence[Any]) -> tuple[Flown, list[str
         end = effective_s(versions[n + 1]) if n + 1 < len(versions) else math.inf
         if not p.waypoints:
             continue  # a cancellation: nothing flown from here on (the previous part ends at `start`)
-        t, x = trajectory_of(p)
+        t, x = version_trajectory(p)
         ct, cx = _clip(t, x, start, end)
         if len(ct) < 2 or not ct[-1] > ct[0]:
             continue  # in force for no time: nothing flown
@@ -367,34 +376,6 @@ def announced_at(sets: Sequence[tuple[float, Sequence[tuple[Any, float]]]]) -> d
     return out
 
 
-def flown_versions(approved: Sequence[tuple[str, Any]], updates: dict, sets: Sequence) -> tuple[dict, list]:
-    """The flown trajectories of the requests that have versions after their approval, and the
-    problems of their chains (see the module docstring).
-
-    ``approved``: (request key, approved plan = version 1); ``updates``: key -> {any: plan of
-    version >= 2}; ``sets``: the recorded constraint sets (t_s, [(constraint, effective_s)]).
-    Returns ({key: Flown}, problems)."""
-    if not updates:
-        return {}, []
-    announced = announced_at(sets)
-    by_key: dict[str, list] = {}
-    for key, p in approved:
-        by_key.setdefault(key, []).append(p)
-    flown, problems = {}, []
-    for key in sorted(updates):
-        v0 = by_key.get(key, [])
-        if len(v0) != 1:
-            problems.append(f"{key}: {len(updates[key])} plan update(s) for a request with "
-                            f"{'no approval' if not v0 else f'{len(v0)} different approvals'} in the recording")
-            continue
-        versions = sorted([v0[0], *updates[key].values()], key=plan_version)
-        chain = chain_problems(key, versions, announced)
-        f, gaps = flown_trajectory(key, versions)
-        problems += chain + gaps
-        flown[key] = f
-    return flown, problems
-
-
 def contingency(p: Any) -> bool:
     """Whether plan version ``p`` is a contingency (F3548 Contingent): the flight could not be
     saved by a deconflicted re-plan, so this version is not deconflicted by design."""
@@ -402,75 +383,6 @@ def contingency(p: Any) -> bool:
         int(getattr(p, "state", 0) or 0) == STATE_CONTINGENT
 
 
-@dataclass
-class PlansInForce:
-    """Every approved flight's plan while in force, one trajectory per part (a flight with later
-    versions: each version from the instant it took effect; else its plan). ``labels``: the
-    flight's label, with `` v<n> (contingency)`` on a contingency version's part; ``groups``:
-    the flight's label, so that two parts of one flight are never a pair
-    (:func:`uam_sim.audit.separation.audit_trajectories`)."""
-
-    parts: list
-    labels: list
-    groups: list
-    contingent: list
-
-    def select(self, keep: Sequence[bool]) -> "PlansInForce":
-        k = [i for i, x in enumerate(keep) if x]
-        return PlansInForce(*([v[i] for i in k] for v in (self.parts, self.labels, self.groups, self.contingent)))
-
-
-def plans_in_force(plans: Sequence[Any], labels: Sequence[str], flown_by_key: dict) -> PlansInForce:
-    """The :class:`PlansInForce` of the approved ``plans`` (``labels``: one per plan) and the
-    flights with versions (``flown_by_key``, :func:`flown_versions`)."""
-    out = PlansInForce([], [], [], [])
-    for p, label in zip(plans, labels):
-        f = flown_by_key.get(label)
-        for t, x, version in (f.parts() if f is not None else [(*trajectory_of(p), p)]):
-            if len(t) < 2:
-                continue
-            c = version is not None and contingency(version)
-            out.parts.append((t, x))
-            out.labels.append(f"{label} v{plan_version(version)} (contingency)" if c else label)
-            out.groups.append(label)
-            out.contingent.append(c)
-    return out
-
-
-def _as_flown(plans: Sequence[Any], labels: Sequence[str], flown_by_key: dict) -> list[Flown]:
-    """Every approved flight as flown: its versions where it has them, else its plan."""
-    flights = []
-    for p, label in zip(plans, labels):
-        f = flown_by_key.get(label)
-        if f is None:
-            t, x = trajectory_of(p)
-            f = Flown(label, [p], t, x, [(plan_version(p), float(t[0]), float(t[-1]))] if len(t) else [])
-        flights.append(f)
-    return flights
-
-
-def announced_gaps(sets: Sequence[tuple[float, Sequence[tuple[Any, float]]]]) -> list[tuple[Any, float, float]]:
-    """(constraint version, announced_s, applied_s) of each version the planner applied after the
-    authority announced it (``announce_s`` recorded with it): while it bound the airspace but
-    not yet the planner's plans."""
-    return [(c, float(c.announce_s), float(since)) for c, since, _until in constraint_intervals(sets)
-            if math.isfinite(getattr(c, "announce_s", -math.inf)) and c.announce_s < since]
-
-
-def audit_incursions(plans: Sequence[Any], labels: Sequence[str], flown_by_key: dict,
-                     sets: Sequence, network=None) -> tuple[list[Incursion], int, list[Incursion]]:
-    """Incursions of every approved flight as flown (its versions where it has them, else its
-    plan) into the recorded constraints while the planner had them in force; how many
-    constraint versions were; and the entries while a version was announced but not yet
-    applied (:func:`announced_gaps`)."""
-    intervals = constraint_intervals(sets)
-    if not intervals:
-        return [], 0, []
-    flights = _as_flown(plans, labels, flown_by_key)
-    gaps = announced_gaps(sets)
-    return (incursions(flights, intervals, network), len(intervals),
-            incursions(flights, gaps, network) if gaps else [])
-
-
-__all__ = ["announced_at", "audit_incursions", "flown_versions", "CONTINUITY_M", "Flown", "Incursion", "chain_problems", "constraint_intervals", "effective_s",
-           "flown_trajectory", "incursions", "plan_version", "plans_in_force", "PlansInForce", "contingency", "announced_gaps", "pad_of"]
+__all__ = ["announced_at", "CONTINUITY_M", "Flown", "Incursion", "chain_problems", "constraint_intervals",
+           "contingency", "effective_s", "flown_trajectory", "incursions", "pad_of", "plan_version",
+           "version_trajectory"]

@@ -251,7 +251,8 @@ def audit_plans(plans: list[Any], separation_m=SEPARATION_M,
 
 
 def sweep_audit(trajectories: Sequence, separation_m, labels: Sequence | None = None,
-                chunk_pairs: int = 4_000_000, max_listed: int = 20, prune: bool = True) -> dict:
+                chunk_pairs: int = 4_000_000, max_listed: int = 20, prune: bool = True,
+                groups: Sequence | None = None) -> dict:
     """Exact minimum separation over every pair of flights, by a time sweep over segments, as the
     study's tables want it (a dict).
 
@@ -270,24 +271,28 @@ def sweep_audit(trajectories: Sequence, separation_m, labels: Sequence | None = 
         labels: names for the pairs (default: indices).
         chunk_pairs: segment pairs per numpy chunk (memory bound).
         prune: False checks every time-overlapping segment pair (the slow reference).
+        groups: a name per trajectory: the parts of one flight (each version while in force)
+            share it, are never a pair, and the pairs are named by it.
     Returns: {"min_separation_m" (None if no two flights share time), "pair_of_min",
     "min_time_s", "losses" (count of flight pairs with a loss), "loss_pairs" (up to max_listed,
     closest first: label, label, distance_m, t_s), "pairs_checked" (flight pairs with a common
     time), "separation_model"} (+ "vertical_separation_m" for the cylinder).
     Complexity: O(S log S + P) for S segments and P time-overlapping segment pairs.
     """
-    return sweep_audits(trajectories, [separation_m], labels, chunk_pairs, max_listed, prune)[0]
+    return sweep_audits(trajectories, [separation_m], labels, chunk_pairs, max_listed, prune, groups)[0]
 
 
 def sweep_audits(trajectories: Sequence, models: Sequence, labels: Sequence | None = None,
-                 chunk_pairs: int = 4_000_000, max_listed: int = 20, prune: bool = True) -> list[dict]:
+                 chunk_pairs: int = 4_000_000, max_listed: int = 20, prune: bool = True,
+                 groups: Sequence | None = None) -> list[dict]:
     """:func:`sweep_audit` in several separation models with one candidate search
     (``uam_planner.audit.sweep_audits``), one dict per model."""
     from uam_planner.audit import sweep_audits as planner_sweeps
 
     labels = list(labels) if labels is not None else list(range(len(trajectories)))
     models = [_model(m) for m in models]
-    results = planner_sweeps(list(trajectories), models, labels=labels, chunk_pairs=chunk_pairs, prune=prune)
+    results = planner_sweeps(list(trajectories), models, labels=labels, chunk_pairs=chunk_pairs, prune=prune,
+                             groups=groups)
     return [_as_dict(res, model, max_listed) for res, model in zip(results, models)]
 
 

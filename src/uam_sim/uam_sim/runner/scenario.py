@@ -11,8 +11,8 @@ from typing import Sequence
 import numpy as np
 
 from uam_planner.planning import Planner
-from uam_planner.replanning import clipped_until
 
+from ..audit.record import PlanVersion
 from ..audit.separation import sweep_audit
 from ..world.flights import run_metrics
 from ..world.demand import RequestGenerator
@@ -140,6 +140,7 @@ def _apply_plan_updates(updates, by_id: dict, replans: list, t: float) -> None:
             continue
         row["version"] = u.version
         row["replan"] = u.kind
+        _record_version(row, u, u.effective_s)
         if u.flight is None:
             row["cancelled"] = True
             continue
@@ -147,6 +148,17 @@ def _apply_plan_updates(updates, by_id: dict, replans: list, t: float) -> None:
         row["_traj"] = spliced(row["_traj"], f.trajectory, u.effective_s)
         row.update(destination=f.destination_id, departure_s=f.departure_s, arrival_s=f.arrival_s,
                    length_m=f.length_m, route=" ".join(f.route_node_ids), level_m=float(f.level_m))
+
+
+def _record_version(row, u, effective_s: float) -> None:
+    """Keep plan update ``u`` as the row's next version in the run's record
+    (``uam_sim.audit.record.PlanVersion``), as the recording keeps its FlightPlan."""
+    from ..audit.record import PlanVersion
+    f = u.flight
+    row["_versions"].append(PlanVersion.of(
+        u.version, effective_s, None if f is None else f.trajectory, update_kind=str(u.kind),
+        origin_id=row["origin"], destination_id=row["destination"] if f is None else f.destination_id,
+        constraint_ids=tuple(u.constraint_ids), reason=str(u.reason)))
 
 
 def _apply_reaction_updates(updates, by_id, reaction, replans, t) -> None:
@@ -282,6 +294,7 @@ class _Reaction:
             e = flight_draws(self.dcfg, row["request_id"]).speed_error
         row["_flown"], row["_e"] = fly_on(row["_flown"], new, e, rate, self.dcfg, self.wind)
         row["_t0"] = t0
+        _record_version(row, u, t0)
         row.setdefault("_pieces", [(float(row["_traj"].departure_s), row["_traj"])])
         row["_pieces"].append((t0, new))
         row.setdefault("_kinds", ["plan"]).append(u.kind)   # each piece's kind, for the audit
@@ -296,41 +309,12 @@ class _Reaction:
         row["_pieces"][-1] = (row["_pieces"][-1][0], row["_traj"])
 
 
-def planned_pieces(row, kinds: bool = False) -> list:
-    """The plans of a flight row as flown in time: each version until the next took effect
-    (a nonconforming update does not chain with the version before it; 1 ms apart, so the
-    plans' audit does not compare a flight with itself). With ``kinds``: (trajectory, kind)
-    pairs, kind "plan" for the first version and the reaction's ``PlanUpdate.kind`` after
-    ("nonconforming", deconflicted; "contingency", flown but not deconflicted)."""
-    pieces = row.get("_pieces")
-    if not pieces:
-        return [(row["_traj"], "plan")] if kinds else [row["_traj"]]
-    names = row.get("_kinds") or ["plan"] * len(pieces)
-    out = []
-    for k, (t0, tr) in enumerate(pieces):
-        nxt = pieces[k + 1][0] - 1e-3 if k + 1 < len(pieces) else math.inf
-        cut = clipped_until(tr, nxt)
-        if cut is not None and cut.times_s.shape[0] >= 2:
-            out.append((cut, names[k]) if kinds else cut)
-    return out
-
-
-def _incursions_as_flown(flown: list, timeline: list, network) -> list:
-    """(request id, constraint label, t_s) of every entry of a flight as flown into a constraint
-    version while the planner had it in force: the audit the analysis of a recording runs
-    (``uam_sim.audit.flown_audit.incursions``), on the runner's flights."""
-    from types import SimpleNamespace
-
-    from ..audit.flown_audit import Flown, incursions
-
-    flights = []
-    for f in flown:
-        tr = f["_traj"]
-        ends = SimpleNamespace(origin_id=f["origin"], destination_id=f["destination"])
-        flights.append(Flown(f["request_id"], [ends], tr.times_s, tr.points_m))
-    labels = {(c.constraint_id, c.version): c.label() for c, _a, _b in timeline}
-    return [(i.key, labels[(i.constraint_id, i.constraint_version)], float(i.t_s))
-            for i in incursions(flights, timeline, network)]
+def run_record(flights: list, timeline=()):
+    """The run's record (:class:`uam_sim.audit.record.RunRecord`) of the runner's flight rows
+    (each row's versions, kept as the planner issued them) and the planner's constraint
+    timeline: the same model, and so the same audits, as the analysis builds from a recording."""
+    from ..audit.record import RunRecord
+    return RunRecord.from_versions([(f["request_id"], f["_versions"]) for f in flights], timeline)
 
 
 #: a flown loss counts as "near a vertiport" when both aircraft are within this horizontal
@@ -517,6 +501,8 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
                             "candidate_index": int(f.candidate_index),
                             "route_index": int(f.route_index), "level_m": float(f.level_m),
                             "route": " ".join(f.route_node_ids), "_traj": f.trajectory,
+                            "_versions": [PlanVersion.of(1, -math.inf, f.trajectory, origin_id=f.origin_id,
+                                                         destination_id=f.destination_id)],
                             "priority": int(f.priority), "operator": f.operator_id,
                             "shortest_length_m": min(
                                 tp.route.length_m for tp in planner.cache.templates(
@@ -563,22 +549,30 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
             e += 1
     audit = {}
     flown = [f for f in flights if not f.get("cancelled")]
+    timeline = ()
+    if planner.constraint_log or planner.initial_constraints:
+        from uam_planner.replanning import constraint_timeline
+        timeline = constraint_timeline(planner.initial_constraints, planner.constraint_log)
+    # what was in force: every approval's versions, a cancellation ending its flight as planned
+    record = run_record(flights, timeline)
     if cfg.audit:
-        # in the run's separation model (the paper's sphere, or the cylinder); what flew
-        pieces = [(f["request_id"], p, k) for f in flown for p, k in planned_pieces(f, kinds=True)]
-        audit = sweep_audit([p for _r, p, _k in pieces], cfg.separation(), labels=[r for r, _p, _k in pieces])
+        # in the run's separation model (the paper's sphere, or the cylinder), the parts of one
+        # flight never a pair
+        in_force = record.in_force()
+        audit = sweep_audit(in_force.parts_as_trajectories(), cfg.separation(), groups=in_force.groups)
         if reaction is not None:
             # the plans the planner deconflicted (every version but the reaction's contingencies,
             # which are flown, announced and deconflicted against by later plans, but not
             # themselves deconflicted: docs/disturbances.md 2b): their losses must be 0
-            dec = [(r, p) for r, p, k in pieces if k != "contingency"]
-            audit["losses_deconflicted"] = audit["losses"] if len(dec) == len(pieces) else \
-                sweep_audit([p for _r, p in dec], cfg.separation(), labels=[r for r, _p in dec])["losses"]
+            dec = in_force.select([not c for c in in_force.contingent])
+            audit["losses_deconflicted"] = audit["losses"] if len(dec.parts) == len(in_force.parts) else \
+                sweep_audit(dec.parts_as_trajectories(), cfg.separation(), groups=dec.groups)["losses"]
     extra = {}
-    if planner.constraint_log or planner.initial_constraints:
-        from uam_planner.replanning import KINDS, constraint_timeline
-        timeline = constraint_timeline(planner.initial_constraints, planner.constraint_log)
-        inc = _incursions_as_flown(flown, timeline, network) if cfg.audit else []
+    if timeline:
+        from uam_planner.replanning import KINDS
+        found = record.incursions(network)[0] if cfg.audit else []
+        labels = {(c.constraint_id, c.version): c.label() for c, _a, _b in timeline}
+        inc = [(i.key, labels[(i.constraint_id, i.constraint_version)], float(i.t_s)) for i in found]
         extra = {"replans": len(replans), **{f"replan_{k}": sum(r["kind"] == k for r in replans)
                                              for k in KINDS},
                  "incursions": len(inc) if cfg.audit else None}
@@ -601,7 +595,7 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
         flown_summary["held_past_plan"] = len(held_ids)
     for f in flights:
         del f["_traj"]
-        for k in ("_flown", "_pieces", "_e", "_t0", "_kinds"):
+        for k in ("_flown", "_pieces", "_e", "_t0", "_kinds", "_versions"):
             f.pop(k, None)
     mwis_epochs = [r for r in epochs if r["vertices"] > 0]
     summary = {
