@@ -19,8 +19,8 @@ from uam_planner.trajectory import Trajectory
 
 
 # The planner's own view of what flew and of its incursions (its closed-form prism test), for the
-# tests of its re-plans; the audit of a run is uam_sim.audit.flown_audit (one implementation).
-def flown_trajectory(versions: Sequence) -> Trajectory | None:
+# tests of its re-plans; the audit of a run reads uam_sim.audit.record (one implementation).
+def spliced_versions(versions: Sequence) -> Trajectory | None:
     """The trajectory flown by one flight given its versions in order (Flight objects with
     ``trajectory`` and ``effective_s``, or None for a cancellation): each version from the
     instant it took effect. None if nothing flew (cancelled before departure)."""
@@ -32,8 +32,7 @@ def flown_trajectory(versions: Sequence) -> Trajectory | None:
     return flown
 
 
-
-def audit_incursions(flown: dict, timeline: Sequence, network, ends: dict) -> list:
+def planner_violations_as_flown(flown: dict, timeline: Sequence, network, ends: dict) -> list:
     """Constraint incursions of what flew: (request_id, constraint label, t_s) for each flight
     whose flown trajectory enters a constraint version while it was in force (its window cut
     to [from_s, until_s)), by the same exact test the planner uses.
@@ -144,7 +143,7 @@ def test_airborne_flight_is_diverted_to_the_nearest_free_vertiport():
     assert [g.request_id for g in p.active] == ["P"] and p.active[0] is f
     assert res.report.replan.kinds == {"diverted": 1} and res.report.replan.affected_airborne == 1
     # the chain: what flew is the old plan up to t_eff and the new one after
-    flown = flown_trajectory([u.previous, f])
+    flown = spliced_versions([u.previous, f])
     np.testing.assert_allclose(flown.points_m[-1], (0, 480, 0))
     assert flight_state(f, 120.0) == "Activated" and flight_state(f, 149.0) == "Ended"
 
@@ -161,7 +160,7 @@ def test_an_airborne_flight_turns_back_at_once_when_that_lands_soonest():
     np.testing.assert_allclose(f.trajectory.times_s, [0.0, 60.0, 120.0])
     np.testing.assert_allclose(f.trajectory.points_m, [(-1000, 0, 0), (-400, 0, 0), (-1000, 0, 0)])
     assert f.weight == pytest.approx(divert_weight(60.0))
-    np.testing.assert_allclose(flown_trajectory([u.previous, f]).points_m[-1], (-1000, 0, 0))
+    np.testing.assert_allclose(spliced_versions([u.previous, f]).points_m[-1], (-1000, 0, 0))
 
 
 def test_a_stream_that_must_turn_back_keeps_its_spacing():
@@ -233,7 +232,7 @@ def min_flown_separation(updates, others=()):
     """The exact minimum distance between what flies (each update's chained versions and the
     flights ``others``), over every pair."""
     from uam_planner.separation import min_separation_m
-    trs = [flown_trajectory([u.previous, u.flight]) for u in updates if u.flight is not None]
+    trs = [spliced_versions([u.previous, u.flight]) for u in updates if u.flight is not None]
     trs += [f.trajectory for f in others]
     return min((min_separation_m(a, b) for a, b in itertools.combinations(trs, 2)), default=math.inf)
 
@@ -447,14 +446,14 @@ def test_audit_of_what_flew_finds_no_incursion_where_the_old_plans_had_one():
     # P: back to Wp (lands 200). Q: Wp through C and mp (the closure of C forbids only landing
     # there), arriving 300 - P has landed at 200, so it is free: no contingency after all
     assert kinds == {"P": "diverted", "Q": "diverted"}
-    flown = {u.request_id: flown_trajectory([u.previous, u.flight]) for u in res.plan_updates}
+    flown = {u.request_id: spliced_versions([u.previous, u.flight]) for u in res.plan_updates}
     ends = {u.request_id: (u.flight.origin_id, u.flight.destination_id) for u in res.plan_updates}
     tl = constraint_timeline(p.initial_constraints, p.constraint_log)
-    assert audit_incursions(flown, tl, p.network, ends) == []
+    assert planner_violations_as_flown(flown, tl, p.network, ends) == []
     # the old plans would have entered the cell (x = 400 at t = 140) had they been flown
     old = {u.request_id: u.previous.trajectory for u in res.plan_updates}
     old_ends = {u.request_id: (u.previous.origin_id, u.previous.destination_id) for u in res.plan_updates}
-    got = sorted(audit_incursions(old, tl, p.network, old_ends))
+    got = sorted(planner_violations_as_flown(old, tl, p.network, old_ends))
     assert got == [("P", "'east' v1 (storm cell)", pytest.approx(140.0)),
                    ("Q", "'east' v1 (storm cell)", pytest.approx(140.0))]
 

@@ -6,7 +6,8 @@
 writes
 
 - ``DIR/operational_intents/<id>_v<version>.json``: one ``GetOperationalIntentDetailsResponse``
-  per approved plan version (``uam/flight_plans``), as known at its decision (the plan's stamp):
+  per plan version of the run's record (``uam_sim.audit.record``, as the analysis builds it from
+  ``uam/flight_plans``: forged plans left out), as known at its decision (the plan's stamp):
   its state there (the FlightPlan's ``state`` where it has one, else
   ``uam_planner.replanning.flight_state``), every volume of the version, and the F3548
   version of that plan version and state (``uam_planner.f3548.intent_version``);
@@ -62,6 +63,33 @@ def _flight(msg, version: int, priority: int):
                   effective_s=stamp_s(msg.effective_time) if version > 1 else float("nan"))
 
 
+def _intent_row(msg, ctx, out: Path, priority: int, operational_intent, as_json, validate, intent_id) -> dict:
+    """The index row of one plan version, its document written (a cancellation: Ended, no file)."""
+    version = max(1, int(getattr(msg, "version", 0) or 0))
+    oid = intent_id(msg.operator_id, msg.request_id)
+    decided = stamp_s(msg.header.stamp)
+    row = {"id": oid, "operator_id": msg.operator_id, "request_id": msg.request_id,
+           "version": version, "decided_s": decided, "state": None, "file": None}
+    if msg.outcome != msg.OUTCOME_APPROVED or not msg.waypoints:
+        row["state"] = "Ended"  # a cancelled version
+        return row
+    f = _flight(msg, version, priority)
+    state = STATES.get(int(getattr(msg, "state", 0) or 0))
+    oi = operational_intent(f, decided, ctx, state=state if state != "Ended" else None)
+    if oi is None:
+        row["state"] = "Ended"
+        return row
+    body = {"operational_intent": as_json(oi)}
+    try:
+        validate(body, "GetOperationalIntentDetailsResponse")
+    except ValueError as exc:
+        raise ValueError(f"{msg.operator_id}/{msg.request_id} v{version}: {exc}") from None
+    row["state"] = oi.reference.state
+    row["file"] = f"operational_intents/{oid}_v{version}.json"
+    (out / row["file"]).write_text(json.dumps(body, separators=(",", ":")))
+    return row
+
+
 def export(recording, out_dir, network_file: str, piece_s: float = 5.0,
            scenario_start_utc: str | None = None) -> dict:
     """Write the F3548 documents of ``recording`` into ``out_dir``; returns the index."""
@@ -71,7 +99,7 @@ def export(recording, out_dir, network_file: str, piece_s: float = 5.0,
     from uam_planner.live_constraints import constraints_from_text
     from uam_planner.network import load_network
 
-    from ..audit.analysis import TOPIC_CONSTRAINTS, TOPIC_PLANS, TOPIC_REQUESTS
+    from ..audit.analysis import TOPIC_CONSTRAINTS, TOPIC_REQUESTS, summarize
     from ..audit.separation import AIRSPACE_METADATA, separation_from_metadata
     from ..recording.mcap_reader import iter_decoded, log_time_zero_ns, read_metadata, require_mcap
 
@@ -89,54 +117,35 @@ def export(recording, out_dir, network_file: str, piece_s: float = 5.0,
     (out / "operational_intents").mkdir(parents=True, exist_ok=True)
     (out / "constraints").mkdir(parents=True, exist_ok=True)
     priority: dict = {}
-    intents, constraints, seen_c = [], [], set()
-    for topic, t_ns, msg in iter_decoded(path, "rclpy", [TOPIC_REQUESTS, TOPIC_PLANS, TOPIC_CONSTRAINTS]):
+    constraints, seen_c = [], set()
+    for topic, _t_ns, msg in iter_decoded(path, "rclpy", [TOPIC_REQUESTS, TOPIC_CONSTRAINTS]):
         if topic == TOPIC_REQUESTS:
             priority[(msg.operator_id, msg.request_id)] = int(getattr(msg, "priority", 0))
             continue
-        if topic == TOPIC_CONSTRAINTS:
-            t_s, pairs = constraints_from_text(msg.data, network)
-            for con, _eff in pairs:
-                key = (con.constraint_id, con.version)
-                if key in seen_c:
-                    continue
-                seen_c.add(key)
-                cid = constraint_entity_id(con.constraint_id)
-                row = {"id": cid, "constraint_id": con.constraint_id, "version": con.version,
-                       "published_s": t_s, "file": None}
-                doc = f3548_constraint(con, ctx)
-                if doc is not None:
-                    body = {"constraint": as_json(doc)}
-                    validate(body, "GetConstraintDetailsResponse")
-                    row["file"] = f"constraints/{cid}_v{con.version}.json"
-                    (out / row["file"]).write_text(json.dumps(body, indent=1))
-                constraints.append(row)
-            continue
-        version = max(1, int(getattr(msg, "version", 0) or 0))
-        oid = intent_id(msg.operator_id, msg.request_id)
-        decided = stamp_s(msg.header.stamp)
-        row = {"id": oid, "operator_id": msg.operator_id, "request_id": msg.request_id,
-               "version": version, "decided_s": decided, "state": None, "file": None}
-        if msg.outcome != msg.OUTCOME_APPROVED:
-            if version > 1 or int(getattr(msg, "state", 0) or 0) == 5:
-                row["state"] = "Ended"  # a cancelled version
-                intents.append(row)
-            continue
-        f = _flight(msg, version, priority.get((msg.operator_id, msg.request_id), 0))
-        state = STATES.get(int(getattr(msg, "state", 0) or 0))
-        oi = operational_intent(f, decided, ctx, state=state if state != "Ended" else None)
-        if oi is None:
-            row["state"] = "Ended"
-        else:
-            body = {"operational_intent": as_json(oi)}
-            try:
-                validate(body, "GetOperationalIntentDetailsResponse")
-            except ValueError as exc:
-                raise ValueError(f"{msg.operator_id}/{msg.request_id} v{version}: {exc}") from None
-            row["state"] = oi.reference.state
-            row["file"] = f"operational_intents/{oid}_v{version}.json"
-            (out / row["file"]).write_text(json.dumps(body, separators=(",", ":")))
-        intents.append(row)
+        t_s, pairs = constraints_from_text(msg.data, network)
+        for con, _eff in pairs:
+            key = (con.constraint_id, con.version)
+            if key in seen_c:
+                continue
+            seen_c.add(key)
+            cid = constraint_entity_id(con.constraint_id)
+            row = {"id": cid, "constraint_id": con.constraint_id, "version": con.version,
+                   "published_s": t_s, "file": None}
+            doc = f3548_constraint(con, ctx)
+            if doc is not None:
+                body = {"constraint": as_json(doc)}
+                validate(body, "GetConstraintDetailsResponse")
+                row["file"] = f"constraints/{cid}_v{con.version}.json"
+                (out / row["file"]).write_text(json.dumps(body, indent=1))
+            constraints.append(row)
+    # the intents are the run's record (uam_sim.audit.record, as the analysis builds it): every
+    # approval that is not forged, each of its versions once
+    record = summarize(path, network=network).record
+    intents = []
+    for flight in record.flights:
+        for msg in flight.versions:
+            intents.append(_intent_row(msg, ctx, out, priority.get((msg.operator_id, msg.request_id), 0),
+                                       operational_intent, as_json, validate, intent_id))
     index = {"recording": str(path), "network": str(network_file), "scenario_start_utc": start,
              "separation": {"kind": model.kind, "separation_m": model.separation_m,
                             "vertical_separation_m": model.vertical_separation_m},
