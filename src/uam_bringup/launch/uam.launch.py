@@ -20,6 +20,7 @@ from launch.event_handlers import OnProcessExit
 from launch.events import Shutdown
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution, PythonExpression
 from launch_ros.actions import Node, PushRosNamespace
+from launch_ros.parameter_descriptions import ParameterValue
 from uam_contract.launch_options import LAUNCH_OPTIONS
 from uam_contract.names import RECORDER_WAITS_FOR
 
@@ -53,6 +54,23 @@ def generate_launch_description() -> LaunchDescription:
         a["wind_speed_mps"], "', '", a["gust_std_mps"], "', '", a["speed_error"], "', '", a["delay_mean_s"], "', '",
         a["vertical_gust_std_mps"], "', '", a["altitude_error_m"], "')"],
         python_modules=["uam_contract", "uam_contract.disturbances"])
+    # the run's choices for the analysis' header (uam_contract.run_choices, as run_fleet.sh
+    # writes them); a string parameter, not read as YAML
+    choices = {"policy": "policy", "backend": "backend", "objective": "objective",
+               "baseline_order": "baseline_order", "rate": "rate", "seed": "seed",
+               "priority_share": "priority_share", "horizon": "horizon_epochs", "commit_ahead": "commit_ahead",
+               "lead_time_s": "lead_time_s", "departure_slot_s": "slot_s", "spatial_buffer_m": "spatial_buffer_m",
+               "temporal_buffer_s": "temporal_buffer_s", "reaction": "reaction",
+               "reaction_period_s": "reaction_period_s", "probe_s": "conflict_probe_s",
+               "probe_margin_m": "conflict_probe_margin_m", "wind_mps": "wind_speed_mps",
+               "wind_from_deg": "wind_from_deg", "gust_mps": "gust_std_mps", "speed_error": "speed_error",
+               "delay_mean_s": "delay_mean_s", "vertical_gust_mps": "vertical_gust_std_mps",
+               "altitude_error_m": "altitude_error_m"}
+    expr = ["uam_contract.run_choices.as_json("]
+    for name, arg in choices.items():
+        expr += [f"{name}='", a[arg], "', "]
+    run_choices = ParameterValue(PythonExpression(expr + [")"], python_modules=["uam_contract.run_choices"]),
+                                 value_type=str)
     recorder_prefix = "nice -n 19"
     sim_params = {"duration_s": a["duration"], "mode": a["mode"], "real_time_factor": a["rtf"],
                   # disturbances, seeded by the run's seed
@@ -69,7 +87,7 @@ def generate_launch_description() -> LaunchDescription:
                                  "foxglove_port": a["foxglove_port"],
                                  # as run_fleet.sh: the run starts once the recorder hears these
                                  "wait_for_publishers": list(RECORDER_WAITS_FOR),
-                                 **airspace}])
+                                 "run_choices": run_choices, **airspace}])
     nodes = [
         Node(package="uam_solvers", executable="solver", name="solver", output="screen",
              parameters=[params_file("solver"), {"default_backend": a["backend"]}]),

@@ -167,3 +167,21 @@ def test_the_runs_choices_are_in_the_header(tmp_path):
     assert ("Run choices      objective priority, priority share 0.05, horizon 5, lead time 300 s, "
             "spatial buffer 10 m, reaction true (as launched)") in format_summary(s)
     assert "Run choices      not recorded" in format_summary(summarize(_write(tmp_path / "none.mcap")))
+
+
+def test_both_launchers_state_the_runs_choices_with_one_function():
+    import json
+    from pathlib import Path
+
+    from uam_contract.run_choices import NAMES, as_json, main
+
+    got = json.loads(as_json(objective="priority", seed="7", reaction="true", probe_s="120", backend="exact"))
+    assert got == {"backend": "exact", "seed": 7, "objective": "priority", "reaction": True, "probe_s": 120}
+    with pytest.raises(ValueError, match="horizon_epochs not among"):
+        as_json(horizon_epochs="5")
+    assert main(["seed"]) == 2
+    # run_fleet.sh and the launch file call it with every name
+    for launcher in ("scripts/run_fleet.sh", "src/uam_bringup/launch/uam.launch.py"):
+        text = Path(launcher).read_text()
+        assert "uam_contract.run_choices" in text, launcher
+        assert all(f"{n}=" in text or f'"{n}"' in text for n in NAMES), launcher
