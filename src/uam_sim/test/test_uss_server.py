@@ -1,9 +1,7 @@
-"""The F3548 USS-USS interface (issue 25, item 3): a real Flask server on loopback answering with
-the standard's documents and errors; a malformed id or a huge query is refused and the server
-keeps serving; auth 'scope' checks the token's scope; states and volumes follow the clock."""
-
-import base64
-import json
+"""The F3548 USS-USS interface: a real Flask server on loopback answering with the standard's
+documents and errors; a malformed id or a huge query is refused and the server keeps serving;
+states and volumes follow the clock. The server runs as deployed, verifying access tokens
+(tokens themselves: test_uss_auth.py; the worker pool: test_uss_pool.py)."""
 
 import numpy as np
 import pytest
@@ -14,7 +12,8 @@ from uam_planner.f3548 import IntentContext, VolumeSpec, constraint_entity_id, i
 from uam_planner.f3548_schema import errors
 from uam_planner.planning import Flight
 from uam_planner.trajectory import Trajectory
-from uam_sim.f3548.uss_server import MAX_URL_CHARS, IntentStore, UssServer
+from uam_sim.f3548.auth import generate_dev_keys, mint_token
+from uam_sim.f3548.uss_server import MAX_URL_CHARS, SCOPE_CONSTRAINTS, SCOPE_INTENTS, IntentStore, UssServer
 
 ORIGIN = (1.29, 103.85, 0.0)
 
@@ -26,22 +25,26 @@ def flight(request_id, t0, version=1, priority=0, contingent=False):
                   contingent=contingent)
 
 
-def token(scopes):
-    enc = lambda d: base64.urlsafe_b64encode(json.dumps(d).encode()).decode().rstrip("=")  # noqa: E731
-    return f"{enc({'alg': 'RS256'})}.{enc({'scope': ' '.join(scopes), 'sub': 'uss2'})}.c2ln"
+@pytest.fixture(scope="module")
+def dev_keys(tmp_path_factory):
+    """A development key pair (private.pem, public.pem) for the module's servers."""
+    return generate_dev_keys(tmp_path_factory.mktemp("uss-keys"))
 
 
 @pytest.fixture
-def server():
+def server(dev_keys):
     ctx = IntentContext(ORIGIN, VolumeSpec.for_separation(100.0))
     store = IntentStore(ctx)
-    srv = UssServer(store, port=0).start()
+    srv = UssServer(store, port=0, auth_key=str(dev_keys[1])).start()
+    srv.token = mint_token(dev_keys[0], "localhost", [SCOPE_INTENTS, SCOPE_CONSTRAINTS])
     yield srv
     srv.stop()
 
 
 def get(srv, path, **kw):
-    return requests.get(srv.url + path, timeout=10, **kw)
+    """GET with the server's valid token (the requests of a peer USS)."""
+    headers = {"Authorization": f"Bearer {srv.token}", **kw.pop("headers", {})}
+    return requests.get(srv.url + path, headers=headers, timeout=10, **kw)
 
 
 def test_details_unknown_ids_and_the_clock(server):
@@ -112,9 +115,10 @@ def test_a_malformed_id_or_a_huge_query_is_refused_and_the_server_keeps_serving(
     r = get(server, f"/uss/v1/operational_intents/{oid}", params={"q": "y" * 10000})
     assert r.status_code == 400
     assert r.json()["message"].startswith("request: the URL has ") and str(MAX_URL_CHARS) in r.json()["message"]
-    r = requests.get(f"{server.url}/uss/v1/operational_intents/{oid}", data=b"z" * 100000, timeout=10)
+    r = get(server, f"/uss/v1/operational_intents/{oid}", data=b"z" * 100000)
     assert r.status_code == 400 and "body of 100000 bytes" in r.json()["message"]
-    r = requests.post(f"{server.url}/uss/v1/operational_intents/{oid}", timeout=10)
+    r = requests.post(f"{server.url}/uss/v1/operational_intents/{oid}", timeout=10,
+                      headers={"Authorization": f"Bearer {server.token}"})
     assert r.status_code == 405 and "message" in r.json()
     # still serving
     assert get(server, f"/uss/v1/operational_intents/{oid}").status_code == 200
@@ -146,25 +150,6 @@ def test_constraint_details(server):
     assert get(server, f"/uss/v1/constraints/{constraint_entity_id('zone')}").json() == first
 
 
-def test_auth_scope_checks_the_standards_scopes():
-    store = IntentStore(IntentContext(ORIGIN, VolumeSpec.for_separation(100.0)))
-    oid = store.put_flight(flight("r1", 30.0))
-    srv = UssServer(store, port=0, auth="scope").start()
-    try:
-        path = f"/uss/v1/operational_intents/{oid}"
-        r = get(srv, path)
-        assert r.status_code == 401 and "bearer access token is required" in r.json()["message"]
-        assert get(srv, path, headers={"Authorization": "Bearer abc"}).status_code == 401
-        r = get(srv, path, headers={"Authorization": "Bearer " + token(["utm.constraint_processing"])})
-        assert r.status_code == 403 and "utm.strategic_coordination" in r.json()["message"]
-        ok = get(srv, path, headers={"Authorization": "Bearer " + token(["utm.strategic_coordination"])})
-        assert ok.status_code == 200
-    finally:
-        srv.stop()
-    with pytest.raises(ValueError, match="auth: 'basic' is not one of off, scope"):
-        UssServer(store, port=0, auth="basic")
-
-
 def test_fetch_another_usss_intents_into_a_constraints_file(server, tmp_path):
     """Intents in over HTTP: fetched from a USS, they load as constraints the planner avoids."""
     from uam_planner.airspace_files import load_airspace as load_constraints
@@ -174,9 +159,13 @@ def test_fetch_another_usss_intents_into_a_constraints_file(server, tmp_path):
     a = server.store.put_flight(flight("r1", 30.0))
     server.store.put_flight(flight("r2", 60.0))
     out = tmp_path / "theirs.json"
-    assert main(["fetch", server.url, "--out", str(out)]) == 0
+    assert main(["fetch", server.url, "--out", str(out)]) == 2  # no token: 401
+    assert main(["fetch", server.url, "--out", str(out), "--token", server.token]) == 0
     cset = load_constraints(out, load_network("config/networks/tiny.yaml"))
     assert len(list(cset)) == 8  # 2 intents x 4 volumes, each a prism
-    assert main(["fetch", server.url, a, "--out", str(out)]) == 0
+    token_file = tmp_path / "token"
+    token_file.write_text(server.token + "\n")
+    assert main(["fetch", server.url, a, "--out", str(out), "--token", f"@{token_file}"]) == 0
     assert len(list(load_constraints(out, load_network("config/networks/tiny.yaml")))) == 4
-    assert main(["fetch", server.url, "0b6d5e4c-3a2b-4c1d-8e9f-0a1b2c3d4e5f", "--out", str(out)]) == 2
+    assert main(["fetch", server.url, "0b6d5e4c-3a2b-4c1d-8e9f-0a1b2c3d4e5f", "--out", str(out),
+                 "--token", server.token]) == 2

@@ -1,5 +1,5 @@
-"""The F3548 USS-USS interface over HTTP (item 3; docs/f3548.md): a Flask app that
-serves the operational intents and constraints of an :class:`IntentStore`, and a server thread.
+"""The F3548 USS-USS interface over HTTP (docs/f3548.md): a Flask app that serves the
+operational intents and constraints of an :class:`IntentStore`, and a server thread.
 
 Endpoints (F3548-21, utm.yaml):
 
@@ -7,28 +7,32 @@ Endpoints (F3548-21, utm.yaml):
 - ``GET /uss/v1/constraints/{entityid}`` -> 200 ``GetConstraintDetailsResponse``;
 - errors as F3548 ``ErrorResponse`` ({"message": ...}): 400 for an id that is not F3548's UUIDv4
   format or a request too large (URL over :data:`MAX_URL_CHARS` characters, a body over
-  :data:`MAX_BODY_BYTES`), 401 / 403 (auth ``scope``: no or undecodable bearer token / a token
-  without the endpoint's scope), 404 unknown (or ended) entity, 405 another method;
-- ``GET /uam_fleet/v1/operational_intents`` and ``/uam_fleet/v1/constraints`` (this project's, not F3548's: with
-  no DSS, the ids a tool can ask for).
+  :data:`MAX_BODY_BYTES`), 401 (no bearer token, or one that is not a valid token for this USS:
+  unsigned, forged, expired, another audience) / 403 (a valid token without the endpoint's
+  scope), 404 unknown (or ended) entity, 405 another method;
+- ``GET /uam_fleet/v1/operational_intents`` and ``/uam_fleet/v1/constraints`` (this project's, not
+  F3548's: with no DSS, the ids a tool can ask for; under the same scopes as the details).
 
-Auth (``auth``): ``off`` (the default, for local runs: no token is asked for) or ``scope``: a
-bearer token (RFC 6750) must be present and be a JWT whose ``scope`` claim holds the
-endpoint's scope (``utm.strategic_coordination`` for intents, ``utm.constraint_processing`` for
-constraints, as utm.yaml says). **The signature is not verified** (no authority's key is
-configured here): ``scope`` checks the standard's scopes, it does not authenticate anyone.
+Auth (``auth``): ``verify`` (the default) checks every request's bearer access token with
+:class:`uam_sim.f3548.auth.TokenVerifier`: its signature against the auth server's public key
+(``auth_key``: a PEM public key or a JWKS file), its expiry, its audience (``auth_audience``,
+by default the host of the server's base URL) and the endpoint's scope
+(``utm.strategic_coordination`` for intents, ``utm.constraint_processing`` for constraints, as
+utm.yaml says). ``off`` serves every caller without a token; the server announces it on stderr
+when it starts (and the node in its log), since no one outside a local run should meet it.
 
 The store holds each intent's volumes as JSON text once (from ``uam_planner.f3548``); a request
 serves every volume of the plan version with the state at the store's time and the version of
 that state (``uam_planner.f3548.intent_version``: a state change is a new version, so the
 details of a version never change), at the cost of one string join. Thread-safe (one lock).
+The HTTP layer is :class:`uam_sim.f3548.pool.PooledWSGIServer`: a bounded pool of workers.
 """
 
 from __future__ import annotations
 
-import base64
 import json
 import re
+import sys
 import threading
 from dataclasses import dataclass
 
@@ -36,12 +40,16 @@ from uam_planner.f3548 import (IntentContext, as_json, constraint_entity_id, f35
                                intent_id, intent_version, ovn, volume4d, volumes_for_limit)
 from uam_planner.replanning import flight_state
 
+from .auth import ALGORITHMS, DEV_SUBJECT
+
 #: F3548 EntityID (UUIDv4) as a path parameter
 ENTITY_ID = re.compile(r"^[0-9a-fA-F]{8}-[0-9a-fA-F]{4}-4[0-9a-fA-F]{3}-[89abAB][0-9a-fA-F]{3}-"
                        r"[0-9a-fA-F]{12}$")
 MAX_URL_CHARS = 2048
 MAX_BODY_BYTES = 65536
-AUTH_MODES = ("off", "scope")
+AUTH_MODES = ("verify", "off")
+#: the realm of the WWW-Authenticate challenge (RFC 6750)
+REALM = "uam_fleet USS"
 PRUNE_EVERY_S = 30.0
 SCOPE_INTENTS = "utm.strategic_coordination"
 SCOPE_CONSTRAINTS = "utm.constraint_processing"
@@ -161,28 +169,18 @@ def _error(status: int, message: str):
     return Response(json.dumps({"message": message}), status=status, mimetype="application/json")
 
 
-def _token_scopes(header: str | None):
-    """The scopes of a bearer JWT (signature NOT verified), or an error message."""
-    if not header or not header.startswith("Bearer "):
-        return None, "Authorization: a bearer access token is required (RFC 6750)"
-    parts = header[len("Bearer "):].strip().split(".")
-    if len(parts) != 3:
-        return None, "Authorization: the bearer token is not a JWT (3 dot-separated parts)"
-    try:
-        payload = json.loads(base64.urlsafe_b64decode(parts[1] + "=" * (-len(parts[1]) % 4)))
-        scope = payload["scope"]
-        return (scope.split() if isinstance(scope, str) else list(scope)), ""
-    except (ValueError, KeyError, TypeError):
-        return None, "Authorization: the bearer token's payload has no readable 'scope' claim"
-
-
-def create_app(store: IntentStore, auth: str = "off"):
-    """The Flask app serving ``store`` (module docstring)."""
+def create_app(store: IntentStore, auth: str = "verify", verifier=None):
+    """The Flask app serving ``store`` (module docstring). ``auth`` ``verify`` needs ``verifier``
+    (a :class:`uam_sim.f3548.auth.TokenVerifier`)."""
     from flask import Flask, Response, request
     from werkzeug.exceptions import HTTPException
 
+    from .auth import AuthError
+
     if auth not in AUTH_MODES:
         raise ValueError(f"auth: {auth!r} is not one of {', '.join(AUTH_MODES)}")
+    if auth == "verify" and verifier is None:
+        raise ValueError("auth: 'verify' needs the auth server's public key (auth_key: a PEM or JWKS file)")
     app = Flask("uam_uss")
     app.config["MAX_CONTENT_LENGTH"] = None  # refused below with the standard's 400
 
@@ -197,28 +195,36 @@ def create_app(store: IntentStore, auth: str = "off"):
                                f"{MAX_BODY_BYTES}")
         return None
 
-    def _check(entityid: str, scope: str):
-        if auth == "scope":
-            scopes, why = _token_scopes(request.headers.get("Authorization"))
-            if scopes is None:
-                return _error(401, why)
-            if scope not in scopes:
-                return _error(403, f"Authorization: the token's scopes {scopes} do not include "
-                                   f"{scope!r}")
-        if len(entityid) > 36 or not ENTITY_ID.match(entityid):
-            shown = entityid if len(entityid) <= 64 else entityid[:64] + "..."
-            return _error(400, f"entityid: {shown!r} is not an F3548 EntityID (a UUIDv4)")
+    def _authorise(scope: str):
+        """None if the request's token grants ``scope``, else the 401 / 403 answer."""
+        if auth == "off":
+            return None
+        try:
+            verifier.verify(request.headers.get("Authorization"), scope)
+        except AuthError as exc:
+            answer = _error(exc.status, exc.message)
+            answer.headers["WWW-Authenticate"] = exc.www_authenticate(REALM)
+            return answer
         return None
 
     def _details(entityid, scope, lookup, missing: str):
-        """One details endpoint: the id and auth checks, then the stored document or a 404."""
-        bad = _check(entityid, scope)
+        """One details endpoint: the auth and id checks, then the stored document or a 404."""
+        bad = _authorise(scope)
         if bad is not None:
             return bad
+        if len(entityid) > 36 or not ENTITY_ID.match(entityid):
+            shown = entityid if len(entityid) <= 64 else entityid[:64] + "..."
+            return _error(400, f"entityid: {shown!r} is not an F3548 EntityID (a UUIDv4)")
         body = lookup(entityid)
         if body is None:
             return _error(404, missing.format(entityid))
         return Response(body, status=200, mimetype="application/json")
+
+    def _listing(scope, ids):
+        bad = _authorise(scope)
+        if bad is not None:
+            return bad
+        return Response(json.dumps({"t_s": store.time_s, "ids": ids()}), mimetype="application/json")
 
     @app.get("/uss/v1/operational_intents/<path:entityid>")
     def operational_intent(entityid):
@@ -232,13 +238,11 @@ def create_app(store: IntentStore, auth: str = "off"):
 
     @app.get("/uam_fleet/v1/operational_intents")
     def list_intents():
-        return Response(json.dumps({"t_s": store.time_s, "ids": store.intent_ids()}),
-                        mimetype="application/json")
+        return _listing(SCOPE_INTENTS, store.intent_ids)
 
     @app.get("/uam_fleet/v1/constraints")
     def list_constraints():
-        return Response(json.dumps({"t_s": store.time_s, "ids": store.constraint_ids()}),
-                        mimetype="application/json")
+        return _listing(SCOPE_CONSTRAINTS, store.constraint_ids)
 
     @app.errorhandler(HTTPException)
     def _http_error(exc):
@@ -248,21 +252,42 @@ def create_app(store: IntentStore, auth: str = "off"):
 
 
 class UssServer:
-    """The app on a werkzeug threaded server in a daemon thread: ``UssServer(store, port=0)``
-    (0 = a free port, see ``.port``), ``.start()``, ``.stop()``. Binds ``host`` (default
-    loopback)."""
+    """The app on a :class:`uam_sim.f3548.pool.PooledWSGIServer` (``workers`` threads, at most
+    ``max_connections`` connections) in a daemon thread: ``UssServer(store, port=0, auth_key=FILE)``
+    (0 = a free port, see ``.port``), ``.start()``, ``.stop()``. Binds ``host`` (default loopback).
+
+    ``auth`` ``verify`` (default) needs ``auth_key`` (the auth server's PEM public key or JWKS
+    file); ``auth_audience`` is the comma-separated audiences a token may name ('' = the host of
+    the store's base URL, :func:`uam_sim.f3548.auth.default_audiences`). ``auth`` ``off``:
+    :attr:`announcement` is written to stderr at ``start()``. Raises ValueError naming the
+    parameter of a bad setting (an unreadable key, a private key, an unknown mode)."""
 
     def __init__(self, store: IntentStore, host: str = "127.0.0.1", port: int = 0,
-                 auth: str = "off"):
-        from werkzeug.serving import WSGIRequestHandler, make_server
+                 auth: str = "verify", auth_key: str = "", auth_audience: str = "",
+                 workers: int = 8, max_connections: int = 256, **pool_options):
+        from werkzeug.serving import WSGIRequestHandler
+
+        from .auth import TokenVerifier, default_audiences  # joserfc and cryptography on first use
+        from .pool import PooledWSGIServer
 
         class _Quiet(WSGIRequestHandler):  # no log line per request (a load of them is the job)
             def log_request(self, *args, **kwargs):
                 pass
 
-        self.store = store
-        self._server = make_server(host, int(port), create_app(store, auth), threaded=True,
-                                   request_handler=_Quiet)
+        if auth not in AUTH_MODES:
+            raise ValueError(f"auth: {auth!r} is not one of {', '.join(AUTH_MODES)}")
+        self.store, self.auth = store, auth
+        self.verifier = None
+        if auth == "verify":
+            if not auth_key:
+                raise ValueError("auth_key: '' but auth is 'verify': give the auth server's public key "
+                                 "(PEM or JWKS file; python -m uam_sim.uss_server keys DIR makes a dev pair), "
+                                 "or auth 'off' for a local run")
+            audiences = ([a.strip().lower() for a in auth_audience.split(",") if a.strip()]
+                         or default_audiences(store.ctx.uss_base_url))
+            self.verifier = TokenVerifier.from_file(auth_key, audiences)
+        self._server = PooledWSGIServer(host, int(port), create_app(store, auth, self.verifier), _Quiet,
+                                        workers=workers, max_connections=max_connections, **pool_options)
         self.host, self.port = host, int(self._server.server_port)
         self._thread = threading.Thread(target=self._server.serve_forever, name="uss-http",
                                         daemon=True)
@@ -271,7 +296,18 @@ class UssServer:
     def url(self) -> str:
         return f"http://{self.host}:{self.port}"
 
+    @property
+    def announcement(self) -> str:
+        """One line saying how requests are authorised (a warning when auth is off)."""
+        if self.auth == "off":
+            return (f"WARNING: F3548 USS server on {self.url}: auth is OFF: every caller is served "
+                    "without an access token (for local runs only; auth 'verify' checks tokens)")
+        return (f"F3548 USS server on {self.url}: bearer tokens verified ({', '.join(ALGORITHMS)}; "
+                f"audience {', '.join(self.verifier.audiences)}; {len(self.verifier.keys)} key(s))")
+
     def start(self) -> "UssServer":
+        if self.auth == "off":
+            print(f"uss_server: {self.announcement}", file=sys.stderr, flush=True)
         self._thread.start()
         return self
 
@@ -316,27 +352,61 @@ def fetch(base_url: str, ids=(), out=None, token: str = "", timeout_s: float = 1
     return result
 
 
+def _cli_keys(args) -> int:
+    from .auth import generate_dev_keys
+
+    private, public = generate_dev_keys(args.folder)
+    print(f"uss_server keys: private key {private} (signs tokens: keep it), public key {public} "
+          f"(the server's auth_key)")
+    return 0
+
+
+def _cli_token(args) -> int:
+    from .auth import mint_token
+
+    print(mint_token(args.key, args.audience, args.scope or [SCOPE_INTENTS, SCOPE_CONSTRAINTS],
+                     lifetime_s=args.lifetime_s, sub=args.sub))
+    return 0
+
+
+def _cli_fetch(args) -> int:
+    token = args.token
+    if token.startswith("@"):  # @FILE: the token from a file (keeps it out of the process list)
+        from pathlib import Path
+        token = Path(token[1:]).read_text().strip()
+    got = fetch(args.base_url, args.ids, args.out, token)
+    print(f"uss_server fetch: {len(got['operational_intents'])} operational intents in {args.out}")
+    return 0
+
+
 def main(argv=None) -> int:
     import argparse
-    import sys
 
     ap = argparse.ArgumentParser(prog="python -m uam_sim.uss_server",
-                                 description="fetch: another USS's operational intents into a "
-                                             "JSON file for --constraints FILE")
+                                 description="fetch: another USS's operational intents into a JSON file for "
+                                             "--constraints FILE; keys, token: a development auth server "
+                                             "(a key pair and access tokens signed with it)")
     sub = ap.add_subparsers(dest="cmd", required=True)
-    f = sub.add_parser("fetch")
+    f = sub.add_parser("fetch", help="GET a USS's operational intents into a file")
     f.add_argument("base_url")
     f.add_argument("ids", nargs="*", help="entity ids (default: all a uam_fleet server lists)")
     f.add_argument("--out", required=True)
-    f.add_argument("--token", default="", help="bearer access token, if the USS asks for one")
+    f.add_argument("--token", default="", help="bearer access token (or @FILE: read from FILE)")
+    k = sub.add_parser("keys", help="make a development key pair (kept if already there)")
+    k.add_argument("folder", help="folder for private.pem and public.pem")
+    t = sub.add_parser("token", help="print an RS256 access token signed with a private key")
+    t.add_argument("--key", required=True, help="PEM private key (e.g. DIR/private.pem of `keys DIR`)")
+    t.add_argument("--audience", default="localhost", help="aud: the host the client calls (default localhost)")
+    t.add_argument("--scope", action="append", help=f"a scope (repeatable; default {SCOPE_INTENTS} and "
+                                                    f"{SCOPE_CONSTRAINTS})")
+    t.add_argument("--lifetime-s", type=float, default=3600.0, help="seconds until exp (default 3600)")
+    t.add_argument("--sub", default=DEV_SUBJECT, help="sub: the client's name")
     args = ap.parse_args(argv)
     try:
-        got = fetch(args.base_url, args.ids, args.out, args.token)
+        return {"fetch": _cli_fetch, "keys": _cli_keys, "token": _cli_token}[args.cmd](args)
     except (ValueError, OSError) as exc:
-        print(f"uss_server fetch: {exc}", file=sys.stderr)
+        print(f"uss_server {args.cmd}: {exc}", file=sys.stderr)
         return 2
-    print(f"uss_server fetch: {len(got['operational_intents'])} operational intents in {args.out}")
-    return 0
 
 
 if __name__ == "__main__":
