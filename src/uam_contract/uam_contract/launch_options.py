@@ -98,6 +98,13 @@ LAUNCH_OPTIONS: tuple[LaunchOption, ...] = (
                  "serve a live Foxglove WebSocket view on this port (0 = off)"),
     LaunchOption("--uss-port", "USS_PORT", "uss_port", "0",
                  "serve the plans as F3548 operational intents over HTTP on this port (0 = off; docs/f3548.md)"),
+    LaunchOption("--uss-auth", "USS_AUTH", "uss_auth", "verify",
+                 "the USS server's access tokens: verify (checked against --uss-auth-key) or off (announced)"),
+    LaunchOption("--uss-auth-key", "USS_AUTH_KEY", "uss_auth_key", "",
+                 "the auth server's public key (PEM or JWKS) for --uss-auth verify; '' = run_fleet.sh makes a "
+                 "development pair in <out>/uss-auth (the launch file needs one)"),
+    LaunchOption("--uss-audience", "USS_AUDIENCE", "uss_audience", "",
+                 "audiences a token may name, comma-separated ('' = localhost and 127.0.0.1)"),
     LaunchOption("--out", "OUT", "out", "", "output folder (run.mcap, run.rrd, logs); default a new folder under runs/"),
     LaunchOption("--recorder-nice", "RECORDER_NICE", "", "19", "the recorder's nice value", only="run_fleet"),
     LaunchOption("", "", "namespace", "", "namespace of the whole graph", only="launch"),

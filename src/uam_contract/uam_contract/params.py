@@ -353,8 +353,16 @@ USS = (
     Param("port", 8090, "TCP port of the HTTP server (0 = any free port, logged)", 0, 65535),
     Param("host", "127.0.0.1", "address to bind ('0.0.0.0' for every interface; loopback by default)",
           check=_nonempty("host")),
-    Param("auth", "off", "'off' (local runs: no token asked for) or 'scope': a bearer JWT whose scope "
-          "claim holds the endpoint's F3548 scope (signature NOT verified)", choices=("off", "scope")),
+    Param("auth", "verify", "'verify': every request needs a bearer access token signed by the auth server "
+          "(auth_key), unexpired, for this USS (auth_audience) and with the endpoint's F3548 scope; 'off': no "
+          "token asked for (local runs only; announced at start)", choices=("verify", "off")),
+    Param("auth_key", "", "the auth server's public key: a PEM public key or a JWK / JWKS file (needed by "
+          "'verify'; `python -m uam_sim.uss_server keys DIR` makes a development pair)"),
+    Param("auth_audience", "", "comma-separated audiences a token's aud may name; '' = the host of uss_base_url "
+          "(loopback: localhost and 127.0.0.1)"),
+    Param("workers", 8, "threads serving requests (a bounded pool; idle connections hold none)", 1, 256),
+    Param("max_connections", 256, "connections waiting or in service at most (at the bound the oldest silent one "
+          "is closed; none silent: 503); at least workers", 1, 10000),
     Param("uss_base_url", "", "the base URL the intents name (no trailing '/'); '' = http://localhost:<port>"),
     Param("network", "", "network file (its origin places the volumes on WGS84)"),
     Param("scenario_start_utc", DEFAULT_SCENARIO_START_UTC, "the UTC instant of simulation time 0 (F3548 "

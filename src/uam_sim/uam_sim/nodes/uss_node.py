@@ -8,8 +8,10 @@ It subscribes to ``uam/flight_plans`` (every approved plan and every new version
 replaces an operational intent; a cancellation ends it), ``uam/requests`` (each request's
 priority, which a FlightPlan does not carry), ``uam/constraints`` (the set the planner plans
 with) and ``/clock`` (states and volume clipping follow simulation time), and serves them with
-:class:`uam_sim.f3548.uss_server.UssServer` (Flask on a werkzeug thread; a bad request is answered
-with the standard's error and never stops the node). Parameters: ``uam_contract.params.USS``.
+:class:`uam_sim.f3548.uss_server.UssServer` (Flask on a bounded pool of worker threads; a bad
+request is answered with the standard's error and never stops the node). Parameters:
+``uam_contract.params.USS``. With ``auth`` ``verify`` (the default) the node does not start
+without ``auth_key``; with ``off`` it logs a warning saying so when it starts.
 """
 
 from __future__ import annotations
@@ -52,12 +54,14 @@ class UssNode(Node):
                                  uss_base_url=p["uss_base_url"] or f"http://localhost:{port}")
         self.store = IntentStore(context(p["port"]))
         self._priority: dict[tuple, int] = {}
-        self.server = UssServer(self.store, p["host"], p["port"], p["auth"])
+        self.server = UssServer(self.store, p["host"], p["port"], p["auth"], auth_key=p["auth_key"],
+                                auth_audience=p["auth_audience"], workers=p["workers"],
+                                max_connections=p["max_connections"])
         self.store.ctx = context(self.server.port)  # port 0: the port the server got (store empty)
         base = self.store.ctx.uss_base_url
         self.server.start()
-        self.get_logger().info(f"serving F3548 USS-USS details on {self.server.url} "
-                               f"(auth {p['auth']}; base url {base})")
+        log = self.get_logger().warning if self.server.auth == "off" else self.get_logger().info
+        log(f"{self.server.announcement}; base url {base}; {p['workers']} workers")
         self.create_subscription(FlightPlan, c.TOPIC_PLANS, self._on_plan, qos.QOS_LATCHED)
         self.create_subscription(FlightRequest, c.TOPIC_REQUESTS, self._on_request, qos.QOS_REQUESTS)
         self.create_subscription(String, c.TOPIC_CONSTRAINTS, self._on_constraints, qos.QOS_CONSTRAINTS)
