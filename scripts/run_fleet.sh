@@ -59,6 +59,13 @@
 #   --foxglove-port N  serve a live Foxglove WebSocket view on port N (default 0 = off; docs/views.md)
 #   --uss-port N       serve the plans and constraints as ASTM F3548 operational intents over HTTP on
 #                      127.0.0.1:N (the USS-USS interface; default 0 = off; docs/f3548.md)
+#   --uss-auth A       verify | off: the USS server's access tokens (default verify: every request needs a
+#                      bearer token signed by the auth server's key, unexpired, for this USS, with the
+#                      endpoint's F3548 scope; off: none asked for, announced on the console and recorded)
+#   --uss-auth-key F   the auth server's public key for --uss-auth verify (PEM or JWKS; default: a
+#                      development key pair made in <out>/uss-auth, with a token for local clients in
+#                      <out>/uss-auth/token)
+#   --uss-audience A   audiences a token may name, comma-separated (default: localhost and 127.0.0.1)
 #   --conformance C    start the conformance monitor: true, false, or auto (default) = only when a
 #                      disturbance is set (it runs at the recorder's nice value)
 #   --recorder-nice N  the recorder's nice value (default 19): it is not in the lockstep loop, so the
@@ -77,6 +84,7 @@ cd "$ROOT"
 BACKEND=exact POLICY=mwis RATE=10 DURATION=3500 SEED=0 NETWORK=config/networks/singapore.yaml
 SPATIAL_BUFFER=0 TEMPORAL_BUFFER=0 WIND=0 WIND_FROM=270 GUST=0 SPEED_ERROR=0 DELAY_MEAN=0 VERTICAL_GUST=0 ALTITUDE_ERROR=0
 DEMAND="" CONSTRAINTS="" MODE=lockstep RTF=1 RERUN=save OUT="" FOXGLOVE_PORT=0 USS_PORT=0 RECORDER_NICE=19 RECORDER_STOP_S=60
+USS_AUTH=verify USS_AUTH_KEY="" USS_AUDIENCE=""
 CONFORMANCE=auto
 SEPARATION="" SEPARATION_M=100 VERTICAL_M=30 SLOT_S=0 CLIMB=5 DESCENT=3
 OBJECTIVE=paper BASELINE_ORDER=arrival PRIORITY_SHARE=0 HORIZON=1 LEAD_TIME=0 COMMIT_AHEAD=false REACTION=false REACTION_PERIOD=0 PROBE=0 PROBE_MARGIN=0 REPLAN_POLICY=""
@@ -116,6 +124,9 @@ while [[ $# -gt 0 ]]; do
     --rerun) RERUN="${2:?--rerun needs a value}"; shift 2;;
     --foxglove-port) FOXGLOVE_PORT="${2:?--foxglove-port needs a value}"; shift 2;;
     --uss-port) USS_PORT="${2:?--uss-port needs a value}"; shift 2;;
+    --uss-auth) USS_AUTH="${2:?--uss-auth needs a value}"; shift 2;;
+    --uss-auth-key) USS_AUTH_KEY="${2:?--uss-auth-key needs a value}"; shift 2;;
+    --uss-audience) USS_AUDIENCE="${2:?--uss-audience needs a value}"; shift 2;;
     --conformance) CONFORMANCE="${2:?--conformance needs a value}"; shift 2;;
     --recorder-nice) RECORDER_NICE="${2:?--recorder-nice needs a value}"; shift 2;;
     --out) OUT="${2:?--out needs a value}"; shift 2;;
@@ -146,6 +157,8 @@ done
 [[ "$FOXGLOVE_PORT" =~ ^[0-9]+$ ]] && (( FOXGLOVE_PORT <= 65535 )) || die "--foxglove-port: '$FOXGLOVE_PORT' is not a port 0..65535"
 [[ "$CONFORMANCE" =~ ^(auto|true|false)$ ]] || die "--conformance: '$CONFORMANCE' is not auto, true or false"
 [[ "$USS_PORT" =~ ^[0-9]+$ ]] && (( USS_PORT <= 65535 )) || die "--uss-port: '$USS_PORT' is not a port 0..65535"
+[[ "$USS_AUTH" == verify || "$USS_AUTH" == off ]] || die "--uss-auth: '$USS_AUTH' is not verify or off"
+[[ -z "$USS_AUTH_KEY" || -f "$USS_AUTH_KEY" ]] || die "--uss-auth-key: no file '$USS_AUTH_KEY'"
 [[ "$RTF" =~ ^[0-9]+(\.[0-9]+)?$ ]] || die "--rtf: '$RTF' is not a positive number"
 [[ -z "$SEPARATION" || "$SEPARATION" == sphere || "$SEPARATION" == cylinder ]] || die "--separation: '$SEPARATION' is not sphere or cylinder"
 for _flag in "separation-m:$SEPARATION_M" "vertical-separation-m:$VERTICAL_M" "slot-s:$SLOT_S" \
@@ -228,6 +241,21 @@ echo "run_fleet: policy $POLICY, backend $BACKEND, rate $RATE per 30 s, ${DURATI
 if [[ "$SEPARATION" == cylinder ]]; then _sep="cylinder H $SEPARATION_M m, V $VERTICAL_M m"; else _sep="sphere $SEPARATION_M m"; fi
 echo "run_fleet: airspace: separation $_sep, departure slot $SLOT_S s"
 echo "run_fleet: outputs in $OUT (ROS_DOMAIN_ID=$ROS_DOMAIN_ID)"
+USS_AUTH_ARGS=(-p "auth:=$USS_AUTH")
+if (( USS_PORT > 0 )) && [[ "$USS_AUTH" == verify ]]; then
+  if [[ -z "$USS_AUTH_KEY" ]]; then
+    # no auth server given: a development one, its key pair and a token in the run's folder
+    python -m uam_sim.uss_server keys "$OUT/uss-auth" >/dev/null || die "--uss-auth verify: no development key pair (above)"
+    USS_AUTH_KEY="$OUT/uss-auth/public.pem"
+    (umask 077; python -m uam_sim.uss_server token --key "$OUT/uss-auth/private.pem" --lifetime-s 86400 \
+      ${USS_AUDIENCE:+--audience "${USS_AUDIENCE%%,*}"} >"$OUT/uss-auth/token") || die "--uss-auth verify: no development token (above)"
+    echo "run_fleet: USS access tokens: development key pair in $OUT/uss-auth; a token (both scopes, 24 h) in $OUT/uss-auth/token; more: python -m uam_sim.uss_server token --key $OUT/uss-auth/private.pem"
+  fi
+  USS_AUTH_ARGS+=(-p "auth_key:=$USS_AUTH_KEY")
+elif (( USS_PORT > 0 )); then
+  echo "run_fleet: WARNING: --uss-auth off: the F3548 USS server answers every caller without an access token" >&2
+fi
+[[ -n "$USS_AUDIENCE" ]] && USS_AUTH_ARGS+=(-p "auth_audience:=$USS_AUDIENCE")
 
 PIDS=() NAMES=()
 # Each node is the installed executable itself (what `ros2 run` would start, without the ros2
@@ -336,8 +364,8 @@ if [[ "$CONFORMANCE" == true ]]; then
 fi
 if (( USS_PORT > 0 )); then  # the F3548 USS-USS interface (docs/f3548.md)
   start uam_sim uss uss -p "port:=$USS_PORT" -p "network:=$NETWORK" -p "separation_model:=$SEPARATION" \
-    -p "separation_m:=$(f "$SEPARATION_M")" -p "vertical_separation_m:=$(f "$VERTICAL_M")"
-  echo "run_fleet: F3548 operational intents on http://127.0.0.1:$USS_PORT/uss/v1/operational_intents/{id} (ids: /uam_fleet/v1/operational_intents)"
+    -p "separation_m:=$(f "$SEPARATION_M")" -p "vertical_separation_m:=$(f "$VERTICAL_M")" "${USS_AUTH_ARGS[@]}"
+  echo "run_fleet: F3548 operational intents on http://127.0.0.1:$USS_PORT/uss/v1/operational_intents/{id} (ids: /uam_fleet/v1/operational_intents; auth $USS_AUTH)"
 fi
 start uam_sim simulator simulator --params-file config/simulator.yaml -p "duration_s:=$DURATION" \
   -p "mode:=$MODE" -p "real_time_factor:=$RTF" -p "wait_for_subscribers:=[$SIM_WAITS]" \

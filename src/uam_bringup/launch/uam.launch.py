@@ -127,10 +127,12 @@ def generate_launch_description() -> LaunchDescription:
              condition=UnlessCondition(conformance_on),
              parameters=[params_file("simulator"), {**sim_params, "wait_for_subscribers": ["recorder"]}]),
     ]
-    # the F3548 USS-USS interface, only with uss_port > 0 (docs/f3548.md)
+    # the F3548 USS-USS interface, only with uss_port > 0 (docs/f3548.md); auth verify (the
+    # default) needs uss_auth_key:=FILE (the node refuses to start without it)
     nodes.append(Node(package="uam_sim", executable="uss", name="uss", output="screen",
                       condition=IfCondition(PythonExpression(["int('", a["uss_port"], "') > 0"])),
-                      parameters=[{"port": a["uss_port"], "network": network,
+                      parameters=[{"port": a["uss_port"], "network": network, "auth": a["uss_auth"],
+                                   "auth_key": a["uss_auth_key"], "auth_audience": a["uss_audience"],
                                    "separation_model": a["separation"],
                                    "separation_m": a["separation_m"],
                                    "vertical_separation_m": a["vertical_separation_m"]}]))
