@@ -7,8 +7,9 @@
 1. Intents: the approvals of an in-process run on the Singapore network at ``--rate`` requests
    per 30 s (25 = 3,000 flights/h) for ``--duration`` simulated seconds (FIFO, fast), put into an
    :class:`uam_sim.f3548.uss_server.IntentStore` and served by the real :class:`UssServer` (Flask on a
-   werkzeug threaded server) on 127.0.0.1; the store's clock is at t = 0, so every intent is
-   served whole (all its volumes: the largest answers).
+   bounded pool of ``--workers`` threads) on 127.0.0.1; the store's clock is at t = 0, so every intent
+   is served whole (all its volumes: the largest answers). With ``--auth verify`` (the default, as
+   deployed) every request carries an RS256 token of a development key pair, verified by the server.
 2. Nominal load (open loop): details requests arrive as a Poisson process of rate
    3,000 flights/h x ``--peers`` (each flight's intent fetched by that many peer USSs) for
    ``--seconds`` s, each sent by a pool of client threads at its arrival time; latency = answer
@@ -81,18 +82,28 @@ def main(argv=None) -> int:
     ap.add_argument("--seconds", type=float, default=60.0, help="wall seconds of the nominal load")
     ap.add_argument("--stress-seconds", type=float, default=20.0)
     ap.add_argument("--clients", type=int, default=4, help="client threads of the stress load")
+    ap.add_argument("--auth", choices=("verify", "off"), default="verify",
+                    help="the server's auth (verify: a token of a development key on every request)")
+    ap.add_argument("--workers", type=int, default=8, help="the server's worker threads")
     args = ap.parse_args(argv)
 
+    import tempfile
+
     from uam_planner.f3548_schema import errors
-    from uam_sim.f3548.uss_server import UssServer
+    from uam_sim.f3548.auth import generate_dev_keys, mint_token
+    from uam_sim.f3548.uss_server import SCOPE_INTENTS, UssServer
 
     store, ids = build_store(args)
-    srv = UssServer(store, port=0).start()
+    keys = tempfile.TemporaryDirectory(prefix="bench-uss-keys-")
+    private, public = generate_dev_keys(keys.name)
+    srv = UssServer(store, port=0, auth=args.auth, auth_key=str(public), workers=args.workers).start()
+    headers = {"Authorization": f"Bearer {mint_token(private, 'localhost', [SCOPE_INTENTS])}"}
     local = threading.local()
 
     def session_of():
         if not hasattr(local, "s"):
             local.s = requests.Session()
+            local.s.headers.update(headers)
         return local.s
 
     rng, rng_lock = random.Random(args.seed), threading.Lock()
@@ -143,6 +154,8 @@ def main(argv=None) -> int:
         wall = time.perf_counter() - t0
     finally:
         srv.stop()
+        keys.cleanup()
+    print(f"auth {args.auth}, {args.workers} workers")
     print(f"answers: mean {np.mean(sizes) / 1024:.0f} KiB, max {np.max(sizes) / 1024:.0f} KiB "
           f"(volumes of 5 s; 4 vertices each)")
     print("| load | requests | rate [req/s] | p50 [ms] | p95 [ms] | p99 [ms] | max [ms] |")
