@@ -340,13 +340,15 @@ start uam_sim request_generator request_generator --params-file config/request_g
 # publishers, so even a run stopped at once records the planner's and the generator's messages.
 RECORDER_WAITS="$(python -c 'from uam_contract.names import RECORDER_WAITS_FOR as w; print(",".join(w))')"
 # the run's choices, written by the recorder into the MCAP (uam_run metadata) for the analysis' header
+USS_CHOICE=()  # the USS server's auth, only when it runs (an 'off' run says so in its header)
+(( USS_PORT > 0 )) && USS_CHOICE=(uss_auth="$USS_AUTH")
 RUN_CHOICES="$(python -m uam_contract.run_choices policy="$POLICY" backend="$BACKEND" objective="$OBJECTIVE" \
   baseline_order="$BASELINE_ORDER" rate="$RATE" seed="$SEED" priority_share="$PRIORITY_SHARE" horizon="$HORIZON" \
   commit_ahead="$COMMIT_AHEAD" lead_time_s="$LEAD_TIME" departure_slot_s="$SLOT_S" spatial_buffer_m="$SPATIAL_BUFFER" \
   temporal_buffer_s="$TEMPORAL_BUFFER" reaction="$REACTION" reaction_period_s="$REACTION_PERIOD" probe_s="$PROBE" \
   probe_margin_m="$PROBE_MARGIN" wind_mps="$WIND" wind_from_deg="$WIND_FROM" gust_mps="$GUST" \
   speed_error="$SPEED_ERROR" delay_mean_s="$DELAY_MEAN" vertical_gust_mps="$VERTICAL_GUST" \
-  altitude_error_m="$ALTITUDE_ERROR")"
+  altitude_error_m="$ALTITUDE_ERROR" "${USS_CHOICE[@]}")"
 NODE_NICE=$RECORDER_NICE
 start uam_sim recorder recorder -p "output:=$MCAP" -p "network:=$NETWORK" -p "rerun:='$RERUN'" -p "rerun_rrd:=$RRD" \
   -p "foxglove_port:=$FOXGLOVE_PORT" "${AIRSPACE[@]}" -p "wait_for_publishers:=[$RECORDER_WAITS]" \

@@ -69,6 +69,8 @@ def generate_launch_description() -> LaunchDescription:
     expr = ["uam_contract.run_choices.as_json("]
     for name, arg in choices.items():
         expr += [f"{name}='", a[arg], "', "]
+    # the USS server's auth, only when it runs (verify or off: an 'off' run says so in its header)
+    expr += ["**({'uss_auth': '", a["uss_auth"], "'} if int('", a["uss_port"], "') > 0 else {}), "]
     run_choices = ParameterValue(PythonExpression(expr + [")"], python_modules=["uam_contract.run_choices"]),
                                  value_type=str)
     recorder_prefix = "nice -n 19"

@@ -16,7 +16,8 @@ import sys
 #: the choices a run states, in the order the header prints them
 NAMES = ("policy backend objective baseline_order rate seed priority_share horizon commit_ahead lead_time_s "
          "departure_slot_s spatial_buffer_m temporal_buffer_s reaction reaction_period_s probe_s probe_margin_m "
-         "wind_mps wind_from_deg gust_mps speed_error delay_mean_s vertical_gust_mps altitude_error_m").split()
+         "wind_mps wind_from_deg gust_mps speed_error delay_mean_s vertical_gust_mps altitude_error_m "
+         "uss_auth").split()
 
 
 def _value(text: str):
