@@ -48,7 +48,7 @@ _LOOPBACK = ("localhost", "127.0.0.1")
 
 class AuthError(Exception):
     """A request refused for its access token: ``status`` 401 or 403, ``error`` the RFC 6750 code
-    (``''`` when no token was sent), ``message`` what was wrong, naming the claim and its value."""
+    (``''`` when no bearer token was sent), ``message`` what was wrong, naming the claim and its value."""
 
     def __init__(self, status: int, error: str, message: str, scope: str = ""):
         super().__init__(message)
@@ -143,15 +143,16 @@ class TokenVerifier:
     """Checks the ``Authorization`` header of a request against the auth server's ``keys``
     (:func:`load_keys`), the accepted ``audiences`` and the endpoint's scope.
 
-    ``verify(header, scope)`` returns a :class:`Grant` or raises :class:`AuthError`. ``now_s``
-    (seconds since 1970) is for tests; by default the wall clock. No leeway on ``exp`` (as
-    InterUSS's mock USS): a client refreshes its token before it expires.
+    ``verify(header, scope)`` returns a :class:`Grant` or raises :class:`AuthError`. ``now_s``:
+    the clock (a callable returning seconds since 1970; default ``time.time``). No leeway on
+    ``exp`` (as InterUSS's mock USS): a client refreshes its token before it expires. Audiences
+    are compared without case, as the host names they are.
     """
 
     def __init__(self, keys, audiences, now_s=None):
         if not keys:
             raise ValueError("auth_key: no public key to verify tokens with")
-        audiences = tuple(a for a in audiences if a)
+        audiences = tuple(a.strip().lower() for a in audiences if a.strip())
         if not audiences:
             raise ValueError("auth_audience: no audience to accept (a token's aud must name this USS)")
         self.keys, self.audiences = list(keys), audiences
@@ -177,8 +178,8 @@ class TokenVerifier:
             raise AuthError(401, "", "Authorization: a bearer access token is required (RFC 6750)")
         kind, _, token = header.strip().partition(" ")
         if kind.lower() != "bearer" or not token.strip():
-            raise AuthError(401, "invalid_request",
-                            f"Authorization: {kind[:20]!r} is not a bearer access token (RFC 6750)")
+            # other credentials (Basic, an empty Bearer) are no bearer token: the bare challenge
+            raise AuthError(401, "", f"Authorization: {kind[:20]!r} is not a bearer access token (RFC 6750)")
         token = token.strip()
         if len(token) > MAX_TOKEN_CHARS:
             raise AuthError(401, "invalid_token",

@@ -283,8 +283,8 @@ class UssServer:
                 raise ValueError("auth_key: '' but auth is 'verify': give the auth server's public key "
                                  "(PEM or JWKS file; python -m uam_sim.uss_server keys DIR makes a dev pair), "
                                  "or auth 'off' for a local run")
-            audiences = ([a.strip().lower() for a in auth_audience.split(",") if a.strip()]
-                         or default_audiences(store.ctx.uss_base_url))
+            audiences = auth_audience.split(",") if auth_audience.strip() else default_audiences(
+                store.ctx.uss_base_url)
             self.verifier = TokenVerifier.from_file(auth_key, audiences)
         self._server = PooledWSGIServer(host, int(port), create_app(store, auth, self.verifier), _Quiet,
                                         workers=workers, max_connections=max_connections, **pool_options)
@@ -334,7 +334,7 @@ def fetch(base_url: str, ids=(), out=None, token: str = "", timeout_s: float = 1
     if not ids:
         r = requests.get(f"{base}/uam_fleet/v1/operational_intents", headers=headers, timeout=timeout_s)
         if r.status_code != 200:
-            raise ValueError(f"{base}: listing the intents: HTTP {r.status_code} (give the ids)")
+            raise ValueError(f"{base}: listing the intents: HTTP {r.status_code}: {r.text[:200]}")
         ids = r.json()["ids"]
     docs = []
     for oid in ids:
