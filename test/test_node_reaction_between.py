@@ -232,22 +232,27 @@ def test_observing_at_instants_keeps_the_first_position_of_each_vehicle(ros_cont
     from graph_harness import make_planner
     planner = make_planner(ros_context, backend="greedy", reaction=True, use_solver_service=False)
 
-    def state(t_s, vehicles):
+    def state(t_s, vehicles, session="sim-1"):
         msg = FleetState(vehicles=[VehicleState(vehicle_id=v, position=Point(x=x, y=0.0, z=90.0))
-                                   for v, x in vehicles])
+                                   for v, x in vehicles], step_index=int(t_s), session=session)
         msg.header.stamp = m.to_time(t_s)
         return msg
     try:
         planner._observe_from_calls = True
+        planner._bind("sim-1", resumed=False)
         for msg in (state(40.0, [("op/a", 1.0), ("op/b", 2.0), ("op/gone", 3.0)]),
                     state(50.0, [("op/a", 11.0), ("op/b", 12.0)]),
+                    state(50.0, [("op/a", 500.0)], session="rogue"),   # another session: not taken
                     state(60.0, [("op/a", 21.0), ("op/b", 22.0)]),
-                    state(60.0, [("op/a", 999.0)])):          # forged: a moved, b left out
+                    state(60.0, [("op/a", 999.0)])):          # forged, session copied: a moved, b left out
             planner._on_fleet_msg(msg)
         with planner._lock:
             planner._read_inbox(60.0, at_epoch=True)
         book = planner.planner.positions
         assert [o.position_m[0] for o in book.observations("op/a", 0.0, 60.0)] == [1.0, 11.0, 21.0]
+        # the second state of step 60 with the bound session is a forgery: the next call is refused
+        assert planner.source.refused("fleet state") == 1
+        assert "two different messages of step 60" in planner.source.problem
         assert [o.position_m[0] for o in book.observations("op/b", 0.0, 60.0)] == [2.0, 12.0, 22.0]
         assert book.latest("op/gone") is None       # not airborne at 60 s: not observed at all
     finally:

@@ -381,7 +381,8 @@ def test_forged_conformance_reports_never_drop_a_flight_nor_change_a_conforming_
 
         def forge(fs):
             ids = [v.vehicle_id for v in fs.vehicles] + ["nobody/x", "generator/never"]
-            pub.publish(Conformance(header=fs.header, step_index=fs.step_index, vehicle_ids=ids,
+            # with the simulator's session copied (anyone can read it): only the content is forged
+            pub.publish(Conformance(header=fs.header, step_index=fs.step_index, session=fs.session, vehicle_ids=ids,
                                     conforming=[False] * len(ids), lateral_m=[500.0] * len(ids),
                                     vertical_m=[0.0] * len(ids), time_error_s=[60.0] * len(ids),
                                     excursion_s=[30.0] * len(ids)))
@@ -402,6 +403,46 @@ def test_forged_conformance_reports_never_drop_a_flight_nor_change_a_conforming_
     flown = {f"{p.operator_id}/{p.request_id}" for p in sim.flown_plans}
     assert flown == {f"{p.operator_id}/{p.request_id}" for p in obs.plans
                      if p.outcome == FlightPlan.OUTCOME_APPROVED}
+
+
+def test_a_fleet_state_forged_ahead_of_the_simulators_ends_the_run_naming_it(ros_context, spin_until):
+    """A rogue that reads each fleet state publishes the next step's before the simulator does,
+    with the simulator's session copied and every vehicle moved 60 m. The planner cannot tell
+    which of the two it believed first, so it refuses the next epoch naming the forgery and the
+    simulator ends the run with that reason (the recording is NOT VERIFIED). Without the session
+    the forgery is not taken at all: the run is the clean run."""
+    from geometry_msgs.msg import Point
+    from uam_msgs.msg import FleetState, VehicleState
+
+    def attacker(copy_session: bool):
+        def attack(executor, nodes, rogue):
+            pub = rogue.node.create_publisher(FleetState, c.TOPIC_FLEET, qos.QOS_STREAM)
+            sent = []
+
+            def forge(fs):
+                if fs.step_index % 2 or not fs.vehicles or sent and sent[-1] >= fs.step_index:
+                    return   # one forgery per two steps, never one of its own
+                t = m.from_time(fs.header.stamp) + 1.0
+                fake = FleetState(step_index=fs.step_index + 1, session=fs.session if copy_session else "rogue",
+                                  vehicles=[VehicleState(vehicle_id=v.vehicle_id, position=Point(
+                                      x=v.position.x + 60.0, y=v.position.y, z=v.position.z)) for v in fs.vehicles])
+                fake.header.stamp, fake.header.frame_id = m.to_time(t), fs.header.frame_id
+                pub.publish(fake)
+                sent.append(fake.step_index)
+            rogue.node.create_subscription(FleetState, c.TOPIC_FLEET, forge, qos.QOS_STREAM)
+            return sent
+        return attack
+
+    obs, nodes, sent = _run_with_rogue(ros_context, spin_until, attacker(True))
+    sim, planner = nodes["simulator"], nodes["planner"]
+    assert sent and "fleet state: two different messages of step" in sim.error, sim.error
+    assert planner.source.problem and "forged" in planner.source.problem
+    obs, nodes, sent = _run_with_rogue(ros_context, spin_until, attacker(False))
+    sim, planner = nodes["simulator"], nodes["planner"]
+    assert not sim.error, sim.error
+    # (the planner reads its inbox, which keeps the newest messages, at each epoch)
+    assert len(sent) > 10 and planner.source.refused("fleet state") > 0
+    assert decisions(obs.plans) == _clean()
 
 
 def test_forged_or_missing_fleet_states_never_make_the_planner_forget_a_late_flight_early():

@@ -70,9 +70,9 @@ def test_direct_cdr_equals_rclpy_serialization():
     from rclpy.serialization import deserialize_message, serialize_message
     from uam_msgs.msg import FleetState, VehicleState
 
-    for t in (0.0, 12.5, 29.0, 40.0):  # two, two, one and no vehicles
+    for t, session in ((0.0, "3f2a9c01d4e5b6a7"), (12.5, "a"), (29.0, "abcd"), (40.0, "s" * 5)):  # 2, 2, 1, 0 vehicles
         s = _fleet().sample(t)
-        msg = FleetState(step_index=int(t * 2))
+        msg = FleetState(step_index=int(t * 2), session=session)
         msg.header.stamp.sec, msg.header.stamp.nanosec, msg.header.frame_id = int(t), 500_000_000, "enu"
         poses = PoseArray()
         poses.header = msg.header
@@ -87,7 +87,7 @@ def test_direct_cdr_equals_rclpy_serialization():
             poses.poses.append(Pose(position=Point(x=p[0], y=p[1], z=p[2]),
                                     orientation=Quaternion(x=q[0], y=q[1], z=q[2], w=q[3])))
         ours = encode_fleet_state(int(t), 500_000_000, "enu", int(t * 2), s.vehicle_ids, s.positions_m,
-                                  s.velocities_mps, s.phases, s.segment_indices, s.flown_m, s.remaining_m)
+                                  s.velocities_mps, s.phases, s.segment_indices, s.flown_m, s.remaining_m, session)
         # Same layout and content (rmw leaves alignment padding uninitialised, so compare decoded
         # messages and lengths rather than raw bytes).
         assert len(ours) == len(serialize_message(msg))
@@ -144,8 +144,8 @@ def test_direct_cdr_with_ids_of_every_length_mod_8(frame_id):
     phases, segs = rng.integers(0, 3, n), rng.integers(0, 9, n)
     flown, rem = rng.uniform(0, 1e4, n), rng.uniform(0, 1e4, n)
     for _ in range(2):  # the second time the ids come from the cache
-        ours = encode_fleet_state(7, 123, frame_id, 42, ids, pos, vel, phases, segs, flown, rem)
-        msg = FleetState(step_index=42, vehicles=[VehicleState(
+        ours = encode_fleet_state(7, 123, frame_id, 42, ids, pos, vel, phases, segs, flown, rem, frame_id[:3])
+        msg = FleetState(step_index=42, session=frame_id[:3], vehicles=[VehicleState(
             vehicle_id=ids[i], position=Point(x=pos[i, 0], y=pos[i, 1], z=pos[i, 2]),
             velocity=Vector3(x=vel[i, 0], y=vel[i, 1], z=vel[i, 2]), phase=int(phases[i]),
             segment_index=int(segs[i]), distance_flown_m=float(flown[i]), distance_remaining_m=float(rem[i]))

@@ -77,6 +77,7 @@ from uam_planner.constraints import ConstraintError
 from uam_planner.live_constraints import parse_update, set_geojson
 from uam_planner.network import load_network
 from uam_planner.conformance import ConformanceBounds
+from uam_planner.sources import BoundSource, conformance_digest, fleet_digest
 from uam_planner.planning import AirspaceConfig, Planner, PlanningConfig, call_solver, default_solve_mwis
 
 
@@ -208,6 +209,8 @@ class PlannerNode(Node):
         # the run tokens (docs/security.md): this planner's own, and the simulator's it serves
         self.session = secrets.token_hex(8)
         self.bound_simulator: str | None = None
+        #: the fleet states and conformance reports taken from the bound simulator only
+        self.source = BoundSource()
         self._epoch_s: float | None = None       # fixed by the first served call
         self.resumed = False
         self.journal = Journal(self.p["journal"]) if self.p["journal"] else None
@@ -224,11 +227,13 @@ class PlannerNode(Node):
 
     def _on_fleet_msg(self, msg: FleetState) -> None:
         self._inbox.append(msg)
-        self._stamped(m.from_time(msg.header.stamp), None)
+        if msg.session == self.bound_simulator:   # another session's stamp wakes no one
+            self._stamped(m.from_time(msg.header.stamp), None)
 
     def _on_conformance_msg(self, msg: Conformance) -> None:
         self._inbox.append(msg)
-        self._stamped(None, m.from_time(msg.header.stamp))
+        if msg.session == self.bound_simulator:
+            self._stamped(None, m.from_time(msg.header.stamp))
 
     def _stamped(self, fleet_s, conformance_s) -> None:
         """A message arrived: wake the calls waiting for its time (``_await_stamps``)."""
@@ -280,6 +285,12 @@ class PlannerNode(Node):
         (:meth:`_observe_at`)."""
         while self._inbox:
             msg = self._inbox.popleft()
+            # only the bound simulator's, each step once (uam_planner.sources)
+            if isinstance(msg, FleetState):
+                if not self.source.take("fleet state", msg.session, msg.step_index, fleet_digest(msg)):
+                    continue
+            elif not self.source.take("conformance report", msg.session, msg.step_index, conformance_digest(msg)):
+                continue
             if isinstance(msg, FleetState):
                 if self._observe_from_calls:
                     seen = self._fleet_buffer.setdefault(stamp_key(m.from_time(msg.header.stamp)), {})
@@ -546,6 +557,8 @@ class PlannerNode(Node):
         if self.bound_simulator is not None and session != self.bound_simulator:
             return (f"session: {wire.echo(session)} is not the simulator this planner serves "
                     f"({self.bound_simulator!r}); a second simulator is refused")
+        if self.source.problem:
+            return self.source.problem
         if not (math.isfinite(request.epoch_s) and request.epoch_s > 0):
             return f"epoch_s: {request.epoch_s!r} must be a positive number of seconds"
         if self._epoch_s is not None and request.epoch_s != self._epoch_s:
@@ -625,6 +638,7 @@ class PlannerNode(Node):
 
     def _bind(self, session: str, resumed: bool) -> None:
         self.bound_simulator = session
+        self.source.bind(session)
         if self.journal is not None:
             self.journal.start(session, keep=resumed)
         self.get_logger().info(f"serving the simulator of session {session!r} (this planner: {self.session!r})")
@@ -802,6 +816,8 @@ class PlannerNode(Node):
         if session != self.bound_simulator:
             return (f"session: {wire.echo(session)} is not the simulator this planner serves "
                     f"({self.bound_simulator!r}); a second simulator is refused")
+        if self.source.problem:
+            return self.source.problem
         if not self.p["reaction"]:
             return "reaction: the planner's reaction to nonconformance is off (parameter reaction); nothing to react with"
         if not (math.isfinite(request.epoch_s) and request.epoch_s == self._epoch_s):

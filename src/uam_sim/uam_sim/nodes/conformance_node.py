@@ -72,7 +72,7 @@ class ConformanceNode(Node):
         pos = [(v.position.x, v.position.y, v.position.z) for v in msg.vehicles]
         states = self.monitor.update(t, ids, pos)
         self.samples += 1
-        out = Conformance(header=msg.header, step_index=msg.step_index,
+        out = Conformance(header=msg.header, step_index=msg.step_index, session=msg.session,
                           vehicle_ids=[s.flight_id for s in states],
                           conforming=[s.conforming for s in states],
                           lateral_m=[s.lateral_m for s in states],

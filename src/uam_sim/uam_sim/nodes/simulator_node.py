@@ -592,7 +592,7 @@ class SimulatorNode(Node):
         # a fraction of the cost (see uam_sim/recording/cdr.py).
         self._fleet_pub.publish(encode_fleet_state(
             stamp.sec, stamp.nanosec, c.FRAME_ID, self.step_index, fs.vehicle_ids, fs.positions_m,
-            fs.velocities_mps, fs.phases, fs.segment_indices, fs.flown_m, fs.remaining_m))
+            fs.velocities_mps, fs.phases, fs.segment_indices, fs.flown_m, fs.remaining_m, self.session))
         self._pose_pub.publish(encode_pose_array(
             stamp.sec, stamp.nanosec, c.FRAME_ID, fs.positions_m, yaw_quaternions(fs.velocities_mps)))
 

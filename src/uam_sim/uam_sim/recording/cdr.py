@@ -126,9 +126,16 @@ class _Layout:
 _LAYOUT: list = [None]  # the last layout used (the simulator's ids change a few times an epoch)
 
 
+def _tail_string(offset: int, text: str) -> bytes:
+    """A CDR string starting at payload offset ``offset`` (padding to 4 first)."""
+    data = text.encode("utf-8")
+    return b"\x00" * ((-offset) % 4) + struct.pack("<I", len(data) + 1) + data + b"\x00"
+
+
 def encode_fleet_state(sec: int, nanosec: int, frame_id: str, step_index: int, vehicle_ids, positions_m,
-                       velocities_mps, phases, segment_indices, flown_m, remaining_m) -> bytes:
-    """Serialized uam_msgs/FleetState. Arrays have one row per vehicle (positions (n, 3) ENU m).
+                       velocities_mps, phases, segment_indices, flown_m, remaining_m, session: str = "") -> bytes:
+    """Serialized uam_msgs/FleetState. Arrays have one row per vehicle (positions (n, 3) ENU m);
+    ``session``: the simulator's run token (the message's last field).
 
     The fixed part of all vehicles is one numpy structured array, scattered into the layout of
     the ids (:class:`_Layout`, kept while the ids stay the same)."""
@@ -138,6 +145,7 @@ def encode_fleet_state(sec: int, nanosec: int, frame_id: str, step_index: int, v
     n = len(vehicle_ids)
     w.u32(n)
     if n == 0:
+        w.string(session)
         return ENCAPSULATION + bytes(w.buf)
     fixed = np.zeros(n, dtype=_VEHICLE_FIXED)
     fixed["pv"][:, :3] = np.asarray(positions_m, dtype=np.float64).reshape(n, 3)
@@ -152,7 +160,7 @@ def encode_fleet_state(sec: int, nanosec: int, frame_id: str, step_index: int, v
         layout = _LAYOUT[0] = _Layout(key, len(w.buf), vehicle_ids)
     body = layout.template.copy()
     body[layout.positions] = fixed.view(np.uint8)
-    return b"".join((ENCAPSULATION, bytes(w.buf), body.tobytes()))
+    return b"".join((ENCAPSULATION, bytes(w.buf), body.tobytes(), _tail_string(len(w.buf) + body.size, session)))
 
 
 _CLOCK = struct.Struct("<4siI")
