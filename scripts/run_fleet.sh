@@ -241,6 +241,12 @@ echo "run_fleet: policy $POLICY, backend $BACKEND, rate $RATE per 30 s, ${DURATI
 if [[ "$SEPARATION" == cylinder ]]; then _sep="cylinder H $SEPARATION_M m, V $VERTICAL_M m"; else _sep="sphere $SEPARATION_M m"; fi
 echo "run_fleet: airspace: separation $_sep, departure slot $SLOT_S s"
 echo "run_fleet: outputs in $OUT (ROS_DOMAIN_ID=$ROS_DOMAIN_ID)"
+# the run's domain, for the tools that join it (python -m uam_planner.nodes.constraint_client --run $OUT)
+echo "ROS_DOMAIN_ID=$ROS_DOMAIN_ID" > "$OUT/run.env"
+# the run's airspace authority: a new key pair each run; the planner takes live constraint
+# updates signed with it only (uam_planner.authority; docs/constraints.md)
+python -m uam_planner.authority new "$OUT/authority" >/dev/null || die "no airspace authority key pair (above)"
+echo "run_fleet: live constraints: python -m uam_planner.nodes.constraint_client add FEATURE.geojson --run $OUT"
 USS_AUTH_ARGS=(-p "auth:=$USS_AUTH")
 if (( USS_PORT > 0 )) && [[ "$USS_AUTH" == verify ]]; then
   if [[ -z "$USS_AUTH_KEY" ]]; then
@@ -329,6 +335,7 @@ start uam_planner planner planner --params-file config/planner.yaml -p "network:
   -p "objective:=$OBJECTIVE" -p "baseline_order:=$BASELINE_ORDER" -p "horizon_epochs:=$HORIZON" \
   -p "commit_ahead:=$COMMIT_AHEAD" -p "reaction:=$REACTION" -p "conflict_probe_s:=$(f "$PROBE")" -p "conflict_probe_margin_m:=$(f "$PROBE_MARGIN")" ${REPLAN_POLICY:+-p "replan_policy:=$REPLAN_POLICY"} \
   -p "climb_rate_mps:=$(f "$CLIMB")" -p "descent_rate_mps:=$(f "$DESCENT")" -p "journal:=$OUT/planner-journal.jsonl" \
+  -p "authorities_file:=$OUT/authority/authorities.yaml" \
   -p "spatial_buffer_m:=$(f "$SPATIAL_BUFFER")" -p "temporal_buffer_s:=$(f "$TEMPORAL_BUFFER")" \
   ${CONSTRAINTS:+-p "constraints_file:=$CONSTRAINTS"}
 start uam_sim request_generator request_generator --params-file config/request_generator.yaml \

@@ -5,8 +5,11 @@ effect at the next epoch and the graph plans around them from then on."""
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
+import tempfile
+from pathlib import Path
 
 import pytest
 
@@ -23,12 +26,22 @@ from uam_contract import names as c  # noqa: E402
 from uam_planner.constraints import MAX_VERTICES, ConstraintSet  # noqa: E402
 from uam_planner.network import load_network  # noqa: E402
 from uam_planner.nodes import conversions as m  # noqa: E402
-from uam_planner.live_constraints import constraints_from_text  # noqa: E402
+from uam_planner.live_constraints import constraints_from_text, withdrawals_from_text  # noqa: E402
+from uam_planner.authority import sign_update, write_authority  # noqa: E402
 
 pytestmark = pytest.mark.ros
 
 ADD, CHANGE, WITHDRAW = (UpdateConstraint.Request.ACTION_ADD, UpdateConstraint.Request.ACTION_CHANGE,
                          UpdateConstraint.Request.ACTION_WITHDRAW)
+NAMES = {ADD: "add", CHANGE: "change", WITHDRAW: "withdraw"}
+
+# the airspace authorities of these tests: "caa" (admin) and "clinic" (its own constraints only)
+_KEYS = Path(tempfile.mkdtemp(prefix="uam-authority-"))
+AUTHORITIES, CAA_KEY = write_authority(_KEYS / "caa", "caa")
+_CLINIC_FILE, CLINIC_KEY = write_authority(_KEYS / "clinic", "clinic", admin=False)
+(_KEYS / "caa" / "clinic.pub.pem").write_bytes((_KEYS / "clinic" / "clinic.pub.pem").read_bytes())
+AUTHORITIES.write_text(AUTHORITIES.read_text() + "  - id: clinic\n    public_key: clinic.pub.pem\n")
+_SEQ = itertools.count(1)
 
 
 def square(cid="hub", version=1, half=250.0, lower=0.0, upper=300.0, start=0.0, end=10000.0, ring=None):
@@ -45,9 +58,14 @@ def closure(cid="C-closed", version=1, vertiport="C", start=0.0, end=150.0):
                                       "vertiport_id": vertiport, "start_s": start, "end_s": end}})
 
 
-def request(action, cid, version, geojson="", reason=""):
-    return UpdateConstraint.Request(action=action, constraint_id=cid, version=version, geojson=geojson,
-                                    reason=reason)
+def request(action, cid, version, geojson="", reason="", by="caa"):
+    """The update, signed by authority ``by`` (None: unsigned) with the next sequence number."""
+    req = UpdateConstraint.Request(action=action, constraint_id=cid, version=version, geojson=geojson,
+                                   reason=reason)
+    if by is not None:
+        key = {"caa": CAA_KEY, "clinic": CLINIC_KEY}[by]
+        req.authorization = sign_update(req, NAMES.get(action, "add"), by, key.read_bytes(), next(_SEQ))
+    return req
 
 
 def call(executor, spin_until, client, req):
@@ -57,7 +75,7 @@ def call(executor, spin_until, client, req):
 
 
 def test_bad_updates_are_refused_naming_the_field_and_nothing_accepted_is_lost(ros_context, spin_until):
-    planner = make_planner(ros_context)
+    planner = make_planner(ros_context, authorities_file=str(AUTHORITIES))
     caller = rclpy.create_node("authority", context=ros_context)
     client = caller.create_client(UpdateConstraint, c.SERVICE_UPDATE_CONSTRAINT)
     executor = SingleThreadedExecutor(context=ros_context)
@@ -89,6 +107,7 @@ def test_bad_updates_are_refused_naming_the_field_and_nothing_accepted_is_lost(r
             (request(ADD, "x", 1, "{not json"), "geojson: not JSON"),
             (request(7, "x", 1, square("x")), "action: 7 is not 0 (add), 1 (change) or 2 (withdraw)"),
             (request(WITHDRAW, "hub", 2, square("hub", version=2)), "geojson: a withdrawal carries no geometry"),
+            (request(ADD, "sky", 1, square("sky", half=1e300)), "beyond the network's extent plus 20000 m"),
         ]
         for req, expected in cases:
             res = call(executor, spin_until, client, req)
@@ -117,7 +136,8 @@ def test_an_update_takes_effect_at_the_next_epoch_and_is_published_latched(ros_c
     naming it, the set is on uam/constraints (latched), and the recording's audit of what flew
     finds no incursion and no loss."""
     out = tmp_path / "live.mcap"
-    executor, nodes, obs = build_graph(ros_context, rate=3.0, seed=5, duration_s=240.0, record_to=out)
+    executor, nodes, obs = build_graph(ros_context, rate=3.0, seed=5, duration_s=240.0, record_to=out,
+                                       planner_extra={"authorities_file": str(AUTHORITIES)})
     sets: list[str] = []
     listener = rclpy.create_node("constraint_listener", context=ros_context)
     listener.create_subscription(String, c.TOPIC_CONSTRAINTS, lambda msg: sets.append(msg.data), qos.QOS_CONSTRAINTS)
@@ -142,6 +162,7 @@ def test_an_update_takes_effect_at_the_next_epoch_and_is_published_latched(ros_c
     net = load_network(TINY)
     t1, later = constraints_from_text(sets[-1], net)
     assert t1 == effective_s and [(k.constraint_id, eff) for k, eff in later] == [("hub", effective_s)]
+    assert later[0][0].author == "caa"   # the recording names who changed the airspace
     cset = ConstraintSet([later[0][0]], net)
     approved = [p for p in obs.plans if p.outcome == FlightPlan.OUTCOME_APPROVED
                 and p.epoch_index * 30.0 >= effective_s]
@@ -178,3 +199,67 @@ def test_the_command_line_client_builds_the_request_from_a_feature_file(tmp_path
     two.write_text(json.dumps({"type": "FeatureCollection", "features": [json.loads(square()), json.loads(square("b"))]}))
     with pytest.raises(ValueError, match="2 features; one update carries exactly one"):
         build_request("add", str(two))
+
+
+def test_only_a_configured_authority_may_change_the_airspace_and_only_its_own_constraints(ros_context, spin_until):
+    """Anyone on the domain can call uam/update_constraint: an unsigned update, one signed by an
+    unknown key, one whose content was changed after signing, a replayed one and one from a
+    planner without authorities are refused naming ``authorization``; a non-admin authority may
+    not change or withdraw another's constraint; the set records each constraint's author and
+    each withdrawal's."""
+    planner = make_planner(ros_context, authorities_file=str(AUTHORITIES))
+    bare = make_planner(ros_context)   # no authorities file: live updates off
+    caller = rclpy.create_node("caller", context=ros_context)
+    client = caller.create_client(UpdateConstraint, c.SERVICE_UPDATE_CONSTRAINT)
+    sets: list[str] = []
+    caller.create_subscription(String, c.TOPIC_CONSTRAINTS, lambda msg: sets.append(msg.data), qos.QOS_CONSTRAINTS)
+    executor = SingleThreadedExecutor(context=ros_context)
+    for n in (planner, caller):
+        executor.add_node(n)
+    try:
+        assert spin_until(executor, client.service_is_ready, 20)
+        unsigned = request(ADD, "hub", 1, square(), by=None)
+        stranger_dir = _KEYS / "stranger"
+        _f, stranger_key = write_authority(stranger_dir, "caa")   # claims to be caa, another key
+        forged = request(ADD, "hub", 1, square(), by=None)
+        forged.authorization = sign_update(forged, "add", "caa", stranger_key.read_bytes(), next(_SEQ))
+        tampered = request(ADD, "hub", 1, square())
+        tampered.geojson = square(half=20000.0)
+        ok = request(ADD, "hub", 1, square())
+        replay = UpdateConstraint.Request(action=ADD, constraint_id="hub", version=1, geojson=square(),
+                                          reason="", authorization=ok.authorization)
+        for req, expected in ((unsigned, "authorization: empty"), (forged, "not signed by 'caa'"),
+                              (tampered, "claim sha256")):
+            res = call(executor, spin_until, client, req)
+            assert not res.accepted and expected in res.error, (expected, res.error)
+        assert call(executor, spin_until, client, ok).accepted
+        res = call(executor, spin_until, client, replay)   # read off the wire and sent again
+        assert not res.accepted and "a replayed update" in res.error, res.error
+        # the clinic may add its own and change it, not the caa's; the caa (admin) may change any
+        assert call(executor, spin_until, client, request(ADD, "pad", 1, closure("pad"), by="clinic")).accepted
+        res = call(executor, spin_until, client, request(CHANGE, "hub", 2, square("hub", version=2), by="clinic"))
+        assert not res.accepted and "'hub' is caa's; 'clinic' may not change or withdraw it" in res.error, res.error
+        res = call(executor, spin_until, client, request(WITHDRAW, "hub", 2, by="clinic"))
+        assert not res.accepted and "may not change or withdraw it" in res.error
+        assert call(executor, spin_until, client, request(CHANGE, "pad", 2, closure("pad", version=2),
+                                                          by="clinic")).accepted
+        assert call(executor, spin_until, client, request(WITHDRAW, "pad", 3, by="caa")).accepted
+        held = planner._projected_constraints()
+        assert list(held) == ["hub"] and held["hub"].author == "caa"
+        # applied at the next epoch: the published set names the author and the withdrawal's
+        with planner._lock:
+            list(planner.planner.prepare_steps(0.0, 0))
+            planner._publish_constraint_changes(0.0)
+        assert spin_until(executor, lambda: any('"author":"caa"' in x for x in sets), 10), sets
+        (_t, [(hub, _eff)]) = constraints_from_text(sets[-1], load_network(TINY))
+        assert hub.author == "caa"
+        assert [(w["id"], w["version"], w["by"]) for w in withdrawals_from_text(sets[-1])] == [("pad", 2, "caa")]
+        executor.remove_node(planner)
+        executor.add_node(bare)
+        assert spin_until(executor, client.service_is_ready, 20)
+        res = call(executor, spin_until, client, request(ADD, "x", 1, square("x")))
+        assert not res.accepted and "no airspace authority is configured" in res.error, res.error
+    finally:
+        executor.shutdown()
+        for n in (planner, bare, caller):
+            n.destroy_node()

@@ -108,5 +108,8 @@ LAUNCH_OPTIONS: tuple[LaunchOption, ...] = (
     LaunchOption("--out", "OUT", "out", "", "output folder (run.mcap, run.rrd, logs); default a new folder under runs/"),
     LaunchOption("--recorder-nice", "RECORDER_NICE", "", "19", "the recorder's nice value", only="run_fleet"),
     LaunchOption("", "", "namespace", "", "namespace of the whole graph", only="launch"),
+    LaunchOption("", "", "authorities_file", "", "the airspace authorities whose signed live constraint updates "
+                 "the planner takes (uam_planner.authority); '' = none taken (run_fleet.sh makes one per run)",
+                 only="launch"),
     LaunchOption("", "", "config_dir", "config", "folder of the parameter files", only="launch"),
 )

@@ -133,6 +133,9 @@ PLANNER = (
     Param("journal", "", "file where the planner journals its approvals (uam_bringup.journal), so a restarted "
           "planner checks the simulator's claim of the flights in the air against its own record; '' for none "
           "(run_fleet.sh writes <out>/planner-journal.jsonl)"),
+    Param("authorities_file", "", "the airspace authorities whose signed updates on uam/update_constraint "
+          "are taken (uam_planner.authority: ids and public keys; run_fleet.sh writes <out>/authority/"
+          "authorities.yaml); '' = live constraint updates are refused"),
     Param("constraints_file", "", "airspace constraints to plan around from the first epoch: a GeoJSON "
           "FeatureCollection or an ED-269 UAS zone file (docs/constraints.md); no candidate entering one "
           "during its window is approved; '' for none (the paper's airspace)"),

@@ -101,6 +101,8 @@ class Constraint:
         announce_s: when the authority announces it [s] (-inf, the default: known from the
             start). A ``Planner`` holds a constraint back until its first epoch at a time >=
             announce_s, and then re-plans the flights it affects (docs/replanning.md).
+        author: the airspace authority that added or last changed it (``uam_planner.authority``;
+            "" for the constraints the run started with).
     """
 
     constraint_id: str
@@ -116,6 +118,7 @@ class Constraint:
     vertiport_id: str | None = None
     pad_index: int | None = None
     announce_s: float = -math.inf
+    author: str = ""
     _index: dict = field(default_factory=dict, init=False, repr=False)  # GEOS tree, built once
 
     def __post_init__(self):
@@ -591,7 +594,8 @@ def constraints_from_geojson(doc: Mapping, network=None) -> list[Constraint]:
         common = dict(constraint_id=cid, version=_prop(props, "version", where),
                       reason=_prop(props, "reason", where, False, ""),
                       start_s=_prop(props, "start_s", where), end_s=_prop(props, "end_s", where),
-                      announce_s=_prop(props, "announce_s", where, False, -math.inf))
+                      announce_s=_prop(props, "announce_s", where, False, -math.inf),
+                      author=str(_prop(props, "author", where, False, "") or ""))
         geom = f.get("geometry")
         try:
             if geom is None:

@@ -35,6 +35,7 @@ import math
 from typing import Any, Iterable
 
 from uam_contract.ids import echo
+from uam_planner.authority import check_extent
 from uam_planner.constraints import MAX_VERTICES, Constraint, ConstraintError, constraints_from_geojson
 
 ACTION_ADD, ACTION_CHANGE, ACTION_WITHDRAW = 0, 1, 2
@@ -97,6 +98,7 @@ def parse_update(req: Any, current: dict, network) -> tuple[str, Any]:
         raise ConstraintError(f"constraint_id: the planner holds {len(current)} constraints, its most "
                               f"({MAX_CONSTRAINTS}); withdraw one first")
     c = _feature_constraint(getattr(req, "geojson", ""), network)
+    check_extent(c, network)
     if c.constraint_id != cid:
         raise ConstraintError(f"geojson properties.id: {c.constraint_id!r} differs from constraint_id {cid!r}")
     if c.version != version:
@@ -127,18 +129,23 @@ def constraint_feature(c: Constraint, **extra) -> dict:
         else:
             rings = [[[float(x), float(y)] for x, y in r] + [[float(r[0][0]), float(r[0][1])]] for r in c.rings_m]
             geometry = {"type": "Polygon", "coordinates": rings}
+    if c.author:
+        props["author"] = c.author
     props.update(extra)
     return {"type": "Feature", "geometry": geometry, "properties": props}
 
 
 def set_geojson(constraints: Iterable[Constraint], t_s: float, effective_s: dict[str, float] | None = None,
-                announced_s: dict[str, float] | None = None) -> str:
+                announced_s: dict[str, float] | None = None, withdrawn: list | None = None) -> str:
     """The set the planner plans with from ``t_s`` on, as the text of ``uam/constraints``: a
     GeoJSON FeatureCollection in ENU metres (``"frame": "enu"``), each feature with its window
     (``start_s``, ``end_s``, null = unbounded), band, ``effective_s`` (when the planner began
     planning with this version) and, where known, ``announce_s`` (when the authority announced
     it: ``announced_s``, else the constraint's own finite ``announce_s``; the audit reports what
-    flew inside it between the two). Read back with :func:`constraints_from_text`."""
+    flew inside it between the two). ``withdrawn``: the withdrawals so far, each {"id",
+    "version", "by" (the authority), "t_s" (when asked), "applied_s"}, written as the collection's
+    ``withdrawn`` list (read with :func:`withdrawals_from_text`). Read back with
+    :func:`constraints_from_text`."""
     eff, ann = effective_s or {}, announced_s or {}
 
     def extra(c):
@@ -148,8 +155,21 @@ def set_geojson(constraints: Iterable[Constraint], t_s: float, effective_s: dict
             out["announce_s"] = float(when)
         return out
     feats = [constraint_feature(c, **extra(c)) for c in sorted(constraints, key=lambda c: c.constraint_id)]
-    return json.dumps({"type": "FeatureCollection", "frame": "enu", "t_s": float(t_s), "features": feats},
-                      separators=(",", ":"), allow_nan=False)
+    doc = {"type": "FeatureCollection", "frame": "enu", "t_s": float(t_s), "features": feats}
+    if withdrawn:
+        doc["withdrawn"] = list(withdrawn)
+    return json.dumps(doc, separators=(",", ":"), allow_nan=False)
+
+
+def withdrawals_from_text(text: str) -> list[dict]:
+    """The ``withdrawn`` list of a published set (:func:`set_geojson`); [] when it has none or
+    is not readable (the set's own reader reports that)."""
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError:
+        return []
+    found = doc.get("withdrawn") if isinstance(doc, dict) else None
+    return [w for w in found if isinstance(w, dict)] if isinstance(found, list) else []
 
 
 def constraints_from_text(text: str, network=None) -> tuple[float, list[tuple[Constraint, float]]]:
@@ -173,4 +193,4 @@ def constraints_from_text(text: str, network=None) -> tuple[float, list[tuple[Co
 
 __all__ = ["ACTIONS", "ACTION_ADD", "ACTION_CHANGE", "ACTION_WITHDRAW", "MAX_CONSTRAINTS",
            "MAX_GEOJSON_CHARS", "MAX_VERTICES", "constraint_feature", "constraints_from_text", "parse_update",
-           "set_geojson"]
+           "set_geojson", "withdrawals_from_text"]

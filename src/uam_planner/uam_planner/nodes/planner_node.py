@@ -77,6 +77,7 @@ from uam_planner.constraints import ConstraintError
 from uam_planner.live_constraints import parse_update, set_geojson
 from uam_planner.network import load_network
 from uam_planner.conformance import ConformanceBounds
+from uam_planner.authority import Authorities
 from uam_planner.sources import BoundSource, conformance_digest, fleet_digest
 from uam_planner.planning import AirspaceConfig, Planner, PlanningConfig, call_solver, default_solve_mwis
 
@@ -125,11 +126,19 @@ class PlannerNode(Node):
             except ValueError as exc:
                 raise ValueError(f"constraints_file: {exc}") from None
             self.planner.set_constraints(cset)
+        # who may change the airspace (uam_planner.authority): without an authorities file the
+        # planner takes no live constraint update
+        self.authorities = None
+        if self.p["authorities_file"]:
+            self.authorities = Authorities.load(self.p["authorities_file"])   # ValueError names the file
         # live constraints: uam/update_constraint, queued in the planner and applied at
         # its next epoch (Planner.update_constraint); the set in force is published on uam/constraints
         self._constraint_effective: dict[str, float] = {c.constraint_id: 0.0 for c in self.config.constraints or ()}
         # when the authority announced each live constraint version (the update's time)
         self._constraint_announced: dict[str, float] = {}
+        # who withdrew which constraint, when asked and when applied (published with the set)
+        self._withdrawals: list[dict] = []
+        self._withdrawn_by: dict[tuple, tuple] = {}   # (id, version) -> (authority, t asked)
         self._constraints_logged = 0        # entries of planner.constraint_log published
         self.constraint_updates_refused = 0
 
@@ -393,9 +402,20 @@ class PlannerNode(Node):
         """Queue (for the next epoch) or refuse one constraint update, naming the field and value."""
         with self._lock:
             now = self._next_epoch_s
+            author = ""
             try:
-                action, what = parse_update(request, self._projected_constraints(), self.network)
+                current = self._projected_constraints()
+                action, what = parse_update(request, current, self.network)
+                if self.authorities is None:
+                    raise ConstraintError("authorization: no airspace authority is configured for this run "
+                                          "(parameter authorities_file): live constraint updates are off")
+                author = self.authorities.verify(request, action)
+                self.authorities.check_owner(author, current.get(request.constraint_id))
+                if action != "withdraw":
+                    what = dataclasses.replace(what, author=author)
                 error = self.planner.update_constraint(action, what, now) or ""
+                if not error and action == "withdraw":
+                    self._withdrawn_by[(request.constraint_id, int(request.version))] = (author, now)
             except ConstraintError as exc:
                 action, error = str(request.action), str(exc)
             if error:
@@ -409,7 +429,7 @@ class PlannerNode(Node):
                                       f"{response.error}")
         else:
             self.get_logger().info(f"constraint update accepted: {action} {request.constraint_id!r} "
-                                   f"v{request.version}, from the epoch at t = {now:g} s")
+                                   f"v{request.version} by {author!r}, from the epoch at t = {now:g} s")
         return response
 
     def _publish_constraint_changes(self, t_s: float) -> None:
@@ -421,6 +441,12 @@ class PlannerNode(Node):
             if u.action == "withdraw":
                 self._constraint_effective.pop(u.constraint.constraint_id, None)
                 self._constraint_announced.pop(u.constraint.constraint_id, None)
+                by = next((v for (cid, _ver), v in self._withdrawn_by.items()
+                           if cid == u.constraint.constraint_id), ("", u.t_s))
+                self._withdrawals.append({"id": u.constraint.constraint_id, "version": int(u.constraint.version),
+                                          "by": by[0], "t_s": float(u.t_s), "applied_s": float(u.applied_s)})
+                self._withdrawn_by = {k: v for k, v in self._withdrawn_by.items()
+                                      if k[0] != u.constraint.constraint_id}
             else:
                 self._constraint_effective[u.constraint.constraint_id] = float(u.applied_s)
                 self._constraint_announced[u.constraint.constraint_id] = float(u.t_s)
@@ -432,7 +458,7 @@ class PlannerNode(Node):
     def _publish_constraints(self, t_s: float) -> None:
         self._constraints_pub.publish(String(data=set_geojson(self.config.constraints or (), t_s,
                                                               self._constraint_effective,
-                                                              self._constraint_announced)))
+                                                              self._constraint_announced, self._withdrawals)))
 
     # ---- requests ----------------------------------------------------------------------------
     def _publish_plan(self, plan: FlightPlan) -> None:
