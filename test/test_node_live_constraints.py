@@ -183,6 +183,7 @@ def test_an_update_takes_effect_at_the_next_epoch_and_is_published_latched(ros_c
     assert s.verified, s.problems
     assert s.audit.ok and s.incursions == [] and s.constraints_in_force == 1
     assert sum(s.plan_updates.values()) == len(updates)
+    assert s.airspace_changes == [f"hub v1 by caa: announced {effective_s:g} s, in force {effective_s:g} s .. end"]
 
 
 def test_the_command_line_client_builds_the_request_from_a_feature_file(tmp_path):

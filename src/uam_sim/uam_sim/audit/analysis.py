@@ -181,6 +181,9 @@ class RunSummary:
     incursions_before_applied: list = field(default_factory=list)
     #: constraint versions the planner had in force during the run (from uam/constraints)
     constraints_in_force: int = 0
+    #: who changed the airspace and when: each constraint version in force (its author, when
+    #: announced, in force from .. until) and each withdrawal (who, when asked, when applied)
+    airspace_changes: list = field(default_factory=list)
     #: the audit of what flew (uam_sim.audit.flown.recording_flown): the fleet states' tracks,
     #: their exact closest approach in the true minimum with the sampling bound, and their F3548
     #: conformance with the approved plans ({} when no fleet positions were recorded)
@@ -442,13 +445,16 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
     updates: dict[str, dict] = {}  # request key -> {plan key: plan} of its versions >= 2
     constraint_sets: list = []     # (t_s, [(constraint, effective_s)]) as the planner published them
     constraint_problems: list = []
+    withdrawals: dict = {}         # (id, version) -> the withdrawal as the planner published it
     t_min, t_max = math.inf, -math.inf
     for topic, log_ns, msg in messages:
         if topic == TOPIC_SYNC:  # announcements: not part of the run's time span
             syncs.append(msg)
             continue
         if topic == TOPIC_CONSTRAINTS:
-            from uam_planner.live_constraints import constraints_from_text
+            from uam_planner.live_constraints import constraints_from_text, withdrawals_from_text
+            for w in withdrawals_from_text(msg.data):
+                withdrawals.setdefault((str(w.get("id")), w.get("version")), w)
             try:
                 constraint_sets.append(constraints_from_text(msg.data))
             except ValueError as exc:
@@ -579,10 +585,29 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
         incursions_before_applied=[i.describe() for i in gap_incursions],
         contingency_conflicts=[[a, b, d, w, bool(w <= fleet_end)] for a, b, d, w in contingency_conflicts],
         constraints_in_force=n_in_force,
+        airspace_changes=_airspace_changes(record.applied, withdrawals.values()),
     )
     # the run's record (uam_sim.audit.record): what the flown audit reads; not part of the JSON
     summary.record = record
     return summary
+
+
+def _airspace_changes(applied, withdrawals) -> list[str]:
+    """Who changed the airspace and when, one line per constraint version in force and per
+    withdrawal, in time order."""
+    def t(x):
+        return "start" if x == -math.inf else ("end" if x == math.inf else f"{x:g} s")
+    rows = []
+    for c, since, until in applied:
+        ann = getattr(c, "announce_s", -math.inf)
+        rows.append((since, f"{c.constraint_id} v{c.version} by {getattr(c, 'author', '') or 'the start set'}: "
+                            + (f"announced {t(ann)}, " if math.isfinite(ann) else "")
+                            + f"in force {t(since)} .. {t(until)}"))
+    for w in withdrawals:
+        when = float(w.get("applied_s", math.nan))
+        rows.append((when, f"{w.get('id')} v{w.get('version')} withdrawn by {w.get('by') or '?'}: asked "
+                           f"{t(float(w.get('t_s', math.nan)))}, applied {t(when)}"))
+    return [text for _k, text in sorted(rows, key=lambda r: (r[0], r[1]))]
 
 
 def _departure_flown(key: str, plan: Any, flights: dict) -> float:
@@ -800,6 +825,9 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
     if s.plan_updates or s.constraints_in_force:
         kinds = ", ".join(f"{n} {k}" for k, n in s.plan_updates.items()) or "none"
         lines.append(f"Plan updates     {kinds}; {s.constraints_in_force} constraint version(s) in force")
+        if s.airspace_changes:
+            lines.append("Airspace changes " + "; ".join(s.airspace_changes[:10])
+                         + (f"; ... {len(s.airspace_changes) - 10} more" if len(s.airspace_changes) > 10 else ""))
         n_in = sum("unavoidable)" in x for x in s.incursions)
         verdict = "OK: no incursion" if not s.incursions else f"{len(s.incursions)} INCURSION(S)" + \
             (f", {n_in} of them by flights already inside when it came into force (unavoidable)" if n_in else "")
