@@ -197,6 +197,31 @@ def test_a_forged_end_of_run_changes_nothing_and_the_recording_does_not_verify(r
     assert any("simulators announced" in p or "publishers" in p for p in s.problems), s.problems
 
 
+def test_a_forged_constraint_set_is_left_out_of_the_audit_and_listed(ros_context, spin_until, tmp_path):
+    """Finding: one std_msgs/String on uam/constraints dated t = 0 (a square over the whole network)
+    made the analysis report an incursion of every flight back to t = 0. The planning reports now
+    name (by SHA-256) every set the planner published; a set none names is listed as forged, left
+    out of the audit, and the recording does not verify, naming it."""
+    from std_msgs.msg import String
+    from uam_planner.constraints import Constraint
+    from uam_planner.live_constraints import set_geojson
+    from uam_sim.audit.analysis import summarize
+
+    sky = Constraint("sky", 1, "forged", 0.0, 1e6, rings_m=((( -5e4, -5e4), (5e4, -5e4), (5e4, 5e4), (-5e4, 5e4)),),
+                     lower_m=-100.0, upper_m=1e4)
+
+    def attack(executor, nodes, rogue):
+        _mid_run(executor, nodes, spin_until)
+        pub = rogue.node.create_publisher(String, c.TOPIC_CONSTRAINTS, qos.QOS_CONSTRAINTS)
+        pub.publish(String(data=set_geojson([sky], 0.0, {"sky": 0.0})))
+    obs, nodes, _ = _run_with_rogue(ros_context, spin_until, attack, tmp_path=tmp_path)
+    assert decisions(obs.plans) == _clean()   # the planner never reads the topic
+    s = summarize(tmp_path / "run.mcap")
+    assert s.forged_constraint_sets and s.incursions == [] and s.constraints_in_force == 0, s.forged_constraint_sets
+    assert not s.verified
+    assert any("named by no planning report" in p and "listed as forged" in p for p in s.problems), s.problems
+
+
 def test_use_sim_time_is_refused_at_run_time(ros_context, spin_until):
     """Finding: /simulator use_sim_time:=true was accepted at run time and froze it for good."""
     def attack(executor, nodes, rogue):

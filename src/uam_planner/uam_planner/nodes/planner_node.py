@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import collections
 import dataclasses
+import hashlib
 import math
 import secrets
 import sys
@@ -140,6 +141,7 @@ class PlannerNode(Node):
         self._withdrawals: list[dict] = []
         self._withdrawn_by: dict[tuple, tuple] = {}   # (id, version) -> (authority, t asked)
         self._constraints_logged = 0        # entries of planner.constraint_log published
+        self._sets_unreported: list[str] = []   # SHA-256 of the sets published since the last report
         self.constraint_updates_refused = 0
 
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
@@ -456,9 +458,10 @@ class PlannerNode(Node):
                                f"{len(self.config.constraints or ())} constraint(s) in force")
 
     def _publish_constraints(self, t_s: float) -> None:
-        self._constraints_pub.publish(String(data=set_geojson(self.config.constraints or (), t_s,
-                                                              self._constraint_effective,
-                                                              self._constraint_announced, self._withdrawals)))
+        text = set_geojson(self.config.constraints or (), t_s, self._constraint_effective,
+                           self._constraint_announced, self._withdrawals)
+        self._sets_unreported.append(hashlib.sha256(text.encode("utf-8")).hexdigest())
+        self._constraints_pub.publish(String(data=text))
 
     # ---- requests ----------------------------------------------------------------------------
     def _publish_plan(self, plan: FlightPlan) -> None:
@@ -784,6 +787,10 @@ class PlannerNode(Node):
             for plan in plans:
                 self._publish_plan(plan)
             report = m.report_to_msg(result.report)
+            # the constraint sets published since the previous report: what the analysis tells
+            # the planner's sets on uam/constraints from forged ones by
+            report.constraint_set_sha256 = " ".join(self._sets_unreported)
+            self._sets_unreported = []
             self._report_pub.publish(report)
             if result.report.fallback:
                 self.get_logger().warning(

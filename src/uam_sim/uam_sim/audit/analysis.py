@@ -47,6 +47,7 @@ the recorded MWIS instances are :mod:`uam_sim.recording.recorded_instances`.
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import math
 import re
@@ -184,6 +185,9 @@ class RunSummary:
     #: who changed the airspace and when: each constraint version in force (its author, when
     #: announced, in force from .. until) and each withdrawal (who, when asked, when applied)
     airspace_changes: list = field(default_factory=list)
+    #: constraint sets on uam/constraints that no planning report names (not the planner's):
+    #: left out of the audit
+    forged_constraint_sets: list = field(default_factory=list)
     #: the audit of what flew (uam_sim.audit.flown.recording_flown): the fleet states' tracks,
     #: their exact closest approach in the true minimum with the sampling bound, and their F3548
     #: conformance with the approved plans ({} when no fleet positions were recorded)
@@ -446,6 +450,8 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
     constraint_sets: list = []     # (t_s, [(constraint, effective_s)]) as the planner published them
     constraint_problems: list = []
     withdrawals: dict = {}         # (id, version) -> the withdrawal as the planner published it
+    published: list = []           # (sha256, log time, set, withdrawals) of each set on uam/constraints
+    named_sets: set = set()        # the sets the planning reports name (the planner's own)
     t_min, t_max = math.inf, -math.inf
     for topic, log_ns, msg in messages:
         if topic == TOPIC_SYNC:  # announcements: not part of the run's time span
@@ -453,10 +459,10 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
             continue
         if topic == TOPIC_CONSTRAINTS:
             from uam_planner.live_constraints import constraints_from_text, withdrawals_from_text
-            for w in withdrawals_from_text(msg.data):
-                withdrawals.setdefault((str(w.get("id")), w.get("version")), w)
+            digest = hashlib.sha256(msg.data.encode("utf-8")).hexdigest()
             try:
-                constraint_sets.append(constraints_from_text(msg.data))
+                published.append((digest, log_ns * 1e-9, constraints_from_text(msg.data),
+                                  withdrawals_from_text(msg.data)))
             except ValueError as exc:
                 constraint_problems.append(f"a constraint set on {TOPIC_CONSTRAINTS} cannot be read: {exc}")
             continue
@@ -490,11 +496,25 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
             fleet_steps.append(int(msg.step_index))
             flown.update(ids)
         elif topic == TOPIC_REPORTS:
+            named_sets.update(str(getattr(msg, "constraint_set_sha256", "") or "").split())
             reports.setdefault(int(msg.epoch_index), set()).add(
                 (int(msg.approved), int(msg.expired), int(msg.eligible_requests), int(msg.vertices)))
             if len(reports[int(msg.epoch_index)]) > 1 or any(e.epoch_index == int(msg.epoch_index) for e in epochs):
                 continue  # a repeat (or a second report) of an epoch counts once in the table
             epochs.append(_epoch_stats(msg))
+    # a set no planning report names was not the planner's: left out of the audit and listed
+    # (recordings made before the reports named their sets: every set is taken)
+    forged_sets = [f"t = {t:g} s (set time {cs[0]:g} s, sha256 {d[:12]})" for d, t, cs, _w in published
+                   if named_sets and d not in named_sets]
+    if forged_sets:
+        constraint_problems.append(f"{len(forged_sets)} constraint set(s) on {TOPIC_CONSTRAINTS} named by no planning "
+                                   f"report ({'; '.join(forged_sets[:3])}): not the planner's, listed as forged, "
+                                   "not audited")
+    for d, _t, cs, ws in published:
+        if not named_sets or d in named_sets:
+            constraint_sets.append(cs)
+            for w in ws:
+                withdrawals.setdefault((str(w.get("id")), w.get("version")), w)
     plans = [p for ps in decisions.values() for p in ps]
     outcomes = [int(p.outcome) for p in plans]
     conflicting = {rid: [_OUTCOME_NAMES.get(int(p.outcome), str(int(p.outcome))) for p in ps]
@@ -586,6 +606,7 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
         contingency_conflicts=[[a, b, d, w, bool(w <= fleet_end)] for a, b, d, w in contingency_conflicts],
         constraints_in_force=n_in_force,
         airspace_changes=_airspace_changes(record.applied, withdrawals.values()),
+        forged_constraint_sets=forged_sets,
     )
     # the run's record (uam_sim.audit.record): what the flown audit reads; not part of the JSON
     summary.record = record
