@@ -198,20 +198,39 @@ if [[ "$BACKEND" == list ]]; then
   python -m uam_solvers.registry
   exit 0
 fi
-python - "$BACKEND" <<'EOF' || exit 2
-import sys
-from uam_solvers.registry import UnknownBackendError, get_backend
-try:
-    ok, why = get_backend(sys.argv[1]).available()
-except UnknownBackendError as exc:
-    sys.exit(f"run_fleet: --backend: {exc}")
-if not ok:
-    sys.exit(f"run_fleet: --backend: {sys.argv[1]!r} is unavailable here: {why}")
-EOF
-
-# the separation model the network was built for (uam_planner.network.Network.separation_model)
-NET_MODEL="$(python -c 'import sys; from uam_planner.network import load_network; print(load_network(sys.argv[1]).separation_model)' "$NETWORK")" \
-  || die "--network: '$NETWORK' does not load (see above)"
+# The values every node will start with, checked against the nodes' own parameter tables, and the
+# input files loaded by the libraries' own loaders, in one process before any node starts (a wrong
+# value otherwise ended a started graph minutes later, its reason in one node's log). Prints the
+# separation model the network was built for (uam_planner.network.Network.separation_model).
+AIRSPACE=(-p "separation_m:=$(f "$SEPARATION_M")" -p "vertical_separation_m:=$(f "$VERTICAL_M")"
+          -p "departure_slot_s:=$(f "$SLOT_S")")
+SOLVER_P=(--params-file config/solver.yaml -p "default_backend:=$BACKEND")
+PLANNER_P=(--params-file config/planner.yaml -p "network:=$NETWORK" \
+  -p "policy:=$POLICY" -p "backend:=$BACKEND" -p "seed:=$SEED" "${AIRSPACE[@]}" \
+  -p "objective:=$OBJECTIVE" -p "baseline_order:=$BASELINE_ORDER" -p "horizon_epochs:=$HORIZON" \
+  -p "commit_ahead:=$COMMIT_AHEAD" -p "reaction:=$REACTION" -p "conflict_probe_s:=$(f "$PROBE")" -p "conflict_probe_margin_m:=$(f "$PROBE_MARGIN")" ${REPLAN_POLICY:+-p "replan_policy:=$REPLAN_POLICY"} \
+  -p "climb_rate_mps:=$(f "$CLIMB")" -p "descent_rate_mps:=$(f "$DESCENT")" \
+  -p "spatial_buffer_m:=$(f "$SPATIAL_BUFFER")" -p "temporal_buffer_s:=$(f "$TEMPORAL_BUFFER")" \
+  ${CONSTRAINTS:+-p "constraints_file:=$CONSTRAINTS"})
+GENERATOR_P=(--params-file config/request_generator.yaml \
+  -p "network:=$NETWORK" -p "rate:=$RATE" -p "seed:=$SEED" -p "priority_share:=$(f "$PRIORITY_SHARE")" \
+  -p "lead_time_s:=$(f "$LEAD_TIME")" \
+  ${DEMAND:+-p "demand_file:=$DEMAND"})
+RECORDER_P=(-p "network:=$NETWORK" -p "rerun:='$RERUN'" -p "foxglove_port:=$FOXGLOVE_PORT" "${AIRSPACE[@]}")
+USS_P=(-p "port:=$USS_PORT" -p "network:=$NETWORK" -p "separation_m:=$(f "$SEPARATION_M")" \
+  -p "vertical_separation_m:=$(f "$VERTICAL_M")")
+SIMULATOR_P=(--params-file config/simulator.yaml -p "duration_s:=$(f "$DURATION")" \
+  -p "mode:=$MODE" -p "real_time_factor:=$(f "$RTF")" \
+  -p "disturbance_seed:=$SEED" -p "wind_speed_mps:=$(f "$WIND")" \
+  -p "wind_from_deg:=$(f "$WIND_FROM")" -p "gust_std_mps:=$(f "$GUST")" -p "speed_error:=$(f "$SPEED_ERROR")" \
+  -p "delay_mean_s:=$(f "$DELAY_MEAN")" -p "vertical_gust_std_mps:=$(f "$VERTICAL_GUST")" \
+  -p "altitude_error_m:=$(f "$ALTITUDE_ERROR")" -p "reaction_period_s:=$(f "$REACTION_PERIOD")")
+USS_CHECK=()  # the USS server's parameters, only when it runs
+(( USS_PORT > 0 )) && USS_CHECK=(--node uss "${USS_P[@]}")
+NET_MODEL="$(python -m uam_sim.preflight --prog run_fleet --backend "$BACKEND" --network "$NETWORK" \
+  --demand "$DEMAND" --constraints "$CONSTRAINTS" --node solver "${SOLVER_P[@]}" \
+  --node planner "${PLANNER_P[@]}" -p "separation_model:=$SEPARATION" --node request_generator "${GENERATOR_P[@]}" \
+  --node recorder "${RECORDER_P[@]}" --node simulator "${SIMULATOR_P[@]}" "${USS_CHECK[@]}")" || exit 2
 if [[ -z "$SEPARATION" ]]; then
   SEPARATION=$NET_MODEL
 elif [[ "$SEPARATION" != "$NET_MODEL" ]]; then
@@ -327,21 +346,11 @@ interrupted() { echo; echo "run_fleet: interrupted; stopping every node"; stop_a
 INTERRUPTED=0
 trap interrupted INT TERM HUP
 
-start uam_solvers solver solver --params-file config/solver.yaml -p "default_backend:=$BACKEND"
-AIRSPACE=(-p "separation_model:=$SEPARATION" -p "separation_m:=$(f "$SEPARATION_M")"
-          -p "vertical_separation_m:=$(f "$VERTICAL_M")" -p "departure_slot_s:=$(f "$SLOT_S")")
-start uam_planner planner planner --params-file config/planner.yaml -p "network:=$NETWORK" \
-  -p "policy:=$POLICY" -p "backend:=$BACKEND" -p "seed:=$SEED" "${AIRSPACE[@]}" \
-  -p "objective:=$OBJECTIVE" -p "baseline_order:=$BASELINE_ORDER" -p "horizon_epochs:=$HORIZON" \
-  -p "commit_ahead:=$COMMIT_AHEAD" -p "reaction:=$REACTION" -p "conflict_probe_s:=$(f "$PROBE")" -p "conflict_probe_margin_m:=$(f "$PROBE_MARGIN")" ${REPLAN_POLICY:+-p "replan_policy:=$REPLAN_POLICY"} \
-  -p "climb_rate_mps:=$(f "$CLIMB")" -p "descent_rate_mps:=$(f "$DESCENT")" -p "journal:=$OUT/planner-journal.jsonl" \
-  -p "authorities_file:=$OUT/authority/authorities.yaml" \
-  -p "spatial_buffer_m:=$(f "$SPATIAL_BUFFER")" -p "temporal_buffer_s:=$(f "$TEMPORAL_BUFFER")" \
-  ${CONSTRAINTS:+-p "constraints_file:=$CONSTRAINTS"}
-start uam_sim request_generator request_generator --params-file config/request_generator.yaml \
-  -p "network:=$NETWORK" -p "rate:=$RATE" -p "seed:=$SEED" -p "priority_share:=$(f "$PRIORITY_SHARE")" \
-  -p "lead_time_s:=$(f "$LEAD_TIME")" \
-  ${DEMAND:+-p "demand_file:=$DEMAND"}
+# (the parameters checked above, and those that name this run's files)
+start uam_solvers solver solver "${SOLVER_P[@]}"
+start uam_planner planner planner "${PLANNER_P[@]}" -p "separation_model:=$SEPARATION" \
+  -p "journal:=$OUT/planner-journal.jsonl" -p "authorities_file:=$OUT/authority/authorities.yaml"
+start uam_sim request_generator request_generator "${GENERATOR_P[@]}"
 # the recorder writes the run's airspace into the MCAP (uam_airspace metadata): the analysis audits in it.
 # It subscribes to the fleet state (which starts the simulator) only once it hears these topics'
 # publishers, so even a run stopped at once records the planner's and the generator's messages.
@@ -357,8 +366,8 @@ RUN_CHOICES="$(python -m uam_contract.run_choices policy="$POLICY" backend="$BAC
   speed_error="$SPEED_ERROR" delay_mean_s="$DELAY_MEAN" vertical_gust_mps="$VERTICAL_GUST" \
   altitude_error_m="$ALTITUDE_ERROR" "${USS_CHOICE[@]}")"
 NODE_NICE=$RECORDER_NICE
-start uam_sim recorder recorder -p "output:=$MCAP" -p "network:=$NETWORK" -p "rerun:='$RERUN'" -p "rerun_rrd:=$RRD" \
-  -p "foxglove_port:=$FOXGLOVE_PORT" "${AIRSPACE[@]}" -p "wait_for_publishers:=[$RECORDER_WAITS]" \
+start uam_sim recorder recorder "${RECORDER_P[@]}" -p "separation_model:=$SEPARATION" -p "output:=$MCAP" \
+  -p "rerun_rrd:=$RRD" -p "wait_for_publishers:=[$RECORDER_WAITS]" \
   -p "run_choices:='$RUN_CHOICES'"
 REC_PID=${PIDS[-1]}
 NODE_NICE=
@@ -372,16 +381,10 @@ if [[ "$CONFORMANCE" == true ]]; then
   SIM_WAITS=recorder,conformance_monitor
 fi
 if (( USS_PORT > 0 )); then  # the F3548 USS-USS interface (docs/f3548.md)
-  start uam_sim uss uss -p "port:=$USS_PORT" -p "network:=$NETWORK" -p "separation_model:=$SEPARATION" \
-    -p "separation_m:=$(f "$SEPARATION_M")" -p "vertical_separation_m:=$(f "$VERTICAL_M")" "${USS_AUTH_ARGS[@]}"
+  start uam_sim uss uss "${USS_P[@]}" -p "separation_model:=$SEPARATION" "${USS_AUTH_ARGS[@]}"
   echo "run_fleet: F3548 operational intents on http://127.0.0.1:$USS_PORT/uss/v1/operational_intents/{id} (ids: /uam_fleet/v1/operational_intents; auth $USS_AUTH)"
 fi
-start uam_sim simulator simulator --params-file config/simulator.yaml -p "duration_s:=$DURATION" \
-  -p "mode:=$MODE" -p "real_time_factor:=$RTF" -p "wait_for_subscribers:=[$SIM_WAITS]" \
-  -p "disturbance_seed:=$SEED" -p "wind_speed_mps:=$(f "$WIND")" \
-  -p "wind_from_deg:=$(f "$WIND_FROM")" -p "gust_std_mps:=$(f "$GUST")" -p "speed_error:=$(f "$SPEED_ERROR")" \
-  -p "delay_mean_s:=$(f "$DELAY_MEAN")" -p "vertical_gust_std_mps:=$(f "$VERTICAL_GUST")" \
-  -p "altitude_error_m:=$(f "$ALTITUDE_ERROR")" -p "reaction_period_s:=$(f "$REACTION_PERIOD")"
+start uam_sim simulator simulator "${SIMULATOR_P[@]}" -p "wait_for_subscribers:=[$SIM_WAITS]"
 SIM_PID=${PIDS[-1]}
 T0=$SECONDS
 SIM_RC=0

@@ -182,8 +182,9 @@ SOLVER = (
 
 SIMULATOR = (
     Param("step_s", 1.0, "simulation step [s]", 0.001, 3600.0),
+    # above 0: a run of 0 s plans nothing and records an empty run
     Param("duration_s", 3500.0, "simulated time after which the run ends [s]; epochs at t < duration_s",
-          0.0, 1e7),
+          0.001, 1e7),
     Param("epoch_s", D.EPOCH_S, "time between planning epochs [s], a multiple of step_s; the one place the epoch "
           "length is configured (the planner gets it in each epoch call)", 0.001, 86400.0),
     Param("mode", "lockstep", "'lockstep': as fast as the planner allows, result independent of CPU speed; "
@@ -213,7 +214,7 @@ SIMULATOR = (
     Param("gust_length_m", 2000.0, "typical gust wavelength [m]", 1.0, 1e6),
     Param("gust_period_s", 60.0, "typical gust period [s]", 0.1, 1e6),
     Param("speed_error", 0.0, "per-flight airspeed error bound: (1 + e) x the plan's speed, e uniform in "
-          "[-speed_error, speed_error] (0.1 = 10 %)", 0.0, 0.79),
+          "[-speed_error, speed_error] (0.1 = 10 %)", 0.0, D.SPEED_ERROR_MAX),
     Param("delay_mean_s", 0.0, "mean departure delay [s] (exponential); 0 = on time", 0.0, 3600.0),
     Param("delay_max_s", 120.0, "departure delays are truncated here [s]", 0.0, 86400.0),
     Param("track_gain_per_s", 0.1, "cross-track guidance gain of the path-following model [1/s]", 0.001, 100.0),
