@@ -33,6 +33,10 @@ K = 5
 PENALTY_FACTOR = 5.0
 #: cruise speed [m/s]
 SPEED_MPS = 10.0
+#: the largest per-flight airspeed error bound (a share of the plan's speed): the simulator keeps
+#: the ground speed at least 20 % of the airspeed, so the bound stays below 0.8; the simulator's
+#: parameter table and the disturbance model (the Monte-Carlo's) refuse a larger one alike
+SPEED_ERROR_MAX = 0.79
 
 
 def as_text(value: float) -> str:

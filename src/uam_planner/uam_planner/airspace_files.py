@@ -22,8 +22,11 @@ def load_airspace(path, network, now_s: float | None = None,
     p = Path(path)
     try:
         doc = json.loads(p.read_text())
-    except (OSError, json.JSONDecodeError) as exc:
+    except OSError as exc:
         raise ConstraintError(f"constraints file {str(p)!r}: {exc}") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ConstraintError(f"constraints file {str(p)!r}: is not JSON ({exc}); a GeoJSON "
+                              "FeatureCollection, an ED-269 zone file or an F3548 document is expected") from None
     if not is_f3548_document(doc):
         return constraint_set_from_document(doc, network, now_s, scenario_start_utc, str(p))
     try:

@@ -145,6 +145,9 @@ def test_gusts_are_seeded_and_have_the_stated_spread():
 def test_bad_disturbance_names_the_field():
     with pytest.raises(ValueError, match=r"speed_error: -0.1 must be >= 0"):
         DisturbanceConfig(speed_error=-0.1)
+    # the simulator node's bound, in the node's words (uam_contract.defaults.SPEED_ERROR_MAX)
+    with pytest.raises(ValueError, match=r"speed_error: 0.795 is above the maximum 0.79"):
+        DisturbanceConfig(speed_error=0.795)
     with pytest.raises(ValueError, match=r"step_s: 0 must be > 0"):
         DisturbanceConfig(step_s=0)
     with pytest.raises(ValueError, match=r"unknown field 'wind'"):

@@ -60,6 +60,7 @@ from typing import Sequence
 
 import numpy as np
 
+from uam_contract.defaults import SPEED_ERROR_MAX
 from uam_contract.disturbances import disturbances_on
 
 from uam_planner.trajectory import Trajectory
@@ -141,9 +142,9 @@ class DisturbanceConfig:
             if v < 0 or (positive and v == 0):
                 raise ValueError(f"DisturbanceConfig.{f.name}: {v!r} must be "
                                  f"{'> 0' if positive else '>= 0'}")
-        if self.speed_error >= 1.0 - MIN_GROUND_SPEED_SHARE:
-            raise ValueError(f"DisturbanceConfig.speed_error: {self.speed_error!r} must be below "
-                             f"{1.0 - MIN_GROUND_SPEED_SHARE}")
+        if self.speed_error > SPEED_ERROR_MAX:  # the node's bound, in its words (uam_contract.defaults)
+            raise ValueError(f"DisturbanceConfig.speed_error: {self.speed_error!r} is above the maximum "
+                             f"{SPEED_ERROR_MAX}")
 
     @property
     def enabled(self) -> bool:
