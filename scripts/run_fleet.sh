@@ -388,8 +388,34 @@ start uam_sim simulator simulator "${SIMULATOR_P[@]}" -p "wait_for_subscribers:=
 SIM_PID=${PIDS[-1]}
 T0=$SECONDS
 SIM_RC=0
+# What the terminal sees of the running graph: the simulator's progress lines (every
+# progress_epochs epochs) and the warnings and errors of the simulator and the planner, e.g. a
+# stall waiting for the fleet state (a lockstep run was otherwise silent for minutes, the reason
+# in planner.log). Each log is read on from the last complete line seen; at most 5 warnings per
+# look and log. No line for STALL_S seconds is announced, with each log's last line.
+declare -A NEWS_LINE=()
+NEWS_T=$SECONDS STALL_S=60
+news() {
+  local name log n at
+  for name in simulator planner; do
+    log="$OUT/$name.log"; at=${NEWS_LINE[$name]:-0}
+    n=$(wc -l 2>/dev/null <"$log") || continue
+    (( n > at )) || continue
+    NEWS_LINE[$name]=$n NEWS_T=$SECONDS
+    sed -n "$((at + 1)),${n}p" "$log" | awk -v who="$name" -v file="$log" '
+      /^\[INFO\].*\]: progress: / { sub(/^[^]]*\] [^]]*\] [^]]*\]: /, ""); print "run_fleet: " who ": " $0; next }
+      /^\[(WARN|ERROR)\]/ { if (++k <= 5) { sub(/^[^]]*\] [^]]*\] [^]]*\]: /, ""); print "run_fleet: " who ": " $0 } }
+      END { if (k > 5) print "run_fleet: " who ": (" k - 5 " more warnings in " file ")" }'
+  done
+  if (( SECONDS - NEWS_T >= STALL_S )); then
+    echo "run_fleet: no news from the simulator or the planner for $((SECONDS - NEWS_T)) s; still waiting. Last lines:"
+    for name in simulator planner; do echo "run_fleet:   $name: $(tail -n 1 "$OUT/$name.log" 2>/dev/null)"; done
+    NEWS_T=$SECONDS
+  fi
+}
 # Watch the graph: a node that dies while the simulator runs ends the run with its log's tail.
 while alive "$SIM_PID" && (( INTERRUPTED == 0 )); do
+  news
   for i in "${!PIDS[@]}"; do
     if (( INTERRUPTED == 0 )) && [[ "${PIDS[$i]}" != "$SIM_PID" && "${NAMES[$i]}" != solver ]] && ! alive "${PIDS[$i]}" \
         && ! grep -q "run finished" "$OUT/simulator.log" 2>/dev/null; then
@@ -404,6 +430,7 @@ while alive "$SIM_PID" && (( INTERRUPTED == 0 )); do
   sleep 0.5 & wait $! || true
 done
 wait "$SIM_PID" 2>/dev/null || SIM_RC=$?
+news
 if (( INTERRUPTED == 0 )); then
   # The recorder closes the file by itself once the simulator announced the end and the last
   # messages are in; planner and generator exit on that announcement too; the solver is a server

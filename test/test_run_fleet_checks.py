@@ -42,3 +42,17 @@ def test_a_wrong_value_is_refused_before_any_node_starts(tmp_path, args, words):
     # the checks take ~2 s at load 3 on 2 cores (a started graph took ~80 s to fail); generous
     # under a test session's load
     assert wall < 30, wall
+
+
+@pytest.mark.slow
+def test_a_lockstep_run_shows_its_progress_on_the_terminal(tmp_path, ros_process_domain_id):
+    """The simulator logs a progress line every progress_epochs (10) epochs and run_fleet.sh shows
+    it: a lockstep run printed three lines and then nothing until the end."""
+    import os
+
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_process_domain_id))
+    res = subprocess.run(["bash", str(ROOT / "scripts" / "run_fleet.sh"), "--network", "config/networks/tiny.yaml",
+                          "--rate", "2", "--duration", "600", "--rerun", "off", "--out", str(tmp_path / "run")],
+                         cwd=ROOT, env=env, capture_output=True, text=True, timeout=170)
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert "run_fleet: simulator: progress: t = 300 s of 600 s (epoch 10), " in res.stdout, res.stdout

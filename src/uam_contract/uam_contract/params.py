@@ -199,6 +199,8 @@ SIMULATOR = (
     Param("startup_timeout_s", 300.0, "wall time [s] to wait at start for the planner's and the demand source's "
           "services (exactly one of each) and the subscribers named in wait_for_subscribers before ending the run "
           "with an error", 0.1, 86400.0),
+    Param("progress_epochs", 10, "log a progress line (simulation time, approvals, airborne, wall time) every "
+          "this many epochs, which run_fleet.sh shows on the terminal; 0 = none", 0, 1_000_000),
     Param("ack_timeout_s", 120.0, "wall time [s] to wait for an epoch's outcome before ending the run with "
           "an error",
           0.1, 86400.0),

@@ -393,6 +393,7 @@ class SimulatorNode(Node):
         self._waiting_epoch = None
         self._early = None
         t_next = (epoch + 1) * self.epoch_s
+        self._log_progress(epoch, t)
         if self.observe_mode:
             # reacting between epochs: the state of this instant was published before the call
             # (_step_once), and the next epoch is asked for only when the fleet is there, after
@@ -405,6 +406,17 @@ class SimulatorNode(Node):
             self._start_epoch(epoch + 1, t_next)
         self._publish_state()
         self.step_index += 1
+
+    def _log_progress(self, epoch: int, t: float) -> None:
+        """Every progress_epochs epochs, one line a terminal can show: a lockstep run is otherwise
+        silent for minutes (run_fleet.sh prints these lines)."""
+        every = self.p["progress_epochs"]
+        if not every or epoch == 0 or epoch % every:
+            return
+        wall = time.monotonic() - self._wall_start if self.started else 0.0
+        self.get_logger().info(
+            f"progress: t = {t:g} s of {self.duration_s:g} s (epoch {epoch}), {self.approvals_received} approvals, "
+            f"{self.active_samples[-1] if self.active_samples else 0} airborne; wall {wall:.0f} s")
 
     def _fly_version(self, key: str, plan: FlightPlan) -> None:
         """Fly a re-planned version from the instant it takes effect (``Fleet.update``: the old
