@@ -67,11 +67,16 @@ def record(path):
 
 
 @pytest.mark.slow  # not in `make test-fast`: a run and its recording, ~5 s
-def test_export_writes_every_version_valid(tmp_path):
+def test_export_writes_every_version_valid(tmp_path, capsys):
     plans = record(tmp_path / "run.mcap")
     out = tmp_path / "f3548"
     assert main([str(tmp_path / "run.mcap"), "--out", str(out), "--network", TINY]) == 0
     index = json.loads((out / "index.json").read_text())
+    said = capsys.readouterr()
+    # the count is of what the index lists, and the export says what it is doing meanwhile
+    assert f"{len(index['constraints'])} constraint versions (" in said.out, said.out
+    assert "export_f3548: [0 s] reading the requests and constraints" in said.err
+    assert "plan versions as operational intents" in said.err
     rows = index["operational_intents"]
     approved = [p for p in plans if p.outcome == FlightPlan.OUTCOME_APPROVED]
     assert len([r for r in rows if r["file"]]) == len(approved)  # each approved version, live at its decision

@@ -30,6 +30,8 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import time
+from typing import Callable
 from datetime import datetime, timedelta, timezone
 from pathlib import Path
 
@@ -91,8 +93,11 @@ def _intent_row(msg, ctx, out: Path, priority: int, operational_intent, as_json,
 
 
 def export(recording, out_dir, network_file: str, piece_s: float = 5.0,
-           scenario_start_utc: str | None = None) -> dict:
-    """Write the F3548 documents of ``recording`` into ``out_dir``; returns the index."""
+           scenario_start_utc: str | None = None, progress: Callable[[str], None] | None = None) -> dict:
+    """Write the F3548 documents of ``recording`` into ``out_dir``; returns the index.
+    ``progress(text)``, if given, hears each step and the intents written so far (an hour's
+    recording takes about a minute)."""
+    say = progress or (lambda text: None)
     from uam_planner.f3548 import (IntentContext, VolumeSpec, as_json, constraint_entity_id,
                                    f3548_constraint, intent_id, operational_intent)
     from uam_planner.f3548_schema import validate
@@ -116,6 +121,7 @@ def export(recording, out_dir, network_file: str, piece_s: float = 5.0,
     out = Path(out_dir)
     (out / "operational_intents").mkdir(parents=True, exist_ok=True)
     (out / "constraints").mkdir(parents=True, exist_ok=True)
+    say("reading the requests and constraints")
     priority: dict = {}
     constraints, seen_c = [], set()
     for topic, _t_ns, msg in iter_decoded(path, "rclpy", [TOPIC_REQUESTS, TOPIC_CONSTRAINTS]):
@@ -140,12 +146,19 @@ def export(recording, out_dir, network_file: str, piece_s: float = 5.0,
             constraints.append(row)
     # the intents are the run's record (uam_sim.audit.record, as the analysis builds it): every
     # approval that is not forged, each of its versions once
+    say(f"{len(constraints)} constraint versions; reading the plans (the run's record, as the analysis does)")
     record = summarize(path, network=network).record
+    total = sum(len(flight.versions) for flight in record.flights)
+    say(f"writing {total} plan versions as operational intents")
     intents = []
+    last = time.monotonic()
     for flight in record.flights:
         for msg in flight.versions:
             intents.append(_intent_row(msg, ctx, out, priority.get((msg.operator_id, msg.request_id), 0),
                                        operational_intent, as_json, validate, intent_id))
+            if time.monotonic() - last >= 5.0:
+                last = time.monotonic()
+                say(f"{len(intents)} of {total} plan versions written")
     index = {"recording": str(path), "network": str(network_file), "scenario_start_utc": start,
              "separation": {"kind": model.kind, "separation_m": model.separation_m,
                             "vertical_separation_m": model.vertical_separation_m},
@@ -170,15 +183,24 @@ def main(argv=None) -> int:
                     help="UTC of simulation time 0 (default: the recording's, else "
                          f"{DEFAULT_SCENARIO_START_UTC})")
     args = ap.parse_args(argv)
+    t0 = time.monotonic()
+
+    def progress(text: str) -> None:
+        print(f"export_f3548: [{time.monotonic() - t0:.0f} s] {text}", file=sys.stderr, flush=True)
+
     try:
-        index = export(args.recording, args.out, args.network, args.piece_s, args.scenario_start_utc)
+        index = export(args.recording, args.out, args.network, args.piece_s, args.scenario_start_utc,
+                       progress=progress)
     except (ValueError, OSError) as exc:
         print(f"export_f3548: {exc}", file=sys.stderr)
         return 2
     files = sum(1 for r in index["operational_intents"] if r["file"])
+    # the constraint versions the index lists; closures have no F3548 form (no document)
+    documents = sum(1 for r in index["constraints"] if r["file"])
     print(f"export_f3548: {files} operational intent versions "
           f"({len({r['id'] for r in index['operational_intents']})} intents), "
-          f"{sum(1 for r in index['constraints'] if r['file'])} constraint versions in {args.out}")
+          f"{len(index['constraints'])} constraint versions ({documents} as F3548 constraint documents, "
+          f"{len(index['constraints']) - documents} closures without one) in {args.out}")
     return 0
 
 
