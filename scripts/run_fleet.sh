@@ -184,8 +184,9 @@ f() { [[ "$1" == *.* ]] && echo "$1" || echo "$1.0"; }
 [[ -z "$DEMAND" || -f "$DEMAND" ]] || die "--demand: no file '$DEMAND'"
 [[ -z "$CONSTRAINTS" || -f "$CONSTRAINTS" ]] || die "--constraints: no file '$CONSTRAINTS'"
 
-bash scripts/setup.sh >/tmp/uam-setup-$$.log 2>&1 || { cat /tmp/uam-setup-$$.log; die "setup failed"; }
-rm -f /tmp/uam-setup-$$.log
+# the set-up shows only the steps it has to do, with their progress (a first run takes minutes;
+# its output went to a temporary file and the terminal showed nothing for 8 min)
+UAM_SETUP_BRIEF=1 bash scripts/setup.sh || die "setup failed (above; its full log: log/setup.log)"
 # shellcheck disable=SC1091
 source scripts/env.sh
 # auto: the monitor runs when the fleet can deviate from its plans or the planner reacts to its
