@@ -303,12 +303,13 @@ def test_the_scenario_clock_and_the_constraints_are_in_the_rrd(tmp_path):
         lg.log_fleet(3.0, ["a"], [[0.0, 0.0, 5.0]])
         lg.log_constraints(30.0, [square, closed])
         lg.log_constraints(60.0, [square])
+        lg.log_fleet(120.0, ["a"], [[0.0, 0.0, 5.0]])  # the run reaches the square's end
     by_entity: dict[str, list] = {}
     for chunk in rr.chunk.RrdReader(path).stream():
         if not chunk.is_static:
             by_entity.setdefault(chunk.entity_path, []).append(chunk.to_record_batch().to_pydict())
     fleet = [d for d in by_entity["/world/fleet"] if "Points3D:positions" in d]
-    assert [str(t) for d in fleet for t in d["utc"]] == ["2025-01-06 00:00:03"]
+    assert [str(t) for d in fleet for t in d["utc"]] == ["2025-01-06 00:00:03", "2025-01-06 00:02:00"]
     rows = [(t.total_seconds(), name) for d in by_entity["/world/constraints/sq"] for k, t in enumerate(d["sim_time"])
             for name in d if ":" in name and d[name][k] is not None]
     assert (30.0, "LineStrips3D:strips") in rows and any(t == 100.0 and "Clear" in n for t, n in rows), rows
@@ -318,6 +319,33 @@ def test_the_scenario_clock_and_the_constraints_are_in_the_rrd(tmp_path):
                for k, t in enumerate(d["sim_time"]) for name in d if ":" in name and d[name][k] is not None]
     assert (30.0, "LineStrips3D:strips") in closure and any(t == 60.0 and "Clear" in n for t, n in closure), closure
     assert "/geo/constraints/sq" in by_entity
+
+
+def test_a_constraint_window_past_the_runs_end_keeps_the_timeline_to_the_run(tmp_path):
+    """A 900 s run with a constraint until 3,600 s: nothing is logged after the run's last moment
+    (the viewer's time cursor follows the newest data: logged at the window's end, the view opened
+    at +3,600 s with the constraint cleared), and the constraint is drawn from its start."""
+    import rerun as rr
+    from uam_planner.constraints import Constraint
+
+    path = tmp_path / "late.rrd"
+    storm = Constraint("storm", 1, "storm", 240.0, 3600.0, center_m=(0.0, 0.0), radius_m=150.0,
+                       lower_m=0.0, upper_m=500.0)
+    with RerunLogger("save", path, network=tiny_network(), batch_steps=1) as lg:
+        lg.log_fleet(0.0, ["a"], [[0.0, 0.0, 5.0]])
+        lg.log_constraints(30.0, [storm])
+        for t in (30.0, 300.0, 900.0):
+            lg.log_fleet(t, ["a"], [[t, 0.0, 5.0]])
+    times, drawn = [], []
+    for chunk in rr.chunk.RrdReader(path).stream():
+        if chunk.is_static:
+            continue
+        d = chunk.to_record_batch().to_pydict()
+        times += [t.total_seconds() for t in d.get("sim_time", [])]
+        if chunk.entity_path == "/world/constraints/storm":
+            drawn += [(t.total_seconds(), "LineStrips3D:strips" in d) for t in d["sim_time"]]
+    assert max(times) == 900.0, sorted(set(times))
+    assert drawn == [(240.0, True)], drawn
 
 
 def test_graph_routes_match_their_aircraft_and_replanned_ones_show_as_such(tmp_path):

@@ -483,6 +483,7 @@ class RerunLogger:
         """
         if not self.enabled:
             return
+        self._release_constraints(t_s)
         rr = self._rr
         pos = np.asarray(positions_m, dtype=np.float64).reshape(-1, 3)
         ids = vehicle_ids if isinstance(vehicle_ids, tuple) else tuple(str(v) for v in vehicle_ids)
@@ -549,6 +550,7 @@ class RerunLogger:
         """Per-epoch metrics as Scalars at simulation time ``t_s`` [s]."""
         if not self.enabled:
             return
+        self._release_constraints(t_s)
         rr = self._rr
         self._at(t_s)
         for name, value in (("approved_cumulative", approved_cumulative),
@@ -564,36 +566,58 @@ class RerunLogger:
         entity ``world/constraints/<id>`` (its prism's outline, :func:`constraint_outline`, labelled
         with id, version, band and window) and ``geo/constraints/<id>`` on the map, shown from
         ``max(t_s, start_s)`` and cleared at ``end_s``; those no longer in the set are cleared at
-        ``t_s``. Logged on the timelines at those instants (Rerun takes data out of time order)."""
+        ``t_s``. A start or an end later than ``t_s`` is logged once the run reaches it (the
+        fleet or an epoch logged at that time or later), never beyond the run: logged at a
+        window's end (+3,600 s), it made the viewer open there, after the run and with every
+        constraint cleared."""
         if not self.enabled:
             return
-        rr = self._rr
+        self._release_constraints(t_s)
         shown = getattr(self, "_constraints_shown", set())
         now = {str(c.constraint_id): c for c in constraints}
+        # a new set replaces what the last one scheduled
+        self._constraint_events = [e for e in getattr(self, "_constraint_events", []) if e[1] not in shown | set(now)]
         self._at(t_s)
         for cid in shown - set(now):
-            self._rec.log(f"world/constraints/{cid}", rr.Clear(recursive=True))
-            if self._origin is not None:
-                self._rec.log(f"geo/constraints/{cid}", rr.Clear(recursive=True))
+            self._log_constraint(cid, None)
         for cid, c in now.items():
             strips = constraint_outline(c, self._network)
             if not strips:
                 continue
-            self._at(max(float(t_s), float(c.start_s)))
-            label = constraint_label(c)
-            self._rec.log(f"world/constraints/{cid}", rr.LineStrips3D(
-                strips, colors=CONSTRAINT_COLOR, radii=_ui(CONSTRAINT_RADIUS_UI), labels=[label] + [""] * (len(strips) - 1)))
-            if self._origin is not None:
-                outlines = [s for s in strips if len(s) > 2][::2]   # each ring once (its bottom)
-                self._rec.log(f"geo/constraints/{cid}", rr.GeoLineStrings(
-                    lat_lon=[self._lat_lon(s) for s in outlines], colors=CONSTRAINT_COLOR,
-                    radii=_ui(CONSTRAINT_RADIUS_UI)))
+            self._constraint_events.append((max(float(t_s), float(c.start_s)), cid, (strips, constraint_label(c))))
             if np.isfinite(c.end_s):
-                self._at(float(c.end_s))
-                self._rec.log(f"world/constraints/{cid}", rr.Clear(recursive=True))
-                if self._origin is not None:
-                    self._rec.log(f"geo/constraints/{cid}", rr.Clear(recursive=True))
+                self._constraint_events.append((float(c.end_s), cid, None))
         self._constraints_shown = set(now)
+        self._release_constraints(t_s)
+        self._at(t_s)
+
+    def _release_constraints(self, t_s: float) -> None:
+        """Log the scheduled constraint starts and ends at or before ``t_s``, each at its time."""
+        events = getattr(self, "_constraint_events", [])
+        due = sorted((e for e in events if e[0] <= t_s), key=lambda e: e[0])
+        if not due:
+            return
+        self._constraint_events = [e for e in events if e[0] > t_s]
+        for when, cid, shape in due:
+            self._at(when)
+            self._log_constraint(cid, shape)
+
+    def _log_constraint(self, cid: str, shape) -> None:
+        """Draw constraint ``cid`` (``shape`` = (strips, label)) or clear it (None), at the current time."""
+        rr = self._rr
+        if shape is None:
+            self._rec.log(f"world/constraints/{cid}", rr.Clear(recursive=True))
+            if self._origin is not None:
+                self._rec.log(f"geo/constraints/{cid}", rr.Clear(recursive=True))
+            return
+        strips, label = shape
+        self._rec.log(f"world/constraints/{cid}", rr.LineStrips3D(
+            strips, colors=CONSTRAINT_COLOR, radii=_ui(CONSTRAINT_RADIUS_UI), labels=[label] + [""] * (len(strips) - 1)))
+        if self._origin is not None:
+            outlines = [s for s in strips if len(s) > 2][::2]   # each ring once (its bottom)
+            self._rec.log(f"geo/constraints/{cid}", rr.GeoLineStrings(
+                lat_lon=[self._lat_lon(s) for s in outlines], colors=CONSTRAINT_COLOR,
+                radii=_ui(CONSTRAINT_RADIUS_UI)))
 
     def log_constraints_msg(self, msg: Any) -> None:
         """A std_msgs/String of ``uam/constraints`` (uam_planner.live_constraints.set_geojson)."""
