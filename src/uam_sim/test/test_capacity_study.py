@@ -91,3 +91,21 @@ def test_the_auto_both_file_is_the_main_study_restricted_to_auto_in_both():
     assert [(a.name, m) for a, m, _cfg in combos] == [("singapore", "both"),
                                                       ("singapore-below-knee", "both"),
                                                       ("city", "both")]
+
+
+def test_the_approval_share_figure_gives_auto_firstfit_and_fifo_their_own_markers(tmp_path, monkeypatch):
+    """One mode's auto, first-fit and FIFO curves shared the mode's marker (the colour already says
+    the mode): each method now keeps its own marker, as in the other figures."""
+    import pandas as pd
+
+    from uam_sim.reports import capacity_report
+
+    seen = {}
+    monkeypatch.setattr(capacity_report, "save_figure", lambda fig, path: seen.setdefault("fig", fig))
+    runs = pd.DataFrame([{"network": "n", "mode": mode, "method": m, "rate": r, "approval_rate": 0.5}
+                         for mode in ("paper", "both") for m in ("auto", "firstfit", "fifo") for r in (10, 20)])
+    capacity_report.approval_share_figure(runs, tmp_path / "share.png")
+    lines = seen["fig"].axes[0].get_lines()
+    marker = {line.get_label(): line.get_marker() for line in lines}
+    assert len({marker[f"paper {m}"] for m in ("auto", "firstfit", "fifo")}) == 3, marker
+    assert marker["paper auto"] == marker["both auto"], marker  # the method's, whatever the mode

@@ -131,7 +131,9 @@ def approval_share_figure(runs: pd.DataFrame, path: Path, interval_s: float = 30
                 if s.empty:
                     continue
                 g = s.groupby("rate").approval_rate.mean()
-                ax.plot(g.index * 3600.0 / interval_s, 100 * g.values, linestyle=ls, marker="os^D"[j],
+                # the colour says the mode, the marker and line the method (a marker per mode
+                # drew auto, first-fit and FIFO of one mode alike)
+                ax.plot(g.index * 3600.0 / interval_s, 100 * g.values, linestyle=ls, marker=_style(m, j)["marker"],
                         color=f"C{j}", label=f"{mode} {m}")
         ax.set_xlabel("offered load [requests / h]")
         ax.set_title(net, fontsize=8)
