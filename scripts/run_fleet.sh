@@ -11,6 +11,8 @@
 #                      paper; docs/objectives.md)
 #   --baseline-order B arrival | priority: the order of fifo and firstfit (default arrival)
 #   --priority-share P share of random requests of priority class 1, e.g. 0.05 (default 0)
+#   --priority-grants FILE  the priority classes each operator may ask for (uam_planner.grants;
+#                      default: the generator's class, 0 for any other operator); above it: refused
 #   --horizon H        epochs the MWIS plans jointly (rolling horizon, default 1: the paper's)
 #   --commit-ahead B   true | false: with --horizon > 1, commit the horizon's later departures now
 #                      as reservations, never re-optimised (default false)
@@ -87,7 +89,7 @@ DEMAND="" CONSTRAINTS="" MODE=lockstep RTF=1 RERUN=save OUT="" FOXGLOVE_PORT=0 U
 USS_AUTH=verify USS_AUTH_KEY="" USS_AUDIENCE=""
 CONFORMANCE=auto
 SEPARATION="" SEPARATION_M=100 VERTICAL_M=30 SLOT_S=0 CLIMB=5 DESCENT=3
-OBJECTIVE=paper BASELINE_ORDER=arrival PRIORITY_SHARE=0 HORIZON=1 LEAD_TIME=0 COMMIT_AHEAD=false REACTION=false REACTION_PERIOD=0 PROBE=0 PROBE_MARGIN=0 REPLAN_POLICY=""
+PRIORITY_GRANTS="" OBJECTIVE=paper BASELINE_ORDER=arrival PRIORITY_SHARE=0 HORIZON=1 LEAD_TIME=0 COMMIT_AHEAD=false REACTION=false REACTION_PERIOD=0 PROBE=0 PROBE_MARGIN=0 REPLAN_POLICY=""
 die() { echo "run_fleet: $*" >&2; exit 2; }
 while [[ $# -gt 0 ]]; do
   case "$1" in
@@ -96,6 +98,7 @@ while [[ $# -gt 0 ]]; do
     --objective) OBJECTIVE="${2:?--objective needs a value}"; shift 2;;
     --baseline-order) BASELINE_ORDER="${2:?--baseline-order needs a value}"; shift 2;;
     --priority-share) PRIORITY_SHARE="${2:?--priority-share needs a value}"; shift 2;;
+    --priority-grants) PRIORITY_GRANTS="${2:?--priority-grants needs a value}"; shift 2;;
     --horizon) HORIZON="${2:?--horizon needs a value}"; shift 2;;
     --commit-ahead) COMMIT_AHEAD="${2:?--commit-ahead needs a value}"; shift 2;;
     --reaction) REACTION="${2:?--reaction needs a value}"; shift 2;;
@@ -182,6 +185,7 @@ fi
 f() { [[ "$1" == *.* ]] && echo "$1" || echo "$1.0"; }
 [[ -f "$NETWORK" ]] || die "--network: no file '$NETWORK'"
 [[ -z "$DEMAND" || -f "$DEMAND" ]] || die "--demand: no file '$DEMAND'"
+[[ -z "$PRIORITY_GRANTS" || -f "$PRIORITY_GRANTS" ]] || die "--priority-grants: no file '$PRIORITY_GRANTS'"
 [[ -z "$CONSTRAINTS" || -f "$CONSTRAINTS" ]] || die "--constraints: no file '$CONSTRAINTS'"
 
 # the set-up shows only the steps it has to do, with their progress (a first run takes minutes;
@@ -267,6 +271,18 @@ echo "ROS_DOMAIN_ID=$ROS_DOMAIN_ID" > "$OUT/run.env"
 # updates signed with it only (uam_planner.authority; docs/constraints.md)
 python -m uam_planner.authority new "$OUT/authority" >/dev/null || die "no airspace authority key pair (above)"
 echo "run_fleet: live constraints: python -m uam_planner.nodes.constraint_client add FEATURE.geojson --run $OUT"
+# the priority classes each operator may ask for (uam_planner.grants): given, or the generator's
+# own class (its priority_class in config/request_generator.yaml) and 0 for any other operator
+if [[ -z "$PRIORITY_GRANTS" ]]; then
+  PRIORITY_GRANTS="$OUT/priority_grants.yaml"
+  python -c 'import sys, yaml
+from uam_planner.grants import PriorityGrants
+gen = yaml.safe_load(open("config/request_generator.yaml"))["request_generator"]["ros__parameters"]
+sys.stdout.write(PriorityGrants(0, {gen["operator_id"]: int(gen["priority_class"])}).as_yaml())' > "$PRIORITY_GRANTS" \
+    || die "no priority grants file (above)"
+fi
+python -c 'import sys; from uam_planner.grants import PriorityGrants; PriorityGrants.load(sys.argv[1])' "$PRIORITY_GRANTS" \
+  || die "--priority-grants: $PRIORITY_GRANTS is not a grants file (above)"
 USS_AUTH_ARGS=(-p "auth:=$USS_AUTH")
 if (( USS_PORT > 0 )) && [[ "$USS_AUTH" == verify ]]; then
   if [[ -z "$USS_AUTH_KEY" ]]; then
@@ -350,7 +366,8 @@ trap interrupted INT TERM HUP
 # (the parameters checked above, and those that name this run's files)
 start uam_solvers solver solver "${SOLVER_P[@]}"
 start uam_planner planner planner "${PLANNER_P[@]}" -p "separation_model:=$SEPARATION" \
-  -p "journal:=$OUT/planner-journal.jsonl" -p "authorities_file:=$OUT/authority/authorities.yaml"
+  -p "journal:=$OUT/planner-journal.jsonl" -p "authorities_file:=$OUT/authority/authorities.yaml" \
+  -p "priority_grants:=$PRIORITY_GRANTS"
 start uam_sim request_generator request_generator "${GENERATOR_P[@]}"
 # the recorder writes the run's airspace into the MCAP (uam_airspace metadata): the analysis audits in it.
 # It subscribes to the fleet state (which starts the simulator) only once it hears these topics'

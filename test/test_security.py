@@ -304,6 +304,32 @@ def test_refusals_keep_the_offending_id_escaped_so_two_are_never_one_decision(ro
     assert all(p.outcome == FlightPlan.OUTCOME_REJECTED and "request_id" in p.reason for p in refused)
 
 
+def test_a_priority_above_the_operators_grant_is_refused_and_takes_no_slot(ros_context, spin_until, tmp_path):
+    """Finding: under --objective priority, 340 priority-255 requests from an operator 'medevac'
+    took legitimate slots (116 -> 102 approved). With the run's priority grants (medevac granted
+    nothing above 0) each is refused naming the field, the value and the grant, and the
+    generator's approvals are those of the same run without the attack."""
+    from uam_planner.grants import PriorityGrants
+
+    grants = tmp_path / "grants.yaml"
+    grants.write_text(PriorityGrants(0, {"generator": 1}).as_yaml())
+    extra = {"objective": "priority", "priority_grants": str(grants)}
+
+    def attack(executor, nodes, rogue):
+        _mid_run(executor, nodes, spin_until, t_s=30.0)
+        for k in range(40):
+            for o, d in (("A", "B"), ("B", "C"), ("C", "A")):
+                rogue.requests.publish(FlightRequest(
+                    operator_id="medevac", request_id=f"m{k}{o}", origin_id=o, destination_id=d, priority=255,
+                    earliest_departure=m.to_time(60), latest_departure=m.to_time(120), request_time=m.to_time(30)))
+    clean, _n, _ = _run_with_rogue(ros_context, spin_until, lambda *a: None, planner_extra=extra)
+    obs, nodes, _ = _run_with_rogue(ros_context, spin_until, attack, planner_extra=extra)
+    forged = [p for p in obs.plans if p.operator_id == "medevac"]
+    assert len(forged) == 120 and all(p.outcome == FlightPlan.OUTCOME_REJECTED for p in forged)
+    assert all("priority: 255 is above operator 'medevac''s grant 0" in p.reason for p in forged), forged[0].reason
+    assert decisions(obs.plans) == decisions(clean.plans) and decisions(clean.plans)
+
+
 def test_escaped_ids_name_the_value_and_never_collide():
     assert wire.escaped_id("ok-1.2_3") == "ok-1.2_3"
     assert wire.escaped_id("") == "!"

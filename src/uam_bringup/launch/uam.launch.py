@@ -109,6 +109,7 @@ def generate_launch_description() -> LaunchDescription:
                                                    "descent_rate_mps": a["descent_rate"],
                                                    "constraints_file": a["constraints_file"],
                                                    "authorities_file": a["authorities_file"],
+                                                   "priority_grants": a["priority_grants"],
                                                    "spatial_buffer_m": a["spatial_buffer_m"],
                                                    "temporal_buffer_s": a["temporal_buffer_s"], **airspace}]),
         Node(package="uam_sim", executable="request_generator", name="request_generator", output="screen",

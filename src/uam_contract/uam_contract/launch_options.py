@@ -71,6 +71,9 @@ LAUNCH_OPTIONS: tuple[LaunchOption, ...] = (
     LaunchOption("--climb-rate", "CLIMB", "climb_rate", D.as_text(D.CLIMB_RATE_MPS), "vertical climb rate at vertiports [m/s]"),
     LaunchOption("--descent-rate", "DESCENT", "descent_rate", D.as_text(D.DESCENT_RATE_MPS), "vertical descent rate at vertiports [m/s]"),
     LaunchOption("--demand", "DEMAND", "demand_file", "", "replay a demand file instead of random requests"),
+    LaunchOption("--priority-grants", "PRIORITY_GRANTS", "priority_grants", "",
+                 "the priority classes each operator may ask for (uam_planner.grants); '' = run_fleet.sh: "
+                 "the generator's class and 0 for any other operator; the launch file: every class taken"),
     LaunchOption("--constraints", "CONSTRAINTS", "constraints_file", "",
                  "airspace constraints the planner plans around (docs/constraints.md)"),
     LaunchOption("--spatial-buffer-m", "SPATIAL_BUFFER", "spatial_buffer_m", "0",

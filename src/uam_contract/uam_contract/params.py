@@ -133,6 +133,10 @@ PLANNER = (
     Param("journal", "", "file where the planner journals its approvals (uam_bringup.journal), so a restarted "
           "planner checks the simulator's claim of the flights in the air against its own record; '' for none "
           "(run_fleet.sh writes <out>/planner-journal.jsonl)"),
+    Param("priority_grants", "", "the priority classes each operator may ask for (uam_planner.grants: a YAML "
+          "file with default and operators); a request above its grant is refused naming it; '' = every class "
+          "taken (run_fleet.sh writes <out>/priority_grants.yaml: the generator's class, 0 for any other "
+          "operator)"),
     Param("authorities_file", "", "the airspace authorities whose signed updates on uam/update_constraint "
           "are taken (uam_planner.authority: ids and public keys; run_fleet.sh writes <out>/authority/"
           "authorities.yaml); '' = live constraint updates are refused"),

@@ -455,6 +455,11 @@ class Planner:
         op = getattr(request, "operator_id", "")
         if not isinstance(op, str):
             return f"operator_id: {op!r} is not a string"
+        grants = self.config.priority_grants
+        if grants is not None:   # a class above the operator's grant (uam_planner.grants)
+            problem = grants.check(op or rid.split("/", 1)[0], getattr(request, "priority", 0))
+            if problem:
+                return problem
         if request.latest_departure_s < request.earliest_departure_s:
             return (f"latest_departure_s: {request.latest_departure_s!r} is before "
                     f"earliest_departure_s {request.earliest_departure_s!r}")

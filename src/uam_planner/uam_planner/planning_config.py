@@ -174,6 +174,8 @@ class PlanningConfig:
             batches deconflict their updates with the wider of that and ``separation``: a
             tactical buffer kept only between the flights that are predicted to come close,
             beside the strategic buffer every plan keeps; 0 (default) = the true minimum.
+        priority_grants: ``uam_planner.grants.PriorityGrants``: a request above its operator's
+            granted class is refused naming the grant; None (default) takes every class.
         conformance: the reaction to nonconforming flights
             (``uam_planner.nonconformance``): a ConformanceBounds the planner checks each
             nonconformance report against (its own plan, its own observation) before it updates
@@ -202,6 +204,7 @@ class PlanningConfig:
     conformance: ConformanceBounds | None = None
     conflict_probe_s: float = 0.0
     conflict_probe_margin_m: float = 0.0
+    priority_grants: object = None   # uam_planner.grants.PriorityGrants; None: every class taken
 
     @property
     def probe_separation(self) -> SeparationModel:

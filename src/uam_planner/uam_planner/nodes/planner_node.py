@@ -79,6 +79,7 @@ from uam_planner.live_constraints import parse_update, set_geojson
 from uam_planner.network import load_network
 from uam_planner.conformance import ConformanceBounds
 from uam_planner.authority import Authorities
+from uam_planner.grants import PriorityGrants
 from uam_planner.sources import BoundSource, conformance_digest, fleet_digest
 from uam_planner.planning import AirspaceConfig, Planner, PlanningConfig, call_solver, default_solve_mwis
 
@@ -115,6 +116,8 @@ class PlannerNode(Node):
             conflict_probe_s=self.p["conflict_probe_s"] if self.p["reaction"] else 0.0,
             conflict_probe_margin_m=self.p["conflict_probe_margin_m"]
             if self.p["reaction"] and self.p["conflict_probe_s"] else 0.0,
+            # the classes each operator may ask for (ValueError naming the file and entry)
+            priority_grants=PriorityGrants.load(self.p["priority_grants"]) if self.p["priority_grants"] else None,
             airspace=AirspaceConfig(**{f: self.p[f] for f in (
                 "separation_model", "vertical_separation_m", "departure_slot_s", "climb_rate_mps",
                 "descent_rate_mps")}))
