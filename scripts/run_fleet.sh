@@ -399,7 +399,9 @@ if [[ "$CONFORMANCE" == true ]]; then
   SIM_WAITS=recorder,conformance_monitor
 fi
 if (( USS_PORT > 0 )); then  # the F3548 USS-USS interface (docs/f3548.md)
-  start uam_sim uss uss "${USS_P[@]}" -p "separation_model:=$SEPARATION" "${USS_AUTH_ARGS[@]}"
+  # it serves the planner's own record (its journal), not the topics anyone can publish
+  start uam_sim uss uss "${USS_P[@]}" -p "separation_model:=$SEPARATION" "${USS_AUTH_ARGS[@]}" \
+    -p "journal:=$OUT/planner-journal.jsonl"
   echo "run_fleet: F3548 operational intents on http://127.0.0.1:$USS_PORT/uss/v1/operational_intents/{id} (ids: /uam_fleet/v1/operational_intents; auth $USS_AUTH)"
 fi
 start uam_sim simulator simulator "${SIMULATOR_P[@]}" -p "wait_for_subscribers:=[$SIM_WAITS]"

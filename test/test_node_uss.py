@@ -94,3 +94,66 @@ def test_the_node_does_not_start_verifying_without_a_key(ros_context):
     finally:
         uss.close()
         uss.destroy_node()
+
+
+def test_the_uss_serves_the_planners_journal_not_what_anyone_publishes(ros_context, spin_until, tmp_path):
+    """Findings: a forged cancellation removed a flying aircraft's intent, a forged plan was served
+    as a real intent, a forged constraint set was served, and one forged /clock at 2^31 - 1 s
+    dropped every served intent. With the planner's journal the USS serves the planner's own
+    record and the clock of the simulator the journal names: none of these reaches a peer."""
+    from builtin_interfaces.msg import Time
+    from rosgraph_msgs.msg import Clock
+    from std_msgs.msg import String
+    from uam_bringup import qos
+    from uam_contract import names as c
+    from uam_msgs.msg import FleetState, Waypoint
+    from uam_planner.constraints import Constraint
+    from uam_planner.live_constraints import set_geojson
+    from uam_sim.nodes.uss_node import UssNode
+
+    journal = tmp_path / "planner-journal.jsonl"
+    executor, nodes, obs = build_graph(ros_context, rate=3.0, duration_s=240.0, backend="greedy",
+                                       planner_extra={"journal": str(journal)})
+    uss = UssNode(context=ros_context, parameter_overrides=params(port=0, network=TINY, auth="off",
+                                                                  journal=str(journal)))
+    rogue = rclpy.create_node("rogue_uss", context=ros_context)
+    plans = rogue.create_publisher(FlightPlan, c.TOPIC_PLANS, qos.QOS_LATCHED)
+    sets = rogue.create_publisher(String, c.TOPIC_CONSTRAINTS, qos.QOS_CONSTRAINTS)
+    clock = rogue.create_publisher(Clock, c.TOPIC_CLOCK, qos.QOS_CLOCK)
+    fleet = rogue.create_publisher(FleetState, c.TOPIC_FLEET, qos.QOS_STREAM)
+    nodes["uss"], nodes["rogue"] = uss, rogue
+    for n in (uss, rogue):
+        executor.add_node(n)
+    try:
+        sim = nodes["simulator"]
+        assert spin_until(executor, lambda: uss.plans >= 2 and sim.t_s >= 60.0, timeout_s=60)
+        flying = [p for p in obs.plans if p.outcome == FlightPlan.OUTCOME_APPROVED]
+        victim = flying[0]
+        oid = intent_id(victim.operator_id, victim.request_id)
+        assert oid in uss.store.intent_ids()
+        fake = FlightPlan(operator_id="rogue", request_id="ghost", outcome=FlightPlan.OUTCOME_APPROVED, version=1)
+        fake.waypoints = [Waypoint(time=Time(sec=100)), Waypoint(time=Time(sec=200))]
+        fake.waypoints[1].position.x = 1000.0
+        cancel = FlightPlan(operator_id=victim.operator_id, request_id=victim.request_id,
+                            outcome=FlightPlan.OUTCOME_REJECTED, version=int(victim.version) + 1)
+        sky = Constraint("sky", 1, "forged", 0.0, 1e6, center_m=(0.0, 0.0), radius_m=5e4, lower_m=0.0, upper_m=1e4)
+        for _ in range(3):
+            plans.publish(fake)
+            plans.publish(cancel)
+            sets.publish(String(data=set_geojson([sky], 0.0)))
+            clock.publish(Clock(clock=Time(sec=2**31 - 1)))
+            ahead = FleetState(session=sim.session, step_index=10**9)
+            ahead.header.stamp = Time(sec=2**31 - 1)
+            fleet.publish(ahead)
+            spin_until(executor, lambda: uss.clock_refused >= 1, timeout_s=5)
+        ids = uss.store.intent_ids()
+        assert oid in ids and intent_id("rogue", "ghost") not in ids
+        assert uss.store.constraint_ids() == [] and uss.store.time_s < 1000.0
+        assert uss.clock_refused >= 1
+        run_to_end(executor, nodes, obs, spin_until)
+        approved = [p for p in obs.plans if p.outcome == FlightPlan.OUTCOME_APPROVED and p.operator_id != "rogue"]
+        assert spin_until(executor, lambda: uss.plans >= len(approved), timeout_s=10), (uss.plans, len(approved))
+        # the simulator's clock (its fleet states are best effort: the last ones may be dropped)
+        assert 150.0 <= uss.store.time_s <= sim.t_s
+    finally:
+        shutdown(executor, nodes)

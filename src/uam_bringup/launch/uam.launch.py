@@ -135,7 +135,9 @@ def generate_launch_description() -> LaunchDescription:
     # default) needs uss_auth_key:=FILE (the node refuses to start without it)
     nodes.append(Node(package="uam_sim", executable="uss", name="uss", output="screen",
                       condition=IfCondition(PythonExpression(["int('", a["uss_port"], "') > 0"])),
-                      parameters=[{"port": a["uss_port"], "network": network, "auth": a["uss_auth"],
+                      parameters=[{"port": a["uss_port"], "network": network,
+                                   # the planner's own record, not the topics anyone can publish
+                                   "journal": PathJoinSubstitution([out, "planner-journal.jsonl"]), "auth": a["uss_auth"],
                                    "auth_key": a["uss_auth_key"], "auth_audience": a["uss_audience"],
                                    "separation_model": a["separation"],
                                    "separation_m": a["separation_m"],

@@ -361,6 +361,12 @@ CONFORMANCE_MONITOR = (
 # the F3548 USS-USS interface (docs/f3548.md; run_fleet.sh --uss-port)
 USS = (
     Param("port", 8090, "TCP port of the HTTP server (0 = any free port, logged)", 0, 65535),
+    Param("journal", "", "the planner's journal (its own record of approvals, versions and constraint sets, "
+          "uam_bringup.journal): served instead of what anyone can publish on uam/flight_plans and "
+          "uam/constraints, with the clock of the simulator it names (its fleet states); '' = the topics "
+          "(warned at start; run_fleet.sh gives <out>/planner-journal.jsonl)"),
+    Param("max_clock_step_s", 60.0, "with journal: the most the served clock may advance from one fleet state "
+          "of the simulator to the next [s] (a forged jump is refused)", 0.001, 1e6),
     Param("host", "127.0.0.1", "address to bind ('0.0.0.0' for every interface; loopback by default)",
           check=_nonempty("host")),
     Param("auth", "verify", "'verify': every request needs a bearer access token signed by the auth server "

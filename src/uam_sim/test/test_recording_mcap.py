@@ -301,7 +301,7 @@ def test_exact_cdr_size_matches_what_dds_delivers():
     assert cdr_size(MwisInstance()) == 28
     assert cdr_size(MwisInstance(edges_u=[7])) == 32
     assert cdr_size(MwisInstance(weights=[1.0])) == 40  # float64 data aligned to 8 after the count
-    assert cdr_size(PlanningReport()) == 149
+    assert cdr_size(PlanningReport()) == 157  # constraint_set_sha256: 4-aligned, length, NUL
     typestore = get_typestore(Stores.ROS2_JAZZY)
     for _topic, _qos, msg in sample_messages() + [("", None, m) for m in (
             PlanningReport(), MwisInstance(), FlightPlan(), FleetState(), EpochSync(), PoseArray())]:

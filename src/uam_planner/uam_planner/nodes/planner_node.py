@@ -464,6 +464,10 @@ class PlannerNode(Node):
         text = set_geojson(self.config.constraints or (), t_s, self._constraint_effective,
                            self._constraint_announced, self._withdrawals)
         self._sets_unreported.append(hashlib.sha256(text.encode("utf-8")).hexdigest())
+        self._last_set_text = text
+        journal = getattr(self, "journal", None)   # the first set is published before the journal opens
+        if journal is not None and journal.started:
+            journal.append_constraints(text)
         self._constraints_pub.publish(String(data=text))
 
     # ---- requests ----------------------------------------------------------------------------
@@ -668,11 +672,23 @@ class PlannerNode(Node):
         return self._next_epoch == 0 and self.epochs_planned == 0 and not self.resumed and \
             self.bound_simulator is None and not self.planner.active
 
+    def _journal(self, plans, flights) -> None:
+        """Journal ``plans`` with the priority class of each one's flight (``flights``; None for
+        a cancellation): the planner's own record, which the USS node serves."""
+        if self.journal is None:
+            return
+        classes = {}
+        for f in flights:
+            if f is not None:
+                classes[tuple(wire.split_scoped(f.request_id))] = int(getattr(f, "priority", 0))
+        self.journal.append(plans, classes)
+
     def _bind(self, session: str, resumed: bool) -> None:
         self.bound_simulator = session
         self.source.bind(session)
         if self.journal is not None:
             self.journal.start(session, keep=resumed)
+            self.journal.append_constraints(self._last_set_text)   # the set in force from the start
         self.get_logger().info(f"serving the simulator of session {session!r} (this planner: {self.session!r})")
 
     def _resume(self, request: PlanEpoch.Request, t_s: float) -> str:
@@ -775,8 +791,8 @@ class PlannerNode(Node):
                 plan = m.plan_update_msg(u, t_s, self.policy, request_id=rid)
                 plan.operator_id = op
                 plans.append(plan)
-            if self.journal is not None:
-                self.journal.append(plans)  # before anyone can hold them
+            # before anyone can hold them
+            self._journal(plans, [*result.approved, *(u.flight for u in result.plan_updates)])
             refusals = result.report.constraint_refusals
             for req in result.expired:
                 op, rid = wire.split_scoped(req.request_id)
@@ -955,8 +971,7 @@ class PlannerNode(Node):
                 plan = m.plan_update_msg(u, t_s, self.policy, request_id=rid)
                 plan.operator_id = op
                 plans.append(plan)
-            if self.journal is not None:
-                self.journal.append(plans)  # before anyone can hold them
+            self._journal(plans, [u.flight for u in updates])  # before anyone can hold them
             for plan in plans:
                 self._publish_plan(plan)
             self.reactions_between += 1

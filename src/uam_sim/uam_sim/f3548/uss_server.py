@@ -94,6 +94,12 @@ class IntentStore:
                 self._intents[oid] = entry
         return oid
 
+    def clear(self) -> None:
+        """Forget every intent and constraint (the planner started a new run)."""
+        with self._lock:
+            self._intents.clear()
+            self._constraints = {}
+
     def end(self, operator_id: str, request_id: str) -> bool:
         with self._lock:
             return self._intents.pop(intent_id(operator_id, request_id), None) is not None

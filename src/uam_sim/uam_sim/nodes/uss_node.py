@@ -4,10 +4,15 @@
 ``install/uam_sim/lib/uam_sim/uss --ros-args -p port:=8090 -p network:=config/networks/tiny.yaml``
 (``run_fleet.sh --uss-port 8090`` starts it with the run's network and separation model).
 
-It subscribes to ``uam/flight_plans`` (every approved plan and every new version becomes or
-replaces an operational intent; a cancellation ends it), ``uam/requests`` (each request's
-priority, which a FlightPlan does not carry), ``uam/constraints`` (the set the planner plans
-with) and ``/clock`` (states and volume clipping follow simulation time), and serves them with
+With ``journal`` (run_fleet.sh gives the planner's) it serves the planner's own record: it follows
+the journal (``uam_bringup.journal.JournalTail``: every approved plan and new version becomes or
+replaces an operational intent, a cancellation ends it, each with its request's priority class;
+each constraint set replaces the served constraints), and takes simulation time only from the
+fleet states of the simulator the journal names (``uam_planner.sources.BoundSource``: its
+session, each step once, never back and never more than ``max_clock_step_s`` ahead), so nothing
+published on the domain by anyone else reaches a peer. Without it (a warning at start) it
+subscribes to ``uam/flight_plans``, ``uam/requests`` (the priorities), ``uam/constraints`` and
+``/clock``. Either way it serves them with
 :class:`uam_sim.f3548.uss_server.UssServer` (Flask on a bounded pool of worker threads; a bad
 request is answered with the standard's error and never stops the node). Parameters:
 ``uam_contract.params.USS``. With ``auth`` ``verify`` (the default) the node does not start
@@ -29,7 +34,7 @@ from uam_bringup.runtime import run_node
 from uam_contract import names as c
 from uam_contract.params import USS
 from uam_contract.stamps import stamp_s
-from uam_msgs.msg import FlightPlan, FlightRequest
+from uam_msgs.msg import FleetState, FlightPlan, FlightRequest
 
 
 class UssNode(Node):
@@ -62,11 +67,70 @@ class UssNode(Node):
         self.server.start()
         log = self.get_logger().warning if self.server.auth == "off" else self.get_logger().info
         log(f"{self.server.announcement}; base url {base}; {p['workers']} workers")
-        self.create_subscription(FlightPlan, c.TOPIC_PLANS, self._on_plan, qos.QOS_LATCHED)
-        self.create_subscription(FlightRequest, c.TOPIC_REQUESTS, self._on_request, qos.QOS_REQUESTS)
-        self.create_subscription(String, c.TOPIC_CONSTRAINTS, self._on_constraints, qos.QOS_CONSTRAINTS)
-        self.create_subscription(Clock, c.TOPIC_CLOCK, self._on_clock, qos.QOS_CLOCK)
         self.plans = 0
+        self.clock_refused = 0
+        self.tail = None
+        if p["journal"]:
+            from uam_bringup.journal import JournalTail
+            from uam_planner.sources import BoundSource
+            self.tail = JournalTail(p["journal"])
+            self.source = BoundSource()
+            self._session = None
+            self._max_step_s = float(p["max_clock_step_s"])
+            self._clock_s = None
+            self.create_timer(0.2, self._poll, clock=self._steady())
+            self.create_subscription(FleetState, c.TOPIC_FLEET, self._on_fleet, qos.QOS_STREAM)
+            self.get_logger().info(f"serving the planner's journal {p['journal']}")
+        else:
+            self.get_logger().warning("no journal: serving what anyone on the domain publishes on "
+                                      f"{c.TOPIC_PLANS}, {c.TOPIC_CONSTRAINTS} and {c.TOPIC_CLOCK}")
+            self.create_subscription(FlightPlan, c.TOPIC_PLANS, self._on_plan, qos.QOS_LATCHED)
+            self.create_subscription(FlightRequest, c.TOPIC_REQUESTS, self._on_request, qos.QOS_REQUESTS)
+            self.create_subscription(String, c.TOPIC_CONSTRAINTS, self._on_constraints, qos.QOS_CONSTRAINTS)
+            self.create_subscription(Clock, c.TOPIC_CLOCK, self._on_clock, qos.QOS_CLOCK)
+
+    @staticmethod
+    def _steady():
+        from rclpy.clock import Clock as RosClock, ClockType
+        return RosClock(clock_type=ClockType.STEADY_TIME)
+
+    def _poll(self) -> None:
+        """The journal's new entries: the newest run's plans and constraint sets."""
+        entries = self.tail.poll()
+        if self.tail.restarted:
+            self.store.clear()
+            self._session = None
+        for e in entries:
+            if e["session"] != self._session:   # the planner serves a new run
+                if self._session is not None:
+                    self.store.clear()
+                self._session = e["session"]
+                self.source = type(self.source)()
+                self.source.bind(self._session)
+                self._clock_s = None
+            if "constraints" in e:
+                self._set_constraints(e["constraints"])
+            else:
+                msg = e["plan"]
+                self._priority[(msg.operator_id, msg.request_id)] = int(e["priority"])
+                self._on_plan(msg)
+
+    def _on_fleet(self, msg) -> None:
+        """Simulation time from the fleet states of the simulator the journal names."""
+        from uam_planner.sources import fleet_digest
+        if not self.source.take("fleet state", msg.session, msg.step_index, fleet_digest(msg)):
+            return
+        t = stamp_s(msg.header.stamp)
+        if self.source.problem or (self._clock_s is not None and not
+                                   self._clock_s <= t <= self._clock_s + self._max_step_s):
+            self.clock_refused += 1
+            if self.clock_refused == 1:
+                self.get_logger().error(self.source.problem or (
+                    f"clock: a fleet state at t = {t:g} s after {self._clock_s:g} s, more than max_clock_step_s "
+                    f"{self._max_step_s:g} s ahead or back: refused"))
+            return
+        self._clock_s = t
+        self.store.set_time(t)
 
     def _on_request(self, msg) -> None:
         self._priority[(msg.operator_id, msg.request_id)] = int(getattr(msg, "priority", 0))
@@ -88,9 +152,12 @@ class UssNode(Node):
         self.plans += 1
 
     def _on_constraints(self, msg) -> None:
+        self._set_constraints(msg.data)
+
+    def _set_constraints(self, text: str) -> None:
         from uam_planner.live_constraints import constraints_from_text
         try:
-            _, pairs = constraints_from_text(msg.data, self.network)
+            _, pairs = constraints_from_text(text, self.network)
         except ValueError as exc:
             self.get_logger().warning(f"{c.TOPIC_CONSTRAINTS}: not served: {exc}")
             return
