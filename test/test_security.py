@@ -222,6 +222,32 @@ def test_a_forged_constraint_set_is_left_out_of_the_audit_and_listed(ros_context
     assert any("named by no planning report" in p and "listed as forged" in p for p in s.problems), s.problems
 
 
+def test_a_third_partys_parameter_change_is_named_in_the_summary(ros_context, spin_until, tmp_path):
+    """Finding: valid values set on the planner's request_wait_timeout_s by another node changed the
+    run and left no trace. A change of a read-only parameter is refused; every accepted one is
+    published by the node that took it, recorded, and named in the summary."""
+    from rclpy.parameter import Parameter
+    from rclpy.parameter_client import AsyncParameterClient
+    from uam_sim.audit.analysis import format_summary, summarize
+
+    answers = {}
+
+    def attack(executor, nodes, rogue):
+        _mid_run(executor, nodes, spin_until)
+        client = AsyncParameterClient(rogue.node, "planner")
+        assert spin_until(executor, lambda: client.services_are_ready(), 10)
+        for name, value in (("request_wait_timeout_s", 7.5), ("k", 2)):
+            fut = client.set_parameters([Parameter(name, value=value)])
+            assert spin_until(executor, fut.done, 10)
+            answers[name] = fut.result().results[0]
+    _obs, nodes, _ = _run_with_rogue(ros_context, spin_until, attack, tmp_path=tmp_path)
+    assert answers["request_wait_timeout_s"].successful and not answers["k"].successful
+    assert "read-only" in answers["k"].reason
+    s = summarize(tmp_path / "run.mcap")
+    assert len(s.parameter_changes) == 1 and "/planner request_wait_timeout_s = 7.5" in s.parameter_changes[0]
+    assert "Parameters       1 change(s) while running" in format_summary(s)
+
+
 def test_use_sim_time_is_refused_at_run_time(ros_context, spin_until):
     """Finding: /simulator use_sim_time:=true was accepted at run time and froze it for good."""
     def attack(executor, nodes, rogue):

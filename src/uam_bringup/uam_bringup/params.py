@@ -73,9 +73,16 @@ def declare_table(node, table: tuple[Param, ...], on_change: Callable[[str, Any]
     A bad start-up value raises ValueError (naming the parameter and the value) before the node
     does anything else. At run time a change is refused (the set_parameters result says why) if
     the parameter is read-only or the value fails its check; else ``on_change(name, value)``
-    is called with the converted value, after every parameter of the call passed.
+    is called with the converted value, after every parameter of the call passed. Every
+    accepted change is published on ``uam/parameter_changes`` (recorded; the summary names it).
     """
+    import json
+
     from rcl_interfaces.msg import SetParametersResult
+    from std_msgs.msg import String
+
+    from uam_bringup import qos
+    from uam_contract import names
 
     missing = sorted({p.rule for p in table if p.rule} - set(rules or {}))
     if missing:
@@ -106,8 +113,11 @@ def declare_table(node, table: tuple[Param, ...], on_change: Callable[[str, Any]
             values[name] = value
             if on_change is not None:
                 on_change(name, value)
+            changes.publish(String(data=json.dumps({"node": node.get_fully_qualified_name(), "parameter": name,
+                                                    "value": value}, default=str)))
         return SetParametersResult(successful=True)
 
+    changes = node.create_publisher(String, names.TOPIC_PARAMETER_CHANGES, qos.QOS_LATCHED)
     node.add_on_set_parameters_callback(on_set)
     return values
 

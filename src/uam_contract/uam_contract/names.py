@@ -32,6 +32,9 @@ SERVICE_REACT = "uam/react"
 # live airspace constraints: the planner serves updates and publishes the set it plans with
 SERVICE_UPDATE_CONSTRAINT = "uam/update_constraint"
 TOPIC_CONSTRAINTS = "uam/constraints"
+#: every parameter change a node accepted at run time, as JSON ({"node", "parameter", "value"}),
+#: published by the node itself (uam_bringup.params.declare_table) and named in the summary
+TOPIC_PARAMETER_CHANGES = "uam/parameter_changes"
 
 # the standard-type views the recorder writes for generic viewers (uam_sim.views.std_msgs_export)
 TOPIC_VIEW_NETWORK = "uam/view/network"
@@ -94,5 +97,6 @@ RECORDED_TOPICS: dict[str, tuple[str, QosSpec]] = {
     TOPIC_POSES: ("geometry_msgs/msg/PoseArray", QOS_RECORD_VOLATILE),
     TOPIC_SYNC: ("uam_msgs/msg/EpochSync", QOS_LATCHED),
     TOPIC_CONSTRAINTS: ("std_msgs/msg/String", QOS_CONSTRAINTS),
+    TOPIC_PARAMETER_CHANGES: ("std_msgs/msg/String", QOS_LATCHED),
     TOPIC_CONFORMANCE: ("uam_msgs/msg/Conformance", QOS_RECORD_VOLATILE),
 }

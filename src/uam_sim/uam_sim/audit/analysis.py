@@ -86,7 +86,9 @@ TOPIC_REPORTS = resolved(names.TOPIC_REPORTS)
 TOPIC_FLEET = resolved(names.TOPIC_FLEET)
 TOPIC_SYNC = resolved(names.TOPIC_SYNC)
 TOPIC_CONSTRAINTS = resolved(names.TOPIC_CONSTRAINTS)
-ANALYSED_TOPICS = (TOPIC_REQUESTS, TOPIC_PLANS, TOPIC_REPORTS, TOPIC_FLEET, TOPIC_SYNC, TOPIC_CONSTRAINTS)
+TOPIC_PARAMETER_CHANGES = resolved(names.TOPIC_PARAMETER_CHANGES)
+ANALYSED_TOPICS = (TOPIC_REQUESTS, TOPIC_PLANS, TOPIC_REPORTS, TOPIC_FLEET, TOPIC_SYNC, TOPIC_CONSTRAINTS,
+                   TOPIC_PARAMETER_CHANGES)
 
 
 
@@ -188,6 +190,8 @@ class RunSummary:
     #: constraint sets on uam/constraints that no planning report names (not the planner's):
     #: left out of the audit
     forged_constraint_sets: list = field(default_factory=list)
+    #: every parameter change a node accepted while the run went on (uam/parameter_changes)
+    parameter_changes: list = field(default_factory=list)
     #: the audit of what flew (uam_sim.audit.flown.recording_flown): the fleet states' tracks,
     #: their exact closest approach in the true minimum with the sampling bound, and their F3548
     #: conformance with the approved plans ({} when no fleet positions were recorded)
@@ -450,12 +454,16 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
     constraint_sets: list = []     # (t_s, [(constraint, effective_s)]) as the planner published them
     constraint_problems: list = []
     withdrawals: dict = {}         # (id, version) -> the withdrawal as the planner published it
+    parameter_changes: list = []   # every run-time parameter change a node accepted
     published: list = []           # (sha256, log time, set, withdrawals) of each set on uam/constraints
     named_sets: set = set()        # the sets the planning reports name (the planner's own)
     t_min, t_max = math.inf, -math.inf
     for topic, log_ns, msg in messages:
         if topic == TOPIC_SYNC:  # announcements: not part of the run's time span
             syncs.append(msg)
+            continue
+        if topic == TOPIC_PARAMETER_CHANGES:
+            parameter_changes.append(_parameter_change(msg.data, log_ns * 1e-9))
             continue
         if topic == TOPIC_CONSTRAINTS:
             from uam_planner.live_constraints import constraints_from_text, withdrawals_from_text
@@ -502,19 +510,7 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
             if len(reports[int(msg.epoch_index)]) > 1 or any(e.epoch_index == int(msg.epoch_index) for e in epochs):
                 continue  # a repeat (or a second report) of an epoch counts once in the table
             epochs.append(_epoch_stats(msg))
-    # a set no planning report names was not the planner's: left out of the audit and listed
-    # (recordings made before the reports named their sets: every set is taken)
-    forged_sets = [f"t = {t:g} s (set time {cs[0]:g} s, sha256 {d[:12]})" for d, t, cs, _w in published
-                   if named_sets and d not in named_sets]
-    if forged_sets:
-        constraint_problems.append(f"{len(forged_sets)} constraint set(s) on {TOPIC_CONSTRAINTS} named by no planning "
-                                   f"report ({'; '.join(forged_sets[:3])}): not the planner's, listed as forged, "
-                                   "not audited")
-    for d, _t, cs, ws in published:
-        if not named_sets or d in named_sets:
-            constraint_sets.append(cs)
-            for w in ws:
-                withdrawals.setdefault((str(w.get("id")), w.get("version")), w)
+    forged_sets = _planners_sets(published, named_sets, constraint_sets, withdrawals, constraint_problems)
     plans = [p for ps in decisions.values() for p in ps]
     outcomes = [int(p.outcome) for p in plans]
     conflicting = {rid: [_OUTCOME_NAMES.get(int(p.outcome), str(int(p.outcome))) for p in ps]
@@ -607,10 +603,38 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
         constraints_in_force=n_in_force,
         airspace_changes=_airspace_changes(record.applied, withdrawals.values()),
         forged_constraint_sets=forged_sets,
+        parameter_changes=parameter_changes,
     )
     # the run's record (uam_sim.audit.record): what the flown audit reads; not part of the JSON
     summary.record = record
     return summary
+
+
+def _planners_sets(published, named_sets, constraint_sets: list, withdrawals: dict, problems: list) -> list:
+    """Of the sets on uam/constraints, those the planning reports name (the planner's) go into
+    ``constraint_sets`` (and their withdrawals into ``withdrawals``); the others are forged: left
+    out of the audit, listed (returned) and a problem of the record. Recordings made before the
+    reports named their sets take every set."""
+    forged = [f"t = {t:g} s (set time {cs[0]:g} s, sha256 {d[:12]})" for d, t, cs, _w in published
+              if named_sets and d not in named_sets]
+    if forged:
+        problems.append(f"{len(forged)} constraint set(s) on {TOPIC_CONSTRAINTS} named by no planning report "
+                        f"({'; '.join(forged[:3])}): not the planner's, listed as forged, not audited")
+    for d, _t, cs, ws in published:
+        if not named_sets or d in named_sets:
+            constraint_sets.append(cs)
+            for w in ws:
+                withdrawals.setdefault((str(w.get("id")), w.get("version")), w)
+    return forged
+
+
+def _parameter_change(text: str, t_s: float) -> str:
+    """One accepted parameter change as the summary names it."""
+    try:
+        d = json.loads(text)
+        return f"t = {t_s:g} s: {d['node']} {d['parameter']} = {d['value']!r}"
+    except (ValueError, KeyError, TypeError):
+        return f"t = {t_s:g} s: unreadable ({text[:80]!r})"
 
 
 def _airspace_changes(applied, withdrawals) -> list[str]:
@@ -785,6 +809,30 @@ def format_choices(choices: dict) -> str:
     return ", ".join(parts)
 
 
+def _airspace_lines(s: RunSummary) -> list[str]:
+    """The summary's lines on the airspace: plan updates, who changed it, incursions as applied
+    and between announcement and application."""
+    lines: list[str] = []
+    if s.plan_updates or s.constraints_in_force:
+        kinds = ", ".join(f"{n} {k}" for k, n in s.plan_updates.items()) or "none"
+        lines.append(f"Plan updates     {kinds}; {s.constraints_in_force} constraint version(s) in force")
+        if s.airspace_changes:
+            lines.append("Airspace changes " + "; ".join(s.airspace_changes[:10])
+                         + (f"; ... {len(s.airspace_changes) - 10} more" if len(s.airspace_changes) > 10 else ""))
+        n_in = sum("unavoidable)" in x for x in s.incursions)
+        verdict = "OK: no incursion" if not s.incursions else f"{len(s.incursions)} INCURSION(S)" + \
+            (f", {n_in} of them by flights already inside when it came into force (unavoidable)" if n_in else "")
+        lines.append(f"Constraint audit {verdict} (every flown version from the instant it took effect)")
+        for text in s.incursions[:20]:
+            lines.append(f"    {text}")
+        if s.incursions_before_applied:
+            lines.append(f"Constraint gap   {len(s.incursions_before_applied)} entry(ies) after the authority "
+                         "announced a constraint and before the planner applied it (its next epoch)")
+            for text in s.incursions_before_applied[:20]:
+                lines.append(f"    {text}")
+    return lines
+
+
 def format_summary(s: RunSummary, epochs: bool = True) -> str:
     """A human-readable report of a RunSummary."""
     lines = [
@@ -843,23 +891,7 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
                      f"inside the run, {len(s.contingency_conflicts) - inside} after its end")
         for a_, b_, d, when, within in s.contingency_conflicts[:20]:
             lines.append(f"    {a_} / {b_}: {d:.1f} m at t = {when:.1f} s{'' if within else ' (after the run)'}")
-    if s.plan_updates or s.constraints_in_force:
-        kinds = ", ".join(f"{n} {k}" for k, n in s.plan_updates.items()) or "none"
-        lines.append(f"Plan updates     {kinds}; {s.constraints_in_force} constraint version(s) in force")
-        if s.airspace_changes:
-            lines.append("Airspace changes " + "; ".join(s.airspace_changes[:10])
-                         + (f"; ... {len(s.airspace_changes) - 10} more" if len(s.airspace_changes) > 10 else ""))
-        n_in = sum("unavoidable)" in x for x in s.incursions)
-        verdict = "OK: no incursion" if not s.incursions else f"{len(s.incursions)} INCURSION(S)" + \
-            (f", {n_in} of them by flights already inside when it came into force (unavoidable)" if n_in else "")
-        lines.append(f"Constraint audit {verdict} (every flown version from the instant it took effect)")
-        for text in s.incursions[:20]:
-            lines.append(f"    {text}")
-        if s.incursions_before_applied:
-            lines.append(f"Constraint gap   {len(s.incursions_before_applied)} entry(ies) after the authority "
-                         "announced a constraint and before the planner applied it (its next epoch)")
-            for text in s.incursions_before_applied[:20]:
-                lines.append(f"    {text}")
+    lines += _airspace_lines(s)
     fl = s.flown
     if fl:  # the audit above is of what was planned; this one of what flew
         ms = fl["min_separation_m"]
@@ -881,6 +913,9 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
                      f"{cf['flight_hours']:.2f} flight hours, {cf['excursions']} excursions "
                      f"({cf['excursions_per_flight_hour']:.2f} per flight hour), longest "
                      f"{cf['longest_excursion_s']:.0f} s (F3548: >= 95 %, <= 18 per hour, <= 10 s)")
+    if s.parameter_changes:   # accepted while the run went on: the run was not launched as its header says
+        lines.append(f"Parameters       {len(s.parameter_changes)} change(s) while running: "
+                     + "; ".join(s.parameter_changes[:10]) + ("; ..." if len(s.parameter_changes) > 10 else ""))
     for problem in s.problems:
         lines.append(f"Recording check  {problem}")
     if s.recorder_check:
