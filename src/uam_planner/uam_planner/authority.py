@@ -82,15 +82,13 @@ class Authorities:
     @classmethod
     def load(cls, path) -> "Authorities":
         """Read an authorities file (see the module docstring); ValueError naming the entry."""
-        import yaml
         from joserfc import jwk
         from joserfc.errors import JoseError
 
+        from .grants import read_yaml
+
         p = Path(path)
-        try:
-            doc = yaml.safe_load(p.read_text(encoding="utf-8"))
-        except (OSError, yaml.YAMLError) as exc:
-            raise ValueError(f"authorities_file: {p}: {exc}") from None
+        doc = read_yaml(p, "authorities_file")
         rows = doc.get("authorities") if isinstance(doc, dict) else None
         if not isinstance(rows, list) or not rows:
             raise ValueError(f"authorities_file: {p}: no 'authorities' list")

@@ -25,6 +25,17 @@ from pathlib import Path
 MAX_CLASS = 255
 
 
+def read_yaml(path, what: str):
+    """The YAML document of a configuration file; ValueError naming ``what`` and the file."""
+    import yaml
+
+    p = Path(path)
+    try:
+        return yaml.safe_load(p.read_text(encoding="utf-8"))
+    except (OSError, yaml.YAMLError) as exc:
+        raise ValueError(f"{what}: {p}: {exc}") from None
+
+
 def _class(value, where: str) -> int:
     if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= MAX_CLASS:
         raise ValueError(f"{where}: {value!r} is not a priority class 0..{MAX_CLASS}")
@@ -65,14 +76,7 @@ class PriorityGrants:
     @classmethod
     def load(cls, path) -> "PriorityGrants":
         """Read a grants file (YAML); ValueError naming the file and the entry."""
-        import yaml
-
-        p = Path(path)
-        try:
-            doc = yaml.safe_load(p.read_text(encoding="utf-8"))
-        except (OSError, yaml.YAMLError) as exc:
-            raise ValueError(f"priority_grants: {p}: {exc}") from None
-        return cls.from_mapping(doc, f"priority_grants: {p}")
+        return cls.from_mapping(read_yaml(path, "priority_grants"), f"priority_grants: {Path(path)}")
 
     def as_yaml(self) -> str:
         lines = ["# priority classes each operator may ask for (uam_planner.grants)", f"default: {self.default}",
