@@ -198,6 +198,9 @@ class _QuboSamplerBackend(Backend):
     """Shared pipeline: QUBO -> sampler -> steepest descent -> repair -> best read."""
 
     samples = True
+    # dwave-samplers releases the GIL while it samples; reads stop near the time limit
+    bounded_in_process = True
+    warm_up_by_solving = True
 
     backend_options: set[str] = set()
 

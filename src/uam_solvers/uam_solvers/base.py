@@ -803,6 +803,16 @@ class Backend(ABC):
     #: whose run up to that size holds the GIL (the guard could not abandon it anyway) or
     #: honours its limit, where the thread hand-off would be pure cost.
     thread_inline_max_vertices: int | None = None
+    #: True for backends that a guard thread can abandon: pure Python or a library that
+    #: releases the GIL, stopping near its time limit (CP-SAT, the dwave samplers, greedy).
+    #: :func:`uam_solvers.solve` runs these in the caller's process; every other backend
+    #: (KaMIS and CHILS hold the GIL, KaMIS can ignore its limit; a third-party backend is not
+    #: known to do either) runs above ``inline_max_vertices`` in a child process that is
+    #: killed at the deadline.
+    bounded_in_process: bool = False
+    #: True when :meth:`warm_up` may solve a four-vertex graph to pay the first call's costs
+    #: (the backend is local and its tiny solve takes milliseconds once warm; not the QPU).
+    warm_up_by_solving: bool = False
     #: Declared options, name -> :class:`uam_solvers.options.Option` (type, default, range).
     options_spec: Mapping[str, Any] = {}
     #: True for backends that draw samples (reads) of a QUBO and answer the best read: they
@@ -825,6 +835,17 @@ class Backend(ABC):
     def available(self) -> tuple[bool, str]:
         """``(True, "")`` when the backend can run here, else ``(False, reason)``."""
         return True, ""
+
+    def warm_up(self) -> None:
+        """Pay this backend's first-call costs in this process now (its library's import and
+        set-up: OR-Tools ~0.3 s, dwave-system and minorminer ~0.6 s on a quiet machine), so
+        that a later solve spends its time limit on solving. The availability check (which
+        imports the library) and, when ``warm_up_by_solving``, one solve of a four-vertex path
+        with a 0.05 s limit. An unavailable backend is left as it is (its solve says why)."""
+        if not self.available()[0] or not self.warm_up_by_solving:
+            return
+        tiny = MwisProblem.from_arrays([1.0, 2.0, 1.5, 1.0], [[0, 1], [1, 2], [2, 3]])
+        self.solve(tiny, time_limit_s=0.05, seed=0, options={})
 
     def require_available(self) -> None:
         """Raise :class:`BackendUnavailable` with the reason when :meth:`available` is False."""

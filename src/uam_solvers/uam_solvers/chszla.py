@@ -62,6 +62,7 @@ class KamisBackend(Backend):
     # in-process only while tiny: KaMIS ignored its time limit on a dense 250-vertex graph (42 s
     # with 5 s); up to 64 vertices it returned within ~50 ms on every graph measured
     inline_max_vertices = 64
+    warm_up_by_solving = True
     options_spec = {
         "resolution": Option("resolution", "int", None, "integer weight of the heaviest vertex "
                              "(None: min(10**6, (2**31 - 1) // n), KaMIS sums weights in 32 bits)",
@@ -115,6 +116,8 @@ class ChilsBackend(Backend):
 
     name = "chils"
     batch_components = True  # ~70 ms set-up per call
+    # (it holds the GIL for its whole run, so it is not bounded_in_process)
+    warm_up_by_solving = True
     reduces_itself = True
     description = "CHILS concurrent local search (chszlablib), best heuristic for large graphs"
     options_spec = {

@@ -146,6 +146,7 @@ class GreedyBackend(Backend):
     name = "greedy"
     description = "Sakai-Togasaki-Yamazaki greedy (GWMIN/GWMIN2/GWMAX), O(m log n), fallback of every backend"
     inline_max_vertices = 2000  # pure Python, O(m log n): ~0.1 s at 2,000 vertices
+    bounded_in_process = True  # pure Python: a guard thread can abandon it
     options_spec = {"rule": Option("rule", "str", "gwmin", "greedy rule (Sakai et al. 2003)",
                                    choices=RULES)}
 

@@ -735,6 +735,8 @@ class QpuEmulatorBackend(Backend):
 
     samples = True
     name = "qpu-emulator"
+    # (minorminer holds the GIL while it embeds, so it is not bounded_in_process)
+    warm_up_by_solving = True
     description = ("the qpu embedding pipeline on a simulated Advantage graph (Pegasus P16, "
                    "simulated annealing); chain statistics, no QPU times")
     options_spec = {

@@ -19,7 +19,8 @@ from importlib import metadata
 
 from .base import Backend
 
-__all__ = ["BUILTIN_BACKENDS", "ENTRY_POINT_GROUP", "UnknownBackendError", "backend_class", "get_backend",
+__all__ = ["BUILTIN_BACKENDS", "ENTRY_POINT_GROUP", "UnknownBackendError", "backend_class",
+           "check_name", "get_backend",
            "list_backends", "backend_names", "sampling_backends"]
 
 ENTRY_POINT_GROUP = "uam_solvers.backends"
@@ -77,6 +78,15 @@ def _load(target: str) -> type:
     return obj  # type: ignore[return-value]
 
 
+def check_name(name: str) -> None:
+    """Raise :class:`UnknownBackendError` listing the known names when no backend is called
+    ``name`` (no module is imported)."""
+    if not isinstance(name, str) or name not in _table():
+        raise UnknownBackendError(
+            f"backend: unknown name {name!r}; known backends: {', '.join(backend_names())}"
+        )
+
+
 def get_backend(name: str) -> Backend:
     """A fresh instance of the backend called ``name``.
 
@@ -84,11 +94,8 @@ def get_backend(name: str) -> Backend:
     registered, and ImportError when the backend's module fails to import. An instance of an
     unavailable backend is returned; its ``solve`` raises BackendUnavailable with the reason.
     """
+    check_name(name)
     table = _table()
-    if not isinstance(name, str) or name not in table:
-        raise UnknownBackendError(
-            f"backend: unknown name {name!r}; known backends: {', '.join(backend_names())}"
-        )
     cls = _load(table[name])
     backend = cls()
     if not isinstance(backend, Backend):
@@ -99,12 +106,8 @@ def get_backend(name: str) -> Backend:
 def backend_class(name: str) -> type:
     """The class of the backend called ``name``, not instantiated (its traits are class
     attributes: ``Backend.samples``, ...). UnknownBackendError as :func:`get_backend`."""
-    table = _table()
-    if not isinstance(name, str) or name not in table:
-        raise UnknownBackendError(
-            f"backend: unknown name {name!r}; known backends: {', '.join(backend_names())}"
-        )
-    return _load(table[name])
+    check_name(name)
+    return _load(_table()[name])
 
 
 def sampling_backends() -> tuple[str, ...]:
