@@ -134,6 +134,15 @@ def _kamis_then_cpsat(corpus):
     return p
 
 
+def _auto_here(p, time_limit_s, options=None):
+    """auto's pipeline solved in this process (``solve`` runs auto above 64 vertices in a child
+    process, where the recording stand-ins below would record out of sight)."""
+    from uam_solvers import build_pipeline
+
+    return build_pipeline("auto").solve(p, time_limit_s=time_limit_s, seed=0,
+                                        options=options or {})
+
+
 def test_the_kamis_probe_before_cpsat_gets_the_tie_break_budget_once(corpus, monkeypatch):
     # twelfth stop: on a graph that goes to CP-SAT, KaMIS's probe (0.01 of the limit, at least
     # 0.05 s) is given the tie-break's budget (3 x that: 0.15 s at 1 s) at once, and no re-run
@@ -142,19 +151,18 @@ def test_the_kamis_probe_before_cpsat_gets_the_tie_break_budget_once(corpus, mon
 
     p = _kamis_then_cpsat(corpus)
     calls = _kamis_calls(monkeypatch)
-    r = solve(p.weights, p.edges, list(p.groups), backend="auto", time_limit_s=1.0)
+    r = _auto_here(p, 1.0)
     assert p.is_independent(r.selected)
     assert calls == [pytest.approx(0.15)], r.stats
     if r.proven_optimal and r.stats["auto_method"] != "kamis":
         assert r.stats["tie_break"] == "kamis unfinished"
     # at most a quarter of the limit: at 0.4 s the probe is 0.1 s
     calls.clear()
-    solve(p.weights, p.edges, list(p.groups), backend="auto", time_limit_s=0.4)
+    _auto_here(p, 0.4)
     assert calls[0] == pytest.approx(0.1)
     # with the tie-break off the probe stays the probe
     calls.clear()
-    solve(p.weights, p.edges, list(p.groups), backend="auto", time_limit_s=1.0,
-          options={"tie_break": False})
+    _auto_here(p, 1.0, {"tie_break": False})
     assert calls == [pytest.approx(0.05)]
     assert auto_mod.KAMIS_PROBE_MAX_SHARE == 0.25
 
@@ -170,7 +178,7 @@ def test_a_graph_kamis_proves_past_the_old_probe_is_answered_by_kamis_alone(corp
     ex = solve(p.weights, p.edges, list(p.groups), backend="exact", time_limit_s=60.0)
     assert ex.proven_optimal
     calls = _kamis_calls(monkeypatch, finishes_at_s=0.1, answer=ex.selected)
-    now = solve(p.weights, p.edges, list(p.groups), backend="auto", time_limit_s=1.0)
+    now = _auto_here(p, 1.0)
     assert now.proven_optimal and now.stats["auto_method"] == "kamis"
     assert "tie_break" not in now.stats and calls == [pytest.approx(0.15)]
     assert now.selected.tolist() == sorted(ex.selected.tolist())
@@ -180,7 +188,7 @@ def test_a_graph_kamis_proves_past_the_old_probe_is_answered_by_kamis_alone(corp
     real = CpSatBackend.solve
     monkeypatch.setattr(CpSatBackend, "solve",
                         lambda self, *a, **k: cpsat.append(1) or real(self, *a, **k))
-    before = solve(p.weights, p.edges, list(p.groups), backend="auto", time_limit_s=1.0)
+    before = _auto_here(p, 1.0)
     assert calls[0] == pytest.approx(0.05) and cpsat  # the probe ran out, CP-SAT followed
     if before.stats.get("tie_break") == "kamis":     # CP-SAT proved, the re-run finished
         assert calls == [pytest.approx(0.05), pytest.approx(0.15)]

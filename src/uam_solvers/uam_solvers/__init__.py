@@ -15,10 +15,15 @@ Backend ``auto`` (:mod:`uam_solvers.auto`) picks KaMIS, CP-SAT or CHILS by size 
 optimality only when proven. Options are declared per backend (``backend.options_spec``,
 dimod-style ``backend.parameters``); an unknown or malformed option is an MwisInputError.
 
-Deadlines that hold even for solvers holding the GIL: :class:`uam_solvers.executor.SolveService`
-(worker processes killed at the limit + margin, lanes by size); ``solve`` here runs in-process,
-``solve_bounded`` through the process's shared SolveService (what the in-process runner and the
-planner's default solve call, so every path keeps limit + ~0.5 s).
+Deadlines hold for every backend, from a cold process too: ``solve`` and ``solve_bounded``
+answer within ``time_limit_s`` + 0.5 s. The first solve with a backend in a process pays its
+import and set-up inside the limit (:mod:`uam_solvers.warmup`; :func:`warm_up` pays it at
+start instead). ``solve`` runs backends that release the GIL in this process under a guard
+thread, and the others (KaMIS, CHILS, ``auto``, the QPU paths, third-party backends) above
+their ``inline_max_vertices`` in a forked child process killed at the limit + 0.3 s
+(:func:`uam_solvers.executor.solve_in_child`). ``solve_bounded`` goes through the process's
+shared :class:`uam_solvers.executor.SolveService` (warm worker processes, what the in-process
+runner and the planner's default solve call) once it is started; until then, as ``solve``.
 """
 from __future__ import annotations
 
@@ -52,6 +57,22 @@ def list_backends() -> list[tuple[str, str, bool, str]]:
     return _list()
 
 
+def warm_up(backends=("auto",), *, service: bool = False) -> dict[str, float]:
+    """Pay the first-call costs of ``backends`` in this process now (see
+    :func:`uam_solvers.warmup.warm_up`): call it at start-up with every backend a run may use,
+    ``service=True`` to start the shared solve service of :func:`solve_bounded` too. Returns
+    the seconds spent per backend.
+
+    Examples:
+        >>> from uam_solvers import warm_up
+        >>> sorted(warm_up(["greedy", "exact"]))
+        ['exact', 'greedy']
+    """
+    from .warmup import warm_up as _warm_up
+
+    return _warm_up(backends, service=service)
+
+
 def __getattr__(attr: str):
     if attr == "UnknownBackendError":
         from .registry import UnknownBackendError
@@ -78,6 +99,7 @@ __all__ = [
     "solve",
     "solve_problem",
     "solve_bounded",
+    "warm_up",
 ]
 
 
@@ -128,14 +150,45 @@ def solve_problem(
     options: Mapping[str, Any] | None = None,
     layers: bool = True,
 ) -> MwisResult:
-    """Solve an already validated problem with the default pipeline (see :func:`build_pipeline`)."""
+    """Solve an already validated problem with the default pipeline (see :func:`build_pipeline`)
+    within ``time_limit_s`` + 0.5 s, as :func:`solve`."""
+    return _solve_problem(problem, backend, time_limit_s, seed, options, layers,
+                          time.perf_counter())
+
+
+def _solve_problem(problem: MwisProblem, backend: str | Backend, time_limit_s: float, seed: int,
+                   options: Mapping[str, Any] | None, layers: bool, t0: float) -> MwisResult:
+    """:func:`solve_problem` for a call that started at ``t0`` (``time.perf_counter()``).
+
+    The limit holds from ``t0``: a backend not yet warm in this process is warmed first
+    (imports, first-call set-up) and gets the time left; a warm one gets ``time_limit_s``
+    exactly (the answers of a warm process are those of a solve without this step). Backends
+    a guard thread can abandon (``bounded_in_process``) and problems up to the backend's
+    ``inline_max_vertices`` are solved here; the rest in a forked child killed at the limit +
+    margin (:func:`uam_solvers.executor.solve_in_child`)."""
     from .options import check_seed, check_time_limit
+    from .warmup import start_up
 
     time_limit_s = check_time_limit(time_limit_s)
     seed = check_seed(seed)
+    spent = start_up(backend, t0 + time_limit_s)
+    if spent is None:
+        from .executor import fallback_answer
+
+        name = backend if isinstance(backend, str) else backend.name
+        return fallback_answer(problem, name, t0, "starting", reason=(
+            f"backend {name!r} was still starting (imports, first call) at its time limit "
+            f"{time_limit_s:g} s; its start goes on in the background"))
     pipeline = _pipeline(backend, layers)
     options = pipeline.validate_options(options)  # before any solve: errors, never a fallback
-    return pipeline.solve(problem, time_limit_s=time_limit_s, seed=seed, options=options)
+    budget = time_limit_s
+    if spent > 0.0:  # the start-up was this call's: the backend gets the time left
+        budget = max(time_limit_s - (time.perf_counter() - t0), 1e-3)
+    if pipeline.bounded_in_process or problem.n <= pipeline.inline_max_vertices:
+        return pipeline.solve(problem, time_limit_s=budget, seed=seed, options=options)
+    from .executor import solve_in_child
+
+    return solve_in_child(pipeline, problem, budget, seed, options, t0)
 
 
 def _checked_fast_path(weights, edges, groups, backend, time_limit_s, seed, options, layers,
@@ -176,8 +229,12 @@ def solve(
 
     Inputs: ``weights`` (n,) finite >= 0; ``edges`` (m, 2) vertex pairs; ``groups`` optional
     clique groups; ``backend`` a registered name (``python -m uam_solvers.registry``) or Backend
-    instance; ``time_limit_s`` wall-time budget; ``seed`` for stochastic backends; ``options``
-    passed to the backend; ``layers`` enables component split and reductions.
+    instance; ``time_limit_s`` wall-time budget [s], which holds whatever the backend does:
+    the answer comes within ``time_limit_s`` + 0.5 s, from a cold process too (a backend's
+    first call in the process pays its imports inside the limit; one that overruns is
+    abandoned or killed and the greedy fallback answers, flagged); ``seed`` for stochastic
+    backends; ``options`` passed to the backend; ``layers`` enables component split and
+    reductions.
     Output: an MwisResult whose ``selected`` is always an independent set of the input graph.
     Raises MwisInputError (bad arrays), UnknownBackendError, BackendUnavailable.
 
@@ -189,11 +246,12 @@ def solve(
         >>> r.selected.tolist(), r.objective, r.proven_optimal
         ([0, 2], 2.5, True)
     """
+    t0 = time.perf_counter()
     res = _checked_fast_path(weights, edges, groups, backend, time_limit_s, seed, options, layers, max_vertices)
     if res is not None:
         return res
     problem = MwisProblem.from_arrays(weights, edges, groups, max_vertices=max_vertices)
-    return solve_problem(problem, backend, time_limit_s, seed, options, layers)
+    return _solve_problem(problem, backend, time_limit_s, seed, options, layers, t0)
 
 
 def solve_bounded(
@@ -207,16 +265,20 @@ def solve_bounded(
     layers: bool = True,
     max_vertices: int | None = None,
 ) -> MwisResult:
-    """:func:`solve` with a deadline that holds: at most ``time_limit_s`` + ~0.5 s of wall
-    time whatever the backend does (one that holds the GIL or ignores its limit is killed,
-    and the answer is the fallback, flagged), through this process's shared
-    :class:`uam_solvers.executor.SolveService` (the same mechanism as the solver node's).
-    The in-process runner and the planner's local solve call this. Small graphs the backend
-    is known to finish at once run in this process (same answers as :func:`solve`); the rest
-    in a warm worker process. Same inputs, outputs and errors as :func:`solve`.
+    """:func:`solve` through this process's shared :class:`uam_solvers.executor.SolveService`
+    (the same mechanism as the solver node's): at most ``time_limit_s`` + 0.5 s of wall time
+    whatever the backend does (one that holds the GIL or ignores its limit is killed, and the
+    answer is the fallback, flagged). The in-process runner and the planner's local solve call
+    this. Small graphs the backend is known to finish at once run in this process (same
+    answers as :func:`solve`); the rest in a warm worker process. A call before the service
+    is started and warm (it takes 1-3 s) does not wait for it: it is answered as by
+    :func:`solve`, then starts the service in the background for the calls after it (which
+    share the CPU with that start); ``warm_up(..., service=True)`` at start-up avoids both.
+    Same inputs, outputs and errors as :func:`solve`.
     """
-    from .executor import shared_service
+    from .executor import ready_shared_service, start_shared_service_in_background
 
+    t0 = time.perf_counter()
     # the exact clique branch and bound of the fast path is bounded by its node limit (pure
     # Python, about 5 us a node), so it runs in this process here as in solve()
     res = _checked_fast_path(weights, edges, groups, backend, time_limit_s, seed, options, layers, max_vertices)
@@ -224,5 +286,10 @@ def solve_bounded(
         res.stats["executor"] = "inline"
         return res
     problem = MwisProblem.from_arrays(weights, edges, groups, max_vertices=max_vertices)
-    return shared_service().solve(problem, backend=backend, time_limit_s=time_limit_s,
-                                  seed=seed, options=options, layers=layers)
+    service = ready_shared_service()
+    if service is None:
+        res = _solve_problem(problem, backend, time_limit_s, seed, options, layers, t0)
+        start_shared_service_in_background()
+        return res
+    return service.solve(problem, backend=backend, time_limit_s=time_limit_s,
+                         seed=seed, options=options, layers=layers)

@@ -55,7 +55,9 @@ from .greedy import conflict_pairs_estimate
 from .options import check_seed, check_time_limit
 
 __all__ = ["SolveService", "DEFAULT_MARGIN_S", "NODE_LAYOUT", "node_service", "shared_service",
-           "close_shared_service"]
+           "close_shared_service", "ready_shared_service", "start_shared_service_in_background",
+           "solve_in_child", "fallback_answer",
+           "start_process"]
 
 log = logging.getLogger("uam_solvers")
 
@@ -111,22 +113,19 @@ def _load_backend(spec) -> Backend:
     return _load(spec)()
 
 
+#: backends every worker warms when it starts (auto's warm-up covers CP-SAT, KaMIS, CHILS and
+#: LearnAndReduce: measured ~3 s on the first CHILS solve of a fresh worker under load)
+WORKER_WARM_UP = ("greedy", "exact", "kamis", "chils", "auto")
+
+
 def _warm_up() -> None:
-    """Pay every first-call cost once when the worker starts (entry-point scan, CP-SAT, KaMIS
-    and CHILS set-up: measured ~3 s on the first CHILS solve of a fresh worker under load)."""
-    from .registry import _entry_points, get_backend
+    """Pay every first-call cost once when the worker starts (entry-point scan, then
+    :func:`uam_solvers.warm_up` of WORKER_WARM_UP)."""
+    from .registry import _entry_points
+    from .warmup import warm_up
 
     _entry_points()
-    tiny = MwisProblem.from_arrays([1.0, 2.0, 1.5, 1.0], [[0, 1], [1, 2], [2, 3]])
-    for name in ("greedy", "exact", "kamis", "chils", "auto"):
-        backend = get_backend(name)
-        if backend.available()[0]:
-            backend.solve(tiny, time_limit_s=0.01, seed=0, options={})
-    # auto's path above 2,000 vertices starts with LearnAndReduce: loading its library and
-    # models took 0.4-0.75 s of the first such solve under load
-    from .auto import learn_and_reduce
-
-    learn_and_reduce(*tiny.csr(), np.array([2, 4, 3, 2]), 0.01, 0)
+    warm_up(WORKER_WARM_UP)
 
 
 def _worker_main(conn) -> None:
@@ -175,6 +174,21 @@ def _worker_main(conn) -> None:
             return
 
 
+def start_process(process) -> None:
+    """``process.start()``, also from a daemonic process: a Dask worker process is daemonic,
+    and multiprocessing refuses children of a daemonic process lest they be orphaned; ours die
+    with it (PR_SET_PDEATHSIG, and the forkserver exits when its pipe closes)."""
+    me = mp.current_process()
+    daemonic = bool(me._config.get("daemon"))
+    if daemonic:
+        me._config["daemon"] = False
+    try:
+        process.start()
+    finally:
+        if daemonic:
+            me._config["daemon"] = True
+
+
 class _Worker:
     """One worker process and the parent's end of its pipe."""
 
@@ -184,18 +198,7 @@ class _Worker:
         self.conn, child = ctx.Pipe(duplex=True)
         self.process = ctx.Process(target=_worker_main, args=(child,), daemon=True,
                                    name=f"uam-solver-{lane}")
-        me = mp.current_process()
-        daemonic = bool(me._config.get("daemon"))
-        if daemonic:
-            # a Dask worker process is daemonic, and multiprocessing refuses children of a
-            # daemonic process lest they be orphaned; ours die with it (PR_SET_PDEATHSIG on the
-            # forkserver's children, and the forkserver exits when its pipe closes)
-            me._config["daemon"] = False
-        try:
-            self.process.start()
-        finally:
-            if daemonic:
-                me._config["daemon"] = True
+        start_process(self.process)
         child.close()
 
     def warm(self, timeout_s: float = 60.0, closing=lambda: False) -> None:
@@ -578,17 +581,27 @@ class SolveService:
     @staticmethod
     def _fallback(problem: MwisProblem, requested: str, t0: float, how: str, waited: float,
                   reason: str, precomputed: tuple | None = None) -> MwisResult:
-        from .greedy import fallback_selection
-
-        log.warning("MWIS fallback to greedy: %s", reason)
-        sel, rule = precomputed if precomputed is not None else fallback_selection(problem)
-        # (edges and groups listed, not all_edges(): that costs ~0.5 s at 10^6 edges)
-        out = make_result(problem, sel, proven_optimal=problem.m == 0 and not problem.groups,
-                          solve_time_s=time.perf_counter() - t0, backend="greedy",
-                          stats={"rule": rule, "requested_backend": requested, "executor": how,
-                                 "queue_wait_s": waited}, message=reason)
-        out.fallback = True
+        out = fallback_answer(problem, requested, t0, how, reason, precomputed)
+        out.stats["queue_wait_s"] = waited
         return out
+
+
+def fallback_answer(problem: MwisProblem, requested: str, t0: float, how: str, reason: str,
+                    precomputed: tuple | None = None) -> MwisResult:
+    """The greedy fallback's answer (``precomputed``: its ``(selection, rule)`` when already
+    computed), flagged: ``fallback=True``, ``reason`` in ``message`` (logged as a warning),
+    ``stats["executor"] = how``; ``solve_time_s`` counted from ``t0``."""
+    from .greedy import fallback_selection
+
+    log.warning("MWIS fallback to greedy: %s", reason)
+    sel, rule = precomputed if precomputed is not None else fallback_selection(problem)
+    # (edges and groups listed, not all_edges(): that costs ~0.5 s at 10^6 edges)
+    out = make_result(problem, sel, proven_optimal=problem.m == 0 and not problem.groups,
+                      solve_time_s=time.perf_counter() - t0, backend="greedy",
+                      stats={"rule": rule, "requested_backend": requested, "executor": how},
+                      message=reason)
+    out.fallback = True
+    return out
 
 
 #: The solver node's worker layout: one worker per lane keeps the node within the two
@@ -620,6 +633,97 @@ def _picklable(options: Mapping[str, Any]) -> bool:
 
 
 # ---------------------------------------------------------------------------------------------
+# One solve in a forked child: the bounded path of uam_solvers.solve
+# ---------------------------------------------------------------------------------------------
+
+def _child_main(conn, pipeline: Backend, problem: MwisProblem, time_limit_s: float, seed: int,
+                options: Mapping[str, Any]) -> None:
+    """Solve once and send ("ok", MwisResult) or ("error", text, is_input_error)."""
+    _die_with_parent()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides when the child stops
+    try:
+        reply: tuple = ("ok", pipeline.solve(problem, time_limit_s=time_limit_s, seed=seed,
+                                             options=options))
+    except BaseException as exc:  # noqa: BLE001 - every failure is reported to the parent
+        reply = ("error", f"{type(exc).__name__}: {exc}", isinstance(exc, MwisInputError))
+    try:
+        conn.send(reply)
+    except Exception:  # noqa: BLE001 - stats that do not pickle: the scalar ones are sent
+        if reply[0] != "ok":
+            raise
+        res = reply[1]
+        res.stats = {k: v for k, v in res.stats.items()
+                     if isinstance(v, (int, float, str, bool, np.integer, np.floating))}
+        conn.send(reply)
+
+
+def solve_in_child(pipeline: Backend, problem: MwisProblem, time_limit_s: float, seed: int,
+                   options: Mapping[str, Any], t0: float,
+                   margin_s: float | None = None) -> MwisResult:
+    """``pipeline.solve(problem, ...)`` in a child process forked from this one, answered
+    within ``time_limit_s + margin_s`` [s] (plus the fallback's own time).
+
+    Forked (~10 ms): the child inherits the warm libraries, the pipeline and the problem, and
+    only the answer is pickled, so options that cannot cross a process boundary (a sampler
+    factory) work, and it costs no worker start from a cold process. A child still running at
+    the limit + ``margin_s`` (default OVERRUN_MARGIN_S) is SIGKILLed (no CPU or memory left
+    behind; it also dies with this process) and the answer is the greedy fallback, flagged,
+    ``stats["executor"] = "killed"``; a child that dies gives the fallback with
+    ``"child-crashed"``. An answer of the child is returned with ``stats["executor"] =
+    "child"`` after the same independence check as the solve service's. An MwisInputError
+    raised in the child is raised here. ``t0``: when the caller's solve started (its
+    ``solve_time_s`` counts from there).
+    """
+    from .greedy import fallback_selection, needs_fast_fallback
+    from .layers import OVERRUN_MARGIN_S
+
+    margin_s = OVERRUN_MARGIN_S if margin_s is None else float(margin_s)
+    ctx = mp.get_context("fork")
+    recv, send = ctx.Pipe(duplex=False)
+    kill_at = time.perf_counter() + time_limit_s + margin_s
+    process = ctx.Process(target=_child_main, daemon=True, name="uam-solver-child",
+                          args=(send, pipeline, problem, time_limit_s, seed, options))
+    start_process(process)
+    send.close()
+    # computed while the child solves where the fallback is the vectorised rule (dense graphs:
+    # up to 0.13 s at 10^6 pairs), so that it is ready at a kill (GWMIN on others: < 0.05 s)
+    precomputed = fallback_selection(problem) if needs_fast_fallback(problem) else None
+    reply: Any = None
+    try:
+        if recv.poll(max(kill_at - time.perf_counter(), 0.0)):
+            reply = recv.recv()
+    except (EOFError, OSError) as exc:
+        reply = exc
+    finally:
+        recv.close()
+    if reply is None:
+        process.kill()  # SIGKILL; reaped by multiprocessing at its next start or exit
+        return fallback_answer(
+            problem, pipeline.name, t0, "killed", precomputed=precomputed, reason=(
+                f"backend {pipeline.name!r} exceeded its time limit: still running after "
+                f"{time.perf_counter() - t0:.3f} s (limit {time_limit_s:g} s + margin "
+                f"{margin_s:g} s); child process killed"))
+    if isinstance(reply, BaseException):
+        process.join(1.0)
+        return fallback_answer(problem, pipeline.name, t0, "child-crashed", precomputed=precomputed,
+                               reason=f"child process of backend {pipeline.name!r} died (exit "
+                                      f"code {process.exitcode}, {type(reply).__name__})")
+    if reply[0] == "error":
+        if reply[2]:  # a bad option or input found by the backend itself: the caller's error
+            raise MwisInputError(reply[1])
+        return fallback_answer(problem, pipeline.name, t0, "child", precomputed=precomputed,
+                               reason=f"backend {pipeline.name!r} raised {reply[1]}")
+    res = reply[1]
+    ok, why = check_selection(problem, res.selected)
+    if not ok:
+        return fallback_answer(problem, pipeline.name, t0, "child", precomputed=precomputed,
+                               reason=f"backend {pipeline.name!r} returned an invalid answer: "
+                                      f"{why}")
+    res.stats["executor"] = "child"
+    return res
+
+
+# ---------------------------------------------------------------------------------------------
 # The process's shared service: the one bounded path of in-process callers
 # ---------------------------------------------------------------------------------------------
 
@@ -647,6 +751,42 @@ def shared_service() -> SolveService:
         return _SHARED
 
 
+_STARTER: threading.Thread | None = None
+_STARTER_LOCK = threading.Lock()
+
+
+def ready_shared_service() -> SolveService | None:
+    """The shared service when it is started and warm, else None (nothing is started: see
+    :func:`start_shared_service_in_background`). What a solve with a time limit asks: the
+    service's start (1-3 s, more under load) cannot be in its limit."""
+    service = _SHARED
+    if service is not None and not service._closed:
+        return service
+    return None
+
+
+def start_shared_service_in_background() -> None:
+    """Start and warm the shared service on a daemon thread (unless it is started or being
+    started), for the solves to come."""
+    global _STARTER
+    if ready_shared_service() is not None:
+        return
+    with _STARTER_LOCK:
+        if _STARTER is None or not _STARTER.is_alive():
+            _STARTER = threading.Thread(target=_start_shared_quietly, daemon=True,
+                                        name="uam-solver-service-start")
+            _STARTER.start()
+
+
+def _start_shared_quietly() -> None:
+    try:
+        shared_service()
+    except Exception as exc:  # noqa: BLE001 - solves go on in process; logged for the operator
+        if not _EXITING:
+            log.warning("starting the shared solve service failed: %s: %s",
+                        type(exc).__name__, exc)
+
+
 def close_shared_service() -> None:
     """Stop the shared service's workers (a later :func:`shared_service` starts new ones)."""
     global _SHARED
@@ -656,14 +796,21 @@ def close_shared_service() -> None:
             _SHARED = None
 
 
+#: backends whose small solves run in this process when the shared service starts (inline: the
+#: auto fast path, the clique branch and bound, CP-SAT and KaMIS on small graphs)
+INLINE_WARM_UP = ("auto", "exact", "kamis", "greedy")
+
+
 def _warm_up_here() -> None:
-    """First-call costs of the solves that run in this process (inline: the auto fast path,
-    the clique branch and bound, CP-SAT and KaMIS on small graphs)."""
+    """First-call costs of the solves that run in this process (:data:`INLINE_WARM_UP`): the
+    backends' warm-up, then one small solve of each through ``solve`` (the pipelines)."""
     try:
         from . import solve
+        from .warmup import warm_up
 
+        warm_up(INLINE_WARM_UP)
         w, e, g = [1.0, 0.9, 0.8, 1.0, 0.7], [[0, 3], [1, 4], [2, 3]], [[0, 1, 2], [3, 4]]
-        for name in ("auto", "exact", "kamis", "greedy"):
+        for name in INLINE_WARM_UP:
             solve(w, e, g, backend=name, time_limit_s=0.5)
     except Exception as exc:  # noqa: BLE001 - a backend that cannot run is reported when asked
         log.warning("solver warm-up in process: %s", exc)
