@@ -20,8 +20,8 @@ The outer layers of the default pipeline (Reduce, ComponentSplit) pass every gra
   groups do not enter the choice (the earlier "interacting partners" score rose with
   the groups and kept KaMIS from graphs it proves in 1-2 ms). Denser graphs are kept from it
   because KaMIS overran even a 0.05 s limit on them (1-2 s at mean degree 40-44, past 8 s at
-  100-150) and it holds the GIL; :func:`uam_solvers.solve_bounded` and the solve service bound
-  any such overrun by a kill.
+  100-150) and it holds the GIL; :func:`uam_solvers.solve` (a forked child),
+  :func:`uam_solvers.solve_bounded` and the solve service bound any such overrun by a kill.
 * CP-SAT on the whole graph (the groups as at-most-one, no greedy hint) with
   ``cpsat_fraction`` (0.9) of the time left, when KaMIS did not prove it and the graph is a
   union of large cliques by structure (:meth:`AutoBackend._cpsat_suits`: the groups' clique

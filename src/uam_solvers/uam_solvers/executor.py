@@ -35,6 +35,11 @@ Usage (what the solver node does)::
     service = SolveService(large_workers=2)
     result = service.solve(problem, backend="auto", time_limit_s=1.0, seed=0, options={})
     service.close()   # kills the workers
+
+Also here: :func:`solve_in_child`, one solve in a child forked from the caller and killed at
+its deadline (what :func:`uam_solvers.solve` does with a backend a thread cannot stop: no worker
+to start, so it holds from a cold process), and the process's shared service
+(:func:`shared_service`; :func:`ready_shared_service` for a solve that cannot wait for its start).
 """
 from __future__ import annotations
 
