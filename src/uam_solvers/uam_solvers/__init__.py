@@ -58,10 +58,12 @@ def list_backends() -> list[tuple[str, str, bool, str]]:
 
 
 def warm_up(backends=("auto",), *, service: bool = False) -> dict[str, float]:
-    """Pay the first-call costs of ``backends`` in this process now (see
-    :func:`uam_solvers.warmup.warm_up`): call it at start-up with every backend a run may use,
-    ``service=True`` to start the shared solve service of :func:`solve_bounded` too. Returns
-    the seconds spent per backend.
+    """Pay the first-call costs of ``backends`` (names or instances) in this process now (see
+    :mod:`uam_solvers.warmup`): call it at start-up with every backend a run may use, so that
+    no solve spends its time limit on imports and set-up; ``service=True`` starts and warms the
+    shared solve service of :func:`solve_bounded` too (its worker processes, 1-3 s). Returns
+    the seconds spent per backend name [s], and under ``"service"`` the service's start.
+    Raises UnknownBackendError for an unknown name, before warming anything.
 
     Examples:
         >>> from uam_solvers import warm_up
@@ -70,7 +72,14 @@ def warm_up(backends=("auto",), *, service: bool = False) -> dict[str, float]:
     """
     from .warmup import warm_up as _warm_up
 
-    return _warm_up(backends, service=service)
+    spent = _warm_up(backends)
+    if service:
+        from .executor import shared_service
+
+        t0 = time.perf_counter()
+        shared_service()
+        spent["service"] = time.perf_counter() - t0
+    return spent
 
 
 def __getattr__(attr: str):

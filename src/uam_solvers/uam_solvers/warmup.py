@@ -7,8 +7,9 @@ load several times that. Counted outside the limit, that made a cold process's f
 overrun it.
 
 * :func:`warm_up` pays these costs now, for the backends a run may use: what a node or the
-  runner calls at start (with ``service=True`` it also starts and warms the process's shared
-  solve service, :func:`uam_solvers.executor.shared_service`).
+  runner calls at start (through :func:`uam_solvers.warm_up`, which with ``service=True``
+  also starts and warms the process's shared solve service,
+  :func:`uam_solvers.executor.shared_service`).
 * :func:`start_up` is what :func:`uam_solvers.solve` calls first: nothing when the backend is
   warm (the backend then gets the whole limit, as before), otherwise the warm-up on a guard
   thread, waited for at most until the deadline; the solve then gets the time left.
@@ -81,18 +82,14 @@ def _warm_now(backend: str | Backend) -> None:
         event.set()
 
 
-def warm_up(backends: Iterable[str | Backend] = ("auto",), *, service: bool = False
-            ) -> dict[str, float]:
+def warm_up(backends: Iterable[str | Backend] = ("auto",)) -> dict[str, float]:
     """Pay the first-call costs of ``backends`` (names or instances) in this process now.
 
     Call it at start-up with every backend the run may use, so that no solve spends its time
-    limit on imports and set-up. With ``service=True`` the process's shared solve service
-    (worker processes, what :func:`uam_solvers.solve_bounded` uses) is started and warmed too.
-    Thread-safe; a backend already warm costs nothing.
+    limit on imports and set-up. Thread-safe; a backend already warm costs nothing.
 
-    Returns the wall time spent per backend name [s] (0 for one already warm), and under
-    ``"service"`` the service's start. Raises UnknownBackendError for an unknown name, before
-    warming anything.
+    Returns the wall time spent per backend name [s] (about 0 for one already warm). Raises
+    UnknownBackendError for an unknown name, before warming anything.
     """
     from .registry import check_name
 
@@ -107,12 +104,6 @@ def warm_up(backends: Iterable[str | Backend] = ("auto",), *, service: bool = Fa
         t0 = time.perf_counter()
         _warm_now(b)
         spent[_label(b)] = time.perf_counter() - t0
-    if service:
-        from .executor import shared_service
-
-        t0 = time.perf_counter()
-        shared_service()
-        spent["service"] = time.perf_counter() - t0
     return spent
 
 
