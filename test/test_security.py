@@ -195,6 +195,8 @@ def test_a_forged_end_of_run_changes_nothing_and_the_recording_does_not_verify(r
     s = summarize(tmp_path / "run.mcap")
     assert not s.verified, s.problems
     assert any("simulators announced" in p or "publishers" in p for p in s.problems), s.problems
+    # the run's end is its simulator's, not the rogue's t = 120 s
+    assert s.run_end == f"ended at t = {DURATION:g} s", s.run_end
 
 
 def test_a_forged_constraint_set_is_left_out_of_the_audit_and_listed(ros_context, spin_until, tmp_path):

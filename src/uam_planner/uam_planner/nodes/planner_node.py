@@ -591,8 +591,9 @@ class PlannerNode(Node):
         if not session or len(session) > wire.MAX_ID_LENGTH:
             return f"session: {wire.echo(session)} must be the simulator's run token (1 to {wire.MAX_ID_LENGTH} characters)"
         if self.bound_simulator is not None and session != self.bound_simulator:
-            return (f"session: {wire.echo(session)} is not the simulator this planner serves "
-                    f"({self.bound_simulator!r}); a second simulator is refused")
+            # (the bound simulator's token is not echoed to a caller that does not hold it)
+            return (f"session: {wire.echo(session)} is not the simulator this planner serves; "
+                    "a second simulator is refused")
         if self.source.problem:
             return self.source.problem
         if not (math.isfinite(request.epoch_s) and request.epoch_s > 0):
@@ -866,8 +867,9 @@ class PlannerNode(Node):
         if self.bound_simulator is None:
             return "react: no epoch planned yet; a reaction comes between two epochs of the bound simulator"
         if session != self.bound_simulator:
-            return (f"session: {wire.echo(session)} is not the simulator this planner serves "
-                    f"({self.bound_simulator!r}); a second simulator is refused")
+            # (the bound simulator's token is not echoed to a caller that does not hold it)
+            return (f"session: {wire.echo(session)} is not the simulator this planner serves; "
+                    "a second simulator is refused")
         if self.source.problem:
             return self.source.problem
         if not self.p["reaction"]:

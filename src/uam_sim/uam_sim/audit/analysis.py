@@ -351,6 +351,13 @@ def run_problems(syncs: list, reports: dict, approved: list, flown_ids: set, fle
     if len(sessions) > 1:
         problems.append(f"{len(sessions)} simulators announced epochs (sessions {_few(sessions)}): "
                         "a second simulator was on the run's domain")
+    # the run's simulator: the session that announced the most epochs (a rogue's few
+    # announcements, its end among them, are not the run's)
+    counts: dict[str, int] = {}
+    for m in sim:
+        counts[str(getattr(m, "session", ""))] = counts.get(str(getattr(m, "session", "")), 0) + 1
+    own = max(sessions, key=lambda x: (counts[x], x == str(getattr(sim[0], "session", ""))))
+    sim = [m for m in sim if str(getattr(m, "session", "")) == own]
     duration = max(float(getattr(m, "duration_s", 0.0)) for m in sim)
     epoch_s = max(float(getattr(m, "epoch_s", 0.0)) for m in sim)
     ends = [m for m in sim if m.finished]
