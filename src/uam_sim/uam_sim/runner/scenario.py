@@ -58,6 +58,9 @@ class ScenarioResult:
     #: every request submitted (id, earliest / latest departure, operator, priority): the
     #: decision study's steady-state window and per-operator shares
     requests: list = field(default_factory=list)
+    #: the run's record (``uam_sim.audit.record.RunRecord``): what was in force; not stored
+    #: with the study's cells
+    record: object = field(default=None, repr=False, compare=False)
 
     def decisions(self) -> dict:
         """request id -> (epoch, candidate) of each approval: what must match across runs."""
@@ -624,4 +627,4 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
     summary["wall_s"] = wall
     summary["real_time_factor"] = duration_s / wall if wall > 0 else float("inf")
     return ScenarioResult(method, rate_label(rate), int(seed), float(duration_s), summary, epochs,
-                          flights, audit, instances, rejections, wall, replans, asked)
+                          flights, audit, instances, rejections, wall, replans, asked, record)
