@@ -7,8 +7,8 @@
 # usage: scripts/run_fleet.sh [options]
 #   --backend NAME     MWIS backend of the solver (default exact; `--backend list` lists them)
 #   --policy P         mwis | fifo | firstfit (default mwis)
-#   --objective O      what the MWIS maximises: paper | count | delay | priority | fair (default
-#                      paper; docs/objectives.md)
+#   --objective O      what the MWIS maximises: a registered objective, paper | count | delay |
+#                      priority | fair, ... (default paper; python -m uam_planner.objectives; docs/objectives.md)
 #   --baseline-order B arrival | priority: the order of fifo and firstfit (default arrival)
 #   --priority-share P share of random requests of priority class 1, e.g. 0.05 (default 0)
 #   --priority-grants FILE  the priority classes each operator may ask for (uam_planner.grants;
@@ -144,7 +144,7 @@ while [[ $# -gt 0 ]]; do
   esac
 done
 [[ "$POLICY" == mwis || "$POLICY" == fifo || "$POLICY" == firstfit ]] || die "--policy: '$POLICY' is not mwis, fifo or firstfit"
-[[ "$OBJECTIVE" =~ ^(paper|count|delay|priority|fair)$ ]] || die "--objective: '$OBJECTIVE' is not paper, count, delay, priority or fair"
+# --objective: checked by the preflight below against the objectives' registry (uam_planner.objectives)
 [[ "$BASELINE_ORDER" == arrival || "$BASELINE_ORDER" == priority ]] || die "--baseline-order: '$BASELINE_ORDER' is not arrival or priority"
 [[ "$PRIORITY_SHARE" =~ ^(0(\.[0-9]+)?|1(\.0+)?)$ ]] || die "--priority-share: '$PRIORITY_SHARE' is not a number in [0, 1]"
 [[ "$HORIZON" =~ ^[0-9]+$ ]] && (( HORIZON >= 1 && HORIZON <= 100 )) || die "--horizon: '$HORIZON' is not an integer in [1, 100]"

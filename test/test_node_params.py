@@ -240,7 +240,7 @@ def test_planner_objective_and_baseline_order_reach_the_library_and_bad_ones_are
     tiny = str(ROOT / "config" / "networks" / "tiny.yaml")
     with pytest.raises(ValueError) as err:
         PlannerNode(context=ros_context, parameter_overrides=params(network=tiny, objective="speed"))
-    assert "parameter objective: 'speed' is not one of paper, count, delay, priority, fair" in str(err.value)
+    assert "parameter objective: 'speed' is not an objective; known: paper, count, delay, priority, fair" in str(err.value)
 
 
 def test_request_priority_survives_the_message_conversions():

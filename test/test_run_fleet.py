@@ -203,7 +203,7 @@ def test_a_killed_run_fleet_stops_every_node_and_no_node_holds_the_domain_lock(t
 
 def test_bad_objective_order_priority_share_and_reaction_period_are_refused_naming_the_flag():
     """Issues 21 and 23: the flags are checked before any node starts."""
-    for args, words in [(["--objective", "best"], "--objective: 'best' is not paper, count, delay, priority or fair"),
+    for args, words in [(["--objective", "best"], "'best' is not an objective; known: paper, count, delay, priority, fair"),
                         (["--baseline-order", "random"], "--baseline-order: 'random' is not arrival or priority"),
                         (["--priority-share", "1.5"], "--priority-share: '1.5' is not a number in [0, 1]"),
                         # issue 23: the reaction between epochs needs the planner's reaction on

@@ -31,7 +31,8 @@ LAUNCH_OPTIONS: tuple[LaunchOption, ...] = (
     LaunchOption("--backend", "BACKEND", "backend", "exact", "MWIS backend of the solver and the planner"),
     LaunchOption("--policy", "POLICY", "policy", "mwis", "mwis, fifo or firstfit"),
     LaunchOption("--objective", "OBJECTIVE", "objective", "paper",
-                 "what the MWIS maximises: paper, count, delay, priority or fair (docs/objectives.md)"),
+                 "what the MWIS maximises: a registered objective (python -m uam_planner.objectives lists "
+                 "them: paper, count, delay, priority, fair, ...; docs/objectives.md)"),
     LaunchOption("--baseline-order", "BASELINE_ORDER", "baseline_order", "arrival",
                  "order of fifo and firstfit: arrival or priority"),
     LaunchOption("--horizon", "HORIZON", "horizon_epochs", "1",

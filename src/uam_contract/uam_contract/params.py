@@ -82,12 +82,9 @@ PLANNER = (
           "min(t + epoch, latest); 0 = the paper's rule (depart at the epoch time t)", 0.0, 86400.0),
     Param("climb_rate_mps", D.CLIMB_RATE_MPS, "vertical climb rate at the vertiports of a layered network [m/s]", 0.001, 100.0),
     Param("descent_rate_mps", D.DESCENT_RATE_MPS, "vertical descent rate at the vertiports of a layered network [m/s]", 0.001, 100.0),
-    Param("objective", "paper", "what the MWIS maximises (docs/objectives.md): 'paper' (the paper's weights), "
-          "'count' (approvals first, then least added delay and detour, lexicographic), 'delay' (the delay from "
-          "the earliest departure an approval saves; urgency for a window closing before the next epoch), "
-          "'priority' (a flight of a higher priority class is never refused for any number of lower ones), "
-          "'fair' (proportional fairness between operators from the running approval shares)",
-          choices=("paper", "count", "delay", "priority", "fair")),
+    Param("objective", "paper", "what the MWIS maximises: a registered objective (uam_planner.objectives; "
+          "`python -m uam_planner.objectives` lists them, docs/objectives.md explains the built-in ones: "
+          "'paper' (the paper's weights), 'count', 'delay', 'priority', 'fair')", rule="objective_name"),
     Param("baseline_order", "arrival", "order in which the fifo and firstfit policies serve requests: 'arrival' "
           "(the paper's) or 'priority' (priority class, then earliest latest departure, then arrival)",
           choices=("arrival", "priority")),

@@ -241,7 +241,7 @@ def test_planner_weights_follow_the_objective():
 
 
 def test_bad_objective_priority_and_order_are_named():
-    with pytest.raises(ValueError, match=r"PlanningConfig.objective must be one of .* got 'speed'"):
+    with pytest.raises(ValueError, match=r"PlanningConfig.objective: 'speed' is not an objective; known: paper, count"):
         PlanningConfig(objective="speed")
     with pytest.raises(ValueError, match=r"PlanningConfig.baseline_order must be one of .* got 1"):
         PlanningConfig(baseline_order=1)

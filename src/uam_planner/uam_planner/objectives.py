@@ -30,19 +30,25 @@ themselves (many classes with many requests each): then the class weights are ke
 integer backends round them (reported by ``EpochWeights.exact_for_integer_backends``), and
 beyond 2^53 :class:`ObjectiveRangeError` is raised naming the counts.
 
+**A registry** (:func:`register_objective`): each objective is a name, a one-line summary and a
+weight function of the epoch (:class:`WeightContext` -> :class:`EpochWeights`); the planner's
+``objective`` parameter, the runner's ``--objective``, run_fleet.sh's check and the planner's
+configuration all read it (:func:`objective_names`, :func:`check_objective`), so a new objective
+is one registered function (docs/extending.md). ``python -m uam_planner.objectives`` lists them.
+
 Pure functions of the epoch's candidates and requests (and the running shares for ``fair``):
 no wall time, no randomness. No rclpy.
 """
 
 from __future__ import annotations
 
+import re
 from collections import Counter, deque
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
-OBJECTIVES = ("paper", "count", "delay", "priority", "fair")
 #: integer weight bound: the integer backends' resolution (uam_solvers CP-SAT, CHILS; KaMIS up
 #: to 2,147 vertices)
 W_MAX = 10**6
@@ -62,10 +68,72 @@ class ObjectiveRangeError(ValueError):
     """The objective's exact weights do not fit float64's whole numbers (names the counts)."""
 
 
+@dataclass(frozen=True)
+class WeightContext:
+    """What an objective's weight function sees of one epoch: its time and length [s], the
+    eligible requests (``req_of[v]`` indexes them), per candidate its departure and flight time
+    [s] and the paper's weight, the running operator shares (``fair``) and the weight bound."""
+
+    t_s: float
+    epoch_s: float
+    requests: Sequence
+    req_of: Any
+    departure_s: Any
+    duration_s: Any
+    paper_weights: Any
+    shares: Any
+    w_max: int
+
+
+@dataclass(frozen=True)
+class Objective:
+    """One registered objective: its name, a one-line summary (help texts) and its weights."""
+
+    name: str
+    summary: str
+    weights: Callable[[WeightContext], "EpochWeights"]
+
+
+_REGISTRY: dict[str, Objective] = {}
+_NAME = re.compile(r"^[a-z][a-z0-9_]{0,31}$")
+
+
+def register_objective(name: str, summary: str, weights: Callable[[WeightContext], "EpochWeights"],
+                       replace: bool = False) -> Objective:
+    """Add an objective (ValueError naming the field for a bad name, a taken one, or a weight
+    function that is not callable). Its weights must be finite and positive, one per candidate."""
+    if not isinstance(name, str) or not _NAME.match(name):
+        raise ValueError(f"objective name: {name!r} is not 1 to 32 lower-case letters, digits or '_'")
+    if name in _REGISTRY and not replace:
+        raise ValueError(f"objective name: {name!r} is already registered")
+    if not callable(weights):
+        raise ValueError(f"objective {name!r}: weights {weights!r} is not callable")
+    _REGISTRY[name] = Objective(name, str(summary), weights)
+    return _REGISTRY[name]
+
+
+def unregister_objective(name: str) -> None:
+    """Remove a registered objective (a test's own)."""
+    _REGISTRY.pop(name, None)
+
+
+def objective_names() -> tuple:
+    """The registered objectives, in the order registered (the built-in ones first)."""
+    return tuple(_REGISTRY)
+
+
+def objective_problem(name) -> str:
+    """Why ``name`` is not a registered objective ('' when it is): the parameter rule."""
+    if not isinstance(name, str) or name not in _REGISTRY:
+        return f"{name!r} is not an objective; known: {', '.join(_REGISTRY)} (uam_planner.objectives)"
+    return ""
+
+
 def check_objective(name) -> str:
     """``name`` if it is an objective, else ValueError naming the value and the choices."""
-    if not isinstance(name, str) or name not in OBJECTIVES:
-        raise ValueError(f"objective must be one of {OBJECTIVES}, got {name!r}")
+    problem = objective_problem(name)
+    if problem:
+        raise ValueError(f"objective: {problem}")
     return name
 
 
@@ -280,7 +348,7 @@ def epoch_weights(objective: str, t_s: float, epoch_s: float, requests: Sequence
     """The weights of one epoch's candidates under ``objective``.
 
     Args:
-        objective: one of :data:`OBJECTIVES`.
+        objective: a registered objective (:func:`objective_names`).
         t_s, epoch_s: the epoch's time and length [s].
         requests: the eligible requests (FlightRequest: earliest/latest departure, priority,
             operator); ``req_of[v]`` indexes them.
@@ -294,27 +362,65 @@ def epoch_weights(objective: str, t_s: float, epoch_s: float, requests: Sequence
     """
     check_objective(objective)
     req_of = np.asarray(req_of, dtype=np.int64)
-    if objective == "paper":
-        return EpochWeights(np.asarray(paper_weights, dtype=np.float64), step_s=0,
-                            exact_for_integer_backends=False)
     n = int(req_of.size)
     if w_max is None:
         w_max = min(W_MAX, (2**31 - 1) // max(n, 1))
-    if objective == "delay":
-        return delay_weights(req_of, departure_s, duration_s, requests, t_s, epoch_s)
-    cost = added_cost_s(req_of, departure_s, duration_s)
-    m = len(requests)
-    if objective == "count":
-        primary = np.ones(n, dtype=np.int64)
-    elif objective == "priority":
-        values = priority_values([getattr(r, "priority", 0) for r in requests])
-        if max(values, default=1) >= FLOAT_EXACT:
-            raise ObjectiveRangeError(
-                f"priority: {len(set(getattr(r, 'priority', 0) for r in requests))} classes over "
-                f"{m} requests need class values above 2^53")
-        primary = np.array([int(values[i]) for i in req_of.tolist()], dtype=np.int64)
-    else:  # fair
-        sh = shares if shares is not None else OperatorShares()
-        phi = [sh.factor(operator_of(r)) for r in requests]
-        primary = np.array([phi[i] for i in req_of.tolist()], dtype=np.int64)
-    return lexicographic_weights(primary, cost, m, w_max)
+    return _REGISTRY[objective].weights(WeightContext(
+        float(t_s), float(epoch_s), requests, req_of, departure_s, duration_s, paper_weights,
+        shares if shares is not None else OperatorShares(), int(w_max)))
+
+
+def _paper(ctx: WeightContext) -> EpochWeights:
+    return EpochWeights(np.asarray(ctx.paper_weights, dtype=np.float64), step_s=0,
+                        exact_for_integer_backends=False)
+
+
+def _delay(ctx: WeightContext) -> EpochWeights:
+    return delay_weights(ctx.req_of, ctx.departure_s, ctx.duration_s, ctx.requests, ctx.t_s, ctx.epoch_s)
+
+
+def _lexicographic(ctx: WeightContext, primary: np.ndarray) -> EpochWeights:
+    """Weights of a primary term per candidate, then the least added delay and detour."""
+    cost = added_cost_s(ctx.req_of, ctx.departure_s, ctx.duration_s)
+    return lexicographic_weights(primary, cost, len(ctx.requests), ctx.w_max)
+
+
+def _count(ctx: WeightContext) -> EpochWeights:
+    return _lexicographic(ctx, np.ones(int(ctx.req_of.size), dtype=np.int64))
+
+
+def _priority(ctx: WeightContext) -> EpochWeights:
+    requests = ctx.requests
+    values = priority_values([getattr(r, "priority", 0) for r in requests])
+    if max(values, default=1) >= FLOAT_EXACT:
+        raise ObjectiveRangeError(
+            f"priority: {len(set(getattr(r, 'priority', 0) for r in requests))} classes over "
+            f"{len(requests)} requests need class values above 2^53")
+    return _lexicographic(ctx, np.array([int(values[i]) for i in ctx.req_of.tolist()], dtype=np.int64))
+
+
+def _fair(ctx: WeightContext) -> EpochWeights:
+    phi = [ctx.shares.factor(operator_of(r)) for r in ctx.requests]
+    return _lexicographic(ctx, np.array([phi[i] for i in ctx.req_of.tolist()], dtype=np.int64))
+
+
+register_objective("paper", "the paper's weights (w = d*/d)", _paper)
+register_objective("count", "approvals first, then least added delay and detour", _count)
+register_objective("delay", "the delay from the earliest departure an approval saves", _delay)
+register_objective("priority", "a flight of a higher priority class is never refused for any number of lower ones",
+                   _priority)
+register_objective("fair", "proportional fairness between operators from the running approval shares", _fair)
+#: the built-in objectives (:func:`objective_names` also lists any registered later)
+OBJECTIVES = objective_names()
+
+
+def main(argv=None) -> int:
+    """``python -m uam_planner.objectives``: the registered objectives, one per line."""
+    for o in _REGISTRY.values():
+        print(f"{o.name:10s} {o.summary}")
+    return 0
+
+
+if __name__ == "__main__":
+    import sys
+    sys.exit(main())

@@ -6,7 +6,9 @@ Two sources, like a setuptools plugin table (Nav2's planner plugins in Python fo
   backend whose optional dependency is missing does not break the others;
 - third-party backends advertised in the ``importlib.metadata`` entry-point group
   ``uam_solvers.backends`` (entry-point name = backend name, value = ``module:Class``). A built-in
-  name wins over an entry point of the same name.
+  name wins over an entry point of the same name;
+- backends registered at run time with :func:`register_backend` (a class or ``"module:Class"``;
+  a plugin's own module, or a test): the same lookup as an entry point (docs/extending.md).
 
 CLI: ``python -m uam_solvers.registry`` prints one line per backend.
 """
@@ -20,7 +22,7 @@ from importlib import metadata
 from .base import Backend
 
 __all__ = ["BUILTIN_BACKENDS", "ENTRY_POINT_GROUP", "UnknownBackendError", "backend_class",
-           "check_name", "get_backend",
+           "check_name", "get_backend", "register_backend", "unregister_backend",
            "list_backends", "backend_names", "sampling_backends"]
 
 ENTRY_POINT_GROUP = "uam_solvers.backends"
@@ -57,19 +59,42 @@ def _entry_points() -> dict[str, str]:
     return {ep.name: ep.value for ep in eps}
 
 
-def _table() -> dict[str, str]:
+#: backends registered at run time (:func:`register_backend`): name -> class or "module:Class"
+_REGISTERED: dict = {}
+
+
+def register_backend(name: str, target) -> None:
+    """Register a backend class (or ``"module:Class"``) under ``name`` for this process; a
+    built-in name cannot be taken (ValueError naming it). In a process pool the workers see it
+    when they import the module that registers it."""
+    if not isinstance(name, str) or not name or name in BUILTIN_BACKENDS:
+        raise ValueError(f"backend name: {name!r} is empty or a built-in backend's")
+    if not (isinstance(target, str) or (isinstance(target, type) and issubclass(target, Backend))):
+        raise ValueError(f"backend {name!r}: {target!r} is neither a Backend subclass nor 'module:Class'")
+    _REGISTERED[name] = target
+
+
+def unregister_backend(name: str) -> None:
+    _REGISTERED.pop(name, None)
+
+
+def _table() -> dict:
     table = dict(_entry_points())
+    table.update(_REGISTERED)
     table.update(BUILTIN_BACKENDS)
     return table
 
 
 def backend_names() -> list[str]:
-    """All known backend names (built-in first, then entry points, each sorted as listed)."""
-    extra = sorted(k for k in _entry_points() if k not in BUILTIN_BACKENDS)
+    """All known backend names (built-in first, then entry points and run-time registrations,
+    sorted)."""
+    extra = sorted({*_entry_points(), *_REGISTERED} - set(BUILTIN_BACKENDS))
     return list(BUILTIN_BACKENDS) + extra
 
 
-def _load(target: str) -> type:
+def _load(target) -> type:
+    if isinstance(target, type):
+        return target
     module_name, _, attr = target.partition(":")
     module = importlib.import_module(module_name)
     obj = module

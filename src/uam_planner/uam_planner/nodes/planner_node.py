@@ -80,6 +80,7 @@ from uam_planner.network import load_network
 from uam_planner.conformance import ConformanceBounds
 from uam_planner.authority import Authorities
 from uam_planner.grants import PriorityGrants
+from uam_planner.objectives import objective_problem
 from uam_planner.sources import BoundSource, conformance_digest, fleet_digest
 from uam_planner.planning import AirspaceConfig, Planner, PlanningConfig, call_solver, default_solve_mwis
 
@@ -93,7 +94,8 @@ class PlannerNode(Node):
         # 3 CPU s of a paper run; BENCHMARKS.md).
         super().__init__("planner", **kwargs)
         self._lock = threading.RLock()
-        self.p = declare_table(self, PLANNER, on_change=self._on_change, rules=param_rules.RULES)
+        self.p = declare_table(self, PLANNER, on_change=self._on_change,
+                               rules={**param_rules.RULES, "objective_name": objective_problem})
         self.network = load_network(self.p["network"])
         given = self.p["separation_model"]
         self.p["separation_model"] = given or self.network.separation_model

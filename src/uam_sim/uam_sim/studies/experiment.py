@@ -131,8 +131,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="conformance bounds (uam_sim.world.conformance.ConformanceBounds), e.g. lateral_m=30,time_s=10")
     # the planning and demand options of run_fleet.sh, by the same names and defaults
     # (uam_sim.runner.experiment_config.ExperimentConfig; test_one_runner_options holds them equal)
-    from uam_planner.objectives import BASELINE_ORDERS, OBJECTIVES
-    p.add_argument("--objective", choices=OBJECTIVES,
+    from uam_planner.objectives import BASELINE_ORDERS, objective_names
+    p.add_argument("--objective", choices=objective_names(),
                    help="what the MWIS maximises (docs/objectives.md; default paper)")
     p.add_argument("--baseline-order", dest="baseline_order", choices=BASELINE_ORDERS,
                    help="the order of fifo and firstfit (default arrival)")
