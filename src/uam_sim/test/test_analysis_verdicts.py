@@ -96,6 +96,22 @@ def test_a_forged_plan_with_a_forged_report_is_listed_and_not_audited(tmp_path):
     assert not s.verified and any("forged" in p for p in s.problems), s.problems
     assert main([str(path), "--no-epochs"]) == 3
 
+def test_the_view_of_a_recording_draws_what_the_record_holds(tmp_path, monkeypatch):
+    """The Rerun view of a recording (log_recording) reads the run's record: r1's and r2's
+    routes are drawn, the forged x9's is not."""
+    pytest.importorskip("rerun")
+    from uam_sim.views import rerun_log
+
+    def forge(rec):
+        rec.write("/uam/flight_plans", _plan("x9", 9999, north_m=5.0), 0)
+        rec.write("/uam/planning_reports", PlanningReport(epoch_index=9999, approved=1), 0)
+    drawn = []
+    original = rerun_log.RerunLogger.log_route
+    monkeypatch.setattr(rerun_log.RerunLogger, "log_route",
+                        lambda self, t, rid, pts: (drawn.append(rid), original(self, t, rid, pts)))
+    rerun_log.log_recording(_write(tmp_path / "forged.mcap", extra=forge), tmp_path / "forged.rrd")
+    assert sorted(drawn) == ["r1", "r2"]
+
 
 def test_an_approval_that_never_flew_is_flagged(tmp_path):
     """Finding: 5 counted approvals never flew and the analysis said OK."""

@@ -614,6 +614,8 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
     )
     # the run's record (uam_sim.audit.record): what the flown audit reads; not part of the JSON
     summary.record = record
+    # the SHA-256 of the constraint sets taken as the planner's (what a view of the recording draws)
+    summary.constraint_sets_taken = {d for d, *_ in published if not named_sets or d in named_sets}
     return summary
 
 

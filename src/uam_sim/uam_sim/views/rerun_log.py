@@ -753,11 +753,19 @@ def log_recording(mcap_path: str | os.PathLike, rrd_path: str | os.PathLike, net
     """Replay a recording's fleet states, flight plans and reports into an .rrd; returns messages.
 
     Messages go to the logger in log-time order, as the recorder node would have sent them live.
-    Decodes with rclpy (the workspace must be sourced).
+    What was in force is the run's record (``uam_sim.audit.record``, as the analysis builds it):
+    a plan or plan version of no flight in it (forged) and a constraint set no planning report
+    names are not drawn. Decodes with rclpy (the workspace must be sourced).
     """
-    from ..audit.analysis import iter_decoded
+    import hashlib
+
+    from ..audit.analysis import iter_decoded, request_key, summarize
+    from ..audit.flown_audit import plan_version
     from ..recording.mcap_reader import log_time_zero_ns
 
+    summary = summarize(mcap_path, network=network)
+    versions = {(f.request, plan_version(v)) for f in summary.record.flights for v in f.versions}
+    sets = summary.constraint_sets_taken
     n = 0
     with RerunLogger("save", rrd_path, network=network, utc_zero_ns=log_time_zero_ns(mcap_path) or None) as logger:
         for topic, _t_ns, msg in iter_decoded(mcap_path, topics=(TOPIC_FLEET, TOPIC_PLANS, TOPIC_REPORTS,
@@ -767,8 +775,13 @@ def log_recording(mcap_path: str | os.PathLike, rrd_path: str | os.PathLike, net
             elif topic == TOPIC_REQUESTS:
                 logger.log_request_msg(msg)
             elif topic == TOPIC_PLANS:
+                in_force = (request_key(msg), plan_version(msg)) in versions
+                if (int(msg.outcome) == 0 or plan_version(msg) > 1) and not in_force:
+                    continue   # not in the record: a forged plan
                 logger.log_flight_plan_msg(msg)
             elif topic == TOPIC_CONSTRAINTS:
+                if hashlib.sha256(msg.data.encode("utf-8")).hexdigest() not in sets:
+                    continue   # not the planner's
                 logger.log_constraints_msg(msg)
             else:
                 logger.log_planning_report_msg(msg)
