@@ -201,3 +201,16 @@ def test_both_launchers_state_the_runs_choices_with_one_function():
         text = Path(launcher).read_text()
         assert "uam_contract.run_choices" in text, launcher
         assert all(f"{n}=" in text or f'"{n}"' in text for n in NAMES), launcher
+
+
+def test_approvals_are_stated_per_priority_class(tmp_path):
+    from uam_sim.audit.analysis import format_summary
+
+    def urgent(rec):
+        rec.write("/uam/requests", FlightRequest(request_id="r3", priority=1), 0)
+    s = summarize(_write(tmp_path / "classes.mcap", extra=urgent))
+    assert s.approvals_by_class == {0: (2, 2), 1: (0, 1)}
+    text = format_summary(s)
+    assert "Classes          class 0: 2 of 2 approved (100.0 %); class 1: 0 of 1 approved (0.0 %)" in text
+    # one class: no line
+    assert "Classes" not in format_summary(summarize(_write(tmp_path / "one.mcap")))

@@ -192,6 +192,8 @@ class RunSummary:
     forged_constraint_sets: list = field(default_factory=list)
     #: every parameter change a node accepted while the run went on (uam/parameter_changes)
     parameter_changes: list = field(default_factory=list)
+    #: priority class -> (approved, requested), over every request of the recording
+    approvals_by_class: dict = field(default_factory=dict)
     #: the audit of what flew (uam_sim.audit.flown.recording_flown): the fleet states' tracks,
     #: their exact closest approach in the true minimum with the sampling bound, and their F3548
     #: conformance with the approved plans ({} when no fleet positions were recorded)
@@ -611,6 +613,7 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
         airspace_changes=_airspace_changes(record.applied, withdrawals.values()),
         forged_constraint_sets=forged_sets,
         parameter_changes=parameter_changes,
+        approvals_by_class=_approvals_by_class(request_rows, flights),
     )
     # the run's record (uam_sim.audit.record): what the flown audit reads; not part of the JSON
     summary.record = record
@@ -635,6 +638,22 @@ def _planners_sets(published, named_sets, constraint_sets: list, withdrawals: di
             for w in ws:
                 withdrawals.setdefault((str(w.get("id")), w.get("version")), w)
     return forged
+
+
+def _approvals_by_class(request_rows: dict, flights: list) -> dict:
+    """priority class -> (approved, requested): each request's class from its request, an
+    approval counted once per request."""
+    asked: dict = {}
+    for row in request_rows.values():
+        c = int(row.get("priority", 0))
+        asked[c] = asked.get(c, 0) + 1
+    got: dict = {}
+    for f in flights:
+        if "#" in str(f.get("request_id", "")):
+            continue   # a second approval of one request (reported as conflicting) counts once
+        c = int(f.get("priority", 0))
+        got[c] = got.get(c, 0) + 1
+    return {c: (got.get(c, 0), asked.get(c, 0)) for c in sorted(set(asked) | set(got))}
 
 
 def _parameter_change(text: str, t_s: float) -> str:
@@ -881,7 +900,12 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
         lines += _flight_lines(f" of {op}", stats)
     shares = ", ".join(f"{k[6:]} {v:.3f}" for k, v in s.flight_stats.items() if k.startswith("share_"))
     if shares:
-        lines.append(f"Operators        approval share {shares}; Jain index {s.flight_stats['jain_index']:.3f}")
+        lines.append(f"Operators        approved of requested, per operator (requests whose window closed in the run): "
+                     f"{shares}; Jain index {s.flight_stats['jain_index']:.3f}")
+    if len(s.approvals_by_class) > 1:
+        lines.append("Classes          " + "; ".join(
+            f"class {c}: {a} of {r} approved" + (f" ({100.0 * a / r:.1f} %)" if r else "")
+            for c, (a, r) in sorted(s.approvals_by_class.items())) + " (every request of the recording)")
     a = s.audit
     if a is not None:
         pair = f" ({a.closest_pair[0]} / {a.closest_pair[1]})" if a.closest_pair else ""
