@@ -11,17 +11,13 @@ from the node (``rules``), so the contract stays below the libraries.
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Any, Callable
 
 from uam_contract.params import FROZEN_BUILTINS, Param, _bool_alias, _choices_text
+from uam_contract.validation import with_rule
 
 
-def _with_rule(p: Param, rule: Callable[[Any], str]) -> Param:
-    own = p.check
-    if own is None:
-        return dataclasses.replace(p, check=rule)
-    return dataclasses.replace(p, check=lambda v: own(v) or rule(v))
+_with_rule = with_rule   # uam_contract.validation: one composition for the nodes and the preflight
 
 
 def _declared(node, p: "Param"):

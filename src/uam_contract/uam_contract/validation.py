@@ -311,3 +311,14 @@ def _adapter(model):
     except TypeError:
         pass
     return adapter
+
+
+def with_rule(p: "Param", rule) -> "Param":
+    """``p`` with ``rule`` (value -> '' or the reason) checked after its own check: how a table's
+    named rule (``Param.rule``) is supplied."""
+    import dataclasses
+
+    own = p.check
+    if own is None:
+        return dataclasses.replace(p, check=rule)
+    return dataclasses.replace(p, check=lambda v: own(v) or rule(v))

@@ -23,7 +23,8 @@ from .base import Backend
 
 __all__ = ["BUILTIN_BACKENDS", "ENTRY_POINT_GROUP", "UnknownBackendError", "backend_class",
            "check_name", "get_backend", "register_backend", "unregister_backend",
-           "list_backends", "backend_names", "sampling_backends"]
+           "list_backends", "backend_names", "sampling_backends", "PARAM_RULES", "backend_problem",
+           "backend_name_problem"]
 
 ENTRY_POINT_GROUP = "uam_solvers.backends"
 
@@ -176,6 +177,30 @@ def format_backend_table() -> str:
     return "\n".join(lines)
 
 
+def backend_problem(name) -> str:
+    if not isinstance(name, str) or not name:
+        return f"{name!r} is not a backend name; known: {', '.join(backend_names())}"
+    try:
+        backend = get_backend(name)
+    except UnknownBackendError:
+        return f"unknown backend {name!r}; known: {', '.join(backend_names())}"
+    ok, reason = backend.available()
+    return "" if ok else f"backend {name!r} is unavailable here: {reason}"
+
+
+def backend_name_problem(name) -> str:
+    """Known name (availability is the solver's business: it may run on another machine)."""
+    try:
+        get_backend(name)
+    except (UnknownBackendError, TypeError):
+        return f"unknown backend {name!r}; known: {', '.join(backend_names())}"
+    return ""
+
+
+#: the parameter rules the nodes' tables name (``Param.rule``): name -> value -> '' or the reason
+PARAM_RULES = {"backend_name": backend_name_problem, "backend_available": backend_problem}
+
+
 def main(argv: list[str] | None = None) -> int:
     """``python -m uam_solvers.registry [list]``: print the backends, one line each."""
     args = list(sys.argv[1:] if argv is None else argv)
@@ -188,3 +213,4 @@ def main(argv: list[str] | None = None) -> int:
 
 if __name__ == "__main__":
     sys.exit(main())
+

@@ -122,19 +122,19 @@ def parse_args(argv: list[str]) -> tuple[dict, list[NodeParams]]:
 def _rules() -> dict:
     """The rules a table names (``Param.rule``), as the nodes supply them."""
     from uam_planner.objectives import objective_problem
-    from uam_solvers.nodes.param_rules import RULES
-    return {**RULES, "objective_name": objective_problem}
+    from uam_solvers.registry import PARAM_RULES
+    return {**PARAM_RULES, "objective_name": objective_problem}
 
 
 def check_params(nodes: list[NodeParams]) -> dict:
     """Every value against its node's table (and the rules it names); returns {node: {name:
     validated value}}."""
-    from uam_bringup.params import _with_rule
+    from uam_contract.validation import with_rule
 
     rules = _rules()
     checked = {}
     for n in nodes:
-        table = {p.name: (_with_rule(p, rules[p.rule]) if p.rule else p) for p in TABLES[n.node]}
+        table = {p.name: (with_rule(p, rules[p.rule]) if p.rule else p) for p in TABLES[n.node]}
         values = {}
         for name, (value, where) in n.values.items():
             p = table.get(name)
