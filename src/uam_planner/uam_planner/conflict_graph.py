@@ -12,7 +12,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .separation import DEFAULT_SEPARATION_M, SegmentSet, as_separation_model, conflicting_pairs
+from .separation import (
+    DEFAULT_SEPARATION_M,
+    SegmentSet,
+    any_conflict,
+    as_separation_model,
+    conflicting_pairs,
+)
 from .trajectory import Trajectory
 
 
@@ -57,16 +63,14 @@ def discard_against_active(candidates, active, separation_m: float = DEFAULT_SEP
                            ) -> np.ndarray:
     """(n,) bool mask of candidates that lose separation with at least one active flight.
 
-    ``candidates`` and ``active`` are sequences of Trajectory or SegmentSets.
+    ``candidates`` and ``active`` are sequences of Trajectory or SegmentSets. A decision per
+    candidate (``separation.any_conflict``: the first loss found settles it), no pair list.
     """
     cand = candidates if isinstance(candidates, SegmentSet) else SegmentSet.from_trajectories(list(candidates))
-    mask = np.zeros(cand.n_trajectories, dtype=bool)
     act = active if isinstance(active, SegmentSet) else SegmentSet.from_trajectories(list(active))
     if cand.n_trajectories == 0 or len(act) == 0:
-        return mask
-    pairs = conflicting_pairs(cand, act, separation_m)
-    mask[pairs[:, 0]] = True
-    return mask
+        return np.zeros(cand.n_trajectories, dtype=bool)
+    return any_conflict(cand, act, separation_m)
 
 
 def _clique_edges(groups: list) -> np.ndarray:
@@ -255,11 +259,10 @@ def build_conflict_graph(candidates, candidate_request, candidate_index, candida
             # with the horizon's pair cache, z cells in the keys as in its calls (the same pairs)
             z_cell = as_separation_model(separation_m).vertical_reach_m \
                 if pair_cache is not None else None
-            pairs = conflicting_pairs(SegmentSet.from_trajectories(candidates.base), act,
-                                      separation_m,
-                                      shifts_a=(candidates.first, candidates.shift_s),
-                                      z_cell_m=z_cell)
-            discarded[pairs[:, 0]] = True
+            discarded = any_conflict(SegmentSet.from_trajectories(candidates.base), act,
+                                     separation_m,
+                                     shifts_a=(candidates.first, candidates.shift_s),
+                                     z_cell_m=z_cell)
     else:
         cand_set = SegmentSet.from_trajectories(list(candidates))
         discarded = discard_against_active(cand_set, active, separation_m)

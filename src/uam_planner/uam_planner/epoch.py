@@ -64,7 +64,7 @@ from .constraints import refuse_candidates
 from .first_fit import first_fit_select
 from .objectives import OperatorShares, epoch_weights, order_requests
 from .planning_config import Flight, FlightRequest, PlanningConfig
-from .separation import SegmentSet, conflicting_pairs
+from .separation import SegmentSet, any_conflict, conflicting_pairs
 from .trajectory import Trajectory
 
 
@@ -645,8 +645,7 @@ def plan_epoch_fifo(t_s: float, epoch_index: int, pending: Sequence[FlightReques
     sep = config.separation
     discarded = np.zeros(len(trajs), dtype=bool)
     if len(trajs) and len(active_set):
-        pairs = conflicting_pairs(cand_set, active_set, sep)
-        discarded[pairs[:, 0]] = True
+        discarded = any_conflict(cand_set, active_set, sep)
     t4 = time.perf_counter()
     phases["deconfliction_s"] = t4 - t3
     surv = np.flatnonzero(~discarded)

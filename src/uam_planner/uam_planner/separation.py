@@ -48,6 +48,9 @@ DEFAULT_SEPARATION_M = defaults.SEPARATION_M   # the one source: uam_contract.de
 # in memory malloc reuses; at 2^20 they were mapped and unmapped per chunk: 2.9 s of system
 # time against 0.8 s in bench_horizon --in-process --cpu (H = 10, 300 s), the same pairs.
 _MAX_PAIRS_PER_CHUNK = 1 << 17
+# Cell-mate pairs per chunk of the check that decides (any_conflict): smaller chunks let the
+# trajectories found blocked in one chunk drop out of the next sooner
+_DECIDE_PAIRS_PER_CHUNK = 1 << 15
 # Broad-phase defaults, tuned on the paper- and city-scale instances of python -m uam_planner.bench
 # (corridors of 0.7-1 km): cells of 12 separations and time buckets of one cell's flight time
 # balance the cell keys per piece (sorting cost) against the pairs that share a cell without
@@ -817,11 +820,140 @@ def _box_filter(l, r, pt: _PieceTable, sk: _SortedKeys, grid: _Grid, single: boo
     return sk.items[l[ok]], sk.items[r[ok]]
 
 
-def _narrow_phase(i, j, pt: _PieceTable, model: SeparationModel, first, shift, ranks=None):
+@dataclass
+class _BroadPhase:
+    """What the broad phase leaves for the narrow phase: the windowed sets, the piece table,
+    the sorted keys and grid, and per sorted entry with partners its cell mates (see
+    :func:`_cell_mates`); ``clock``: wall times at its steps, for ``stats``."""
+    sa: SegmentSet
+    sb: SegmentSet
+    single: bool
+    groups: np.ndarray | None
+    pt: _PieceTable
+    sk: _SortedKeys
+    grid: _Grid
+    left_pos: np.ndarray
+    right_first: np.ndarray
+    n_right: np.ndarray
+    runs_skipped: bool
+    n_items: int
+    clock: list
+
+    def fill_stats(self, stats: dict, n_exact: int) -> None:
+        c = self.clock
+        stats.update(segments_a=len(self.sa), segments_b=len(self.sb), pieces=int(self.n_items),
+                     keys=int(self.sk.keys.shape[0]), pairs_sharing_cell=int(self.n_right.sum()),
+                     exact_checks=n_exact, pieces_s=c[1] - c[0], keys_s=c[2] - c[1],
+                     sort_s=c[3] - c[2], pairs_and_exact_s=c[4] - c[3])
+
+
+def _broad_phase(model: SeparationModel, sa: SegmentSet, sb: SegmentSet, single: bool, groups,
+                 groups_b, slack_traj, cell_m, bucket_s, z_cell_m) -> _BroadPhase | None:
+    """Pieces, their cell keys, sorted, and the cell mates of every entry (steps 1-4 of the
+    module's header); None when the two sets have no common time."""
+    separation_m = model.separation_m
+    if z_cell_m is None and model.kind == "cylinder" and _CYLINDER_Z_KEYS:
+        # The cylinder's vertical reach V as z cells: pieces cruising on levels V apart share no
+        # cell, so their pairs are never made (the z filter would drop them all); the same piece
+        # pairs reach the exact kernel, so the same pairs and distances to the last bit
+        # (see z_cell_m below), for about half the cell-mate pairs at flight levels.
+        z_cell_m = model.vertical_reach_m
+    if len(sa) == 0 or len(sb) == 0:
+        return None
+    if not single:
+        # Only the common time window can hold a conflict.
+        sa, sb = _common_window(sa, sb, slack_traj)
+        if len(sa) == 0 or len(sb) == 0:
+            return None
+
+    clock = [time.perf_counter()]
+    cell, bucket = _grid_size(sa, separation_m, cell_m, bucket_s)
+    half = 0.5 * float(separation_m)
+    half_z = 0.5 * model.vertical_reach_m
+    pa = _cut_pieces(sa, cell, bucket, half, half_z)
+    pb = pa if single else _cut_pieces(sb, cell, bucket, half, half_z)
+    na = pa.t0.shape[0]
+    # a's pieces occupy their boxes until t1 plus their trajectory's largest shift
+    pa_t1_sweep = pa.t1 if slack_traj is None else pa.t1 + slack_traj[sa.traj[pa.seg]]
+    clock.append(time.perf_counter())
+    if z_cell_m is not None and not (np.isfinite(z_cell_m) and z_cell_m > 0.0):
+        raise ValueError(f"z_cell_m must be positive and finite, got {z_cell_m!r}")
+    # z boundaries at -V/2 + k z_cell_m: flight levels at multiples of V = z_cell_m touch (their
+    # boxes, inflated by V/2) exactly on a boundary and share no cell
+    grid = _make_grid(pa, pb, pa_t1_sweep, cell, bucket, z_cell_m, -half_z)
+    ra = grid.ranges(pa, pa_t1_sweep)
+    rb = ra if single else grid.ranges(pb, pb.t1)
+    grid.nx = int(max(ra[1].max(), rb[1].max())) + 1
+    grid.ny = int(max(ra[3].max(), rb[3].max())) + 1
+    grid.nt = int(max(ra[5].max(), rb[5].max())) + 1
+    if grid.z_bounds is not None:
+        grid.nz = int(max(ra[7].max(), rb[7].max())) + 1
+        if ((grid.nt * grid.ny * grid.nx * grid.nz) * 2).bit_length() > 63:
+            # the widened (coordinate) sort has no z: leave z out of the keys
+            grid.z_bounds, grid.nz = None, 1
+            ra, rb = ra[:6], rb[:6]
+    n_items = na + (0 if single else pb.t0.shape[0])
+    sk = _sorted_keys(ra, rb, single, na, n_items, grid, clock)
+    run_label = None
+    if single and _SKIP_OWN_RUNS:
+        # Within a cell the entries sort by piece (packed codes, or the widened lexsort), so by
+        # trajectory: a trajectory's entries are one run, and so are a group's when the labels
+        # do not decrease with the trajectory (the planner's request order). Checked, not
+        # assumed: if the labels decrease anywhere within a cell, this call makes every pair
+        # and filters it as before.
+        s_traj = sa.traj[pa.seg][sk.items]
+        lab = s_traj if groups is None else groups[s_traj]
+        if bool(np.all((lab[1:] >= lab[:-1]) | (sk.cell_key[1:] != sk.cell_key[:-1]))):
+            run_label = lab
+    left_pos, right_first, n_right = _cell_mates(sk, single, run_label)
+    iz0 = None
+    if grid.z_bounds is not None:
+        iz0 = ra[6] if single else np.concatenate((ra[6], rb[6]))
+    pt = _piece_table(pa, pb, sa, sb, single, pa_t1_sweep, slack_traj is not None, sk.items,
+                      None if single or groups is None else (groups, groups_b), iz0)
+    clock.append(time.perf_counter())
+    return _BroadPhase(sa, sb, single, groups, pt, sk, grid, left_pos, right_first, n_right,
+                       run_label is not None, n_items, clock)
+
+
+def _near_piece_pairs(bp: _BroadPhase, max_pairs: int, open_left=None):
+    """The piece pairs (i, j) that may come near (after :func:`_box_filter`), in chunks of
+    about ``max_pairs`` cell-mate pairs, in the sorted keys' order (earliest time bucket
+    first). ``open_left``: optional callable(start, stop) -> bool mask over the entries
+    ``left_pos[start:stop]``, called just before their chunk: the entries left out make no
+    pairs (a caller that has already decided them)."""
+    csum = np.cumsum(bp.n_right)
+    start = 0
+    while start < bp.left_pos.shape[0]:
+        done = int(csum[start - 1]) if start > 0 else 0
+        stop = int(np.searchsorted(csum, done + max_pairs, side="right"))
+        stop = max(stop, start + 1)
+        lp = bp.left_pos[start:stop]
+        nr = bp.n_right[start:stop]
+        rf = bp.right_first[start:stop]
+        if open_left is not None:
+            m = open_left(start, stop)
+            lp, nr, rf = lp[m], nr[m], rf[m]
+        start = stop
+        cnt = int(nr.sum())
+        if cnt == 0:
+            continue
+        lrep = np.repeat(lp, nr)
+        rpos = np.repeat(rf, nr) + (np.arange(cnt, dtype=np.int64) - np.repeat(np.cumsum(nr) - nr, nr))
+        i, j = _box_filter(lrep, rpos, bp.pt, bp.sk, bp.grid, bp.single, bp.groups,
+                           bp.runs_skipped)
+        if i.size:
+            yield i, j
+
+
+def _narrow_phase(i, j, pt: _PieceTable, model: SeparationModel, first, shift, ranks=None,
+                  skip=None):
     """The exact check of the piece pairs (i, j): (a index, b index, distance) of the pairs
     that lose separation (a index a candidate when shifted), or None; and the exact checks done.
     ``ranks`` (rank_a, rank_b): the kernel takes the piece of the lower-ranked trajectory first
-    (its rounding is not symmetric to the last bit), as one call over the union would."""
+    (its rounding is not symmetric to the last bit), as one call over the union would.
+    ``skip``: optional (n_candidates,) bool, with shifts: candidates not to check (already
+    decided); the others get the same values, so the same distances to the last bit."""
     separation_m = model.separation_m
     if shift is None:
         u, w = i, j
@@ -841,6 +973,25 @@ def _narrow_phase(i, j, pt: _PieceTable, model: SeparationModel, first, shift, r
     cnt = first[ta + 1] - first[ta]
     cand = np.repeat(first[ta], cnt) + (np.arange(int(cnt.sum()), dtype=np.int64)
                                         - np.repeat(np.cumsum(cnt) - cnt, cnt))
+    if skip is not None:
+        # only the candidates still open: the piece pairs repeated per open candidate
+        go = ~skip[cand]
+        rows = np.repeat(np.arange(i.shape[0], dtype=np.int64), cnt)[go]
+        cand = cand[go]
+        j_rep = j[rows]
+        dt = shift[cand]
+        extra = int(j_rep.size) - int(cnt.size)
+        t0i = pt.P_t0[i[rows]]
+        t0i += dt
+        t1i = pt.P_t1[i[rows]]
+        t1i += dt
+        ir = i[rows]
+        d = model.segment_measure(t0i, t1i, pt.P_p0[ir], pt.P_v[ir], pt.P_t0[j_rep],
+                                  pt.P_t1[j_rep], pt.P_p0[j_rep], pt.P_v[j_rep])
+        lose = d < separation_m
+        if not lose.any():
+            return None, extra
+        return (cand[lose], pt.P_traj[j_rep[lose]], d[lose]), extra
     # gather each piece pair's values once, then repeat them per candidate (the same values as
     # gathering at the repeated indices, for a fraction of the gathers)
     j_rep = np.repeat(j, cnt)
@@ -922,13 +1073,6 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
     share a space-time cell (see the module docstring).
     """
     model = as_separation_model(separation_m)
-    separation_m = model.separation_m
-    if z_cell_m is None and model.kind == "cylinder" and _CYLINDER_Z_KEYS:
-        # The cylinder's vertical reach V as z cells: pieces cruising on levels V apart share no
-        # cell, so their pairs are never made (the z filter would drop them all); the same piece
-        # pairs reach the exact kernel, so the same pairs and distances to the last bit
-        # (see z_cell_m below), for about half the cell-mate pairs at flight levels.
-        z_cell_m = model.vertical_reach_m
     single = trajs_b is None
     sa = _as_segment_set(trajs_a)
     sb = sa if single else _as_segment_set(trajs_b)
@@ -940,85 +1084,16 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
     ranks = None if ranks[0] is None else ranks
     empty = np.zeros((0, 2), dtype=np.int64)
     nothing = (empty, np.zeros(0)) if return_distances else empty
-    if len(sa) == 0 or len(sb) == 0:
+    bp = _broad_phase(model, sa, sb, single, groups, groups_b, slack_traj, cell_m, bucket_s,
+                      z_cell_m)
+    if bp is None:
         return nothing
-    if not single:
-        # Only the common time window can hold a conflict.
-        sa, sb = _common_window(sa, sb, slack_traj)
-        if len(sa) == 0 or len(sb) == 0:
-            return nothing
-
-    # Broad phase: pieces, their cell keys, sorted; the pairs of pieces sharing a cell.
-    clock = [time.perf_counter()]
-    cell, bucket = _grid_size(sa, separation_m, cell_m, bucket_s)
-    half = 0.5 * float(separation_m)
-    half_z = 0.5 * model.vertical_reach_m
-    pa = _cut_pieces(sa, cell, bucket, half, half_z)
-    pb = pa if single else _cut_pieces(sb, cell, bucket, half, half_z)
-    na = pa.t0.shape[0]
-    # a's pieces occupy their boxes until t1 plus their trajectory's largest shift
-    pa_t1_sweep = pa.t1 if slack_traj is None else pa.t1 + slack_traj[sa.traj[pa.seg]]
-    clock.append(time.perf_counter())
-    if z_cell_m is not None and not (np.isfinite(z_cell_m) and z_cell_m > 0.0):
-        raise ValueError(f"z_cell_m must be positive and finite, got {z_cell_m!r}")
-    # z boundaries at -V/2 + k z_cell_m: flight levels at multiples of V = z_cell_m touch (their
-    # boxes, inflated by V/2) exactly on a boundary and share no cell
-    grid = _make_grid(pa, pb, pa_t1_sweep, cell, bucket, z_cell_m, -half_z)
-    ra = grid.ranges(pa, pa_t1_sweep)
-    rb = ra if single else grid.ranges(pb, pb.t1)
-    grid.nx = int(max(ra[1].max(), rb[1].max())) + 1
-    grid.ny = int(max(ra[3].max(), rb[3].max())) + 1
-    grid.nt = int(max(ra[5].max(), rb[5].max())) + 1
-    if grid.z_bounds is not None:
-        grid.nz = int(max(ra[7].max(), rb[7].max())) + 1
-        if ((grid.nt * grid.ny * grid.nx * grid.nz) * 2).bit_length() > 63:
-            # the widened (coordinate) sort has no z: leave z out of the keys
-            grid.z_bounds, grid.nz = None, 1
-            ra, rb = ra[:6], rb[:6]
-    n_items = na + (0 if single else pb.t0.shape[0])
-    sk = _sorted_keys(ra, rb, single, na, n_items, grid, clock)
-    run_label = None
-    if single and _SKIP_OWN_RUNS:
-        # Within a cell the entries sort by piece (packed codes, or the widened lexsort), so by
-        # trajectory: a trajectory's entries are one run, and so are a group's when the labels
-        # do not decrease with the trajectory (the planner's request order). Checked, not
-        # assumed: if the labels decrease anywhere within a cell, this call makes every pair
-        # and filters it as before.
-        s_traj = sa.traj[pa.seg][sk.items]
-        lab = s_traj if groups is None else groups[s_traj]
-        if bool(np.all((lab[1:] >= lab[:-1]) | (sk.cell_key[1:] != sk.cell_key[:-1]))):
-            run_label = lab
-    left_pos, right_first, n_right = _cell_mates(sk, single, run_label)
-    iz0 = None
-    if grid.z_bounds is not None:
-        iz0 = ra[6] if single else np.concatenate((ra[6], rb[6]))
-    pt = _piece_table(pa, pb, sa, sb, single, pa_t1_sweep, slack_traj is not None, sk.items,
-                      None if single or groups is None else (groups, groups_b), iz0)
-
-    # Narrow phase, in bounded chunks of cell-mate pairs: box filters, then the exact check.
-    clock.append(time.perf_counter())
     out_pairs = []
     out_dist = []
-    n_shared = int(n_right.sum())
     n_exact = 0
-    csum = np.cumsum(n_right)
-    start = 0
-    while start < left_pos.shape[0]:
-        done = int(csum[start - 1]) if start > 0 else 0
-        stop = int(np.searchsorted(csum, done + _MAX_PAIRS_PER_CHUNK, side="right"))
-        stop = max(stop, start + 1)
-        lp = left_pos[start:stop]
-        nr = n_right[start:stop]
-        rf = right_first[start:stop]
-        cnt = int(nr.sum())
-        lrep = np.repeat(lp, nr)
-        rpos = np.repeat(rf, nr) + (np.arange(cnt, dtype=np.int64) - np.repeat(np.cumsum(nr) - nr, nr))
-        start = stop
-        i, j = _box_filter(lrep, rpos, pt, sk, grid, single, groups, run_label is not None)
+    for i, j in _near_piece_pairs(bp, _MAX_PAIRS_PER_CHUNK):
         n_exact += int(i.size)
-        if i.size == 0:
-            continue
-        lost, extra = _narrow_phase(i, j, pt, model, first, shift, ranks)
+        lost, extra = _narrow_phase(i, j, bp.pt, model, first, shift, ranks)
         n_exact += extra
         if lost is None:
             continue
@@ -1027,16 +1102,71 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
             a_idx, b_idx = np.minimum(a_idx, b_idx), np.maximum(a_idx, b_idx)
         out_pairs.append(np.stack((a_idx, b_idx), axis=1))
         out_dist.append(d)
-    clock.append(time.perf_counter())
+    bp.clock.append(time.perf_counter())
     if stats is not None:
-        stats.update(segments_a=len(sa), segments_b=len(sb), pieces=int(n_items),
-                     keys=int(sk.keys.shape[0]), pairs_sharing_cell=n_shared, exact_checks=n_exact,
-                     pieces_s=clock[1] - clock[0], keys_s=clock[2] - clock[1],
-                     sort_s=clock[3] - clock[2], pairs_and_exact_s=clock[4] - clock[3])
+        bp.fill_stats(stats, n_exact)
     if not out_pairs:
         return nothing
-    nbt = int(max(sa.n_trajectories, sb.n_trajectories,
+    nbt = int(max(bp.sa.n_trajectories, bp.sb.n_trajectories,
                   0 if shift is None else shift.shape[0])) + 1
     pairs, dist = _unique_min_pairs(out_pairs, out_dist, nbt)
     return (pairs, dist) if return_distances else pairs
+
+
+def any_conflict(trajs_a, trajs_b, separation_m: float = DEFAULT_SEPARATION_M,
+                 cell_m: float | None = None, bucket_s: float | None = None,
+                 shifts_a=None, z_cell_m: float | None = None,
+                 stats: dict | None = None) -> np.ndarray:
+    """Per trajectory of ``trajs_a`` (or per candidate, with ``shifts_a``): does it lose
+    separation with at least one trajectory of ``trajs_b``? The check that decides.
+
+    The same answer, to the last bit, as marking the first column of
+    ``conflicting_pairs(trajs_a, trajs_b, ...)`` with the same arguments (the same pieces, cells
+    and exact kernel on the same piece pairs, in the same orientation), for less work: no
+    distances and no pair list are kept, and a trajectory (candidate) stops being checked at its
+    first loss. The pairs of pieces that share a cell are walked in the sorted keys' order,
+    earliest time bucket first, so most of what a busy epoch discards is found near its
+    departure and the later buckets skip it (``test_any_conflict_matches_conflicting_pairs``).
+
+    Args: as :func:`conflicting_pairs` (two sets only; no groups or ranks: a decision does not
+        depend on which pair is found first). ``stats`` also gets ``decided_early``: the
+        trajectories (candidates) found blocked before the last chunk.
+    Returns: (n_a,) bool, or (n_candidates,) bool with ``shifts_a``.
+    Complexity: the broad phase of :func:`conflicting_pairs`; the box filter and the exact
+    kernel only over the piece pairs of trajectories (candidates) not yet blocked.
+    """
+    model = as_separation_model(separation_m)
+    sa = _as_segment_set(trajs_a)
+    sb = _as_segment_set(trajs_b)
+    first, shift, slack_traj = _check_shifts(shifts_a, False, sa.n_trajectories)
+    n_out = sa.n_trajectories if shift is None else int(shift.shape[0])
+    blocked = np.zeros(n_out, dtype=bool)
+    bp = _broad_phase(model, sa, sb, False, None, None, slack_traj, cell_m, bucket_s, z_cell_m)
+    if bp is None:
+        return blocked
+    # per trajectory of a: how many of its candidates are still open (1 each without shifts)
+    open_count = np.ones(sa.n_trajectories, dtype=np.int64) if shift is None \
+        else np.diff(first)
+    template_of = None if shift is None else \
+        np.repeat(np.arange(sa.n_trajectories, dtype=np.int64), np.diff(first))
+    left_traj = bp.pt.P_traj[bp.sk.items[bp.left_pos]]
+    n_exact = 0
+    for i, j in _near_piece_pairs(bp, _DECIDE_PAIRS_PER_CHUNK,
+                                  lambda s, e: open_count[left_traj[s:e]] > 0):
+        keep = open_count[bp.pt.P_traj[i]] > 0
+        i, j = i[keep], j[keep]
+        n_exact += int(i.size)
+        if i.size == 0:
+            continue
+        lost, extra = _narrow_phase(i, j, bp.pt, model, first, shift, None, blocked)
+        n_exact += extra
+        if lost is None:
+            continue
+        blocked[lost[0]] = True
+        open_count = (~blocked).astype(np.int64) if template_of is None else \
+            np.bincount(template_of, weights=~blocked, minlength=sa.n_trajectories)
+    bp.clock.append(time.perf_counter())
+    if stats is not None:
+        bp.fill_stats(stats, n_exact)
+    return blocked
 
