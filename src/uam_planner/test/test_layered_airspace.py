@@ -249,3 +249,29 @@ def test_a_request_with_no_route_avoiding_other_vertiports_is_rejected_at_submit
     assert reason is not None and "without passing through another vertiport" in reason
     assert p.submit(req("r2", "A", "C")) is None
     assert [f.request_id for f in p.plan(0.0, 0).approved] == ["r2"]
+
+
+@pytest.mark.parametrize("policy", ["mwis", "fifo"])
+def test_route_searches_run_by_submit_count_in_the_next_epochs_planning_time(policy):
+    """A new origin-destination pair of a layered network is searched when ``submit``
+    validates it; that time is part of the next epoch's figures (phase "routes_s"), and a
+    planner whose routes were precomputed spends none there."""
+    from uam_planner.synthetic import generate_network
+    city = generate_network(60, 6, seed=1, levels_m=[60.0, 90.0], pads_per_vertiport=2)
+    cfg = AirspaceConfig("cylinder", 30.0, 5.0)
+    lazy = Planner(city, PlanningConfig(airspace=cfg), policy, solve_mwis=_first_each)
+    warm = Planner(city, PlanningConfig(airspace=cfg, precompute_routes=True), policy,
+                   solve_mwis=_first_each)
+    for p in (lazy, warm):
+        assert p.submit(FlightRequest("r1", "A000", "A001", 0.0, 0.0, 60.0)) is None
+    lazy_rep, warm_rep = lazy.plan(0.0, 0).report, warm.plan(0.0, 0).report
+    assert lazy_rep.phase_times_s["routes_s"] > 0.0
+    assert lazy_rep.planning_time_s >= lazy_rep.phase_times_s["routes_s"]
+    assert warm_rep.phase_times_s["routes_s"] == 0.0
+    assert lazy_rep.approved == warm_rep.approved == 1
+    assert lazy.plan(30.0, 1).report.phase_times_s["routes_s"] == 0.0   # counted once
+
+
+def _first_each(weights, edges, groups):
+    from uam_solvers import solve
+    return solve(weights, edges, groups=groups, backend="greedy")

@@ -109,6 +109,10 @@ class Planner:
         self.active_index = ActiveFlightIndex()
         self._known_ids: set[str] = set()
         self._rejected_since_plan = 0
+        # wall time [s] of the route searches that ``submit`` ran since the last epoch (a new
+        # origin-destination pair of a layered network is searched when it is validated): part
+        # of the next epoch's planning time, its phase "routes_s"
+        self._route_search_s = 0.0
         self._prepared: PreparedEpoch | None = None
         # requests decided (approved or expired) and approved per operator (the "fair"
         # objective's running shares, over the whole run or a sliding window)
@@ -466,10 +470,15 @@ class Planner:
         if net.layered:
             # vertiports are terminals: a pair may have no route that avoids the others (the
             # Network only guarantees reachability through them); the routes are cached anyway
+            misses = self.cache.misses
+            t = time.perf_counter()
             try:
                 self.cache.templates(net.index[request.origin_id], net.index[request.destination_id])
             except ValueError as exc:
                 return f"destination_id: {exc}"
+            finally:
+                if self.cache.misses != misses:
+                    self._route_search_s += time.perf_counter() - t
         return None
 
     def submit(self, request: FlightRequest) -> str | None:
@@ -531,6 +540,7 @@ class Planner:
                                             horizon=1))  # uam_planner.first_fit; myopic
             prep = PreparedEpoch(t_s=float(t_s), epoch_index=int(epoch_index), pending=list(self.pending),
                                  report=res.report, result=res)
+        self._count_route_searches(prep)
         if held or seen:
             # each held flight is counted once (its plan, if still active, or one projection),
             # each projected one as its plan
@@ -544,6 +554,18 @@ class Planner:
                 prep.report.overruns = {k: o.until_s for k, o in self.overruns.items()}
         self._prepared = prep
         return prep
+
+    def _count_route_searches(self, prep: PreparedEpoch) -> None:
+        """The route searches ``submit`` ran for this epoch's requests become part of its
+        planning time (phase "routes_s"): the epoch's figures hold everything it cost."""
+        routes_s, self._route_search_s = self._route_search_s, 0.0
+        if prep.result is not None:
+            rep = prep.result.report
+            rep.phase_times_s["routes_s"] = routes_s
+            rep.planning_time_s += routes_s
+        else:
+            prep.phases["routes_s"] = routes_s
+            prep.prepare_s += routes_s
 
     def _projected_traffic(self, t_s: float) -> list:
         """With the conflict probe on (``conflict_probe_s``): every airborne flight's projection

@@ -1,0 +1,137 @@
+#!/usr/bin/env python3
+"""CPU per planning epoch on the synthetic layered city, at steady state.
+
+    python scripts/bench_epoch_cpu.py --per-hour 3000
+    python scripts/bench_epoch_cpu.py --per-hour 10000
+    python scripts/bench_epoch_cpu.py --per-hour 30000 --duration 1500 --steady-from 900
+
+The city is ``generate_network(2000, 100, seed, levels 60/90/120/150 m, 4 pads)``, cylinder
+H 100 m / V 30 m, 5 s departure slots, the paper's demand generator (window 60 s) at
+``--per-hour`` requests per hour, planned in process by ``Planner`` (policy MWIS, backend
+greedy in process: the solve's CPU is left out, it is the solvers' figure, not the epoch's).
+Routes are precomputed when the planner is made (``PlanningConfig.precompute_routes``; its
+one-off CPU is printed as the set-up), or with ``--lazy-routes`` searched when a pair is first
+requested.
+
+CPU of one epoch = the process CPU time of that epoch's ``submit`` calls plus its ``plan``
+call, minus the solve's: everything the planner spends on the epoch, wherever it happens (a
+route search inside ``submit`` counts). Epochs before ``--steady-from`` [s] (the fleet filling
+up) are left out of the percentiles. Prints p50 / p99 / max of the CPU and of the report's
+``planning_time_s`` (wall), the airborne count, candidates and discarded per epoch, the
+approvals (which must not depend on the code's speed) and the load average before and after.
+CPU time is far less sensitive than wall time to other processes on the same cores.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+for pkg in ("uam_contract", "uam_planner", "uam_solvers", "uam_sim"):
+    sys.path.insert(0, str(ROOT / "src" / pkg))
+
+from uam_planner.planning import AirspaceConfig, Planner, PlanningConfig  # noqa: E402
+from uam_planner.synthetic import generate_network  # noqa: E402
+from uam_sim.world.demand import RequestGenerator  # noqa: E402
+
+
+def run(per_hour: float, duration_s: float, steady_from_s: float, seed: int = 0,
+        slot_s: float = 5.0, precompute: bool = True) -> dict:
+    """Plan ``duration_s`` of the city at ``per_hour``; per-epoch CPU and counts."""
+    from uam_solvers.greedy import greedy_mwis
+    net = generate_network(2000, 100, seed=seed, levels_m=[60.0, 90.0, 120.0, 150.0],
+                           pads_per_vertiport=4)
+    cfg = PlanningConfig(airspace=AirspaceConfig("cylinder", 30.0, slot_s), backend="greedy",
+                         seed=seed, precompute_routes=precompute)
+    solve_cpu = [0.0]
+
+    class _Answer:
+        backend = "greedy"
+
+        def __init__(self, selected):
+            self.selected = selected
+
+    def solve(weights, edges, groups):
+        c = time.process_time()
+        try:
+            return _Answer(greedy_mwis(weights, edges))
+        finally:
+            solve_cpu[0] += time.process_time() - c
+
+    c_setup = time.process_time()
+    planner = Planner(net, cfg, "mwis", solve_mwis=solve)
+    setup_cpu = time.process_time() - c_setup
+    demand = RequestGenerator(net.aerodrome_ids, per_hour * 30.0 / 3600.0, 30.0, 60.0, seed)
+    rows = []
+    approved = 0
+    for e in range(int(math.ceil(duration_s / cfg.epoch_s - 1e-9))):
+        t = e * cfg.epoch_s
+        solve_cpu[0] = 0.0
+        c = time.process_time()
+        for r in demand.requests_at(t, e):
+            reason = planner.submit(r)
+            if reason is not None:
+                raise SystemExit(f"request {r.request_id} refused: {reason}")
+        c_submit = time.process_time() - c
+        res = planner.plan(t, e)
+        cpu = time.process_time() - c - solve_cpu[0]
+        rep = res.report
+        approved += len(res.approved)
+        rows.append((t, cpu, c_submit, rep.planning_time_s, rep.active_flights - rep.approved,
+                     rep.candidates, rep.discarded, rep.approved))
+    a = np.array(rows)
+    steady = a[a[:, 0] >= steady_from_s]
+    return {"all": a, "steady": steady, "approved": approved, "setup_cpu_s": setup_cpu}
+
+
+def _pct(x, q):
+    return float(np.percentile(x, q)) if len(x) else float("nan")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--per-hour", type=float, default=3000.0)
+    ap.add_argument("--duration", type=float, default=None,
+                    help="simulated seconds (default 1,800 s; 1,500 s at >= 20,000/h)")
+    ap.add_argument("--steady-from", type=float, default=None,
+                    help="first epoch time [s] counted (default: duration - 600 s)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--lazy-routes", action="store_true",
+                    help="search each origin-destination pair's routes when first requested "
+                         "(in submit) instead of when the planner is made")
+    args = ap.parse_args(argv)
+    duration = args.duration if args.duration is not None else \
+        (1500.0 if args.per_hour >= 20000 else 1800.0)
+    steady_from = args.steady_from if args.steady_from is not None else duration - 600.0
+    load0 = os.getloadavg()
+    t_wall = time.perf_counter()
+    r = run(args.per_hour, duration, steady_from, args.seed,
+            precompute=not args.lazy_routes)
+    wall = time.perf_counter() - t_wall
+    load1 = os.getloadavg()
+    s = r["steady"]
+    ms = 1e3
+    routes = "lazy routes" if args.lazy_routes else "routes precomputed"
+    print(f"city 2000/100, 4 levels, 4 pads, cylinder 100/30 m, 5 s slots, {routes}, {args.per_hour:g} "
+          f"requests/h, {duration:g} s, seed {args.seed}; steady state t >= {steady_from:g} s "
+          f"({len(s)} epochs)")
+    print("| CPU per epoch p50 / p99 / max | of it in submit, p50 / max | planning_time_s p50 / "
+          "p99 (wall) | airborne mean | candidates mean | discarded mean | approved (run) |")
+    print(f"| {ms * _pct(s[:, 1], 50):.1f} / {ms * _pct(s[:, 1], 99):.1f} / "
+          f"{ms * s[:, 1].max():.1f} ms | {ms * _pct(s[:, 2], 50):.1f} / {ms * s[:, 2].max():.1f} "
+          f"ms | {ms * _pct(s[:, 3], 50):.1f} / {ms * _pct(s[:, 3], 99):.1f} ms | "
+          f"{s[:, 4].mean():.0f} | {s[:, 5].mean():.0f} | {s[:, 6].mean():.0f} | {r['approved']} |")
+    print(f"planner set-up CPU {r['setup_cpu_s']:.2f} s; run {wall:.0f} s wall; load average "
+          f"{load0[0]:.2f} before, {load1[0]:.2f} after")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
