@@ -5,7 +5,8 @@ separation with any of them. ``any_conflict`` gives it without distances or pair
 checking a candidate at its first loss; these tests hold it to the mask that the first column
 of ``conflicting_pairs`` gives (the path the planner took before), bit for bit, on seeded random
 cases with exact ties (a flight trailing another by exactly the separation, levels exactly V
-apart and a rounding step off), with and without departure shifts, in both models.
+apart and a rounding step off), with and without departure shifts, in both models, with the
+planner's stages in time, finer ones and a single stage.
 """
 
 import numpy as np
@@ -56,11 +57,18 @@ def _mask(pairs, n):
     return m
 
 
+STAGES = [separation._DECIDE_STAGES_S, (5.0, 20.0, 60.0, 150.0), ()]
+
+
+@pytest.mark.parametrize("stages", STAGES)
 @pytest.mark.parametrize("model", [SPHERE, CYL])
 @pytest.mark.parametrize("seed", range(6))
-def test_any_conflict_matches_conflicting_pairs(model, seed, monkeypatch):
-    # small chunks: many candidates are decided in one chunk and skipped in the next ones
+def test_any_conflict_matches_conflicting_pairs(model, seed, stages, monkeypatch):
+    # small chunks: many candidates are decided in one chunk and skipped in the next ones; the
+    # planner's stages, finer ones (most segments in a later stage than their trajectory's
+    # first) and one stage
     monkeypatch.setattr(separation, "_DECIDE_PAIRS_PER_CHUNK", 64)
+    monkeypatch.setattr(separation, "_DECIDE_STAGES_S", stages)
     a, b = _case(seed, 80, 120)
     want = _mask(conflicting_pairs(a, b, model), len(a))
     assert 10 < want.sum() < len(a)
@@ -72,10 +80,12 @@ def test_any_conflict_matches_conflicting_pairs(model, seed, monkeypatch):
         assert any_conflict(a, b, model, **kw).tolist() == want_kw.tolist()
 
 
+@pytest.mark.parametrize("stages", STAGES)
 @pytest.mark.parametrize("model", [SPHERE, CYL])
 @pytest.mark.parametrize("seed", range(4))
-def test_any_conflict_with_shifts_matches_conflicting_pairs(model, seed, monkeypatch):
+def test_any_conflict_with_shifts_matches_conflicting_pairs(model, seed, stages, monkeypatch):
     monkeypatch.setattr(separation, "_DECIDE_PAIRS_PER_CHUNK", 64)
+    monkeypatch.setattr(separation, "_DECIDE_STAGES_S", stages)
     base, active = _case(100 + seed, 40, 80)
     rng = np.random.default_rng(seed)
     counts = rng.integers(0, 8, len(base))               # 0..7 slots per template
