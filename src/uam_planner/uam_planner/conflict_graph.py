@@ -97,7 +97,9 @@ class ShiftedCandidates:
     """
 
     def __init__(self, base, first, shift_s, exact=None):
-        self.base = list(base)
+        # a sequence; one with a ``segment_set()`` method (the planner's templates) gives the
+        # base segments without building each base trajectory
+        self.base = base if hasattr(base, "segment_set") else list(base)
         self.first = np.asarray(first, dtype=np.int64)
         self.shift_s = np.asarray(shift_s, dtype=np.float64)
         self.template_of = np.repeat(np.arange(len(self.base)), np.diff(self.first))
@@ -107,6 +109,11 @@ class ShiftedCandidates:
 
     def __len__(self) -> int:
         return int(self.shift_s.shape[0])
+
+    def base_segments(self) -> SegmentSet:
+        """The SegmentSet of the base trajectories."""
+        fast = getattr(self.base, "segment_set", None)
+        return fast() if fast is not None else SegmentSet.from_trajectories(list(self.base))
 
     def __getitem__(self, c):
         c = int(c)
@@ -259,7 +266,7 @@ def build_conflict_graph(candidates, candidate_request, candidate_index, candida
             # with the horizon's pair cache, z cells in the keys as in its calls (the same pairs)
             z_cell = as_separation_model(separation_m).vertical_reach_m \
                 if pair_cache is not None else None
-            discarded = any_conflict(SegmentSet.from_trajectories(candidates.base), act,
+            discarded = any_conflict(candidates.base_segments(), act,
                                      separation_m,
                                      shifts_a=(candidates.first, candidates.shift_s),
                                      z_cell_m=z_cell)

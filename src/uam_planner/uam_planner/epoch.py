@@ -321,10 +321,44 @@ class _Candidates:
         starts = [c for c in range(n) if c == 0 or self.tmpls[c] is not self.tmpls[c - 1]]
         first = np.asarray(starts + [n], dtype=np.int64)
         deps = np.asarray(self.departures_s, dtype=np.float64)
-        base = [self.tmpls[c].trajectory(self.departures_s[c]) for c in starts]
+        base = _Departures([self.tmpls[c] for c in starts], [self.departures_s[c] for c in starts])
         shift = deps - np.repeat(deps[first[:-1]], np.diff(first)) if n else deps
         build = (lambda c: self.tmpls[c].trajectory(self.departures_s[c])) if exact else None
         return ShiftedCandidates(base, first, shift, exact=build)
+
+
+class _Departures:
+    """Trajectories of templates flown from given departures [s], each built on access; their
+    SegmentSet comes straight from the templates' arrays (most of a busy epoch's candidates are
+    discarded against the active flights, and only the survivors' trajectories are needed)."""
+
+    def __init__(self, tmpls: list, departures_s: list):
+        self.tmpls = tmpls
+        self.departures_s = departures_s
+
+    def __len__(self) -> int:
+        return len(self.tmpls)
+
+    def __getitem__(self, j) -> Trajectory:
+        return self.tmpls[j].trajectory(self.departures_s[j])
+
+    def segment_set(self) -> SegmentSet:
+        """The SegmentSet of every trajectory: the same floats as
+        ``SegmentSet.from_trajectories`` over them (each time is the template's relative time
+        plus the departure, one addition as in ``RouteTemplate.trajectory``)."""
+        n = len(self.tmpls)
+        if n == 0:
+            return SegmentSet.from_trajectories([])
+        segs = [tp.segments_rel for tp in self.tmpls]
+        counts = np.fromiter((s[0].shape[0] for s in segs), dtype=np.int64, count=n)
+        dep = np.repeat(np.asarray(self.departures_s, dtype=np.float64), counts)
+        t0 = np.concatenate([s[0] for s in segs])
+        t0 += dep
+        t1 = np.concatenate([s[1] for s in segs])
+        t1 += dep
+        return SegmentSet(np.repeat(np.arange(n, dtype=np.int64), counts), t0, t1,
+                          np.concatenate([s[2] for s in segs]),
+                          np.concatenate([s[3] for s in segs]), n)
 
 
 def _paper_weights(config: PlanningConfig, network) -> bool:
@@ -348,19 +382,20 @@ def _epoch_candidates(t_s: float, eligible: Sequence[FlightRequest], network, co
         if best_only:
             ts = ts[:1]
             slots = slots[:1]
-        best_t = min(tp.duration_s for tp in ts)
-        c = 0
-        for tp in ts:
-            for dep in slots.tolist():
-                out.tmpls.append(tp)
-                out.departures_s.append(dep)
-                if paper:
-                    out.weights.append(tp.route.weight)
-                else:
-                    out.weights.append(best_t / (tp.duration_s + (dep - float(slots[0]))))
-                out.req_of.append(i)
-                out.index_in_request.append(c)
-                c += 1
+        durations = [tp.duration_s for tp in ts]
+        best_t = min(durations)
+        deps = slots.tolist()
+        n_c = len(ts) * len(deps)
+        # per template, its slots in order (the same floats as one candidate at a time)
+        for tp, dur in zip(ts, durations):
+            out.tmpls.extend([tp] * len(deps))
+            out.departures_s.extend(deps)
+            if paper:
+                out.weights.extend([tp.route.weight] * len(deps))
+            else:
+                out.weights.extend([best_t / (dur + (dep - deps[0])) for dep in deps])
+        out.req_of.extend([i] * n_c)
+        out.index_in_request.extend(range(n_c))
     if config.objective != "paper" and out.tmpls:
         # with a horizon, "not approved now" means not within the H epochs
         w = epoch_weights(config.objective, t_s, horizon * config.epoch_s, eligible, out.req_of,
