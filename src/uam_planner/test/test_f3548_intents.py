@@ -32,7 +32,7 @@ def test_a_hand_built_plan_gives_the_expected_volumes():
     # 10 m/s east for 10 s (two 5 s pieces), then a 3 s climb of 30 m straight up
     traj = Trajectory(np.array([0.0, 10.0, 13.0]),
                       np.array([[0.0, 0.0, 100.0], [100.0, 0.0, 100.0], [100.0, 0.0, 130.0]]))
-    vols = trajectory_volumes(traj, VolumeSpec.for_separation(100.0))
+    vols = trajectory_volumes(traj, VolumeSpec(50.0, 50.0))
     assert len(vols) == 3
     # piece 1: x 0 -> 50, widened 50 m each side, 50 m beyond each end; band 100 -/+ 50
     np.testing.assert_allclose(vols[0].corners_m, [[-50, -50], [100, -50], [100, 50], [-50, 50]])
@@ -42,10 +42,12 @@ def test_a_hand_built_plan_gives_the_expected_volumes():
     # the climb (no horizontal motion): a 100 m square about (100, 0), band 100-50 .. 130+50
     np.testing.assert_allclose(vols[2].corners_m, [[50, -50], [150, -50], [150, 50], [50, 50]])
     assert (vols[2].lower_m, vols[2].upper_m, vols[2].t0_s, vols[2].t1_s) == (50.0, 180.0, 10.0, 13.0)
-    # the cylinder takes V / 2 vertically; longer pieces cut fewer volumes
+    # a separation gives half of it less F3548's 1 cm (the cylinder V / 2 vertically), so flights
+    # exactly at the separation get volumes 2 cm apart; longer pieces cut fewer volumes
     from uam_planner.separation import SeparationModel
+    assert VolumeSpec.for_separation(100.0) == VolumeSpec(49.99, 49.99)
     spec = VolumeSpec.for_separation(SeparationModel("cylinder", 100.0, 30.0), max_piece_s=10.0)
-    assert (spec.horizontal_buffer_m, spec.vertical_buffer_m) == (50.0, 15.0)
+    assert (spec.horizontal_buffer_m, spec.vertical_buffer_m) == (49.99, 14.99)
     assert len(trajectory_volumes(traj, spec)) == 2
     # from_s keeps the piece flying at from_s whole and drops the ones that ended
     assert [v.t0_s for v in trajectory_volumes(traj, VolumeSpec.for_separation(100.0), 7.0)] == [5.0, 10.0]
@@ -77,7 +79,7 @@ def test_the_intent_reference_details_and_times():
     lats = [p.lat for p in v.outline_polygon.vertices]
     assert min(lats) == pytest.approx(1.29 - 50 / 110575.0, abs=2e-7)  # 2e-7 deg: 2 cm
     assert max(lats) == pytest.approx(1.29 + 50 / 110575.0, abs=2e-7)
-    assert abs(v.altitude_lower.value - 70.0) < 0.01 and abs(v.altitude_upper.value - 170.0) < 0.01
+    assert abs(v.altitude_lower.value - 70.01) < 0.01 and abs(v.altitude_upper.value - 169.99) < 0.01
     # rounding to the microsecond: start down, end up
     start = ctx.start_ns
     assert rfc3339(0.0000015, start) == "2025-01-06T00:00:00.000001Z"
@@ -117,15 +119,16 @@ def test_a_loss_of_separation_always_intersects_and_separation_may_not_be_disjoi
     # piece of b at [15, 20] s spans x in [-50, 100] and a's [10, 15] s piece x in [50, 200]
     trail = flight([15.0, 115.0], [[0, 0, 100], [1000, 0, 100]], "t")
     assert first_intersection(va, trajectory_volumes(trail.trajectory, spec)) is not None
-    # 230 m behind (23 s) is beyond D_h = 2 hypot(10 * 5 + 50, 50) = 223.6 m: disjoint
+    # 230 m behind (23 s) is beyond D_h = 2 hypot(10 * 5 + 49.99, 49.99) = 223.58 m: disjoint
     d_h, d_v = spec.bounds_m(10.0, 0.0)
-    assert d_h == pytest.approx(2 * math.hypot(100.0, 50.0)) and d_v == 100.0
+    assert d_h == pytest.approx(2 * math.hypot(99.99, 49.99)) and d_v == pytest.approx(99.98)
     far = flight([23.0, 123.0], [[0, 0, 100], [1000, 0, 100]], "f")
     assert first_intersection(va, trajectory_volumes(far.trajectory, spec)) is None
-    # 1 cm precision: two boxes 0.5 cm apart intersect, 2 cm apart do not
+    # 1 cm precision: side by side 99.985 m apart (a loss of 1.5 cm) the boxes are 0.5 cm apart
+    # and intersect; exactly at the separation, 100 m, they are 2 cm apart and do not
     side = lambda dy: flight([0.0, 100.0], [[0, dy, 100], [1000, dy, 100]], "s")  # noqa: E731
-    assert first_intersection(va, trajectory_volumes(side(100.005).trajectory, spec)) is not None
-    assert first_intersection(va, trajectory_volumes(side(100.02).trajectory, spec)) is None
+    assert first_intersection(va, trajectory_volumes(side(99.985).trajectory, spec)) is not None
+    assert first_intersection(va, trajectory_volumes(side(100.0).trajectory, spec)) is None
 
 
 def _holds_the_half_separation_box(f, vols, spec, times):
@@ -255,12 +258,12 @@ def test_another_usss_intents_and_constraints_come_in_as_constraints(tmp_path):
     cons = constraints_from_f3548(doc, net, spec=VolumeSpec.for_separation(100.0))
     assert len(cons) == 1 and cons[0].constraint_id.startswith("oi:")
     assert "priority 5" in cons[0].reason and "uss2" in cons[0].reason
-    # their rectangle [-310, 310] x [-10, 10], widened by 50 m (mitre: still a rectangle)
+    # their rectangle [-310, 310] x [-10, 10], widened by 49.99 m (mitre: still a rectangle)
     xy = cons[0].rings_m[0]
-    assert np.allclose(sorted({round(v, 1) for v in xy[:, 0]}), [-360.0, 360.0], atol=0.05)
-    assert np.allclose(sorted({round(v, 1) for v in xy[:, 1]}), [-60.0, 60.0], atol=0.05)
-    assert cons[0].lower_m == pytest.approx(120 - 5 - 50, abs=0.01)
-    assert cons[0].upper_m == pytest.approx(120 + 5 + 50, abs=0.01)
+    assert np.allclose(sorted({round(v, 2) for v in xy[:, 0]}), [-359.99, 359.99], atol=0.01)
+    assert np.allclose(sorted({round(v, 2) for v in xy[:, 1]}), [-59.99, 59.99], atol=0.01)
+    assert cons[0].lower_m == pytest.approx(120 - 5 - 49.99, abs=0.01)
+    assert cons[0].upper_m == pytest.approx(120 + 5 + 49.99, abs=0.01)
     assert (cons[0].start_s, cons[0].end_s) == (100.0, 160.0)
     storm = f3548_constraint(Constraint("s", 3, "", 0.0, 500.0, center_m=(800.0, 0.0), radius_m=100.0,
                                         lower_m=0.0, upper_m=300.0), ctx)
@@ -283,3 +286,122 @@ def test_another_usss_intents_and_constraints_come_in_as_constraints(tmp_path):
     from uam_planner.constraints import ConstraintError
     with pytest.raises(ConstraintError, match="not an F3548 OperationalIntent"):
         load_constraints(path, net)
+
+
+LAYERED = "config/networks/singapore-layered.yaml"
+
+
+def test_adjacent_flight_levels_publish_bands_2_cm_apart_everywhere():
+    """On a layered network z is the height above the ellipsoid: a level's band is exactly the
+    level -/+ (V / 2 - 1 cm), so two flights on adjacent levels crossing 8 km from the origin
+    publish volumes 2 cm apart (reading z as ENU up made bands 30.1 m wide there, overlapping)."""
+    from uam_planner.f3548 import first_published_intersection, volume4d
+    from uam_planner.network import load_network
+    from uam_planner.separation import SeparationModel
+
+    net = load_network(LAYERED)
+    spec = VolumeSpec.for_separation(SeparationModel("cylinder", 100.0, 30.0))
+    ctx = IntentContext.for_network(net, spec)
+    assert ctx.altitude_is_height and not IntentContext.for_network(load_network("config/networks/tiny.yaml"),
+                                                                    spec).altitude_is_height
+    east = flight([0.0, 100.0], [[7500, 6000, 60.0], [8500, 6000, 60.0]], "east")
+    north = flight([0.0, 100.0], [[8000, 5500, 90.0], [8000, 6500, 90.0]], "north")
+    docs = {f.request_id: [as_json(volume4d(v, ctx)) for v in trajectory_volumes(f.trajectory, spec)]
+            for f in (east, north)}
+    for rid, level in (("east", 60.0), ("north", 90.0)):
+        bands = {(v["volume"]["altitude_lower"]["value"], v["volume"]["altitude_upper"]["value"])
+                 for v in docs[rid]}
+        assert bands == {(level - 14.99, level + 14.99)}
+    assert first_published_intersection(docs["east"], docs["north"], net.origin_lat_lon_alt) is None
+    # the same flights 1.5 cm closer than the levels (a loss of separation) do intersect
+    low = flight([0.0, 100.0], [[8000, 5500, 89.985], [8000, 6500, 89.985]], "low")
+    low_docs = [as_json(volume4d(v, ctx)) for v in trajectory_volumes(low.trajectory, spec)]
+    assert first_published_intersection(docs["east"], low_docs, net.origin_lat_lon_alt) is not None
+    # the horizontal map is one for every height: a point keeps its latitude and longitude
+    hi = volume4d(trajectory_volumes(flight([0.0, 5.0], [[8000, 6000, 150.0], [8000, 6000, 150.0]]).trajectory,
+                                     spec)[0], ctx)
+    lo = volume4d(trajectory_volumes(flight([0.0, 5.0], [[8000, 6000, 60.0], [8000, 6000, 60.0]]).trajectory,
+                                     spec)[0], ctx)
+    assert as_json(hi.volume.outline_polygon) == as_json(lo.volume.outline_polygon)
+
+
+def _layered_run(separation_m):
+    """A layered run (cylinder H = separation_m, V = 30 m, 5 s slots) with storms announced where
+    flights are going (re-plans): every (flight, plan version, decision time)."""
+    from uam_planner.network import load_network
+    from uam_sim.runner.experiment_config import make_config
+    from uam_sim.runner.scenario import run_scenario
+
+    net = load_network(LAYERED)
+    cfg = make_config(network=LAYERED, separation_model="cylinder", separation_m=separation_m,
+                      vertical_separation_m=30.0, departure_slot_s=5.0, audit=False, time_limit_s=5.0)
+    decided = []
+
+    def before(planner, t, k):
+        if 3 <= k <= 7:  # a storm 60 s ahead of a flight still in the air in 2 min
+            f = sorted((fl for fl, _ in decided if fl.arrival_s > t + 120.0), key=lambda fl: fl.request_id)[0]
+            p = f.trajectory.position_at(t + 60.0, clamp=True)
+            planner.update_constraint("add", Constraint(f"storm{k}", 1, "storm", t + 30.0, 900.0,
+                                                        center_m=(float(p[0]), float(p[1])), radius_m=700.0,
+                                                        lower_m=0.0, upper_m=500.0), t)
+
+    def keep(t, k, submitted, rejected, result):
+        decided.extend((f, t) for f in result.approved)
+        decided.extend((u.flight, t) for u in result.plan_updates if u.flight is not None)
+
+    run_scenario(net, "greedy", 6.0, 4, 240.0, cfg, observer=keep, before_epoch=before)
+    return net, decided
+
+
+def _published_pairs(net, decided, ctx):
+    """(pairs of intents of different flights that stand at the same time and fly at overlapping
+    times, the intersecting ones as (a, b, vertical overlap [m])), on the published documents.
+    A version stands from its decision until the flight's next version."""
+    from uam_planner.f3548 import first_published_intersection, published_prisms, volume4d
+
+    versions = {}
+    for f, t in decided:
+        versions.setdefault(f.request_id, []).append((t, f))
+    items = []
+    for rid, vs in versions.items():
+        vs.sort(key=lambda x: (x[0], x[1].version))
+        for n, (t, f) in enumerate(vs):
+            until = vs[n + 1][0] if n + 1 < len(vs) else f.arrival_s
+            vols, _ = volumes_for_limit(f.trajectory, ctx.spec)
+            prisms = published_prisms([as_json(volume4d(v, ctx)) for v in vols], net.origin_lat_lon_alt)
+            items.append((rid, t, until, f, prisms))
+    pairs, hits = 0, []
+    for i, a in enumerate(items):
+        for b in items[i + 1:]:
+            if a[0] == b[0] or a[2] < b[1] or b[2] < a[1] \
+                    or a[3].arrival_s < b[3].departure_s or b[3].arrival_s < a[3].departure_s:
+                continue
+            pairs += 1
+            hit = first_published_intersection(a[4], b[4], net.origin_lat_lon_alt)
+            if hit is not None:
+                pa, pb = a[4][hit[0]], b[4][hit[1]]
+                hits.append((a[3], b[3], min(pa[2], pb[2]) - max(pa[1], pb[1])))
+    return pairs, hits
+
+
+@pytest.mark.slow  # not in `make test-fast`: two layered runs in process, ~40 s
+def test_no_two_published_intents_of_a_layered_run_with_replans_intersect():
+    """The published documents of a layered run with re-plans, as a peer checks them (1 cm):
+    at the plain 100 m separation only same-level pairs meet (in trail or crossing within the
+    bound D_h); none of adjacent levels. Planned with H >= D_h + 1 cm (224 m for 5 s pieces at
+    10 m/s), no two intents intersect."""
+    from uam_planner.separation import SeparationModel
+
+    spec = VolumeSpec.for_separation(SeparationModel("cylinder", 100.0, 30.0))
+    d_h, _ = spec.bounds_m(10.0)
+    for separation_m in (100.0, math.ceil(d_h + PRECISION_M)):
+        net, decided = _layered_run(separation_m)
+        assert max(f.version for f, _ in decided) >= 2 and len(decided) >= 30  # re-plans
+        ctx = IntentContext.for_network(net, spec)
+        pairs, hits = _published_pairs(net, decided, ctx)
+        assert pairs > 500
+        if separation_m == 100.0:
+            assert hits and all(overlap > 1.0 for _, _, overlap in hits), hits  # the same band only
+            assert all(a.trajectory.points_m[1, 2] == b.trajectory.points_m[1, 2] for a, b, _ in hits)
+        else:
+            assert hits == [], [(a.request_id, b.request_id, o) for a, b, o in hits]

@@ -12,11 +12,14 @@ pieces. A piece flown from A (time ta) to B (time tb) gives
 - in time [ta, tb] (start rounded down, end up, to the microsecond).
 
 ``VolumeSpec.for_separation`` takes r_h = H / 2 and r_v = V / 2 of the run's separation model
-(the sphere: V = H = the radius). So at every instant t the aircraft's half-separation box
-(disc r_h x band r_v) lies inside the volume of the piece flying at t, and:
+(the sphere: V = H = the radius), each less F3548's 1 cm precision: two flights exactly at the
+separation (two adjacent flight levels) get volumes 2 cm apart, which F3548 counts as disjoint
+(it counts volumes within 1 cm of each other as intersecting). So at every instant t the
+aircraft's box (disc r_h x band r_v) lies inside the volume of the piece flying at t, and:
 
-- **a loss of separation always shows as intersecting volumes** (two aircraft closer than H
-  horizontally and V vertically at t: their midpoint lies in both volumes at t);
+- **a loss of separation by more than 1 cm always shows as intersecting volumes** at F3548's
+  precision (two aircraft within H - 1 cm horizontally and V - 1 cm vertically at t: their
+  boxes, and so their volumes at t, are within 1 cm of each other);
 - **the converse does not hold**: a volume holds its whole piece for its whole time window, so
   two flights that keep separation can have intersecting volume sets. :meth:`VolumeSpec.bounds_m`
   gives the exact sufficient condition used in the tests: the volume sets of two flights are
@@ -27,10 +30,20 @@ pieces. A piece flown from A (time ta) to B (time tb) gives
   volume sets that never intersect; with the paper's 100 m and 5 s pieces at 10 m/s,
   D_h = 223.6 m.
 
-**Frames.** Corners are converted from the network's ENU frame to WGS84 exactly
-(``uam_planner.geo.enu_to_geodetic``, at the piece's lower and upper altitude; the band is the
-least and greatest ellipsoidal height over the corners). Polygon edges are geodesics in F3548 and
-straight lines in ENU; for pieces of ~50 m the two differ by far less than 1 cm.
+**Frames.** What a trajectory's z means depends on the network (``IntentContext.for_network``):
+
+- a layered network (``Network.layered``): z is the height above the WGS84 ellipsoid (the
+  flight level), so the band is exactly [min z - r_v, max z + r_v]: two levels V apart give
+  bands V - 2 r_v apart everywhere. (x, y) is published at the latitude and longitude of the
+  ENU point (x, y, ``horizontal_up_m``), one map for every height, so volumes disjoint in the
+  network's frame stay disjoint when published;
+- the paper's networks: z is ENU up. Corners are converted to WGS84 exactly
+  (``uam_planner.geo.enu_to_geodetic``, at the piece's lower and upper altitude); the band is the
+  least and greatest ellipsoidal height over the corners, so it holds the ENU slab (ENU up
+  tilts from the local vertical: a 30 m slab spans 30.27 m of heights at 10 km).
+
+Polygon edges are geodesics in F3548 and straight lines in ENU; for pieces of ~50 m the two
+differ by far less than 1 cm.
 
 **References.** ``id``: a UUID in F3548's UUIDv4 format derived from (operator, request id) by
 SHA-1 (``uuid5`` with its version bits set to 4, as F3548's EntityID pattern demands), so the
@@ -100,11 +113,13 @@ class VolumeSpec:
 
     @classmethod
     def for_separation(cls, separation, max_piece_s: float = DEFAULT_PIECE_S) -> "VolumeSpec":
-        """r_h = H / 2, r_v = V / 2 (the sphere: both the radius / 2) of a SeparationModel or a
-        number (the paper's sphere of that radius)."""
+        """r_h = H / 2 - 1 cm, r_v = V / 2 - 1 cm (the sphere: both the radius / 2 - 1 cm) of a
+        SeparationModel or a number (the paper's sphere of that radius): flights exactly at the
+        separation get volumes 2 cm apart, disjoint at F3548's 1 cm precision."""
         model: SeparationModel = as_separation_model(separation)
         vertical = model.separation_m if model.kind == "sphere" else model.vertical_separation_m
-        return cls(model.separation_m / 2.0, vertical / 2.0, float(max_piece_s))
+        return cls(model.separation_m / 2.0 - PRECISION_M, vertical / 2.0 - PRECISION_M,
+                   float(max_piece_s))
 
     def bounds_m(self, horizontal_speed_mps: float, vertical_speed_mps: float = 0.0) -> tuple:
         """(D_h, D_v): two flights whose pieces' windows overlap at t and whose volumes meet are
@@ -198,6 +213,48 @@ def first_intersection(a: Sequence[EnuVolume], b: Sequence[EnuVolume],
     return None
 
 
+def published_prisms(volumes, origin_lat_lon_alt) -> list:
+    """(polygon in the origin's tangent plane [m], lower, upper [m], t0, t1 [s since 1970]) of
+    Volume4D JSON documents with polygon outlines (what :func:`first_published_intersection`
+    compares; make them once when a set is compared many times)."""
+    from implicitdict import StringBasedDateTime
+
+    from .geo import geodetic_to_enu
+    origin = origin_lat_lon_alt
+    out = []
+    for v in volumes:
+        if isinstance(v, tuple):  # already made
+            out.append(v)
+            continue
+        vol = v["volume"]
+        ll = np.array([[p["lat"], p["lng"], float(origin[2])]
+                       for p in vol["outline_polygon"]["vertices"]], dtype=float)
+        xy = geodetic_to_enu(ll, origin)[:, :2]
+        times = [StringBasedDateTime(v[k]["value"]).datetime.timestamp() for k in ("time_start", "time_end")]
+        out.append((ShapelyPolygon(xy), float(vol["altitude_lower"]["value"]),
+                    float(vol["altitude_upper"]["value"]), *times))
+    return out
+
+
+def first_published_intersection(a: Sequence[dict], b: Sequence[dict], origin_lat_lon_alt,
+                                 precision_m: float = PRECISION_M):
+    """As :func:`first_intersection`, on published Volume4Ds (JSON, polygon outlines, W84
+    heights, RFC 3339 windows; or :func:`published_prisms` of them), as a peer sees them:
+    vertices placed in the tangent plane of ``origin_lat_lon_alt`` at its height (over a city,
+    within millimetres of the geodesic distances), bands compared as heights. The first
+    intersecting pair (i, j) or None."""
+    pa, pb = published_prisms(a, origin_lat_lon_alt), published_prisms(b, origin_lat_lon_alt)
+    if not pa or not pb:
+        return None
+    tree = STRtree([p[0] for p in pb])
+    for i, (poly, lo, hi, t0, t1) in enumerate(pa):
+        for j in sorted(int(k) for k in tree.query(poly, predicate="dwithin", distance=precision_m)):
+            _, lo2, hi2, s0, s1 = pb[j]
+            if t0 <= s1 and s0 <= t1 and lo <= hi2 + precision_m and lo2 <= hi + precision_m:
+                return i, j
+    return None
+
+
 # ---- identities and times ---------------------------------------------------------------------
 
 def entity_id(kind: str, *parts: str) -> str:
@@ -256,6 +313,9 @@ class IntentContext:
         scenario_start_utc: the UTC instant of simulation time 0 (ISO 8601 with a zone; 'sim' is
             refused: F3548 needs absolute times).
         manager, uss_base_url: the USS the intents say they come from (no trailing '/').
+        altitude_is_height: True when z is the height above the WGS84 ellipsoid (a layered
+            network), False when it is ENU up (module docstring, "Frames").
+        horizontal_up_m: with ``altitude_is_height``, the ENU up [m] at which (x, y) is placed.
     """
 
     origin_lat_lon_alt: tuple
@@ -263,6 +323,18 @@ class IntentContext:
     scenario_start_utc: str = DEFAULT_SCENARIO_START_UTC
     manager: str = DEFAULT_MANAGER
     uss_base_url: str = DEFAULT_USS_BASE_URL
+    altitude_is_height: bool = False
+    horizontal_up_m: float = 0.0
+
+    @classmethod
+    def for_network(cls, network, spec: VolumeSpec, **kw) -> "IntentContext":
+        """The context of ``network``: its origin, and for a layered network z read as the
+        height above the ellipsoid, (x, y) placed at the mean flight level."""
+        if getattr(network, "layered", False):
+            kw.setdefault("altitude_is_height", True)
+            kw.setdefault("horizontal_up_m", float(np.mean(network.levels_m))
+                          - float(network.origin_lat_lon_alt[2]))
+        return cls(tuple(float(v) for v in network.origin_lat_lon_alt), spec, **kw)
 
     def __post_init__(self):
         start = scenario_start_ns(self.scenario_start_utc)
@@ -291,22 +363,31 @@ class IntentContext:
     def altitude(self, h_m: float) -> api.Altitude:
         return api.Altitude(value=float(h_m), reference="W84", units="M")
 
+    def outline_and_band(self, corners_m, lower_m: float, upper_m: float) -> tuple:
+        """(lat lng (k, 2) [deg], lowest, highest height [m]) of the prism ``corners_m`` (k, 2)
+        x [lower_m, upper_m] in the network's frame (module docstring, "Frames")."""
+        xy = np.asarray(corners_m, dtype=float).reshape(-1, 2)
+        k = xy.shape[0]
+        if self.altitude_is_height:
+            enu = np.column_stack([xy, np.full(k, self.horizontal_up_m)])
+            return enu_to_geodetic(enu, self.origin_lat_lon_alt)[:, :2], float(lower_m), float(upper_m)
+        enu = np.zeros((2 * k, 3))
+        enu[:k, :2] = xy
+        enu[k:, :2] = xy
+        enu[:k, 2] = lower_m
+        enu[k:, 2] = upper_m
+        lla = enu_to_geodetic(enu, self.origin_lat_lon_alt)
+        return ((lla[:k, :2] + lla[k:, :2]) / 2.0, float(lla[:k, 2].min()),
+                float(lla[k:, 2].max()))
+
 
 def volume4d(v: EnuVolume, ctx: IntentContext) -> api.Volume4D:
     """One EnuVolume as an F3548 Volume4D (WGS84 corners, W84 altitudes, UTC window)."""
-    k = v.corners_m.shape[0]
-    enu = np.zeros((2 * k, 3))
-    enu[:k, :2] = v.corners_m
-    enu[k:, :2] = v.corners_m
-    enu[:k, 2] = v.lower_m
-    enu[k:, 2] = v.upper_m
-    lla = enu_to_geodetic(enu, ctx.origin_lat_lon_alt)
-    mid = (lla[:k, :2] + lla[k:, :2]) / 2.0
-    vertices = [api.LatLngPoint(lat=float(lat), lng=float(lng)) for lat, lng in mid]
+    latlng, lower, upper = ctx.outline_and_band(v.corners_m, v.lower_m, v.upper_m)
+    vertices = [api.LatLngPoint(lat=float(lat), lng=float(lng)) for lat, lng in latlng]
     return api.Volume4D(
         volume=api.Volume3D(outline_polygon=api.Polygon(vertices=vertices),
-                            altitude_lower=ctx.altitude(float(lla[:k, 2].min())),
-                            altitude_upper=ctx.altitude(float(lla[k:, 2].max()))),
+                            altitude_lower=ctx.altitude(lower), altitude_upper=ctx.altitude(upper)),
         time_start=ctx.time(v.t0_s), time_end=ctx.time(v.t1_s, up=True))
 
 
@@ -347,21 +428,21 @@ def constraint_volumes(c, ctx: IntentContext) -> list:
     finite = [z for z in (c.lower_m, c.upper_m) if math.isfinite(z)]
     z_ref = finite[0] if finite else 0.0
     kw = {}
+    xy = np.asarray(c.rings_m[0], dtype=float) if c.rings_m is not None \
+        else np.asarray(c.center_m, dtype=float).reshape(1, 2)
+    latlng, _, _ = ctx.outline_and_band(xy, z_ref, z_ref)
     if c.rings_m is not None:
-        ring = np.asarray(c.rings_m[0], dtype=float)
-        enu = np.column_stack([ring, np.full(len(ring), z_ref)])
-        lla = enu_to_geodetic(enu, ctx.origin_lat_lon_alt)
         kw["outline_polygon"] = api.Polygon(vertices=[api.LatLngPoint(lat=float(a), lng=float(b))
-                                                      for a, b, _ in lla])
+                                                      for a, b in latlng])
     else:
-        lla = enu_to_geodetic([c.center_m[0], c.center_m[1], z_ref], ctx.origin_lat_lon_alt)
-        kw["outline_circle"] = api.Circle(center=api.LatLngPoint(lat=float(lla[0]), lng=float(lla[1])),
+        kw["outline_circle"] = api.Circle(center=api.LatLngPoint(lat=float(latlng[0, 0]),
+                                                                 lng=float(latlng[0, 1])),
                                           radius=api.Radius(value=float(c.radius_m), units="M"))
-    centre = np.asarray(c.rings_m[0], float).mean(axis=0) if c.rings_m is not None \
-        else np.asarray(c.center_m, float)
+    centre = xy.mean(axis=0)
     for name, z in (("altitude_lower", c.lower_m), ("altitude_upper", c.upper_m)):
         if math.isfinite(z):
-            h = enu_to_geodetic([centre[0], centre[1], z], ctx.origin_lat_lon_alt)[2]
+            h = z if ctx.altitude_is_height else \
+                enu_to_geodetic([centre[0], centre[1], z], ctx.origin_lat_lon_alt)[2]
             kw[name] = ctx.altitude(float(h))
     v4 = {"volume": api.Volume3D(**kw)}
     if math.isfinite(c.start_s):
@@ -428,10 +509,11 @@ def _sim_s(time_doc, start_ns: int, where: str) -> float:
 
 
 def _volume_constraint(v4: dict, cid: str, version: int, reason: str, origin, start_ns: int,
-                       buffer_h: float, buffer_v: float, where: str):
+                       buffer_h: float, buffer_v: float, where: str, heights: bool = False):
     """One F3548 Volume4D (JSON) as a prism Constraint in the network's frame, widened by
     ``buffer_h`` horizontally (mitre joins: the polygon stays a polygon) and ``buffer_v``
-    below and above."""
+    below and above. ``heights``: the frame's z is the height above the ellipsoid (a layered
+    network), so a W84 altitude is taken as it is."""
     from shapely.geometry import Polygon as P
 
     from .constraints import Constraint
@@ -473,7 +555,7 @@ def _volume_constraint(v4: dict, cid: str, version: int, reason: str, origin, st
         if alt is None:
             return -math.inf if sign < 0 else math.inf
         h = float(alt["value"])
-        z = geodetic_to_enu([*_centre_lla(centre, origin), h], origin)[2]
+        z = h if heights else geodetic_to_enu([*_centre_lla(centre, origin), h], origin)[2]
         return float(z + sign * buffer_v)
 
     start = _sim_s(v4["time_start"], start_ns, f"{where}.time_start") if v4.get("time_start") else -math.inf
@@ -507,6 +589,7 @@ def constraints_from_f3548(doc, network, scenario_start_utc: str = DEFAULT_SCENA
     spec = spec or VolumeSpec.for_separation(100.0)
     start_ns = scenario_start_ns(scenario_start_utc)
     origin = network.origin_lat_lon_alt
+    heights = bool(getattr(network, "layered", False))
     items = doc if isinstance(doc, list) else [doc]
     out = []
     for n, item in enumerate(items):
@@ -535,7 +618,8 @@ def constraints_from_f3548(doc, network, scenario_start_utc: str = DEFAULT_SCENA
                 reason += f" ({det['type']})"
             for k, v4 in enumerate(vols):
                 out.append(_volume_constraint(v4, f"cst:{ref['id']}:{k}", ref["version"], reason,
-                                              origin, start_ns, 0.0, 0.0, f"{where}.volumes[{k}]"))
+                                              origin, start_ns, 0.0, 0.0, f"{where}.volumes[{k}]",
+                                              heights))
             continue
         vols = list(det.get("volumes") or []) + list(det.get("off_nominal_volumes") or [])
         reason = (f"operational intent {ref['id']} of {ref.get('manager', '?')} "
@@ -543,5 +627,5 @@ def constraints_from_f3548(doc, network, scenario_start_utc: str = DEFAULT_SCENA
         for k, v4 in enumerate(vols):
             out.append(_volume_constraint(v4, f"oi:{ref['id']}:{k}", ref["version"], reason, origin,
                                           start_ns, spec.horizontal_buffer_m, spec.vertical_buffer_m,
-                                          f"{where}.volumes[{k}]"))
+                                          f"{where}.volumes[{k}]", heights))
     return out

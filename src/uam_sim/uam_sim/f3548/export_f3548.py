@@ -117,7 +117,7 @@ def export(recording, out_dir, network_file: str, piece_s: float = 5.0,
     zero = log_time_zero_ns(path)
     start = scenario_start_utc or (_utc_text(zero) if zero > 0 else DEFAULT_SCENARIO_START_UTC)
     spec = VolumeSpec.for_separation(model, piece_s)
-    ctx = IntentContext(network.origin_lat_lon_alt, spec, scenario_start_utc=start)
+    ctx = IntentContext.for_network(network, spec, scenario_start_utc=start)
     out = Path(out_dir)
     (out / "operational_intents").mkdir(parents=True, exist_ok=True)
     (out / "constraints").mkdir(parents=True, exist_ok=True)
