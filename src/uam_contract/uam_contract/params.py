@@ -376,7 +376,7 @@ USS = (
     Param("workers", 8, "threads serving requests (a bounded pool; idle connections hold none)", 1, 256),
     Param("max_connections", 256, "connections waiting or in service at most (at the bound the oldest silent one "
           "is closed; none silent: 503); at least workers", 1, 10000),
-    Param("uss_base_url", "", "the base URL the intents name (no trailing '/'); '' = http://localhost:<port>"),
+    Param("uss_base_url", "", "the base URL the intents name (no trailing '/'); '' = http://<host>:<port> of the server as bound"),
     Param("network", "", "network file (its origin places the volumes on WGS84)"),
     Param("scenario_start_utc", DEFAULT_SCENARIO_START_UTC, "the UTC instant of simulation time 0 (F3548 "
           "times are absolute)", check=_utc_rule),

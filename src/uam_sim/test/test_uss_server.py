@@ -169,3 +169,38 @@ def test_fetch_another_usss_intents_into_a_constraints_file(server, tmp_path):
     assert len(list(load_constraints(out, load_network("config/networks/tiny.yaml")))) == 4
     assert main(["fetch", server.url, "0b6d5e4c-3a2b-4c1d-8e9f-0a1b2c3d4e5f", "--out", str(out),
                  "--token", server.token]) == 2
+
+
+def test_every_refusal_has_an_error_response_and_ids_are_case_insensitive(server):
+    """A request line over 65,536 bytes (414) and a malformed one (400) are refused by the HTTP
+    layer, with an F3548 ErrorResponse like every other refusal; an upper-case id is the same
+    id (RFC 4122); the server's URL is the address it is bound to."""
+    import socket
+
+    oid = server.store.put_flight(flight("r1", 30.0))
+    r = get(server, f"/uss/v1/operational_intents/{oid.upper()}")
+    assert r.status_code == 200 and r.json()["operational_intent"]["reference"]["id"] == oid
+    r = get(server, "/uss/v1/operational_intents/" + "x" * 70000)
+    assert r.status_code == 414 and r.headers["Content-Type"] == "application/json"
+    assert errors(r.json(), "ErrorResponse") == [] and "HTTP 414" in r.json()["message"]
+    with socket.create_connection(("127.0.0.1", server.port), timeout=10) as s:
+        s.sendall(b'GET /a" b\\ HTTP/1.1\r\n\r\n')  # bad syntax, with a quote and a backslash
+        answer = b""
+        while chunk := s.recv(65536):  # until the server closes
+            answer += chunk
+    head, body = answer.decode().split("\r\n\r\n", 1)
+    assert head.startswith("HTTP/1.1 400") and "application/json" in head
+    import json
+    assert "HTTP 400" in json.loads(body)["message"]
+    assert server.url == f"http://127.0.0.1:{server.port}"
+    assert get(server, f"/uss/v1/operational_intents/{oid}").status_code == 200
+
+
+def test_the_base_url_is_the_address_the_server_has():
+    import socket
+
+    from uam_sim.f3548.uss_server import base_url
+    assert base_url("127.0.0.1", 8090) == "http://127.0.0.1:8090"
+    assert base_url("uss1.example.com", 443) == "http://uss1.example.com:443"
+    assert base_url("::1", 8090) == "http://[::1]:8090"
+    assert base_url("0.0.0.0", 8090) == f"http://{socket.getfqdn()}:8090"

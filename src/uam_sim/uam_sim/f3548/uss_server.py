@@ -170,6 +170,18 @@ class IntentStore:
             return self._constraints.get(entity_id)
 
 
+def base_url(host: str, port: int) -> str:
+    """The URL a server bound to ``host``:``port`` really has: ``http://HOST:PORT`` (the bound
+    address as it is; for a wildcard bind, 0.0.0.0 or ::, the machine's fully qualified name,
+    the one name that reaches every interface); an IPv6 address in brackets."""
+    import socket
+    if host in ("", "0.0.0.0", "::"):
+        host = socket.getfqdn()
+    if ":" in host and not host.startswith("["):
+        host = f"[{host}]"
+    return f"http://{host}:{int(port)}"
+
+
 def _error(status: int, message: str):
     from flask import Response
     return Response(json.dumps({"message": message}), status=status, mimetype="application/json")
@@ -221,7 +233,7 @@ def create_app(store: IntentStore, auth: str = "verify", verifier=None):
         if len(entityid) > 36 or not ENTITY_ID.match(entityid):
             shown = entityid if len(entityid) <= 64 else entityid[:64] + "..."
             return _error(400, f"entityid: {shown!r} is not an F3548 EntityID (a UUIDv4)")
-        body = lookup(entityid)
+        body = lookup(entityid.lower())  # ids are UUIDs: RFC 4122 reads them case-insensitively
         if body is None:
             return _error(404, missing.format(entityid))
         return Response(body, status=200, mimetype="application/json")
@@ -276,9 +288,25 @@ class UssServer:
         from .auth import TokenVerifier, default_audiences  # joserfc and cryptography on first use
         from .pool import PooledWSGIServer
 
-        class _Quiet(WSGIRequestHandler):  # no log line per request (a load of them is the job)
+        class _Quiet(WSGIRequestHandler):
+            """No log line per request (a load of them is the job); what the HTTP layer refuses
+            before the app sees it (a request line over 65,536 bytes: 414, a malformed request
+            line: 400) answered with an F3548 ErrorResponse, not an HTML page."""
             def log_request(self, *args, **kwargs):
                 pass
+
+            def send_error(self, code, message=None, explain=None):
+                short, long = self.responses.get(code, ("Error", ""))
+                text = f"request: HTTP {int(code)} {message or short}: {explain or long}"
+                body = json.dumps({"message": text[:500]}).encode()  # the client's bytes, escaped
+                self.send_response(int(code), short)
+                self.send_header("Connection", "close")
+                self.send_header("Content-Type", "application/json")
+                self.send_header("Content-Length", str(len(body)))
+                self.end_headers()
+                if self.command != "HEAD" and int(code) >= 200 and int(code) not in (204, 304):
+                    self.wfile.write(body)
+                self.close_connection = True
 
         if auth not in AUTH_MODES:
             raise ValueError(f"auth: {auth!r} is not one of {', '.join(AUTH_MODES)}")
@@ -300,7 +328,8 @@ class UssServer:
 
     @property
     def url(self) -> str:
-        return f"http://{self.host}:{self.port}"
+        """The server's base URL as bound (:func:`base_url`)."""
+        return base_url(self.host, self.port)
 
     @property
     def announcement(self) -> str:

@@ -44,7 +44,7 @@ class UssNode(Node):
         from uam_planner.f3548 import IntentContext, VolumeSpec
         from uam_planner.network import load_network
         from uam_planner.separation import SeparationModel
-        from uam_sim.f3548.uss_server import IntentStore, UssServer
+        from uam_sim.f3548.uss_server import IntentStore, UssServer, base_url
 
         if not p["network"]:
             raise ValueError("parameter network: a network file is needed (its origin places the volumes)")
@@ -54,9 +54,9 @@ class UssNode(Node):
         spec = VolumeSpec.for_separation(model, p["volume_piece_s"])
 
         def context(port):
-            return IntentContext(self.network.origin_lat_lon_alt, spec,
-                                 scenario_start_utc=p["scenario_start_utc"],
-                                 uss_base_url=p["uss_base_url"] or f"http://localhost:{port}")
+            return IntentContext.for_network(self.network, spec,
+                                             scenario_start_utc=p["scenario_start_utc"],
+                                             uss_base_url=p["uss_base_url"] or base_url(p["host"], port))
         self.store = IntentStore(context(p["port"]))
         self._priority: dict[tuple, int] = {}
         self.server = UssServer(self.store, p["host"], p["port"], p["auth"], auth_key=p["auth_key"],
