@@ -162,14 +162,17 @@ class TokenVerifier:
     def from_file(cls, path, audiences) -> "TokenVerifier":
         return cls(load_keys(path), audiences)
 
-    def verify(self, header: str | None, scope: str) -> Grant:
+    def verify(self, header: str | None, scope) -> Grant:
+        """The grant of a valid token holding ``scope`` (a scope, or a tuple of scopes of which
+        any one will do, as utm.yaml lists alternatives); raises AuthError (401 / 403)."""
         claims = self._verified_claims(self._bearer(header))
         scopes = claims.get("scope", "")
         scopes = tuple(scopes.split()) if isinstance(scopes, str) else ()
-        if scope not in scopes:
+        wanted = (scope,) if isinstance(scope, str) else tuple(scope)
+        if not any(w in scopes for w in wanted):
             raise AuthError(403, "insufficient_scope",
-                            f"Authorization: the token's scope {' '.join(scopes)!r} does not include {scope!r}",
-                            scope=scope)
+                            f"Authorization: the token's scope {' '.join(scopes)!r} does not include "
+                            f"{' or '.join(repr(w) for w in wanted)}", scope=" ".join(wanted))
         return Grant(str(claims.get("sub", "")), str(claims.get("iss", "")), scopes)
 
     @staticmethod

@@ -53,6 +53,22 @@ REALM = "uam_fleet USS"
 PRUNE_EVERY_S = 30.0
 SCOPE_INTENTS = "utm.strategic_coordination"
 SCOPE_CONSTRAINTS = "utm.constraint_processing"
+SCOPE_CONFORMANCE = "utm.conformance_monitoring_sa"
+#: makeUssReport takes a token with any F3548 scope (utm.yaml)
+SCOPES_REPORT = (SCOPE_INTENTS, SCOPE_CONSTRAINTS, "utm.constraint_management", SCOPE_CONFORMANCE,
+                 "utm.availability_arbitration")
+#: InterUSS's versioning interface: the scope and the one system identity answered
+SCOPE_VERSIONS = "interuss.versioning.read_system_versions"
+SYSTEM_IDENTITY = "astm.f3548.v21"
+
+
+def system_version() -> str:
+    """This USS's version: the installed uam_sim package's (``0+unknown`` from a source tree)."""
+    from importlib.metadata import PackageNotFoundError, version
+    try:
+        return f"uam_fleet-{version('uam_sim')}"
+    except PackageNotFoundError:
+        return "uam_fleet-0+unknown"
 
 
 @dataclass
@@ -187,10 +203,69 @@ def _error(status: int, message: str):
     return Response(json.dumps({"message": message}), status=status, mimetype="application/json")
 
 
-def create_app(store: IntentStore, auth: str = "verify", verifier=None):
+def _peer_routes(app, store: IntentStore, inbox, authorise) -> None:
+    """The endpoints a peer or a test tool calls beyond the details: telemetry, InterUSS's
+    versioning interface, and (with ``inbox``) notifications and reports. ``authorise(scope)``:
+    None, or the 401 / 403 answer."""
+    from flask import Response, g, request
+
+    @app.get("/uss/v1/operational_intents/<entityid>/telemetry")
+    def telemetry(entityid):
+        bad = authorise(SCOPE_CONFORMANCE)
+        if bad is not None:
+            return bad
+        if not ENTITY_ID.match(entityid) or store.details(entityid.lower()) is None:
+            return _error(404, f"operational intent {entityid[:64]!r} is not managed here (unknown or ended)")
+        # no position reports reach this USS (the fleet's states are the simulator's)
+        return _error(412, f"operational intent {entityid}: no telemetry is available from this USS")
+
+    @app.get("/versions/<system_identity>")
+    def versions(system_identity):
+        bad = authorise(SCOPE_VERSIONS)
+        if bad is not None:
+            return bad
+        if system_identity != SYSTEM_IDENTITY:
+            return _error(404, f"system_identity: {system_identity[:64]!r} is not one of this USS's "
+                               f"({SYSTEM_IDENTITY})")
+        return Response(json.dumps({"system_identity": SYSTEM_IDENTITY, "system_version": system_version()}),
+                        mimetype="application/json")
+
+    def _peer(scope, handle):
+        """One endpoint a peer posts to: its token, a JSON body, then ``handle(body, manager)``."""
+        from .peers import NotificationError
+        bad = authorise(scope)
+        if bad is not None:
+            return bad
+        if inbox is None:
+            return _error(404, f"{request.path}: this server takes no notifications (no planner is wired)")
+        body = request.get_json(silent=True)
+        if body is None:
+            return _error(400, "body: not a JSON document")
+        manager = getattr(getattr(g, "grant", None), "sub", "") or ""
+        try:
+            return handle(body, manager)
+        except NotificationError as exc:
+            return _error(exc.status, exc.message)
+
+    @app.post("/uss/v1/operational_intents")
+    def notify_intent():
+        return _peer(SCOPE_INTENTS, lambda body, who: (inbox.notify(body, "operational_intent", who), ("", 204))[1])
+
+    @app.post("/uss/v1/constraints")
+    def notify_constraint():
+        return _peer(SCOPE_CONSTRAINTS, lambda body, who: (inbox.notify(body, "constraint", who), ("", 204))[1])
+
+    @app.post("/uss/v1/reports")
+    def report():
+        return _peer(SCOPES_REPORT, lambda body, who: Response(json.dumps(inbox.report(body, who)), status=201,
+                                                               mimetype="application/json"))
+
+
+def create_app(store: IntentStore, auth: str = "verify", verifier=None, inbox=None):
     """The Flask app serving ``store`` (module docstring). ``auth`` ``verify`` needs ``verifier``
-    (a :class:`uam_sim.f3548.auth.TokenVerifier`)."""
-    from flask import Flask, Response, request
+    (a :class:`uam_sim.f3548.auth.TokenVerifier`). With ``inbox`` (a
+    :class:`uam_sim.f3548.peers.PeerInbox`) it takes peers' notifications and reports."""
+    from flask import Flask, Response, g, request
     from werkzeug.exceptions import HTTPException
 
     from .auth import AuthError
@@ -218,7 +293,7 @@ def create_app(store: IntentStore, auth: str = "verify", verifier=None):
         if auth == "off":
             return None
         try:
-            verifier.verify(request.headers.get("Authorization"), scope)
+            g.grant = verifier.verify(request.headers.get("Authorization"), scope)
         except AuthError as exc:
             answer = _error(exc.status, exc.message)
             answer.headers["WWW-Authenticate"] = exc.www_authenticate(REALM)
@@ -262,6 +337,8 @@ def create_app(store: IntentStore, auth: str = "verify", verifier=None):
     def list_constraints():
         return _listing(SCOPE_CONSTRAINTS, store.constraint_ids)
 
+    _peer_routes(app, store, inbox, _authorise)
+
     @app.errorhandler(HTTPException)
     def _http_error(exc):
         return _error(exc.code or 500, f"{exc.name}: {request.method} {request.path[:200]}")
@@ -282,7 +359,7 @@ class UssServer:
 
     def __init__(self, store: IntentStore, host: str = "127.0.0.1", port: int = 0,
                  auth: str = "verify", auth_key: str = "", auth_audience: str = "",
-                 workers: int = 8, max_connections: int = 256, **pool_options):
+                 workers: int = 8, max_connections: int = 256, inbox=None, **pool_options):
         from werkzeug.serving import WSGIRequestHandler
 
         from .auth import TokenVerifier, default_audiences  # joserfc and cryptography on first use
@@ -320,7 +397,7 @@ class UssServer:
             audiences = auth_audience.split(",") if auth_audience.strip() else default_audiences(
                 store.ctx.uss_base_url)
             self.verifier = TokenVerifier.from_file(auth_key, audiences)
-        self._server = PooledWSGIServer(host, int(port), create_app(store, auth, self.verifier), _Quiet,
+        self._server = PooledWSGIServer(host, int(port), create_app(store, auth, self.verifier, inbox), _Quiet,
                                         workers=workers, max_connections=max_connections, **pool_options)
         self.host, self.port = host, int(self._server.server_port)
         self._thread = threading.Thread(target=self._server.serve_forever, name="uss-http",

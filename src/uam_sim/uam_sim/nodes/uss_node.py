@@ -59,9 +59,14 @@ class UssNode(Node):
                                              uss_base_url=p["uss_base_url"] or base_url(p["host"], port))
         self.store = IntentStore(context(p["port"]))
         self._priority: dict[tuple, int] = {}
+        from uam_sim.f3548.peers import PeerInbox
+        # peers' notifications are validated, kept and logged; reaching the planner needs its
+        # side of the hook (docs/f3548.md, "Peers"), so here the listener only logs the updates
+        self.inbox = PeerInbox(self.network, spec, p["scenario_start_utc"], listener=self._on_peer_change,
+                               log=self.get_logger().info)
         self.server = UssServer(self.store, p["host"], p["port"], p["auth"], auth_key=p["auth_key"],
                                 auth_audience=p["auth_audience"], workers=p["workers"],
-                                max_connections=p["max_connections"])
+                                max_connections=p["max_connections"], inbox=self.inbox)
         self.store.ctx = context(self.server.port)  # port 0: the port the server got (store empty)
         base = self.store.ctx.uss_base_url
         self.server.start()
@@ -162,6 +167,11 @@ class UssNode(Node):
             self.get_logger().warning(f"{c.TOPIC_CONSTRAINTS}: not served: {exc}")
             return
         self.store.set_constraints([con for con, _ in pairs])
+
+    def _on_peer_change(self, updates, kind, entity_id) -> None:
+        self.get_logger().warning(f"peer {kind} {entity_id}: {len(updates)} constraint updates "
+                                  f"({', '.join(a for a, _ in updates)}) not passed to the planner: "
+                                  f"the planner takes them through its own service (docs/f3548.md, \"Peers\")")
 
     def _on_clock(self, msg) -> None:
         self.store.set_time(stamp_s(msg.clock))
