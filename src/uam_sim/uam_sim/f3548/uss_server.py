@@ -10,6 +10,9 @@ Endpoints (F3548-21, utm.yaml):
   :data:`MAX_BODY_BYTES`), 401 (no bearer token, or one that is not a valid token for this USS:
   unsigned, forged, expired, another audience) / 403 (a valid token without the endpoint's
   scope), 404 unknown (or ended) entity, 405 another method;
+- ``POST /uss/v1/operational_intents``, ``/uss/v1/constraints`` (peers' notifications, with a
+  :class:`uam_sim.f3548.peers.PeerInbox`), ``POST /uss/v1/reports``, ``GET .../{entityid}/telemetry``
+  (412: no telemetry here), ``GET /versions/astm.f3548.v21`` (InterUSS's versioning interface);
 - ``GET /uam_fleet/v1/operational_intents`` and ``/uam_fleet/v1/constraints`` (this project's, not
   F3548's: with no DSS, the ids a tool can ask for; under the same scopes as the details).
 
