@@ -270,6 +270,10 @@ echo "ROS_DOMAIN_ID=$ROS_DOMAIN_ID" > "$OUT/run.env"
 # the run's airspace authority: a new key pair each run; the planner takes live constraint
 # updates signed with it only (uam_planner.authority; docs/constraints.md)
 python -m uam_planner.authority new "$OUT/authority" >/dev/null || die "no airspace authority key pair (above)"
+if (( USS_PORT > 0 )); then  # the USS's own authority: it passes peers' intents to the planner (not an admin)
+  python -m uam_planner.authority new "$OUT/authority" --id uss-peers --not-admin --add >/dev/null \
+    || die "no key pair for the USS's authority (above)"
+fi
 echo "run_fleet: live constraints: python -m uam_planner.nodes.constraint_client add FEATURE.geojson --run $OUT"
 # the priority classes each operator may ask for (uam_planner.grants): given, or the generator's
 # own class (its priority_class in config/request_generator.yaml) and 0 for any other operator
@@ -401,7 +405,7 @@ fi
 if (( USS_PORT > 0 )); then  # the F3548 USS-USS interface (docs/f3548.md)
   # it serves the planner's own record (its journal), not the topics anyone can publish
   start uam_sim uss uss "${USS_P[@]}" -p "separation_model:=$SEPARATION" "${USS_AUTH_ARGS[@]}" \
-    -p "journal:=$OUT/planner-journal.jsonl"
+    -p "journal:=$OUT/planner-journal.jsonl" -p "authority_key:=$OUT/authority/uss-peers.key.pem"
   echo "run_fleet: F3548 operational intents on http://127.0.0.1:$USS_PORT/uss/v1/operational_intents/{id} (ids: /uam_fleet/v1/operational_intents; auth $USS_AUTH)"
 fi
 start uam_sim simulator simulator "${SIMULATOR_P[@]}" -p "wait_for_subscribers:=[$SIM_WAITS]"

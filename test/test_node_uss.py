@@ -157,3 +157,44 @@ def test_the_uss_serves_the_planners_journal_not_what_anyone_publishes(ros_conte
         assert 150.0 <= uss.store.time_s <= sim.t_s
     finally:
         shutdown(executor, nodes)
+
+
+def test_a_peers_intent_reaches_the_planner_through_the_uss_authority(ros_context, spin_until, tmp_path):
+    """A peer posts its operational intent to our USS: the uss node passes it to the planner as a
+    live constraint signed by the USS's own airspace authority (not an admin), and the planner
+    holds it, authored by that authority, for its next epoch."""
+    import numpy as np
+    from uam_planner.authority import write_authority
+    from uam_planner.f3548 import IntentContext, VolumeSpec, as_json, operational_intent
+    from uam_planner.network import load_network
+    from uam_planner.planning import Flight
+    from uam_planner.trajectory import Trajectory
+    from uam_sim.nodes.uss_node import UssNode
+
+    listing, _caa = write_authority(tmp_path / "auth", "caa")
+    _listing, peers_key = write_authority(tmp_path / "auth", "uss-peers", admin=False, add=True)
+    executor, nodes, obs = build_graph(ros_context, rate=3.0, duration_s=240.0, backend="greedy",
+                                       planner_extra={"authorities_file": str(listing)})
+    uss = UssNode(context=ros_context, parameter_overrides=params(port=0, network=TINY, auth="off",
+                                                                  authority_key=str(peers_key)))
+    nodes["uss"] = uss
+    executor.add_node(uss)
+    try:
+        planner = nodes["planner"]
+        assert spin_until(executor, lambda: planner.epochs_planned >= 2, timeout_s=60)
+        net = load_network(TINY)
+        ctx = IntentContext(net.origin_lat_lon_alt, VolumeSpec(10.0, 5.0, 1000.0), manager="uss2")
+        traj = Trajectory(np.array([60.0, 1000.0]), np.array([[0.0, -50.0, 100.0], [0.0, 50.0, 100.0]]))
+        f = Flight("theirs", "X", "Y", ("X", "Y"), traj, 60.0, 1000.0, 0.0, 1.0, 0, "mwis", "greedy", 0,
+                   operator_id="uss2-op", version=1)
+        doc = as_json(operational_intent(f, 0.0, ctx))
+        body = {"operational_intent_id": doc["reference"]["id"], "operational_intent": doc,
+                "subscriptions": [{"subscription_id": "0b6d5e4c-3a2b-4c1d-8e9f-0a1b2c3d4e5f",
+                                   "notification_index": 1}]}
+        r = requests.post(f"{uss.server.url}/uss/v1/operational_intents", json=body, timeout=10)
+        assert r.status_code == 204, r.text
+        assert spin_until(executor, lambda: uss.peer_updates_accepted >= 1, timeout_s=20)
+        held = list(planner._projected_constraints().values())
+        assert len(held) == 1 and held[0].author == "uss-peers"
+    finally:
+        shutdown(executor, nodes)

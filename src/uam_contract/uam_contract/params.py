@@ -362,6 +362,11 @@ USS = (
           "uam_bringup.journal): served instead of what anyone can publish on uam/flight_plans and "
           "uam/constraints, with the clock of the simulator it names (its fleet states); '' = the topics "
           "(warned at start; run_fleet.sh gives <out>/planner-journal.jsonl)"),
+    Param("authority_key", "", "the private key (PEM) of the USS's own airspace authority, with which it passes "
+          "peers' intents and constraints to the planner (signed uam/update_constraint updates; "
+          "uam_planner.authority); '' = peers' changes are only logged (run_fleet.sh makes one, 'uss-peers', "
+          "not an admin)"),
+    Param("authority_id", "uss-peers", "that authority's id, as in the planner's authorities file"),
     Param("max_clock_step_s", 60.0, "with journal: the most the served clock may advance from one fleet state "
           "of the simulator to the next [s] (a forged jump is refused)", 0.001, 1e6),
     Param("host", "127.0.0.1", "address to bind ('0.0.0.0' for every interface; loopback by default)",

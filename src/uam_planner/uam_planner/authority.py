@@ -203,9 +203,11 @@ def sign_update(req: Any, action: str, authority_id: str, private_key_pem: bytes
     return jwt.encode({"alg": ALGORITHMS[0]}, claims, jwk.import_key(private_key_pem, "EC"))
 
 
-def write_authority(folder, authority_id: str = RUN_AUTHORITY_ID, admin: bool = True) -> tuple[Path, Path]:
+def write_authority(folder, authority_id: str = RUN_AUTHORITY_ID, admin: bool = True,
+                    add: bool = False) -> tuple[Path, Path]:
     """A new EC P-256 key pair for ``authority_id`` in ``folder``, and an authorities file
-    naming it: (authorities file, private key file; readable by its owner only)."""
+    naming it (``add``: appended to the folder's file, which keeps its other authorities):
+    (authorities file, private key file; readable by its owner only)."""
     import os
 
     from joserfc import jwk
@@ -219,9 +221,13 @@ def write_authority(folder, authority_id: str = RUN_AUTHORITY_ID, admin: bool = 
     private.write_bytes(key.as_pem(private=True))
     (out / f"{authority_id}.pub.pem").write_bytes(key.as_pem(private=False))
     listing = out / "authorities.yaml"
-    listing.write_text(f"# the run's airspace authorities (uam_planner.authority)\nauthorities:\n"
-                       f"  - id: {authority_id}\n    public_key: {authority_id}.pub.pem\n"
-                       f"    admin: {'true' if admin else 'false'}\n", encoding="utf-8")
+    entry = (f"  - id: {authority_id}\n    public_key: {authority_id}.pub.pem\n"
+             f"    admin: {'true' if admin else 'false'}\n")
+    if add and listing.is_file():
+        listing.write_text(listing.read_text(encoding="utf-8") + entry, encoding="utf-8")
+    else:
+        listing.write_text("# the run's airspace authorities (uam_planner.authority)\nauthorities:\n" + entry,
+                           encoding="utf-8")
     return listing, private
 
 
@@ -237,8 +243,9 @@ def main(argv=None) -> int:
     new.add_argument("folder")
     new.add_argument("--id", default=RUN_AUTHORITY_ID)
     new.add_argument("--not-admin", action="store_true", help="may change only its own constraints")
+    new.add_argument("--add", action="store_true", help="add it to the folder's authorities file")
     args = ap.parse_args(argv)
-    listing, private = write_authority(args.folder, args.id, not args.not_admin)
+    listing, private = write_authority(args.folder, args.id, not args.not_admin, add=args.add)
     print(f"authorities file {listing}; private key {private}")
     return 0
 

@@ -134,3 +134,45 @@ def _some_flight():
     traj = Trajectory(np.array([30.0, 50.0]), np.array([[0.0, 0, 0], [200.0, 0, 0]]))
     return Flight("r1", "A", "B", ("A", "B"), traj, 30.0, 50.0, 200.0, 1.0, 0, "mwis", "greedy", 0,
                   operator_id="op")
+
+
+def test_a_peers_intent_reaches_the_planner_as_a_signed_update_of_the_uss_authority(tmp_path):
+    """In the node graph the planner takes a live constraint only signed by an airspace authority:
+    the USS forwards peers' changes as its own (non-admin) authority, and the planner's rules
+    (uam_planner.authority, live_constraints) take them as they would from the node."""
+    from uam_planner.authority import Authorities, write_authority
+    from uam_planner.live_constraints import parse_update
+    from uam_sim.f3548.peers import PlannerForwarder, constraint_updates
+    from uam_planner.f3548 import constraints_from_f3548
+
+    net = lanes()
+    planner = Planner(net, PlanningConfig(k=2), "mwis", solve_mwis=best_of_each)
+    listing, key = write_authority(tmp_path / "auth", "uss-peers", admin=False)
+    authorities = Authorities.load(listing)
+    forward = PlannerForwarder("uss-peers", key.read_bytes(), seq0=1000)
+    doc = their_intent(net)
+    spec = VolumeSpec.for_separation(100.0)
+    start = IntentContext(net.origin_lat_lon_alt, spec).scenario_start_utc
+    added = constraints_from_f3548({"operational_intent": doc}, net, start, spec=spec)
+
+    def take(req):   # what the planner node does with a request
+        current = planner._projected_constraints()
+        action, what = parse_update(req, current, net)
+        author = authorities.verify(req, action)
+        authorities.check_owner(author, current.get(req.constraint_id))
+        if action != "withdraw":
+            import dataclasses
+            what = dataclasses.replace(what, author=author)
+        return planner.update_constraint(action, what, 80.0)
+    for req in forward.requests(constraint_updates({}, added)):
+        assert take(req) is None
+    held = planner._projected_constraints()
+    assert [(c.constraint_id, c.author) for c in held.values()] == [(added[0].constraint_id, "uss-peers")]
+    for req in forward.requests(constraint_updates({c.constraint_id: c for c in added}, [])):
+        assert take(req) is None
+    assert planner._projected_constraints() == {}
+    # a replayed request of the forwarder is refused
+    (req,) = forward.requests(constraint_updates({}, added))
+    assert take(req) is None
+    with pytest.raises(ValueError, match="a replayed update"):
+        take(req)

@@ -53,6 +53,46 @@ def constraint_updates(old: dict, new: list) -> list:
     return out
 
 
+#: UpdateConstraint's actions (uam_planner.live_constraints)
+_ACTION_CODES = {"add": 0, "change": 1, "withdraw": 2}
+
+
+class PlannerForwarder:
+    """Peers' changes as updates of the planner's live constraints, signed by the USS's own
+    airspace authority (``uam_planner.authority``; run_fleet.sh makes it, not an admin, so it
+    may change only what it added): each :func:`constraint_updates` pair becomes one request with
+    UpdateConstraint's fields (a plain object the node copies into the message). ``seq0``: the
+    first sequence number (each request takes the next)."""
+
+    def __init__(self, authority_id: str, private_key_pem: bytes, seq0: int):
+        self.authority_id, self.key = str(authority_id), bytes(private_key_pem)
+        self.seq = int(seq0)
+        self.sent: dict[str, int] = {}   # constraint id -> the version last sent
+
+    def requests(self, updates) -> list:
+        import json
+        from types import SimpleNamespace
+
+        from uam_planner.authority import sign_update
+        from uam_planner.live_constraints import constraint_feature
+
+        out = []
+        for action, what in updates:
+            if action == "withdraw":
+                cid = str(what)
+                req = SimpleNamespace(action=_ACTION_CODES[action], constraint_id=cid,
+                                      version=self.sent.get(cid, 0) + 1, reason="withdrawn by the peer", geojson="")
+            else:
+                req = SimpleNamespace(action=_ACTION_CODES[action], constraint_id=what.constraint_id,
+                                      version=int(what.version), reason=str(what.reason),
+                                      geojson=json.dumps(constraint_feature(what)))
+            self.seq += 1
+            req.authorization = sign_update(req, action, self.authority_id, self.key, self.seq)
+            self.sent[req.constraint_id] = int(req.version)
+            out.append(req)
+        return out
+
+
 class PeerInbox:
     """Peers' intents and constraints (the newest version of each) and their reports.
 

@@ -22,6 +22,7 @@ without ``auth_key``; with ``off`` it logs a warning saying so when it starts.
 from __future__ import annotations
 
 import sys
+import time
 from dataclasses import replace
 
 from rclpy.node import Node
@@ -59,9 +60,19 @@ class UssNode(Node):
                                              uss_base_url=p["uss_base_url"] or base_url(p["host"], port))
         self.store = IntentStore(context(p["port"]))
         self._priority: dict[tuple, int] = {}
-        from uam_sim.f3548.peers import PeerInbox
-        # peers' notifications are validated, kept and logged; reaching the planner needs its
-        # side of the hook (docs/f3548.md, "Peers"), so here the listener only logs the updates
+        from uam_sim.f3548.peers import PeerInbox, PlannerForwarder
+        # peers' notifications are validated and kept; with the USS's own airspace authority
+        # (authority_key) each change goes to the planner as a signed live constraint update
+        self.forward = None
+        self.peer_updates_accepted = 0
+        if p["authority_key"]:
+            from pathlib import Path
+            from uam_msgs.srv import UpdateConstraint
+            key = Path(p["authority_key"]).read_bytes()   # OSError names the file
+            # sequence numbers above any earlier run's: the wall clock in ns at start (the
+            # planner only needs them to grow)
+            self.forward = PlannerForwarder(p["authority_id"], key, time.time_ns())
+            self._update_client = self.create_client(UpdateConstraint, c.SERVICE_UPDATE_CONSTRAINT)
         self.inbox = PeerInbox(self.network, spec, p["scenario_start_utc"], listener=self._on_peer_change,
                                log=self.get_logger().info)
         self.server = UssServer(self.store, p["host"], p["port"], p["auth"], auth_key=p["auth_key"],
@@ -169,9 +180,27 @@ class UssNode(Node):
         self.store.set_constraints([con for con, _ in pairs])
 
     def _on_peer_change(self, updates, kind, entity_id) -> None:
-        self.get_logger().warning(f"peer {kind} {entity_id}: {len(updates)} constraint updates "
-                                  f"({', '.join(a for a, _ in updates)}) not passed to the planner: "
-                                  f"the planner takes them through its own service (docs/f3548.md, \"Peers\")")
+        """A peer's change (an HTTP worker thread): to the planner as signed updates."""
+        if self.forward is None:
+            self.get_logger().warning(f"peer {kind} {entity_id}: {len(updates)} constraint updates "
+                                      f"({', '.join(a for a, _ in updates)}) not passed to the planner: "
+                                      "no authority_key (docs/f3548.md, \"Peers\")")
+            return
+        from uam_msgs.srv import UpdateConstraint
+        for fields in self.forward.requests(updates):
+            req = UpdateConstraint.Request(action=fields.action, constraint_id=fields.constraint_id,
+                                           version=int(fields.version), reason=fields.reason,
+                                           geojson=fields.geojson, authorization=fields.authorization)
+            fut = self._update_client.call_async(req)
+            fut.add_done_callback(lambda f, cid=req.constraint_id: self._peer_answer(cid, f))
+
+    def _peer_answer(self, cid: str, fut) -> None:
+        res = fut.result()
+        if res is None or not res.accepted:
+            self.get_logger().warning(f"peer constraint {cid!r}: the planner refused it: "
+                                      f"{'no answer' if res is None else res.error}")
+        else:
+            self.peer_updates_accepted += 1
 
     def _on_clock(self, msg) -> None:
         self.store.set_time(stamp_s(msg.clock))
