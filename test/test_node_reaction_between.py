@@ -257,3 +257,22 @@ def test_observing_at_instants_keeps_the_first_position_of_each_vehicle(ros_cont
         assert book.latest("op/gone") is None       # not airborne at 60 s: not observed at all
     finally:
         planner.destroy_node()
+
+
+def test_states_that_arrived_before_the_simulator_called_count_for_the_wait(ros_context):
+    """The simulator publishes the fleet state of t = 0 before its first epoch call: once the
+    planner binds to that simulator the state counts for the wait of the reaction mode (it waited
+    request_wait_timeout_s, 60 s, for a state it had), and another session's never does."""
+    from uam_msgs.msg import FleetState
+    from graph_harness import make_planner
+    planner = make_planner(ros_context, backend="greedy", reaction=True, use_solver_service=False)
+    try:
+        for session, t in (("rogue", 30.0), ("sim-1", 0.0)):
+            msg = FleetState(session=session, step_index=int(t))
+            msg.header.stamp = m.to_time(t)
+            planner._on_fleet_msg(msg)
+        assert not planner._stamps_reached(0.0, False)
+        planner._bind("sim-1", resumed=False)
+        assert planner._stamps_reached(0.0, False) and not planner._stamps_reached(30.0, False)
+    finally:
+        planner.destroy_node()

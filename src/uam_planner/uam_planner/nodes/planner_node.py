@@ -689,6 +689,16 @@ class PlannerNode(Node):
     def _bind(self, session: str, resumed: bool) -> None:
         self.bound_simulator = session
         self.source.bind(session)
+        # the fleet states and reports of this simulator that arrived before it called: their
+        # stamps count for the waits (_await_stamps) from now on (a t = 0 state waited 60 s)
+        for msg in list(self._inbox):
+            if msg.session != session:
+                continue
+            t = m.from_time(msg.header.stamp)
+            if isinstance(msg, FleetState):
+                self._stamped(t, None)
+            else:
+                self._stamped(None, t)
         if self.journal is not None:
             self.journal.start(session, keep=resumed)
             self.journal.append_constraints(self._last_set_text)   # the set in force from the start
