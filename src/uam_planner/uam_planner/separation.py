@@ -1212,29 +1212,4 @@ def _decide_stage(model, sa, sb, slack_traj, cell, bucket, z_cell_m, first, shif
     if stats is not None:
         bp.fill_stats(stats, n_exact)
     return open_count
-    # per trajectory of a: how many of its candidates are still open (1 each without shifts)
-    open_count = np.ones(sa.n_trajectories, dtype=np.int64) if shift is None \
-        else np.diff(first)
-    template_of = None if shift is None else \
-        np.repeat(np.arange(sa.n_trajectories, dtype=np.int64), np.diff(first))
-    left_traj = bp.pt.P_traj[bp.sk.items[bp.left_pos]]
-    n_exact = 0
-    for i, j in _near_piece_pairs(bp, _DECIDE_PAIRS_PER_CHUNK,
-                                  lambda s, e: open_count[left_traj[s:e]] > 0):
-        keep = open_count[bp.pt.P_traj[i]] > 0
-        i, j = i[keep], j[keep]
-        n_exact += int(i.size)
-        if i.size == 0:
-            continue
-        lost, extra = _narrow_phase(i, j, bp.pt, model, first, shift, None, blocked)
-        n_exact += extra
-        if lost is None:
-            continue
-        blocked[lost[0]] = True
-        open_count = (~blocked).astype(np.int64) if template_of is None else \
-            np.bincount(template_of, weights=~blocked, minlength=sa.n_trajectories)
-    bp.clock.append(time.perf_counter())
-    if stats is not None:
-        bp.fill_stats(stats, n_exact)
-    return blocked
 
