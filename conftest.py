@@ -86,7 +86,15 @@ def spin_until(executor, condition: Callable[[], bool], timeout_s: float = 10.0,
         remaining = deadline - time.monotonic()
         if remaining <= 0:
             return bool(condition())
-        executor.spin_once(timeout_sec=min(step_s, remaining))
+        try:
+            executor.spin_once(timeout_sec=min(step_s, remaining))
+        except Exception as exc:  # noqa: BLE001 - only rclpy's race below is tolerated
+            # rclpy's MultiThreadedExecutor can take a timer a node has just cancelled (a run
+            # that ends on an error cancels its timers) and raise "timer is canceled" from the
+            # spin (ros2/rclpy#1485, fixed upstream after the wheels used here): the node meant
+            # it; anything else is raised
+            if "timer is canceled" not in str(exc):
+                raise
 
 
 @pytest.fixture(name="spin_until")

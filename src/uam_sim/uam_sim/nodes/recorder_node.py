@@ -53,6 +53,7 @@ finishes a chunk at least every ``flush_period_s`` of wall time, so a crash lose
 from __future__ import annotations
 
 import json
+import math
 import sys
 import time
 from pathlib import Path
@@ -73,7 +74,7 @@ from uam_sim.recording.cdr import fleet_state_digest, fleet_state_step_index, le
 from uam_sim.recording.mcap_reader import CLOCK_METADATA
 from uam_sim.recording.mcap_schema import message_class
 from uam_sim.recording.mcap_writer import McapRecorder
-from uam_contract.stamps import scenario_start_ns, sim_stamp_ns
+from uam_contract.stamps import scenario_start_ns, sim_stamp_ns, stamp_ns
 from uam_sim.views.rerun_log import RerunLogger
 from uam_sim.views.std_msgs_export import ViewExporter
 
@@ -224,6 +225,8 @@ class RecorderNode(Node):
             for vm in self.views.network_messages(0):
                 self._write_view(vm)
         self.finish_requested = False
+        self._end = None               # (end time [ns], epoch length [s]) of a clean end of run
+        self._fleet_stamp_ns = -1      # the newest fleet state's stamp
         self._finish_quiet_s = p["finish_quiet_s"]
         self._finish_timeout_s = p["finish_timeout_s"]
         self._finish_requested_at = 0.0
@@ -334,6 +337,9 @@ class RecorderNode(Node):
                                    "last messages are in")
             self.finish_requested = True
             self._finish_requested_at = time.monotonic()
+            # a clean end: what it announces must be in before the file closes (under load the
+            # recorder, niced, can be seconds behind: quiet alone closed it at step 467 of 600)
+            self._end = None if msg.error else (stamp_ns(msg.epoch_time), float(msg.epoch_s))
             self._finish_timer.reset()
         if self.finish_requested:
             self._maybe_close()
@@ -345,8 +351,20 @@ class RecorderNode(Node):
         if self._drain():
             self._last_rx = time.monotonic()
         now = time.monotonic()
-        if now - self._last_rx >= self._finish_quiet_s or now - self._finish_requested_at >= self._finish_timeout_s:
+        if now - self._finish_requested_at >= self._finish_timeout_s or \
+                (now - self._last_rx >= self._finish_quiet_s and self._all_in()):
             self.close()
+
+    def _all_in(self) -> bool:
+        """After a clean end: the fleet state of the end's time and the report of every epoch
+        before it have arrived (after an end on an error, whatever came)."""
+        if self._end is None:
+            return True
+        end_ns, epoch_s = self._end
+        if self._fleet_stamp_ns < end_ns - 1_000_000:
+            return False
+        n = math.ceil(end_ns * 1e-9 / epoch_s - 1e-9) if epoch_s > 0 else 0
+        return all(k in self.check.announced for k in range(n))
 
     def _write(self, topic: str, cls: type, data: bytes):
         """Write one message; returns it deserialized, or None for the per-step types (their
@@ -358,6 +376,8 @@ class RecorderNode(Node):
             stamp = sim_stamp_ns(msg)
         if topic == c.TOPIC_CLOCK and stamp is not None:
             self._clock_ns = max(self._clock_ns, stamp)
+        if topic == c.TOPIC_FLEET and stamp is not None:
+            self._fleet_stamp_ns = max(self._fleet_stamp_ns, stamp)
         log_ns = stamp if stamp is not None else self._clock_ns
         if not self.recorder.has_topic(self._names[topic]):
             self._register(topic, cls)
