@@ -301,7 +301,8 @@ RECORDER = (
     Param("flush_period_s", 1.0, "wall time after which the open chunk is written out, the most a crash "
           "loses [s]", 0.01, 3600.0),
     Param("finish_quiet_s", 0.5, "after the simulator's end of run, close once no message has arrived for this "
-          "long (messages of other topics may still be on their way) [s wall]", 0.0, 60.0),
+          "long (messages of other topics may still be on their way) and, after a clean end, the end's fleet "
+          "state and every epoch's report are in [s wall]", 0.0, 60.0),
     Param("finish_timeout_s", 10.0, "after the simulator's end of run, close at the latest after this long "
           "[s wall]", 0.0, 3600.0),
     Param("views", True, "also write the run in standard types for generic viewers (/uam/view/*: PointCloud2, "

@@ -35,6 +35,50 @@ def t(sec: int) -> Time:
     return Time(sec=sec, nanosec=0)
 
 
+def test_after_a_clean_end_the_recorder_waits_for_what_the_end_announces(ros_context, spin_until, tmp_path):
+    """The simulator's end of run (t = 60 s, 30 s epochs) arrives before the recorder has the
+    fleet state of 60 s and the report of epoch 1 (a recorder behind under load): it stays open
+    past finish_quiet_s until both are in, then closes."""
+    import time as _time
+    out = tmp_path / "rec" / "run.mcap"
+    recorder = RecorderNode(context=ros_context, parameter_overrides=[
+        Parameter("output", value=str(out)), Parameter("rerun", value="off"),
+        Parameter("network", value=str(ROOT / "config" / "networks" / "tiny.yaml"))])
+    talker = Node("talker_end", context=ros_context)
+    pubs = {resolved(topic): talker.create_publisher(cls, topic, qos) for topic, (cls, qos) in RECORDED_TOPICS.items()}
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(recorder)
+    executor.add_node(talker)
+    try:
+        assert spin_until(executor, lambda: all(p.get_subscription_count() >= 1 for p in pubs.values()), 20)
+
+        def state(k):
+            fs = FleetState(step_index=k)
+            fs.header.stamp = t(k)
+            pubs["/uam/fleet_state"].publish(fs)
+        for k in (0, 30, 59):
+            state(k)
+        report = PlanningReport(epoch_index=0)
+        report.header.stamp = t(0)
+        pubs["/uam/planning_reports"].publish(report)
+        pubs["/uam/epoch_sync"].publish(EpochSync(sender="simulator", session="s", finished=True,
+                                                  epoch_time=t(60), epoch_s=30.0))
+        assert spin_until(executor, lambda: recorder.finish_requested, 10)
+        end = _time.monotonic() + 2.0          # four times finish_quiet_s
+        while _time.monotonic() < end:
+            executor.spin_once(timeout_sec=0.05)
+        assert not recorder.finished
+        state(60)
+        late = PlanningReport(epoch_index=1)
+        late.header.stamp = t(30)
+        pubs["/uam/planning_reports"].publish(late)
+        assert spin_until(executor, lambda: recorder.finished, 5)   # well before finish_timeout_s
+    finally:
+        executor.shutdown()
+        recorder.destroy_node()
+        talker.destroy_node()
+
+
 def test_records_every_topic_and_closes_on_the_simulators_finish(ros_context, spin_until, tmp_path):
     out = tmp_path / "rec" / "run.mcap"
     recorder = RecorderNode(context=ros_context, parameter_overrides=[
@@ -68,7 +112,7 @@ def test_records_every_topic_and_closes_on_the_simulators_finish(ros_context, sp
         assert not recorder.finished
         # a planner's EpochSync does not end the run; the simulator's finished one does
         pubs["/uam/epoch_sync"].publish(EpochSync(sender="planner", finished=True, epoch_time=t(5)))
-        pubs["/uam/epoch_sync"].publish(EpochSync(sender="simulator", finished=True, epoch_time=t(5)))
+        pubs["/uam/epoch_sync"].publish(EpochSync(sender="simulator", finished=True, epoch_time=t(4)))
         assert spin_until(executor, lambda: recorder.finished, 20)
     finally:
         executor.shutdown()
@@ -193,7 +237,7 @@ def test_recorder_checks_announced_approvals_and_never_deserializes_fleet_states
         report.header.stamp = t(0)
         pubs[c.TOPIC_REPORTS].publish(report)
         assert spin_until(executor, lambda: recorder.messages_written == 11, 20)
-        pubs[c.TOPIC_SYNC].publish(EpochSync(sender="simulator", finished=True, epoch_time=t(3)))
+        pubs[c.TOPIC_SYNC].publish(EpochSync(sender="simulator", finished=True, epoch_time=t(2)))
         assert spin_until(executor, lambda: recorder.finished, 20)
     finally:
         executor.shutdown()

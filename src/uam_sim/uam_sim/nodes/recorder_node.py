@@ -44,9 +44,10 @@ the check fail, naming them, so the analysis never calls such a run OK. A publis
 and goes between two looks is not seen: only SROS2 stops forged messages.
 
 It stops and closes the file (summary, footer) when the simulator has announced the end of the run
-(EpochSync with ``finished`` from sender "simulator") and no message has arrived for
+(EpochSync with ``finished`` from sender "simulator"), no message has arrived for
 ``finish_quiet_s`` (messages of other topics can still be on their way when the announcement
-arrives; at most ``finish_timeout_s``), on Ctrl-C and on SIGTERM. While running it
+arrives) and, after a clean end, the end's fleet state and every epoch's report are in (at most
+``finish_timeout_s``); on Ctrl-C and on SIGTERM. While running it
 finishes a chunk at least every ``flush_period_s`` of wall time, so a crash loses at most that.
 """
 
@@ -357,13 +358,14 @@ class RecorderNode(Node):
 
     def _all_in(self) -> bool:
         """After a clean end: the fleet state of the end's time and the report of every epoch
-        before it have arrived (after an end on an error, whatever came)."""
+        before it have arrived (those of a topic that brought nothing at all are not waited for;
+        after an end on an error, whatever came)."""
         if self._end is None:
             return True
         end_ns, epoch_s = self._end
-        if self._fleet_stamp_ns < end_ns - 1_000_000:
+        if 0 <= self._fleet_stamp_ns < end_ns - 1_000_000:
             return False
-        n = math.ceil(end_ns * 1e-9 / epoch_s - 1e-9) if epoch_s > 0 else 0
+        n = math.ceil(end_ns * 1e-9 / epoch_s - 1e-9) if epoch_s > 0 and self.check.announced else 0
         return all(k in self.check.announced for k in range(n))
 
     def _write(self, topic: str, cls: type, data: bytes):
