@@ -105,7 +105,7 @@ def test_a_replayed_run_recorded_again_gives_the_same_summary(ros_context, spin_
             fs = FleetState(step_index=k, vehicles=[VehicleState(vehicle_id=v) for v in ("r0", "r1")])
             fs.header.stamp = Time(sec=k)
             rec.write("/uam/fleet_state", fs, k * NS)
-        rec.write("/uam/epoch_sync", EpochSync(sender="simulator", finished=True, epoch_time=Time(sec=5)), 5 * NS)
+        rec.write("/uam/epoch_sync", EpochSync(sender="simulator", finished=True, epoch_time=Time(sec=4)), 5 * NS)
         rec.add_metadata(AIRSPACE_METADATA, airspace_metadata())
 
     again = tmp_path / "again.mcap"
