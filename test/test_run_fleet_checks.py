@@ -12,6 +12,8 @@ import time
 
 import pytest
 
+from load_factor import slack
+
 pytest.importorskip("rclpy", reason="needs the built workspace (scripts/test.sh sources it)")
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
@@ -40,8 +42,8 @@ def test_a_wrong_value_is_refused_before_any_node_starts(tmp_path, args, words):
     assert res.returncode == 2 and words in res.stderr, (args, res.stdout, res.stderr)
     assert not out.exists(), "a node started: the run folder was made"
     # the checks take ~2 s at load 3 on 2 cores (a started graph took ~80 s to fail); generous
-    # under a test session's load
-    assert wall < 30, wall
+    # under a test session's load, and scaled by the documented load factor (test/load_factor.py)
+    assert wall < slack(30.0), wall
 
 
 @pytest.mark.slow
