@@ -36,6 +36,7 @@ rclpy-free; raises ``ConstraintError`` naming the field (``authorization``, ``co
 from __future__ import annotations
 
 import hashlib
+import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -133,7 +134,6 @@ class Authorities:
             raise ConstraintError(f"authorization: {len(token)} characters, more than {MAX_TOKEN_CHARS}")
         try:
             unverified = jws.extract_compact(token.encode("ascii"))
-            import json
             claimed = json.loads(unverified.payload)
             iss = claimed.get("iss") if isinstance(claimed, dict) else None
         except (JoseError, ValueError, UnicodeError) as exc:

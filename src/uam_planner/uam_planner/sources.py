@@ -60,11 +60,17 @@ class BoundSource:
         return self.foreign.get(kind, 0)
 
 
-def fleet_digest(msg) -> int:
-    """A digest of a FleetState's content (its stamp, ids and positions)."""
+def fleet_rows(msg) -> list:
+    """(vehicle id, x, y, z) of every vehicle of a FleetState, read once for its digest and its
+    observations."""
+    return [(v.vehicle_id, v.position.x, v.position.y, v.position.z) for v in msg.vehicles]
+
+
+def fleet_digest(msg, rows: list | None = None) -> int:
+    """A digest of a FleetState's content (its stamp, ids and positions; ``rows``: its
+    :func:`fleet_rows`, when read already)."""
     s = msg.header.stamp
-    return hash((int(s.sec), int(s.nanosec),
-                 tuple((v.vehicle_id, v.position.x, v.position.y, v.position.z) for v in msg.vehicles)))
+    return hash((int(s.sec), int(s.nanosec), tuple(fleet_rows(msg) if rows is None else rows)))
 
 
 def conformance_digest(msg) -> int:
@@ -73,4 +79,4 @@ def conformance_digest(msg) -> int:
     return hash((int(s.sec), int(s.nanosec), tuple(msg.vehicle_ids), tuple(bool(x) for x in msg.conforming)))
 
 
-__all__ = ["BoundSource", "REMEMBERED_STEPS", "conformance_digest", "fleet_digest"]
+__all__ = ["BoundSource", "REMEMBERED_STEPS", "conformance_digest", "fleet_digest", "fleet_rows"]

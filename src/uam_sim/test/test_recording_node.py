@@ -35,22 +35,28 @@ def t(sec: int) -> Time:
     return Time(sec=sec, nanosec=0)
 
 
+def _recorder_and_talker(ros_context, spin_until, out, rerun: str, talker_name: str):
+    """A recorder writing ``out`` and a node publishing on every recorded topic, matched."""
+    recorder = RecorderNode(context=ros_context, parameter_overrides=[
+        Parameter("output", value=str(out)), Parameter("rerun", value=rerun),
+        Parameter("network", value=str(ROOT / "config" / "networks" / "tiny.yaml"))])
+    talker = Node(talker_name, context=ros_context)
+    pubs = {resolved(topic): talker.create_publisher(cls, topic, qos) for topic, (cls, qos) in RECORDED_TOPICS.items()}
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(recorder)
+    executor.add_node(talker)
+    assert spin_until(executor, lambda: all(p.get_subscription_count() >= 1 for p in pubs.values()), 20)
+    return recorder, talker, pubs, executor
+
+
 def test_after_a_clean_end_the_recorder_waits_for_what_the_end_announces(ros_context, spin_until, tmp_path):
     """The simulator's end of run (t = 60 s, 30 s epochs) arrives before the recorder has the
     fleet state of 60 s and the report of epoch 1 (a recorder behind under load): it stays open
     past finish_quiet_s until both are in, then closes."""
     import time as _time
     out = tmp_path / "rec" / "run.mcap"
-    recorder = RecorderNode(context=ros_context, parameter_overrides=[
-        Parameter("output", value=str(out)), Parameter("rerun", value="off"),
-        Parameter("network", value=str(ROOT / "config" / "networks" / "tiny.yaml"))])
-    talker = Node("talker_end", context=ros_context)
-    pubs = {resolved(topic): talker.create_publisher(cls, topic, qos) for topic, (cls, qos) in RECORDED_TOPICS.items()}
-    executor = SingleThreadedExecutor(context=ros_context)
-    executor.add_node(recorder)
-    executor.add_node(talker)
+    recorder, talker, pubs, executor = _recorder_and_talker(ros_context, spin_until, out, "off", "talker_end")
     try:
-        assert spin_until(executor, lambda: all(p.get_subscription_count() >= 1 for p in pubs.values()), 20)
 
         def state(k):
             fs = FleetState(step_index=k)
@@ -81,16 +87,8 @@ def test_after_a_clean_end_the_recorder_waits_for_what_the_end_announces(ros_con
 
 def test_records_every_topic_and_closes_on_the_simulators_finish(ros_context, spin_until, tmp_path):
     out = tmp_path / "rec" / "run.mcap"
-    recorder = RecorderNode(context=ros_context, parameter_overrides=[
-        Parameter("output", value=str(out)), Parameter("rerun", value="save"),
-        Parameter("network", value=str(ROOT / "config" / "networks" / "tiny.yaml"))])
-    talker = Node("talker", context=ros_context)
-    pubs = {resolved(topic): talker.create_publisher(cls, topic, qos) for topic, (cls, qos) in RECORDED_TOPICS.items()}
-    executor = SingleThreadedExecutor(context=ros_context)
-    executor.add_node(recorder)
-    executor.add_node(talker)
+    recorder, talker, pubs, executor = _recorder_and_talker(ros_context, spin_until, out, "save", "talker")
     try:
-        assert spin_until(executor, lambda: all(p.get_subscription_count() >= 1 for p in pubs.values()), 20)
         for k in range(5):
             pubs["/clock"].publish(Clock(clock=t(k)))
             fs = FleetState(step_index=k, vehicles=[VehicleState(vehicle_id="r1", position=Point(x=10.0 * k))])

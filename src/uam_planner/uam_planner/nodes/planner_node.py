@@ -81,7 +81,7 @@ from uam_planner.conformance import ConformanceBounds
 from uam_planner.authority import Authorities
 from uam_planner.grants import PriorityGrants
 from uam_planner.objectives import objective_problem
-from uam_planner.sources import BoundSource, conformance_digest, fleet_digest
+from uam_planner.sources import BoundSource, conformance_digest, fleet_digest, fleet_rows
 from uam_planner.planning import AirspaceConfig, Planner, PlanningConfig, call_solver, default_solve_mwis
 
 
@@ -302,20 +302,21 @@ class PlannerNode(Node):
         while self._inbox:
             msg = self._inbox.popleft()
             # only the bound simulator's, each step once (uam_planner.sources)
-            if isinstance(msg, FleetState):
-                if not self.source.take("fleet state", msg.session, msg.step_index, fleet_digest(msg)):
-                    continue
-            elif not self.source.take("conformance report", msg.session, msg.step_index, conformance_digest(msg)):
+            if not isinstance(msg, FleetState):
+                if self.source.take("conformance report", msg.session, msg.step_index, conformance_digest(msg)):
+                    self._on_conformance(msg)
                 continue
-            if isinstance(msg, FleetState):
-                if self._observe_from_calls:
-                    seen = self._fleet_buffer.setdefault(stamp_key(m.from_time(msg.header.stamp)), {})
-                    for v in msg.vehicles:
-                        seen.setdefault(v.vehicle_id, (v.position.x, v.position.y, v.position.z))
-                else:
-                    self._on_fleet(msg)
-            else:
-                self._on_conformance(msg)
+            rows = fleet_rows(msg)   # read once: the digest and the observations
+            if not self.source.take("fleet state", msg.session, msg.step_index, fleet_digest(msg, rows)):
+                continue
+            t = m.from_time(msg.header.stamp)
+            if self._observe_from_calls:
+                seen = self._fleet_buffer.setdefault(stamp_key(t), {})
+                for vid, x, y, z in rows:
+                    seen.setdefault(vid, (x, y, z))
+            else:   # the planner's own observation of every vehicle in the fleet state
+                for vid, x, y, z in rows:
+                    self.planner.observe(vid, t, (x, y, z))
         if self._observe_from_calls and t_s is not None:
             self._observe_at(float(t_s), at_epoch)
 
@@ -342,12 +343,6 @@ class PlannerNode(Node):
         lo = stamp_key(t_s - max(OBSERVE_BACK_S))
         for key in [k for k in self._fleet_buffer if k < lo]:
             del self._fleet_buffer[key]
-
-    def _on_fleet(self, msg: FleetState) -> None:
-        """The planner's own observation of every vehicle in the fleet state."""
-        t = m.from_time(msg.header.stamp)
-        for v in msg.vehicles:
-            self.planner.observe(v.vehicle_id, t, (v.position.x, v.position.y, v.position.z))
 
     def _on_conformance(self, msg: Conformance) -> None:
         """Each vehicle the monitor calls nonconforming: a claim, queued for the next epoch, where

@@ -719,13 +719,15 @@ def _flight_row(plan: Any, label: str, request: dict | None) -> dict:
 
 
 def summarize(path: str | Path, separation_m=None, reader: str = "rclpy",
-              default_separation=SEPARATION_M, network=None) -> RunSummary:
+              default_separation=SEPARATION_M, network=None, flown: bool = True) -> RunSummary:
     """Read a recording and return its :class:`RunSummary` (see the module docstring).
 
     ``separation_m``: the audit's model (number = sphere, or a SeparationModel); None = the
     run's own, from the recording's ``uam_airspace`` metadata, else ``default_separation``.
     ``network``: the run's network (a Network or a network file), for the flights' detour in
     metres over the shortest route, as the runner measures it (None: no detour in metres).
+    ``flown``: False leaves out the audit of what flew (``summary.flown`` stays {}): for the
+    readers that need only the run's record (the F3548 export, the view of a recording).
     """
     path = Path(path)
     if not path.is_file():
@@ -745,7 +747,8 @@ def summarize(path: str | Path, separation_m=None, reader: str = "rclpy",
     summary.recorder_check = read_metadata(path, RECORDER_CHECK)
     summary.run_choices = _decoded(read_metadata(path, RUN_METADATA))
     from .flown import recording_flown
-    summary.flown = recording_flown(path, separation_m, record=getattr(summary, "record", None))
+    if flown:
+        summary.flown = recording_flown(path, separation_m, record=getattr(summary, "record", None))
     if summary.recorder_check.get("ok") == "false":
         summary.problems.append(f"the recorder found: {summary.recorder_check.get('verdict', '?')}")
     if recovered:

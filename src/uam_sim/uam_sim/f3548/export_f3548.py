@@ -147,7 +147,7 @@ def export(recording, out_dir, network_file: str, piece_s: float = 5.0,
     # the intents are the run's record (uam_sim.audit.record, as the analysis builds it): every
     # approval that is not forged, each of its versions once
     say(f"{len(constraints)} constraint versions; reading the plans (the run's record, as the analysis does)")
-    record = summarize(path, network=network).record
+    record = summarize(path, network=network, flown=False).record
     total = sum(len(flight.versions) for flight in record.flights)
     say(f"writing {total} plan versions as operational intents")
     intents = []

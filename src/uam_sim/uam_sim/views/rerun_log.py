@@ -763,7 +763,7 @@ def log_recording(mcap_path: str | os.PathLike, rrd_path: str | os.PathLike, net
     from ..audit.flown_audit import plan_version
     from ..recording.mcap_reader import log_time_zero_ns
 
-    summary = summarize(mcap_path, network=network)
+    summary = summarize(mcap_path, network=network, flown=False)   # the record is enough
     versions = {(f.request, plan_version(v)) for f in summary.record.flights for v in f.versions}
     sets = summary.constraint_sets_taken
     n = 0
