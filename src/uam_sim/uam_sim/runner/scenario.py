@@ -156,7 +156,6 @@ def _apply_plan_updates(updates, by_id: dict, replans: list, t: float) -> None:
 def _record_version(row, u, effective_s: float) -> None:
     """Keep plan update ``u`` as the row's next version in the run's record
     (``uam_sim.audit.record.PlanVersion``), as the recording keeps its FlightPlan."""
-    from ..audit.record import PlanVersion
     f = u.flight
     row["_versions"].append(PlanVersion.of(
         u.version, effective_s, None if f is None else f.trajectory, update_kind=str(u.kind),
