@@ -125,6 +125,8 @@ class Planner:
         self.initial_constraints: tuple = ()    # the constraints in force from the start
         self._requests: dict = {}               # request_id -> FlightRequest of active flights
         self._plan_updates: list = []           # decided in prepare, returned by commit
+        self._cancellations: list = []          # cancel() since the last commit (PlanUpdate)
+        self._aside: dict = {}                  # request_id -> Flight set aside (set_aside)
         self._replan_report = None
         # the reaction to nonconformance (uam_planner.nonconformance): the planner's
         # own observations of the vehicles and the reports (claims) not acted on yet
@@ -491,6 +493,90 @@ class Planner:
         self.pending.append(request)
         return None
 
+    def _between_epochs(self, request_id, t_s) -> str | None:
+        if self._prepared is not None:
+            return (f"request_id: {request_id!r}: epoch {self._prepared.epoch_index} is prepared; "
+                    "ask again after its commit")
+        if isinstance(t_s, bool) or not isinstance(t_s, (int, float, np.integer, np.floating)) \
+                or not math.isfinite(t_s):
+            return f"t_s: {t_s!r} is not a finite time"
+        return None
+
+    def cancel(self, request_id: str, t_s: float, reason: str = "cancelled by its operator") -> str | None:
+        """End ``request_id`` at ``t_s`` [s], as its operator asks: a waiting request is withdrawn
+        (it is never decided); an approved flight (active or set aside) that has not departed by
+        ``t_s`` is dropped, and the next :meth:`commit` reports it as a PlanUpdate of kind
+        'cancelled' (version + 1, effective ``t_s``), as a re-plan's cancellation is reported.
+        An airborne flight is not cancelled (the aircraft flies; it lands as planned).
+
+        Returns None when done, else why not (naming the field and value). Between epochs only:
+        a prepared epoch holds its requests until it is committed."""
+        from .replanning import PlanUpdate
+        problem = self._between_epochs(request_id, t_s)
+        if problem is not None:
+            return problem
+        for i, r in enumerate(self.pending):
+            if r.request_id == request_id:
+                del self.pending[i]
+                return None
+        f = self._aside.get(request_id) or next((f for f in self.active if f.request_id == request_id), None)
+        if f is None:
+            return f"request_id: {request_id!r} is neither waiting nor an approved flight of this planner"
+        if f.departure_s < t_s:
+            return (f"request_id: {request_id!r} departed at {f.departure_s:g} s, before t_s {t_s:g} s: "
+                    f"an airborne flight is not cancelled (it lands at {f.arrival_s:g} s)")
+        if self._aside.pop(request_id, None) is None:
+            self.active = [a for a in self.active if a is not f]
+        self._requests.pop(request_id, None)
+        self._cancellations.append(PlanUpdate(request_id, f.operator_id, int(f.version) + 1, "cancelled", (),
+                                              str(reason), float(t_s), None, f))
+        return None
+
+    def set_aside(self, request_id: str, t_s: float) -> str | None:
+        """Take the approved flight ``request_id`` (not departed by ``t_s``) out of the traffic
+        that the next epochs deconflict against, while a replacement is planned (its operator
+        modifies it); nothing is reported. Then :meth:`cancel` it (the replacement was approved)
+        or :meth:`put_back` it. Returns None, or why not (naming the field and value)."""
+        problem = self._between_epochs(request_id, t_s)
+        if problem is not None:
+            return problem
+        f = next((f for f in self.active if f.request_id == request_id), None)
+        if f is None:
+            return f"request_id: {request_id!r} is not an active flight of this planner"
+        if f.departure_s < t_s:
+            return (f"request_id: {request_id!r} departed at {f.departure_s:g} s, before t_s {t_s:g} s: "
+                    "an airborne flight is not re-planned by its operator")
+        self.active = [a for a in self.active if a is not f]
+        self._aside[request_id] = f
+        return None
+
+    def put_back(self, request_id: str, t_s: float) -> str | None:
+        """Return a flight set aside to the active flights, if it still keeps separation with
+        every active flight and stays out of every constraint; otherwise it is cancelled (as
+        :meth:`cancel`) and the reason is returned."""
+        from .separation import any_conflict
+        problem = self._between_epochs(request_id, t_s)
+        if problem is not None:
+            return problem
+        f = self._aside.get(request_id)
+        if f is None:
+            return f"request_id: {request_id!r} is not a flight set aside"
+        why = None
+        if self.active and bool(any_conflict([f.trajectory], [a.trajectory for a in self.active],
+                                             self.config.separation)[0]):
+            why = "it now loses separation with a flight approved while it was set aside"
+        elif self.config.constraints is not None and len(self.config.constraints):
+            cset, net = self.config.constraints, self.network
+            which, _ = cset.violations([f.trajectory], [net.index[f.origin_id]], [net.index[f.destination_id]])
+            if which[0] >= 0:
+                why = f"it now enters constraint {cset.constraints[which[0]].constraint_id!r}"
+        if why is not None:
+            self.cancel(request_id, t_s, f"cancelled: {why}")
+            return f"request_id: {request_id!r}: {why}"
+        del self._aside[request_id]
+        self.active = self.active + [f]
+        return None
+
     def prepare(self, t_s: float, epoch_index: int) -> PreparedEpoch:
         """Prepare the epoch at ``t_s`` [s] up to its conflict graph; finish with :meth:`commit`.
 
@@ -604,7 +690,8 @@ class Planner:
             raise RuntimeError("commit: this epoch was not prepared by this planner (or is committed)")
         self._prepared = None
         result = commit_epoch(prep, answer, self.config, solve_s)
-        result.plan_updates = list(self._plan_updates)
+        result.plan_updates = self._cancellations + list(self._plan_updates)
+        self._cancellations = []
         result.report.replan = self._replan_report
         result.report.nonconformance = self._nonconformance_report
         self._plan_updates, self._replan_report, self._nonconformance_report = [], None, None
@@ -640,6 +727,10 @@ class Planner:
         self._known_ids.update(f.request_id for f in flights)
         self._known_ids.update(decided_ids)
         self.pending = [r for r in self.pending if r.request_id not in self._known_ids]
+
+    def flight(self, request_id: str):
+        """The approved flight of ``request_id`` in force (active, or set aside), or None."""
+        return self._aside.get(request_id) or next((f for f in self.active if f.request_id == request_id), None)
 
     def is_known(self, request_id: str) -> bool:
         """True once ``request_id`` was accepted (or restored): a later request with it is a duplicate."""
