@@ -564,6 +564,24 @@ def _volume_constraint(v4: dict, cid: str, version: int, reason: str, origin, st
                       upper_m=up(upper, +1), **shape)
 
 
+def volume_prism(v4: dict, network, scenario_start_utc: str, constraint_id: str, where: str,
+                 buffer_h_m: float = 0.0, buffer_v_m: float = 0.0):
+    """One Volume4D (JSON, F3548's or InterUSS flight_planning's: the same fields) as a prism
+    Constraint in ``network``'s frame, widened by ``buffer_h_m`` / ``buffer_v_m``; times on the
+    scenario's clock. Raises F3548Error naming ``where`` and the field (a reference other than
+    W84, a polygon of fewer than 3 vertices, no outline, a time that is not RFC 3339)."""
+    if not isinstance(v4, dict):
+        raise F3548Error(f"{where}: {type(v4).__name__} is not a Volume4D")
+    try:
+        return _volume_constraint(v4, constraint_id, 1, where, network.origin_lat_lon_alt,
+                                  scenario_start_ns(scenario_start_utc), float(buffer_h_m), float(buffer_v_m),
+                                  where, bool(getattr(network, "layered", False)))
+    except (KeyError, TypeError, ValueError) as exc:
+        if isinstance(exc, F3548Error):
+            raise
+        raise F3548Error(f"{where}: {exc}") from None
+
+
 def _centre_lla(centre_enu, origin):
     lla = enu_to_geodetic([float(centre_enu[0]), float(centre_enu[1]), 0.0], origin)
     return float(lla[0]), float(lla[1])

@@ -13,6 +13,8 @@ Endpoints (F3548-21, utm.yaml):
 - ``POST /uss/v1/operational_intents``, ``/uss/v1/constraints`` (peers' notifications, with a
   :class:`uam_sim.f3548.peers.PeerInbox`), ``POST /uss/v1/reports``, ``GET .../{entityid}/telemetry``
   (412: no telemetry here), ``GET /versions/astm.f3548.v21`` (InterUSS's versioning interface);
+- with a :class:`uam_sim.f3548.flight_planning.FlightPlanning`, InterUSS's flight_planning
+  interface under ``/flight_planning/v1`` (status, upsert and delete flight plans, clear area);
 - ``GET /uam_fleet/v1/operational_intents`` and ``/uam_fleet/v1/constraints`` (this project's, not
   F3548's: with no DSS, the ids a tool can ask for; under the same scopes as the details).
 
@@ -264,10 +266,45 @@ def _peer_routes(app, store: IntentStore, inbox, authorise) -> None:
                                                                mimetype="application/json"))
 
 
-def create_app(store: IntentStore, auth: str = "verify", verifier=None, inbox=None):
+def _flight_planning_routes(app, planning, authorise) -> None:
+    """InterUSS's flight_planning interface (``uam_sim.f3548.flight_planning``): each operation
+    of the library's table at its path, behind its scopes."""
+    from flask import Response, request
+
+    from .flight_planning import SCOPES, route
+
+    def answer(status_doc):
+        status, doc = status_doc
+        return Response(json.dumps(doc), status=status, mimetype="application/json")
+
+    def body():
+        return request.get_json(silent=True)
+
+    def endpoint(op, call):
+        def view(**params):
+            bad = authorise(SCOPES[op])
+            if bad is not None:
+                return bad
+            if request.method in ("PUT", "POST") and body() is None:
+                return _error(400, "body: not a JSON document")
+            return answer(call(**params))
+        view.__name__ = f"flight_planning_{op.value}"
+        verb, rule = route(op)
+        app.add_url_rule(rule, view_func=view, methods=[verb])
+
+    from uas_standards.interuss.automated_testing.flight_planning.v1.api import OperationID as Op
+    endpoint(Op.GetStatus, lambda: planning.status())
+    endpoint(Op.UpsertFlightPlan, lambda flight_plan_id: planning.upsert(flight_plan_id, body()))
+    endpoint(Op.DeleteFlightPlan, lambda flight_plan_id: planning.delete(flight_plan_id))
+    endpoint(Op.ClearArea, lambda: planning.clear_area(body()))
+
+
+def create_app(store: IntentStore, auth: str = "verify", verifier=None, inbox=None, planning=None):
     """The Flask app serving ``store`` (module docstring). ``auth`` ``verify`` needs ``verifier``
     (a :class:`uam_sim.f3548.auth.TokenVerifier`). With ``inbox`` (a
-    :class:`uam_sim.f3548.peers.PeerInbox`) it takes peers' notifications and reports."""
+    :class:`uam_sim.f3548.peers.PeerInbox`) it takes peers' notifications and reports; with
+    ``planning`` (a :class:`uam_sim.f3548.flight_planning.FlightPlanning`) it serves InterUSS's
+    flight_planning interface under ``/flight_planning/v1``."""
     from flask import Flask, Response, g, request
     from werkzeug.exceptions import HTTPException
 
@@ -341,6 +378,8 @@ def create_app(store: IntentStore, auth: str = "verify", verifier=None, inbox=No
         return _listing(SCOPE_CONSTRAINTS, store.constraint_ids)
 
     _peer_routes(app, store, inbox, _authorise)
+    if planning is not None:
+        _flight_planning_routes(app, planning, _authorise)
 
     @app.errorhandler(HTTPException)
     def _http_error(exc):
@@ -362,7 +401,7 @@ class UssServer:
 
     def __init__(self, store: IntentStore, host: str = "127.0.0.1", port: int = 0,
                  auth: str = "verify", auth_key: str = "", auth_audience: str = "",
-                 workers: int = 8, max_connections: int = 256, inbox=None, **pool_options):
+                 workers: int = 8, max_connections: int = 256, inbox=None, planning=None, **pool_options):
         from werkzeug.serving import WSGIRequestHandler
 
         from .auth import TokenVerifier, default_audiences  # joserfc and cryptography on first use
@@ -400,7 +439,7 @@ class UssServer:
             audiences = auth_audience.split(",") if auth_audience.strip() else default_audiences(
                 store.ctx.uss_base_url)
             self.verifier = TokenVerifier.from_file(auth_key, audiences)
-        self._server = PooledWSGIServer(host, int(port), create_app(store, auth, self.verifier, inbox), _Quiet,
+        self._server = PooledWSGIServer(host, int(port), create_app(store, auth, self.verifier, inbox, planning), _Quiet,
                                         workers=workers, max_connections=max_connections, **pool_options)
         self.host, self.port = host, int(self._server.server_port)
         self._thread = threading.Thread(target=self._server.serve_forever, name="uss-http",
