@@ -14,7 +14,7 @@ import pytest
 
 from uam_planner import separation
 from uam_planner.conflict_graph import ShiftedCandidates, build_conflict_graph
-from uam_planner.separation import SeparationModel, any_conflict, conflicting_pairs
+from uam_planner.separation import SegmentSet, SeparationModel, any_conflict, conflicting_pairs
 from uam_planner.trajectory import Trajectory
 
 SPHERE = SeparationModel("sphere", 100.0)
@@ -136,6 +136,23 @@ def test_conflict_graph_is_the_one_built_from_the_pair_list(monkeypatch):
     assert 0 < old.n_discarded < n
     assert new.edges.tolist() == old.edges.tolist()
     assert new.weights.tolist() == old.weights.tolist()
+
+
+def test_survivors_segments_are_those_of_their_trajectories():
+    """``ShiftedCandidates.segments_of``: the survivors' segments without a trajectory each,
+    the same floats as flattening their trajectories (a shift of 0 is the base itself)."""
+    base, _ = _case(11, 12, 0)
+    counts = np.array([0, 3, 1, 5, 2, 0, 4, 1, 3, 2, 6, 1])
+    first = np.concatenate(([0], np.cumsum(counts)))
+    shift = np.concatenate([np.array([0.0, 5.0, 7.5, 10.0, 12.5, 15.0])[:c] for c in counts])
+    cands = ShiftedCandidates(base, first, shift)
+    keep = np.array([0, 2, 3, 4, 9, 10, 11, 17, 20, len(cands) - 1])
+    got = cands.segments_of(keep)
+    want = SegmentSet.from_trajectories([cands[i] for i in keep])
+    assert got.n_trajectories == want.n_trajectories == keep.size
+    for name in ("traj", "t0_s", "t1_s", "p0_m", "v_mps"):
+        assert getattr(got, name).tobytes() == getattr(want, name).tobytes(), name
+    assert len(cands.segments_of(np.zeros(0, np.int64))) == 0
 
 
 def _city_run(per_epoch: int = 50, epochs: int = 15) -> tuple:

@@ -115,6 +115,30 @@ class ShiftedCandidates:
         fast = getattr(self.base, "segment_set", None)
         return fast() if fast is not None else SegmentSet.from_trajectories(list(self.base))
 
+    def segments_of(self, candidates, base: SegmentSet | None = None) -> SegmentSet:
+        """The SegmentSet of the candidates ``candidates`` (indices, in that order): the same
+        floats as ``SegmentSet.from_trajectories([self[c] for c in candidates])``, without
+        building a trajectory per candidate (each time is the base's plus the shift, one
+        addition as in ``__getitem__``). ``base``: ``base_segments()``, if already made."""
+        idx = np.asarray(candidates, dtype=np.int64)
+        if self.exact is not None:
+            return SegmentSet.from_trajectories([self[c] for c in idx.tolist()])
+        bs = self.base_segments() if base is None else base
+        # the base's segments are grouped by template, in order
+        seg_first = np.searchsorted(bs.traj, np.arange(len(self.base) + 1))
+        tpl = self.template_of[idx]
+        count = seg_first[tpl + 1] - seg_first[tpl]
+        rows = np.repeat(seg_first[tpl], count) + (np.arange(int(count.sum()), dtype=np.int64)
+                                                   - np.repeat(np.cumsum(count) - count, count))
+        dt = np.repeat(self.shift_s[idx], count)
+        t0 = bs.t0_s[rows]
+        t1 = bs.t1_s[rows]
+        moved = dt != 0.0   # a candidate at the base's own slot is the base, not base + 0.0
+        t0[moved] += dt[moved]
+        t1[moved] += dt[moved]
+        return SegmentSet(np.repeat(np.arange(idx.shape[0], dtype=np.int64), count), t0, t1,
+                          bs.p0_m[rows], bs.v_mps[rows], int(idx.shape[0]))
+
     def __getitem__(self, c):
         c = int(c)
         if self.exact is not None:
@@ -258,6 +282,7 @@ def build_conflict_graph(candidates, candidate_request, candidate_index, candida
         raise ValueError(f"candidate_request values must lie in [0, {n_requests - 1}]")
 
     t = time.perf_counter()
+    base = None
     if isinstance(candidates, ShiftedCandidates):
         discarded = np.zeros(n, dtype=bool)
         act = active if isinstance(active, SegmentSet) else \
@@ -266,7 +291,8 @@ def build_conflict_graph(candidates, candidate_request, candidate_index, candida
             # with the horizon's pair cache, z cells in the keys as in its calls (the same pairs)
             z_cell = as_separation_model(separation_m).vertical_reach_m \
                 if pair_cache is not None else None
-            discarded = any_conflict(candidates.base_segments(), act,
+            base = candidates.base_segments()
+            discarded = any_conflict(base, act,
                                      separation_m,
                                      shifts_a=(candidates.first, candidates.shift_s),
                                      z_cell_m=z_cell)
@@ -278,15 +304,17 @@ def build_conflict_graph(candidates, candidate_request, candidate_index, candida
     keep = np.flatnonzero(~discarded)
     vreq = cand_req[keep]
     # Conflicts among survivors of different requests.
-    surv = [candidates[i] for i in keep]
     if pair_cache is not None:
         if keys is None or bucket_s is None:
             raise ValueError("build_conflict_graph: pair_cache needs keys and bucket_s")
+        surv = [candidates[i] for i in keep]
         conflict = pair_cache.conflicts([keys[i] for i in keep.tolist()], surv, vreq, separation_m,
                                         bucket_s)
     else:
+        surv = candidates.segments_of(keep, base) if isinstance(candidates, ShiftedCandidates) \
+            else [candidates[i] for i in keep]
         conflict = conflicting_pairs(surv, None, separation_m, groups_a=vreq,
-                                     bucket_s=bucket_s) if len(surv) > 1 \
+                                     bucket_s=bucket_s) if keep.shape[0] > 1 \
             else np.zeros((0, 2), dtype=np.int64)
     t2 = time.perf_counter()
 

@@ -585,6 +585,27 @@ def _make_grid(pa: _Pieces, pb: _Pieces, pa_t1_sweep, cell: float, bucket: float
     return grid
 
 
+def _keyed_grid(pa: _Pieces, pb: _Pieces, pa_t1_sweep, cell: float, bucket: float, z_cell_m,
+                half_z: float, single: bool):
+    """The grid both sets are keyed on and every piece's cell index ranges on it (a's pieces
+    swept to ``pa_t1_sweep``): (grid with its extent in cells, ra, rb)."""
+    # z boundaries at -V/2 + k z_cell_m: flight levels at multiples of V = z_cell_m touch (their
+    # boxes, inflated by V/2) exactly on a boundary and share no cell
+    grid = _make_grid(pa, pb, pa_t1_sweep, cell, bucket, z_cell_m, -half_z)
+    ra = grid.ranges(pa, pa_t1_sweep)
+    rb = ra if single else grid.ranges(pb, pb.t1)
+    grid.nx = int(max(ra[1].max(), rb[1].max())) + 1
+    grid.ny = int(max(ra[3].max(), rb[3].max())) + 1
+    grid.nt = int(max(ra[5].max(), rb[5].max())) + 1
+    if grid.z_bounds is not None:
+        grid.nz = int(max(ra[7].max(), rb[7].max())) + 1
+        if ((grid.nt * grid.ny * grid.nx * grid.nz) * 2).bit_length() > 63:
+            # the widened (coordinate) sort has no z: leave z out of the keys
+            grid.z_bounds, grid.nz = None, 1
+            ra, rb = ra[:6], rb[:6]
+    return grid, ra, rb
+
+
 def _expand_keys(r, side: int, offset: int, grid: _Grid, widened: bool, packed: bool,
                  item_bits: int):
     """Every (cell, side, item) key of the pieces with index ranges ``r``: the (t, y, x)
@@ -681,17 +702,22 @@ def _sorted_keys(ra, rb, single: bool, na: int, n_items: int, grid: _Grid,
             order = np.argsort(codes)
             keys = codes[order]
             items = items[order]
-        cell_key = keys >> 1
-        # cell coordinates of each sorted entry (for the canonical-cell test)
-        kz = None
-        if grid.z_bounds is not None:
-            rest, kz = np.divmod(cell_key, grid.nz)
-            rest, kx = np.divmod(rest, grid.nx)
-        else:
-            rest, kx = np.divmod(cell_key, grid.nx)
-        kt, ky = np.divmod(rest, grid.ny)
-        return _SortedKeys(items, keys, cell_key, kt, ky, kx, kz)
+        return _cell_coordinates(items, keys, grid)
     return _SortedKeys(items, keys, cell_key, kt, ky, kx)
+
+
+def _cell_coordinates(items: np.ndarray, keys: np.ndarray, grid: _Grid) -> _SortedKeys:
+    """The sorted keys with each entry's cell coordinates (for the canonical-cell test), from
+    int64 keys (cell * 2 + side) on ``grid``."""
+    cell_key = keys >> 1
+    kz = None
+    if grid.z_bounds is not None:
+        rest, kz = np.divmod(cell_key, grid.nz)
+        rest, kx = np.divmod(rest, grid.nx)
+    else:
+        rest, kx = np.divmod(cell_key, grid.nx)
+    kt, ky = np.divmod(rest, grid.ny)
+    return _SortedKeys(items, keys, cell_key, kt, ky, kx, kz)
 
 
 def _cell_mates(sk: _SortedKeys, single: bool, run_label=None):
@@ -754,34 +780,65 @@ class _PieceTable:
     S_iz0: np.ndarray | None = None    # z in the keys: each sorted entry's first z cell
 
 
+@dataclass
+class _PieceArrays:
+    """Per-piece values of both sets by global item id (b's offset by len(a)): what the piece
+    table gathers in sorted-key order. ``t1_sweep``: a's pieces held until their t1 plus their
+    trajectory's largest shift; ``group``: two sets with groups, each piece's group label;
+    ``iz0``: z in the keys, each piece's first z cell."""
+    t0: np.ndarray
+    t1: np.ndarray
+    t1_sweep: np.ndarray
+    p0: np.ndarray
+    v: np.ndarray
+    traj: np.ndarray
+    xlo: np.ndarray
+    xhi: np.ndarray
+    ylo: np.ndarray
+    yhi: np.ndarray
+    zlo: np.ndarray
+    zhi: np.ndarray
+    group: np.ndarray | None = None
+    iz0: np.ndarray | None = None
+
+
+def _piece_arrays(pa: _Pieces, pb: _Pieces, sa: SegmentSet, sb: SegmentSet, single: bool,
+                  pa_t1_sweep, slack: bool, groups_ab=None, iz0=None) -> _PieceArrays:
+    if single:
+        return _PieceArrays(pa.t0, pa.t1, pa_t1_sweep if slack else pa.t1, pa.p0,
+                            sa.v_mps[pa.seg], sa.traj[pa.seg], pa.xlo, pa.xhi, pa.ylo, pa.yhi,
+                            pa.zlo, pa.zhi, None, iz0)
+    t1 = np.concatenate((pa.t1, pb.t1))
+    group = None
+    if groups_ab is not None:
+        ga, gb = groups_ab
+        group = np.concatenate((ga[sa.traj[pa.seg]], gb[sb.traj[pb.seg]]))
+    return _PieceArrays(np.concatenate((pa.t0, pb.t0)), t1,
+                        np.concatenate((pa_t1_sweep, pb.t1)) if slack else t1,
+                        np.concatenate((pa.p0, pb.p0)),
+                        np.concatenate((sa.v_mps[pa.seg], sb.v_mps[pb.seg])),
+                        np.concatenate((sa.traj[pa.seg], sb.traj[pb.seg])),
+                        np.concatenate((pa.xlo, pb.xlo)), np.concatenate((pa.xhi, pb.xhi)),
+                        np.concatenate((pa.ylo, pb.ylo)), np.concatenate((pa.yhi, pb.yhi)),
+                        np.concatenate((pa.zlo, pb.zlo)), np.concatenate((pa.zhi, pb.zhi)),
+                        group, iz0)
+
+
+def _gather_table(P: _PieceArrays, items: np.ndarray, single: bool) -> _PieceTable:
+    """The piece table of the sorted entries ``items`` (the same per-piece values in
+    sorted-key order)."""
+    return _PieceTable(P.t0, P.t1, P.p0, P.v, P.traj,
+                       P.t0[items], P.t1_sweep[items], P.xlo[items], P.xhi[items], P.ylo[items],
+                       P.yhi[items], P.zlo[items], P.zhi[items], P.traj[items] if single else None,
+                       None if P.group is None else P.group[items],
+                       None if P.iz0 is None else P.iz0[items])
+
+
 def _piece_table(pa: _Pieces, pb: _Pieces, sa: SegmentSet, sb: SegmentSet, single: bool,
                  pa_t1_sweep, slack: bool, items: np.ndarray, groups_ab=None,
                  iz0=None) -> _PieceTable:
-    if single:
-        P_t0, P_t1, P_xlo, P_xhi, P_ylo, P_yhi = pa.t0, pa.t1, pa.xlo, pa.xhi, pa.ylo, pa.yhi
-        P_zlo, P_zhi = pa.zlo, pa.zhi
-    else:
-        P_t0 = np.concatenate((pa.t0, pb.t0))
-        P_t1 = np.concatenate((pa.t1, pb.t1))
-        P_xlo = np.concatenate((pa.xlo, pb.xlo))
-        P_xhi = np.concatenate((pa.xhi, pb.xhi))
-        P_ylo = np.concatenate((pa.ylo, pb.ylo))
-        P_yhi = np.concatenate((pa.yhi, pb.yhi))
-        P_zlo = np.concatenate((pa.zlo, pb.zlo))
-        P_zhi = np.concatenate((pa.zhi, pb.zhi))
-    P_p0 = pa.p0 if single else np.concatenate((pa.p0, pb.p0))
-    P_traj = np.concatenate((sa.traj[pa.seg], sb.traj[pb.seg])) if not single else sa.traj[pa.seg]
-    P_v = sa.v_mps[pa.seg] if single else np.concatenate((sa.v_mps[pa.seg], sb.v_mps[pb.seg]))
-    # The same per-piece values in sorted-key order.
-    S_t1 = P_t1[items] if not slack else np.concatenate((pa_t1_sweep, pb.t1))[items]
-    S_group = None
-    if not single and groups_ab is not None:
-        ga, gb = groups_ab
-        S_group = np.concatenate((ga[sa.traj[pa.seg]], gb[sb.traj[pb.seg]]))[items]
-    return _PieceTable(P_t0, P_t1, P_p0, P_v, P_traj,
-                       P_t0[items], S_t1, P_xlo[items], P_xhi[items], P_ylo[items], P_yhi[items],
-                       P_zlo[items], P_zhi[items], P_traj[items] if single else None, S_group,
-                       None if iz0 is None else iz0[items])
+    return _gather_table(_piece_arrays(pa, pb, sa, sb, single, pa_t1_sweep, slack, groups_ab,
+                                       iz0), items, single)
 
 
 def _box_filter(l, r, pt: _PieceTable, sk: _SortedKeys, grid: _Grid, single: bool, groups,
@@ -882,20 +939,7 @@ def _broad_phase(model: SeparationModel, sa: SegmentSet, sb: SegmentSet, single:
     clock.append(time.perf_counter())
     if z_cell_m is not None and not (np.isfinite(z_cell_m) and z_cell_m > 0.0):
         raise ValueError(f"z_cell_m must be positive and finite, got {z_cell_m!r}")
-    # z boundaries at -V/2 + k z_cell_m: flight levels at multiples of V = z_cell_m touch (their
-    # boxes, inflated by V/2) exactly on a boundary and share no cell
-    grid = _make_grid(pa, pb, pa_t1_sweep, cell, bucket, z_cell_m, -half_z)
-    ra = grid.ranges(pa, pa_t1_sweep)
-    rb = ra if single else grid.ranges(pb, pb.t1)
-    grid.nx = int(max(ra[1].max(), rb[1].max())) + 1
-    grid.ny = int(max(ra[3].max(), rb[3].max())) + 1
-    grid.nt = int(max(ra[5].max(), rb[5].max())) + 1
-    if grid.z_bounds is not None:
-        grid.nz = int(max(ra[7].max(), rb[7].max())) + 1
-        if ((grid.nt * grid.ny * grid.nx * grid.nz) * 2).bit_length() > 63:
-            # the widened (coordinate) sort has no z: leave z out of the keys
-            grid.z_bounds, grid.nz = None, 1
-            ra, rb = ra[:6], rb[:6]
+    grid, ra, rb = _keyed_grid(pa, pb, pa_t1_sweep, cell, bucket, z_cell_m, half_z, single)
     n_items = na + (0 if single else pb.t0.shape[0])
     sk = _sorted_keys(ra, rb, single, na, n_items, grid, clock)
     run_label = None
@@ -1137,8 +1181,12 @@ def any_conflict(trajs_a, trajs_b, separation_m: float = DEFAULT_SEPARATION_M,
     - within a stage, the cell mates are walked in the sorted keys' order (earliest time bucket
       first) and the entries of trajectories decided in one chunk make no pairs in the next.
 
-    Every stage cuts the same pieces (the cell and time bucket are the ones a single call
-    chooses) and the exact kernel sees the same piece pairs in the same orientation, so a
+    b's pieces are cut, keyed on one grid and sorted once per call; a stage keys only a's open
+    pieces and takes from b only the entries of the cells those touch, so the work per stage
+    follows a's open pieces and their cell mates, not the size of b. The pieces are the ones a
+    single call cuts (the same cell and time bucket), and the piece pairs that pass the box
+    filter do not depend on the grid's origin (every pair of overlapping boxes, once, in its
+    canonical cell), so the exact kernel sees the same piece pairs in the same orientation and a
     decision is the pair list's (``test_any_conflict_matches_conflicting_pairs``).
 
     Args: as :func:`conflicting_pairs` (two sets only; no groups or ranks: a decision does not
@@ -1158,8 +1206,13 @@ def any_conflict(trajs_a, trajs_b, separation_m: float = DEFAULT_SEPARATION_M,
     sa, sb = _common_window(sa, sb, slack_traj)
     if len(sa) == 0 or len(sb) == 0:
         return blocked
+    if z_cell_m is None and model.kind == "cylinder" and _CYLINDER_Z_KEYS:
+        z_cell_m = model.vertical_reach_m   # as _broad_phase: the same pieces and pairs
+    if z_cell_m is not None and not (np.isfinite(z_cell_m) and z_cell_m > 0.0):
+        raise ValueError(f"z_cell_m must be positive and finite, got {z_cell_m!r}")
     # the grid a single call over the windowed sets chooses, for every stage
     cell, bucket = _grid_size(sa, model.separation_m, cell_m, bucket_s)
+    keyed = _KeyedSets.make(model, sa, sb, slack_traj, cell, bucket, z_cell_m)
     # per trajectory of a: how many of its candidates are still open (1 each without shifts)
     template_of = None if shift is None else \
         np.repeat(np.arange(sa.n_trajectories, dtype=np.int64), np.diff(first))
@@ -1170,13 +1223,19 @@ def any_conflict(trajs_a, trajs_b, separation_m: float = DEFAULT_SEPARATION_M,
     lo = -np.inf
     for hi in _DECIDE_STAGES_S + (np.inf,):
         hi = t_first + hi
-        stage = sa.take((sa.t0_s >= lo) & (sa.t0_s < hi) & (open_count[sa.traj] > 0))
+        in_stage = (sa.t0_s >= lo) & (sa.t0_s < hi) & (open_count[sa.traj] > 0)
         lo = hi
-        if len(stage) == 0:
+        if not in_stage.any():
             continue
         st = {} if stats is not None else None
-        open_count = _decide_stage(model, stage, sb, slack_traj, cell, bucket, z_cell_m, first,
-                                   shift, template_of, blocked, open_count, st)
+        if keyed is None:   # extents beyond one int64 code: the general broad phase per stage
+            bp = _broad_phase(model, sa.take(in_stage), sb, False, None, None, slack_traj,
+                              cell, bucket, z_cell_m)
+        else:
+            bp = keyed.stage(in_stage)
+        if bp is not None:
+            open_count = _decide_stage(bp, model, first, shift, template_of, blocked,
+                                       open_count, st)
         for k, v in (st or {}).items():
             total[k] = total.get(k, 0) + v
     if stats is not None:
@@ -1184,14 +1243,79 @@ def any_conflict(trajs_a, trajs_b, separation_m: float = DEFAULT_SEPARATION_M,
     return blocked
 
 
-def _decide_stage(model, sa, sb, slack_traj, cell, bucket, z_cell_m, first, shift, template_of,
-                  blocked, open_count, stats):
-    """One stage of :func:`any_conflict`: mark in ``blocked`` the candidates of ``sa`` (a's
-    segments of this stage) that lose separation with ``sb``; returns the updated open count
-    per trajectory of a."""
-    bp = _broad_phase(model, sa, sb, False, None, None, slack_traj, cell, bucket, z_cell_m)
-    if bp is None:
-        return open_count
+@dataclass
+class _KeyedSets:
+    """Both sets of :func:`any_conflict` cut into pieces and keyed on one grid once, b's keys
+    sorted once; :meth:`stage` builds one stage's broad phase from a's pieces of the chosen
+    segments and the b entries of the cells they touch."""
+    sa: SegmentSet
+    sb: SegmentSet
+    pa: _Pieces
+    grid: _Grid
+    ra: tuple
+    item_bits: int
+    b_codes: np.ndarray      # b's packed (cell, side, item) codes, sorted
+    b_cell: np.ndarray       # their cells
+    arrays: _PieceArrays
+    n_items: int
+
+    @classmethod
+    def make(cls, model, sa, sb, slack_traj, cell, bucket, z_cell_m) -> "_KeyedSets | None":
+        """None when one packed int64 code cannot hold a cell and an item (huge extents)."""
+        half = 0.5 * float(model.separation_m)
+        half_z = 0.5 * model.vertical_reach_m
+        pa = _cut_pieces(sa, cell, bucket, half, half_z)
+        pb = _cut_pieces(sb, cell, bucket, half, half_z)
+        pa_t1_sweep = pa.t1 if slack_traj is None else pa.t1 + slack_traj[sa.traj[pa.seg]]
+        grid, ra, rb = _keyed_grid(pa, pb, pa_t1_sweep, cell, bucket, z_cell_m, half_z, False)
+        na = pa.t0.shape[0]
+        n_items = na + pb.t0.shape[0]
+        item_bits = max(int(n_items).bit_length(), 1)
+        if ((grid.nt * grid.ny * grid.nx * grid.nz) * 2).bit_length() + item_bits > 63:
+            return None
+        b_codes, _ = _expand_keys(rb, 1, na, grid, False, True, item_bits)
+        b_codes.sort()
+        iz0 = None if grid.z_bounds is None else np.concatenate((ra[6], rb[6]))
+        arrays = _piece_arrays(pa, pb, sa, sb, False, pa_t1_sweep, slack_traj is not None,
+                               None, iz0)
+        return cls(sa, sb, pa, grid, ra, item_bits, b_codes, b_codes >> (item_bits + 1),
+                   arrays, n_items)
+
+    def stage(self, seg_mask: np.ndarray) -> "_BroadPhase | None":
+        """The broad phase of a's pieces of the segments ``seg_mask`` against b."""
+        clock = [time.perf_counter()]
+        idx = np.flatnonzero(seg_mask[self.pa.seg])
+        clock.append(time.perf_counter())
+        # a's keys with their position in idx packed in, sorted; then their global ids
+        codes, _ = _expand_keys(tuple(r[idx] for r in self.ra), 0, 0, self.grid, False, True,
+                                self.item_bits)
+        codes.sort()
+        mask = (1 << self.item_bits) - 1
+        a_keys = codes >> self.item_bits
+        a_codes = (a_keys << self.item_bits) | idx[codes & mask]
+        cells = a_keys >> 1
+        cells = cells[np.concatenate(([True], cells[1:] != cells[:-1]))]
+        lo = np.searchsorted(self.b_cell, cells, side="left")
+        n = np.searchsorted(self.b_cell, cells, side="right") - lo
+        pos = np.repeat(lo, n) + (np.arange(int(n.sum()), dtype=np.int64)
+                                  - np.repeat(np.cumsum(n) - n, n))
+        clock.append(time.perf_counter())
+        # a's entries sort before b's within a cell (side 0 < 1); two sorted runs: a merge
+        merged = np.concatenate((a_codes, self.b_codes[pos]))
+        merged.sort(kind="stable")
+        sk = _cell_coordinates(merged & mask, merged >> self.item_bits, self.grid)
+        left_pos, right_first, n_right = _cell_mates(sk, False)
+        pt = _gather_table(self.arrays, sk.items, False)
+        clock.append(time.perf_counter())
+        return _BroadPhase(self.sa.take(seg_mask), self.sb, False, None, pt, sk, self.grid,
+                           left_pos, right_first, n_right, False, self.n_items, clock)
+
+
+def _decide_stage(bp: _BroadPhase, model, first, shift, template_of, blocked, open_count,
+                  stats):
+    """One stage of :func:`any_conflict`: mark in ``blocked`` the candidates that lose
+    separation among the piece pairs of ``bp`` (a's segments of this stage against b);
+    returns the updated open count per trajectory of a."""
     left_traj = bp.pt.P_traj[bp.sk.items[bp.left_pos]]
     n_exact = 0
     for i, j in _near_piece_pairs(bp, _DECIDE_PAIRS_PER_CHUNK,
@@ -1207,7 +1331,7 @@ def _decide_stage(model, sa, sb, slack_traj, cell, bucket, z_cell_m, first, shif
             continue
         blocked[lost[0]] = True
         open_count = (~blocked).astype(np.int64) if template_of is None else \
-            np.bincount(template_of, weights=~blocked, minlength=sa.n_trajectories)
+            np.bincount(template_of, weights=~blocked, minlength=open_count.shape[0])
     bp.clock.append(time.perf_counter())
     if stats is not None:
         bp.fill_stats(stats, n_exact)
