@@ -899,10 +899,12 @@ class _BroadPhase:
     runs_skipped: bool
     n_items: int
     clock: list
+    segments_a: int = -1   # a's segments taking part, when not all of ``sa`` (a stage)
 
     def fill_stats(self, stats: dict, n_exact: int) -> None:
         c = self.clock
-        stats.update(segments_a=len(self.sa), segments_b=len(self.sb), pieces=int(self.n_items),
+        stats.update(segments_a=len(self.sa) if self.segments_a < 0 else self.segments_a,
+                     segments_b=len(self.sb), pieces=int(self.n_items),
                      keys=int(self.sk.keys.shape[0]), pairs_sharing_cell=int(self.n_right.sum()),
                      exact_checks=n_exact, pieces_s=c[1] - c[0], keys_s=c[2] - c[1],
                      sort_s=c[3] - c[2], pairs_and_exact_s=c[4] - c[3])
@@ -1307,8 +1309,9 @@ class _KeyedSets:
         left_pos, right_first, n_right = _cell_mates(sk, False)
         pt = _gather_table(self.arrays, sk.items, False)
         clock.append(time.perf_counter())
-        return _BroadPhase(self.sa.take(seg_mask), self.sb, False, None, pt, sk, self.grid,
-                           left_pos, right_first, n_right, False, self.n_items, clock)
+        return _BroadPhase(self.sa, self.sb, False, None, pt, sk, self.grid, left_pos,
+                           right_first, n_right, False, self.n_items, clock,
+                           int(np.count_nonzero(seg_mask)))
 
 
 def _decide_stage(bp: _BroadPhase, model, first, shift, template_of, blocked, open_count,
