@@ -1,18 +1,12 @@
 """A short run's .rrd opened in the real Rerun viewer, headless, and judged from its screenshot.
 
-The viewer is the binary in the rerun-sdk wheel (``rerun``), run under Xvfb and rendering with
-Mesa's software Vulkan (lavapipe); scripts/setup.sh installs both when missing. ``--screenshot-to``
-makes the viewer save one frame and quit. The recording ends with aircraft in the air, and the
-blueprint puts the time cursor on the newest data, so the frame shows them.
+The viewer runs headless as :mod:`uam_sim.views.screenshot` runs it (Xvfb, Mesa's software
+Vulkan, ``--screenshot-to``). The recording ends with aircraft in the air, and the blueprint puts
+the time cursor on the newest data, so the frame shows them.
 """
 
 from __future__ import annotations
 
-import os
-import shutil
-import socket
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +16,7 @@ pytest.importorskip("uam_msgs.msg", reason="needs the built workspace (source sc
 
 from uam_sim.views.rerun_log import (AERODROME_COLOR, CORRIDOR_COLOR, LEVEL_COLORS, ROUTE_COLOR,  # noqa: E402
                                VEHICLE_COLOR)
+from uam_sim.views.screenshot import WINDOW, screenshot as render, xvfb_display as private_display  # noqa: E402
 from view_runs import ROOT, record_run  # noqa: E402
 
 SINGAPORE = ROOT / "config" / "networks" / "singapore.yaml"
@@ -29,52 +24,16 @@ SINGAPORE_LAYERED = ROOT / "config" / "networks" / "singapore-layered.yaml"
 
 pytestmark = pytest.mark.slow
 
-WINDOW = (1400, 800)
-
-
-def _cli() -> str:
-    exe = Path(sys.executable).with_name("rerun")
-    found = str(exe) if exe.exists() else shutil.which("rerun")
-    assert found, "the rerun CLI of rerun-sdk is not installed (scripts/setup.sh installs it)"
-    return found
-
 
 @pytest.fixture(scope="module")
 def xvfb_display():
-    """A private X display (Xvfb picks a free number and tells it through a pipe).
-
-    The screen is larger than twice the window, so that the pointer, which starts at the centre
-    of the screen, is outside the window and no hover tooltip covers the view."""
-    xvfb = shutil.which("Xvfb")
-    assert xvfb, "Xvfb is not installed (scripts/setup.sh installs the Debian package xvfb)"
-    r, w = os.pipe()
-    proc = subprocess.Popen([xvfb, "-displayfd", str(w), "-screen", "0", "4000x3000x24", "-nolisten", "tcp"],
-                            pass_fds=(w,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    os.close(w)
-    try:
-        with os.fdopen(r) as f:
-            number = f.readline().strip()
-        assert number, "Xvfb did not report a display number"
-        yield f":{number}"
-    finally:
-        proc.terminate()
-        proc.wait(timeout=10)
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+    with private_display() as display:
+        yield display
 
 
 def screenshot(path: Path, out: Path, display: str, tmp: Path) -> np.ndarray:
-    env = dict(os.environ, DISPLAY=display, XDG_RUNTIME_DIR=str(tmp))
-    env.pop("WAYLAND_DISPLAY", None)   # force X11 (Xvfb)
-    cmd = [_cli(), str(path), "--port", str(_free_port()), "--screenshot-to", str(out),
-           "--window-size", f"{WINDOW[0]}x{WINDOW[1]}"]
-    done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=240)
-    assert done.returncode == 0 and out.exists(), done.stdout[-3000:] + done.stderr[-3000:]
     from PIL import Image
+    render(path, out, display, WINDOW)
     return np.asarray(Image.open(out).convert("RGB")).astype(np.int16)
 
 
@@ -101,7 +60,7 @@ def test_viewer_shows_aircraft_and_corridors_in_the_top_down_view(shot):
     h, w, _ = img.shape
     # The top-down view is the left ~60 % of the window, below the top bar, above the time panel.
     left = img[int(0.06 * h):int(0.95 * h), :int(0.58 * w)]
-    right = img[int(0.06 * h):int(0.35 * h), int(0.62 * w):]   # the geographic view
+    right = img[int(0.06 * h):int(0.27 * h), int(0.61 * w):int(0.79 * w)]   # the geographic view
     scale = w / WINDOW[0]                                         # screenshots are in physical pixels
     aircraft = near(left, VEHICLE_COLOR)
     corridors = near(left, CORRIDOR_COLOR)
