@@ -106,7 +106,7 @@ def test_rrd_verifies_and_contains_the_entities(rrd):
     data = subprocess.run([_cli(), "rrd", "print", "-vvv", str(path)], capture_output=True, text=True,
                           timeout=120).stdout
     for view in ("Network (top-down)", "Geographic", "Flights", "MWIS size", "Solve time [s]",
-                 "Approvals and expiries", "Delay from the earliest departure [s]", "Operator approval share"):
+                 "Approvals and expiries", "Departure delay [s]", "Operator approval share"):
         assert view in data, view
 
 
@@ -127,9 +127,9 @@ def test_blueprint_lays_out_the_views():
         for child in getattr(part, "contents", None) or []:
             walk(child)
     walk(bp.root_container)
-    assert {"Network (top-down)", "Geographic", "Flights", "MWIS size (conflict-graph vertices)",
+    assert {"Network (top-down)", "Geographic", "Flights", "MWIS size [vertices]",
             "MWIS selected vertices", "Solve time [s]", "Approvals and expiries",
-            "Delay from the earliest departure [s]", "Operator approval share"} <= set(names)
+            "Departure delay [s]", "Operator approval share"} <= set(names)
     assert not any(n.startswith("Side") for n in names)  # one level: nothing to see from the side
 
 
@@ -218,6 +218,18 @@ def test_levels_of_a_layered_network_are_drawn_in_their_colours():
             walk(child)
     walk(make_blueprint(net).root_container)
     assert f"Side (from the south, heights x{k:.0f})" in names
+    # the side view names each level by its height, at that height
+    _, (level_pts,), level_kw = logged["side/network/levels"]
+    assert level_kw["labels"] == ["60 m", "90 m", "120 m"] and level_kw["show_labels"] is True
+    assert [p[2] for p in level_pts] == pytest.approx([60.0 * k, 90.0 * k, 120.0 * k])
+    # a constraint is drawn in the side view too, its band's heights exaggerated as the levels
+    from uam_planner.constraints import Constraint
+    disk = Constraint("disk", 1, "", 0.0, 100.0, center_m=(1000.0, 0.0), radius_m=200.0, lower_m=50.0, upper_m=100.0)
+    logger.log_constraints(10.0, [disk])
+    _, top, _ = logged["world/constraints/disk"]
+    _, drawn, _ = logged["side/constraints/disk"]
+    assert len(drawn) == len(top)
+    assert sorted({round(float(z), 6) for s in drawn for z in s[:, 2]}) == pytest.approx([50.0 * k, 100.0 * k])
 
 
 def _latest_at(path, entity: str) -> dict[float, dict]:
@@ -370,3 +382,84 @@ def test_graph_routes_match_their_aircraft_and_replanned_ones_show_as_such(tmp_p
     assert shown[1.0]["LineStrips3D:colors"] == [int.from_bytes(bytes(ROUTE_COLOR), "big")]
     assert np.asarray(shown[31.0]["LineStrips3D:strips"][0]).shape == (2, 3)
     assert shown[31.0]["LineStrips3D:colors"] == [int.from_bytes(bytes(REPLANNED_ROUTE_COLOR) + b"\xff", "big")]
+
+
+def _panel_sizes(part, width: float, height: float, out: dict) -> dict:
+    """Size in UI points of each view of a blueprint laid out in ``width`` x ``height``: the
+    containers' shares (equal when unset) split the space; a grid fills rows of its columns."""
+    if not hasattr(part, "kind"):   # a view, not a container
+        out[str(part.name)] = (width, height)
+        return out
+    contents, kind = list(part.contents), str(part.kind)
+    if "Horizontal" in kind:
+        shares = np.asarray(part.column_shares or [1.0] * len(contents), dtype=float)
+        for child, s in zip(contents, shares / shares.sum()):
+            _panel_sizes(child, width * s, height, out)
+    elif "Vertical" in kind:
+        shares = np.asarray(part.row_shares or [1.0] * len(contents), dtype=float)
+        for child, s in zip(contents, shares / shares.sum()):
+            _panel_sizes(child, width, height * s, out)
+    else:
+        assert "Grid" in kind, kind
+        rows = -(-len(contents) // part.grid_columns)
+        for child in contents:
+            _panel_sizes(child, width / part.grid_columns, height / rows, out)
+    return out
+
+
+def test_the_metric_panels_are_readable_at_1400x800():
+    """At 1400x800 (about 730 points under the top bar, above the time panel) every metric panel
+    is tall and wide enough for the y axis's values beside its legend (eight panels stacked in one
+    column had ~90 points each); a multi-series legend sits in a corner, the shares on a fixed
+    0..1 axis."""
+    from uam_sim.views.rerun_log import make_blueprint
+
+    bp = make_blueprint(tiny_network())
+    sizes = _panel_sizes(bp.root_container, 1400.0, 730.0, {})
+    plots = {n: wh for n, wh in sizes.items() if n not in ("Network (top-down)", "Geographic")}
+    assert len(plots) == 7, sorted(sizes)
+    assert all(w >= 250 and h >= 150 for w, h in plots.values()), plots
+    views = {}
+
+    def walk(part):
+        views[str(getattr(part, "name", ""))] = part
+        for child in part.contents if hasattr(part, "kind") else ():
+            walk(child)
+    walk(bp.root_container)
+    for name in ("Flights", "Approvals and expiries", "Departure delay [s]", "Operator approval share"):
+        legend = views[name].properties["PlotLegend"]
+        assert legend.corner is not None and legend.visible is None, name
+    share_range = views["Operator approval share"].properties["ScalarAxis"].range.as_arrow_array().to_pylist()[0]
+    assert share_range[0] <= 0.0 and share_range[1] >= 1.0, share_range
+
+
+def test_crowded_vertiport_labels_are_thinned_and_every_vertiport_is_drawn():
+    """Four vertiports within 400 m in the middle of a 20 km network: one keeps its label (the
+    one with most corridors), the others are drawn unlabelled, with their full names for hover;
+    the two far apart keep theirs. Names lose their parenthesised part on the map."""
+    from uam_sim.views.rerun_log import LABEL_CHAR_PX, LABEL_LINE_PX, LABEL_VIEW_PX
+
+    xy = [(-10000.0, 0.0), (10000.0, 0.0), (0.0, 0.0), (300.0, 100.0), (-200.0, -150.0), (100.0, 350.0)]
+    names = ("West Port", "East Port", "Centre (Downtown)", "Centre North", "Centre South", "Centre Quay")
+    net = NS(enu_m=np.array([(x, y, 5.0) for x, y in xy]), is_aerodrome=np.ones(6, dtype=bool),
+             edges=np.array([[3, 0], [3, 1], [3, 2], [0, 2]]), names=names,
+             node_ids=tuple(f"V{i}" for i in range(6)), origin_lat_lon_alt=(1.29, 103.85, 0.0))
+    logged = {}
+    fake_rr = NS(LineStrips3D=lambda *a, **kw: ("strips", a, kw), Points3D=lambda pts, **kw: (np.asarray(pts), kw),
+                 GeoLineStrings=lambda **kw: kw, GeoPoints=lambda *a, **kw: kw)
+    logger = RerunLogger("off")
+    logger._rr = fake_rr
+    logger._rec = NS(log=lambda entity, arch, static=False: logged.__setitem__(entity, arch))
+    logger.log_network(net)
+    pts, kw = logged["world/network/aerodromes/labelled"]
+    assert kw["show_labels"] is True and sorted(kw["labels"]) == ["Centre North", "East Port", "West Port"]
+    hidden, hkw = logged["world/network/aerodromes/unlabelled"]
+    assert hkw["show_labels"] is False and sorted(hkw["labels"]) == ["Centre (Downtown)", "Centre Quay", "Centre South"]
+    assert len(pts) + len(hidden) == 6
+    # no two shown labels' boxes (centred on their anchors, at the view's scale) overlap
+    m_per_px = 20000.0 / LABEL_VIEW_PX
+    for i in range(len(pts)):
+        for j in range(i + 1, len(pts)):
+            half_widths = (len(kw["labels"][i]) + len(kw["labels"][j])) * LABEL_CHAR_PX * m_per_px / 2
+            assert (abs(pts[i, 0] - pts[j, 0]) >= half_widths
+                    or abs(pts[i, 1] - pts[j, 1]) >= LABEL_LINE_PX * m_per_px), (kw["labels"][i], kw["labels"][j])

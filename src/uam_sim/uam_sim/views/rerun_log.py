@@ -5,22 +5,25 @@ The blueprint (:func:`make_blueprint`) shows, side by side:
 
 - **Network (top-down)**: a 3D view whose camera looks straight down on the network (north up),
   corridors coloured by flight level (one colour when the network has no levels), vertiports
-  labelled, aircraft as points whose size is in UI points (visible at any zoom), and the routes of
+  labelled where their labels do not overlap (:func:`declutter_labels`), aircraft as points whose size is in UI points (visible at any zoom), and the routes of
   the airborne flights as thin lines. Clicking an aircraft selects it *and* its route (they are
   instance ``k`` of the same entity, see ``world/fleet`` below), which Rerun highlights;
-- **Side (from the south)**, for a layered network: its corridors again (``side/network``),
-  heights exaggerated (:func:`height_exaggeration`) so that the flight levels lie apart, each in
-  its colour; top-down the highest level covers the others;
+- **Side (from the south)**, for a layered network: its corridors and constraints again
+  (``side/``), heights exaggerated (:func:`height_exaggeration`) so that the flight levels lie
+  apart, each in its colour and labelled with its height; top-down the highest level covers the
+  others;
 - **Geographic**: the same network and fleet as GeoPoints / GeoLineStrings on a map
   (OpenStreetMap tiles when the viewer is online; the points are drawn without tiles too);
-- **Metrics** on the ``sim_time`` timeline: approved (cumulative), airborne and pending flights;
+- **Metrics** on the ``sim_time`` timeline, two panels abreast with the map: approved (cumulative), airborne and pending flights;
   MWIS size (conflict-graph vertices) and selected vertices in panels of their own (at city scale
   ~20 selected beside ~1,300 vertices sat flat at 0 on one axis); MWIS solve time [s].
 
 Entity layout (ENU metres, z up; geographic entities in WGS84 degrees):
 
 - ``world/network/corridors`` (static): one 2-point LineStrips3D per corridor, coloured by level;
-- ``world/network/aerodromes`` (static): Points3D labelled with the vertiport names;
+- ``world/network/aerodromes/labelled`` (static): Points3D of the vertiports whose labels (their
+  names without a parenthesised part) fit without overlapping; ``.../unlabelled``: the others,
+  their names shown on hover;
 - ``world/network/waypoints`` (static): the other network nodes, small grey points;
 - ``world/fleet``: Points3D of the airborne aircraft at each simulation step (labels = vehicle
   ids, shown on hover) and, on the same entity, LineStrips3D of their approved routes in the same
@@ -35,8 +38,10 @@ Entity layout (ENU metres, z up; geographic entities in WGS84 degrees):
   ``metrics/delay/p95_s`` and ``metrics/delay/mean_s`` (the approved flights' departure - their
   request's earliest departure, over the run so far; numpy's linear percentile, as
   ``uam_sim.world.flights``), ``metrics/share/<operator>`` (approved / decided so far, per named
-  operator): the panels "Approvals and expiries", "Delay from the earliest departure [s]" and
-  "Operator approval share".
+  operator): the panels "Approvals and expiries", "Departure delay [s]" and
+  "Operator approval share";
+- ``side/network/corridors``, ``side/network/levels`` (static), ``side/constraints/<id>``: the
+  side view's corridors, level labels and constraints, heights exaggerated (layered networks).
 
 Every time-varying entity is logged on the ``sim_time`` timeline (a duration, seconds of
 simulation time) and, given the scenario's UTC start (``utc_zero_ns``, as the recorder and
@@ -88,6 +93,9 @@ ROUTE_RADIUS_UI = 2.5
 #: Share of the network's horizontal extent that its height range spans in the views (heights
 #: are exaggerated: 30 m between flight levels is invisible beside 40 km of city).
 HEIGHT_SHARE = 0.25
+
+#: Where the side view names the flight levels: left of the network by this share of its width.
+LEVEL_LABEL_OFFSET = 0.15
 
 #: Attribute names under which a network may carry one flight level per corridor.
 LEVEL_ATTRIBUTES = ("edge_levels", "corridor_levels", "edge_level")
@@ -151,6 +159,47 @@ def _node_labels(network: Any) -> list[str]:
     ids = list(network.node_ids)
     names = list(getattr(network, "names", None) or ids)
     return [str(n) if n else str(i) for n, i in zip(names, ids)]
+
+
+#: Vertiport labels in the top-down view: their estimated size on screen at 1400x800, where the
+#: network spans about LABEL_VIEW_PX pixels, LABEL_CHAR_PX per character and LABEL_LINE_PX high.
+LABEL_VIEW_PX = 600.0
+LABEL_CHAR_PX = 7.5
+LABEL_LINE_PX = 18.0
+
+
+def short_label(name: str) -> str:
+    """A vertiport's name without its parenthesised part: ``"Tampines (Tampines West)"`` -> ``"Tampines"``."""
+    return name.split(" (")[0].strip() or name
+
+
+def declutter_labels(xy_m: Any, texts: Sequence[str], priority: Sequence[float] | None = None,
+                     view_px: float = LABEL_VIEW_PX) -> np.ndarray:
+    """Which labels to show so that no two overlap on screen: a boolean mask over ``texts``.
+
+    Each label is a box centred on its anchor ``xy_m`` (ENU metres), ``len(text)`` x
+    :data:`LABEL_CHAR_PX` wide and :data:`LABEL_LINE_PX` high, at the scale where the anchors'
+    extent spans ``view_px`` pixels. Labels are taken greedily in order of ``priority``
+    (highest first, ties in input order) and one is kept when its box meets no kept box.
+    Deterministic; O(n^2) for n labels (a network has tens of vertiports).
+    """
+    xy = np.asarray(xy_m, dtype=np.float64).reshape(-1, 2)
+    if len(xy) != len(texts):
+        raise ValueError(f"texts: {len(texts)} labels for {len(xy)} anchors")
+    if not len(xy):
+        return np.zeros(0, dtype=bool)
+    m_per_px = max(float(np.ptp(xy[:, 0])), float(np.ptp(xy[:, 1])), 100.0) / view_px
+    half_w = np.array([len(t) for t in texts], dtype=np.float64) * LABEL_CHAR_PX * m_per_px / 2
+    height = LABEL_LINE_PX * m_per_px
+    order = np.argsort(-np.asarray(priority if priority is not None else np.zeros(len(xy)), dtype=np.float64),
+                       kind="stable")
+    keep = np.zeros(len(xy), dtype=bool)
+    for i in order:
+        kept = np.flatnonzero(keep)
+        clear_x = np.abs(xy[kept, 0] - xy[i, 0]) >= half_w[kept] + half_w[i]
+        clear_y = np.abs(xy[kept, 1] - xy[i, 1]) >= height
+        keep[i] = bool(np.all(clear_x | clear_y))
+    return keep
 
 
 def height_exaggeration(network: Any) -> float:
@@ -245,6 +294,15 @@ def constraint_label(c: Any) -> str:
     return f"{c.label()}{band} [{t(c.start_s)}, {t(c.end_s)}) s"
 
 
+#: the fixed y range of the operator approval shares (approved / decided, 0..1)
+SHARE_RANGE = (0.0, 1.05)
+#: the map and the metric panels, this many side by side
+METRIC_COLUMNS = 2
+#: panel titles short enough for a panel's width at 1400x800 (~280 px; longer ones were cut)
+MWIS_SIZE_TITLE = "MWIS size [vertices]"
+DELAY_TITLE = "Departure delay [s]"
+
+
 def make_blueprint(network: Any = None) -> Any:
     """The viewer layout sent with every recording (see the module docstring)."""
     import rerun.blueprint as rrb
@@ -274,31 +332,36 @@ def make_blueprint(network: Any = None) -> Any:
     # The plots show the run from its start up to the time cursor (not a window around it).
     axis = rrb.TimeAxis(view_range=rrb.TimeRange(start=rrb.TimeRangeBoundary.infinite(),
                                                  end=rrb.TimeRangeBoundary.cursor_relative(seconds=0.0)))
+    # Legends: a multi-series panel puts its legend where its curves are not. Counts that
+    # start at 0 and grow (approvals, airborne, delays) leave the top left empty; the shares
+    # start at 0 or 1 on the left, so their legend goes to the bottom right on a fixed 0..1 axis.
+    top_left = rrb.PlotLegend(rrb.Corner2D.LeftTop)
     flights = rrb.TimeSeriesView(name="Flights", origin="metrics", axis_x=axis, contents=[
         "$origin/approved_cumulative", "$origin/active_aircraft", "$origin/pending_requests"],
-        plot_legend=rrb.PlotLegend(rrb.Corner2D.LeftTop))
+        plot_legend=top_left)
     # one panel each: at city scale the selection (~20) sat flat at 0 beside ~1,300 vertices;
     # a single series needs no legend (the title names it), so none covers the curve's start
     no_legend = rrb.PlotLegend(visible=False)
-    mwis = rrb.TimeSeriesView(name="MWIS size (conflict-graph vertices)", origin="metrics",
+    mwis = rrb.TimeSeriesView(name=MWIS_SIZE_TITLE, origin="metrics",
                               axis_x=axis, contents=["$origin/mwis_vertices"], plot_legend=no_legend)
     selected = rrb.TimeSeriesView(name="MWIS selected vertices", origin="metrics", axis_x=axis,
                                   contents=["$origin/mwis_selected"], plot_legend=no_legend)
     solve = rrb.TimeSeriesView(name="Solve time [s]", origin="metrics", axis_x=axis,
                                contents=["$origin/solve_time_s"], plot_legend=no_legend)
-    legend = rrb.PlotLegend(rrb.Corner2D.LeftTop)
     decisions = rrb.TimeSeriesView(name="Approvals and expiries", origin="metrics/decisions",
-                                   axis_x=axis, contents="$origin/**", plot_legend=legend)
-    delay = rrb.TimeSeriesView(name="Delay from the earliest departure [s]", origin="metrics/delay",
-                               axis_x=axis, contents="$origin/**", plot_legend=legend)
+                                   axis_x=axis, contents="$origin/**", plot_legend=top_left)
+    delay = rrb.TimeSeriesView(name=DELAY_TITLE, origin="metrics/delay",
+                               axis_x=axis, contents="$origin/**", plot_legend=top_left)
     shares = rrb.TimeSeriesView(name="Operator approval share", origin="metrics/share",
-                                axis_x=axis, contents="$origin/**", plot_legend=legend)
+                                axis_x=axis, contents="$origin/**", axis_y=rrb.ScalarAxis(range=SHARE_RANGE),
+                                plot_legend=rrb.PlotLegend(rrb.Corner2D.RightBottom))
+    # The map and the metric panels two abreast: stacked in one column, eight panels had ~90 px
+    # each at 1400x800, too little for the y axis's values beside a legend.
+    plots = rrb.Grid(geo, flights, mwis, selected, solve, decisions, delay, shares,
+                     grid_columns=METRIC_COLUMNS)
     return rrb.Blueprint(
         rrb.Horizontal(rrb.Vertical(top_down, side_view, row_shares=[3, 1]) if layered else top_down,
-                       # the decision panels under the run's: the top-down view keeps
-                       # its 3/5 of the width
-                       rrb.Vertical(geo, flights, mwis, selected, solve, decisions, delay, shares,
-                                    row_shares=[3, 2, 2, 2, 2, 2, 2, 2]),
+                       plots,
                        column_shares=[3, 2]),
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),
@@ -363,6 +426,8 @@ class RerunLogger:
         self._decided: dict[str, int] = {}
         self._approved_by: dict[str, int] = {}
         self._styled_ops: set[str] = set()
+        # the side view's height factor, once a layered network is logged (None: no side view)
+        self._side_k: float | None = None
         if mode == "off":
             return
         import rerun as rr
@@ -439,17 +504,28 @@ class RerunLogger:
                       rr.LineStrips3D(list(world_strips), colors=world_colors, radii=_ui(CORRIDOR_RADIUS_UI)),
                       static=True)
         if levels_m and len(strips):  # the side view's copy, heights exaggerated
-            k = height_exaggeration(network)
+            k = self._side_k = height_exaggeration(network)
             self._rec.log("side/network/corridors",
                           rr.LineStrips3D(list(world_strips * np.array([1.0, 1.0, k])), colors=world_colors,
                                           radii=_ui(CORRIDOR_RADIUS_UI)), static=True)
+            # each level named by its height, left of the network's west end, in its colour
+            west = float(enu[:, 0].min()) - LEVEL_LABEL_OFFSET * float(max(np.ptp(enu[:, 0]), 100.0))
+            self._rec.log("side/network/levels", rr.Points3D(
+                [(west, float(enu[:, 1].mean()), z * k) for z in levels_m],
+                labels=[f"{z:g} m" for z in levels_m], colors=level_colors(np.arange(len(levels_m))),
+                radii=_ui(WAYPOINT_RADIUS_UI), show_labels=True), static=True)
         is_aero = np.asarray(network.is_aerodrome, dtype=bool)
-        all_labels = _node_labels(network)
-        labels = [all_labels[i] for i in np.flatnonzero(is_aero)]
-        self._rec.log("world/network/aerodromes",
-                      rr.Points3D(enu[is_aero], labels=labels, colors=AERODROME_COLOR,
-                                  radii=_ui(AERODROME_RADIUS_UI), show_labels=True,
-                                  point_shading="flat"), static=True)
+        aero = np.flatnonzero(is_aero)
+        names = [_node_labels(network)[i] for i in aero]
+        # hubs (most corridors) keep their label first; the others show theirs on hover
+        degree = np.bincount(edges.ravel(), minlength=len(enu))[aero] if len(edges) else np.zeros(len(aero))
+        shown = declutter_labels(enu[aero, :2], [short_label(n) for n in names], priority=degree)
+        for path, mask, visible in (("world/network/aerodromes/labelled", shown, True),
+                                    ("world/network/aerodromes/unlabelled", ~shown, False)):
+            self._rec.log(path, rr.Points3D(
+                enu[aero[mask]], labels=[short_label(n) if visible else n for n, m in zip(names, mask) if m],
+                colors=AERODROME_COLOR, radii=_ui(AERODROME_RADIUS_UI), show_labels=visible,
+                point_shading="flat"), static=True)
         self._rec.log("world/network/waypoints",
                       rr.Points3D(enu[~is_aero], colors=WAYPOINT_COLOR, radii=_ui(WAYPOINT_RADIUS_UI)),
                       static=True)
@@ -605,14 +681,21 @@ class RerunLogger:
     def _log_constraint(self, cid: str, shape) -> None:
         """Draw constraint ``cid`` (``shape`` = (strips, label)) or clear it (None), at the current time."""
         rr = self._rr
+        k = self._side_k   # a side view (a layered network) shows them too
         if shape is None:
             self._rec.log(f"world/constraints/{cid}", rr.Clear(recursive=True))
+            if k is not None:
+                self._rec.log(f"side/constraints/{cid}", rr.Clear(recursive=True))
             if self._origin is not None:
                 self._rec.log(f"geo/constraints/{cid}", rr.Clear(recursive=True))
             return
         strips, label = shape
         self._rec.log(f"world/constraints/{cid}", rr.LineStrips3D(
             strips, colors=CONSTRAINT_COLOR, radii=_ui(CONSTRAINT_RADIUS_UI), labels=[label] + [""] * (len(strips) - 1)))
+        if k is not None:
+            self._rec.log(f"side/constraints/{cid}", rr.LineStrips3D(
+                [s * np.array([1.0, 1.0, k]) for s in strips], colors=CONSTRAINT_COLOR,
+                radii=_ui(CONSTRAINT_RADIUS_UI)))
         if self._origin is not None:
             outlines = [s for s in strips if len(s) > 2][::2]   # each ring once (its bottom)
             self._rec.log(f"geo/constraints/{cid}", rr.GeoLineStrings(
