@@ -467,7 +467,12 @@ trap - INT TERM HUP
 echo "run_fleet: node graph finished in $((SECONDS - T0)) s wall (simulator exit code $SIM_RC)"
 grep -h "run finished" "$OUT/simulator.log" || true
 echo "run_fleet: recording: $MCAP"
-[[ "$RERUN" == save && -f "$RRD" ]] && echo "run_fleet: rerun:     $RRD   (view: rerun $RRD)"
+# The view is the .rrd: `rerun run.mcap` opens Rerun's generic MCAP reader (dots and raw fields)
+if [[ -f "$RRD" ]]; then
+  echo "run_fleet: view:      rerun $RRD   (not 'rerun $MCAP': Rerun's generic MCAP reader, see docs/views.md)"
+else
+  echo "run_fleet: view:      python -m uam_sim.rerun_log $MCAP --network $NETWORK && rerun $RRD"
+fi
 echo "run_fleet: node logs: $OUT/*.log"
 ANALYSIS_RC=0
 if [[ -f "$MCAP" ]]; then
