@@ -55,3 +55,22 @@ def test_the_recommended_disturbance_settings_are_the_same_in_the_readme_and_the
     row = next(line for line in table.splitlines() if "(recommended)" in line)
     flags = re.search(r"`(--[^`]+)`", row).group(1)
     assert f"`{flags}`" in README, flags
+
+
+def test_the_readme_picture_is_made_by_its_script_from_a_real_run():
+    """The README's picture is the output of scripts/make_readme_picture.sh (a run of the node
+    graph rendered by the headless viewer), the README names that command, and the picture is a
+    small 1400x800 PNG."""
+    from PIL import Image
+
+    script = ROOT / "scripts" / "make_readme_picture.sh"
+    assert script.is_file() and script.stat().st_mode & 0o111, f"{script}: missing or not executable"
+    body = script.read_text()
+    picture = re.search(r"^OUT=(\S+)$", body, flags=re.M).group(1)
+    assert "scripts/run_fleet.sh" in body and "uam_sim.views.screenshot" in body, script
+    shown = re.search(r"^!\[[^]]*\]\(([^)]+)\)", README, flags=re.M).group(1)
+    assert shown == picture, (shown, picture)
+    assert "scripts/make_readme_picture.sh" in README
+    path = ROOT / picture
+    assert path.stat().st_size < 400_000, f"{picture}: {path.stat().st_size} bytes"
+    assert Image.open(path).size == (1400, 800), Image.open(path).size

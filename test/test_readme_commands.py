@@ -128,6 +128,10 @@ def test_every_readme_command_runs_as_written(tmp_path, ros_process_domain_id):
             return in_env + c, "Safety audit     OK"
         if c.startswith("install/uam_sim/lib/uam_sim/replay "):
             return in_env + c.replace("rate:=10.0", "rate:=60.0"), "replay done:"
+        if c.startswith("rerun ") and c.endswith(".rrd"):
+            # the viewer on the demo's .rrd: here Rerun checks the file, headless
+            rrd = q(str(demo_out / "run.rrd"))
+            return in_env + f"rerun rrd verify {rrd} && echo verified {rrd}", "verified "
         if c.startswith("rerun ") and c.endswith(".mcap"):
             # the viewer: here Rerun reads the same file into an .rrd, headless
             return (in_env + f"rerun mcap convert {q(str(mcap))} -o {q(str(tmp_path / 'from_mcap.rrd'))}"

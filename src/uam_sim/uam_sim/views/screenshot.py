@@ -37,14 +37,15 @@ def rerun_cli() -> str:
 def xvfb_display() -> Iterator[str]:
     """A private X display (``":N"``) for the time of the ``with`` block.
 
-    Xvfb picks a free number and reports it through a pipe. The screen is larger than twice the
-    window, so that the pointer, which starts at the centre of the screen, is outside the window
-    and no hover tooltip covers the view."""
+    Xvfb picks a free number and reports it through a pipe. The screen is more than twice the
+    window in physical pixels (the viewer draws at 2x: 2800x1600 for 1400x800), so that the
+    pointer, which starts at the centre of the screen, is outside the window and no hover
+    tooltip covers the view (at 4000x3000 one covered a plot)."""
     xvfb = shutil.which("Xvfb")
     if not xvfb:
         raise RuntimeError("Xvfb: not installed (scripts/setup.sh installs the Debian package xvfb)")
     r, w = os.pipe()
-    proc = subprocess.Popen([xvfb, "-displayfd", str(w), "-screen", "0", "4000x3000x24", "-nolisten", "tcp"],
+    proc = subprocess.Popen([xvfb, "-displayfd", str(w), "-screen", "0", "6400x4000x24", "-nolisten", "tcp"],
                             pass_fds=(w,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     os.close(w)
     try:
