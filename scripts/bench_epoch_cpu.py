@@ -43,11 +43,13 @@ from uam_sim.world.demand import RequestGenerator  # noqa: E402
 
 
 def run(per_hour: float, duration_s: float, steady_from_s: float, seed: int = 0,
-        slot_s: float = 5.0, precompute: bool = True) -> dict:
-    """Plan ``duration_s`` of the city at ``per_hour``; per-epoch CPU and counts."""
+        slot_s: float = 5.0, precompute: bool = True, city: dict | None = None) -> dict:
+    """Plan ``duration_s`` of the city at ``per_hour``; per-epoch CPU and counts. ``city``:
+    generate_network's arguments (default the 2,000-node, 100-vertiport layered city)."""
     from uam_solvers.greedy import greedy_mwis
-    net = generate_network(2000, 100, seed=seed, levels_m=[60.0, 90.0, 120.0, 150.0],
-                           pads_per_vertiport=4)
+    spec = dict(n_nodes=2000, n_aerodromes=100, levels_m=[60.0, 90.0, 120.0, 150.0],
+                pads_per_vertiport=4) if city is None else dict(city)
+    net = generate_network(seed=seed, **spec)
     cfg = PlanningConfig(airspace=AirspaceConfig("cylinder", 30.0, slot_s), backend="greedy",
                          seed=seed, precompute_routes=precompute)
     solve_cpu = [0.0]

@@ -228,6 +228,7 @@ def test_observing_at_instants_keeps_the_first_position_of_each_vehicle(ros_cont
     stamped like the real one, which moves one vehicle and leaves the other out, changes nothing;
     a vehicle absent from the state of the call's time is not observed at the earlier instants."""
     from geometry_msgs.msg import Point
+    from rclpy.serialization import serialize_message
     from uam_msgs.msg import FleetState, VehicleState
     from graph_harness import make_planner
     planner = make_planner(ros_context, backend="greedy", reaction=True, use_solver_service=False)
@@ -245,7 +246,7 @@ def test_observing_at_instants_keeps_the_first_position_of_each_vehicle(ros_cont
                     state(50.0, [("op/a", 500.0)], session="rogue"),   # another session: not taken
                     state(60.0, [("op/a", 21.0), ("op/b", 22.0)]),
                     state(60.0, [("op/a", 999.0)])):          # forged, session copied: a moved, b left out
-            planner._on_fleet_msg(msg)
+            planner._on_fleet_msg(serialize_message(msg))   # the subscription is raw
         with planner._lock:
             planner._read_inbox(60.0, at_epoch=True)
         book = planner.planner.positions
@@ -263,6 +264,7 @@ def test_states_that_arrived_before_the_simulator_called_count_for_the_wait(ros_
     """The simulator publishes the fleet state of t = 0 before its first epoch call: once the
     planner binds to that simulator the state counts for the wait of the reaction mode (it waited
     request_wait_timeout_s, 60 s, for a state it had), and another session's never does."""
+    from rclpy.serialization import serialize_message
     from uam_msgs.msg import FleetState
     from graph_harness import make_planner
     planner = make_planner(ros_context, backend="greedy", reaction=True, use_solver_service=False)
@@ -270,7 +272,7 @@ def test_states_that_arrived_before_the_simulator_called_count_for_the_wait(ros_
         for session, t in (("rogue", 30.0), ("sim-1", 0.0)):
             msg = FleetState(session=session, step_index=int(t))
             msg.header.stamp = m.to_time(t)
-            planner._on_fleet_msg(msg)
+            planner._on_fleet_msg(serialize_message(msg))   # the subscription is raw
         assert not planner._stamps_reached(0.0, False)
         planner._bind("sim-1", resumed=False)
         assert planner._stamps_reached(0.0, False) and not planner._stamps_reached(30.0, False)

@@ -190,6 +190,34 @@ class PositionBook:
             del q[0]
         return None
 
+    def observe_many(self, request_ids, t_s: float, positions_m) -> str | None:
+        """Record one observation per vehicle of a fleet state at ``t_s`` [s]: ``positions_m``
+        (n, 3), row i the position of ``request_ids[i]``; the same as :meth:`observe` of each
+        row, checked per array instead of per row. Returns None, or why rows (or the state)
+        were refused (naming the field); the other rows are recorded."""
+        ids = list(request_ids)
+        if isinstance(t_s, bool) or not isinstance(t_s, (int, float, np.integer, np.floating)) \
+                or not math.isfinite(t_s):
+            return f"t_s: {t_s!r} is not a finite time"
+        p = np.asarray(positions_m, dtype=np.float64)
+        if p.shape != (len(ids), 3):
+            return f"positions_m: shape {p.shape} for {len(ids)} vehicles"
+        ok = np.isfinite(p).all(axis=1)
+        refused = []
+        t = float(t_s)
+        for rid, row, good in zip(ids, p.tolist(), ok.tolist()):
+            if not good or not isinstance(rid, str) or not rid:
+                refused.append(self.observe(rid, t, row))
+                continue
+            q = self._obs.setdefault(rid, [])
+            if q and t <= q[-1].t_s:
+                self.observe(rid, t, row)   # not after the newest: the general path
+                continue
+            q.append(Observation(t, tuple(row)))
+            if len(q) > MAX_OBSERVATIONS:
+                del q[0]
+        return f"{len(refused)} of {len(ids)} rows refused, the first: {refused[0]}" if refused else None
+
     def prune(self, t_s: float) -> None:
         """Drop the observations older than ``SPEED_WINDOW_S`` before the epoch at ``t_s``."""
         lo = float(t_s) - SPEED_WINDOW_S

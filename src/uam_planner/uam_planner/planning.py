@@ -276,6 +276,11 @@ class Planner:
         observation was refused (naming the field and value)."""
         return self.positions.observe(request_id, t_s, position_m)
 
+    def observe_fleet(self, request_ids, t_s: float, positions_m) -> str | None:
+        """The planner's own observations of every vehicle of a fleet state at ``t_s``
+        (``positions_m`` (n, 3), row i of ``request_ids[i]``), as :meth:`observe` of each."""
+        return self.positions.observe_many(request_ids, t_s, positions_m)
+
     def report_nonconforming(self, request_id: str, t_s: float, source: str = "") -> str | None:
         """A claim that ``request_id`` is nonconforming at ``t_s`` (from the conformance
         monitor). None if queued, else why it is refused (naming the field and value). Queued

@@ -10,12 +10,16 @@ forged. The planner cannot tell which it already believed, so :class:`BoundSourc
 problem and the planner refuses the next epoch call with it: the simulator ends the run with the
 reason, and the recording is NOT VERIFIED (docs/security.md).
 
-rclpy-free: the node passes each message's kind, session, step and a digest of its content.
+rclpy-free: the node passes each message's kind, session, step and a digest of its content; a
+fleet state as a :class:`FleetView` read straight from its bytes.
 """
 
 from __future__ import annotations
 
 from collections import OrderedDict
+from dataclasses import dataclass
+
+import numpy as np
 
 #: how many recent steps per kind are remembered to compare a second message with
 REMEMBERED_STEPS = 4096
@@ -60,17 +64,55 @@ class BoundSource:
         return self.foreign.get(kind, 0)
 
 
-def fleet_rows(msg) -> list:
-    """(vehicle id, x, y, z) of every vehicle of a FleetState, read once for its digest and its
-    observations."""
-    return [(v.vehicle_id, v.position.x, v.position.y, v.position.z) for v in msg.vehicles]
+@dataclass(frozen=True)
+class FleetView:
+    """What the planner takes from a FleetState: its stamp, step, session, vehicle ids and
+    positions (n, 3) [m], and a digest of its content (stamp, ids, positions) that tells two
+    messages of one step apart. Made from the serialized message
+    (:func:`uam_planner.fleet_state_cdr.observed_fleet`) or from a deserialized one
+    (:meth:`of_message`); both give the same view and digest."""
+    sec: int
+    nanosec: int
+    step_index: int
+    session: str
+    vehicle_ids: tuple
+    positions_m: np.ndarray
+    digest: int
+
+    @classmethod
+    def make(cls, sec, nanosec, step_index, session, vehicle_ids, positions_m) -> "FleetView":
+        ids = tuple(vehicle_ids)
+        pos = np.ascontiguousarray(positions_m, dtype=np.float64).reshape(len(ids), 3)
+        return cls(int(sec), int(nanosec), int(step_index), str(session), ids, pos,
+                   hash((int(sec), int(nanosec), ids, pos.tobytes())))
+
+    @classmethod
+    def of_message(cls, msg) -> "FleetView":
+        """From a deserialized FleetState (anything with its fields)."""
+        s = msg.header.stamp
+        return cls.make(s.sec, s.nanosec, msg.step_index, msg.session,
+                        [v.vehicle_id for v in msg.vehicles],
+                        [(v.position.x, v.position.y, v.position.z) for v in msg.vehicles])
+
+    @classmethod
+    def of_cdr(cls, data: bytes) -> "FleetView | None":
+        """From the serialized message (little-endian CDR); None for big-endian data."""
+        from .fleet_state_cdr import observed_fleet
+        d = observed_fleet(data)
+        if d is None:
+            return None
+        s = d.header.stamp
+        return cls.make(s.sec, s.nanosec, d.step_index, d.session, d.vehicle_ids, d.positions_m)
+
+    @property
+    def t_s(self) -> float:
+        return self.sec + self.nanosec * 1e-9
 
 
-def fleet_digest(msg, rows: list | None = None) -> int:
-    """A digest of a FleetState's content (its stamp, ids and positions; ``rows``: its
-    :func:`fleet_rows`, when read already)."""
-    s = msg.header.stamp
-    return hash((int(s.sec), int(s.nanosec), tuple(fleet_rows(msg) if rows is None else rows)))
+def fleet_digest(msg) -> int:
+    """A digest of a FleetState's content (its stamp, ids and positions), as :class:`FleetView`
+    computes it."""
+    return msg.digest if isinstance(msg, FleetView) else FleetView.of_message(msg).digest
 
 
 def conformance_digest(msg) -> int:
@@ -79,4 +121,4 @@ def conformance_digest(msg) -> int:
     return hash((int(s.sec), int(s.nanosec), tuple(msg.vehicle_ids), tuple(bool(x) for x in msg.conforming)))
 
 
-__all__ = ["BoundSource", "REMEMBERED_STEPS", "conformance_digest", "fleet_digest", "fleet_rows"]
+__all__ = ["BoundSource", "FleetView", "REMEMBERED_STEPS", "conformance_digest", "fleet_digest"]

@@ -69,6 +69,7 @@ def test_direct_cdr_equals_rclpy_serialization():
     from geometry_msgs.msg import Point, Pose, PoseArray, Quaternion, Vector3
     from rclpy.serialization import deserialize_message, serialize_message
     from uam_msgs.msg import FleetState, VehicleState
+    from uam_planner.fleet_state_cdr import observed_fleet
 
     for t, session in ((0.0, "3f2a9c01d4e5b6a7"), (12.5, "a"), (29.0, "abcd"), (40.0, "s" * 5)):  # 2, 2, 1, 0 vehicles
         s = _fleet().sample(t)
@@ -92,6 +93,10 @@ def test_direct_cdr_equals_rclpy_serialization():
         # messages and lengths rather than raw bytes).
         assert len(ours) == len(serialize_message(msg))
         assert deserialize_message(ours, FleetState) == msg
+        # what the planner node reads from rclpy's own bytes
+        theirs = observed_fleet(serialize_message(msg))
+        assert theirs.session == session and theirs.vehicle_ids == list(s.vehicle_ids)
+        np.testing.assert_array_equal(theirs.positions_m, np.asarray(s.positions_m).reshape(-1, 3))
         pose_bytes = encode_pose_array(int(t), 500_000_000, "enu", s.positions_m, quats)
         assert len(pose_bytes) == len(serialize_message(poses))
         assert deserialize_message(pose_bytes, PoseArray) == poses
@@ -104,6 +109,7 @@ def test_stamps_ids_and_positions_are_read_from_the_cdr_without_deserializing():
     from geometry_msgs.msg import PoseArray
     from rosgraph_msgs.msg import Clock
     from uam_msgs.msg import FlightPlan, PlanningReport
+    from uam_planner.fleet_state_cdr import observed_fleet
     from uam_sim.recording.cdr import fleet_state_digest, fleet_state_step_index, leading_stamp_ns, serialize_exact
 
     cases = (("", []), ("enu", ["a"]), ("e", ["r00001_000", "x" * 13, "é", "b7"]),
@@ -113,10 +119,18 @@ def test_stamps_ids_and_positions_are_read_from_the_cdr_without_deserializing():
     for frame, ids in cases:
         pos = np.arange(3.0 * len(ids)).reshape(-1, 3) * 1.5 - 7.0
         vel = np.arange(3.0 * len(ids)).reshape(-1, 3) * -0.25 + 2.0
+        session = "s" * (len(ids) % 7) + "-run"
         data = encode_fleet_state(77, 123, frame, 5, ids, pos, vel, np.zeros(len(ids), np.uint8),
-                                  np.arange(len(ids), dtype=np.uint32), np.ones(len(ids)), np.ones(len(ids)))
+                                  np.arange(len(ids), dtype=np.uint32), np.ones(len(ids)), np.ones(len(ids)),
+                                  session)
         d = fleet_state_digest(data, positions=True)
         assert d.vehicle_ids == ids and d.step_index == 5 == fleet_state_step_index(data)
+        # the planner's reading: the same, and the session after the vehicles
+        o = observed_fleet(data)
+        assert o.session == session and o.vehicle_ids == ids
+        np.testing.assert_array_equal(o.positions_m, pos)
+        with pytest.raises(ValueError, match="session"):
+            observed_fleet(data[:-(len(session) + 2)])
         np.testing.assert_array_equal(d.positions_m, pos)
         np.testing.assert_array_equal(d.velocities_mps, vel)
         assert leading_stamp_ns(data) == 77 * 10**9 + 123
@@ -136,6 +150,7 @@ def test_direct_cdr_with_ids_of_every_length_mod_8(frame_id):
     from geometry_msgs.msg import Point, Vector3
     from rclpy.serialization import deserialize_message, serialize_message
     from uam_msgs.msg import FleetState, VehicleState
+    from uam_planner.fleet_state_cdr import observed_fleet
 
     ids = ["x" * k for k in range(1, 18)] + ["generator/r00012_003", "médecin/é"]
     n = len(ids)
@@ -153,6 +168,13 @@ def test_direct_cdr_with_ids_of_every_length_mod_8(frame_id):
         msg.header.stamp.sec, msg.header.stamp.nanosec, msg.header.frame_id = 7, 123, frame_id
         assert len(ours) == len(serialize_message(msg))
         assert deserialize_message(ours, FleetState) == msg
+        theirs = observed_fleet(serialize_message(msg))   # ids of every length, then the session
+        assert theirs.session == frame_id[:3] and theirs.vehicle_ids == ids
+        np.testing.assert_array_equal(theirs.positions_m, pos)
+        # what the planner node reads from rclpy's own bytes
+        theirs = observed_fleet(serialize_message(msg))
+        assert theirs.session == msg.session and theirs.vehicle_ids == ids and theirs.step_index == 42
+        np.testing.assert_array_equal(theirs.positions_m, pos)
 
 
 def test_clock_cdr_equals_rclpy_serialization():

@@ -81,7 +81,7 @@ from uam_planner.conformance import ConformanceBounds
 from uam_planner.authority import Authorities
 from uam_planner.grants import PriorityGrants
 from uam_planner.objectives import objective_problem
-from uam_planner.sources import BoundSource, conformance_digest, fleet_digest, fleet_rows
+from uam_planner.sources import BoundSource, FleetView, conformance_digest
 from uam_planner.planning import AirspaceConfig, Planner, PlanningConfig, call_solver, default_solve_mwis
 
 
@@ -174,8 +174,11 @@ class PlannerNode(Node):
         # the fleet state always (safety gap: a flight seen flying past its plan is
         # held in the traffic picture until it lands, uam_planner.nonconformance.overruns); the
         # conformance reports only with the reaction on
+        # raw: the fleet state is read from its bytes (uam_planner.fleet_state_cdr), not
+        # deserialized into a VehicleState, a Point and a Vector3 object per vehicle (most of
+        # this node's CPU in the paper scenario)
         self.create_subscription(FleetState, c.TOPIC_FLEET, self._on_fleet_msg, qos.QOS_STREAM,
-                                 callback_group=group)
+                                 callback_group=group, raw=True)
         if self.p["reaction"]:
             self.create_subscription(Conformance, c.TOPIC_CONFORMANCE, self._on_conformance_msg, qos.QOS_STREAM,
                                      callback_group=group)
@@ -241,10 +244,14 @@ class PlannerNode(Node):
             f"{self.config.separation.kind}, departure slot {self.config.airspace.departure_slot_s:g} s, "
             f"{len(self.config.constraints or ())} constraint(s)")
 
-    def _on_fleet_msg(self, msg: FleetState) -> None:
+    def _on_fleet_msg(self, data: bytes) -> None:
+        msg = FleetView.of_cdr(data)
+        if msg is None:   # big-endian CDR: deserialized in full
+            from rclpy.serialization import deserialize_message
+            msg = FleetView.of_message(deserialize_message(data, FleetState))
         self._inbox.append(msg)
         if msg.session == self.bound_simulator:   # another session's stamp wakes no one
-            self._stamped(m.from_time(msg.header.stamp), None)
+            self._stamped(msg.t_s, None)
 
     def _on_conformance_msg(self, msg: Conformance) -> None:
         self._inbox.append(msg)
@@ -302,21 +309,19 @@ class PlannerNode(Node):
         while self._inbox:
             msg = self._inbox.popleft()
             # only the bound simulator's, each step once (uam_planner.sources)
-            if not isinstance(msg, FleetState):
+            if not isinstance(msg, FleetView):
                 if self.source.take("conformance report", msg.session, msg.step_index, conformance_digest(msg)):
                     self._on_conformance(msg)
                 continue
-            rows = fleet_rows(msg)   # read once: the digest and the observations
-            if not self.source.take("fleet state", msg.session, msg.step_index, fleet_digest(msg, rows)):
+            if not self.source.take("fleet state", msg.session, msg.step_index, msg.digest):
                 continue
-            t = m.from_time(msg.header.stamp)
+            t = msg.t_s
             if self._observe_from_calls:
                 seen = self._fleet_buffer.setdefault(stamp_key(t), {})
-                for vid, x, y, z in rows:
-                    seen.setdefault(vid, (x, y, z))
+                for vid, pos in zip(msg.vehicle_ids, msg.positions_m.tolist()):
+                    seen.setdefault(vid, tuple(pos))
             else:   # the planner's own observation of every vehicle in the fleet state
-                for vid, x, y, z in rows:
-                    self.planner.observe(vid, t, (x, y, z))
+                self.planner.observe_fleet(msg.vehicle_ids, t, msg.positions_m)
         if self._observe_from_calls and t_s is not None:
             self._observe_at(float(t_s), at_epoch)
 
@@ -689,11 +694,10 @@ class PlannerNode(Node):
         for msg in list(self._inbox):
             if msg.session != session:
                 continue
-            t = m.from_time(msg.header.stamp)
-            if isinstance(msg, FleetState):
-                self._stamped(t, None)
+            if isinstance(msg, FleetView):
+                self._stamped(msg.t_s, None)
             else:
-                self._stamped(None, t)
+                self._stamped(None, m.from_time(msg.header.stamp))
         if self.journal is not None:
             self.journal.start(session, keep=resumed)
             self.journal.append_constraints(self._last_set_text)   # the set in force from the start
