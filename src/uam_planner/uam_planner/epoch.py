@@ -120,14 +120,17 @@ class EpochResult:
     """Approvals, expiries and the requests left waiting after one epoch, with the report.
 
     ``plan_updates``: the new versions and cancellations of flights approved before, decided at
-    this epoch because constraints changed (``uam_planner.replanning.PlanUpdate``, one per
-    affected flight; empty when nothing changed)."""
+    this epoch because constraints changed, an operator modified or cancelled its flight, or the
+    reaction acted (``uam_planner.replanning.PlanUpdate``, one per affected flight; empty when
+    nothing changed). ``refused_modifications``: request id -> (why, whether the previous
+    version stays in force) of each modification (``Planner.modify``) this epoch did not approve."""
 
     approved: list
     expired: list
     waiting: list
     report: EpochReport
     plan_updates: list = field(default_factory=list)
+    refused_modifications: dict = field(default_factory=dict)
 
 
 # ---- MWIS answer checking ---------------------------------------------------------------------

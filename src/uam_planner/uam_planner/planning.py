@@ -126,7 +126,10 @@ class Planner:
         self._requests: dict = {}               # request_id -> FlightRequest of active flights
         self._plan_updates: list = []           # decided in prepare, returned by commit
         self._cancellations: list = []          # cancel() since the last commit (PlanUpdate)
-        self._aside: dict = {}                  # request_id -> Flight set aside (set_aside)
+        # modifications (modify): request_id -> the replacement FlightRequest, decided at the
+        # next epoch; while that epoch is planned, request_id -> (replacement, the version it replaces)
+        self._modifying: dict = {}
+        self._deciding: dict = {}
         self._replan_report = None
         # the reaction to nonconformance (uam_planner.nonconformance): the planner's
         # own observations of the vehicles and the reports (claims) not acted on yet
@@ -437,12 +440,13 @@ class Planner:
         epoch's report."""
         self._rejected_since_plan += 1
 
-    def validate(self, request: FlightRequest) -> str | None:
-        """Why ``request`` cannot be accepted (naming the field and value), or None."""
+    def validate(self, request: FlightRequest, replacing: bool = False) -> str | None:
+        """Why ``request`` cannot be accepted (naming the field and value), or None. ``replacing``:
+        it is a new version of a request already known (:meth:`modify`), not a new request."""
         rid = getattr(request, "request_id", None)
         if not isinstance(rid, str) or not rid:
             return f"request_id: {rid!r} is not a non-empty string"
-        if rid in self._known_ids:
+        if rid in self._known_ids and not replacing:
             return f"request_id: {rid!r} duplicates an earlier request"
         net = self.network
         for name in ("origin_id", "destination_id"):
@@ -509,10 +513,11 @@ class Planner:
 
     def cancel(self, request_id: str, t_s: float, reason: str = "cancelled by its operator") -> str | None:
         """End ``request_id`` at ``t_s`` [s], as its operator asks: a waiting request is withdrawn
-        (it is never decided); an approved flight (active or set aside) that has not departed by
-        ``t_s`` is dropped, and the next :meth:`commit` reports it as a PlanUpdate of kind
-        'cancelled' (version + 1, effective ``t_s``), as a re-plan's cancellation is reported.
-        An airborne flight is not cancelled (the aircraft flies; it lands as planned).
+        (it is never decided), and so is a modification not decided yet (:meth:`modify`); an
+        approved flight that has not departed by ``t_s`` is dropped, and the next :meth:`commit`
+        reports it as a PlanUpdate of kind 'cancelled' (version + 1, effective ``t_s``), as a
+        re-plan's cancellation is reported. An airborne flight is not cancelled (the aircraft
+        flies; it lands as planned).
 
         Returns None when done, else why not (naming the field and value). Between epochs only:
         a prepared epoch holds its requests until it is committed."""
@@ -524,63 +529,130 @@ class Planner:
             if r.request_id == request_id:
                 del self.pending[i]
                 return None
-        f = self._aside.get(request_id) or next((f for f in self.active if f.request_id == request_id), None)
+        f = next((f for f in self.active if f.request_id == request_id), None)
         if f is None:
             return f"request_id: {request_id!r} is neither waiting nor an approved flight of this planner"
         if f.departure_s < t_s:
             return (f"request_id: {request_id!r} departed at {f.departure_s:g} s, before t_s {t_s:g} s: "
                     f"an airborne flight is not cancelled (it lands at {f.arrival_s:g} s)")
-        if self._aside.pop(request_id, None) is None:
-            self.active = [a for a in self.active if a is not f]
+        self._modifying.pop(request_id, None)
+        self.active = [a for a in self.active if a is not f]
         self._requests.pop(request_id, None)
         self._cancellations.append(PlanUpdate(request_id, f.operator_id, int(f.version) + 1, "cancelled", (),
                                               str(reason), float(t_s), None, f))
         return None
 
-    def set_aside(self, request_id: str, t_s: float) -> str | None:
-        """Take the approved flight ``request_id`` (not departed by ``t_s``) out of the traffic
-        that the next epochs deconflict against, while a replacement is planned (its operator
-        modifies it); nothing is reported. Then :meth:`cancel` it (the replacement was approved)
-        or :meth:`put_back` it. Returns None, or why not (naming the field and value)."""
-        problem = self._between_epochs(request_id, t_s)
+    def modify(self, request: FlightRequest, t_s: float) -> str | None:
+        """Plan a new version of the approved flight ``request.request_id`` from ``request`` (its
+        operator changed its plan: ends, window, priority), as of ``t_s`` [s]. Returns None if
+        queued, else why not (naming the field and value): the flight must be approved, not
+        departed by ``t_s``, and not already being modified; ``request`` is checked as
+        :meth:`submit` checks a new one.
+
+        Decided at the next epoch, and at that epoch only: there the flight in force is left out
+        of the traffic (after that epoch's re-plans) and ``request`` is planned with the epoch's
+        other requests, deconflicted against everything else. Approved, the new flight replaces
+        the old in the active flights as version + 1 of the same request (a PlanUpdate of kind
+        :data:`~uam_planner.replanning.KIND_MODIFIED`, effective at the epoch; the same F3548
+        operational intent, a new version). Not approved (no conflict-free candidate at that
+        epoch), the old version stays in force if it still keeps separation with every flight
+        approved meanwhile and stays out of every constraint, else it is cancelled; either way
+        :attr:`EpochResult.refused_modifications` says so. Deciding at one epoch keeps the old
+        version out of the traffic for the planning of that one epoch only, never while it
+        could depart or while a reaction between epochs deconflicts against it."""
+        rid = getattr(request, "request_id", None)
+        problem = self._between_epochs(rid, t_s)
         if problem is not None:
             return problem
-        f = next((f for f in self.active if f.request_id == request_id), None)
+        f = next((f for f in self.active if f.request_id == rid), None)
         if f is None:
-            return f"request_id: {request_id!r} is not an active flight of this planner"
+            return f"request_id: {rid!r} is not an approved flight of this planner"
         if f.departure_s < t_s:
-            return (f"request_id: {request_id!r} departed at {f.departure_s:g} s, before t_s {t_s:g} s: "
+            return (f"request_id: {rid!r} departed at {f.departure_s:g} s, before t_s {t_s:g} s: "
                     "an airborne flight is not re-planned by its operator")
-        self.active = [a for a in self.active if a is not f]
-        self._aside[request_id] = f
+        if rid in self._modifying:
+            return f"request_id: {rid!r} has a modification waiting for the next epoch"
+        reason = self.validate(request, replacing=True)
+        if reason is not None:
+            return reason
+        self._modifying[rid] = request
         return None
 
-    def put_back(self, request_id: str, t_s: float) -> str | None:
-        """Return a flight set aside to the active flights, if it still keeps separation with
-        every active flight and stays out of every constraint; otherwise it is cancelled (as
-        :meth:`cancel`) and the reason is returned."""
+    def _start_modifications(self, t_s: float) -> None:
+        """At an epoch's prepare, after its re-plans: each modification's flight in force leaves
+        the traffic and its replacement joins the epoch's requests (``_deciding``)."""
+        self._deciding, mods, self._modifying = {}, self._modifying, {}
+        for rid, req in mods.items():
+            f = next((f for f in self.active if f.request_id == rid), None)
+            if f is None or f.departure_s < t_s:   # landed, cancelled by a re-plan, or departed
+                self._deciding[rid] = (req, f)
+                continue
+            self.active = [a for a in self.active if a is not f]
+            self._deciding[rid] = (req, f)
+            self.pending.append(req)
+
+    def _keeps_out(self, f: Flight) -> str | None:
+        """Why flight ``f`` may not rejoin the active flights (it loses separation with one, or
+        enters a constraint), or None."""
         from .separation import any_conflict
-        problem = self._between_epochs(request_id, t_s)
-        if problem is not None:
-            return problem
-        f = self._aside.get(request_id)
-        if f is None:
-            return f"request_id: {request_id!r} is not a flight set aside"
-        why = None
         if self.active and bool(any_conflict([f.trajectory], [a.trajectory for a in self.active],
                                              self.config.separation)[0]):
-            why = "it now loses separation with a flight approved while it was set aside"
-        elif self.config.constraints is not None and len(self.config.constraints):
-            cset, net = self.config.constraints, self.network
+            return "it now loses separation with a flight approved while it was out of the traffic"
+        cset, net = self.config.constraints, self.network
+        if cset is not None and len(cset):
             which, _ = cset.violations([f.trajectory], [net.index[f.origin_id]], [net.index[f.destination_id]])
             if which[0] >= 0:
-                why = f"it now enters constraint {cset.constraints[which[0]].constraint_id!r}"
-        if why is not None:
-            self.cancel(request_id, t_s, f"cancelled: {why}")
-            return f"request_id: {request_id!r}: {why}"
-        del self._aside[request_id]
-        self.active = self.active + [f]
+                return f"it now enters constraint {cset.constraints[which[0]].constraint_id!r}"
         return None
+
+    def _finish_modifications(self, result: EpochResult, t_s: float) -> list:
+        """At the commit of the epoch that decided the modifications: approved replacements become
+        new versions (PlanUpdates, out of ``result.approved``); the others are refused (out of
+        ``result.expired`` and the waiting requests), their old versions put back or cancelled.
+        Returns the PlanUpdates; ``result.refused_modifications`` gets the refusals."""
+        from .replanning import KIND_MODIFIED, PlanUpdate
+        deciding, self._deciding = self._deciding, {}
+        if not deciding:
+            return []
+        updates = []
+        new_versions = []
+        for f in result.approved:
+            got = deciding.get(f.request_id)
+            if got is None or got[1] is None:
+                continue
+            old = got[1]
+            new = replace(f, version=int(old.version) + 1, effective_s=float(t_s))
+            new_versions.append(new)
+            updates.append(PlanUpdate(f.request_id, old.operator_id, new.version, KIND_MODIFIED, (),
+                                      f"modified by its operator: {new.origin_id} -> {new.destination_id}, "
+                                      f"departs at {new.departure_s:g} s", float(t_s), new, old,
+                                      float(new.arrival_s - old.arrival_s)))
+        done = {f.request_id for f in new_versions}
+        result.approved = [f for f in result.approved if f.request_id not in deciding]
+        refusals = result.report.constraint_refusals if hasattr(result.report, "constraint_refusals") else {}
+        result.expired = [r for r in result.expired if r.request_id not in deciding]
+        result.waiting = [r for r in result.waiting if r.request_id not in deciding]
+        result.report.approved, result.report.expired = len(result.approved), len(result.expired)
+        self.active = self.active + new_versions
+        for rid in sorted(set(deciding) - done):
+            old = deciding[rid][1]
+            if old is None:
+                result.refused_modifications[rid] = (
+                    f"request_id: {rid!r}: the flight is no longer an approved flight that has not departed "
+                    f"(landed, departed or cancelled) at t = {t_s:g} s", False)
+                continue
+            why = refusals.get(rid) or f"no conflict-free candidate for the new version at the epoch at {t_s:g} s"
+            lost = self._keeps_out(old)
+            if lost is None:
+                self.active = self.active + [old]
+                result.refused_modifications[rid] = (f"{why}; the previous version stays in force", True)
+            else:
+                self._requests.pop(rid, None)
+                updates.append(PlanUpdate(rid, old.operator_id, int(old.version) + 1, "cancelled", (),
+                                          f"cancelled: {lost}", float(t_s), None, old))
+                result.refused_modifications[rid] = (f"{why}; the previous version could not be kept: {lost}",
+                                                     False)
+        return updates
 
     def prepare(self, t_s: float, epoch_index: int) -> PreparedEpoch:
         """Prepare the epoch at ``t_s`` [s] up to its conflict graph; finish with :meth:`commit`.
@@ -612,6 +684,7 @@ class Planner:
             self._requests = {k: r for k, r in self._requests.items() if k in alive}
         yield from self._apply_constraint_updates(t_s, epoch_index)
         yield from self._react_to_nonconformance(t_s, epoch_index)
+        self._start_modifications(t_s)
         # the traffic new requests are deconflicted against: the active flights, the held
         # flights' projections and, with the conflict probe, the airborne flights' projections
         # (new objects every epoch, after the active ones: the segment index stays incremental)
@@ -695,7 +768,12 @@ class Planner:
             raise RuntimeError("commit: this epoch was not prepared by this planner (or is committed)")
         self._prepared = None
         result = commit_epoch(prep, answer, self.config, solve_s)
-        result.plan_updates = self._cancellations + list(self._plan_updates)
+        if self._deciding:   # the replacements' requests, by id (their flights keep their ids)
+            by_id = {r.request_id: r for r in prep.pending}
+            self._requests.update((f.request_id, by_id[f.request_id]) for f in result.approved
+                                  if f.request_id in self._deciding)
+        modified = self._finish_modifications(result, prep.t_s)
+        result.plan_updates = self._cancellations + list(self._plan_updates) + modified
         self._cancellations = []
         result.report.replan = self._replan_report
         result.report.nonconformance = self._nonconformance_report
@@ -734,8 +812,11 @@ class Planner:
         self.pending = [r for r in self.pending if r.request_id not in self._known_ids]
 
     def flight(self, request_id: str):
-        """The approved flight of ``request_id`` in force (active, or set aside), or None."""
-        return self._aside.get(request_id) or next((f for f in self.active if f.request_id == request_id), None)
+        """The approved flight of ``request_id`` in force (its newest version), or None."""
+        f = next((f for f in self.active if f.request_id == request_id), None)
+        if f is None and request_id in self._deciding:   # out of the traffic while its epoch is planned
+            f = self._deciding[request_id][1]
+        return f
 
     def is_known(self, request_id: str) -> bool:
         """True once ``request_id`` was accepted (or restored): a later request with it is a duplicate."""

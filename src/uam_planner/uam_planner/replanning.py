@@ -54,6 +54,9 @@ from .trajectory import Trajectory
 
 ACTIONS = ("add", "change", "withdraw")
 KINDS = ("kept", "rerouted", "retimed", "diverted", "cancelled", "contingency")
+#: the kind of a new version an operator asked for (``Planner.modify``): not a re-plan, so not
+#: one of KINDS (the re-plan counts); it names no constraint
+KIND_MODIFIED = "modified"
 STATES = ("Accepted", "Activated", "Contingent", "Ended")  # ASTM F3548-21 (Nonconforming: uam_planner.nonconformance)
 W_KEEP = 4.0
 DELAY_SCALE_S = 300.0

@@ -12,6 +12,7 @@ from implicitdict import ImplicitDict
 from uas_standards.interuss.automated_testing.flight_planning.v1 import api
 
 from uam_planner.constraints import Constraint
+from uas_standards.astm.f3548.v21.api import GetOperationalIntentDetailsResponse
 from uam_planner.f3548 import IntentContext, VolumeSpec, intent_id
 from uam_planner.geo import enu_to_geodetic
 from uam_planner.grants import PriorityGrants
@@ -187,25 +188,32 @@ def test_a_plan_goes_through_the_planner_is_served_as_an_intent_then_modified_an
     assert again.json() == r.json()
     assert sum(a.request_id.startswith(FID) for a in uss.planner.active) == 1
 
-    # modified: the other way round -> a new version planned, the old one cancelled
+    # modified: the other way round -> a new version of the same flight, so of the same
+    # operational intent (same id, a higher version, another OVN)
+    before = served(uss, FID).json()["operational_intent"]["reference"]
     r = put(uss, FID, upsert(uss.ctx, uss.net, "req-2", west_to_east=False))
     got = parsed(r, api.UpsertFlightPlanResponse)
     assert got.planning_result == api.PlanningActivityResult.Completed, got
-    assert uss.planner.flight(FID) is None
-    f2 = uss.planner.flight(f"{FID}.v2")
-    assert (f2.origin_id, f2.destination_id) == ("Ep", "Wp")
-    assert served(uss, FID).status_code == 404 and served(uss, f"{FID}.v2").status_code == 200
+    assert got.flight_plan_status == api.FlightPlanStatus.Planned
+    f2 = uss.planner.flight(FID)
+    assert (f2.origin_id, f2.destination_id, f2.version) == ("Ep", "Wp", f.version + 1)
+    assert sum(a.request_id == FID for a in uss.planner.active) == 1
+    after = served(uss, FID).json()["operational_intent"]["reference"]
+    assert after["id"] == before["id"] and after["version"] > before["version"] and after["ovn"] != before["ovn"]
+    assert ImplicitDict.parse(served(uss, FID).json(), GetOperationalIntentDetailsResponse)
+    updates = [(u.request_id, u.kind, u.version) for res in uss.planning.decider.results for u in res.plan_updates]
+    assert updates == [(FID, "modified", f.version + 1)]
 
     r = delete(uss, FID)
     got = parsed(r, api.DeleteFlightPlanResponse)
     assert r.status_code == 200
     assert (got.planning_result, got.flight_plan_status) == (api.PlanningActivityResult.Completed,
                                                              api.FlightPlanStatus.Closed)
-    assert uss.planner.flight(f"{FID}.v2") is None and served(uss, f"{FID}.v2").status_code == 404
+    assert uss.planner.flight(FID) is None and served(uss, FID).status_code == 404
     # the next epoch reports the cancellation as the planner reports any
     uss.planning.decider._epoch()
-    kinds = [(u.request_id, u.kind) for res in uss.planning.decider.results for u in res.plan_updates]
-    assert (FID, "cancelled") in kinds and (f"{FID}.v2", "cancelled") in kinds
+    kinds = [(u.request_id, u.kind, u.version) for res in uss.planning.decider.results for u in res.plan_updates]
+    assert (FID, "cancelled", f.version + 2) in kinds
     # deleted twice: 404, with a body InterUSS's client can still read
     r = delete(uss, FID)
     assert r.status_code == 404
@@ -221,6 +229,25 @@ def test_a_rejected_modification_keeps_the_previous_version(uss):
     assert "priority: 7 is above operator 'flight_planning''s grant 0" in got.notes
     assert "previous version stays in force" in got.notes
     assert uss.planner.flight(FID) is not None and served(uss, FID).status_code == 200
+
+
+def test_a_modification_without_a_conflict_free_candidate_keeps_the_previous_version(uss):
+    """The new version is decided at the next epoch only: a constraint closing the lane from then
+    on leaves it no candidate; the old version (departing before the closure) stays in force,
+    with its version, and nothing is reported."""
+    assert put(uss, FID, upsert(uss.ctx, uss.net, "a")).json()["planning_result"] == "Completed"
+    f = uss.planner.flight(FID)
+    wall = Constraint("wall", 0, "closed lane", f.arrival_s + 1.0, np.inf,
+                      rings_m=(np.array([[-1200.0, -300.0], [1200.0, -300.0], [1200.0, 300.0], [-1200.0, 300.0]]),))
+    uss.planner.set_constraints([wall])
+    # a later departure (within the planner's horizon) arrives after the closure begins
+    r = put(uss, FID, upsert(uss.ctx, uss.net, "b", t0=f.departure_s + 30.0, t1=f.departure_s + 60.0))
+    got = parsed(r, api.UpsertFlightPlanResponse)
+    assert got.planning_result == api.PlanningActivityResult.Rejected, got
+    assert got.flight_plan_status == api.FlightPlanStatus.Planned
+    assert "previous version stays in force" in got.notes and got.notes.startswith("expired")
+    assert uss.planner.flight(FID) == f
+    assert [u for res in uss.planning.decider.results for u in res.plan_updates] == []
 
 
 def test_a_plan_that_cannot_be_deconflicted_is_rejected_and_nothing_is_served(uss):

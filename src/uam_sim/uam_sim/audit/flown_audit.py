@@ -45,6 +45,7 @@ import numpy as np
 
 from uam_contract.stamps import stamp_s
 from uam_planner.nonconformance import KIND, KIND_CONTINGENCY, KIND_YIELD, RATE_WORD
+from uam_planner.replanning import KIND_MODIFIED
 
 from .separation import trajectory_of
 
@@ -153,7 +154,8 @@ def chain_problems(key: str, versions: Sequence[Any], announced: dict[str, float
     for p in versions[1:]:
         ids = [str(i) for i in getattr(p, "constraint_ids", [])]
         e = effective_s(p)
-        if not ids and not (reaction_update(p) or str(getattr(p, "update_kind", "")) == KIND_YIELD):
+        # an operator's modification and a yield name no constraint
+        if not ids and not (reaction_update(p) or str(getattr(p, "update_kind", "")) in (KIND_YIELD, KIND_MODIFIED)):
             out.append(f"{key}: version {plan_version(p)} ({getattr(p, 'update_kind', '') or 'update'}) names no "
                        "constraint")
         for cid in ids:

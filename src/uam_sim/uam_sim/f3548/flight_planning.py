@@ -289,18 +289,25 @@ class InProcessDecider:
             self.store.end(operator_id, request_id)
         return problem
 
-    def set_aside(self, request_id: str) -> str | None:
-        return self.planner.set_aside(request_id, self.now_s)
-
-    def put_back(self, request_id: str, operator_id: str) -> str | None:
-        problem = self.planner.put_back(request_id, self.now_s)
-        if problem is not None and self.store is not None:
-            self.store.end(operator_id, request_id)
-        return problem
+    def modify(self, request) -> Decision:
+        """A new version of the approved flight ``request.request_id`` (``Planner.modify``),
+        decided at the next epoch: 'approved' (``flight`` the new version), 'rejected' (refused
+        at once; ``flight`` the version in force, unchanged) or 'expired' (no conflict-free
+        candidate at that epoch; ``flight`` the previous version if it stays in force, else None)."""
+        reason = self.planner.modify(request, self.t_s)
+        if reason is not None:
+            return Decision("rejected", reason, self.planner.flight(request.request_id))
+        result = self._epoch()
+        from uam_planner.replanning import KIND_MODIFIED
+        rid = request.request_id
+        for u in result.plan_updates:
+            if u.request_id == rid and u.kind == KIND_MODIFIED:
+                return Decision("approved", flight=u.flight)
+        why, kept = result.refused_modifications.get(rid, ("not decided at the next epoch", False))
+        return Decision("expired", why, self.planner.flight(rid) if kept else None)
 
     def flight(self, request_id: str):
-        """The planner's flight of ``request_id`` in force (its newest version; one set aside
-        too), or None."""
+        """The planner's flight of ``request_id`` in force (its newest version), or None."""
         return self.planner.flight(request_id)
 
 
@@ -309,8 +316,8 @@ class InProcessDecider:
 @dataclass
 class _Plan:
     """One flight plan of the interface: the planner request in force and how it was asked."""
-    request_id: str                      # the planner's request id of the version in force
-    version: int                         # 1, 2, ... (a modification plans a new request)
+    request_id: str                      # the planner's request id (the flight plan's id)
+    version: int                         # 1, 2, ...: the flight plan's versions asked and approved
     asked: tuple                         # (origin, destination, earliest, latest, priority)
     answered: dict = field(default_factory=dict)
 
@@ -340,8 +347,8 @@ class FlightPlanning:
 
     ``network`` and ``ctx`` (an IntentContext: the scenario clock, the volume spec) place the
     areas; flight plans are planned as requests of operator ``operator_id`` (whose priority
-    grant applies), with the planner request id ``<flight_plan_id>`` (``<flight_plan_id>.v<n>``
-    for the n-th version of a modified plan). Each operation returns ``(HTTP status, JSON
+    grant applies), with the planner request id ``<flight_plan_id>``; a modification is a new
+    version of the same request (``Planner.modify``), so of the same operational intent. Each operation returns ``(HTTP status, JSON
     document)``; one operation at a time (a lock). Requests repeated with the same
     ``request_id`` get the first answer (the newest :data:`MAX_ANSWERS` are kept).
     """
@@ -352,6 +359,7 @@ class FlightPlanning:
         self.log = log or (lambda text: None)
         self._lock = threading.Lock()
         self.plans: dict[str, _Plan] = {}
+        self._tries: dict[str, int] = {}   # flight plan id -> planner requests made for it
         self._answers: OrderedDict = OrderedDict()
 
     # ---- status --------------------------------------------------------------------------------
@@ -409,21 +417,34 @@ class FlightPlanning:
             return self._close(fid, as_upsert=True)
         now = self.decider.t_s
         old = self.plans.get(fid)
-        version = 1 if old is None else old.version + 1
-        request_id = fid if version == 1 else f"{fid}.v{version}"
-        tr = flight_request(request_id, plan_doc, self.network, self.ctx.scenario_start_utc, now,
+        current = self.decider.flight(old.request_id) if old is not None else None
+        if current is not None:
+            tr = flight_request(old.request_id, plan_doc, self.network, self.ctx.scenario_start_utc, now,
+                                self.operator_id)
+            r = tr.request
+            asked = (r.origin_id, r.destination_id, tr.area.start_s, tr.area.end_s, r.priority)
+            if old.asked == asked:
+                # the same plan asked again (e.g. usage_state Planned -> InUse): nothing to re-plan;
+                # the aircraft flies from its planned departure
+                return 200, _upsert_answer(api.PlanningActivityResult.Completed.value,
+                                           _status_of(current, self.decider.now_s),
+                                           self._notes(current, "unchanged"), self._as_planned(plan_doc, current))
+            return self._modify(fid, old, tr, asked, plan_doc)
+        if old is not None:   # its flight ended (landed, cancelled): planned anew
+            del self.plans[fid]
+        tr = flight_request(self._new_request_id(fid), plan_doc, self.network, self.ctx.scenario_start_utc, now,
                             self.operator_id)
         r = tr.request
         asked = (r.origin_id, r.destination_id, tr.area.start_s, tr.area.end_s, r.priority)
-        if old is not None:
-            current = self.decider.flight(old.request_id)
-            if current is not None and old.asked == asked:
-                # the same plan asked again (e.g. usage_state Planned -> InUse): nothing to re-plan;
-                # the aircraft flies from its planned departure
-                return 200, _upsert_answer(api.PlanningActivityResult.Completed.value, _status_of(current, self.decider.now_s),
-                                           self._notes(current, "unchanged"), self._as_planned(plan_doc, current))
-            return self._modify(fid, old, current, tr, asked, plan_doc)
-        return self._plan(fid, tr, asked, plan_doc, version)
+        return self._plan(fid, tr, asked, plan_doc, 1)
+
+    def _new_request_id(self, fid: str) -> str:
+        """The planner request id of a new request for flight plan ``fid``: ``fid`` the first
+        time, ``<fid>.<n>`` for the n-th (the planner never takes an id twice: a plan refused at
+        its epoch, or whose flight ended, is asked anew under a new id)."""
+        n = self._tries.get(fid, 0) + 1
+        self._tries[fid] = n
+        return fid if n == 1 else f"{fid}.{n}"
 
     def _notes(self, flight, what: str) -> str:
         return (f"{what}: {flight.origin_id} -> {flight.destination_id}, departs at t = {flight.departure_s:g} s, "
@@ -453,27 +474,25 @@ class FlightPlanning:
         return 200, _upsert_answer(result.value, api.FlightPlanStatus.NotPlanned.value,
                                    f"{d.outcome}: {d.reason}")
 
-    def _modify(self, fid: str, old: _Plan, current, tr: Translation, asked: tuple, plan_doc: dict) -> tuple:
-        """A new version: the old flight is set aside (out of the traffic) while the new one is
-        planned; approved, the old one is cancelled; not approved, the old one is put back if it
-        still keeps separation (else the answer says it is lost)."""
-        if current is None:   # the old plan ended (landed, cancelled): the new one is a new flight
-            return self._plan(fid, tr, asked, plan_doc, old.version + 1)
-        problem = self.decider.set_aside(old.request_id)
-        if problem is not None:
-            return self._not_supported(fid, f"modification: {problem}")
-        status, doc = self._plan(fid, tr, asked, plan_doc, old.version + 1)
-        if doc["planning_result"] == api.PlanningActivityResult.Completed.value:
-            self.decider.cancel(old.request_id, self.operator_id, "replaced by a modification of its flight plan")
-            return status, doc
-        why = self.decider.put_back(old.request_id, self.operator_id)
-        if why is None:
-            doc["flight_plan_status"] = _status_of(current, self.decider.now_s)
-            doc["notes"] += "; the previous version stays in force"
-        else:
-            del self.plans[fid]
-            doc["notes"] += f"; the previous version could not be kept: {why}"
-        return status, doc
+    def _modify(self, fid: str, old: _Plan, tr: Translation, asked: tuple, plan_doc: dict) -> tuple:
+        """A new version of the same flight (``decider.modify``: the same request id, so the same
+        operational intent, version + 1). Not approved, the previous version stays in force if it
+        still keeps separation (the answer says so), else it is cancelled and the answer says why."""
+        d = self.decider.modify(tr.request)
+        self.log(f"flight plan {fid}: modification {tr.request.origin_id} -> {tr.request.destination_id}, "
+                 f"priority {tr.request.priority}: {d.outcome} {d.reason}".rstrip())
+        R, S = api.PlanningActivityResult, api.FlightPlanStatus
+        if d.outcome == "approved":
+            self.plans[fid] = _Plan(old.request_id, old.version + 1, asked)
+            return 200, _upsert_answer(R.Completed.value, _status_of(d.flight, self.decider.now_s),
+                                       self._notes(d.flight, "modified"), self._as_planned(plan_doc, d.flight))
+        result = R.Failed if d.outcome == "failed" else R.Rejected
+        if d.flight is not None:
+            return 200, _upsert_answer(result.value, _status_of(d.flight, self.decider.now_s),
+                                       f"{d.outcome}: {d.reason}; the previous version stays in force")
+        del self.plans[fid]
+        return 200, _upsert_answer(result.value, S.Closed.value,
+                                   f"{d.outcome}: {d.reason}; the previous version is no longer in force")
 
     # ---- delete --------------------------------------------------------------------------------
     def delete(self, flight_plan_id: str) -> tuple:
