@@ -270,8 +270,10 @@ echo "ROS_DOMAIN_ID=$ROS_DOMAIN_ID" > "$OUT/run.env"
 # the run's airspace authority: a new key pair each run; the planner takes live constraint
 # updates signed with it only (uam_planner.authority; docs/constraints.md)
 python -m uam_planner.authority new "$OUT/authority" >/dev/null || die "no airspace authority key pair (above)"
-if (( USS_PORT > 0 )); then  # the USS's own authority: it passes peers' intents to the planner (not an admin)
-  python -m uam_planner.authority new "$OUT/authority" --id uss-peers --not-admin --add >/dev/null \
+if (( USS_PORT > 0 )); then  # the USS's own authority (not an admin): it passes peers' intents to the planner and
+  # puts the flight plans of its flight_planning interface (operator flight_planning) in its name
+  python -m uam_planner.authority new "$OUT/authority" --id uss-peers --not-admin --add \
+    --operator flight_planning >/dev/null \
     || die "no key pair for the USS's authority (above)"
 fi
 echo "run_fleet: live constraints: python -m uam_planner.nodes.constraint_client add FEATURE.geojson --run $OUT"

@@ -31,6 +31,9 @@ SERVICE_RELEASE_DEMAND = "uam/release_demand"
 SERVICE_REACT = "uam/react"
 # live airspace constraints: the planner serves updates and publishes the set it plans with
 SERVICE_UPDATE_CONSTRAINT = "uam/update_constraint"
+# a USS's flight requests, signed by its airspace authority (uam_planner.signed_requests; the
+# UpdateConstraint type): the planner answers each once decided
+SERVICE_USS_FLIGHT_PLAN = "uam/uss_flight_plan"
 TOPIC_CONSTRAINTS = "uam/constraints"
 #: every parameter change a node accepted at run time, as JSON ({"node", "parameter", "value"}),
 #: published by the node itself (uam_bringup.params.declare_table) and named in the summary

@@ -368,6 +368,10 @@ USS = (
           "uam_planner.authority); '' = peers' changes are only logged (run_fleet.sh makes one, 'uss-peers', "
           "not an admin)"),
     Param("authority_id", "uss-peers", "that authority's id, as in the planner's authorities file"),
+    Param("flight_planning_timeout_s", 25.0, "with authority_key: InterUSS's flight_planning interface is served, "
+          "each flight plan put to the planner (signed uam/uss_flight_plan requests of operator flight_planning, which "
+          "the authorities file gives that authority); the longest wall time [s] an answer waits for the planner's "
+          "decision (then Failed, the request withdrawn); below the test director's read timeout", 0.1, 3600.0),
     Param("max_clock_step_s", 60.0, "with journal: the most the served clock may advance from one fleet state "
           "of the simulator to the next [s] (a forged jump is refused)", 0.001, 1e6),
     Param("host", "127.0.0.1", "address to bind ('0.0.0.0' for every interface; loopback by default)",

@@ -10,6 +10,13 @@ named in its authorities file (the ``authorities_file`` parameter), read once at
         admin: true                # may change or withdraw any authority's constraint
       - id: hospital
         public_key: hospital.pub.pem
+      - id: uss
+        public_key: uss.pub.pem
+        operators: [flight_planning]   # requests of these operators come only signed by this authority
+
+An authority with ``operators`` is a USS that puts flight requests to the planner in those
+operators' names (:mod:`uam_planner.signed_requests`, the service ``uam/uss_flight_plan``): the
+planner takes requests of those operators only signed by it, never from ``uam/requests``.
 
 Each update carries ``authorization``: a JWT (ES256, RFC 7519) signed with the authority's
 private key, whose claims bind it to the request and to the authority's sequence:
@@ -71,6 +78,7 @@ class Authority:
     authority_id: str
     key: Any
     admin: bool = False
+    operators: tuple = ()
 
 
 @dataclass
@@ -116,13 +124,32 @@ class Authorities:
             admin = row.get("admin", False)
             if not isinstance(admin, bool):
                 raise ValueError(f"{where}.admin: {echo(admin)} is not true or false")
-            by_id[aid] = Authority(aid, key, admin)
+            ops = row.get("operators", [])
+            if not isinstance(ops, list) or not all(isinstance(o, str) and o for o in ops):
+                raise ValueError(f"{where}.operators: {echo(ops)} is not a list of operator ids")
+            taken = [o for o in ops for other in by_id.values() if o in other.operators]
+            if taken:
+                raise ValueError(f"{where}.operators: {taken[0]!r} is another authority's already")
+            by_id[aid] = Authority(aid, key, admin, tuple(ops))
         return cls(by_id)
 
-    def verify(self, req: Any, action: str) -> str:
+    def operator_authority(self, operator_id: str) -> str | None:
+        """The authority whose signed requests alone may speak for ``operator_id``, or None."""
+        return next((a.authority_id for a in self.by_id.values() if operator_id in a.operators), None)
+
+    def check_operator(self, author: str, operator_id: str) -> None:
+        """Refuse (ConstraintError naming ``operator_id``) a request of ``operator_id`` signed by
+        ``author`` unless ``author`` is that operator's authority."""
+        if operator_id not in self.by_id[author].operators:
+            raise ConstraintError(f"operator_id: {echo(operator_id)} is not an operator of authority {author!r} "
+                                  f"(its operators: {', '.join(self.by_id[author].operators) or 'none'})")
+
+    def verify(self, req: Any, action: str, channel: str = "") -> str:
         """The id of the authority that signed update ``req`` (anything with UpdateConstraint's
         fields) for ``action``; ConstraintError naming ``authorization`` otherwise. A verified
-        update's ``seq`` is taken: the same update again is refused."""
+        update's ``seq`` is taken: the same update again is refused. ``channel``: the sequence
+        the ``seq`` belongs to ('' for constraint updates; a USS's flight requests count apart,
+        so that the two services' calls may arrive in any order)."""
         from joserfc import jws, jwt
         from joserfc.errors import JoseError
 
@@ -155,11 +182,12 @@ class Authorities:
         seq = claims.get("seq")
         if isinstance(seq, bool) or not isinstance(seq, int):
             raise ConstraintError(f"authorization: claim seq {echo(seq)} is not an integer")
-        last = self.seq.get(iss)
+        key = iss if not channel else f"{iss}#{channel}"
+        last = self.seq.get(key)
         if last is not None and seq <= last:
             raise ConstraintError(f"authorization: seq {seq} of {iss!r} is not above {last}, the last taken "
                                   "(a replayed update)")
-        self.seq[iss] = seq
+        self.seq[key] = seq
         return iss
 
     def check_owner(self, author: str, held: Constraint | None) -> None:
@@ -204,9 +232,10 @@ def sign_update(req: Any, action: str, authority_id: str, private_key_pem: bytes
 
 
 def write_authority(folder, authority_id: str = RUN_AUTHORITY_ID, admin: bool = True,
-                    add: bool = False) -> tuple[Path, Path]:
+                    add: bool = False, operators=()) -> tuple[Path, Path]:
     """A new EC P-256 key pair for ``authority_id`` in ``folder``, and an authorities file
-    naming it (``add``: appended to the folder's file, which keeps its other authorities):
+    naming it (``add``: appended to the folder's file, which keeps its other authorities;
+    ``operators``: the operators it alone may put requests for):
     (authorities file, private key file; readable by its owner only)."""
     import os
 
@@ -223,6 +252,8 @@ def write_authority(folder, authority_id: str = RUN_AUTHORITY_ID, admin: bool = 
     listing = out / "authorities.yaml"
     entry = (f"  - id: {authority_id}\n    public_key: {authority_id}.pub.pem\n"
              f"    admin: {'true' if admin else 'false'}\n")
+    if operators:
+        entry += f"    operators: [{', '.join(operators)}]\n"
     if add and listing.is_file():
         listing.write_text(listing.read_text(encoding="utf-8") + entry, encoding="utf-8")
     else:
@@ -244,8 +275,11 @@ def main(argv=None) -> int:
     new.add_argument("--id", default=RUN_AUTHORITY_ID)
     new.add_argument("--not-admin", action="store_true", help="may change only its own constraints")
     new.add_argument("--add", action="store_true", help="add it to the folder's authorities file")
+    new.add_argument("--operator", action="append", default=[],
+                     help="an operator whose requests only this authority may put (a USS's; repeatable)")
     args = ap.parse_args(argv)
-    listing, private = write_authority(args.folder, args.id, not args.not_admin, add=args.add)
+    listing, private = write_authority(args.folder, args.id, not args.not_admin, add=args.add,
+                                       operators=args.operator)
     print(f"authorities file {listing}; private key {private}")
     return 0
 

@@ -127,7 +127,8 @@ class Planner:
         self._plan_updates: list = []           # decided in prepare, returned by commit
         self._cancellations: list = []          # cancel() since the last commit (PlanUpdate)
         # modifications (modify): request_id -> the replacement FlightRequest, decided at the
-        # next epoch; while that epoch is planned, request_id -> (replacement, the version it replaces)
+        # next epoch; while that epoch is planned, request_id -> (replacement, the version it
+        # replaces or None, why None)
         self._modifying: dict = {}
         self._deciding: dict = {}
         self._replan_report = None
@@ -584,11 +585,14 @@ class Planner:
         self._deciding, mods, self._modifying = {}, self._modifying, {}
         for rid, req in mods.items():
             f = next((f for f in self.active if f.request_id == rid), None)
-            if f is None or f.departure_s < t_s:   # landed, cancelled by a re-plan, or departed
-                self._deciding[rid] = (req, f)
+            if f is None:   # landed or cancelled by this epoch's re-plan
+                self._deciding[rid] = (req, None, "the flight is no longer an approved flight of this planner")
+                continue
+            if f.departure_s < t_s:   # departed meanwhile: flies its plan
+                self._deciding[rid] = (req, None, f"the flight departed at {f.departure_s:g} s; it flies its plan")
                 continue
             self.active = [a for a in self.active if a is not f]
-            self._deciding[rid] = (req, f)
+            self._deciding[rid] = (req, f, "")
             self.pending.append(req)
 
     def _keeps_out(self, f: Flight) -> str | None:
@@ -635,11 +639,11 @@ class Planner:
         result.report.approved, result.report.expired = len(result.approved), len(result.expired)
         self.active = self.active + new_versions
         for rid in sorted(set(deciding) - done):
-            old = deciding[rid][1]
+            _req, old, gone = deciding[rid]
             if old is None:
-                result.refused_modifications[rid] = (
-                    f"request_id: {rid!r}: the flight is no longer an approved flight that has not departed "
-                    f"(landed, departed or cancelled) at t = {t_s:g} s", False)
+                held = self.flight(rid) is not None
+                result.refused_modifications[rid] = (f"request_id: {rid!r}: at the epoch at {t_s:g} s {gone}"
+                                                     + ("; the previous version stays in force" if held else ""), held)
                 continue
             why = refusals.get(rid) or f"no conflict-free candidate for the new version at the epoch at {t_s:g} s"
             lost = self._keeps_out(old)

@@ -2,9 +2,11 @@
 
     ros2 run uam_planner planner --ros-args --params-file config/planner.yaml
 
-Subscribes uam/requests (FlightRequest); serves uam/plan_epoch (PlanEpoch) and
+Subscribes uam/requests (FlightRequest); serves uam/plan_epoch (PlanEpoch),
 uam/update_constraint (UpdateConstraint: live airspace constraints, queued to the next epoch,
-docs/constraints.md); calls uam/solve_mwis (SolveMwis); publishes uam/flight_plans (every
+docs/constraints.md) and uam/uss_flight_plan (a USS's flight requests, modifications and
+cancellations, signed by its airspace authority: uam_planner.signed_requests; answered once
+decided); calls uam/solve_mwis (SolveMwis); publishes uam/flight_plans (every
 decision, and every new version of a plan re-planned around a constraint, docs/replanning.md),
 uam/planning_reports, uam/constraints (the set in force, latched) and its progress on
 uam/epoch_sync (for the recorder). Names and QoS: uam_contract.names;
@@ -158,6 +160,14 @@ class PlannerNode(Node):
         self._publish_constraints(0.0)
         self._constraint_service = self.create_service(UpdateConstraint, c.SERVICE_UPDATE_CONSTRAINT,
                                                        self._on_update_constraint)
+        # a USS's signed flight requests (uam_planner.signed_requests): each call waits for its
+        # decision (scoped request id -> Future of (accepted, why)); operations that change the
+        # planner's flights wait until no epoch is being planned (_idle_waiters)
+        self._uss_waiters: dict[str, Future] = {}
+        self._idle_waiters: list[Future] = []
+        self.uss_requests_refused = 0
+        self._uss_service = self.create_service(UpdateConstraint, c.SERVICE_USS_FLIGHT_PLAN, self._on_uss_flight_plan,
+                                                callback_group=self._group)
         self.create_subscription(FlightRequest, c.TOPIC_REQUESTS, self._on_request, qos.QOS_REQUESTS)
         self.create_subscription(EpochSync, c.TOPIC_SYNC, self._on_sync, qos.QOS_LATCHED)
         # the reaction to nonconformance (uam_planner.nonconformance): the fleet state is
@@ -472,12 +482,122 @@ class PlannerNode(Node):
             journal.append_constraints(text)
         self._constraints_pub.publish(String(data=text))
 
+    # ---- a USS's signed flight requests (uam_planner.signed_requests) ---------------------------
+    def _decided(self, key: str, accepted: bool, why: str, t_s: float | None = None) -> None:
+        """The decision on ``key``: to the USS call waiting for it, if one is."""
+        fut = self._uss_waiters.pop(key, None)
+        if fut is not None and not fut.done():
+            fut.set_result((accepted, why, self._last_epoch_s if t_s is None else t_s))
+
+    def _decided_at_epoch(self, result, t_s: float) -> None:
+        """Under the lock, after an epoch's commit: its decisions to the USS calls waiting."""
+        from uam_planner.replanning import KIND_MODIFIED
+        if not self._uss_waiters:
+            return
+        for f in result.approved:
+            self._decided(f.request_id, True, "", t_s)
+        for u in result.plan_updates:
+            if u.kind == KIND_MODIFIED:
+                self._decided(u.request_id, True, "", t_s)
+        refusals = result.report.constraint_refusals
+        for r in result.expired:
+            self._decided(r.request_id, False, refusals.get(r.request_id) or
+                          f"no conflict-free departure found by latest_departure {r.latest_departure_s:g} s", t_s)
+        for rid, (why, _kept) in result.refused_modifications.items():
+            self._decided(rid, False, why, t_s)
+
+    def _wake_idle(self) -> None:
+        waiting, self._idle_waiters = self._idle_waiters, []
+        for fut in waiting:
+            if not fut.done():
+                fut.set_result(True)
+
+    def _busy(self) -> bool:
+        """An epoch or a reaction is being planned (the planner's flights may not change now)."""
+        return self._inflight is not None or self._react_inflight is not None or self._deferred is not None
+
+    def _uss_refused(self, request, response, error: str, signed: bool):
+        response.accepted, response.error = False, wire.bounded(error)
+        response.effective_time = m.to_time(self._last_epoch_s)
+        if not signed:   # not the USS's: recorded apart from its own refused requests
+            self.uss_requests_refused += 1
+            self.get_logger().warning(f"refused a flight request on {c.SERVICE_USS_FLIGHT_PLAN} "
+                                      f"({wire.echo(request.constraint_id)}): {response.error}")
+        return response
+
+    async def _on_uss_flight_plan(self, request, response):
+        """One operation of a USS (plan, modify, cancel), signed by the airspace authority that
+        holds the request's operator; answered once decided (plan, modify: at the epoch that
+        decides; cancel: at once), naming the field and value when refused."""
+        from uam_planner import signed_requests as sr
+        with self._lock:
+            try:
+                op = sr.op_of(request.action)
+                if self.authorities is None:
+                    raise ConstraintError("authorization: no airspace authority is configured for this run "
+                                          "(parameter authorities_file): a USS's requests are refused")
+                author = self.authorities.verify(request, sr.ACT_PREFIX + op, channel=sr.CHANNEL)
+                fields = sr.request_fields(request.geojson, op)
+                self.authorities.check_operator(author, fields["operator_id"])
+                problem = wire.check_id("request_id", request.constraint_id)
+                if problem:
+                    raise ConstraintError(problem)
+            except ConstraintError as exc:
+                return self._uss_refused(request, response, str(exc), signed=False)
+        key = wire.scoped_id(fields["operator_id"], request.constraint_id)
+        while True:   # act between epochs only
+            with self._lock:
+                if self._held is not None:
+                    return self._uss_refused(request, response, "planner: no epoch planned yet (the run has not "
+                                             "started); ask again", signed=True)
+                if not self._busy():
+                    fut = self._uss_act(op, key, fields, request, author)
+                    break
+                idle = Future()
+                self._idle_waiters.append(idle)
+            await idle
+        accepted, why, t_s = await fut
+        response.accepted, response.error = bool(accepted), wire.bounded(why)
+        response.effective_time = m.to_time(t_s)
+        response.constraints = len(self.config.constraints or ())
+        self.get_logger().info(f"{op} {key!r} by {author!r}: {'done' if accepted else 'refused: ' + response.error}")
+        return response
+
+    def _uss_act(self, op: str, key: str, fields: dict, request, author: str) -> Future:
+        """Under the lock, between epochs: do ``op`` on ``key``; the Future of its decision."""
+        fut = Future()
+        now = self._next_epoch_s
+        if op == "cancel":
+            why = self.planner.cancel(key, now, request.reason or "cancelled by its USS") or ""
+            fut.set_result((not why, why, now))
+            return fut
+        msg = FlightRequest(operator_id=fields["operator_id"], request_id=request.constraint_id,
+                            origin_id=fields["origin_id"], destination_id=fields["destination_id"],
+                            request_time=m.to_time(fields["request_time_s"]),
+                            earliest_departure=m.to_time(fields["earliest_departure_s"]),
+                            latest_departure=m.to_time(fields["latest_departure_s"]), priority=fields["priority"])
+        self._uss_waiters[key] = fut
+        if op == "plan":
+            self.requests_received += 1
+            got = self._decide(msg, signed_by=author)
+            if got is not None and not fut.done():
+                self._arrived(got)
+            return fut
+        why = wire.check_request(msg, now, max_window_s=self.p["max_window_s"],
+                                 max_request_lead_s=self.p["max_request_lead_s"]) or \
+            self.planner.modify(m.request_from_msg(msg, request_id=key), now)
+        if why:
+            self._decided(key, False, why, now)
+        return fut
+
     # ---- requests ----------------------------------------------------------------------------
     def _publish_plan(self, plan: FlightPlan) -> None:
         self._plan_pub.publish(plan)
         self.plans_published += 1
 
     def _answer(self, msg: FlightRequest, outcome: int, reason: str, ids_ok: bool) -> None:
+        """Publish the refusal of ``msg`` (and, when ``ids_ok``, answer the USS call waiting for
+        its id, if one is)."""
         reason = wire.bounded(reason)
         origin = msg.origin_id if len(msg.origin_id) <= wire.MAX_NODE_ID_LENGTH else ""
         dest = msg.destination_id if len(msg.destination_id) <= wire.MAX_NODE_ID_LENGTH else ""
@@ -487,6 +607,8 @@ class PlannerNode(Node):
                                  self._last_epoch_s, max(self._next_epoch - 1, 0), self.policy)
         plan.operator_id = wire.escaped_id(msg.operator_id)
         self._publish_plan(plan)
+        if ids_ok:
+            self._decided(wire.scoped_id(msg.operator_id, msg.request_id), False, reason)
         self.planner.record_rejection()
         # at most one log line a second: rclpy's logger costs milliseconds a call, which a flood
         # would turn into minutes (its own throttling pays that cost on every call too)
@@ -523,10 +645,20 @@ class PlannerNode(Node):
                     continue
             self._decide(msg)
 
-    def _decide(self, msg: FlightRequest) -> str | None:
-        """Accept or refuse ``msg`` now; return its scoped id when the ids are valid."""
+    def _decide(self, msg: FlightRequest, signed_by: str = "") -> str | None:
+        """Accept or refuse ``msg`` now; return its scoped id when the ids are valid. ``signed_by``:
+        the authority that signed it (uam/uss_flight_plan); a request of an operator that an
+        authority holds is taken only signed by that authority."""
         ids_ok = not (wire.check_id("operator_id", msg.operator_id) or wire.check_id("request_id", msg.request_id))
         key = wire.scoped_id(msg.operator_id, msg.request_id) if ids_ok else None
+        holder = self.authorities.operator_authority(msg.operator_id) if self.authorities is not None else None
+        if holder is not None and signed_by != holder:
+            # neither taken nor answered as a decision on the id: a forger can neither use up
+            # the operator's ids nor pass for the planner's answer to its USS
+            self._answer(msg, FlightPlan.OUTCOME_REJECTED,
+                         f"operator_id: {msg.operator_id!r}'s requests are taken only signed by airspace authority "
+                         f"{holder!r} on {c.SERVICE_USS_FLIGHT_PLAN}", False)
+            return None
         if key is not None and key in self._taken:
             self._answer(msg, FlightPlan.OUTCOME_DUPLICATE,
                          f"request_id: {msg.request_id!r} of operator {msg.operator_id!r} is already taken; "
@@ -669,6 +801,7 @@ class PlannerNode(Node):
         finally:
             with self._lock:
                 self._inflight = None
+                self._wake_idle()
 
     def _fresh(self) -> bool:
         """True while this planner holds nothing of a run: no epoch planned, no resume taken."""
@@ -817,6 +950,7 @@ class PlannerNode(Node):
                 plans.append(plan)
             for plan in plans:
                 self._publish_plan(plan)
+            self._decided_at_epoch(result, t_s)
             report = m.report_to_msg(result.report)
             # the constraint sets published since the previous report: what the analysis tells
             # the planner's sets on uam/constraints from forged ones by
@@ -932,6 +1066,7 @@ class PlannerNode(Node):
         finally:
             with self._lock:
                 self._react_inflight = None
+                self._wake_idle()
 
     async def _drive_steps(self, steps, served_counter: str):
         """Run a planner step generator (``prepare_steps``, ``react_between_steps``) to its value:

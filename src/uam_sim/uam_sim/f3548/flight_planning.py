@@ -487,12 +487,15 @@ class FlightPlanning:
             return 200, _upsert_answer(R.Completed.value, _status_of(d.flight, self.decider.now_s),
                                        self._notes(d.flight, "modified"), self._as_planned(plan_doc, d.flight))
         result = R.Failed if d.outcome == "failed" else R.Rejected
+        # (the planner's reason may say already what became of the previous version)
         if d.flight is not None:
+            kept = "the previous version stays in force"
             return 200, _upsert_answer(result.value, _status_of(d.flight, self.decider.now_s),
-                                       f"{d.outcome}: {d.reason}; the previous version stays in force")
+                                       f"{d.outcome}: {d.reason}" + ("" if kept in d.reason else f"; {kept}"))
         del self.plans[fid]
+        lost = "the previous version is no longer in force"
         return 200, _upsert_answer(result.value, S.Closed.value,
-                                   f"{d.outcome}: {d.reason}; the previous version is no longer in force")
+                                   f"{d.outcome}: {d.reason}" + ("" if "previous version" in d.reason else f"; {lost}"))
 
     # ---- delete --------------------------------------------------------------------------------
     def delete(self, flight_plan_id: str) -> tuple:

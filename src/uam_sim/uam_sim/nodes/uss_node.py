@@ -17,11 +17,19 @@ subscribes to ``uam/flight_plans``, ``uam/requests`` (the priorities), ``uam/con
 request is answered with the standard's error and never stops the node). Parameters:
 ``uam_contract.params.USS``. With ``auth`` ``verify`` (the default) the node does not start
 without ``auth_key``; with ``off`` it logs a warning saying so when it starts.
+
+With ``authority_key`` it also serves InterUSS's flight_planning interface
+(:class:`uam_sim.f3548.flight_planning.FlightPlanning`) over :class:`NodeDecider`: each flight
+plan, modification and cancellation goes to the planner node as a request signed by the USS's
+authority (``uam/uss_flight_plan``, :mod:`uam_planner.signed_requests`), and an answer waits, at
+most ``flight_planning_timeout_s``, for the planner's decision; an approval counts only once the
+planner's journal (or, without one, its plans topic) holds the plan.
 """
 
 from __future__ import annotations
 
 import sys
+import threading
 import time
 from dataclasses import replace
 
@@ -75,10 +83,23 @@ class UssNode(Node):
             self._update_client = self.create_client(UpdateConstraint, c.SERVICE_UPDATE_CONSTRAINT)
         self.inbox = PeerInbox(self.network, spec, p["scenario_start_utc"], listener=self._on_peer_change,
                                log=self.get_logger().info)
+        # the flights of the flight_planning interface's operator, newest version each, as the
+        # planner's record (journal or plans topic) holds them: what the decider reads
+        self.decider = None
+        self.planning = None
+        if p["authority_key"]:
+            from uam_planner.signed_requests import FlightPlanSigner
+            from uam_sim.f3548.flight_planning import DEFAULT_OPERATOR, FlightPlanning
+            signer = FlightPlanSigner(p["authority_id"], key, time.time_ns())
+            self.decider = NodeDecider(self, signer, DEFAULT_OPERATOR, p["flight_planning_timeout_s"])
+            self.planning = FlightPlanning(self.decider, self.network, context(p["port"]), DEFAULT_OPERATOR,
+                                           log=self.get_logger().info)
         self.server = UssServer(self.store, p["host"], p["port"], p["auth"], auth_key=p["auth_key"],
                                 auth_audience=p["auth_audience"], workers=p["workers"],
-                                max_connections=p["max_connections"], inbox=self.inbox)
+                                max_connections=p["max_connections"], inbox=self.inbox, planning=self.planning)
         self.store.ctx = context(self.server.port)  # port 0: the port the server got (store empty)
+        if self.planning is not None:
+            self.planning.ctx = self.store.ctx
         base = self.store.ctx.uss_base_url
         self.server.start()
         log = self.get_logger().warning if self.server.auth == "off" else self.get_logger().info
@@ -120,6 +141,8 @@ class UssNode(Node):
             if e["session"] != self._session:   # the planner serves a new run
                 if self._session is not None:
                     self.store.clear()
+                    if self.decider is not None:
+                        self.decider.forget()
                 self._session = e["session"]
                 self.source = type(self.source)()
                 self.source.bind(self._session)
@@ -156,6 +179,8 @@ class UssNode(Node):
         if msg.outcome != FlightPlan.OUTCOME_APPROVED:
             if int(getattr(msg, "version", 0) or 0) > 1 or msg.state == FlightPlan.STATE_ENDED:
                 self.store.end(msg.operator_id, msg.request_id)  # a cancellation of a version
+                if self.decider is not None:
+                    self.decider.ended(msg.operator_id, msg.request_id)
             return
         try:
             f = flight_from_plan(msg)
@@ -165,6 +190,8 @@ class UssNode(Node):
         f = replace(f, operator_id=msg.operator_id,
                     priority=self._priority.get((msg.operator_id, msg.request_id), 0))
         self.store.put_flight(f)
+        if self.decider is not None:
+            self.decider.held(f)
         self.plans += 1
 
     def _on_constraints(self, msg) -> None:
@@ -207,6 +234,130 @@ class UssNode(Node):
 
     def close(self) -> None:
         self.server.stop()
+
+
+class NodeDecider:
+    """The flight_planning interface's decider in the node graph (the library path's is
+    ``InProcessDecider``): each operation is a signed call of ``uam/uss_flight_plan`` made from
+    an HTTP worker thread, which waits (at most ``timeout_s`` of wall time) for the planner's
+    answer; an approval or a new version counts only once the node's record of the planner's
+    plans (its journal, or its plans topic) holds it (:meth:`held`), since anyone may answer a
+    service call. The times are the served clock's (the simulator's, as the node takes it)."""
+
+    def __init__(self, node, signer, operator_id: str, timeout_s: float):
+        from uam_msgs.srv import UpdateConstraint
+        self.node, self.signer, self.operator_id, self.timeout_s = node, signer, operator_id, float(timeout_s)
+        self.client = node.create_client(UpdateConstraint, c.SERVICE_USS_FLIGHT_PLAN)
+        self._lock = threading.Condition()
+        self._flights: dict = {}   # request id -> Flight (newest version), this operator's only
+
+    # ---- the planner's record, from the node's journal or topic callbacks --------------------------
+    def held(self, flight) -> None:
+        if flight.operator_id != self.operator_id:
+            return
+        with self._lock:
+            old = self._flights.get(flight.request_id)
+            if old is None or int(flight.version) >= int(old.version):
+                self._flights[flight.request_id] = flight
+            self._lock.notify_all()
+
+    def ended(self, operator_id: str, request_id: str) -> None:
+        if operator_id == self.operator_id:
+            with self._lock:
+                self._flights.pop(request_id, None)
+                self._lock.notify_all()
+
+    def forget(self) -> None:
+        with self._lock:
+            self._flights.clear()
+            self._lock.notify_all()
+
+    # ---- the decider's surface (uam_sim.f3548.flight_planning) ------------------------------------
+    @property
+    def t_s(self) -> float:
+        return self.node.store.time_s
+
+    @property
+    def now_s(self) -> float:
+        return self.node.store.time_s
+
+    def ready(self) -> bool:
+        return self.client.service_is_ready()
+
+    def flight(self, request_id: str):
+        with self._lock:
+            return self._flights.get(request_id)
+
+    def _call(self, fields) -> tuple:
+        """(accepted, error) of one signed call, or (None, why) with no answer in time."""
+        from uam_msgs.srv import UpdateConstraint
+        req = UpdateConstraint.Request(action=fields.action, constraint_id=fields.constraint_id,
+                                       version=int(fields.version), reason=fields.reason, geojson=fields.geojson,
+                                       authorization=fields.authorization)
+        if not self.client.wait_for_service(timeout_sec=min(self.timeout_s, 5.0)):
+            return None, f"the planner does not serve {c.SERVICE_USS_FLIGHT_PLAN}"
+        done = threading.Event()
+        fut = self.client.call_async(req)
+        fut.add_done_callback(lambda _f: done.set())
+        if not done.wait(self.timeout_s):
+            self.client.remove_pending_request(fut)
+            return None, f"no decision of the planner within {self.timeout_s:g} s (flight_planning_timeout_s)"
+        res = fut.result()
+        return bool(res.accepted), str(res.error)
+
+    def _await(self, request_id: str, version: int):
+        """The flight of ``request_id`` at ``version`` or later once the record holds it, or None."""
+        deadline = time.monotonic() + self.timeout_s
+        with self._lock:
+            while True:
+                f = self._flights.get(request_id)
+                if f is not None and int(f.version) >= version:
+                    return f
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return None
+                self._lock.wait(min(left, 0.5))
+
+    def _withdraw(self, request_id: str) -> None:
+        self._call(self.signer.operation("cancel", request_id=request_id, operator_id=self.operator_id,
+                                         reason="withdrawn: no decision in time"))
+
+    def decide(self, request):
+        from uam_sim.f3548.flight_planning import Decision
+        request = replace(request, operator_id=self.operator_id)
+        ok, why = self._call(self.signer.operation("plan", request, version=1))
+        if ok is None:
+            self._withdraw(request.request_id)
+            return Decision("failed", f"{why}; the request is withdrawn")
+        if not ok:
+            return Decision("rejected", why)
+        f = self._await(request.request_id, 1)
+        if f is None:
+            return Decision("failed", "the planner's answer is not in its record (journal) in time")
+        return Decision("approved", flight=f)
+
+    def modify(self, request):
+        from uam_sim.f3548.flight_planning import Decision
+        current = self.flight(request.request_id)
+        version = int(current.version) + 1 if current is not None else 1
+        ok, why = self._call(self.signer.operation("modify", replace(request, operator_id=self.operator_id),
+                                                   version=version))
+        if ok is None:
+            return Decision("failed", why, self.flight(request.request_id))
+        if not ok:
+            # Planner.modify's own sentence says whether the previous version stays in force
+            kept = "could not be kept" not in why
+            return Decision("rejected", why, self.flight(request.request_id) if kept else None)
+        f = self._await(request.request_id, version)
+        if f is None:
+            return Decision("failed", "the planner's new version is not in its record (journal) in time",
+                            self.flight(request.request_id))
+        return Decision("approved", flight=f)
+
+    def cancel(self, request_id: str, operator_id: str, reason: str) -> str | None:
+        ok, why = self._call(self.signer.operation("cancel", request_id=request_id, operator_id=operator_id,
+                                                   reason=reason))
+        return None if ok else why
 
 
 def main(args=None) -> int:
