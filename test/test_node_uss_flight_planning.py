@@ -106,19 +106,6 @@ def test_flight_plans_go_to_the_planner_signed_and_forgeries_are_refused(ros_con
         doc = requests.get(f"{base}/uss/v1/operational_intents/{oid}", headers=user, timeout=10).json()
         ref1 = doc["operational_intent"]["reference"]
 
-        # modified (another destination): a new version of the same intent
-        t = sim.t_s
-        r = call(executor, spin_until, lambda: requests.put(
-            f"{base}{PREFIX}/flight_plans/{FID}", json=upsert(ctx, net, "r2", t + 40.0, t + 400.0, "A", "C"),
-            headers=user, timeout=60))
-        got = r.json()
-        assert (got["planning_result"], got["flight_plan_status"]) == ("Completed", "Planned"), got
-        f2 = planner.planner.flight(key)
-        assert (f2.origin_id, f2.destination_id, f2.version) == ("A", "C", 2)
-        doc = requests.get(f"{base}/uss/v1/operational_intents/{oid}", headers=user, timeout=10).json()
-        ref2 = doc["operational_intent"]["reference"]
-        assert ref2["id"] == ref1["id"] and ref2["version"] > ref1["version"] and ref2["ovn"] != ref1["ovn"]
-
         # forged in the USS's name: on the topic, unsigned, and signed by another key
         forged_requests.publish(FlightRequest(operator_id=OP, request_id="forged-1", origin_id="A",
                                               destination_id="C", priority=0))
@@ -139,6 +126,19 @@ def test_flight_plans_go_to_the_planner_signed_and_forgeries_are_refused(ros_con
         refusal = next(p for p in obs.plans if p.request_id == "forged-1")
         assert refusal.outcome == FlightPlan.OUTCOME_REJECTED and "operator_id: 'flight_planning'" in refusal.reason
         assert planner.planner.flight(f"{OP}/forged-1") is None and planner.planner.flight(f"{OP}/forged-2") is None
+
+        # modified (another destination): a new version of the same intent
+        t = sim.t_s
+        r = call(executor, spin_until, lambda: requests.put(
+            f"{base}{PREFIX}/flight_plans/{FID}", json=upsert(ctx, net, "r2", t + 100.0, t + 400.0, "A", "C"),
+            headers=user, timeout=60))
+        got = r.json()
+        assert (got["planning_result"], got["flight_plan_status"]) == ("Completed", "Planned"), got
+        f2 = planner.planner.flight(key)
+        assert (f2.origin_id, f2.destination_id, f2.version) == ("A", "C", 2)
+        doc = requests.get(f"{base}/uss/v1/operational_intents/{oid}", headers=user, timeout=10).json()
+        ref2 = doc["operational_intent"]["reference"]
+        assert ref2["id"] == ref1["id"] and ref2["version"] > ref1["version"] and ref2["ovn"] != ref1["ovn"]
 
         # deleted before it departs: the planner cancels it; its intent ends with the journal's record
         r = call(executor, spin_until, lambda: requests.delete(f"{base}{PREFIX}/flight_plans/{FID}", headers=user,
