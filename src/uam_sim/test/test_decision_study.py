@@ -338,7 +338,8 @@ def test_a_pinned_code_version_is_only_for_collecting_tables(tmp_path, capsys):
 def test_the_committed_report_rebuilds_byte_for_byte_from_the_committed_tables(tmp_path):
     d = tmp_path / "decision-study"
     d.mkdir()
-    for name in ("study.json", "runs.csv", "windows.csv", "e0.csv.gz"):
+    for name in ("study.json", "runs.csv", "windows.csv", "e0.csv.gz", "amendments.csv",
+                 "superseded_runs.csv"):
         if (COMMITTED / name).exists():
             shutil.copy(COMMITTED / name, d / name)
     text, _tables = report_text(d, "docs/decision-study")  # named as the committed one

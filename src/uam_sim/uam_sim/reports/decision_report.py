@@ -11,10 +11,11 @@ as "no effect". No number is written by hand.
 
 Statistics: paired per seed (every method of one cell at one seed plans the same requests),
 Student t intervals (``uam_sim.reports.stats.mean_interval``), two-sided one-sample t p-values
-(``scipy.stats.ttest_1samp``) for the secondary comparisons, adjusted by Holm within each
-experiment (:func:`uam_sim.reports.stats.holm`). Pooled estimates stack the per-seed relative
-differences of every group of a comparison (a fixed-effect estimate of one shared relative
-effect; the pairs are independent runs) with a t interval over all pairs.
+(``scipy.stats.ttest_1samp``). Pooled rows stack the per-seed relative differences of every
+group of a comparison with a t interval over all pairs (what the power rows use); beside them
+the fixed- and random-effects pools with Cochran's Q and I^2, and a pooled claim only where
+heterogeneity allows; Holm over exactly the claims the Answers make
+(:mod:`uam_sim.reports.decision_review`).
 """
 
 from __future__ import annotations
@@ -29,7 +30,8 @@ import numpy as np
 import pandas as pd
 
 from ..runner.files import write_csv
-from .stats import holm, mean_interval, seeds_needed
+from . import decision_review as review
+from .stats import mean_interval, seeds_needed
 
 SIZE_BINS = [1, 8, 16, 32, 64, 128, 256, 512, 1024, 4096, 100000]
 E0_ORDER = ["firstfit", "greedy", "auto", "exact", "sa", "tabu", "qpu-emulator", "reference"]
@@ -91,7 +93,6 @@ def comparison_rows(runs: pd.DataFrame, study: dict) -> list:
     level = float(study["power"]["level"])
     out = []
     for exp in study["experiments"]:
-        fam = []
         for kind in ("primary", "secondary"):
             for comp in exp[kind]:
                 neg = next(j for j, t in enumerate(comp["terms"]) if t["sign"] < 0)
@@ -118,8 +119,6 @@ def comparison_rows(runs: pd.DataFrame, study: dict) -> list:
                            "rel_pct": rm, "rel_lo": rlo, "rel_hi": rhi,
                            "positive": int((d > 0).sum()), "negative": int((d < 0).sum()), "p": p}
                     out.append(row)
-                    if kind == "secondary":
-                        fam.append(row)
                 if len(rel_all) >= 2:
                     rm, rlo, rhi = mean_interval(rel_all, level)
                     out.append({"experiment": exp["name"], "kind": f"{kind}-pooled",
@@ -128,11 +127,34 @@ def comparison_rows(runs: pd.DataFrame, study: dict) -> list:
                                 "rel_pct": rm, "rel_lo": rlo, "rel_hi": rhi,
                                 "positive": int((np.array(rel_all) > 0).sum()),
                                 "negative": int((np.array(rel_all) < 0).sum())})
-        ps = [r["p"] for r in fam]
-        okp = [i for i, p in enumerate(ps) if isinstance(p, float) and math.isfinite(p)]
-        for i, a in zip(okp, holm([ps[i] for i in okp])):
-            fam[i]["p_holm"] = a
     return out
+
+
+def missing_runs(seeds_per_arm: list, target: int) -> int:
+    """Runs missing for every arm to have ``target`` seeds: the sum over arms of
+    max(0, target - seeds of the arm) (one run is one arm at one seed)."""
+    return int(sum(max(0, int(target) - int(n)) for n in seeds_per_arm))
+
+
+def paper_figures_text(study: dict) -> str:
+    """Which experiment stands for which of the paper's figures, with the model each runs on read
+    from the config (the paper's model is airspace mode ``paper``)."""
+    parts = []
+    for exp in study["experiments"]:
+        if exp["name"] != "E3":
+            continue
+        for c in exp["cells"]:
+            net = c["network"] if isinstance(c["network"], str) else "a synthetic city"
+            model = ("the paper's model" if c.get("mode") == "paper"
+                     else f"airspace mode `{c.get('mode')}`, not the paper's model (mode `paper`)")
+            parts.append(f"{exp['name']}'s approvals against the request rate (cell {c['name']}: "
+                         f"network {net}, {model}, rates {', '.join(map(str, c['rates']))})")
+    lead = ("; ".join(parts) + " stand beside the paper's Fig. 3 (cumulative approvals) in kind, "
+            "not in numbers") if parts else "No experiment sweeps the request rate"
+    return (lead + "; E0's solve time per size bin beside its Fig. 6 (time to solution). The "
+            "figures side by side, with the paper's statements and our values of the same "
+            "quantities, are in docs/paper-study/REPORT.md (\"The paper's figures side by side\"). "
+            "The paper gives no value for the expanded airspace, the objectives or the horizon.")
 
 
 def mde(sd: float, n: int, level: float = 0.95, power: float = 0.8) -> float:
@@ -332,7 +354,8 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:  # noqa:
     runs, windows, e0 = _read(d, "runs.csv"), _read(d, "windows.csv"), _read(d, "e0.csv.gz")
     L = ["# The decision study: where optimisation matters (issue 24)", "",
          "Written by `uam_sim.reports.decision_report` from the tables in this directory alone "
-         "(`study.json`, `runs.csv`, `windows.csv`, `e0.csv.gz`): "
+         "(`study.json`, `runs.csv`, `windows.csv`, `e0.csv.gz`, `amendments.csv`, "
+         "`superseded_runs.csv`): "
          f"`python -m uam_sim.decision_report {shown or d.as_posix()}` writes it again, byte for byte "
          "(src/uam_sim/test/test_decision_study.py checks). The cells are run by "
          "`python -m uam_sim.decision_study --config config/decision-study.yaml --stage "
@@ -369,6 +392,7 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:  # noqa:
     prow = power_rows(runs, study) if runs is not None else []
     tables["power"] = prow
     miss = []
+    arm_keys = ["cell", "variant", "rate", "method"]
     for exp in study["experiments"]:
         have = runs[runs["experiment"] == exp["name"]] if runs is not None else None
         n_arms = len(exp["cells"]) * int(np.prod([len(v) for v in exp["vary"].values()]) if exp["vary"] else 1)
@@ -380,12 +404,15 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:  # noqa:
         per_seed_runs = sum(len(c["rates"]) for c in exp["cells"]) * (n_arms // max(1, len(exp["cells"]))) \
             * len(exp["methods"])
         pilot = int(study["power"]["pilot_seeds"])
+        per_arm = (have.groupby([k for k in arm_keys if k in have])["seed"].nunique().tolist()
+                   if have is not None and len(have) else [])
+        per_arm += [0] * max(0, per_seed_runs - len(per_arm))  # arms with no run at all
         miss.append([exp["name"], per_seed_runs, n_runs, ", ".join(map(str, seeds)) or "none",
-                     max(0, pilot * per_seed_runs - n_runs) if target is None else 0,
+                     missing_runs(per_arm, pilot),
                      target if target is not None else "pilot not complete",
-                     "-" if target is None else max(0, target * per_seed_runs - n_runs)])
-    L += _table(miss, ["experiment", "runs per seed", "runs in runs.csv", "seeds present",
-                       f"pilot runs missing ({study['power']['pilot_seeds']} seeds)",
+                     "-" if target is None else missing_runs(per_arm, target)])
+    L += _table(miss, ["experiment", "runs per seed", "runs in runs.csv", "seeds present (any arm)",
+                       f"pilot runs missing ({study['power']['pilot_seeds']} seeds in every arm)",
                        "seeds the power needs (capped)", "runs still missing at that"])
     e0_runs = [r["name"] for r in study["e0"]["runs"]]
     solvers = list(study["e0"]["backends"]) + ["reference"]
@@ -455,10 +482,14 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:  # noqa:
     tables["comparisons"] = comps
     for exp in study["experiments"]:
         L += [f"## {exp['name']}: {exp['question']}", ""]
-        L.append("Declared before running (config/decision-study.yaml, copied to study.json):")
+        L.append("Declared in config/decision-study.yaml (copied to study.json); what was changed "
+                 "after data is marked and listed under \"Amendments after seeing data\":")
         for kind in ("primary", "secondary"):
             for c in exp[kind]:
-                L.append(f"- {kind}: `{c['name']}`: {_terms_text(c)}, in `{c['metric']}`")
+                am = review.amended(d, exp["name"], c["name"])
+                L.append(f"- {kind}: `{c['name']}`: {_terms_text(c)}, in `{c['metric']}`"
+                         + (f" (`per: {c['per']}`)" if c.get("per") else "")
+                         + (f"; amended after data in {', '.join(f'`{x}`' for x in am)}" if am else ""))
         L.append("")
         rows = [r for r in comps if r["experiment"] == exp["name"]]
         if not rows:
@@ -474,7 +505,8 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:  # noqa:
             elif r.get("seeds", 0) == 0:
                 L.append(f"- {r['kind']} `{r['comparison']}` ({r['group']}): no common seeds yet.")
             else:
-                holm_txt = (f" (Holm-adjusted p {_f(r['p_holm'], 3)})" if "p_holm" in r else "")
+                holm_txt = (f" (unadjusted p {_f(r['p'], 3)}; claims and Holm in the Answers)"
+                            if r["kind"] == "secondary" and math.isfinite(r.get("p", math.nan)) else "")
                 L.append(f"- {r['kind']} `{r['comparison']}` ({r['group']}): "
                          + _verdict(r, UNITS.get(r["metric"], ""))[:-1] + holm_txt + ".")
         L.append("")
@@ -494,49 +526,17 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:  # noqa:
                           "delay p95 [s]", "detour [m]", *[f"p95 delay prio {c[16:]} [s]" for c in prio],
                           "Jain", "solve median [s]", "solve max [s]", "overruns", "fallbacks"])
         L.append("")
-    # -- answers, one line per declared comparison and the optimiser's solve time
+    # -- pooling, the answers and what the tables say about the method
+    het = review.heterogeneity_rows(runs, study) if runs is not None else []
+    L += review.heterogeneity_lines(het)
+    claims = review.answer_claims(runs, study) if runs is not None else []
     L += ["## Answers", "",
-          "One line per declared comparison, from the rows above (the pooled row where there is "
-          "one, else each group), and the solve time of the MWIS runs per experiment.", ""]
+          "One line per claim: per declared comparison its pooled estimate where heterogeneity "
+          "allows (fixed effect, random effects beside it), else each group, absolute and relative. "
+          + (review.holm_family_text(claims) if claims else ""), ""]
     for exp in study["experiments"]:
-        rows = [r for r in comps if r["experiment"] == exp["name"]]
-        for kind in ("primary", "secondary"):
-            for c in exp[kind]:
-                mine = [r for r in rows if r["comparison"] == c["name"] and r["kind"].startswith(kind)
-                        and r.get("seeds", 0) >= 2]
-                pooled = [r for r in mine if r["kind"].endswith("pooled")]
-                if not mine:
-                    L.append(f"- {exp['name']} {kind} `{c['name']}`: not yet answered (fewer than "
-                             "2 paired seeds).")
-                    continue
-                r = pooled[0] if pooled else mine[0]
-                where = "pooled over every group" if pooled else r["group"]
-                ex = (r["rel_lo"] > 0 or r["rel_hi"] < 0) if math.isfinite(r.get("rel_lo", math.nan)) else False
-                power = ""
-                if kind == "primary":
-                    # what the seeds run can detect: the power table's row that sets the seeds
-                    pr = [p for p in prow if p["experiment"] == exp["name"]
-                          and p["comparison"] == c["name"] and p.get("decides")]
-                    if pr and math.isfinite(float(pr[0].get("mde_now", math.nan))):
-                        u = "%" if str(pr[0]["group"]).startswith("pooled") \
-                            else UNITS.get(c["metric"], "")
-                        where_p = "" if u == "%" else f" ({pr[0]['group']})"
-                        n_what = "paired differences (seeds x groups)" if u == "%" else "seeds"
-                        power = (f" With {pr[0]['seeds_run']} {n_what}{where_p} the smallest true difference "
-                                 f"found with 80 % probability (MDE) is {_f(pr[0]['mde_now'], 2)} "
-                                 f"{u}; at the cap of {pr[0]['max_seeds']} seeds "
-                                 f"{_f(pr[0]['mde_at_cap'], 2)} {u}.")
-                        if u == "%":
-                            power = power.replace(f"at the cap of {pr[0]['max_seeds']} seeds",
-                                                  f"at the cap of {pr[0]['max_seeds']} seeds per group")
-                half = (r["rel_hi"] - r["rel_lo"]) / 2 if math.isfinite(r.get("rel_lo", math.nan)) \
-                    else math.nan
-                L.append(f"- {exp['name']} {kind} `{c['name']}` ({c['metric']}, {where}): "
-                         f"{_f(r['rel_pct'], 2, True)} % [{_f(r['rel_lo'], 2, True)}, {_f(r['rel_hi'], 2, True)}]"
-                         + (f" {'above' if r['rel_lo'] > 0 else 'below'} 0." if ex
-                            else f", not resolved at this power: the interval includes 0 (half-width "
-                                 f"{_f(half, 2)} %), so an effect of that size is neither shown nor "
-                                 "excluded; this is not evidence of no effect.") + power)
+        mine = [c for c in claims if c["experiment"] == exp["name"]]
+        L += review.answer_lines(mine, prow, UNITS)
         if runs is not None:
             mw = runs[(runs["experiment"] == exp["name"]) & ~runs["method"].isin(["fifo", "firstfit"])]
             if len(mw):
@@ -546,6 +546,12 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:  # noqa:
                          f"solves past limit + 0.4 s, {int(mw['fallbacks'].sum())} fallbacks."
                          + _load_text(runs[runs["experiment"] == exp["name"]]))
     L.append("")
+    cup_lines, cup_txt = (review.cuped_lines(review.cuped_rows(runs, study), UNITS, study)
+                          if runs is not None else ([], "no runs"))
+    L += cup_lines
+    if runs is not None:
+        L += review.fairness_lines(runs, study)
+    L += review.amendments_lines(d, runs, study, prow, cup_txt) if runs is not None else []
     # -- E0
     L += ["## E0: matched shadow solves", "",
           f"Each epoch's recorded instance of the reference runs (method {study['e0']['method']}), "
@@ -577,19 +583,16 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:  # noqa:
             L.append(f"- {s}: mean gap {_f(m, 3)} % [{_f(lo, 3)}, {_f(hi, 3)}] over {len(x)} instances "
                      f"({int((x['gap_pct'] <= 1e-9).sum())} at the best known); "
                      f"{over} solves past limit + 0.4 s.")
-        L += ["", f"Instances: {g[['run', 'epoch']].drop_duplicates().shape[0]}; proven optimum known "
+        L += [""] + review.e0_clustered_lines(g, [x for x in E0_ORDER if x in set(g["solver"])])
+        L += [f"Instances: {g[['run', 'epoch']].drop_duplicates().shape[0]}; proven optimum known "
               f"for {int(g.drop_duplicates(['run', 'epoch'])['best_proven'].sum())} of them.", "",
               f"![E0: mean gap per solver and size bin]({E0_FIGURE})", ""]
     else:
         L += ["No E0 rows yet.", ""]
-    # -- the paper's figures
-    L += ["## The paper's figures", "",
-          "Reproduced in kind, not in numbers (our network is not the paper's): E3's approvals "
-          "against request rate on the paper's model corresponds to the paper's figure of approved "
-          "requests against the request rate, and E0's solve time per size bin to its "
-          "time-to-solution figure (the paper's figure numbers are not restated here; see "
-          "docs/paper-study/REPORT.md). The paper gives no value for the expanded airspace, the "
-          "objectives or the horizon.", ""]
+    # -- the paper's figures, and what is not answered
+    L += ["## The paper's figures", "", paper_figures_text(study), ""]
+    if runs is not None:
+        L += review.not_answered_lines(runs, study, int(e0["vertices"].max()) if e0 is not None else None)
     return "\n".join(L).rstrip() + "\n", tables
 
 

@@ -224,3 +224,121 @@ def mser_truncation(series, batch: int = 5) -> int:
         if val < best - 1e-12:
             best, best_k = val, k
     return best_k * batch
+
+
+def random_effects(effects, ses, level: float = LEVEL) -> dict:
+    """Fixed-effect (inverse variance) and DerSimonian-Laird random-effects pooling of ``k``
+    estimates ``effects`` with standard errors ``ses`` (same units), with Cochran's Q, its
+    chi-square p-value (df k - 1) and I^2 = max(0, (Q - df) / Q) [%].
+
+    Returns a dict: ``k``, ``fe``, ``fe_lo``, ``fe_hi``, ``fe_p`` (two-sided z test), ``re``,
+    ``re_lo``, ``re_hi``, ``re_p``, ``hk_lo``, ``hk_hi`` (the random-effects interval with the
+    Hartung-Knapp-Sidik-Jonkman SE and a t quantile), ``tau2``, ``q``, ``q_df``, ``q_p``, ``i2_pct``. Normal
+    quantiles, as ``statsmodels.stats.meta_analysis.combine_effects(method_re="dl")`` (the
+    reference; statsmodels is not pinned in requirements.txt, which is part of the run code's
+    version, and the 12 lines below are its formulas). Raises StatsError when fewer than 2
+    estimates or a standard error is not positive (its weight would be infinite).
+    """
+    from scipy.stats import chi2, norm
+    y = np.asarray(list(effects), dtype=float)
+    s = np.asarray(list(ses), dtype=float)
+    if y.size < 2 or y.size != s.size:
+        raise StatsError(f"random_effects: need >= 2 estimates with one SE each, got {y.size} and {s.size}")
+    if not np.all(np.isfinite(s)) or np.any(s <= 0):
+        raise StatsError(f"random_effects: every SE must be positive and finite, got {s.tolist()}")
+    w = 1.0 / s ** 2
+    fe = float(np.sum(w * y) / np.sum(w))
+    fe_se = float(math.sqrt(1.0 / np.sum(w)))
+    q = float(np.sum(w * (y - fe) ** 2))
+    df = y.size - 1
+    c = float(np.sum(w) - np.sum(w ** 2) / np.sum(w))
+    tau2 = max(0.0, (q - df) / c) if c > 0 else 0.0
+    wr = 1.0 / (s ** 2 + tau2)
+    re = float(np.sum(wr * y) / np.sum(wr))
+    re_se = float(math.sqrt(1.0 / np.sum(wr)))
+    z = float(norm.ppf(0.5 + level / 2))
+    # Hartung-Knapp-Sidik-Jonkman: the random-effects SE from the weighted residuals with a t
+    # quantile on k - 1 df (DL's normal interval is too narrow with few groups)
+    from scipy.stats import t as student_t
+    hk_se = float(math.sqrt(np.sum(wr * (y - re) ** 2) / (df * np.sum(wr))))
+    tq = float(student_t.ppf(0.5 + level / 2, df))
+    return {"k": int(y.size), "hk_lo": re - tq * hk_se, "hk_hi": re + tq * hk_se,
+            "fe": fe, "fe_lo": fe - z * fe_se, "fe_hi": fe + z * fe_se,
+            "fe_p": float(2 * norm.sf(abs(fe) / fe_se)),
+            "re": re, "re_lo": re - z * re_se, "re_hi": re + z * re_se,
+            "re_p": float(2 * norm.sf(abs(re) / re_se)), "tau2": tau2,
+            "q": q, "q_df": df, "q_p": float(chi2.sf(q, df)),
+            "i2_pct": max(0.0, 100.0 * (q - df) / q) if q > 0 else 0.0}
+
+
+def cluster_bootstrap_mean(values, clusters, level: float = LEVEL, resamples: int = 4_000,
+                           seed: int = 0) -> tuple:
+    """(mean, low, high): the mean of ``values`` with a percentile interval from resampling whole
+    clusters with replacement (the observations of one cluster are not independent: instances of
+    one run share its traffic). Each resample draws as many clusters as there are and takes the
+    mean over all their observations. Seeded, vectorised: O(resamples x clusters)."""
+    v = np.asarray(list(values), dtype=float)
+    c = np.asarray(list(clusters))
+    if v.size == 0 or v.size != c.size:
+        raise StatsError(f"cluster_bootstrap_mean: {v.size} values and {c.size} cluster labels")
+    labels, idx = np.unique(c, return_inverse=True)
+    sums = np.bincount(idx, weights=v, minlength=labels.size)
+    counts = np.bincount(idx, minlength=labels.size).astype(float)
+    rng = np.random.default_rng(seed)
+    draw = rng.integers(0, labels.size, size=(resamples, labels.size))
+    means = sums[draw].sum(axis=1) / counts[draw].sum(axis=1)
+    a = (1.0 - level) / 2
+    return float(v.mean()), float(np.quantile(means, a)), float(np.quantile(means, 1 - a))
+
+
+def binomial_upper(events: int, trials: int, level: float = LEVEL) -> float:
+    """The exact (Clopper-Pearson) one-sided upper confidence bound of a binomial proportion at
+    ``level``; with 0 events it is 1 - (1 - level)^(1/n), about 3 / n (the rule of three)."""
+    from scipy.stats import beta
+    if trials <= 0 or not 0 <= events <= trials:
+        raise StatsError(f"binomial_upper: events {events} of trials {trials}")
+    if events == trials:
+        return 1.0
+    return float(beta.ppf(level, events + 1, trials - events))
+
+
+def cuped(diffs, covariate) -> dict:
+    """CUPED (regression adjustment on a pre-treatment covariate shared by both arms of a pair):
+    d_adj = d - theta (x - mean x), theta = cov(d, x) / var(x). Returns ``theta``, the adjusted
+    differences ``adjusted`` and ``variance_reduction`` = 1 - var(d_adj) / var(d) (= corr^2);
+    theta 0 and no reduction when the covariate does not vary."""
+    d = np.asarray(list(diffs), dtype=float)
+    x = np.asarray(list(covariate), dtype=float)
+    if d.size != x.size or d.size < 3:
+        raise StatsError(f"cuped: need >= 3 pairs with a covariate each, got {d.size} and {x.size}")
+    vx = float(np.var(x, ddof=1))
+    theta = float(np.cov(d, x, ddof=1)[0, 1] / vx) if vx > 0 else 0.0
+    adj = d - theta * (x - x.mean())
+    vd = float(np.var(d, ddof=1))
+    return {"theta": theta, "adjusted": adj,
+            "variance_reduction": 1.0 - float(np.var(adj, ddof=1)) / vd if vd > 0 else 0.0}
+
+
+def jain_min_max_bound(jain: float, n: int = 3) -> float:
+    """The smallest min/max ratio n shares can have at Jain's index ``jain`` (a lower bound on
+    the ratio; Jain alone does not give the ratio itself for n > 2). With the largest share 1
+    and the smallest r, the others at the value that maximises the index, the index rises with
+    r; found by bisection on r."""
+    if not 0 < jain <= 1 or n < 2:
+        raise StatsError(f"jain_min_max_bound: jain {jain}, n {n}")
+
+    def best_index(r: float) -> float:
+        # the n - 2 middle shares all at m: the index's maximum over m in [r, 1]
+        m = np.linspace(r, 1.0, 201)
+        s = 1.0 + r + (n - 2) * m
+        ss = 1.0 + r * r + (n - 2) * m * m
+        return float(np.max(s * s / (n * ss)))
+
+    lo, hi = 0.0, 1.0
+    for _ in range(50):
+        mid = (lo + hi) / 2
+        if best_index(mid) >= jain:
+            hi = mid
+        else:
+            lo = mid
+    return hi
