@@ -2,6 +2,7 @@
 figures and report sections of a small sweep."""
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -101,3 +102,16 @@ def test_small_study_has_every_figure_and_paired_section(tmp_path):
     again = report_from_tables(copy)
     assert again.read_text() == report
     assert "TTS(0.99) per call and per read" in report and "Per read:" in report
+
+
+@pytest.mark.slow  # about 25 s: every table of the committed paper study and its figures
+def test_the_committed_paper_report_is_its_generators_output(tmp_path):
+    import shutil
+    committed = Path(__file__).resolve().parents[3] / "docs" / "paper-study"
+    copy = tmp_path / "paper-study"
+    shutil.copytree(committed, copy)
+    again = report_from_tables(copy).read_text()
+    assert "## The paper's figures side by side" in again
+    for fig in ("### Fig. 3", "### Fig. 4", "### Fig. 5", "### Fig. 6"):
+        assert fig in again, fig
+    assert again == (committed / "REPORT.md").read_text()

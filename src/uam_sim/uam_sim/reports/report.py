@@ -636,6 +636,8 @@ def _closing_section(L: list, cells, figs: dict, tts: dict) -> None:
     for title, text, verdict in paper_checks(cells, figs, tts):
         L += [f"- **{title}: {verdict}.** {text}"]
     L.append("")
+    from .paper_figures import side_by_side_lines
+    L += side_by_side_lines(cells, figs, tts, _rates(cells))
     extra = beyond_paper(cells)
     if extra:
         L += ["## Beyond the paper's statements", ""] + [f"- {text}" for text in extra] + [""]
