@@ -4,8 +4,10 @@
     python scripts/bench_epoch_cpu.py --per-hour 3000
     python scripts/bench_epoch_cpu.py --per-hour 10000
     python scripts/bench_epoch_cpu.py --per-hour 30000 --duration 1500 --steady-from 900
+    python scripts/bench_epoch_cpu.py --city city-30k --per-hour 30000 --method auto --lazy-routes
 
-The city is ``generate_network(2000, 100, seed, levels 60/90/120/150 m, 4 pads)``, cylinder
+The city is ``--city`` of ``uam_planner.synthetic.CITIES`` (default ``layered-city``:
+``generate_network(2000, 100, seed, levels 60/90/120/150 m, 4 pads)``), cylinder
 H 100 m / V 30 m, 5 s departure slots, the paper's demand generator (window 60 s) at
 ``--per-hour`` requests per hour, planned in process by ``Planner`` (policy MWIS, backend
 greedy in process: the solve's CPU is left out, it is the solvers' figure, not the epoch's).
@@ -38,20 +40,23 @@ for pkg in ("uam_contract", "uam_planner", "uam_solvers", "uam_sim"):
     sys.path.insert(0, str(ROOT / "src" / pkg))
 
 from uam_planner.planning import AirspaceConfig, Planner, PlanningConfig  # noqa: E402
-from uam_planner.synthetic import generate_network  # noqa: E402
+from uam_planner.synthetic import CITIES, generate_city, generate_network  # noqa: E402
 from uam_sim.world.demand import RequestGenerator  # noqa: E402
 
 
 def run(per_hour: float, duration_s: float, steady_from_s: float, seed: int = 0,
-        slot_s: float = 5.0, precompute: bool = True, city: dict | None = None) -> dict:
-    """Plan ``duration_s`` of the city at ``per_hour``; per-epoch CPU and counts. ``city``:
-    generate_network's arguments (default the 2,000-node, 100-vertiport layered city)."""
+        slot_s: float = 5.0, precompute: bool = True, city: str | dict = "layered-city",
+        method: str = "greedy", time_limit_s: float = 1.0) -> dict:
+    """Plan ``duration_s`` of the city at ``per_hour``; per-epoch CPU and counts. ``city``: a
+    name of ``uam_planner.synthetic.CITIES`` or generate_network's arguments. ``method``:
+    ``greedy`` (the greedy MWIS in process: its CPU is left out), ``auto`` (the bounded solver,
+    ``time_limit_s``; its CPU is left out too, and part of it runs in a worker process) or
+    ``firstfit`` (the first-fit baseline, no solve)."""
     from uam_solvers.greedy import greedy_mwis
-    spec = dict(n_nodes=2000, n_aerodromes=100, levels_m=[60.0, 90.0, 120.0, 150.0],
-                pads_per_vertiport=4) if city is None else dict(city)
-    net = generate_network(seed=seed, **spec)
-    cfg = PlanningConfig(airspace=AirspaceConfig("cylinder", 30.0, slot_s), backend="greedy",
-                         seed=seed, precompute_routes=precompute)
+    net = generate_city(city, seed) if isinstance(city, str) else generate_network(seed=seed, **city)
+    cfg = PlanningConfig(airspace=AirspaceConfig("cylinder", 30.0, slot_s),
+                         backend="auto" if method == "auto" else "greedy", seed=seed,
+                         precompute_routes=precompute, time_limit_s=time_limit_s)
     solve_cpu = [0.0]
 
     class _Answer:
@@ -63,12 +68,19 @@ def run(per_hour: float, duration_s: float, steady_from_s: float, seed: int = 0,
     def solve(weights, edges, groups):
         c = time.process_time()
         try:
+            if method == "auto":
+                import uam_solvers
+                return uam_solvers.solve_bounded(weights, edges, groups=groups, backend="auto",
+                                                 time_limit_s=time_limit_s, seed=seed)
             return _Answer(greedy_mwis(weights, edges))
         finally:
             solve_cpu[0] += time.process_time() - c
 
     c_setup = time.process_time()
-    planner = Planner(net, cfg, "mwis", solve_mwis=solve)
+    if method == "auto":
+        import uam_solvers
+        uam_solvers.warm_up(["auto"], service=True)
+    planner = Planner(net, cfg, "firstfit" if method == "firstfit" else "mwis", solve_mwis=solve)
     setup_cpu = time.process_time() - c_setup
     demand = RequestGenerator(net.aerodrome_ids, per_hour * 30.0 / 3600.0, 30.0, 60.0, seed)
     rows = []
@@ -87,7 +99,7 @@ def run(per_hour: float, duration_s: float, steady_from_s: float, seed: int = 0,
         rep = res.report
         approved += len(res.approved)
         rows.append((t, cpu, c_submit, rep.planning_time_s, rep.active_flights - rep.approved,
-                     rep.candidates, rep.discarded, rep.approved))
+                     rep.candidates, rep.discarded, rep.approved, rep.expired))
     a = np.array(rows)
     steady = a[a[:, 0] >= steady_from_s]
     return {"all": a, "steady": steady, "approved": approved, "setup_cpu_s": setup_cpu}
@@ -105,6 +117,10 @@ def main(argv=None) -> int:
     ap.add_argument("--steady-from", type=float, default=None,
                     help="first epoch time [s] counted (default: duration - 600 s)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--city", default="layered-city", choices=sorted(CITIES),
+                    help="the synthetic city (uam_planner.synthetic.CITIES)")
+    ap.add_argument("--method", default="greedy", choices=["greedy", "auto", "firstfit"],
+                    help="greedy or auto MWIS (the solve's CPU left out), or the first-fit baseline")
     ap.add_argument("--lazy-routes", action="store_true",
                     help="search each origin-destination pair's routes when first requested "
                          "(in submit) instead of when the planner is made")
@@ -115,21 +131,25 @@ def main(argv=None) -> int:
     load0 = os.getloadavg()
     t_wall = time.perf_counter()
     r = run(args.per_hour, duration, steady_from, args.seed,
-            precompute=not args.lazy_routes)
+            precompute=not args.lazy_routes, city=args.city, method=args.method)
     wall = time.perf_counter() - t_wall
     load1 = os.getloadavg()
     s = r["steady"]
     ms = 1e3
     routes = "lazy routes" if args.lazy_routes else "routes precomputed"
-    print(f"city 2000/100, 4 levels, 4 pads, cylinder 100/30 m, 5 s slots, {routes}, {args.per_hour:g} "
-          f"requests/h, {duration:g} s, seed {args.seed}; steady state t >= {steady_from:g} s "
-          f"({len(s)} epochs)")
+    print(f"city {args.city} ({CITIES[args.city]}), method {args.method}, cylinder 100/30 m, 5 s slots, "
+          f"{routes}, {args.per_hour:g} requests/h, {duration:g} s, seed {args.seed}; steady state "
+          f"t >= {steady_from:g} s ({len(s)} epochs)")
+    decided = s[:, 7].sum() + s[:, 8].sum()
+    share = s[:, 7].sum() / decided if decided else float("nan")
     print("| CPU per epoch p50 / p99 / max | of it in submit, p50 / max | planning_time_s p50 / "
-          "p99 (wall) | airborne mean | candidates mean | discarded mean | approved (run) |")
+          "p99 (wall) | airborne mean | candidates mean | discarded mean | approved of decided, "
+          "steady | approved (run) |")
     print(f"| {ms * _pct(s[:, 1], 50):.1f} / {ms * _pct(s[:, 1], 99):.1f} / "
           f"{ms * s[:, 1].max():.1f} ms | {ms * _pct(s[:, 2], 50):.1f} / {ms * s[:, 2].max():.1f} "
           f"ms | {ms * _pct(s[:, 3], 50):.1f} / {ms * _pct(s[:, 3], 99):.1f} ms | "
-          f"{s[:, 4].mean():.0f} | {s[:, 5].mean():.0f} | {s[:, 6].mean():.0f} | {r['approved']} |")
+          f"{s[:, 4].mean():.0f} | {s[:, 5].mean():.0f} | {s[:, 6].mean():.0f} | "
+          f"{100 * share:.1f} % | {r['approved']} |")
     print(f"planner set-up CPU {r['setup_cpu_s']:.2f} s; run {wall:.0f} s wall; load average "
           f"{load0[0]:.2f} before, {load1[0]:.2f} after")
     return 0

@@ -75,3 +75,15 @@ def test_extent_sets_the_area():
 def test_bad_arguments_are_named(kwargs, pattern):
     with pytest.raises(NetworkError, match=pattern):
         generate_network(**kwargs)
+def test_named_cities_are_their_generator_arguments():
+    """``generate_city``: the named city is generate_network with its arguments and the seed
+    (the benchmarks' layered city is the one the studies fly); an unknown name is refused
+    naming the known ones."""
+    from uam_planner.synthetic import CITIES, generate_city
+    got = generate_city("layered-city", seed=3)
+    want = generate_network(seed=3, **CITIES["layered-city"])
+    assert got.name == "layered-city-s3" and got.layered
+    assert got.node_ids == want.node_ids
+    assert np.array_equal(got.enu_m, want.enu_m) and np.array_equal(got.edges, want.edges)
+    with pytest.raises(NetworkError, match="city: 'nowhere' is not one of"):
+        generate_city("nowhere")

@@ -17,7 +17,7 @@ from scipy.spatial import Delaunay, QhullError, cKDTree
 
 from uam_planner.network import DEFAULT_ENU_ORIGIN, Network, NetworkError, network_from_enu
 
-__all__ = ["generate_network", "DEFAULT_CORRIDOR_SPACING_M"]
+__all__ = ["CITIES", "DEFAULT_CORRIDOR_SPACING_M", "generate_city", "generate_network"]
 
 #: Default grid spacing of corridor way points when no extent is given, metres.
 DEFAULT_CORRIDOR_SPACING_M = 750.0
@@ -157,6 +157,27 @@ def generate_network(n_nodes: int, n_aerodromes: int, seed: int, extent_m: float
     return network_from_enu(name or default, ids, enu, is_aerodrome, pairs,
                             origin_lat_lon_alt=origin_lat_lon_alt, airspace=airspace,
                             pads_m=pads)
+
+
+#: Named synthetic cities: :func:`generate_network`'s arguments but the seed.
+#: - ``layered-city``: the benchmarks' and studies' city (2,000 nodes, 100 vertiports, 4
+#:   levels, 4 pads; 33 km across). Its en-route capacity, not its vertiports, binds: about
+#:   3,000 requests/h at 95 % approvals, 28 % approved at 30,000/h (BENCHMARKS.md).
+#: - ``city-30k``: an airspace sized for 30,000 requests/h (docs/airspace.md, "A city sized for
+#:   the demand": how its size was found and the approvals it sustains).
+CITIES: dict[str, dict] = {
+    "layered-city": dict(n_nodes=2000, n_aerodromes=100, levels_m=[60.0, 90.0, 120.0, 150.0],
+                         pads_per_vertiport=4),
+}
+
+
+def generate_city(name: str, seed: int = 0) -> Network:
+    """The named synthetic city of :data:`CITIES` with ``seed``; NetworkError for an unknown
+    name (naming the known ones)."""
+    if name not in CITIES:
+        raise NetworkError(f"city: {name!r} is not one of {sorted(CITIES)}")
+    spec = CITIES[name]
+    return generate_network(seed=seed, name=f"{name}-s{seed}", **spec)
 
 
 def _benchmark(argv=None) -> int:
