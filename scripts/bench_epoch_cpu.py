@@ -27,6 +27,7 @@ CPU time is far less sensitive than wall time to other processes on the same cor
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import sys
@@ -119,6 +120,9 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--city", default="layered-city", choices=sorted(CITIES),
                     help="the synthetic city (uam_planner.synthetic.CITIES)")
+    ap.add_argument("--city-json", default=None,
+                    help="generate_network's arguments but the seed, as JSON (a city not in "
+                         "CITIES, e.g. while sizing one); replaces --city")
     ap.add_argument("--method", default="greedy", choices=["greedy", "auto", "firstfit"],
                     help="greedy or auto MWIS (the solve's CPU left out), or the first-fit baseline")
     ap.add_argument("--lazy-routes", action="store_true",
@@ -131,13 +135,15 @@ def main(argv=None) -> int:
     load0 = os.getloadavg()
     t_wall = time.perf_counter()
     r = run(args.per_hour, duration, steady_from, args.seed,
-            precompute=not args.lazy_routes, city=args.city, method=args.method)
+            precompute=not args.lazy_routes,
+            city=json.loads(args.city_json) if args.city_json else args.city, method=args.method)
     wall = time.perf_counter() - t_wall
     load1 = os.getloadavg()
     s = r["steady"]
     ms = 1e3
     routes = "lazy routes" if args.lazy_routes else "routes precomputed"
-    print(f"city {args.city} ({CITIES[args.city]}), method {args.method}, cylinder 100/30 m, 5 s slots, "
+    city = args.city_json or f"{args.city} ({CITIES[args.city]})"
+    print(f"city {city}, method {args.method}, cylinder 100/30 m, 5 s slots, "
           f"{routes}, {args.per_hour:g} requests/h, {duration:g} s, seed {args.seed}; steady state "
           f"t >= {steady_from:g} s ({len(s)} epochs)")
     decided = s[:, 7].sum() + s[:, 8].sum()
