@@ -342,3 +342,61 @@ def test_over_http_through_the_pooled_server(keys):
         assert put(uss, FID, upsert(uss.ctx, uss.net, "h3"), headers={}).status_code == 401
     finally:
         uss.srv.stop()
+
+
+ROOT = __import__("pathlib").Path(__file__).resolve().parents[3]
+DRIVER = ROOT / "test" / "interuss" / "drive_flight_planning.py"
+
+
+def interuss_python():
+    """The Python of the InterUSS environment scripts/setup.sh makes (scripts/interuss_env.sh),
+    or a skip saying why there is none."""
+    import subprocess
+
+    env_dir = subprocess.run(["bash", str(ROOT / "scripts" / "interuss_env.sh"), "dir"], capture_output=True,
+                             text=True, check=True).stdout.strip()
+    why = subprocess.run(["bash", str(ROOT / "scripts" / "interuss_env.sh"), "why"], capture_output=True,
+                         text=True, check=True).stdout.strip()
+    if not why.startswith("ready: "):
+        pytest.skip(f"InterUSS's code is not installed: {why}")
+    return f"{env_dir}/bin/python"
+
+
+@pytest.mark.slow
+def test_interuss_monitorlib_plans_modifies_and_ends_a_flight_and_reads_our_version(keys, tmp_path):
+    """InterUSS's own code (interuss-monitoring's monitorlib, in its Python 3.13 environment)
+    drives the interface over HTTP as uss_qualifier does: V1FlightPlannerClient plans, modifies
+    and ends a flight, InterUSSVersioningClient reads our version, and every served intent passes
+    monitorlib.schema_validation with uas_standards' F3548 type."""
+    import json
+    import subprocess
+
+    from uam_sim.f3548.uss_server import SCOPE_VERSIONS, system_version
+
+    python = interuss_python()
+    uss = make_uss(keys, served_over_http=True)
+    try:
+        token = mint_token(keys[0], "127.0.0.1", [SCOPE_PLAN, SCOPE_DIRECT, SCOPE_INTENTS, SCOPE_VERSIONS])
+        spec = {"base_url": uss.srv.url, "token": token, "flight_plan_id": FID, "intent_id": intent_id(OP, FID),
+                "plan": upsert(uss.ctx, uss.net, "m1")["flight_plan"],
+                "modified": upsert(uss.ctx, uss.net, "m2", west_to_east=False)["flight_plan"]}
+        (tmp_path / "spec.json").write_text(json.dumps(spec))
+        run = subprocess.run([python, str(DRIVER), str(tmp_path / "spec.json")], capture_output=True, text=True,
+                             timeout=120)
+        assert run.returncode == 0, run.stderr[-2000:]
+        got = json.loads(run.stdout)
+    finally:
+        uss.srv.stop()
+    assert got["readiness"] == {"errors": []}, got
+    assert (got["plan"]["activity_result"], got["plan"]["flight_plan_status"]) == ("Completed", "Planned"), got
+    assert got["plan"]["as_planned_volumes"] > 2   # the intent's volumes, read by monitorlib's FlightInfo
+    planned, modified = got["intent_planned"], got["intent_modified"]
+    assert planned["status"] == 200 and planned["schema_errors"] == [] and planned["volumes"] > 2, planned
+    assert (got["modify"]["activity_result"], got["modify"]["flight_plan_status"]) == ("Completed", "Planned"), got
+    assert modified["status"] == 200 and modified["schema_errors"] == [], modified
+    # a modification is a new version of the same operational intent
+    assert modified["id"] == planned["id"] == intent_id(OP, FID)
+    assert modified["version"] > planned["version"] and modified["ovn"] != planned["ovn"]
+    assert got["version"] == {"version": system_version()}, got
+    assert (got["end"]["activity_result"], got["end"]["flight_plan_status"]) == ("Completed", "Closed"), got
+    assert got["intent_ended"]["status"] == 404, got
