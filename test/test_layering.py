@@ -11,6 +11,7 @@ from the source with ``ast``, nothing is imported.
 from __future__ import annotations
 
 import ast
+import functools
 import pathlib
 import re
 import xml.etree.ElementTree as ET
@@ -27,6 +28,12 @@ NODES_RANK = 5
 # recording <-> analysis; issue 11 removed layers <-> reductions and base <-> options.
 KNOWN_UPWARD_IMPORTS: set = set()
 KNOWN_CYCLES: set = set()
+
+
+@functools.lru_cache(maxsize=None)
+def _parse(path: pathlib.Path) -> ast.Module:
+    """The syntax tree of one source file, parsed once per test run (the tests only read it)."""
+    return ast.parse(path.read_text(), str(path))
 
 
 def _modules() -> dict[str, pathlib.Path]:
@@ -70,7 +77,7 @@ def _sim_rank(room: str) -> int:
 
 def _imports(module: str, path: pathlib.Path, known: set[str]) -> set[str]:
     """Project modules that ``module`` imports (resolved to the longest known module name)."""
-    tree = ast.parse(path.read_text(), str(path))
+    tree = _parse(path)
     is_pkg = path.name == "__init__.py"
     names = set()
     for node in ast.walk(tree):
@@ -96,6 +103,12 @@ def _imports(module: str, path: pathlib.Path, known: set[str]) -> set[str]:
 
 
 def _graph() -> nx.DiGraph:
+    """The module import graph; a copy of the one built once, so a test may add edges to it."""
+    return _build_graph().copy()
+
+
+@functools.lru_cache(maxsize=None)
+def _build_graph() -> nx.DiGraph:
     mods = _modules()
     g = nx.DiGraph()
     g.add_nodes_from(mods)
@@ -142,7 +155,7 @@ def test_uam_sim_rooms_import_only_their_own_or_lower_rooms():
 def _main_only(module: str, mods: dict | None = None) -> bool:
     """True when a top-level module only imports a room's ``main`` and runs it (a command)."""
     path = (mods or _modules())[module]
-    tree = ast.parse(path.read_text())
+    tree = _parse(path)
     imports = [n for n in tree.body if isinstance(n, (ast.Import, ast.ImportFrom))]
     return all(isinstance(n, ast.Import) or [a.name for a in n.names] == ["main"] for n in imports) and \
         len([n for n in tree.body if isinstance(n, (ast.FunctionDef, ast.ClassDef))]) == 0
@@ -163,7 +176,7 @@ def test_library_and_contract_modules_never_import_rclpy_at_import_time():
     for mod, path in _modules().items():
         if _rank(mod) == NODES_RANK or mod.startswith("uam_bringup."):
             continue  # glue: allowed
-        tree = ast.parse(path.read_text())
+        tree = _parse(path)
         for node in tree.body:
             names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
                 [node.module or ""] if isinstance(node, ast.ImportFrom) else []
