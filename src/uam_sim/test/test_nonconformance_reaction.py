@@ -2,6 +2,7 @@
 docs/disturbances.md). Every expected value is computed by hand in the comments: the paper's
 sphere of 100 m, speed 10 m/s, epochs of 30 s, the conformance bounds 30 m, 15 m, 10 s."""
 
+import functools
 import math
 
 import numpy as np
@@ -148,20 +149,31 @@ def test_with_no_deconflicted_update_it_stays_in_the_picture_as_a_contingency():
     assert {f.request_id for f in p.active} == {"P", "Q2"}
 
 
+#: the settings of the runner's disturbed runs on the tiny network below
+TINY_RUN = dict(epoch_s=30.0, time_limit_s=5.0, corpus_max_vertices=0,
+                disturbance={"speed_error": 0.3, "gust_std_mps": 0.5})
+
+
+@functools.lru_cache(maxsize=None)
+def tiny_run(**settings):
+    """The in-process runner on the tiny network (greedy, rate 3, seed 4, 300 s) with TINY_RUN and
+    ``settings``; each set of settings runs once per test process (the reaction at the epochs is
+    in two tests), and the tests only read the result."""
+    from uam_planner.network import load_network
+    from uam_sim.runner.experiment_config import REPO_ROOT, make_config
+    from uam_sim.runner.scenario import run_scenario
+    net = load_network(REPO_ROOT / "config" / "networks" / "tiny.yaml")
+    return run_scenario(net, "greedy", 3.0, 4, 300.0, make_config(dict(TINY_RUN, **settings)))
+
+
 def test_the_runner_reacts_and_off_is_todays_run():
     """The in-process runner with --reaction: its monitor reports, the planner confirms and
     updates, the aircraft fly on; conformance improves and every update is recorded. Reaction
     off is the run without the option, field for field (timings aside)."""
-    from uam_planner.network import load_network
-    from uam_sim.runner.experiment_config import REPO_ROOT, make_config
-    from uam_sim.runner.scenario import run_scenario
     from uam_sim.runner.sweep import TIMING_FIELDS
-    net = load_network(REPO_ROOT / "config" / "networks" / "tiny.yaml")
-    dist = {"speed_error": 0.3, "gust_std_mps": 0.5}
-    base = dict(epoch_s=30.0, time_limit_s=5.0, corpus_max_vertices=0, disturbance=dist)
-    off = run_scenario(net, "greedy", 3.0, 4, 300.0, make_config(base))
-    off2 = run_scenario(net, "greedy", 3.0, 4, 300.0, make_config(dict(base, reaction=False)))
-    on = run_scenario(net, "greedy", 3.0, 4, 300.0, make_config(dict(base, reaction=True)))
+    off = tiny_run()
+    off2 = tiny_run(reaction=False)
+    on = tiny_run(reaction=True)
     import json
     strip = lambda s: json.dumps({k: v for k, v in s.items() if k not in TIMING_FIELDS},  # noqa: E731
                                  sort_keys=True, default=str)
@@ -436,14 +448,9 @@ def test_the_reaction_graph_is_handed_to_the_caller_and_its_answer_taken():
 def test_the_runner_reacts_between_epochs():
     """reaction_period_s = 5 s in the runner: updates take effect between epochs, and the
     longest excursion is shorter than with the reaction at the epochs only (same seed)."""
-    from uam_planner.network import load_network
-    from uam_sim.runner.experiment_config import REPO_ROOT, ExperimentError, make_config
-    from uam_sim.runner.scenario import run_scenario
-    net = load_network(REPO_ROOT / "config" / "networks" / "tiny.yaml")
-    base = dict(epoch_s=30.0, time_limit_s=5.0, corpus_max_vertices=0, reaction=True,
-                disturbance={"speed_error": 0.3, "gust_std_mps": 0.5})
-    at_epochs = run_scenario(net, "greedy", 3.0, 4, 300.0, make_config(base))
-    often = run_scenario(net, "greedy", 3.0, 4, 300.0, make_config(dict(base, reaction_period_s=5.0)))
+    from uam_sim.runner.experiment_config import ExperimentError, make_config
+    at_epochs = tiny_run(reaction=True)
+    often = tiny_run(reaction=True, reaction_period_s=5.0)
     assert any(r["t_s"] % 30.0 != 0 for r in often.replans)
     assert all(r["t_s"] % 5.0 == 0 for r in often.replans)
     assert often.summary["conf_longest_excursion_s"] < at_epochs.summary["conf_longest_excursion_s"]
@@ -452,7 +459,7 @@ def test_the_runner_reacts_between_epochs():
     for r in (at_epochs, often):
         assert 0 <= r.summary["flown_losses_with_contingency"] <= r.summary["flown_losses"]
     with pytest.raises(ExperimentError, match="reaction_period_s: 45"):
-        make_config(dict(base, reaction_period_s=45.0))
+        make_config(dict(TINY_RUN, reaction=True, reaction_period_s=45.0))
 
 
 def test_the_runners_record_keeps_each_version_in_force_by_its_kind():
