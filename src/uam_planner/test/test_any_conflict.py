@@ -59,6 +59,19 @@ def _mask(pairs, n):
 
 STAGES = [separation._DECIDE_STAGES_S, (5.0, 20.0, 60.0, 150.0), ()]
 
+#: the pair lists' masks by case and setting, computed once for the three stage settings of a
+#: case: conflicting_pairs does not read the deciding stages or chunks the tests vary
+_WANT: dict = {}
+
+
+def _want(key, a, b, model, n, **kw):
+    """The mask of the pair list of case ``key`` (which fixes a, b and any shifts) in ``model``
+    with the cell settings ``kw``."""
+    full_key = (key, repr(model), repr(sorted((k, v) for k, v in kw.items() if k != "shifts_a")))
+    if full_key not in _WANT:
+        _WANT[full_key] = _mask(conflicting_pairs(a, b, model, **kw), n)
+    return _WANT[full_key]
+
 
 @pytest.mark.parametrize("stages", STAGES)
 @pytest.mark.parametrize("model", [SPHERE, CYL])
@@ -70,13 +83,13 @@ def test_any_conflict_matches_conflicting_pairs(model, seed, stages, monkeypatch
     monkeypatch.setattr(separation, "_DECIDE_PAIRS_PER_CHUNK", 64)
     monkeypatch.setattr(separation, "_DECIDE_STAGES_S", stages)
     a, b = _case(seed, 80, 120)
-    want = _mask(conflicting_pairs(a, b, model), len(a))
+    want = _want(("plain", seed), a, b, model, len(a))
     assert 10 < want.sum() < len(a)
     assert any_conflict(a, b, model).tolist() == want.tolist()
     # other cells cut other pieces: at a tie the exact kernel may then round the other way, so
     # each setting is compared with the pair list of the same setting
     for kw in (dict(cell_m=150.0, bucket_s=15.0), dict(z_cell_m=model.vertical_reach_m)):
-        want_kw = _mask(conflicting_pairs(a, b, model, **kw), len(a))
+        want_kw = _want(("plain", seed), a, b, model, len(a), **kw)
         assert any_conflict(a, b, model, **kw).tolist() == want_kw.tolist()
 
 
@@ -92,7 +105,7 @@ def test_any_conflict_with_shifts_matches_conflicting_pairs(model, seed, stages,
     first = np.concatenate(([0], np.cumsum(counts)))
     shift = np.concatenate([5.0 * np.arange(c) for c in counts])
     st = {}
-    want = _mask(conflicting_pairs(base, active, model, shifts_a=(first, shift)), shift.size)
+    want = _want(("shifted", seed), base, active, model, shift.size, shifts_a=(first, shift))
     got = any_conflict(base, active, model, shifts_a=(first, shift), stats=st)
     assert got.tolist() == want.tolist() and 10 < want.sum() < shift.size
     assert st["exact_checks"] > 0
