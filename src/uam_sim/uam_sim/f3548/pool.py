@@ -38,6 +38,7 @@ MAX_CONNECTIONS = 256
 IDLE_TIMEOUT_S = 10.0
 REQUEST_TIMEOUT_S = 10.0
 _LISTEN = object()
+_WAKE = object()
 
 
 class PooledWSGIServer(BaseWSGIServer):
@@ -57,6 +58,11 @@ class PooledWSGIServer(BaseWSGIServer):
         super().__init__(host, port, app, handler)
         self.workers, self.max_connections = int(workers), int(max_connections)
         self.idle_timeout_s, self.request_timeout_s = float(idle_timeout_s), float(request_timeout_s)
+        # shutdown() writes a byte here so that the accepting loop stops at once, not at its next
+        # poll (up to 0.5 s later)
+        self._wake_r, self._wake_w = socket.socketpair()
+        self._wake_r.setblocking(False)
+        self._wake_w.setblocking(False)
         self._pool = ThreadPoolExecutor(max_workers=self.workers, thread_name_prefix="uss-worker")
         self._waiting: collections.OrderedDict = collections.OrderedDict()  # socket -> (address, since)
         self._busy = 0                    # connections handed to the pool and not yet closed
@@ -73,10 +79,13 @@ class PooledWSGIServer(BaseWSGIServer):
         self._stopped.clear()
         sel = selectors.DefaultSelector()
         sel.register(self.socket, selectors.EVENT_READ, _LISTEN)
+        sel.register(self._wake_r, selectors.EVENT_READ, _WAKE)
         try:
             while not self._stop.is_set():
                 for key, _ in sel.select(timeout=min(poll_interval, self.idle_timeout_s)):
-                    if key.data is _LISTEN:
+                    if key.data is _WAKE:
+                        self._drain_wake()
+                    elif key.data is _LISTEN:
                         self._accept(sel)
                     else:
                         self._dispatch(sel, key.fileobj)
@@ -89,8 +98,24 @@ class PooledWSGIServer(BaseWSGIServer):
 
     def shutdown(self) -> None:
         self._stop.set()
+        try:
+            self._wake_w.send(b"x")
+        except OSError:  # closed, or its buffer already full of wake-ups: the loop wakes anyway
+            pass
         self._stopped.wait()
         self._pool.shutdown(wait=True)
+
+    def server_close(self) -> None:
+        super().server_close()
+        self._wake_r.close()
+        self._wake_w.close()
+
+    def _drain_wake(self) -> None:
+        try:
+            while self._wake_r.recv(4096):
+                pass
+        except OSError:  # nothing more to read (BlockingIOError) or closed
+            pass
 
     def _accept(self, sel) -> None:
         try:
