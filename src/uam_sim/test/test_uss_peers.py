@@ -33,8 +33,14 @@ def best_of_each(weights, edges, groups):
     return SimpleNamespace(selected=np.array([int(np.argmax(weights))]), backend="best")
 
 
+@pytest.fixture(scope="module")
+def dev_keys(tmp_path_factory):
+    """The servers' development key pair, made once for the module (RSA 2048 takes a while)."""
+    return generate_dev_keys(tmp_path_factory.mktemp("keys"))
+
+
 @pytest.fixture
-def live(tmp_path):
+def live(dev_keys):
     """A planner flying P (Wp at 0 s, Ep at 200 s), and a server whose inbox hands peers'
     changes to it, announced at the planner's clock (80 s here)."""
     net = lanes()
@@ -52,7 +58,7 @@ def live(tmp_path):
     spec = VolumeSpec.for_separation(100.0)
     inbox = PeerInbox(net, spec, IntentContext(net.origin_lat_lon_alt, spec).scenario_start_utc,
                       listener=to_planner, log=logged.append)
-    private, public = generate_dev_keys(tmp_path / "keys")
+    private, public = dev_keys
     srv = UssServer(IntentStore(IntentContext(net.origin_lat_lon_alt, spec)), port=0, auth_key=str(public),
                     inbox=inbox).start()
     token = mint_token(private, "localhost", [SCOPE_INTENTS, SCOPE_CONSTRAINTS, SCOPE_VERSIONS,
