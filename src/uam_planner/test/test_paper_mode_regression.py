@@ -19,14 +19,24 @@ from uam_planner.planning import FlightRequest, Planner, PlanningConfig
 NETWORK = Path(__file__).resolve().parents[3] / "config" / "networks" / "singapore.yaml"
 
 
+#: each (policy, backend, seed, rate)'s planner, demand and decisions after its latest test: the
+#: 3,500 s test continues the 900 s one's run (the planner is causal, so its first 30 epochs are
+#: the 900 s run), and the first 900 s are planned once when both tests run
+_RUNS: dict = {}
+
+
 def _run(policy: str, backend: str, seed: int = 7, rate: int = 10, duration_s: float = 3500.0):
-    net = load_network(NETWORK)
-    planner = Planner(net, PlanningConfig(backend=backend, seed=seed, precompute_routes=False),
-                      policy)
-    rng = np.random.default_rng(seed)
-    decisions = []
-    n = 0
-    for e in range(int(np.ceil(duration_s / 30.0))):
+    epochs = int(np.ceil(duration_s / 30.0))
+    # taken out while it runs: a run that fails part way is not continued by the next test
+    run = _RUNS.pop((policy, backend, seed, rate), None)
+    if run is None or run["epochs"] > epochs:
+        net = load_network(NETWORK)
+        run = {"net": net, "epochs": 0, "n": 0, "decisions": [], "rng": np.random.default_rng(seed),
+               "planner": Planner(net, PlanningConfig(backend=backend, seed=seed,
+                                                      precompute_routes=False), policy)}
+    net, planner, rng, decisions = run["net"], run["planner"], run["rng"], run["decisions"]
+    n = run["n"]
+    for e in range(run["epochs"], epochs):
         t = 30.0 * e
         for _ in range(rate):
             o, d = rng.choice(len(net.aerodrome_ids), 2, replace=False)
@@ -36,6 +46,8 @@ def _run(policy: str, backend: str, seed: int = 7, rate: int = 10, duration_s: f
         for f in planner.plan(t, e).approved:
             decisions.append(f"{f.request_id}:{e}:{f.candidate_index}:{f.departure_s:.3f}:"
                              f"{' '.join(f.route_node_ids)}")
+    run.update(epochs=epochs, n=n)
+    _RUNS[(policy, backend, seed, rate)] = run
     digest = hashlib.sha256("\n".join(decisions).encode()).hexdigest()[:16]
     return n, len(decisions), digest
 
