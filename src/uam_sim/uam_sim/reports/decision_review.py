@@ -23,6 +23,7 @@ import math
 import numpy as np
 import pandas as pd
 
+from .decision_groups import _equal, _groups
 from .stats import (cluster_bootstrap_mean, cuped, holm, jain_min_max_bound,
                     mean_interval, random_effects)
 
@@ -55,7 +56,6 @@ def _p(x) -> str:
 def group_pairs(runs: pd.DataFrame, exp: dict, comp: dict) -> list:
     """[(label, seeds, d, base)] of one comparison: per group its common seeds, the paired
     differences (units of the metric) and the base arm's values, in seed order."""
-    from .decision_report import _groups
     neg = next(j for j, t in enumerate(comp["terms"]) if t["sign"] < 0)
     out = []
     for label, vals in _groups(runs, exp, comp):
@@ -365,7 +365,6 @@ def _rerun_effect(runs, superseded, study, a) -> str:
     for t in comp["terms"]:
         sel = old[old["method"] == t["method"]]
         for k, v in t["where"].items():
-            from .decision_report import _equal
             sel = sel[_equal(sel[k], v)]
         arms["treatment" if t["sign"] > 0 else "control"] = len(sel)
     moved = pd.merge(old, runs, on=keys, suffixes=("_old", "_new"))
@@ -455,7 +454,6 @@ def cuped_rows(runs: pd.DataFrame, study: dict) -> list:
     for exp in study["experiments"]:
         for comp in exp["primary"]:
             neg = next(t for t in comp["terms"] if t["sign"] < 0)
-            from .decision_report import _equal
             for label, seeds, d, _b in group_pairs(runs, exp, comp):
                 sel = runs[(runs["experiment"] == exp["name"]) & (runs["method"] == neg["method"])]
                 for part in label.split(", "):
