@@ -27,8 +27,17 @@ runner and the planner's default solve call) once it is started; until then, as 
 """
 from __future__ import annotations
 
+import os
 import threading
 import time
+
+# chszlablib (KaMIS, CHILS, learn-and-reduce) runs on its bundled libgomp, which reads this when
+# it loads. A libgomp thread pool made in a process (any CHILS call there, e.g. a warm-up) hangs
+# every child forked from it (solve_in_child forks one per large solve): after
+# warm_up(["chils"]) each 150-vertex 'auto' solve was killed at its limit and answered by the
+# greedy fallback. One thread keeps the forks sound; CHILS's default num_concurrent is 1, so
+# its answers do not change. A caller who sets OMP_NUM_THREADS keeps it (and the hang).
+os.environ.setdefault("OMP_NUM_THREADS", "1")
 from typing import Any, Mapping, Sequence
 
 from .base import (
