@@ -311,7 +311,7 @@ def test_constraints_are_drawn_with_their_window_as_markers_and_points():
     assert arr.markers[0].action == 3   # DELETEALL: the set replaces the one before
     lines = [m for m in arr.markers if m.type == MARKER_LINE_LIST and m.action == 0]
     texts = sorted(m.text for m in arr.markers if m.type == 9)
-    assert texts == ["'C-closed' v2 [0, 150) s", "'hub' v1 (event) 0..300 m [0, 10000) s"]
+    assert texts == ["C-closed v2 [0, 150) s", "hub v1 0..300 m [0, 10000) s"]
     by_len = sorted(len(m.points) for m in lines)
     assert by_len == [24, 2 * 48]   # the closure's ring: 48 segments
     pc = ts.deserialize_cdr(cloud.data, "sensor_msgs/msg/PointCloud2")

@@ -287,11 +287,13 @@ def constraint_outline(c: Any, network: Any = None, segments: int = 48) -> list[
 
 
 def constraint_label(c: Any) -> str:
-    """``id vN (reason) [start, end) s``: what a view writes beside a constraint."""
+    """``id vN band [start, end) s``: what a view writes beside a constraint. Not its reason:
+    drawn on the map, the reasons' sentences covered one another and the vertiports' names in
+    the city centre (the summary and the planner's messages give it, ``Constraint.label``)."""
     def t(x: float) -> str:
         return "-inf" if x == -np.inf else "inf" if x == np.inf else f"{x:g}"
     band = "" if c.kind == "closure" else f" {t(c.lower_m)}..{t(c.upper_m)} m"
-    return f"{c.label()}{band} [{t(c.start_s)}, {t(c.end_s)}) s"
+    return f"{c.constraint_id} v{c.version}{band} [{t(c.start_s)}, {t(c.end_s)}) s"
 
 
 #: the fixed y range of the operator approval shares (approved / decided, 0..1)
