@@ -316,22 +316,10 @@ def _terms_text(comp: dict) -> str:
 
 
 # complexity over 25: the report as one sequence of sections; to be split into a function per section
-def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:  # noqa: C901
-    """The report's text and its derived tables; ``shown``: the directory as the report names it
-    (default ``d``), so a copy elsewhere rebuilds the same bytes."""
-    study = json.loads((d / "study.json").read_text(encoding="utf-8"))
-    runs, windows, e0 = _read(d, "runs.csv"), _read(d, "windows.csv"), _read(d, "e0.csv.gz")
-    L = ["# The decision study: where optimisation matters (issue 24)", "",
-         "Written by `uam_sim.reports.decision_report` from the tables in this directory alone "
-         "(`study.json`, `runs.csv`, `windows.csv`, `e0.csv.gz`, `amendments.csv`, "
-         "`superseded_runs.csv`): "
-         f"`python -m uam_sim.decision_report {shown or d.as_posix()}` writes it again, byte for byte "
-         "(src/uam_sim/test/test_decision_study.py checks). The cells are run by "
-         "`python -m uam_sim.decision_study --config config/decision-study.yaml --stage "
-         "e0|pilot|full` (see its docstring and docs/decision-study/README.md).", ""]
-    tables = {}
-    # -- record
-    L += ["## Record", ""]
+def _record_lines(runs, e0) -> list:
+    """The "Record" section: the commits and code versions that ran the cells, counted per table
+    from each row's own ``commit`` and ``code_version`` columns."""
+    L = ["## Record", ""]
     commits = []
     for name, df in (("runs.csv", runs), ("e0.csv.gz", e0)):
         if df is not None and "commit" in df:
@@ -356,10 +344,14 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:  # noqa:
                  "code) has a code version of its own, at which none of these cells has run; "
                  "the study would compute them again (`stale_cells` in its summary line).")
     L.append("")
-    # -- missing
-    L += ["## What has run and what is missing", ""]
-    prow = power_rows(runs, study) if runs is not None else []
-    tables["power"] = prow
+    return L
+
+
+def _missing_lines(runs, e0, study: dict, prow: list) -> list:
+    """The "What has run and what is missing" section: per experiment the runs per seed, the runs
+    present, the seeds present and the runs still missing for the pilot and for the seeds the
+    power rows ``prow`` need; then the E0 (reference run, solver) cells not yet in ``e0``."""
+    L = ["## What has run and what is missing", ""]
     miss = []
     arm_keys = ["cell", "variant", "rate", "method"]
     for exp in study["experiments"]:
@@ -391,17 +383,22 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:  # noqa:
         done = set()
     absent = [f"{r} / {s}" for r in e0_runs for s in solvers if (r, s) not in done]
     L += ["", "E0 cells (reference run / solver) missing: " + (", ".join(absent) if absent else "none") + ".", ""]
-    # -- steady state
+    return L
+
+
+def _steady_state_lines(windows, study: dict) -> list:
+    """The "Steady-state window" section: how the window is chosen, and the table of each
+    experiment cell's truncation epoch and warm-up [s] from ``windows``."""
     ss = study["steady_state"]
-    L += ["## Steady-state window", "",
-          f"Chosen from the data: {ss['method'].upper()} (White's MSER with batches of 5 epochs, "
-          f"truncation searched over the first half of the run) on the mean over seeds of the "
-          f"reference method's ({ss['reference_method']}) per-epoch `{ss['series']}` (flights in "
-          "the air), per variant; then one window per experiment cell and rate, the latest of "
-          "its variants' truncations, which every method and variant uses (so a comparison "
-          "across variants, as E2's horizons, counts the same requests in both arms). A request "
-          "counts when its earliest departure is at or after the truncation and its latest "
-          "departure at or before the run's end.", ""]
+    L = ["## Steady-state window", "",
+         f"Chosen from the data: {ss['method'].upper()} (White's MSER with batches of 5 epochs, "
+         f"truncation searched over the first half of the run) on the mean over seeds of the "
+         f"reference method's ({ss['reference_method']}) per-epoch `{ss['series']}` (flights in "
+         "the air), per variant; then one window per experiment cell and rate, the latest of "
+         "its variants' truncations, which every method and variant uses (so a comparison "
+         "across variants, as E2's horizons, counts the same requests in both arms). A request "
+         "counts when its earliest departure is at or after the truncation and its latest "
+         "departure at or before the run's end.", ""]
     if windows is not None:
         own = "variant_truncation_epoch" in windows.columns
         L += _table([[r["experiment"], r["cell"], r["variant"], r["rate"], r["reference_method"],
@@ -412,18 +409,23 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:  # noqa:
     else:
         L.append("No run yet.")
     L.append("")
-    # -- power
+    return L
+
+
+def _power_lines(study: dict, prow: list) -> list:
+    """The "Seeds from power" section: the power rows ``prow`` as a table (paired SD, half-widths
+    and MDEs in the metric's units) and a line per deciding comparison the cap cannot reach."""
     pw = study["power"]
-    L += ["## Seeds from power", "",
-          f"Per primary comparison, the paired SD of the seeds run so far gives the seeds a "
-          f"{int(round(pw['level'] * 100))} % CI half-width of {_f(pw['half_width_pct'], 1)} % of the "
-          f"reference arm's mean needs (t interval; `uam_sim.reports.stats.seeds_needed`); the "
-          f"study runs that many, capped at {pw['max_seeds']}. A comparison declared `per: pooled` "
-          "(the same question in every group) takes its seeds from its pooled row (per-seed "
-          "relative differences stacked over the groups, in % of the base arm); the others from "
-          "their groups (\"sets seeds\"). MDE: the minimal detectable effect, the true difference "
-          f"a two-sided test at {int(round(pw['level'] * 100))} % finds with probability "
-          f"{_f(pw.get('mde_power', 0.8) * 100, 0)} %, at the seeds run and at the cap.", ""]
+    L = ["## Seeds from power", "",
+         f"Per primary comparison, the paired SD of the seeds run so far gives the seeds a "
+         f"{int(round(pw['level'] * 100))} % CI half-width of {_f(pw['half_width_pct'], 1)} % of the "
+         f"reference arm's mean needs (t interval; `uam_sim.reports.stats.seeds_needed`); the "
+         f"study runs that many, capped at {pw['max_seeds']}. A comparison declared `per: pooled` "
+         "(the same question in every group) takes its seeds from its pooled row (per-seed "
+         "relative differences stacked over the groups, in % of the base arm); the others from "
+         "their groups (\"sets seeds\"). MDE: the minimal detectable effect, the true difference "
+         f"a two-sided test at {int(round(pw['level'] * 100))} % finds with probability "
+         f"{_f(pw.get('mde_power', 0.8) * 100, 0)} %, at the seeds run and at the cap.", ""]
     if prow:
         L += _table([[r["experiment"], r["comparison"], r["group"], "yes" if r["decides"] else "no",
                       r["seeds_run"], _f(r["paired_sd"], 2),
@@ -446,58 +448,73 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:  # noqa:
     else:
         L.append("No pilot rows yet (`--stage pilot`).")
     L.append("")
-    # -- experiments
-    comps = comparison_rows(runs, study) if runs is not None else []
-    tables["comparisons"] = comps
-    for exp in study["experiments"]:
-        L += [f"## {exp['name']}: {exp['question']}", ""]
-        L.append("Declared in config/decision-study.yaml (copied to study.json); what was changed "
-                 "after data is marked and listed under \"Amendments after seeing data\":")
-        for kind in ("primary", "secondary"):
-            for c in exp[kind]:
-                am = review.amended(d, exp["name"], c["name"])
-                L.append(f"- {kind}: `{c['name']}`: {_terms_text(c)}, in `{c['metric']}`"
-                         + (f" (`per: {c['per']}`)" if c.get("per") else "")
-                         + (f"; amended after data in {', '.join(f'`{x}`' for x in am)}" if am else ""))
-        L.append("")
-        rows = [r for r in comps if r["experiment"] == exp["name"]]
-        if not rows:
-            L += ["No runs yet.", ""]
-            continue
-        for r in rows:
-            if r["kind"].endswith("pooled"):
-                L.append(f"- {r['kind']} `{r['comparison']}` over every group: "
-                         f"{_f(r['rel_pct'], 2, True)} % [{_f(r['rel_lo'], 2, True)}, {_f(r['rel_hi'], 2, True)}] "
-                         f"({r['seeds']} pairs, {r['positive']} positive)"
-                         + (": the interval excludes 0." if (r["rel_lo"] > 0 or r["rel_hi"] < 0)
-                            else ": the interval includes 0 (not resolved at this power)."))
-            elif r.get("seeds", 0) == 0:
-                L.append(f"- {r['kind']} `{r['comparison']}` ({r['group']}): no common seeds yet.")
-            else:
-                holm_txt = (f" (unadjusted p {_f(r['p'], 3)}; claims and Holm in the Answers)"
-                            if r["kind"] == "secondary" and math.isfinite(r.get("p", math.nan)) else "")
-                L.append(f"- {r['kind']} `{r['comparison']}` ({r['group']}): "
-                         + _verdict(r, UNITS.get(r["metric"], ""))[:-1] + holm_txt + ".")
-        L.append("")
-        ex = runs[runs["experiment"] == exp["name"]]
-        keys = ["cell", "variant", "rate", "method"]
-        agg = ex.groupby(keys, sort=True)
-        prio = sorted(c for c in ex.columns if c.startswith("delay_p95_s_prio") and ex[c].notna().any())
-        out = []
-        for k, g in agg:
-            out.append([*k, len(g), _f(g["approved_ss"].mean()), _f(g["expired_ss"].mean()),
-                        _f(g["delay_mean_s"].mean()), _f(g["delay_p95_s"].mean()),
-                        _f(g["detour_mean_m"].mean(), 0),
-                        *[_f(g[c].mean()) for c in prio], _f(g["jain_index"].mean(), 3),
-                        _f(g["solve_time_median_s"].mean(), 3), _f(g["solve_time_max_s"].max(), 2),
-                        int(g["overruns"].sum()), int(g["fallbacks"].sum())])
-        L += _table(out, [*keys, "seeds", "approved (window)", "expired (window)", "delay mean [s]",
-                          "delay p95 [s]", "detour [m]", *[f"p95 delay prio {c[16:]} [s]" for c in prio],
-                          "Jain", "solve median [s]", "solve max [s]", "overruns", "fallbacks"])
-        L.append("")
-    # -- pooling, the answers and what the tables say about the method
+    return L
+
+
+def _comparison_line(r: dict) -> str:
+    """One comparison row ``r`` (from comparison_rows) as a bullet: a pooled estimate with its
+    interval [%], "no common seeds yet", or the group's verdict in the metric's units."""
+    if r["kind"].endswith("pooled"):
+        return (f"- {r['kind']} `{r['comparison']}` over every group: "
+                f"{_f(r['rel_pct'], 2, True)} % [{_f(r['rel_lo'], 2, True)}, {_f(r['rel_hi'], 2, True)}] "
+                f"({r['seeds']} pairs, {r['positive']} positive)"
+                + (": the interval excludes 0." if (r["rel_lo"] > 0 or r["rel_hi"] < 0)
+                   else ": the interval includes 0 (not resolved at this power)."))
+    if r.get("seeds", 0) == 0:
+        return f"- {r['kind']} `{r['comparison']}` ({r['group']}): no common seeds yet."
+    holm_txt = (f" (unadjusted p {_f(r['p'], 3)}; claims and Holm in the Answers)"
+                if r["kind"] == "secondary" and math.isfinite(r.get("p", math.nan)) else "")
+    return (f"- {r['kind']} `{r['comparison']}` ({r['group']}): "
+            + _verdict(r, UNITS.get(r["metric"], ""))[:-1] + holm_txt + ".")
+
+
+def _arm_means_table(ex: pd.DataFrame) -> list:
+    """One experiment's runs ``ex`` as a table of per-arm means over seeds: approvals and expiries
+    in the window, delays [s], detour [m], Jain's index, solve times [s], overruns and fallbacks."""
+    keys = ["cell", "variant", "rate", "method"]
+    agg = ex.groupby(keys, sort=True)
+    prio = sorted(c for c in ex.columns if c.startswith("delay_p95_s_prio") and ex[c].notna().any())
+    out = []
+    for k, g in agg:
+        out.append([*k, len(g), _f(g["approved_ss"].mean()), _f(g["expired_ss"].mean()),
+                    _f(g["delay_mean_s"].mean()), _f(g["delay_p95_s"].mean()),
+                    _f(g["detour_mean_m"].mean(), 0),
+                    *[_f(g[c].mean()) for c in prio], _f(g["jain_index"].mean(), 3),
+                    _f(g["solve_time_median_s"].mean(), 3), _f(g["solve_time_max_s"].max(), 2),
+                    int(g["overruns"].sum()), int(g["fallbacks"].sum())])
+    return _table(out, [*keys, "seeds", "approved (window)", "expired (window)", "delay mean [s]",
+                        "delay p95 [s]", "detour [m]", *[f"p95 delay prio {c[16:]} [s]" for c in prio],
+                        "Jain", "solve median [s]", "solve max [s]", "overruns", "fallbacks"])
+
+
+def _experiment_lines(d: Path, runs, exp: dict, comps: list) -> list:
+    """One experiment's section: its declared comparisons (marked where amended after data), a
+    line per computed comparison of ``comps``, and its table of per-arm means."""
+    L = [f"## {exp['name']}: {exp['question']}", ""]
+    L.append("Declared in config/decision-study.yaml (copied to study.json); what was changed "
+             "after data is marked and listed under \"Amendments after seeing data\":")
+    for kind in ("primary", "secondary"):
+        for c in exp[kind]:
+            am = review.amended(d, exp["name"], c["name"])
+            L.append(f"- {kind}: `{c['name']}`: {_terms_text(c)}, in `{c['metric']}`"
+                     + (f" (`per: {c['per']}`)" if c.get("per") else "")
+                     + (f"; amended after data in {', '.join(f'`{x}`' for x in am)}" if am else ""))
+    L.append("")
+    rows = [r for r in comps if r["experiment"] == exp["name"]]
+    if not rows:
+        return L + ["No runs yet.", ""]
+    L += [_comparison_line(r) for r in rows]
+    L.append("")
+    L += _arm_means_table(runs[runs["experiment"] == exp["name"]])
+    L.append("")
+    return L
+
+
+def _answers_lines(runs, study: dict, prow: list) -> list:
+    """The heterogeneity section and the "Answers": one line per claim, and per experiment the
+    solve times [s], overruns and fallbacks of its MWIS runs."""
     het = review.heterogeneity_rows(runs, study) if runs is not None else []
-    L += review.heterogeneity_lines(het)
+    L = review.heterogeneity_lines(het)
     claims = review.answer_claims(runs, study) if runs is not None else []
     L += ["## Answers", "",
           "One line per claim: per declared comparison its pooled estimate where heterogeneity "
@@ -515,50 +532,82 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:  # noqa:
                          f"solves past limit + 0.4 s, {int(mw['fallbacks'].sum())} fallbacks."
                          + _load_text(runs[runs["experiment"] == exp["name"]]))
     L.append("")
+    return L
+
+
+def _e0_lines(e0, study: dict, e0s: list) -> list:
+    """The "E0: matched shadow solves" section: the summary rows ``e0s`` as a table (gaps [%],
+    wall times [s]), a line per solver with its mean gap and interval, and the figure's link."""
+    L = ["## E0: matched shadow solves", "",
+         f"Each epoch's recorded instance of the reference runs (method {study['e0']['method']}), "
+         + (f"a seeded sample of up to {study['e0']['per_bin']} per size bin, " if study['e0'].get('per_bin')
+            else "every epoch's instance (no sampling), ")
+         + f"solved by every solver at "
+         f"{_f(study['e0']['time_limit_s'], 1)} s and by the reference "
+         f"({study['e0']['reference']['backend']}, {_f(study['e0']['reference']['time_limit_s'], 0)} s). "
+         "Gap = (best known - objective) / best known, the best known being the best of every "
+         "solver on that instance; \"best proven\" = a proven-optimal answer reached it. Count gap "
+         "= the reference's number of approvals minus the solver's (negative: the solver approved "
+         "more flights with less weight).", ""]
+    if not e0s:
+        return L + ["No E0 rows yet.", ""]
+    L += _table([[r["solver"], r["bin"], r["instances"], _f(r["gap_mean_pct"], 3), _f(r["gap_max_pct"], 3),
+                  _f(100 * r["at_best_share"], 1), _f(r["count_gap_mean"], 2),
+                  _f(100 * r["best_proven_share"], 1), _f(100 * r["proven_share"], 1),
+                  r["fallbacks"], _f(r["wall_median_s"], 3), _f(r["wall_max_s"], 2)] for r in e0s],
+                ["solver", "vertices", "instances", "gap mean [%]", "gap max [%]", "at best [%]",
+                 "count gap mean", "best proven [%]", "proven [%]", "fallbacks", "wall median [s]",
+                 "wall max [s]"])
+    L.append("")
+    g = e0_gaps(e0)
+    for s in [x for x in E0_ORDER if x in set(g["solver"])]:
+        x = g[g["solver"] == s]
+        m, lo, hi = mean_interval(x["gap_pct"].to_numpy(dtype=float))
+        over = int((x["wall_s"] > x["time_limit_s"] + 0.4).sum())
+        L.append(f"- {s}: mean gap {_f(m, 3)} % [{_f(lo, 3)}, {_f(hi, 3)}] over {len(x)} instances "
+                 f"({int((x['gap_pct'] <= 1e-9).sum())} at the best known); "
+                 f"{over} solves past limit + 0.4 s.")
+    L += [""] + review.e0_clustered_lines(g, [x for x in E0_ORDER if x in set(g["solver"])])
+    L += [f"Instances: {g[['run', 'epoch']].drop_duplicates().shape[0]}; proven optimum known "
+          f"for {int(g.drop_duplicates(['run', 'epoch'])['best_proven'].sum())} of them.", "",
+          f"![E0: mean gap per solver and size bin]({E0_FIGURE})", ""]
+    return L
+
+
+def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:
+    """The report's text and its derived tables; ``shown``: the directory as the report names it
+    (default ``d``), so a copy elsewhere rebuilds the same bytes."""
+    study = json.loads((d / "study.json").read_text(encoding="utf-8"))
+    runs, windows, e0 = _read(d, "runs.csv"), _read(d, "windows.csv"), _read(d, "e0.csv.gz")
+    L = ["# The decision study: where optimisation matters (issue 24)", "",
+         "Written by `uam_sim.reports.decision_report` from the tables in this directory alone "
+         "(`study.json`, `runs.csv`, `windows.csv`, `e0.csv.gz`, `amendments.csv`, "
+         "`superseded_runs.csv`): "
+         f"`python -m uam_sim.decision_report {shown or d.as_posix()}` writes it again, byte for byte "
+         "(src/uam_sim/test/test_decision_study.py checks). The cells are run by "
+         "`python -m uam_sim.decision_study --config config/decision-study.yaml --stage "
+         "e0|pilot|full` (see its docstring and docs/decision-study/README.md).", ""]
+    tables = {}
+    L += _record_lines(runs, e0)
+    prow = power_rows(runs, study) if runs is not None else []
+    tables["power"] = prow
+    L += _missing_lines(runs, e0, study, prow)
+    L += _steady_state_lines(windows, study)
+    L += _power_lines(study, prow)
+    comps = comparison_rows(runs, study) if runs is not None else []
+    tables["comparisons"] = comps
+    for exp in study["experiments"]:
+        L += _experiment_lines(d, runs, exp, comps)
+    L += _answers_lines(runs, study, prow)
     cup_lines, cup_txt = (review.cuped_lines(review.cuped_rows(runs, study), UNITS, study)
                           if runs is not None else ([], "no runs"))
     L += cup_lines
     if runs is not None:
         L += review.fairness_lines(runs, study)
     L += review.amendments_lines(d, runs, study, prow, cup_txt) if runs is not None else []
-    # -- E0
-    L += ["## E0: matched shadow solves", "",
-          f"Each epoch's recorded instance of the reference runs (method {study['e0']['method']}), "
-          + (f"a seeded sample of up to {study['e0']['per_bin']} per size bin, " if study['e0'].get('per_bin')
-             else "every epoch's instance (no sampling), ")
-          + f"solved by every solver at "
-          f"{_f(study['e0']['time_limit_s'], 1)} s and by the reference "
-          f"({study['e0']['reference']['backend']}, {_f(study['e0']['reference']['time_limit_s'], 0)} s). "
-          "Gap = (best known - objective) / best known, the best known being the best of every "
-          "solver on that instance; \"best proven\" = a proven-optimal answer reached it. Count gap "
-          "= the reference's number of approvals minus the solver's (negative: the solver approved "
-          "more flights with less weight).", ""]
     e0s = e0_summary(e0) if e0 is not None else []
     tables["e0_summary"] = e0s
-    if e0s:
-        L += _table([[r["solver"], r["bin"], r["instances"], _f(r["gap_mean_pct"], 3), _f(r["gap_max_pct"], 3),
-                      _f(100 * r["at_best_share"], 1), _f(r["count_gap_mean"], 2),
-                      _f(100 * r["best_proven_share"], 1), _f(100 * r["proven_share"], 1),
-                      r["fallbacks"], _f(r["wall_median_s"], 3), _f(r["wall_max_s"], 2)] for r in e0s],
-                    ["solver", "vertices", "instances", "gap mean [%]", "gap max [%]", "at best [%]",
-                     "count gap mean", "best proven [%]", "proven [%]", "fallbacks", "wall median [s]",
-                     "wall max [s]"])
-        L.append("")
-        g = e0_gaps(e0)
-        for s in [x for x in E0_ORDER if x in set(g["solver"])]:
-            x = g[g["solver"] == s]
-            m, lo, hi = mean_interval(x["gap_pct"].to_numpy(dtype=float))
-            over = int((x["wall_s"] > x["time_limit_s"] + 0.4).sum())
-            L.append(f"- {s}: mean gap {_f(m, 3)} % [{_f(lo, 3)}, {_f(hi, 3)}] over {len(x)} instances "
-                     f"({int((x['gap_pct'] <= 1e-9).sum())} at the best known); "
-                     f"{over} solves past limit + 0.4 s.")
-        L += [""] + review.e0_clustered_lines(g, [x for x in E0_ORDER if x in set(g["solver"])])
-        L += [f"Instances: {g[['run', 'epoch']].drop_duplicates().shape[0]}; proven optimum known "
-              f"for {int(g.drop_duplicates(['run', 'epoch'])['best_proven'].sum())} of them.", "",
-              f"![E0: mean gap per solver and size bin]({E0_FIGURE})", ""]
-    else:
-        L += ["No E0 rows yet.", ""]
-    # -- the paper's figures, and what is not answered
+    L += _e0_lines(e0, study, e0s)
     L += ["## The paper's figures", "", paper_figures_text(study), ""]
     if runs is not None:
         L += review.not_answered_lines(runs, study, int(e0["vertices"].max()) if e0 is not None else None)
