@@ -436,6 +436,187 @@ def _rejection_reasons(plans: list) -> tuple[dict, dict]:
     return reasons, values
 
 
+@dataclass
+class _Stream:
+    """What one pass over a run's messages gathers, topic by topic, before any audit: the
+    requests, the distinct decisions, the fleet's steps, the planning reports and the constraint
+    sets as published (times in seconds of log time)."""
+    request_ids: set = field(default_factory=set)
+    request_rows: dict = field(default_factory=dict)  # request key -> the first request's times, class, operator
+    decisions: dict = field(default_factory=dict)  # request id -> distinct plans, in arrival order
+    seen: set = field(default_factory=set)
+    duplicates: int = 0
+    refused_duplicates: int = 0
+    fleet_t: list = field(default_factory=list)
+    fleet_n: list = field(default_factory=list)
+    fleet_steps: list = field(default_factory=list)
+    flown: set = field(default_factory=set)
+    epochs: list = field(default_factory=list)
+    syncs: list = field(default_factory=list)
+    reports: dict = field(default_factory=dict)
+    updates: dict = field(default_factory=dict)  # request key -> {plan key: plan} of its versions >= 2
+    constraint_sets: list = field(default_factory=list)  # (t_s, [(constraint, effective_s)]) as the planner published them
+    constraint_problems: list = field(default_factory=list)
+    withdrawals: dict = field(default_factory=dict)  # (id, version) -> the withdrawal as the planner published it
+    parameter_changes: list = field(default_factory=list)  # every run-time parameter change a node accepted
+    published: list = field(default_factory=list)  # (sha256, log time, set, withdrawals) of each set on uam/constraints
+    named_sets: set = field(default_factory=set)  # the sets the planning reports name (the planner's own)
+    t_min: float = math.inf
+    t_max: float = -math.inf
+
+    def add(self, topic: str, log_ns: int, msg: Any) -> None:
+        """Take one message of ``topic`` logged at ``log_ns`` [ns]."""
+        if topic == TOPIC_SYNC:  # announcements: not part of the run's time span
+            self.syncs.append(msg)
+            return
+        if topic == TOPIC_PARAMETER_CHANGES:
+            self.parameter_changes.append(_parameter_change(msg.data, log_ns * 1e-9))
+            return
+        if topic == TOPIC_CONSTRAINTS:
+            self._add_constraints(log_ns, msg)
+            return
+        self.t_min, self.t_max = min(self.t_min, log_ns * 1e-9), max(self.t_max, log_ns * 1e-9)
+        if topic == TOPIC_REQUESTS:
+            key = request_key(msg)
+            self.request_ids.add(key)
+            self.request_rows.setdefault(key, {
+                "earliest_departure_s": stamp_s(msg.earliest_departure),
+                "latest_departure_s": stamp_s(msg.latest_departure),
+                "priority": int(getattr(msg, "priority", 0)),  # recordings without priorities: 0
+                "operator": str(getattr(msg, "operator_id", "") or "")})
+        elif topic == TOPIC_PLANS:
+            self._add_plan(msg)
+        elif topic == TOPIC_FLEET:
+            ids = _vehicle_ids(msg)
+            self.fleet_t.append(stamp_s(msg.header.stamp))
+            self.fleet_n.append(len(ids))
+            self.fleet_steps.append(int(msg.step_index))
+            self.flown.update(ids)
+        elif topic == TOPIC_REPORTS:
+            self._add_report(msg)
+
+    def decided(self) -> tuple[list, list, dict, list]:
+        """Every distinct plan decided, their outcomes, the ids decided more than one way (each
+        with its outcomes' names) and the approvals as (request key, plan)."""
+        plans = [p for ps in self.decisions.values() for p in ps]
+        outcomes = [int(p.outcome) for p in plans]
+        conflicting = {rid: [_OUTCOME_NAMES.get(int(p.outcome), str(int(p.outcome))) for p in ps]
+                       for rid, ps in self.decisions.items() if len(ps) > 1}
+        all_approved = [(rid, p) for rid, ps in self.decisions.items() for p in ps
+                        if int(p.outcome) == OUTCOME_APPROVED]
+        return plans, outcomes, conflicting, all_approved
+
+    def _add_constraints(self, log_ns: int, msg: Any) -> None:
+        """A constraint set as published on the constraints topic, with its SHA-256; one that
+        cannot be read is a problem of the run."""
+        from uam_planner.live_constraints import constraints_from_text, withdrawals_from_text
+        digest = hashlib.sha256(msg.data.encode("utf-8")).hexdigest()
+        try:
+            self.published.append((digest, log_ns * 1e-9, constraints_from_text(msg.data),
+                                   withdrawals_from_text(msg.data)))
+        except ValueError as exc:
+            self.constraint_problems.append(f"a constraint set on {TOPIC_CONSTRAINTS} cannot be read: {exc}")
+
+    def _add_plan(self, msg: Any) -> None:
+        """A plan: a refused duplicate is counted, a later version kept apart as an update, and a
+        first decision kept once per distinct plan."""
+        if int(msg.outcome) == OUTCOME_DUPLICATE:
+            self.refused_duplicates += 1
+            return
+        rid = request_key(msg)
+        if int(getattr(msg, "version", 0) or 0) > 1:  # a new version of an approved plan
+            self.updates.setdefault(rid, {})[(int(msg.version),) + _plan_key(msg)] = msg
+            return
+        if rid in self.decisions:
+            self.duplicates += 1
+        key = _plan_key(msg)
+        if key not in self.seen:
+            self.seen.add(key)
+            self.decisions.setdefault(rid, []).append(msg)
+
+    def _add_report(self, msg: Any) -> None:
+        """A planning report: the constraint sets it names, and its epoch's row (once per epoch)."""
+        self.named_sets.update(str(getattr(msg, "constraint_set_sha256", "") or "").split())
+        self.reports.setdefault(int(msg.epoch_index), set()).add(
+            (int(msg.approved), int(msg.expired), int(msg.eligible_requests), int(msg.vertices)))
+        if len(self.reports[int(msg.epoch_index)]) > 1 or any(e.epoch_index == int(msg.epoch_index)
+                                                              for e in self.epochs):
+            return  # a repeat (or a second report) of an epoch counts once in the table
+        self.epochs.append(_epoch_stats(msg))
+
+
+def _average_active(fleet_t: list, fleet_n: list) -> float:
+    """The time-averaged number of aircraft in the air over the fleet's steps (times ``fleet_t``
+    [s], counts ``fleet_n``); 0.0 without a step."""
+    avg_active = 0.0
+    if fleet_t:
+        order = np.argsort(fleet_t, kind="stable")
+        t = np.asarray(fleet_t)[order]
+        n = np.asarray(fleet_n, dtype=np.float64)[order]
+        if len(t) > 1 and t[-1] > t[0]:
+            # each step's count holds until the next step (sample-and-hold time average)
+            avg_active = float(np.sum(n[:-1] * np.diff(t)) / (t[-1] - t[0]))
+        else:
+            avg_active = float(n.mean())
+    return avg_active
+
+
+def _flight_rows(record, request_rows: dict, network) -> tuple[list, list, list]:
+    """The approved plans of the run's ``record`` (each flight's first version), their labels and
+    their flight rows; given the ``network``, each row's shortest route length [m]."""
+    approved_plans = [f.versions[0] for f in record.flights]
+    labels = [f.key for f in record.flights]
+    flights = [_flight_row(p, label, request_rows.get(request_key(p)))
+               for p, label in zip(approved_plans, labels)]
+    if network is not None:  # the detour in metres, as the runner measures it
+        shortest = shortest_route_lengths_m(network, [(f["origin"], f["destination"]) for f in flights])
+        for f in flights:
+            f["shortest_length_m"] = shortest.get((f["origin"], f["destination"]))
+    return approved_plans, labels, flights
+
+
+def _epochs_end_s(epochs: list) -> float | None:
+    """The run's end as the epochs show it [s]: the last epoch's time + the epoch length (the
+    median step between epochs); None with fewer than two epochs."""
+    ts = sorted({e.t_s for e in epochs})
+    return ts[-1] + float(np.median(np.diff(ts))) if len(ts) > 1 else None
+
+
+def _metrics_by_operator(flights: list, requests: list, end_s: float | None) -> dict:
+    """The flight metrics per operator, when more than one operator flew; else {}."""
+    by_operator = {}
+    if len({f["operator_id"] for f in flights}) > 1:
+        for op in sorted({f["operator_id"] for f in flights}):
+            by_operator[op] = run_metrics([f for f in flights if f["operator_id"] == op],
+                                          [r for r in requests if r["operator"] == op], end_s=end_s)
+    return by_operator
+
+
+def _run_record(s: _Stream, all_approved: list, fleet_end: float) -> tuple:
+    """The run's record from the approvals ``all_approved`` ((request key, plan)) and their
+    updates: (every approval's record, the record without the forged ones, the run's problems,
+    the forged plans, the run's end as ``run_problems`` reads it); ``fleet_end`` [s]: the last
+    fleet state's time."""
+    from .record import RunRecord
+    everything = RunRecord.from_plans(all_approved, s.updates, s.constraint_sets)
+    flown_by_key = everything.by_key()
+    run, forged, run_end = run_problems(
+        s.syncs, s.reports, [(rid, int(p.epoch_index), _departure_flown(rid, p, flown_by_key))
+                             for rid, p in all_approved], s.flown, fleet_end)
+    # the record of the run: every approval but the forged ones, each flight's versions in force
+    record = everything.without(forged)
+    return everything, record, run, forged, run_end
+
+
+def _audit_record(record, approved_plans: list, labels: list, separation_m) -> tuple:
+    """The separation audit of the plans in force and the conflicts involving a contingency
+    ([label a, label b, distance m, t s]): of each flight's versions when a plan was updated,
+    else of the approved plans as they are (the paper's runs)."""
+    if record.updated:
+        return record.audit_plans(separation_m)
+    return audit_plans(approved_plans, separation_m, labels=labels), []
+
+
 def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SEPARATION_M,
                        path: str = "", reader: str = "", complete_file: bool = True,
                        network=None) -> RunSummary:
@@ -447,151 +628,45 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
     ``separation_m``: the audit's separation model (a number: the sphere; or a SeparationModel).
     Complexity: linear in the messages, plus the audit (quadratic in overlapping flights).
     """
-    request_ids: set[str] = set()
-    request_rows: dict[str, dict] = {}  # request key -> the first request's times, class, operator
-    decisions: dict[str, list] = {}  # request id -> distinct plans, in arrival order
-    seen: set[tuple] = set()
-    duplicates = refused_duplicates = 0
-    fleet_t: list[float] = []
-    fleet_n: list[int] = []
-    fleet_steps: list[int] = []
-    flown: set[str] = set()
-    epochs: list[EpochStats] = []
-    syncs: list = []
-    reports: dict[int, set] = {}
-    updates: dict[str, dict] = {}  # request key -> {plan key: plan} of its versions >= 2
-    constraint_sets: list = []     # (t_s, [(constraint, effective_s)]) as the planner published them
-    constraint_problems: list = []
-    withdrawals: dict = {}         # (id, version) -> the withdrawal as the planner published it
-    parameter_changes: list = []   # every run-time parameter change a node accepted
-    published: list = []           # (sha256, log time, set, withdrawals) of each set on uam/constraints
-    named_sets: set = set()        # the sets the planning reports name (the planner's own)
-    t_min, t_max = math.inf, -math.inf
+    s = _Stream()
     for topic, log_ns, msg in messages:
-        if topic == TOPIC_SYNC:  # announcements: not part of the run's time span
-            syncs.append(msg)
-            continue
-        if topic == TOPIC_PARAMETER_CHANGES:
-            parameter_changes.append(_parameter_change(msg.data, log_ns * 1e-9))
-            continue
-        if topic == TOPIC_CONSTRAINTS:
-            from uam_planner.live_constraints import constraints_from_text, withdrawals_from_text
-            digest = hashlib.sha256(msg.data.encode("utf-8")).hexdigest()
-            try:
-                published.append((digest, log_ns * 1e-9, constraints_from_text(msg.data),
-                                  withdrawals_from_text(msg.data)))
-            except ValueError as exc:
-                constraint_problems.append(f"a constraint set on {TOPIC_CONSTRAINTS} cannot be read: {exc}")
-            continue
-        t_min, t_max = min(t_min, log_ns * 1e-9), max(t_max, log_ns * 1e-9)
-        if topic == TOPIC_REQUESTS:
-            key = request_key(msg)
-            request_ids.add(key)
-            request_rows.setdefault(key, {
-                "earliest_departure_s": stamp_s(msg.earliest_departure),
-                "latest_departure_s": stamp_s(msg.latest_departure),
-                "priority": int(getattr(msg, "priority", 0)),  # recordings without priorities: 0
-                "operator": str(getattr(msg, "operator_id", "") or "")})
-        elif topic == TOPIC_PLANS:
-            if int(msg.outcome) == OUTCOME_DUPLICATE:
-                refused_duplicates += 1
-                continue
-            rid = request_key(msg)
-            if int(getattr(msg, "version", 0) or 0) > 1:  # a new version of an approved plan
-                updates.setdefault(rid, {})[(int(msg.version),) + _plan_key(msg)] = msg
-                continue
-            if rid in decisions:
-                duplicates += 1
-            key = _plan_key(msg)
-            if key not in seen:
-                seen.add(key)
-                decisions.setdefault(rid, []).append(msg)
-        elif topic == TOPIC_FLEET:
-            ids = _vehicle_ids(msg)
-            fleet_t.append(stamp_s(msg.header.stamp))
-            fleet_n.append(len(ids))
-            fleet_steps.append(int(msg.step_index))
-            flown.update(ids)
-        elif topic == TOPIC_REPORTS:
-            named_sets.update(str(getattr(msg, "constraint_set_sha256", "") or "").split())
-            reports.setdefault(int(msg.epoch_index), set()).add(
-                (int(msg.approved), int(msg.expired), int(msg.eligible_requests), int(msg.vertices)))
-            if len(reports[int(msg.epoch_index)]) > 1 or any(e.epoch_index == int(msg.epoch_index) for e in epochs):
-                continue  # a repeat (or a second report) of an epoch counts once in the table
-            epochs.append(_epoch_stats(msg))
-    forged_sets = _planners_sets(published, named_sets, constraint_sets, withdrawals, constraint_problems)
-    plans = [p for ps in decisions.values() for p in ps]
-    outcomes = [int(p.outcome) for p in plans]
-    conflicting = {rid: [_OUTCOME_NAMES.get(int(p.outcome), str(int(p.outcome))) for p in ps]
-                   for rid, ps in decisions.items() if len(ps) > 1}
-    all_approved = [(rid, p) for rid, ps in decisions.items() for p in ps if int(p.outcome) == OUTCOME_APPROVED]
-    fleet_end = max(fleet_t) if fleet_t else -math.inf
-    from .record import RunRecord
-    everything = RunRecord.from_plans(all_approved, updates, constraint_sets)
-    flown_by_key = everything.by_key()
-    run, forged, run_end = run_problems(
-        syncs, reports, [(rid, int(p.epoch_index), _departure_flown(rid, p, flown_by_key))
-                         for rid, p in all_approved], flown, fleet_end)
-    # the record of the run: every approval but the forged ones, each flight's versions in force
-    record = everything.without(forged)
-    approved_plans = [f.versions[0] for f in record.flights]
-    labels = [f.key for f in record.flights]
+        s.add(topic, log_ns, msg)
+    forged_sets = _planners_sets(s.published, s.named_sets, s.constraint_sets, s.withdrawals,
+                                 s.constraint_problems)
+    plans, outcomes, conflicting, all_approved = s.decided()
+    fleet_end = max(s.fleet_t) if s.fleet_t else -math.inf
+    everything, record, run, forged, run_end = _run_record(s, all_approved, fleet_end)
     reasons, values = _rejection_reasons(plans)
-    flights = [_flight_row(p, label, request_rows.get(request_key(p)))
-               for p, label in zip(approved_plans, labels)]
-    if network is not None:  # the detour in metres, as the runner measures it
-        shortest = shortest_route_lengths_m(network, [(f["origin"], f["destination"]) for f in flights])
-        for f in flights:
-            f["shortest_length_m"] = shortest.get((f["origin"], f["destination"]))
-
-    avg_active = 0.0
-    if fleet_t:
-        order = np.argsort(fleet_t, kind="stable")
-        t = np.asarray(fleet_t)[order]
-        n = np.asarray(fleet_n, dtype=np.float64)[order]
-        if len(t) > 1 and t[-1] > t[0]:
-            # each step's count holds until the next step (sample-and-hold time average)
-            avg_active = float(np.sum(n[:-1] * np.diff(t)) / (t[-1] - t[0]))
-        else:
-            avg_active = float(n.mean())
+    approved_plans, labels, flights = _flight_rows(record, s.request_rows, network)
+    avg_active = _average_active(s.fleet_t, s.fleet_n)
     # a FIFO or first-fit epoch reports its graph but solves no MWIS: its selection is not one
-    with_instance = [e for e in epochs if e.vertices > 0 and e.policy in ("", "mwis")]
-    max_active = int(max(fleet_n)) if fleet_n else 0
-    if record.updated:
-        audit, contingency_conflicts = record.audit_plans(separation_m)
-    else:  # the approved plans as they are (the paper's runs)
-        audit, contingency_conflicts = audit_plans(approved_plans, separation_m, labels=labels), []
+    with_instance = [e for e in s.epochs if e.vertices > 0 and e.policy in ("", "mwis")]
+    max_active = int(max(s.fleet_n)) if s.fleet_n else 0
+    audit, contingency_conflicts = _audit_record(record, approved_plans, labels, separation_m)
     found_incursions, gap_incursions = record.incursions(network)
-    n_in_force = len(record.applied)
-    # the run's end as the epochs show it: the last epoch's time + the epoch length (the median
-    # step between epochs); requests still within their window then are left out, as in the runner
-    ts = sorted({e.t_s for e in epochs})
-    end_s = ts[-1] + float(np.median(np.diff(ts))) if len(ts) > 1 else None
-    requests = list(request_rows.values())
-    by_operator = {}
-    if len({f["operator_id"] for f in flights}) > 1:
-        for op in sorted({f["operator_id"] for f in flights}):
-            by_operator[op] = run_metrics([f for f in flights if f["operator_id"] == op],
-                                          [r for r in requests if r["operator"] == op], end_s=end_s)
+    # requests still within their window at the run's end are left out, as in the runner
+    end_s = _epochs_end_s(s.epochs)
+    requests = list(s.request_rows.values())
+    by_operator = _metrics_by_operator(flights, requests, end_s)
     summary = RunSummary(
         path=str(path), reader=reader, complete_file=complete_file,
-        sim_start_s=t_min if math.isfinite(t_min) else 0.0,
-        sim_end_s=t_max if math.isfinite(t_max) else 0.0,
-        requests=len(request_ids),
+        sim_start_s=s.t_min if math.isfinite(s.t_min) else 0.0,
+        sim_end_s=s.t_max if math.isfinite(s.t_max) else 0.0,
+        requests=len(s.request_ids),
         approved=outcomes.count(OUTCOME_APPROVED),
         rejected=outcomes.count(OUTCOME_REJECTED),
         expired=outcomes.count(OUTCOME_EXPIRED),
-        undecided=len(request_ids - set(decisions)),
-        duplicate_decisions=duplicates,
-        plans_without_request=len(set(decisions) - request_ids),
+        undecided=len(s.request_ids - set(s.decisions)),
+        duplicate_decisions=s.duplicates,
+        plans_without_request=len(set(s.decisions) - s.request_ids),
         average_active_aircraft=avg_active,
         max_active_aircraft=max_active,
-        fleet_steps=len(fleet_t),
-        epochs=sorted(epochs, key=lambda e: e.epoch_index),
+        fleet_steps=len(s.fleet_t),
+        epochs=sorted(s.epochs, key=lambda e: e.epoch_index),
         mwis_vertices=_stats([e.vertices for e in with_instance]),
         mwis_selected=_stats([e.selected for e in with_instance]),
         solve_time_s=_stats([e.solve_time_s for e in with_instance]),
-        fallbacks=sum(e.fallback for e in epochs),
+        fallbacks=sum(e.fallback for e in s.epochs),
         rejection_reasons=reasons,
         rejection_values=values,
         flights=flights,
@@ -599,26 +674,26 @@ def summarize_messages(messages: Iterable[tuple[str, int, Any]], separation_m=SE
         flight_stats_by_operator=by_operator,
         audit=audit,
         conflicting_decisions=conflicting,
-        duplicate_requests_refused=refused_duplicates,
-        problems=integrity_problems(epochs, [(request_key(p), int(p.epoch_index)) for p in approved_plans], flown,
-                                    max_active, audit, conflicting, fleet_steps) + run
-        + constraint_problems + everything.problems,
+        duplicate_requests_refused=s.refused_duplicates,
+        problems=integrity_problems(s.epochs, [(request_key(p), int(p.epoch_index)) for p in approved_plans],
+                                    s.flown, max_active, audit, conflicting, s.fleet_steps) + run
+        + s.constraint_problems + everything.problems,
         forged_plans=forged,
         run_end=run_end,
-        plan_updates=_update_counts(updates),
+        plan_updates=_update_counts(s.updates),
         incursions=[i.describe() for i in found_incursions],
         incursions_before_applied=[i.describe() for i in gap_incursions],
         contingency_conflicts=[[a, b, d, w, bool(w <= fleet_end)] for a, b, d, w in contingency_conflicts],
-        constraints_in_force=n_in_force,
-        airspace_changes=_airspace_changes(record.applied, withdrawals.values()),
+        constraints_in_force=len(record.applied),
+        airspace_changes=_airspace_changes(record.applied, s.withdrawals.values()),
         forged_constraint_sets=forged_sets,
-        parameter_changes=parameter_changes,
-        approvals_by_class=_approvals_by_class(request_rows, flights),
+        parameter_changes=s.parameter_changes,
+        approvals_by_class=_approvals_by_class(s.request_rows, flights),
     )
     # the run's record (uam_sim.audit.record): what the flown audit reads; not part of the JSON
     summary.record = record
     # the SHA-256 of the constraint sets taken as the planner's (what a view of the recording draws)
-    summary.constraint_sets_taken = {d for d, *_ in published if not named_sets or d in named_sets}
+    summary.constraint_sets_taken = {d for d, *_ in s.published if not s.named_sets or d in s.named_sets}
     return summary
 
 
