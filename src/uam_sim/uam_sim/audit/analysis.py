@@ -939,8 +939,9 @@ def _airspace_lines(s: RunSummary) -> list[str]:
     return lines
 
 
-def format_summary(s: RunSummary, epochs: bool = True) -> str:
-    """A human-readable report of a RunSummary."""
+def _decision_lines(s: RunSummary) -> list[str]:
+    """The recording, its run choices, its time span [s] and the requests by outcome, with the
+    duplicates, conflicting decisions and rejection reasons."""
     lines = [
         f"Recording        {s.path}{'' if s.complete_file else '  (INCOMPLETE: cut short, read what was written)'}",
         f"Run choices      {format_choices(s.run_choices)} (as launched)" if s.run_choices else
@@ -961,7 +962,13 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
         lines.append(f"    CONFLICTING decisions for {rid!r}: {', '.join(outs)}")
     for reason, n in sorted(s.rejection_reasons.items(), key=lambda kv: -kv[1]):
         lines.append(f"    {n:5d} x {_reason_with_values(reason, s.rejection_values.get(reason)) or '(no reason given)'}")
-    lines += [
+    return lines
+
+
+def _fleet_and_flight_lines(s: RunSummary) -> list[str]:
+    """The active aircraft, the MWIS instances (vertices, selected, solve time [ms]), the flight
+    metrics (overall and per operator), the operators' shares and the approvals per class."""
+    lines = [
         f"Active aircraft  average {s.average_active_aircraft:.2f} (time-average over "
         f"{s.fleet_steps} fleet states), max {s.max_active_aircraft}",
     ]
@@ -984,6 +991,13 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
         lines.append("Classes          " + "; ".join(
             f"class {c}: {a} of {r} approved" + (f" ({100.0 * a / r:.1f} %)" if r else "")
             for c, (a, r) in sorted(s.approvals_by_class.items())) + " (every request of the recording)")
+    return lines
+
+
+def _planned_audit_lines(s: RunSummary) -> list[str]:
+    """The safety audit of the plans (verdict, minimum separation [m], losses) and the conflicts
+    of contingency plans, each pair with its distance [m] and time [s]."""
+    lines = []
     a = s.audit
     if a is not None:
         pair = f" ({a.closest_pair[0]} / {a.closest_pair[1]})" if a.closest_pair else ""
@@ -1002,28 +1016,41 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
                      f"inside the run, {len(s.contingency_conflicts) - inside} after its end")
         for a_, b_, d, when, within in s.contingency_conflicts[:20]:
             lines.append(f"    {a_} / {b_}: {d:.1f} m at t = {when:.1f} s{'' if within else ' (after the run)'}")
-    lines += _airspace_lines(s)
-    fl = s.flown
-    if fl:  # the audit above is of what was planned; this one of what flew
-        ms = fl["min_separation_m"]
-        verdict = flown_verdict(fl)
-        exact = (f"{fl.get('pieces_exact', 0):,} of {fl.get('pieces', 0):,} pieces exact (flown straight, "
-                 f"{fl.get('pieces_straight', 0):,} of them, or on a straight part of their plan)")
-        lines.append(f"Flown audit      {verdict} (what flew: the fleet states, samples {fl['sample_step_s']:g} s "
-                     f"apart; the audit above is of the plans): minimum " + ("-" if ms is None else f"{ms:.1f} m") + f" (the chords); "
-                     f"{fl['losses']} loss(es) proven, {fl.get('unresolved', 0)} pair(s) unresolved; {exact}, "
-                     f"elsewhere a sampling bound per pair of at most {fl['sampling_bound_m']:.1f} m horizontal, "
-                     f"{fl.get('sampling_bound_v_m', 0.0):.2f} m vertical; "
-                     f"{fl.get('samples_off_plan', '-')} sample(s) off their plan as flown")
-        for a_, b_, d, t_ in fl.get("loss_pairs", [])[:20]:
-            lines.append(f"    loss {a_} / {b_}: {d:.1f} m at t = {t_:.1f} s")
-        for a_, b_, d, t_ in fl.get("unresolved_pairs", [])[:20]:
-            lines.append(f"    unresolved {a_} / {b_}: chords {d:.1f} m at t = {t_:.1f} s")
-        cf = fl["conformance"]
-        lines.append(f"Conformance      {conformance_verdict(cf)}: {cf['conformance_percent']:.2f} % of "
-                     f"{cf['flight_hours']:.2f} flight hours, {cf['excursions']} excursions "
-                     f"({cf['excursions_per_flight_hour']:.2f} per flight hour), longest "
-                     f"{cf['longest_excursion_s']:.0f} s (F3548: >= 95 %, <= 18 per hour, <= 10 s)")
+    return lines
+
+
+def _flown_lines(fl: dict) -> list[str]:
+    """The audit of what flew (``RunSummary.flown``): its verdict, minimum [m], losses, unresolved
+    pairs and sampling bounds [m], then the F3548 conformance line; [] when it was not run."""
+    if not fl:
+        return []
+    lines = []
+    ms = fl["min_separation_m"]
+    verdict = flown_verdict(fl)
+    exact = (f"{fl.get('pieces_exact', 0):,} of {fl.get('pieces', 0):,} pieces exact (flown straight, "
+             f"{fl.get('pieces_straight', 0):,} of them, or on a straight part of their plan)")
+    lines.append(f"Flown audit      {verdict} (what flew: the fleet states, samples {fl['sample_step_s']:g} s "
+                 f"apart; the audit above is of the plans): minimum " + ("-" if ms is None else f"{ms:.1f} m") + f" (the chords); "
+                 f"{fl['losses']} loss(es) proven, {fl.get('unresolved', 0)} pair(s) unresolved; {exact}, "
+                 f"elsewhere a sampling bound per pair of at most {fl['sampling_bound_m']:.1f} m horizontal, "
+                 f"{fl.get('sampling_bound_v_m', 0.0):.2f} m vertical; "
+                 f"{fl.get('samples_off_plan', '-')} sample(s) off their plan as flown")
+    for a_, b_, d, t_ in fl.get("loss_pairs", [])[:20]:
+        lines.append(f"    loss {a_} / {b_}: {d:.1f} m at t = {t_:.1f} s")
+    for a_, b_, d, t_ in fl.get("unresolved_pairs", [])[:20]:
+        lines.append(f"    unresolved {a_} / {b_}: chords {d:.1f} m at t = {t_:.1f} s")
+    cf = fl["conformance"]
+    lines.append(f"Conformance      {conformance_verdict(cf)}: {cf['conformance_percent']:.2f} % of "
+                 f"{cf['flight_hours']:.2f} flight hours, {cf['excursions']} excursions "
+                 f"({cf['excursions_per_flight_hour']:.2f} per flight hour), longest "
+                 f"{cf['longest_excursion_s']:.0f} s (F3548: >= 95 %, <= 18 per hour, <= 10 s)")
+    return lines
+
+
+def _check_lines(s: RunSummary) -> list[str]:
+    """The parameters changed while running, the recording's problems, the recorder's check and
+    how the run ended."""
+    lines = []
     if s.parameter_changes:   # accepted while the run went on: the run was not launched as its header says
         lines.append(f"Parameters       {len(s.parameter_changes)} change(s) while running: "
                      + "; ".join(s.parameter_changes[:10]) + ("; ..." if len(s.parameter_changes) > 10 else ""))
@@ -1033,15 +1060,33 @@ def format_summary(s: RunSummary, epochs: bool = True) -> str:
         lines.append(f"Recorder check   {s.recorder_check.get('verdict', '')}")
     if s.run_end:
         lines.append(f"Run              {s.run_end}")
+    return lines
+
+
+def _epoch_table(epochs: list) -> list[str]:
+    """A blank line and one row per epoch: its time [s], the instance, the decisions and the
+    solve time [ms]."""
+    lines = [""]
+    lines.append(f"{'epoch':>5} {'t [s]':>8} {'elig':>5} {'vert':>5} {'edges':>6} {'sel':>4} "
+                 f"{'appr':>5} {'exp':>4} {'active':>6} {'solve [ms]':>10}  backend")
+    for e in epochs:
+        lines.append(f"{e.epoch_index:5d} {e.t_s:8.1f} {e.eligible_requests:5d} {e.vertices:5d} "
+                     f"{e.edges:6d} {e.selected:4d} {e.approved:5d} {e.expired:4d} "
+                     f"{e.active_flights:6d} {e.solve_time_s * 1e3:10.2f}  {e.backend_used}"
+                     f"{' (fallback)' if e.fallback else ''}")
+    return lines
+
+
+def format_summary(s: RunSummary, epochs: bool = True) -> str:
+    """A human-readable report of a RunSummary."""
+    lines = _decision_lines(s)
+    lines += _fleet_and_flight_lines(s)
+    lines += _planned_audit_lines(s)
+    lines += _airspace_lines(s)
+    lines += _flown_lines(s.flown)  # the audit above is of what was planned; this one of what flew
+    lines += _check_lines(s)
     if epochs and s.epochs:
-        lines.append("")
-        lines.append(f"{'epoch':>5} {'t [s]':>8} {'elig':>5} {'vert':>5} {'edges':>6} {'sel':>4} "
-                     f"{'appr':>5} {'exp':>4} {'active':>6} {'solve [ms]':>10}  backend")
-        for e in s.epochs:
-            lines.append(f"{e.epoch_index:5d} {e.t_s:8.1f} {e.eligible_requests:5d} {e.vertices:5d} "
-                         f"{e.edges:6d} {e.selected:4d} {e.approved:5d} {e.expired:4d} "
-                         f"{e.active_flights:6d} {e.solve_time_s * 1e3:10.2f}  {e.backend_used}"
-                         f"{' (fallback)' if e.fallback else ''}")
+        lines += _epoch_table(s.epochs)
     return "\n".join(lines)
 
 
