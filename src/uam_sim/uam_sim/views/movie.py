@@ -170,61 +170,47 @@ def ffmpeg_path() -> str | None:
         return shutil.which("ffmpeg")
 
 
-def make_movie(paths: Sequence[str | Path], out: str | Path, network: Any = None,
-               labels: Sequence[str] | None = None, step_s: float = 10.0, fps: int = 12,
-               dpi: int = 100, t_end_s: float | None = None, until: str | float = "end") -> Path:
-    """Render the runs side by side into ``out`` (.mp4 or .gif); returns the written path.
+_BACKGROUND, _UNUSED, _SPINE = "#111318", "#444a55", "#333844"
 
-    One frame per ``step_s`` of simulated time from 0 to ``t_end_s`` if given, else to
-    :func:`movie_end_s` of ``until`` (default: the run's end, not the last arrival after it).
-    """
-    import matplotlib
-    matplotlib.use("Agg")
+
+def _panels(runs: list, counter: "UseCounter"):
+    """The figure, one panel per run side by side over the corridors' extent [m] with 5 % of
+    padding, and per panel its (corridor lines, aircraft dots, title, run)."""
     import matplotlib.pyplot as plt
-    from matplotlib import animation
     from matplotlib.collections import LineCollection
 
-    if step_s <= 0:
-        raise ValueError(f"step_s: must be > 0, got {step_s}")
-    if fps <= 0:
-        raise ValueError(f"fps: must be > 0, got {fps}")
-    runs = [read_plans(p, labels[i] if labels else None) for i, p in enumerate(paths)]
-    counter = UseCounter.from_runs(runs, network)
-    t_end = t_end_s if t_end_s is not None else movie_end_s(runs, until)
-    frames = np.arange(0.0, t_end + 1e-9, step_s)
-    final = [counter.uses_until(r, t_end) for r in runs]
-    vmax = max(1.0, max(float(f.max()) for f in final))
     xy = np.concatenate([np.stack(list(counter.segments.values())).reshape(-1, 2)])
     lo, hi = xy.min(axis=0), xy.max(axis=0)
     pad = 0.05 * max(hi - lo)
-    cmap = plt.get_cmap("plasma")
-
     aspect = float((hi[1] - lo[1] + 2 * pad) / (hi[0] - lo[0] + 2 * pad))
     panel_w = 6.0
     fig, axes = plt.subplots(1, len(runs), figsize=(panel_w * len(runs) + 1.2, panel_w * aspect + 0.9),
                              squeeze=False)
     fig.subplots_adjust(left=0.01, right=0.9, bottom=0.02, top=0.86, wspace=0.03)
-    fig.patch.set_facecolor("#111318")
+    fig.patch.set_facecolor(_BACKGROUND)
     artists = []
     segs = np.stack(list(counter.segments.values()))
     for ax, run in zip(axes[0], runs):
-        ax.set_facecolor("#111318")
+        ax.set_facecolor(_BACKGROUND)
         ax.set_aspect("equal")
         ax.set_xlim(lo[0] - pad, hi[0] + pad)
         ax.set_ylim(lo[1] - pad, hi[1] + pad)
         ax.set_xticks([])
         ax.set_yticks([])
-        lines = LineCollection(segs, colors="#444a55", linewidths=1.0)
+        lines = LineCollection(segs, colors=_UNUSED, linewidths=1.0)
         ax.add_collection(lines)
         dots = ax.scatter(np.zeros(0), np.zeros(0), s=10, c="#ffffff", edgecolors="none", zorder=3)
         for spine in ax.spines.values():
-            spine.set_color("#333844")
+            spine.set_color(_SPINE)
         title = ax.set_title(run.label, color="white", fontsize=11)
         artists.append((lines, dots, title, run))
-    # Used corridors start a quarter up the colour map, so that one flight already stands out
-    # from the unused (grey) ones on the dark background.
-    def use_colors(uses: np.ndarray) -> np.ndarray:
-        return cmap(0.25 + 0.75 * np.clip(uses / vmax, 0, 1))
+    return fig, artists
+
+
+def _use_colorbar(fig, cmap, vmax: float) -> None:
+    """The colour bar of corridor use (flights so far, 0 to ``vmax``) at the figure's right."""
+    import matplotlib
+    import matplotlib.pyplot as plt
 
     sm = plt.cm.ScalarMappable(cmap=matplotlib.colors.ListedColormap(cmap(np.linspace(0.25, 1.0, 256))),
                                norm=plt.Normalize(0, vmax))
@@ -233,12 +219,23 @@ def make_movie(paths: Sequence[str | Path], out: str | Path, network: Any = None
     cbar.set_label("flights that used the corridor so far", color="white")
     cbar.ax.yaxis.set_tick_params(color="white", labelcolor="white")
 
+
+def _frame_drawer(frames: np.ndarray, artists: list, counter: "UseCounter", cmap, vmax: float):
+    """The animation's callback: frame ``k`` draws every panel at ``frames[k]`` [s] (corridors
+    coloured and widened by their use so far, the aircraft in the air, the title's counts)."""
+    import matplotlib
+
+    # Used corridors start a quarter up the colour map, so that one flight already stands out
+    # from the unused (grey) ones on the dark background.
+    def use_colors(uses: np.ndarray) -> np.ndarray:
+        return cmap(0.25 + 0.75 * np.clip(uses / vmax, 0, 1))
+
     def draw(k: int):
         t = float(frames[k])
         out = []
         for lines, dots, title, run in artists:
             uses = counter.uses_until(run, t)
-            colors = np.where(uses[:, None] > 0, use_colors(uses), matplotlib.colors.to_rgba("#444a55"))
+            colors = np.where(uses[:, None] > 0, use_colors(uses), matplotlib.colors.to_rgba(_UNUSED))
             lines.set_color(colors)
             lines.set_linewidth(np.where(uses > 0, 1.5 + 3.5 * np.clip(uses / vmax, 0, 1), 0.8))
             pos = positions_at(run, t)
@@ -247,10 +244,15 @@ def make_movie(paths: Sequence[str | Path], out: str | Path, network: Any = None
             title.set_text(f"{run.label}\nt = {t:.0f} s   approved {approved}   airborne {len(pos)}")
             out += [lines, dots, title]
         return out
+    return draw
 
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    anim = animation.FuncAnimation(fig, draw, frames=len(frames), blit=False)
+
+def _save_animation(anim, fig, out: Path, fps: int, dpi: int) -> Path:
+    """Write ``anim`` to ``out``: MP4 (H.264) with the found ffmpeg, else a GIF with Pillow (the
+    suffix changed to .gif, said on stderr); returns the written path."""
+    import matplotlib
+    from matplotlib import animation
+
     ffmpeg = ffmpeg_path()
     if out.suffix.lower() == ".gif" or ffmpeg is None:
         if out.suffix.lower() != ".gif":
@@ -264,6 +266,40 @@ def make_movie(paths: Sequence[str | Path], out: str | Path, network: Any = None
             # H.264 in yuv420p needs even frame sizes: pad by one pixel where needed
             "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2", "-pix_fmt", "yuv420p"])
         anim.save(str(out), writer=writer, dpi=dpi, savefig_kwargs={"facecolor": fig.get_facecolor()})
+    return out
+
+
+def make_movie(paths: Sequence[str | Path], out: str | Path, network: Any = None,
+               labels: Sequence[str] | None = None, step_s: float = 10.0, fps: int = 12,
+               dpi: int = 100, t_end_s: float | None = None, until: str | float = "end") -> Path:
+    """Render the runs side by side into ``out`` (.mp4 or .gif); returns the written path.
+
+    One frame per ``step_s`` of simulated time from 0 to ``t_end_s`` if given, else to
+    :func:`movie_end_s` of ``until`` (default: the run's end, not the last arrival after it).
+    """
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib import animation
+
+    if step_s <= 0:
+        raise ValueError(f"step_s: must be > 0, got {step_s}")
+    if fps <= 0:
+        raise ValueError(f"fps: must be > 0, got {fps}")
+    runs = [read_plans(p, labels[i] if labels else None) for i, p in enumerate(paths)]
+    counter = UseCounter.from_runs(runs, network)
+    t_end = t_end_s if t_end_s is not None else movie_end_s(runs, until)
+    frames = np.arange(0.0, t_end + 1e-9, step_s)
+    final = [counter.uses_until(r, t_end) for r in runs]
+    vmax = max(1.0, max(float(f.max()) for f in final))
+    cmap = plt.get_cmap("plasma")
+    fig, artists = _panels(runs, counter)
+    _use_colorbar(fig, cmap, vmax)
+    draw = _frame_drawer(frames, artists, counter, cmap, vmax)
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    anim = animation.FuncAnimation(fig, draw, frames=len(frames), blit=False)
+    out = _save_animation(anim, fig, out, fps, dpi)
     plt.close(fig)
     return out
 
