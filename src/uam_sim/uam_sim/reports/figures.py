@@ -376,12 +376,10 @@ def per_read_tts(row, p: float = 0.99):
     return v
 
 
-def tts_figure(tts: dict, path: Path) -> dict:
-    """TTS(p) per call (one trial = one solver call of ``reads`` reads) and, for the annealers,
-    per read (one trial = one read, the paper's definition), box plots per backend (log scale,
-    every outlier shown)."""
-    rows = tts.get("rows") or []
-    p = float(tts.get("p", 0.99))
+def _tts_by_backend(rows: list, p: float) -> tuple[dict, dict, dict, dict]:
+    """The TTS rows grouped per backend: the finite TTS(p) per call [s], the count of instances
+    that never reached the optimum, and, for the rows with per-read data, the per-read TTS [s]
+    and its count not reached."""
     by: dict = {}
     missed: dict = {}
     per_read: dict = {}
@@ -401,43 +399,52 @@ def tts_figure(tts: dict, path: Path) -> dict:
                 per_read[b].append(pr)
             else:
                 read_missed[b] = read_missed.get(b, 0) + 1
-    if not by:
-        return {}
-    names = [m for m in METHOD_ORDER if m in by] + sorted(set(by) - set(METHOD_ORDER))
-    table = []
-    for m in names:
-        x = np.array(by[m], dtype=float)
-        n_all = x.size + missed.get(m, 0)
-        mine = [r for r in rows if str(r.get("backend")) == m]
-        rules = [r.get("rule") for r in mine]
-        pe = [float(r["p_opt"]) for r in mine if r.get("p_opt") not in (None, "")]
-        pr = np.array(per_read.get(m, []), dtype=float)
-        fr = [_num(r, "read_opt_fraction") for r in mine]
-        fr = [f for f in fr if f is not None]
-        reads = [_num(r, "num_reads") for r in mine if _num(r, "num_reads")]
-        row = {"backend": m, "instances": int(n_all),
-               "median_s": float(np.median(x)) if x.size else float("nan"),
-               "p25_s": float(np.percentile(x, 25)) if x.size else float("nan"),
-               "p75_s": float(np.percentile(x, 75)) if x.size else float("nan"),
-               "max_s": float(x.max()) if x.size else float("nan"),
-               "not_reached": int(missed.get(m, 0)),
-               "penalised": int(sum(r == "deterministic miss penalty" for r in rules)),
-               "mean_p_opt": float(np.mean(pe)) if pe else float("nan"),
-               # reached the optimum with 99 % confidence in under 0.1 s, over all instances
-               "share_under_0.1s": float((x < 0.1).sum() / n_all) if n_all else float("nan"),
-               "reads_per_call": float(np.median(reads)) if reads else float("nan"),
-               "per_read_median_s": float(np.median(pr)) if pr.size else float("nan"),
-               "per_read_p25_s": float(np.percentile(pr, 25)) if pr.size else float("nan"),
-               "per_read_p75_s": float(np.percentile(pr, 75)) if pr.size else float("nan"),
-               "per_read_not_reached": int(read_missed.get(m, 0)),
-               "mean_p_read": float(np.mean(fr)) if fr else float("nan"),
-               "share_p_read_below_p": float(np.mean(np.array(fr) < p)) if fr else float("nan")}
-        if pr.size >= 2:
-            from scipy.stats import bootstrap
-            ci = bootstrap((pr,), np.median, confidence_level=0.95, n_resamples=2000,
-                           method="percentile", random_state=np.random.default_rng(0)).confidence_interval
-            row["per_read_median_lo"], row["per_read_median_hi"] = float(ci.low), float(ci.high)
-        table.append(row)
+    return by, missed, per_read, read_missed
+
+
+def _tts_table_row(m: str, rows: list, p: float, by: dict, missed: dict, per_read: dict,
+                   read_missed: dict) -> dict:
+    """Backend ``m``'s row of the TTS table: quartiles of TTS(p) per call and per read [s], the
+    instances not reached, the mean success probabilities, and a bootstrap 95 % interval of the
+    per-read median (seeded) when it has two values or more."""
+    x = np.array(by[m], dtype=float)
+    n_all = x.size + missed.get(m, 0)
+    mine = [r for r in rows if str(r.get("backend")) == m]
+    rules = [r.get("rule") for r in mine]
+    pe = [float(r["p_opt"]) for r in mine if r.get("p_opt") not in (None, "")]
+    pr = np.array(per_read.get(m, []), dtype=float)
+    fr = [_num(r, "read_opt_fraction") for r in mine]
+    fr = [f for f in fr if f is not None]
+    reads = [_num(r, "num_reads") for r in mine if _num(r, "num_reads")]
+    row = {"backend": m, "instances": int(n_all),
+           "median_s": float(np.median(x)) if x.size else float("nan"),
+           "p25_s": float(np.percentile(x, 25)) if x.size else float("nan"),
+           "p75_s": float(np.percentile(x, 75)) if x.size else float("nan"),
+           "max_s": float(x.max()) if x.size else float("nan"),
+           "not_reached": int(missed.get(m, 0)),
+           "penalised": int(sum(r == "deterministic miss penalty" for r in rules)),
+           "mean_p_opt": float(np.mean(pe)) if pe else float("nan"),
+           # reached the optimum with 99 % confidence in under 0.1 s, over all instances
+           "share_under_0.1s": float((x < 0.1).sum() / n_all) if n_all else float("nan"),
+           "reads_per_call": float(np.median(reads)) if reads else float("nan"),
+           "per_read_median_s": float(np.median(pr)) if pr.size else float("nan"),
+           "per_read_p25_s": float(np.percentile(pr, 25)) if pr.size else float("nan"),
+           "per_read_p75_s": float(np.percentile(pr, 75)) if pr.size else float("nan"),
+           "per_read_not_reached": int(read_missed.get(m, 0)),
+           "mean_p_read": float(np.mean(fr)) if fr else float("nan"),
+           "share_p_read_below_p": float(np.mean(np.array(fr) < p)) if fr else float("nan")}
+    if pr.size >= 2:
+        from scipy.stats import bootstrap
+        ci = bootstrap((pr,), np.median, confidence_level=0.95, n_resamples=2000,
+                       method="percentile", random_state=np.random.default_rng(0)).confidence_interval
+        row["per_read_median_lo"], row["per_read_median_hi"] = float(ci.low), float(ci.high)
+    return row
+
+
+def _tts_plot(names: list, p: float, by: dict, missed: dict, per_read: dict, read_missed: dict,
+              path: Path) -> None:
+    """The TTS box plots (log scale [s], every outlier, the 0.1 s line): per call for every
+    backend of ``names`` and, beside it, per read for those with per-read values; saved to ``path``."""
     read_names = [m for m in names if per_read.get(m)]
     fig, axes = plt.subplots(1, 2 if read_names else 1, figsize=(11 if read_names else 6.4, 4.2),
                              squeeze=False)
@@ -466,6 +473,20 @@ def tts_figure(tts: dict, path: Path) -> dict:
         a.grid(alpha=0.3, which="both")
     fig.suptitle("Time to solution, instances sampled from the runs")
     save_figure(fig, path)
+
+
+def tts_figure(tts: dict, path: Path) -> dict:
+    """TTS(p) per call (one trial = one solver call of ``reads`` reads) and, for the annealers,
+    per read (one trial = one read, the paper's definition), box plots per backend (log scale,
+    every outlier shown)."""
+    rows = tts.get("rows") or []
+    p = float(tts.get("p", 0.99))
+    by, missed, per_read, read_missed = _tts_by_backend(rows, p)
+    if not by:
+        return {}
+    names = [m for m in METHOD_ORDER if m in by] + sorted(set(by) - set(METHOD_ORDER))
+    table = [_tts_table_row(m, rows, p, by, missed, per_read, read_missed) for m in names]
+    _tts_plot(names, p, by, missed, per_read, read_missed, path)
     return {"path": str(path), "table": table}
 
 
