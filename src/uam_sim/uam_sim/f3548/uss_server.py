@@ -299,23 +299,10 @@ def _flight_planning_routes(app, planning, authorise) -> None:
     endpoint(Op.ClearArea, lambda: planning.clear_area(body()))
 
 
-def create_app(store: IntentStore, auth: str = "verify", verifier=None, inbox=None, planning=None):
-    """The Flask app serving ``store`` (module docstring). ``auth`` ``verify`` needs ``verifier``
-    (a :class:`uam_sim.f3548.auth.TokenVerifier`). With ``inbox`` (a
-    :class:`uam_sim.f3548.peers.PeerInbox`) it takes peers' notifications and reports; with
-    ``planning`` (a :class:`uam_sim.f3548.flight_planning.FlightPlanning`) it serves InterUSS's
-    flight_planning interface under ``/flight_planning/v1``."""
-    from flask import Flask, Response, g, request
-    from werkzeug.exceptions import HTTPException
-
-    from .auth import AuthError
-
-    if auth not in AUTH_MODES:
-        raise ValueError(f"auth: {auth!r} is not one of {', '.join(AUTH_MODES)}")
-    if auth == "verify" and verifier is None:
-        raise ValueError("auth: 'verify' needs the auth server's public key (auth_key: a PEM or JWKS file)")
-    app = Flask("uam_uss")
-    app.config["MAX_CONTENT_LENGTH"] = None  # refused below with the standard's 400
+def _size_limits(app) -> None:
+    """Refuse, before any route, a URL longer than MAX_URL_CHARS characters or a body larger
+    than MAX_BODY_BYTES bytes with the standard's 400."""
+    from flask import request
 
     @app.before_request
     def _limits():
@@ -328,6 +315,14 @@ def create_app(store: IntentStore, auth: str = "verify", verifier=None, inbox=No
                                f"{MAX_BODY_BYTES}")
         return None
 
+
+def _authoriser(auth: str, verifier):
+    """``authorise(scope)`` for the routes: None if the request's token grants ``scope`` (or
+    ``auth`` is ``off``), else the 401 / 403 answer with its WWW-Authenticate header."""
+    from flask import g, request
+
+    from .auth import AuthError
+
     def _authorise(scope: str):
         """None if the request's token grants ``scope``, else the 401 / 403 answer."""
         if auth == "off":
@@ -339,10 +334,17 @@ def create_app(store: IntentStore, auth: str = "verify", verifier=None, inbox=No
             answer.headers["WWW-Authenticate"] = exc.www_authenticate(REALM)
             return answer
         return None
+    return _authorise
+
+
+def _store_routes(app, store: IntentStore, authorise) -> None:
+    """The details of an operational intent and of a constraint (F3548's USS interface), and
+    the listings of their ids with the store's time [s]."""
+    from flask import Response
 
     def _details(entityid, scope, lookup, missing: str):
         """One details endpoint: the auth and id checks, then the stored document or a 404."""
-        bad = _authorise(scope)
+        bad = authorise(scope)
         if bad is not None:
             return bad
         if len(entityid) > 36 or not ENTITY_ID.match(entityid):
@@ -354,7 +356,7 @@ def create_app(store: IntentStore, auth: str = "verify", verifier=None, inbox=No
         return Response(body, status=200, mimetype="application/json")
 
     def _listing(scope, ids):
-        bad = _authorise(scope)
+        bad = authorise(scope)
         if bad is not None:
             return bad
         return Response(json.dumps({"t_s": store.time_s, "ids": ids()}), mimetype="application/json")
@@ -377,9 +379,28 @@ def create_app(store: IntentStore, auth: str = "verify", verifier=None, inbox=No
     def list_constraints():
         return _listing(SCOPE_CONSTRAINTS, store.constraint_ids)
 
-    _peer_routes(app, store, inbox, _authorise)
+
+def create_app(store: IntentStore, auth: str = "verify", verifier=None, inbox=None, planning=None):
+    """The Flask app serving ``store`` (module docstring). ``auth`` ``verify`` needs ``verifier``
+    (a :class:`uam_sim.f3548.auth.TokenVerifier`). With ``inbox`` (a
+    :class:`uam_sim.f3548.peers.PeerInbox`) it takes peers' notifications and reports; with
+    ``planning`` (a :class:`uam_sim.f3548.flight_planning.FlightPlanning`) it serves InterUSS's
+    flight_planning interface under ``/flight_planning/v1``."""
+    from flask import Flask, request
+    from werkzeug.exceptions import HTTPException
+
+    if auth not in AUTH_MODES:
+        raise ValueError(f"auth: {auth!r} is not one of {', '.join(AUTH_MODES)}")
+    if auth == "verify" and verifier is None:
+        raise ValueError("auth: 'verify' needs the auth server's public key (auth_key: a PEM or JWKS file)")
+    app = Flask("uam_uss")
+    app.config["MAX_CONTENT_LENGTH"] = None  # refused below with the standard's 400
+    _size_limits(app)
+    authorise = _authoriser(auth, verifier)
+    _store_routes(app, store, authorise)
+    _peer_routes(app, store, inbox, authorise)
     if planning is not None:
-        _flight_planning_routes(app, planning, _authorise)
+        _flight_planning_routes(app, planning, authorise)
 
     @app.errorhandler(HTTPException)
     def _http_error(exc):
