@@ -24,6 +24,75 @@ def sample_tts_corpus(entries: list, n: int, min_v: int, max_v: int, seed: int) 
     return [pool[i] for i in idx.tolist()]
 
 
+def _available_backends(names: list) -> tuple[list, dict]:
+    """The backends of ``names`` that are available here, in order, and the others with why."""
+    from uam_solvers.registry import get_backend
+    backends, unavailable = [], {}
+    for b in names:
+        try:
+            ok, why = get_backend(b).available()
+        except Exception as exc:  # unknown/broken backend: leave it out and say so
+            ok, why = False, str(exc)
+        if ok:
+            backends.append(b)
+        else:
+            unavailable[b] = why
+    return backends, unavailable
+
+
+def _study_key(t: dict, sample: list, backends: list, caps: dict) -> str:
+    """The SHA-256 of what decides a TTS study's rows: the sampled instances, the backends, their
+    sub-sample caps, the reads, repetitions, seed and time limit [s]."""
+    return hashlib.sha256(json.dumps(
+        {"names": [e.name for e in sample], "backends": backends, "caps": caps,
+         "reads": int(t["reads"]), "repetitions": int(t.get("repetitions", 5)),
+         "seed": int(t.get("seed", 0)), "time_limit_s": float(t.get("time_limit_s", 10.0))},
+        sort_keys=True).encode()).hexdigest()
+
+
+def _cached_study(cache: Path, study_key: str) -> dict | None:
+    """The result in ``cache`` (marked reused) when it is of ``study_key``, else None."""
+    if cache.exists():
+        try:
+            cached = json.loads(cache.read_text(encoding="utf-8"))
+        except (OSError, json.JSONDecodeError):
+            cached = {}
+        if cached.get("key") == study_key:
+            cached["result"]["reused"] = True
+            return cached["result"]
+    return None
+
+
+def _measure(run_study, t: dict, sample: list, backends: list, caps: dict) -> tuple[list, list, float]:
+    """Each backend's TTS rows on the sample (a capped backend on a seeded sub-sample of it), the
+    instances skipped (each once) and the wall time of it all [s]."""
+    t0 = time.perf_counter()
+    rows, skipped = [], []
+    for b in backends:
+        # a slow backend may be studied on a seeded sub-sample of the same sample
+        sub = sample_tts_corpus(sample, int(caps[b]), 0, 10**9, int(t.get("seed", 0)) + 1) \
+            if b in caps else sample
+        r, sk = run_study(sub, [b], repetitions=int(t.get("repetitions", 5)),
+                          num_reads=int(t["reads"]), time_limit_s=float(t.get("time_limit_s", 10.0)),
+                          seed=int(t.get("seed", 0)), log=lambda *a, **k: None)
+        rows.extend(r)
+        skipped.extend(x for x in sk if x not in skipped)
+    return rows, skipped, time.perf_counter() - t0
+
+
+def _nothing_measured(unavailable: dict, backends: list, skipped: list, sample: list, corpus) -> dict:
+    """The skipped result of a study that produced no row, saying why."""
+    why = []
+    if unavailable:
+        why.append("unavailable backends: " + "; ".join(f"{b} ({r})" for b, r in unavailable.items()))
+    if not backends:
+        why.append("no configured backend is available")
+    if skipped:
+        why.append(f"{len(skipped)} of {len(sample)} instances skipped (no proven optimum)")
+    return {"status": "skipped", "corpus": str(corpus), "instances": len(sample),
+            "reason": "nothing to measure (" + ", ".join(why or ["no row was produced"]) + ")"}
+
+
 def run_tts(cfg: ExperimentConfig, entries: list) -> dict:
     """The TTS(p) study on a sample of the collected instances, through uam_solvers.tts.
 
@@ -50,55 +119,17 @@ def run_tts(cfg: ExperimentConfig, entries: list) -> dict:
     except (ImportError, AttributeError) as exc:
         return {"status": "skipped", "reason": f"uam_solvers.tts is not available ({exc})",
                 "corpus": str(corpus), "instances": len(sample)}
-    from uam_solvers.registry import get_backend
-    backends, unavailable = [], {}
-    for b in t["backends"]:
-        try:
-            ok, why = get_backend(b).available()
-        except Exception as exc:  # unknown/broken backend: leave it out and say so
-            ok, why = False, str(exc)
-        if ok:
-            backends.append(b)
-        else:
-            unavailable[b] = why
+    backends, unavailable = _available_backends(t["backends"])
     caps = dict(t.get("backend_instances") or {})
     # a finished study of the same sample and settings is reused (like a finished cell)
-    study_key = hashlib.sha256(json.dumps(
-        {"names": [e.name for e in sample], "backends": backends, "caps": caps,
-         "reads": int(t["reads"]), "repetitions": int(t.get("repetitions", 5)),
-         "seed": int(t.get("seed", 0)), "time_limit_s": float(t.get("time_limit_s", 10.0))},
-        sort_keys=True).encode()).hexdigest()
+    study_key = _study_key(t, sample, backends, caps)
     cache = out / "tts_study.json"
-    if cache.exists():
-        try:
-            cached = json.loads(cache.read_text(encoding="utf-8"))
-        except (OSError, json.JSONDecodeError):
-            cached = {}
-        if cached.get("key") == study_key:
-            cached["result"]["reused"] = True
-            return cached["result"]
-    t0 = time.perf_counter()
-    rows, skipped = [], []
-    for b in backends:
-        # a slow backend may be studied on a seeded sub-sample of the same sample
-        sub = sample_tts_corpus(sample, int(caps[b]), 0, 10**9, int(t.get("seed", 0)) + 1) \
-            if b in caps else sample
-        r, sk = run_study(sub, [b], repetitions=int(t.get("repetitions", 5)),
-                          num_reads=int(t["reads"]), time_limit_s=float(t.get("time_limit_s", 10.0)),
-                          seed=int(t.get("seed", 0)), log=lambda *a, **k: None)
-        rows.extend(r)
-        skipped.extend(x for x in sk if x not in skipped)
-    wall = time.perf_counter() - t0
+    cached = _cached_study(cache, study_key)
+    if cached is not None:
+        return cached
+    rows, skipped, wall = _measure(run_study, t, sample, backends, caps)
     if not rows:  # nothing was measured: say why instead of reporting an empty study
-        why = []
-        if unavailable:
-            why.append("unavailable backends: " + "; ".join(f"{b} ({r})" for b, r in unavailable.items()))
-        if not backends:
-            why.append("no configured backend is available")
-        if skipped:
-            why.append(f"{len(skipped)} of {len(sample)} instances skipped (no proven optimum)")
-        return {"status": "skipped", "corpus": str(corpus), "instances": len(sample),
-                "reason": "nothing to measure (" + ", ".join(why or ["no row was produced"]) + ")"}
+        return _nothing_measured(unavailable, backends, skipped, sample, corpus)
     tts_mod.write_csv(out / "tts.csv", rows)
     rows = [asdict(r) if hasattr(r, "__dataclass_fields__") else dict(r) for r in rows]
     result = {"status": "ok", "rows": rows, "csv": str(out / "tts.csv"), "corpus": str(corpus),
