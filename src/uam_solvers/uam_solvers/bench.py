@@ -504,22 +504,11 @@ def deadline_benchmark(seed: int, backends, limit_s: float = 1.0, out=print) -> 
 HORIZON_LIMIT_S = 5.0
 
 
-def corpus_benchmark(path=None, limit_s: float = 1.0, repeats: int = TARGET_REPEATS,
-                     out=print, cpsat: bool = False) -> list[dict]:
-    """target on the committed corpus of real planner instances (layered mode,
-    ``instances.REAL_CORPUS``, written by scripts/make_mwis_corpus.py): per size bucket,
-    ``auto`` end to end (``uam_solvers.solve`` from the arrays, as the planner calls it) against
-    KaMIS branch-and-reduce called directly on the CSR, interleaved instance by instance, each
-    the best of ``repeats`` runs; with ``cpsat`` also the exact backend (CP-SAT) called
-    directly, and auto's wall against it where both proved (the horizon corpus, which KaMIS does
-    not prove). Returns one dict per instance."""
-    from .instances import SIZE_BUCKETS, load_corpus, real_corpus_path, size_bucket
+def _corpus_rows(entries: list, limit_s: float, repeats: int, cpsat: bool) -> list[dict]:
+    """One row per corpus entry: auto end to end and KaMIS direct (interleaved, best of
+    ``repeats``), with ``cpsat`` CP-SAT direct too; walls [s], proofs, objectives, validity."""
+    from .instances import size_bucket
 
-    path = real_corpus_path() if path is None else path
-    entries = load_corpus(path)
-    warm = max(entries, key=lambda e: e.problem.n).problem
-    _solve_arrays(warm, "auto", limit_s, 0)
-    kamis_direct(warm, limit_s)
     rows = []
     for e in entries:
         p = e.problem
@@ -533,11 +522,14 @@ def corpus_benchmark(path=None, limit_s: float = 1.0, repeats: int = TARGET_REPE
                      "auto_obj": r.objective, "auto_valid": p.is_independent(r.selected),
                      "auto_method": r.stats.get("auto_method", ""), "kamis_s": dk,
                      "kamis_finished": fk, "kamis_obj": ok})
-    out(f"\n## `auto` on the real corpus: {os.path.basename(str(path))}, "
-        f"{len(entries)} instances, limit {limit_s:g} s\n")
-    out(f"(`auto` by `uam_solvers.solve` from the arrays, end to end, as the planner calls it; "
-        f"KaMIS branch-and-reduce on the prebuilt CSR, 'finished' = returned before 0.9 of the "
-        f"limit, a completed search; interleaved, best of {repeats})\n")
+    return rows
+
+
+def _corpus_bucket_table(rows: list[dict], out) -> None:
+    """The table of auto against KaMIS per size bucket: median walls [ms], proofs, the ratio
+    auto/KaMIS where both finished, validity and objectives."""
+    from .instances import SIZE_BUCKETS
+
     out("| bucket, vertices | instances | vertices (range) | edges median | auto median ms | "
         "auto proven | KaMIS direct median ms | KaMIS finished | auto proven where KaMIS "
         "finished | median ratio auto/KaMIS (both) | max ratio | auto valid | auto >= KaMIS "
@@ -564,6 +556,11 @@ def corpus_benchmark(path=None, limit_s: float = 1.0, repeats: int = TARGET_REPE
             f"{int(np.median([x['m'] for x in rs]))} | {np.median(a):.2f} | "
             f"{sum(x['auto_proven'] for x in rs)} | {np.median(k):.2f} | {kf} | {ap_k}/{kf} | - "
             f"| - | {sum(x['auto_valid'] for x in rs)}/{len(rs)} | {geq}/{len(rs)} |")
+
+
+def _corpus_kamis_line(rows: list[dict], out) -> None:
+    """The verdict against KaMIS: what auto proved of what KaMIS finished, the ratio auto/KaMIS,
+    the instances slow by both 2x and EXCESS_MS [ms], and whether every answer was valid."""
     kf = [x for x in rows if x["kamis_finished"]]
     missed = [x["name"] for x in kf if not x["auto_proven"]]
     pk = [x for x in kf if x["auto_proven"]]
@@ -580,20 +577,52 @@ def corpus_benchmark(path=None, limit_s: float = 1.0, repeats: int = TARGET_REPE
            f"than {EXCESS_MS:g} ms over KaMIS: {len(slow)}" + (f" ({', '.join(slow)})" if slow else "")
            if ratios.size else "")
         + f"; every answer valid: {all(x['auto_valid'] for x in rows)}")
+
+
+def _corpus_cpsat_line(rows: list[dict], out) -> None:
+    """The verdict against CP-SAT direct: proofs of each, auto's methods and fallbacks, the wall
+    ratio auto/CP-SAT and medians [s] where both proved, and the objectives."""
+    both = [x for x in rows if x["auto_proven"] and x["cpsat_proven"]]
+    rc = np.array([x["auto_s"] / x["cpsat_s"] for x in both])
+    out(f"CP-SAT direct (the exact backend's model, one call each) proved "
+        f"{sum(x['cpsat_proven'] for x in rows)} of {len(rows)}, auto "
+        f"{sum(x['auto_proven'] for x in rows)} of {len(rows)} (methods: "
+        f"{', '.join(sorted({x['auto_method'] for x in rows}))}); auto fallbacks "
+        f"{sum(x['auto_fallback'] for x in rows)}"
+        + (f"; wall auto/CP-SAT where both proved: median {np.median(rc):.2f}, max "
+           f"{rc.max():.2f}; auto median {np.median([x['auto_s'] for x in both]):.3f} s, "
+           f"CP-SAT {np.median([x['cpsat_s'] for x in both]):.3f} s" if rc.size else "")
+        + f"; auto objective >= CP-SAT's: "
+          f"{sum(x['auto_obj'] >= x['cpsat_obj'] - 1e-9 * max(1.0, abs(x['cpsat_obj'])) for x in rows)}"
+          f"/{len(rows)}")
+
+
+def corpus_benchmark(path=None, limit_s: float = 1.0, repeats: int = TARGET_REPEATS,
+                     out=print, cpsat: bool = False) -> list[dict]:
+    """target on the committed corpus of real planner instances (layered mode,
+    ``instances.REAL_CORPUS``, written by scripts/make_mwis_corpus.py): per size bucket,
+    ``auto`` end to end (``uam_solvers.solve`` from the arrays, as the planner calls it) against
+    KaMIS branch-and-reduce called directly on the CSR, interleaved instance by instance, each
+    the best of ``repeats`` runs; with ``cpsat`` also the exact backend (CP-SAT) called
+    directly, and auto's wall against it where both proved (the horizon corpus, which KaMIS does
+    not prove). Returns one dict per instance."""
+    from .instances import load_corpus, real_corpus_path
+
+    path = real_corpus_path() if path is None else path
+    entries = load_corpus(path)
+    warm = max(entries, key=lambda e: e.problem.n).problem
+    _solve_arrays(warm, "auto", limit_s, 0)
+    kamis_direct(warm, limit_s)
+    rows = _corpus_rows(entries, limit_s, repeats, cpsat)
+    out(f"\n## `auto` on the real corpus: {os.path.basename(str(path))}, "
+        f"{len(entries)} instances, limit {limit_s:g} s\n")
+    out(f"(`auto` by `uam_solvers.solve` from the arrays, end to end, as the planner calls it; "
+        f"KaMIS branch-and-reduce on the prebuilt CSR, 'finished' = returned before 0.9 of the "
+        f"limit, a completed search; interleaved, best of {repeats})\n")
+    _corpus_bucket_table(rows, out)
+    _corpus_kamis_line(rows, out)
     if cpsat:
-        both = [x for x in rows if x["auto_proven"] and x["cpsat_proven"]]
-        rc = np.array([x["auto_s"] / x["cpsat_s"] for x in both])
-        out(f"CP-SAT direct (the exact backend's model, one call each) proved "
-            f"{sum(x['cpsat_proven'] for x in rows)} of {len(rows)}, auto "
-            f"{sum(x['auto_proven'] for x in rows)} of {len(rows)} (methods: "
-            f"{', '.join(sorted({x['auto_method'] for x in rows}))}); auto fallbacks "
-            f"{sum(x['auto_fallback'] for x in rows)}"
-            + (f"; wall auto/CP-SAT where both proved: median {np.median(rc):.2f}, max "
-               f"{rc.max():.2f}; auto median {np.median([x['auto_s'] for x in both]):.3f} s, "
-               f"CP-SAT {np.median([x['cpsat_s'] for x in both]):.3f} s" if rc.size else "")
-            + f"; auto objective >= CP-SAT's: "
-              f"{sum(x['auto_obj'] >= x['cpsat_obj'] - 1e-9 * max(1.0, abs(x['cpsat_obj'])) for x in rows)}"
-              f"/{len(rows)}")
+        _corpus_cpsat_line(rows, out)
     return rows
 
 
