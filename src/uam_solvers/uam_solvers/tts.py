@@ -222,6 +222,60 @@ def _backend_options(name: str, num_reads: int, optimum: float,
     return options
 
 
+def _repeated_calls(problem: MwisProblem, backend, options: dict, optimum: float, repetitions: int,
+                    time_limit_s: float, seed: int) -> dict:
+    """``repetitions`` timed calls of ``backend`` on ``problem`` (seeds ``seed``, ``seed`` + 1,
+    ...): each call's wall time [s], the calls that reached ``optimum``, the invalid answers,
+    the best objective, and what the annealers report per read (optimal fractions, reads and
+    their hits, anneal time per sample [us])."""
+    times, hits, invalid, best, read_fractions = [], 0, 0, -math.inf, []
+    reads_total = read_hits = 0
+    anneal_us = []
+    for rep in range(repetitions):
+        start = time.perf_counter()
+        result = backend.solve(problem, time_limit_s=time_limit_s, seed=seed + rep,
+                               options=options)
+        times.append(time.perf_counter() - start)
+        ok, _ = check_selection(problem, result.selected)
+        if not ok:
+            invalid += 1
+            continue
+        objective = problem.objective(result.selected)
+        best = max(best, objective)
+        hits += _reaches(objective, optimum)
+        if "optimal_fraction" in result.stats:
+            read_fractions.append(float(result.stats["optimal_fraction"]))
+            reads = int(result.stats.get("reads", 0))
+            reads_total += reads
+            read_hits += int(round(float(result.stats["optimal_fraction"]) * reads))
+        if "qpu_anneal_time_per_sample_us" in result.stats:
+            anneal_us.append(float(result.stats["qpu_anneal_time_per_sample_us"]))
+    return {"times": times, "hits": hits, "invalid": invalid, "best": best,
+            "read_fractions": read_fractions, "reads_total": reads_total, "read_hits": read_hits,
+            "anneal_us": anneal_us}
+
+
+def _tts_row(entry: CorpusEntry, optimum: float, name: str, calls: dict, repetitions: int,
+             num_reads: int, deterministic: bool) -> TtsRow:
+    """The TTS row of backend ``name`` on ``entry`` from its repeated ``calls``: the mean call
+    time t_c [s], the share of calls at the optimum, TTS(0.99) [s] by its rule, and per read."""
+    problem = entry.problem
+    t_c = float(np.mean(calls["times"]))
+    p_opt = calls["hits"] / repetitions
+    tts, rule = time_to_solution(t_c, p_opt, deterministic=deterministic)
+    per_read = _per_read(calls["reads_total"], calls["read_hits"], calls["times"], calls["anneal_us"])
+    read_fractions = calls["read_fractions"]
+    return TtsRow(
+        instance=entry.name, n_vertices=problem.n, n_edges=len(problem.all_edges()),
+        backend=name, repetitions=repetitions,
+        num_reads=num_reads if name in ANNEALING_BACKENDS else None,
+        t_c_s=t_c, p_opt=p_opt, tts99_s=tts,
+        reached=rule not in ("not reached", "deterministic miss penalty"),
+        rule=rule, optimum=float(optimum), best_objective=float(calls["best"]),
+        read_opt_fraction=float(np.mean(read_fractions)) if read_fractions else None,
+        invalid_runs=calls["invalid"], **per_read)
+
+
 def run_study(entries: Sequence[CorpusEntry], backends: Sequence[str], repetitions: int,
               num_reads: int = DEFAULT_STUDY_NUM_READS, time_limit_s: float = 60.0,
               seed: int = 0, optimum_time_limit_s: float = 600.0,
@@ -267,41 +321,9 @@ def run_study(entries: Sequence[CorpusEntry], backends: Sequence[str], repetitio
             if name not in warmed:  # imports and one-time set-up are not part of t_c
                 backend.solve(problem, time_limit_s=time_limit_s, seed=seed, options=options)
                 warmed.add(name)
-            times, hits, invalid, best, read_fractions = [], 0, 0, -math.inf, []
-            reads_total = read_hits = 0
-            anneal_us = []
-            for rep in range(repetitions):
-                start = time.perf_counter()
-                result = backend.solve(problem, time_limit_s=time_limit_s, seed=seed + rep,
-                                       options=options)
-                times.append(time.perf_counter() - start)
-                ok, _ = check_selection(problem, result.selected)
-                if not ok:
-                    invalid += 1
-                    continue
-                objective = problem.objective(result.selected)
-                best = max(best, objective)
-                hits += _reaches(objective, optimum)
-                if "optimal_fraction" in result.stats:
-                    read_fractions.append(float(result.stats["optimal_fraction"]))
-                    reads = int(result.stats.get("reads", 0))
-                    reads_total += reads
-                    read_hits += int(round(float(result.stats["optimal_fraction"]) * reads))
-                if "qpu_anneal_time_per_sample_us" in result.stats:
-                    anneal_us.append(float(result.stats["qpu_anneal_time_per_sample_us"]))
-            t_c = float(np.mean(times))
-            p_opt = hits / repetitions
-            tts, rule = time_to_solution(t_c, p_opt, deterministic=name in deterministic)
-            per_read = _per_read(reads_total, read_hits, times, anneal_us)
-            rows.append(TtsRow(
-                instance=entry.name, n_vertices=problem.n, n_edges=len(problem.all_edges()),
-                backend=name, repetitions=repetitions,
-                num_reads=num_reads if name in ANNEALING_BACKENDS else None,
-                t_c_s=t_c, p_opt=p_opt, tts99_s=tts,
-                reached=rule not in ("not reached", "deterministic miss penalty"),
-                rule=rule, optimum=float(optimum), best_objective=float(best),
-                read_opt_fraction=float(np.mean(read_fractions)) if read_fractions else None,
-                invalid_runs=invalid, **per_read))
+            calls = _repeated_calls(problem, backend, options, optimum, repetitions, time_limit_s, seed)
+            rows.append(_tts_row(entry, optimum, name, calls, repetitions, num_reads,
+                                 name in deterministic))
         if (index + 1) % 10 == 0 or index + 1 == len(entries):
             log(f"[{index + 1}/{len(entries)}] instances done")
     return rows, skipped
