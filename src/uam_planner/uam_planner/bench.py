@@ -325,7 +325,8 @@ def _commit() -> str:
         return "unknown"
 
 
-def main(argv=None) -> int:
+def _parser() -> argparse.ArgumentParser:
+    """The command line: the size of each phase's scenario and which phases to skip."""
     ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.split("\n\n")[0])
     ap.add_argument("--network", help="paper-scale network file (default config/networks/singapore.yaml)")
     ap.add_argument("--paper-epochs", type=int, default=120)
@@ -344,80 +345,111 @@ def main(argv=None) -> int:
     ap.add_argument("--constraint-segments", type=int, default=200_000)
     ap.add_argument("--skip", action="append", default=[],
                     choices=["paper", "city", "kernel", "graph", "constraints"])
-    args = ap.parse_args(argv)
+    return ap
+
+
+def _paper_phase(args) -> None:
+    """The paper-scale scenario with routes precomputed and on demand, each the best of
+    ``--paper-repeats`` runs by median cycle [ms]; then the scenario's sizes."""
+    path = _find_network(args.network)
+
+    def best_run(precompute: bool):
+        # The same seeded scenario run several times; keep the run with the lowest median
+        # cycle (other processes on shared cores only ever add time).
+        best = None
+        for _ in range(max(1, args.paper_repeats)):
+            t = time.perf_counter()
+            net, reps = paper_scale(path, args.paper_epochs, 10, args.seed, precompute=precompute)
+            t_setup = time.perf_counter() - t - sum(r.planning_time_s + r.solve_time_s
+                                                    for r in reps)
+            warm = reps[10:] if len(reps) > 20 else reps
+            med = statistics.median(r.planning_time_s for r in warm)
+            if best is None or med < best[0]:
+                best = (med, net, warm, t_setup)
+        return best[1:]
+
+    net, warm, t_pre = best_run(True)
+    print(_phase_row("paper, routes precomputed", warm))
+    _, warm_od, _ = best_run(False)
+    print(_phase_row("paper, routes on demand", warm_od))
+    act = [r.active_flights for r in warm]
+    cand = [r.candidates for r in warm]
+    print(f"  paper scale: {net.name}, {len(net.node_ids)} nodes, {len(net.aerodrome_ids)} "
+          f"aerodromes; {len(warm)} epochs after warm-up (best of {args.paper_repeats} runs); active flights median "
+          f"{statistics.median(act):.0f} (max {max(act)}); candidates/epoch median "
+          f"{statistics.median(cand):.0f}; route precompute for all "
+          f"{len(net.aerodrome_ids) * (len(net.aerodrome_ids) - 1)} aerodrome pairs took "
+          f"about {t_pre:.2f} s once; target median cycle < 20 ms")
+
+
+def _city_phase(args) -> None:
+    """The city-scale scenario: the first epoch (cold cache) and the others (warm), in ms."""
+    net, reps = city_scale(args.city_nodes, args.city_aerodromes, args.city_active,
+                           args.city_requests, args.city_epochs, args.seed)
+    print(_phase_row("city cold cache (ep 0)", reps[:1]))
+    if len(reps) > 1:
+        print(_phase_row("city warm cache (ep>=1)", reps[1:]))
+    r = reps[-1]
+    print(f"  city scale: {net.name}, {len(net.node_ids)} nodes, {net.n_edges} corridors; "
+          f"{args.city_requests} requests/epoch, active flights at plan "
+          f"{reps[0].active_flights - reps[0].approved}; last epoch: {r.candidates} candidates, "
+          f"{r.discarded} discarded, {r.conflict_edges} conflict edges; target cycle < 1 s")
+
+
+def _kernel_phase(args) -> None:
+    """The pair-distance kernel's throughput, segment pairs per second by wall and CPU time."""
+    rate, rate_cpu = kernel_throughput(args.kernel_pairs, 7, args.seed)
+    print(f"  kernel: segment_pair_min_distance {rate / 1e6:.1f} million exact segment-pair "
+          f"checks/s by wall time, {rate_cpu / 1e6:.1f} million/s by CPU time "
+          f"({args.kernel_pairs} pairs per call, best of 7); target >= 5 million/s")
+
+
+def _graph_phase(args) -> None:
+    """The conflict graph's build time against the airborne flights, median of the repeats [ms]
+    and its parts."""
+    reps, net = graph_scale(args.city_nodes, args.city_aerodromes, args.graph_active,
+                            args.graph_candidates, args.graph_repeats, args.seed)
+    med = lambda k: 1e3 * statistics.median(r[k] for r in reps)  # noqa: E731
+    r = reps[-1]
+    print(f"  graph scale: {net.name}, {r['requests']} requests, {r['candidates']} candidates "
+          f"against {args.graph_active} airborne flights (cylinder 100/30 m, 5 s slots): "
+          f"conflict graph built in median {med('build_s'):.0f} ms (deconfliction "
+          f"{med('deconfliction_s'):.0f}, conflicts {med('conflicts_s'):.0f}, graph "
+          f"{med('graph_s'):.0f}; best {1e3 * min(x['build_s'] for x in reps):.0f} ms, "
+          f"{args.graph_repeats} repeats; cpu incl. trajectories median {med('cpu_s'):.0f} ms); "
+          f"trajectories {med('trajectories_s'):.0f} ms, active index {med('index_s'):.1f} ms; "
+          f"{r['discarded']} discarded, {r['vertices']} vertices, {r['edges']} edges "
+          f"({r['conflict_edges']} conflict edges); target median < 1 s")
+
+
+def _constraints_phase(args) -> None:
+    """The airspace constraints: the prism entry kernel's throughput per case, then the
+    planner's filter of candidates against a square and a vertiport closure [ms]."""
+    for label, rate, rate_cpu in constraint_throughput(args.constraint_segments, 5, args.seed):
+        print(f"  constraints: prism_entry_times, {label}: {rate / 1e6:.2f} million segment-prism "
+              f"checks/s by wall time, {rate_cpu / 1e6:.2f} million/s by CPU time "
+              f"({args.constraint_segments} segments in the bounding box, best of 5)")
+    med_s, n_c, n_s, n_ref, n_lost = constraint_filter(args.city_nodes, args.city_aerodromes,
+                                                       args.graph_candidates, 5, args.seed)
+    print(f"  constraints: planner filter on {n_c} candidates ({n_s} segments) against a 2 km "
+          f"square and a vertiport closure: median {1e3 * med_s:.0f} ms of 5 (trajectories "
+          f"included); {n_ref} candidates refused, {n_lost} requests lost every candidate")
+
+
+#: the phases in the order they run, by their --skip names
+_PHASES = (("paper", _paper_phase), ("city", _city_phase), ("kernel", _kernel_phase),
+           ("graph", _graph_phase), ("constraints", _constraints_phase))
+
+
+def main(argv=None) -> int:
+    args = _parser().parse_args(argv)
 
     print(f"machine: {_machine()}; commit {_commit()}; load average at start "
           f"{os.getloadavg()[0]:.2f} (wall times grow when other processes share the cores)")
     print(_header())
-    if "paper" not in args.skip:
-        path = _find_network(args.network)
-        def best_run(precompute: bool):
-            # The same seeded scenario run several times; keep the run with the lowest median
-            # cycle (other processes on shared cores only ever add time).
-            best = None
-            for _ in range(max(1, args.paper_repeats)):
-                t = time.perf_counter()
-                net, reps = paper_scale(path, args.paper_epochs, 10, args.seed, precompute=precompute)
-                t_setup = time.perf_counter() - t - sum(r.planning_time_s + r.solve_time_s
-                                                        for r in reps)
-                warm = reps[10:] if len(reps) > 20 else reps
-                med = statistics.median(r.planning_time_s for r in warm)
-                if best is None or med < best[0]:
-                    best = (med, net, warm, t_setup)
-            return best[1:]
-
-        net, warm, t_pre = best_run(True)
-        print(_phase_row("paper, routes precomputed", warm))
-        _, warm_od, _ = best_run(False)
-        print(_phase_row("paper, routes on demand", warm_od))
-        act = [r.active_flights for r in warm]
-        cand = [r.candidates for r in warm]
-        print(f"  paper scale: {net.name}, {len(net.node_ids)} nodes, {len(net.aerodrome_ids)} "
-              f"aerodromes; {len(warm)} epochs after warm-up (best of {args.paper_repeats} runs); active flights median "
-              f"{statistics.median(act):.0f} (max {max(act)}); candidates/epoch median "
-              f"{statistics.median(cand):.0f}; route precompute for all "
-              f"{len(net.aerodrome_ids) * (len(net.aerodrome_ids) - 1)} aerodrome pairs took "
-              f"about {t_pre:.2f} s once; target median cycle < 20 ms")
-    if "city" not in args.skip:
-        net, reps = city_scale(args.city_nodes, args.city_aerodromes, args.city_active,
-                               args.city_requests, args.city_epochs, args.seed)
-        print(_phase_row("city cold cache (ep 0)", reps[:1]))
-        if len(reps) > 1:
-            print(_phase_row("city warm cache (ep>=1)", reps[1:]))
-        r = reps[-1]
-        print(f"  city scale: {net.name}, {len(net.node_ids)} nodes, {net.n_edges} corridors; "
-              f"{args.city_requests} requests/epoch, active flights at plan "
-              f"{reps[0].active_flights - reps[0].approved}; last epoch: {r.candidates} candidates, "
-              f"{r.discarded} discarded, {r.conflict_edges} conflict edges; target cycle < 1 s")
-    if "kernel" not in args.skip:
-        rate, rate_cpu = kernel_throughput(args.kernel_pairs, 7, args.seed)
-        print(f"  kernel: segment_pair_min_distance {rate / 1e6:.1f} million exact segment-pair "
-              f"checks/s by wall time, {rate_cpu / 1e6:.1f} million/s by CPU time "
-              f"({args.kernel_pairs} pairs per call, best of 7); target >= 5 million/s")
-    if "graph" not in args.skip:
-        reps, net = graph_scale(args.city_nodes, args.city_aerodromes, args.graph_active,
-                                args.graph_candidates, args.graph_repeats, args.seed)
-        med = lambda k: 1e3 * statistics.median(r[k] for r in reps)  # noqa: E731
-        r = reps[-1]
-        print(f"  graph scale: {net.name}, {r['requests']} requests, {r['candidates']} candidates "
-              f"against {args.graph_active} airborne flights (cylinder 100/30 m, 5 s slots): "
-              f"conflict graph built in median {med('build_s'):.0f} ms (deconfliction "
-              f"{med('deconfliction_s'):.0f}, conflicts {med('conflicts_s'):.0f}, graph "
-              f"{med('graph_s'):.0f}; best {1e3 * min(x['build_s'] for x in reps):.0f} ms, "
-              f"{args.graph_repeats} repeats; cpu incl. trajectories median {med('cpu_s'):.0f} ms); "
-              f"trajectories {med('trajectories_s'):.0f} ms, active index {med('index_s'):.1f} ms; "
-              f"{r['discarded']} discarded, {r['vertices']} vertices, {r['edges']} edges "
-              f"({r['conflict_edges']} conflict edges); target median < 1 s")
-    if "constraints" not in args.skip:
-        for label, rate, rate_cpu in constraint_throughput(args.constraint_segments, 5, args.seed):
-            print(f"  constraints: prism_entry_times, {label}: {rate / 1e6:.2f} million segment-prism "
-                  f"checks/s by wall time, {rate_cpu / 1e6:.2f} million/s by CPU time "
-                  f"({args.constraint_segments} segments in the bounding box, best of 5)")
-        med_s, n_c, n_s, n_ref, n_lost = constraint_filter(args.city_nodes, args.city_aerodromes,
-                                                           args.graph_candidates, 5, args.seed)
-        print(f"  constraints: planner filter on {n_c} candidates ({n_s} segments) against a 2 km "
-              f"square and a vertiport closure: median {1e3 * med_s:.0f} ms of 5 (trajectories "
-              f"included); {n_ref} candidates refused, {n_lost} requests lost every candidate")
+    for name, phase in _PHASES:
+        if name not in args.skip:
+            phase(args)
     return 0
 
 
