@@ -151,84 +151,23 @@ class Network:
         names = tuple("" if s is None else str(s) for s in self.names)
         if len(names) != n:
             raise NetworkError(f"names: {len(names)} entries for {n} nodes")
-        index: dict[str, int] = {}
-        for i, node_id in enumerate(node_ids):
-            if not isinstance(node_id, str) or not node_id:
-                raise NetworkError(f"node_ids[{i}]: {node_id!r} is not a non-empty string")
-            if node_id in index:
-                raise NetworkError(
-                    f"node_ids[{i}]: {node_id!r} duplicates node_ids[{index[node_id]}]")
-            index[node_id] = i
+        index = _node_index(node_ids)
         is_aerodrome = np.array(self.is_aerodrome, dtype=bool).reshape(-1)
         if is_aerodrome.shape != (n,):
             raise NetworkError(f"is_aerodrome: shape {is_aerodrome.shape}, expected ({n},)")
         lla = np.array(self.lat_lon_alt, dtype=np.float64)
         enu = np.array(self.enu_m, dtype=np.float64)
-        for fname, arr in (("lat_lon_alt", lla), ("enu_m", enu)):
-            if arr.shape != (n, 3):
-                raise NetworkError(f"{fname}: shape {arr.shape}, expected ({n}, 3)")
-            bad = np.argwhere(~np.isfinite(arr))
-            if len(bad):
-                i, j = bad[0]
-                raise NetworkError(
-                    f"{fname}[{i}] (id {node_ids[i]!r}): {arr[i].tolist()} is not finite")
+        _check_coordinates(node_ids, lla, enu)
         origin = tuple(float(v) for v in self.origin_lat_lon_alt)
         if len(origin) != 3 or not all(math.isfinite(v) for v in origin):
             raise NetworkError(f"origin_lat_lon_alt: {self.origin_lat_lon_alt!r} is not 3 finite numbers")
         edges = np.array(self.edges, dtype=np.int64).reshape(-1, 2) if len(self.edges) else \
             np.zeros((0, 2), dtype=np.int64)
-        m = len(edges)
-        if m:
-            bad = np.flatnonzero((edges < 0).any(axis=1) | (edges >= n).any(axis=1))
-            if len(bad):
-                raise NetworkError(f"edges[{bad[0]}]: {edges[bad[0]].tolist()} has a node index "
-                                   f"outside [0, {n - 1}]")
-            bad = np.flatnonzero(edges[:, 0] >= edges[:, 1])
-            if len(bad):
-                u, v = edges[bad[0]]
-                what = "is a self loop" if u == v else "is not ordered u < v"
-                raise NetworkError(f"edges[{bad[0]}] ({node_ids[u]!r}-{node_ids[v]!r}): "
-                                   f"{[int(u), int(v)]} {what}")
-            order = np.lexsort((edges[:, 1], edges[:, 0]))
-            if np.any(order != np.arange(m)):
-                raise NetworkError("edges: not sorted lexicographically by (u, v)")
-            dup = np.flatnonzero((np.diff(edges, axis=0) == 0).all(axis=1))
-            if len(dup):
-                u, v = edges[dup[0] + 1]
-                raise NetworkError(f"edges[{dup[0] + 1}] ({node_ids[u]!r}-{node_ids[v]!r}): "
-                                   f"duplicate corridor")
+        _check_edges(edges, node_ids)
         edges = edges.astype(np.int32)
         length = np.array(self.edge_length_m, dtype=np.float64).reshape(-1)
-        if length.shape != (m,):
-            raise NetworkError(f"edge_length_m: shape {length.shape}, expected ({m},)")
-        expected = np.linalg.norm(enu[edges[:, 1]] - enu[edges[:, 0]], axis=1) if m else length
-        if m and not np.allclose(length, expected, rtol=1e-9, atol=1e-6):
-            k = int(np.argmax(np.abs(length - expected)))
-            raise NetworkError(f"edge_length_m[{k}]: {length[k]} differs from the ENU distance "
-                               f"{expected[k]}")
-        short = np.flatnonzero(length < MIN_CORRIDOR_LENGTH_M)
-        if len(short):
-            u, v = edges[short[0]]
-            raise NetworkError(
-                f"edges[{short[0]}] ({node_ids[u]!r}-{node_ids[v]!r}): zero-length corridor "
-                f"({length[short[0]]:.3g} m; end points coincide)")
-
-        aerodrome_indices = np.flatnonzero(is_aerodrome).astype(np.int64)
-        if len(aerodrome_indices) < 2:
-            raise NetworkError(
-                f"is_aerodrome: {len(aerodrome_indices)} aerodrome(s); at least 2 are needed")
-        adjacency = scipy.sparse.csr_array(
-            (np.concatenate([length, length]),
-             (np.concatenate([edges[:, 0], edges[:, 1]]), np.concatenate([edges[:, 1], edges[:, 0]]))),
-            shape=(n, n))
-        _, labels = scipy.sparse.csgraph.connected_components(adjacency, directed=False)
-        a_labels = labels[aerodrome_indices]
-        off = np.flatnonzero(a_labels != a_labels[0])
-        if len(off):
-            a, b = node_ids[aerodrome_indices[0]], node_ids[aerodrome_indices[off[0]]]
-            raise NetworkError(f"corridors: aerodromes {a!r} and {b!r} cannot reach each other "
-                               f"({len(off)} of {len(aerodrome_indices)} aerodromes are not "
-                               f"connected to {a!r})")
+        _check_lengths(length, edges, enu, node_ids)
+        aerodrome_indices, adjacency = _connected_aerodromes(is_aerodrome, edges, length, node_ids)
 
         zones = tuple(self.no_fly_zones)
         _check_no_fly_zones(zones, node_ids, enu, edges, origin)
@@ -389,6 +328,100 @@ def _segment_point_distance_xy(a: np.ndarray, b: np.ndarray, p: np.ndarray) -> n
     return np.linalg.norm(a + t[:, None] * d - p, axis=1)
 
 
+def _node_index(node_ids: tuple) -> dict[str, int]:
+    """Node id -> index; raises NetworkError on an id that is not a non-empty string or repeats."""
+    index: dict[str, int] = {}
+    for i, node_id in enumerate(node_ids):
+        if not isinstance(node_id, str) or not node_id:
+            raise NetworkError(f"node_ids[{i}]: {node_id!r} is not a non-empty string")
+        if node_id in index:
+            raise NetworkError(
+                f"node_ids[{i}]: {node_id!r} duplicates node_ids[{index[node_id]}]")
+        index[node_id] = i
+    return index
+
+
+def _check_coordinates(node_ids: tuple, lla: np.ndarray, enu: np.ndarray) -> None:
+    """Raises NetworkError unless the geodetic (deg, deg, m) and ENU [m] coordinates are one
+    finite row of 3 per node."""
+    n = len(node_ids)
+    for fname, arr in (("lat_lon_alt", lla), ("enu_m", enu)):
+        if arr.shape != (n, 3):
+            raise NetworkError(f"{fname}: shape {arr.shape}, expected ({n}, 3)")
+        bad = np.argwhere(~np.isfinite(arr))
+        if len(bad):
+            i, j = bad[0]
+            raise NetworkError(
+                f"{fname}[{i}] (id {node_ids[i]!r}): {arr[i].tolist()} is not finite")
+
+
+def _check_edges(edges: np.ndarray, node_ids: tuple) -> None:
+    """Raises NetworkError unless every corridor (u, v) joins two nodes with u < v and the
+    corridors are sorted by (u, v) without a duplicate."""
+    n, m = len(node_ids), len(edges)
+    if not m:
+        return
+    bad = np.flatnonzero((edges < 0).any(axis=1) | (edges >= n).any(axis=1))
+    if len(bad):
+        raise NetworkError(f"edges[{bad[0]}]: {edges[bad[0]].tolist()} has a node index "
+                           f"outside [0, {n - 1}]")
+    bad = np.flatnonzero(edges[:, 0] >= edges[:, 1])
+    if len(bad):
+        u, v = edges[bad[0]]
+        what = "is a self loop" if u == v else "is not ordered u < v"
+        raise NetworkError(f"edges[{bad[0]}] ({node_ids[u]!r}-{node_ids[v]!r}): "
+                           f"{[int(u), int(v)]} {what}")
+    order = np.lexsort((edges[:, 1], edges[:, 0]))
+    if np.any(order != np.arange(m)):
+        raise NetworkError("edges: not sorted lexicographically by (u, v)")
+    dup = np.flatnonzero((np.diff(edges, axis=0) == 0).all(axis=1))
+    if len(dup):
+        u, v = edges[dup[0] + 1]
+        raise NetworkError(f"edges[{dup[0] + 1}] ({node_ids[u]!r}-{node_ids[v]!r}): "
+                           f"duplicate corridor")
+
+
+def _check_lengths(length: np.ndarray, edges: np.ndarray, enu: np.ndarray, node_ids: tuple) -> None:
+    """Raises NetworkError unless each corridor's length [m] is its end points' ENU distance and
+    at least MIN_CORRIDOR_LENGTH_M."""
+    m = len(edges)
+    if length.shape != (m,):
+        raise NetworkError(f"edge_length_m: shape {length.shape}, expected ({m},)")
+    expected = np.linalg.norm(enu[edges[:, 1]] - enu[edges[:, 0]], axis=1) if m else length
+    if m and not np.allclose(length, expected, rtol=1e-9, atol=1e-6):
+        k = int(np.argmax(np.abs(length - expected)))
+        raise NetworkError(f"edge_length_m[{k}]: {length[k]} differs from the ENU distance "
+                           f"{expected[k]}")
+    short = np.flatnonzero(length < MIN_CORRIDOR_LENGTH_M)
+    if len(short):
+        u, v = edges[short[0]]
+        raise NetworkError(
+            f"edges[{short[0]}] ({node_ids[u]!r}-{node_ids[v]!r}): zero-length corridor "
+            f"({length[short[0]]:.3g} m; end points coincide)")
+
+
+def _connected_aerodromes(is_aerodrome: np.ndarray, edges: np.ndarray, length: np.ndarray,
+                          node_ids: tuple) -> tuple[np.ndarray, "scipy.sparse.csr_array"]:
+    """The aerodromes' node indices and the symmetric adjacency of corridor lengths [m]; raises
+    NetworkError with fewer than 2 aerodromes or one that cannot reach the first."""
+    n = len(node_ids)
+    aerodrome_indices = np.flatnonzero(is_aerodrome).astype(np.int64)
+    if len(aerodrome_indices) < 2:
+        raise NetworkError(
+            f"is_aerodrome: {len(aerodrome_indices)} aerodrome(s); at least 2 are needed")
+    adjacency = scipy.sparse.csr_array(
+        (np.concatenate([length, length]),
+         (np.concatenate([edges[:, 0], edges[:, 1]]), np.concatenate([edges[:, 1], edges[:, 0]]))),
+        shape=(n, n))
+    _, labels = scipy.sparse.csgraph.connected_components(adjacency, directed=False)
+    a_labels = labels[aerodrome_indices]
+    off = np.flatnonzero(a_labels != a_labels[0])
+    if len(off):
+        a, b = node_ids[aerodrome_indices[0]], node_ids[aerodrome_indices[off[0]]]
+        raise NetworkError(f"corridors: aerodromes {a!r} and {b!r} cannot reach each other "
+                           f"({len(off)} of {len(aerodrome_indices)} aerodromes are not "
+                           f"connected to {a!r})")
+    return aerodrome_indices, adjacency
 def _check_no_fly_zones(zones: Sequence[NoFlyZone], node_ids: Sequence[str], enu: np.ndarray,
                         edges: np.ndarray, origin: tuple[float, float, float]) -> None:
     """Raise NetworkError if a node lies inside, or a corridor crosses, a no-fly zone. O(z (n+m))."""
