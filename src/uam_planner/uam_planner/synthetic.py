@@ -63,6 +63,55 @@ def pad_offsets_m(n_pads: int, spacing_m: float = 150.0) -> list[list[float]]:
     return [[float(radius * math.cos(a)), float(radius * math.sin(a))] for a in ang]
 
 
+def _check_arguments(n_nodes, n_aerodromes, seed, pads_per_vertiport, levels_m, pad_spacing_m,
+                     cruise_alt_m) -> None:
+    """Raises NetworkError naming the first of :func:`generate_network`'s arguments that is
+    not an integer or a positive finite number where one is needed, or out of range."""
+    for label, value in (("n_nodes", n_nodes), ("n_aerodromes", n_aerodromes), ("seed", seed)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+            raise NetworkError(f"{label}: {value!r} is not an integer")
+    if n_aerodromes < 2:
+        raise NetworkError(f"n_aerodromes: {n_aerodromes} is below the minimum 2")
+    if n_nodes < n_aerodromes + 1:
+        raise NetworkError(f"n_nodes: {n_nodes} must exceed n_aerodromes ({n_aerodromes}) by at "
+                           f"least 1 corridor node")
+    if isinstance(pads_per_vertiport, bool) or not isinstance(pads_per_vertiport, (int, np.integer)) \
+            or pads_per_vertiport < 1:
+        raise NetworkError(f"pads_per_vertiport: {pads_per_vertiport!r} is not an integer >= 1")
+    if pads_per_vertiport > 1 and not levels_m:
+        raise NetworkError(f"pads_per_vertiport: {pads_per_vertiport} pads need levels_m "
+                           f"(a layered network)")
+    if not (isinstance(pad_spacing_m, (int, float)) and math.isfinite(pad_spacing_m)
+            and pad_spacing_m > 0):
+        raise NetworkError(f"pad_spacing_m: {pad_spacing_m!r} is not a positive finite number")
+    if not (isinstance(cruise_alt_m, (int, float)) and math.isfinite(cruise_alt_m)
+            and cruise_alt_m > 0):
+        raise NetworkError(f"cruise_alt_m: {cruise_alt_m!r} is not a positive finite number")
+
+
+def _corridor_points(rng: np.random.Generator, n_corridor: int, k: int, spacing_m: float,
+                     extent_m: float) -> np.ndarray:
+    """The corridor way points' east/north [m]: one per cell, picked at random, of a k x k grid
+    of ``spacing_m`` centred on the origin, jittered by up to 0.3 spacings."""
+    cells = np.sort(rng.choice(k * k, size=n_corridor, replace=False))
+    cx, cy = cells % k, cells // k
+    jitter = rng.uniform(-0.3, 0.3, size=(n_corridor, 2))
+    return (np.stack([cx, cy], axis=1) + 0.5 + jitter) * spacing_m - extent_m / 2.0
+
+
+def _aerodrome_access(rng: np.random.Generator, xy: np.ndarray, n_aerodromes: int,
+                      extent_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """The aerodromes' east/north [m], uniform over the square, and their access corridors
+    (aerodrome index, node index) to the nearest corridor way points (numbered after them)."""
+    a_xy = rng.uniform(-extent_m / 2.0, extent_m / 2.0, size=(n_aerodromes, 2))
+    n_links = min(_AERODROME_LINKS, len(xy))
+    _, nearest = cKDTree(xy).query(a_xy, k=n_links)
+    nearest = np.asarray(nearest).reshape(n_aerodromes, n_links)
+    access = np.stack([np.repeat(np.arange(n_aerodromes), n_links),
+                       nearest.reshape(-1) + n_aerodromes], axis=1)
+    return a_xy, access
+
+
 def generate_network(n_nodes: int, n_aerodromes: int, seed: int, extent_m: float | None = None,
                      cruise_alt_m: float = 120.0, name: str | None = None,
                      origin_lat_lon_alt=DEFAULT_ENU_ORIGIN, levels_m=None,
@@ -94,26 +143,8 @@ def generate_network(n_nodes: int, n_aerodromes: int, seed: int, extent_m: float
     Euclidean minimum spanning tree; each aerodrome is joined to its 2 nearest corridor nodes.
     Raises NetworkError on bad arguments. O(n log n).
     """
-    for label, value in (("n_nodes", n_nodes), ("n_aerodromes", n_aerodromes), ("seed", seed)):
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-            raise NetworkError(f"{label}: {value!r} is not an integer")
-    if n_aerodromes < 2:
-        raise NetworkError(f"n_aerodromes: {n_aerodromes} is below the minimum 2")
-    if n_nodes < n_aerodromes + 1:
-        raise NetworkError(f"n_nodes: {n_nodes} must exceed n_aerodromes ({n_aerodromes}) by at "
-                           f"least 1 corridor node")
-    if isinstance(pads_per_vertiport, bool) or not isinstance(pads_per_vertiport, (int, np.integer)) \
-            or pads_per_vertiport < 1:
-        raise NetworkError(f"pads_per_vertiport: {pads_per_vertiport!r} is not an integer >= 1")
-    if pads_per_vertiport > 1 and not levels_m:
-        raise NetworkError(f"pads_per_vertiport: {pads_per_vertiport} pads need levels_m "
-                           f"(a layered network)")
-    if not (isinstance(pad_spacing_m, (int, float)) and math.isfinite(pad_spacing_m)
-            and pad_spacing_m > 0):
-        raise NetworkError(f"pad_spacing_m: {pad_spacing_m!r} is not a positive finite number")
-    if not (isinstance(cruise_alt_m, (int, float)) and math.isfinite(cruise_alt_m)
-            and cruise_alt_m > 0):
-        raise NetworkError(f"cruise_alt_m: {cruise_alt_m!r} is not a positive finite number")
+    _check_arguments(n_nodes, n_aerodromes, seed, pads_per_vertiport, levels_m, pad_spacing_m,
+                     cruise_alt_m)
     n_corridor = int(n_nodes - n_aerodromes)
     k = max(1, math.ceil(math.sqrt(n_corridor)))
     if extent_m is None:
@@ -122,19 +153,9 @@ def generate_network(n_nodes: int, n_aerodromes: int, seed: int, extent_m: float
         raise NetworkError(f"extent_m: {extent_m!r} is not a positive finite number")
     spacing_m = float(extent_m) / k
     rng = np.random.default_rng(seed)
-
-    cells = np.sort(rng.choice(k * k, size=n_corridor, replace=False))
-    cx, cy = cells % k, cells // k
-    jitter = rng.uniform(-0.3, 0.3, size=(n_corridor, 2))
-    xy = (np.stack([cx, cy], axis=1) + 0.5 + jitter) * spacing_m - extent_m / 2.0
+    xy = _corridor_points(rng, n_corridor, k, spacing_m, extent_m)
     corridor_edges = _corridor_edges(xy, spacing_m) + n_aerodromes
-
-    a_xy = rng.uniform(-extent_m / 2.0, extent_m / 2.0, size=(n_aerodromes, 2))
-    n_links = min(_AERODROME_LINKS, n_corridor)
-    _, nearest = cKDTree(xy).query(a_xy, k=n_links)
-    nearest = np.asarray(nearest).reshape(n_aerodromes, n_links)
-    access = np.stack([np.repeat(np.arange(n_aerodromes), n_links),
-                       nearest.reshape(-1) + n_aerodromes], axis=1)
+    a_xy, access = _aerodrome_access(rng, xy, n_aerodromes, extent_m)
 
     enu = np.zeros((n_nodes, 3))
     enu[:n_aerodromes, :2] = a_xy
