@@ -126,6 +126,85 @@ def _as_index_array(values: Any, field_name: str, n: int) -> np.ndarray:
     return idx
 
 
+def _checked_weights(weights: Any, max_vertices: int | None) -> np.ndarray:
+    """``weights`` as a 1-D float64 array; raises MwisInputError naming the first weight that is
+    not finite or negative, a size over ``max_vertices``, or a total that could overflow."""
+    try:
+        w = np.asarray(weights, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise MwisInputError(f"weights: not numeric ({exc})") from None
+    if w.ndim != 1:
+        raise MwisInputError(f"weights: expected a 1-D array, got shape {w.shape}")
+    n = int(w.shape[0])
+    if max_vertices is not None and n > max_vertices:
+        raise MwisInputError(f"weights: {n} vertices exceed the limit max_vertices={max_vertices}")
+    if n:
+        i = int(np.argmax(w))  # (a NaN is its own maximum: it fails the test below)
+        wmax = float(w[i])
+    # all finite and >= 0 (a NaN fails both comparisons): one reduction and the maximum;
+    # otherwise the passes below name the first bad weight (~3 us of a small solve)
+    if n and not (float(w.min()) >= 0.0 and math.isfinite(wmax)):
+        bad = ~np.isfinite(w)
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise MwisInputError(f"weights[{i}]: {float(w[i])!r} is not finite")
+        bad = w < 0
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise MwisInputError(f"weights[{i}]: {float(w[i])!r} is negative")
+    if n:
+        # Objectives are float64 sums: refuse weights whose total could overflow (scaled
+        # sum, so the check itself cannot overflow).
+        if wmax > 0 and wmax * float(np.sum(w / wmax)) > MAX_TOTAL_WEIGHT:
+            raise MwisInputError(
+                f"weights[{i}]: {wmax!r} is too large: the total weight must stay below "
+                f"{MAX_TOTAL_WEIGHT:g} (rescale the weights)")
+    return w
+
+
+def _normalised_keys(e: np.ndarray, n: int) -> np.ndarray | None:
+    """The keys u * n + v [int64] of integer edges ``e`` that are already normalised (in range,
+    u < v, strictly increasing keys), else None (the edges need the full checks)."""
+    keys = None
+    if e.dtype.kind in "iu" and e.shape[0] and n < 2**31:
+        # already normalised (the planner's edges, every MwisProblem's own): in range, u < v
+        # and strictly increasing keys u * n + v (sorted, unique; u[0] >= 0 then bounds
+        # every u), checked in the caller's dtype; the keys are kept for the CSR, the
+        # listed-groups check and the triangle gate (~4 passes over the pairs
+        # instead of ~15)
+        u, v = e[:, 0], e[:, 1]
+        if int(u[0]) >= 0 and int(v.max()) < n and bool((u < v).all()):
+            keys = u.astype(np.int64) * n + v.astype(np.int64)
+            if keys.size > 1 and not bool((keys[1:] > keys[:-1]).all()):
+                keys = None
+    return keys
+
+
+def _checked_edges(e: np.ndarray, n: int) -> np.ndarray:
+    """Edges ``e`` (m, 2) as int64 vertex indices; raises MwisInputError naming the first pair
+    that is not integer, has a vertex outside [0, n) or is a self-loop."""
+    if e.dtype.kind == "i" and e.size and int(e.min()) >= 0 and int(e.max()) < n:
+        # signed integers all in range (the planner's edges): nothing to report, so no
+        # per-element mask (two reductions instead of four array passes)
+        e64, bad = e.astype(np.int64, copy=False), None
+    else:
+        e64, bad2 = _index_values(e, "edges", n)
+        bad = bad2.any(axis=1)
+    if bad is not None and bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        pair = repr(tuple(e[i].tolist()))
+        if e.dtype.kind in "fO" and any(
+                isinstance(v, (float, np.floating)) and (not math.isfinite(v) or v != round(v))
+                for v in e[i].tolist()):
+            raise MwisInputError(f"edges[{i}]: {pair} is not a pair of integer vertex indices")
+        raise MwisInputError(f"edges[{i}]: {pair} has a vertex out of range [0, {n})")
+    loops = e64[:, 0] == e64[:, 1]
+    if loops.any():
+        i = int(np.flatnonzero(loops)[0])
+        raise MwisInputError(f"edges[{i}]: ({int(e64[i, 0])}, {int(e64[i, 1])}) is a self-loop")
+    return e64
+
+
 @dataclass(frozen=True, eq=False)
 class MwisProblem:
     """A validated MWIS instance (a conflict graph).
@@ -161,80 +240,21 @@ class MwisProblem:
         ``max_vertices`` an optional size limit on n.
         Raises :class:`MwisInputError` naming the field and value. O(m log m + sum |group|).
         """
-        try:
-            w = np.asarray(weights, dtype=np.float64)
-        except (TypeError, ValueError) as exc:
-            raise MwisInputError(f"weights: not numeric ({exc})") from None
-        if w.ndim != 1:
-            raise MwisInputError(f"weights: expected a 1-D array, got shape {w.shape}")
+        w = _checked_weights(weights, max_vertices)
         n = int(w.shape[0])
-        if max_vertices is not None and n > max_vertices:
-            raise MwisInputError(f"weights: {n} vertices exceed the limit max_vertices={max_vertices}")
-        if n:
-            i = int(np.argmax(w))  # (a NaN is its own maximum: it fails the test below)
-            wmax = float(w[i])
-        # all finite and >= 0 (a NaN fails both comparisons): one reduction and the maximum;
-        # otherwise the passes below name the first bad weight (~3 us of a small solve)
-        if n and not (float(w.min()) >= 0.0 and math.isfinite(wmax)):
-            bad = ~np.isfinite(w)
-            if bad.any():
-                i = int(np.flatnonzero(bad)[0])
-                raise MwisInputError(f"weights[{i}]: {float(w[i])!r} is not finite")
-            bad = w < 0
-            if bad.any():
-                i = int(np.flatnonzero(bad)[0])
-                raise MwisInputError(f"weights[{i}]: {float(w[i])!r} is negative")
-        if n:
-            # Objectives are float64 sums: refuse weights whose total could overflow (scaled
-            # sum, so the check itself cannot overflow).
-            if wmax > 0 and wmax * float(np.sum(w / wmax)) > MAX_TOTAL_WEIGHT:
-                raise MwisInputError(
-                    f"weights[{i}]: {wmax!r} is too large: the total weight must stay below "
-                    f"{MAX_TOTAL_WEIGHT:g} (rescale the weights)")
-
         e = _edge_array(edges)
         if e.size == 0:
             e = np.zeros((0, 2), dtype=np.int64)
         if e.ndim != 2 or e.shape[1] != 2:
             raise MwisInputError(f"edges: expected shape (m, 2), got {e.shape}")
-        keys = None
-        if e.dtype.kind in "iu" and e.shape[0] and n < 2**31:
-            # already normalised (the planner's edges, every MwisProblem's own): in range, u < v
-            # and strictly increasing keys u * n + v (sorted, unique; u[0] >= 0 then bounds
-            # every u), checked in the caller's dtype; the keys are kept for the CSR, the
-            # listed-groups check and the triangle gate (~4 passes over the pairs
-            # instead of ~15)
-            u, v = e[:, 0], e[:, 1]
-            if int(u[0]) >= 0 and int(v.max()) < n and bool((u < v).all()):
-                keys = u.astype(np.int64) * n + v.astype(np.int64)
-                if keys.size > 1 and not bool((keys[1:] > keys[:-1]).all()):
-                    keys = None
+        keys = _normalised_keys(e, n)
         if keys is not None:
             gs = _normalise_groups(groups, n)
             problem = cls(weights=w, edges=e.astype(np.int32), groups=tuple(gs))
             keys.setflags(write=False)
             problem.__dict__["_listed_keys"] = keys  # (cached_property's slot)
             return problem
-        if e.dtype.kind == "i" and e.size and int(e.min()) >= 0 and int(e.max()) < n:
-            # signed integers all in range (the planner's edges): nothing to report, so no
-            # per-element mask (two reductions instead of four array passes)
-            e64, bad = e.astype(np.int64, copy=False), None
-        else:
-            e64, bad2 = _index_values(e, "edges", n)
-            bad = bad2.any(axis=1)
-        if bad is not None and bad.any():
-            i = int(np.flatnonzero(bad)[0])
-            pair = repr(tuple(e[i].tolist()))
-            if e.dtype.kind in "fO" and any(
-                    isinstance(v, (float, np.floating)) and (not math.isfinite(v) or v != round(v))
-                    for v in e[i].tolist()):
-                raise MwisInputError(f"edges[{i}]: {pair} is not a pair of integer vertex indices")
-            raise MwisInputError(f"edges[{i}]: {pair} has a vertex out of range [0, {n})")
-        loops = e64[:, 0] == e64[:, 1]
-        if loops.any():
-            i = int(np.flatnonzero(loops)[0])
-            raise MwisInputError(f"edges[{i}]: ({int(e64[i, 0])}, {int(e64[i, 1])}) is a self-loop")
-        norm = _normalise_edges(e64)
+        norm = _normalise_edges(_checked_edges(e, n))
 
         gs = _normalise_groups(groups, n)
         return cls(weights=w, edges=norm.astype(np.int32), groups=tuple(gs))
