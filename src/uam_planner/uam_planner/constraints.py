@@ -691,6 +691,58 @@ def _schedule_windows(schedule, lo_s: float, hi_s: float, start_ns: int, where: 
     return sorted(out)
 
 
+def _ed269_periods(z, where: str, start_ns: int) -> list[tuple[float, float]]:
+    """A zone's applicability as (start, end) windows [s of simulation]: unbounded when
+    permanent or open-ended, one window per day for a daily schedule."""
+    periods = []
+    for k, a in enumerate(z.applicability):
+        w = f"{where}.applicability[{k}]"
+        permanent = str(getattr(a.permanent, "value", a.permanent)) == "YES"
+        t0 = _utc_s(a.startDateTime, start_ns, f"{w}.startDateTime") \
+            if a.get("startDateTime") and not permanent else -math.inf
+        t1 = _utc_s(a.endDateTime, start_ns, f"{w}.endDateTime") \
+            if a.get("endDateTime") and not permanent else math.inf
+        if a.get("schedule"):
+            periods.extend(_schedule_windows(a.schedule, t0, t1, start_ns, f"{w}.schedule"))
+            continue
+        periods.append((t0, t1))
+    return periods
+
+
+def _ed269_band(vol, origin_alt: float) -> list[float]:
+    """A geometry volume's [lower, upper] limits as ENU up [m] (feet converted, AMSL less the
+    origin's altitude ``origin_alt`` [m]); a missing limit is unbounded."""
+    unit = _FT_M if str(getattr(vol.uomDimensions, "value", vol.uomDimensions)) == "FT" else 1.0
+    band = []
+    for name, ref, default in (("lowerLimit", "lowerVerticalReference", -math.inf),
+                               ("upperLimit", "upperVerticalReference", math.inf)):
+        v = vol.get(name)
+        if v is None:
+            band.append(default)
+            continue
+        z_m = float(v) * unit
+        if str(getattr(vol.get(ref), "value", vol.get(ref))) == "AMSL":
+            z_m -= origin_alt
+        band.append(z_m)
+    return band
+
+
+def _ed269_geometry(hp, network, w: str) -> dict:
+    """A horizontal projection as Constraint's keywords: a circle's ENU centre and radius [m], or
+    the polygon's rings in ENU [m] (at most MAX_VERTICES vertices)."""
+    kind = str(getattr(hp.type, "value", hp.type))
+    if kind == "Circle":
+        c = _to_enu([hp.center], "wgs84", network, f"{w}.horizontalProjection.center")[0]
+        return dict(center_m=(c[0], c[1]), radius_m=hp.radius)
+    rings = hp.coordinates or []
+    if sum(len(r) for r in rings) > MAX_VERTICES + len(rings):
+        raise ConstraintError(f"{w}.horizontalProjection.coordinates: more than the "
+                              f"{MAX_VERTICES} vertices of ASTM F3548-21 (CstrMaxVertices)")
+    return dict(rings_m=tuple(_to_enu(r, "wgs84", network,
+                                      f"{w}.horizontalProjection.coordinates[{j}]")
+                              for j, r in enumerate(rings)))
+
+
 def constraints_from_ed269(doc: Mapping, network, scenario_start_utc: str | None = None) -> list[Constraint]:
     """Constraints from an EUROCAE ED-269 UAS zone file, parsed with ``uas_standards``' types
     (``uas_standards.eurocae_ed269.ED269Schema``), where it fits this planner:
@@ -730,47 +782,13 @@ def constraints_from_ed269(doc: Mapping, network, scenario_start_utc: str | None
         reasons = ",".join(str(getattr(r, "value", r)) for r in (z.get("reason") or []))
         text = restriction + (f": {reasons}" if reasons else "") + \
             (f" / {z.message}" if z.get("message") else "")
-        periods = []
-        for k, a in enumerate(z.applicability):
-            w = f"{where}.applicability[{k}]"
-            permanent = str(getattr(a.permanent, "value", a.permanent)) == "YES"
-            t0 = _utc_s(a.startDateTime, start_ns, f"{w}.startDateTime") \
-                if a.get("startDateTime") and not permanent else -math.inf
-            t1 = _utc_s(a.endDateTime, start_ns, f"{w}.endDateTime") \
-                if a.get("endDateTime") and not permanent else math.inf
-            if a.get("schedule"):
-                periods.extend(_schedule_windows(a.schedule, t0, t1, start_ns, f"{w}.schedule"))
-                continue
-            periods.append((t0, t1))
+        periods = _ed269_periods(z, where, start_ns)
         n = len(z.geometry) * len(periods)
         for g, vol in enumerate(z.geometry):
             w = f"{where}.geometry[{g}]"
-            unit = _FT_M if str(getattr(vol.uomDimensions, "value", vol.uomDimensions)) == "FT" else 1.0
-            band = []
-            for name, ref, default in (("lowerLimit", "lowerVerticalReference", -math.inf),
-                                       ("upperLimit", "upperVerticalReference", math.inf)):
-                v = vol.get(name)
-                if v is None:
-                    band.append(default)
-                    continue
-                z_m = float(v) * unit
-                if str(getattr(vol.get(ref), "value", vol.get(ref))) == "AMSL":
-                    z_m -= origin_alt
-                band.append(z_m)
-            hp = vol.horizontalProjection
-            kind = str(getattr(hp.type, "value", hp.type))
+            band = _ed269_band(vol, origin_alt)
             try:
-                if kind == "Circle":
-                    c = _to_enu([hp.center], "wgs84", network, f"{w}.horizontalProjection.center")[0]
-                    geom = dict(center_m=(c[0], c[1]), radius_m=hp.radius)
-                else:
-                    rings = hp.coordinates or []
-                    if sum(len(r) for r in rings) > MAX_VERTICES + len(rings):
-                        raise ConstraintError(f"{w}.horizontalProjection.coordinates: more than the "
-                                              f"{MAX_VERTICES} vertices of ASTM F3548-21 (CstrMaxVertices)")
-                    geom = dict(rings_m=tuple(_to_enu(r, "wgs84", network,
-                                                      f"{w}.horizontalProjection.coordinates[{j}]")
-                                              for j, r in enumerate(rings)))
+                geom = _ed269_geometry(vol.horizontalProjection, network, w)
                 for k, (t0, t1) in enumerate(periods):
                     cid = z.identifier if n == 1 else f"{z.identifier}.{g}.{k}"
                     out.append(Constraint(cid, 0, text, t0, t1, lower_m=band[0], upper_m=band[1], **geom))
