@@ -107,6 +107,74 @@ def trajectory_of(plan: Any) -> tuple[np.ndarray, np.ndarray]:
     return times, points
 
 
+def _bounded_pairs(flights: list[tuple[np.ndarray, np.ndarray]], labels: list[str], groups,
+                   only_pairs_with, vertical_m) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """The pairs (i < j) airborne together, of different groups (and with a flagged flight when
+    ``only_pairs_with``), with the gap between their bounding boxes [m] as a lower bound on their
+    distance; with a cylinder (``vertical_m`` not None) the pairs whose boxes are ``vertical_m``
+    or more apart vertically are left out, counted as checked, and the bound is horizontal.
+    Returns (i, j, bound, pairs checked by the vertical bound alone)."""
+    n = len(flights)
+    t0 = np.array([f[0][0] for f in flights])
+    t1 = np.array([f[0][-1] for f in flights])
+    lo = np.array([f[1].min(axis=0) for f in flights])
+    hi = np.array([f[1].max(axis=0) for f in flights])
+    iu, ju = np.triu_indices(n, k=1)
+    # airborne together, and not two parts of one flight (one group: its versions in force)
+    grp = np.array([str(x) for x in (labels if groups is None else groups)], dtype=object)
+    together = (t0[iu] <= t1[ju]) & (t0[ju] <= t1[iu]) & (grp[iu] != grp[ju])
+    if only_pairs_with is not None:
+        flag = np.asarray(only_pairs_with, dtype=bool)
+        together &= flag[iu] | flag[ju]
+    iu, ju = iu[together], ju[together]
+    gap = np.maximum(0.0, np.maximum(lo[iu] - hi[ju], lo[ju] - hi[iu]))  # per axis, (k, 3)
+    checked = 0
+    if vertical_m is not None:
+        # boxes V or more apart vertically: never vertically within V, so no distance counts;
+        # such a pair is checked by that bound alone (counted as checked)
+        close = gap[:, 2] < vertical_m
+        checked = int((~close).sum())
+        iu, ju, gap = iu[close], ju[close], gap[close, :2]
+    return iu, ju, np.sqrt((gap * gap).sum(axis=1)), checked
+
+
+class _PairSearch:
+    """The exact closest approach of pairs taken in order of their lower bound [m]: the smallest
+    distance found [m] and its pair, every loss of separation [label a, label b, m, s] and the
+    pairs checked."""
+
+    def __init__(self, flights, labels, iu, ju, bound, separation_m: float, vertical_m, checked: int):
+        self.flights, self.labels = flights, labels
+        self.iu, self.ju, self.bound = iu, ju, bound
+        self.separation_m, self.vertical_m = separation_m, vertical_m
+        self.checked = checked
+        self.best, self.best_pair, self.losses = math.inf, None, []
+        # plain Python floats for the pure-Python kernel (converting numpy scalars per pair is slow)
+        self.plain: dict = {}
+
+    def flight(self, i):
+        if i not in self.plain:
+            times, points = self.flights[i]
+            self.plain[i] = ([float(t) for t in times], [tuple(map(float, p)) for p in points])
+        return self.plain[i]
+
+    def walk(self, ks) -> None:
+        """The pairs ``ks`` (indices into the pairs, in bound order) until the bound reaches both
+        the separation minimum and the smallest distance found."""
+        from uam_planner.audit import pair_min_distance
+
+        for k in ks:
+            if self.bound[k] >= self.separation_m and self.bound[k] >= self.best:
+                return
+            i, j = int(self.iu[k]), int(self.ju[k])
+            d, t = pair_min_distance(self.flight(i), self.flight(j), self.vertical_m)
+            self.checked += 1
+            if d < self.best:
+                self.best, self.best_pair = d, [self.labels[i], self.labels[j]]
+            if d < self.separation_m * (1.0 - TIE_RELATIVE):
+                self.losses.append([self.labels[i], self.labels[j], float(d), float(t)])
+
+
 def audit_trajectories(flights: list[tuple[np.ndarray, np.ndarray]], labels: list[str],
                        separation_m=SEPARATION_M, groups: Sequence | None = None,
                        only_pairs_with: Sequence[bool] | None = None) -> SafetyAudit:
@@ -132,8 +200,6 @@ def audit_trajectories(flights: list[tuple[np.ndarray, np.ndarray]], labels: lis
     vertically close (checked by that bound alone: counted in ``pairs_checked``, no distance),
     and distances are horizontal while vertically closer than V.
     """
-    from uam_planner.audit import pair_min_distance
-
     model = _model(separation_m)
     separation_m = model.separation_m
     cylinder = model.kind == "cylinder"
@@ -143,36 +209,8 @@ def audit_trajectories(flights: list[tuple[np.ndarray, np.ndarray]], labels: lis
     n = len(flights)
     if n < 2:
         return SafetyAudit(float(separation_m), math.inf, None, [], 0, **kind)
-    t0 = np.array([f[0][0] for f in flights])
-    t1 = np.array([f[0][-1] for f in flights])
-    lo = np.array([f[1].min(axis=0) for f in flights])
-    hi = np.array([f[1].max(axis=0) for f in flights])
-    iu, ju = np.triu_indices(n, k=1)
-    # airborne together, and not two parts of one flight (one group: its versions in force)
-    grp = np.array([str(x) for x in (labels if groups is None else groups)], dtype=object)
-    together = (t0[iu] <= t1[ju]) & (t0[ju] <= t1[iu]) & (grp[iu] != grp[ju])
-    if only_pairs_with is not None:
-        flag = np.asarray(only_pairs_with, dtype=bool)
-        together &= flag[iu] | flag[ju]
-    iu, ju = iu[together], ju[together]
-    gap = np.maximum(0.0, np.maximum(lo[iu] - hi[ju], lo[ju] - hi[iu]))  # per axis, (k, 3)
-    checked = 0
-    if cylinder:
-        # boxes V or more apart vertically: never vertically within V, so no distance counts;
-        # such a pair is checked by that bound alone (counted as checked)
-        close = gap[:, 2] < vertical_m
-        checked = int((~close).sum())
-        iu, ju, gap = iu[close], ju[close], gap[close, :2]
-    bound = np.sqrt((gap * gap).sum(axis=1))
+    iu, ju, bound, checked = _bounded_pairs(flights, labels, groups, only_pairs_with, vertical_m)
     order = np.argsort(bound, kind="stable")
-    # plain Python floats for the pure-Python kernel (converting numpy scalars per pair is slow)
-    plain: dict = {}
-
-    def flight(i):
-        if i not in plain:
-            times, points = flights[i]
-            plain[i] = ([float(t) for t in times], [tuple(map(float, p)) for p in points])
-        return plain[i]
     # A second, finer bound (on the 2,000-flight city recording nearly every
     # pair's boxes overlap, and the loop below ran for tens of CPU-minutes): the pairs that come
     # within `reach` on each horizontal axis at some common instant, by uam_planner.audit's grid
@@ -185,29 +223,17 @@ def audit_trajectories(flights: list[tuple[np.ndarray, np.ndarray]], labels: lis
     near = _near_flight_pairs(flights, reach)
     codes = iu.astype(np.int64) * n + ju.astype(np.int64)
     is_near = np.isin(codes, near)
-    best, best_pair, losses = math.inf, None, []
-
-    def walk(ks):
-        nonlocal best, best_pair, checked
-        for k in ks:
-            if bound[k] >= separation_m and bound[k] >= best:
-                return
-            i, j = int(iu[k]), int(ju[k])
-            d, t = pair_min_distance(flight(i), flight(j), vertical_m)
-            checked += 1
-            if d < best:
-                best, best_pair = d, [labels[i], labels[j]]
-            if d < separation_m * (1.0 - TIE_RELATIVE):
-                losses.append([labels[i], labels[j], float(d), float(t)])
-    walk(order[is_near[order]])
+    search = _PairSearch(flights, labels, iu, ju, bound, separation_m, vertical_m, checked)
+    search.walk(order[is_near[order]])
     far = order[~is_near[order]]
-    if best < reach:
-        checked += int(far.size)
+    if search.best < reach:
+        search.checked += int(far.size)
     else:
-        walk(far)
+        search.walk(far)
+    losses = search.losses
     losses.sort(key=lambda x: (x[3], x[0], x[1]))
-    return SafetyAudit(separation_m=float(separation_m), min_separation_m=float(best),
-                       closest_pair=best_pair, losses=losses, pairs_checked=checked, **kind)
+    return SafetyAudit(separation_m=float(separation_m), min_separation_m=float(search.best),
+                       closest_pair=search.best_pair, losses=losses, pairs_checked=search.checked, **kind)
 
 
 def _near_flight_pairs(flights: list[tuple[np.ndarray, np.ndarray]], reach_m: float) -> np.ndarray:
