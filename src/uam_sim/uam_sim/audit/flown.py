@@ -302,6 +302,49 @@ def _pair_within(a: Trajectory, ea: tuple, b: Trajectory, eb: tuple, model, sign
     return float(dist[k]), float(t0[k] + s_star[k] * (t1[k] - t0[k]))
 
 
+def _pieces(tracks: Mapping[str, Trajectory], ids: list, velocities) -> tuple[dict, dict]:
+    """The tracks to audit (the simulator's motion when ``velocities`` are given) and per track
+    which of its pieces are exact (flown straight, or one turn rebuilt; none without them)."""
+    if velocities:
+        motion = {i: simulator_motion(tracks[i], velocities.get(i)) for i in ids}
+        return {i: motion[i][0] for i in ids}, {i: motion[i][1] for i in ids}
+    return tracks, {i: np.zeros(max(tracks[i].times_s.size - 1, 0), dtype=bool) for i in ids}
+
+
+def _widened(model: SeparationModel, bh: float, bv: float) -> SeparationModel:
+    """The minimum widened by the largest pair bounds, horizontal ``bh`` and vertical ``bv`` [m]:
+    for the cylinder each axis by its own, for the sphere the radius by their hypotenuse."""
+    if model.kind == "cylinder":
+        return SeparationModel(model.kind, model.separation_m + bh, model.vertical_separation_m + bv)
+    return SeparationModel(model.kind, model.separation_m + math.hypot(bh, bv), model.vertical_separation_m)
+
+
+def _pairs_within(pairs, tracks: Mapping, bounds: dict, model: SeparationModel, sign: float) -> list:
+    """Of the listed ``pairs`` [a, b, ...], those whose bounded pieces come within the minimum
+    (``sign`` +1: possibly, -1: provably), each [a, b, distance m, t s]."""
+    found = []
+    for a, b, _d, _t in pairs:
+        d, t = _pair_within(tracks[a], bounds[a], tracks[b], bounds[b], model, sign)
+        if math.isfinite(d):
+            found.append([a, b, d, t])
+    return found
+
+
+def _with_plans(out: dict, proven: list, bounds: dict, plans: Mapping, ids: list, exact: dict) -> None:
+    """Into ``out``: the proven losses in place of the chords' own (kept as interpolated_*), the
+    samples off their plan, the tracks without a plan and the counts of exact pieces."""
+    out["interpolated_losses"], out["interpolated_loss_pairs"] = out["losses"], out["loss_pairs"][:LISTED]
+    out["losses"], out["loss_pairs"] = len(proven), sorted(proven, key=lambda x: x[2])
+    # samples not on the plan flown (what the simulator flies: 0 without disturbances)
+    out["samples_off_plan"] = sum(b[2] for i, b in bounds.items() if i in plans)
+    out["tracks_without_plan"] = sum(i not in plans for i in ids)
+    # pieces whose bound is 0 on both axes (on the plan, straight and level or one segment)
+    out["pieces_exact"] = sum(int(((b[0] == 0) & (b[1] == 0)).sum()) for b in bounds.values())
+    out["pieces"] = sum(int(b[0].size) for b in bounds.values())
+    # pieces exact from the simulator's reported motion (flown straight, or one turn rebuilt)
+    out["pieces_straight"] = sum(int(s.sum()) for s in exact.values())
+
+
 def flown_audit(tracks: Mapping[str, Trajectory], separation, sample_step_s: float | None = None,
                 prune: bool = True, plans: Mapping[str, Trajectory] | None = None,
                 velocities: Mapping[str, np.ndarray] | None = None) -> dict:
@@ -342,43 +385,19 @@ def flown_audit(tracks: Mapping[str, Trajectory], separation, sample_step_s: flo
                     "possible_losses": out["losses"], "unresolved": 0, "unresolved_pairs": [],
                     "max_speed_mps": vmax})
         return out
-    if velocities:
-        motion = {i: simulator_motion(tracks[i], velocities.get(i)) for i in ids}
-        tracks = {i: motion[i][0] for i in ids}
-        trajs = [tracks[i] for i in ids]
-        exact = {i: motion[i][1] for i in ids}
-    else:
-        exact = {i: np.zeros(max(tracks[i].times_s.size - 1, 0), dtype=bool) for i in ids}
+    tracks, exact = _pieces(tracks, ids, velocities)
+    trajs = [tracks[i] for i in ids]
     bounds = {i: piece_bounds(tracks[i], (plans or {}).get(i), vh, vz, exact[i]) for i in ids}
     bh = 2.0 * max((float(b[0].max()) for b in bounds.values() if b[0].size), default=0.0)
     bv = 2.0 * max((float(b[1].max()) for b in bounds.values() if b[1].size), default=0.0)
     # one candidate search for both minima (uam_planner.audit.sweep_audits): the chords in the
     # minimum, and in the minimum widened by the largest pair bound (a superset of the possible)
-    if model.kind == "cylinder":
-        wide = SeparationModel(model.kind, model.separation_m + bh, model.vertical_separation_m + bv)
-    else:
-        wide = SeparationModel(model.kind, model.separation_m + math.hypot(bh, bv), model.vertical_separation_m)
-    out, wide_out = sweep_audits(trajs, [model, wide], labels=ids, prune=prune, max_listed=None)
-    possible, proven = [], []
-    for a, b, _d, _t in wide_out["loss_pairs"]:
-        d, t = _pair_within(tracks[a], bounds[a], tracks[b], bounds[b], model, +1.0)
-        if math.isfinite(d):
-            possible.append([a, b, d, t])
+    out, wide_out = sweep_audits(trajs, [model, _widened(model, bh, bv)], labels=ids, prune=prune,
+                                 max_listed=None)
+    possible = _pairs_within(wide_out["loss_pairs"], tracks, bounds, model, +1.0)
     if plans is not None:
-        for a, b, _d, _t in out["loss_pairs"]:
-            d, t = _pair_within(tracks[a], bounds[a], tracks[b], bounds[b], model, -1.0)
-            if math.isfinite(d):
-                proven.append([a, b, d, t])
-        out["interpolated_losses"], out["interpolated_loss_pairs"] = out["losses"], out["loss_pairs"][:LISTED]
-        out["losses"], out["loss_pairs"] = len(proven), sorted(proven, key=lambda x: x[2])
-        # samples not on the plan flown (what the simulator flies: 0 without disturbances)
-        out["samples_off_plan"] = sum(b[2] for i, b in bounds.items() if i in plans)
-        out["tracks_without_plan"] = sum(i not in plans for i in ids)
-        # pieces whose bound is 0 on both axes (on the plan, straight and level or one segment)
-        out["pieces_exact"] = sum(int(((b[0] == 0) & (b[1] == 0)).sum()) for b in bounds.values())
-        out["pieces"] = sum(int(b[0].size) for b in bounds.values())
-        # pieces exact from the simulator's reported motion (flown straight, or one turn rebuilt)
-        out["pieces_straight"] = sum(int(s.sum()) for s in exact.values())
+        proven = _pairs_within(out["loss_pairs"], tracks, bounds, model, -1.0)
+        _with_plans(out, proven, bounds, plans, ids, exact)
     proven_pairs = {(a, b) for a, b, _d, _t in out["loss_pairs"]}
     unresolved = sorted((x for x in possible if (x[0], x[1]) not in proven_pairs), key=lambda x: x[2])
     out["unresolved"], out["unresolved_pairs"] = len(unresolved), unresolved[:LISTED]
