@@ -67,6 +67,72 @@ def _known(v) -> bool:
     return v is not None and v != ""
 
 
+def _in_window(warmup_s: float | None, end_s: float | None):
+    """The filter of requests and flights: earliest departure at or after ``warmup_s`` and latest
+    departure (where known) at or before ``end_s`` [s]; a row without an earliest departure is
+    kept only when neither is given."""
+    lo = -math.inf if warmup_s is None else float(warmup_s)
+    hi = math.inf if end_s is None else float(end_s)
+    filtered = warmup_s is not None or end_s is not None
+
+    def inside(row) -> bool:
+        e = row.get("earliest_departure_s")
+        if not _known(e):
+            return not filtered
+        last = row.get("latest_departure_s")
+        return float(e) >= lo and (not _known(last) or float(last) <= hi)
+    return inside
+
+
+def _route_and_delay(fl: list) -> dict:
+    """The flights' count, route length [m] and distance flown [km], detour [% and m], share on
+    their shortest candidate, and departure delay (mean, p95 [s] and share delayed)."""
+    delay = np.array([float(f["departure_s"]) - float(f["earliest_departure_s"]) for f in fl
+                      if _known(f.get("earliest_departure_s"))], dtype=float)
+    length = np.array([float(f["length_m"]) for f in fl], dtype=float)
+    weight = np.array([float(f["weight"]) for f in fl if _known(f.get("weight"))], dtype=float)
+    # a weight outside (0, 1] is not the paper's d*/d (another objective's, or a plan written by
+    # hand): no detour from it
+    paper_w = weight[(weight > 0) & (weight <= 1)]
+    det_m = np.array([float(f["length_m"]) - float(f["shortest_length_m"]) for f in fl
+                      if _known(f.get("shortest_length_m"))], dtype=float)
+    return {"flights": len(fl),
+            "route_length_mean_m": _mean(length),
+            "flown_km": float(length.sum() / 1000.0),
+            "detour_mean_pct": _mean(100.0 * (1.0 / paper_w - 1.0)),
+            "detour_mean_m": _mean(det_m),
+            "shortest_share": float(np.mean([int(f["candidate_index"]) == 0 for f in fl]))
+            if fl and all(_known(f.get("candidate_index")) for f in fl) else float("nan"),
+            "delay_mean_s": _mean(delay),
+            "delay_p95_s": _p95(delay),
+            "delayed_share": float((delay > 1e-6).mean()) if delay.size else float("nan")}
+
+
+def _class_delays(fl: list, rq: list) -> dict:
+    """The p95 departure delay [s] per priority class, when more than one class is present."""
+    out = {}
+    classes = sorted({int(r.get("priority", 0)) for r in rq} | {int(f.get("priority", 0)) for f in fl})
+    if len(classes) > 1:
+        for c in classes:
+            out[f"delay_p95_s_prio{c}"] = _p95(np.array(
+                [float(f["departure_s"]) - float(f["earliest_departure_s"]) for f in fl
+                 if int(f.get("priority", 0)) == c and _known(f.get("earliest_departure_s"))]))
+    return out
+
+
+def _operator_shares(fl: list, rq: list) -> dict:
+    """Per named operator its share of requests approved, then Jain's index over the shares."""
+    def operator(row) -> str:
+        return str(row.get("operator", row.get("operator_id", "")) or "")
+    asked = Counter(operator(r) for r in rq)
+    got = Counter(operator(f) for f in fl)
+    named = sorted(o for o in asked if o)
+    shares = {o: got[o] / asked[o] for o in named}
+    out = {f"share_{o}": shares[o] for o in named}
+    out["jain_index"] = jain_index(list(shares.values())) if named else float("nan")
+    return out
+
+
 def run_metrics(flights: Iterable[Mapping] | Mapping, requests: Iterable[Mapping] | None = None,
                 warmup_s: float | None = None, end_s: float | None = None,
                 network=None, top=None) -> dict:
@@ -97,53 +163,12 @@ def run_metrics(flights: Iterable[Mapping] | Mapping, requests: Iterable[Mapping
     requests = None if requests is None else list(requests)
     if not flights and not requests:
         return {}
-    lo = -math.inf if warmup_s is None else float(warmup_s)
-    hi = math.inf if end_s is None else float(end_s)
-    filtered = warmup_s is not None or end_s is not None
-
-    def inside(row) -> bool:
-        e = row.get("earliest_departure_s")
-        if not _known(e):
-            return not filtered
-        last = row.get("latest_departure_s")
-        return float(e) >= lo and (not _known(last) or float(last) <= hi)
+    inside = _in_window(warmup_s, end_s)
     fl = [f for f in flights if inside(f)]
-    delay = np.array([float(f["departure_s"]) - float(f["earliest_departure_s"]) for f in fl
-                      if _known(f.get("earliest_departure_s"))], dtype=float)
-    length = np.array([float(f["length_m"]) for f in fl], dtype=float)
-    weight = np.array([float(f["weight"]) for f in fl if _known(f.get("weight"))], dtype=float)
-    # a weight outside (0, 1] is not the paper's d*/d (another objective's, or a plan written by
-    # hand): no detour from it
-    paper_w = weight[(weight > 0) & (weight <= 1)]
-    det_m = np.array([float(f["length_m"]) - float(f["shortest_length_m"]) for f in fl
-                      if _known(f.get("shortest_length_m"))], dtype=float)
-    out = {"flights": len(fl),
-           "route_length_mean_m": _mean(length),
-           "flown_km": float(length.sum() / 1000.0),
-           "detour_mean_pct": _mean(100.0 * (1.0 / paper_w - 1.0)),
-           "detour_mean_m": _mean(det_m),
-           "shortest_share": float(np.mean([int(f["candidate_index"]) == 0 for f in fl]))
-           if fl and all(_known(f.get("candidate_index")) for f in fl) else float("nan"),
-           "delay_mean_s": _mean(delay),
-           "delay_p95_s": _p95(delay),
-           "delayed_share": float((delay > 1e-6).mean()) if delay.size else float("nan")}
+    out = _route_and_delay(fl)
     rq = [r for r in requests if inside(r)] if requests is not None else []
-    classes = sorted({int(r.get("priority", 0)) for r in rq} | {int(f.get("priority", 0)) for f in fl})
-    if len(classes) > 1:
-        for c in classes:
-            out[f"delay_p95_s_prio{c}"] = _p95(np.array(
-                [float(f["departure_s"]) - float(f["earliest_departure_s"]) for f in fl
-                 if int(f.get("priority", 0)) == c and _known(f.get("earliest_departure_s"))]))
-
-    def operator(row) -> str:
-        return str(row.get("operator", row.get("operator_id", "")) or "")
-    asked = Counter(operator(r) for r in rq)
-    got = Counter(operator(f) for f in fl)
-    named = sorted(o for o in asked if o)
-    shares = {o: got[o] / asked[o] for o in named}
-    for o in named:
-        out[f"share_{o}"] = shares[o]
-    out["jain_index"] = jain_index(list(shares.values())) if named else float("nan")
+    out.update(_class_delays(fl, rq))
+    out.update(_operator_shares(fl, rq))
     if network is not None and top is not None:
         use = corridor_use_m(network, fl)
         out["central_share"] = float(use[top].sum() / use.sum()) if use.sum() > 0 else float("nan")
