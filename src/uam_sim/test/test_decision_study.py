@@ -266,7 +266,9 @@ def test_the_study_runs_resumes_and_its_report_rebuilds_from_the_tables(tmp_path
     write_decision_report(out)
     assert (out / "REPORT.md").read_text() == first
     assert "## E0: matched shadow solves" in first and "| E1 | p |" in first
-    assert "- E1 primary `p` (approved_ss, pooled over every group): " in first  # answered
+    # answered: pooled where heterogeneity allows a pooled claim, else per group (this pilot
+    # has one group)
+    assert "- E1 primary `p` (approved_ss, cell sg, rate 4): " in first
     assert "Machine load (1-min average, the larger of before and after each run) median" in first
     # the tables rebuilt where no cell of this code version is (a later version, another cells
     # folder): the finished tables are kept, not replaced by empty ones
