@@ -579,7 +579,7 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:
     (default ``d``), so a copy elsewhere rebuilds the same bytes."""
     study = json.loads((d / "study.json").read_text(encoding="utf-8"))
     runs, windows, e0 = _read(d, "runs.csv"), _read(d, "windows.csv"), _read(d, "e0.csv.gz")
-    L = ["# The decision study: where optimisation matters (issue 24)", "",
+    L = ["# The decision study: where optimisation matters", "",
          "Written by `uam_sim.reports.decision_report` from the tables in this directory alone "
          "(`study.json`, `runs.csv`, `windows.csv`, `e0.csv.gz`, `amendments.csv`, "
          "`superseded_runs.csv`): "
