@@ -1,8 +1,10 @@
-"""Selecting a comparison's arms from the decision study's runs table: one home for the
-report (:mod:`uam_sim.reports.decision_report`) and its review
-(:mod:`uam_sim.reports.decision_review`), which both group runs this way."""
+"""What the decision study's report (:mod:`uam_sim.reports.decision_report`) and its review
+(:mod:`uam_sim.reports.decision_review`) share: selecting a comparison's arms from the runs
+table, and writing a number."""
 
 from __future__ import annotations
+
+import math
 
 import pandas as pd
 
@@ -37,3 +39,15 @@ def _groups(runs: pd.DataFrame, exp: dict, comp: dict) -> list:
         label = ", ".join(f"{k} {g[k]}" for k in keys) or "all"
         out.append((label, vals))
     return out
+
+
+def fmt_number(x, nd: int, sign: bool = False) -> str:
+    """``x`` with ``nd`` decimals and thousands separators (a sign when ``sign``); "-" for a
+    missing or non-finite value."""
+    try:
+        x = float(x)
+    except (TypeError, ValueError):
+        return "-"
+    if not math.isfinite(x):
+        return "-"
+    return f"{x:+,.{nd}f}" if sign else f"{x:,.{nd}f}"

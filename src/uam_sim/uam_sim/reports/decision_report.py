@@ -31,7 +31,7 @@ import pandas as pd
 
 from ..runner.files import write_csv
 from . import decision_review as review
-from .decision_groups import _groups
+from .decision_groups import _groups, fmt_number
 from .stats import mean_interval, seeds_needed
 
 SIZE_BINS = [1, 8, 16, 32, 64, 128, 256, 512, 1024, 4096, 100000]
@@ -39,13 +39,7 @@ E0_ORDER = ["firstfit", "greedy", "auto", "exact", "sa", "tabu", "qpu-emulator",
 
 
 def _f(x, nd=1, sign=False) -> str:
-    try:
-        x = float(x)
-    except (TypeError, ValueError):
-        return "-"
-    if not math.isfinite(x):
-        return "-"
-    return f"{x:+,.{nd}f}" if sign else f"{x:,.{nd}f}"
+    return fmt_number(x, nd, sign)
 
 
 def _table(rows: list, heads: list) -> list:

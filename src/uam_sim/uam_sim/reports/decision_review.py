@@ -23,7 +23,7 @@ import math
 import numpy as np
 import pandas as pd
 
-from .decision_groups import _equal, _groups
+from .decision_groups import _equal, _groups, fmt_number
 from .stats import (cluster_bootstrap_mean, cuped, holm, jain_min_max_bound,
                     mean_interval, random_effects)
 
@@ -38,13 +38,7 @@ CLUSTER_RESAMPLES = 4_000
 
 
 def _f(x, nd=2, sign=False) -> str:
-    try:
-        x = float(x)
-    except (TypeError, ValueError):
-        return "-"
-    if not math.isfinite(x):
-        return "-"
-    return f"{x:+,.{nd}f}" if sign else f"{x:,.{nd}f}"
+    return fmt_number(x, nd, sign)
 
 
 def _p(x) -> str:
