@@ -81,13 +81,8 @@ def _shown(value) -> str:
 
 def parse_body(body, kind):
     """``body`` (JSON) as the library's ``kind``; FlightPlanningError 400 naming the field."""
-    from implicitdict import ImplicitDict
-    if not isinstance(body, dict):
-        raise FlightPlanningError(400, f"body: {type(body).__name__} is not a JSON object {kind.__name__}")
-    try:
-        return ImplicitDict.parse(body, kind)
-    except (ValueError, KeyError, TypeError) as exc:
-        raise FlightPlanningError(400, f"body: not a {kind.__name__}: {str(exc)[:300]}") from None
+    from .peers import parse_typed
+    return parse_typed(body, kind, FlightPlanningError, "a ")
 
 
 def check_flight_plan_id(flight_plan_id: str) -> str:

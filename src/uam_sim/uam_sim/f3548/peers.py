@@ -26,14 +26,18 @@ class NotificationError(ValueError):
         self.status, self.message = status, message
 
 
-def _parse(body, kind):
+def parse_typed(body, kind, error=None, what: str = "an F3548 "):
+    """``body`` (decoded JSON) parsed as the ``uas_standards`` type ``kind``; otherwise
+    ``error(400, message)`` (default NotificationError) naming the body and the type."""
     from implicitdict import ImplicitDict
+    error = NotificationError if error is None else error
     if not isinstance(body, dict):
-        raise NotificationError(400, f"body: {type(body).__name__} is not a JSON object {kind.__name__}")
+        raise error(400, f"body: {type(body).__name__} is not a JSON object {kind.__name__}")
     try:
         return ImplicitDict.parse(body, kind)
     except (ValueError, KeyError, TypeError) as exc:
-        raise NotificationError(400, f"body: not an F3548 {kind.__name__}: {str(exc)[:300]}") from None
+        raise error(400, f"body: not {what}{kind.__name__}: {str(exc)[:300]}") from None
+
 
 
 def constraint_updates(old: dict, new: list) -> list:
@@ -140,7 +144,7 @@ class PeerInbox:
         from uas_standards.astm.f3548.v21 import api
 
         from uam_planner.f3548 import F3548Error
-        params = _parse(body, api.PutOperationalIntentDetailsParameters if kind == "operational_intent"
+        params = parse_typed(body, api.PutOperationalIntentDetailsParameters if kind == "operational_intent"
                         else api.PutConstraintDetailsParameters)
         entity_id = str(params[f"{kind}_id"]).lower()
         doc = body.get(kind)
@@ -164,7 +168,7 @@ class PeerInbox:
         """A peer's ErrorReport: validated, kept (the newest ``max_reports``), logged; returned with
         the ``report_id`` assigned here."""
         from uas_standards.astm.f3548.v21 import api
-        _parse(body, api.ErrorReport)
+        parse_typed(body, api.ErrorReport)
         out = dict(body, report_id=str(uuid.uuid4()))
         with self._lock:
             self.reports.append(out)
