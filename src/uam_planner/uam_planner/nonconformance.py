@@ -1103,7 +1103,31 @@ def overrun_trajectory(plan: Trajectory, obs: Observation, cap_s: float) -> Traj
     return Trajectory(np.append(ts[keep], cap_s), np.vstack((ps[keep], tr.position_at(cap_s))))
 
 
-def overruns(t_s: float, plans: dict, book: PositionBook, previous: dict) -> dict:
+def _planned_times(rid: str, plan, obs: list, cache: dict | None) -> np.ndarray:
+    """The planned time of each sighting's nearest path point (:func:`nearest` without the
+    sightings' times), per sighting. ``cache`` (request id -> (plan, {sighting time: planned
+    time})) keeps the answers for a plan version from one epoch to the next: a sighting's is a
+    function of the plan and its position alone (``nearest`` answers each point on its own), and
+    a sighting never changes once taken, so only the new ones are computed (the planner node
+    sees every vehicle every second: ~120 sightings a flight in the window, ~30 of them new)."""
+    if cache is None:
+        return nearest(plan, np.array([o.position_m for o in obs]))[3]
+    ent = cache.get(rid)
+    if ent is None or ent[0] is not plan:
+        ent = cache[rid] = (plan, {})
+    known = ent[1]
+    new = [o for o in obs if o.t_s not in known]
+    if new:
+        tau_new = nearest(plan, np.array([o.position_m for o in new]))[3]
+        known.update(zip((o.t_s for o in new), tau_new.tolist()))
+    lo = obs[0].t_s
+    for t in [t for t in known if t < lo]:   # pruned from the book: never asked for again
+        del known[t]
+    return np.array([known[o.t_s] for o in obs], dtype=np.float64)
+
+
+def overruns(t_s: float, plans: dict, book: PositionBook, previous: dict,
+             cache: dict | None = None) -> dict:
     """The flights held past their plans at the epoch ``t_s``: request id -> :class:`Overrun`.
 
     Args:
@@ -1112,8 +1136,14 @@ def overruns(t_s: float, plans: dict, book: PositionBook, previous: dict) -> dic
         book: the planner's own observations; those stamped in [plan departure, ``t_s``] count.
         previous: the result of the last epoch (the latest-landing projection of a plan version
             is only ever replaced by one that lands later).
+        cache: optional dict kept by the caller from one epoch to the next: the sightings'
+            planned times already computed (:func:`_planned_times`; the same answers); the
+            flights not in ``plans`` are dropped from it.
     Held flights whose projections have landed by ``t_s`` are left out.
     """
+    if cache is not None:
+        for rid in [r for r in cache if r not in plans]:
+            del cache[rid]
     out = {}
     for rid, f in plans.items():
         prev = previous.get(rid)
@@ -1133,7 +1163,7 @@ def overruns(t_s: float, plans: dict, book: PositionBook, previous: dict) -> dic
             # the plan's speed; the rejoin's first leg is built for the ones kept). Without the
             # sightings' times on purpose: where the path comes back over itself the first pass
             # is taken, the earliest planned time, so the latest landing (never a shorter hold)
-            _j, _l, _p, tau = nearest(plan, np.array([o.position_m for o in obs]))
+            tau = _planned_times(rid, plan, obs, cache)
             land = np.array([o.t_s for o in obs]) + (float(plan.arrival_s) - tau)
             k = int(np.argmax(land))
             if land[k] > arrival + OVERRUN_TOLERANCE_S and \

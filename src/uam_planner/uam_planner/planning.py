@@ -140,6 +140,7 @@ class Planner:
         # flights held past their plans (the safety gap; uam_planner.nonconformance
         # .overruns): request id -> Overrun, deconflicted against until its projection lands
         self.overruns: dict = {}
+        self._sightings: dict = {}   # overruns' cache: the sightings' planned times per plan
         self.reaction_log: list = []   # the reports of the reactions between epochs
 
     @property
@@ -761,7 +762,7 @@ class Planner:
         plans.update((f.request_id, f) for f in self.active)
         self.positions.prune(t_s)
         if self.overruns or self.positions:
-            self.overruns = overruns(t_s, plans, self.positions, self.overruns)
+            self.overruns = overruns(t_s, plans, self.positions, self.overruns, self._sightings)
         self.positions.forget(set(f.request_id for f in self.active if f.arrival_s >= t_s) |
                               set(self.overruns))
 
