@@ -372,6 +372,9 @@ USS = (
           "each flight plan put to the planner (signed uam/uss_flight_plan requests of operator flight_planning, which "
           "the authorities file gives that authority); the longest wall time [s] an answer waits for the planner's "
           "decision (then Failed, the request withdrawn); below the test director's read timeout", 0.1, 3600.0),
+    Param("peers", [""], "the managers (token subjects) whose notifications of intents and constraints this USS "
+          "takes; [''] = any caller with a valid token and scope. Whoever calls, a notification must name its "
+          "caller as the manager, and an entity held changes only by its manager (uam_sim.f3548.peers)"),
     Param("max_clock_step_s", 60.0, "with journal: the most the served clock may advance from one fleet state "
           "of the simulator to the next [s] (a forged jump is refused)", 0.001, 1e6),
     Param("host", "127.0.0.1", "address to bind ('0.0.0.0' for every interface; loopback by default)",

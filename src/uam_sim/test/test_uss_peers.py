@@ -116,6 +116,35 @@ def test_bad_notifications_are_refused_with_an_error_response(live):
     assert live.inbox.entity_ids() == []
 
 
+def test_a_peer_notifies_of_its_own_intents_only(live, dev_keys):
+    """The caller is its token's subject: a notification naming another manager is refused, an
+    entity held changes or goes only by its manager's notification, and with a list of peers
+    the others are refused; each a 403 ErrorResponse naming the field, nothing applied."""
+    url = f"{live.srv.url}/uss/v1/operational_intents"
+    private, _public = dev_keys
+    scopes = [SCOPE_INTENTS, SCOPE_CONSTRAINTS]
+    other = {"Authorization": f"Bearer {mint_token(private, 'localhost', scopes, sub='uss3')}"}
+    doc = their_intent(live.net)   # managed by uss2
+    oid = doc["reference"]["id"]
+    subs = [{"subscription_id": "0b6d5e4c-3a2b-4c1d-8e9f-0a1b2c3d4e5f", "notification_index": 1}]
+    body = {"operational_intent_id": oid, "operational_intent": doc, "subscriptions": subs}
+    r = requests.post(url, json=body, headers=other, timeout=10)   # uss3 posting uss2's intent
+    assert r.status_code == 403 and r.json()["message"].startswith("operational_intent.reference.manager")
+    assert errors(r.json(), "ErrorResponse") == [] and live.inbox.entity_ids() == []
+    assert requests.post(url, json=body, headers=live.headers, timeout=10).status_code == 204
+    # uss3 may neither delete nor replace what uss2 manages
+    for b in ({"operational_intent_id": oid, "subscriptions": subs},):
+        r = requests.post(url, json=b, headers=other, timeout=10)
+        assert r.status_code == 403 and r.json()["message"].startswith("operational_intent_id")
+    assert live.inbox.entity_ids() == [f"operational_intent:{oid}"]
+    # a list of peers: uss2 is not on it
+    live.inbox.peers = frozenset({"uss3"})
+    r = requests.post(url, json={"operational_intent_id": oid, "subscriptions": subs},
+                      headers=live.headers, timeout=10)
+    assert r.status_code == 403 and r.json()["message"].startswith("manager: 'uss2'")
+    assert live.inbox.entity_ids() == [f"operational_intent:{oid}"] and live.refused == []
+
+
 def test_reports_versions_and_telemetry(live):
     report = {"exchange": {"url": "https://uss2/uss/v1/operational_intents/x", "method": "GET",
                            "recorder_role": "Client", "request_time": {"value": "2025-01-06T00:00:00Z",

@@ -19,7 +19,8 @@ from collections import deque
 
 
 class NotificationError(ValueError):
-    """A notification refused: ``status`` (400 / 409) and a message naming the field and value."""
+    """A notification refused: ``status`` (400 / 403 / 409) and a message naming the field and
+    value."""
 
     def __init__(self, status: int, message: str):
         super().__init__(message)
@@ -104,12 +105,20 @@ class PeerInbox:
     by our half-separation; ``listener(updates, kind, entity_id)`` is called with the
     :func:`constraint_updates` of every accepted change (outside the lock); ``log(text)`` gets one
     line per notification and report.
+
+    Who may say what (the caller is the ``sub`` of its verified token, F3548's manager): a
+    notification's document must name its caller as ``reference.manager`` (a USS notifies of
+    its own intents and constraints, never of another's), and an entity already held changes or
+    goes only by a notification of the manager that holds it. ``peers``: the managers this USS
+    takes notifications from at all (None: any caller with a valid token and scope). Without
+    token checks (the server's ``auth off``) there is no caller to check.
     """
 
     def __init__(self, network, spec, scenario_start_utc: str, listener=None, log=None,
-                 max_reports: int = 1000):
+                 max_reports: int = 1000, peers=None):
         self.network, self.spec, self.start = network, spec, scenario_start_utc
         self.listener, self.log = listener, log or (lambda text: None)
+        self.peers = None if peers is None else frozenset(str(x) for x in peers)
         self._lock = threading.Lock()
         self._docs: dict[str, tuple] = {}            # (kind, id) -> (version, document)
         self._constraints: dict[str, dict] = {}      # (kind, id) -> {constraint id: Constraint}
@@ -156,6 +165,7 @@ class PeerInbox:
             if not ref.get("ovn"):
                 raise NotificationError(400, f"{kind}.reference.ovn: missing (F3548: a notification "
                                              f"carries the OVN)")
+        self._check_caller(kind, entity_id, doc, manager)
         try:
             updates = self._apply(kind, entity_id, doc)
         except F3548Error as exc:
@@ -163,6 +173,23 @@ class PeerInbox:
         what = "deleted" if doc is None else f"version {doc['reference']['version']} of {doc['reference'].get('manager', '?')}"
         self.log(f"peer {kind} {entity_id} ({what}, from {manager or '?'}): {len(updates)} constraint updates")
         return updates
+
+    def _check_caller(self, kind: str, entity_id: str, doc, manager: str) -> None:
+        """NotificationError 403 unless ``manager`` may send this notification (class doc)."""
+        if not manager:
+            return
+        if self.peers is not None and manager not in self.peers:
+            raise NotificationError(403, f"manager: {manager!r} is not a peer this USS takes "
+                                         f"notifications from")
+        if doc is not None and str(doc["reference"].get("manager", "")) != manager:
+            raise NotificationError(403, f"{kind}.reference.manager: {doc['reference'].get('manager')!r} "
+                                         f"is not the caller {manager!r} (a USS notifies of its own)")
+        with self._lock:
+            held = self._docs.get(f"{kind}:{entity_id}")
+        owner = None if held is None else str(held[1]["reference"].get("manager", ""))
+        if owner is not None and owner != manager:
+            raise NotificationError(403, f"{kind}_id: {entity_id!r} is managed by {owner!r}, not by "
+                                         f"the caller {manager!r}")
 
     def report(self, body, manager: str = "") -> dict:
         """A peer's ErrorReport: validated, kept (the newest ``max_reports``), logged; returned with

@@ -81,8 +81,9 @@ class UssNode(Node):
             # planner only needs them to grow)
             self.forward = PlannerForwarder(p["authority_id"], key, time.time_ns())
             self._update_client = self.create_client(UpdateConstraint, c.SERVICE_UPDATE_CONSTRAINT)
+        peers = [x for x in p["peers"] if x]
         self.inbox = PeerInbox(self.network, spec, p["scenario_start_utc"], listener=self._on_peer_change,
-                               log=self.get_logger().info)
+                               log=self.get_logger().info, peers=peers or None)
         # the flights of the flight_planning interface's operator, newest version each, as the
         # planner's record (journal or plans topic) holds them: what the decider reads
         self.decider = None
