@@ -531,7 +531,7 @@ class Planner:
             if r.request_id == request_id:
                 del self.pending[i]
                 return None
-        f = next((f for f in self.active if f.request_id == request_id), None)
+        f = self.flight(request_id)   # between epochs: the active one
         if f is None:
             return f"request_id: {request_id!r} is neither waiting nor an approved flight of this planner"
         if f.departure_s < t_s:
@@ -566,7 +566,7 @@ class Planner:
         problem = self._between_epochs(rid, t_s)
         if problem is not None:
             return problem
-        f = next((f for f in self.active if f.request_id == rid), None)
+        f = self.flight(rid)
         if f is None:
             return f"request_id: {rid!r} is not an approved flight of this planner"
         if f.departure_s < t_s:
