@@ -325,7 +325,7 @@ def test_adjacent_flight_levels_publish_bands_2_cm_apart_everywhere():
     assert as_json(hi.volume.outline_polygon) == as_json(lo.volume.outline_polygon)
 
 
-def _layered_run(separation_m):
+def _layered_run(separation_m, intent_volume_piece_s=0.0):
     """A layered run (cylinder H = separation_m, V = 30 m, 5 s slots) with storms announced where
     flights are going (re-plans): every (flight, plan version, decision time)."""
     from uam_planner.network import load_network
@@ -334,7 +334,8 @@ def _layered_run(separation_m):
 
     net = load_network(LAYERED)
     cfg = make_config(network=LAYERED, separation_model="cylinder", separation_m=separation_m,
-                      vertical_separation_m=30.0, departure_slot_s=5.0, audit=False, time_limit_s=5.0)
+                      vertical_separation_m=30.0, departure_slot_s=5.0, audit=False, time_limit_s=5.0,
+                      intent_volume_piece_s=intent_volume_piece_s)
     decided = []
 
     def before(planner, t, k):
@@ -396,23 +397,22 @@ def _published_pairs(net, decided, ctx):
     return pairs, hits
 
 
-@pytest.mark.slow  # not in `make test-fast`: two layered runs in process, ~40 s
+@pytest.mark.slow  # not in `make test-fast`: two layered runs in process, ~30 s
 def test_no_two_published_intents_of_a_layered_run_with_replans_intersect():
     """The published documents of a layered run with re-plans, as a peer checks them (1 cm):
     at the plain 100 m separation only same-level pairs meet (in trail or crossing within the
-    bound D_h); none of adjacent levels. Planned with H >= D_h + 1 cm (224 m for 5 s pieces at
-    10 m/s), no two intents intersect."""
+    bound D_h); none of adjacent levels. In F3548 mode (the planner checks the published
+    volumes too, ``intent_volume_piece_s``) at the same 100 m, no two intents intersect."""
     from uam_planner.separation import SeparationModel
 
     spec = VolumeSpec.for_separation(SeparationModel("cylinder", 100.0, 30.0))
-    d_h, _ = spec.bounds_m(10.0)
-    for separation_m in (100.0, math.ceil(d_h + PRECISION_M)):
-        net, decided = _layered_run(separation_m)
+    for piece_s in (0.0, spec.max_piece_s):
+        net, decided = _layered_run(100.0, piece_s)
         assert max(f.version for f, _ in decided) >= 2 and len(decided) >= 30  # re-plans
         ctx = IntentContext.for_network(net, spec)
         pairs, hits = _published_pairs(net, decided, ctx)
         assert pairs > 500
-        if separation_m == 100.0:
+        if not piece_s:
             assert hits and all(overlap > 1.0 for _, _, overlap in hits), hits  # the same band only
             assert all(a.trajectory.points_m[1, 2] == b.trajectory.points_m[1, 2] for a, b, _ in hits)
         else:

@@ -541,6 +541,7 @@ def prepare_epoch_mwis(t_s: float, epoch_index: int, pending: Sequence[FlightReq
         len(eligible), active_set, config.separation, timings=phases, keys=keys,
         pair_cache=pair_cache if use_cache else None,
         bucket_s=_horizon_bucket_s(config) if horizon > 1 else None)
+    graph = _with_intent_volumes(graph, trajs, airborne, config, t_s, phases)
     return PreparedEpoch(t_s=float(t_s), epoch_index=int(epoch_index), pending=list(pending), report=report,
                          graph=graph, eligible=eligible, tmpls=tmpls, trajs=trajs, req_of=req_of,
                          weights=cands.weights, index_in_request=cands.index_in_request,
@@ -548,6 +549,20 @@ def prepare_epoch_mwis(t_s: float, epoch_index: int, pending: Sequence[FlightReq
                          phases=phases, horizon=horizon, epoch_s=float(config.epoch_s),
                          slots=config.airspace.departure_slot_s > 0.0,
                          commit_ahead=bool(config.commit_ahead))
+
+
+def _with_intent_volumes(graph, trajs, airborne, config: PlanningConfig, t_s: float, phases: dict):
+    """In F3548 mode, ``graph`` with the published volumes kept disjoint too
+    (``uam_planner.intent_volumes.restrict_graph``; timed as ``volumes_s``); else ``graph``."""
+    spec = config.intent_volumes
+    if spec is None:
+        return graph
+    from .intent_volumes import restrict_graph
+    t = time.perf_counter()
+    # the flights' pieces that ended more than a second before the epoch meet no candidate
+    graph = restrict_graph(graph, trajs, [f.trajectory for f in airborne], spec, float(t_s) - 1.0)
+    phases["volumes_s"] = time.perf_counter() - t
+    return graph
 
 
 def _horizon_bucket_s(config: PlanningConfig) -> float:
@@ -684,11 +699,20 @@ def plan_epoch_fifo(t_s: float, epoch_index: int, pending: Sequence[FlightReques
     discarded = np.zeros(len(trajs), dtype=bool)
     if len(trajs) and len(active_set):
         discarded = any_conflict(cand_set, active_set, sep)
+    spec = config.intent_volumes
+    if spec is not None and len(trajs) and airborne:   # F3548 mode: the published volumes too
+        from .intent_volumes import intent_pairs
+        discarded[intent_pairs(trajs, [f.trajectory for f in airborne], spec, float(t_s) - 1.0)[:, 0]] = True
     t4 = time.perf_counter()
     phases["deconfliction_s"] = t4 - t3
     surv = np.flatnonzero(~discarded)
     conflicts = conflicting_pairs([trajs[i] for i in surv], None, sep) \
         if surv.size > 1 else np.zeros((0, 2), dtype=np.int64)
+    if spec is not None and surv.size > 1:
+        from .conflict_graph import _unique_pairs
+        from .intent_volumes import intent_pairs
+        conflicts = _unique_pairs(np.concatenate(
+            [conflicts, intent_pairs([trajs[i] for i in surv], None, spec)]), surv.size)
     t5 = time.perf_counter()
     phases["conflicts_s"] = t5 - t4
     partners: dict[int, list[int]] = {}

@@ -176,6 +176,10 @@ class PlanningConfig:
             beside the strategic buffer every plan keeps; 0 (default) = the true minimum.
         priority_grants: ``uam_planner.grants.PriorityGrants``: a request above its operator's
             granted class is refused naming the grant; None (default) takes every class.
+        intent_volume_piece_s: F3548 mode: the longest time window of one published volume [s]
+            (the USS's ``volume_piece_s``); > 0 keeps the published volumes of every two flights
+            disjoint at F3548's 1 cm, beside the separation (``uam_planner.intent_volumes``;
+            ``intent_volumes`` is the VolumeSpec); 0 (default) = the separation only.
         conformance: the reaction to nonconforming flights
             (``uam_planner.nonconformance``): a ConformanceBounds the planner checks each
             nonconformance report against (its own plan, its own observation) before it updates
@@ -205,6 +209,16 @@ class PlanningConfig:
     conflict_probe_s: float = 0.0
     conflict_probe_margin_m: float = 0.0
     priority_grants: object = None   # uam_planner.grants.PriorityGrants; None: every class taken
+    intent_volume_piece_s: float = 0.0
+
+    @property
+    def intent_volumes(self):
+        """The VolumeSpec of the intents the USS publishes for these plans (r_h, r_v from the true
+        minimum, as ``uam_sim``'s USS makes it), or None when ``intent_volume_piece_s`` is 0."""
+        if not self.intent_volume_piece_s:
+            return None
+        from .f3548 import VolumeSpec   # uas_standards' types load only in F3548 mode
+        return VolumeSpec.for_separation(self.minimum_separation, float(self.intent_volume_piece_s))
 
     @property
     def probe_separation(self) -> SeparationModel:
@@ -251,7 +265,7 @@ class PlanningConfig:
             raise ValueError(f"PlanningConfig.constraints must be a ConstraintSet or None, got "
                              f"{type(self.constraints).__name__}")
         for name in ("spatial_buffer_m", "temporal_buffer_s", "conflict_probe_s",
-                     "conflict_probe_margin_m"):
+                     "conflict_probe_margin_m", "intent_volume_piece_s"):
             _positive("PlanningConfig", name, getattr(self, name), allow_zero=True)
         if self.conformance is not None and not isinstance(self.conformance, ConformanceBounds):
             raise ValueError(f"PlanningConfig.conformance must be a ConformanceBounds or None, got "

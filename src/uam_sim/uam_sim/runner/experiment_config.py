@@ -130,6 +130,9 @@ class ExperimentConfig:
             minimum at their observed speeds are updated too); 0 (default) = no probe.
         conflict_probe_margin_m: with the probe, its margin [m]
             (``PlanningConfig.conflict_probe_margin_m``); 0 (default) = the true minimum.
+        intent_volume_piece_s: F3548 mode: the published volumes' longest window [s]; > 0 keeps
+            every two flights' volumes disjoint too (``PlanningConfig.intent_volume_piece_s``);
+            0 (default) = the separation only.
         metrics_warmup_s: the decision metrics (delay, shares, ...) leave out requests whose
             earliest departure is before it (the warm-up); 0 = none.
         cumulative_rates: rates shown in the cumulative-approvals figure (default: up to 4 spread).
@@ -187,6 +190,7 @@ class ExperimentConfig:
     reaction_period_s: Float = 0.0
     conflict_probe_s: Float = 0.0  # with the reaction: PlanningConfig.conflict_probe_s
     conflict_probe_margin_m: Float = 0.0  # with the probe: PlanningConfig.conflict_probe_margin_m
+    intent_volume_piece_s: Float = 0.0  # F3548 mode: PlanningConfig.intent_volume_piece_s
     tts: Optional[Mapping] = field(default_factory=lambda: {
         "enabled": True, "instances": 629, "min_vertices": 5, "max_vertices": 50, "reads": 100,
         "repetitions": 5, "backend_instances": {"qpu-emulator": 60},
@@ -225,7 +229,8 @@ class ExperimentConfig:
                               conformance=self.conformance_bounds() if self.reaction else None,
                               conflict_probe_s=self.conflict_probe_s if self.reaction else 0.0,
                               conflict_probe_margin_m=self.conflict_probe_margin_m
-                              if self.reaction and self.conflict_probe_s else 0.0)
+                              if self.reaction and self.conflict_probe_s else 0.0,
+                              intent_volume_piece_s=self.intent_volume_piece_s)
 
     def disturbance_config(self):
         """The DisturbanceConfig of ``disturbance`` (off when empty); its seed is the cell's."""
