@@ -482,47 +482,24 @@ def _decomposed_embedded(problem, child, *, backend, seed, time_limit_s, started
                        solve_time_s=time.perf_counter() - started, backend=backend, stats=stats)
 
 
-def embedded_solve(problem: MwisProblem, child, *, backend: str, seed: int, time_limit_s: float,
-                   options: Mapping[str, Any], report_qpu_timing: bool,
-                   sampler_parameters: Mapping[str, Any]) -> MwisResult:
-    """Embed the MWIS QUBO on `child` (a structured dimod sampler), sample, unembed, refine.
-
-    Args:
-        problem: the MWIS problem.
-        child: structured sampler (DWaveSampler, AdvantageStandInSampler, StructureComposite).
-        backend: name for the result.
-        seed: solve seed, passed to the child only if it declares a "seed" parameter.
-        time_limit_s: also the default minorminer timeout (at least 1 s).
-        options: common options (num_reads, lambda, optimum) and chain_strength,
-            chain_strength_prefactor, embedding_seed, embedding_timeout_s, embedding_tries.
-        report_qpu_timing: copy sampleset.info["timing"] into the statistics (qpu only).
-        sampler_parameters: wanted sampler parameters (annealing_time, num_sweeps, ...); each is
-            passed only if the child declares it.
-
-    Returns:
-        MwisResult (proven_optimal False) with the statistics listed in the module docstring.
-    """
-    from dwave.embedding.chain_breaks import majority_vote
+def _chain_strength_choice(options: Mapping[str, Any]) -> tuple[Any, str]:
+    """The chain strength to pass dwave-system and its rule's name for the statistics: the
+    uniform torque compensation (with the option's prefactor) unless a number is given."""
     from dwave.embedding.chain_strength import uniform_torque_compensation
-    from dwave.system import EmbeddingComposite
 
-    started = time.perf_counter()
-    options = given(options)
-    parsed = common_options(options, _QPU_OPTIONS)
-    if problem.n == 0:
-        return make_result(problem, np.zeros(0, dtype=np.int32), proven_optimal=True,
-                           solve_time_s=time.perf_counter() - started, backend=backend,
-                           stats={"reads": 0})
     prefactor = _float_option(options, "chain_strength_prefactor",
                               DEFAULT_CHAIN_STRENGTH_PREFACTOR)
     chain_strength_option = options.get("chain_strength", "uniform_torque_compensation")
     if chain_strength_option in ("uniform_torque_compensation", "utc", None):
         chain_strength = functools.partial(uniform_torque_compensation, prefactor=prefactor)
-        chain_strength_rule = f"uniform_torque_compensation(prefactor={prefactor})"
-    else:
-        chain_strength = _float_option(options, "chain_strength", None)
-        chain_strength_rule = "fixed"
-    embedding_parameters = {
+        return chain_strength, f"uniform_torque_compensation(prefactor={prefactor})"
+    return _float_option(options, "chain_strength", None), "fixed"
+
+
+def _embedding_parameters(options: Mapping[str, Any], time_limit_s: float) -> dict:
+    """minorminer's parameters from the options: seed, timeout (half the limit by default) and
+    tries."""
+    return {
         "random_seed": _int_option(options, "embedding_seed", 0, 0),
         # half the limit by default (it was max(1, limit): minorminer uses its whole timeout,
         # so a 1 s limit ran to 1.4 s and was killed; the backend contract test)
@@ -530,26 +507,27 @@ def embedded_solve(problem: MwisProblem, child, *, backend: str, seed: int, time
         "tries": _int_option(options, "embedding_tries", 10, 1),
     }
 
+
+def _declared_parameters(child, parsed: Mapping[str, Any], sampler_parameters: Mapping[str, Any],
+                         seed: int) -> tuple[dict, list[str]]:
+    """The wanted sampler parameters split into those ``child`` declares (passed) and the names
+    of those it does not (reported, never passed: a sampler refuses unknown parameters)."""
     params = {"num_reads": parsed["num_reads"], **sampler_parameters}
     declared = getattr(child, "parameters", {}) or {}
     if "seed" in declared:
         params["seed"] = int(seed) % 2**32
     passed = {k: v for k, v in params.items() if k in declared}
     not_passed = sorted(k for k in params if k not in declared)
+    return passed, not_passed
 
-    fits, why = fits_target(problem, child)
-    direct_max = options.get("max_direct_vertices", QPU_DIRECT_MAX_VERTICES)
-    if not fits or problem.n > direct_max:
-        # refused at once (no minorminer call that can never succeed): decompose instead
-        return _decomposed_embedded(problem, child, backend=backend, seed=seed,
-                                    time_limit_s=time_limit_s, started=started, parsed=parsed,
-                                    options=options, passed=passed, chain_strength=chain_strength,
-                                    embedding_parameters=embedding_parameters,
-                                    reason=why or f"{problem.n} vertices > max_direct_vertices "
-                                    f"= {direct_max}")
 
-    qubo = mwis_qubo(problem, parsed["lambda"])
-    bqm = qubo.to_bqm()
+def _sample_direct(problem: MwisProblem, child, bqm, *, backend: str, chain_strength,
+                   embedding_parameters: Mapping[str, Any], passed: Mapping[str, Any]):
+    """Embed ``bqm`` with minorminer (cached) and sample it on ``child``; when minorminer finds
+    no embedding in its time, the topology's clique embedding of K_n serves instead. Returns
+    (sample set, seconds from the first sample call to the resolved sample set)."""
+    from dwave.embedding.chain_breaks import majority_vote
+    from dwave.system import EmbeddingComposite
 
     composite = EmbeddingComposite(child, find_embedding=cached_find_embedding,
                                    embedding_parameters=embedding_parameters)
@@ -578,11 +556,12 @@ def embedded_solve(problem: MwisProblem, child, *, backend: str, seed: int, time
             bqm, chain_strength=chain_strength, chain_break_method=majority_vote,
             chain_break_fraction=True, return_embedding=True, **passed)
         sampleset.resolve()
-    sample_time = time.perf_counter() - sample_start
+    return sampleset, time.perf_counter() - sample_start
 
-    raw = sampleset_to_array(sampleset, problem.n)
-    post_start = time.perf_counter()
-    selected, stats = refine_and_repair(problem, qubo, raw, optimum=parsed["optimum"])
+
+def _embedding_stats(sampleset, chain_strength_rule: str) -> dict:
+    """Chain lengths, qubits, the chain strength dwave-system used (0 when every chain is one
+    qubit) and the chain-break fractions weighted by occurrences, from the sample set."""
     context = sampleset.info.get("embedding_context", {})
     chains = context.get("embedding", {})
     lengths = np.array([len(chain) for chain in chains.values()], dtype=np.int64)
@@ -595,9 +574,7 @@ def embedded_solve(problem: MwisProblem, child, *, backend: str, seed: int, time
         # every chain is one qubit: dwave-system skips chain couplings altogether
         used_strength = 0.0
         chain_strength_rule = "none needed (every chain is a single qubit)"
-    stats.update({
-        "lambda": parsed["lambda"],
-        "num_reads": parsed["num_reads"],
+    return {
         "chain_length_max": int(lengths.max()) if lengths.size else 0,
         "chain_length_mean": float(lengths.mean()) if lengths.size else 0.0,
         "qubits_used": int(lengths.sum()),
@@ -606,14 +583,11 @@ def embedded_solve(problem: MwisProblem, child, *, backend: str, seed: int, time
         "chain_break_method": "majority_vote",
         "chain_break_fraction": float(np.average(breaks, weights=counts)),
         "reads_with_broken_chains": float(np.average(breaks > 0, weights=counts)),
-        "embedding_seed": embedding_parameters["random_seed"],
-        "sampler": type(child).__name__,
-        "sampler_is_stand_in": bool(getattr(child, "properties", {}).get("stand_in", False)),
-        "sampler_parameters": ",".join(f"{k}={v}" for k, v in sorted(passed.items())),
-        "sample_time_s": sample_time,
-    })
-    if not_passed:
-        stats["sampler_parameters_not_supported"] = ",".join(not_passed)
+    }
+
+
+def _add_qpu_timing(stats: dict, sampleset, report_qpu_timing: bool) -> None:
+    """Copy the sampler's own timing (microseconds) into ``stats``, or say why there is none."""
     timing = sampleset.info.get("timing") if report_qpu_timing else None
     if not report_qpu_timing:
         stats["qpu_timing"] = "none (emulator)"
@@ -624,6 +598,72 @@ def embedded_solve(problem: MwisProblem, child, *, backend: str, seed: int, time
         for key in _TIMING_KEYS:
             if key in timing:
                 stats[f"{key}_us"] = float(timing[key])
+
+
+def embedded_solve(problem: MwisProblem, child, *, backend: str, seed: int, time_limit_s: float,
+                   options: Mapping[str, Any], report_qpu_timing: bool,
+                   sampler_parameters: Mapping[str, Any]) -> MwisResult:
+    """Embed the MWIS QUBO on `child` (a structured dimod sampler), sample, unembed, refine.
+
+    Args:
+        problem: the MWIS problem.
+        child: structured sampler (DWaveSampler, AdvantageStandInSampler, StructureComposite).
+        backend: name for the result.
+        seed: solve seed, passed to the child only if it declares a "seed" parameter.
+        time_limit_s: also the default minorminer timeout (at least 1 s).
+        options: common options (num_reads, lambda, optimum) and chain_strength,
+            chain_strength_prefactor, embedding_seed, embedding_timeout_s, embedding_tries.
+        report_qpu_timing: copy sampleset.info["timing"] into the statistics (qpu only).
+        sampler_parameters: wanted sampler parameters (annealing_time, num_sweeps, ...); each is
+            passed only if the child declares it.
+
+    Returns:
+        MwisResult (proven_optimal False) with the statistics listed in the module docstring.
+    """
+    started = time.perf_counter()
+    options = given(options)
+    parsed = common_options(options, _QPU_OPTIONS)
+    if problem.n == 0:
+        return make_result(problem, np.zeros(0, dtype=np.int32), proven_optimal=True,
+                           solve_time_s=time.perf_counter() - started, backend=backend,
+                           stats={"reads": 0})
+    chain_strength, chain_strength_rule = _chain_strength_choice(options)
+    embedding_parameters = _embedding_parameters(options, time_limit_s)
+    passed, not_passed = _declared_parameters(child, parsed, sampler_parameters, seed)
+
+    fits, why = fits_target(problem, child)
+    direct_max = options.get("max_direct_vertices", QPU_DIRECT_MAX_VERTICES)
+    if not fits or problem.n > direct_max:
+        # refused at once (no minorminer call that can never succeed): decompose instead
+        return _decomposed_embedded(problem, child, backend=backend, seed=seed,
+                                    time_limit_s=time_limit_s, started=started, parsed=parsed,
+                                    options=options, passed=passed, chain_strength=chain_strength,
+                                    embedding_parameters=embedding_parameters,
+                                    reason=why or f"{problem.n} vertices > max_direct_vertices "
+                                    f"= {direct_max}")
+
+    qubo = mwis_qubo(problem, parsed["lambda"])
+    bqm = qubo.to_bqm()
+    sampleset, sample_time = _sample_direct(problem, child, bqm, backend=backend,
+                                            chain_strength=chain_strength,
+                                            embedding_parameters=embedding_parameters, passed=passed)
+
+    raw = sampleset_to_array(sampleset, problem.n)
+    post_start = time.perf_counter()
+    selected, stats = refine_and_repair(problem, qubo, raw, optimum=parsed["optimum"])
+    stats.update({
+        "lambda": parsed["lambda"],
+        "num_reads": parsed["num_reads"],
+        **_embedding_stats(sampleset, chain_strength_rule),
+        "embedding_seed": embedding_parameters["random_seed"],
+        "sampler": type(child).__name__,
+        "sampler_is_stand_in": bool(getattr(child, "properties", {}).get("stand_in", False)),
+        "sampler_parameters": ",".join(f"{k}={v}" for k, v in sorted(passed.items())),
+        "sample_time_s": sample_time,
+    })
+    if not_passed:
+        stats["sampler_parameters_not_supported"] = ",".join(not_passed)
+    _add_qpu_timing(stats, sampleset, report_qpu_timing)
     stats["postprocess_time_s"] = time.perf_counter() - post_start
     return make_result(problem, selected, proven_optimal=False,
                        solve_time_s=time.perf_counter() - started, backend=backend, stats=stats)
