@@ -418,7 +418,6 @@ class SolveService:
         fallback answer instead.
         """
         from . import build_pipeline
-        from .registry import _table, get_backend
 
         t0 = time.perf_counter()
         limit = check_time_limit(time_limit_s, max_s=self.max_time_limit_s)
@@ -426,11 +425,7 @@ class SolveService:
         if problem.n > self.max_vertices:
             raise MwisInputError(f"weights: {problem.n} vertices exceed the limit "
                                  f"max_vertices={self.max_vertices}")
-        if isinstance(backend, str):
-            instance = get_backend(backend)
-            spec: Any = _table()[backend]
-        else:
-            instance = spec = backend
+        instance, spec = _backend_and_spec(backend)
         instance.require_available()
         opts = instance.validate_options(options)
         inline_max = min(int(getattr(instance, "inline_max_vertices", 0)), self.inline_max_vertices)
@@ -441,13 +436,28 @@ class SolveService:
             res.stats["executor"] = "inline"
             self.counts["inline"] += 1
             return res
+        return self._solve_in_worker(problem, instance.name, spec, t0, limit, seed, opts, layers)
+
+    def solve_arrays(self, weights, edges, groups=None, **kwargs) -> MwisResult:
+        """:meth:`solve` from plain arrays (validated by MwisProblem.from_arrays)."""
+        problem = MwisProblem.from_arrays(weights, edges, groups, max_vertices=self.max_vertices)
+        return self.solve(problem, **kwargs)
+
+    # -- internals ------------------------------------------------------------------------
+
+    def _solve_in_worker(self, problem: MwisProblem, name: str, spec: Any, t0: float,
+                         limit: float, seed: int, opts: Mapping[str, Any],
+                         layers: bool) -> MwisResult:
+        """One solve on a warm worker of its lane: the worker's checked answer, or the flagged
+        fallback when no worker frees up in time, the job cannot be sent or the worker is killed
+        at the deadline."""
         lane = "small" if problem.n <= self.small_lane_max_vertices else "large"
         deadline = t0 + limit
         worker = self._acquire(lane, deadline)
         waited = time.perf_counter() - t0
         if worker is None:
             self.counts["no-free-worker"] += 1
-            return self._fallback(problem, instance.name, t0, "no-free-worker", waited,
+            return self._fallback(problem, name, t0, "no-free-worker", waited,
                                   f"no free {lane}-lane worker within the time limit "
                                   f"{limit:g} s (all busy)")
         remaining = max(deadline - time.perf_counter(), 1e-3)
@@ -456,18 +466,27 @@ class SolveService:
         except (OSError, ValueError) as exc:
             self._replace_in_background(worker)
             self.counts["worker-crashed"] += 1
-            return self._fallback(problem, instance.name, t0, "worker-crashed", waited,
+            return self._fallback(problem, name, t0, "worker-crashed", waited,
                                   f"sending the job to the worker failed ({exc})")
-        # On large graphs the worker first sends the fallback answer ("partial"), then the
-        # solve's; a kill at the deadline then answers at once with that best-so-far. Where
-        # that is not sent but the fallback is the vectorised one (dense graphs: up to 0.13 s
-        # at 10^6 pairs), this process computes it now, while the worker solves, so that it is
-        # ready before the limit (GWMIN on the others takes < 0.05 s).
-        precomputed = None
-        from .greedy import fallback_selection, needs_fast_fallback
+        reply, precomputed = self._await_reply(worker, deadline, _precomputed_fallback(problem))
+        if reply is None:
+            worker.signal_kill()  # SIGKILL now: no CPU or memory left behind; reaped below
+            self._replace_in_background(worker)
+            self.counts["killed"] += 1
+            return self._fallback(problem, name, t0, "killed", waited, precomputed=precomputed,
+                                  reason=
+                                  f"backend {name!r} exceeded its time limit: still "
+                                  f"running after {time.perf_counter() - t0:.3f} s (limit "
+                                  f"{limit:g} s + margin {self.margin_s:g} s); worker killed"
+                                  + ("; answer: the worker's greedy answer computed before the "
+                                     "solve" if precomputed is not None else ""))
+        return self._worker_answer(problem, name, worker, reply, t0, waited)
 
-        if problem.n <= PRECOMPUTE_FALLBACK_ABOVE and needs_fast_fallback(problem):
-            precomputed = fallback_selection(problem)
+    def _await_reply(self, worker: _Worker, deadline: float,
+                     precomputed: tuple | None) -> tuple[Any, tuple | None]:
+        """Wait for the worker's reply until ``deadline + margin_s``; a fallback answer the
+        worker sends first ("partial") replaces ``precomputed``. Returns (the reply, None when
+        the time ran out, or the EOFError or OSError of a broken pipe; the fallback answer)."""
         reply = None
         try:
             while True:
@@ -479,17 +498,13 @@ class SolveService:
                 precomputed, reply = (reply[1], reply[2]), None
         except (EOFError, OSError) as exc:
             reply = exc
-        if reply is None:
-            worker.signal_kill()  # SIGKILL now: no CPU or memory left behind; reaped below
-            self._replace_in_background(worker)
-            self.counts["killed"] += 1
-            return self._fallback(problem, instance.name, t0, "killed", waited, precomputed=precomputed,
-                                  reason=
-                                  f"backend {instance.name!r} exceeded its time limit: still "
-                                  f"running after {time.perf_counter() - t0:.3f} s (limit "
-                                  f"{limit:g} s + margin {self.margin_s:g} s); worker killed"
-                                  + ("; answer: the worker's greedy answer computed before the "
-                                     "solve" if precomputed is not None else ""))
+        return reply, precomputed
+
+    def _worker_answer(self, problem: MwisProblem, name: str, worker: _Worker, reply: Any,
+                       t0: float, waited: float) -> MwisResult:
+        """The answer from a worker's reply: checked in this process and rebuilt, or the flagged
+        fallback for a crashed worker, a solver's exception or an invalid set (a bad option or
+        input the backend found raises MwisInputError, the caller's error)."""
         try:
             if isinstance(reply, BaseException):
                 raise reply
@@ -498,20 +513,20 @@ class SolveService:
             code = worker.process.exitcode
             self._replace_in_background(worker)
             self.counts["worker-crashed"] += 1
-            return self._fallback(problem, instance.name, t0, "worker-crashed", waited,
-                                  f"worker process of backend {instance.name!r} died "
+            return self._fallback(problem, name, t0, "worker-crashed", waited,
+                                  f"worker process of backend {name!r} died "
                                   f"(exit code {code}, {type(exc).__name__})")
         self._release(worker)
         if reply[0] == "error":
             if reply[2]:  # a bad option or input found by the backend itself: the caller's error
                 raise MwisInputError(reply[1])
-            return self._fallback(problem, instance.name, t0, "worker", waited,
-                                  f"backend {instance.name!r} raised {reply[1]}")
+            return self._fallback(problem, name, t0, "worker", waited,
+                                  f"backend {name!r} raised {reply[1]}")
         res = reply[1]
         ok, why = check_selection(problem, res.selected)
         if not ok:
-            return self._fallback(problem, instance.name, t0, "worker", waited,
-                                  f"backend {instance.name!r} returned an invalid answer: {why}")
+            return self._fallback(problem, name, t0, "worker", waited,
+                                  f"backend {name!r} returned an invalid answer: {why}")
         elapsed = time.perf_counter() - t0
         out = make_result(problem, res.selected, proven_optimal=res.proven_optimal,
                           solve_time_s=elapsed, backend=res.backend,
@@ -519,13 +534,6 @@ class SolveService:
                           message=res.message)
         self.counts["worker"] += 1
         return out
-
-    def solve_arrays(self, weights, edges, groups=None, **kwargs) -> MwisResult:
-        """:meth:`solve` from plain arrays (validated by MwisProblem.from_arrays)."""
-        problem = MwisProblem.from_arrays(weights, edges, groups, max_vertices=self.max_vertices)
-        return self.solve(problem, **kwargs)
-
-    # -- internals ------------------------------------------------------------------------
 
     def _acquire(self, lane: str, deadline: float) -> _Worker | None:
         with self._cond:
@@ -624,6 +632,31 @@ def node_service(max_time_limit_s: float = 60.0, max_vertices: int = 20_000) -> 
     it, for the node and for benchmarks of the node's path without ROS."""
     return SolveService(**NODE_LAYOUT, max_time_limit_s=float(max_time_limit_s),
                         max_vertices=int(max_vertices))
+
+
+def _backend_and_spec(backend: str | Backend) -> tuple[Backend, Any]:
+    """The backend instance and what a worker gets to build its own: the registry entry for a
+    name, the instance itself otherwise."""
+    from .registry import _table, get_backend
+
+    if isinstance(backend, str):
+        return get_backend(backend), _table()[backend]
+    return backend, backend
+
+
+def _precomputed_fallback(problem: MwisProblem) -> tuple | None:
+    """The fallback answer computed in this process while the worker solves, or None.
+
+    On large graphs the worker first sends the fallback answer ("partial"), then the solve's;
+    a kill at the deadline then answers at once with that best-so-far. Where that is not sent
+    but the fallback is the vectorised one (dense graphs: up to 0.13 s at 10^6 pairs), this
+    process computes it now, while the worker solves, so that it is ready before the limit
+    (GWMIN on the others takes < 0.05 s)."""
+    from .greedy import fallback_selection, needs_fast_fallback
+
+    if problem.n <= PRECOMPUTE_FALLBACK_ABOVE and needs_fast_fallback(problem):
+        return fallback_selection(problem)
+    return None
 
 
 def _picklable(options: Mapping[str, Any]) -> bool:
