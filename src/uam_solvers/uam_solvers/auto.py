@@ -556,71 +556,21 @@ class AutoBackend(Backend):
             return make_result(problem, [], proven_optimal=True, solve_time_s=0.0, backend=self.name)
         if n <= opts["bb_max_vertices"] and \
                 clique_cover_size(n, problem.groups) <= opts["bb_max_cover"]:
-            # exact branch and bound over the requests' cliques, no extension call; it gives up
-            # (None) past its node limit and KaMIS below takes over
-            node_limit = bb_node_limit(time_limit_s, opts["bb_node_limit"])
-            sel, nodes = clique_branch_and_bound(problem, node_limit)
-            if sel is not None:
-                return make_result(problem, sel, proven_optimal=True,
-                                   solve_time_s=time.perf_counter() - t0, backend=self.name,
-                                   stats={"auto_method": "clique-bb", "bb_nodes": nodes})
+            res = self._solve_bb(problem, time_limit_s, opts, t0)
+            if res is not None:
+                return res
         if n <= SMALL_KAMIS_VERTICES:
             return self._solve_part(problem, time_limit_s, seed, opts, t0)
         if self._parts is None:  # a component handed over by the split below
             return self._solve_part(problem, time_limit_s, seed, opts, t0)
-        incumbent = None
-        tri = None
-        share = 0.0  # KaMIS's first share on the whole graph (0: KaMIS did not run)
-        tie_budget_s = 0.0  # the tie-break's re-run budget (_tie_budget of KaMIS's first share)
         degree = conflict_degree(problem)
         pairs = int(problem.all_edges().shape[0])
-        if n <= opts["kamis_max_vertices"] and opts["kamis_fraction"] > 0:
-            clustered = False
-            cpsat_next = False
-            if degree > opts["kamis_max_degree"] and pairs <= max(KAMIS_CLUSTERED_MAX_PAIRS,
-                                                                   opts["cpsat_max_pairs"]):
-                density = degree / max(n - 1, 1)
-                tri = gate_triangle_ratio(problem, (opts["kamis_min_triangle_ratio"],
-                                                    opts["cpsat_min_triangle_ratio"],
-                                                    KAMIS_MIN_TRIANGLE_EXCESS * density))
-                clustered = (opts["kamis_min_triangle_ratio"] <= 1.0
-                             and pairs <= KAMIS_CLUSTERED_MAX_PAIRS
-                             and tri >= opts["kamis_min_triangle_ratio"]
-                             and tri >= KAMIS_MIN_TRIANGLE_EXCESS * density)
-                cpsat_next = self._cpsat_suits(problem, tri, pairs, opts)
-            if degree <= opts["kamis_max_degree"] or clustered:
-                # what proves first: KaMIS branch-and-reduce on the whole graph (its exact
-                # reductions are faster than the Python layers, and it splits itself) with a
-                # small share of the limit, at most kamis_max_share_s (a probe when CP-SAT
-                # follows); a return before 0.9 of the share is its completed search, a proof
-                # (a search stopped by the limit runs to it, as for the kamis backend), returned
-                # at once; otherwise CP-SAT (clique-structured graphs) and the split below
-                # (CP-SAT per component, CHILS) get the rest of the limit
-                fraction = opts["kamis_clustered_fraction" if clustered else "kamis_fraction"]
-                cap = max(min(time_limit_s * fraction, opts["kamis_max_share_s"]), 1e-3)
-                share = cap
-                if cpsat_next:
-                    share = min(cap, max(time_limit_s * opts["kamis_probe_fraction"],
-                                         opts["kamis_probe_min_s"]))
-                tie_budget_s = self._tie_budget(share, opts)
-                if cpsat_next and opts["tie_break"]:
-                    # the probe is given the tie-break's budget at once: the
-                    # re-run after a CP-SAT proof would spend it anyway, so the canonical set is
-                    # the same; a graph KaMIS proves within it (the layered corpus's 671 and
-                    # 1,274 vertices: 55-70 ms, past the 0.05 s probe) needs no CP-SAT and no
-                    # re-run, and one it does not (the horizon graphs) pays the budget once
-                    share = max(share, min(tie_budget_s, time_limit_s * KAMIS_PROBE_MAX_SHARE, cap))
-                res = self._kamis.solve(problem, time_limit_s=share, seed=seed,
-                                        options={"finish_fraction": 0.9})
-                if res.proven_optimal:
-                    # KaMIS's result on this same problem, already checked and its objective
-                    # recomputed by make_result: relabelled, not rebuilt (~10 us)
-                    res.backend, res.solve_time_s = self.name, time.perf_counter() - t0
-                    res.stats = {**res.stats, "auto_method": "kamis", "conflict_degree": degree,
-                                 **({} if tri is None else {"triangle_ratio": round(tri, 4)})}
-                    return res
-                incumbent = res  # KaMIS's best set when its share ran out: kept if better
-                incumbent.stats = {**res.stats, "auto_method": "kamis (limit)"}
+        # share: KaMIS's first share on the whole graph (0: KaMIS did not run); tie_budget_s:
+        # the tie-break's re-run budget (_tie_budget of that share)
+        proven, incumbent, tri, share, tie_budget_s = self._kamis_first(
+            problem, time_limit_s, seed, opts, t0, degree, pairs)
+        if proven is not None:
+            return proven
         if n <= self.split_max_vertices_parts:
             res = self._cpsat_whole(problem, time_limit_s, seed, opts, t0, tri, pairs)
             if res is not None and (res.proven_optimal or _little_left(time_limit_s, t0)):
@@ -641,6 +591,93 @@ class AutoBackend(Backend):
             return self._canonical(problem, res, share, time_limit_s, seed, opts, t0,
                                        tie_budget_s)
         return self._solve_large(problem, time_limit_s, seed, opts, t0)
+
+    def _solve_bb(self, problem: MwisProblem, time_limit_s: float, opts: dict,
+                  t0: float) -> MwisResult | None:
+        """The proven answer of the exact branch and bound over the requests' cliques (no
+        extension call), or None when it gave up past its node limit (KaMIS then takes over)."""
+        node_limit = bb_node_limit(time_limit_s, opts["bb_node_limit"])
+        sel, nodes = clique_branch_and_bound(problem, node_limit)
+        if sel is None:
+            return None
+        return make_result(problem, sel, proven_optimal=True,
+                           solve_time_s=time.perf_counter() - t0, backend=self.name,
+                           stats={"auto_method": "clique-bb", "bb_nodes": nodes})
+
+    def _kamis_gate(self, problem: MwisProblem, degree: float, pairs: int,
+                    opts: dict) -> tuple[float | None, bool, bool]:
+        """For a graph above ``kamis_max_degree`` with few enough pairs: whether it is
+        clustered (a union of cliques by the triangle ratio, so KaMIS still gets it first) and
+        whether CP-SAT suits it after KaMIS. Returns (triangle ratio, None when not sampled;
+        clustered; CP-SAT next)."""
+        n = problem.n
+        tri = None
+        clustered = False
+        cpsat_next = False
+        if degree > opts["kamis_max_degree"] and pairs <= max(KAMIS_CLUSTERED_MAX_PAIRS,
+                                                               opts["cpsat_max_pairs"]):
+            density = degree / max(n - 1, 1)
+            tri = gate_triangle_ratio(problem, (opts["kamis_min_triangle_ratio"],
+                                                opts["cpsat_min_triangle_ratio"],
+                                                KAMIS_MIN_TRIANGLE_EXCESS * density))
+            clustered = (opts["kamis_min_triangle_ratio"] <= 1.0
+                         and pairs <= KAMIS_CLUSTERED_MAX_PAIRS
+                         and tri >= opts["kamis_min_triangle_ratio"]
+                         and tri >= KAMIS_MIN_TRIANGLE_EXCESS * density)
+            cpsat_next = self._cpsat_suits(problem, tri, pairs, opts)
+        return tri, clustered, cpsat_next
+
+    def _kamis_share(self, time_limit_s: float, opts: dict, clustered: bool,
+                     cpsat_next: bool) -> tuple[float, float]:
+        """KaMIS's first share of the limit on the whole graph and the tie-break's re-run
+        budget: a small share, at most kamis_max_share_s, a probe when CP-SAT follows."""
+        fraction = opts["kamis_clustered_fraction" if clustered else "kamis_fraction"]
+        cap = max(min(time_limit_s * fraction, opts["kamis_max_share_s"]), 1e-3)
+        share = cap
+        if cpsat_next:
+            share = min(cap, max(time_limit_s * opts["kamis_probe_fraction"],
+                                 opts["kamis_probe_min_s"]))
+        tie_budget_s = self._tie_budget(share, opts)
+        if cpsat_next and opts["tie_break"]:
+            # the probe is given the tie-break's budget at once: the
+            # re-run after a CP-SAT proof would spend it anyway, so the canonical set is
+            # the same; a graph KaMIS proves within it (the layered corpus's 671 and
+            # 1,274 vertices: 55-70 ms, past the 0.05 s probe) needs no CP-SAT and no
+            # re-run, and one it does not (the horizon graphs) pays the budget once
+            share = max(share, min(tie_budget_s, time_limit_s * KAMIS_PROBE_MAX_SHARE, cap))
+        return share, tie_budget_s
+
+    def _kamis_first(self, problem: MwisProblem, time_limit_s: float, seed: int, opts: dict,
+                     t0: float, degree: float, pairs: int
+                     ) -> tuple[MwisResult | None, MwisResult | None, float | None, float, float]:
+        """KaMIS on the whole graph first, where it suits. Returns (its proven answer or None;
+        its unproven answer kept as the incumbent or None; the triangle ratio or None; its
+        share [s], 0 when it did not run; the tie-break's re-run budget [s])."""
+        if not (problem.n <= opts["kamis_max_vertices"] and opts["kamis_fraction"] > 0):
+            return None, None, None, 0.0, 0.0
+        tri, clustered, cpsat_next = self._kamis_gate(problem, degree, pairs, opts)
+        if not (degree <= opts["kamis_max_degree"] or clustered):
+            return None, None, tri, 0.0, 0.0
+        # what proves first: KaMIS branch-and-reduce on the whole graph (its exact
+        # reductions are faster than the Python layers, and it splits itself) with a
+        # small share of the limit, at most kamis_max_share_s (a probe when CP-SAT
+        # follows); a return before 0.9 of the share is its completed search, a proof
+        # (a search stopped by the limit runs to it, as for the kamis backend), returned
+        # at once; otherwise CP-SAT (clique-structured graphs) and the split below
+        # (CP-SAT per component, CHILS) get the rest of the limit
+        share, tie_budget_s = self._kamis_share(time_limit_s, opts, clustered, cpsat_next)
+        res = self._kamis.solve(problem, time_limit_s=share, seed=seed,
+                                options={"finish_fraction": 0.9})
+        if res.proven_optimal:
+            # KaMIS's result on this same problem, already checked and its objective
+            # recomputed by make_result: relabelled, not rebuilt (~10 us)
+            res.backend, res.solve_time_s = self.name, time.perf_counter() - t0
+            res.stats = {**res.stats, "auto_method": "kamis", "conflict_degree": degree,
+                         **({} if tri is None else {"triangle_ratio": round(tri, 4)})}
+            return res, None, tri, share, tie_budget_s
+        incumbent = res  # KaMIS's best set when its share ran out: kept if better
+        incumbent.stats = {**res.stats, "auto_method": "kamis (limit)"}
+        return None, incumbent, tri, share, tie_budget_s
 
     @staticmethod
     def _tie_budget(share: float, opts: dict) -> float:
@@ -846,30 +883,53 @@ class AutoBackend(Backend):
             res.stats = {**res.stats, **stats}
             return res
         kernel = k.problem(scale)
-        incumbent = None  # KaMIS's kernel set when it did not finish (lifted once, at the end)
-        if (k.n <= opts["kamis_max_vertices"] and opts["kamis_fraction"] > 0
+        # incumbent: KaMIS's kernel set when it did not finish (lifted once, at the end)
+        proven_res, incumbent = self._kernel_kamis(problem, k, kernel, wi, scale, time_limit_s,
+                                                   seed, opts, t0, stats)
+        if proven_res is not None:
+            return proven_res
+        return self._kernel_chils(problem, k, kernel, incumbent, time_limit_s, seed, opts, t0,
+                                  stats)
+
+    def _kernel_kamis(self, problem: MwisProblem, k: LrKernel, kernel: MwisProblem,
+                      wi: np.ndarray, scale: float, time_limit_s: float, seed: int, opts: dict,
+                      t0: float, stats: dict) -> tuple[MwisResult | None, np.ndarray | None]:
+        """KaMIS branch-and-reduce on a small sparse LearnAndReduce kernel. Returns (the lifted
+        answer when its search completed, proven when the integer weights agree, else None;
+        its independent kernel set when it did not complete, else None)."""
+        from .base import integer_proof_holds
+
+        if not (k.n <= opts["kamis_max_vertices"] and opts["kamis_fraction"] > 0
                 and conflict_degree(kernel) <= opts["kamis_max_degree"]
                 and int(k.int_weights.sum()) < 2**31):
-            # the kernel's own integer weights (no second rounding), which KaMIS sums in 32 bits
-            from chszlablib._kamis_wmis import branch_reduce
+            return None, None
+        # the kernel's own integer weights (no second rounding), which KaMIS sums in 32 bits
+        from chszlablib._kamis_wmis import branch_reduce
 
-            share = max(min(time_limit_s * opts["kamis_fraction"], opts["kamis_max_share_s"]),
-                        1e-3)
-            tk = time.perf_counter()
-            int_obj, verts = branch_reduce(k.indptr.astype(np.int32), k.indices.astype(np.int32),
-                                           k.int_weights.astype(np.int32), share,
-                                           int(seed) % (2**31))
-            finished = time.perf_counter() - tk < 0.9 * share
-            ksel = np.asarray(verts, dtype=np.int64)
-            if kernel.is_independent(ksel):
-                if finished:
-                    sel = k.lift(ksel)
-                    proven = integer_proof_holds(problem, sel, wi, scale, k.offset + int(int_obj))
-                    return make_result(problem, sel, proven_optimal=proven,
-                                       solve_time_s=time.perf_counter() - t0,
-                                       backend=self.name,
-                                       stats={**stats, "auto_method": "learn-and-reduce+kamis"})
-                incumbent = ksel
+        share = max(min(time_limit_s * opts["kamis_fraction"], opts["kamis_max_share_s"]),
+                    1e-3)
+        tk = time.perf_counter()
+        int_obj, verts = branch_reduce(k.indptr.astype(np.int32), k.indices.astype(np.int32),
+                                       k.int_weights.astype(np.int32), share,
+                                       int(seed) % (2**31))
+        finished = time.perf_counter() - tk < 0.9 * share
+        ksel = np.asarray(verts, dtype=np.int64)
+        if not kernel.is_independent(ksel):
+            return None, None
+        if not finished:
+            return None, ksel
+        sel = k.lift(ksel)
+        proven = integer_proof_holds(problem, sel, wi, scale, k.offset + int(int_obj))
+        return make_result(problem, sel, proven_optimal=proven,
+                           solve_time_s=time.perf_counter() - t0,
+                           backend=self.name,
+                           stats={**stats, "auto_method": "learn-and-reduce+kamis"}), None
+
+    def _kernel_chils(self, problem: MwisProblem, k: LrKernel, kernel: MwisProblem,
+                      incumbent: np.ndarray | None, time_limit_s: float, seed: int, opts: dict,
+                      t0: float, stats: dict) -> MwisResult:
+        """CHILS on the kernel with the time left; the better of its set and KaMIS's unfinished
+        one (``incumbent``), lifted to ``problem`` (never claimed optimal)."""
         kres = self._solve_chils(kernel, time_limit_s, seed, opts, t0,
                                  method="learn-and-reduce+chils")
         ksel = np.asarray(kres.selected, dtype=np.int64)
