@@ -109,6 +109,48 @@ class _Neighbourhoods:
         return sel[coo.row], coo.col, c.tocoo().data.astype(np.int64), deg, idx, in_focus
 
 
+def _simplicial(rows: np.ndarray, cols: np.ndarray, sub_rc: np.ndarray, wl: np.ndarray,
+                deg: np.ndarray, in_focus: np.ndarray) -> np.ndarray:
+    """Rule 3's candidates (local indices): v in focus, not isolated, with N[v] in N[u] for every
+    neighbour u and w(v) maximal over N[v]."""
+    not_simp = ~in_focus
+    np.logical_or.at(not_simp, rows, ~sub_rc | (wl[cols] > wl[rows]))
+    return np.flatnonzero(~not_simp & (deg > 0))
+
+
+def _take_simplicial(simp: np.ndarray, rows: np.ndarray, cols: np.ndarray,
+                     k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Rule 3 applied to the candidates in index order: the vertices forced in and the local
+    mask of every vertex removed (them and their neighbours)."""
+    local_alive = np.ones(k, dtype=bool)
+    starts = np.searchsorted(rows, np.arange(k + 1))  # rows are sorted
+    took = []
+    for v in simp.tolist():  # sequential: a removed neighbour may be simplicial too
+        if not local_alive[v]:
+            continue
+        # Earlier removals only shrink N(v): still a clique, w(v) still maximal.
+        nb = cols[starts[v]:starts[v + 1]]
+        took.append(v)
+        local_alive[v] = False
+        local_alive[nb] = False
+    return np.asarray(took, dtype=np.int64), ~local_alive
+
+
+def _dominated(rows: np.ndarray, cols: np.ndarray, common: np.ndarray, deg: np.ndarray,
+               wl: np.ndarray, sub_rc: np.ndarray, touched: np.ndarray) -> np.ndarray | None:
+    """Rule 4: the dominated vertices (local, unique), None when there are none.
+
+    r dominates c; on exact ties (same N[], same weight) the lower index wins. Only pairs
+    untouched by this round's simplicial removals: their closed neighbourhoods did not
+    change, so the inclusion computed this round still holds."""
+    sub_cr = common == deg[cols] + 1
+    mutual_tie = sub_cr & (wl[cols] >= wl[rows]) & (cols < rows)
+    dom = sub_rc & (wl[rows] >= wl[cols]) & ~mutual_tie & ~touched[rows] & ~touched[cols]
+    if not dom.any():
+        return None
+    return np.unique(cols[dom])
+
+
 def reduce_problem(problem: MwisProblem, max_rounds: int = 64) -> Reduction:
     """Apply the exact reductions of this module until none applies.
 
@@ -149,40 +191,20 @@ def reduce_problem(problem: MwisProblem, max_rounds: int = 64) -> Reduction:
         wl = w[idx]
         # sub_rc: N[r] is a subset of N[c].
         sub_rc = common == deg[rows] + 1
-        # Rule 3: simplicial v: N[v] in N[u] for every neighbour u, and w(v) max over N[v].
-        not_simp = ~in_focus
-        np.logical_or.at(not_simp, rows, ~sub_rc | (wl[cols] > wl[rows]))
-        simp = np.flatnonzero(~not_simp & (deg > 0))
+        simp = _simplicial(rows, cols, sub_rc, wl, deg, in_focus)
         removed_any = bool(iso.any())
         touched = np.zeros(k, dtype=bool)  # removed this round or adjacent to a removal
         if simp.size:
-            local_alive = np.ones(k, dtype=bool)
-            starts = np.searchsorted(rows, np.arange(k + 1))  # rows are sorted
-            took = []
-            for v in simp.tolist():  # sequential: a removed neighbour may be simplicial too
-                if not local_alive[v]:
-                    continue
-                # Earlier removals only shrink N(v): still a clique, w(v) still maximal.
-                nb = cols[starts[v]:starts[v + 1]]
-                took.append(v)
-                local_alive[v] = False
-                local_alive[nb] = False
-            took = np.asarray(took, dtype=np.int64)
+            took, gone = _take_simplicial(simp, rows, cols, k)
             forced.append(idx[took])
             counts["reduce_simplicial"] += int(took.size)
-            alive[idx[~local_alive]] = False
+            alive[idx[gone]] = False
             removed_any = True
-            touched = ~local_alive
+            touched = gone
             gone_rows = touched[rows]
             touched[cols[gone_rows]] = True  # neighbours of removed vertices
-        # Rule 4: domination, r dominates c; on exact ties (same N[], same weight) the lower
-        # index wins. Only pairs untouched by this round's simplicial removals: their closed
-        # neighbourhoods did not change, so the inclusion computed above still holds.
-        sub_cr = common == deg[cols] + 1
-        mutual_tie = sub_cr & (wl[cols] >= wl[rows]) & (cols < rows)
-        dom = sub_rc & (wl[rows] >= wl[cols]) & ~mutual_tie & ~touched[rows] & ~touched[cols]
-        if dom.any():
-            victims = np.unique(cols[dom])
+        victims = _dominated(rows, cols, common, deg, wl, sub_rc, touched)
+        if victims is not None:
             alive[idx[victims]] = False
             counts["reduce_dominated"] += int(victims.size)
             removed_any = True
