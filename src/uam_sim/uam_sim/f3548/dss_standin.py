@@ -398,65 +398,82 @@ def _check_answer(op: Op, status: int, doc) -> None:
                                     f"{errs[:3]}")
 
 
-def create_app(verifier, dss: StandInDss | None = None):
-    """The stand-in's Flask app over ``dss`` (a new :class:`StandInDss` if None); ``verifier``: a
-    :class:`uam_sim.f3548.auth.TokenVerifier` (every DSS call needs a token; its ``sub`` is the
-    caller's identity, a reference's manager). ``app.dss`` is the state."""
-    from flask import Flask, Response, request
-    from werkzeug.exceptions import HTTPException
+def _json_reply(status: int, doc):
+    """A Flask response carrying ``doc`` as JSON with HTTP ``status``."""
+    from flask import Response
+
+    return Response(json.dumps(doc), status=status, mimetype="application/json")
+
+
+def _checked_request(op: Op, verifier, params: dict) -> tuple[str, dict, object]:
+    """The checks every request passes before its handler: body size, a token for the
+    operation's scopes, UUIDv4 path ids (lower-cased) and the body parsed as the operation's
+    request type. Returns (the caller's identity, the path parameters, the body or None);
+    StandInError names what failed."""
+    from flask import request
 
     from .auth import AuthError
 
-    dss = dss or StandInDss()
-    app = Flask("uam_dss_standin")
-    app.dss = dss
+    spec = api.OPERATIONS[op]
+    if (request.content_length or 0) > MAX_BODY_BYTES:
+        raise StandInError(413, f"body: {request.content_length} bytes, more than {MAX_BODY_BYTES}")
+    try:
+        grant = verifier.verify(request.headers.get("Authorization"), SCOPES[op])
+    except AuthError as exc:
+        raise StandInError(exc.status, exc.message) from None
+    for name, value in params.items():
+        if name in ("entityid", "subscriptionid") and not UUID4.match(value.lower()):
+            raise StandInError(400, f"{name}: {value[:64]!r} is not a UUIDv4")
+    params = {k: (v.lower() if k in ("entityid", "subscriptionid") else v) for k, v in params.items()}
+    body = None
+    if spec.request_body_type is not None:
+        raw = request.get_json(silent=True)
+        if not isinstance(raw, dict):
+            raise StandInError(400, f"body: not a JSON object {spec.request_body_type.__name__}")
+        try:
+            body = ImplicitDict.parse(raw, spec.request_body_type)
+        except (ValueError, KeyError, TypeError) as exc:
+            raise StandInError(400, f"body: not a {spec.request_body_type.__name__}: "
+                                    f"{str(exc)[:300]}") from None
+    return grant.sub or "", params, body
 
-    def reply(status: int, doc) -> Response:
-        return Response(json.dumps(doc), status=status, mimetype="application/json")
 
-    def endpoint(op: Op, handle):
-        spec = api.OPERATIONS[op]
+def _answer(op: Op, verifier, handle, params: dict):
+    """One request of ``op`` answered: checked, handled, and the answer checked against the
+    operation's type for its status (a refusal logged, a failed check a 500)."""
+    from flask import request
 
-        def view(**params):
-            try:
-                if (request.content_length or 0) > MAX_BODY_BYTES:
-                    raise StandInError(413, f"body: {request.content_length} bytes, more than {MAX_BODY_BYTES}")
-                try:
-                    grant = verifier.verify(request.headers.get("Authorization"), SCOPES[op])
-                except AuthError as exc:
-                    raise StandInError(exc.status, exc.message) from None
-                for name, value in params.items():
-                    if name in ("entityid", "subscriptionid") and not UUID4.match(value.lower()):
-                        raise StandInError(400, f"{name}: {value[:64]!r} is not a UUIDv4")
-                params = {k: (v.lower() if k in ("entityid", "subscriptionid") else v) for k, v in params.items()}
-                body = None
-                if spec.request_body_type is not None:
-                    raw = request.get_json(silent=True)
-                    if not isinstance(raw, dict):
-                        raise StandInError(400, f"body: not a JSON object {spec.request_body_type.__name__}")
-                    try:
-                        body = ImplicitDict.parse(raw, spec.request_body_type)
-                    except (ValueError, KeyError, TypeError) as exc:
-                        raise StandInError(400, f"body: not a {spec.request_body_type.__name__}: "
-                                                f"{str(exc)[:300]}") from None
-                status, doc = handle(body, grant.sub or "", **params)
-            except StandInError as exc:
-                status, doc = exc.status, exc.body if exc.body is not None else {"message": exc.message}
-                if status >= 500:
-                    log.error("%s: %s", LOG_PREFIX, exc.message)
-                else:
-                    log.info("%s: %s %s refused: %d %s", LOG_PREFIX, request.method, request.path, status, exc.message)
-            try:
-                _check_answer(op, status, doc)
-            except StandInError as exc:
-                log.error("%s: %s", LOG_PREFIX, exc.message)
-                status, doc = 500, {"message": exc.message}
-            return reply(status, doc)
+    try:
+        who, params, body = _checked_request(op, verifier, params)
+        status, doc = handle(body, who, **params)
+    except StandInError as exc:
+        status, doc = exc.status, exc.body if exc.body is not None else {"message": exc.message}
+        if status >= 500:
+            log.error("%s: %s", LOG_PREFIX, exc.message)
+        else:
+            log.info("%s: %s %s refused: %d %s", LOG_PREFIX, request.method, request.path, status, exc.message)
+    try:
+        _check_answer(op, status, doc)
+    except StandInError as exc:
+        log.error("%s: %s", LOG_PREFIX, exc.message)
+        status, doc = 500, {"message": exc.message}
+    return _json_reply(status, doc)
 
-        view.__name__ = f"dss_{op.value}"
-        app.add_url_rule(re.sub(r"\{(\w+)\}", r"<\1>", spec.path), view_func=view, methods=[spec.verb])
 
-    handlers = {
+def _add_endpoint(app, verifier, op: Op, handle) -> None:
+    """Serve ``op`` on ``app`` at its F3548 path and verb, answered by ``handle``."""
+    spec = api.OPERATIONS[op]
+
+    def view(**params):
+        return _answer(op, verifier, handle, params)
+
+    view.__name__ = f"dss_{op.value}"
+    app.add_url_rule(re.sub(r"\{(\w+)\}", r"<\1>", spec.path), view_func=view, methods=[spec.verb])
+
+
+def _handlers(dss: StandInDss) -> dict:
+    """Each served operation's handler: (body, caller, path parameters) -> (status, answer)."""
+    return {
         Op.CreateOperationalIntentReference: lambda b, who, entityid: dss.put_intent(entityid, None, b, who),
         Op.UpdateOperationalIntentReference: lambda b, who, entityid, ovn: dss.put_intent(entityid, ovn, b, who),
         Op.DeleteOperationalIntentReference: lambda b, who, entityid, ovn: (200, dss.delete_intent(entityid, ovn, who)),
@@ -479,13 +496,26 @@ def create_app(verifier, dss: StandInDss | None = None):
         Op.DeleteSubscription:
             lambda b, who, subscriptionid, version: (200, dss.delete_subscription(subscriptionid, version)),
     }
+
+
+def create_app(verifier, dss: StandInDss | None = None):
+    """The stand-in's Flask app over ``dss`` (a new :class:`StandInDss` if None); ``verifier``: a
+    :class:`uam_sim.f3548.auth.TokenVerifier` (every DSS call needs a token; its ``sub`` is the
+    caller's identity, a reference's manager). ``app.dss`` is the state."""
+    from flask import Flask, request
+    from werkzeug.exceptions import HTTPException
+
+    dss = dss or StandInDss()
+    app = Flask("uam_dss_standin")
+    app.dss = dss
+    handlers = _handlers(dss)
     for op, handle in handlers.items():
-        endpoint(op, handle)
+        _add_endpoint(app, verifier, op, handle)
     served = set(handlers) & set(DSS_OPERATIONS)
 
     @app.errorhandler(HTTPException)
     def _http_error(exc):
-        return reply(exc.code or 500, {"message": f"stand-in DSS: {exc.name}: {request.method} {request.path[:200]}"})
+        return _json_reply(exc.code or 500, {"message": f"stand-in DSS: {exc.name}: {request.method} {request.path[:200]}"})
 
     log.info("%s: serving %d DSS operations (in memory, not a DSS)", LOG_PREFIX, len(served))
     return app
