@@ -61,6 +61,9 @@
 #   --foxglove-port N  serve a live Foxglove WebSocket view on port N (default 0 = off; docs/views.md)
 #   --uss-port N       serve the plans and constraints as ASTM F3548 operational intents over HTTP on
 #                      127.0.0.1:N (the USS-USS interface; default 0 = off; docs/f3548.md)
+#   --volume-piece S   with --uss-port: the longest time window of one published Volume4D [s] (default 5);
+#                      the planner then keeps the published volumes of every two flights disjoint too
+#                      (F3548 mode; docs/f3548.md)
 #   --uss-auth A       verify | off: the USS server's access tokens (default verify: every request needs a
 #                      bearer token signed by the auth server's key, unexpired, for this USS, with the
 #                      endpoint's F3548 scope; off: none asked for, announced on the console and recorded)
@@ -86,7 +89,7 @@ cd "$ROOT"
 BACKEND=exact POLICY=mwis RATE=10 DURATION=3500 SEED=0 NETWORK=config/networks/singapore.yaml
 SPATIAL_BUFFER=0 TEMPORAL_BUFFER=0 WIND=0 WIND_FROM=270 GUST=0 SPEED_ERROR=0 DELAY_MEAN=0 VERTICAL_GUST=0 ALTITUDE_ERROR=0
 DEMAND="" CONSTRAINTS="" MODE=lockstep RTF=1 RERUN=save OUT="" FOXGLOVE_PORT=0 USS_PORT=0 RECORDER_NICE=19 RECORDER_STOP_S=60
-USS_AUTH=verify USS_AUTH_KEY="" USS_AUDIENCE=""
+USS_AUTH=verify USS_AUTH_KEY="" USS_AUDIENCE="" VOLUME_PIECE=5
 CONFORMANCE=auto
 SEPARATION="" SEPARATION_M=100 VERTICAL_M=30 SLOT_S=0 CLIMB=5 DESCENT=3
 PRIORITY_GRANTS="" OBJECTIVE=paper BASELINE_ORDER=arrival PRIORITY_SHARE=0 HORIZON=1 LEAD_TIME=0 COMMIT_AHEAD=false REACTION=false REACTION_PERIOD=0 PROBE=0 PROBE_MARGIN=0 REPLAN_POLICY=""
@@ -127,6 +130,7 @@ while [[ $# -gt 0 ]]; do
     --rerun) RERUN="${2:?--rerun needs a value}"; shift 2;;
     --foxglove-port) FOXGLOVE_PORT="${2:?--foxglove-port needs a value}"; shift 2;;
     --uss-port) USS_PORT="${2:?--uss-port needs a value}"; shift 2;;
+    --volume-piece) VOLUME_PIECE="${2:?--volume-piece needs a value}"; shift 2;;
     --uss-auth) USS_AUTH="${2:?--uss-auth needs a value}"; shift 2;;
     --uss-auth-key) USS_AUTH_KEY="${2:?--uss-auth-key needs a value}"; shift 2;;
     --uss-audience) USS_AUDIENCE="${2:?--uss-audience needs a value}"; shift 2;;
@@ -217,13 +221,15 @@ PLANNER_P=(--params-file config/planner.yaml -p "network:=$NETWORK" \
   -p "climb_rate_mps:=$(f "$CLIMB")" -p "descent_rate_mps:=$(f "$DESCENT")" \
   -p "spatial_buffer_m:=$(f "$SPATIAL_BUFFER")" -p "temporal_buffer_s:=$(f "$TEMPORAL_BUFFER")" \
   ${CONSTRAINTS:+-p "constraints_file:=$CONSTRAINTS"})
+# F3548 mode: with the USS serving, the planner keeps the volumes it publishes disjoint
+(( USS_PORT > 0 )) && PLANNER_P+=(-p "intent_volume_piece_s:=$(f "$VOLUME_PIECE")")
 GENERATOR_P=(--params-file config/request_generator.yaml \
   -p "network:=$NETWORK" -p "rate:=$RATE" -p "seed:=$SEED" -p "priority_share:=$(f "$PRIORITY_SHARE")" \
   -p "lead_time_s:=$(f "$LEAD_TIME")" \
   ${DEMAND:+-p "demand_file:=$DEMAND"})
 RECORDER_P=(-p "network:=$NETWORK" -p "rerun:='$RERUN'" -p "foxglove_port:=$FOXGLOVE_PORT" "${AIRSPACE[@]}")
 USS_P=(-p "port:=$USS_PORT" -p "network:=$NETWORK" -p "separation_m:=$(f "$SEPARATION_M")" \
-  -p "vertical_separation_m:=$(f "$VERTICAL_M")")
+  -p "vertical_separation_m:=$(f "$VERTICAL_M")" -p "volume_piece_s:=$(f "$VOLUME_PIECE")")
 SIMULATOR_P=(--params-file config/simulator.yaml -p "duration_s:=$(f "$DURATION")" \
   -p "mode:=$MODE" -p "real_time_factor:=$(f "$RTF")" \
   -p "disturbance_seed:=$SEED" -p "wind_speed_mps:=$(f "$WIND")" \

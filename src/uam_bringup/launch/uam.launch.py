@@ -111,7 +111,12 @@ def generate_launch_description() -> LaunchDescription:
                                                    "authorities_file": a["authorities_file"],
                                                    "priority_grants": a["priority_grants"],
                                                    "spatial_buffer_m": a["spatial_buffer_m"],
-                                                   "temporal_buffer_s": a["temporal_buffer_s"], **airspace}]),
+                                                   "temporal_buffer_s": a["temporal_buffer_s"],
+                                                   # F3548 mode: with the USS serving, its volumes
+                                                   "intent_volume_piece_s": ParameterValue(PythonExpression(
+                                                       ["float('", a["volume_piece_s"], "') if int('",
+                                                        a["uss_port"], "') > 0 else 0.0"]), value_type=float),
+                                                   **airspace}]),
         Node(package="uam_sim", executable="request_generator", name="request_generator", output="screen",
              parameters=[params_file("request_generator"), {"network": network, "rate": a["rate"],
                                                              "seed": a["seed"], "demand_file": a["demand_file"],
@@ -141,7 +146,8 @@ def generate_launch_description() -> LaunchDescription:
                                    "auth_key": a["uss_auth_key"], "auth_audience": a["uss_audience"],
                                    "separation_model": a["separation"],
                                    "separation_m": a["separation_m"],
-                                   "vertical_separation_m": a["vertical_separation_m"]}]))
+                                   "vertical_separation_m": a["vertical_separation_m"],
+                                   "volume_piece_s": a["volume_piece_s"]}]))
     return LaunchDescription(
         [DeclareLaunchArgument(name, default_value=default, description=text)
          for name, (default, text) in ARGS.items()]

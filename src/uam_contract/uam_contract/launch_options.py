@@ -102,6 +102,9 @@ LAUNCH_OPTIONS: tuple[LaunchOption, ...] = (
                  "serve a live Foxglove WebSocket view on this port (0 = off)"),
     LaunchOption("--uss-port", "USS_PORT", "uss_port", "0",
                  "serve the plans as F3548 operational intents over HTTP on this port (0 = off; docs/f3548.md)"),
+    LaunchOption("--volume-piece", "VOLUME_PIECE", "volume_piece_s", "5",
+                 "with --uss-port: the longest time window of one published Volume4D [s]; the planner then keeps "
+                 "the published volumes of every two flights disjoint too (F3548 mode; docs/f3548.md)"),
     LaunchOption("--uss-auth", "USS_AUTH", "uss_auth", "verify",
                  "the USS server's access tokens: verify (checked against --uss-auth-key) or off (announced)"),
     LaunchOption("--uss-auth-key", "USS_AUTH_KEY", "uss_auth_key", "",

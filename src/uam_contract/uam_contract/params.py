@@ -163,6 +163,9 @@ PLANNER = (
           "of the minimum widened by this much and deconflicts its own updates with at least that (a "
           "tactical buffer between the flights predicted to come close; docs/disturbances.md); 0 = the "
           "true minimum", 0.0, 10000.0),
+    Param("intent_volume_piece_s", 0.0, "F3548 mode: the longest time window of one published Volume4D [s] "
+          "(the USS's volume_piece_s); > 0 keeps the published volumes of every two flights disjoint too, "
+          "beside the separation (docs/f3548.md); 0 = the separation only", 0.0, 86400.0),
 )
 
 SOLVER = (

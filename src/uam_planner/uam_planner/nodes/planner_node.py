@@ -120,6 +120,7 @@ class PlannerNode(Node):
             conflict_probe_s=self.p["conflict_probe_s"] if self.p["reaction"] else 0.0,
             conflict_probe_margin_m=self.p["conflict_probe_margin_m"]
             if self.p["reaction"] and self.p["conflict_probe_s"] else 0.0,
+            intent_volume_piece_s=self.p["intent_volume_piece_s"],
             # the classes each operator may ask for (ValueError naming the file and entry)
             priority_grants=PriorityGrants.load(self.p["priority_grants"]) if self.p["priority_grants"] else None,
             airspace=AirspaceConfig(**{f: self.p[f] for f in (
