@@ -12,6 +12,7 @@ from shapely.geometry import Point
 
 from uam_planner.constraints import Constraint
 from uam_planner.f3548 import (PRECISION_M, F3548Error, IntentContext, VolumeSpec, as_json,
+                               published_intersections,
                                f3548_constraint, first_intersection, intent_id, intent_version, operational_intent,
                                ovn, rfc3339, trajectory_volumes, volumes_for_limit)
 from uam_planner.f3548_schema import errors, validate, validate_implicit
@@ -354,49 +355,6 @@ def _layered_run(separation_m, intent_volume_piece_s=0.0):
     return net, decided
 
 
-def _published_pairs(net, decided, ctx):
-    """(pairs of intents of different flights that stand at the same time and fly at overlapping
-    times, the intersecting ones as (a, b, vertical overlap [m])), on the published documents.
-    A version stands from its decision until the flight's next version."""
-    from uam_planner.f3548 import first_published_intersection, published_prisms, volume4d
-
-    versions = {}
-    for f, t in decided:
-        versions.setdefault(f.request_id, []).append((t, f))
-    items = []
-    for rid, vs in versions.items():
-        vs.sort(key=lambda x: (x[0], x[1].version))
-        for n, (t, f) in enumerate(vs):
-            until = vs[n + 1][0] if n + 1 < len(vs) else f.arrival_s
-            vols, _ = volumes_for_limit(f.trajectory, ctx.spec)
-            prisms = published_prisms([as_json(volume4d(v, ctx)) for v in vols], net.origin_lat_lon_alt)
-            # (..., the prisms, each prism's t0, t1 [s since 1970], lower, upper [m])
-            items.append((rid, t, until, f, prisms,
-                          np.array([(q[3], q[4], q[1], q[2]) for q in prisms], dtype=float).reshape(-1, 4)))
-    pairs, hits = 0, []
-    for i, a in enumerate(items):
-        for b in items[i + 1:]:
-            if a[0] == b[0] or a[2] < b[1] or b[2] < a[1] \
-                    or a[3].arrival_s < b[3].departure_s or b[3].arrival_s < a[3].departure_s:
-                continue
-            pairs += 1
-            # only a prism that overlaps one of the other set in time and band can be in the pair
-            # first_published_intersection returns (it asks both of every pair it returns, with
-            # the same arithmetic): compared without the others, in the same order, the first
-            # intersecting pair is the same, at a fraction of the tree queries
-            ta, tb = a[5], b[5]
-            ok = ((ta[:, 0, None] <= tb[None, :, 1]) & (tb[None, :, 0] <= ta[:, 1, None])
-                  & (ta[:, 2, None] <= tb[None, :, 3] + PRECISION_M)
-                  & (tb[None, :, 2] <= ta[:, 3, None] + PRECISION_M))
-            ia, ib = np.flatnonzero(ok.any(axis=1)), np.flatnonzero(ok.any(axis=0))
-            hit = first_published_intersection([a[4][i] for i in ia], [b[4][j] for j in ib],
-                                               net.origin_lat_lon_alt)
-            if hit is not None:
-                pa, pb = a[4][ia[hit[0]]], b[4][ib[hit[1]]]
-                hits.append((a[3], b[3], min(pa[2], pb[2]) - max(pa[1], pb[1])))
-    return pairs, hits
-
-
 @pytest.mark.slow  # not in `make test-fast`: two layered runs in process, ~30 s
 def test_no_two_published_intents_of_a_layered_run_with_replans_intersect():
     """The published documents of a layered run with re-plans, as a peer checks them (1 cm):
@@ -410,7 +368,7 @@ def test_no_two_published_intents_of_a_layered_run_with_replans_intersect():
         net, decided = _layered_run(100.0, piece_s)
         assert max(f.version for f, _ in decided) >= 2 and len(decided) >= 30  # re-plans
         ctx = IntentContext.for_network(net, spec)
-        pairs, hits = _published_pairs(net, decided, ctx)
+        pairs, hits = published_intersections(decided, ctx, net.origin_lat_lon_alt)
         assert pairs > 500
         if not piece_s:
             assert hits and all(overlap > 1.0 for _, _, overlap in hits), hits  # the same band only

@@ -91,3 +91,28 @@ def test_later_windows_do_not_meet():
     b = Trajectory(np.array([100.001, 200.0]), np.array([[0.0, 0, 60], [1000.0, 0, 60]]))
     c = Trajectory(np.array([100.0, 200.0]), np.array([[1000.0, 0, 60], [2000.0, 0, 60]]))
     assert intent_pairs([a, b, c], None, SPEC).tolist() == [[0, 2]]
+
+
+def test_restrict_graph_discards_and_joins_by_volumes():
+    """Two requests in trail 150 m apart (separated: no edge by the separation) get an edge by
+    their volumes; a candidate whose volumes meet a flight in force is discarded; the rest of the
+    graph is kept as it was."""
+    from uam_planner.conflict_graph import build_conflict_graph
+    from uam_planner.intent_volumes import restrict_graph
+
+    def line(x0, z, t0=0.0):
+        return Trajectory(np.array([t0, t0 + 100.0]), np.array([[x0, 0, z], [x0 + 1000.0, 0, z]]))
+
+    far = Trajectory(np.array([0.0, 100.0]), np.array([[0.0, 5000, 60], [1000.0, 5000, 60]]))
+    cands = [line(150.0, 60), line(0.0, 60), line(0.0, 90), far]   # requests 0, 1, 1, 2
+    req = np.array([0, 1, 1, 2])
+    graph = build_conflict_graph(cands, req, np.array([0, 0, 1, 0]), np.ones(4), 3, (), SeparationModel("cylinder", 100.0, 30.0))
+    assert graph.n_vertices == 4 and graph.n_conflict_edges == 0
+    g2 = restrict_graph(graph, cands, [], SPEC, -math.inf)
+    assert g2.edges.tolist() == [[0, 1], [1, 2]]           # the clique of request 1 and the trail
+    assert g2.n_conflict_edges == 1 and g2.n_clique_edges == 1
+    in_force = [Trajectory(np.array([0.0, 100.0]), np.array([[150.0, 5000, 60], [1150.0, 5000, 60]]))]
+    g3 = restrict_graph(graph, cands, in_force, SPEC, -math.inf)
+    assert g3.vertex_source.tolist() == [0, 1, 2] and g3.discarded.tolist() == [False, False, False, True]
+    assert g3.n_discarded == 1 and [g.tolist() for g in g3.groups] == [[0], [1, 2], []]
+    assert restrict_graph(graph, cands, in_force, SPEC, 200.0).n_discarded == 0   # ended before

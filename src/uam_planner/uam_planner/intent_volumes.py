@@ -56,6 +56,7 @@ class VolumeTable:
         corners: (m, 4, 2) rectangle corners [m], in the order of ``f3548._rectangle``.
         lower, upper: (m,) band [m]; t0, t1: (m,) window [s].
         n_owners: number of trajectories.
+        box_lo, box_hi: (m, 2) the rectangles' bounding boxes [m] (the cheap first test).
     """
 
     owner: np.ndarray
@@ -66,6 +67,13 @@ class VolumeTable:
     t0: np.ndarray
     t1: np.ndarray
     n_owners: int
+    box_lo: np.ndarray = None
+    box_hi: np.ndarray = None
+
+    def __post_init__(self):
+        if self.box_lo is None:
+            object.__setattr__(self, "box_lo", self.corners.min(axis=1))
+            object.__setattr__(self, "box_hi", self.corners.max(axis=1))
 
     def __len__(self) -> int:
         return int(self.owner.shape[0])
@@ -106,8 +114,16 @@ def volume_table(trajectories: Sequence, spec, from_s: float = -math.inf) -> Vol
     """The volumes of ``trajectories`` under ``spec`` (a ``uam_planner.f3548.VolumeSpec``): each
     segment cut into ``ceil(duration / max_piece_s)`` equal pieces; with ``from_s`` only the
     pieces that end after it (as ``trajectory_volumes``). O(volumes)."""
-    owner, t0, t1, p0, p1 = _segments(trajectories)
+    return _cut(_segments(trajectories), len(trajectories), spec, from_s)
+
+
+def _cut(segs: tuple, n_owners: int, spec, from_s: float = -math.inf, only=None) -> VolumeTable:
+    """The VolumeTable of the segments ``segs`` (``_segments``), of those where ``only`` (a mask
+    over them) if given; each volume keeps its segment's index."""
+    owner, t0, t1, p0, p1 = segs
     n = np.maximum(1, np.ceil((t1 - t0) / spec.max_piece_s - 1e-9)).astype(np.int64)
+    if only is not None:
+        n = np.where(only, n, 0)
     idx = np.repeat(np.arange(owner.shape[0]), n)
     start = np.cumsum(n) - n
     k = np.arange(idx.shape[0], dtype=np.int64) - start[idx]
@@ -125,7 +141,7 @@ def volume_table(trajectories: Sequence, spec, from_s: float = -math.inf) -> Vol
     return VolumeTable(owner[idx][keep], idx[keep].astype(np.int64),
                        _rectangles(a[:, :2], b[:, :2], spec.horizontal_buffer_m),
                        np.minimum(a[:, 2], b[:, 2]) - r_v, np.maximum(a[:, 2], b[:, 2]) + r_v,
-                       ta, tb, len(trajectories))
+                       ta, tb, n_owners)
 
 
 def _point_segment(p: np.ndarray, e0: np.ndarray, e1: np.ndarray) -> np.ndarray:
@@ -162,15 +178,11 @@ def rectangle_distance(ca: np.ndarray, cb: np.ndarray) -> np.ndarray:
 
 
 def _meet(ca: np.ndarray, cb: np.ndarray, tol: float) -> np.ndarray:
-    """(p,) bool: rectangles within ``tol`` of each other. Bounding boxes first, then the
-    separating axes; the exact distance only where the gap is in (0, tol]."""
-    lo_a, hi_a = ca.min(axis=1), ca.max(axis=1)
-    lo_b, hi_b = cb.min(axis=1), cb.max(axis=1)
-    out = ((lo_a <= hi_b + tol) & (lo_b <= hi_a + tol)).all(axis=1)
-    idx = np.flatnonzero(out)
-    gap = _separating_gap(ca[idx], cb[idx])
-    out[idx[gap > tol]] = False
-    near = idx[(gap > 0) & (gap <= tol)]
+    """(p,) bool: rectangles within ``tol`` of each other (bounding boxes already within it):
+    the separating axes, then the exact distance only where the gap is in (0, tol]."""
+    gap = _separating_gap(ca, cb)
+    out = gap <= 0
+    near = np.flatnonzero((gap > 0) & (gap <= tol))
     if near.shape[0]:
         out[near] = rectangle_distance(ca[near], cb[near]) <= tol
     return out
@@ -239,11 +251,14 @@ def _segment_set(segs: tuple, from_s: float = -math.inf):
 
 
 def intent_pairs(trajs_a: Sequence, trajs_b: Sequence | None, spec, from_s_b: float = -math.inf,
-                 groups=None, precision_m: float = PRECISION_M, margin_m: float = MARGIN_M) -> np.ndarray:
+                 groups=None, known=None, precision_m: float = PRECISION_M,
+                 margin_m: float = MARGIN_M) -> np.ndarray:
     """(p, 2) pairs (i of ``trajs_a``, j of ``trajs_b``) whose published volumes meet (``b``'s from
     ``from_s_b`` on), or with ``trajs_b`` None pairs i < j within ``trajs_a`` of different
     ``groups``. Only segments that come within the volumes' reach (:func:`_reach_model`, found
-    by the exact separation check on segments) are cut into volumes and compared. Sorted."""
+    by the exact separation check on segments) are cut into volumes and compared; pairs in
+    ``known`` ((k, 2), i < j; already in conflict for the caller) are not compared and not
+    returned. Sorted."""
     from .separation import conflicting_pairs
     tol = float(precision_m) + float(margin_m)
     single = trajs_b is None
@@ -258,20 +273,34 @@ def intent_pairs(trajs_a: Sequence, trajs_b: Sequence | None, spec, from_s_b: fl
     else:
         near = conflicting_pairs(_segment_set(sa), _segment_set(sb, from_s_b), model)
     near = np.asarray(near).reshape(-1, 2)[:, :2].astype(np.int64)
+    nb = np.int64(max(len(trajs_a) if single else len(trajs_b), 1))
+    if near.shape[0] and known is not None and len(known):
+        oi, oj = sa[0][near[:, 0]], sb[0][near[:, 1]]
+        if single:
+            oi, oj = np.minimum(oi, oj), np.maximum(oi, oj)
+        kc = np.sort(np.asarray(known, dtype=np.int64).reshape(-1, 2) @ np.array([nb, 1], dtype=np.int64))
+        code = oi * nb + oj
+        pos = np.clip(np.searchsorted(kc, code), 0, kc.shape[0] - 1)
+        near = near[kc[pos] != code]
     if not near.shape[0]:
         return np.zeros((0, 2), dtype=np.int64)
-    a = volume_table(trajs_a, spec)
-    b = a if single else volume_table(trajs_b, spec, from_s_b)
+    # volumes only of the segments that may meet
+    used_a = np.zeros(sa[0].shape[0], dtype=bool)
+    used_b = used_a if single else np.zeros(sb[0].shape[0], dtype=bool)
+    used_a[near[:, 0]] = True
+    used_b[near[:, 1]] = True
+    a = _cut(sa, len(trajs_a), spec, only=used_a)
+    b = a if single else _cut(sb, len(trajs_b), spec, from_s_b, only=used_b)
     p = _aligned_pairs(a, b, near, sa[0].shape[0], sb[0].shape[0])
     i, j = p[:, 0], p[:, 1]
     ok = (a.t0[i] <= b.t1[j]) & (b.t0[j] <= a.t1[i]) \
-        & (a.lower[i] <= b.upper[j] + tol) & (b.lower[j] <= a.upper[i] + tol)
+        & (a.lower[i] <= b.upper[j] + tol) & (b.lower[j] <= a.upper[i] + tol) \
+        & (a.box_lo[i] <= b.box_hi[j] + tol).all(axis=1) & (b.box_lo[j] <= a.box_hi[i] + tol).all(axis=1)
     i, j = i[ok], j[ok]
     meet = _meet(a.corners[i], b.corners[j], tol)
     oi, oj = a.owner[i[meet]], b.owner[j[meet]]
     if single:
         oi, oj = np.minimum(oi, oj), np.maximum(oi, oj)
-    nb = np.int64(max(b.n_owners, 1))
     code = np.sort(oi * nb + oj)
     code = code[np.concatenate(([True], code[1:] != code[:-1]))] if code.shape[0] else code
     return np.stack([code // nb, code % nb], axis=1)
@@ -293,15 +322,16 @@ def restrict_graph(graph, candidates, in_force: Sequence, spec, from_s: float):
     if len(in_force):
         blocked[intent_pairs(surv, list(in_force), spec, from_s)[:, 0]] = True
     keep = ~blocked
-    pairs = intent_pairs(surv, None, spec, groups=graph.vertex_request)
-    pairs = pairs[keep[pairs[:, 0]] & keep[pairs[:, 1]]]
+    kept = np.flatnonzero(keep)
+    # among the kept, pairs not already joined by the graph (edges are u < v, kept order kept)
+    new_of = np.cumsum(keep) - 1
+    e = graph.edges.astype(np.int64).reshape(-1, 2)
+    e = new_of[e[keep[e[:, 0]] & keep[e[:, 1]]]] if e.shape[0] else e
+    pairs = intent_pairs([surv[i] for i in kept.tolist()], None, spec,
+                         groups=graph.vertex_request[kept], known=e)
     if not blocked.any() and not pairs.shape[0]:
         return graph
-    new = np.cumsum(keep) - 1                       # old vertex -> new vertex
-    old_edges = graph.edges.astype(np.int64)
-    old_edges = old_edges[keep[old_edges[:, 0]] & keep[old_edges[:, 1]]] if old_edges.shape[0] else old_edges
-    n = int(keep.sum())
-    edges = _unique_pairs(np.concatenate([new[old_edges], new[pairs]]).reshape(-1, 2), n).astype(np.int32)
+    edges = _unique_pairs(np.concatenate([e, pairs]).reshape(-1, 2), kept.shape[0]).astype(np.int32)
     vreq = graph.vertex_request[keep]
     order = np.argsort(vreq, kind="stable")
     bounds = np.searchsorted(vreq[order], np.arange(len(graph.groups) + 1))
