@@ -1073,6 +1073,25 @@ def _unique_min_pairs(out_pairs, out_dist, nbt: int):
     return pairs[order][first], dist[order][first]
 
 
+def _lost_piece_pairs(bp: _BroadPhase, model: SeparationModel, first, shift, ranks, single: bool):
+    """Exact check of ``bp``'s piece pairs in chunks (bounded memory): lost pairs, distances per chunk, checks done."""
+    out_pairs = []
+    out_dist = []
+    n_exact = 0
+    for i, j in _near_piece_pairs(bp, _MAX_PAIRS_PER_CHUNK):
+        n_exact += int(i.size)
+        lost, extra = _narrow_phase(i, j, bp.pt, model, first, shift, ranks)
+        n_exact += extra
+        if lost is None:
+            continue
+        a_idx, b_idx, d = lost
+        if single:
+            a_idx, b_idx = np.minimum(a_idx, b_idx), np.maximum(a_idx, b_idx)
+        out_pairs.append(np.stack((a_idx, b_idx), axis=1))
+        out_dist.append(d)
+    return out_pairs, out_dist, n_exact
+
+
 def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPARATION_M,
                       groups_a=None, cell_m: float | None = None, bucket_s: float | None = None,
                       return_distances: bool = False, stats: dict | None = None,
@@ -1138,20 +1157,7 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
                       z_cell_m)
     if bp is None:
         return nothing
-    out_pairs = []
-    out_dist = []
-    n_exact = 0
-    for i, j in _near_piece_pairs(bp, _MAX_PAIRS_PER_CHUNK):
-        n_exact += int(i.size)
-        lost, extra = _narrow_phase(i, j, bp.pt, model, first, shift, ranks)
-        n_exact += extra
-        if lost is None:
-            continue
-        a_idx, b_idx, d = lost
-        if single:
-            a_idx, b_idx = np.minimum(a_idx, b_idx), np.maximum(a_idx, b_idx)
-        out_pairs.append(np.stack((a_idx, b_idx), axis=1))
-        out_dist.append(d)
+    out_pairs, out_dist, n_exact = _lost_piece_pairs(bp, model, first, shift, ranks, single)
     bp.clock.append(time.perf_counter())
     if stats is not None:
         bp.fill_stats(stats, n_exact)
