@@ -242,6 +242,57 @@ class CandidatePairCache:
         return pairs
 
 
+def _candidate_arrays(candidate_request, candidate_index, candidate_weight, n: int, n_requests: int):
+    """The per-candidate arrays as int64, int64, float64, checked: a wrong shape or request is refused by name."""
+    cand_req = np.asarray(candidate_request, dtype=np.int64)
+    cand_idx = np.asarray(candidate_index, dtype=np.int64)
+    cand_w = np.asarray(candidate_weight, dtype=np.float64)
+    for name, arr in (("candidate_request", cand_req), ("candidate_index", cand_idx),
+                      ("candidate_weight", cand_w)):
+        if arr.shape != (n,):
+            raise ValueError(f"{name} must have shape ({n},), got {arr.shape}")
+    if n and (cand_req.min() < 0 or cand_req.max() >= n_requests):
+        raise ValueError(f"candidate_request values must lie in [0, {n_requests - 1}]")
+    return cand_req, cand_idx, cand_w
+
+
+def _discarded_by_active(candidates, n: int, active, separation_m, pair_cache):
+    """(n,) bool: the candidates that lose separation with an active flight; base segments of shifted ones (reused)."""
+    base = None
+    if isinstance(candidates, ShiftedCandidates):
+        discarded = np.zeros(n, dtype=bool)
+        act = active if isinstance(active, SegmentSet) else \
+            SegmentSet.from_trajectories(list(active))
+        if n and len(act):
+            # with the horizon's pair cache, z cells in the keys as in its calls (the same pairs)
+            z_cell = as_separation_model(separation_m).vertical_reach_m \
+                if pair_cache is not None else None
+            base = candidates.base_segments()
+            discarded = any_conflict(base, act,
+                                     separation_m,
+                                     shifts_a=(candidates.first, candidates.shift_s),
+                                     z_cell_m=z_cell)
+    else:
+        cand_set = SegmentSet.from_trajectories(list(candidates))
+        discarded = discard_against_active(cand_set, active, separation_m)
+    return discarded, base
+
+
+def _survivor_conflicts(candidates, keep, vreq, base, separation_m, keys, pair_cache, bucket_s):
+    """The conflict edges among the survivors ``keep`` of different requests (pair cache when given: fewer checks)."""
+    if pair_cache is not None:
+        if keys is None or bucket_s is None:
+            raise ValueError("build_conflict_graph: pair_cache needs keys and bucket_s")
+        surv = [candidates[i] for i in keep]
+        return pair_cache.conflicts([keys[i] for i in keep.tolist()], surv, vreq, separation_m,
+                                    bucket_s)
+    surv = candidates.segments_of(keep, base) if isinstance(candidates, ShiftedCandidates) \
+        else [candidates[i] for i in keep]
+    return conflicting_pairs(surv, None, separation_m, groups_a=vreq,
+                             bucket_s=bucket_s) if keep.shape[0] > 1 \
+        else np.zeros((0, 2), dtype=np.int64)
+
+
 def build_conflict_graph(candidates, candidate_request, candidate_index, candidate_weight,
                          n_requests: int, active=(), separation_m: float = DEFAULT_SEPARATION_M,
                          timings: dict | None = None, keys=None,
@@ -270,52 +321,17 @@ def build_conflict_graph(candidates, candidate_request, candidate_index, candida
     """
     import time
 
-    cand_req = np.asarray(candidate_request, dtype=np.int64)
-    cand_idx = np.asarray(candidate_index, dtype=np.int64)
-    cand_w = np.asarray(candidate_weight, dtype=np.float64)
     n = len(candidates)
-    for name, arr in (("candidate_request", cand_req), ("candidate_index", cand_idx),
-                      ("candidate_weight", cand_w)):
-        if arr.shape != (n,):
-            raise ValueError(f"{name} must have shape ({n},), got {arr.shape}")
-    if n and (cand_req.min() < 0 or cand_req.max() >= n_requests):
-        raise ValueError(f"candidate_request values must lie in [0, {n_requests - 1}]")
-
+    cand_req, cand_idx, cand_w = _candidate_arrays(candidate_request, candidate_index,
+                                                   candidate_weight, n, n_requests)
     t = time.perf_counter()
-    base = None
-    if isinstance(candidates, ShiftedCandidates):
-        discarded = np.zeros(n, dtype=bool)
-        act = active if isinstance(active, SegmentSet) else \
-            SegmentSet.from_trajectories(list(active))
-        if n and len(act):
-            # with the horizon's pair cache, z cells in the keys as in its calls (the same pairs)
-            z_cell = as_separation_model(separation_m).vertical_reach_m \
-                if pair_cache is not None else None
-            base = candidates.base_segments()
-            discarded = any_conflict(base, act,
-                                     separation_m,
-                                     shifts_a=(candidates.first, candidates.shift_s),
-                                     z_cell_m=z_cell)
-    else:
-        cand_set = SegmentSet.from_trajectories(list(candidates))
-        discarded = discard_against_active(cand_set, active, separation_m)
+    discarded, base = _discarded_by_active(candidates, n, active, separation_m, pair_cache)
     t1 = time.perf_counter()
 
     keep = np.flatnonzero(~discarded)
     vreq = cand_req[keep]
-    # Conflicts among survivors of different requests.
-    if pair_cache is not None:
-        if keys is None or bucket_s is None:
-            raise ValueError("build_conflict_graph: pair_cache needs keys and bucket_s")
-        surv = [candidates[i] for i in keep]
-        conflict = pair_cache.conflicts([keys[i] for i in keep.tolist()], surv, vreq, separation_m,
-                                        bucket_s)
-    else:
-        surv = candidates.segments_of(keep, base) if isinstance(candidates, ShiftedCandidates) \
-            else [candidates[i] for i in keep]
-        conflict = conflicting_pairs(surv, None, separation_m, groups_a=vreq,
-                                     bucket_s=bucket_s) if keep.shape[0] > 1 \
-            else np.zeros((0, 2), dtype=np.int64)
+    conflict = _survivor_conflicts(candidates, keep, vreq, base, separation_m, keys, pair_cache,
+                                   bucket_s)
     t2 = time.perf_counter()
 
     order = np.argsort(vreq, kind="stable")
