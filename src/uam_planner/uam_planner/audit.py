@@ -317,25 +317,87 @@ def _flights_sharing_time(seg, n) -> int:
     return int((np.searchsorted(a, b, side="right") - np.arange(a.size) - 1).sum())
 
 
-def _near_pairs(seg, reach_m: float, max_entries: int = 8_000_000):
-    """Every pair (i < j, sweep order) of segments of different flights, closed-overlapping in
-    time, that may come within ``reach_m`` per horizontal axis at a common instant: a grid hash
-    on time buckets and horizontal cells. Sorted, unique.
+class _PieceGrid:
+    """:func:`_near_pairs`'s pieces (cut at time-bucket edges) and their boxes' cells, plain and widened by reach."""
 
-    Each segment is cut into pieces at the edges of time buckets of length T (the instant a
-    piece ends on an edge is a piece of its own); two segments that share an instant t* both
-    have a piece in t*'s bucket whose time interval holds t*. A piece is entered (its bucket,
-    the cells of side c >= reach its box covers) on the "plain" side and (its bucket, the cells
-    its box widened by reach covers) on the "wide" side; the positions of two segments at t*
-    lie in their pieces' boxes, so if they are within reach on each axis the cell of one lies
-    in the other's wide cells: the pair is found. Cost: O(S log S) in the pieces and entries
-    (T = c / the fastest segment speed, so a piece spans about one cell), plus the pairs found.
-    """
+    def __init__(self, seg, reach: float):
+        import numpy as np
+
+        self.S = seg[0].size
+        self.seg_of, self.bucket, lo, hi = _time_pieces(seg, reach)
+        c = reach
+        org = lo.min(axis=0) - 2 * reach
+        self.plain_lo = np.floor((lo - org) / c).astype(np.int64)
+        self.plain_hi = np.floor((hi - org) / c).astype(np.int64)
+        self.wide_lo = np.floor((lo - reach - org) / c).astype(np.int64)
+        self.wide_hi = np.floor((hi + reach - org) / c).astype(np.int64)
+        self.ny = int(max(self.plain_hi[:, 1].max(), self.wide_hi[:, 1].max())) + 2
+        self.nx = int(max(self.plain_hi[:, 0].max(), self.wide_hi[:, 0].max())) + 2
+
+    def entries(self, lo_c, hi_c, rows):
+        """(cell code, piece) of every cell of the pieces ``rows`` in [lo_c, hi_c]: the keys two pieces meet on."""
+        import numpy as np
+
+        n_x = hi_c[rows, 0] - lo_c[rows, 0] + 1
+        n_y = hi_c[rows, 1] - lo_c[rows, 1] + 1
+        cnt = n_x * n_y
+        piece = np.repeat(rows, cnt)
+        r = np.arange(piece.size) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+        nyr = np.repeat(n_y, cnt)
+        cx = lo_c[piece, 0] + r // nyr
+        cy = lo_c[piece, 1] + r % nyr
+        return (self.bucket[piece] * self.nx + cx) * self.ny + cy, piece
+
+    def batches(self, max_entries: int):
+        """The pieces in bucket order, batches of about ``max_entries`` wide entries (bounded memory), whole buckets."""
+        import numpy as np
+
+        bucket, wide_lo, wide_hi = self.bucket, self.wide_lo, self.wide_hi
+        order = np.argsort(bucket, kind="stable")
+        wide_cnt = ((wide_hi[:, 0] - wide_lo[:, 0] + 1) * (wide_hi[:, 1] - wide_lo[:, 1] + 1))[order]
+        cum = np.cumsum(wide_cnt)
+        start = 0
+        while start < order.size:
+            base = cum[start - 1] if start else 0
+            stop = max(int(np.searchsorted(cum, base + max_entries, side="right")), start + 1)
+            # never split a bucket between batches
+            last_b = bucket[order[stop - 1]]
+            stop = int(np.searchsorted(bucket[order], last_b, side="right"))
+            rows = order[start:stop]
+            start = stop
+            yield rows
+
+    def near_codes(self, seg, rows):
+        """Sorted unique codes i * S + j of the segment pairs of one batch's cell mates (None: no cell mates)."""
+        import numpy as np
+
+        t0, t1, _p0, _p1, f = seg
+        S, seg_of = self.S, self.seg_of
+        kp, pp = self.entries(self.plain_lo, self.plain_hi, rows)
+        srt = np.argsort(kp, kind="stable")
+        kp, pp = kp[srt], pp[srt]
+        kw, pw = self.entries(self.wide_lo, self.wide_hi, rows)
+        left = np.searchsorted(kp, kw, side="left")
+        right = np.searchsorted(kp, kw, side="right")
+        m = right - left
+        if not m.sum():
+            return None
+        a = np.repeat(pw, m)
+        b = pp[np.repeat(left, m) + (np.arange(int(m.sum())) - np.repeat(np.cumsum(m) - m, m))]
+        sa, sb = seg_of[a], seg_of[b]
+        keep = f[sa] != f[sb]
+        sa, sb = sa[keep], sb[keep]
+        i, j = np.minimum(sa, sb), np.maximum(sa, sb)
+        keep = np.maximum(t0[i], t0[j]) <= np.minimum(t1[i], t1[j])
+        return _sorted_unique(i[keep] * S + j[keep])
+
+
+def _time_pieces(seg, reach: float):
+    """Segments cut at time-bucket edges (T: about one cell of flight): (segment, bucket, box lo, box hi) per piece."""
     import numpy as np
 
-    t0, t1, p0, p1, f = seg
+    t0, t1, p0, p1, _f = seg
     S = t0.size
-    reach = float(reach_m) * (1.0 + 1e-9) + 1e-6   # the boxes' rounding, generously
     c = reach
     speed = np.sqrt(np.square((p1 - p0)[:, :2]).sum(axis=1)) / (t1 - t0)
     # T from the speed of the fast segments, not of the fastest one: any T finds every pair (a
@@ -359,56 +421,33 @@ def _near_pairs(seg, reach_m: float, max_entries: int = 8_000_000):
     xa = p0[seg_of, :2] + ((ta - t0[seg_of]) / w)[:, None] * (p1 - p0)[seg_of, :2]
     xb = p0[seg_of, :2] + ((tb - t0[seg_of]) / w)[:, None] * (p1 - p0)[seg_of, :2]
     lo, hi = np.minimum(xa, xb), np.maximum(xa, xb)
-    org = lo.min(axis=0) - 2 * reach
-    plain_lo = np.floor((lo - org) / c).astype(np.int64)
-    plain_hi = np.floor((hi - org) / c).astype(np.int64)
-    wide_lo = np.floor((lo - reach - org) / c).astype(np.int64)
-    wide_hi = np.floor((hi + reach - org) / c).astype(np.int64)
-    ny = int(max(plain_hi[:, 1].max(), wide_hi[:, 1].max())) + 2
-    nx = int(max(plain_hi[:, 0].max(), wide_hi[:, 0].max())) + 2
+    return seg_of, bucket, lo, hi
 
-    def entries(lo_c, hi_c, rows):
-        n_x = hi_c[rows, 0] - lo_c[rows, 0] + 1
-        n_y = hi_c[rows, 1] - lo_c[rows, 1] + 1
-        cnt = n_x * n_y
-        piece = np.repeat(rows, cnt)
-        r = np.arange(piece.size) - np.repeat(np.cumsum(cnt) - cnt, cnt)
-        nyr = np.repeat(n_y, cnt)
-        cx = lo_c[piece, 0] + r // nyr
-        cy = lo_c[piece, 1] + r % nyr
-        return (bucket[piece] * nx + cx) * ny + cy, piece
 
-    # pieces in bucket order, batched so that the entries of a batch stay bounded
-    order = np.argsort(bucket, kind="stable")
-    wide_cnt = ((wide_hi[:, 0] - wide_lo[:, 0] + 1) * (wide_hi[:, 1] - wide_lo[:, 1] + 1))[order]
-    cum = np.cumsum(wide_cnt)
+def _near_pairs(seg, reach_m: float, max_entries: int = 8_000_000):
+    """Every pair (i < j, sweep order) of segments of different flights, closed-overlapping in
+    time, that may come within ``reach_m`` per horizontal axis at a common instant: a grid hash
+    on time buckets and horizontal cells. Sorted, unique.
+
+    Each segment is cut into pieces at the edges of time buckets of length T (the instant a
+    piece ends on an edge is a piece of its own); two segments that share an instant t* both
+    have a piece in t*'s bucket whose time interval holds t*. A piece is entered (its bucket,
+    the cells of side c >= reach its box covers) on the "plain" side and (its bucket, the cells
+    its box widened by reach covers) on the "wide" side; the positions of two segments at t*
+    lie in their pieces' boxes, so if they are within reach on each axis the cell of one lies
+    in the other's wide cells: the pair is found. Cost: O(S log S) in the pieces and entries
+    (T = c / the fastest segment speed, so a piece spans about one cell), plus the pairs found.
+    """
+    import numpy as np
+
+    S = seg[0].size
+    reach = float(reach_m) * (1.0 + 1e-9) + 1e-6   # the boxes' rounding, generously
+    grid = _PieceGrid(seg, reach)
     codes = []
-    start = 0
-    while start < order.size:
-        base = cum[start - 1] if start else 0
-        stop = max(int(np.searchsorted(cum, base + max_entries, side="right")), start + 1)
-        # never split a bucket between batches
-        last_b = bucket[order[stop - 1]]
-        stop = int(np.searchsorted(bucket[order], last_b, side="right"))
-        rows = order[start:stop]
-        start = stop
-        kp, pp = entries(plain_lo, plain_hi, rows)
-        srt = np.argsort(kp, kind="stable")
-        kp, pp = kp[srt], pp[srt]
-        kw, pw = entries(wide_lo, wide_hi, rows)
-        left = np.searchsorted(kp, kw, side="left")
-        right = np.searchsorted(kp, kw, side="right")
-        m = right - left
-        if not m.sum():
-            continue
-        a = np.repeat(pw, m)
-        b = pp[np.repeat(left, m) + (np.arange(int(m.sum())) - np.repeat(np.cumsum(m) - m, m))]
-        sa, sb = seg_of[a], seg_of[b]
-        keep = f[sa] != f[sb]
-        sa, sb = sa[keep], sb[keep]
-        i, j = np.minimum(sa, sb), np.maximum(sa, sb)
-        keep = np.maximum(t0[i], t0[j]) <= np.minimum(t1[i], t1[j])
-        codes.append(_sorted_unique(i[keep] * S + j[keep]))
+    for rows in grid.batches(max_entries):
+        code = grid.near_codes(seg, rows)
+        if code is not None:
+            codes.append(code)
     if not codes:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
     u = _sorted_unique(np.concatenate(codes))
