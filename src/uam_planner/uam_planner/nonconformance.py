@@ -333,6 +333,64 @@ def _neighbour_alternatives(f, t_eff: float, config, network) -> list:
     return out[:1] + _constraint_free(out[1:], f, config, network, t_eff, airborne)
 
 
+def _selection_steps(graph, select: Callable, policy: str):
+    """Generator: ``select``'s (selected, report) for ``graph``; with "mwis" from the answer sent back for it."""
+    from .replanning import SOLVE_HERE
+    answer = (yield graph) if policy == "mwis" else SOLVE_HERE
+    return select(graph, policy) if answer is SOLVE_HERE else select(graph, policy, answer)
+
+
+def _segments_from(trs: list, t_eff: float):
+    """``trs`` from ``t_eff`` on as one SegmentSet: what flew before ``t_eff`` is past, it cannot meet anything."""
+    from .separation import SegmentSet
+    s_ = SegmentSet.from_trajectories([_clipped(t, t_eff) or t for t in trs])
+    return s_.take(s_.t1_s >= t_eff) if len(s_) else s_
+
+
+def _meets(trs: list, obstacles: list, t_eff: float, separation) -> bool:
+    """Whether any of ``trs`` loses ``separation`` with any of ``obstacles`` from ``t_eff`` on (a refused yield)."""
+    from .separation import conflicting_pairs
+    if not trs or not obstacles:
+        return False
+    return bool(len(conflicting_pairs(_segments_from(trs, t_eff), _segments_from(obstacles, t_eff), separation)))
+
+
+def _yield_neighbours(unsaved: dict, cand_of: dict, config, t_eff: float) -> set:
+    """The flights of ``cand_of`` that an unsaved flight's least-conflicting alternative meets: those that may yield."""
+    from .separation import conflicting_pairs
+    keys = sorted(cand_of)
+    oset = _segments_from([cand_of[j].trajectory for j in keys], t_eff)
+    neighbours = set()
+    for alts in unsaved.values():
+        a = _least_conflicting(alts, [cand_of[j].trajectory for j in keys], config, t_eff)
+        pairs = conflicting_pairs(_segments_from([a[0]], t_eff), oset, config.separation)
+        neighbours.update(keys[k] for k in np.unique(pairs[:, 1]).tolist())
+    return neighbours
+
+
+def _yield_graph(unsaved: dict, moves: dict, cand_of: dict, others: list, held: list, chosen_trs: list,
+                 config, t_eff: float):
+    """One round's graph of the yield stage: (its vertices' (owner, trajectory, weight, move), owners, the graph)."""
+    from .conflict_graph import build_conflict_graph
+    rs, js = sorted(unsaved), sorted(moves)
+    moving_ids = {cand_of[j].request_id for j in js}
+    flat = [(("r", r), a[0], YIELD_SAVE + a[1], None) for r in rs for a in unsaved[r]] + \
+        [(("n", j), a[0], a[1], a) for j in js for a in moves[j]]
+    owners = [o for o, *_ in flat]
+    req = {o: i for i, o in enumerate(dict.fromkeys(owners))}
+    req_of = np.array([req[o] for o in owners], dtype=np.int64)
+    cand = np.zeros(len(flat), dtype=np.int64)
+    for i in range(1, len(flat)):
+        cand[i] = cand[i - 1] + 1 if owners[i] == owners[i - 1] else 0
+    fixed = [f.trajectory for j, f in others if j not in moves] + \
+        [tr for rid, tr in held if rid not in moving_ids] + list(chosen_trs)
+    act = _segments_from(fixed, t_eff) if fixed else ()
+    graph = build_conflict_graph([_clipped(x[1], t_eff) or x[1] for x in flat], req_of, cand,
+                                 np.array([x[2] for x in flat], dtype=np.float64), len(req), act,
+                                 config.separation)
+    return flat, owners, graph
+
+
 def _yield_steps(t_eff: float, unsaved: dict, others: list, held: list, chosen_trs: list, config,
                  select: Callable, policy: str, network, report: dict):
     """The yield stage (see YIELD_SHARES): ``unsaved`` {r: its alternatives}, ``others``
@@ -343,57 +401,23 @@ def _yield_steps(t_eff: float, unsaved: dict, others: list, held: list, chosen_t
     that move); both empty when it saves nothing. A neighbour's own projections do not block
     its own alternatives, but they stay where they are while it keeps its plan: a choice that
     meets them is refused and that neighbour fixed for the next round."""
-    from .conflict_graph import build_conflict_graph
-    from .separation import SegmentSet, conflicting_pairs
-
-    def seg(trs):
-        s_ = SegmentSet.from_trajectories([_clipped(t, t_eff) or t for t in trs])
-        return s_.take(s_.t1_s >= t_eff) if len(s_) else s_
-
-    def meets(trs, obstacles) -> bool:
-        if not trs or not obstacles:
-            return False
-        return bool(len(conflicting_pairs(seg(trs), seg(obstacles), config.separation)))
-
     cand_of = {j: f for j, f in others if not f.contingent and f.trajectory.arrival_s > t_eff}
     if not cand_of:
         return {}, {}
-    keys = sorted(cand_of)
-    oset = seg([cand_of[j].trajectory for j in keys])
-    neighbours = set()
-    for alts in unsaved.values():
-        a = _least_conflicting(alts, [cand_of[j].trajectory for j in keys], config, t_eff)
-        pairs = conflicting_pairs(seg([a[0]]), oset, config.separation)
-        neighbours.update(keys[k] for k in np.unique(pairs[:, 1]).tolist())
+    neighbours = _yield_neighbours(unsaved, cand_of, config, t_eff)
     if not neighbours:
         return {}, {}
     moves = {j: _neighbour_alternatives(cand_of[j], t_eff, config, network) for j in sorted(neighbours)}
     proj = {}
     for rid, tr in held:
         proj.setdefault(rid, []).append(tr)
-    from .replanning import SOLVE_HERE
     for _round in range(YIELD_ROUNDS):
         rs, js = sorted(unsaved), sorted(moves)
-        moving_ids = {cand_of[j].request_id for j in js}
-        flat = [(("r", r), a[0], YIELD_SAVE + a[1], None) for r in rs for a in unsaved[r]] + \
-            [(("n", j), a[0], a[1], a) for j in js for a in moves[j]]
-        owners = [o for o, *_ in flat]
-        req = {o: i for i, o in enumerate(dict.fromkeys(owners))}
-        req_of = np.array([req[o] for o in owners], dtype=np.int64)
-        cand = np.zeros(len(flat), dtype=np.int64)
-        for i in range(1, len(flat)):
-            cand[i] = cand[i - 1] + 1 if owners[i] == owners[i - 1] else 0
-        fixed = [f.trajectory for j, f in others if j not in moves] + \
-            [tr for rid, tr in held if rid not in moving_ids] + list(chosen_trs)
-        act = seg(fixed) if fixed else ()
-        graph = build_conflict_graph([_clipped(x[1], t_eff) or x[1] for x in flat], req_of, cand,
-                                     np.array([x[2] for x in flat], dtype=np.float64), len(req), act,
-                                     config.separation)
+        flat, owners, graph = _yield_graph(unsaved, moves, cand_of, others, held, chosen_trs, config, t_eff)
         report["yield_vertices"] = report.get("yield_vertices", 0) + graph.n_vertices
         if not graph.n_vertices:
             return {}, {}
-        answer = (yield graph) if policy == "mwis" else SOLVE_HERE
-        selected, _er = select(graph, policy) if answer is SOLVE_HERE else select(graph, policy, answer)
+        selected, _er = yield from _selection_steps(graph, select, policy)
         got = {}
         for v in np.asarray(selected).tolist():
             src = int(graph.vertex_source[v])
@@ -403,7 +427,7 @@ def _yield_steps(t_eff: float, unsaved: dict, others: list, held: list, chosen_t
         left = [j for j in js if ("n", j) not in got]
         chosen_now = [x[1] for o, x in got.items() if o[0] == "r" or x[3][2]]
         left += [j for j in js if ("n", j) in got and not got[("n", j)][3][2]
-                 and meets(chosen_now, proj.get(cand_of[j].request_id, []))]
+                 and _meets(chosen_now, proj.get(cand_of[j].request_id, []), t_eff, config.separation)]
         if not left:
             saved = {r: next(a for a in unsaved[r] if a[0] is got[("r", r)][1])
                      for r in rs if ("r", r) in got}
