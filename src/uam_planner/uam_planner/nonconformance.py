@@ -561,6 +561,157 @@ def react(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: P
                                  network, fixed, fixed_ids), lambda _graph: SOLVE_HERE)
 
 
+@dataclass(frozen=True, eq=False)
+class _Batch:
+    """What the steps of one reaction batch share (:func:`react_steps`, :func:`_probe_batch_steps`), and its report."""
+
+    t_eff: float
+    epoch_index: int
+    active: Sequence
+    found: dict
+    config: object
+    select: Callable
+    policy: str
+    network: object
+    report: dict
+
+
+def _react_alternatives(b: _Batch, idx: list, book: PositionBook, probed: dict | None):
+    """(rates, alternatives per row, {row: keep-its-plan alternative}) of the flights ``idx`` (their re-joins)."""
+    per = []
+    keep: dict = {}   # row -> the keep-its-plan alternative of a probed flight
+    rates, rejoins = _observed_updates(idx, b.active, b.found, book, b.t_eff, b.report)
+    for r, i in enumerate(idx):
+        f = b.active[i]
+        alts, _base, _own = rejoins[r]
+        alts = _constraint_free(alts, f, b.config, b.network, b.t_eff, True) or alts[:1]
+        if probed and i in probed:
+            # it conforms: keeping its plan is an alternative too (the least preferred), so the
+            # batch never leaves it with a plan the others' updates were not deconflicted from
+            keep[len(per)] = (f.trajectory, KEEP_WEIGHT)
+            alts = alts + [keep[len(per)]]
+        per.append(alts)
+    return rates, per, keep
+
+
+def _react_solve_steps(b: _Batch, idx: list, per: list, fixed: list):
+    """Generator: the one graph of every row's alternatives, against the others and ``fixed``: ({row: alt}, backend)."""
+    from .conflict_graph import build_conflict_graph
+    from .separation import SegmentSet
+
+    others = [f for j, f in enumerate(b.active) if j not in b.found]
+    act = SegmentSet.from_trajectories([f.trajectory for f in others] + fixed)
+    act = act.take(act.t1_s >= b.t_eff) if len(act) else act
+    flat = [a for alts in per for a in alts]
+    b.report["alternatives"] = len(flat)
+    req_of = np.repeat(np.arange(len(idx)), [len(a) for a in per]).astype(np.int64)
+    cand = np.concatenate([np.arange(len(a)) for a in per]).astype(np.int64) if flat else np.zeros(0, np.int64)
+    # deconflicted from t_eff on (what flew before is past)
+    trs = [_clipped(a[0], b.t_eff) or a[0] for a in flat]
+    graph = build_conflict_graph(trs, req_of, cand, np.array([a[1] for a in flat], dtype=np.float64),
+                                 len(idx), act, b.config.separation)
+    b.report["vertices"], b.report["edges"] = graph.n_vertices, graph.n_edges
+    chosen = {}
+    backend = b.policy
+    if graph.n_vertices:
+        selected, er = yield from _selection_steps(graph, b.select, b.policy)
+        backend = er.backend_used or b.policy
+        for v in np.asarray(selected).tolist():
+            src = int(graph.vertex_source[v])
+            chosen[int(req_of[src])] = flat[src]
+    return chosen, backend
+
+
+def _react_yield_steps(b: _Batch, unsaved: dict, chosen: dict, fixed: list, fixed_ids: Sequence):
+    """Generator: the neighbours' yield for the rows ``unsaved`` (saved ones into ``chosen``): (saved, moved)."""
+    saved: dict = {}
+    moved: dict = {}
+    if unsaved:
+        held = list(zip(fixed_ids, fixed)) if len(fixed_ids) == len(fixed) else \
+            [("", tr) for tr in fixed]
+        saved, moved = yield from _yield_steps(
+            b.t_eff, unsaved, [(j, f) for j, f in enumerate(b.active) if j not in b.found], held,
+            [chosen[r][0] for r in sorted(chosen)], b.config, b.select, b.policy, b.network, b.report)
+        chosen.update(saved)
+        b.report["yield_saved"], b.report["yield_moved"] = len(saved), len(moved)
+    return saved, moved
+
+
+def _react_diversions(b: _Batch, idx: list, left: list, rates: list, chosen: dict, others: list,
+                      fixed: list, router) -> dict:
+    """{row: _Alt} of the rows ``left`` re-routed or diverted, each clear of all else (into ``chosen``)."""
+    diverted: dict = {}       # row -> the _Alt flown (its destination and route change)
+    if left and router is not None and b.network is not None:
+        taken = [chosen[r][0] for r in sorted(chosen)]
+        for r in left:
+            f = b.active[idx[r]]
+            alt = _first_clear(_divert_alternatives(f, b.found[idx[r]][0], rates[r], b.t_eff, b.network,
+                                                    b.config, router),
+                               [g.trajectory for g in others] + list(fixed) + taken, b.config, b.t_eff)
+            if alt is not None:
+                diverted[r] = alt
+                chosen[r] = (alt.trajectory, alt.weight)
+                taken.append(alt.trajectory)
+        b.report["diverted"] = sum(1 for a in diverted.values() if a.kind == "diverted")
+        b.report["rerouted"] = sum(1 for a in diverted.values() if a.kind == "rerouted")
+    return diverted
+
+
+def _react_updates(b: _Batch, idx: list, rates: list, per: list, keep: dict, chosen: dict, diverted: dict,
+                   others: list, fixed: list, probed: dict | None, backend: str) -> tuple[list, list]:
+    """(updates, new versions) of the rows: the chosen update, else a contingency; a probed one may keep its plan."""
+    t_eff, report = b.t_eff, b.report
+    updates, new_versions = [], []
+    for r, i in enumerate(idx):
+        f = b.active[i]
+        obs, (lat, ver, terr) = b.found[i]
+        what = (f"nonconforming at t = {obs.t_s:g} s (lateral {lat:.1f} m, vertical {ver:.1f} m, "
+                f"time {terr:+.1f} s); intent updated from where it is, {RATE_WORD} {rates[r]:.12g}")
+        a = chosen.get(r)
+        if r in keep:
+            what = _probe_reason(probed[i], obs, lat, terr, rates[r])
+            if a is None or a is keep[r]:
+                report["probe_kept"] = report.get("probe_kept", 0) + 1
+                continue  # it conforms: it keeps its plan rather than fly a contingency
+            report["probe_updates"] = report.get("probe_updates", 0) + 1
+        contingent = a is None
+        if a is None:
+            if not per[r]:
+                continue  # nothing left to fly: it is at its plan's end (it keeps its plan)
+            a = _least_conflicting(per[r], [f.trajectory for f in others] + fixed +
+                                   [x.trajectory for x in new_versions], b.config, t_eff,
+                                   true_first=True)
+            kind = KIND_CONTINGENCY
+            reason = (f"contingency: {what}; each of its {len(per[r])} updated intents loses "
+                      f"separation with another flight: flown but not deconflicted")
+        else:
+            kind = KIND
+            reason = f"{KIND}: {what}"
+        changes = {}
+        if r in diverted:
+            d = diverted[r]
+            changes = _route_changes(d, b.network)
+            reason += f"; {d.kind} to {changes['destination_id']!r} (no re-timing kept separation)"
+        nf, up = _reaction_update(f, a, kind, reason, b.policy, backend, b.epoch_index, t_eff,
+                                  rates[r], contingent, **changes)
+        updates.append(up)
+        new_versions.append(nf)
+        report["kinds"][kind] = report["kinds"].get(kind, 0) + 1
+    return updates, new_versions
+
+
+def _neighbour_updates(b: _Batch, idx: list, saved: dict, moved: dict, yielded: dict, updates: list,
+                       new_versions: list) -> None:
+    """The updates and new versions (appended) of the neighbours that yield so that the rows ``saved`` keep it."""
+    for j in sorted(moved):
+        f, nf, how = b.active[j], yielded[j], moved[j][2]
+        saved_ids = ", ".join(b.active[idx[r]].request_id for r in sorted(saved))
+        updates.append(_yield_update(f, nf, f"{KIND_YIELD}: {how} so that the nonconforming "
+                                            f"{saved_ids} keep(s) separation", b.t_eff))
+        new_versions.append(nf)
+        b.report["kinds"][KIND_YIELD] = b.report["kinds"].get(KIND_YIELD, 0) + 1
+
+
 def react_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict, book: PositionBook,
                 config, select: Callable, policy: str, network=None, fixed: Sequence = (),
                 fixed_ids: Sequence = (), probed: dict | None = None, held: Sequence = (),
@@ -602,9 +753,6 @@ def react_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict, b
     Returns: (new active list: the others in their order, then the new versions; PlanUpdate per
     flight in ``active`` order; a report dict: flights, alternatives, vertices, edges, kinds).
     """
-    from .conflict_graph import build_conflict_graph
-    from .separation import SegmentSet
-
     idx = sorted(found)
     report = {"t_s": float(t_eff), "flights": len(idx), "alternatives": 0, "vertices": 0,
               "edges": 0, "kinds": {}, "rates": {}}
@@ -615,42 +763,10 @@ def react_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict, b
         return (yield from _probe_batch_steps(t_eff, epoch_index, active, found, book, config,
                                               select, policy, network, fixed, probed, report,
                                               held, router))
-    others = [f for j, f in enumerate(active) if j not in found]
+    b = _Batch(t_eff, epoch_index, active, found, config, select, policy, network, report)
     fixed = list(fixed)
-    act = SegmentSet.from_trajectories([f.trajectory for f in others] + fixed)
-    act = act.take(act.t1_s >= t_eff) if len(act) else act
-    per = []
-    keep: dict = {}   # row -> the keep-its-plan alternative of a probed flight
-    rates, rejoins = _observed_updates(idx, active, found, book, t_eff, report)
-    for r, i in enumerate(idx):
-        f = active[i]
-        alts, _base, _own = rejoins[r]
-        alts = _constraint_free(alts, f, config, network, t_eff, True) or alts[:1]
-        if probed and i in probed:
-            # it conforms: keeping its plan is an alternative too (the least preferred), so the
-            # batch never leaves it with a plan the others' updates were not deconflicted from
-            keep[len(per)] = (f.trajectory, KEEP_WEIGHT)
-            alts = alts + [keep[len(per)]]
-        per.append(alts)
-    flat = [a for alts in per for a in alts]
-    report["alternatives"] = len(flat)
-    req_of = np.repeat(np.arange(len(idx)), [len(a) for a in per]).astype(np.int64)
-    cand = np.concatenate([np.arange(len(a)) for a in per]).astype(np.int64) if flat else np.zeros(0, np.int64)
-    # deconflicted from t_eff on (what flew before is past)
-    trs = [_clipped(a[0], t_eff) or a[0] for a in flat]
-    graph = build_conflict_graph(trs, req_of, cand, np.array([a[1] for a in flat], dtype=np.float64),
-                                 len(idx), act, config.separation)
-    report["vertices"], report["edges"] = graph.n_vertices, graph.n_edges
-    chosen = {}
-    backend = policy
-    if graph.n_vertices:
-        from .replanning import SOLVE_HERE
-        answer = (yield graph) if policy == "mwis" else SOLVE_HERE
-        selected, er = select(graph, policy) if answer is SOLVE_HERE else select(graph, policy, answer)
-        backend = er.backend_used or policy
-        for v in np.asarray(selected).tolist():
-            src = int(graph.vertex_source[v])
-            chosen[int(req_of[src])] = flat[src]
+    rates, per, keep = _react_alternatives(b, idx, book, probed)
+    chosen, backend = yield from _react_solve_steps(b, idx, per, fixed)
     if keep and any(r not in chosen for r in keep):
         # a probed flight whose own plan conflicts with the batch's fixed traffic (a held
         # projection): no probe update of this batch is taken, every probed flight keeps its plan
@@ -658,78 +774,16 @@ def react_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict, b
         report["probe_dropped"] = len(keep)
     # the flights no alternative of their own saves: their neighbours may yield (YIELD_SHARES)
     unsaved = {r: per[r] for r in range(len(idx)) if r not in chosen and per[r] and r not in keep}
-    saved: dict = {}
-    moved: dict = {}
-    if unsaved:
-        held = list(zip(fixed_ids, fixed)) if len(fixed_ids) == len(fixed) else \
-            [("", tr) for tr in fixed]
-        saved, moved = yield from _yield_steps(
-            t_eff, unsaved, [(j, f) for j, f in enumerate(active) if j not in found], held,
-            [chosen[r][0] for r in sorted(chosen)], config, select, policy, network, report)
-        chosen.update(saved)
-        report["yield_saved"], report["yield_moved"] = len(saved), len(moved)
+    saved, moved = yield from _react_yield_steps(b, unsaved, chosen, fixed, fixed_ids)
     yielded = {j: moved_flight(active[j], moved[j], t_eff, epoch_index, policy, backend) for j in moved}
     others = [yielded.get(j, f) for j, f in enumerate(active) if j not in found]
     # the flights still unsaved: re-routed or diverted from where they are, one at a time in
     # index order, each clear of every other flight, the held projections and what is chosen
-    diverted: dict = {}       # row -> the _Alt flown (its destination and route change)
     left = [r for r in range(len(idx)) if r not in chosen and per[r] and r not in keep]
-    if left and router is not None and network is not None:
-        taken = [chosen[r][0] for r in sorted(chosen)]
-        for r in left:
-            f = active[idx[r]]
-            alt = _first_clear(_divert_alternatives(f, found[idx[r]][0], rates[r], t_eff, network,
-                                                    config, router),
-                               [g.trajectory for g in others] + list(fixed) + taken, config, t_eff)
-            if alt is not None:
-                diverted[r] = alt
-                chosen[r] = (alt.trajectory, alt.weight)
-                taken.append(alt.trajectory)
-        report["diverted"] = sum(1 for a in diverted.values() if a.kind == "diverted")
-        report["rerouted"] = sum(1 for a in diverted.values() if a.kind == "rerouted")
-    updates, new_versions = [], []
-    for r, i in enumerate(idx):
-        f = active[i]
-        obs, (lat, ver, terr) = found[i]
-        what = (f"nonconforming at t = {obs.t_s:g} s (lateral {lat:.1f} m, vertical {ver:.1f} m, "
-                f"time {terr:+.1f} s); intent updated from where it is, {RATE_WORD} {rates[r]:.12g}")
-        a = chosen.get(r)
-        if r in keep:
-            what = _probe_reason(probed[i], obs, lat, terr, rates[r])
-            if a is None or a is keep[r]:
-                report["probe_kept"] = report.get("probe_kept", 0) + 1
-                continue  # it conforms: it keeps its plan rather than fly a contingency
-            report["probe_updates"] = report.get("probe_updates", 0) + 1
-        contingent = a is None
-        if a is None:
-            if not per[r]:
-                continue  # nothing left to fly: it is at its plan's end (it keeps its plan)
-            a = _least_conflicting(per[r], [f.trajectory for f in others] + fixed +
-                                   [x.trajectory for x in new_versions], config, t_eff,
-                                   true_first=True)
-            kind = KIND_CONTINGENCY
-            reason = (f"contingency: {what}; each of its {len(per[r])} updated intents loses "
-                      f"separation with another flight: flown but not deconflicted")
-        else:
-            kind = KIND
-            reason = f"{KIND}: {what}"
-        changes = {}
-        if r in diverted:
-            d = diverted[r]
-            changes = _route_changes(d, network)
-            reason += f"; {d.kind} to {changes['destination_id']!r} (no re-timing kept separation)"
-        nf, up = _reaction_update(f, a, kind, reason, policy, backend, epoch_index, t_eff,
-                                  rates[r], contingent, **changes)
-        updates.append(up)
-        new_versions.append(nf)
-        report["kinds"][kind] = report["kinds"].get(kind, 0) + 1
-    for j in sorted(moved):                           # the neighbours that yield
-        f, nf, how = active[j], yielded[j], moved[j][2]
-        saved_ids = ", ".join(active[idx[r]].request_id for r in sorted(saved))
-        updates.append(_yield_update(f, nf, f"{KIND_YIELD}: {how} so that the nonconforming "
-                                            f"{saved_ids} keep(s) separation", t_eff))
-        new_versions.append(nf)
-        report["kinds"][KIND_YIELD] = report["kinds"].get(KIND_YIELD, 0) + 1
+    diverted = _react_diversions(b, idx, left, rates, chosen, others, fixed, router)
+    updates, new_versions = _react_updates(b, idx, rates, per, keep, chosen, diverted, others, fixed,
+                                           probed, backend)
+    _neighbour_updates(b, idx, saved, moved, yielded, updates, new_versions)
     replaced = {u.request_id for u in updates}
     keep = [f for j, f in enumerate(active) if active[j].request_id not in replaced]
     return keep + new_versions, updates, report
