@@ -838,6 +838,169 @@ def probe_batch_separation(config):
                            max(a.vertical_separation_m, b.vertical_separation_m))
 
 
+def _probe_alternatives(b: _Batch, idx: list, rejoins: list) -> tuple[list, list]:
+    """(alternatives, projection up to the look-ahead) per probed row: re-joins, shifts, then keeping its plan."""
+    from .replanning import clipped_until
+
+    look = float(b.config.conflict_probe_s)
+    per, proj = [], []
+    for r, i in enumerate(idx):
+        f = b.active[i]
+        obs = b.found[i][0]
+        alts, base, own = rejoins[r]
+        if own is not None and alts:
+            for delta in PROBE_SHIFTS_S:
+                tr = shifted_trajectory(own, float(obs.t_s), delta)
+                if tr is None or tr.arrival_s <= b.t_eff:
+                    continue
+                alts.append((tr, _delay_weight(tr, base)))
+        alts = _constraint_free(alts, f, b.config, b.network, b.t_eff, True) or alts[:1]
+        per.append(alts + [(f.trajectory, KEEP_WEIGHT)])   # the last one: keep its plan
+        pr = _clipped(own, b.t_eff) if own is not None else None
+        pr = clipped_until(pr, b.t_eff + look) if pr is not None else None
+        proj.append(pr if pr is not None and pr.times_s.shape[0] >= 2 else None)
+    return per, proj
+
+
+def _hold_alternatives(b: _Batch, f) -> list:
+    """The alternatives of ``f``, due to depart: its plan held on the pad by each of HOLD_SHIFTS_S, keeping it last."""
+    tr = f.trajectory
+    shifted = [Trajectory(tr.times_s + d, tr.points_m) for d in HOLD_SHIFTS_S]
+    alts = [(s, _delay_weight(s, tr.arrival_s)) for s in shifted]
+    alts = _constraint_free(alts, f, b.config, b.network, b.t_eff, False)
+    return alts + [(tr, HOLD_KEEP_WEIGHT)]        # the last one: keep its plan
+
+
+def _projection_edges(graph, flat: list, src: list, trs: list, per: list, proj: list, sep):
+    """``graph`` with an edge from each row's keep vertex to the others' vertices its projection meets (flown so)."""
+    from .conflict_graph import _unique_pairs
+    from .separation import conflicting_pairs
+
+    add = []
+    for v, s_v in enumerate(src):
+        r, c, _a = flat[s_v]
+        if c != len(per[r]) - 1 or proj[r] is None:
+            continue                                # not a keep vertex, or nothing projected
+        us = [u for u, s_u in enumerate(src) if flat[s_u][0] != r]
+        if us:
+            pairs = np.asarray(conflicting_pairs([proj[r]], [trs[src[u]] for u in us],
+                                                 sep)).reshape(-1, 2)
+            add += [(min(v, us[y]), max(v, us[y])) for y in pairs[:, 1].tolist()]
+    if not add:
+        return graph
+    edges = _unique_pairs(np.concatenate((np.asarray(graph.edges, np.int64).reshape(-1, 2),
+                                          np.array(add, np.int64))), graph.n_vertices)
+    return replace(graph, edges=edges.astype(np.int32),
+                   n_conflict_edges=graph.n_conflict_edges + len(add))
+
+
+def _probe_round_graph(b: _Batch, rows: list, per: list, proj: list, others: list, extra: list, sep):
+    """One solve round's graph of the rows still in: ((row, index, alternative) list, vertex sources, graph)."""
+    from .conflict_graph import build_conflict_graph
+
+    t_eff = b.t_eff
+    flat = [(r, c, a) for r in rows for c, a in enumerate(per[r])]
+    trs = [_clipped(a[0], t_eff) or a[0] for _r, _c, a in flat]
+    # the margin is kept from the batch's own flights (the rows, the released ones' plans and
+    # projections: those predicted to come close); every other flight at the planner's
+    # buffered separation, as every plan keeps it (against all traffic at
+    # minimum + margin, an update that parted the pair could be refused for a third flight
+    # planned at the buffer)
+    ok = ~((_conflict_counts(trs, others, b.config.separation, t_eff) > 0) |
+           (_conflict_counts(trs, extra, sep, t_eff) > 0))
+    flat = [x for x, k in zip(flat, ok.tolist()) if k]
+    trs = [x for x, k in zip(trs, ok.tolist()) if k]
+    at = {r: q for q, r in enumerate(rows)}
+    req_of = np.array([at[r] for r, _c, _a in flat], dtype=np.int64)
+    cand = np.array([c for _r, c, _a in flat], dtype=np.int64)
+    graph = build_conflict_graph(trs, req_of, cand,
+                                 np.array([a[1] + PROBE_COVER for _r, _c, a in flat]),
+                                 len(rows), (), sep)
+    src = np.asarray(graph.vertex_source).tolist()
+    return flat, src, _projection_edges(graph, flat, src, trs, per, proj, sep)
+
+
+def _probe_solve_steps(b: _Batch, rows_i: list, per: list, proj: list, others: list, sep):
+    """Generator: solve rounds until every row left has a vertex (one left out keeps its plan): (chosen, backend)."""
+    rows, extra, chosen, backend = list(range(len(rows_i))), [], {}, b.policy
+    while rows:
+        flat, src, graph = _probe_round_graph(b, rows, per, proj, others, extra, sep)
+        b.report["vertices"] += graph.n_vertices
+        b.report["edges"] += graph.n_edges
+        got = {}
+        if graph.n_vertices:
+            selected, er = yield from _selection_steps(graph, b.select, b.policy)
+            backend = er.backend_used or b.policy
+            for v in np.asarray(selected).tolist():
+                r, c, a = flat[src[v]]
+                got[r] = (c, a)
+        left = [r for r in rows if r not in got]
+        if not left:
+            chosen.update(got)
+            break
+        for r in left:                                  # it keeps its plan, flown as projected
+            rows.remove(r)
+            extra += [b.active[rows_i[r]].trajectory] + ([proj[r]] if proj[r] is not None else [])
+            b.report["probe_released"] = b.report.get("probe_released", 0) + 1
+    return chosen, backend
+
+
+def _probe_updates(b: _Batch, idx: list, rates: list, per: list, chosen: dict, diverted: dict, widest: dict,
+                   probed: dict, sep, backend: str) -> tuple[list, list]:
+    """(updates, new versions) of the probed rows the batch moves (re-timed, re-routed or diverted); the others keep."""
+    report = b.report
+    updates, new_versions = [], []
+    for r, i in enumerate(idx):
+        f = b.active[i]
+        obs, (lat, _ver, terr) = b.found[i]
+        ch = chosen.get(r)
+        d = diverted.get(r)
+        if d is not None:
+            ch = (-1, (d.trajectory, d.weight))
+        if ch is None or ch[0] == len(per[r]) - 1:
+            report["probe_kept"] = report.get("probe_kept", 0) + 1
+            continue
+        report["probe_updates"] = report.get("probe_updates", 0) + 1
+        what = _probe_reason(probed[i], obs, lat, terr, rates[r])
+        changes = {}
+        if d is not None:
+            changes = _route_changes(d, b.network)
+            what += (f"; {d.kind} to {changes['destination_id']!r} from where it is (no "
+                     f"re-timing kept separation)")
+        if r in widest:
+            what += (f"; the widest berth left: {widest[r]:.1f} m at the closest (nothing kept "
+                     f"{sep.separation_m:g} m)")
+        nf, up = _reaction_update(f, ch[1], KIND, f"{KIND}: {what}", b.policy, backend, b.epoch_index,
+                                  b.t_eff, rates[r], False, **changes)
+        updates.append(up)
+        new_versions.append(nf)
+        report["kinds"][KIND] = report["kinds"].get(KIND, 0) + 1
+    return updates, new_versions
+
+
+def _hold_updates(b: _Batch, idx: list, rows_i: list, per: list, chosen: dict, probed: dict, backend: str,
+                  updates: list, new_versions: list) -> None:
+    """The updates and new versions (appended) of the rows on the ground the batch holds on the pad."""
+    report = b.report
+    for r in range(len(idx), len(rows_i)):                # on the ground: held, or keeps its plan
+        f = b.active[rows_i[r]]
+        ch = chosen.get(r)
+        if ch is None or ch[0] == len(per[r]) - 1:
+            continue
+        tr = ch[1][0]
+        delay = float(tr.departure_s - f.departure_s)
+        met = sorted(b.active[idx[q]].request_id for q in range(len(idx))
+                     if f.request_id in probed.get(idx[q], ()))
+        nf = moved_flight(f, (tr, ch[1][1], ""), b.t_eff, b.epoch_index, b.policy, backend)
+        updates.append(_yield_update(
+            f, nf, f"{KIND_YIELD}: held on the pad {delay:g} s (departs at {tr.departure_s:g} s) so "
+            f"that {', '.join(met) or 'the probed flights'} keep(s) separation (conflict probe)",
+            b.t_eff))
+        new_versions.append(nf)
+        report["probe_held"] = report.get("probe_held", 0) + 1
+        report["kinds"][KIND_YIELD] = report["kinds"].get(KIND_YIELD, 0) + 1
+
+
 def _probe_batch_steps(t_eff: float, epoch_index: int, active: Sequence, found: dict,
                        book: PositionBook, config, select: Callable, policy: str, network,
                        fixed: Sequence, probed: dict, report: dict, held: Sequence = (),
@@ -869,142 +1032,26 @@ def _probe_batch_steps(t_eff: float, epoch_index: int, active: Sequence, found: 
     Where nothing keeps the batch's separation, such a flight takes the widest berth that keeps
     the true minimum (see :func:`_probe_diversions`).
     A generator as :func:`react_steps`: it yields each round's graph."""
-    from .conflict_graph import _unique_pairs, build_conflict_graph
-    from .replanning import SOLVE_HERE, clipped_until
-    from .separation import conflicting_pairs
-
     idx = sorted(found)
     hold = sorted({int(i) for i in held if i not in found and active[i].departure_s > t_eff})
     rows_i = idx + hold          # the batch's rows: the probed flights, then those on the ground
-    look = float(config.conflict_probe_s)
     sep = probe_batch_separation(config)
-    per, proj = [], []
+    b = _Batch(t_eff, epoch_index, active, found, config, select, policy, network, report)
     rates, rejoins = _observed_updates(idx, active, found, book, t_eff, report)
-    for r, i in enumerate(idx):
-        f = active[i]
-        obs = found[i][0]
-        alts, base, own = rejoins[r]
-        if own is not None and alts:
-            for delta in PROBE_SHIFTS_S:
-                tr = shifted_trajectory(own, float(obs.t_s), delta)
-                if tr is None or tr.arrival_s <= t_eff:
-                    continue
-                alts.append((tr, _delay_weight(tr, base)))
-        alts = _constraint_free(alts, f, config, network, t_eff, True) or alts[:1]
-        per.append(alts + [(f.trajectory, KEEP_WEIGHT)])   # the last one: keep its plan
-        pr = _clipped(own, t_eff) if own is not None else None
-        pr = clipped_until(pr, t_eff + look) if pr is not None else None
-        proj.append(pr if pr is not None and pr.times_s.shape[0] >= 2 else None)
+    per, proj = _probe_alternatives(b, idx, rejoins)
     for i in hold:
-        f = active[i]
-        tr = f.trajectory
-        shifted = [Trajectory(tr.times_s + d, tr.points_m) for d in HOLD_SHIFTS_S]
-        alts = [(s, _delay_weight(s, tr.arrival_s)) for s in shifted]
-        alts = _constraint_free(alts, f, config, network, t_eff, False)
-        per.append(alts + [(tr, HOLD_KEEP_WEIGHT)])        # the last one: keep its plan
+        per.append(_hold_alternatives(b, active[i]))
         proj.append(None)
     ground = set(hold)
     others = [f.trajectory for j, f in enumerate(active) if j not in found and j not in ground] + \
         list(fixed)
-    rows, extra, chosen, backend = list(range(len(rows_i))), [], {}, policy
     report["alternatives"] = sum(len(a) for a in per)
-    while rows:
-        flat = [(r, c, a) for r in rows for c, a in enumerate(per[r])]
-        trs = [_clipped(a[0], t_eff) or a[0] for _r, _c, a in flat]
-        # the margin is kept from the batch's own flights (the rows, the released ones' plans and
-        # projections: those predicted to come close); every other flight at the planner's
-        # buffered separation, as every plan keeps it (against all traffic at
-        # minimum + margin, an update that parted the pair could be refused for a third flight
-        # planned at the buffer)
-        ok = ~((_conflict_counts(trs, others, config.separation, t_eff) > 0) |
-               (_conflict_counts(trs, extra, sep, t_eff) > 0))
-        flat = [x for x, k in zip(flat, ok.tolist()) if k]
-        trs = [x for x, k in zip(trs, ok.tolist()) if k]
-        at = {r: q for q, r in enumerate(rows)}
-        req_of = np.array([at[r] for r, _c, _a in flat], dtype=np.int64)
-        cand = np.array([c for _r, c, _a in flat], dtype=np.int64)
-        graph = build_conflict_graph(trs, req_of, cand,
-                                     np.array([a[1] + PROBE_COVER for _r, _c, a in flat]),
-                                     len(rows), (), sep)
-        src = np.asarray(graph.vertex_source).tolist()
-        add = []
-        for v, s_v in enumerate(src):
-            r, c, _a = flat[s_v]
-            if c != len(per[r]) - 1 or proj[r] is None:
-                continue                                # not a keep vertex, or nothing projected
-            us = [u for u, s_u in enumerate(src) if flat[s_u][0] != r]
-            if us:
-                pairs = np.asarray(conflicting_pairs([proj[r]], [trs[src[u]] for u in us],
-                                                     sep)).reshape(-1, 2)
-                add += [(min(v, us[y]), max(v, us[y])) for y in pairs[:, 1].tolist()]
-        if add:
-            edges = _unique_pairs(np.concatenate((np.asarray(graph.edges, np.int64).reshape(-1, 2),
-                                                  np.array(add, np.int64))), graph.n_vertices)
-            graph = replace(graph, edges=edges.astype(np.int32),
-                            n_conflict_edges=graph.n_conflict_edges + len(add))
-        report["vertices"] += graph.n_vertices
-        report["edges"] += graph.n_edges
-        got = {}
-        if graph.n_vertices:
-            answer = (yield graph) if policy == "mwis" else SOLVE_HERE
-            selected, er = select(graph, policy) if answer is SOLVE_HERE else select(graph, policy, answer)
-            backend = er.backend_used or policy
-            for v in np.asarray(selected).tolist():
-                r, c, a = flat[src[v]]
-                got[r] = (c, a)
-        left = [r for r in rows if r not in got]
-        if not left:
-            chosen.update(got)
-            break
-        for r in left:                                  # it keeps its plan, flown as projected
-            rows.remove(r)
-            extra += [active[rows_i[r]].trajectory] + ([proj[r]] if proj[r] is not None else [])
-            report["probe_released"] = report.get("probe_released", 0) + 1
+    chosen, backend = yield from _probe_solve_steps(b, rows_i, per, proj, others, sep)
     diverted, widest = _probe_diversions(t_eff, idx, rows_i, active, found, rates, per, proj,
                                          chosen, others, sep, config, network, router, report)
-    updates, new_versions = [], []
-    for r, i in enumerate(idx):
-        f = active[i]
-        obs, (lat, _ver, terr) = found[i]
-        ch = chosen.get(r)
-        d = diverted.get(r)
-        if d is not None:
-            ch = (-1, (d.trajectory, d.weight))
-        if ch is None or ch[0] == len(per[r]) - 1:
-            report["probe_kept"] = report.get("probe_kept", 0) + 1
-            continue
-        report["probe_updates"] = report.get("probe_updates", 0) + 1
-        what = _probe_reason(probed[i], obs, lat, terr, rates[r])
-        changes = {}
-        if d is not None:
-            changes = _route_changes(d, network)
-            what += (f"; {d.kind} to {changes['destination_id']!r} from where it is (no "
-                     f"re-timing kept separation)")
-        if r in widest:
-            what += (f"; the widest berth left: {widest[r]:.1f} m at the closest (nothing kept "
-                     f"{sep.separation_m:g} m)")
-        nf, up = _reaction_update(f, ch[1], KIND, f"{KIND}: {what}", policy, backend, epoch_index,
-                                  t_eff, rates[r], False, **changes)
-        updates.append(up)
-        new_versions.append(nf)
-        report["kinds"][KIND] = report["kinds"].get(KIND, 0) + 1
-    for r in range(len(idx), len(rows_i)):                # on the ground: held, or keeps its plan
-        f = active[rows_i[r]]
-        ch = chosen.get(r)
-        if ch is None or ch[0] == len(per[r]) - 1:
-            continue
-        tr = ch[1][0]
-        delay = float(tr.departure_s - f.departure_s)
-        met = sorted(active[idx[q]].request_id for q in range(len(idx))
-                     if f.request_id in probed.get(idx[q], ()))
-        nf = moved_flight(f, (tr, ch[1][1], ""), t_eff, epoch_index, policy, backend)
-        updates.append(_yield_update(
-            f, nf, f"{KIND_YIELD}: held on the pad {delay:g} s (departs at {tr.departure_s:g} s) so "
-            f"that {', '.join(met) or 'the probed flights'} keep(s) separation (conflict probe)",
-            t_eff))
-        new_versions.append(nf)
-        report["probe_held"] = report.get("probe_held", 0) + 1
-        report["kinds"][KIND_YIELD] = report["kinds"].get(KIND_YIELD, 0) + 1
+    updates, new_versions = _probe_updates(b, idx, rates, per, chosen, diverted, widest, probed, sep,
+                                           backend)
+    _hold_updates(b, idx, rows_i, per, chosen, probed, backend, updates, new_versions)
     replaced = {u.request_id for u in updates}
     return [f for f in active if f.request_id not in replaced] + new_versions, updates, report
 
