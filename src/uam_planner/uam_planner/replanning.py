@@ -719,8 +719,275 @@ def replan(t_eff: float, epoch_index: int, active: Sequence, requests: dict, net
                      lambda _graph: SOLVE_HERE)
 
 
-# complexity over 25: the batch re-plan as one generator of solve steps (its stages share the batch); to be split into named steps
-def replan_steps(t_eff: float, epoch_index: int, active: Sequence, requests: dict, network, config,  # noqa: C901
+class _Replan:
+    """One batch re-plan of :func:`replan_steps`: the state its rounds build up, and its steps."""
+
+    def __init__(self, t_eff: float, epoch_index: int, active: Sequence, requests: dict, network, config, cache,
+                 cset: ConstraintSet, select: Callable, departures: Callable, policy: str, held: Sequence,
+                 affected: dict, rep: ReplanReport):
+        self.t_eff, self.epoch_index, self.active, self.requests = t_eff, epoch_index, active, requests
+        self.network, self.config, self.cache, self.cset = network, config, cache, cset
+        self.select, self.departures, self.policy, self.held, self.rep = select, departures, policy, held, rep
+        idx = sorted(affected)
+        self.router = _Router(network, cache, cset, t_eff)
+        self.why = dict(affected)        # index in active -> (constraint index, entry time)
+        self.pulled_by: dict = {}        # index -> request_id of the contingency it was pulled in for
+        self.clean: dict = {}            # index -> its constraint-free alternatives, preference order
+        self.fixed: dict = {}            # index -> _Alt flown as a FIXED flight (contingency or no way out)
+        self.unavoidable: set = set()    # no constraint-free alternative at all: it flies its plan
+        self.unresolved: dict = {}       # contingencies flown not deconflicted -> why
+        self.hold_of: dict = {}          # index -> seconds held at the branch point by its contingency
+        self.work = list(idx)            # flights being decided by the graph
+        self.in_replan = set(idx)
+        for i in idx:
+            rep.affected_airborne += int(active[i].departure_s < t_eff)
+            rep.affected_not_departed += int(active[i].departure_s >= t_eff)
+        self.act_memo: dict = {}
+        self.chosen: dict = {}           # index -> _Alt chosen by the graph
+        self.held_opts: dict = {}        # index -> its contingency options in the graph (unsaved before)
+        self.rounds = 0
+
+    def held_now(self):
+        """The held projections of flights not being re-planned (fixed for every decision)."""
+        mine = {self.active[j].request_id for j in self.in_replan}
+        return [tr for rid, tr in self.held if rid not in mine]
+
+    def act_set(self, extra=()):
+        """The flights every alternative keeps separation with (from t_eff on): not re-planned, fixed, held."""
+        from .separation import SegmentSet
+        # the same flights in the same order give the same set: built again only when the
+        # flights re-planned or the fixed ones changed (the cascade's
+        # rounds rebuilt it from ~1,200 trajectories each time)
+        fixed, t_eff = self.fixed, self.t_eff
+        key = (frozenset(self.in_replan), tuple((i, id(a)) for i, a in fixed.items())) if not extra else None
+        got = self.act_memo.get(key) if key is not None else None
+        if got is not None:
+            return got[0]
+        trs = [f.trajectory for j, f in enumerate(self.active) if j not in self.in_replan] + \
+            [a.trajectory for a in fixed.values()] + self.held_now() + list(extra)
+        s_ = SegmentSet.from_trajectories(trs)
+        s_ = s_.take(s_.t1_s >= t_eff) if len(s_) else s_
+        if key is not None:
+            self.act_memo.clear()
+            self.act_memo[key] = (s_, list(fixed.values()))  # holds them: their ids stay theirs
+        return s_
+
+    def generate(self, todo, act):
+        """Alternatives of the flights ``todo`` (stage 2 for those with too few survivors)."""
+        from .conflict_graph import discard_against_active
+        active, t_eff, network, config, router = self.active, self.t_eff, self.network, self.config, self.router
+        groups = []
+        for i in todo:
+            f = active[i]
+            airborne = f.departure_s < t_eff
+            origin = None if airborne else network.node_index(f.origin_id)
+            alts = _airborne_alternatives(f, t_eff, network, config, router) + \
+                [x for x in (_turn_back(f, t_eff, network, config),) if x is not None] if airborne else \
+                _ground_alternatives(f, self.requests.get(f.request_id), t_eff, network, self.cache,
+                                     self.departures)
+            groups += [([_keep_alt(f, network)], origin), (alts, origin)]
+        # every flight's alternatives tested against the constraints in one call
+        # (one call per flight and kind was ~15 % of the decision)
+        free = _constraint_free_many(groups, self.cset, t_eff, network)
+        lists = [free[2 * r] + free[2 * r + 1] for r in range(len(todo))]
+        flat1 = [a.trajectory for alts in lists for a in alts]
+        gone = discard_against_active(flat1, act, config.separation) if flat1 and len(act) \
+            else np.zeros(len(flat1), dtype=bool)
+        pos = 0
+        for r, i in enumerate(todo):
+            n = len(lists[r])
+            left = n - int(gone[pos:pos + n].sum())
+            pos += n
+            f = active[i]
+            if left < STAGE2_BELOW and f.departure_s < t_eff:
+                lists[r] += _constraint_free(_airborne_alternatives(f, t_eff, network, config, router, stage=2),
+                                             self.cset, t_eff, network, None)
+                self.rep.stage2 += 1
+            lists[r].sort(key=lambda a: -a.weight)  # stable: preference order within the flight
+            self.clean[i] = lists[r]
+            self.rep.alternatives += len(lists[r])
+
+    def generate_new(self):
+        """Alternatives of the flights new to the graph; an airborne one with none at all flies its plan, fixed."""
+        todo = [i for i in self.work if i not in self.clean]
+        if todo:
+            self.generate(todo, self.act_set())
+            # an airborne flight with no constraint-free alternative at all (already inside, or
+            # entering before its branch point) flies its plan: fixed before the graph
+            for i in todo:
+                if not self.clean[i] and self.active[i].departure_s < self.t_eff:
+                    self.fixed[i] = _keep_alt(self.active[i], self.network)
+                    self.unavoidable.add(i)
+            self.work = [i for i in self.work if i not in self.fixed]
+
+    def round_graph(self):
+        """This round's graph of the flights in ``work``, against the fixed traffic: (alternatives, rows, graph)."""
+        from .conflict_graph import build_conflict_graph
+        act = self.act_set()
+        per_flight = [self.clean[i] + self.held_opts.get(i, []) for i in self.work]
+        flat = [a for alts in per_flight for a in alts]
+        req_of = np.repeat(np.arange(len(self.work)), [len(a) for a in per_flight]).astype(np.int64)
+        cand_idx = np.concatenate([np.arange(len(a)) for a in per_flight]).astype(np.int64) \
+            if flat else np.zeros(0, np.int64)
+        graph = build_conflict_graph([a.trajectory for a in flat], req_of, cand_idx,
+                                     np.array([a.weight for a in flat], dtype=np.float64), len(self.work),
+                                     act, self.config.separation)
+        return flat, req_of, graph
+
+    def solve_steps(self, graph):
+        """Generator: the vertices selected in ``graph`` (with "mwis" from the answer sent back), into the report."""
+        rep = self.rep
+        ts = time.perf_counter()
+        if graph.n_vertices == 0:
+            selected = np.zeros(0, dtype=np.int64)
+        else:
+            answer = (yield graph) if self.policy == "mwis" else SOLVE_HERE
+            selected, er = self.select(graph, self.policy) if answer is SOLVE_HERE else \
+                self.select(graph, self.policy, answer)
+            rep.graphs_solved += 1
+            rep.backend_used = er.backend_used
+            if er.fallback:  # any round's fallback is reported
+                rep.fallback, rep.fallback_reason = True, er.fallback_reason
+        rep.solve_time_s += time.perf_counter() - ts
+        return selected
+
+    def rounds_steps(self):
+        """Generator: the graph, then cascade rounds around unsaved airborne flights until none is left or the bound."""
+        while True:
+            self.generate_new()
+            flat, req_of, graph = self.round_graph()
+            if self.rounds == 0:
+                self.rep.vertices, self.rep.edges = graph.n_vertices, graph.n_edges
+            selected = yield from self.solve_steps(graph)
+            self.chosen = {}
+            for v in selected.tolist():
+                src = int(graph.vertex_source[v])
+                self.chosen[self.work[int(req_of[src])]] = flat[src]
+            unsaved = [i for i in self.work if i not in self.chosen and self.active[i].departure_s < self.t_eff]
+            if not unsaved or self.rounds >= CASCADE_ROUNDS:
+                break
+            self.rounds += 1
+            fresh = [i for i in unsaved if i not in self.held_opts]
+            if fresh:
+                self.add_contingency_options(fresh)
+                continue
+            self.fix_contingencies(unsaved)
+            self.work = [i for i in self.work if i not in self.fixed]
+        self.rep.cascade_rounds, self.rep.pulled_in = self.rounds, len(self.pulled_by)
+
+    def add_contingency_options(self, fresh):
+        """The contingency options of the flights ``fresh`` join the next graph, to be decided jointly."""
+        # first, the unsaved flights' contingency options join the graph (holds at the branch
+        # point, then each alternative; weights below every diversion): decided jointly
+        t_eff = self.t_eff
+        for i in fresh:
+            cands, _holds = _contingency_candidates(self.clean[i], self.active[i], t_eff, self.cset, self.network,
+                                                    self.config)
+            mine = {id(a) for a in self.clean[i]}
+            self.held_opts[i] = [replace(c, kind="contingency", weight=_contingency_weight(c, t_eff))
+                                 for c in cands if id(c) not in mine]
+
+    def fix_contingencies(self, unsaved):
+        """Each of ``unsaved`` flies a FIXED contingency; the flights it would meet are re-planned around it."""
+        # each unsaved airborne flight becomes a contingency, deconflicted as a FIXED flight
+        # (airborne flights outrank flights not departed); the flights it would lose separation
+        # with are re-planned around it: chosen ones in the next graph, unaffected ones pulled in
+        active, clean, fixed, chosen = self.active, self.clean, self.fixed, self.chosen
+        options = {i: _contingency_candidates(clean[i], active[i], self.t_eff, self.cset, self.network, self.config)
+                   for i in unsaved}
+        for n_i, i in enumerate(unsaved):
+            # the others still to be decided: the round's later contingencies (every option, holds
+            # too) and the flights the graph saved (their alternatives: the next graph's choice)
+            pending = [options[u] for u in unsaved[n_i + 1:]] + \
+                [(clean[u], None) for u in self.work if u in chosen and u not in fixed]
+            a, hold, hits, clash = _contingency_choice(options[i], active, self.in_replan, fixed, chosen,
+                                                       self.config, self.t_eff, pending, self.held_now())
+            fixed[i], self.hold_of[i] = a, hold
+            if clash:  # it cannot avoid another fixed flight: flown, the loss reported
+                self.unresolved[i] = "it cannot avoid another contingency (or a flight held past its plan)"
+            chosen.pop(i, None)
+            for j in hits:
+                if len(self.pulled_by) >= CASCADE_MAX_PULLED:
+                    self.unresolved.setdefault(i, f"the cascade's bound of {CASCADE_MAX_PULLED} flights pulled in")
+                    break
+                self.pulled_by[j] = active[i].request_id
+                self.why[j] = self.why[i]
+                self.in_replan.add(j)
+                self.work.append(j)
+
+    def past_bound(self):
+        """The airborne flights unsaved after the last round fly their least-conflicting option; the counts."""
+        # past the bound: the last unsaved airborne flights fly their least-conflicting alternative,
+        # NOT deconflicted (reported: ReplanReport.unresolved, the reason, the audit of what flew)
+        active, t_eff = self.active, self.t_eff
+        for i in [i for i in self.work if i not in self.chosen and active[i].departure_s < t_eff]:
+            options_i = _contingency_candidates(self.clean[i], active[i], t_eff, self.cset, self.network, self.config)
+            a, hold, _hits, _clash = _contingency_choice(options_i, active, self.in_replan, self.fixed, self.chosen,
+                                                         self.config, t_eff, held=self.held_now())
+            self.fixed[i], self.hold_of[i] = a, hold
+            self.unresolved[i] = f"the cascade's bound of {CASCADE_ROUNDS} rounds"
+        rep = self.rep
+        rep.unavoidable, rep.unresolved = len(self.unavoidable), len(self.unresolved)
+        rep.contingencies_fixed = len(self.fixed) - len(self.unavoidable) - len(self.unresolved) + \
+            sum(1 for a in self.chosen.values() if a.kind == "contingency")
+
+    def contingency_what(self, i: int, a: _Alt) -> str:
+        """What flight ``i`` flying the contingency ``a`` does, and whether it is deconflicted (for its reason)."""
+        land = self.network.node_ids[a.destination]
+        hold_note = f" after holding {self.hold_of[i]:g} s at its branch point" if self.hold_of.get(i) else ""
+        if i in self.unavoidable:
+            return "no route avoids it: it flies its current plan (an incursion that cannot be avoided)"
+        if i not in self.fixed:
+            return (f"no alternative that stays out keeps separation with the others; contingency "
+                    f"landing at {land!r}{hold_note}, deconflicted with every other flight (chosen in "
+                    f"the graph)")
+        if i in self.unresolved:
+            return (f"each of its {len(self.clean[i])} alternatives that stay out loses separation with "
+                    f"another flight; contingency landing at {land!r}{hold_note}, flown but not "
+                    f"deconflicted ({self.unresolved[i]})")
+        return (f"no alternative that stays out keeps separation with the others; contingency "
+                f"landing at {land!r}{hold_note}, deconflicted with every other flight (fixed: the "
+                f"flights it would meet are re-planned around it)")
+
+    def update_of(self, i: int):
+        """(PlanUpdate, new version or None when cancelled) of the re-planned flight ``i``, with its reason."""
+        f, t_eff, network = self.active[i], self.t_eff, self.network
+        k_c, when = self.why[i]
+        c = self.cset.constraints[k_c]
+        cids = (c.constraint_id,)
+        a = self.fixed.get(i, self.chosen.get(i))
+        contingent = i in self.fixed or (a is not None and a.kind == "contingency")
+        if a is not None and a.kind == "contingency":
+            self.hold_of[i] = a.hold_s
+        by = self.pulled_by.get(i)
+        cause = (f"its plan enters constraint {c.label()} at t = {when:g} s" if by is None else
+                 f"its plan loses separation with contingency flight {by!r} (constraint {c.label()})")
+        if a is None:
+            reason = (f"cancelled: {cause} and no route, level or departure in its window avoids it "
+                      f"and keeps separation")
+            return PlanUpdate(f.request_id, f.operator_id, f.version + 1, "cancelled", cids,
+                              reason, float(t_eff), None, f), None
+        if contingent:
+            kind = "contingency"
+            reason = f"contingency: {cause}; {self.contingency_what(i, a)}"
+        else:
+            kind = a.kind
+            reason = (f"{kind}: {cause}".replace("enters", "entered", 1) if kind != "kept"
+                      else f"kept: its plan stays out of constraint {c.label()}")
+            if kind == "diverted":
+                reason += f"; diverted to {network.node_ids[a.destination]!r}"
+        nf = replace(f, destination_id=network.node_ids[a.destination], route_node_ids=a.route_node_ids,
+                     trajectory=a.trajectory, departure_s=a.trajectory.departure_s,
+                     arrival_s=a.trajectory.arrival_s, length_m=a.length_m, weight=a.weight,
+                     candidate_index=a.candidate_index, method=f"replan-{self.policy}",
+                     backend=self.rep.backend_used or self.policy, epoch_index=int(self.epoch_index),
+                     route_index=a.route_index, version=f.version + 1, effective_s=float(t_eff),
+                     contingent=contingent)
+        return PlanUpdate(f.request_id, f.operator_id, nf.version, kind, cids, reason,
+                          float(t_eff), nf, f, nf.arrival_s - f.arrival_s), nf
+
+
+def replan_steps(t_eff: float, epoch_index: int, active: Sequence, requests: dict, network, config,
                  cache, cset: ConstraintSet, select: Callable, departures: Callable, policy: str = "mwis",
                  affected: dict | None = None, labels: Sequence[str] = (), held: Sequence = ()):
     """Re-plan the flights of ``active`` that the constraints ``cset`` affect, at ``t_eff``.
@@ -759,9 +1026,6 @@ def replan_steps(t_eff: float, epoch_index: int, active: Sequence, requests: dic
         order, then the new versions; PlanUpdate per affected flight in ``active`` order;
         ReplanReport).
     """
-    from .conflict_graph import build_conflict_graph
-    from .separation import SegmentSet
-
     t0, c0 = time.perf_counter(), time.process_time()
     rep = ReplanReport(t_s=float(t_eff), policy=policy, updates=list(labels))
     if affected is None:
@@ -772,228 +1036,19 @@ def replan_steps(t_eff: float, epoch_index: int, active: Sequence, requests: dic
         rep.decision_time_s = time.perf_counter() - t0
         rep.decision_cpu_s = time.process_time() - c0
         return list(active), [], rep
-    from .conflict_graph import discard_against_active
-    router = _Router(network, cache, cset, t_eff)
-    why = dict(affected)        # index in active -> (constraint index, entry time)
-    pulled_by: dict = {}        # index -> request_id of the contingency it was pulled in for
-    clean: dict = {}            # index -> its constraint-free alternatives, preference order
-    fixed: dict = {}            # index -> _Alt flown as a FIXED flight (contingency or no way out)
-    unavoidable: set = set()    # no constraint-free alternative at all: it flies its plan
-    unresolved: dict = {}       # contingencies flown not deconflicted -> why
-    hold_of: dict = {}          # index -> seconds held at the branch point by its contingency
-    work = list(idx)            # flights being decided by the graph
-    in_replan = set(idx)
-    for i in idx:
-        rep.affected_airborne += int(active[i].departure_s < t_eff)
-        rep.affected_not_departed += int(active[i].departure_s >= t_eff)
-
-    def held_now():
-        """The held projections of flights not being re-planned (fixed for every decision)."""
-        mine = {active[j].request_id for j in in_replan}
-        return [tr for rid, tr in held if rid not in mine]
-
-    act_memo: dict = {}
-
-    def act_set(extra=()):
-        # the same flights in the same order give the same set: built again only when the
-        # flights re-planned or the fixed ones changed (the cascade's
-        # rounds rebuilt it from ~1,200 trajectories each time)
-        key = (frozenset(in_replan), tuple((i, id(a)) for i, a in fixed.items())) if not extra else None
-        got = act_memo.get(key) if key is not None else None
-        if got is not None:
-            return got[0]
-        trs = [f.trajectory for j, f in enumerate(active) if j not in in_replan] + \
-            [a.trajectory for a in fixed.values()] + held_now() + list(extra)
-        s_ = SegmentSet.from_trajectories(trs)
-        s_ = s_.take(s_.t1_s >= t_eff) if len(s_) else s_
-        if key is not None:
-            act_memo.clear()
-            act_memo[key] = (s_, list(fixed.values()))  # holds them: their ids stay theirs
-        return s_
-
-    def generate(todo, act):
-        """Alternatives of the flights ``todo`` (stage 2 for those with too few survivors)."""
-        groups = []
-        for i in todo:
-            f = active[i]
-            airborne = f.departure_s < t_eff
-            origin = None if airborne else network.node_index(f.origin_id)
-            alts = _airborne_alternatives(f, t_eff, network, config, router) + \
-                [x for x in (_turn_back(f, t_eff, network, config),) if x is not None] if airborne else \
-                _ground_alternatives(f, requests.get(f.request_id), t_eff, network, cache, departures)
-            groups += [([_keep_alt(f, network)], origin), (alts, origin)]
-        # every flight's alternatives tested against the constraints in one call
-        # (one call per flight and kind was ~15 % of the decision)
-        free = _constraint_free_many(groups, cset, t_eff, network)
-        lists = [free[2 * r] + free[2 * r + 1] for r in range(len(todo))]
-        flat1 = [a.trajectory for alts in lists for a in alts]
-        gone = discard_against_active(flat1, act, config.separation) if flat1 and len(act) \
-            else np.zeros(len(flat1), dtype=bool)
-        pos = 0
-        for r, i in enumerate(todo):
-            n = len(lists[r])
-            left = n - int(gone[pos:pos + n].sum())
-            pos += n
-            f = active[i]
-            if left < STAGE2_BELOW and f.departure_s < t_eff:
-                lists[r] += _constraint_free(_airborne_alternatives(f, t_eff, network, config, router, stage=2),
-                                             cset, t_eff, network, None)
-                rep.stage2 += 1
-            lists[r].sort(key=lambda a: -a.weight)  # stable: preference order within the flight
-            clean[i] = lists[r]
-            rep.alternatives += len(lists[r])
-
-    chosen: dict = {}           # index -> _Alt chosen by the graph
-    held_opts: dict = {}        # index -> its contingency options in the graph (unsaved before)
-    rounds = 0
-    while True:
-        todo = [i for i in work if i not in clean]
-        if todo:
-            generate(todo, act_set())
-            # an airborne flight with no constraint-free alternative at all (already inside, or
-            # entering before its branch point) flies its plan: fixed before the graph
-            for i in todo:
-                if not clean[i] and active[i].departure_s < t_eff:
-                    fixed[i] = _keep_alt(active[i], network)
-                    unavoidable.add(i)
-            work = [i for i in work if i not in fixed]
-        act = act_set()
-        per_flight = [clean[i] + held_opts.get(i, []) for i in work]
-        flat = [a for alts in per_flight for a in alts]
-        req_of = np.repeat(np.arange(len(work)), [len(a) for a in per_flight]).astype(np.int64)
-        cand_idx = np.concatenate([np.arange(len(a)) for a in per_flight]).astype(np.int64) \
-            if flat else np.zeros(0, np.int64)
-        graph = build_conflict_graph([a.trajectory for a in flat], req_of, cand_idx,
-                                     np.array([a.weight for a in flat], dtype=np.float64), len(work),
-                                     act, config.separation)
-        if rounds == 0:
-            rep.vertices, rep.edges = graph.n_vertices, graph.n_edges
-        ts = time.perf_counter()
-        if graph.n_vertices == 0:
-            selected = np.zeros(0, dtype=np.int64)
-        else:
-            answer = (yield graph) if policy == "mwis" else SOLVE_HERE
-            selected, er = select(graph, policy) if answer is SOLVE_HERE else select(graph, policy, answer)
-            rep.graphs_solved += 1
-            rep.backend_used = er.backend_used
-            if er.fallback:  # any round's fallback is reported
-                rep.fallback, rep.fallback_reason = True, er.fallback_reason
-        rep.solve_time_s += time.perf_counter() - ts
-        chosen = {}
-        for v in selected.tolist():
-            src = int(graph.vertex_source[v])
-            chosen[work[int(req_of[src])]] = flat[src]
-        unsaved = [i for i in work if i not in chosen and active[i].departure_s < t_eff]
-        if not unsaved or rounds >= CASCADE_ROUNDS:
-            break
-        rounds += 1
-        fresh = [i for i in unsaved if i not in held_opts]
-        if fresh:
-            # first, the unsaved flights' contingency options join the graph (holds at the branch
-            # point, then each alternative; weights below every diversion): decided jointly
-            for i in fresh:
-                cands, _holds = _contingency_candidates(clean[i], active[i], t_eff, cset, network, config)
-                mine = {id(a) for a in clean[i]}
-                held_opts[i] = [replace(c, kind="contingency", weight=_contingency_weight(c, t_eff))
-                                for c in cands if id(c) not in mine]
-            continue
-        # each unsaved airborne flight becomes a contingency, deconflicted as a FIXED flight
-        # (airborne flights outrank flights not departed); the flights it would lose separation
-        # with are re-planned around it: chosen ones in the next graph, unaffected ones pulled in
-        options = {i: _contingency_candidates(clean[i], active[i], t_eff, cset, network, config)
-                   for i in unsaved}
-        for n_i, i in enumerate(unsaved):
-            # the others still to be decided: the round's later contingencies (every option, holds
-            # too) and the flights the graph saved (their alternatives: the next graph's choice)
-            pending = [options[u] for u in unsaved[n_i + 1:]] + \
-                [(clean[u], None) for u in work if u in chosen and u not in fixed]
-            a, hold, hits, clash = _contingency_choice(options[i], active, in_replan, fixed, chosen, config,
-                                                       t_eff, pending, held_now())
-            fixed[i], hold_of[i] = a, hold
-            if clash:  # it cannot avoid another fixed flight: flown, the loss reported
-                unresolved[i] = "it cannot avoid another contingency (or a flight held past its plan)"
-            chosen.pop(i, None)
-            for j in hits:
-                if len(pulled_by) >= CASCADE_MAX_PULLED:
-                    unresolved.setdefault(i, f"the cascade's bound of {CASCADE_MAX_PULLED} flights pulled in")
-                    break
-                pulled_by[j] = active[i].request_id
-                why[j] = why[i]
-                in_replan.add(j)
-                work.append(j)
-        work = [i for i in work if i not in fixed]
-    rep.cascade_rounds, rep.pulled_in = rounds, len(pulled_by)
-    # past the bound: the last unsaved airborne flights fly their least-conflicting alternative,
-    # NOT deconflicted (reported: ReplanReport.unresolved, the reason, the audit of what flew)
-    for i in [i for i in work if i not in chosen and active[i].departure_s < t_eff]:
-        options_i = _contingency_candidates(clean[i], active[i], t_eff, cset, network, config)
-        a, hold, _hits, _clash = _contingency_choice(options_i, active, in_replan, fixed, chosen, config, t_eff,
-                                                     held=held_now())
-        fixed[i], hold_of[i] = a, hold
-        unresolved[i] = f"the cascade's bound of {CASCADE_ROUNDS} rounds"
-
-    rep.unavoidable, rep.unresolved = len(unavoidable), len(unresolved)
-    rep.contingencies_fixed = len(fixed) - len(unavoidable) - len(unresolved) + \
-        sum(1 for a in chosen.values() if a.kind == "contingency")
-
+    rp = _Replan(t_eff, epoch_index, active, requests, network, config, cache, cset, select, departures,
+                 policy, held, affected, rep)
+    yield from rp.rounds_steps()
+    rp.past_bound()
     updates, new_versions = [], []
-    method = f"replan-{policy}"
-    order = [i for i in range(len(active)) if i in in_replan]
-    for i in order:
-        f = active[i]
-        k_c, when = why[i]
-        c = cset.constraints[k_c]
-        cids = (c.constraint_id,)
-        a = fixed.get(i, chosen.get(i))
-        contingent = i in fixed or (a is not None and a.kind == "contingency")
-        if a is not None and a.kind == "contingency":
-            hold_of[i] = a.hold_s
-        by = pulled_by.get(i)
-        cause = (f"its plan enters constraint {c.label()} at t = {when:g} s" if by is None else
-                 f"its plan loses separation with contingency flight {by!r} (constraint {c.label()})")
-        if a is None:
-            reason = (f"cancelled: {cause} and no route, level or departure in its window avoids it "
-                      f"and keeps separation")
-            updates.append(PlanUpdate(f.request_id, f.operator_id, f.version + 1, "cancelled", cids,
-                                      reason, float(t_eff), None, f))
-            continue
-        if contingent:
-            kind = "contingency"
-            land = network.node_ids[a.destination]
-            held = f" after holding {hold_of[i]:g} s at its branch point" if hold_of.get(i) else ""
-            if i in unavoidable:
-                what = "no route avoids it: it flies its current plan (an incursion that cannot be avoided)"
-            elif i not in fixed:
-                what = (f"no alternative that stays out keeps separation with the others; contingency "
-                        f"landing at {land!r}{held}, deconflicted with every other flight (chosen in "
-                        f"the graph)")
-            elif i in unresolved:
-                what = (f"each of its {len(clean[i])} alternatives that stay out loses separation with "
-                        f"another flight; contingency landing at {land!r}{held}, flown but not "
-                        f"deconflicted ({unresolved[i]})")
-            else:
-                what = (f"no alternative that stays out keeps separation with the others; contingency "
-                        f"landing at {land!r}{held}, deconflicted with every other flight (fixed: the "
-                        f"flights it would meet are re-planned around it)")
-            reason = f"contingency: {cause}; {what}"
-        else:
-            kind = a.kind
-            reason = (f"{kind}: {cause}".replace("enters", "entered", 1) if kind != "kept"
-                      else f"kept: its plan stays out of constraint {c.label()}")
-            if kind == "diverted":
-                reason += f"; diverted to {network.node_ids[a.destination]!r}"
-        nf = replace(f, destination_id=network.node_ids[a.destination], route_node_ids=a.route_node_ids,
-                     trajectory=a.trajectory, departure_s=a.trajectory.departure_s,
-                     arrival_s=a.trajectory.arrival_s, length_m=a.length_m, weight=a.weight,
-                     candidate_index=a.candidate_index, method=method, backend=rep.backend_used or policy,
-                     epoch_index=int(epoch_index), route_index=a.route_index,
-                     version=f.version + 1, effective_s=float(t_eff), contingent=contingent)
-        updates.append(PlanUpdate(f.request_id, f.operator_id, nf.version, kind, cids, reason,
-                                  float(t_eff), nf, f, nf.arrival_s - f.arrival_s))
-        new_versions.append(nf)
+    for i in [i for i in range(len(active)) if i in rp.in_replan]:
+        up, nf = rp.update_of(i)
+        updates.append(up)
+        if nf is not None:
+            new_versions.append(nf)
     for u in updates:
         rep.kinds[u.kind] = rep.kinds.get(u.kind, 0) + 1
     rep.decision_time_s = time.perf_counter() - t0
     rep.decision_cpu_s = time.process_time() - c0
-    kept_order = [f for j, f in enumerate(active) if j not in in_replan]
+    kept_order = [f for j, f in enumerate(active) if j not in rp.in_replan]
     return kept_order + new_versions, updates, rep
