@@ -554,13 +554,12 @@ def prepare_epoch_mwis(t_s: float, epoch_index: int, pending: Sequence[FlightReq
 def _with_intent_volumes(graph, trajs, airborne, config: PlanningConfig, t_s: float, phases: dict):
     """In F3548 mode, ``graph`` with the published volumes kept disjoint too
     (``uam_planner.intent_volumes.restrict_graph``; timed as ``volumes_s``); else ``graph``."""
-    spec = config.intent_volumes
-    if spec is None:
+    if config.intent_volumes is None:
         return graph
-    from .intent_volumes import restrict_graph
+    from .intent_volumes import graph_for_config
     t = time.perf_counter()
     # the flights' pieces that ended more than a second before the epoch meet no candidate
-    graph = restrict_graph(graph, trajs, [f.trajectory for f in airborne], spec, float(t_s) - 1.0)
+    graph = graph_for_config(graph, trajs, [f.trajectory for f in airborne], config, float(t_s) - 1.0)
     phases["volumes_s"] = time.perf_counter() - t
     return graph
 

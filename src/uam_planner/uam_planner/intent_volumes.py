@@ -344,3 +344,13 @@ def restrict_graph(graph, candidates, in_force: Sequence, spec, from_s: float):
                          groups=groups, n_candidates=graph.n_candidates,
                          n_discarded=int(discarded.sum()), n_clique_edges=n_clique,
                          n_conflict_edges=int(edges.shape[0]) - n_clique, discarded=discarded)
+
+
+def graph_for_config(graph, candidates, in_force: Sequence, config, from_s: float):
+    """In F3548 mode (``config.intent_volumes`` set: ``PlanningConfig.intent_volume_piece_s`` >
+    0), :func:`restrict_graph`; else ``graph`` itself. The one call every planning graph makes
+    (epochs, re-plans, reactions)."""
+    spec = config.intent_volumes
+    if spec is None or graph.n_vertices == 0:
+        return graph
+    return restrict_graph(graph, candidates, list(in_force), spec, from_s)

@@ -385,9 +385,12 @@ def _yield_graph(unsaved: dict, moves: dict, cand_of: dict, others: list, held: 
     fixed = [f.trajectory for j, f in others if j not in moves] + \
         [tr for rid, tr in held if rid not in moving_ids] + list(chosen_trs)
     act = _segments_from(fixed, t_eff) if fixed else ()
-    graph = build_conflict_graph([_clipped(x[1], t_eff) or x[1] for x in flat], req_of, cand,
-                                 np.array([x[2] for x in flat], dtype=np.float64), len(req), act,
-                                 config.separation)
+    trs = [_clipped(x[1], t_eff) or x[1] for x in flat]
+    graph = build_conflict_graph(trs, req_of, cand, np.array([x[2] for x in flat], dtype=np.float64), len(req),
+                                 act, config.separation)
+    if config.intent_volumes is not None:   # F3548 mode: the new versions' volumes too
+        from .intent_volumes import graph_for_config
+        graph = graph_for_config(graph, trs, fixed, config, t_eff - 1.0)
     return flat, owners, graph
 
 
@@ -610,6 +613,9 @@ def _react_solve_steps(b: _Batch, idx: list, per: list, fixed: list):
     trs = [_clipped(a[0], b.t_eff) or a[0] for a in flat]
     graph = build_conflict_graph(trs, req_of, cand, np.array([a[1] for a in flat], dtype=np.float64),
                                  len(idx), act, b.config.separation)
+    if b.config.intent_volumes is not None:   # F3548 mode: the new versions' volumes too
+        from .intent_volumes import graph_for_config
+        graph = graph_for_config(graph, trs, [f.trajectory for f in others] + fixed, b.config, b.t_eff - 1.0)
     b.report["vertices"], b.report["edges"] = graph.n_vertices, graph.n_edges
     chosen = {}
     backend = b.policy

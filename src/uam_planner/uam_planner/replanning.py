@@ -763,14 +763,17 @@ class _Replan:
         got = self.act_memo.get(key) if key is not None else None
         if got is not None:
             return got[0]
-        trs = [f.trajectory for j, f in enumerate(self.active) if j not in self.in_replan] + \
-            [a.trajectory for a in fixed.values()] + self.held_now() + list(extra)
-        s_ = SegmentSet.from_trajectories(trs)
+        s_ = SegmentSet.from_trajectories(self.in_force(extra))
         s_ = s_.take(s_.t1_s >= t_eff) if len(s_) else s_
         if key is not None:
             self.act_memo.clear()
             self.act_memo[key] = (s_, list(fixed.values()))  # holds them: their ids stay theirs
         return s_
+
+    def in_force(self, extra=()) -> list:
+        """The trajectories of the flights every alternative avoids: not re-planned, fixed, held."""
+        return [f.trajectory for j, f in enumerate(self.active) if j not in self.in_replan] + \
+            [a.trajectory for a in self.fixed.values()] + self.held_now() + list(extra)
 
     def generate(self, todo, act):
         """Alternatives of the flights ``todo`` (stage 2 for those with too few survivors)."""
@@ -832,6 +835,10 @@ class _Replan:
         graph = build_conflict_graph([a.trajectory for a in flat], req_of, cand_idx,
                                      np.array([a.weight for a in flat], dtype=np.float64), len(self.work),
                                      act, self.config.separation)
+        if self.config.intent_volumes is not None:   # F3548 mode: the new versions' volumes too
+            from .intent_volumes import graph_for_config
+            graph = graph_for_config(graph, [a.trajectory for a in flat], self.in_force(), self.config,
+                                     self.t_eff - 1.0)
         return flat, req_of, graph
 
     def solve_steps(self, graph):
