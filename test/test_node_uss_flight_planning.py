@@ -77,7 +77,7 @@ def test_flight_plans_go_to_the_planner_signed_and_forgeries_are_refused(ros_con
     executor, nodes, obs = build_graph(
         ros_context, rate=0.3, duration_s=900.0, backend="greedy",
         planner_extra={"authorities_file": str(listing), "journal": str(journal), "horizon_epochs": 4,
-                       "commit_ahead": True},
+                       "commit_ahead": True, "intent_volume_piece_s": 5.0},   # F3548 mode, as run_fleet.sh
         simulator_extra={"mode": "realtime", "real_time_factor": 15.0})
     uss = UssNode(context=ros_context, parameter_overrides=params(
         port=0, network=TINY, auth_key=str(public), journal=str(journal), authority_key=str(uss_key)))
@@ -89,6 +89,7 @@ def test_flight_plans_go_to_the_planner_signed_and_forgeries_are_refused(ros_con
         executor.add_node(n)
     base = uss.server.url
     planner, sim = nodes["planner"], nodes["simulator"]
+    assert planner.planner.config.intent_volumes.max_piece_s == 5.0   # the parameter reached the Planner
     ctx, net = uss.store.ctx, uss.network
     try:
         assert spin_until(executor, lambda: planner.epochs_planned >= 1 and uss.decider.ready(), timeout_s=60)
