@@ -29,6 +29,8 @@ from uam_contract.names import RECORDER_WAITS_FOR
 ARGS = {o.arg: (o.default, o.help) for o in LAUNCH_OPTIONS if o.only != "run_fleet"}
 
 
+# long (over 80 lines): one Node per process of the graph with its parameters, read top to
+# bottom as the graph it launches (the options themselves come from uam_contract.launch_options)
 def generate_launch_description() -> LaunchDescription:
     a = {name: LaunchConfiguration(name) for name in ARGS}
     cfg = a["config_dir"]

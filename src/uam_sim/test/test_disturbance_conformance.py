@@ -369,16 +369,22 @@ def test_montecarlo_aggregates_a_point_by_hand():
     assert row["approval_rate"] == pytest.approx(0.8) and row["conformance_percent"] == pytest.approx(97.5)
     assert row["excursions_per_flight_hour"] == pytest.approx(0.2) and row["longest_excursion_s"] == 12.0
     assert row["flown_losses"] == 1 and row["flown_min_separation_m"] == 80.0 and row["flights"] == 80
-    # the approval rate over the runs, 0.75 and 0.8333: mean 0.7917, Student's t (1 degree of
-    # freedom, 12.706) x sd / sqrt(2) = 12.706 x |0.75 - 0.8333| / 2 = 0.5294 either side
-    assert row["approval_ci95_low"] == pytest.approx(0.7917 - 0.5294, abs=1e-3)
-    assert row["approval_ci95_high"] == pytest.approx(0.7917 + 0.5294, abs=1e-3)
+    # the approval rate over two runs, 0.75 and 0.8333: Student's t with 1 degree of freedom
+    # (12.706) would give 26.2-132.1 %, no interval to speak of: none below 3 runs
+    assert math.isnan(row["approval_ci95_low"]) and math.isnan(row["approval_ci95_high"])
+    # three runs, 0.75, 0.8333 and 1.0: mean 0.8611, sd 0.1273, t(2) = 4.303: 0.8611 -+ 0.3162,
+    # the upper end within the share's bound 1
+    c = dict(b, requests=20, approved=20)
+    row3 = aggregate((0.1, 25.0, 5.0), [{"summary": a}, {"summary": b}, {"summary": c}])
+    assert row3["approval_ci95_low"] == pytest.approx(0.8611 - 0.3162, abs=1e-3)
+    assert row3["approval_ci95_high"] == 1.0
     # 1 flown loss in 80 flights: the exact Poisson bound chi2(0.95, 4) / 2 / 80 = 9.4877 / 160
     assert row["flown_losses_per_flight_upper95"] == pytest.approx(9.4877 / 160.0, rel=1e-4)
     from uam_sim.studies.montecarlo import format_table, poisson_upper95, spread_ci95
     assert poisson_upper95(0, 1000) == pytest.approx(2.9957 / 1000.0, rel=1e-4)   # the rule of three
     assert all(math.isnan(x) for x in spread_ci95([0.5]))
-    assert "26.2-132.1 %" in format_table([row]) and "0.0593" in format_table([row])
+    assert "54.5-100.0 %" in format_table([row3]) and "| - |" in format_table([row])
+    assert "0.0593" in format_table([row])
 
 
 def test_the_planner_keeps_the_buffered_separation_and_the_audit_the_minimum():

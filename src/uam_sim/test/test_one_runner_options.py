@@ -83,3 +83,16 @@ def test_a_flag_reaches_the_config():
                                       "--probe", "120", "--probe-margin", "50"])
     assert (args.objective, args.horizon_epochs, args.lead_time_s, args.conflict_probe_s,
             args.conflict_probe_margin_m) == ("count", 5, 300.0, 120.0, 50.0)
+
+
+def test_the_montecarlo_takes_run_fleets_defaults_for_what_they_share():
+    """The Monte-Carlo's network, rate and disturbances default to run_fleet.sh's (a tiny
+    Monte-Carlo with no flag is the graph's world, not the disturbance study's)."""
+    from uam_sim.studies.montecarlo import build_parser
+    table = _launch_defaults()
+    args = build_parser().parse_args([])
+    for flag, dest in (("--network", "network"), ("--rate", "rate"), ("--gust", "gust"), ("--wind", "wind"),
+                       ("--delay-mean", "delay_mean"), ("--reaction-period", "reaction_period"),
+                       ("--probe", "probe"), ("--probe-margin", "probe_margin")):
+        assert _same(table[flag], getattr(args, dest)), (flag, table[flag], getattr(args, dest))
+    assert args.reaction == [False]   # run_fleet.sh's --reaction false

@@ -90,6 +90,8 @@ from uam_planner.planning import AirspaceConfig, Planner, PlanningConfig, call_s
 class PlannerNode(Node):
     """ROS glue around uam_planner.planning.Planner."""
 
+    # long (over 80 lines): ROS glue that declares the node's state, publishers, services and
+    # subscriptions one by one, each with its reason; no logic to split into steps
     def __init__(self, **kwargs):
         # No use_sim_time: the node takes simulation time from the epoch protocol, never from a
         # clock, and a /clock subscription would cost it a callback per simulated second (about

@@ -16,8 +16,12 @@ nonconformance, when it is on) and the **losses of separation in what flew**: th
 closest approach between the flown tracks (:func:`uam_sim.audit.flown.flown_audit`) in the true
 minimum, never the buffered one. Writes ``<out>/montecarlo.csv`` and prints the table.
 
-The default network is the synthetic city of the capacity study's paper mode scaled down
-(``--network`` takes a file or ``synthetic:n_nodes=...,n_aerodromes=...,seed=...``).
+The options it shares with the node graph (network, rate, wind, gusts, departure delay, the
+reaction's period, the probe and its margin) default to run_fleet.sh's, from the launchers' one
+table (``uam_contract.launch_options``; a test holds them equal): with no flag, the Singapore
+network and no disturbance but the swept speed errors. The disturbance study's world is
+``--network synthetic:n_nodes=400,n_aerodromes=30,seed=1 --gust 1`` (docs/disturbances.md).
+Its own defaults: 4 seeds of 1,800 s and the greedy MWIS (a grid of points needs many runs).
 """
 
 from __future__ import annotations
@@ -36,7 +40,14 @@ from .experiment import key_values
 from ..runner.experiment_config import ExperimentError, make_config
 from ..runner.sweep import cell_key, cell_params, run_cell
 
-DEFAULT_NETWORK = {"synthetic": {"n_nodes": 400, "n_aerodromes": 30, "seed": 1}}
+#: the disturbance study's network (its commands name it: docs/disturbances.md)
+STUDY_NETWORK = {"synthetic": {"n_nodes": 400, "n_aerodromes": 30, "seed": 1}}
+
+
+def _shared_default(flag: str) -> str:
+    """run_fleet.sh's default of ``flag`` (the launchers' one table)."""
+    from uam_contract.launch_options import LAUNCH_OPTIONS
+    return next(o.default for o in LAUNCH_OPTIONS if o.flag == flag)
 COLUMNS = ("speed_error", "spatial_buffer_m", "temporal_buffer_s", "reaction", "runs", "requests", "flights",
            "approval_rate", "conformance_percent", "excursions_per_flight_hour", "longest_excursion_s",
            "nonconforming_flights", "replans", "flown_losses", "flown_min_separation_m",
@@ -46,15 +57,15 @@ COLUMNS = ("speed_error", "spatial_buffer_m", "temporal_buffer_s", "reaction", "
            "probe_updates")
 
 
-def spread_ci95(values) -> tuple[float, float]:
+def spread_ci95(values, bounds: tuple = (-math.inf, math.inf)) -> tuple[float, float]:
     """The 95 % confidence interval of the mean of per-run values (Student's t over the runs:
     the runs are independent, the flights of one run are not); (nan, nan) below 2 runs."""
     from scipy import stats
     v = np.asarray(list(values), dtype=np.float64)
-    if v.size < 2:
+    if v.size < 3:   # with 2 runs Student's t is 12.7 standard errors wide: no interval to speak of
         return math.nan, math.nan
     half = float(stats.t.ppf(0.975, v.size - 1) * v.std(ddof=1) / math.sqrt(v.size))
-    return float(v.mean() - half), float(v.mean() + half)
+    return float(max(v.mean() - half, bounds[0])), float(min(v.mean() + half, bounds[1]))
 
 
 def poisson_upper95(k: int, n: int) -> float:
@@ -146,7 +157,8 @@ def aggregate(point: tuple, cells: list[dict]) -> dict:
             "held_past_plan": sum(x.get("held_past_plan", 0) for x in s),
             # uncertainty: the approval rate's spread over the runs, the flown-loss rate's bound
             **dict(zip(("approval_ci95_low", "approval_ci95_high"),
-                       spread_ci95(x["approved"] / x["requests"] for x in s if x["requests"]))),
+                       spread_ci95((x["approved"] / x["requests"] for x in s if x["requests"]),
+                                   (0.0, 1.0)))),   # a share: the interval within [0, 1]
             "flown_losses_per_flight_upper95": poisson_upper95(sum(x["flown_losses"] for x in s), appr),
             # of the flown losses, those with a flight flown as a contingency (None: not known
             # for every run: cells from before the count, or more losses than listed)
@@ -267,34 +279,40 @@ def figure(rows: list[dict], path) -> Path:
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="montecarlo", description=__doc__.split("\n\n")[0], allow_abbrev=False)
-    p.add_argument("--network", type=_network, default=DEFAULT_NETWORK,
-                   help="network file or synthetic:n_nodes=N,n_aerodromes=A,seed=S (default: 400 nodes, 30 vertiports)")
+    p.add_argument("--network", type=_network, default=_shared_default("--network"),
+                   help="network file or synthetic:n_nodes=N,n_aerodromes=A,seed=S (default: run_fleet.sh's, "
+                        f"{_shared_default('--network')}; the disturbance study's: "
+                        "synthetic:n_nodes=400,n_aerodromes=30,seed=1)")
     p.add_argument("--speed-errors", type=_num_list, default=[0.0, 0.05, 0.1])
     p.add_argument("--spatial-buffers", type=_num_list, default=[0.0, 10.0, 25.0, 50.0])
     p.add_argument("--temporal-buffers", type=_num_list, default=[0.0, 5.0, 10.0])
     p.add_argument("--axes", action="store_true",
                    help="each buffer alone (spatial buffers at 0 s, temporal at 0 m) instead of every pair")
-    p.add_argument("--gust", type=float, default=1.0, help="gust std per component [m/s] (default 1)")
-    p.add_argument("--wind", type=float, default=0.0, help="steady wind [m/s] (default 0)")
-    p.add_argument("--delay-mean", type=float, default=0.0, help="mean departure delay [s] (default 0)")
+    p.add_argument("--gust", type=float, default=float(_shared_default("--gust")),
+                   help="gust std per component [m/s] (default run_fleet.sh's, 0; the disturbance study's: 1)")
+    p.add_argument("--wind", type=float, default=float(_shared_default("--wind")),
+                   help="steady wind [m/s] (default run_fleet.sh's, 0)")
+    p.add_argument("--delay-mean", type=float, default=float(_shared_default("--delay-mean")),
+                   help="mean departure delay [s] (default run_fleet.sh's, 0)")
     p.add_argument("--time-gain", type=float, default=0.0,
                    help="along-track (4D) guidance gain [1/s]; 0 = airspeed held, no time control (default)")
     p.add_argument("--step", type=float, default=1.0, help="disturbance model step [s] (default 1)")
     p.add_argument("--reaction", type=_reaction, default=[False],
                    help="the planner's reaction to nonconforming flights: off (default), on or both")
-    p.add_argument("--reaction-period", type=float, default=0.0, metavar="S",
+    p.add_argument("--reaction-period", type=float, default=float(_shared_default("--reaction-period")), metavar="S",
                    help="with the reaction on, also react every S seconds between epochs "
                         "(0 = at the epochs only)")
-    p.add_argument("--probe", type=float, default=0.0, metavar="S",
+    p.add_argument("--probe", type=float, default=float(_shared_default("--probe")), metavar="S",
                    help="with the reaction on, the planner's conflict probe look-ahead [s] "
                         "(PlanningConfig.conflict_probe_s; 0 = no probe, default)")
-    p.add_argument("--probe-margin", type=float, default=0.0, metavar="M",
+    p.add_argument("--probe-margin", type=float, default=float(_shared_default("--probe-margin")), metavar="M",
                    help="with the probe, its margin [m]: it predicts losses of the minimum + M and "
                         "deconflicts its own updates with at least that (PlanningConfig."
                         "conflict_probe_margin_m; 0 = the true minimum, default)")
     p.add_argument("--conformance", type=key_values, help="conformance bounds, e.g. lateral_m=30,time_s=10")
     p.add_argument("--seeds", default="4", help="a count n (seeds 0..n-1) or a comma list")
-    p.add_argument("--rate", type=float, default=10.0, help="requests per 30 s (default 10)")
+    p.add_argument("--rate", type=float, default=float(_shared_default("--rate")),
+                   help="requests per 30 s (default run_fleet.sh's, 10)")
     p.add_argument("--duration", type=float, default=1800.0, help="simulated seconds per run (default 1800)")
     p.add_argument("--method", default="greedy", help="MWIS backend or fifo/firstfit (default greedy)")
     p.add_argument("--time-limit", type=float, default=5.0, help="MWIS time limit [s]")
