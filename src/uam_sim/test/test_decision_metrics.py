@@ -111,3 +111,30 @@ def test_every_objective_is_deterministic_given_a_seed(horizon):
         assert run_scenario(net, "greedy", 8, 3, 300.0, cfg).decisions() == first and first, obj
         seen[obj] = first
     assert len({tuple(sorted(d.items())) for d in seen.values()}) > 1
+
+
+def test_per_class_approvals_and_the_operators_spread_move_where_totals_and_jain_do_not():
+    """Two runs with the same total approvals: the class-1 approvals and the operators' min/max
+    ratio tell them apart; Jain's index barely does."""
+    req = ([{"earliest_departure_s": 0.0, "priority": 1, "operator": "a"}] * 2
+           + [{"earliest_departure_s": 0.0, "priority": 0, "operator": "a"}] * 48
+           + [{"earliest_departure_s": 0.0, "priority": 0, "operator": "b"}] * 50)
+
+    def flight(prio, op, delay):
+        return {"departure_s": delay, "earliest_departure_s": 0.0, "length_m": 1000.0, "priority": prio,
+                "operator": op}
+
+    # run x approves both class-1 requests, run y neither; both approve 90 of 100
+    x = [flight(1, "a", 0.0)] * 2 + [flight(0, "a", 10.0)] * 44 + [flight(0, "b", 20.0)] * 44
+    y = [flight(0, "a", 10.0)] * 45 + [flight(0, "b", 20.0)] * 45
+    mx, my = decision_metrics(x, req), decision_metrics(y, req)
+    assert mx["flights"] == my["flights"] == 90
+    assert (mx["requests_prio1"], mx["approved_prio1"], mx["approval_rate_prio1"]) == (2, 2, 1.0)
+    assert (my["approved_prio1"], my["approval_rate_prio1"]) == (0, 0.0)
+    assert my["approval_rate_prio0"] == pytest.approx(90 / 98)
+    assert mx["delay_mean_s_prio1"] == 0.0 and mx["delay_mean_s_prio0"] == pytest.approx(15.0)
+    assert math.isnan(my["delay_mean_s_prio1"])
+    # shares: x 46/50 and 44/50 (ratio 0.9565), y 45/50 and 45/50 (1.0); Jain 0.9995 and 1.0
+    assert mx["operator_share_ratio"] == pytest.approx(44 / 46) and my["operator_share_ratio"] == 1.0
+    assert (mx["operator_share_min"], mx["operator_share_max"]) == (0.88, 0.92)
+    assert mx["jain_index"] > 0.999

@@ -109,14 +109,23 @@ def _route_and_delay(fl: list) -> dict:
 
 
 def _class_delays(fl: list, rq: list) -> dict:
-    """The p95 departure delay [s] per priority class, when more than one class is present."""
+    """Per priority class, when more than one class is present: the p95 and mean departure delay
+    [s] and, with the requests, the requests, approvals and approval rate of the class (what a
+    priority objective moves; the totals hide a class of a few per cent)."""
     out = {}
     classes = sorted({int(r.get("priority", 0)) for r in rq} | {int(f.get("priority", 0)) for f in fl})
     if len(classes) > 1:
         for c in classes:
-            out[f"delay_p95_s_prio{c}"] = _p95(np.array(
-                [float(f["departure_s"]) - float(f["earliest_departure_s"]) for f in fl
-                 if int(f.get("priority", 0)) == c and _known(f.get("earliest_departure_s"))]))
+            delays = np.array([float(f["departure_s"]) - float(f["earliest_departure_s"]) for f in fl
+                               if int(f.get("priority", 0)) == c and _known(f.get("earliest_departure_s"))])
+            out[f"delay_p95_s_prio{c}"] = _p95(delays)
+            out[f"delay_mean_s_prio{c}"] = float(delays.mean()) if delays.size else float("nan")
+            if rq:
+                asked = sum(1 for r in rq if int(r.get("priority", 0)) == c)
+                got = sum(1 for f in fl if int(f.get("priority", 0)) == c)
+                out[f"requests_prio{c}"] = asked
+                out[f"approved_prio{c}"] = got
+                out[f"approval_rate_prio{c}"] = got / asked if asked else float("nan")
     return out
 
 
@@ -130,6 +139,11 @@ def _operator_shares(fl: list, rq: list) -> dict:
     shares = {o: got[o] / asked[o] for o in named}
     out = {f"share_{o}": shares[o] for o in named}
     out["jain_index"] = jain_index(list(shares.values())) if named else float("nan")
+    # the least and greatest operator's approval rate and their ratio: it moves where Jain's
+    # index sits at its ceiling (>= 0.997 for rates within a few per cent of each other)
+    lo, hi = (min(shares.values()), max(shares.values())) if named else (float("nan"), float("nan"))
+    out["operator_share_min"], out["operator_share_max"] = lo, hi
+    out["operator_share_ratio"] = lo / hi if named and hi > 0 else float("nan")
     return out
 
 
@@ -154,7 +168,9 @@ def run_metrics(flights: Iterable[Mapping] | Mapping, requests: Iterable[Mapping
     Returns: a flat dict (a tidy summary row), {} when there is neither a flight nor a request:
     ``flights``, ``route_length_mean_m``, ``flown_km``, ``detour_mean_pct``, ``detour_mean_m``,
     ``shortest_share``, ``delay_mean_s``, ``delay_p95_s``, ``delayed_share``, ``jain_index``,
-    ``delay_p95_s_prio<c>`` per class (more than one present), ``share_<op>`` per named operator,
+    per class (more than one present) ``delay_p95_s_prio<c>``, ``delay_mean_s_prio<c>`` and with
+    the requests ``requests_prio<c>``, ``approved_prio<c>``, ``approval_rate_prio<c>``;
+    ``share_<op>`` per named operator and ``operator_share_min`` / ``_max`` / ``_ratio``;
     ``central_share`` with a network. O(n log n).
     """
     if isinstance(flights, Mapping):
