@@ -1,6 +1,10 @@
-"""Whether a run's flights can leave their plans: the one rule that the simulator's disturbance
-model (``uam_sim.world.disturbance.DisturbanceConfig.enabled``), ``scripts/run_fleet.sh`` and the
-launch file read, the last two to start the conformance monitor with ``--conformance auto``.
+"""Whether a run's flights can leave their plans: the rule ``scripts/run_fleet.sh`` and the launch
+file read to start the conformance monitor with ``--conformance auto``. It is the simulator's
+disturbance model's rule (``uam_sim.world.disturbance.DisturbanceConfig.enabled``: any level of a
+registered effect not 0) for its built-in effects: LEVELS are their levels, in their registration
+order (held equal by src/uam_sim/test/test_disturbance_conformance.py; this package, the lowest
+layer, does not import the simulator). A plugin effect's level is not here: the launchers do not
+pass it.
 
     python -m uam_contract.disturbances CONFORMANCE REACTION WIND GUST SPEED_ERROR DELAY_MEAN \
         VERTICAL_GUST ALTITUDE_ERROR        # prints true or false: start the monitor?

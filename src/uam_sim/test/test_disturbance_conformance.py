@@ -131,6 +131,35 @@ def test_draws_are_seeded_per_flight_and_within_bounds():
     assert flight_draws(other, "r5") != a[5]
 
 
+def test_every_effect_draws_in_registration_order_from_one_generator():
+    # the speed error's uniform u, the delay's exponential x, the altitude error's uniform z, in
+    # that order from the flight's generator, whatever the levels
+    import zlib
+    cfg = DisturbanceConfig(speed_error=0.1, delay_mean_s=20.0, delay_max_s=30.0, altitude_error_m=5.0, seed=3)
+    rng = np.random.default_rng([3, zlib.crc32(b"r7")])
+    u, x, z = rng.uniform(-1.0, 1.0), rng.exponential(1.0), rng.uniform(-1.0, 1.0)
+    assert flight_draws(cfg, "r7") == FlightDraws(float(u * 0.1), float(min(x * 20.0, 30.0)), float(z * 5.0))
+    assert flight_draws(DisturbanceConfig(altitude_error_m=5.0, seed=3), "r7") == FlightDraws(0.0, 0.0, float(z * 5.0))
+
+
+def test_the_launchers_rule_is_the_registry_of_the_built_in_effects():
+    # uam_contract.disturbances (run_fleet.sh and the launch file read it) does not import the
+    # simulator: its levels are the built-in effects' levels, in their registration order
+    from uam_contract.disturbances import LEVELS, disturbances_on
+    from uam_sim.world.disturbance import BUILTIN_EFFECTS, effects
+
+    built_in = [e for e in effects() if e.name in BUILTIN_EFFECTS]
+    assert [e.name for e in built_in] == list(BUILTIN_EFFECTS)
+    assert tuple(level for e in built_in for level in e.levels) == LEVELS
+    assert not DisturbanceConfig().enabled and not disturbances_on(*[0] * len(LEVELS))
+    for i, level in enumerate(LEVELS):
+        levels = [0.0] * len(LEVELS)
+        levels[i] = 0.05
+        assert disturbances_on(*levels) and DisturbanceConfig(**{level: 0.05}).enabled, level
+    # the along-track guidance has no level: alone it flies the plan exactly
+    assert not DisturbanceConfig(time_gain_per_s=0.1).enabled
+
+
 def test_gusts_are_seeded_and_have_the_stated_spread():
     from uam_sim.world.disturbance import WindField
     cfg = DisturbanceConfig(gust_std_mps=2.0, seed=1)
