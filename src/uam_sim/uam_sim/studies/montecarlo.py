@@ -97,6 +97,18 @@ def _network(text: str):
     return text
 
 
+def point_disturbance(args, speed_error: float) -> dict:
+    """The disturbance fields of a point at ``speed_error``: its flags', then ``--disturbance``'s
+    (ExperimentError when that sets a field one of the flags sets)."""
+    dist = {"speed_error": speed_error, "gust_std_mps": args.gust, "delay_mean_s": args.delay_mean,
+            "wind_speed_mps": args.wind, "step_s": args.step, "time_gain_per_s": args.time_gain}
+    more = dict(getattr(args, "disturbance", None) or {})
+    taken = sorted(set(more) & set(dist))
+    if taken:
+        raise ExperimentError(f"--disturbance: {taken[0]} is set by a flag of its own")
+    return {**dist, **more}
+
+
 def point_configs(args) -> list[tuple[tuple, dict]]:
     """((speed error, spatial, temporal, reaction), config dict) of every grid point."""
     out = []
@@ -108,9 +120,7 @@ def point_configs(args) -> list[tuple[tuple, dict]]:
     for e in args.speed_errors:
         for (bs, bt), react in ((c, r) for c in combos for r in args.reaction):
             if True:
-                dist = {"speed_error": e, "gust_std_mps": args.gust, "delay_mean_s": args.delay_mean,
-                        "wind_speed_mps": args.wind, "step_s": args.step,
-                        "time_gain_per_s": args.time_gain}
+                dist = point_disturbance(args, e)
                 cfg = make_config({"network": args.network, "methods": [args.method], "rates": [args.rate],
                                    "seeds": args.seeds, "duration_s": args.duration,
                                    "time_limit_s": args.time_limit, "spatial_buffer_m": bs,
@@ -297,6 +307,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--time-gain", type=float, default=0.0,
                    help="along-track (4D) guidance gain [1/s]; 0 = airspeed held, no time control (default)")
     p.add_argument("--step", type=float, default=1.0, help="disturbance model step [s] (default 1)")
+    p.add_argument("--disturbance", type=key_values, metavar="K=V,...",
+                   help="more disturbance fields for every point: DisturbanceConfig fields without a flag "
+                        "here, or a registered effect's own (docs/extending.md), e.g. "
+                        "vertical_gust_std_mps=0.5,altitude_error_m=10")
     p.add_argument("--reaction", type=_reaction, default=[False],
                    help="the planner's reaction to nonconforming flights: off (default), on or both")
     p.add_argument("--reaction-period", type=float, default=float(_shared_default("--reaction-period")), metavar="S",

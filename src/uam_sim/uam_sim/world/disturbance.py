@@ -837,7 +837,9 @@ SIMULATOR_PARAMS = {"wind_speed_mps": "wind_speed_mps", "wind_from_deg": "wind_f
 
 
 def from_simulator_params(params: dict, step_s: float) -> DisturbanceConfig:
-    """The DisturbanceConfig of the simulator node's parameters; the flown tracks are sampled at
-    the simulator's step."""
-    return DisturbanceConfig(step_s=float(step_s),
-                             **{field_: params[name] for name, field_ in SIMULATOR_PARAMS.items()})
+    """The DisturbanceConfig of the simulator node's parameters (SIMULATOR_PARAMS, and a registered
+    effect's own fields, each from the parameter of its name when there is one); the flown tracks
+    are sampled at the simulator's step."""
+    own = {name: params[name] for name in _effect_params() if name in params}
+    return DisturbanceConfig.from_mapping({"step_s": float(step_s), **own,
+                                           **{field_: params[name] for name, field_ in SIMULATOR_PARAMS.items()}})
