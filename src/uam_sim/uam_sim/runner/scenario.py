@@ -386,8 +386,7 @@ def _flown_summary(flights: list, cfg: ExperimentConfig, dcfg) -> dict:
     return out
 
 
-# complexity over 25: the runner's epoch loop; to be split into named steps
-def run_scenario(network, method: str, rate: float, seed: int, duration_s: float,  # noqa: C901
+def run_scenario(network, method: str, rate: float, seed: int, duration_s: float,
                  config: ExperimentConfig | None = None, demand=None,
                  observer=None, before_epoch=None) -> ScenarioResult:
     """Run one scenario in process: requests from the seeded generator, one planner, one method.
@@ -418,7 +417,27 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
     """
     cfg = config if config is not None else ExperimentConfig()
     t_wall = time.perf_counter()
-    policy = method if method in BASELINES else "mwis"
+    run = _ScenarioRun(network, method, rate, seed, duration_s, cfg, demand)
+    n_epochs = int(math.ceil(duration_s / cfg.epoch_s - 1e-9))
+    for e in range(n_epochs):
+        run.epoch(e, before_epoch, observer)
+    run.react_to_the_end(n_epochs)
+    audit, extra, flown = run.audit()
+    flown_summary = run.flown_summary(flown)
+    run.drop_private_keys()
+    summary = run.summary(rate, n_epochs, audit, extra, flown)
+    summary.update({k: v for k, v in flown_summary.items() if k not in extra})  # replans: count
+    wall = time.perf_counter() - t_wall
+    summary["wall_s"] = wall
+    summary["real_time_factor"] = duration_s / wall if wall > 0 else float("inf")
+    return ScenarioResult(method, rate_label(rate), int(seed), float(duration_s), summary, run.epochs,
+                          run.flights, audit, run.instances, run.rejections, wall, run.replans, run.asked,
+                          run.record)
+
+
+def _planner(network, method: str, cfg: ExperimentConfig, seed: int, policy: str) -> Planner:
+    """The run's planner: the method's policy (a baseline or the MWIS with the method's solver)
+    and the constraints file's constraints."""
     pcfg = cfg.planning_config("greedy" if method in BASELINES else method, seed)
     planner = Planner(network, pcfg, policy=policy,
                       solve_mwis=None if policy in BASELINES else _solver(method, cfg, seed))
@@ -430,200 +449,262 @@ def run_scenario(network, method: str, rate: float, seed: int, duration_s: float
                                                      now_s=0.0))
         except ValueError as exc:
             raise ExperimentError(f"constraints_file: {exc}") from None
-    if demand is None:
-        demand = RequestGenerator(network.aerodrome_ids, rate, cfg.interval_s, cfg.window_s, seed,
-                                  priority_share=cfg.priority_share,
-                                  priority_class=cfg.priority_class, operators=cfg.operators,
-                                  lead_time_s=cfg.lead_time_s,
-                                  operator_lead_times_s=cfg.operator_lead_times_s)
-    disturbed = bool(cfg.disturbance)  # what flies is the disturbance model's
-    if disturbed:
-        from dataclasses import replace as _replace
-        from ..world.disturbance import WindField, fly_plans
-        dcfg = _replace(cfg.disturbance_config(), seed=int(seed))
-        wind = WindField(dcfg)
-    reaction = _Reaction(planner, dcfg, wind, cfg.conformance_bounds(), cfg.epoch_s,
-                         period_s=cfg.reaction_period_s) if disturbed and cfg.reaction else None
-    between = reaction is not None and 0.0 < cfg.reaction_period_s < cfg.epoch_s
-    # what flies is not the plan: the planner sees the fleet (as the node sees /uam/fleet_state),
-    # so it holds a flight that flies past its plan (the safety gap)
-    watch = reaction if reaction is not None else \
-        _Reaction(planner, dcfg, wind, cfg.conformance_bounds(), cfg.epoch_s, report=False) if disturbed else None
-    n_epochs = int(math.ceil(duration_s / cfg.epoch_s - 1e-9))
-    next_interval = 0
-    epochs, flights, instances, rejections, replans = [], [], [], [], []
-    by_id: dict = {}
-    n_requests = approved_cum = expired_cum = 0
-    earliest_s: dict = {}
-    latest_s: dict = {}
-    asked = []  # every request submitted, for the decision metrics
-    held_ids: set = set()  # flights the planner held past their plans
-    for e in range(n_epochs):
+    return planner
+
+
+class _ScenarioRun:
+    """One in-process run as its epochs go by (:func:`run_scenario`): the planner, the demand,
+    the flight rows and counters, and, with a disturbance, what flies and the reaction."""
+
+    def __init__(self, network, method: str, rate: float, seed: int, duration_s: float,
+                 cfg: ExperimentConfig, demand):
+        self.network, self.method, self.seed, self.duration_s, self.cfg = network, method, seed, duration_s, cfg
+        self.policy = method if method in BASELINES else "mwis"
+        self.planner = _planner(network, method, cfg, seed, self.policy)
+        if demand is None:
+            demand = RequestGenerator(network.aerodrome_ids, rate, cfg.interval_s, cfg.window_s, seed,
+                                      priority_share=cfg.priority_share,
+                                      priority_class=cfg.priority_class, operators=cfg.operators,
+                                      lead_time_s=cfg.lead_time_s,
+                                      operator_lead_times_s=cfg.operator_lead_times_s)
+        self.demand = demand
+        self._disturbance()
+        self.epochs, self.flights, self.instances, self.rejections, self.replans = [], [], [], [], []
+        self.by_id: dict = {}
+        self.n_requests = self.approved_cum = self.expired_cum = 0
+        self.next_interval = 0
+        self.earliest_s: dict = {}
+        self.latest_s: dict = {}
+        self.asked: list = []         # every request submitted, for the decision metrics
+        self.held_ids: set = set()    # flights the planner held past their plans
+        self.record = None
+
+    def _disturbance(self) -> None:
+        """With a disturbance, what flies is the model's: its config (seeded by the run's seed),
+        the wind field, the reaction to nonconformance when on, and what the planner watches."""
+        cfg = self.cfg
+        self.disturbed = bool(cfg.disturbance)
+        self.dcfg = self.wind = self.reaction = self.watch = None
+        if self.disturbed:
+            from dataclasses import replace
+            from ..world.disturbance import WindField
+            self.dcfg = replace(cfg.disturbance_config(), seed=int(self.seed))
+            self.wind = WindField(self.dcfg)
+            if cfg.reaction:
+                self.reaction = _Reaction(self.planner, self.dcfg, self.wind, cfg.conformance_bounds(),
+                                          cfg.epoch_s, period_s=cfg.reaction_period_s)
+            # what flies is not the plan: the planner sees the fleet (as the node sees
+            # /uam/fleet_state), so it holds a flight that flies past its plan (the safety gap)
+            self.watch = self.reaction if self.reaction is not None else \
+                _Reaction(self.planner, self.dcfg, self.wind, cfg.conformance_bounds(), cfg.epoch_s, report=False)
+        self.between = self.reaction is not None and 0.0 < cfg.reaction_period_s < cfg.epoch_s
+
+    def epoch(self, e: int, before_epoch, observer) -> None:
+        """Epoch ``e``: its requests submitted, the planner's plan, its updates and approvals
+        folded into the flight rows (and flown), the reaction until the next epoch, its row."""
+        cfg, planner = self.cfg, self.planner
         t = e * cfg.epoch_s
-        # every demand instant up to t, in time order (equal spacing when interval_s == epoch_s)
-        submitted, refused = [], []
-        while next_interval * cfg.interval_s <= t + 1e-9 and next_interval * cfg.interval_s < duration_s:
-            for req in demand.requests_at(next_interval * cfg.interval_s, next_interval):
-                n_requests += 1
-                submitted.append(req)
-                earliest_s[req.request_id] = req.earliest_departure_s  # for the delay analysis
-                latest_s[req.request_id] = req.latest_departure_s
-                asked.append({"request_id": req.request_id,
-                              "earliest_departure_s": req.earliest_departure_s,
-                              "latest_departure_s": req.latest_departure_s,
-                              "operator": req.operator_id, "priority": int(req.priority)})
-                reason = planner.submit(req)
-                if reason is not None:
-                    rejections.append((req.request_id, reason))
-                    refused.append((req, reason))
-            next_interval += 1
+        submitted, refused = self._submit(t)
         if before_epoch is not None:
             before_epoch(planner, t, e)
-        if watch is not None:
-            watch.before_epoch(t, flights)
+        if self.watch is not None:
+            self.watch.before_epoch(t, self.flights)
         res = planner.plan(t, e)
-        held_ids.update(res.report.overruns)
+        self.held_ids.update(res.report.overruns)
         if res.plan_updates:
-            if reaction is not None:
-                _apply_disturbed_updates(res.plan_updates, by_id, reaction, replans, t)
+            if self.reaction is not None:
+                _apply_disturbed_updates(res.plan_updates, self.by_id, self.reaction, self.replans, t)
             else:
-                _apply_plan_updates(res.plan_updates, by_id, replans, t)
+                _apply_plan_updates(res.plan_updates, self.by_id, self.replans, t)
         if observer is not None:
             observer(t, e, submitted, refused, res)
         rep = res.report
-        approved_cum += len(res.approved)
-        expired_cum += len(res.expired)
+        self.approved_cum += len(res.approved)
+        self.expired_cum += len(res.expired)
         for f in res.approved:
-            flights.append({"request_id": f.request_id, "origin": f.origin_id,
-                            "destination": f.destination_id, "epoch": e,
-                            "earliest_departure_s": earliest_s.get(f.request_id),
-                            "latest_departure_s": latest_s.get(f.request_id),
-                            "departure_s": f.departure_s, "arrival_s": f.arrival_s,
-                            "length_m": f.length_m, "weight": f.weight,
-                            "candidate_index": int(f.candidate_index),
-                            "route_index": int(f.route_index), "level_m": float(f.level_m),
-                            "route": " ".join(f.route_node_ids), "_traj": f.trajectory,
-                            "_versions": [PlanVersion.of(1, -math.inf, f.trajectory, origin_id=f.origin_id,
-                                                         destination_id=f.destination_id)],
-                            "priority": int(f.priority), "operator": f.operator_id,
-                            "shortest_length_m": min(
-                                tp.route.length_m for tp in planner.cache.templates(
-                                    network.node_index(f.origin_id),
-                                    network.node_index(f.destination_id)))})
-            by_id[f.request_id] = flights[-1]
-        if disturbed and res.approved:
-            new = flights[len(flights) - len(res.approved):]
-            for f, track in zip(new, fly_plans([f["_traj"] for f in new],
-                                               [f["request_id"] for f in new], dcfg, wind)):
-                f["_flown"] = track
-        if between:   # the reaction between this epoch and the next
-            reaction.between(t, t + cfg.epoch_s, flights, e, by_id, replans)
-        epochs.append({"epoch": e, "t_s": t, "requests_cum": n_requests, "pending": rep.pending,
-                       "eligible": rep.eligible, "candidates": rep.candidates,
-                       "discarded": rep.discarded, "vertices": rep.vertices, "edges": rep.edges,
-                       "conflict_edges": rep.conflict_edges, "selected": len(res.approved),
-                       "approved_cum": approved_cum, "expired": len(res.expired),
-                       "expired_cum": expired_cum, "active": rep.active_flights,
-                       "objective": rep.objective, "solve_time_s": rep.solve_time_s,
-                       "planning_time_s": rep.planning_time_s,
-                       "proven_optimal": bool(rep.proven_optimal), "fallback": bool(rep.fallback),
-                       "backend_used": rep.backend_used})
-        if policy == "mwis" and 0 < rep.vertices <= cfg.corpus_max_vertices:
-            instances.append({"epoch": e, "weights": [float(w) for w in rep.weights],
-                              "edges": np.asarray(rep.edges_array).reshape(-1, 2).tolist(),
-                              "groups": groups_from_ids(rep.vertex_request_ids)})
+            self.flights.append(self._flight_row(f, e))
+            self.by_id[f.request_id] = self.flights[-1]
+        if self.disturbed and res.approved:
+            self._fly(self.flights[len(self.flights) - len(res.approved):])
+        if self.between:   # the reaction between this epoch and the next
+            self.reaction.between(t, t + cfg.epoch_s, self.flights, e, self.by_id, self.replans)
+        self.epochs.append(self._epoch_row(e, t, res))
+        if self.policy == "mwis" and 0 < rep.vertices <= cfg.corpus_max_vertices:
+            self.instances.append({"epoch": e, "weights": [float(w) for w in rep.weights],
+                                   "edges": np.asarray(rep.edges_array).reshape(-1, 2).tolist(),
+                                   "groups": groups_from_ids(rep.vertex_request_ids)})
 
-    if reaction is not None:
-        # the flights approved by the end fly on after it: the reaction goes on (no new requests,
-        # none planned: the requests still pending are dropped) until the last one has landed,
-        # so every flight is monitored and updated to its end
+    def _submit(self, t: float) -> tuple[list, list]:
+        """The requests of every demand instant up to ``t``, in time order (equal spacing when
+        interval_s == epoch_s), submitted to the planner: (submitted, (request, reason) refused)."""
+        cfg, planner = self.cfg, self.planner
+        submitted, refused = [], []
+        while self.next_interval * cfg.interval_s <= t + 1e-9 and \
+                self.next_interval * cfg.interval_s < self.duration_s:
+            for req in self.demand.requests_at(self.next_interval * cfg.interval_s, self.next_interval):
+                self.n_requests += 1
+                submitted.append(req)
+                self.earliest_s[req.request_id] = req.earliest_departure_s  # for the delay analysis
+                self.latest_s[req.request_id] = req.latest_departure_s
+                self.asked.append({"request_id": req.request_id,
+                                   "earliest_departure_s": req.earliest_departure_s,
+                                   "latest_departure_s": req.latest_departure_s,
+                                   "operator": req.operator_id, "priority": int(req.priority)})
+                reason = planner.submit(req)
+                if reason is not None:
+                    self.rejections.append((req.request_id, reason))
+                    refused.append((req, reason))
+            self.next_interval += 1
+        return submitted, refused
+
+    def _flight_row(self, f, e: int) -> dict:
+        """The row of the approved flight ``f`` (epoch ``e``), its plan as its first version."""
+        network = self.network
+        return {"request_id": f.request_id, "origin": f.origin_id,
+                "destination": f.destination_id, "epoch": e,
+                "earliest_departure_s": self.earliest_s.get(f.request_id),
+                "latest_departure_s": self.latest_s.get(f.request_id),
+                "departure_s": f.departure_s, "arrival_s": f.arrival_s,
+                "length_m": f.length_m, "weight": f.weight,
+                "candidate_index": int(f.candidate_index),
+                "route_index": int(f.route_index), "level_m": float(f.level_m),
+                "route": " ".join(f.route_node_ids), "_traj": f.trajectory,
+                "_versions": [PlanVersion.of(1, -math.inf, f.trajectory, origin_id=f.origin_id,
+                                             destination_id=f.destination_id)],
+                "priority": int(f.priority), "operator": f.operator_id,
+                "shortest_length_m": min(
+                    tp.route.length_m for tp in self.planner.cache.templates(
+                        network.node_index(f.origin_id),
+                        network.node_index(f.destination_id)))}
+
+    def _epoch_row(self, e: int, t: float, res) -> dict:
+        """Epoch ``e``'s row: its graph, selection, counts so far, objective and times."""
+        rep = res.report
+        return {"epoch": e, "t_s": t, "requests_cum": self.n_requests, "pending": rep.pending,
+                "eligible": rep.eligible, "candidates": rep.candidates,
+                "discarded": rep.discarded, "vertices": rep.vertices, "edges": rep.edges,
+                "conflict_edges": rep.conflict_edges, "selected": len(res.approved),
+                "approved_cum": self.approved_cum, "expired": len(res.expired),
+                "expired_cum": self.expired_cum, "active": rep.active_flights,
+                "objective": rep.objective, "solve_time_s": rep.solve_time_s,
+                "planning_time_s": rep.planning_time_s,
+                "proven_optimal": bool(rep.proven_optimal), "fallback": bool(rep.fallback),
+                "backend_used": rep.backend_used}
+
+    def _fly(self, rows: list) -> None:
+        """What ``rows`` fly: their plans flown by the disturbance model."""
+        from ..world.disturbance import fly_plans
+        for f, track in zip(rows, fly_plans([f["_traj"] for f in rows], [f["request_id"] for f in rows],
+                                            self.dcfg, self.wind)):
+            f["_flown"] = track
+
+    def react_to_the_end(self, n_epochs: int) -> None:
+        """With the reaction on, the flights approved by the end fly on after it: the reaction
+        goes on (no new requests, none planned: the requests still pending are dropped) until the
+        last one has landed, so every flight is monitored and updated to its end."""
+        if self.reaction is None:
+            return
+        cfg, planner = self.cfg, self.planner
         planner.pending = []
         e = n_epochs
         while any(f.get("_flown") is not None and f["_flown"].arrival_s >= e * cfg.epoch_s
-                  for f in flights if not f.get("cancelled")):
+                  for f in self.flights if not f.get("cancelled")):
             t = e * cfg.epoch_s
-            reaction.before_epoch(t, flights)
+            self.reaction.before_epoch(t, self.flights)
             res = planner.plan(t, e)
-            held_ids.update(res.report.overruns)
-            _apply_disturbed_updates(res.plan_updates, by_id, reaction, replans, t)
-            if between:
-                reaction.between(t, t + cfg.epoch_s, flights, e, by_id, replans)
+            self.held_ids.update(res.report.overruns)
+            _apply_disturbed_updates(res.plan_updates, self.by_id, self.reaction, self.replans, t)
+            if self.between:
+                self.reaction.between(t, t + cfg.epoch_s, self.flights, e, self.by_id, self.replans)
             e += 1
-    audit = {}
-    flown = [f for f in flights if not f.get("cancelled")]
-    timeline = ()
-    if planner.constraint_log or planner.initial_constraints:
-        from uam_planner.replanning import constraint_timeline
-        timeline = constraint_timeline(planner.initial_constraints, planner.constraint_log)
-    # what was in force: every approval's versions, a cancellation ending its flight as planned
-    record = run_record(flights, timeline)
-    if cfg.audit:
-        # in the run's separation model (the paper's sphere, or the cylinder), the parts of one
-        # flight never a pair
-        in_force = record.in_force()
-        audit = sweep_audit(in_force.parts_as_trajectories(), cfg.separation(), groups=in_force.groups)
-        if reaction is not None:
-            # the plans the planner deconflicted (every version but the reaction's contingencies,
-            # which are flown, announced and deconflicted against by later plans, but not
-            # themselves deconflicted: docs/disturbances.md 2b): their losses must be 0
-            dec = in_force.select([not c for c in in_force.contingent])
-            audit["losses_deconflicted"] = audit["losses"] if len(dec.parts) == len(in_force.parts) else \
-                sweep_audit(dec.parts_as_trajectories(), cfg.separation(), groups=dec.groups)["losses"]
-    extra = {}
-    if timeline:
-        from uam_planner.replanning import KINDS
-        found = record.incursions(network)[0] if cfg.audit else []
-        labels = {(c.constraint_id, c.version): c.label() for c, _a, _b in timeline}
-        inc = [(i.key, labels[(i.constraint_id, i.constraint_version)], float(i.t_s)) for i in found]
-        extra = {"replans": len(replans), **{f"replan_{k}": sum(r["kind"] == k for r in replans)
-                                             for k in KINDS},
-                 "incursions": len(inc) if cfg.audit else None}
-        audit = dict(audit, incursions=[list(x) for x in inc[:20]])
-    if disturbed:
-        # a re-planned flight flies its spliced plan (old version before the switch, new after)
-        again = [f for f in flown if f.get("replan") and "_flown" in f and f.get("_t0") is None]
-        for f, track in zip(again, fly_plans([f["_traj"] for f in again],
-                                             [f["request_id"] for f in again], dcfg, wind)):
-            f["_flown"] = track
-    flown_summary = _flown_summary(flown, cfg, dcfg) if disturbed else {}
-    if flown_summary:
-        flown_summary["replans"] = len(replans)
-        if cfg.reaction:   # flights re-timed so that a nonconforming one keeps separation
-            flown_summary["reaction_yields"] = sum(1 for r in replans if r["kind"] == "yielded")
-            # nonconforming flights diverted to another vertiport
-            flown_summary["reaction_diversions"] = sum(1 for r in replans if r.get("diverted"))
-            if cfg.conflict_probe_s:   # updates the planner's conflict probe asked for
-                flown_summary["reaction_probe_updates"] = sum(1 for r in replans if r.get("probe"))
-        flown_summary["held_past_plan"] = len(held_ids)
-    for f in flights:
-        del f["_traj"]
-        for k in ("_flown", "_pieces", "_e", "_t0", "_kinds", "_versions"):
-            f.pop(k, None)
-    mwis_epochs = [r for r in epochs if r["vertices"] > 0]
-    summary = {
-        "method": method, "rate": rate_label(rate), "seed": int(seed), "duration_s": float(duration_s),
-        "epochs": n_epochs, "requests": n_requests, "rejected": len(rejections),
-        "approved": approved_cum, "expired": expired_cum,
-        "pending_end": n_requests - len(rejections) - approved_cum - expired_cum,
-        "approval_rate": approved_cum / n_requests if n_requests else float("nan"),
-        "avg_airborne": average_airborne([f["departure_s"] for f in flown],
-                                         [f["arrival_s"] for f in flown], duration_s),
-        **epoch_statistics(epochs),
-        "proven_optimal_share": (float(np.mean([r["proven_optimal"] for r in mwis_epochs]))
-                                 if mwis_epochs and policy == "mwis" else float("nan")),
-        "fallbacks": int(sum(r["fallback"] for r in epochs)),
-        "min_separation_m": audit.get("min_separation_m"),
-        "losses": audit.get("losses"),
-        **({"losses_deconflicted": audit.get("losses_deconflicted")} if reaction is not None else {}),
-        "objective": cfg.objective,
-        # requests still within their window at the end (filed ahead) are left out
-        **{k: v for k, v in run_metrics(flights, asked, warmup_s=cfg.metrics_warmup_s or None,
-                                        end_s=duration_s).items() if k != "flights"},
-        **extra,
-    }
-    summary.update({k: v for k, v in flown_summary.items() if k not in extra})  # replans: count
-    wall = time.perf_counter() - t_wall
-    summary["wall_s"] = wall
-    summary["real_time_factor"] = duration_s / wall if wall > 0 else float("inf")
-    return ScenarioResult(method, rate_label(rate), int(seed), float(duration_s), summary, epochs,
-                          flights, audit, instances, rejections, wall, replans, asked, record)
+
+    def audit(self) -> tuple[dict, dict, list]:
+        """The run's record (what was in force: every approval's versions, a cancellation ending
+        its flight as planned) and its separation audit, the constraint columns when any
+        constraint was in force, and the flights that flew: (audit, columns, flights)."""
+        cfg, planner = self.cfg, self.planner
+        audit = {}
+        flown = [f for f in self.flights if not f.get("cancelled")]
+        timeline = ()
+        if planner.constraint_log or planner.initial_constraints:
+            from uam_planner.replanning import constraint_timeline
+            timeline = constraint_timeline(planner.initial_constraints, planner.constraint_log)
+        self.record = record = run_record(self.flights, timeline)
+        if cfg.audit:
+            # in the run's separation model (the paper's sphere, or the cylinder), the parts of one
+            # flight never a pair
+            in_force = record.in_force()
+            audit = sweep_audit(in_force.parts_as_trajectories(), cfg.separation(), groups=in_force.groups)
+            if self.reaction is not None:
+                # the plans the planner deconflicted (every version but the reaction's contingencies,
+                # which are flown, announced and deconflicted against by later plans, but not
+                # themselves deconflicted: docs/disturbances.md 2b): their losses must be 0
+                dec = in_force.select([not c for c in in_force.contingent])
+                audit["losses_deconflicted"] = audit["losses"] if len(dec.parts) == len(in_force.parts) else \
+                    sweep_audit(dec.parts_as_trajectories(), cfg.separation(), groups=dec.groups)["losses"]
+        extra = {}
+        if timeline:
+            from uam_planner.replanning import KINDS
+            found = record.incursions(self.network)[0] if cfg.audit else []
+            labels = {(c.constraint_id, c.version): c.label() for c, _a, _b in timeline}
+            inc = [(i.key, labels[(i.constraint_id, i.constraint_version)], float(i.t_s)) for i in found]
+            extra = {"replans": len(self.replans), **{f"replan_{k}": sum(r["kind"] == k for r in self.replans)
+                                                      for k in KINDS},
+                     "incursions": len(inc) if cfg.audit else None}
+            audit = dict(audit, incursions=[list(x) for x in inc[:20]])
+        return audit, extra, flown
+
+    def flown_summary(self, flown: list) -> dict:
+        """With a disturbance, what flew (:func:`_flown_summary`) and the reaction's counts; {}
+        without. A re-planned flight flies its spliced plan (old version before the switch, new
+        after)."""
+        if not self.disturbed:
+            return {}
+        cfg, replans = self.cfg, self.replans
+        self._fly([f for f in flown if f.get("replan") and "_flown" in f and f.get("_t0") is None])
+        out = _flown_summary(flown, cfg, self.dcfg)
+        if out:
+            out["replans"] = len(replans)
+            if cfg.reaction:   # flights re-timed so that a nonconforming one keeps separation
+                out["reaction_yields"] = sum(1 for r in replans if r["kind"] == "yielded")
+                # nonconforming flights diverted to another vertiport
+                out["reaction_diversions"] = sum(1 for r in replans if r.get("diverted"))
+                if cfg.conflict_probe_s:   # updates the planner's conflict probe asked for
+                    out["reaction_probe_updates"] = sum(1 for r in replans if r.get("probe"))
+            out["held_past_plan"] = len(self.held_ids)
+        return out
+
+    def drop_private_keys(self) -> None:
+        """The flight rows as the result holds them: without their trajectories and the
+        disturbance model's state."""
+        for f in self.flights:
+            del f["_traj"]
+            for k in ("_flown", "_pieces", "_e", "_t0", "_kinds", "_versions"):
+                f.pop(k, None)
+
+    def summary(self, rate: float, n_epochs: int, audit: dict, extra: dict, flown: list) -> dict:
+        """The run's summary row (without what flew and the wall time)."""
+        cfg, epochs = self.cfg, self.epochs
+        approved, n_requests = self.approved_cum, self.n_requests
+        mwis_epochs = [r for r in epochs if r["vertices"] > 0]
+        return {
+            "method": self.method, "rate": rate_label(rate), "seed": int(self.seed),
+            "duration_s": float(self.duration_s), "epochs": n_epochs, "requests": n_requests,
+            "rejected": len(self.rejections), "approved": approved, "expired": self.expired_cum,
+            "pending_end": n_requests - len(self.rejections) - approved - self.expired_cum,
+            "approval_rate": approved / n_requests if n_requests else float("nan"),
+            "avg_airborne": average_airborne([f["departure_s"] for f in flown],
+                                             [f["arrival_s"] for f in flown], self.duration_s),
+            **epoch_statistics(epochs),
+            "proven_optimal_share": (float(np.mean([r["proven_optimal"] for r in mwis_epochs]))
+                                     if mwis_epochs and self.policy == "mwis" else float("nan")),
+            "fallbacks": int(sum(r["fallback"] for r in epochs)),
+            "min_separation_m": audit.get("min_separation_m"),
+            "losses": audit.get("losses"),
+            **({"losses_deconflicted": audit.get("losses_deconflicted")} if self.reaction is not None else {}),
+            "objective": cfg.objective,
+            # requests still within their window at the end (filed ahead) are left out
+            **{k: v for k, v in run_metrics(self.flights, self.asked, warmup_s=cfg.metrics_warmup_s or None,
+                                            end_s=self.duration_s).items() if k != "flights"},
+            **extra,
+        }
