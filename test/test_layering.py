@@ -273,3 +273,45 @@ def test_the_load_factor_scales_and_refuses_nonsense(monkeypatch):
             assert "UAM_TEST_LOAD_FACTOR" in str(exc) and bad in str(exc)
         else:
             raise AssertionError(f"{bad!r} was accepted")
+
+
+#: functions a reader can hold: at most this many over 80 lines, each with its reason in a
+#: comment just above it (``# long (over 80 lines): ...``)
+MAX_LONG_FUNCTIONS = 5
+
+
+def _long_functions(root: pathlib.Path) -> list:
+    """(path, name, lines, reason or None) of every function over 80 lines outside the tests."""
+    out = []
+    for path in sorted(root.glob("src/*/**/*.py")):
+        if "/test/" in str(path):
+            continue
+        text = path.read_text()
+        lines = text.splitlines()
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) \
+                    and node.end_lineno - node.lineno + 1 > 80:
+                first = min([d.lineno for d in node.decorator_list] + [node.lineno]) - 1
+                above = []
+                for line in reversed(lines[:first]):
+                    if not line.strip().startswith("#"):
+                        break
+                    above.insert(0, line.strip())
+                reason = " ".join(above) if any(a.startswith("# long (over 80 lines)") for a in above) else None
+                out.append((str(path.relative_to(root)), node.name, node.end_lineno - node.lineno + 1, reason))
+    return out
+
+
+def test_at_most_five_long_functions_each_with_its_reason():
+    long = _long_functions(ROOT)
+    assert len(long) <= MAX_LONG_FUNCTIONS, [(p, n, k) for p, n, k, _ in long]
+    assert all(reason for *_, reason in long), [(p, n, k) for p, n, k, r in long if not r]
+
+
+def test_a_long_function_without_its_reason_is_seen(tmp_path):
+    body = "\n".join(f"    x{i} = {i}" for i in range(85))
+    pkg = tmp_path / "src" / "pkg" / "pkg"
+    pkg.mkdir(parents=True)
+    (pkg / "m.py").write_text(f"def f():\n{body}\n\n\n# long (over 80 lines): a table\ndef g():\n{body}\n")
+    got = {n: r for _p, n, _k, r in _long_functions(tmp_path)}
+    assert got["f"] is None and got["g"].startswith("# long (over 80 lines)")

@@ -119,21 +119,20 @@ def point_configs(args) -> list[tuple[tuple, dict]]:
         combos = [(bs, bt) for bs in args.spatial_buffers for bt in args.temporal_buffers]
     for e in args.speed_errors:
         for (bs, bt), react in ((c, r) for c in combos for r in args.reaction):
-            if True:
-                dist = point_disturbance(args, e)
-                cfg = make_config({"network": args.network, "methods": [args.method], "rates": [args.rate],
-                                   "seeds": args.seeds, "duration_s": args.duration,
-                                   "time_limit_s": args.time_limit, "spatial_buffer_m": bs,
-                                   "temporal_buffer_s": bt, "disturbance": dist,
-                                   "conformance": args.conformance or {}, "out": args.out,
-                                   "reaction": react,
-                                   "reaction_period_s": args.reaction_period if react else 0.0,
-                                   "conflict_probe_s": getattr(args, "probe", 0.0) if react else 0.0,
-                                   "conflict_probe_margin_m": getattr(args, "probe_margin", 0.0)
-                                   if react and getattr(args, "probe", 0.0) else 0.0,
-                                   "workers": args.workers, "scheduler": args.scheduler,
-                                   "corpus_max_vertices": 0})
-                out.append(((e, bs, bt, react), asdict(cfg)))
+            dist = point_disturbance(args, e)
+            cfg = make_config({"network": args.network, "methods": [args.method], "rates": [args.rate],
+                               "seeds": args.seeds, "duration_s": args.duration,
+                               "time_limit_s": args.time_limit, "spatial_buffer_m": bs,
+                               "temporal_buffer_s": bt, "disturbance": dist,
+                               "conformance": args.conformance or {}, "out": args.out,
+                               "reaction": react,
+                               "reaction_period_s": args.reaction_period if react else 0.0,
+                               "conflict_probe_s": getattr(args, "probe", 0.0) if react else 0.0,
+                               "conflict_probe_margin_m": getattr(args, "probe_margin", 0.0)
+                               if react and getattr(args, "probe", 0.0) else 0.0,
+                               "workers": args.workers, "scheduler": args.scheduler,
+                               "corpus_max_vertices": 0})
+            out.append(((e, bs, bt, react), asdict(cfg)))
     return out
 
 
