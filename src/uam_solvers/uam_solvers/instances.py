@@ -290,7 +290,7 @@ def large_instance(n_vertices: int, seed: int, k: int = 5, mean_interactions: fl
 
 def grouped_random_instance(n_vertices: int, seed: int, k: int = 5, cross_degree: float = 2.5,
                             detour_max: float = 0.4) -> MwisProblem:
-    """A paper-shaped graph as the issue-20 measurement built it: ceil(n_vertices / k)
+    """A paper-shaped graph as the bounded-solve measurement builds it (BENCHMARKS.md): ceil(n_vertices / k)
     requests of ``k`` candidates (weights d*/d as the planner makes them, one clique group
     each, the clique pairs listed among the edges as the planner lists them) plus random
     conflicts between candidates of different requests, ``cross_degree`` per vertex on average
