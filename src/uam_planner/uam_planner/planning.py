@@ -740,9 +740,9 @@ class Planner:
         """With the conflict probe on (``conflict_probe_s``): every airborne flight's projection
         (from the planner's newest sighting at its observed progress rate, up to the look-ahead;
         ``nonconformance.projections``) as a Flight, traffic that new requests are deconflicted
-        against beside its plan. Thirteenth stop: a flight approved to leave a vertiport at
-        once kept the buffer from the plan of a flight landing there 15 s later, which landed
-        4 s early (seen early by the probe): 91 m flown at a 25 m buffer. Empty otherwise."""
+        against beside its plan (without it, a flight approved to leave a vertiport at once
+        kept the buffer only from the plan of a flight landing there 15 s later, which landed
+        4 s early, seen early by the probe: 91 m flown at a 25 m buffer). Empty otherwise."""
         cfg = self.config
         if cfg.conformance is None or not cfg.conflict_probe_s:
             return []

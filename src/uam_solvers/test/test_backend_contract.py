@@ -1,15 +1,15 @@
 """The contract every registered backend keeps (built-in and entry points), through the solve
-service (issue 11): a valid independent set, the objective recomputed from the weights, the
-time limit held, options validated."""
+service: a valid independent set, the objective recomputed from the weights, the time limit
+held, options validated; checked by ``uam_solvers.testing``, the kit plugin authors use."""
 
 import numpy as np
 import pytest
 
 import uam_solvers.registry as registry
-from uam_solvers import MwisInputError
 from uam_solvers.executor import SolveService
-from uam_solvers.instances import large_instance, paper_instance
 from uam_solvers.qpu import AdvantageStandInSampler, QpuBackend
+from uam_solvers.testing import (CONTRACT_PROBLEMS, assert_answer_kept, assert_backend_contract,
+                                 assert_options_validated)
 
 # not in `make test-fast`: every backend through a SolveService's worker processes
 pytestmark = pytest.mark.slow
@@ -58,7 +58,7 @@ def _runnable(name):
 
 
 _WARM: set = set()
-PROBLEMS = {"paper-8": paper_instance(8, seed=11), "large-400": large_instance(400, seed=12)}
+PROBLEMS = {k: make() for k, make in CONTRACT_PROBLEMS.items()}
 
 
 @pytest.mark.parametrize("name", _names())
@@ -67,7 +67,6 @@ def test_backend_contract(service, name, which):
     ok, why = _runnable(name)
     if not ok:
         pytest.skip(f"{name} unavailable here: {why}")
-    problem = PROBLEMS[which]
     if name not in _WARM:
         # a backend's first solve in the worker pays its imports and set-up (the QPU stand-in
         # builds the Advantage graph): paid here with a generous limit, not held to the contract's
@@ -75,17 +74,9 @@ def test_backend_contract(service, name, which):
         # (3 s: enough for the imports; CHILS runs to its limit, so not more)
         service.solve(PROBLEMS["paper-8"], backend=_backend(name), time_limit_s=3.0, seed=0)
         _WARM.add(name)
-    r = service.solve(problem, backend=_backend(name), time_limit_s=LIMIT_S, seed=0)
-    assert problem.is_independent(r.selected)
-    assert r.objective == pytest.approx(float(np.sum(problem.weights[r.selected])), rel=1e-12)
-    # the backend itself answered within its limit: a backend that does not answer by the limit
-    # + margin is killed and the greedy fallback answers in its place ("killed"), which breaks the
-    # contract (no wall-clock bound here: the wall against the limit is measured by
-    # `python -m uam_solvers.bench --issue20`, its deadline table)
-    assert r.stats["executor"] in ("inline", "worker"), (name, r.stats["executor"], r.message)
-    assert not r.fallback, (name, r.message)
-    if r.proven_optimal:
-        assert not r.fallback
+    # the plugin authors' kit: the same checks (no wall-clock bound here: the wall against the
+    # limit is measured by `python -m uam_solvers.bench --issue20`, its deadline table)
+    assert_answer_kept(service, _backend(name), PROBLEMS[which], LIMIT_S)
 
 
 @pytest.mark.parametrize("name", _names())
@@ -93,11 +84,24 @@ def test_backend_options_are_validated(service, name):
     ok, why = _runnable(name)
     if not ok:
         pytest.skip(f"{name} unavailable here: {why}")
-    with pytest.raises(MwisInputError, match=r"options\['bogus'\]"):
-        service.solve(PROBLEMS["paper-8"], backend=_backend(name), time_limit_s=LIMIT_S,
-                      options={"bogus": 1})
-    for key, spec in registry.get_backend(name).options_spec.items():
-        if spec.kind in ("int", "float"):
-            with pytest.raises(MwisInputError, match=rf"options\[{key!r}\]"):
-                service.solve(PROBLEMS["paper-8"], backend=_backend(name), time_limit_s=LIMIT_S,
-                              options={key: "not a number"})
+    assert_options_validated(service, _backend(name), PROBLEMS["paper-8"],
+                             registry.get_backend(name).options_spec, LIMIT_S)
+
+
+def test_the_kit_runs_on_a_backend_class_and_sees_a_broken_one():
+    """``assert_backend_contract`` as a plugin author calls it: on a Backend subclass (with its
+    determinism), and a backend that returns a set that is not independent fails it."""
+    from uam_solvers.base import make_result
+    from uam_solvers.greedy import GreedyBackend
+
+    assert_backend_contract(GreedyBackend, deterministic=True)
+
+    class Broken(GreedyBackend):
+        name = "broken-for-the-kit"
+
+        def solve(self, problem, *, time_limit_s, seed=0, options=None):
+            return make_result(problem, np.arange(problem.n), proven_optimal=False, solve_time_s=0.0,
+                               backend=self.name)
+
+    with pytest.raises(AssertionError):
+        assert_backend_contract(Broken)
