@@ -27,7 +27,7 @@
 #   --probe S          with --reaction true, the conflict probe's look-ahead [s]: at each reaction
 #                      the airborne flights are projected at their observed progress and pairs
 #                      predicted to lose separation within S s are re-planned (default 0: off;
-#                      docs/disturbances.md, 2b')
+#                      docs/disturbances.md, 5)
 #   --probe-margin M   with --probe, the probe's margin [m]: it predicts losses of the minimum + M
 #                      and deconflicts its own updates with at least that (default 0)
 #   --rate R           requests per 30 s (default 10, the paper's middle rate)

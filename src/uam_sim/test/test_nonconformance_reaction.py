@@ -195,7 +195,7 @@ def test_the_runner_reacts_and_off_is_todays_run():
 
 
 # ---- flights that fly past their plan (issue 23, the safety gap; uam_planner.nonconformance
-# .overruns, docs/disturbances.md 2c): held in the planner's traffic picture, by hand ---------
+# .overruns, docs/disturbances.md 6): held in the planner's traffic picture, by hand ---------
 #: P (W at 0 s, E at 600 s) in a 1 m/s head wind: 9 m/s over the ground, x = 9 t, lands at
 #: 6000 / 9 = 666.67 s, 66.7 s after its planned arrival
 LATE = fly(P.trajectory, FlightDraws(), HEAD_WIND)
