@@ -755,7 +755,7 @@ class Planner:
     def _hold_overruns(self, t_s: float) -> None:
         """Step 1 of ``prepare``, before flights past their planned arrival are dropped: from
         the planner's own observations, the flights that fly past their plans and how long they
-        are held (:func:`uam_planner.nonconformance.overruns`; docs/disturbances.md 2c). Then
+        are held (:func:`uam_planner.nonconformance.overruns`; docs/disturbances.md, section 6). Then
         the held flights whose projection has landed by ``t_s`` are let go, and observations of
         flights the planner no longer holds are forgotten."""
         plans = {o.request_id: o.plan for o in self.overruns.values()}

@@ -638,7 +638,7 @@ class _ScenarioRun:
             if self.reaction is not None:
                 # the plans the planner deconflicted (every version but the reaction's contingencies,
                 # which are flown, announced and deconflicted against by later plans, but not
-                # themselves deconflicted: docs/disturbances.md 2b): their losses must be 0
+                # themselves deconflicted: docs/disturbances.md, section 3): their losses must be 0
                 dec = in_force.select([not c for c in in_force.contingent])
                 audit["losses_deconflicted"] = audit["losses"] if len(dec.parts) == len(in_force.parts) else \
                     sweep_audit(dec.parts_as_trajectories(), cfg.separation(), groups=dec.groups)["losses"]
