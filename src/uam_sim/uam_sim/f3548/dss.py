@@ -103,6 +103,81 @@ class DevTokens:
         return tok
 
 
+class AuthServerTokens:
+    """Tokens asked of an auth server's token endpoint the way InterUSS's dummy OAuth server
+    takes it (``GET {token_endpoint}?grant_type=client_credentials&scope=...&intended_audience=...
+    &issuer=dummy&sub=...``, answered ``{"access_token": ...}``; monitorlib's ``DummyOAuth``
+    adapter asks the same), one per (audience, scopes), asked again a minute before its ``exp``.
+    ``sub`` names this USS (a reference's ``manager`` at the DSS)."""
+
+    def __init__(self, token_endpoint: str, sub: str = "uam-fleet", timeout_s: float = 10.0, session=None):
+        import requests
+
+        parts = urlsplit(token_endpoint)
+        if parts.scheme not in ("http", "https") or not parts.hostname:
+            raise ValueError(f"token_endpoint: {token_endpoint!r} is not an http(s) URL with a host")
+        if not sub:
+            raise ValueError("sub: empty (the identity the tokens are asked for)")
+        self.token_endpoint, self.sub, self.timeout_s = token_endpoint, str(sub), float(timeout_s)
+        self._session = session or requests.Session()
+        self._cache: dict = {}
+
+    def token(self, audience: str, scopes) -> str:
+        from urllib.parse import urlencode
+
+        key = (audience, tuple(scopes))
+        tok, exp = self._cache.get(key, ("", 0.0))
+        if time.time() <= exp - 60.0:
+            return tok
+        query = urlencode({"grant_type": "client_credentials", "scope": " ".join(scopes),
+                           "intended_audience": audience, "issuer": "dummy", "sub": self.sub})
+        url = f"{self.token_endpoint}?{query}"
+        r = self._session.request("GET", url, timeout=self.timeout_s)
+        if r.status_code != 200:
+            raise ValueError(f"token_endpoint: GET {self.token_endpoint}: HTTP {r.status_code}: {r.text[:200]}")
+        tok = str(r.json().get("access_token") or "")
+        if not tok:
+            raise ValueError(f"token_endpoint: {self.token_endpoint}: no access_token in the answer")
+        self._cache[key] = (tok, _expiry(tok))
+        return tok
+
+
+def _expiry(token: str) -> float:
+    """The ``exp`` claim of a JWT (read, not verified: the client only needs to know when to ask
+    again), or 0 (ask every time) when it has none."""
+    import base64
+
+    try:
+        payload = token.split(".")[1]
+        claims = json.loads(base64.urlsafe_b64decode(payload + "=" * (-len(payload) % 4)))
+        return float(claims.get("exp", 0.0))
+    except (IndexError, ValueError, TypeError):
+        return 0.0
+
+
+def token_source(token_file: str = "", dev_key: str = "", auth_url: str = "", sub: str = "uam-fleet"):
+    """The token source of exactly one of: ``token_file`` (a file holding one bearer token with
+    every scope needed: :class:`StaticToken`), ``dev_key`` (a development private key PEM:
+    :class:`DevTokens` with ``sub``), ``auth_url`` (an auth server's token endpoint:
+    :class:`AuthServerTokens` with ``sub``). ValueError naming the parameters otherwise."""
+    given = {k: v for k, v in (("dss_token_file", token_file), ("dss_dev_key", dev_key),
+                               ("dss_auth_url", auth_url)) if v}
+    if len(given) != 1:
+        raise ValueError(f"dss_token_file, dss_dev_key, dss_auth_url: {len(given)} given "
+                         f"({', '.join(given) or 'none'}); a DSS needs exactly one way to get tokens")
+    from pathlib import Path
+    path = token_file or dev_key
+    if path and not Path(path).is_file():
+        raise ValueError(f"{next(iter(given))}: {path!r} is not a readable file")
+    if token_file:
+        return StaticToken(Path(token_file).read_text().strip())
+    if dev_key:
+        tokens = DevTokens(dev_key, sub=sub)
+        tokens.token("localhost", ["utm.strategic_coordination"])   # a public key, or no key: refused now
+        return tokens
+    return AuthServerTokens(auth_url, sub=sub)
+
+
 def _as_json(obj) -> dict:
     """An ImplicitDict (or plain dict) as JSON-ready data (enums and datetimes as strings)."""
     return json.loads(json.dumps(obj, default=str))

@@ -30,6 +30,9 @@ The store holds each intent's volumes as JSON text once (from ``uam_planner.f354
 serves every volume of the plan version with the state at the store's time and the version of
 that state (``uam_planner.f3548.intent_version``: a state change is a new version, so the
 details of a version never change), at the cost of one string join. Thread-safe (one lock).
+With a DSS (:class:`uam_sim.f3548.dss_sync.DssSync`) the reference of a version the DSS holds is
+the DSS's own (its version, OVN, manager, subscription; :meth:`IntentStore.set_reference`);
+a version the DSS does not hold is served with the local reference, as without a DSS.
 The HTTP layer is :class:`uam_sim.f3548.pool.PooledWSGIServer`: a bounded pool of workers.
 """
 
@@ -83,6 +86,20 @@ class _Intent:
     volumes_json: list    # each volume's JSON text
 
 
+@dataclass(frozen=True)
+class IntentView:
+    """An operational intent as served at one instant: what its DSS reference must say.
+    ``version`` is the local F3548 version (``intent_version``: one per plan version and state),
+    ``plan_version`` the plan's; ``volumes_json`` every volume's JSON text (served as ``volumes``,
+    or as ``off_nominal_volumes`` when Contingent)."""
+    entity_id: str
+    version: int
+    plan_version: int
+    state: str
+    volumes_json: tuple
+    priority: int
+
+
 class IntentStore:
     """The live operational intents and constraints of one USS (thread-safe).
 
@@ -90,15 +107,24 @@ class IntentStore:
     ``end(operator_id, request_id)`` removes it (a cancellation); ``set_constraints`` replaces the
     constraint set; ``set_time`` moves the clock (simulation seconds) that states and volume
     clipping use. ``details(id)`` / ``constraint_details(id)``: the response's JSON text or None.
+    ``views()``: every live intent as an :class:`IntentView`; ``set_reference``: the DSS's
+    reference of a version. ``on_change`` (a callable without arguments, or None) is called
+    after every change of the intents or the clock (outside the lock), e.g. to wake a DSS sync.
     """
 
     def __init__(self, ctx: IntentContext):
         self.ctx = ctx
+        self.on_change = None
         self._lock = threading.Lock()
         self._intents: dict[str, _Intent] = {}
         self._constraints: dict[str, str] = {}
+        self._dss_refs: dict[str, tuple] = {}   # entity id -> (local version, the DSS's reference, JSON)
         self._t_s = 0.0
         self._pruned_s = 0.0
+
+    def _changed(self) -> None:
+        if self.on_change is not None:
+            self.on_change()
 
     # ---- updates ---------------------------------------------------------------------------
     def put_flight(self, flight) -> str:
@@ -113,17 +139,24 @@ class IntentStore:
             old = self._intents.get(oid)
             if old is None or int(old.flight.version) <= int(flight.version):
                 self._intents[oid] = entry
+        self._changed()
         return oid
 
     def clear(self) -> None:
         """Forget every intent and constraint (the planner started a new run)."""
         with self._lock:
             self._intents.clear()
+            self._dss_refs.clear()
             self._constraints = {}
+        self._changed()
 
     def end(self, operator_id: str, request_id: str) -> bool:
+        oid = intent_id(operator_id, request_id)
         with self._lock:
-            return self._intents.pop(intent_id(operator_id, request_id), None) is not None
+            gone = self._intents.pop(oid, None) is not None
+            self._dss_refs.pop(oid, None)
+        self._changed()
+        return gone
 
     def set_constraints(self, constraints) -> None:
         docs = {}
@@ -145,6 +178,8 @@ class IntentStore:
                 self._pruned_s = self._t_s
                 for oid in [k for k, e in self._intents.items() if e.flight.arrival_s < self._t_s]:
                     del self._intents[oid]
+                    self._dss_refs.pop(oid, None)
+        self._changed()
 
     @property
     def time_s(self) -> float:
@@ -158,33 +193,79 @@ class IntentStore:
         with self._lock:
             return sorted(self._constraints)
 
-    # ---- reads -----------------------------------------------------------------------------
-    def details(self, entity_id: str) -> str | None:
-        """The GetOperationalIntentDetailsResponse of ``entity_id`` at the store's time, as JSON
-        text; None if unknown or Ended."""
+    # ---- the DSS's references --------------------------------------------------------------
+    def views(self) -> list:
+        """Every intent served at the store's time (not Ended) as an :class:`IntentView`, by id."""
         with self._lock:
-            entry = self._intents.get(entity_id)
+            entries = sorted(self._intents.items())
             t = self._t_s
-        if entry is None:
-            return None
+        out = []
+        for oid, entry in entries:
+            view = self._view(oid, entry, t)
+            if view is not None:
+                out.append(view)
+        return out
+
+    @staticmethod
+    def _view(oid: str, entry: _Intent, t: float):
         f = entry.flight
         state = flight_state(f, t)
         if state == "Ended" or not entry.volumes_json:
             return None
+        return IntentView(oid, intent_version(f.version, state), int(f.version), state,
+                          tuple(entry.volumes_json), int(f.priority))
+
+    def set_reference(self, entity_id: str, version: int, reference: dict) -> None:
+        """Serve ``reference`` (the DSS's OperationalIntentReference, JSON) as the reference of
+        local version ``version`` of ``entity_id``: its version, OVN, manager and subscription
+        are the DSS's. Kept while the intent stays at that version; an intent no longer served
+        keeps none. The DSS issues one reference per change, so a version's OVN, once the
+        DSS's, stays."""
+        text = json.dumps(reference, separators=(",", ":"))
+        with self._lock:
+            if entity_id in self._intents:
+                self._dss_refs[entity_id] = (int(version), text)
+
+    def reference_of(self, entity_id: str):
+        """(local version, the DSS's reference as a dict) held for ``entity_id``, or None."""
+        with self._lock:
+            held = self._dss_refs.get(entity_id)
+        return None if held is None else (held[0], json.loads(held[1]))
+
+    def document(self, view: IntentView, reference_json: str | None = None) -> str:
+        """The OperationalIntent (``{"reference": ..., "details": ...}``) of ``view`` as JSON text,
+        with ``reference_json`` as its reference (default: the local one)."""
+        vols = view.volumes_json
+        if reference_json is None:
+            first, last = json.loads(vols[0]), json.loads(vols[-1])
+            ref = {"id": view.entity_id, "manager": self.ctx.manager, "uss_availability": "Unknown",
+                   "version": view.version, "state": view.state, "ovn": ovn(view.entity_id, view.version),
+                   "time_start": first["time_start"], "time_end": last["time_end"],
+                   "uss_base_url": self.ctx.uss_base_url, "subscription_id": self.ctx.subscription_id}
+            reference_json = json.dumps(ref, separators=(",", ":"))
+        joined = "[" + ",".join(vols) + "]"
+        nominal, off = ("[]", joined) if view.state == "Contingent" else (joined, "[]")
+        return ('{"reference":' + reference_json + ',"details":{"volumes":' + nominal
+                + ',"off_nominal_volumes":' + off + ',"priority":' + str(int(view.priority)) + '}}')
+
+    # ---- reads -----------------------------------------------------------------------------
+    def details(self, entity_id: str) -> str | None:
+        """The GetOperationalIntentDetailsResponse of ``entity_id`` at the store's time, as JSON
+        text; None if unknown or Ended. The reference is the DSS's when the DSS holds this version
+        (:meth:`set_reference`), else the local one (version ``intent_version``, OVN derived)."""
+        with self._lock:
+            entry = self._intents.get(entity_id)
+            held = self._dss_refs.get(entity_id)
+            t = self._t_s
+        if entry is None:
+            return None
         # every volume of the plan version, whenever asked: its details change only with a new
         # version (a new plan version or a state change, intent_version)
-        vols = entry.volumes_json
-        first, last = json.loads(vols[0]), json.loads(vols[-1])
-        version = intent_version(f.version, state)
-        ref = {"id": entity_id, "manager": self.ctx.manager, "uss_availability": "Unknown",
-               "version": version, "state": state, "ovn": ovn(entity_id, version),
-               "time_start": first["time_start"], "time_end": last["time_end"],
-               "uss_base_url": self.ctx.uss_base_url, "subscription_id": self.ctx.subscription_id}
-        joined = "[" + ",".join(vols) + "]"
-        nominal, off = ("[]", joined) if state == "Contingent" else (joined, "[]")
-        return ('{"operational_intent":{"reference":' + json.dumps(ref, separators=(",", ":"))
-                + ',"details":{"volumes":' + nominal + ',"off_nominal_volumes":' + off
-                + ',"priority":' + str(int(f.priority)) + '}}}')
+        view = self._view(entity_id, entry, t)
+        if view is None:
+            return None
+        reference = held[1] if held is not None and held[0] == view.version else None
+        return '{"operational_intent":' + self.document(view, reference) + '}'
 
     def constraint_details(self, entity_id: str) -> str | None:
         with self._lock:
