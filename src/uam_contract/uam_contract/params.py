@@ -58,6 +58,15 @@ def _nonempty(what: str) -> Callable[[str], str]:
     return lambda v: "" if v else f"empty; give {what}"
 
 
+def _http_url_or_empty(value: str) -> str:
+    from urllib.parse import urlsplit
+
+    parts = urlsplit(value)
+    if value and (parts.scheme not in ("http", "https") or not parts.hostname):
+        return f"{value[:200]!r} is not an http(s) URL with a host (or '' for none)"
+    return ""
+
+
 PLANNER = (
     Param("network", "", "routing network file (.yaml, .geojson, .graphml), e.g. config/networks/singapore.yaml",
           check=_nonempty("a network file, e.g. config/networks/singapore.yaml")),
@@ -404,6 +413,22 @@ USS = (
           "half [m]", 0.001, 10000.0),
     Param("volume_piece_s", 5.0, "longest time window of one Volume4D [s] (docs/f3548.md: the bound)",
           0.01, 86400.0),
+    Param("dss_url", "", "the DSS (the URL its /dss/v1 paths are under, e.g. http://localhost:8082) in which the USS "
+          "keeps a reference of every intent it serves, whose OVN it then serves, and whose subscribers it notifies "
+          "(uam_sim.f3548.dss_sync); '' = no DSS: local OVNs, no DSS called", check=_http_url_or_empty),
+    Param("dss_token_file", "", "with dss_url, one of three token sources: a file holding one bearer token sent "
+          "with every DSS call and notification (it needs every scope: utm.strategic_coordination, "
+          "utm.constraint_processing; and an aud each receiver takes)"),
+    Param("dss_dev_key", "", "with dss_url, one of three token sources: a development private key (PEM; "
+          "`python -m uam_sim.uss_server keys DIR`) that mints a token per audience and scope, sub dss_subject"),
+    Param("dss_auth_url", "", "with dss_url, one of three token sources: an auth server's token endpoint asked "
+          "as InterUSS's dummy OAuth server is (GET ?grant_type=client_credentials&scope=..&intended_audience=.."
+          "&sub=dss_subject), e.g. http://localhost:8085/token"),
+    Param("dss_subject", "uam-fleet", "the sub of minted or asked tokens: this USS's identity at the DSS (its "
+          "references' manager)", check=_nonempty("the USS's identity, e.g. uam-fleet")),
+    Param("dss_audience", "", "the aud of tokens for the DSS; '' = the host of dss_url"),
+    Param("dss_retry_s", 5.0, "wall time [s] between retries of the DSS puts and deletes that failed (each "
+          "change is tried at once)", 0.05, 3600.0),
 )
 
 TABLES = {"planner": PLANNER, "solver": SOLVER, "simulator": SIMULATOR, "request_generator": REQUEST_GENERATOR,

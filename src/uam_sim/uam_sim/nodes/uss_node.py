@@ -24,6 +24,13 @@ plan, modification and cancellation goes to the planner node as a request signed
 authority (``uam/uss_flight_plan``, :mod:`uam_planner.signed_requests`), and an answer waits, at
 most ``flight_planning_timeout_s``, for the planner's decision; an approval counts only once the
 planner's journal (or, without one, its plans topic) holds the plan.
+
+With ``dss_url`` it keeps a reference of every served intent in that DSS
+(:class:`uam_sim.f3548.dss_sync.DssSync`, in a thread of its own: created, updated at each new
+version, deleted when the intent ends; the DSS's reference then served; the subscribers the DSS
+names notified), with tokens from ``dss_token_file``, ``dss_dev_key`` or ``dss_auth_url``. A
+flight_planning answer then also waits (at most :data:`DSS_WAIT_S`) for the DSS's reference.
+Without it no DSS is called and the OVNs are local, as before.
 """
 
 from __future__ import annotations
@@ -44,6 +51,11 @@ from uam_contract import names as c
 from uam_contract.params import USS
 from uam_contract.stamps import stamp_s
 from uam_msgs.msg import FleetState, FlightPlan, FlightRequest
+
+
+#: the longest wall time [s] a flight_planning answer waits for the DSS's reference after the
+#: planner's decision (a DSS that does not answer is logged and the answer goes out)
+DSS_WAIT_S = 10.0
 
 
 class UssNode(Node):
@@ -102,11 +114,50 @@ class UssNode(Node):
         if self.planning is not None:
             self.planning.ctx = self.store.ctx
         base = self.store.ctx.uss_base_url
+        self.dss_sync = self._dss_sync(p)   # a bad token source refuses the start before any thread runs
         self.server.start()
         log = self.get_logger().warning if self.server.auth == "off" else self.get_logger().info
         log(f"{self.server.announcement}; base url {base}; {p['workers']} workers")
+        if self.dss_sync is not None:
+            self.dss_sync.start(p["dss_retry_s"])
         self.plans = 0
         self.clock_refused = 0
+        self._follow(p)
+
+    def _dss_sync(self, p):
+        """With ``dss_url``: the DSS's references of the served intents (a DssSync, started once
+        the server is); None without (local OVNs, no DSS called: the node as it was)."""
+        if not p["dss_url"]:
+            unused = [k for k in ("dss_token_file", "dss_dev_key", "dss_auth_url") if p[k]]
+            if unused:
+                self.get_logger().warning(f"{', '.join(unused)} given without dss_url: not used (no DSS)")
+            return None
+        from uam_sim.f3548.dss import DssClient, token_source
+        from uam_sim.f3548.dss_sync import DssSync
+        tokens = token_source(p["dss_token_file"], p["dss_dev_key"], p["dss_auth_url"], p["dss_subject"])
+        client = DssClient(p["dss_url"], tokens, audience=p["dss_audience"])
+        self.get_logger().info(f"DSS {client.base_url} (token audience {client.audience}): every served intent's "
+                               f"reference kept there, failures retried every {p['dss_retry_s']:g} s")
+        return DssSync(self.store, client, log=self.get_logger().info, warn=self.get_logger().warning)
+
+    def await_dss(self, operator_id: str, request_id: str, plan_version: int | None, timeout_s: float) -> str:
+        """With a DSS: wait (at most ``timeout_s``) until the DSS holds the reference of the
+        intent at ``plan_version`` (None: holds none), or its put or delete failed, so that a
+        flight_planning answer follows the DSS's record, as a test director reading the DSS
+        expects. The outcome (DssSync.wait_settled), '' without a DSS."""
+        if self.dss_sync is None:
+            return ""
+        from uam_planner.f3548 import intent_id
+        oid = intent_id(operator_id, request_id)
+        outcome = self.dss_sync.wait_settled(oid, plan_version, timeout_s)
+        if outcome not in ("synced", "deleted"):
+            self.get_logger().warning(f"DSS: operational intent {oid} ({operator_id}/{request_id}): {outcome} "
+                                      f"after {timeout_s:g} s; answered all the same (the planner's decision stands)")
+        return outcome
+
+    def _follow(self, p) -> None:
+        """What the store serves: the planner's journal and the simulator's clock, or (no
+        journal) the topics."""
         self.tail = None
         if p["journal"]:
             from uam_bringup.journal import JournalTail
@@ -234,6 +285,8 @@ class UssNode(Node):
         self.store.set_time(stamp_s(msg.clock))
 
     def close(self) -> None:
+        if self.dss_sync is not None:
+            self.dss_sync.stop()
         self.server.stop()
 
 
@@ -248,6 +301,8 @@ class NodeDecider:
     def __init__(self, node, signer, operator_id: str, timeout_s: float):
         from uam_msgs.srv import UpdateConstraint
         self.node, self.signer, self.operator_id, self.timeout_s = node, signer, operator_id, float(timeout_s)
+        # with a DSS, an answer also waits for the DSS's reference, at most this long
+        self.dss_wait_s = min(self.timeout_s, DSS_WAIT_S)
         self.client = node.create_client(UpdateConstraint, c.SERVICE_USS_FLIGHT_PLAN)
         self._lock = threading.Condition()
         self._flights: dict = {}   # request id -> Flight (newest version), this operator's only
@@ -335,6 +390,7 @@ class NodeDecider:
         f = self._await(request.request_id, 1)
         if f is None:
             return Decision("failed", "the planner's answer is not in its record (journal) in time")
+        self.node.await_dss(self.operator_id, request.request_id, int(f.version), self.dss_wait_s)
         return Decision("approved", flight=f)
 
     def modify(self, request):
@@ -353,11 +409,14 @@ class NodeDecider:
         if f is None:
             return Decision("failed", "the planner's new version is not in its record (journal) in time",
                             self.flight(request.request_id))
+        self.node.await_dss(self.operator_id, request.request_id, int(f.version), self.dss_wait_s)
         return Decision("approved", flight=f)
 
     def cancel(self, request_id: str, operator_id: str, reason: str) -> str | None:
         ok, why = self._call(self.signer.operation("cancel", request_id=request_id, operator_id=operator_id,
                                                    reason=reason))
+        if ok:   # the store ends the intent once the journal records the cancellation
+            self.node.await_dss(operator_id, request_id, None, self.dss_wait_s)
         return None if ok else why
 
 
