@@ -115,3 +115,14 @@ def test_the_committed_paper_report_is_its_generators_output(tmp_path):
     for fig in ("### Fig. 3", "### Fig. 4", "### Fig. 5", "### Fig. 6"):
         assert fig in again, fig
     assert again == (committed / "REPORT.md").read_text()
+
+
+@pytest.mark.slow  # about 12 s: the committed load sweep's tables and figures
+def test_the_committed_load_sweep_report_is_its_generators_output(tmp_path):
+    import shutil
+    committed = Path(__file__).resolve().parents[3] / "docs" / "load-sweep"
+    copy = tmp_path / "load-sweep"
+    shutil.copytree(committed, copy)
+    again = report_from_tables(copy).read_text()
+    assert "--config config/load-sweep.yaml --out results/load-sweep" in again   # its own command
+    assert again == (committed / "REPORT.md").read_text()

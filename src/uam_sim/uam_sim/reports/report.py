@@ -22,6 +22,10 @@ from .stats import compare
 # The command that regenerates the committed study (docs/paper-study).
 STUDY_COMMAND = ("python -m uam_sim.experiment --config config/experiment.yaml --out results/study "
                  "--workers 2")
+# Each committed study's command, by the output folder its configuration names
+STUDY_COMMANDS = {"results/study": STUDY_COMMAND,
+                  "results/load-sweep": "python -m uam_sim.experiment --config config/load-sweep.yaml "
+                                        "--out results/load-sweep --workers 2"}
 
 
 def _f(x, nd=2) -> str:
@@ -328,7 +332,7 @@ def write_report(sweep, outputs: dict, machine: dict, out: Path) -> Path:
     tts = outputs.get("tts", {})
     methods = _methods(cells)
     mm = mwis_methods(cells)
-    L = _intro_lines()
+    L = _intro_lines(cfg.out)
     _setup_section(L, sweep, outputs, machine, methods)
     L += ["## Departures from the paper", ""] + [f"- {d}" for d in departures(cfg, figs, tts)] + [""]
     _safety_section(L, cfg, cells)
@@ -349,13 +353,13 @@ def write_report(sweep, outputs: dict, machine: dict, out: Path) -> Path:
     return path
 
 
-def _intro_lines() -> list:
+def _intro_lines(out: str = "results/study") -> list:
     return ["# UAM fleet planning study: results", "",
          "Written by `uam_sim.studies.experiment` (the in-process runner). Every number below is computed "
          "from the tables in this directory (`runs.csv`, `epochs.csv`, `flights.csv`, `tts.csv`, "
          f"gzipped where large, and `{INPUTS}`): `python -m uam_sim.report DIR` writes this report "
          "and its figures again from them. The whole study (cells, TTS, tables, report):", "",
-         f"    {STUDY_COMMAND}", "",
+         f"    {STUDY_COMMANDS.get(str(out), f'python -m uam_sim.experiment --out {out}')}", "",
          "Comparisons between methods are paired per seed (every method plans the same requests "
          "at one rate and seed) and given as mean difference [95 % CI] over seeds (Student t, "
          "`uam_sim.reports.stats`); 'k+ / j-' counts the seeds with a positive / negative difference. A "
