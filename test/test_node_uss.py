@@ -18,6 +18,8 @@ from uam_msgs.msg import FlightPlan  # noqa: E402
 from graph_harness import TINY, build_graph, params, run_to_end, shutdown  # noqa: E402
 from uam_planner.f3548 import constraint_entity_id, intent_id, intent_version  # noqa: E402
 from uam_planner.f3548_schema import errors  # noqa: E402
+import flask  # noqa: E402,F401  the uss node's server, imported before any node's start-up thread
+# imports the solvers (two threads importing werkzeug at once raised KeyError 'werkzeug')
 
 pytestmark = pytest.mark.ros
 

@@ -15,6 +15,8 @@ requests = pytest.importorskip("requests")
 
 from graph_harness import TINY, build_graph, params, shutdown  # noqa: E402
 from test_node_uss_flight_planning import FID, OP, call, upsert  # noqa: E402
+import flask  # noqa: E402,F401  the uss node's server, imported before any node's start-up thread
+# imports the solvers (two threads importing werkzeug at once raised KeyError 'werkzeug')
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 

@@ -15,6 +15,8 @@ rclpy = pytest.importorskip("rclpy", reason="needs the built workspace (scripts/
 requests = pytest.importorskip("requests")
 
 from graph_harness import TINY, build_graph, params, shutdown  # noqa: E402
+import flask  # noqa: E402,F401  the uss node's server, imported before any node's start-up thread
+# imports the solvers (two threads importing werkzeug at once raised KeyError 'werkzeug')
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
