@@ -211,3 +211,27 @@ def test_a_peers_intent_reaches_the_planner_as_a_signed_update_of_the_uss_author
     assert take(req) is None
     with pytest.raises(ValueError, match="a replayed update"):
         take(req)
+
+
+def test_the_largest_notification_f3548_allows_fits_the_body_bound():
+    """OiMaxVertices (10,000) in volumes and again in off-nominal volumes, as a peer (or this USS)
+    may send them: under MAX_BODY_BYTES, which refuses only what no F3548 notification can be."""
+    import json
+
+    from uas_standards.astm.f3548.v21.constants import OiMaxVertices
+
+    from uam_sim.f3548.uss_server import MAX_BODY_BYTES
+
+    vertex = {"lat": 1.2345678901234567, "lng": 103.8765432109876543}
+    volume = {"volume": {"outline_polygon": {"vertices": [vertex] * 4},
+                         "altitude_lower": {"value": 45.01, "reference": "W84", "units": "M"},
+                         "altitude_upper": {"value": 74.99, "reference": "W84", "units": "M"}},
+              "time_start": {"value": "2025-01-06T00:00:30.000000Z", "format": "RFC3339"},
+              "time_end": {"value": "2025-01-06T00:00:35.000000Z", "format": "RFC3339"}}
+    n = OiMaxVertices // 4
+    body = {"operational_intent_id": "0b6d5e4c-3a2b-4c1d-8e9f-0a1b2c3d4e5f",
+            "operational_intent": {"details": {"volumes": [volume] * n, "off_nominal_volumes": [volume] * n,
+                                               "priority": 0}},
+            "subscriptions": [{"subscription_id": "0b6d5e4c-3a2b-4c1d-8e9f-0a1b2c3d4e5f", "notification_index": 3}]}
+    size = len(json.dumps(body).encode())
+    assert 1 << 20 < size < MAX_BODY_BYTES, size

@@ -54,7 +54,10 @@ from .auth import ALGORITHMS, DEV_SUBJECT
 ENTITY_ID = re.compile(r"^[0-9a-fA-F]{8}-[0-9a-fA-F]{4}-4[0-9a-fA-F]{3}-[89abAB][0-9a-fA-F]{3}-"
                        r"[0-9a-fA-F]{12}$")
 MAX_URL_CHARS = 2048
-MAX_BODY_BYTES = 65536
+#: a request body's bound: the largest notification F3548 allows (OiMaxVertices = 10,000 vertices,
+#: 2,500 four-cornered volumes, in volumes and again in off-nominal volumes: about 2.6 MB of JSON)
+#: fits; a long intent of ours is about 150 KiB on the Singapore network
+MAX_BODY_BYTES = 4 << 20
 AUTH_MODES = ("verify", "off")
 #: the realm of the WWW-Authenticate challenge (RFC 6750)
 REALM = "uam_fleet USS"
