@@ -64,6 +64,11 @@
 #   --volume-piece S   with --uss-port: the longest time window of one published Volume4D [s] (default 5);
 #                      the planner then keeps the published volumes of every two flights disjoint too
 #                      (F3548 mode; docs/f3548.md)
+#   --dss-url U        with --uss-port: the DSS whose operational intent references the USS keeps in step
+#                      with its intents (default '' = none; docs/f3548.md, DSS reference management)
+#   --dss-token-file F with --dss-url: a file holding the bearer token sent to the DSS
+#   --dss-auth-url U   with --dss-url: an auth server's token endpoint asked for each token (InterUSS's
+#                      dummy OAuth), instead of --dss-token-file
 #   --uss-auth A       verify | off: the USS server's access tokens (default verify: every request needs a
 #                      bearer token signed by the auth server's key, unexpired, for this USS, with the
 #                      endpoint's F3548 scope; off: none asked for, announced on the console and recorded)
@@ -89,7 +94,7 @@ cd "$ROOT"
 BACKEND=exact POLICY=mwis RATE=10 DURATION=3500 SEED=0 NETWORK=config/networks/singapore.yaml
 SPATIAL_BUFFER=0 TEMPORAL_BUFFER=0 WIND=0 WIND_FROM=270 GUST=0 SPEED_ERROR=0 DELAY_MEAN=0 VERTICAL_GUST=0 ALTITUDE_ERROR=0
 DEMAND="" CONSTRAINTS="" MODE=lockstep RTF=1 RERUN=save OUT="" FOXGLOVE_PORT=0 USS_PORT=0 RECORDER_NICE=19 RECORDER_STOP_S=60
-USS_AUTH=verify USS_AUTH_KEY="" USS_AUDIENCE="" VOLUME_PIECE=5
+USS_AUTH=verify USS_AUTH_KEY="" USS_AUDIENCE="" VOLUME_PIECE=5 DSS_URL="" DSS_TOKEN_FILE="" DSS_AUTH_URL=""
 CONFORMANCE=auto
 SEPARATION="" SEPARATION_M=100 VERTICAL_M=30 SLOT_S=0 CLIMB=5 DESCENT=3
 PRIORITY_GRANTS="" OBJECTIVE=paper BASELINE_ORDER=arrival PRIORITY_SHARE=0 HORIZON=1 LEAD_TIME=0 COMMIT_AHEAD=false REACTION=false REACTION_PERIOD=0 PROBE=0 PROBE_MARGIN=0 REPLAN_POLICY=""
@@ -130,6 +135,9 @@ while [[ $# -gt 0 ]]; do
     --rerun) RERUN="${2:?--rerun needs a value}"; shift 2;;
     --foxglove-port) FOXGLOVE_PORT="${2:?--foxglove-port needs a value}"; shift 2;;
     --uss-port) USS_PORT="${2:?--uss-port needs a value}"; shift 2;;
+    --dss-url) DSS_URL="${2:?--dss-url needs a value}"; shift 2;;
+    --dss-token-file) DSS_TOKEN_FILE="${2:?--dss-token-file needs a value}"; shift 2;;
+    --dss-auth-url) DSS_AUTH_URL="${2:?--dss-auth-url needs a value}"; shift 2;;
     --volume-piece) VOLUME_PIECE="${2:?--volume-piece needs a value}"; shift 2;;
     --uss-auth) USS_AUTH="${2:?--uss-auth needs a value}"; shift 2;;
     --uss-auth-key) USS_AUTH_KEY="${2:?--uss-auth-key needs a value}"; shift 2;;
@@ -166,6 +174,7 @@ done
 [[ "$USS_PORT" =~ ^[0-9]+$ ]] && (( USS_PORT <= 65535 )) || die "--uss-port: '$USS_PORT' is not a port 0..65535"
 [[ "$USS_AUTH" == verify || "$USS_AUTH" == off ]] || die "--uss-auth: '$USS_AUTH' is not verify or off"
 [[ -z "$USS_AUTH_KEY" || -f "$USS_AUTH_KEY" ]] || die "--uss-auth-key: no file '$USS_AUTH_KEY'"
+[[ -z "$DSS_TOKEN_FILE" || -f "$DSS_TOKEN_FILE" ]] || die "--dss-token-file: no file '$DSS_TOKEN_FILE'"
 [[ "$RTF" =~ ^[0-9]+(\.[0-9]+)?$ ]] || die "--rtf: '$RTF' is not a positive number"
 [[ -z "$SEPARATION" || "$SEPARATION" == sphere || "$SEPARATION" == cylinder ]] || die "--separation: '$SEPARATION' is not sphere or cylinder"
 for _flag in "separation-m:$SEPARATION_M" "vertical-separation-m:$VERTICAL_M" "slot-s:$SLOT_S" \
@@ -229,7 +238,9 @@ GENERATOR_P=(--params-file config/request_generator.yaml \
   ${DEMAND:+-p "demand_file:=$DEMAND"})
 RECORDER_P=(-p "network:=$NETWORK" -p "rerun:='$RERUN'" -p "foxglove_port:=$FOXGLOVE_PORT" "${AIRSPACE[@]}")
 USS_P=(-p "port:=$USS_PORT" -p "network:=$NETWORK" -p "separation_m:=$(f "$SEPARATION_M")" \
-  -p "vertical_separation_m:=$(f "$VERTICAL_M")" -p "volume_piece_s:=$(f "$VOLUME_PIECE")")
+  -p "vertical_separation_m:=$(f "$VERTICAL_M")" -p "volume_piece_s:=$(f "$VOLUME_PIECE")" \
+  ${DSS_URL:+-p "dss_url:=$DSS_URL"} ${DSS_TOKEN_FILE:+-p "dss_token_file:=$DSS_TOKEN_FILE"} \
+  ${DSS_AUTH_URL:+-p "dss_auth_url:=$DSS_AUTH_URL"})
 SIMULATOR_P=(--params-file config/simulator.yaml -p "duration_s:=$(f "$DURATION")" \
   -p "mode:=$MODE" -p "real_time_factor:=$(f "$RTF")" \
   -p "disturbance_seed:=$SEED" -p "wind_speed_mps:=$(f "$WIND")" \

@@ -149,7 +149,8 @@ def generate_launch_description() -> LaunchDescription:
                                    "separation_model": a["separation"],
                                    "separation_m": a["separation_m"],
                                    "vertical_separation_m": a["vertical_separation_m"],
-                                   "volume_piece_s": a["volume_piece_s"]}]))
+                                   "volume_piece_s": a["volume_piece_s"], "dss_url": a["dss_url"],
+                                   "dss_token_file": a["dss_token_file"], "dss_auth_url": a["dss_auth_url"]}]))
     return LaunchDescription(
         [DeclareLaunchArgument(name, default_value=default, description=text)
          for name, (default, text) in ARGS.items()]

@@ -105,6 +105,13 @@ LAUNCH_OPTIONS: tuple[LaunchOption, ...] = (
     LaunchOption("--volume-piece", "VOLUME_PIECE", "volume_piece_s", "5",
                  "with --uss-port: the longest time window of one published Volume4D [s]; the planner then keeps "
                  "the published volumes of every two flights disjoint too (F3548 mode; docs/f3548.md)"),
+    LaunchOption("--dss-url", "DSS_URL", "dss_url", "",
+                 "with --uss-port: the DSS whose operational intent references the USS keeps in step with its "
+                 "intents ('' = none; docs/f3548.md, DSS reference management)"),
+    LaunchOption("--dss-token-file", "DSS_TOKEN_FILE", "dss_token_file", "",
+                 "with --dss-url: a file holding the bearer token sent to the DSS (or --dss-auth-url)"),
+    LaunchOption("--dss-auth-url", "DSS_AUTH_URL", "dss_auth_url", "",
+                 "with --dss-url: an auth server's token endpoint asked for each token (InterUSS's dummy OAuth)"),
     LaunchOption("--uss-auth", "USS_AUTH", "uss_auth", "verify",
                  "the USS server's access tokens: verify (checked against --uss-auth-key) or off (announced)"),
     LaunchOption("--uss-auth-key", "USS_AUTH_KEY", "uss_auth_key", "",
