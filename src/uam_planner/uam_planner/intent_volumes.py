@@ -213,29 +213,84 @@ def _reach_model(trajs: Sequence, spec, tol: float):
     return SeparationModel("cylinder", d_h + tol + 1e-3, d_v + tol + 1e-3)
 
 
-def _aligned_pairs(a: VolumeTable, b: VolumeTable, seg_pairs: np.ndarray, n_seg_a: int,
-                   n_seg_b: int) -> np.ndarray:
+def _expand(first: np.ndarray, count: np.ndarray) -> tuple:
+    """(row, value) of the runs ``first[r] .. first[r] + count[r] - 1``, concatenated."""
+    count = np.maximum(count, 0)
+    row = np.repeat(np.arange(count.shape[0]), count)
+    return row, np.repeat(first, count) + (np.arange(row.shape[0]) - np.repeat(np.cumsum(count) - count, count))
+
+
+def _within_reach(sa: tuple, sb: tuple, si: np.ndarray, sj: np.ndarray, reach) -> tuple:
+    """(lo, hi) [s] per segment pair (si of sa, sj of sb): the times both fly within which they
+    are closer than ``reach`` (a cylinder: horizontally and vertically at once), from the roots
+    of the relative motion (linear on both segments), widened by a millisecond; lo > hi where
+    never. Two volumes of the pair can meet only at such a time (:func:`_reach_model`)."""
+    def motion(segs, k):
+        t0, t1, p0, p1 = segs[1][k], segs[2][k], segs[3][k], segs[4][k]
+        dur = t1 - t0
+        v = (p1 - p0) / np.where(dur > 0, dur, 1.0)[:, None]
+        return t0, t1, p0 - v * t0[:, None], v        # position = c + v t
+    a0, a1, ca, va = motion(sa, si)
+    b0, b1, cb, vb = motion(sb, sj)
+    c, w = ca - cb, va - vb
+    lo, hi = np.maximum(a0, b0), np.minimum(a1, b1)
+    big = np.inf
+    # horizontally: |c + w t|^2 < R^2, a quadratic in t
+    qa = w[:, 0] ** 2 + w[:, 1] ** 2
+    qb = 2.0 * (c[:, 0] * w[:, 0] + c[:, 1] * w[:, 1])
+    qc = c[:, 0] ** 2 + c[:, 1] ** 2 - float(reach.separation_m) ** 2
+    moving = qa > 1e-12
+    disc = qb * qb - 4.0 * qa * qc
+    root = np.sqrt(np.maximum(disc, 0.0))
+    h_lo = np.where(moving, (-qb - root) / np.where(moving, 2.0 * qa, 1.0), np.where(qc < 0, -big, big))
+    h_hi = np.where(moving, (-qb + root) / np.where(moving, 2.0 * qa, 1.0), np.where(qc < 0, big, -big))
+    never = moving & (disc < 0)
+    h_lo, h_hi = np.where(never, big, h_lo), np.where(never, -big, h_hi)
+    # vertically: |c_z + w_z t| < V
+    vz, cz, r = w[:, 2], c[:, 2], float(reach.vertical_separation_m)
+    climbing = np.abs(vz) > 1e-12
+    safe = np.where(climbing, vz, 1.0)
+    e1, e2 = (-r - cz) / safe, (r - cz) / safe
+    v_lo = np.where(climbing, np.minimum(e1, e2), np.where(np.abs(cz) < r, -big, big))
+    v_hi = np.where(climbing, np.maximum(e1, e2), np.where(np.abs(cz) < r, big, -big))
+    eps = 1e-3
+    return np.maximum(lo, np.maximum(h_lo, v_lo)) - eps, np.minimum(hi, np.minimum(h_hi, v_hi)) + eps
+
+
+def _aligned_pairs(a: VolumeTable, b: VolumeTable, seg_pairs: np.ndarray, sa: tuple, sb: tuple,
+                   piece_s: float, reach) -> np.ndarray:
     """(p, 2) (volume of a, volume of b) pairs of the segment pairs ``seg_pairs`` whose windows
-    may overlap: a segment's volumes are in time order, so the volumes of segment j overlapping
-    a volume of segment i form one run, found by a search (widened by one on each side; the
-    window test decides)."""
-    fa = np.searchsorted(a.segment, np.arange(n_seg_a + 1))
-    fb = np.searchsorted(b.segment, np.arange(n_seg_b + 1))
+    may overlap at a time the two segments are within ``reach`` (:func:`_within_reach`). A
+    segment's volumes split its time span evenly (``_cut``), so the volumes of segment i
+    meeting that time, and for each the volumes of segment j its window meets, are index ranges
+    found by arithmetic, each widened by one on both sides against rounding (the window test
+    decides)."""
+    def layout(t: VolumeTable, segs: tuple):
+        t0, t1 = segs[1], segs[2]
+        n = np.maximum(1, np.ceil((t1 - t0) / piece_s - 1e-9)).astype(np.int64)
+        first = np.searchsorted(t.segment, np.arange(t0.shape[0] + 1))
+        kept = first[1:] - first[:-1]
+        return t0, t1, n, first[:-1], n - kept      # the k of each segment's first kept volume
+
+    def k_range(t0, t1, n, lo_s, hi_s):
+        """Volume indices k of segments (t0, t1, n) whose windows may meet [lo_s, hi_s]."""
+        dur = np.where(t1 > t0, t1 - t0, 1.0)
+        return (np.floor((lo_s - t0) / dur * n).astype(np.int64) - 1,
+                np.floor((hi_s - t0) / dur * n).astype(np.int64) + 1)
+
+    ta0, ta1, na, fa, ka0 = layout(a, sa)
+    tb0, tb1, nb, fb, kb0 = layout(b, sb)
     si, sj = seg_pairs[:, 0], seg_pairs[:, 1]
-    cnt = fa[si + 1] - fa[si]
-    ia = np.repeat(fa[si], cnt) + (np.arange(int(cnt.sum())) - np.repeat(np.cumsum(cnt) - cnt, cnt))
-    jo = np.repeat(sj, cnt)
-    # b's volumes keyed by (segment, t1), one float each: segment + t1 / span keeps the order
-    span = float(max(np.abs(b.t1).max(initial=0.0), np.abs(a.t1).max(initial=0.0))) * 2.0 + 1.0
-    kb = b.segment + (b.t1 + span / 2.0) / span
-    lo = np.searchsorted(kb, jo + (a.t0[ia] + span / 2.0) / span) - 1
-    hi = np.searchsorted(kb, jo + (a.t1[ia] + span / 2.0) / span) + 2
-    lo = np.clip(lo, fb[jo], fb[jo + 1])
-    hi = np.clip(hi, lo, fb[jo + 1])
-    c = hi - lo
-    ii = np.repeat(ia, c)
-    jj = np.repeat(lo, c) + (np.arange(int(c.sum())) - np.repeat(np.cumsum(c) - c, c))
-    return np.stack([ii, jj], axis=1)
+    near_lo, near_hi = _within_reach(sa, sb, si, sj, reach)
+    lo, hi = k_range(ta0[si], ta1[si], na[si], near_lo, near_hi)
+    lo, hi = np.maximum(lo, ka0[si]), np.minimum(hi, na[si] - 1)
+    row, k = _expand(lo, hi - lo + 1)
+    ia = fa[si[row]] + (k - ka0[si[row]])                    # the volumes of i, by table index
+    j = sj[row]
+    lo, hi = k_range(tb0[j], tb1[j], nb[j], a.t0[ia], a.t1[ia])
+    lo, hi = np.maximum(lo, kb0[j]), np.minimum(hi, nb[j] - 1)
+    row2, kj = _expand(lo, hi - lo + 1)
+    return np.stack([ia[row2], fb[j[row2]] + (kj - kb0[j[row2]])], axis=1)
 
 
 def _segment_set(segs: tuple, from_s: float = -math.inf):
@@ -291,7 +346,7 @@ def intent_pairs(trajs_a: Sequence, trajs_b: Sequence | None, spec, from_s_b: fl
     used_b[near[:, 1]] = True
     a = _cut(sa, len(trajs_a), spec, only=used_a)
     b = a if single else _cut(sb, len(trajs_b), spec, from_s_b, only=used_b)
-    p = _aligned_pairs(a, b, near, sa[0].shape[0], sb[0].shape[0])
+    p = _aligned_pairs(a, b, near, sa, sb, float(spec.max_piece_s), model)
     i, j = p[:, 0], p[:, 1]
     ok = (a.t0[i] <= b.t1[j]) & (b.t0[j] <= a.t1[i]) \
         & (a.lower[i] <= b.upper[j] + tol) & (b.lower[j] <= a.upper[i] + tol) \
