@@ -58,10 +58,12 @@ from .conflict_graph import (
     CandidatePairCache,
     ConflictGraph,
     ShiftedCandidates,
+    _unique_pairs,
     build_conflict_graph,
 )
 from .constraints import refuse_candidates
 from .first_fit import first_fit_select
+from .intent_volumes import graph_for_config, intent_pairs
 from .objectives import OperatorShares, epoch_weights, order_requests
 from .planning_config import Flight, FlightRequest, PlanningConfig
 from .separation import SegmentSet, any_conflict, conflicting_pairs
@@ -556,7 +558,6 @@ def _with_intent_volumes(graph, trajs, airborne, config: PlanningConfig, t_s: fl
     (``uam_planner.intent_volumes.restrict_graph``; timed as ``volumes_s``); else ``graph``."""
     if config.intent_volumes is None:
         return graph
-    from .intent_volumes import graph_for_config
     t = time.perf_counter()
     # the flights' pieces that ended more than a second before the epoch meet no candidate
     graph = graph_for_config(graph, trajs, [f.trajectory for f in airborne], config, float(t_s) - 1.0)
@@ -700,7 +701,6 @@ def plan_epoch_fifo(t_s: float, epoch_index: int, pending: Sequence[FlightReques
         discarded = any_conflict(cand_set, active_set, sep)
     spec = config.intent_volumes
     if spec is not None and len(trajs) and airborne:   # F3548 mode: the published volumes too
-        from .intent_volumes import intent_pairs
         discarded[intent_pairs(trajs, [f.trajectory for f in airborne], spec, float(t_s) - 1.0)[:, 0]] = True
     t4 = time.perf_counter()
     phases["deconfliction_s"] = t4 - t3
@@ -708,8 +708,6 @@ def plan_epoch_fifo(t_s: float, epoch_index: int, pending: Sequence[FlightReques
     conflicts = conflicting_pairs([trajs[i] for i in surv], None, sep) \
         if surv.size > 1 else np.zeros((0, 2), dtype=np.int64)
     if spec is not None and surv.size > 1:
-        from .conflict_graph import _unique_pairs
-        from .intent_volumes import intent_pairs
         conflicts = _unique_pairs(np.concatenate(
             [conflicts, intent_pairs([trajs[i] for i in surv], None, spec)]), surv.size)
     t5 = time.perf_counter()

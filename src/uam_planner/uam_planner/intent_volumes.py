@@ -188,28 +188,26 @@ def _meet(ca: np.ndarray, cb: np.ndarray, tol: float) -> np.ndarray:
     return out
 
 
-def _reach_model(trajs: Sequence, spec, tol: float):
+def _velocity(segs: tuple, k=slice(None)) -> np.ndarray:
+    """(m, 3) velocity [m/s] of the segments ``k`` of ``segs`` (``_segments``); 0 where a segment
+    takes no time."""
+    dur = segs[2][k] - segs[1][k]
+    moving = dur > 0
+    return np.where(moving[:, None], (segs[4][k] - segs[3][k]) / np.where(moving, dur, 1.0)[:, None], 0.0)
+
+
+def _reach_model(segs: Sequence[tuple], spec, tol: float):
     """A cylinder that two flights come closer than whenever a volume of each meets (windows
     sharing t, rectangles and bands within ``tol``): at t each aircraft lies on its piece, and
     every point of a piece's rectangle is within sqrt((L + r_h)^2 + r_h^2) of every point of the
     piece (L <= v_h dt), every height of its band within r_v + v_z dt; so the aircraft are within
-    D_h + tol horizontally and D_v + tol vertically at t (``VolumeSpec.bounds_m``, with the
-    largest speeds and window of ``trajs``)."""
+    D_h + tol horizontally and D_v + tol vertically at t (``VolumeSpec.bounds_m`` at the largest
+    speeds of the segments ``segs``)."""
     from .separation import SeparationModel
-    v_h = v_z = 0.0
-    longest = 0.0
-    for tr in trajs:
-        d = np.diff(tr.points_m, axis=0)
-        dt = np.diff(tr.times_s)
-        ok = dt > 0
-        if ok.any():
-            v_h = max(v_h, float((np.hypot(d[ok, 0], d[ok, 1]) / dt[ok]).max()))
-            v_z = max(v_z, float((np.abs(d[ok, 2]) / dt[ok]).max()))
-            longest = max(longest, float(dt.max()))
-    piece = min(float(spec.max_piece_s), longest) if longest else float(spec.max_piece_s)
-    r_h, r_v = spec.horizontal_buffer_m, spec.vertical_buffer_m
-    d_h = 2.0 * math.hypot(v_h * piece + r_h, r_h)
-    d_v = 2.0 * (r_v + v_z * piece)
+    v = np.concatenate([_velocity(x) for x in segs])
+    v_h = float(np.hypot(v[:, 0], v[:, 1]).max(initial=0.0))
+    v_z = float(np.abs(v[:, 2]).max(initial=0.0))
+    d_h, d_v = spec.bounds_m(v_h, v_z)
     return SeparationModel("cylinder", d_h + tol + 1e-3, d_v + tol + 1e-3)
 
 
@@ -226,9 +224,7 @@ def _within_reach(sa: tuple, sb: tuple, si: np.ndarray, sj: np.ndarray, reach) -
     of the relative motion (linear on both segments), widened by a millisecond; lo > hi where
     never. Two volumes of the pair can meet only at such a time (:func:`_reach_model`)."""
     def motion(segs, k):
-        t0, t1, p0, p1 = segs[1][k], segs[2][k], segs[3][k], segs[4][k]
-        dur = t1 - t0
-        v = (p1 - p0) / np.where(dur > 0, dur, 1.0)[:, None]
+        t0, t1, p0, v = segs[1][k], segs[2][k], segs[3][k], _velocity(segs, k)
         return t0, t1, p0 - v * t0[:, None], v        # position = c + v t
     a0, a1, ca, va = motion(sa, si)
     b0, b1, cb, vb = motion(sb, sj)
@@ -297,10 +293,9 @@ def _segment_set(segs: tuple, from_s: float = -math.inf):
     """The SegmentSet whose 'trajectories' are the segments ``segs`` (``_segments``) themselves,
     those ending after ``from_s`` (each keeps its index)."""
     from .separation import SegmentSet
-    owner, t0, t1, p0, p1 = segs
+    owner, t0, t1, p0, _p1 = segs
     keep = t1 > from_s
-    dt = t1 - t0
-    v = (p1 - p0) / np.where(dt > 0, dt, 1.0)[:, None]
+    v = _velocity(segs)
     return SegmentSet(np.flatnonzero(keep).astype(np.int64), t0[keep], t1[keep], p0[keep], v[keep],
                       int(owner.shape[0]))
 
@@ -319,9 +314,9 @@ def intent_pairs(trajs_a: Sequence, trajs_b: Sequence | None, spec, from_s_b: fl
     single = trajs_b is None
     if not len(trajs_a) or (not single and not len(trajs_b)):
         return np.zeros((0, 2), dtype=np.int64)
-    model = _reach_model(list(trajs_a) + ([] if single else list(trajs_b)), spec, tol)
     sa = _segments(trajs_a)
     sb = sa if single else _segments(trajs_b)
+    model = _reach_model([sa] if single else [sa, sb], spec, tol)
     if single:
         g = sa[0] if groups is None else np.asarray(groups)[sa[0]]
         near = conflicting_pairs(_segment_set(sa), None, model, groups_a=g)

@@ -72,6 +72,7 @@ from .conformance import (  # noqa: F401
     nearest,
     verify,
 )
+from .intent_volumes import graph_for_config
 from .replanning import PlanUpdate
 from .trajectory import Trajectory
 
@@ -388,9 +389,7 @@ def _yield_graph(unsaved: dict, moves: dict, cand_of: dict, others: list, held: 
     trs = [_clipped(x[1], t_eff) or x[1] for x in flat]
     graph = build_conflict_graph(trs, req_of, cand, np.array([x[2] for x in flat], dtype=np.float64), len(req),
                                  act, config.separation)
-    if config.intent_volumes is not None:   # F3548 mode: the new versions' volumes too
-        from .intent_volumes import graph_for_config
-        graph = graph_for_config(graph, trs, fixed, config, t_eff - 1.0)
+    graph = graph_for_config(graph, trs, fixed, config, t_eff - 1.0)   # F3548 mode: volumes too
     return flat, owners, graph
 
 
@@ -613,9 +612,8 @@ def _react_solve_steps(b: _Batch, idx: list, per: list, fixed: list):
     trs = [_clipped(a[0], b.t_eff) or a[0] for a in flat]
     graph = build_conflict_graph(trs, req_of, cand, np.array([a[1] for a in flat], dtype=np.float64),
                                  len(idx), act, b.config.separation)
-    if b.config.intent_volumes is not None:   # F3548 mode: the new versions' volumes too
-        from .intent_volumes import graph_for_config
-        graph = graph_for_config(graph, trs, [f.trajectory for f in others] + fixed, b.config, b.t_eff - 1.0)
+    # F3548 mode: the new versions' volumes too
+    graph = graph_for_config(graph, trs, [f.trajectory for f in others] + fixed, b.config, b.t_eff - 1.0)
     b.report["vertices"], b.report["edges"] = graph.n_vertices, graph.n_edges
     chosen = {}
     backend = b.policy

@@ -50,6 +50,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from .constraints import Constraint, ConstraintError, ConstraintSet, check_against
+from .intent_volumes import graph_for_config
 from .trajectory import Trajectory
 
 ACTIONS = ("add", "change", "withdraw")
@@ -835,10 +836,9 @@ class _Replan:
         graph = build_conflict_graph([a.trajectory for a in flat], req_of, cand_idx,
                                      np.array([a.weight for a in flat], dtype=np.float64), len(self.work),
                                      act, self.config.separation)
-        if self.config.intent_volumes is not None:   # F3548 mode: the new versions' volumes too
-            from .intent_volumes import graph_for_config
-            graph = graph_for_config(graph, [a.trajectory for a in flat], self.in_force(), self.config,
-                                     self.t_eff - 1.0)
+        # F3548 mode: the new versions' volumes too (in force: the flights the graph avoids)
+        graph = graph_for_config(graph, [a.trajectory for a in flat], self.in_force(), self.config,
+                                 self.t_eff - 1.0)
         return flat, req_of, graph
 
     def solve_steps(self, graph):

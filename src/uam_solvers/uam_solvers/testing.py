@@ -33,13 +33,9 @@ CONTRACT_PROBLEMS = {"paper-8": lambda: paper_instance(8, seed=11),
                      "large-400": lambda: large_instance(400, seed=12)}
 
 
-def _solve(service, backend, problem, time_limit_s: float, **kw):
-    return service.solve(problem, backend=backend, time_limit_s=time_limit_s, **kw)
-
-
 def assert_answer_kept(service, backend, problem, time_limit_s: float = 1.0, seed: int = 0) -> None:
     """The answer of ``backend`` on ``problem`` through ``service`` keeps the contract."""
-    r = _solve(service, backend, problem, time_limit_s, seed=seed)
+    r = service.solve(problem, backend=backend, time_limit_s=time_limit_s, seed=seed)
     assert problem.is_independent(r.selected), f"not an independent set: {r.selected!r}"
     total = float(np.sum(problem.weights[r.selected]))
     assert abs(r.objective - total) <= 1e-12 * max(1.0, abs(total)), (r.objective, total)
@@ -52,7 +48,7 @@ def assert_options_validated(service, backend, problem, options_spec, time_limit
     for key, value in [("bogus", 1)] + [(k, "not a number") for k, spec in options_spec.items()
                                          if spec.kind in ("int", "float")]:
         try:
-            _solve(service, backend, problem, time_limit_s, options={key: value})
+            service.solve(problem, backend=backend, time_limit_s=time_limit_s, options={key: value})
         except MwisInputError as exc:
             assert f"options[{key!r}]" in str(exc), str(exc)
         else:
@@ -61,8 +57,8 @@ def assert_options_validated(service, backend, problem, options_spec, time_limit
 
 def assert_deterministic(service, backend, problem, time_limit_s: float = 1.0, seed: int = 3) -> None:
     """Two solves with one seed give one set."""
-    a = _solve(service, backend, problem, time_limit_s, seed=seed)
-    b = _solve(service, backend, problem, time_limit_s, seed=seed)
+    a = service.solve(problem, backend=backend, time_limit_s=time_limit_s, seed=seed)
+    b = service.solve(problem, backend=backend, time_limit_s=time_limit_s, seed=seed)
     assert sorted(np.asarray(a.selected).tolist()) == sorted(np.asarray(b.selected).tolist())
 
 
@@ -81,7 +77,7 @@ def assert_backend_contract(backend, time_limit_s: float = 1.0, service=None,
     service = SolveService(small_workers=1, large_workers=1, margin_s=10.0) if own else service
     try:
         problems = {k: make() for k, make in CONTRACT_PROBLEMS.items()}
-        _solve(service, backend, problems["paper-8"], 3.0, seed=0)   # warm-up
+        service.solve(problems["paper-8"], backend=backend, time_limit_s=3.0, seed=0)   # warm-up
         for problem in problems.values():
             assert_answer_kept(service, backend, problem, time_limit_s)
         assert_options_validated(service, backend, problems["paper-8"], instance.options_spec, time_limit_s)
