@@ -20,7 +20,8 @@ call, minus the solve's: everything the planner spends on the epoch, wherever it
 route search inside ``submit`` counts). Epochs before ``--steady-from`` [s] (the fleet filling
 up) are left out of the percentiles. Prints p50 / p99 / max of the CPU and of the report's
 ``planning_time_s`` (wall), the airborne count, candidates and discarded per epoch, the
-approvals (which must not depend on the code's speed) and the load average before and after.
+approvals (which must not depend on the code's speed), the process's peak resident memory and
+the load average before and after.
 CPU time is far less sensitive than wall time to other processes on the same cores.
 """
 
@@ -30,6 +31,7 @@ import argparse
 import json
 import math
 import os
+import resource
 import sys
 import time
 from pathlib import Path
@@ -156,8 +158,10 @@ def main(argv=None) -> int:
           f"ms | {ms * _pct(s[:, 3], 50):.1f} / {ms * _pct(s[:, 3], 99):.1f} ms | "
           f"{s[:, 4].mean():.0f} | {s[:, 5].mean():.0f} | {s[:, 6].mean():.0f} | "
           f"{100 * share:.1f} % | {r['approved']} |")
-    print(f"planner set-up CPU {r['setup_cpu_s']:.2f} s; run {wall:.0f} s wall; load average "
-          f"{load0[0]:.2f} before, {load1[0]:.2f} after")
+    # ru_maxrss: the process's resident peak [KiB on Linux], network, routes and fleet included
+    peak_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    print(f"planner set-up CPU {r['setup_cpu_s']:.2f} s; run {wall:.0f} s wall; peak memory "
+          f"(resident) {peak_mib:,.0f} MiB; load average {load0[0]:.2f} before, {load1[0]:.2f} after")
     return 0
 
 
