@@ -530,6 +530,37 @@ def _wait_for_workers(svc, n: int = 2, timeout_s: float = 60.0) -> None:
         time.sleep(0.05)
 
 
+def e0_solve_rows(sample: list, solver: str, backend: str, limit: float, seed: int) -> list:
+    """One row per instance of ``sample`` ([(epoch, t_s, MwisProblem)]) solved by ``backend``
+    within ``limit`` [s] (``solver``: the row's label, e.g. ``reference``): first-fit is
+    :func:`uam_planner.first_fit.first_fit_select` on the instance, in process; every other
+    backend goes through one :class:`uam_solvers.executor.SolveService`, whose deadline holds.
+    ``wall_s`` is the answer's wall time [s], the service's wait for its workers left out."""
+    from uam_planner.first_fit import first_fit_select
+    from uam_solvers.executor import SolveService
+    rows = []
+    with SolveService(max_time_limit_s=max(limit, 1.0)) as svc:
+        for epoch, t_s, prob in sample:
+            t0 = time.perf_counter()
+            if backend == FIRSTFIT:
+                ans = first_fit_select(prob.weights, prob.all_edges(), [g.tolist() for g in prob.groups])
+                sel = np.asarray(ans.selected, dtype=int)
+                obj, proven, fb = float(prob.weights[sel].sum()), False, False
+            else:
+                _wait_for_workers(svc)
+                t0 = time.perf_counter()
+                res = svc.solve(prob, backend=backend, time_limit_s=limit, seed=seed)
+                sel = np.asarray(res.selected, dtype=int)
+                obj, proven, fb = float(res.objective), bool(res.proven_optimal), bool(res.fallback)
+            wall = time.perf_counter() - t0
+            rows.append({"epoch": int(epoch), "t_s": float(t_s), "vertices": int(prob.n),
+                         "edges": int(len(prob.all_edges())), "solver": solver,
+                         "backend": backend, "time_limit_s": limit, "objective": round(obj, 9),
+                         "count": int(sel.size), "proven_optimal": proven, "fallback": fb,
+                         "wall_s": wall})
+    return rows
+
+
 RECORD = "instances"  # the E0 cell that re-runs a reference run and keeps its sampled instances
 
 
@@ -538,9 +569,7 @@ def e0_cell(conf: dict, solver: str, _rate, _seed, cells_dir: str) -> dict:
     ``solver == RECORD``: re-run the reference run and keep its sampled instances (weights,
     edges, groups); else: solve ``conf["sample"]`` (the instances of that run's RECORD cell,
     sent with the task, so workers need no shared file system) with ``solver``."""
-    from uam_planner.first_fit import first_fit_select
     from uam_solvers.base import MwisProblem
-    from uam_solvers.executor import SolveService
 
     from ..runner.sweep import _commit, code_version
     _commit(), code_version()  # before the run: the code this process loaded
@@ -560,26 +589,7 @@ def e0_cell(conf: dict, solver: str, _rate, _seed, cells_dir: str) -> dict:
     ref = e0["reference"]
     limit = float(ref["time_limit_s"] if solver == REFERENCE else e0["time_limit_s"])
     backend = ref["backend"] if solver == REFERENCE else solver
-    rows = []
-    with SolveService(max_time_limit_s=max(limit, 1.0)) as svc:
-        for epoch, t_s, prob in sample:
-            t0 = time.perf_counter()
-            if backend == FIRSTFIT:
-                ans = first_fit_select(prob.weights, prob.all_edges(), [g.tolist() for g in prob.groups])
-                sel = np.asarray(ans.selected, dtype=int)
-                obj, proven, fb = float(prob.weights[sel].sum()), False, False
-            else:
-                _wait_for_workers(svc)
-                t0 = time.perf_counter()
-                res = svc.solve(prob, backend=backend, time_limit_s=limit, seed=int(conf["seed"]))
-                sel = np.asarray(res.selected, dtype=int)
-                obj, proven, fb = float(res.objective), bool(res.proven_optimal), bool(res.fallback)
-            wall = time.perf_counter() - t0
-            rows.append({"epoch": int(epoch), "t_s": float(t_s), "vertices": int(prob.n),
-                         "edges": int(len(prob.all_edges())), "solver": solver,
-                         "backend": backend, "time_limit_s": limit, "objective": round(obj, 9),
-                         "count": int(sel.size), "proven_optimal": proven, "fallback": fb,
-                         "wall_s": wall})
+    rows = e0_solve_rows(sample, solver, backend, limit, int(conf["seed"]))
     cell = {"key": key, "format": E0_FORMAT, "run": conf["name"], "rows": rows,
             "instances": len(sample), "ran_at": _commit(), "code_version": code_version()}
     write_json_atomic(Path(cells_dir) / f"{key}.json", cell)
