@@ -551,6 +551,10 @@ def fairness_lines(runs: pd.DataFrame, study: dict) -> list:
     return L
 
 
+#: the report that answers what E0's instances are too small for (uam_sim.studies.large_instances)
+LARGE_INSTANCES_REPORT = "docs/large-instances/REPORT.md"
+
+
 def not_answered_lines(runs: pd.DataFrame, study: dict, e0_max_vertices: int | None = None) -> list:
     """What the committed tables cannot answer, each with what it needs; a column's absence is
     read from runs.csv, not assumed."""
@@ -570,9 +574,10 @@ def not_answered_lines(runs: pd.DataFrame, study: dict, e0_max_vertices: int | N
     items.append(f"The knee: run-level rates are {', '.join(map(str, rates))} only; a sweep from "
                  f"below {min(rates)} (everything approved) to saturation needs new runs.")
     items.append("Where optimisation pays on the large city's instances (>= 10,000 vertices) and "
-                 "re-planning after a restriction: E0's largest instance has "
-                 f"{e0_max_vertices if e0_max_vertices is not None else 'no'} vertices; new "
-                 "shadow solves needed.")
+                 "re-planning after a restriction: beyond E0, whose largest instance has "
+                 f"{e0_max_vertices if e0_max_vertices is not None else 'no'} vertices; answered "
+                 f"from their own tables in [{LARGE_INSTANCES_REPORT}](../large-instances/REPORT.md) (the city-30k's epochs "
+                 "solved by every backend, and MWIS against first-fit re-planning).")
     items.append("Per-epoch series from which the steady-state windows re-derive: not committed "
                  "(windows.csv holds the truncations only); the cells that had them are gone.")
     return ["## Not answered from these tables", ""] + [f"- {t}" for t in items] + [""]
