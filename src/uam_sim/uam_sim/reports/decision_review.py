@@ -553,6 +553,11 @@ def fairness_lines(runs: pd.DataFrame, study: dict) -> list:
 
 #: the report that answers what E0's instances are too small for (uam_sim.studies.large_instances)
 LARGE_INSTANCES_REPORT = "docs/large-instances/REPORT.md"
+#: the load sweeps (docs/<dir>, config/load-sweep*.yaml): the rates, arms and per-class
+#: metrics E1-E3 lack, on the three airspaces
+LOAD_SWEEPS = (("load-sweep-paper", "Singapore, the paper's model"),
+               ("load-sweep", "layered Singapore, mode both"),
+               ("load-sweep-city", "the synthetic city, mode both"))
 
 
 def not_answered_lines(runs: pd.DataFrame, study: dict, e0_max_vertices: int | None = None) -> list:
@@ -561,18 +566,28 @@ def not_answered_lines(runs: pd.DataFrame, study: dict, e0_max_vertices: int | N
     cols = set(runs.columns)
     rates = sorted({r for e in study["experiments"] for c in e["cells"] for r in c["rates"]})
     methods = sorted({m for e in study["experiments"] for m in e["methods"]})
+    sweeps = ", ".join(f"[{label}](../{d}/REPORT.md)" for d, label in LOAD_SWEEPS)
+    rerun = ("in E1-E3 themselves they need the experiments run again at one code version, "
+             "every arm (`--stage full`, hours on 2 cores)")
     items = []
     if not any(c.startswith("approved_ss_prio") for c in cols):
         items.append("Per-class approvals (runs.csv has p95 delay per priority class, no approvals "
-                     "per class): new runs recording them.")
+                     f"per class): answered beside E1-E3 by the load sweeps ({sweeps}: approvals "
+                     f"and delay per priority class, from their own runs.csv); {rerun}.")
     if not any(c.startswith("approval_rate_op") or c.startswith("approved_ss_op") for c in cols):
         items.append("Per-operator approval rates and their min/max ratio (runs.csv has Jain's "
-                     "index only; its bound is above): new runs recording them.")
+                     "index only; its bound is above): new runs recording them (the runner's "
+                     "summaries now carry them, `operator_share_min/max/ratio`; the load sweeps' "
+                     "demand names no operator).")
     if "greedy" not in methods:
         items.append(f"Weighted greedy as a run-level arm (run-level methods: {', '.join(methods)}; "
-                     "greedy is in E0 only): new runs.")
-    items.append(f"The knee: run-level rates are {', '.join(map(str, rates))} only; a sweep from "
-                 f"below {min(rates)} (everything approved) to saturation needs new runs.")
+                     f"greedy is in E0 only): answered beside E1-E3 by the load sweeps ({sweeps}: "
+                     "weighted greedy beside first-fit, auto and FIFO; first-fit by priority in "
+                     f"the paper's model and the city, in arrival order on layered Singapore); "
+                     f"{rerun}.")
+    items.append(f"The knee: run-level rates are {', '.join(map(str, rates))} only; the load sweeps "
+                 f"({sweeps}) run from where every request is approved to saturation and locate "
+                 "each method's knee from their tables.")
     items.append("Where optimisation pays on the large city's instances (>= 10,000 vertices) and "
                  "re-planning after a restriction: beyond E0, whose largest instance has "
                  f"{e0_max_vertices if e0_max_vertices is not None else 'no'} vertices; answered "
