@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from .figures import BASELINES, NEVER_PROVING, flight_metrics
+from .knee import knee_section
 from .stats import compare
 
 # The command that regenerates the committed study (docs/paper-study).
@@ -25,7 +26,12 @@ STUDY_COMMAND = ("python -m uam_sim.experiment --config config/experiment.yaml -
 # Each committed study's command, by the output folder its configuration names
 STUDY_COMMANDS = {"results/study": STUDY_COMMAND,
                   "results/load-sweep": "python -m uam_sim.experiment --config config/load-sweep.yaml "
-                                        "--out results/load-sweep --workers 2"}
+                                        "--out results/load-sweep --workers 2",
+                  "results/load-sweep-paper": "python -m uam_sim.experiment --config "
+                                              "config/load-sweep-paper.yaml --out results/load-sweep-paper "
+                                              "--workers 1",
+                  "results/load-sweep-city": "python -m uam_sim.experiment --config config/load-sweep-city.yaml "
+                                             "--out results/load-sweep-city --workers 1"}
 
 
 def _f(x, nd=2) -> str:
@@ -337,6 +343,8 @@ def write_report(sweep, outputs: dict, machine: dict, out: Path) -> Path:
     L += ["## Departures from the paper", ""] + [f"- {d}" for d in departures(cfg, figs, tts)] + [""]
     _safety_section(L, cfg, cells)
     _runs_section(L, cells, methods)
+    if cfg.priority_share > 0 or cfg.operators:  # a demand with classes or operators: the load sweeps
+        L += knee_section(cells, methods, _rates(cells), cfg.interval_s)
 
     def fig(name, title, cols, heads=None, note="", nd=2):
         _fig_section(L, figs, out, name, title, cols, heads, note, nd)
@@ -371,9 +379,8 @@ def _setup_section(L: list, sweep, outputs: dict, machine: dict, methods: list) 
     cells = sweep.cells
     wall_total = sum(c["summary"]["wall_s"] for c in cells)
     L += ["## Setup", "",
-          f"- network: `{cfg.network}`; methods: {', '.join(methods)} (fifo = shortest route in "
-          "arrival order; firstfit = in arrival order the first conflict-free of the same k "
-          "candidates; the others are MWIS backends)",
+          f"- network: `{cfg.network}`; methods: {', '.join(methods)} ({_baselines_text(cfg)}; "
+          "the others are MWIS backends)",
           f"- rates (requests per {cfg.interval_s:g} s): {cfg.rates}; seeds: {cfg.seeds}",
           f"- duration {cfg.duration_s:g} s, epoch {cfg.epoch_s:g} s, departure window "
           f"{cfg.window_s:g} s, separation {_separation_text(cfg)}, k = {cfg.k} candidates, "
@@ -394,6 +401,15 @@ def _setup_section(L: list, sweep, outputs: dict, machine: dict, methods: list) 
     full = {"workers": cfg.workers, **{k: v for k, v in asdict(cfg).items() if k != "tts"}}
     L += ["<details><summary>All parameters</summary>", "", "```", *(f"{k}: {v}" for k, v in full.items()),
           f"tts: {cfg.tts}", "```", "</details>", ""]
+
+
+def _baselines_text(cfg) -> str:
+    """What FIFO and first-fit are, in the order they serve requests (cfg.baseline_order)."""
+    if getattr(cfg, "baseline_order", "arrival") == "priority":
+        return ("fifo = shortest route, by priority class then earliest latest departure; firstfit = "
+                "in that order the first conflict-free of the same k candidates")
+    return ("fifo = shortest route in arrival order; firstfit = in arrival order the first "
+            "conflict-free of the same k candidates")
 
 
 def _safety_section(L: list, cfg, cells) -> None:
