@@ -33,6 +33,23 @@ def test_the_bound_reads_the_held_out_seeds_alone(tmp_path):
     assert "`held.csv` (h) ran at `bbb`, its baseline `tune.csv` at `aaa`" in text
 
 
+def test_held_out_sets_are_bound_together_and_each_alone_and_a_gap_carries_its_note(tmp_path):
+    _table(tmp_path, "held.csv", 1_000, 0)
+    _table(tmp_path, "held2.csv", 2_000, 0)
+    (tmp_path / "tables.json").write_text(json.dumps({"point": POINT, "tables": {
+        "held.csv": {"seeds": "0-9", "code": "aaa", "role": "held-out", "what": "h"},
+        "held2.csv": {"seeds": "14-23", "code": "bbb", "role": "held-out", "what": "h2"}},
+        "gaps": {"10-11": {"explained": False, "note": "left out by the first sweep."}}}))
+    text = report_text(tmp_path)
+    # 1 - 0.05^(1/3000) = 9.98e-4 from all 3,000 held-out flights together
+    assert "0 flown losses in 3,000 held-out flights (20 runs, seeds 0-9, 14-23)" in text
+    assert "below 9.98e-04 per flight" in text and "ran at `aaa`, `bbb`" in text
+    assert "- `held.csv` (`aaa`): 0 flown losses in 1,000 flights (10 runs, seeds 0-9)" in text
+    assert "- `held2.csv` (`bbb`): 0 flown losses in 2,000 flights" in text
+    assert "Seeds 10-11: left out by the first sweep. Why they were left out is not recorded" in text
+    assert "Seeds 12-13: neither the tables nor the history" in text
+
+
 def test_parse_seeds():
     assert parse_seeds("0-2,5,7-8") == [0, 1, 2, 5, 7, 8]
 

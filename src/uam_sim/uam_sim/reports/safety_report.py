@@ -6,8 +6,9 @@ Reads ``tables.json`` (per Monte-Carlo table: the seeds, the commit that ran it,
 seeds were used to find and fix losses, "tuning", or looked at only after, "held-out") and the
 tables it names, and writes ``REPORT.md``: the bound on the flown-loss rate per flight and on the
 share of runs with a loss, from the held-out seeds alone (the tuning seeds were used to find and
-remove every loss, so they cannot bound what remains), the seeds no table holds, and where a row
-and the baseline it is compared with ran at different commits.
+remove every loss, so they cannot bound what remains): from every held-out set together and from
+each alone; the seeds no table holds, with what ``tables.json``'s ``gaps`` records of them; and
+where a row and the baseline it is compared with ran at different commits.
 """
 
 from __future__ import annotations
@@ -52,6 +53,44 @@ def _row(df: pd.DataFrame, point: dict) -> pd.Series | None:
     return sel.iloc[0] if len(sel) else None
 
 
+def _bound_text(sets: list, what: str) -> str:
+    """The bound on the flown-loss rate per flight and on the share of runs with a loss, from
+    (name, row, seeds) of one or more tables at the point."""
+    n = sum(int(r["flights"]) for _, r, _ in sets)
+    k = sum(int(r["flown_losses"]) for _, r, _ in sets)
+    runs = sum(int(r["runs"]) for _, r, _ in sets)
+    # a run with a loss has at least one; with k = 0 no run has one
+    runs_with = 0 if k == 0 else min(k, runs)
+    return (f"{k} flown losses in {n:,} {what} ({runs} runs, seeds "
+            f"{_ranges(sorted(s for _, _, ss in sets for s in ss))}): the loss rate is below "
+            f"{binomial_upper(k, n, LEVEL):.2e} per flight (rule of three {3 / n:.2e}), and "
+            + (f"at most {binomial_upper(runs_with, runs, LEVEL):.1%} of runs have a loss"
+               if k == 0 else f"{k} losses in at most {runs_with} of {runs} runs")
+            + f" ({LEVEL:.0%}).")
+
+
+def _gap_lines(man: dict) -> list:
+    """The seeds between the least and greatest that no table holds, each range with what
+    ``tables.json``'s ``gaps`` records of it (its note, and whether that explains it)."""
+    every = sorted({s for t in man["tables"].values() for s in parse_seeds(t["seeds"])})
+    gap = sorted(set(range(every[0], every[-1] + 1)) - set(every)) if every else []
+    if not gap:
+        return ["None: every seed in the range is in a table."]
+    notes = man.get("gaps", {})
+    noted = {s for seeds in notes for s in parse_seeds(seeds)}
+    L = [f"Seeds {_ranges(gap)} are in no table between seed {every[0]} and {every[-1]}."]
+    for seeds, g in notes.items():
+        if set(parse_seeds(seeds)) & set(gap):
+            L += ["", f"Seeds {seeds}: {g['note']}"
+                  + ("" if g.get("explained") else " Why they were left out is not recorded, so "
+                     "their absence is unexplained.")]
+    rest = sorted(set(gap) - noted)
+    if rest:
+        L += ["", f"Seeds {_ranges(rest)}: neither the tables nor the history that committed them "
+              "says why, so their absence is unexplained."]
+    return L
+
+
 def report_text(d: Path) -> str:
     man = json.loads((d / "tables.json").read_text(encoding="utf-8"))
     point = man["point"]
@@ -77,17 +116,17 @@ def report_text(d: Path) -> str:
     L += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
     L += ["", "## The bound, held-out seeds only", ""]
     if held:
-        n = sum(int(r["flights"]) for _, r, _ in held)
-        k = sum(int(r["flown_losses"]) for _, r, _ in held)
-        runs = sum(int(r["runs"]) for _, r, _ in held)
-        # a run with a loss has at least one; with k = 0 no run has one
-        runs_with = 0 if k == 0 else min(k, runs)
-        L.append(f"{k} flown losses in {n:,} held-out flights ({runs} runs, seeds "
-                 f"{_ranges(sorted(s for _, _, ss in held for s in ss))}): the loss rate is below "
-                 f"{binomial_upper(k, n, LEVEL):.2e} per flight (rule of three {3 / n:.2e}), and "
-                 + (f"at most {binomial_upper(runs_with, runs, LEVEL):.1%} of runs have a loss"
-                    if k == 0 else f"{k} losses in at most {runs_with} of {runs} runs")
-                 + f" ({LEVEL:.0%}).")
+        codes = sorted({man["tables"][name]["code"] for name, _, _ in held})
+        L.append(_bound_text(held, "held-out flights")
+                 + ("" if len(held) == 1 else
+                    f" All {len(held)} held-out sets together; they ran at "
+                    + ", ".join(f"`{c}`" for c in codes)
+                    + (", so pooling them assumes the commits between fly the same"
+                       if len(codes) > 1 else "") + "."))
+        if len(held) > 1:
+            L += ["", "Each held-out set alone:", ""]
+            L += [f"- `{name}` (`{man['tables'][name]['code']}`): " + _bound_text([(name, r, ss)], "flights")
+                  for name, r, ss in held]
     else:
         L.append("No held-out table at this point: no valid bound.")
     if tuning:
@@ -98,12 +137,7 @@ def report_text(d: Path) -> str:
               "held-out ones would claim a bound "
               f"({binomial_upper(k_t + sum(int(r['flown_losses']) for _, r, _ in held), n_t + sum(int(r['flights']) for _, r, _ in held)):.2e}) "
               "the held-out seeds alone do not give."]
-    every = sorted({s for t in man["tables"].values() for s in parse_seeds(t["seeds"])})
-    gap = sorted(set(range(every[0], every[-1] + 1)) - set(every)) if every else []
-    L += ["", "## Seeds no table holds", "",
-          (f"Seeds {_ranges(gap)} are in no table between seed {every[0]} and {every[-1]}; neither "
-           "the tables nor the history that committed them says why, so their absence is "
-           "unexplained." if gap else "None: every seed in the range is in a table.")]
+    L += ["", "## Seeds no table holds", "", *_gap_lines(man)]
     L += ["", "## Rows compared with a baseline at another commit", ""]
     mism = [(name, t, man["tables"][t["baseline"]]) for name, t in man["tables"].items()
             if t.get("baseline") and man["tables"][t["baseline"]]["code"] != t["code"]]
