@@ -42,3 +42,19 @@ def test_operators_spread_is_the_mean_over_the_seeds():
              for s, lo in ((0, 0.6), (1, 0.72))]
     (row,) = operator_rows(cells, ["a"], [2])
     assert row["seeds"] == 2 and abs(row["min"] - 0.66) < 1e-12 and abs(row["ratio"] - 0.66 / 0.9) < 1e-12
+
+
+def test_the_committed_load_sweeps_print_their_knee_and_classes_from_runs_csv():
+    """Each committed load sweep's REPORT.md holds the section its runs.csv gives (the whole
+    report byte for byte is the slow test's, for docs/load-sweep)."""
+    from pathlib import Path
+
+    from uam_sim.reports.report import STUDY_COMMANDS, _methods, _rates, _read_csv
+    docs = Path(__file__).resolve().parents[3] / "docs"
+    for name in ("load-sweep", "load-sweep-paper", "load-sweep-city"):
+        d = docs / name
+        cells = [{"summary": row} for row in _read_csv(d, "runs.csv")]
+        text = (d / "REPORT.md").read_text(encoding="utf-8")
+        section = "\n".join(knee_section(cells, _methods(cells), _rates(cells), 30.0))
+        assert section in text, name
+        assert STUDY_COMMANDS[f"results/{name}"] in text, name   # its own command
