@@ -119,7 +119,8 @@ def report_text(d: Path) -> str:
         codes = sorted({man["tables"][name]["code"] for name, _, _ in held})
         L.append(_bound_text(held, "held-out flights")
                  + ("" if len(held) == 1 else
-                    f" All {len(held)} held-out sets together; they ran at "
+                    (" Both held-out sets together" if len(held) == 2 else f" All {len(held)} held-out sets together")
+                    + "; they ran at "
                     + ", ".join(f"`{c}`" for c in codes)
                     + (", so pooling them assumes the commits between fly the same"
                        if len(codes) > 1 else "") + "."))
