@@ -58,3 +58,12 @@ def test_the_committed_load_sweeps_print_their_knee_and_classes_from_runs_csv():
         section = "\n".join(knee_section(cells, _methods(cells), _rates(cells), 30.0))
         assert section in text, name
         assert STUDY_COMMANDS[f"results/{name}"] in text, name   # its own command
+
+
+def test_a_rate_the_tables_decimals_would_round_is_written_in_full():
+    """0.25 requests per 30 s at one decimal would read 0.2, as the rate 0.2 does: written in
+    full, and the whole rates keep the table's decimals."""
+    from uam_sim.reports.report import _table
+    text = _table([{"rate": 0.2, "x": 1.0}, {"rate": 0.25, "x": 2.0}, {"rate": 10.0, "x": 3.0}],
+                  ["rate", "x"], nd=1)
+    assert [line.split(" | ")[0] for line in text.splitlines()[2:]] == ["| 0.2", "| 0.25", "| 10.0"]

@@ -57,9 +57,18 @@ def _table(rows: list, cols: list, heads: list | None = None, nd: int = 2) -> st
     heads = heads or cols
     out = ["| " + " | ".join(heads) + " |", "|" + "---|" * len(cols)]
     for r in rows:
-        out.append("| " + " | ".join(_f(r.get(c), nd) if not isinstance(r.get(c), str)
-                                     else r.get(c) for c in cols) + " |")
+        out.append("| " + " | ".join(_cell(r.get(c), c, nd) for c in cols) + " |")
     return "\n".join(out) + "\n"
+
+
+def _cell(v, col: str, nd: int) -> str:
+    """One table cell: text as it is, a number to ``nd`` decimals; a rate those decimals would
+    round (0.25 at one decimal) in full, so that no two rates of a table read the same."""
+    if isinstance(v, str):
+        return v
+    if col == "rate" and isinstance(v, float) and math.isfinite(v) and round(v, nd) != v:
+        return f"{v:g}"
+    return _f(v, nd)
 
 
 def _rel(fig_path: str, out: Path) -> str:
