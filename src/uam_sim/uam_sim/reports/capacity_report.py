@@ -22,6 +22,7 @@ import numpy as np
 import pandas as pd
 
 from .figures import STYLE, mean_ci, plt, save_figure
+from .markdown import table_lines
 from .stats import paired
 
 MODES = ["paper", "slots", "levels", "both"]
@@ -63,9 +64,7 @@ def _ci(p, nd=1) -> str:
 
 
 def _table(rows: list, heads: list) -> str:
-    out = ["| " + " | ".join(heads) + " |", "|" + "|".join("---" for _ in heads) + "|"]
-    out += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
-    return "\n".join(out)
+    return "\n".join(table_lines(rows, heads))
 
 
 def per_seed(runs: pd.DataFrame, arm: str, mode: str, method: str, rate, col: str = "approved") -> dict:

@@ -32,6 +32,7 @@ import pandas as pd
 from ..runner.files import write_csv
 from . import decision_review as review
 from .decision_groups import _groups, fmt_number
+from .markdown import table_lines as _table
 from .stats import mean_interval, seeds_needed
 
 SIZE_BINS = [1, 8, 16, 32, 64, 128, 256, 512, 1024, 4096, 100000]
@@ -40,12 +41,6 @@ E0_ORDER = ["firstfit", "greedy", "auto", "exact", "sa", "tabu", "qpu-emulator",
 
 def _f(x, nd=1, sign=False) -> str:
     return fmt_number(x, nd, sign)
-
-
-def _table(rows: list, heads: list) -> list:
-    out = ["| " + " | ".join(heads) + " |", "|" + "---|" * len(heads)]
-    out += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
-    return out
 
 
 # -- comparisons -------------------------------------------------------------------------------

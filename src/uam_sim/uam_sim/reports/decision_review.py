@@ -24,6 +24,7 @@ import numpy as np
 import pandas as pd
 
 from .decision_groups import _equal, _groups, fmt_number
+from .markdown import table_lines as _table
 from .stats import (cluster_bootstrap_mean, cuped, holm, jain_min_max_bound,
                     mean_interval, random_effects)
 
@@ -139,11 +140,6 @@ def heterogeneity_lines(rows: list) -> list:
                       "fixed effect [%]", "random effects DL [%]", "random effects HKSJ [%]",
                       "Q (df)", "Q's p", "I^2 [%]", "pooled claimed"])
     return L + [""]
-
-
-def _table(rows, heads):
-    out = ["| " + " | ".join(heads) + " |", "|" + "---|" * len(heads)]
-    return out + ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
 
 
 # -- the Answers' claims and their Holm family ----------------------------------------------------

@@ -14,6 +14,8 @@ import re
 
 import numpy as np
 
+from .markdown import table_lines
+
 #: the share of the requests approved below which a rate is past the knee
 KNEE_APPROVAL = 0.95
 
@@ -48,11 +50,13 @@ def approval_by_rate(cells, methods: list, rates: list) -> dict:
     return out
 
 
-def knee_rows(cells, methods: list, rates: list, threshold: float = KNEE_APPROVAL) -> list:
+def knee_rows(cells, methods: list, rates: list, threshold: float = KNEE_APPROVAL,
+              by: dict | None = None) -> list:
     """Per method: the last rate whose mean approval rate is at least ``threshold`` before the
     first that is below it (the knee), their approval rates and the one at the highest rate.
-    A method that never falls below has no knee (None)."""
-    by = approval_by_rate(cells, methods, rates)
+    A method that never falls below has no knee (None). ``by``: :func:`approval_by_rate`'s
+    answer, when the caller has it."""
+    by = approval_by_rate(cells, methods, rates) if by is None else by
     rows = []
     for m in methods:
         seen = [r for r in rates if (m, r) in by]
@@ -117,8 +121,7 @@ def operator_rows(cells, methods: list, rates: list) -> list:
 
 
 def _md(heads: list, rows: list) -> list:
-    return ["| " + " | ".join(heads) + " |", "|" + "---|" * len(heads),
-            *("| " + " | ".join(str(x) for x in r) + " |" for r in rows), ""]
+    return table_lines(rows, heads) + [""]
 
 
 def _rate_text(rate) -> str:
@@ -134,7 +137,7 @@ def knee_section(cells, methods: list, rates: list, interval_s: float) -> list:
          f"each run's approved / requested (`runs.csv` approval_rate). The knee of a method is the "
          f"lowest rate below {100 * KNEE_APPROVAL:g} %; below it (nearly) every request is approved.", ""]
     L += _md(["rate", *methods], [[_rate_text(r), *(_pct(by.get((m, r))) for m in methods)] for r in rates])
-    knees = knee_rows(cells, methods, rates)
+    knees = knee_rows(cells, methods, rates, by=by)
     L += _md(["method", f"last rate >= {100 * KNEE_APPROVAL:g} %", "approved [%]", "knee (first rate below)",
               "approved [%]", "highest rate", "approved [%]"],
              [[k["method"], _rate_text(k["last_above"]), _pct(k["rate_last_above"]), _rate_text(k["knee"]),

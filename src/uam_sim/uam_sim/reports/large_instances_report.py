@@ -31,6 +31,7 @@ import numpy as np
 import pandas as pd
 
 from ..runner.files import write_csv
+from .markdown import table_lines as _table
 from .stats import mean_interval, paired
 
 TARGET_GAP_PCT = 0.1
@@ -49,11 +50,6 @@ def _f(x, nd: int = 2, sign: bool = False) -> str:
     if isinstance(x, (int, np.integer)):
         return f"{int(x):+,d}" if sign else f"{int(x):,d}"
     return f"{float(x):+,.{nd}f}" if sign else f"{float(x):,.{nd}f}"
-
-
-def _table(rows: list, heads: list) -> list:
-    out = ["| " + " | ".join(heads) + " |", "|" + "---|" * len(heads)]
-    return out + ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
 
 
 def _true(col: pd.Series) -> pd.Series:
@@ -176,9 +172,8 @@ def _solves_lines(cfg: dict, g: pd.DataFrame, rows: list) -> list:
         by = x.set_index("solver")
         inst_rows.append([run, int(epoch), _f(int(x["vertices"].iloc[0])),
                           _f(int(x["edges"].iloc[0])), _f(float(x["best_known"].iloc[0]), 3)]
-                         + [_f(by.loc[s, "gap_pct"], 3) + ("*" if s in by.index
-                                                           and _true(by.loc[[s], "fallback"]).iloc[0]
-                                                           else "")
+                         + [_f(by.loc[s, "gap_pct"], 3)
+                            + ("*" if _true(by.loc[[s], "fallback"]).iloc[0] else "")
                             if s in by.index else "-" for s in solvers])
     L += _table(inst_rows, ["run", "epoch", "vertices", "edges", "best known"] + solvers)
     return L + ["", "`*`: a fallback answer.", ""]

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .markdown import table_lines as _table
+
 #: Why our numbers differ from the paper's, one home per cause.
 DEVIATIONS = {
     "simulator": "OneSky (the paper) -> this simulator and its own Singapore corridor network "
@@ -20,11 +22,6 @@ DEVIATIONS = {
 def _mean(cells, method, rate, key):
     v = [c["summary"][key] for c in cells if c["summary"]["method"] == method and c["summary"]["rate"] == rate]
     return float(np.mean(v)) if v else float("nan")
-
-
-def _table(rows, heads):
-    out = ["| " + " | ".join(heads) + " |", "|" + "---|" * len(heads)]
-    return out + ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
 
 
 def side_by_side_lines(cells, figs: dict, tts: dict, rates_shown) -> list:

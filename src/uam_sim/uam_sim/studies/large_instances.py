@@ -178,8 +178,8 @@ def run_solves(cfg: dict, out: Path, progress: bool = True) -> dict:
     rows, epochs = [], []
     for per_hour, dur in zip(cfg["record"]["rates_per_hour"], cfg["record"]["duration_s"]):
         cell = solve_rate(cfg, per_hour, dur, cells, progress)
-        rows += [{k: {**r, "commit": cell["ran_at"], "code_version": cell["code_version"]}[k]
-                  for k in SOLVE_COLUMNS} for r in cell["rows"]]
+        ran = {"commit": cell["ran_at"], "code_version": cell["code_version"]}
+        rows += [{k: (ran[k] if k in ran else r[k]) for k in SOLVE_COLUMNS} for r in cell["rows"]]
         epochs += [{k: e[k] for k in EPOCH_COLUMNS} for e in cell["epochs"]]
     write_csv(out / "solves.csv.gz", rows)
     write_csv(out / "instances.csv", epochs)
