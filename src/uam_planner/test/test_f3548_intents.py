@@ -375,3 +375,25 @@ def test_no_two_published_intents_of_a_layered_run_with_replans_intersect():
             assert all(a.trajectory.points_m[1, 2] == b.trajectory.points_m[1, 2] for a, b, _ in hits)
         else:
             assert hits == [], [(a.request_id, b.request_id, o) for a, b, o in hits]
+
+
+def test_published_times_read_by_the_fast_parser_equal_implicitdicts():
+    """published_prisms reads the form rfc3339 writes with the standard library's parser and
+    every other form with implicitdict's: the same instants to the last bit."""
+    import random
+
+    from implicitdict import StringBasedDateTime
+
+    from uam_planner.f3548 import _timestamp, rfc3339
+
+    rng = random.Random(7)
+    start = 1_790_000_000_123_456_789
+    for _ in range(2000):
+        t = rng.uniform(-1e5, 1e6)
+        for up in (False, True):
+            s = rfc3339(t, start, up)
+            assert _timestamp(s) == StringBasedDateTime(s).datetime.timestamp(), s
+    # peers' forms: no fraction, nanoseconds, an offset, one digit
+    for s in ("2026-12-07T20:10:08Z", "2026-12-07T20:10:08.123456789Z",
+              "2026-12-07T21:10:08.5+01:00", "2026-12-07T20:10:08.1Z"):
+        assert _timestamp(s) == StringBasedDateTime(s).datetime.timestamp(), s

@@ -16,7 +16,10 @@ import os, signal, time
 # caller that ignores SIGINT) hands its children SIGINT ignored, and Python keeps it ignored
 signal.signal(signal.SIGINT, signal.default_int_handler)
 from uam_solvers import solve
-solve([1.0, 2.0, 1.5], [[0, 1], [1, 2]], backend="exact", time_limit_s=1.0)
+# a limit the cold start (OR-Tools' import) fits in on a loaded machine too: at 1 s the answer
+# could be the fallback, with the start-up still in CP-SAT on a daemon thread at the exit
+r = solve([1.0, 2.0, 1.5], [[0, 1], [1, 2]], backend="exact", time_limit_s=30.0)
+assert not r.fallback and r.backend == "exact", (r.backend, r.message)
 try:
     os.kill(os.getpid(), signal.SIGINT)
     time.sleep(5)

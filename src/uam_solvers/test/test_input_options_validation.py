@@ -89,6 +89,24 @@ def test_unknown_option_is_an_error_for_every_backend(name):
     assert name in str(info.value)
 
 
+@pytest.mark.parametrize("name", ["qpu-emulator", "exact", "sa"])
+def test_a_bad_option_is_an_error_even_when_the_backend_is_still_starting(name, monkeypatch):
+    """A cold backend whose start-up outlasts the limit is answered by the fallback; a bad
+    option must not be: it is checked before the start-up (a loaded machine made the
+    qpu-emulator's start-up outlast 1 s, and the bad option came back as a fallback)."""
+    if not _available(name):
+        pytest.skip(f"{name} unavailable here")
+    import uam_solvers.warmup as warmup
+
+    monkeypatch.setattr(warmup, "start_up", lambda backend, deadline: None)
+    with pytest.raises(MwisInputError, match=r"options\['no_such_option'\]"):
+        uam_solvers.solve(W, EDGES, GROUPS, backend=name, options={"no_such_option": 1},
+                          time_limit_s=1.0)
+    # a good option still gets the fallback of a backend that is starting
+    r = uam_solvers.solve(W, EDGES, GROUPS, backend=name, options={}, time_limit_s=1.0)
+    assert r.fallback and r.stats["requested_backend"] == name
+
+
 @pytest.mark.parametrize("name, key, value", [
     ("exact", "num_workers", -3),
     ("exact", "num_workers", 500),

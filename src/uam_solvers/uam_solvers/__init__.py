@@ -189,6 +189,11 @@ def _solve_problem(problem: MwisProblem, backend: str | Backend, time_limit_s: f
 
     time_limit_s = check_time_limit(time_limit_s)
     seed = check_seed(seed)
+    if options:
+        # a bad option is an error, never a fallback: checked on the backend itself (its
+        # module's import, not its library's start-up) before a start-up that a cold backend
+        # may not finish within the limit
+        (get_backend(backend) if isinstance(backend, str) else backend).validate_options(options)
     spent = start_up(backend, t0 + time_limit_s)
     if spent is None:
         from .executor import fallback_answer
