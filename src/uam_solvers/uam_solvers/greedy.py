@@ -212,6 +212,56 @@ def _local_max(n: int, rows: np.ndarray, indices: np.ndarray, weights) -> np.nda
     return np.flatnonzero(chosen).astype(np.int32)
 
 
+def _local_max_grouped(n: int, edges: np.ndarray, groups, weights) -> np.ndarray:
+    """:func:`_local_max` on the listed ``edges`` (m, 2) plus every pair inside each of the
+    clique ``groups``, without listing the group pairs: per round, a live vertex's group
+    neighbours add (its group's live members - 1) to its degree, and it beats them when it is
+    its group's best live member (highest key, then lowest index), as the pairs would have it.
+    So the same degrees, keys and picks: the same selection, to the vertex, as listing the
+    pairs (tested), at O(m + sum |group|) a round instead of O(m + sum |group|^2): a planning
+    epoch of the large city has ~420 candidates per request, so its group pairs are 80 % of
+    its 27 M conflict pairs."""
+    w = np.asarray(weights, dtype=np.float64)
+    e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    rows = np.concatenate([e[:, 0], e[:, 1]])
+    cols = np.concatenate([e[:, 1], e[:, 0]])
+    gl = [np.asarray(g, dtype=np.int64) for g in groups if len(g) > 0]
+    sizes = np.array([g.size for g in gl], dtype=np.int64)
+    mem = np.concatenate(gl) if gl else np.zeros(0, dtype=np.int64)
+    gid = np.repeat(np.arange(sizes.size, dtype=np.int64), sizes)
+    starts = np.cumsum(sizes) - sizes
+    alive = np.ones(n, dtype=bool)
+    chosen = np.zeros(n, dtype=bool)
+    while alive.any():
+        live_edge = alive[rows] & alive[cols]
+        r, c = rows[live_edge], cols[live_edge]
+        deg = np.bincount(r, minlength=n)
+        live_mem = alive[mem]
+        if mem.size:
+            live_cnt = np.add.reduceat(live_mem.astype(np.int64), starts)
+            deg = deg + np.bincount(mem[live_mem], weights=(live_cnt[gid] - 1)[live_mem],
+                                    minlength=n).astype(np.int64)
+        key = w / (deg + 1.0)
+        loses = (key[c] > key[r]) | ((key[c] == key[r]) & (c < r))
+        beaten = np.zeros(n, dtype=bool)
+        beaten[r[loses]] = True
+        if mem.size:
+            key_m = np.where(live_mem, key[mem], -np.inf)
+            best_key = np.maximum.reduceat(key_m, starts)
+            best = np.minimum.reduceat(np.where(live_mem & (key_m == best_key[gid]), mem, n),
+                                       starts)
+            beaten[mem[live_mem & (mem != best[gid])]] = True
+        pick = alive & ~beaten
+        chosen |= pick
+        alive &= ~pick
+        gone = np.zeros(n, dtype=bool)
+        gone[c[pick[r]]] = True
+        if mem.size:
+            gone[mem[np.logical_or.reduceat(pick[mem], starts)[gid]]] = True
+        alive &= ~gone
+    return np.flatnonzero(chosen).astype(np.int32)
+
+
 #: Above this many vertices the fallback answer comes from :func:`local_max_greedy`.
 FAST_FALLBACK_ABOVE = 5000
 #: ... or above this many conflict pairs (GWMIN took 0.17 s at 2 x 10^5 pairs, 2.2 s at 5 x 10^5)
@@ -238,16 +288,7 @@ def fallback_selection(problem: MwisProblem) -> tuple[np.ndarray, str]:
     clique of 1,000 with pendants, 0.13 s on G(2000, 0.5)). Returns (selected, rule name)."""
     if not needs_fast_fallback(problem):
         return greedy_mwis(problem.weights, problem.all_edges()), "gwmin"
-    # listed edges plus group pairs, not deduplicated (sorting 10^6 pairs would double the cost)
-    parts = [problem.edges.astype(np.int64)]
-    by_size: dict[int, list[np.ndarray]] = {}
-    for g in problem.groups:
-        by_size.setdefault(int(g.size), []).append(g)
-    for k, gl in by_size.items():
-        mat = np.stack(gl).astype(np.int64)
-        iu, ju = np.triu_indices(k, k=1)
-        parts.append(np.stack([mat[:, iu].ravel(), mat[:, ju].ravel()], axis=1))
-    e = np.concatenate(parts, axis=0)
-    rows = np.concatenate([e[:, 0], e[:, 1]])
-    cols = np.concatenate([e[:, 1], e[:, 0]])
-    return _local_max(problem.n, rows, cols, problem.weights), "local-max gwmin key"
+    # listed edges and groups as they are: a pair listed and in a group counts twice in the
+    # degrees, as it did when the group pairs were listed beside the edges (not deduplicated)
+    return (_local_max_grouped(problem.n, problem.edges, problem.groups, problem.weights),
+            "local-max gwmin key")
