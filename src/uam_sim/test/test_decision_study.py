@@ -151,6 +151,13 @@ def test_every_variant_of_a_cell_and_rate_is_measured_in_one_window():
                                                        own["h5"])
     # another rate keeps its own window
     assert w[("E2", "sg", "horizon_epochs=1", 40)][0] == own["h1r40"]
+    # the same windows from the per-epoch rows as a reader of epochs.csv.gz has them (text)
+    from uam_sim.studies.decision_study import epoch_rows, windows_from_epoch_rows
+    for k, r in enumerate(records):
+        r[3]["summary"]["seed"] = k
+    text = [{k: str(v) for k, v in row.items()} for row in epoch_rows(records)]
+    again = windows_from_epoch_rows(text, ss)
+    assert {(k[0], k[1], k[2], int(k[3])): v for k, v in again.items()} == w
 
 
 def _runs(diffs, base=100.0):
@@ -259,6 +266,20 @@ def test_the_study_runs_resumes_and_its_report_rebuilds_from_the_tables(tmp_path
     proven = e0[e0["proven_optimal"]]
     # a proven optimum is the best any solver found on that instance
     assert np.allclose(proven["objective"], best[proven.index])
+    # the per-epoch series are committed beside the windows, and the windows re-derive from them
+    import csv
+    import gzip
+
+    from uam_sim.studies.decision_study import windows_from_epoch_rows
+    with gzip.open(out / "epochs.csv.gz", "rt", newline="") as f:
+        erows = list(csv.DictReader(f))
+    assert len({(r["method"], r["seed"], r["variant"]) for r in erows}) == info["runs"]
+    rederived = windows_from_epoch_rows(erows, cfg["steady_state"])
+    with open(out / "windows.csv", newline="") as f:
+        committed = {(r["experiment"], r["cell"], r["variant"], r["rate"]):
+                     (int(r["truncation_epoch"]), float(r["warmup_s"]), r["reference_method"],
+                      int(r["variant_truncation_epoch"])) for r in csv.DictReader(f)}
+    assert {k: (int(w[0]), float(w[1]), w[2], int(w[3])) for k, w in rederived.items()} == committed
     # resumes: the finished cells are reused (the pilot again computes nothing)
     again = run_stage(cfg, "pilot", out, progress=False)
     assert again["runs"] == info["runs"]
@@ -272,7 +293,8 @@ def test_the_study_runs_resumes_and_its_report_rebuilds_from_the_tables(tmp_path
     assert "Machine load (1-min average, the larger of before and after each run) median" in first
     # the tables rebuilt where no cell of this code version is (a later version, another cells
     # folder): the finished tables are kept, not replaced by empty ones
-    before = {n: (out / n).read_bytes() for n in ("runs.csv", "windows.csv", "e0.csv.gz")}
+    before = {n: (out / n).read_bytes() for n in ("runs.csv", "windows.csv", "e0.csv.gz",
+                                                  "epochs.csv.gz")}
     run_stage(dict(cfg, cells=str(tmp_path / "no-cells")), "tables", out, progress=False)
     assert {n: (out / n).read_bytes() for n in before} == before
     assert (out / "REPORT.md").read_text() == first

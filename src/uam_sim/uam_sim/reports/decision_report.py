@@ -599,7 +599,8 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, dict]:
     L += _e0_lines(e0, study, e0s)
     L += ["## The paper's figures", "", paper_figures_text(study), ""]
     if runs is not None:
-        L += review.not_answered_lines(runs, study, int(e0["vertices"].max()) if e0 is not None else None)
+        L += review.not_answered_lines(runs, study, int(e0["vertices"].max()) if e0 is not None else None,
+                                       (Path(d) / "epochs.csv.gz").exists())
     return "\n".join(L).rstrip() + "\n", tables
 
 

@@ -556,9 +556,10 @@ LOAD_SWEEPS = (("load-sweep-paper", "Singapore, the paper's model"),
                ("load-sweep-city", "the synthetic city, mode both"))
 
 
-def not_answered_lines(runs: pd.DataFrame, study: dict, e0_max_vertices: int | None = None) -> list:
+def not_answered_lines(runs: pd.DataFrame, study: dict, e0_max_vertices: int | None = None,
+                       epoch_series: bool = False) -> list:
     """What the committed tables cannot answer, each with what it needs; a column's absence is
-    read from runs.csv, not assumed."""
+    read from runs.csv, not assumed (``epoch_series``: whether epochs.csv.gz is there)."""
     cols = set(runs.columns)
     rates = sorted({r for e in study["experiments"] for c in e["cells"] for r in c["rates"]})
     methods = sorted({m for e in study["experiments"] for m in e["methods"]})
@@ -589,6 +590,10 @@ def not_answered_lines(runs: pd.DataFrame, study: dict, e0_max_vertices: int | N
                  f"{e0_max_vertices if e0_max_vertices is not None else 'no'} vertices; answered "
                  f"from their own tables in [{LARGE_INSTANCES_REPORT}](../large-instances/REPORT.md) (the city-30k's epochs "
                  "solved by every backend, and MWIS against first-fit re-planning).")
-    items.append("Per-epoch series from which the steady-state windows re-derive: not committed "
-                 "(windows.csv holds the truncations only); the cells that had them are gone.")
+    if not epoch_series:
+        items.append("Per-epoch series from which the steady-state windows re-derive: not "
+                     "committed with these runs (windows.csv holds the truncations only; the "
+                     "cells that had them are gone). The tables stage writes them "
+                     "(`epochs.csv.gz`, re-derived by `decision_study.windows_from_epoch_rows`) "
+                     "for every run it collects, so a rerun commits them.")
     return ["## Not answered from these tables", ""] + [f"- {t}" for t in items] + [""]

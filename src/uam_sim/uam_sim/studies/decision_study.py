@@ -347,27 +347,62 @@ def windows(records: list, ss: dict, epoch_s: float) -> dict:
     variants (E2's horizons) then counts the same requests in both arms: with a window per
     variant, E2's pilot compared approvals over 3,750 s (H = 1) with approvals over 4,050 s
     (H = 5), 8 % more requests in one arm."""
+    return _windows([((e["name"], c["name"], variant_label(v), cell["summary"]["rate"]),
+                      cell["summary"]["method"], cell["epochs"]) for e, c, v, cell in records], ss)
+
+
+def windows_from_epoch_rows(rows: list, ss: dict) -> dict:
+    """:func:`windows` from the committed per-epoch series (``epochs.csv.gz``, rows of
+    :func:`epoch_rows`): the same windows, so that a reader re-derives windows.csv."""
+    runs: dict = {}
+    for r in rows:
+        key = (r["experiment"], r["cell"], r["variant"], r["rate"], r["method"], r["seed"])
+        runs.setdefault(key, []).append(r)
+    items = []
+    for (en, cn, vl, rate, method, _seed), eps in runs.items():
+        eps = sorted(eps, key=lambda r: int(r["epoch"]))
+        items.append(((en, cn, vl, rate), method,
+                      [{ss["series"]: float(r[ss["series"]]), "t_s": float(r["t_s"])}
+                       for r in eps]))
+    return _windows(items, ss)
+
+
+def _windows(items: list, ss: dict) -> dict:
+    """:func:`windows` on [((experiment, cell, variant label, rate), method, epochs)]."""
     groups: dict = {}
-    for e, c, v, cell in records:
-        s = cell["summary"]
-        key = (e["name"], c["name"], variant_label(v), s["rate"])
-        groups.setdefault(key, {}).setdefault(s["method"], []).append(cell)
+    for key, method, epochs in items:
+        groups.setdefault(key, {}).setdefault(method, []).append(epochs)
     out = {}
     for key, by_method in groups.items():
-        ref = by_method.get(ss["reference_method"]) or by_method[sorted(by_method)[0]]
+        ref_method = ss["reference_method"] if ss["reference_method"] in by_method \
+            else sorted(by_method)[0]
+        ref = by_method[ref_method]
         if ss["method"] == "none":
-            out[key] = (0, 0.0, ref[0]["summary"]["method"])
+            out[key] = (0, 0.0, ref_method)
             continue
-        n = min(len(cell["epochs"]) for cell in ref)
-        mean = np.mean([[float(ep[ss["series"]]) for ep in cell["epochs"][:n]] for cell in ref], axis=0)
+        n = min(len(eps) for eps in ref)
+        mean = np.mean([[float(ep[ss["series"]]) for ep in eps[:n]] for eps in ref], axis=0)
         d = mser_truncation(mean)
-        out[key] = (d, float(ref[0]["epochs"][d]["t_s"]) if n else 0.0, ref[0]["summary"]["method"])
+        out[key] = (d, float(ref[0][d]["t_s"]) if n else 0.0, ref_method)
     latest: dict = {}
     for (en, cn, _vl, rate), w in out.items():
         k = (en, cn, rate)
         if k not in latest or w[1] > latest[k][1]:
             latest[k] = w
     return {key: (*latest[(key[0], key[1], key[3])][:2], w[2], w[0]) for key, w in out.items()}
+
+
+def epoch_rows(records: list) -> list:
+    """One row per epoch of every run (``epochs.csv.gz``): the run's experiment, cell, variant,
+    method, rate and seed, then the epoch's own fields (``active``, the series the windows are
+    chosen on, among them), from which the windows re-derive (:func:`windows_from_epoch_rows`)."""
+    rows = []
+    for e, c, v, cell in records:
+        s = cell["summary"]
+        tag = {"experiment": e["name"], "cell": c["name"], "variant": variant_label(v),
+               "method": s["method"], "rate": s["rate"], "seed": s["seed"]}
+        rows.extend({**tag, "epoch": k, **ep} for k, ep in enumerate(cell["epochs"]))
+    return rows
 
 
 def run_row(e, c, v, cell, window, time_limit_s: float) -> dict:
@@ -432,8 +467,8 @@ def run_row(e, c, v, cell, window, time_limit_s: float) -> dict:
     return row
 
 
-def tables(cfg: dict, results: list, entries: list) -> tuple[list, list]:
-    """runs.csv and windows.csv rows from the swept cells."""
+def tables(cfg: dict, results: list, entries: list) -> tuple[list, list, list]:
+    """runs.csv, windows.csv and epochs.csv.gz rows from the swept cells."""
     by_arm = {a.name: (e, c, v) for e, c, v, a in entries}
     records = []
     limits = {}
@@ -460,7 +495,7 @@ def tables(cfg: dict, results: list, entries: list) -> tuple[list, list]:
               "reference_method": w[2], "variant_truncation_epoch": w[3],
               "truncation_epoch": w[0], "warmup_s": w[1]}
              for k, w in sorted(win.items(), key=lambda kv: tuple(map(str, kv[0])))]
-    return rows, wrows
+    return rows, wrows, epoch_rows(records)
 
 
 # -- E0: matched shadow solves --------------------------------------------------------------------
@@ -769,13 +804,16 @@ def run_stage(cfg: dict, stage: str, out: Path, experiments=None, backends=None,
             all_results += done
             all_entries += ent
             stale += [p for _a, _m, sw in done for p in sw.stale]
-        rows, wrows = tables(cfg, all_results, all_entries)
+        rows, wrows, erows = tables(cfg, all_results, all_entries)
         names_all = [e["name"] for e in cfg["experiments"]]
         rows = with_committed_rows(out / "runs.csv", rows, "experiment", names_all, cfg["cells"])
         wrows = with_committed_rows(out / "windows.csv", wrows, "experiment", names_all, cfg["cells"])
+        erows = with_committed_rows(out / "epochs.csv.gz", erows, "experiment", names_all,
+                                    cfg["cells"])
         if rows or not (out / "runs.csv").exists():
             write_csv(out / "runs.csv", rows)
             write_csv(out / "windows.csv", wrows)
+            write_csv(out / "epochs.csv.gz", erows)
         else:  # as for e0.csv.gz below: an empty table never replaces a finished one
             print(f"decision_study: no finished run cell at this code version in {cfg['cells']}; "
                   f"{out / 'runs.csv'} and windows.csv kept as they were", file=sys.stderr)
