@@ -808,8 +808,7 @@ def run_stage(cfg: dict, stage: str, out: Path, experiments=None, backends=None,
         names_all = [e["name"] for e in cfg["experiments"]]
         rows = with_committed_rows(out / "runs.csv", rows, "experiment", names_all, cfg["cells"])
         wrows = with_committed_rows(out / "windows.csv", wrows, "experiment", names_all, cfg["cells"])
-        erows = with_committed_rows(out / "epochs.csv.gz", erows, "experiment", names_all,
-                                    cfg["cells"])
+        erows = with_committed_rows(out / "epochs.csv.gz", erows, "experiment", names_all, cfg["cells"])
         if rows or not (out / "runs.csv").exists():
             write_csv(out / "runs.csv", rows)
             write_csv(out / "windows.csv", wrows)
