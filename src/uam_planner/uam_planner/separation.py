@@ -70,6 +70,10 @@ DEFAULT_BUCKET_CELLS = 1.0
 #   in its cell, where the labels are checked not to decrease within every cell.
 _CYLINDER_Z_KEYS = True
 _SKIP_OWN_RUNS = True
+# The check that decides (any_conflict) walks its cell-mate pairs in a compiled kernel
+# (separation_kernel): the same decisions to the last bit as the numpy path kept beside it
+# (off: numpy), without the numpy path's gathers and temporaries per pair and per candidate
+_COMPILED_DECIDE = True
 
 
 _KERNEL_BLOCK = 8192
@@ -1324,7 +1328,12 @@ def _decide_stage(bp: _BroadPhase, model, first, shift, template_of, blocked, op
                   stats):
     """One stage of :func:`any_conflict`: mark in ``blocked`` the candidates that lose
     separation among the piece pairs of ``bp`` (a's segments of this stage against b);
-    returns the updated open count per trajectory of a."""
+    returns the updated open count per trajectory of a. Compiled (:func:`_decide_compiled`)
+    or, with ``_COMPILED_DECIDE`` off, in numpy: the same decisions to the last bit.
+    ``stats["exact_checks"]``: the exact measures taken (one per piece pair and open
+    candidate); the compiled path stops at a candidate's first loss, so it counts fewer."""
+    if _COMPILED_DECIDE:
+        return _decide_compiled(bp, model, first, shift, blocked, open_count, stats)
     left_traj = bp.pt.P_traj[bp.sk.items[bp.left_pos]]
     n_exact = 0
     for i, j in _near_piece_pairs(bp, _DECIDE_PAIRS_PER_CHUNK,
@@ -1346,3 +1355,59 @@ def _decide_stage(bp: _BroadPhase, model, first, shift, template_of, blocked, op
         bp.fill_stats(stats, n_exact)
     return open_count
 
+
+
+def _decide_compiled(bp: _BroadPhase, model, first, shift, blocked, open_count, stats):
+    """:func:`_decide_stage` by the compiled kernel (``separation_kernel.decide_pairs``): the
+    box filter and the exact measure per cell-mate pair and open candidate, nothing
+    materialised; ``blocked`` and the returned int64 open counts updated in place."""
+    from . import separation_kernel
+
+    if bp.single:
+        raise ValueError("the compiled decide path compares two sets, not one")
+    f8, i8 = np.float64, np.int64
+
+    def c(a, dtype):   # one array type per argument: one compiled version of the kernel
+        return np.require(a, dtype, ("C", "W"))
+
+    pt, sk, grid = bp.pt, bp.sk, bp.grid
+    open_count = c(open_count, i8)
+    use_z = sk.kz is not None
+    none_i8 = np.zeros(1, dtype=i8)
+    box = tuple(c(x, f8) for x in (pt.S_t0, pt.S_t1, pt.S_xlo, pt.S_xhi, pt.S_ylo, pt.S_yhi,
+                                    pt.S_zlo, pt.S_zhi))
+    cells = tuple(c(x, i8) for x in (sk.kt, sk.kx, sk.ky, sk.kz if use_z else none_i8,
+                                      pt.S_iz0 if use_z else none_i8))
+    n_exact = separation_kernel.decide_pairs(
+        c(bp.left_pos, i8), c(bp.right_first, i8), c(bp.n_right, i8), c(sk.items, i8),
+        c(pt.P_traj, i8), box, cells, use_z,
+        none_i8 if pt.S_group is None else c(pt.S_group, i8), pt.S_group is not None,
+        (float(grid.tt0), float(grid.bucket), float(grid.x0), float(grid.y0), float(grid.cell)),
+        (c(pt.P_t0, f8), c(pt.P_t1, f8), c(pt.P_p0, f8), c(pt.P_v, f8)),
+        none_i8 if shift is None else c(first, i8),
+        np.zeros(1, dtype=f8) if shift is None else c(shift, f8), shift is not None,
+        model.kind == "cylinder", float(model.separation_m), float(model.vertical_separation_m),
+        float(_WINDOW_TOLERANCE_S), blocked, open_count)
+    bp.clock.append(time.perf_counter())
+    if stats is not None:
+        bp.fill_stats(stats, int(n_exact))
+    return open_count
+
+
+_WARM = False
+
+
+def warm_up() -> None:
+    """Compile the kernel of the check that decides now, at start-up, so that no epoch pays
+    for it: :func:`any_conflict` on two crossing flights in both models, with and without
+    departure shifts. A cold compile takes seconds; numba keeps the result in ``__pycache__``
+    and later processes only load it. Once per process; nothing to do with the numpy path."""
+    global _WARM
+    if _WARM or not _COMPILED_DECIDE:
+        return
+    a = [Trajectory(np.array([0.0, 100.0]), np.array([[-500.0, 0.0, 60.0], [500.0, 0.0, 60.0]]))]
+    b = [Trajectory(np.array([0.0, 100.0]), np.array([[0.0, -500.0, 60.0], [0.0, 500.0, 60.0]]))]
+    for model in (SeparationModel("sphere"), SeparationModel("cylinder")):
+        any_conflict(a, b, model)
+        any_conflict(a, b, model, shifts_a=(np.array([0, 2]), np.array([0.0, 5.0])))
+    _WARM = True

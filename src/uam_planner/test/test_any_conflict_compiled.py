@@ -1,0 +1,252 @@
+"""The compiled check that decides (``separation_kernel``) against the numpy path it replaces.
+
+``any_conflict`` walks its cell-mate pairs in a numba kernel when ``separation._COMPILED_DECIDE``
+is on, in numpy when it is off. The two must decide the same to the last bit: the kernel's
+measures are the numpy kernels' floating-point operations in the same order, and these tests
+hold them to it, per segment pair (the distances themselves, byte for byte) and per decision,
+on seeded random cases in both models, with and without departure shifts, with trajectories
+longer than the deciding stages, and on the ties where a decision could flip on the last bit:
+flat segments exactly V apart, touching time intervals, zero relative velocity, a candidate
+whose only loss is in the last stage. Both are also held to the first column of
+``conflicting_pairs``, the pair list the planner used before the deciding check.
+"""
+
+import numpy as np
+import pytest
+
+from uam_planner import separation, separation_kernel
+from uam_planner.separation import (SeparationModel, any_conflict, conflicting_pairs,
+                                    segment_pair_min_distance, segment_pair_min_horizontal_m)
+from uam_planner.trajectory import Trajectory
+
+SPHERE = SeparationModel("sphere", 100.0)
+CYL = SeparationModel("cylinder", 100.0, 30.0)
+LEVELS = [60.0, 90.0, 120.0, 150.0]
+
+
+def _decide(monkeypatch, compiled: bool, a, b, model, **kw):
+    """any_conflict with the compiled path on or off, and its stats."""
+    monkeypatch.setattr(separation, "_COMPILED_DECIDE", compiled)
+    st: dict = {}
+    got = any_conflict(a, b, model, stats=st, **kw)
+    return got, st
+
+
+def _both(monkeypatch, a, b, model, **kw):
+    """The compiled and the numpy decisions (equal, or the test fails), the pair list's mask
+    beside them, and the two paths' stats."""
+    got, st_c = _decide(monkeypatch, True, a, b, model, **kw)
+    want, st_n = _decide(monkeypatch, False, a, b, model, **kw)
+    assert got.dtype == want.dtype == bool
+    assert got.tolist() == want.tolist()
+    shifts = kw.get("shifts_a")
+    n = len(a) if shifts is None else len(shifts[1])
+    mask = np.zeros(n, dtype=bool)
+    pairs = conflicting_pairs(a, b, model, **kw)
+    mask[pairs[:, 0]] = True
+    assert got.tolist() == mask.tolist()
+    # the same stats keys (none when no stage had a piece pair to look at); the compiled path
+    # stops at a candidate's first loss, within a chunk too, so it takes at most as many
+    # exact measures
+    assert set(st_c) == set(st_n)
+    assert st_c.get("exact_checks", 0) <= st_n.get("exact_checks", 0)
+    return got, st_c, st_n
+
+
+def _long_flight(rng, t0, n_legs):
+    """A flight of ``n_legs`` legs at 8-15 m/s between random points, levels changing between
+    legs (climbs and descents): with 4-8 legs it lasts longer than the deciding stages."""
+    pts = [np.array([*rng.uniform(-2000, 2000, 2), rng.choice(LEVELS)])]
+    times = [t0]
+    for _ in range(n_legs):
+        p = np.array([*rng.uniform(-2000, 2000, 2), rng.choice(LEVELS)])
+        times.append(times[-1] + np.linalg.norm(p - pts[-1]) / rng.uniform(8.0, 15.0) + 1.0)
+        pts.append(p)
+    return Trajectory(np.array(times), np.array(pts))
+
+
+def _case(seed, n_a, n_b):
+    """Random long flights a and b, and ties: some of b fly a's path the separation ahead or
+    behind in time (10 s at 10 m/s for a straight copy), one level (V) up, or one rounding step
+    off a level."""
+    rng = np.random.default_rng(seed)
+    a = [_long_flight(rng, rng.uniform(0, 60), int(rng.integers(1, 8))) for _ in range(n_a)]
+    b = [_long_flight(rng, rng.uniform(-600, 900), int(rng.integers(1, 8))) for _ in range(n_b)]
+    for k in range(0, n_a, 4):
+        tr = a[k]
+        pts = tr.points_m.copy()
+        if k % 8 == 4:
+            pts[:, 2] = pts[:, 2] + 30.0
+        if k % 12 == 0:
+            pts[1:, 2] = np.nextafter(pts[1:, 2], np.inf if k % 24 else -np.inf)
+        b.append(Trajectory(tr.times_s + rng.choice([-10.0, 10.0, 0.0, 600.0]), pts))
+    return a, b
+
+
+def _shifts(seed, n):
+    rng = np.random.default_rng(seed)
+    counts = rng.integers(0, 8, n)
+    first = np.concatenate(([0], np.cumsum(counts)))
+    shift = np.concatenate([5.0 * np.arange(c) for c in counts])
+    return first, shift
+
+
+@pytest.mark.parametrize("stages", [separation._DECIDE_STAGES_S, (10.0, 40.0, 200.0, 700.0)])
+@pytest.mark.parametrize("model", [SPHERE, CYL], ids=["sphere", "cylinder"])
+@pytest.mark.parametrize("seed", range(5))
+def test_compiled_decisions_are_the_numpy_paths(model, seed, stages, monkeypatch):
+    monkeypatch.setattr(separation, "_DECIDE_STAGES_S", stages)
+    a, b = _case(seed, 50, 70)
+    got, st, _ = _both(monkeypatch, a, b, model)
+    assert 5 < got.sum() < len(a)
+    assert st["exact_checks"] > 0
+    # the segments of a starting after the last stage boundary take part (a late stage)
+    assert max(tr.times_s[-2] for tr in a) > stages[-1] + 60.0
+    for kw in (dict(cell_m=150.0, bucket_s=15.0), dict(z_cell_m=model.vertical_reach_m)):
+        _both(monkeypatch, a, b, model, **kw)
+
+
+@pytest.mark.parametrize("model", [SPHERE, CYL], ids=["sphere", "cylinder"])
+@pytest.mark.parametrize("seed", range(4))
+def test_compiled_decisions_with_shifts_are_the_numpy_paths(model, seed, monkeypatch):
+    base, active = _case(50 + seed, 30, 60)
+    first, shift = _shifts(seed, len(base))
+    got, _, _ = _both(monkeypatch, base, active, model, shifts_a=(first, shift))
+    assert 5 < got.sum() < shift.size
+    _both(monkeypatch, base, active, model, shifts_a=(first, shift),
+          z_cell_m=model.vertical_reach_m)
+
+
+def _segments(rng, n):
+    """Random segment pairs with the ties mixed in: equal velocities, flat segments exactly V
+    (30 m) apart, touching or disjoint time intervals, a common instant only."""
+    t0a = rng.uniform(0, 100, n)
+    t1a = t0a + rng.uniform(0, 60, n)
+    t0b = t0a + rng.uniform(-40, 40, n)
+    t1b = t0b + rng.uniform(0, 60, n)
+    p0a = rng.uniform(-300, 300, (n, 3))
+    p0b = p0a + rng.uniform(-150, 150, (n, 3)) * [1.0, 1.0, 0.4]
+    va = rng.uniform(-15, 15, (n, 3)) * [1.0, 1.0, 0.3]
+    vb = rng.uniform(-15, 15, (n, 3)) * [1.0, 1.0, 0.3]
+    k = np.arange(n)
+    vb[k % 5 == 0] = va[k % 5 == 0]                     # zero relative velocity
+    flat = k % 5 == 1                                   # two flat segments V apart
+    va[flat, 2] = vb[flat, 2] = 0.0
+    p0b[flat, 2] = p0a[flat, 2] + 30.0
+    t0b[k % 7 == 2] = t1a[k % 7 == 2]                   # touching intervals
+    t0b[k % 7 == 3] = np.nextafter(t1a[k % 7 == 3], np.inf)   # one rounding step apart
+    t1a[k % 11 == 4] = t0a[k % 11 == 4]                 # an instant
+    return t0a, t1a, p0a, va, t0b, t1b, p0b, vb
+
+
+def test_kernel_measures_are_the_numpy_kernels_to_the_last_bit():
+    rng = np.random.default_rng(0)
+    args = _segments(rng, 3000)
+    t0a, t1a, p0a, va, t0b, t1b, p0b, vb = args
+    sphere = segment_pair_min_distance(*args)
+    cylinder = segment_pair_min_horizontal_m(*args, 30.0)
+    got_s = np.empty_like(sphere)
+    got_c = np.empty_like(cylinder)
+    for k in range(sphere.shape[0]):
+        row = (t0a[k], t1a[k], *p0a[k], *va[k], t0b[k], t1b[k], *p0b[k], *vb[k])
+        got_s[k] = separation_kernel.sphere_measure(*row)
+        got_c[k] = separation_kernel.cylinder_measure(*row, 30.0, separation._WINDOW_TOLERANCE_S)
+    assert got_s.tobytes() == sphere.tobytes()
+    assert got_c.tobytes() == cylinder.tobytes()
+    # the ties are there: finite and infinite measures, both models
+    assert np.isfinite(cylinder).sum() > 300 and np.isinf(cylinder).sum() > 300
+    assert np.isinf(sphere).sum() > 100 and (sphere < 100.0).sum() > 100
+
+
+def _line(t0, t1, p0, p1):
+    return Trajectory(np.array([t0, t1], float), np.array([p0, p1], float))
+
+
+def _ties():
+    """(name, a, b, loses in the cylinder, loses in the sphere): one flight against one."""
+    east = _line(0, 200, (-1000, 0, 90), (1000, 0, 90))
+    up = 90.0 + 30.0
+    below = np.nextafter(up, 0.0)
+    north = _line(0, 100, (0, -500, 90), (0, 500, 90))
+    return [
+        ("V above", east, _line(0, 200, (-1000, 0, up), (1000, 0, up)), False, True),
+        ("a step less than V above", east, _line(0, 200, (-1000, 0, below), (1000, 0, below)),
+         True, True),
+        ("touching in time", north, _line(100, 150, (0, 500, 90), (0, 1000, 90)), True, True),
+        ("a step apart in time", north,
+         _line(np.nextafter(100.0, np.inf), 150, (0, 500, 90), (0, 1000, 90)), False, False),
+        ("same velocity, the separation ahead", east,
+         _line(0, 200, (-900, 0, 90), (1100, 0, 90)), False, False),
+        ("same velocity, a step closer", east,
+         _line(0, 200, (np.nextafter(-900.0, -np.inf), 0, 90), (np.nextafter(1100.0, -np.inf), 0,
+                                                                 90)), True, True),
+        ("same velocity, the separation above", east,
+         _line(0, 200, (-1000, 0, 190), (1000, 0, 190)), False, False),
+    ]
+
+
+@pytest.mark.parametrize("name, a, b, cylinder, sphere", _ties(), ids=[t[0] for t in _ties()])
+def test_ties_decide_the_same_in_both_paths(name, a, b, cylinder, sphere, monkeypatch):
+    for model, want in ((CYL, cylinder), (SPHERE, sphere)):
+        got, _, _ = _both(monkeypatch, [a], [b], model)
+        assert got.tolist() == [want], model.kind
+        # the same flight as one of several candidates, departing 0, 5 and 10 s late
+        got, _, _ = _both(monkeypatch, [a], [b], model,
+                          shifts_a=(np.array([0, 3]), np.array([0.0, 5.0, 10.0])))
+        assert got[0] == want
+
+
+def test_all_ties_together_decide_the_same(monkeypatch):
+    a = [t[1] for t in _ties()]
+    b = [t[2] for t in _ties()]
+    for model in (SPHERE, CYL):
+        _both(monkeypatch, a, b, model)
+
+
+def test_a_loss_in_the_last_stage_only_decides_the_same(monkeypatch):
+    """Candidates of a long flight whose only loss is 20 min after a's first departure (past
+    every stage boundary): some shifts meet the crossing flight there, others pass."""
+    # east, over the origin at t = 1000, in legs of 100 s: the legs near the origin start in
+    # the last stage
+    times = np.arange(0.0, 2001.0, 100.0)
+    east = Trajectory(times, np.stack((-10000.0 + 10.0 * times, 0.0 * times, 90.0 + 0.0 * times),
+                                      axis=1))
+    assert times[9] > separation._DECIDE_STAGES_S[-1]
+    other = _line(0, 10, (5000, 5000, 150), (5100, 5000, 150))  # a's stages start at t = 0
+    a = [other, east]
+    north = _line(1000, 1200, (0, -1000, 90), (0, 1000, 90))    # over the origin at t = 1100
+    first = np.array([0, 1, 31])
+    shift = np.concatenate(([0.0], 5.0 * np.arange(30)))
+    for model in (SPHERE, CYL):
+        got, st_c, st_n = _both(monkeypatch, a, [north], model, shifts_a=(first, shift))
+        lost = np.flatnonzero(got) - 1
+        # candidate k departs 5 k s late: over the origin at 1000 + 5 k, north at 1100
+        assert lost.min() > 0 and 100 / 5 in lost and got[0] == False  # noqa: E712
+        assert st_c["exact_checks"] > 0 and st_n["exact_checks"] >= st_c["exact_checks"]
+        got, _, _ = _both(monkeypatch, a, [north], model)
+        assert got.tolist() == [False, False]
+
+
+def test_huge_extents_take_the_general_broad_phase_and_decide_the_same(monkeypatch):
+    """Extents whose packed cell codes do not fit int64: the per-stage general broad phase
+    (keys sorted by their coordinates) feeds the same kernel."""
+    a, b = _case(3, 20, 30)
+    far = 1e13
+    a.append(_line(0, 200, (far - 1000, far, 90), (far + 1000, far, 90)))
+    b.append(_line(0, 200, (far, far - 1000, 90), (far, far + 1000, 90)))
+    for model in (SPHERE, CYL):
+        got, _, _ = _both(monkeypatch, a, b, model)
+        assert got[-1] and got[:-1].any()
+
+
+def test_one_compiled_version_serves_every_setting(monkeypatch):
+    """Both models, shifts or none, z in the keys or not: the kernel sees one set of argument
+    types, so a process compiles (or loads) it once."""
+    separation.warm_up()
+    a, b = _case(9, 10, 10)
+    first, shift = _shifts(9, len(a))
+    monkeypatch.setattr(separation, "_COMPILED_DECIDE", True)
+    for model in (SPHERE, CYL):
+        for kw in ({}, dict(shifts_a=(first, shift)), dict(z_cell_m=30.0)):
+            any_conflict(a, b, model, **kw)
+    assert len(separation_kernel.decide_pairs.signatures) == 1

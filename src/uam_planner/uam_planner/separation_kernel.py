@@ -1,0 +1,189 @@
+"""The compiled kernel of the check that decides (``separation.any_conflict``), with numba.
+
+One stage of ``any_conflict`` walks, per left entry of the broad phase (a's pieces, in the
+sorted keys' order), the entry's cell mates of b, keeps the pairs the box filter keeps
+(``separation._box_filter``: z overlap, canonical z cell, time and x / y overlap in the
+canonical cell) and runs the exact measure once per open candidate of a's trajectory, marking a
+candidate blocked at its first loss. The numpy path materialises every cell-mate pair, then
+every piece pair per candidate, and gathers their values: here nothing is materialised.
+
+The two measures are the numpy kernels (``separation._cpa_block`` for the sphere,
+``separation.segment_pair_min_horizontal_m`` for the cylinder) written per pair with the same
+floating-point operations in the same order, so every distance, hence every decision, is the
+same to the last bit (``test_any_conflict_compiled.py`` compares the two paths). No fastmath:
+the compiler must not reassociate or fuse a multiply and an add (an FMA rounds once, numpy
+twice). ``cache=True`` keeps the machine code in ``__pycache__``: a process compiles at most
+once (seconds), later processes load it (``separation.warm_up`` does it at start-up).
+"""
+
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+# numpy semantics for a division by zero (inf / nan, no exception); the kernels divide only
+# where the numpy code does, by a non-zero value
+_JIT = dict(cache=True, error_model="numpy", nogil=True)
+
+
+@njit(**_JIT)
+def _max(a, b):
+    """np.maximum of two floats (the first when equal, the NaN when either is NaN)."""
+    return a if (a >= b or a != a) else b
+
+
+@njit(**_JIT)
+def _min(a, b):
+    """np.minimum of two floats."""
+    return a if (a <= b or a != a) else b
+
+
+@njit(**_JIT)
+def sphere_measure(t0a, t1a, ax, ay, az, vax, vay, vaz, t0b, t1b, bx, by, bz, vbx, vby, vbz):
+    """Exact minimum 3D distance [m] of one segment pair over its common time (+inf without
+    one): ``separation._cpa_block`` for one pair, operation for operation."""
+    lo = _max(t0a, t0b)
+    span = _min(t1a, t1b) - lo
+    if span < 0.0:
+        return math.inf
+    da = lo - t0a
+    db = lo - t0b
+    rx = ((vax * da + ax) - bx) - vbx * db
+    ry = ((vay * da + ay) - by) - vby * db
+    rz = ((vaz * da + az) - bz) - vbz * db
+    dvx = vax - vbx
+    dvy = vay - vby
+    dvz = vaz - vbz
+    a = (dvx * dvx + dvy * dvy) + dvz * dvz
+    b = -((rx * dvx + ry * dvy) + rz * dvz)
+    tau = b / a if a > 0.0 else 0.0
+    hi = _max(span, 0.0)
+    # np.clip(tau, 0, hi): max with the lower bound first, then min with the upper one
+    tau = tau if (tau > 0.0 or tau != tau) else 0.0
+    tau = tau if (tau < hi or tau != tau) else hi
+    rx = rx + dvx * tau
+    ry = ry + dvy * tau
+    rz = rz + dvz * tau
+    return math.sqrt((rx * rx + ry * ry) + rz * rz)
+
+
+@njit(**_JIT)
+def cylinder_measure(t0a, t1a, ax, ay, az, vax, vay, vaz, t0b, t1b, bx, by, bz, vbx, vby, vbz,
+                     vertical_m, tolerance_s):
+    """Exact minimum horizontal distance [m] of one segment pair over the common times when
+    the vertical distance is below ``vertical_m`` (+inf if never):
+    ``separation.segment_pair_min_horizontal_m`` with ``_vertical_window`` for one pair."""
+    lo = _max(t0a, t0b)
+    span = _min(t1a, t1b) - lo
+    if not span >= 0.0:
+        return math.inf
+    da = lo - t0a
+    db = lo - t0b
+    rx = (ax + vax * da) - (bx + vbx * db)
+    ry = (ay + vay * da) - (by + vby * db)
+    rz = (az + vaz * da) - (bz + vbz * db)
+    dx = vax - vbx
+    dy = vay - vby
+    dz = vaz - vbz
+    # the vertical window [wl, wh] of [0, span] where |rz + dz tau| < vertical_m
+    if dz != 0.0:
+        a = (-vertical_m - rz) / dz
+        b = (vertical_m - rz) / dz
+        vl = _min(a, b)
+        vh = _max(a, b)
+        if not (vl < span + tolerance_s and vh > -tolerance_s):
+            return math.inf
+    else:
+        if not abs(rz) < vertical_m:
+            return math.inf
+        vl = -math.inf
+        vh = math.inf
+    wl = _max(vl, 0.0)
+    wh = _min(vh, span)
+    aa = dx * dx + dy * dy
+    tau = -(rx * dx + ry * dy) / aa if aa > 0.0 else 0.0
+    tau = _min(_max(tau, wl), _max(wh, wl))
+    return math.hypot(rx + dx * tau, ry + dy * tau)
+
+
+@njit(**_JIT)
+def _near(l, r, box, cells, use_z, grid):
+    """The box filter of one sorted-entry pair (l, r) (``separation._box_filter``): z boxes
+    overlapping with positive length, the canonical z cell (``use_z``), then time, x and y
+    overlapping with the low corner of the intersection in l's cell. ``box``: (t0, t1 swept,
+    xlo, xhi, ylo, yhi, zlo, zhi) per sorted entry; ``cells``: (kt, kx, ky, kz, iz0) per sorted
+    entry (kz, iz0 unused without ``use_z``); ``grid``: (tt0, bucket, x0, y0, cell)."""
+    t0, t1, xlo, xhi, ylo, yhi, zlo, zhi = box
+    kt, kx, ky, kz, iz0 = cells
+    tt0, bucket, x0, y0, cell = grid
+    if not _max(zlo[l], zlo[r]) < _min(zhi[l], zhi[r]):
+        return False
+    if use_z and max(iz0[l], iz0[r]) != kz[l]:
+        return False
+    lo = _max(t0[l], t0[r])
+    if not (lo <= _min(t1[l], t1[r]) and math.floor((lo - tt0) / bucket) == kt[l]):
+        return False
+    lo = _max(xlo[l], xlo[r])
+    if not (lo <= _min(xhi[l], xhi[r]) and math.floor((lo - x0) / cell) == kx[l]):
+        return False
+    lo = _max(ylo[l], ylo[r])
+    return lo <= _min(yhi[l], yhi[r]) and math.floor((lo - y0) / cell) == ky[l]
+
+
+@njit(**_JIT)
+def _measure(i, j, dt, shifted, pieces, cylinder, vertical_m, tolerance_s):
+    """The model's measure of piece i of a (its times + ``dt`` when ``shifted``) against
+    piece j of b; ``pieces``: (t0, t1, p0, v) by item id."""
+    t0, t1, p0, v = pieces
+    t0a = t0[i]
+    t1a = t1[i]
+    if shifted:
+        t0a += dt
+        t1a += dt
+    if cylinder:
+        return cylinder_measure(t0a, t1a, p0[i, 0], p0[i, 1], p0[i, 2], v[i, 0], v[i, 1], v[i, 2],
+                                t0[j], t1[j], p0[j, 0], p0[j, 1], p0[j, 2], v[j, 0], v[j, 1],
+                                v[j, 2], vertical_m, tolerance_s)
+    return sphere_measure(t0a, t1a, p0[i, 0], p0[i, 1], p0[i, 2], v[i, 0], v[i, 1], v[i, 2],
+                          t0[j], t1[j], p0[j, 0], p0[j, 1], p0[j, 2], v[j, 0], v[j, 1], v[j, 2])
+
+
+@njit(**_JIT)
+def decide_pairs(left_pos, right_first, n_right, items, traj, box, cells, use_z, group,
+                 use_group, grid, pieces, first, shift, shifted, cylinder, separation_m,
+                 vertical_m, tolerance_s, blocked, open_count):
+    """One stage of ``any_conflict``: per left entry e (sorted keys' order) whose trajectory
+    ta = traj[items[left_pos[e]]] has an open candidate, per cell mate r of the
+    ``n_right[e]`` from ``right_first[e]`` that passes the box filter (and has another group,
+    with ``use_group``), per candidate c of ta not yet blocked (``first[ta] .. first[ta+1]-1``
+    flown ``shift[c]`` s later when ``shifted``, else c = ta): c is blocked when the measure is
+    below ``separation_m`` (strict). Updates ``blocked`` and ``open_count`` (open candidates
+    per trajectory of a) in place; returns the number of exact measures taken."""
+    n_exact = 0
+    for e in range(left_pos.shape[0]):
+        lp = left_pos[e]
+        i = items[lp]
+        ta = traj[i]
+        if open_count[ta] <= 0:
+            continue
+        c0 = first[ta] if shifted else ta
+        c1 = first[ta + 1] if shifted else ta + 1
+        for r in range(right_first[e], right_first[e] + n_right[e]):
+            if use_group and group[lp] == group[r]:
+                continue
+            if not _near(lp, r, box, cells, use_z, grid):
+                continue
+            j = items[r]
+            for c in range(c0, c1):
+                if blocked[c]:
+                    continue
+                n_exact += 1
+                d = _measure(i, j, shift[c] if shifted else 0.0, shifted, pieces, cylinder,
+                             vertical_m, tolerance_s)
+                if d < separation_m:
+                    blocked[c] = True
+                    open_count[ta] -= 1
+            if open_count[ta] <= 0:
+                break
+    return n_exact
