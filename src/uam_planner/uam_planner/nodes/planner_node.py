@@ -83,6 +83,7 @@ from uam_planner.conformance import ConformanceBounds
 from uam_planner.authority import Authorities
 from uam_planner.grants import PriorityGrants
 from uam_planner.objectives import objective_problem
+from uam_planner import separation
 from uam_planner.sources import BoundSource, FleetView, conformance_digest
 from uam_planner.planning import AirspaceConfig, Planner, PlanningConfig, call_solver, default_solve_mwis
 
@@ -402,6 +403,9 @@ class PlannerNode(Node):
             from uam_solvers.executor import shared_service
 
             shared_service()
+        # the compiled check that decides (uam_planner.separation), compiled or loaded from its
+        # cache now: seconds when cold, paid before the first epoch is asked for
+        separation.warm_up()
         self._service = self.create_service(PlanEpoch, c.SERVICE_PLAN_EPOCH, self._on_plan_epoch,
                                             callback_group=self._group)
         self._react_service = self.create_service(React, c.SERVICE_REACT, self._on_react, callback_group=self._group)

@@ -10,6 +10,7 @@ from typing import Sequence
 
 import numpy as np
 
+from uam_planner import separation
 from uam_planner.planning import Planner
 
 from ..audit.record import PlanVersion
@@ -441,6 +442,7 @@ def _planner(network, method: str, cfg: ExperimentConfig, seed: int, policy: str
     pcfg = cfg.planning_config("greedy" if method in BASELINES else method, seed)
     planner = Planner(network, pcfg, policy=policy,
                       solve_mwis=None if policy in BASELINES else _solver(method, cfg, seed))
+    separation.warm_up()  # the compiled check that decides, compiled or loaded now, not in epoch 0
     if cfg.constraints_file:
         from uam_planner.airspace_files import load_airspace
         from .experiment_config import resolve_path
