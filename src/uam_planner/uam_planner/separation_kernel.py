@@ -108,45 +108,51 @@ def cylinder_measure(t0a, t1a, ax, ay, az, vax, vay, vaz, t0b, t1b, bx, by, bz, 
 
 
 @njit(**_JIT)
-def _near(l, r, box, cells, use_z, grid):
+def _near(lb, rb, lcell, r_iz0, use_z, grid):
     """The box filter of one sorted-entry pair (l, r) (``separation._box_filter``): z boxes
     overlapping with positive length, the canonical z cell (``use_z``), then time, x and y
-    overlapping with the low corner of the intersection in l's cell. ``box``: (t0, t1 swept,
-    xlo, xhi, ylo, yhi, zlo, zhi) per sorted entry; ``cells``: (kt, kx, ky, kz, iz0) per sorted
-    entry (kz, iz0 unused without ``use_z``); ``grid``: (tt0, bucket, x0, y0, cell)."""
-    t0, t1, xlo, xhi, ylo, yhi, zlo, zhi = box
-    kt, kx, ky, kz, iz0 = cells
+    overlapping with the low corner of the intersection in l's cell. ``lb``, ``rb``: the two
+    entries' (t0, t1 swept, xlo, xhi, ylo, yhi, zlo, zhi); ``lcell``: l's cell (kt, kx, ky, kz)
+    and first z cell; ``r_iz0``: r's first z cell; ``grid``: (tt0, bucket, x0, y0, cell).
+    Scalars only: an array argument would cost a reference count per pair."""
+    t0l, t1l, xlol, xhil, ylol, yhil, zlol, zhil = lb
+    t0r, t1r, xlor, xhir, ylor, yhir, zlor, zhir = rb
+    kt, kx, ky, kz, iz0 = lcell
     tt0, bucket, x0, y0, cell = grid
-    if not _max(zlo[l], zlo[r]) < _min(zhi[l], zhi[r]):
+    if not _max(zlol, zlor) < _min(zhil, zhir):
         return False
-    if use_z and max(iz0[l], iz0[r]) != kz[l]:
+    if use_z and max(iz0, r_iz0) != kz:
         return False
-    lo = _max(t0[l], t0[r])
-    if not (lo <= _min(t1[l], t1[r]) and math.floor((lo - tt0) / bucket) == kt[l]):
+    lo = _max(t0l, t0r)
+    if not (lo <= _min(t1l, t1r) and math.floor((lo - tt0) / bucket) == kt):
         return False
-    lo = _max(xlo[l], xlo[r])
-    if not (lo <= _min(xhi[l], xhi[r]) and math.floor((lo - x0) / cell) == kx[l]):
+    lo = _max(xlol, xlor)
+    if not (lo <= _min(xhil, xhir) and math.floor((lo - x0) / cell) == kx):
         return False
-    lo = _max(ylo[l], ylo[r])
-    return lo <= _min(yhi[l], yhi[r]) and math.floor((lo - y0) / cell) == ky[l]
+    lo = _max(ylol, ylor)
+    return lo <= _min(yhil, yhir) and math.floor((lo - y0) / cell) == ky
 
 
 @njit(**_JIT)
-def _measure(i, j, dt, shifted, pieces, cylinder, vertical_m, tolerance_s):
-    """The model's measure of piece i of a (its times + ``dt`` when ``shifted``) against
-    piece j of b; ``pieces``: (t0, t1, p0, v) by item id."""
-    t0, t1, p0, v = pieces
-    t0a = t0[i]
-    t1a = t1[i]
+def _measure(a, b, dt, shifted, cylinder, vertical_m, tolerance_s):
+    """The model's measure of a's piece (its times + ``dt`` when ``shifted``) against b's;
+    ``a``, ``b``: (t0, t1, x, y, z, vx, vy, vz)."""
+    t0a, t1a, ax, ay, az, vax, vay, vaz = a
+    t0b, t1b, bx, by, bz, vbx, vby, vbz = b
     if shifted:
         t0a += dt
         t1a += dt
     if cylinder:
-        return cylinder_measure(t0a, t1a, p0[i, 0], p0[i, 1], p0[i, 2], v[i, 0], v[i, 1], v[i, 2],
-                                t0[j], t1[j], p0[j, 0], p0[j, 1], p0[j, 2], v[j, 0], v[j, 1],
-                                v[j, 2], vertical_m, tolerance_s)
-    return sphere_measure(t0a, t1a, p0[i, 0], p0[i, 1], p0[i, 2], v[i, 0], v[i, 1], v[i, 2],
-                          t0[j], t1[j], p0[j, 0], p0[j, 1], p0[j, 2], v[j, 0], v[j, 1], v[j, 2])
+        return cylinder_measure(t0a, t1a, ax, ay, az, vax, vay, vaz, t0b, t1b, bx, by, bz, vbx,
+                                vby, vbz, vertical_m, tolerance_s)
+    return sphere_measure(t0a, t1a, ax, ay, az, vax, vay, vaz, t0b, t1b, bx, by, bz, vbx, vby,
+                          vbz)
+
+
+@njit(**_JIT)
+def _motion(k, t0, t1, p0, v):
+    """Piece k's (t0, t1, x, y, z, vx, vy, vz)."""
+    return (t0[k], t1[k], p0[k, 0], p0[k, 1], p0[k, 2], v[k, 0], v[k, 1], v[k, 2])
 
 
 @njit(**_JIT)
@@ -158,8 +164,14 @@ def decide_pairs(left_pos, right_first, n_right, items, traj, box, cells, use_z,
     ``n_right[e]`` from ``right_first[e]`` that passes the box filter (and has another group,
     with ``use_group``), per candidate c of ta not yet blocked (``first[ta] .. first[ta+1]-1``
     flown ``shift[c]`` s later when ``shifted``, else c = ta): c is blocked when the measure is
-    below ``separation_m`` (strict). Updates ``blocked`` and ``open_count`` (open candidates
-    per trajectory of a) in place; returns the number of exact measures taken."""
+    below ``separation_m`` (strict). ``box``: (t0, t1 swept, xlo, xhi, ylo, yhi, zlo, zhi) per
+    sorted entry; ``cells``: (kt, kx, ky, kz, iz0) per sorted entry (kz, iz0 read only with
+    ``use_z``); ``pieces``: (t0, t1, p0, v) by item id. Updates ``blocked`` and
+    ``open_count`` (open candidates per trajectory of a) in place; returns the number of exact
+    measures taken."""
+    t0, t1, xlo, xhi, ylo, yhi, zlo, zhi = box
+    kt, kx, ky, kz, iz0 = cells
+    pt0, pt1, pp0, pv = pieces
     n_exact = 0
     for e in range(left_pos.shape[0]):
         lp = left_pos[e]
@@ -169,18 +181,22 @@ def decide_pairs(left_pos, right_first, n_right, items, traj, box, cells, use_z,
             continue
         c0 = first[ta] if shifted else ta
         c1 = first[ta + 1] if shifted else ta + 1
+        lb = (t0[lp], t1[lp], xlo[lp], xhi[lp], ylo[lp], yhi[lp], zlo[lp], zhi[lp])
+        lcell = (kt[lp], kx[lp], ky[lp], kz[lp] if use_z else 0, iz0[lp] if use_z else 0)
+        a = _motion(i, pt0, pt1, pp0, pv)
         for r in range(right_first[e], right_first[e] + n_right[e]):
             if use_group and group[lp] == group[r]:
                 continue
-            if not _near(lp, r, box, cells, use_z, grid):
+            rb = (t0[r], t1[r], xlo[r], xhi[r], ylo[r], yhi[r], zlo[r], zhi[r])
+            if not _near(lb, rb, lcell, iz0[r] if use_z else 0, use_z, grid):
                 continue
-            j = items[r]
+            b = _motion(items[r], pt0, pt1, pp0, pv)
             for c in range(c0, c1):
                 if blocked[c]:
                     continue
                 n_exact += 1
-                d = _measure(i, j, shift[c] if shifted else 0.0, shifted, pieces, cylinder,
-                             vertical_m, tolerance_s)
+                d = _measure(a, b, shift[c] if shifted else 0.0, shifted, cylinder, vertical_m,
+                             tolerance_s)
                 if d < separation_m:
                     blocked[c] = True
                     open_count[ta] -= 1
