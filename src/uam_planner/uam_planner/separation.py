@@ -1191,7 +1191,10 @@ def any_conflict(trajs_a, trajs_b, separation_m: float = DEFAULT_SEPARATION_M,
       have an open candidate, so the later segments of the blocked ones are never cut into
       pieces or keyed;
     - within a stage, the cell mates are walked in the sorted keys' order (earliest time bucket
-      first) and the entries of trajectories decided in one chunk make no pairs in the next.
+      first) by a compiled kernel (``separation_kernel``, :func:`warm_up` at start-up) that
+      checks a candidate until its first loss and a trajectory until its last candidate is
+      blocked (with ``_COMPILED_DECIDE`` off, in numpy: the entries of trajectories decided in
+      one chunk make no pairs in the next).
 
     b's pieces are cut, keyed on one grid and sorted once per call; a stage keys only a's open
     pieces and takes from b only the entries of the cells those touch, so the work per stage
@@ -1202,7 +1205,8 @@ def any_conflict(trajs_a, trajs_b, separation_m: float = DEFAULT_SEPARATION_M,
     decision is the pair list's (``test_any_conflict_matches_conflicting_pairs``).
 
     Args: as :func:`conflicting_pairs` (two sets only; no groups or ranks: a decision does not
-        depend on which pair is found first); ``stats`` gets the counts summed over the stages.
+        depend on which pair is found first); ``stats`` gets the counts summed over the stages
+        (``exact_checks``: the exact measures taken, one per piece pair and open candidate).
     Returns: (n_a,) bool, or (n_candidates,) bool with ``shifts_a``.
     Complexity: the broad phase of :func:`conflicting_pairs` over b and over the segments of a
     not yet decided; the box filter and the exact kernel only over their piece pairs.
