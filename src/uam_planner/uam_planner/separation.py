@@ -1186,30 +1186,26 @@ def any_conflict(trajs_a, trajs_b, separation_m: float = DEFAULT_SEPARATION_M,
     first loss. Two things make that pay where most of a is blocked (a busy epoch discards
     98 % of its candidates, most of them near their departure):
 
-    - stages in time: a's segments are checked in windows of their start time
-      (``_DECIDE_STAGES_S`` after a's first), each stage only for the trajectories that still
-      have an open candidate, so the later segments of the blocked ones are never cut into
-      pieces or keyed;
-    - within a stage, the cell mates are walked in the sorted keys' order (earliest time bucket
-      first) by a compiled kernel (``separation_kernel``, :func:`warm_up` at start-up) that
-      checks a candidate until its first loss and a trajectory until its last candidate is
-      blocked (with ``_COMPILED_DECIDE`` off, in numpy: the entries of trajectories decided in
-      one chunk make no pairs in the next).
+    - stages in time: a's segments in windows of their start time (``_DECIDE_STAGES_S``),
+      each only for the trajectories with an open candidate (the later segments of the
+      blocked ones are never cut into pieces or keyed);
+    - within a stage, a compiled kernel (``separation_kernel``; :func:`warm_up` at start-up)
+      walks the cell mates in the sorted keys' order, a candidate until its first loss, a
+      trajectory until its last candidate is blocked (``_COMPILED_DECIDE`` off: in numpy,
+      the entries of trajectories decided in one chunk make no pairs in the next).
 
-    b's pieces are cut, keyed on one grid and sorted once per call; a stage keys only a's open
-    pieces and takes from b only the entries of the cells those touch, so the work per stage
-    follows a's open pieces and their cell mates, not the size of b. The pieces are the ones a
-    single call cuts (the same cell and time bucket), and the piece pairs that pass the box
-    filter do not depend on the grid's origin (every pair of overlapping boxes, once, in its
-    canonical cell), so the exact kernel sees the same piece pairs in the same orientation and a
-    decision is the pair list's (``test_any_conflict_matches_conflicting_pairs``).
+    b's pieces are cut, keyed and sorted once per call; a stage keys only a's open pieces and
+    takes from b the entries of the cells those touch (work per stage follows a's open pieces,
+    not the size of b). The piece pairs that pass the box filter do not depend on the grid's
+    origin (each pair of overlapping boxes once, in its canonical cell), so the exact kernel
+    sees the pair list's piece pairs in the same orientation (``test_any_conflict.py``).
 
     Args: as :func:`conflicting_pairs` (two sets only; no groups or ranks: a decision does not
         depend on which pair is found first); ``stats`` gets the counts summed over the stages
         (``exact_checks``: the exact measures taken, one per piece pair and open candidate).
     Returns: (n_a,) bool, or (n_candidates,) bool with ``shifts_a``.
-    Complexity: the broad phase of :func:`conflicting_pairs` over b and over the segments of a
-    not yet decided; the box filter and the exact kernel only over their piece pairs.
+    Complexity: the broad phase over b and a's undecided segments; the box filter and the
+    exact kernel only over their piece pairs.
     """
     model = as_separation_model(separation_m)
     sa = _as_segment_set(trajs_a)
