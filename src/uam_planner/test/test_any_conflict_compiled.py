@@ -250,3 +250,31 @@ def test_one_compiled_version_serves_every_setting(monkeypatch):
         for kw in ({}, dict(shifts_a=(first, shift)), dict(z_cell_m=30.0)):
             any_conflict(a, b, model, **kw)
     assert len(separation_kernel.decide_pairs.signatures) == 1
+
+
+def test_keep_freed_memory_keeps_a_freed_temporary_for_the_next_one():
+    """After separation.keep_freed_memory, a freed 20 MB temporary is kept and the next one
+    reuses it; by default glibc gives it back and the next one faults its pages in again. In
+    fresh processes: the setting changes the process's allocator."""
+    import subprocess
+    import sys
+
+    code = (
+        "import resource, sys, numpy as np\n"
+        "from uam_planner import separation\n"
+        "if sys.argv[1] == 'keep':\n"
+        "    assert separation.keep_freed_memory()\n"
+        "def faults():\n"
+        "    f0 = resource.getrusage(resource.RUSAGE_SELF).ru_minflt\n"
+        "    np.ones(20 << 17).sum()\n"
+        "    return resource.getrusage(resource.RUSAGE_SELF).ru_minflt - f0\n"
+        "faults()\n"
+        "print(faults())\n")
+
+    def second_faults(how):
+        out = subprocess.run([sys.executable, "-c", code, how], capture_output=True, text=True,
+                             timeout=120, check=True)
+        return int(out.stdout.split()[-1])
+    default, kept = second_faults("default"), second_faults("keep")
+    assert default > 100, default   # the default gave the first one back
+    assert kept < 50, (kept, default)

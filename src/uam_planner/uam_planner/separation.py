@@ -1397,14 +1397,42 @@ def _decide_compiled(bp: _BroadPhase, model, first, shift, blocked, open_count, 
 _WARM = False
 
 
+#: glibc's mallopt parameters (malloc.h): M_TRIM_THRESHOLD, M_MMAP_THRESHOLD
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+
+
+def keep_freed_memory() -> bool:
+    """Tell glibc's allocator to keep freed memory for reuse (trim threshold 1 GiB, mmap
+    threshold 32 MiB, its maximum) instead of returning it to the system after each large free.
+
+    Why: an epoch makes and frees numpy temporaries of 0.1-30 MB many times; returned to the
+    system, each is faulted in again (zeroed pages) at its next allocation. glibc adapts its
+    thresholds to a process's large frees, but loading numba's LLVM left them where the
+    temporaries went back every time: on the layered city at 3,000 requests/h, 290,000-650,000
+    page faults a run instead of 140,000, and CPU per epoch p99 104 ms instead of 83-90 ms
+    (BENCHMARKS.md). The cost is memory a process has used staying with it (its peak).
+    False where the C library is not glibc (nothing changed)."""
+    import ctypes
+    import ctypes.util
+
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        mallopt = libc.mallopt
+    except (OSError, AttributeError):
+        return False
+    return bool(mallopt(_M_TRIM_THRESHOLD, 1 << 30)) and bool(mallopt(_M_MMAP_THRESHOLD, 32 << 20))
+
+
 def warm_up() -> None:
-    """Compile the kernel of the check that decides now, at start-up, so that no epoch pays
-    for it: :func:`any_conflict` on two crossing flights in both models, with and without
-    departure shifts. A cold compile takes seconds; numba keeps the result in ``__pycache__``
-    and later processes only load it. Once per process; nothing to do with the numpy path."""
+    """Ready this process for planning epochs, at start-up, so that no epoch pays for it:
+    compile the kernel of the check that decides (:func:`any_conflict` on two crossing flights
+    in both models, with and without departure shifts; a cold compile takes seconds, numba
+    keeps the result in ``__pycache__`` and later processes only load it), and
+    :func:`keep_freed_memory`. Once per process; nothing to do with the numpy path."""
     global _WARM
     if _WARM or not _COMPILED_DECIDE:
         return
+    keep_freed_memory()
     a = [Trajectory(np.array([0.0, 100.0]), np.array([[-500.0, 0.0, 60.0], [500.0, 0.0, 60.0]]))]
     b = [Trajectory(np.array([0.0, 100.0]), np.array([[0.0, -500.0, 60.0], [0.0, 500.0, 60.0]]))]
     for model in (SeparationModel("sphere"), SeparationModel("cylinder")):
