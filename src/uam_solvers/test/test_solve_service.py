@@ -177,3 +177,26 @@ def test_wait_until_ready_checks_its_timeout_and_is_false_once_closed():
     finally:
         svc.close()
     assert not svc.wait_until_ready(1.0)
+
+
+def test_a_large_problem_s_fallback_is_made_while_the_worker_solves(service, monkeypatch):
+    """Above PRECOMPUTE_FALLBACK_ABOVE vertices the fallback is computed on a thread of the
+    caller's process while the worker solves, so a kill finds it ready (on the large city's
+    graphs it took a second after the kill); computed once, not again after the kill."""
+    import uam_solvers.executor as executor
+    import uam_solvers.greedy as greedy
+
+    problem = paper_instance(6, seed=1)
+    _wait_for_workers(service, 2)
+    # this process's threshold only: the worker (its own process) sends no partial answer
+    monkeypatch.setattr(executor, "PRECOMPUTE_FALLBACK_ABOVE", problem.n - 1)
+    real, calls = greedy.fallback_selection, []
+
+    def counted(p):
+        calls.append(threading.current_thread().name)
+        return real(p)
+    monkeypatch.setattr(greedy, "fallback_selection", counted)
+    r = service.solve(problem, backend=tb.GilHoldingBackend(), time_limit_s=0.5)
+    assert r.fallback and r.stats["executor"] == "killed" and problem.is_independent(r.selected)
+    assert calls == ["uam-solvers-fallback"]
+    _wait_for_workers(service, 2)

@@ -460,6 +460,9 @@ class SolveService:
             return self._fallback(problem, name, t0, "no-free-worker", waited,
                                   f"no free {lane}-lane worker within the time limit "
                                   f"{limit:g} s (all busy)")
+        # started before the job is sent: sending 10^7 edges takes a part of the limit
+        background = _fallback_in_background(problem) if problem.n > PRECOMPUTE_FALLBACK_ABOVE \
+            else None
         remaining = max(deadline - time.perf_counter(), 1e-3)
         try:
             worker.conn.send((spec, _pack(problem), remaining, seed, opts, bool(layers)))
@@ -469,6 +472,8 @@ class SolveService:
             return self._fallback(problem, name, t0, "worker-crashed", waited,
                                   f"sending the job to the worker failed ({exc})")
         reply, precomputed = self._await_reply(worker, deadline, _precomputed_fallback(problem))
+        if reply is None and precomputed is None and background is not None:
+            precomputed = background.result()
         if reply is None:
             worker.signal_kill()  # SIGKILL now: no CPU or memory left behind; reaped below
             self._replace_in_background(worker)
@@ -657,6 +662,27 @@ def _precomputed_fallback(problem: MwisProblem) -> tuple | None:
     if problem.n <= PRECOMPUTE_FALLBACK_ABOVE and needs_fast_fallback(problem):
         return fallback_selection(problem)
     return None
+
+
+def _fallback_in_background(problem: MwisProblem):
+    """A Future of the fallback answer (``fallback_selection``), computed on a thread of this
+    process while the worker solves: on the large city's graphs (10^5 vertices, 27 M pairs) the
+    worker's own best-so-far ("partial") comes after the kill at the limit + margin, and the
+    fallback computed only then took another second; numpy releases the GIL, so the thread
+    uses the other core. Its answer is dropped when the worker's comes in time."""
+    from concurrent.futures import Future
+
+    from .greedy import fallback_selection
+
+    fut: Future = Future()
+
+    def run() -> None:
+        try:
+            fut.set_result(fallback_selection(problem))
+        except BaseException as exc:  # noqa: BLE001 - raised to the caller by result()
+            fut.set_exception(exc)
+    threading.Thread(target=run, name="uam-solvers-fallback", daemon=True).start()
+    return fut
 
 
 def _picklable(options: Mapping[str, Any]) -> bool:
