@@ -7,6 +7,12 @@ from uam_solvers.base import MwisProblem
 from uam_solvers.greedy import _local_max, _local_max_grouped, fallback_selection
 
 
+def _grouped(n, edges, groups, weights):
+    e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    return _local_max_grouped(n, np.concatenate([e[:, 0], e[:, 1]]),
+                              np.concatenate([e[:, 1], e[:, 0]]), groups, weights)
+
+
 def _listed_pairs_answer(n, edges, groups, weights):
     """The reference: every group pair listed beside the edges, both directions, duplicates kept."""
     parts = [np.asarray(edges, dtype=np.int64).reshape(-1, 2)]
@@ -41,12 +47,12 @@ def test_grouped_local_max_equals_the_listed_pairs(seed):
     n = int(rng.integers(2, 300))
     weights, edges, groups = _case(rng, n, int(rng.integers(0, 40)), int(rng.integers(0, 3 * n)),
                                    overlap=bool(seed % 2), ties=seed % 3 == 0)
-    got = _local_max_grouped(n, edges, groups, weights)
+    got = _grouped(n, edges, groups, weights)
     assert got.tolist() == _listed_pairs_answer(n, edges, groups, weights).tolist()
     # through the problem (edges normalised, groups deduplicated) as the solve service calls it
     prob = MwisProblem.from_arrays(weights, edges, groups)
     ref = _listed_pairs_answer(prob.n, prob.edges, prob.groups, prob.weights)
-    assert _local_max_grouped(prob.n, prob.edges, prob.groups, prob.weights).tolist() == ref.tolist()
+    assert _grouped(prob.n, prob.edges, prob.groups, prob.weights).tolist() == ref.tolist()
     assert MwisProblem.from_arrays(weights, edges, groups).is_independent(got)
 
 

@@ -191,30 +191,12 @@ def _local_max(n: int, rows: np.ndarray, indices: np.ndarray, weights) -> np.nda
     """:func:`local_max_greedy` on directed pairs (rows[k], indices[k]), both directions of
     every edge present; duplicate pairs are harmless (degrees then count them twice, which
     only changes the order of picks, not independence or maximality)."""
-    w = np.asarray(weights, dtype=np.float64)
-    alive = np.ones(n, dtype=bool)
-    chosen = np.zeros(n, dtype=bool)
-    while alive.any():
-        live_edge = alive[rows] & alive[indices]
-        r, c = rows[live_edge], indices[live_edge]
-        deg = np.bincount(r, minlength=n)
-        key = w / (deg + 1.0)
-        # r loses to c when key[c] > key[r], or equal keys and c < r
-        loses = (key[c] > key[r]) | ((key[c] == key[r]) & (c < r))
-        beaten = np.zeros(n, dtype=bool)
-        beaten[r[loses]] = True
-        pick = alive & ~beaten
-        chosen |= pick
-        alive &= ~pick
-        gone = np.zeros(n, dtype=bool)
-        gone[c[pick[r]]] = True
-        alive &= ~gone
-    return np.flatnonzero(chosen).astype(np.int32)
+    return _local_max_grouped(n, rows, indices, (), weights)
 
 
-def _local_max_grouped(n: int, edges: np.ndarray, groups, weights) -> np.ndarray:
-    """:func:`_local_max` on the listed ``edges`` (m, 2) plus every pair inside each of the
-    clique ``groups``, without listing the group pairs: per round, a live vertex's group
+def _local_max_grouped(n: int, rows: np.ndarray, cols: np.ndarray, groups, weights) -> np.ndarray:
+    """:func:`_local_max` on the directed pairs (rows[k], cols[k]) plus every pair inside each
+    of the clique ``groups``, without listing the group pairs: per round, a live vertex's group
     neighbours add (its group's live members - 1) to its degree, and it beats them when it is
     its group's best live member (highest key, then lowest index), as the pairs would have it.
     So the same degrees, keys and picks: the same selection, to the vertex, as listing the
@@ -222,9 +204,7 @@ def _local_max_grouped(n: int, edges: np.ndarray, groups, weights) -> np.ndarray
     epoch of the large city has ~420 candidates per request, so its group pairs are 80 % of
     its 27 M conflict pairs."""
     w = np.asarray(weights, dtype=np.float64)
-    e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
-    rows = np.concatenate([e[:, 0], e[:, 1]])
-    cols = np.concatenate([e[:, 1], e[:, 0]])
+    rows, cols = np.asarray(rows, dtype=np.int64), np.asarray(cols, dtype=np.int64)
     gl = [np.asarray(g, dtype=np.int64) for g in groups if len(g) > 0]
     sizes = np.array([g.size for g in gl], dtype=np.int64)
     mem = np.concatenate(gl) if gl else np.zeros(0, dtype=np.int64)
@@ -290,5 +270,6 @@ def fallback_selection(problem: MwisProblem) -> tuple[np.ndarray, str]:
         return greedy_mwis(problem.weights, problem.all_edges()), "gwmin"
     # listed edges and groups as they are: a pair listed and in a group counts twice in the
     # degrees, as it did when the group pairs were listed beside the edges (not deduplicated)
-    return (_local_max_grouped(problem.n, problem.edges, problem.groups, problem.weights),
-            "local-max gwmin key")
+    e = problem.edges.astype(np.int64)
+    rows, cols = np.concatenate([e[:, 0], e[:, 1]]), np.concatenate([e[:, 1], e[:, 0]])
+    return _local_max_grouped(problem.n, rows, cols, problem.groups, problem.weights), "local-max gwmin key"
