@@ -74,6 +74,9 @@ _SKIP_OWN_RUNS = True
 # (separation_kernel): the same decisions to the last bit as the numpy path kept beside it
 # (off: numpy), without the numpy path's gathers and temporaries per pair and per candidate
 _COMPILED_DECIDE = True
+# conflicting_pairs without shifts, ranks or distances (the conflict graph's call) walks its
+# cell-mate pairs in a compiled kernel too: the same pairs as the numpy path kept beside it (off)
+_COMPILED_PAIRS = True
 
 
 _KERNEL_BLOCK = 8192
@@ -1161,6 +1164,8 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
                       z_cell_m)
     if bp is None:
         return nothing
+    if _COMPILED_PAIRS and not return_distances and shift is None and ranks is None:
+        return _pairs_compiled(bp, model, stats)
     out_pairs, out_dist, n_exact = _lost_piece_pairs(bp, model, first, shift, ranks, single)
     bp.clock.append(time.perf_counter())
     if stats is not None:
@@ -1357,6 +1362,29 @@ def _decide_stage(bp: _BroadPhase, model, first, shift, template_of, blocked, op
 
 
 
+def _c(a, dtype):
+    """``a`` as a C-contiguous writable array of ``dtype``: one array type per kernel argument,
+    so one compiled version of each kernel."""
+    return np.require(a, dtype, ("C", "W"))
+
+
+def _kernel_tables(bp: _BroadPhase):
+    """The broad phase's arrays as the kernels take them: (box, cells, grid, pieces, use_z) (see
+    ``separation_kernel.decide_pairs``); kz and iz0 a dummy unless z is in the keys."""
+    f8, i8 = np.float64, np.int64
+    pt, sk, grid = bp.pt, bp.sk, bp.grid
+    use_z = sk.kz is not None
+    none_i8 = np.zeros(1, dtype=i8)
+    box = tuple(_c(x, f8) for x in (pt.S_t0, pt.S_t1, pt.S_xlo, pt.S_xhi, pt.S_ylo, pt.S_yhi,
+                                     pt.S_zlo, pt.S_zhi))
+    cells = tuple(_c(x, i8) for x in (sk.kt, sk.kx, sk.ky, sk.kz if use_z else none_i8,
+                                       pt.S_iz0 if use_z else none_i8))
+    return (box, cells,
+            (float(grid.tt0), float(grid.bucket), float(grid.x0), float(grid.y0),
+             float(grid.cell)),
+            (_c(pt.P_t0, f8), _c(pt.P_t1, f8), _c(pt.P_p0, f8), _c(pt.P_v, f8)), use_z)
+
+
 def _decide_compiled(bp: _BroadPhase, model, first, shift, blocked, open_count, stats):
     """:func:`_decide_stage` by the compiled kernel (``separation_kernel.decide_pairs``): the
     box filter and the exact measure per cell-mate pair and open candidate, nothing
@@ -1366,32 +1394,59 @@ def _decide_compiled(bp: _BroadPhase, model, first, shift, blocked, open_count, 
     if bp.single:
         raise ValueError("the compiled decide path compares two sets, not one")
     f8, i8 = np.float64, np.int64
-
-    def c(a, dtype):   # one array type per argument: one compiled version of the kernel
-        return np.require(a, dtype, ("C", "W"))
-
-    pt, sk, grid = bp.pt, bp.sk, bp.grid
-    open_count = c(open_count, i8)
-    use_z = sk.kz is not None
+    pt = bp.pt
+    open_count = _c(open_count, i8)
+    box, cells, grid, pieces, use_z = _kernel_tables(bp)
     none_i8 = np.zeros(1, dtype=i8)
-    box = tuple(c(x, f8) for x in (pt.S_t0, pt.S_t1, pt.S_xlo, pt.S_xhi, pt.S_ylo, pt.S_yhi,
-                                    pt.S_zlo, pt.S_zhi))
-    cells = tuple(c(x, i8) for x in (sk.kt, sk.kx, sk.ky, sk.kz if use_z else none_i8,
-                                      pt.S_iz0 if use_z else none_i8))
     n_exact = separation_kernel.decide_pairs(
-        c(bp.left_pos, i8), c(bp.right_first, i8), c(bp.n_right, i8), c(sk.items, i8),
-        c(pt.P_traj, i8), box, cells, use_z,
-        none_i8 if pt.S_group is None else c(pt.S_group, i8), pt.S_group is not None,
-        (float(grid.tt0), float(grid.bucket), float(grid.x0), float(grid.y0), float(grid.cell)),
-        (c(pt.P_t0, f8), c(pt.P_t1, f8), c(pt.P_p0, f8), c(pt.P_v, f8)),
-        none_i8 if shift is None else c(first, i8),
-        np.zeros(1, dtype=f8) if shift is None else c(shift, f8), shift is not None,
+        _c(bp.left_pos, i8), _c(bp.right_first, i8), _c(bp.n_right, i8), _c(bp.sk.items, i8),
+        _c(pt.P_traj, i8), box, cells, use_z,
+        none_i8 if pt.S_group is None else _c(pt.S_group, i8), pt.S_group is not None,
+        grid, pieces, none_i8 if shift is None else _c(first, i8),
+        np.zeros(1, dtype=f8) if shift is None else _c(shift, f8), shift is not None,
         model.kind == "cylinder", float(model.separation_m), float(model.vertical_separation_m),
         float(_WINDOW_TOLERANCE_S), blocked, open_count)
     bp.clock.append(time.perf_counter())
     if stats is not None:
         bp.fill_stats(stats, int(n_exact))
     return open_count
+
+
+def _pair_drop(bp: _BroadPhase):
+    """(drop, group) for ``separation_kernel.lost_pairs``: the pairs :func:`_box_filter` drops
+    before its box tests (within one set unless ``runs_skipped``: one trajectory's, and one
+    group's by trajectory; across two sets: one group's by sorted entry)."""
+    if bp.single and not bp.runs_skipped:
+        return (1, None) if bp.groups is None else (2, bp.groups)
+    if not bp.single and bp.pt.S_group is not None:
+        return 3, bp.pt.S_group
+    return 0, None
+
+
+def _pairs_compiled(bp: _BroadPhase, model, stats) -> np.ndarray:
+    """:func:`conflicting_pairs` without shifts, ranks or distances, by the compiled kernel
+    (``separation_kernel.lost_pairs``): the same (k, 2) pairs, sorted and unique, as
+    :func:`_lost_piece_pairs` then :func:`_unique_min_pairs`, nothing materialised per pair.
+    ``stats["exact_checks"]``: the measures taken; a piece pair whose trajectory pair the
+    kernel has just recorded is not measured again, so it counts fewer than the numpy path
+    (which counts every piece pair past the box filter)."""
+    from . import separation_kernel
+
+    i8 = np.int64
+    box, cells, grid, pieces, use_z = _kernel_tables(bp)
+    drop, group = _pair_drop(bp)
+    nbt = int(max(bp.sa.n_trajectories, bp.sb.n_trajectories)) + 1
+    codes, n_exact = separation_kernel.lost_pairs(
+        _c(bp.left_pos, i8), _c(bp.right_first, i8), _c(bp.n_right, i8), _c(bp.sk.items, i8),
+        _c(bp.pt.P_traj, i8), box, cells, use_z,
+        np.zeros(1, dtype=i8) if group is None else _c(group, i8), drop, grid, pieces,
+        bp.single, model.kind == "cylinder", float(model.separation_m),
+        float(model.vertical_separation_m), float(_WINDOW_TOLERANCE_S), nbt)
+    bp.clock.append(time.perf_counter())
+    if stats is not None:
+        bp.fill_stats(stats, int(n_exact))
+    codes = np.unique(codes)
+    return np.stack((codes // nbt, codes % nbt), axis=1)
 
 
 _WARM = False
@@ -1425,12 +1480,13 @@ def keep_freed_memory() -> bool:
 
 def warm_up() -> None:
     """Ready this process for planning epochs, at start-up, so that no epoch pays for it:
-    compile the kernel of the check that decides (:func:`any_conflict` on two crossing flights
-    in both models, with and without departure shifts; a cold compile takes seconds, numba
-    keeps the result in ``__pycache__`` and later processes only load it), and
-    :func:`keep_freed_memory`. Once per process; nothing to do with the numpy path."""
+    compile the kernels of the check that decides (:func:`any_conflict` on two crossing flights
+    in both models, with and without departure shifts) and of :func:`conflicting_pairs` (the
+    two flights as one set; a cold compile takes seconds, numba keeps the result in
+    ``__pycache__`` and later processes only load it), and :func:`keep_freed_memory`. Once per
+    process; nothing to do with the numpy paths."""
     global _WARM
-    if _WARM or not _COMPILED_DECIDE:
+    if _WARM or not (_COMPILED_DECIDE or _COMPILED_PAIRS):
         return
     keep_freed_memory()
     a = [Trajectory(np.array([0.0, 100.0]), np.array([[-500.0, 0.0, 60.0], [500.0, 0.0, 60.0]]))]
@@ -1438,4 +1494,5 @@ def warm_up() -> None:
     for model in (SeparationModel("sphere"), SeparationModel("cylinder")):
         any_conflict(a, b, model)
         any_conflict(a, b, model, shifts_a=(np.array([0, 2]), np.array([0.0, 5.0])))
+        conflicting_pairs(a + b, None, model, groups_a=[0, 1])
     _WARM = True

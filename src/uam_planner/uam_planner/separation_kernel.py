@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
 
 # numpy semantics for a division by zero (inf / nan, no exception); the kernels divide only
@@ -203,3 +204,72 @@ def decide_pairs(left_pos, right_first, n_right, items, traj, box, cells, use_z,
             if open_count[ta] <= 0:
                 break
     return n_exact
+
+
+@njit(**_JIT)
+def _push(out, n, code):
+    """``out`` with ``code`` at position n, doubled first when full."""
+    if n == out.shape[0]:
+        grown = np.empty(2 * n, dtype=np.int64)
+        grown[:n] = out
+        out = grown
+    out[n] = code
+    return out
+
+
+@njit(**_JIT)
+def _pair_code(ta, tb, single, nbt):
+    """The code ``a * nbt + b`` of a trajectory pair: (min, max) within one set."""
+    if single and tb < ta:
+        return tb * nbt + ta
+    return ta * nbt + tb
+
+
+@njit(**_JIT)
+def lost_pairs(left_pos, right_first, n_right, items, traj, box, cells, use_z, group, drop,
+               grid, pieces, single, cylinder, separation_m, vertical_m, tolerance_s, nbt):
+    """``conflicting_pairs`` without shifts, ranks or distances: per left entry e (sorted
+    keys' order), per cell mate r of the ``n_right[e]`` from ``right_first[e]`` that passes
+    the box filter, the measure of e's piece (first argument) against r's; a pair below
+    ``separation_m`` (strict) records its trajectories' code (:func:`_pair_code`).
+    ``drop``: which pairs the box filter drops first: 0 none; within one set, 1 the pairs of
+    one trajectory, 2 also those of one group (``group`` by trajectory); across two sets, 3
+    the pairs of one group (``group`` by sorted entry). A cell mate whose pair is
+    the last one recorded is not measured again (the set is the same). ``box``, ``cells``,
+    ``grid``, ``pieces``: as in :func:`decide_pairs`. Returns (codes with repeats, measures
+    taken)."""
+    t0, t1, xlo, xhi, ylo, yhi, zlo, zhi = box
+    kt, kx, ky, kz, iz0 = cells
+    pt0, pt1, pp0, pv = pieces
+    out = np.empty(1024, dtype=np.int64)
+    n = 0
+    n_exact = 0
+    last = -1
+    for e in range(left_pos.shape[0]):
+        lp = left_pos[e]
+        i = items[lp]
+        ta = traj[i]
+        lb = (t0[lp], t1[lp], xlo[lp], xhi[lp], ylo[lp], yhi[lp], zlo[lp], zhi[lp])
+        lcell = (kt[lp], kx[lp], ky[lp], kz[lp] if use_z else 0, iz0[lp] if use_z else 0)
+        a = _motion(i, pt0, pt1, pp0, pv)
+        for r in range(right_first[e], right_first[e] + n_right[e]):
+            j = items[r]
+            tb = traj[j]
+            if (drop == 1 or drop == 2) and ta == tb:
+                continue
+            if (drop == 2 and group[ta] == group[tb]) or (drop == 3 and group[lp] == group[r]):
+                continue
+            code = _pair_code(ta, tb, single, nbt)
+            if code == last:
+                continue
+            rb = (t0[r], t1[r], xlo[r], xhi[r], ylo[r], yhi[r], zlo[r], zhi[r])
+            if not _near(lb, rb, lcell, iz0[r] if use_z else 0, use_z, grid):
+                continue
+            n_exact += 1
+            d = _measure(a, _motion(j, pt0, pt1, pp0, pv), 0.0, False, cylinder, vertical_m,
+                         tolerance_s)
+            if d < separation_m:
+                out = _push(out, n, code)
+                n += 1
+                last = code
+    return out[:n], n_exact
