@@ -1122,8 +1122,8 @@ def conflicting_pairs(trajs_a, trajs_b=None, separation_m: float = DEFAULT_SEPAR
         return_distances: also return each pair's exact minimum distance [m] (for the
             cylinder: the minimum horizontal distance while vertically closer than V).
         stats: optional dict that receives broad-phase counts (segments, pieces, keys, pairs
-            sharing a cell that were made, i.e. without a set's own runs, exact checks) and wall
-            times, for benchmarks.
+            sharing a cell that were made, i.e. without a set's own runs, exact checks: fewer
+            on the compiled path, see :func:`_pairs_compiled`) and wall times, for benchmarks.
         shifts_a: optional ``(first, shift_s)``, only with ``trajs_b``: trajectory j of a stands
             for the candidates ``first[j] .. first[j+1]-1``, candidate c being trajectory j
             flown ``shift_s[c] >= 0`` seconds later (departure slots). The broad phase then runs

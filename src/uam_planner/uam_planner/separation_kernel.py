@@ -6,6 +6,9 @@ sorted keys' order), the entry's cell mates of b, keeps the pairs the box filter
 canonical cell) and runs the exact measure once per open candidate of a's trajectory, marking a
 candidate blocked at its first loss. The numpy path materialises every cell-mate pair, then
 every piece pair per candidate, and gathers their values: here nothing is materialised.
+``lost_pairs`` does the same for ``separation.conflicting_pairs`` without shifts, ranks or
+distances (the conflict graph's call): the box filter per cell-mate pair, one measure per pair
+kept, and the codes of the trajectory pairs that lose separation.
 
 The two measures are the numpy kernels (``separation._cpa_block`` for the sphere,
 ``separation.segment_pair_min_horizontal_m`` for the cylinder) written per pair with the same
