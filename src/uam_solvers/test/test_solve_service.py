@@ -188,7 +188,7 @@ def test_a_large_problem_s_fallback_is_made_while_the_worker_solves(service, mon
 
     problem = paper_instance(6, seed=1)
     _wait_for_workers(service, 2)
-    # this process's threshold only: the worker (its own process) sends no partial answer
+    # this process's threshold (the worker, its own process, computes no fallback at all)
     monkeypatch.setattr(executor, "PRECOMPUTE_FALLBACK_ABOVE", problem.n - 1)
     real, calls = greedy.fallback_selection, []
 

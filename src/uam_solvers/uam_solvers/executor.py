@@ -155,17 +155,12 @@ def _worker_main(conn) -> None:
                 conn.send(("warm", f"{type(exc).__name__}: {exc}"))
             continue
         spec, packed, limit_s, seed, options, layers = job
-        t0 = time.perf_counter()
         try:
             backend = _load_backend(spec)
             problem = _unpack(*packed)
-            if problem.n > PRECOMPUTE_FALLBACK_ABOVE:
-                # best-so-far for the parent in case this solve is killed (~0.6 s at 10^5)
-                from .greedy import fallback_selection
-
-                sel, rule = fallback_selection(problem)
-                conn.send(("partial", sel, rule))
-                limit_s = max(limit_s - (time.perf_counter() - t0), 1e-3)
+            # no best-so-far of its own: above PRECOMPUTE_FALLBACK_ABOVE vertices the parent
+            # computes the fallback on a thread while this solves (_fallback_in_background),
+            # so the whole limit goes to the solve
             inner = Reduce(ComponentSplit(backend)) if layers else backend
             result = inner.solve(problem, time_limit_s=limit_s, seed=seed, options=options)
             result.stats = {k: v for k, v in result.stats.items()
@@ -471,8 +466,9 @@ class SolveService:
             self.counts["worker-crashed"] += 1
             return self._fallback(problem, name, t0, "worker-crashed", waited,
                                   f"sending the job to the worker failed ({exc})")
-        reply, precomputed = self._await_reply(worker, deadline, _precomputed_fallback(problem))
-        if reply is None and precomputed is None and background is not None:
+        precomputed = _precomputed_fallback(problem)
+        reply = self._await_reply(worker, deadline)
+        if reply is None and background is not None:
             precomputed = background.result()
         if reply is None:
             worker.signal_kill()  # SIGKILL now: no CPU or memory left behind; reaped below
@@ -487,23 +483,15 @@ class SolveService:
                                      "solve" if precomputed is not None else ""))
         return self._worker_answer(problem, name, worker, reply, t0, waited)
 
-    def _await_reply(self, worker: _Worker, deadline: float,
-                     precomputed: tuple | None) -> tuple[Any, tuple | None]:
-        """Wait for the worker's reply until ``deadline + margin_s``; a fallback answer the
-        worker sends first ("partial") replaces ``precomputed``. Returns (the reply, None when
-        the time ran out, or the EOFError or OSError of a broken pipe; the fallback answer)."""
-        reply = None
+    def _await_reply(self, worker: _Worker, deadline: float) -> Any:
+        """Wait for the worker's reply until ``deadline + margin_s``. Returns the reply, None
+        when the time ran out, or the EOFError or OSError of a broken pipe."""
         try:
-            while True:
-                if not worker.conn.poll(max(deadline + self.margin_s - time.perf_counter(), 0.0)):
-                    break
-                reply = worker.conn.recv()
-                if reply[0] != "partial":
-                    break
-                precomputed, reply = (reply[1], reply[2]), None
+            if not worker.conn.poll(max(deadline + self.margin_s - time.perf_counter(), 0.0)):
+                return None
+            return worker.conn.recv()
         except (EOFError, OSError) as exc:
-            reply = exc
-        return reply, precomputed
+            return exc
 
     def _worker_answer(self, problem: MwisProblem, name: str, worker: _Worker, reply: Any,
                        t0: float, waited: float) -> MwisResult:
@@ -652,9 +640,8 @@ def _backend_and_spec(backend: str | Backend) -> tuple[Backend, Any]:
 def _precomputed_fallback(problem: MwisProblem) -> tuple | None:
     """The fallback answer computed in this process while the worker solves, or None.
 
-    On large graphs the worker first sends the fallback answer ("partial"), then the solve's;
-    a kill at the deadline then answers at once with that best-so-far. Where that is not sent
-    but the fallback is the vectorised one (dense graphs: up to 0.13 s at 10^6 pairs), this
+    On large graphs (above PRECOMPUTE_FALLBACK_ABOVE vertices) a thread computes it
+    (:func:`_fallback_in_background`). Below, where the fallback is the vectorised one (dense graphs: up to 0.13 s at 10^6 pairs), this
     process computes it now, while the worker solves, so that it is ready before the limit
     (GWMIN on the others takes < 0.05 s)."""
     from .greedy import fallback_selection, needs_fast_fallback
@@ -666,10 +653,10 @@ def _precomputed_fallback(problem: MwisProblem) -> tuple | None:
 
 def _fallback_in_background(problem: MwisProblem):
     """A Future of the fallback answer (``fallback_selection``), computed on a thread of this
-    process while the worker solves: on the large city's graphs (10^5 vertices, 27 M pairs) the
-    worker's own best-so-far ("partial") comes after the kill at the limit + margin, and the
-    fallback computed only then took another second; numpy releases the GIL, so the thread
-    uses the other core. Its answer is dropped when the worker's comes in time."""
+    process while the worker solves, started before the job is sent: on the large city's graphs
+    (10^5 vertices, 27 M pairs) it takes ~1 s, and computed only after a kill at the limit +
+    margin it came on top. numpy releases the GIL, so the thread uses the other core. Its answer
+    is dropped when the worker's comes in time."""
     from concurrent.futures import Future
 
     from .greedy import fallback_selection
