@@ -567,8 +567,11 @@ def _pieces(flat: np.ndarray, counts: np.ndarray) -> list[np.ndarray]:
 
 def sorted_unique(values: np.ndarray) -> np.ndarray:
     """Sorted unique values of a 1-D integer array by sort-and-compare: several times faster
-    here than numpy 2's hash-based ``np.unique`` on 10^5 keys. O(m log m)."""
-    a = np.sort(np.asarray(values).reshape(-1), kind="stable")
+    here than numpy 2's hash-based ``np.unique`` on 10^5 keys. O(m log m). numpy's default
+    sort (vectorised introsort on x86) and not a stable one: equal integers cannot be told
+    apart, so the result is the same, and on 5.5 M random int64 keys it takes 0.13 CPU-s
+    against the stable sort's 0.62."""
+    a = np.sort(np.asarray(values).reshape(-1))
     if a.size == 0:
         return a
     keep = np.empty(a.size, dtype=bool)
@@ -629,7 +632,9 @@ def _normalise_edges(e: np.ndarray) -> np.ndarray:
         # MwisProblem's own), no sort
         return np.stack([lo, hi], axis=1)
     key = sorted_unique(key)
-    return np.stack([key // base, key % base], axis=1)
+    out = np.empty((key.shape[0], 2), dtype=np.int64)
+    np.divmod(key, base, out=(out[:, 0], out[:, 1]))
+    return out
 
 
 def check_selection(problem: MwisProblem, selected: Any) -> tuple[bool, str]:
