@@ -264,3 +264,24 @@ def test_build_network_from_plain_lists_with_an_origin_tuple():
         build_network("", doc["nodes"], doc["corridors"])
     with pytest.raises(NetworkError, match=r"nodes: expected a list, got dict"):
         build_network("x", {"A": 1}, doc["corridors"])
+
+
+def test_edge_indices_of_many_pairs_are_edge_index_of_each_and_name_a_missing_corridor():
+    from uam_planner.synthetic import generate_network
+
+    net = generate_network(200, 10, seed=3)
+    rng = np.random.default_rng(0)
+    pick = rng.integers(0, net.n_edges, 500)
+    u, v = net.edges[pick, 0], net.edges[pick, 1]
+    flip = rng.random(500) < 0.5          # either order
+    u, v = np.where(flip, v, u), np.where(flip, u, v)
+    got = net.edge_indices(u, v)
+    assert got.tolist() == [net.edge_index(a, b) for a, b in zip(u, v)] == pick.tolist()
+    assert net.edge_indices([], []).shape == (0,)
+    a, b = (int(x) for x in net.edges[0])
+    far = next(w for w in range(net.n_nodes) if w != a and net.graph.get_edge_data(a, w) is None)
+    for bad_u, bad_v in (([a, a], [b, far]), ([a], [net.n_nodes]), ([-1], [b])):
+        with pytest.raises(NetworkError, match="no corridor between node indices"):
+            net.edge_indices(bad_u, bad_v)
+    with pytest.raises(NetworkError, match=f"{a} and {far}"):
+        net.edge_indices([a, a], [b, far])

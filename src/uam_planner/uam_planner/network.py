@@ -17,6 +17,7 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Annotated, Any, Iterable, Mapping, Sequence
 
@@ -242,6 +243,36 @@ class Network:
             raise NetworkError(f"no corridor between node indices {u} and {v} "
                                f"in network {self.name!r}")
         return data["edge_index"]
+
+    @cached_property
+    def _edge_keys(self) -> tuple[np.ndarray, np.ndarray]:
+        """(sorted keys lo * n + hi of the corridors, the corridor index of each key)."""
+        e = np.asarray(self.edges, dtype=np.int64).reshape(-1, 2)
+        keys = np.minimum(e[:, 0], e[:, 1]) * self.n_nodes + np.maximum(e[:, 0], e[:, 1])
+        order = np.argsort(keys, kind="stable")
+        return keys[order], order
+
+    def edge_indices(self, u, v) -> np.ndarray:
+        """:meth:`edge_index` of many node index pairs at once (arrays u, v, either order):
+        int64 corridor indices; NetworkError naming the first pair without a corridor.
+        O(k log E)."""
+        u = np.asarray(u, dtype=np.int64).reshape(-1)
+        v = np.asarray(v, dtype=np.int64).reshape(-1)
+        if u.shape != v.shape:
+            raise NetworkError(f"edge_indices: u has {u.size} entries, v {v.size}")
+        keys, order = self._edge_keys
+        n = self.n_nodes
+        ok = (u >= 0) & (u < n) & (v >= 0) & (v < n)
+        want = np.minimum(u, v) * n + np.maximum(u, v)
+        pos = np.minimum(np.searchsorted(keys, want), max(keys.size - 1, 0))
+        ok &= keys.size > 0
+        if keys.size:
+            ok &= keys[pos] == want
+        if not ok.all():
+            i = int(np.flatnonzero(~ok)[0])
+            raise NetworkError(f"no corridor between node indices {int(u[i])} and {int(v[i])} "
+                               f"in network {self.name!r}")
+        return order[pos]
 
     def path_length_m(self, path: Sequence[int]) -> float:
         """Length in metres of a route given as a sequence of node indices along corridors.

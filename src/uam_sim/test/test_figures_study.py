@@ -44,6 +44,28 @@ def test_flight_metrics_by_hand():
     assert m["delay_mean_s"] == 30.0 and m["delayed_share"] == 0.5 and m["shortest_share"] == 0.5
     assert m["central_share"] == pytest.approx(1000 / 4000)
     assert corridor_use_m(net, flights).tolist() == [1000.0, 1000.0, 2000.0]
+    assert corridor_use_m(net, []).tolist() == [0.0, 0.0, 0.0]
+
+
+def test_corridor_use_adds_each_leg_in_the_flights_order_as_a_loop_would():
+    """The vectorised sum is the loop over every leg of every route, to the last bit (lengths
+    that do not add exactly: a corridor flown many times)."""
+    from uam_planner.synthetic import generate_network
+
+    net = generate_network(300, 12, seed=5)
+    rng = np.random.default_rng(1)
+    flights = []
+    for _ in range(300):
+        walk = [int(rng.integers(0, net.n_nodes))]
+        for _ in range(int(rng.integers(1, 12))):
+            walk.append(int(rng.choice(list(net.graph.neighbors(walk[-1])))))
+        flights.append({"route": " ".join(net.node_ids[i] for i in walk)})
+    loop = np.zeros(net.n_edges)
+    for f in flights:
+        idx = [net.node_index(x) for x in f["route"].split()]
+        for a, b in zip(idx[:-1], idx[1:]):
+            loop[net.edge_index(a, b)] += net.edge_length_m[net.edge_index(a, b)]
+    assert corridor_use_m(net, flights).tobytes() == loop.tobytes()
     assert flight_metrics({"flights": []}) == {}
 
 
@@ -104,25 +126,38 @@ def test_small_study_has_every_figure_and_paired_section(tmp_path):
     assert "TTS(0.99) per call and per read" in report and "Per read:" in report
 
 
-@pytest.mark.slow  # about 25 s: every table of the committed paper study and its figures
+@pytest.mark.slow  # about 15 s: every table of the committed paper study, the figures' tables
 def test_the_committed_paper_report_is_its_generators_output(tmp_path):
     import shutil
     committed = Path(__file__).resolve().parents[3] / "docs" / "paper-study"
     copy = tmp_path / "paper-study"
-    shutil.copytree(committed, copy)
-    again = report_from_tables(copy).read_text()
+    shutil.copytree(committed, copy, ignore=shutil.ignore_patterns("figures"))
+    again = report_from_tables(copy, render=False).read_text()   # the images: the small study's test
     assert "## The paper's figures side by side" in again
     for fig in ("### Fig. 3", "### Fig. 4", "### Fig. 5", "### Fig. 6"):
         assert fig in again, fig
     assert again == (committed / "REPORT.md").read_text()
 
 
-@pytest.mark.slow  # about 12 s: the committed load sweep's tables and figures
+@pytest.mark.slow  # about 12 s: the committed load sweep's tables, the figures' tables
 def test_the_committed_load_sweep_report_is_its_generators_output(tmp_path):
     import shutil
     committed = Path(__file__).resolve().parents[3] / "docs" / "load-sweep"
     copy = tmp_path / "load-sweep"
-    shutil.copytree(committed, copy)
-    again = report_from_tables(copy).read_text()
+    shutil.copytree(committed, copy, ignore=shutil.ignore_patterns("figures"))
+    again = report_from_tables(copy, render=False).read_text()
     assert "--config config/load-sweep.yaml --out results/load-sweep" in again   # its own command
     assert again == (committed / "REPORT.md").read_text()
+
+
+@pytest.mark.slow  # 5-10 s each: every table of the study, the figures' tables, no image
+@pytest.mark.parametrize("study", ["load-sweep-city", "load-sweep-paper"])
+def test_the_other_committed_load_sweeps_rebuild_from_their_tables(tmp_path, study):
+    import shutil
+    committed = Path(__file__).resolve().parents[3] / "docs" / study
+    copy = tmp_path / study
+    shutil.copytree(committed, copy, ignore=shutil.ignore_patterns("figures"))
+    again = report_from_tables(copy, render=False).read_text()
+    assert f"--out results/{study}" in again   # its own command
+    assert again == (committed / "REPORT.md").read_text()
+    assert not list((copy / "figures").glob("*.png"))   # the tables only

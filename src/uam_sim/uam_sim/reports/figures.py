@@ -16,6 +16,7 @@ request.
 from __future__ import annotations
 
 import math
+from contextvars import ContextVar
 from pathlib import Path
 
 import matplotlib
@@ -39,10 +40,17 @@ STYLE = {"fifo": ("o", "-", "tab:blue"), "firstfit": ("s", "--", "tab:orange"),
          "kamis": ("<", "--", "tab:olive"), "chils": (">", ":", "tab:cyan")}
 
 
+#: False inside ``make_figures(..., render=False)``: the figures' tables are computed, no
+#: image is laid out or written (a third of a report's rebuild time is PNG rendering)
+_RENDER: ContextVar[bool] = ContextVar("uam_figures_render", default=True)
+
+
 def save_figure(fig, path) -> None:
-    """Lay out, save (110 dpi) and close a figure: the end of every figure of the studies."""
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    """Lay out, save (110 dpi) and close a figure: the end of every figure of the studies
+    (only closed when rendering is off)."""
+    if _RENDER.get():
+        fig.tight_layout()
+        fig.savefig(path, dpi=110)
     plt.close(fig)
 
 
@@ -620,9 +628,18 @@ def corridor_figure(cells, network, path: Path, rate=None, share: float = 0.10) 
             "corridors": int(network.n_edges), "map_rate": rate, "top_mask": top}
 
 
-def make_figures(cells, cfg, tts: dict, out: Path) -> dict:
-    """Write every figure as PNG into ``out/figures``; returns name -> {path, table}."""
-    d = Path(out) / "figures"
+def make_figures(cells, cfg, tts: dict, out: Path, render: bool = True) -> dict:
+    """Write every figure as PNG into ``out/figures``; returns name -> {path, table}.
+    ``render=False``: the same dict (the tables the report prints), no image written."""
+    token = _RENDER.set(bool(render))
+    try:
+        return _make_figures(cells, cfg, tts, Path(out))
+    finally:
+        _RENDER.reset(token)
+
+
+def _make_figures(cells, cfg, tts: dict, out: Path) -> dict:
+    d = out / "figures"
     d.mkdir(parents=True, exist_ok=True)
     figs = {
         "cumulative": cumulative_figure(cells, d / "cumulative_approved.png", cfg.cumulative_rates),

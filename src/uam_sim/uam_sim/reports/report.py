@@ -730,11 +730,15 @@ def _parse(v: str):
 
 def _read_csv(d: Path, name: str) -> list:
     import csv
+    import functools
     import gzip
     for p, opener in ((d / name, open), (d / f"{name}.gz", gzip.open)):
         if p.exists():
+            # each distinct text parsed once: the values (None, bool, int, float, str) are
+            # immutable, and a study's tables repeat most of theirs (methods, counts, flags)
+            parse = functools.lru_cache(maxsize=1 << 16)(_parse)
             with opener(p, "rt", encoding="utf-8", newline="") as fh:
-                return [{k: _parse(v) for k, v in row.items()} for row in csv.DictReader(fh)]
+                return [{k: parse(v) for k, v in row.items()} for row in csv.DictReader(fh)]
     return []
 
 
@@ -760,9 +764,11 @@ def cells_from_tables(d: Path) -> list:
     return cells
 
 
-def report_from_tables(d, figures: bool = True) -> Path:
+def report_from_tables(d, figures: bool = True, render: bool = True) -> Path:
     """Write ``d/REPORT.md`` (and the figures) again from the tables and ``report_inputs.json``
-    of a finished study (e.g. docs/paper-study): every number of the report comes from them."""
+    of a finished study (e.g. docs/paper-study): every number of the report comes from them.
+    ``render=False``: the figures' tables and the report's text the same, no image written
+    (the committed reports' rebuild tests)."""
     import json
     from types import SimpleNamespace
 
@@ -779,7 +785,7 @@ def report_from_tables(d, figures: bool = True) -> Path:
     sweep = SimpleNamespace(config=cfg, cells=cells, computed=[None] * sw["computed"],
                             reused=[None] * sw["reused"], wall_s=sw["wall_s"],
                             missing=[tuple(m) for m in sw.get("missing", [])])
-    figs = make_figures(cells, cfg, tts, d) if figures else {}
+    figs = make_figures(cells, cfg, tts, d, render=render) if figures else {}
     return write_report(sweep, {"figures": figs, "tts": tts, "wall_s": inputs.get("wall_s", 0.0)},
                         inputs["machine"], d)
 

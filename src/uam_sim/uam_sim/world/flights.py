@@ -34,16 +34,19 @@ import numpy as np
 
 
 def corridor_use_m(network, flights) -> np.ndarray:
-    """Flown distance per corridor [m] of a run's flights (each flight's route node ids)."""
-    use = np.zeros(network.n_edges, dtype=float)
-    L = np.asarray(network.edge_length_m)
+    """Flown distance per corridor [m] of a run's flights (each flight's route node ids).
+    Every leg of every route at once (``Network.edge_indices``); ``np.bincount`` adds each
+    corridor's lengths one by one in the flights' order, as a loop over the legs would."""
+    L = np.asarray(network.edge_length_m, dtype=float)
+    starts, ends = [], []
     for f in flights:
-        ids = f["route"].split()
-        idx = [network.node_index(x) for x in ids]
-        for a, b in zip(idx[:-1], idx[1:]):
-            e = network.edge_index(a, b)
-            use[e] += L[e]
-    return use
+        idx = [network.node_index(x) for x in f["route"].split()]
+        starts += idx[:-1]
+        ends += idx[1:]
+    if not starts:
+        return np.zeros(network.n_edges, dtype=float)
+    e = network.edge_indices(starts, ends)
+    return np.bincount(e, weights=L[e], minlength=network.n_edges).astype(float, copy=False)
 
 
 def jain_index(values: Sequence[float]) -> float:
