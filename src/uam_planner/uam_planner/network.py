@@ -21,7 +21,6 @@ from functools import cached_property
 from pathlib import Path
 from typing import Annotated, Any, Iterable, Mapping, Sequence
 
-import networkx as nx
 import numpy as np
 import pydantic
 import scipy.sparse
@@ -142,7 +141,6 @@ class Network:
     index: dict[str, int] = field(init=False, repr=False)
     aerodrome_ids: tuple[str, ...] = field(init=False, repr=False)
     aerodrome_indices: np.ndarray = field(init=False, repr=False)
-    graph: nx.Graph = field(init=False, repr=False)
     adjacency_m: scipy.sparse.csr_array = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -175,13 +173,6 @@ class Network:
         levels, rule, pads = _check_airspace(self.levels_m, self.direction_rule, self.pads_m,
                                              index, is_aerodrome, lla)
 
-        graph = nx.Graph(name=str(self.name))
-        graph.add_nodes_from(
-            (i, {"id": node_ids[i], "aerodrome": bool(is_aerodrome[i])}) for i in range(n))
-        graph.add_edges_from(
-            (int(u), int(v), {"length_m": float(d), "edge_index": k})
-            for k, ((u, v), d) in enumerate(zip(edges.tolist(), length.tolist())))
-
         set_(self, "name", str(self.name))
         set_(self, "node_ids", node_ids)
         set_(self, "names", names)
@@ -198,7 +189,6 @@ class Network:
         set_(self, "index", index)
         set_(self, "aerodrome_ids", tuple(node_ids[i] for i in aerodrome_indices))
         set_(self, "aerodrome_indices", _readonly(aerodrome_indices))
-        set_(self, "graph", graph)
         set_(self, "adjacency_m", adjacency)
 
     # -- queries -------------------------------------------------------------------------------
@@ -238,11 +228,22 @@ class Network:
 
     def edge_index(self, u: int, v: int) -> int:
         """Index into ``edges`` of the corridor between node indices u and v (either order). O(1)."""
-        data = self.graph.get_edge_data(int(u), int(v))
-        if data is None:
-            raise NetworkError(f"no corridor between node indices {u} and {v} "
-                               f"in network {self.name!r}")
-        return data["edge_index"]
+        return int(self.edge_indices([u], [v])[0])
+
+    @cached_property
+    def graph(self):
+        """The network as a networkx Graph (node i with ``id`` and ``aerodrome``, each corridor
+        with ``length_m`` and ``edge_index``), built on first use: importing networkx costs
+        ~0.3 CPU-s, and only the studies' figures and GraphML files use it, not the nodes."""
+        import networkx as nx
+
+        graph = nx.Graph(name=str(self.name))
+        graph.add_nodes_from((i, {"id": self.node_ids[i], "aerodrome": bool(self.is_aerodrome[i])})
+                             for i in range(self.n_nodes))
+        graph.add_edges_from(
+            (int(u), int(v), {"length_m": float(d), "edge_index": k})
+            for k, ((u, v), d) in enumerate(zip(self.edges.tolist(), self.edge_length_m.tolist())))
+        return graph
 
     @cached_property
     def _edge_keys(self) -> tuple[np.ndarray, np.ndarray]:
@@ -937,6 +938,8 @@ def _load_geojson(path: Path) -> Network:
 
 def _load_graphml(path: Path) -> Network:
     try:
+        import networkx as nx
+
         g = nx.read_graphml(path)
     except Exception as exc:  # networkx raises assorted parser errors
         raise NetworkError(f"{path}: not readable as GraphML ({type(exc).__name__}: {exc})") from None
@@ -1043,6 +1046,8 @@ def save_network_graphml(net: Network, path) -> None:
     if net.layered:
         raise NetworkError(f"save_network_graphml: network {net.name!r} is layered (levels, pads); only the "
                            f"YAML format holds those, use save_network_yaml")
+    import networkx as nx
+
     o = net.origin_lat_lon_alt
     g = nx.Graph(name=net.name, origin_lat=o[0], origin_lon=o[1], origin_alt_m=o[2])
     if net.no_fly_zones:
