@@ -79,7 +79,8 @@ def freeze_start_up_objects() -> None:
 
 
 def init_with_stop_event(args=None):
-    """``rclpy.init`` with our own SIGINT/SIGTERM handling; returns an Event set on either signal.
+    """``rclpy.init`` with our own SIGINT/SIGTERM handling (and rclpy's logger naming its caller
+    cheaply: :func:`cheap_log_caller`); returns an Event set on either signal.
 
     rclpy's own handlers raise KeyboardInterrupt wherever the main thread happens to be (inside a
     callback, or while destroying the node), which can kill a node before its clean-up. Here a
@@ -92,6 +93,7 @@ def init_with_stop_event(args=None):
     from rclpy.signals import SignalHandlerOptions
 
     stop = threading.Event()
+    cheap_log_caller()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
 
     def on_signal(_signum, _frame) -> None:
@@ -230,7 +232,6 @@ def _run_node(make_node, name: str, args=None, *, threads: int = 1, linger_s: fl
     from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
 
     report_cpu_time_at_exit(name)
-    cheap_log_caller()
     stop = init_with_stop_event(args)
     import threading
     threading.Thread(target=_watch_stop, args=(name, stop, stateless), daemon=True,
