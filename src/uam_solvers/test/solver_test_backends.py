@@ -38,3 +38,14 @@ class WorkerPidBackend(Backend):
     def solve(self, problem, *, time_limit_s, seed, options):
         return make_result(problem, [], proven_optimal=False, solve_time_s=0.0, backend=self.name,
                            stats={"pid": os.getpid(), "seed": seed})
+
+
+class LimitReportingBackend(Backend):
+    """Answers the empty set and reports the time limit it was given."""
+
+    name = "test-limit"
+    description = "test: reports the time limit that reached it"
+
+    def solve(self, problem, *, time_limit_s, seed, options):
+        return make_result(problem, [], proven_optimal=False, solve_time_s=0.0, backend=self.name,
+                           stats={"limit_s": float(time_limit_s)})

@@ -72,6 +72,20 @@ def test_gil_holding_backend_is_killed_at_the_deadline(service):
     assert again.stats["executor"] == "worker" and not again.fallback
 
 
+def test_the_limit_counts_from_the_caller_s_start_when_given(service):
+    """``started_at``: the caller's own work before the call (solve_bounded's validation of
+    the arrays) is inside its limit; the worker gets the time left, not the whole limit."""
+    problem = large_instance(300, seed=4)
+    _wait_for_workers(service, 2)
+    full = service.solve(problem, backend=tb.LimitReportingBackend(), time_limit_s=5.0)
+    began = time.perf_counter() - 3.0
+    cut = service.solve(problem, backend=tb.LimitReportingBackend(), time_limit_s=5.0,
+                        started_at=began)
+    assert full.stats["executor"] == cut.stats["executor"] == "worker"
+    assert 4.0 < full.stats["limit_s"] <= 5.0
+    assert 0.0 < cut.stats["limit_s"] <= 2.0
+
+
 def test_small_request_does_not_wait_behind_a_large_one(service):
     large = large_instance(2000, seed=0)
     small = paper_instance(4, seed=2)

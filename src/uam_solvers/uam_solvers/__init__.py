@@ -316,5 +316,6 @@ def solve_bounded(
         res = _solve_problem(problem, backend, time_limit_s, seed, options, layers, t0)
         start_shared_service_in_background()
         return res
+    # the limit counts from this call's start: the arrays' validation is inside it
     return service.solve(problem, backend=backend, time_limit_s=time_limit_s,
-                         seed=seed, options=options, layers=layers)
+                         seed=seed, options=options, layers=layers, started_at=t0)
