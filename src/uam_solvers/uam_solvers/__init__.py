@@ -255,9 +255,10 @@ def solve(
     instance; ``time_limit_s`` wall-time budget [s], which holds whatever the backend does:
     the answer comes within ``time_limit_s`` + 0.5 s, from a cold process too (a backend's
     first call in the process pays its imports inside the limit; one that overruns is
-    abandoned or killed and the greedy fallback answers, flagged; the arrays' validation comes
-    on top, ~0.8 s at 5.5 M edges, so a city-sized graph is best validated once into an
-    MwisProblem and given to :func:`solve_problem` or a SolveService); ``seed`` for stochastic
+    abandoned or killed and the greedy fallback answers, flagged; for a warm backend the
+    arrays' validation comes on top, ~0.5 s at 5.5 M unsorted edges, inside the limit with
+    :func:`solve_bounded`, so a city-sized graph is best validated once into an MwisProblem and
+    given to :func:`solve_problem` or a SolveService); ``seed`` for stochastic
     backends; ``options`` passed to the backend; ``layers`` enables component split and
     reductions.
     Output: an MwisResult whose ``selected`` is always an independent set of the input graph.
