@@ -77,6 +77,11 @@ _COMPILED_DECIDE = True
 # conflicting_pairs without shifts, ranks or distances (the conflict graph's call) walks its
 # cell-mate pairs in a compiled kernel too: the same pairs as the numpy path kept beside it (off)
 _COMPILED_PAIRS = True
+# The broad phase's own steps (cutting pieces, cell ranges, packed keys, a stage's merge, cell
+# coordinates, cell mates, the piece table's gathers) in compiled kernels (broad_phase_kernel):
+# the same arrays to the last bit as the numpy steps kept beside them (off: numpy), without a
+# temporary per operation; keys too wide for one packed int64 code stay on numpy
+_COMPILED_KEYS = True
 
 
 _KERNEL_BLOCK = 8192
@@ -425,7 +430,34 @@ class _Pieces:
 
 def _cut_pieces(s: SegmentSet, cell_m: float, bucket_s: float, half_m: float,
                 half_z_m: float) -> _Pieces:
-    """Cut each segment into pieces at most cell_m long and bucket_s in duration."""
+    """Cut each segment into pieces at most cell_m long and bucket_s in duration (compiled
+    with ``_COMPILED_KEYS``, unless a count is not finite or huge: the same pieces)."""
+    if _COMPILED_KEYS and len(s):
+        pieces = _cut_pieces_compiled(s, cell_m, bucket_s, half_m, half_z_m)
+        if pieces is not None:
+            return pieces
+    return _cut_pieces_numpy(s, cell_m, bucket_s, half_m, half_z_m)
+
+
+def _cut_pieces_compiled(s: SegmentSet, cell_m: float, bucket_s: float, half_m: float,
+                         half_z_m: float) -> "_Pieces | None":
+    """:func:`_cut_pieces_numpy` by ``broad_phase_kernel``; None where a segment's count of
+    pieces is not finite or beyond the kernel's bound (the numpy path decides those)."""
+    from . import broad_phase_kernel as kernel
+
+    f8 = np.float64
+    t0, t1, v = _c(s.t0_s, f8), _c(s.t1_s, f8), _c(s.v_mps, f8)
+    n, ok = kernel.piece_counts(t0, t1, v, float(cell_m), float(bucket_s))
+    if not ok:
+        return None
+    seg, pt0, pt1, p0, box = kernel.cut_pieces(t0, t1, _c(s.p0_m, f8), v, n, float(half_m),
+                                               float(half_z_m))
+    return _Pieces(seg, pt0, pt1, p0, *box)
+
+
+def _cut_pieces_numpy(s: SegmentSet, cell_m: float, bucket_s: float, half_m: float,
+                      half_z_m: float) -> _Pieces:
+    """:func:`_cut_pieces` in numpy."""
     dur = s.t1_s - s.t0_s
     length = np.linalg.norm(s.v_mps, axis=1) * dur
     n = np.maximum(np.maximum(np.ceil(length / cell_m), np.ceil(dur / bucket_s)), 1).astype(np.int64)
@@ -544,7 +576,19 @@ class _Grid:
 
     def ranges(self, p: _Pieces, t1):
         """Per piece, the first and last cell index along x, y and t its box touches (and,
-        with ``z_bounds``, along z: see :func:`_z_ranges`)."""
+        with ``z_bounds``, along z: see :func:`_z_ranges`); compiled with ``_COMPILED_KEYS``."""
+        if _COMPILED_KEYS and p.t0.shape[0]:
+            from . import broad_phase_kernel as kernel
+
+            f8 = np.float64
+            use_z = self.z_bounds is not None
+            r = kernel.cell_ranges(
+                tuple(_c(x, f8) for x in (p.xlo, p.xhi, p.ylo, p.yhi, p.zlo, p.zhi)),
+                _c(p.t0, f8), _c(t1, f8),
+                (float(self.x0), float(self.y0), float(self.tt0), float(self.cell),
+                 float(self.bucket)),
+                _c(self.z_bounds, f8) if use_z else np.zeros(1), use_z)
+            return r if use_z else r[:6]
         r = (np.floor((p.xlo - self.x0) / self.cell).astype(np.int64),
              np.floor((p.xhi - self.x0) / self.cell).astype(np.int64),
              np.floor((p.ylo - self.y0) / self.cell).astype(np.int64),
@@ -678,6 +722,12 @@ def _sorted_keys(ra, rb, single: bool, na: int, n_items: int, grid: _Grid,
     # pieces of different cells would share a key or pieces of one cell be split, silently
     # missing conflicts; then cells are sorted by their (t, y, x) coordinates instead.
     widened = max_code.bit_length() > 63
+    if _COMPILED_KEYS and packed:
+        codes = _packed_codes(((ra, 0, 0),) if single else ((ra, 0, 0), (rb, 1, na)), grid,
+                              item_bits)
+        clock.append(time.perf_counter())
+        codes.sort()
+        return _cell_coordinates_packed(codes, item_bits, grid)
     ka, ia = _expand_keys(ra, 0, 0, grid, widened, packed, item_bits)
     if single:
         codes, items = ka, ia
@@ -713,6 +763,49 @@ def _sorted_keys(ra, rb, single: bool, na: int, n_items: int, grid: _Grid,
     return _SortedKeys(items, keys, cell_key, kt, ky, kx)
 
 
+_NO_I8 = np.zeros(0, dtype=np.int64)
+
+
+def _kernel_ranges(r) -> tuple:
+    """Cell index ranges as the kernels take them: eight int64 arrays (the z pair empty when z
+    is not in the keys)."""
+    r = tuple(_c(x, np.int64) for x in r)
+    return r if len(r) == 8 else r + (_NO_I8, _NO_I8)
+
+
+def _packed_codes(parts, grid: _Grid, item_bits: int, idx=None) -> np.ndarray:
+    """The packed codes :func:`_expand_keys` makes (not widened, packed) for each (ranges,
+    side, item offset) of ``parts``, concatenated in that order, by ``broad_phase_kernel``.
+    ``idx``: only these pieces of the one part, each with item idx[e] (a stage's pieces)."""
+    from . import broad_phase_kernel as kernel
+
+    use_z = grid.z_bounds is not None
+    use_idx = idx is not None
+    ix = _c(idx, np.int64) if use_idx else _NO_I8
+    parts = [(_kernel_ranges(r), int(side), int(off)) for r, side, off in parts]
+    counts = [kernel.key_count(r, ix, use_idx, use_z) for r, _, _ in parts]
+    out = np.empty(int(sum(counts)), dtype=np.int64)
+    pos = 0
+    shape = (int(grid.ny), int(grid.nx), int(grid.nz))
+    for r, side, off in parts:
+        pos = kernel.pack_keys(r, ix, use_idx, use_z, side, off, shape, int(item_bits), out,
+                               pos)
+    return out
+
+
+def _cell_coordinates_packed(codes: np.ndarray, item_bits: int, grid: _Grid) -> _SortedKeys:
+    """:func:`_cell_coordinates` of sorted packed codes (item in the low ``item_bits``),
+    compiled with ``_COMPILED_KEYS``."""
+    if not _COMPILED_KEYS:
+        return _cell_coordinates(codes & ((1 << item_bits) - 1), codes >> item_bits, grid)
+    from . import broad_phase_kernel as kernel
+
+    use_z = grid.z_bounds is not None
+    items, keys, cell_key, kt, ky, kx, kz = kernel.cell_coordinates(
+        _c(codes, np.int64), int(item_bits), (int(grid.ny), int(grid.nx), int(grid.nz)), use_z)
+    return _SortedKeys(items, keys, cell_key, kt, ky, kx, kz if use_z else None)
+
+
 def _cell_coordinates(items: np.ndarray, keys: np.ndarray, grid: _Grid) -> _SortedKeys:
     """The sorted keys with each entry's cell coordinates (for the canonical-cell test), from
     int64 keys (cell * 2 + side) on ``grid``."""
@@ -735,7 +828,15 @@ def _cell_mates(sk: _SortedKeys, single: bool, run_label=None):
     ``run_label`` (within one set): each sorted entry's label (its trajectory, or its group),
     non-decreasing within every cell; the partners then start after the entry's run of equal
     labels in its cell, so pairs of one trajectory (group), which the box filter would drop
-    first, are never made (the pairs made are the ones the filter would keep, in its order)."""
+    first, are never made (the pairs made are the ones the filter would keep, in its order).
+    Compiled with ``_COMPILED_KEYS``: the same arrays."""
+    if _COMPILED_KEYS:
+        from . import broad_phase_kernel as kernel
+
+        i8 = np.int64
+        return kernel.cell_mates(_c(sk.keys, i8), _c(sk.cell_key, i8), bool(single),
+                                 _NO_I8 if run_label is None else _c(run_label, i8),
+                                 run_label is not None)
     m = sk.keys.shape[0]
     bounds = np.flatnonzero(np.diff(sk.cell_key)) + 1
     g_start = np.concatenate(([0], bounds))
@@ -833,7 +934,17 @@ def _piece_arrays(pa: _Pieces, pb: _Pieces, sa: SegmentSet, sb: SegmentSet, sing
 
 def _gather_table(P: _PieceArrays, items: np.ndarray, single: bool) -> _PieceTable:
     """The piece table of the sorted entries ``items`` (the same per-piece values in
-    sorted-key order)."""
+    sorted-key order); the box columns gathered in one compiled pass with ``_COMPILED_KEYS``."""
+    if _COMPILED_KEYS:
+        from . import broad_phase_kernel as kernel
+
+        f8 = np.float64
+        box = kernel.gather_boxes(_c(items, np.int64), tuple(
+            _c(x, f8) for x in (P.t0, P.t1_sweep, P.xlo, P.xhi, P.ylo, P.yhi, P.zlo, P.zhi)))
+        return _PieceTable(P.t0, P.t1, P.p0, P.v, P.traj, *box,
+                           P.traj[items] if single else None,
+                           None if P.group is None else P.group[items],
+                           None if P.iz0 is None else P.iz0[items])
     return _PieceTable(P.t0, P.t1, P.p0, P.v, P.traj,
                        P.t0[items], P.t1_sweep[items], P.xlo[items], P.xhi[items], P.ylo[items],
                        P.yhi[items], P.zlo[items], P.zhi[items], P.traj[items] if single else None,
@@ -1290,7 +1401,10 @@ class _KeyedSets:
         item_bits = max(int(n_items).bit_length(), 1)
         if ((grid.nt * grid.ny * grid.nx * grid.nz) * 2).bit_length() + item_bits > 63:
             return None
-        b_codes, _ = _expand_keys(rb, 1, na, grid, False, True, item_bits)
+        if _COMPILED_KEYS:
+            b_codes = _packed_codes(((rb, 1, na),), grid, item_bits)
+        else:
+            b_codes, _ = _expand_keys(rb, 1, na, grid, False, True, item_bits)
         b_codes.sort()
         iz0 = None if grid.z_bounds is None else np.concatenate((ra[6], rb[6]))
         arrays = _piece_arrays(pa, pb, sa, sb, False, pa_t1_sweep, slack_traj is not None,
@@ -1303,6 +1417,32 @@ class _KeyedSets:
         clock = [time.perf_counter()]
         idx = np.flatnonzero(seg_mask[self.pa.seg])
         clock.append(time.perf_counter())
+        if _COMPILED_KEYS:
+            sk = self._merged_compiled(idx, clock)
+        else:
+            sk = self._merged_numpy(idx, clock)
+        left_pos, right_first, n_right = _cell_mates(sk, False)
+        pt = _gather_table(self.arrays, sk.items, False)
+        clock.append(time.perf_counter())
+        return _BroadPhase(self.sa, self.sb, False, None, pt, sk, self.grid, left_pos,
+                           right_first, n_right, False, self.n_items, clock,
+                           int(np.count_nonzero(seg_mask)))
+
+    def _merged_compiled(self, idx: np.ndarray, clock: list) -> _SortedKeys:
+        """:meth:`_merged_numpy` by ``broad_phase_kernel``: a's codes packed with their global
+        ids (idx ascends, so the sorted order is the same), sorted, then merged with b's codes
+        of the cells they touch in one pass."""
+        from . import broad_phase_kernel as kernel
+
+        ra = tuple(self.ra)
+        codes = _packed_codes(((ra, 0, 0),), self.grid, self.item_bits, idx)
+        codes.sort()
+        clock.append(time.perf_counter())
+        merged = kernel.merge_stage(codes, self.b_codes, self.b_cell, int(self.item_bits) + 1)
+        return _cell_coordinates_packed(merged, self.item_bits, self.grid)
+
+    def _merged_numpy(self, idx: np.ndarray, clock: list) -> _SortedKeys:
+        """The sorted keys of a's pieces ``idx`` and b's entries of the cells they touch."""
         # a's keys with their position in idx packed in, sorted; then their global ids
         codes, _ = _expand_keys(tuple(r[idx] for r in self.ra), 0, 0, self.grid, False, True,
                                 self.item_bits)
@@ -1320,13 +1460,7 @@ class _KeyedSets:
         # a's entries sort before b's within a cell (side 0 < 1); two sorted runs: a merge
         merged = np.concatenate((a_codes, self.b_codes[pos]))
         merged.sort(kind="stable")
-        sk = _cell_coordinates(merged & mask, merged >> self.item_bits, self.grid)
-        left_pos, right_first, n_right = _cell_mates(sk, False)
-        pt = _gather_table(self.arrays, sk.items, False)
-        clock.append(time.perf_counter())
-        return _BroadPhase(self.sa, self.sb, False, None, pt, sk, self.grid, left_pos,
-                           right_first, n_right, False, self.n_items, clock,
-                           int(np.count_nonzero(seg_mask)))
+        return _cell_coordinates(merged & mask, merged >> self.item_bits, self.grid)
 
 
 def _decide_stage(bp: _BroadPhase, model, first, shift, template_of, blocked, open_count,
@@ -1482,11 +1616,12 @@ def warm_up() -> None:
     """Ready this process for planning epochs, at start-up, so that no epoch pays for it:
     compile the kernels of the check that decides (:func:`any_conflict` on two crossing flights
     in both models, with and without departure shifts) and of :func:`conflicting_pairs` (the
-    two flights as one set; a cold compile takes seconds, numba keeps the result in
+    two flights as one set), which run the broad phase's kernels (``broad_phase_kernel``) on
+    the way (a cold compile takes seconds, numba keeps the result in
     ``__pycache__`` and later processes only load it), and :func:`keep_freed_memory`. Once per
     process; nothing to do with the numpy paths."""
     global _WARM
-    if _WARM or not (_COMPILED_DECIDE or _COMPILED_PAIRS):
+    if _WARM or not (_COMPILED_DECIDE or _COMPILED_PAIRS or _COMPILED_KEYS):
         return
     keep_freed_memory()
     a = [Trajectory(np.array([0.0, 100.0]), np.array([[-500.0, 0.0, 60.0], [500.0, 0.0, 60.0]]))]

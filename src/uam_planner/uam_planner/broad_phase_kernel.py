@@ -1,0 +1,279 @@
+"""Compiled steps of the broad phase of ``separation`` (numba), beside the numpy steps they
+replace (``separation._COMPILED_KEYS`` off: numpy).
+
+Each kernel returns the same arrays as its numpy step, to the last bit: the pieces of
+``separation._cut_pieces``, the cell index ranges of ``separation._Grid.ranges``, the packed
+(cell, side, item) codes of ``separation._expand_keys``, a stage's merged codes of
+``separation._KeyedSets.stage``, the cell coordinates of ``separation._cell_coordinates``, the
+cell mates of ``separation._cell_mates`` and the box columns of ``separation._gather_table``.
+Why: the numpy steps make a temporary array per operation and repeat every per-piece value per
+key; here one loop writes each result once (``test_broad_phase_compiled.py`` compares the two).
+
+The floating-point rules of ``separation_kernel`` hold: the same operations in the same order
+as numpy, no fastmath (no reassociation, no fused multiply-add), numpy's minimum / maximum
+(``separation_kernel._min`` / ``_max``) and a norm summed as numpy sums it
+((x x + y y) + z z). Integer codes are exact; where numpy's sort would order them, the
+kernels write them in sorted order (the codes are unique, so any correct order is the same).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .separation_kernel import _JIT, _max, _min
+
+# Above this many pieces per segment the numpy path cuts (its errors and memory use stand)
+_MAX_PIECES_PER_SEGMENT = float(1 << 31)
+
+
+@njit(**_JIT)
+def piece_counts(t0_s, t1_s, v, cell_m, bucket_s):
+    """Per segment, its number of pieces (as ``separation._cut_pieces``), and whether every
+    count is a finite number the kernels take (else the numpy path cuts)."""
+    n = np.empty(t0_s.shape[0], dtype=np.int64)
+    for s in range(t0_s.shape[0]):
+        dur = t1_s[s] - t0_s[s]
+        norm = math.sqrt((v[s, 0] * v[s, 0] + v[s, 1] * v[s, 1]) + v[s, 2] * v[s, 2])
+        nf = _max(_max(np.ceil(norm * dur / cell_m), np.ceil(dur / bucket_s)), 1.0)
+        if not (nf <= _MAX_PIECES_PER_SEGMENT):
+            return n, False
+        n[s] = int(nf)
+    return n, True
+
+
+@njit(**_JIT)
+def cut_pieces(t0_s, t1_s, p0_m, v, n, half_m, half_z_m):
+    """The pieces of ``separation._cut_pieces`` from the segments and their counts ``n``:
+    (seg, t0, t1, p0, (xlo, xhi, ylo, yhi, zlo, zhi))."""
+    q = 0
+    for s in range(n.shape[0]):
+        q += n[s]
+    seg = np.empty(q, dtype=np.int64)
+    t0 = np.empty(q)
+    t1 = np.empty(q)
+    p0 = np.empty((q, 3))
+    box = (np.empty(q), np.empty(q), np.empty(q), np.empty(q), np.empty(q), np.empty(q))
+    halves = (half_m, half_m, half_z_m)
+    p = 0
+    for s in range(n.shape[0]):
+        nk = n[s]
+        base = t0_s[s]
+        step = (t1_s[s] - base) / nk
+        for k in range(nk):
+            seg[p] = s
+            a = base + k * step
+            b = t1_s[s] if k + 1 == nk else base + (k + 1) * step
+            t0[p] = a
+            t1[p] = b
+            for d in range(3):
+                x = p0_m[s, d] + v[s, d] * (a - base)
+                x1 = x + v[s, d] * (b - a)
+                p0[p, d] = x
+                box[2 * d][p] = _min(x, x1) - halves[d]
+                box[2 * d + 1][p] = _max(x, x1) + halves[d]
+            p += 1
+    return seg, t0, t1, p0, box
+
+
+@njit(**_JIT)
+def _cells(x, origin, size, out):
+    """``np.floor((x - origin) / size).astype(np.int64)`` into ``out`` (the grid's checks keep
+    every quotient finite and below 2^62)."""
+    for k in range(x.shape[0]):
+        out[k] = math.floor((x[k] - origin) / size)
+
+
+@njit(**_JIT)
+def _count_at_most(bounds, x, strict):
+    """#{b in the sorted ``bounds``: b < x (``strict``) or b <= x}: ``np.searchsorted``'s
+    index, side 'left' or 'right'."""
+    lo = 0
+    hi = bounds.shape[0]
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if bounds[mid] < x or (not strict and bounds[mid] == x):
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@njit(**_JIT)
+def cell_ranges(box, t0, t1, grid, z_bounds, use_z):
+    """``separation._Grid.ranges``: per piece (ix0, ix1, iy0, iy1, it0, it1, iz0, iz1); the z
+    pair only with ``use_z`` (else empty). ``box``: (xlo, xhi, ylo, yhi, zlo, zhi); ``grid``:
+    (x0, y0, tt0, cell, bucket)."""
+    x0, y0, tt0, cell, bucket = grid
+    q = t0.shape[0]
+    nz = q if use_z else 0
+    r = (np.empty(q, dtype=np.int64), np.empty(q, dtype=np.int64),
+         np.empty(q, dtype=np.int64), np.empty(q, dtype=np.int64),
+         np.empty(q, dtype=np.int64), np.empty(q, dtype=np.int64),
+         np.empty(nz, dtype=np.int64), np.empty(nz, dtype=np.int64))
+    _cells(box[0], x0, cell, r[0])
+    _cells(box[1], x0, cell, r[1])
+    _cells(box[2], y0, cell, r[2])
+    _cells(box[3], y0, cell, r[3])
+    _cells(t0, tt0, bucket, r[4])
+    _cells(t1, tt0, bucket, r[5])
+    for k in range(nz):
+        # the first z cell: #{b <= zlo} - 1, the last: #{b < zhi} - 1 (separation._z_ranges)
+        r[6][k] = _count_at_most(z_bounds, box[4][k], False) - 1
+        r[7][k] = _count_at_most(z_bounds, box[5][k], True) - 1
+    return r
+
+
+@njit(**_JIT)
+def key_count(r, idx, use_idx, use_z):
+    """How many keys the pieces ``idx`` (``use_idx``; else all) with index ranges ``r`` have."""
+    m = idx.shape[0] if use_idx else r[0].shape[0]
+    total = 0
+    for e in range(m):
+        k = idx[e] if use_idx else e
+        c = (r[1][k] - r[0][k] + 1) * (r[3][k] - r[2][k] + 1) * (r[5][k] - r[4][k] + 1)
+        if use_z:
+            c *= r[7][k] - r[6][k] + 1
+        total += c
+    return total
+
+
+@njit(**_JIT)
+def pack_keys(r, idx, use_idx, use_z, side, offset, shape, item_bits, out, pos):
+    """``separation._expand_keys`` packed (not widened): the codes
+    ((((t ny + y) nx + x) nz + z) 2 + side) << item_bits | item of the pieces ``idx``
+    (``use_idx``: item idx[e]; else every piece, item offset + e), written from ``out[pos]``
+    in its order (piece by piece; z, then x, then y, then t fastest to slowest). ``shape``:
+    (ny, nx, nz). Returns the position after the last code."""
+    ny, nx, nz = shape
+    m = idx.shape[0] if use_idx else r[0].shape[0]
+    for e in range(m):
+        k = idx[e] if use_idx else e
+        item = k if use_idx else offset + e
+        z0 = r[6][k] if use_z else 0
+        z1 = r[7][k] if use_z else 0
+        for it in range(r[4][k], r[5][k] + 1):
+            for iy in range(r[2][k], r[3][k] + 1):
+                row = it * ny + iy
+                for ix in range(r[0][k], r[1][k] + 1):
+                    cell = row * nx + ix
+                    for iz in range(z0, z1 + 1):
+                        code = ((cell * nz + iz) * 2 + side) << item_bits
+                        out[pos] = code | item
+                        pos += 1
+    return pos
+
+
+@njit(**_JIT)
+def merge_stage(a_codes, b_codes, b_cell, cell_shift):
+    """A stage's sorted codes (``separation._KeyedSets.stage``): a's sorted codes and, in each
+    cell a's codes touch, b's codes of that cell after them (side 0 < 1), cells ascending.
+    ``b_codes`` sorted, ``b_cell`` their cells; a code's cell is code >> ``cell_shift``."""
+    out = np.empty(a_codes.shape[0] + b_codes.shape[0], dtype=np.int64)
+    n = 0
+    j = 0
+    i = 0
+    na = a_codes.shape[0]
+    nb = b_cell.shape[0]
+    while i < na:
+        c = a_codes[i] >> cell_shift
+        while i < na and (a_codes[i] >> cell_shift) == c:
+            out[n] = a_codes[i]
+            n += 1
+            i += 1
+        while j < nb and b_cell[j] < c:
+            j += 1
+        while j < nb and b_cell[j] == c:
+            out[n] = b_codes[j]
+            n += 1
+            j += 1
+    return out[:n]
+
+
+@njit(**_JIT)
+def cell_coordinates(codes, item_bits, shape, use_z):
+    """``separation._cell_coordinates`` of sorted packed codes: (items, keys, cell_key, kt, ky,
+    kx, kz), kz empty unless ``use_z``. ``shape``: (ny, nx, nz)."""
+    ny, nx, nz = shape
+    m = codes.shape[0]
+    mask = (1 << item_bits) - 1
+    items = np.empty(m, dtype=np.int64)
+    keys = np.empty(m, dtype=np.int64)
+    cell_key = np.empty(m, dtype=np.int64)
+    kt = np.empty(m, dtype=np.int64)
+    ky = np.empty(m, dtype=np.int64)
+    kx = np.empty(m, dtype=np.int64)
+    kz = np.empty(m if use_z else 0, dtype=np.int64)
+    for p in range(m):
+        items[p] = codes[p] & mask
+        key = codes[p] >> item_bits
+        keys[p] = key
+        rest = key >> 1
+        cell_key[p] = rest
+        if use_z:
+            kz[p] = rest % nz
+            rest //= nz
+        kx[p] = rest % nx
+        rest //= nx
+        ky[p] = rest % ny
+        kt[p] = rest // ny
+    return items, keys, cell_key, kt, ky, kx, kz
+
+
+@njit(**_JIT)
+def cell_mates(keys, cell_key, single, run_label, use_label):
+    """``separation._cell_mates``: (left_pos, right_first, n_right) of the sorted entries with
+    partners in their cell; within one set the entries after each (with ``use_label``: after
+    its run of equal ``run_label`` in its cell), across two sets a's entries and the b entries
+    of their cell."""
+    m = keys.shape[0]
+    left_pos = np.empty(m, dtype=np.int64)
+    right_first = np.empty(m, dtype=np.int64)
+    n_right = np.empty(m, dtype=np.int64)
+    n = 0
+    g = 0
+    while g < m:
+        end = g + 1
+        while end < m and cell_key[end] == cell_key[g]:
+            end += 1
+        if single:
+            p = g
+            while p < end:
+                run_end = p + 1
+                if use_label:
+                    while run_end < end and run_label[run_end] == run_label[p]:
+                        run_end += 1
+                if end > run_end:
+                    for e in range(p, run_end):
+                        left_pos[n] = e
+                        right_first[n] = run_end
+                        n_right[n] = end - run_end
+                        n += 1
+                p = run_end
+        else:
+            first_b = g
+            while first_b < end and (keys[first_b] & 1) == 0:
+                first_b += 1
+            if end > first_b:
+                for e in range(g, first_b):
+                    left_pos[n] = e
+                    right_first[n] = first_b
+                    n_right[n] = end - first_b
+                    n += 1
+        g = end
+    return left_pos[:n], right_first[:n], n_right[:n]
+
+
+@njit(**_JIT)
+def gather_boxes(items, cols):
+    """``cols[c][items]`` for every column of ``cols`` (the piece table's box columns)."""
+    m = items.shape[0]
+    out = (np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m),
+           np.empty(m), np.empty(m))
+    for p in range(m):
+        k = items[p]
+        for c in range(8):
+            out[c][p] = cols[c][k]
+    return out
