@@ -268,12 +268,21 @@ def cell_mates(keys, cell_key, single, run_label, use_label):
 
 @njit(**_JIT)
 def gather_boxes(items, cols):
-    """``cols[c][items]`` for every column of ``cols`` (the piece table's box columns)."""
+    """``cols[c][items]`` for every column of ``cols`` (the piece table's box columns: t0,
+    t1 swept, xlo, xhi, ylo, yhi, zlo, zhi), in one pass over ``items``."""
     m = items.shape[0]
+    t0, t1, xlo, xhi, ylo, yhi, zlo, zhi = cols
     out = (np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m),
            np.empty(m), np.empty(m))
+    o0, o1, o2, o3, o4, o5, o6, o7 = out
     for p in range(m):
         k = items[p]
-        for c in range(8):
-            out[c][p] = cols[c][k]
+        o0[p] = t0[k]
+        o1[p] = t1[k]
+        o2[p] = xlo[k]
+        o3[p] = xhi[k]
+        o4[p] = ylo[k]
+        o5[p] = yhi[k]
+        o6[p] = zlo[k]
+        o7[p] = zhi[k]
     return out
