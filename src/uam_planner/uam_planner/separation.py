@@ -1498,7 +1498,11 @@ def _decide_stage(bp: _BroadPhase, model, first, shift, template_of, blocked, op
 
 def _c(a, dtype):
     """``a`` as a C-contiguous writable array of ``dtype``: one array type per kernel argument,
-    so one compiled version of each kernel."""
+    so one compiled version of each kernel. The array itself when it already is one (what
+    np.require returns then, without its few microseconds per call)."""
+    if isinstance(a, np.ndarray) and a.dtype == dtype and a.flags.c_contiguous \
+            and a.flags.writeable:
+        return a
     return np.require(a, dtype, ("C", "W"))
 
 
