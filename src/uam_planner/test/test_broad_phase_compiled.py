@@ -88,6 +88,7 @@ def test_pieces_are_the_numpy_pieces_to_the_last_bit(seed):
         _same(got, separation._cut_pieces_numpy(s, cell, bucket, half, half_z), "pieces")
 
 
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")  # squares beyond 1e308: inf
 def test_the_norm_is_numpys_norm():
     """The kernels sum the squared components as numpy's norm does, (x x + y y) + z z; the
     other association differs on some of these vectors (so this test can tell them apart)."""
@@ -96,6 +97,24 @@ def test_the_norm_is_numpys_norm():
     x, y, z = v[:, 0], v[:, 1], v[:, 2]
     assert np.sqrt((x * x + y * y) + z * z).tobytes() == np.linalg.norm(v, axis=1).tobytes()
     assert np.sqrt(x * x + (y * y + z * z)).tobytes() != np.linalg.norm(v, axis=1).tobytes()
+    from uam_planner import broad_phase_kernel as kernel
+
+    v[:3] = [[np.nan, 0.0, 1.0], [np.inf, 1.0, 0.0], [-np.inf, np.nan, 0.0]]
+    v[3:6] = [[1e-320, 5e-324, 0.0], [1e200, 1e200, 1e200], [-0.0, -0.0, -0.0]]
+    _same(kernel.speeds(v), np.linalg.norm(v, axis=1), "speeds")
+
+
+def test_a_masked_take_is_boolean_indexing():
+    """SegmentSet.take by a mask (np.compress) gives the arrays boolean indexing gives."""
+    s = _extreme_segments(2, 500, 1200.0, 100.0)
+    rng = np.random.default_rng(2)
+    for keep in (rng.random(500) < 0.7, np.zeros(500, bool), np.ones(500, bool)):
+        got = s.take(keep)
+        _same(got, SegmentSet(s.traj[keep], s.t0_s[keep], s.t1_s[keep], s.p0_m[keep],
+                              s.v_mps[keep], s.n_trajectories), "take")
+        assert got.p0_m.flags.c_contiguous and got.v_mps.flags.c_contiguous
+    with pytest.raises(IndexError):
+        s.take(np.ones(499, bool))
 
 
 def test_counts_at_an_exact_multiple_of_the_cell():
@@ -278,6 +297,6 @@ def test_one_compiled_version_of_each_kernel(monkeypatch):
         any_conflict(a, b, model, z_cell_m=30.0)
         conflicting_pairs(a + b, None, model, groups_a=np.arange(len(a) + len(b)))
         conflicting_pairs(a, b, model, return_distances=True)
-    for name in ("piece_counts", "cut_pieces", "cell_ranges", "key_count", "pack_keys",
+    for name in ("speeds", "piece_counts", "cut_pieces", "cell_ranges", "key_count", "pack_keys",
                  "merge_stage", "cell_coordinates", "cell_mates", "gather_boxes"):
         assert len(getattr(kernel, name).signatures) == 1, name

@@ -30,14 +30,28 @@ _MAX_PIECES_PER_SEGMENT = float(1 << 31)
 
 
 @njit(**_JIT)
+def _norm(v, s):
+    """``np.linalg.norm(v, axis=1)[s]``: the squares summed as numpy sums them."""
+    return math.sqrt((v[s, 0] * v[s, 0] + v[s, 1] * v[s, 1]) + v[s, 2] * v[s, 2])
+
+
+@njit(**_JIT)
+def speeds(v):
+    """``np.linalg.norm(v, axis=1)`` of (s, 3) velocities (``separation._grid_size``)."""
+    out = np.empty(v.shape[0])
+    for s in range(v.shape[0]):
+        out[s] = _norm(v, s)
+    return out
+
+
+@njit(**_JIT)
 def piece_counts(t0_s, t1_s, v, cell_m, bucket_s):
     """Per segment, its number of pieces (as ``separation._cut_pieces``), and whether every
     count is a finite number the kernels take (else the numpy path cuts)."""
     n = np.empty(t0_s.shape[0], dtype=np.int64)
     for s in range(t0_s.shape[0]):
         dur = t1_s[s] - t0_s[s]
-        norm = math.sqrt((v[s, 0] * v[s, 0] + v[s, 1] * v[s, 1]) + v[s, 2] * v[s, 2])
-        nf = _max(_max(np.ceil(norm * dur / cell_m), np.ceil(dur / bucket_s)), 1.0)
+        nf = _max(_max(np.ceil(_norm(v, s) * dur / cell_m), np.ceil(dur / bucket_s)), 1.0)
         if not (nf <= _MAX_PIECES_PER_SEGMENT):
             return n, False
         n[s] = int(nf)
