@@ -226,6 +226,14 @@ def cell_coordinates(codes, item_bits, shape, use_z):
         keys[p] = key
         rest = key >> 1
         cell_key[p] = rest
+        if p > 0 and rest == cell_key[p - 1]:
+            # the entries of one cell lie together: its coordinates once (divisions are slow)
+            kt[p] = kt[p - 1]
+            ky[p] = ky[p - 1]
+            kx[p] = kx[p - 1]
+            if use_z:
+                kz[p] = kz[p - 1]
+            continue
         if use_z:
             kz[p] = rest % nz
             rest //= nz
@@ -281,22 +289,52 @@ def cell_mates(keys, cell_key, single, run_label, use_label):
 
 
 @njit(**_JIT)
-def gather_boxes(items, cols):
-    """``cols[c][items]`` for every column of ``cols`` (the piece table's box columns: t0,
-    t1 swept, xlo, xhi, ylo, yhi, zlo, zhi), in one pass over ``items``."""
-    m = items.shape[0]
+def box_rows(cols):
+    """The piece table's eight box columns (t0, t1 swept, xlo, xhi, ylo, yhi, zlo, zhi) as
+    the rows of one (q, 8) array: a gather then reads one cache line per piece, not eight."""
     t0, t1, xlo, xhi, ylo, yhi, zlo, zhi = cols
+    rows = np.empty((t0.shape[0], 8))
+    for k in range(t0.shape[0]):
+        rows[k, 0] = t0[k]
+        rows[k, 1] = t1[k]
+        rows[k, 2] = xlo[k]
+        rows[k, 3] = xhi[k]
+        rows[k, 4] = ylo[k]
+        rows[k, 5] = yhi[k]
+        rows[k, 6] = zlo[k]
+        rows[k, 7] = zhi[k]
+    return rows
+
+
+@njit(**_JIT)
+def gather_boxes(items, rows, labels, use):
+    """The columns of ``rows[items]`` (:func:`box_rows`) and ``labels[c][items]`` for the int
+    columns (traj, group, iz0) with ``use[c]`` (else empty), in one pass over ``items``: what
+    ``separation._gather_table`` gathers column by column."""
+    m = items.shape[0]
     out = (np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m),
            np.empty(m), np.empty(m))
     o0, o1, o2, o3, o4, o5, o6, o7 = out
+    traj, group, iz0 = labels
+    use_traj, use_group, use_iz0 = use
+    lab = (np.empty(m if use_traj else 0, dtype=np.int64),
+           np.empty(m if use_group else 0, dtype=np.int64),
+           np.empty(m if use_iz0 else 0, dtype=np.int64))
+    l0, l1, l2 = lab
     for p in range(m):
         k = items[p]
-        o0[p] = t0[k]
-        o1[p] = t1[k]
-        o2[p] = xlo[k]
-        o3[p] = xhi[k]
-        o4[p] = ylo[k]
-        o5[p] = yhi[k]
-        o6[p] = zlo[k]
-        o7[p] = zhi[k]
-    return out
+        o0[p] = rows[k, 0]
+        o1[p] = rows[k, 1]
+        o2[p] = rows[k, 2]
+        o3[p] = rows[k, 3]
+        o4[p] = rows[k, 4]
+        o5[p] = rows[k, 5]
+        o6[p] = rows[k, 6]
+        o7[p] = rows[k, 7]
+        if use_traj:
+            l0[p] = traj[k]
+        if use_group:
+            l1[p] = group[k]
+        if use_iz0:
+            l2[p] = iz0[k]
+    return out, lab

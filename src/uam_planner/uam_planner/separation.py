@@ -34,7 +34,7 @@ Pairs are generated in bounded chunks so memory stays bounded even in a crowded 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
@@ -919,13 +919,16 @@ class _PieceArrays:
     zhi: np.ndarray
     group: np.ndarray | None = None
     iz0: np.ndarray | None = None
+    # the box columns as (q, 8) rows for the compiled gather, made at its first use
+    rows: np.ndarray | None = field(default=None, compare=False, repr=False)
 
 
 def _piece_arrays(pa: _Pieces, pb: _Pieces, sa: SegmentSet, sb: SegmentSet, single: bool,
                   pa_t1_sweep, slack: bool, groups_ab=None, iz0=None) -> _PieceArrays:
+    # np.take(v, seg, axis=0): the rows v[seg] gathers, a few times faster on (s, 3) arrays
     if single:
         return _PieceArrays(pa.t0, pa.t1, pa_t1_sweep if slack else pa.t1, pa.p0,
-                            sa.v_mps[pa.seg], sa.traj[pa.seg], pa.xlo, pa.xhi, pa.ylo, pa.yhi,
+                            np.take(sa.v_mps, pa.seg, axis=0), sa.traj[pa.seg], pa.xlo, pa.xhi, pa.ylo, pa.yhi,
                             pa.zlo, pa.zhi, None, iz0)
     t1 = np.concatenate((pa.t1, pb.t1))
     group = None
@@ -935,7 +938,8 @@ def _piece_arrays(pa: _Pieces, pb: _Pieces, sa: SegmentSet, sb: SegmentSet, sing
     return _PieceArrays(np.concatenate((pa.t0, pb.t0)), t1,
                         np.concatenate((pa_t1_sweep, pb.t1)) if slack else t1,
                         np.concatenate((pa.p0, pb.p0)),
-                        np.concatenate((sa.v_mps[pa.seg], sb.v_mps[pb.seg])),
+                        np.concatenate((np.take(sa.v_mps, pa.seg, axis=0),
+                                        np.take(sb.v_mps, pb.seg, axis=0))),
                         np.concatenate((sa.traj[pa.seg], sb.traj[pb.seg])),
                         np.concatenate((pa.xlo, pb.xlo)), np.concatenate((pa.xhi, pb.xhi)),
                         np.concatenate((pa.ylo, pb.ylo)), np.concatenate((pa.yhi, pb.yhi)),
@@ -950,12 +954,16 @@ def _gather_table(P: _PieceArrays, items: np.ndarray, single: bool) -> _PieceTab
         from . import broad_phase_kernel as kernel
 
         f8 = np.float64
-        box = kernel.gather_boxes(_c(items, np.int64), tuple(
-            _c(x, f8) for x in (P.t0, P.t1_sweep, P.xlo, P.xhi, P.ylo, P.yhi, P.zlo, P.zhi)))
+        if P.rows is None:   # built once, gathered from by every stage of any_conflict
+            P.rows = kernel.box_rows(tuple(_c(x, f8) for x in (
+                P.t0, P.t1_sweep, P.xlo, P.xhi, P.ylo, P.yhi, P.zlo, P.zhi)))
+        labels = (P.traj if single else None, P.group, P.iz0)
+        box, lab = kernel.gather_boxes(
+            _c(items, np.int64), P.rows,
+            tuple(_NO_I8 if x is None else _c(x, np.int64) for x in labels),
+            tuple(x is not None for x in labels))
         return _PieceTable(P.t0, P.t1, P.p0, P.v, P.traj, *box,
-                           P.traj[items] if single else None,
-                           None if P.group is None else P.group[items],
-                           None if P.iz0 is None else P.iz0[items])
+                           *(None if x is None else y for x, y in zip(labels, lab)))
     return _PieceTable(P.t0, P.t1, P.p0, P.v, P.traj,
                        P.t0[items], P.t1_sweep[items], P.xlo[items], P.xhi[items], P.ylo[items],
                        P.yhi[items], P.zlo[items], P.zhi[items], P.traj[items] if single else None,
