@@ -29,6 +29,8 @@ or in time, so all-pairs checking would waste nearly all its work. We
 Sorting is O(N log N) in the number of piece keys N, and the exact kernel's cost follows the
 number of pieces that share a cell at the same time, not the square of the number of flights.
 Pairs are generated in bounded chunks so memory stays bounded even in a crowded cell.
+Steps 2-4 run in compiled kernels (``broad_phase_kernel``; ``_COMPILED_KEYS`` off: numpy), which
+make the same arrays to the last bit as the numpy steps kept beside them.
 """
 
 from __future__ import annotations
