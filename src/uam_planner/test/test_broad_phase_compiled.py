@@ -21,7 +21,7 @@ from uam_planner import separation
 from uam_planner.separation import SegmentSet, any_conflict, conflicting_pairs
 
 sys.path.insert(0, os.path.dirname(__file__))  # the shared cases, beside this file
-from separation_cases import CYL, SPHERE  # noqa: E402
+from separation_cases import CYL, SPHERE, line  # noqa: E402
 from separation_cases import random_case as _case  # noqa: E402
 from separation_cases import ties as _ties  # noqa: E402
 
@@ -216,6 +216,24 @@ def test_every_broad_phase_array_is_the_numpy_one(seed, model, monkeypatch):
         got, want = _both(monkeypatch, _broad, model, u, w, **kw)
         assert got is not None
         _same(got, want, f"broad phase {sorted(kw)}")
+
+
+@pytest.mark.parametrize("far,widened", [(3e10, False), (1e13, True)])
+def test_keys_not_packed_or_widened_are_the_numpy_ones(far, widened, monkeypatch):
+    """Extents too large for one packed code (keys and items apart), or for one int64 cell
+    code (keys sorted by coordinates): the numpy keys, then the compiled cell mates and
+    gathers, the same arrays either way."""
+    a, b = _case(7, 15, 20)
+    a.append(line(0, 200, (far - 1000, far, 90), (far + 1000, far, 90)))
+    b.append(line(0, 200, (far, far - 1000, 90), (far, far + 1000, 90)))
+    for model in (SPHERE, CYL):
+        for u, w in ((a, b), (a + b, None)):
+            got, want = _both(monkeypatch, _broad, model, u, w)
+            grid = got.grid
+            max_code = grid.nt * grid.ny * grid.nx * grid.nz * 2
+            assert (max_code.bit_length() > 63) == widened
+            assert max_code.bit_length() + int(got.n_items).bit_length() > 63
+            _same(got, want, "broad phase")
 
 
 def _stages(model, a, b, shifts=None):
