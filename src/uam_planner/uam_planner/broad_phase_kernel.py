@@ -162,21 +162,41 @@ def pack_keys(r, idx, use_idx, use_z, side, offset, shape, item_bits, out, pos):
     in its order (piece by piece; z, then x, then y, then t fastest to slowest). ``shape``:
     (ny, nx, nz). Returns the position after the last code."""
     ny, nx, nz = shape
-    m = idx.shape[0] if use_idx else r[0].shape[0]
+    ix0, ix1, iy0, iy1, it0, it1, iz0, iz1 = r
+    # the code is linear in the coordinates (exact: every code fits int64), so its strides
+    # per z, x, y and t cell replace the products per key
+    sz = 2 << item_bits
+    sx = nz * sz
+    sy = nx * sx
+    st = ny * sy
+    m = idx.shape[0] if use_idx else ix0.shape[0]
     for e in range(m):
         k = idx[e] if use_idx else e
-        item = k if use_idx else offset + e
-        z0 = r[6][k] if use_z else 0
-        z1 = r[7][k] if use_z else 0
-        for it in range(r[4][k], r[5][k] + 1):
-            for iy in range(r[2][k], r[3][k] + 1):
-                row = it * ny + iy
-                for ix in range(r[0][k], r[1][k] + 1):
-                    cell = row * nx + ix
-                    for iz in range(z0, z1 + 1):
-                        code = ((cell * nz + iz) * 2 + side) << item_bits
-                        out[pos] = code | item
+        tail = (side << item_bits) | (k if use_idx else offset + e)
+        z0 = iz0[k] * sz if use_z else 0
+        z1 = iz1[k] * sz if use_z else 0
+        x0 = ix0[k] * sx
+        x1 = ix1[k] * sx
+        y0 = iy0[k] * sy
+        y1 = iy1[k] * sy
+        t = it0[k] * st + tail
+        t_end = it1[k] * st + tail
+        while t <= t_end:
+            y = t + y0
+            y_end = t + y1
+            while y <= y_end:
+                x = y + x0
+                x_end = y + x1
+                while x <= x_end:
+                    z = x + z0
+                    z_end = x + z1
+                    while z <= z_end:
+                        out[pos] = z
                         pos += 1
+                        z += sz
+                    x += sx
+                y += sy
+            t += st
     return pos
 
 
