@@ -154,6 +154,23 @@ def test_a_count_not_finite_is_left_to_numpy(bad, monkeypatch):
     assert errors[0] == errors[1]
 
 
+def test_z_cells_are_searchsorted():
+    """The z cell counts (a guess settled by comparisons) are np.searchsorted's, side 'right'
+    and 'left', on boundaries as _make_grid makes them, at, a step off, and far from them."""
+    from uam_planner import broad_phase_kernel as kernel
+
+    rng = np.random.default_rng(5)
+    for n, z0, dz in ((1, 0.0, 30.0), (2, -15.0, 30.0), (9, -15.0, 30.0), (40, 1e6, 0.1),
+                      (7, -3.3, 7.7)):
+        bounds = z0 + dz * np.arange(n, dtype=np.float64)
+        x = np.concatenate((bounds, np.nextafter(bounds, np.inf), np.nextafter(bounds, -np.inf),
+                            z0 + dz * rng.uniform(-3, n + 3, 300), [-1e300, 1e300]))
+        inv = 1.0 / (bounds[1] - bounds[0]) if n > 1 else 0.0
+        for side, strict in (("right", False), ("left", True)):
+            got = [kernel._count_at_most(bounds, v, strict, inv) for v in x]
+            assert got == np.searchsorted(bounds, x, side=side).tolist(), (n, side)
+
+
 def _keyed(model, a, b, z_cell_m):
     """Pieces, grid and cell ranges as _broad_phase makes them (a, b trajectories)."""
     sa, sb = SegmentSet.from_trajectories(a), SegmentSet.from_trajectories(b)

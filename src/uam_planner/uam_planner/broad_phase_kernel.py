@@ -101,18 +101,25 @@ def _cells(x, origin, size, out):
 
 
 @njit(**_JIT)
-def _count_at_most(bounds, x, strict):
+def _counted(b, x, strict):
+    return b < x or (not strict and b == x)
+
+
+@njit(**_JIT)
+def _count_at_most(bounds, x, strict, inv_step):
     """#{b in the sorted ``bounds``: b < x (``strict``) or b <= x}: ``np.searchsorted``'s
-    index, side 'left' or 'right'."""
-    lo = 0
-    hi = bounds.shape[0]
-    while lo < hi:
-        mid = (lo + hi) >> 1
-        if bounds[mid] < x or (not strict and bounds[mid] == x):
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo
+    index, side 'left' or 'right', for a finite x (z is in the keys only when every z box is
+    finite). Started at the guess (x - bounds[0]) ``inv_step`` and settled by comparisons
+    alone (the guess's rounding cannot change the count), so nearly no branch is mispredicted
+    as in a bisection."""
+    n = bounds.shape[0]
+    f = (x - bounds[0]) * inv_step + 1.0
+    g = 0 if not f > 0.0 else (n if f > n else int(f))
+    while g < n and _counted(bounds[g], x, strict):
+        g += 1
+    while g > 0 and not _counted(bounds[g - 1], x, strict):
+        g -= 1
+    return g
 
 
 @njit(**_JIT)
@@ -133,10 +140,11 @@ def cell_ranges(box, t0, t1, grid, z_bounds, use_z):
     _cells(box[3], y0, cell, r[3])
     _cells(t0, tt0, bucket, r[4])
     _cells(t1, tt0, bucket, r[5])
+    inv_step = 1.0 / (z_bounds[1] - z_bounds[0]) if z_bounds.shape[0] > 1 else 0.0
     for k in range(nz):
         # the first z cell: #{b <= zlo} - 1, the last: #{b < zhi} - 1 (separation._z_ranges)
-        r[6][k] = _count_at_most(z_bounds, box[4][k], False) - 1
-        r[7][k] = _count_at_most(z_bounds, box[5][k], True) - 1
+        r[6][k] = _count_at_most(z_bounds, box[4][k], False, inv_step) - 1
+        r[7][k] = _count_at_most(z_bounds, box[5][k], True, inv_step) - 1
     return r
 
 
