@@ -930,8 +930,8 @@ def _piece_arrays(pa: _Pieces, pb: _Pieces, sa: SegmentSet, sb: SegmentSet, sing
     # np.take(v, seg, axis=0): the rows v[seg] gathers, a few times faster on (s, 3) arrays
     if single:
         return _PieceArrays(pa.t0, pa.t1, pa_t1_sweep if slack else pa.t1, pa.p0,
-                            np.take(sa.v_mps, pa.seg, axis=0), sa.traj[pa.seg], pa.xlo, pa.xhi, pa.ylo, pa.yhi,
-                            pa.zlo, pa.zhi, None, iz0)
+                            np.take(sa.v_mps, pa.seg, axis=0), sa.traj[pa.seg], pa.xlo,
+                            pa.xhi, pa.ylo, pa.yhi, pa.zlo, pa.zhi, None, iz0)
     t1 = np.concatenate((pa.t1, pb.t1))
     group = None
     if groups_ab is not None:
