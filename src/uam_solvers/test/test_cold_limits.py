@@ -90,6 +90,35 @@ def test_solve_kills_a_gil_holding_backend_and_answers_with_the_fallback():
     assert r.stats["requested_backend"] == "test-gil-hog"
 
 
+def test_a_bounded_backend_s_large_graph_goes_to_a_child_with_the_fallback_made_meanwhile(
+        monkeypatch):
+    """Above PRECOMPUTE_FALLBACK_ABOVE vertices even a backend a guard thread could abandon
+    runs in a child killed at the limit (in process, the layers before it are not bounded),
+    and a dense graph's fallback is made on a thread while the child runs, not before the
+    wait (which made the kill late)."""
+    import uam_solvers.greedy as greedy
+
+    class ClaimsBounded(tb.GilHoldingBackend):
+        name = "test-claims-bounded"
+        bounded_in_process = True   # wrongly: a guard thread cannot stop its C call
+
+    p = paper_instance(6, seed=1)
+    monkeypatch.setattr(executor, "PRECOMPUTE_FALLBACK_ABOVE", p.n - 1)
+    monkeypatch.setattr(greedy, "needs_fast_fallback", lambda problem: True)
+    made_on = []
+    real = greedy.fallback_selection
+
+    def counted(problem):
+        made_on.append(threading.current_thread().name)
+        return real(problem)
+    monkeypatch.setattr(greedy, "fallback_selection", counted)
+    r = uam_solvers.solve(p.weights, p.edges, list(p.groups), backend=ClaimsBounded(),
+                          time_limit_s=0.3)
+    assert r.fallback and r.stats["executor"] == "killed" and "child process killed" in r.message
+    assert made_on == ["uam-solvers-fallback"]   # once, on the thread, used at the kill
+    assert p.is_independent(r.selected) and r.objective > 0
+
+
 def test_solve_survives_a_crashing_backend_and_reports_a_backends_input_error():
     p = paper_instance(6, seed=2)
     r = uam_solvers.solve(p.weights, p.edges, list(p.groups), backend=tb.CrashingBackend(),

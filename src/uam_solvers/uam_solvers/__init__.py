@@ -180,10 +180,11 @@ def _solve_problem(problem: MwisProblem, backend: str | Backend, time_limit_s: f
 
     The limit holds from ``t0``: a backend not yet warm in this process is warmed first
     (imports, first-call set-up) and gets the time left; a warm one gets ``time_limit_s``
-    exactly (the answers of a warm process are those of a solve without this step). Backends
-    a guard thread can abandon (``bounded_in_process``) and problems up to the backend's
-    ``inline_max_vertices`` are solved here; the rest in a forked child killed at the limit +
-    margin (:func:`uam_solvers.executor.solve_in_child`)."""
+    exactly (the answers of a warm process are those of a solve without this step). Problems
+    up to the backend's ``inline_max_vertices``, and up to ``PRECOMPUTE_FALLBACK_ABOVE``
+    vertices for backends a guard thread can abandon (``bounded_in_process``), are solved
+    here; the rest in a forked child killed at the limit + margin
+    (:func:`uam_solvers.executor.solve_in_child`)."""
     from .options import check_seed, check_time_limit
     from .warmup import start_up
 
@@ -207,9 +208,15 @@ def _solve_problem(problem: MwisProblem, backend: str | Backend, time_limit_s: f
     budget = time_limit_s
     if spent > 0.0:  # the start-up was this call's: the backend gets the time left
         budget = max(time_limit_s - (time.perf_counter() - t0), 1e-3)
-    if pipeline.bounded_in_process or problem.n <= pipeline.inline_max_vertices:
+    from .executor import PRECOMPUTE_FALLBACK_ABOVE, solve_in_child
+
+    # a guard thread abandons a bounded backend at its limit, but not the layers' reductions
+    # before it: on the large city's graphs (10^5 vertices, 27 M pairs) an in-process sa
+    # answered after 10.5 s at a 1 s limit, the abandoned thread slowing the fallback; those
+    # go to a child killed at the limit, as every unbounded backend's graphs do
+    if problem.n <= pipeline.inline_max_vertices or \
+            (pipeline.bounded_in_process and problem.n <= PRECOMPUTE_FALLBACK_ABOVE):
         return pipeline.solve(problem, time_limit_s=budget, seed=seed, options=options)
-    from .executor import solve_in_child
 
     return solve_in_child(pipeline, problem, budget, seed, options, t0)
 

@@ -728,7 +728,7 @@ def solve_in_child(pipeline: Backend, problem: MwisProblem, time_limit_s: float,
     raised in the child is raised here. ``t0``: when the caller's solve started (its
     ``solve_time_s`` counts from there).
     """
-    from .greedy import fallback_selection, needs_fast_fallback
+    from .greedy import needs_fast_fallback
     from .layers import OVERRUN_MARGIN_S
 
     margin_s = OVERRUN_MARGIN_S if margin_s is None else float(margin_s)
@@ -739,9 +739,11 @@ def solve_in_child(pipeline: Backend, problem: MwisProblem, time_limit_s: float,
                           args=(send, pipeline, problem, time_limit_s, seed, options))
     start_process(process)
     send.close()
-    # computed while the child solves where the fallback is the vectorised rule (dense graphs:
-    # up to 0.13 s at 10^6 pairs), so that it is ready at a kill (GWMIN on others: < 0.05 s)
-    precomputed = fallback_selection(problem) if needs_fast_fallback(problem) else None
+    # made on a thread while the child solves where the fallback is the vectorised rule (dense
+    # graphs: 0.13 s at 10^6 pairs, ~0.8 s at the large city's 27 M), so that it is ready at a
+    # kill and the kill is not late (made here first, it delayed the poll: a cold sa answered
+    # after 2.5 s at a 1 s limit on the large city's graph); GWMIN on others: < 0.05 s
+    background = _fallback_in_background(problem) if needs_fast_fallback(problem) else None
     reply: Any = None
     try:
         if recv.poll(max(kill_at - time.perf_counter(), 0.0)):
@@ -751,7 +753,10 @@ def solve_in_child(pipeline: Backend, problem: MwisProblem, time_limit_s: float,
     finally:
         recv.close()
     if reply is None:
-        process.kill()  # SIGKILL; reaped by multiprocessing at its next start or exit
+        process.kill()  # first: the fallback's thread then has the core to itself
+    precomputed = background.result() if background is not None and \
+        (reply is None or isinstance(reply, BaseException) or reply[0] == "error") else None
+    if reply is None:   # SIGKILLed above; reaped by multiprocessing at its next start or exit
         return fallback_answer(
             problem, pipeline.name, t0, "killed", precomputed=precomputed, reason=(
                 f"backend {pipeline.name!r} exceeded its time limit: still running after "
