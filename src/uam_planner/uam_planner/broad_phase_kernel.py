@@ -273,6 +273,18 @@ def cell_coordinates(codes, item_bits, shape, use_z):
 
 
 @njit(**_JIT)
+def _mates(left_pos, right_first, n_right, n, lo, hi, first, end):
+    """Entries lo..hi-1 each with the partners first..end-1: written from position ``n``;
+    returns the position after them."""
+    for e in range(lo, hi):
+        left_pos[n] = e
+        right_first[n] = first
+        n_right[n] = end - first
+        n += 1
+    return n
+
+
+@njit(**_JIT)
 def cell_mates(keys, cell_key, single, run_label, use_label):
     """``separation._cell_mates``: (left_pos, right_first, n_right) of the sorted entries with
     partners in their cell; within one set the entries after each (with ``use_label``: after
@@ -296,22 +308,14 @@ def cell_mates(keys, cell_key, single, run_label, use_label):
                     while run_end < end and run_label[run_end] == run_label[p]:
                         run_end += 1
                 if end > run_end:
-                    for e in range(p, run_end):
-                        left_pos[n] = e
-                        right_first[n] = run_end
-                        n_right[n] = end - run_end
-                        n += 1
+                    n = _mates(left_pos, right_first, n_right, n, p, run_end, run_end, end)
                 p = run_end
         else:
             first_b = g
             while first_b < end and (keys[first_b] & 1) == 0:
                 first_b += 1
             if end > first_b:
-                for e in range(g, first_b):
-                    left_pos[n] = e
-                    right_first[n] = first_b
-                    n_right[n] = end - first_b
-                    n += 1
+                n = _mates(left_pos, right_first, n_right, n, g, first_b, first_b, end)
         g = end
     return left_pos[:n], right_first[:n], n_right[:n]
 

@@ -159,7 +159,7 @@ def _worker_main(conn) -> None:
             backend = _load_backend(spec)
             problem = _unpack(*packed)
             # no best-so-far of its own: above PRECOMPUTE_FALLBACK_ABOVE vertices the parent
-            # computes the fallback on a thread while this solves (_fallback_in_background),
+            # computes the fallback on a thread while this solves (_fallback_meanwhile),
             # so the whole limit goes to the solve
             inner = Reduce(ComponentSplit(backend)) if layers else backend
             result = inner.solve(problem, time_limit_s=limit_s, seed=seed, options=options)
@@ -459,8 +459,7 @@ class SolveService:
                                   f"no free {lane}-lane worker within the time limit "
                                   f"{limit:g} s (all busy)")
         # started before the job is sent: sending 10^7 edges takes a part of the limit
-        background = _fallback_in_background(problem) if problem.n > PRECOMPUTE_FALLBACK_ABOVE \
-            else None
+        background = _fallback_meanwhile(problem)
         remaining = max(deadline - time.perf_counter(), 1e-3)
         try:
             worker.conn.send((spec, _pack(problem), remaining, seed, opts, bool(layers)))
@@ -469,10 +468,8 @@ class SolveService:
             self.counts["worker-crashed"] += 1
             return self._fallback(problem, name, t0, "worker-crashed", waited,
                                   f"sending the job to the worker failed ({exc})")
-        precomputed = _precomputed_fallback(problem)
         reply = self._await_reply(worker, deadline)
-        if reply is None and background is not None:
-            precomputed = background.result()
+        precomputed = background.result() if reply is None and background is not None else None
         if reply is None:
             worker.signal_kill()  # SIGKILL now: no CPU or memory left behind; reaped below
             self._replace_in_background(worker)
@@ -482,8 +479,8 @@ class SolveService:
                                   f"backend {name!r} exceeded its time limit: still "
                                   f"running after {time.perf_counter() - t0:.3f} s (limit "
                                   f"{limit:g} s + margin {self.margin_s:g} s); worker killed"
-                                  + ("; answer: the worker's greedy answer computed before the "
-                                     "solve" if precomputed is not None else ""))
+                                  + ("; answer: the greedy answer made while the worker "
+                                     "solved" if precomputed is not None else ""))
         return self._worker_answer(problem, name, worker, reply, t0, waited)
 
     def _await_reply(self, worker: _Worker, deadline: float) -> Any:
@@ -640,17 +637,16 @@ def _backend_and_spec(backend: str | Backend) -> tuple[Backend, Any]:
     return backend, backend
 
 
-def _precomputed_fallback(problem: MwisProblem) -> tuple | None:
-    """The fallback answer computed in this process while the worker solves, or None.
+def _fallback_meanwhile(problem: MwisProblem):
+    """The fallback answer made on a thread while a worker or child solves (a Future), or
+    None where it is made only if needed: above PRECOMPUTE_FALLBACK_ABOVE vertices and where
+    the fallback is the vectorised rule (``needs_fast_fallback``: dense graphs, 0.13 s at 10^6
+    pairs, ~0.8 s at the large city's 27 M), so that it is ready at a kill and never delays
+    it; GWMIN on the others takes < 0.05 s after the kill."""
+    from .greedy import needs_fast_fallback
 
-    On large graphs (above PRECOMPUTE_FALLBACK_ABOVE vertices) a thread computes it
-    (:func:`_fallback_in_background`). Below, where the fallback is the vectorised one (dense graphs: up to 0.13 s at 10^6 pairs), this
-    process computes it now, while the worker solves, so that it is ready before the limit
-    (GWMIN on the others takes < 0.05 s)."""
-    from .greedy import fallback_selection, needs_fast_fallback
-
-    if problem.n <= PRECOMPUTE_FALLBACK_ABOVE and needs_fast_fallback(problem):
-        return fallback_selection(problem)
+    if problem.n > PRECOMPUTE_FALLBACK_ABOVE or needs_fast_fallback(problem):
+        return _fallback_in_background(problem)
     return None
 
 
@@ -728,7 +724,6 @@ def solve_in_child(pipeline: Backend, problem: MwisProblem, time_limit_s: float,
     raised in the child is raised here. ``t0``: when the caller's solve started (its
     ``solve_time_s`` counts from there).
     """
-    from .greedy import needs_fast_fallback
     from .layers import OVERRUN_MARGIN_S
 
     margin_s = OVERRUN_MARGIN_S if margin_s is None else float(margin_s)
@@ -739,11 +734,9 @@ def solve_in_child(pipeline: Backend, problem: MwisProblem, time_limit_s: float,
                           args=(send, pipeline, problem, time_limit_s, seed, options))
     start_process(process)
     send.close()
-    # made on a thread while the child solves where the fallback is the vectorised rule (dense
-    # graphs: 0.13 s at 10^6 pairs, ~0.8 s at the large city's 27 M), so that it is ready at a
-    # kill and the kill is not late (made here first, it delayed the poll: a cold sa answered
-    # after 2.5 s at a 1 s limit on the large city's graph); GWMIN on others: < 0.05 s
-    background = _fallback_in_background(problem) if needs_fast_fallback(problem) else None
+    # on a thread, not here before the wait: made first, it delayed the poll and so the kill
+    # (a cold sa answered after 2.5 s at a 1 s limit on the large city's graph)
+    background = _fallback_meanwhile(problem)
     reply: Any = None
     try:
         if recv.poll(max(kill_at - time.perf_counter(), 0.0)):

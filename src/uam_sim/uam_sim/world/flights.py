@@ -46,7 +46,7 @@ def corridor_use_m(network, flights) -> np.ndarray:
     if not starts:
         return np.zeros(network.n_edges, dtype=float)
     e = network.edge_indices(starts, ends)
-    return np.bincount(e, weights=L[e], minlength=network.n_edges).astype(float, copy=False)
+    return np.bincount(e, weights=L[e], minlength=network.n_edges)
 
 
 def jain_index(values: Sequence[float]) -> float:
