@@ -301,37 +301,51 @@ class CandidateCache:
         return list(range(first, n, 2))
 
     def _layered(self, o: int, d: int, routes) -> list[RouteTemplate]:
-        """One template per (route, allowed level): pad climb, cruise, pad descent."""
+        """One template per (allowed level, route), level-major: pad climb, cruise, pad descent.
+
+        Each route's templates for all its levels are built at once, as rows of (levels, points)
+        arrays, and each template holds read-only views of its row: a pair of a large city has
+        up to 12 levels x 5 routes, and one numpy call per template made this function three
+        quarters of a route search's CPU. The arithmetic is the same per element as one template
+        at a time (same differences, norms of two terms, sequential cumulative sums)."""
         net = self.network
         xy = net.enu_m[:, :2]
         alt = net.lat_lon_alt[:, 2]
         pads_o, pads_d = net.pads_of(o), net.pads_of(d)
-        out = []
-        for li in self.allowed_levels(o, d):
-            level = float(net.levels_m[li])
-            po = xy[o] + pads_o[li % len(pads_o)]
-            pd = xy[d] + pads_d[li % len(pads_d)]
-            for r in routes:
-                mid = xy[np.asarray(r.node_indices[1:-1], dtype=np.int64)].reshape(-1, 2)
-                horiz = np.concatenate(([po], mid, [pd]))
-                pts = np.concatenate((
-                    [(po[0], po[1], alt[o])],
-                    np.column_stack((horiz, np.full(horiz.shape[0], level))),
-                    [(pd[0], pd[1], alt[d])]))
-                pts = np.ascontiguousarray(pts, dtype=np.float64)
-                legs = np.linalg.norm(np.diff(horiz, axis=0), axis=1)
-                if np.any(legs <= 0.0):
-                    raise ValueError(f"route {[net.node_ids[i] for i in r.node_indices]} has a pad "
-                                     f"on a corridor node (zero-length leg)")
-                dur = np.concatenate(([(level - alt[o]) / self.climb_rate_mps],
-                                      legs / self.speed_mps,
-                                      [(level - alt[d]) / self.descent_rate_mps]))
-                rel = np.concatenate(([0.0], np.cumsum(dur)))
-                t0 = rel[:-1]
-                t1 = rel[1:]
-                v = (pts[1:] - pts[:-1]) / (t1 - t0)[:, None]
-                for a in (pts, rel, v):
-                    a.setflags(write=False)
-                out.append(RouteTemplate(r, tuple(net.node_ids[i] for i in r.node_indices),
-                                         pts, rel, (t0, t1, pts[:-1], v), li, level))
-        return out
+        lis = np.asarray(self.allowed_levels(o, d), dtype=np.int64)
+        levels = np.asarray(net.levels_m, dtype=np.float64)[lis]
+        n_l = len(lis)
+        po = xy[o] + pads_o[lis % len(pads_o)]
+        pd = xy[d] + pads_d[lis % len(pads_d)]
+        climb = (levels - alt[o]) / self.climb_rate_mps
+        descent = (levels - alt[d]) / self.descent_rate_mps
+        blocks = []
+        for r in routes:
+            mid = xy[np.asarray(r.node_indices[1:-1], dtype=np.int64)].reshape(-1, 2)
+            n_h = mid.shape[0] + 2
+            pts = np.empty((n_l, n_h + 2, 3), dtype=np.float64)
+            pts[:, 0, :2] = po
+            pts[:, 0, 2] = alt[o]
+            pts[:, 1, :2] = po
+            pts[:, 2:n_h, :2] = mid
+            pts[:, n_h, :2] = pd
+            pts[:, 1:n_h + 1, 2] = levels[:, None]
+            pts[:, n_h + 1, :2] = pd
+            pts[:, n_h + 1, 2] = alt[d]
+            legs = np.linalg.norm(np.diff(pts[:, 1:n_h + 1, :2], axis=1), axis=2)
+            if np.any(legs <= 0.0):
+                raise ValueError(f"route {[net.node_ids[i] for i in r.node_indices]} has a pad "
+                                 f"on a corridor node (zero-length leg)")
+            dur = np.empty((n_l, n_h + 1), dtype=np.float64)
+            dur[:, 0] = climb
+            dur[:, 1:n_h] = legs / self.speed_mps
+            dur[:, n_h] = descent
+            rel = np.zeros((n_l, n_h + 2), dtype=np.float64)
+            np.cumsum(dur, axis=1, out=rel[:, 1:])
+            v = np.diff(pts, axis=1) / np.diff(rel, axis=1)[:, :, None]
+            for a in (pts, rel, v):
+                a.setflags(write=False)
+            blocks.append((r, tuple(net.node_ids[i] for i in r.node_indices), pts, rel, v))
+        return [RouteTemplate(r, ids, pts[j], rel[j], (rel[j, :-1], rel[j, 1:], pts[j, :-1], v[j]),
+                              int(lis[j]), float(levels[j]))
+                for j in range(n_l) for r, ids, pts, rel, v in blocks]
