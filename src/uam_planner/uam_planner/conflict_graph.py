@@ -8,6 +8,7 @@ a largest-weight set of mutually conflict-free routes, at most one per request.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -73,12 +74,22 @@ def discard_against_active(candidates, active, separation_m: float = DEFAULT_SEP
     return any_conflict(cand, act, separation_m)
 
 
+@functools.lru_cache(maxsize=512)
+def _upper_pairs(c: int) -> tuple[np.ndarray, np.ndarray]:
+    """``np.triu_indices(c, k=1)``, read-only and kept: a request's group has one of a few
+    sizes, and building the indices was most of the clique edges' time."""
+    iu, ju = np.triu_indices(c, k=1)
+    iu.setflags(write=False)
+    ju.setflags(write=False)
+    return iu, ju
+
+
 def _clique_edges(groups: list) -> np.ndarray:
     parts = []
     for g in groups:
         c = g.shape[0]
         if c > 1:
-            iu, ju = np.triu_indices(c, k=1)
+            iu, ju = _upper_pairs(int(c))
             parts.append(np.stack((g[iu], g[ju]), axis=1))
     return np.concatenate(parts) if parts else np.zeros((0, 2), dtype=np.int64)
 
