@@ -85,7 +85,7 @@ class _PenalisedGraph:
         self.pos_bwd = pos[m:]
         self.n = n
         self._mat = None
-        self.edge_of = {(int(u), int(v)): k for k, (u, v) in enumerate(edges.tolist())}
+        self._network = network
 
     def matrix(self, cost: np.ndarray) -> scipy.sparse.csr_matrix:
         """The CSR matrix with corridor costs ``cost`` (m,); reuses one matrix object."""
@@ -97,8 +97,9 @@ class _PenalisedGraph:
         return self._mat
 
     def path_edges(self, path: list[int]) -> np.ndarray:
-        return np.fromiter((self.edge_of[(min(a, b), max(a, b))] for a, b in zip(path, path[1:])),
-                           dtype=np.int64, count=len(path) - 1)
+        """The corridor indices along ``path`` (node indices), in order."""
+        p = np.asarray(path, dtype=np.int64)
+        return self._network.edge_indices(p[:-1], p[1:])
 
 
 def _validate_k_penalty(k, penalty_factor):
