@@ -42,7 +42,7 @@ from scipy.sparse.csgraph import dijkstra
 from .trajectory import DEFAULT_SPEED_MPS, Trajectory, relative_times_s
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class CandidateRoute:
     """One candidate route of a request.
 
@@ -174,7 +174,7 @@ def candidate_routes(network, origin_id: str, destination_id: str, k: int = 5,
                    terminals=network.layered)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class RouteTemplate:
     """A candidate route ready to fly: waypoints and times relative to departure.
 
