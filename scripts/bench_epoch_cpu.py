@@ -20,8 +20,8 @@ call, minus the solve's: everything the planner spends on the epoch, wherever it
 route search inside ``submit`` counts). Epochs before ``--steady-from`` [s] (the fleet filling
 up) are left out of the percentiles. Prints p50 / p99 / max of the CPU and of the report's
 ``planning_time_s`` (wall), the airborne count, candidates and discarded per epoch, the
-approvals (which must not depend on the code's speed), the process's peak resident memory and
-the load average before and after.
+approvals (which must not depend on the code's speed), the full garbage collections inside the
+steady epochs, the process's peak resident memory and the load average before and after.
 CPU time is far less sensitive than wall time to other processes on the same cores.
 """
 
@@ -80,6 +80,7 @@ def run(per_hour: float, duration_s: float, steady_from_s: float, seed: int = 0,
         finally:
             solve_cpu[0] += time.process_time() - c
 
+    gc_cpu = _collector_clock()
     c_setup = time.process_time()
     if method == "auto":
         import uam_solvers
@@ -93,6 +94,7 @@ def run(per_hour: float, duration_s: float, steady_from_s: float, seed: int = 0,
     for e in range(int(math.ceil(duration_s / cfg.epoch_s - 1e-9))):
         t = e * cfg.epoch_s
         solve_cpu[0] = 0.0
+        gc_cpu[0] = 0.0
         c = time.process_time()
         for r in demand.requests_at(t, e):
             reason = planner.submit(r)
@@ -104,10 +106,29 @@ def run(per_hour: float, duration_s: float, steady_from_s: float, seed: int = 0,
         rep = res.report
         approved += len(res.approved)
         rows.append((t, cpu, c_submit, rep.planning_time_s, rep.active_flights - rep.approved,
-                     rep.candidates, rep.discarded, rep.approved, rep.expired))
+                     rep.candidates, rep.discarded, rep.approved, rep.expired, gc_cpu[0]))
     a = np.array(rows)
     steady = a[a[:, 0] >= steady_from_s]
     return {"all": a, "steady": steady, "approved": approved, "setup_cpu_s": setup_cpu}
+
+
+def _collector_clock() -> list:
+    """[CPU s] of the cyclic garbage collector's full (generation 2) collections since the
+    caller last set it to 0: a full collection walks every tracked object of the process (the
+    route cache's templates among them), so at city scale one costs a large share of an epoch."""
+    import gc
+
+    acc = [0.0, 0.0]   # total, start of the running collection
+
+    def clock(phase, info):
+        if info.get("generation") != 2:
+            return
+        if phase == "start":
+            acc[1] = time.process_time()
+        else:
+            acc[0] += time.process_time() - acc[1]
+    gc.callbacks.append(clock)
+    return acc
 
 
 def _pct(x, q):
@@ -160,6 +181,9 @@ def main(argv=None) -> int:
           f"ms | {ms * _pct(s[:, 3], 50):.1f} / {ms * _pct(s[:, 3], 99):.1f} ms | "
           f"{s[:, 4].mean():.0f} | {s[:, 5].mean():.0f} | {s[:, 6].mean():.0f} | "
           f"{100 * share:.1f} % | {r['approved']} |")
+    print(f"steady epochs with a full garbage collection: {int((s[:, 9] > 0).sum())}; its CPU "
+          f"{ms * s[:, 9].sum():.0f} ms in all, at most {ms * s[:, 9].max():.0f} ms in an epoch "
+          f"(inside the CPU per epoch above)")
     # ru_maxrss: the process's resident peak [KiB on Linux], network, routes and fleet included
     peak_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     print(f"planner set-up CPU {r['setup_cpu_s']:.2f} s; run {wall:.0f} s wall; peak memory "
