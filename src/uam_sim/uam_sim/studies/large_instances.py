@@ -12,8 +12,10 @@ Two stages, each writing committed tables to the config's ``out`` (docs/large-in
   ``scripts/bench_epoch_cpu.py --lazy-routes`` plans it (cylinder H 100 m / V 30 m, 5 s departure
   slots, the paper's demand generator, window 60 s, routes searched when a pair is first
   requested), under the policy ``record.method`` (first-fit, the decision study's E0 reference
-  policy: it builds the MWIS policy's instance and decides fast). Every epoch's instance is
-  kept; a seeded sample per size bin (:func:`uam_sim.studies.decision_study.e0_sample`) is solved
+  policy: it builds the MWIS policy's instance and decides fast). Every epoch is planned, but
+  only those at ``t >= record.record_from_s`` (per rate: the steady-state window; earlier
+  epochs are the warm-up that fills the sky) keep their instance; of those, a seeded sample per
+  size bin (:func:`uam_sim.studies.decision_study.e0_sample`) is solved
   by every solver of ``solve.backends`` at ``solve.time_limit_s`` and by the reference
   (``solve.reference``), each through :func:`uam_sim.studies.decision_study.e0_solve_rows`
   (E0's solve, so the rows mean what E0's mean). ``instances.csv``: every recorded epoch (size,
@@ -36,6 +38,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import yaml
@@ -50,7 +53,8 @@ def load_config(path) -> dict:
     """config/large-instances.yaml as a dict; a missing section or key is named."""
     cfg = yaml.safe_load(Path(path).read_text(encoding="utf-8")) or {}
     for section, keys in (("record", ("city", "city_seed", "method", "rates_per_hour",
-                                      "duration_s", "seed", "slot_s", "vertical_separation_m")),
+                                      "duration_s", "record_from_s", "seed", "slot_s",
+                                      "vertical_separation_m")),
                           ("solve", ("backends", "time_limit_s", "reference", "bins", "per_bin",
                                      "seed")),
                           ("replanning", ("args",))):
@@ -63,6 +67,7 @@ def load_config(path) -> dict:
     if not isinstance(durs, list) or len(durs) != len(rates):
         raise ValueError(f"{path}: record.duration_s must list one duration per rate "
                          f"({len(rates)}), got {durs!r}")
+    _check_record_from(path, cfg["record"].get("record_from_s"), rates, durs)
     if "firstfit" not in cfg["solve"]["backends"]:
         raise ValueError(f"{path}: solve.backends must include 'firstfit' (the baseline every "
                          f"gain is read against), got {cfg['solve']['backends']!r}")
@@ -71,22 +76,37 @@ def load_config(path) -> dict:
     return cfg
 
 
+def _check_record_from(path, froms, rates, durs) -> None:
+    """record.record_from_s: one start of the recorded window [s] per rate, a number >= 0 and
+    below the rate's duration (at least one epoch is recorded); ValueError naming the value."""
+    if not isinstance(froms, list) or len(froms) != len(rates):
+        raise ValueError(f"{path}: record.record_from_s must list one start [s] per rate "
+                         f"({len(rates)}), got {froms!r}")
+    for rate, start, dur in zip(rates, froms, durs):
+        ok = isinstance(start, (int, float)) and not isinstance(start, bool)
+        if not ok or not (0.0 <= float(start) < float(dur)):
+            raise ValueError(f"{path}: record.record_from_s = {start!r} for {rate} requests/h: "
+                             f"must be a number >= 0 and below its duration_s ({dur})")
+
+
 def run_name(cfg: dict, per_hour) -> str:
     return f"{cfg['record']['city']}-r{int(per_hour)}"
 
 
 def record_city(city: str, city_seed: int, per_hour: float, duration_s: float, seed: int,
                 method: str = "firstfit", slot_s: float = 5.0,
-                vertical_separation_m: float = 30.0) -> tuple[list, list]:
+                vertical_separation_m: float = 30.0, record_from_s: float = 0.0) -> tuple[list, list]:
     """Plan ``duration_s`` [s] of the named city at ``per_hour`` requests per hour in process
     under ``method`` (``firstfit`` or ``fifo``; the planner's own baselines, no solver), as
-    ``scripts/bench_epoch_cpu.py --lazy-routes`` builds the run. Returns ([(epoch, t_s,
-    MwisProblem)] of every epoch with a conflict graph, [one dict per epoch: its counts and CPU
-    seconds])."""
+    ``scripts/bench_epoch_cpu.py --lazy-routes`` builds the run. Every epoch is planned (the
+    warm-up fills the sky), but only those at ``t >= record_from_s`` keep their instance: an
+    early epoch of a busy city holds ~27 M edges, so keeping every epoch's would not fit in
+    memory. Returns ([(epoch, t_s, kept instance)] of every recorded epoch with a conflict graph
+    (:func:`kept_problem` builds its MwisProblem; ``.n`` is its vertex count), [one dict per
+    epoch: its counts, CPU seconds and ``warmup`` (t < record_from_s)])."""
     from uam_planner.planning import AirspaceConfig, Planner, PlanningConfig
     from uam_planner.synthetic import generate_city
 
-    from ..runner.scenario import problem_from_report
     from ..world.demand import RequestGenerator
     net = generate_city(city, city_seed)
     cfg = PlanningConfig(airspace=AirspaceConfig("cylinder", float(vertical_separation_m),
@@ -104,29 +124,47 @@ def record_city(city: str, city_seed: int, per_hour: float, duration_s: float, s
             if reason is not None:
                 raise ValueError(f"request {r.request_id} refused: {reason}")
         rep = planner.plan(t, e).report
+        warmup = t < float(record_from_s)
         epochs.append({"epoch": e, "t_s": t, "eligible": rep.eligible, "vertices": rep.vertices,
                        "edges": rep.edges, "approved": rep.approved,
                        "airborne": rep.active_flights - rep.approved,
-                       "cpu_s": time.process_time() - c})
-        problem = problem_from_report(rep)
-        if problem is not None:
-            found.append((e, t, problem))
+                       "cpu_s": time.process_time() - c, "warmup": warmup})
+        if not warmup and rep.vertices > 0:
+            found.append((e, t, _kept(rep)))
     return found, epochs
 
 
-def _key(cfg: dict, per_hour, duration_s) -> str:
+def _kept(report) -> SimpleNamespace:
+    """An epoch's instance as its report holds it (int32 edges, copied: a few bytes per edge);
+    the MwisProblem, ~3x that, is built only for the sampled ones (:func:`kept_problem`)."""
+    return SimpleNamespace(n=int(report.vertices), vertices=int(report.vertices),
+                           weights=np.array(report.weights, dtype=np.float64),
+                           edges_array=np.array(report.edges_array, dtype=np.int32),
+                           vertex_request_ids=list(report.vertex_request_ids))
+
+
+def kept_problem(kept: SimpleNamespace):
+    """The MwisProblem of a kept instance (weights, edges, one group per request)."""
+    from ..runner.scenario import problem_from_report
+    return problem_from_report(kept)
+
+
+def _key(cfg: dict, per_hour, duration_s, record_from_s) -> str:
     from ..runner.sweep import code_version
-    params = {"record": {**cfg["record"], "rates_per_hour": per_hour, "duration_s": duration_s},
+    params = {"record": {**cfg["record"], "rates_per_hour": per_hour, "duration_s": duration_s,
+                         "record_from_s": record_from_s},
               "solve": cfg["solve"]}
     digest = hashlib.sha256(json.dumps(params, sort_keys=True, default=str).encode()).hexdigest()[:16]
     return f"solves_{run_name(cfg, per_hour)}_{digest}_c{code_version()}"
 
 
-def solve_rate(cfg: dict, per_hour, duration_s, cells: Path, progress: bool = True) -> dict:
-    """One rate's cell: record, sample, solve by every solver and the reference; cached."""
+def solve_rate(cfg: dict, per_hour, duration_s, cells: Path, progress: bool = True,
+               record_from_s: float = 0.0) -> dict:
+    """One rate's cell: record (instances kept from ``record_from_s`` on), sample the kept ones,
+    solve by every solver and the reference; cached."""
     from ..runner.sweep import _commit, code_version
     from .decision_study import REFERENCE, e0_sample, e0_solve_rows
-    key = _key(cfg, per_hour, duration_s)
+    key = _key(cfg, per_hour, duration_s, record_from_s)
     path = cells / f"{key}.json"
     if path.exists():
         return json.loads(path.read_text())
@@ -134,13 +172,17 @@ def solve_rate(cfg: dict, per_hour, duration_s, cells: Path, progress: bool = Tr
     load0 = os.getloadavg()[0]
     found, epochs = record_city(rec["city"], int(rec["city_seed"]), float(per_hour),
                                 float(duration_s), int(rec["seed"]), rec["method"],
-                                float(rec["slot_s"]), float(rec["vertical_separation_m"]))
-    sample = e0_sample(found, list(sol["bins"]), sol["per_bin"], int(sol["seed"]))
-    picked = {int(ep) for ep, _t, _p in sample}
+                                float(rec["slot_s"]), float(rec["vertical_separation_m"]),
+                                float(record_from_s))
+    picked_kept = e0_sample(found, list(sol["bins"]), sol["per_bin"], int(sol["seed"]))
+    picked = {int(ep) for ep, _t, _p in picked_kept}
     if progress:
-        print(f"{run_name(cfg, per_hour)}: {len(found)} instances "
-              f"({', '.join(str(p.n) for _e, _t, p in found)} vertices); sampled epochs "
-              f"{sorted(picked)}", flush=True)
+        print(f"{run_name(cfg, per_hour)}: {len(epochs) - len(found)} warm-up or empty epochs, "
+              f"{len(found)} instances kept ({', '.join(str(p.n) for _e, _t, p in found)} "
+              f"vertices); sampled epochs {sorted(picked)}", flush=True)
+    del found  # only the sample's instances are built and solved
+    sample = [(e, t, kept_problem(k)) for e, t, k in picked_kept]
+    del picked_kept
     rows = []
     for solver in list(sol["backends"]) + [REFERENCE]:
         ref = solver == REFERENCE
@@ -157,8 +199,8 @@ def solve_rate(cfg: dict, per_hour, duration_s, cells: Path, progress: bool = Tr
     for r in rows:
         r.update({"run": name, "rate_per_hour": per_hour})
     for ep in epochs:
-        ep.update({"run": name, "rate_per_hour": per_hour, "sampled": ep["epoch"] in picked,
-                   "load": round(load0, 2)})
+        ep.update({"run": name, "rate_per_hour": per_hour, "record_from_s": record_from_s,
+                   "sampled": ep["epoch"] in picked, "load": round(load0, 2)})
     cell = {"key": key, "run": name, "rows": rows, "epochs": epochs, "ran_at": _commit(),
             "code_version": code_version()}
     cells.mkdir(parents=True, exist_ok=True)
@@ -169,15 +211,16 @@ def solve_rate(cfg: dict, per_hour, duration_s, cells: Path, progress: bool = Tr
 SOLVE_COLUMNS = ["run", "rate_per_hour", "epoch", "t_s", "vertices", "edges", "solver", "backend",
                  "time_limit_s", "objective", "count", "proven_optimal", "fallback", "wall_s",
                  "load", "commit", "code_version"]
-EPOCH_COLUMNS = ["run", "rate_per_hour", "epoch", "t_s", "eligible", "vertices", "edges",
-                 "approved", "airborne", "sampled", "cpu_s", "load"]
+EPOCH_COLUMNS = ["run", "rate_per_hour", "record_from_s", "epoch", "t_s", "warmup", "eligible",
+                 "vertices", "edges", "approved", "airborne", "sampled", "cpu_s", "load"]
 
 
 def run_solves(cfg: dict, out: Path, progress: bool = True) -> dict:
     cells = Path(cfg["cells"])
     rows, epochs = [], []
-    for per_hour, dur in zip(cfg["record"]["rates_per_hour"], cfg["record"]["duration_s"]):
-        cell = solve_rate(cfg, per_hour, dur, cells, progress)
+    rec = cfg["record"]
+    for per_hour, dur, start in zip(rec["rates_per_hour"], rec["duration_s"], rec["record_from_s"]):
+        cell = solve_rate(cfg, per_hour, dur, cells, progress, start)
         ran = {"commit": cell["ran_at"], "code_version": cell["code_version"]}
         rows += [{k: (ran[k] if k in ran else r[k]) for k in SOLVE_COLUMNS} for r in cell["rows"]]
         epochs += [{k: e[k] for k in EPOCH_COLUMNS} for e in cell["epochs"]]
