@@ -82,16 +82,21 @@ def gaps(solves: pd.DataFrame, bins: list) -> pd.DataFrame:
     return g
 
 
-def summary_rows(g: pd.DataFrame, bins: list) -> list:
-    """One row per solver and size bin: gaps, time to target, proofs, fallbacks, wall."""
+def summary_rows(g: pd.DataFrame, bins: list, keys: set | None = None) -> list:
+    """One row per solver and size bin: gaps, time to target, proofs, fallbacks, wall; of every
+    instance (subset ``all``) or, with ``keys`` ({(run, epoch)}), of those instances alone
+    (subset ``steady state``)."""
     rows = []
+    if keys is not None:
+        g = g[[k in keys for k in zip(g["run"], g["epoch"].astype(int))]]
     for s in [x for x in ORDER if x in set(g["solver"])]:
         for lo, hi in zip(bins[:-1], bins[1:]):
             x = g[(g["solver"] == s) & (g["bin_lo"] == lo)]
             if x.empty:
                 continue
             ttt = x["time_to_target_s"].dropna()
-            rows.append({"solver": s, "bin": _bin_label(lo, hi), "instances": len(x),
+            rows.append({"subset": "all" if keys is None else STEADY,
+                         "solver": s, "bin": _bin_label(lo, hi), "instances": len(x),
                          "vertices_max": int(x["vertices"].max()),
                          "gap_mean_pct": float(x["gap_pct"].mean()),
                          "gap_max_pct": float(x["gap_pct"].max()),
@@ -106,6 +111,46 @@ def summary_rows(g: pd.DataFrame, bins: list) -> list:
     return rows
 
 
+# -- the recorded window -------------------------------------------------------------------------
+
+STEADY, WARMUP, START = "steady state", "warm-up", "from the start"
+
+
+def phases(inst: pd.DataFrame) -> pd.Series:
+    """Each epoch row's phase: ``warm-up`` (before its run's ``record_from_s``: planned to fill
+    the sky, its instance neither kept nor sampled), ``steady state`` (at or after a
+    ``record_from_s`` > 0) or ``from the start`` (a run recorded from t = 0, no warm-up).
+    Tables without the window's columns are read as recorded from the start."""
+    start = inst["record_from_s"] if "record_from_s" in inst else pd.Series(0.0, inst.index)
+    warm = _true(inst["warmup"]) if "warmup" in inst else pd.Series(False, inst.index)
+    return pd.Series(np.where(warm, WARMUP, np.where(start.astype(float) > 0, STEADY, START)),
+                     index=inst.index)
+
+
+def check_window(inst: pd.DataFrame, solves: pd.DataFrame) -> None:
+    """Every solved instance is an epoch of instances.csv marked sampled and not warm-up, and
+    every epoch marked sampled was solved: ValueError naming the first (run, epoch) that is not."""
+    ph = phases(inst)
+    bad = inst[_true(inst["sampled"]) & (ph == WARMUP)]
+    if len(bad):
+        r = bad.iloc[0]
+        raise ValueError(f"instances.csv: run {r['run']} epoch {int(r['epoch'])} (t = "
+                         f"{r['t_s']} s) is sampled but in its warm-up (record_from_s = "
+                         f"{r['record_from_s']})")
+    picked = {(r, int(e)) for r, e in inst[_true(inst["sampled"])][["run", "epoch"]].itertuples(index=False)}
+    solved = {(r, int(e)) for r, e in solves[["run", "epoch"]].drop_duplicates().itertuples(index=False)}
+    for what, x in (("solved but not a sampled epoch of instances.csv", sorted(solved - picked)),
+                    ("sampled in instances.csv but not solved", sorted(picked - solved))):
+        if x:
+            raise ValueError(f"solves.csv.gz: run {x[0][0]} epoch {x[0][1]} is {what}")
+
+
+def steady_keys(inst: pd.DataFrame) -> set:
+    """{(run, epoch)} of the steady-state epochs."""
+    x = inst[phases(inst) == STEADY]
+    return {(r, int(e)) for r, e in x[["run", "epoch"]].itertuples(index=False)}
+
+
 # -- sections ------------------------------------------------------------------------------------
 
 def _instances_lines(cfg: dict, inst: pd.DataFrame) -> list:
@@ -115,22 +160,29 @@ def _instances_lines(cfg: dict, inst: pd.DataFrame) -> list:
          f"`{rec['method']}` (it builds the instance the MWIS policy would solve), cylinder "
          f"separation with V = {_f(rec['vertical_separation_m'], 0)} m, "
          f"{_f(rec['slot_s'], 0)} s departure slots, demand seed {rec['seed']}, routes searched "
-         "when a pair is first requested. One row per run: its epochs, the instances' sizes, the "
-         "requests decided per epoch and the share of them approved (the contention the "
-         "instances carry), the flights airborne at the last epoch, and the CPU per epoch of "
-         "building and deciding it (the process's CPU time, solver-free).", ""]
+         "when a pair is first requested. One row per run and phase: its epochs (t from / to), "
+         "the instances' sizes, the requests decided per epoch and the share of them approved "
+         "(the contention the instances carry), the flights airborne (median and at the last "
+         "epoch), and the CPU per epoch of building and deciding it (the process's CPU time, "
+         f"solver-free). Phase: `{WARMUP}` = planned before the run's `record_from_s` to fill "
+         "the sky, its instances neither kept nor sampled; "
+         f"`{STEADY}` = from `record_from_s` on; `{START}` = a run recorded from t = 0.", ""]
     rows = []
-    for run, x in inst.groupby("run", sort=False):
-        rows.append([run, _f(int(x["rate_per_hour"].iloc[0])), len(x),
+    inst = inst.assign(phase=phases(inst))
+    for (run, phase), x in inst.groupby(["run", "phase"], sort=False):
+        rows.append([run, _f(int(x["rate_per_hour"].iloc[0])), phase, len(x),
+                     f"{_f(x['t_s'].min(), 0)} / {_f(x['t_s'].max(), 0)}",
                      f"{_f(int(x['vertices'].min()))} / {_f(int(x['vertices'].median()))} / "
                      f"{_f(int(x['vertices'].max()))}", _f(int(x["edges"].max())),
                      _f(x["eligible"].mean(), 1),
                      _f(100.0 * x["approved"].sum() / max(int(x["eligible"].sum()), 1), 1),
-                     _f(int(x["airborne"].iloc[-1])), int(_true(x["sampled"]).sum()),
+                     f"{_f(int(x['airborne'].median()))} / {_f(int(x['airborne'].iloc[-1]))}",
+                     int(_true(x["sampled"]).sum()),
                      f"{_f(x['cpu_s'].median(), 1)} / {_f(x['cpu_s'].max(), 1)}"])
-    L += _table(rows, ["run", "requests/h", "epochs", "vertices min / median / max",
-                       "edges max", "requests decided per epoch", "approved [%]",
-                       "airborne at the end", "sampled", "CPU per epoch median / max [s]"])
+    L += _table(rows, ["run", "requests/h", "phase", "epochs", "t [s]",
+                       "vertices min / median / max", "edges max", "requests decided per epoch",
+                       "approved [%]", "airborne median / at the end", "sampled",
+                       "CPU per epoch median / max [s]"])
     return L + [""]
 
 
@@ -155,16 +207,21 @@ def _solves_lines(cfg: dict, g: pd.DataFrame, rows: list) -> list:
          f"{_f(int(ref[_true(ref['proven_optimal'])]['vertices'].max())) if _true(ref['proven_optimal']).any() else 'none'} "
          f"vertices) and fell back on {int(_true(ref['fallback']).sum())}; above that the best "
          "known is a bound from below, not the optimum.", ""]
-    L += _table([[r["solver"], r["bin"], r["instances"], _f(r["vertices_max"]),
-                  _f(r["gap_mean_pct"], 3), _f(r["gap_max_pct"], 3),
-                  _f(100 * r["reached_share"], 0), _f(r["time_to_target_median_s"], 2),
-                  _f(r["gain_mean_pct"], 3, True), _f(r["count_gain_mean"], 2, True),
-                  _f(100 * r["proven_share"], 0), r["fallbacks"], _f(r["wall_median_s"], 2),
-                  _f(r["wall_max_s"], 2)] for r in rows],
-                ["solver", "vertices", "instances", "largest", "gap mean [%]", "gap max [%]",
-                 "target reached [%]", "time to target median [s]", "gain over first-fit [%]",
-                 "approvals over first-fit", "proven [%]", "fallbacks", "wall median [s]",
-                 "wall max [s]"])
+    head = ["solver", "vertices", "instances", "largest", "gap mean [%]", "gap max [%]",
+            "target reached [%]", "time to target median [s]", "gain over first-fit [%]",
+            "approvals over first-fit", "proven [%]", "fallbacks", "wall median [s]",
+            "wall max [s]"]
+    for subset in ("all", STEADY):
+        sel = [r for r in rows if r["subset"] == subset]
+        if subset == STEADY and sel:
+            L += ["", "The same of the steady-state instances alone (best known and gaps as "
+                  "above):", ""]
+        L += _table([[r["solver"], r["bin"], r["instances"], _f(r["vertices_max"]),
+                      _f(r["gap_mean_pct"], 3), _f(r["gap_max_pct"], 3),
+                      _f(100 * r["reached_share"], 0), _f(r["time_to_target_median_s"], 2),
+                      _f(r["gain_mean_pct"], 3, True), _f(r["count_gain_mean"], 2, True),
+                      _f(100 * r["proven_share"], 0), r["fallbacks"], _f(r["wall_median_s"], 2),
+                      _f(r["wall_max_s"], 2)] for r in sel], head) if sel else []
     L += ["", "Per instance, the gap [%] of each solver (`-`: not run):", ""]
     solvers = [s for s in ORDER if s in set(g["solver"])]
     inst_rows = []
@@ -289,6 +346,56 @@ def _prediction_lines(g: pd.DataFrame, inst: pd.DataFrame, rp_res: dict) -> list
     return ["## The paper's prediction", "", txt, ""]
 
 
+def _steady_lines(g: pd.DataFrame, inst: pd.DataFrame) -> list:
+    """The paper's prediction answered from the steady-state rows alone: their contention
+    (instances.csv) and the optimiser's gain over first-fit on their sampled instances."""
+    ph = phases(inst)
+    st, warm = inst[ph == STEADY], inst[ph == WARMUP]
+    if st.empty:
+        return []
+    keys = steady_keys(inst)
+    sg = g[[k in keys for k in zip(g["run"], g["epoch"].astype(int))]]
+    runs = ", ".join(f"{run} from t = {_f(float(x['record_from_s'].iloc[0]), 0)} s"
+                     for run, x in st.groupby("run", sort=False))
+    approved, decided = int(st["approved"].sum()), int(st["eligible"].sum())
+    share = 100.0 * approved / max(decided, 1)
+    txt = (f"At steady state ({runs}: {len(st)} epochs, after {len(warm)} warm-up epochs planned "
+           f"to fill the sky but neither kept nor sampled), first-fit approved {_f(share, 1)} % of "
+           f"the {_f(decided)} requests it decided ({_f(st['eligible'].mean(), 1)} per epoch), with "
+           f"{_f(int(st['airborne'].median()))} flights airborne (median; "
+           f"{_f(int(st['airborne'].min()))} to {_f(int(st['airborne'].max()))}) and instances of "
+           f"{_f(int(st['vertices'].min()))} to {_f(int(st['vertices'].max()))} vertices: "
+           + ("the requests compete there." if approved < decided else
+              "every request is approved even there, so the requests do not compete."))
+    opt = sg[sg["solver"] == OPTIMISER]
+    if opt.empty:
+        return ["## At steady state", "", txt + " None of its instances was solved.", ""]
+    m, lo, hi = mean_interval(opt["gain_pct"].to_numpy(dtype=float))
+    c, clo, chi = mean_interval(opt["count_gain"].to_numpy(dtype=float))
+    ff = sg[sg["solver"] == BASELINE]
+    count_word = _interval_word(clo, chi, "more", "fewer", "no more and no fewer")
+    obj_word = _interval_word(lo, hi, "above", "below", "not distinguishable from")
+    verdict = ("holds here: the optimiser approves more flights than first-fit" if count_word == "more"
+               else "holds in the objective only: the optimiser's selection weighs more than "
+               "first-fit's without approving more flights" if obj_word == "above"
+               else "is not borne out here: the optimiser is not above first-fit")
+    opts = sg[~sg["solver"].isin([BASELINE, "reference"])]
+    fb = int(_true(opts["fallback"]).sum())
+    ref = sg[sg["solver"] == "reference"]
+    txt += (f" On its {len(opt)} sampled instances (each solved by first-fit and by {OPTIMISER} "
+            f"from the same epoch's instance: per epoch, the run does not take the optimiser's "
+            f"answer), {OPTIMISER} at the 1 s limit gains {_f(m, 3, True)} % [{_f(lo, 3, True)}, "
+            f"{_f(hi, 3, True)}] over first-fit in the objective (it is {obj_word} first-fit "
+            f"there) and {_f(c, 2, True)} [{_f(clo, 2, True)}, {_f(chi, 2, True)}] approvals per "
+            f"instance, against first-fit's {_f(ff['count'].mean(), 1)} (it approves {count_word} "
+            f"flights than first-fit): the paper's prediction {verdict}. {fb} of the {len(opts)} answers of the "
+            f"1 s optimisers there were fallbacks (the greedy answer computed before the solve; "
+            f"wall time median {_f(opts['wall_s'].median(), 1)} s, max "
+            f"{_f(opts['wall_s'].max(), 1)} s), and the reference proved "
+            f"{int(_true(ref['proven_optimal']).sum())} of its {len(ref)} answers optimal.")
+    return ["## At steady state", "", txt, ""]
+
+
 def _read(d: Path, name: str):
     p = d / name
     return pd.read_csv(p) if p.exists() and p.stat().st_size > 0 else None
@@ -310,10 +417,12 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, list]:
          "(README.md beside this file).", ""]
     rows = []
     if inst is not None and solves is not None:
+        check_window(inst, solves)
         g = gaps(solves, bins)
-        rows = summary_rows(g, bins)
+        rows = summary_rows(g, bins) + summary_rows(g, bins, steady_keys(inst))
         loads = solves["load"]
-        L += [f"Recorded: {len(inst)} epochs in {inst['run'].nunique()} runs, "
+        L += [f"Recorded: {len(inst)} epochs in {inst['run'].nunique()} runs "
+              f"({int((phases(inst) == WARMUP).sum())} of them warm-up), "
               f"{_f(inst['cpu_s'].sum(), 0)} CPU-s of planning; solved: "
               f"{solves[['run', 'epoch']].drop_duplicates().shape[0]} instances by "
               f"{solves['solver'].nunique()} solvers, {_f(solves['wall_s'].sum(), 0)} s of wall "
@@ -323,7 +432,8 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, list]:
               f"{_f(loads.max(), 1)} on 2 cores: the 1 s limits are wall time, so load can decide "
               "a fallback.", ""]
         rp_lines, rp_res = _replanning_lines(rp, args)
-        L += _prediction_lines(g, inst, rp_res)
+        L += _prediction_lines(g, inst[phases(inst) != WARMUP], rp_res)
+        L += _steady_lines(g, inst)
         L += _instances_lines(cfg, inst)
         L += _solves_lines(cfg, g, rows)
         L += rp_lines
