@@ -156,3 +156,13 @@ def test_a_bad_recorded_window_names_the_field_and_the_value(tmp_path, value, wo
     path.write_text(yaml.safe_dump(cfg))
     with pytest.raises(ValueError, match=re.escape(words)):
         load_config(path)
+
+
+@pytest.mark.parametrize("value", [0, 2.5, "all", True])
+def test_a_bad_steady_sample_size_names_the_field_and_the_value(tmp_path, value):
+    cfg = yaml.safe_load(CONFIG.read_text())
+    cfg["solve"]["steady_per_bin"] = value
+    path = tmp_path / "c.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    with pytest.raises(ValueError, match=re.escape(f"solve.steady_per_bin = {value!r}")):
+        load_config(path)

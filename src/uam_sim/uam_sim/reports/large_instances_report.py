@@ -192,7 +192,10 @@ def _solves_lines(cfg: dict, g: pd.DataFrame, rows: list) -> list:
     ref = g[g["solver"] == "reference"]
     L = ["## Matched shadow solves", "",
          f"{n_inst} instances (a seeded sample of up to {sol['per_bin']} per size bin of each "
-         f"run, bins {', '.join(_f(b) for b in sol['bins'])}), each solved by "
+         f"run, bins {', '.join(_f(b) for b in sol['bins'])}; of a steady-state window "
+         + ("every kept instance" if sol.get("steady_per_bin", sol["per_bin"]) is None else
+            f"up to {sol.get('steady_per_bin', sol['per_bin'])} per bin")
+         + "), each solved by "
          f"{', '.join(sol['backends'])} at {_f(sol['time_limit_s'], 1)} s and by the reference "
          f"({sol['reference']['backend']}, {_f(sol['reference']['time_limit_s'], 0)} s), one "
          "after the other on one worker (uam_sim.studies.decision_study.e0_solve_rows, as E0). "
@@ -297,6 +300,8 @@ def _prediction_lines(g: pd.DataFrame, inst: pd.DataFrame, rp_res: dict) -> list
     at_best = top[np.isclose(top["objective"], top["best_known"])]
     own = int(at_best.groupby(["run", "epoch"])["fallback"].apply(lambda c: _true(c).all()).sum())
     reached = g[(g["bin_lo"] == large[1]) & (g["solver"] == OPTIMISER)]["reached"].mean()
+    runs = list(dict.fromkeys(g[g["bin_lo"] == large[1]]["run"]))
+    inst = inst[inst["run"].isin(runs)]
     approved, decided = int(inst["approved"].sum()), int(inst["eligible"].sum())
     contention = ("every request" if approved == decided else
                   f"{_f(100.0 * approved / max(decided, 1), 1)} % of the requests")
@@ -318,7 +323,8 @@ def _prediction_lines(g: pd.DataFrame, inst: pd.DataFrame, rp_res: dict) -> list
            f"gain {trend} with the instance's size and is {obj_word} first-fit's in the largest "
            f"bin, where it approves {count_word} flights than first-fit "
            f"({_f(large[6], 2, True)} [{_f(large[7], 2, True)}, {_f(large[8], 2, True)}] per "
-           f"instance). Under first-fit the recorded epochs approved {contention} they decided, "
+           f"instance). Under first-fit the recorded epochs of the runs these instances come "
+           f"from ({', '.join(runs)}) approved {contention} they decided, "
            f"with a median of {_f(per_request, 0)} vertices per request decided (levels x "
            f"departure slots x routes): {why}. At this size the 1 s limit "
            f"{'binds' if fb else 'holds'}: {fb} of the "
@@ -346,6 +352,11 @@ def _prediction_lines(g: pd.DataFrame, inst: pd.DataFrame, rp_res: dict) -> list
     return ["## The paper's prediction", "", txt, ""]
 
 
+def _epoch_s(x: pd.DataFrame) -> float:
+    """A run's epoch length [s]: the median step of its epochs' times."""
+    return float(np.median(np.diff(np.sort(x["t_s"].to_numpy(dtype=float)))))
+
+
 def _steady_lines(g: pd.DataFrame, inst: pd.DataFrame) -> list:
     """The paper's prediction answered from the steady-state rows alone: their contention
     (instances.csv) and the optimiser's gain over first-fit on their sampled instances."""
@@ -359,12 +370,19 @@ def _steady_lines(g: pd.DataFrame, inst: pd.DataFrame) -> list:
                      for run, x in st.groupby("run", sort=False))
     approved, decided = int(st["approved"].sum()), int(st["eligible"].sum())
     share = 100.0 * approved / max(decided, 1)
+    offered = sum(float(x["rate_per_hour"].iloc[0]) * len(x) * _epoch_s(inst[inst["run"] == run])
+                  / 3600.0 for run, x in st.groupby("run", sort=False))
     txt = (f"At steady state ({runs}: {len(st)} epochs, after {len(warm)} warm-up epochs planned "
            f"to fill the sky but neither kept nor sampled), first-fit approved {_f(share, 1)} % of "
-           f"the {_f(decided)} requests it decided ({_f(st['eligible'].mean(), 1)} per epoch), with "
+           f"the {_f(decided)} requests it decided ({_f(st['eligible'].mean(), 1)} per epoch; a "
+           f"request refused in an epoch is decided again while its departure window lasts): "
+           f"{_f(approved / len(st), 1)} approvals per epoch, {_f(100.0 * approved / offered, 1)} % "
+           f"of the {_f(offered / len(st), 1)} requests the rate offers per epoch, with "
            f"{_f(int(st['airborne'].median()))} flights airborne (median; "
            f"{_f(int(st['airborne'].min()))} to {_f(int(st['airborne'].max()))}) and instances of "
-           f"{_f(int(st['vertices'].min()))} to {_f(int(st['vertices'].max()))} vertices: "
+           f"{_f(int(st['vertices'].min()))} to {_f(int(st['vertices'].max()))} vertices"
+           + (f" (the warm-up's up to {_f(int(warm['vertices'].max()))}: the airborne flights "
+              "discard most candidates)" if len(warm) else "") + ": "
            + ("the requests compete there." if approved < decided else
               "every request is approved even there, so the requests do not compete."))
     opt = sg[sg["solver"] == OPTIMISER]
@@ -373,11 +391,12 @@ def _steady_lines(g: pd.DataFrame, inst: pd.DataFrame) -> list:
     m, lo, hi = mean_interval(opt["gain_pct"].to_numpy(dtype=float))
     c, clo, chi = mean_interval(opt["count_gain"].to_numpy(dtype=float))
     ff = sg[sg["solver"] == BASELINE]
-    count_word = _interval_word(clo, chi, "more", "fewer", "no more and no fewer")
+    count_word = _interval_word(clo, chi, "more", "fewer", "no more and no fewer"
+                                if clo == chi == 0 else "not distinguishably more or fewer")
     obj_word = _interval_word(lo, hi, "above", "below", "not distinguishable from")
     verdict = ("holds here: the optimiser approves more flights than first-fit" if count_word == "more"
                else "holds in the objective only: the optimiser's selection weighs more than "
-               "first-fit's without approving more flights" if obj_word == "above"
+               "first-fit's without approving distinguishably more flights" if obj_word == "above"
                else "is not borne out here: the optimiser is not above first-fit")
     opts = sg[~sg["solver"].isin([BASELINE, "reference"])]
     fb = int(_true(opts["fallback"]).sum())

@@ -68,6 +68,10 @@ def load_config(path) -> dict:
         raise ValueError(f"{path}: record.duration_s must list one duration per rate "
                          f"({len(rates)}), got {durs!r}")
     _check_record_from(path, cfg["record"].get("record_from_s"), rates, durs)
+    spb = cfg["solve"].setdefault("steady_per_bin", cfg["solve"]["per_bin"])
+    if spb is not None and (isinstance(spb, bool) or not isinstance(spb, int) or spb < 1):
+        raise ValueError(f"{path}: solve.steady_per_bin = {spb!r}: must be an integer >= 1 or "
+                         f"null (every instance kept at steady state)")
     if "firstfit" not in cfg["solve"]["backends"]:
         raise ValueError(f"{path}: solve.backends must include 'firstfit' (the baseline every "
                          f"gain is read against), got {cfg['solve']['backends']!r}")
@@ -174,7 +178,8 @@ def solve_rate(cfg: dict, per_hour, duration_s, cells: Path, progress: bool = Tr
                                 float(duration_s), int(rec["seed"]), rec["method"],
                                 float(rec["slot_s"]), float(rec["vertical_separation_m"]),
                                 float(record_from_s))
-    picked_kept = e0_sample(found, list(sol["bins"]), sol["per_bin"], int(sol["seed"]))
+    per_bin = sol["per_bin"] if float(record_from_s) == 0 else sol["steady_per_bin"]
+    picked_kept = e0_sample(found, list(sol["bins"]), per_bin, int(sol["seed"]))
     picked = {int(ep) for ep, _t, _p in picked_kept}
     if progress:
         print(f"{run_name(cfg, per_hour)}: {len(epochs) - len(found)} warm-up or empty epochs, "
