@@ -288,8 +288,13 @@ def _gain_by_bin(g: pd.DataFrame, solver: str) -> list:
     return out
 
 
-def _prediction_lines(g: pd.DataFrame, inst: pd.DataFrame, rp_res: dict) -> list:
-    """One paragraph answering the paper's prediction; every number and word from the rows."""
+PREDICTION = "The paper predicts that the optimiser matters once capacity grows."
+
+
+def _prediction_lines(g: pd.DataFrame, inst: pd.DataFrame, rp_res: dict,
+                      lead: bool = True) -> list:
+    """One paragraph answering the paper's prediction by instance size; every number and word
+    from the rows. ``lead``: it opens the section (no steady-state paragraph before it)."""
     gains = _gain_by_bin(g, OPTIMISER)
     if not gains:
         return []
@@ -314,8 +319,8 @@ def _prediction_lines(g: pd.DataFrame, inst: pd.DataFrame, rp_res: dict) -> list
     why = ("each request brings many candidates and the requests barely compete, so there is "
            "little for the optimiser to win in approvals" if approved == decided else
            "some requests compete for the same airspace")
-    txt = (f"The paper predicts that the optimiser matters once capacity grows. On the largest "
-           f"instances recorded here it pays {pays}: {OPTIMISER} at the 1 s limit is "
+    txt = ((f"{PREDICTION} On the largest " if lead else "By size: on the largest ")
+           + f"instances recorded here it pays {pays}: {OPTIMISER} at the 1 s limit is "
            f"{_f(small[3], 3, True)} % [{_f(small[4], 3, True)}, {_f(small[5], 3, True)}] above "
            f"first-fit in the objective in the smallest bin ({small[0]} vertices, {small[2]} "
            f"instances) and {_f(large[3], 3, True)} % [{_f(large[4], 3, True)}, "
@@ -349,7 +354,7 @@ def _prediction_lines(g: pd.DataFrame, inst: pd.DataFrame, rp_res: dict) -> list
                 + _interval_word(v.lo, v.hi, "saves more", "saves fewer", "saves no more and no fewer")
                 + f" flights from a contingency ({_f(v.mean, 2, True)} [{_f(v.lo, 2, True)}, "
                 f"{_f(v.hi, 2, True)}], {v.positive} of {v.n} seeds up).")
-    return ["## The paper's prediction", "", txt, ""]
+    return (["## The paper's prediction", ""] if lead else []) + [txt, ""]
 
 
 def _epoch_s(x: pd.DataFrame) -> float:
@@ -358,8 +363,10 @@ def _epoch_s(x: pd.DataFrame) -> float:
 
 
 def _steady_lines(g: pd.DataFrame, inst: pd.DataFrame) -> list:
-    """The paper's prediction answered from the steady-state rows alone: their contention
-    (instances.csv) and the optimiser's gain over first-fit on their sampled instances."""
+    """The paper's prediction answered from the steady-state rows alone (the section's first
+    paragraph: the prediction is about contention, which only these rows carry): their
+    contention (instances.csv) and the optimiser's gain over first-fit on their sampled
+    instances."""
     ph = phases(inst)
     st, warm = inst[ph == STEADY], inst[ph == WARMUP]
     if st.empty:
@@ -372,7 +379,7 @@ def _steady_lines(g: pd.DataFrame, inst: pd.DataFrame) -> list:
     share = 100.0 * approved / max(decided, 1)
     offered = sum(float(x["rate_per_hour"].iloc[0]) * len(x) * _epoch_s(inst[inst["run"] == run])
                   / 3600.0 for run, x in st.groupby("run", sort=False))
-    txt = (f"At steady state ({runs}: {len(st)} epochs, after {len(warm)} warm-up epochs planned "
+    txt = (f"{PREDICTION} At steady state ({runs}: {len(st)} epochs, after {len(warm)} warm-up epochs planned "
            f"to fill the sky but neither kept nor sampled), first-fit approved {_f(share, 1)} % of "
            f"the {_f(decided)} requests it decided ({_f(st['eligible'].mean(), 1)} per epoch; a "
            f"request refused in an epoch is decided again while its departure window lasts): "
@@ -387,7 +394,7 @@ def _steady_lines(g: pd.DataFrame, inst: pd.DataFrame) -> list:
               "every request is approved even there, so the requests do not compete."))
     opt = sg[sg["solver"] == OPTIMISER]
     if opt.empty:
-        return ["## At steady state", "", txt + " None of its instances was solved.", ""]
+        return ["## The paper's prediction", "", txt + " None of its instances was solved.", ""]
     m, lo, hi = mean_interval(opt["gain_pct"].to_numpy(dtype=float))
     c, clo, chi = mean_interval(opt["count_gain"].to_numpy(dtype=float))
     ff = sg[sg["solver"] == BASELINE]
@@ -414,7 +421,7 @@ def _steady_lines(g: pd.DataFrame, inst: pd.DataFrame) -> list:
             f"wall time median {_f(opts['wall_s'].median(), 1)} s, max "
             f"{_f(opts['wall_s'].max(), 1)} s), and the reference proved "
             f"{int(_true(ref['proven_optimal']).sum())} of its {len(ref)} answers optimal.")
-    return ["## At steady state", "", txt, ""]
+    return ["## The paper's prediction", "", txt, ""]
 
 
 def _read(d: Path, name: str):
@@ -453,8 +460,9 @@ def report_text(d: Path, shown: str | None = None) -> tuple[str, list]:
               f"{_f(loads.max(), 1)} on 2 cores: the 1 s limits are wall time, so load can decide "
               "a fallback.", ""]
         rp_lines, rp_res = _replanning_lines(rp, args)
-        L += _prediction_lines(g, inst[phases(inst) != WARMUP], rp_res)
-        L += _steady_lines(g, inst)
+        steady = _steady_lines(g, inst)
+        L += steady
+        L += _prediction_lines(g, inst[phases(inst) != WARMUP], rp_res, lead=not steady)
         L += _instances_lines(cfg, inst)
         L += _solves_lines(cfg, g, rows)
         L += rp_lines
