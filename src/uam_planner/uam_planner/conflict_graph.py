@@ -74,14 +74,23 @@ def discard_against_active(candidates, active, separation_m: float = DEFAULT_SEP
     return any_conflict(cand, act, separation_m)
 
 
-@functools.lru_cache(maxsize=512)
-def _upper_pairs(c: int) -> tuple[np.ndarray, np.ndarray]:
-    """``np.triu_indices(c, k=1)``, read-only and kept: a request's group has one of a few
-    sizes, and building the indices was most of the clique edges' time."""
+#: groups up to this size keep their upper-triangle indices (at most ~5.6 MB for all of them)
+_KEPT_GROUP_SIZE = 128
+
+
+@functools.lru_cache(maxsize=_KEPT_GROUP_SIZE)
+def _kept_upper_pairs(c: int) -> tuple[np.ndarray, np.ndarray]:
     iu, ju = np.triu_indices(c, k=1)
     iu.setflags(write=False)
     ju.setflags(write=False)
     return iu, ju
+
+
+def _upper_pairs(c: int) -> tuple[np.ndarray, np.ndarray]:
+    """``np.triu_indices(c, k=1)``, read-only, kept for small groups: a request's group has one
+    of a few sizes, and building the indices was most of the clique edges' time; a large city's
+    groups (hundreds of candidates) would make the kept ones hundreds of MB, so those are built."""
+    return _kept_upper_pairs(c) if c <= _KEPT_GROUP_SIZE else np.triu_indices(c, k=1)
 
 
 def _clique_edges(groups: list) -> np.ndarray:
