@@ -29,7 +29,8 @@ TIMEOUT_S=$(python -c "import sys; f = float(sys.argv[1]); assert f >= 1; print(
   || { echo "scripts/test.sh: UAM_TEST_LOAD_FACTOR: '$LOAD_FACTOR' must be a number >= 1" >&2; exit 2; }
 export UAM_TEST_HANG_S="${UAM_TEST_HANG_S:-$(( TIMEOUT_S * 4 / 3 ))}"
 set +e
-python -m pytest --timeout="$TIMEOUT_S" "${WORKERS[@]}" "$@"
+# the 30 slowest tests are listed after the summary: where `make test`'s time goes
+python -m pytest --timeout="$TIMEOUT_S" --durations=30 "${WORKERS[@]}" "$@"
 rc=$?
 set -e
 exit $rc
