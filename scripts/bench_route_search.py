@@ -55,26 +55,23 @@ def main(argv=None) -> int:
         pairs.add((int(o), int(d)))
     ordered = sorted(pairs)
     per_pair = []
+    cache = None
     for _ in range(args.repeat):
+        cache = None   # a fresh cache each time, the last one kept for what follows
+        gc.collect()
         cache = CandidateCache(net)
         c = time.process_time()
         cache.precompute(ordered)
         per_pair.append((time.process_time() - c) / len(ordered))
-        del cache
-    cache = CandidateCache(net)
-    cache.precompute(ordered)
-    gc.collect()
-    base = len(gc.get_objects())
-    del cache
-    gc.collect()
-    tracked = base - len(gc.get_objects())
-    cache = CandidateCache(net)
-    cache.precompute(ordered)
     gc.collect()
     c = time.process_time()
     gc.collect()
     full_s = time.process_time() - c
     n_tpl = sum(len(cache.templates(o, d)) for o, d in ordered)
+    base = len(gc.get_objects())
+    cache = None
+    gc.collect()
+    tracked = base - len(gc.get_objects())
     print(f"city {args.city}: {args.pairs} pairs, {n_tpl / args.pairs:.1f} templates per pair")
     print(f"| CPU per pair, median of {args.repeat} | tracked objects per pair | a full "
           f"collection with them cached (whole process) |")

@@ -88,7 +88,7 @@ def summary_rows(g: pd.DataFrame, bins: list, keys: set | None = None) -> list:
     (subset ``steady state``)."""
     rows = []
     if keys is not None:
-        g = g[[k in keys for k in zip(g["run"], g["epoch"].astype(int))]]
+        g = of_epochs(g, keys)
     for s in [x for x in ORDER if x in set(g["solver"])]:
         for lo, hi in zip(bins[:-1], bins[1:]):
             x = g[(g["solver"] == s) & (g["bin_lo"] == lo)]
@@ -143,6 +143,11 @@ def check_window(inst: pd.DataFrame, solves: pd.DataFrame) -> None:
                     ("sampled in instances.csv but not solved", sorted(picked - solved))):
         if x:
             raise ValueError(f"solves.csv.gz: run {x[0][0]} epoch {x[0][1]} is {what}")
+
+
+def of_epochs(g: pd.DataFrame, keys: set) -> pd.DataFrame:
+    """The rows of ``g`` whose (run, epoch) is in ``keys``."""
+    return g[[k in keys for k in zip(g["run"], g["epoch"].astype(int))]]
 
 
 def steady_keys(inst: pd.DataFrame) -> set:
@@ -371,8 +376,7 @@ def _steady_lines(g: pd.DataFrame, inst: pd.DataFrame) -> list:
     st, warm = inst[ph == STEADY], inst[ph == WARMUP]
     if st.empty:
         return []
-    keys = steady_keys(inst)
-    sg = g[[k in keys for k in zip(g["run"], g["epoch"].astype(int))]]
+    sg = of_epochs(g, steady_keys(inst))
     runs = ", ".join(f"{run} from t = {_f(float(x['record_from_s'].iloc[0]), 0)} s"
                      for run, x in st.groupby("run", sort=False))
     approved, decided = int(st["approved"].sum()), int(st["eligible"].sum())
